@@ -1,0 +1,120 @@
+"""The ``haptify`` command (spec §0.5): sub-commands are plugins registered under the entry-point
+group ``haptify.commands``; each plugin's ``register(subparsers)`` adds its parser and sets
+``func(args, ui) -> int``.
+
+Exit codes: 0 success (valid), 1 the input is invalid or a check failed, 2 the command could not run.
+No traceback ever reaches the user: coded errors print as findings, anything else as E999.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from contextlib import contextmanager
+from importlib.metadata import entry_points
+from typing import Any, Iterator
+
+from haptify.errors import Finding, HaptifyError
+from haptify.versions import PACKAGE_VERSION, SCHEMA_VERSION, SPEC_VERSION
+
+EXIT_OK, EXIT_INVALID, EXIT_CANNOT_RUN = 0, 1, 2
+
+
+class UI:
+    """Output policy of one invocation: human text (rich), ``--json`` or ``--quiet``."""
+
+    def __init__(self, json_mode: bool = False, quiet: bool = False) -> None:
+        self.json_mode = json_mode
+        self.quiet = quiet
+
+    def say(self, text: str) -> None:
+        """A human line on stdout (suppressed by --quiet and --json)."""
+        if not (self.quiet or self.json_mode):
+            print(text)
+
+    def emit_json(self, payload: Any) -> None:
+        """The machine-readable result on stdout (only with --json)."""
+        if self.json_mode:
+            print(json.dumps(payload, indent=2, default=_json_default))
+
+    def warn(self, text: str) -> None:
+        if not self.quiet:
+            print(text, file=sys.stderr)
+
+    @contextmanager
+    def progress(self, description: str, total: float | None) -> Iterator[Any]:
+        """A progress bar on stderr for work that can take more than ~2 s; yields ``advance(n=1)``."""
+        if self.quiet or self.json_mode or not sys.stderr.isatty():
+            yield lambda n=1: None
+            return
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+        with Progress(TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(), transient=True) as bar:
+            task = bar.add_task(description, total=total)
+            yield lambda n=1: bar.advance(task, n)
+
+
+def _json_default(obj: Any) -> Any:
+    if hasattr(obj, "to_dict"):
+        return obj.to_dict()
+    if hasattr(obj, "tolist"):
+        return obj.tolist()
+    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="haptify",
+        description="Haptify: benchmark grounded force-feedback haptic devices from external measurements.",
+    )
+    parser.add_argument("--version", action="store_true", help="print package, spec and schema versions")
+    parser.add_argument("--json", action="store_true", help="machine-readable output on stdout")
+    parser.add_argument("--quiet", "-q", action="store_true", help="print only errors")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for ep in sorted(entry_points(group="haptify.commands"), key=lambda e: e.name):
+        ep.load()(sub)
+    return parser
+
+
+def _print_findings(ui: UI, findings: list[Finding]) -> None:
+    if ui.json_mode:
+        ui.emit_json({"ok": False, "findings": [f.to_dict() for f in findings]})
+    else:
+        for f in findings:
+            print(str(f), file=sys.stderr)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``haptify`` console script; returns the process exit code."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse already printed usage or --help
+        return EXIT_OK if exc.code == 0 else EXIT_CANNOT_RUN
+    ui = UI(json_mode=args.json, quiet=args.quiet)
+    if args.version:
+        versions = {"package": PACKAGE_VERSION, "spec": SPEC_VERSION, "schema": SCHEMA_VERSION}
+        if ui.json_mode:
+            ui.emit_json(versions)
+        else:
+            print(f"haptify {PACKAGE_VERSION} (spec {SPEC_VERSION}, schemas {SCHEMA_VERSION})")
+        return EXIT_OK
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return EXIT_CANNOT_RUN
+    try:
+        return int(args.func(args, ui))
+    except HaptifyError as err:
+        _print_findings(ui, err.findings)
+        return EXIT_CANNOT_RUN
+    except KeyboardInterrupt:
+        ui.warn("interrupted; nothing half-written was left behind")
+        return EXIT_CANNOT_RUN
+    except Exception as exc:  # the last guard: report, never a traceback
+        _print_findings(ui, [Finding("E999", f"{type(exc).__name__}: {exc}")])
+        return EXIT_CANNOT_RUN
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,357 @@
+"""Session storage: folders, stream files, checksums and atomic writes (spec chapter 3).
+
+Reading is lazy: :func:`open_session` parses and checks ``session.json`` only; each stream is read
+when asked for. Writing goes through :class:`SessionWriter`, which writes the whole session into a
+temporary sibling folder and renames it into place, so an interrupted write never leaves a half
+session. Nothing outside the session folder is ever read or written (§3.3).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+from pydantic import ValidationError
+
+from haptify.errors import Finding, HaptifyError, fail
+from haptify.session_format import (
+    Device,
+    DeviceRef,
+    Session,
+    Stream,
+    Trial,
+    default_stream_file,
+    expected_columns,
+    is_safe_relative_path,
+    kind_table,
+)
+from haptify.versions import SPEC_VERSION
+
+MANIFEST = "session.json"
+HASH_CHUNK = 1 << 20
+
+
+def sha256_file(path: Path) -> str:
+    """Hex sha256 of a file's bytes (spec §3.4)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(HASH_CHUNK), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def resolve_inside(root: Path, relative: str, *, file_label: str | None = None) -> Path:
+    """The path of ``relative`` inside ``root``; raises E108/E109 when it would leave the folder (§3.3)."""
+    label = file_label or relative
+    if not is_safe_relative_path(relative):
+        raise fail("E108", f"path {relative!r} is absolute or leaves the session folder", file=label,
+                   expected="a relative path inside the session folder", found=relative)
+    candidate = root / relative
+    real_root = root.resolve()
+    real = candidate.resolve()
+    if real != real_root and real_root not in real.parents:
+        raise fail("E109", f"{relative!r} resolves outside the session folder", file=label,
+                   expected=f"a file under {real_root}", found=str(real))
+    return candidate
+
+
+def pointer_of(loc: Iterable[Any]) -> str:
+    """A JSON pointer (RFC 6901) from a pydantic/jsonschema location tuple."""
+    parts = [str(p).replace("~", "~0").replace("/", "~1") for p in loc]
+    return "/" + "/".join(parts) if parts else ""
+
+
+def parse_json_file(path: Path, code: str, label: str) -> Any:
+    """Parse a JSON file; malformed JSON raises ``code`` with line and column."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise fail(code, f"{label} is not UTF-8 text: {exc.reason} at byte {exc.start}", file=label) from None
+    except OSError as exc:
+        raise fail(code, f"{label} cannot be read: {exc.strerror}", file=label) from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise fail(code, f"{label} is not well-formed JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})",
+                   file=label, expected="JSON", found=text[max(0, exc.pos - 20): exc.pos + 20]) from None
+
+
+def pydantic_findings(exc: ValidationError, code: str, label: str) -> list[Finding]:
+    """One finding per pydantic error, with JSON pointer and expected/found."""
+    out = []
+    for err in exc.errors(include_url=False):
+        found = err.get("input")
+        if isinstance(found, (dict, list)):
+            found = f"<{type(found).__name__}>"
+        out.append(Finding(code, f"{err['msg']}", file=label, pointer=pointer_of(err["loc"]),
+                           expected=err.get("ctx", {}).get("expected", err["type"]), found=found))
+    return out
+
+
+class SessionFolder:
+    """A session opened for reading (spec §3.1): the manifest, and streams on demand."""
+
+    def __init__(self, root: Path, manifest: Session, raw: dict) -> None:
+        self.root = root
+        self.manifest = manifest
+        self.raw = raw
+
+    # -- manifest navigation ------------------------------------------------------------------
+    @property
+    def session_id(self) -> str:
+        return self.manifest.session_id
+
+    @property
+    def trials(self) -> list[Trial]:
+        return self.manifest.trials
+
+    def trial(self, trial_id: str) -> Trial:
+        for t in self.manifest.trials:
+            if t.id == trial_id:
+                return t
+        raise fail("E903", f"no trial {trial_id!r} in session {self.session_id}", file=MANIFEST,
+                   expected=[t.id for t in self.manifest.trials], found=trial_id)
+
+    def trials_of(self, protocol: str) -> list[Trial]:
+        """Trials of one protocol, ordered by repetition."""
+        return sorted((t for t in self.manifest.trials if t.protocol == protocol), key=lambda t: (t.repetition, t.id))
+
+    def stream(self, trial_id: str, kind: str) -> Stream | None:
+        """The trial's stream of ``kind``, or None when it has none."""
+        return next((s for s in self.trial(trial_id).streams if s.kind == kind), None)
+
+    def device(self) -> Device:
+        """The device description, reading ``device.json`` when the manifest refers to one."""
+        dev = self.manifest.device
+        if isinstance(dev, DeviceRef):
+            path = resolve_inside(self.root, dev.file)
+            if not path.is_file():
+                raise fail("E106", f"device file {dev.file!r} does not exist", file=dev.file)
+            data = parse_json_file(path, "E106", dev.file)
+            try:
+                return Device.model_validate(data)
+            except ValidationError as exc:
+                raise HaptifyError(*pydantic_findings(exc, "E106", dev.file)) from None
+        return dev
+
+    # -- stream data ----------------------------------------------------------------------------
+    def stream_path(self, stream: Stream) -> Path:
+        return resolve_inside(self.root, stream.file)
+
+    def clock_offset(self, stream: Stream) -> float:
+        """Seconds to add to the stream's ``t`` to put it on the session clock (spec §2.8)."""
+        return sum(c.offset_s for c in self.manifest.calibration if c.kind == "clock_offset" and c.stream_file == stream.file)
+
+    def read_stream(self, stream: Stream, *, verify: bool = False, session_clock: bool = True) -> pd.DataFrame:
+        """The stream's table: ``t`` then the kind's columns, float64 (spec §3.2).
+
+        ``verify`` checks the sha256 first (E111); ``session_clock`` applies clock-offset records.
+        """
+        path = self.stream_path(stream)
+        if not path.is_file():
+            raise fail("E110", f"stream file {stream.file!r} does not exist", file=stream.file)
+        if verify:
+            digest = sha256_file(path)
+            if digest != stream.sha256:
+                raise fail("E111", f"checksum of {stream.file!r} does not match the manifest", file=stream.file,
+                           expected=stream.sha256, found=digest)
+        table = read_table(path, stream.format, [c.name for c in stream.columns], label=stream.file)
+        if session_clock:
+            offset = self.clock_offset(stream)
+            if offset:
+                table["t"] = table["t"] + offset
+        return table
+
+    def read(self, trial_id: str, kind: str, **kw: Any) -> pd.DataFrame:
+        """Shortcut: the table of the trial's stream of ``kind`` (E302 when the trial has none)."""
+        s = self.stream(trial_id, kind)
+        if s is None:
+            raise fail("E302", f"trial {trial_id!r} has no {kind} stream", file=MANIFEST, expected=kind, found=None)
+        return self.read_stream(s, **kw)
+
+
+def read_table(path: Path, fmt: str, columns: list[str], *, label: str) -> pd.DataFrame:
+    """Read a stream file as float64 columns; unreadable files raise E112, a wrong CSV header E211."""
+    try:
+        if fmt == "parquet":
+            table = pq.read_table(path)
+            frame = table.to_pandas()
+        else:
+            with open(path, encoding="utf-8") as fh:
+                header = fh.readline().rstrip("\r\n").split(",")
+            if header != columns:
+                raise fail("E211", f"CSV header of {label!r} differs from the declared columns", file=label,
+                           expected=columns, found=header)
+            frame = pd.read_csv(path, dtype="float64", float_precision="round_trip", na_values=["NaN"],
+                                keep_default_na=False, engine="c")
+    except HaptifyError:
+        raise
+    except (OSError, pa.ArrowException, ValueError, pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise fail("E112", f"{label!r} cannot be read as {fmt}: {exc}", file=label) from None
+    for name in frame.columns:
+        if frame[name].dtype != np.float64:
+            raise fail("E212", f"column {name!r} of {label!r} is {frame[name].dtype}, not float64", file=label,
+                       column=str(name), expected="float64", found=str(frame[name].dtype))
+    return frame
+
+
+def open_session(path: str | os.PathLike) -> SessionFolder:
+    """Open a session folder and parse its manifest (E101–E105); streams are read lazily."""
+    root = Path(path)
+    if not root.is_dir():
+        raise fail("E101", f"{str(root)!r} is not a session folder", file=str(root))
+    manifest_path = root / MANIFEST
+    if not manifest_path.is_file():
+        raise fail("E102", f"no {MANIFEST} in {str(root)!r}", file=MANIFEST)
+    raw = parse_json_file(manifest_path, "E103", MANIFEST)
+    if isinstance(raw, dict) and raw.get("spec_version") not in (None, SPEC_VERSION):
+        raise fail("E105", f"spec version {raw.get('spec_version')!r} is not supported", file=MANIFEST,
+                   pointer="/spec_version", expected=SPEC_VERSION, found=raw.get("spec_version"))
+    try:
+        manifest = Session.model_validate(raw)
+    except ValidationError as exc:
+        raise HaptifyError(*pydantic_findings(exc, "E104", MANIFEST)) from None
+    return SessionFolder(root, manifest, raw)
+
+
+# --- writing -----------------------------------------------------------------------------------
+
+def write_table(path: Path, frame: pd.DataFrame, fmt: str) -> None:
+    """Write a float64 table as Parquet (zstd) or CSV (shortest round-trip decimal, NaN as 'NaN')."""
+    if fmt == "parquet":
+        pq.write_table(pa.Table.from_pandas(frame, preserve_index=False), path, compression="zstd")
+    else:
+        frame.to_csv(path, index=False, na_rep="NaN", float_format=None, lineterminator="\n")
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    """Write a text file atomically (temp file in the same folder, then rename; spec §3.6)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def atomic_write_json(path: Path, payload: Any) -> None:
+    atomic_write_text(path, json.dumps(payload, indent=2, ensure_ascii=False) + "\n")
+
+
+def replace_folder_atomically(build: Path, target: Path, overwrite: bool) -> None:
+    """Move a fully written ``build`` folder to ``target`` (E901 when it exists and not ``overwrite``)."""
+    if target.exists():
+        if not overwrite:
+            shutil.rmtree(build, ignore_errors=True)
+            raise fail("E901", f"{str(target)!r} already exists", file=str(target))
+        old = target.parent / f".{target.name}.old-{uuid.uuid4().hex[:8]}"
+        os.replace(target, old)
+        os.replace(build, target)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.replace(build, target)
+
+
+@dataclass
+class _PendingStream:
+    trial_id: str
+    stream: dict
+    frame: pd.DataFrame
+
+
+@dataclass
+class SessionWriter:
+    """Build a session in memory and write it atomically (spec §3.6).
+
+    ``manifest`` holds every session-level field of :class:`Session` except ``trials``; trials and
+    streams are added with :meth:`add_trial` and :meth:`add_stream`; :meth:`write` fills in rows and
+    checksums, validates the manifest against the model, and renames the finished folder into place.
+    """
+
+    manifest: dict
+    extra_files: dict[str, str] = field(default_factory=dict)
+    _trials: list[dict] = field(default_factory=list)
+    _streams: list[_PendingStream] = field(default_factory=list)
+
+    def add_trial(self, trial_id: str, protocol: str, *, powered: bool, repetition: int = 1, label: str | None = None,
+                  rendering: Mapping | None = None, notes: str | None = None) -> dict:
+        trial = {"id": trial_id, "protocol": protocol, "repetition": repetition, "powered": powered, "streams": []}
+        for key, val in (("label", label), ("rendering", rendering), ("notes", notes)):
+            if val is not None:
+                trial[key] = dict(val) if isinstance(val, Mapping) else val
+        self._trials.append(trial)
+        return trial
+
+    def add_stream(self, trial_id: str, kind: str, data: Mapping[str, Any] | pd.DataFrame, *, rate_hz: float,
+                   frame: str | None = None, fmt: str = "parquet", entities: list[str] | None = None,
+                   file: str | None = None) -> dict:
+        """Add a stream; ``data`` maps every expected column name (``t`` first) to a 1-D array."""
+        trial = next(t for t in self._trials if t["id"] == trial_id)
+        present = list(data.keys()) if isinstance(data, Mapping) else list(data.columns)
+        cols = expected_columns(kind, entities, present)
+        missing = [c for c, _ in cols if c not in present]
+        if missing:
+            raise fail("E201", f"{kind} stream of trial {trial_id!r} lacks columns {missing}", column=missing[0],
+                       expected=[c for c, _ in cols], found=present)
+        table = pd.DataFrame({c: np.asarray(data[c], dtype=np.float64) for c, _ in cols})
+        stream = {
+            "kind": kind,
+            "file": file or default_stream_file(trial_id, kind, fmt),
+            "format": fmt,
+            "rate_hz": float(rate_hz),
+            "frame": frame or kind_table(kind)["frames"][0],
+            "columns": [{"name": c, "unit": u} for c, u in cols],
+            "rows": int(len(table)),
+            "sha256": "0" * 64,
+        }
+        if entities is not None:
+            stream["entities"] = list(entities)
+        trial["streams"].append(stream)
+        self._streams.append(_PendingStream(trial_id, stream, table))
+        return stream
+
+    def build_manifest(self) -> dict:
+        return {**self.manifest, "spec_version": SPEC_VERSION, "trials": self._trials}
+
+    def write(self, target: str | os.PathLike, *, overwrite: bool = False) -> Path:
+        """Write the session folder atomically and return its path."""
+        target = Path(target)
+        if target.exists() and not overwrite:
+            raise fail("E901", f"{str(target)!r} already exists", file=str(target))
+        target.parent.mkdir(parents=True, exist_ok=True)
+        build = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
+        try:
+            for pending in self._streams:
+                path = resolve_inside(build, pending.stream["file"])
+                path.parent.mkdir(parents=True, exist_ok=True)
+                write_table(path, pending.frame, pending.stream["format"])
+                pending.stream["sha256"] = sha256_file(path)
+            for rel, text in self.extra_files.items():
+                atomic_write_text(resolve_inside(build, rel), text)
+            manifest = self.build_manifest()
+            try:
+                Session.model_validate(manifest)
+            except ValidationError as exc:
+                raise HaptifyError(*pydantic_findings(exc, "E104", MANIFEST)) from None
+            atomic_write_json(build / MANIFEST, manifest)
+            replace_folder_atomically(build, target, overwrite)
+        except BaseException:
+            shutil.rmtree(build, ignore_errors=True)
+            raise
+        return target

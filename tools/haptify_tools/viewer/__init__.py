@@ -1,0 +1,1 @@
+"""The session viewer on rerun (issue 7)."""
