@@ -1,0 +1,73 @@
+"""Computing every metric a session allows (spec §15.4).
+
+The metric families are found through their definition files: each ``schemas/<v>/metrics/<family>.json``
+names, in ``module``, the reference module that computes it. That module exposes
+``compute(ctx: ComputeContext) -> list[MetricResult | Unavailable]``. Work shared between families
+(calibrated handle signals, plate wrenches) is cached on the context, so it is done once per trial.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable
+
+from haptify.errors import Finding, HaptifyError
+from haptify.metric_definitions import all_families
+from haptify.results import Implementation, MetricResult, ResultsFile, ResultWarning, Unavailable
+from haptify.storage import MANIFEST, SessionFolder, sha256_file
+from haptify.versions import PACKAGE_VERSION
+
+
+@dataclass
+class ComputeContext:
+    """What a family's ``compute`` receives: the session, a per-run cache and a warning sink."""
+
+    session: SessionFolder
+    wanted: set[str] | None = None  # metric ids asked for (None: all)
+    warnings: list[ResultWarning] = field(default_factory=list)
+    _cache: dict[Any, Any] = field(default_factory=dict)
+
+    def cached(self, key: Any, build: Callable[[], Any]) -> Any:
+        """Memoise ``build()`` under ``key`` for this run (e.g. ``("handle_signals", trial_id)``)."""
+        if key not in self._cache:
+            self._cache[key] = build()
+        return self._cache[key]
+
+    def wants(self, metric_id: str) -> bool:
+        return self.wanted is None or metric_id in self.wanted
+
+    def warn(self, code: str, message: str, metric: str | None = None, trial: str | None = None) -> None:
+        Finding(code, message)  # checks the code is catalogued
+        self.warnings.append(ResultWarning(code=code, message=message, metric=metric, trial=trial))
+
+
+def family_modules() -> list[tuple[str, str]]:
+    """``(family, module)`` for every definition file that names a computing module."""
+    return [(f.family, f.module) for f in all_families() if f.module]
+
+
+def compute_session(session: SessionFolder, metrics: Iterable[str] | None = None,
+                    progress: Callable[[int], None] | None = None) -> ResultsFile:
+    """Compute every metric (or those in ``metrics``) that the session's trials allow."""
+    wanted = set(metrics) if metrics else None
+    known = {m.id for f in all_families() for m in f.metrics}
+    if wanted and not wanted <= known:
+        unknown = sorted(wanted - known)
+        raise HaptifyError(Finding("E903", f"unknown metric id(s) {unknown}", expected=sorted(known), found=unknown))
+    ctx = ComputeContext(session=session, wanted=wanted)
+    out = ResultsFile(implementation=Implementation(name="haptify-reference", version=PACKAGE_VERSION),
+                      session_id=session.session_id, manifest_sha256=sha256_file(session.root / MANIFEST))
+    for family, module_name in family_modules():
+        fam_ids = {m.id for f in all_families() if f.family == family for m in f.metrics}
+        if wanted is not None and not (fam_ids & wanted):
+            continue
+        module = importlib.import_module(module_name)
+        for item in module.compute(ctx):
+            if not ctx.wants(item.id):
+                continue
+            (out.metrics if isinstance(item, MetricResult) else out.unavailable).append(item)
+        if progress:
+            progress(1)
+    out.warnings = ctx.warnings
+    return out
