@@ -193,7 +193,7 @@ def read_table(path: Path, fmt: str, columns: list[str], *, label: str) -> pd.Da
             if header != columns:
                 raise fail("E211", f"CSV header of {label!r} differs from the declared columns", file=label,
                            expected=columns, found=header)
-            frame = pd.read_csv(path, dtype="float64", float_precision="round_trip", na_values=["NaN"],
+            frame = pd.read_csv(path, dtype="float64", na_values=["NaN"],
                                 keep_default_na=False, engine="c")
     except HaptifyError:
         raise
