@@ -1,0 +1,30 @@
+"""The haptify command (spec §0.5): versions, JSON, exit codes, no tracebacks."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+from haptify.cli import main
+from haptify.versions import PACKAGE_VERSION, SCHEMA_VERSION, SPEC_VERSION
+
+
+def test_version_human_and_json(capsys):
+    assert main(["--version"]) == 0
+    assert f"haptify {PACKAGE_VERSION} (spec {SPEC_VERSION}" in capsys.readouterr().out
+    assert main(["--json", "--version"]) == 0
+    assert json.loads(capsys.readouterr().out) == {"package": PACKAGE_VERSION, "spec": SPEC_VERSION,
+                                                   "schema": SCHEMA_VERSION}
+
+
+def test_unknown_command_and_no_command_exit_2(capsys):
+    assert main(["frobnicate"]) == 2
+    assert main([]) == 2
+    capsys.readouterr()
+
+
+def test_console_script_runs_without_traceback():
+    proc = subprocess.run([sys.executable, "-m", "haptify.cli", "--help"], capture_output=True, text=True)
+    assert proc.returncode == 0
+    assert "COMMAND" in proc.stdout and "Traceback" not in proc.stderr

@@ -1,0 +1,107 @@
+"""Fill the generated tables of the spec from the normative data (spec §0.3).
+
+A spec chapter marks a generated block with ``<!-- BEGIN GENERATED: <what> [arg] -->`` …
+``<!-- END GENERATED -->``. ``<what>`` is ``params <family>`` (a metric family's parameters and
+metrics), ``stream-kinds``, ``protocols`` or ``codes``. ``--check`` exits 1 when a chapter's tables
+differ from the data, so prose tables cannot drift from the definition files.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from pathlib import Path
+
+from haptify import schemas
+from haptify.metric_definitions import family
+
+REPO = Path(__file__).resolve().parents[2]
+SPEC_DIR = REPO / "spec"
+BLOCK = re.compile(r"(<!-- BEGIN GENERATED: (?P<what>[a-z-]+)(?: (?P<arg>[a-z_]+))? -->\n)(?P<body>.*?)(<!-- END GENERATED -->)", re.S)
+
+
+def _cell(value: object) -> str:
+    return str(value).replace("|", "\\|").replace("\n", " ")
+
+
+def _table(header: list[str], rows: list[list[object]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(_cell(c) for c in row) + " |" for row in rows]
+    return "\n".join(lines) + "\n"
+
+
+def params_table(name: str) -> str:
+    fam = family(name)
+    out = f"Definition file `metrics/{name}.json`, version {fam.version}.\n\n"
+    if fam.parameters:
+        out += _table(["parameter", "value", "unit", "meaning"],
+                      [[f"`{k}`", f"`{p.value}`", p.unit or "—", p.description] for k, p in fam.parameters.items()])
+    if fam.metrics:
+        out += "\n" + _table(["metric id", "unit", "shape", "from protocols", "aggregation", "definition"],
+                             [[f"`{m.id}`", m.unit, m.shape, ", ".join(m.protocols), m.aggregation, m.description]
+                              for m in fam.metrics])
+    return out
+
+
+def stream_kinds_table() -> str:
+    data = schemas.load("stream-kinds.json")
+    rows = []
+    for kind, spec in data["kinds"].items():
+        if "entity_columns" in spec:
+            cols = ", ".join(f"`<entity>_{c['name']}` ({c['unit']})" for c in spec["entity_columns"])
+        else:
+            cols = ", ".join(f"`{c['name']}` ({c['unit']})" for c in spec["columns"])
+            if spec.get("optional_columns"):
+                cols += "; optional " + ", ".join(f"`{c['name']}`" for c in spec["optional_columns"])
+        rows.append([f"`{kind}`", cols, ", ".join(f"`{f}`" for f in spec["frames"]),
+                     "yes" if spec["nan_allowed"] else "no", spec["recommended_rate_hz"], spec["description"]])
+    return _table(["kind", "columns after `t` (unit)", "frame", "NaN allowed", "recommended Hz", "content"], rows)
+
+
+def protocols_table() -> str:
+    data = schemas.load("protocols.json")["protocols"]
+    rows = [[f"`{name}`", {True: "no (passive)", False: "yes (active)", None: "either"}[p["passive"]],
+             ", ".join(f"`{k}`" for k in p["required"]) or "—", ", ".join(f"`{k}`" for k in p["recommended"]) or "—",
+             p["description"]] for name, p in data.items()]
+    return _table(["protocol", "powered", "required streams", "recommended streams", "what"], rows)
+
+
+def codes_table() -> str:
+    rows = [[f"`{c['code']}`", c["name"], c["severity"], f"§{c['spec_section']}", c["title"], c["hint"]]
+            for c in schemas.load("codes.json")["codes"]]
+    return _table(["code", "name", "severity", "spec", "meaning", "hint"], rows)
+
+
+def render_block(what: str, arg: str | None) -> str:
+    if what == "params" and arg:
+        return params_table(arg)
+    return {"stream-kinds": stream_kinds_table, "protocols": protocols_table, "codes": codes_table}[what]()
+
+
+def regenerate(text: str) -> str:
+    return BLOCK.sub(lambda m: m.group(1) + render_block(m.group("what"), m.group("arg")) + m.group(5), text)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--check", action="store_true", help="exit 1 when a chapter's generated tables are stale")
+    args = parser.parse_args(argv)
+    stale = []
+    for path in sorted(SPEC_DIR.glob("*.md")):
+        text = path.read_text(encoding="utf-8")
+        new = regenerate(text)
+        if new != text:
+            stale.append(path)
+            if not args.check:
+                path.write_text(new, encoding="utf-8")
+    if args.check and stale:
+        print("stale generated tables (run python -m haptify_tools.gen_docs):", *map(str, stale), sep="\n  ")
+        return 1
+    if not args.check:
+        print(f"updated {len(stale)} chapter(s)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,66 @@
+"""Generate the JSON Schemas in ``schemas/<v>/`` from the pydantic models (spec §0.3).
+
+The pydantic models in the reference are the single source; this tool writes their JSON Schemas
+(draft 2020-12, ``$id`` carrying the spec version) and ``--check`` fails when a committed file is
+stale. Run ``python -m haptify_tools.gen_schemas`` after changing a model.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import sys
+from pathlib import Path
+
+from haptify.versions import SCHEMA_VERSION, SPEC_VERSION, schema_id
+
+# schema name -> "module:Class"; the file is schemas/<spec>/<name>.schema.json unless a path is given.
+MODELS: dict[str, str] = {
+    "session": "haptify.session_format:Session",
+    "device": "haptify.session_format:Device",
+    "rig": "haptify.session_format:Rig",
+    "metric-definition": "haptify.metric_definitions:MetricFamily",
+    "results": "haptify.results:ResultsFile",
+}
+
+REPO = Path(__file__).resolve().parents[2]
+SCHEMA_DIR = REPO / "schemas" / SPEC_VERSION
+
+
+def render(name: str, target: str) -> str:
+    """The JSON text of schema ``name`` generated from ``target`` (``module:Class``)."""
+    module_name, cls_name = target.split(":")
+    model = getattr(importlib.import_module(module_name), cls_name)
+    body = model.model_json_schema(mode="validation")
+    doc = {"$schema": "https://json-schema.org/draft/2020-12/schema", "$id": schema_id(name),
+           "x-haptify-schema-version": SCHEMA_VERSION}
+    doc.update(body)
+    return json.dumps(doc, indent=2, ensure_ascii=False, sort_keys=False) + "\n"
+
+
+def targets() -> dict[Path, str]:
+    return {SCHEMA_DIR / f"{name}.schema.json": render(name, target) for name, target in MODELS.items()}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--check", action="store_true", help="exit 1 when a committed schema is stale")
+    args = parser.parse_args(argv)
+    stale = []
+    for path, text in targets().items():
+        current = path.read_text(encoding="utf-8") if path.exists() else None
+        if current != text:
+            stale.append(path)
+            if not args.check:
+                path.write_text(text, encoding="utf-8")
+    if args.check and stale:
+        print("stale schemas (run python -m haptify_tools.gen_schemas):", *map(str, stale), sep="\n  ")
+        return 1
+    if not args.check:
+        print(f"wrote {len(stale)} schema(s)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
