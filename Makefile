@@ -19,7 +19,7 @@ $(STAMP): pyproject.toml | $(PY)
 install: $(STAMP)
 
 demo: $(STAMP)
-	$(PY) -m haptify.demo --out $(OUT)
+	$(PY) -m haptify_tools.demo --out $(OUT)
 
 test: $(STAMP)
 	$(PY) -m pytest -q -n 2 tests
