@@ -73,8 +73,24 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--quiet", "-q", action="store_true", help="print only errors")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for ep in sorted(entry_points(group="haptify.commands"), key=lambda e: e.name):
-        ep.load()(sub)
+        try:
+            register = ep.load()
+        except Exception as exc:  # a broken plugin must not take the other commands down
+            _register_broken(sub, ep.name, ep.value, exc)
+            continue
+        register(sub)
     return parser
+
+
+def _register_broken(sub, name: str, target: str, exc: Exception) -> None:
+    """Keep a plugin that failed to import visible: calling it reports E999 with the cause."""
+
+    def run(args, ui) -> int:
+        raise HaptifyError(Finding("E999", f"the '{name}' command ({target}) failed to load: {type(exc).__name__}: {exc}"))
+
+    parser = sub.add_parser(name, help=f"(unavailable: {type(exc).__name__})", add_help=False)
+    parser.add_argument("rest", nargs="*")
+    parser.set_defaults(func=run)
 
 
 def _print_findings(ui: UI, findings: list[Finding]) -> None:

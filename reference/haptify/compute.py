@@ -14,7 +14,7 @@ from typing import Any, Callable, Iterable
 
 from haptify.errors import Finding, HaptifyError
 from haptify.metric_definitions import all_families
-from haptify.results import Implementation, MetricResult, ResultsFile, ResultWarning, Unavailable
+from haptify.results import DeviceSummary, Implementation, MetricResult, ResultsFile, ResultWarning, Unavailable
 from haptify.storage import MANIFEST, SessionFolder, sha256_file
 from haptify.versions import PACKAGE_VERSION
 
@@ -56,8 +56,11 @@ def compute_session(session: SessionFolder, metrics: Iterable[str] | None = None
         unknown = sorted(wanted - known)
         raise HaptifyError(Finding("E903", f"unknown metric id(s) {unknown}", expected=sorted(known), found=unknown))
     ctx = ComputeContext(session=session, wanted=wanted)
+    device = session.device()
     out = ResultsFile(implementation=Implementation(name="haptify-reference", version=PACKAGE_VERSION),
-                      session_id=session.session_id, manifest_sha256=sha256_file(session.root / MANIFEST))
+                      session_id=session.session_id,
+                      device=DeviceSummary(manufacturer=device.manufacturer, model=device.model, serial=device.serial),
+                      manifest_sha256=sha256_file(session.root / MANIFEST))
     for family, module_name in family_modules():
         fam_ids = {m.id for f in all_families() if f.family == family for m in f.metrics}
         if wanted is not None and not (fam_ids & wanted):

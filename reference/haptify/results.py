@@ -69,6 +69,19 @@ class Implementation(BaseModel):
     version: str
 
 
+class DeviceSummary(BaseModel):
+    """Which device the results describe (copied from the session's device description)."""
+
+    model_config = ConfigDict(extra="forbid")
+    manufacturer: str
+    model: str
+    serial: str | None = None
+
+    @property
+    def label(self) -> str:
+        return f"{self.manufacturer} {self.model}" + (f" #{self.serial}" if self.serial else "")
+
+
 class ResultsFile(BaseModel):
     """``results.json`` (spec §15.1)."""
 
@@ -76,6 +89,7 @@ class ResultsFile(BaseModel):
     spec_version: str = SPEC_VERSION
     implementation: Implementation
     session_id: str
+    device: DeviceSummary | None = None
     manifest_sha256: str = Field(pattern=r"^[0-9a-f]{64}$")
     metrics: list[MetricResult] = Field(default_factory=list)
     unavailable: list[Unavailable] = Field(default_factory=list)
