@@ -1,0 +1,80 @@
+"""``haptify validate SESSION [--json]`` (spec §4.6): check a session folder and report every finding.
+
+Human output groups the findings by trial and file; ``--json`` prints a
+:class:`~haptify.validation.ValidationReportModel` (``validation-report.schema.json``). Exit code 0 when
+the session is valid (warnings allowed), 1 when it is invalid, 2 when validation could not run.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from haptify.validation import ValidationReport, SessionValidator
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``validate`` sub-command (entry point ``validate = "haptify.cmd_validate:register"``)."""
+    parser = subparsers.add_parser(
+        "validate", help="check a session folder against the Haptify spec",
+        description="Check a session folder (session.json and its stream files) against the Haptify spec and "
+                    "report every problem, grouped by trial and file. Exit code: 0 valid (warnings allowed), "
+                    "1 invalid, 2 could not run.")
+    parser.add_argument("session", metavar="SESSION", help="the session folder")
+    parser.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
+                        help="print the report as JSON (validation-report.schema.json)")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace, ui: Any) -> int:
+    """Validate ``args.session``; print the report; return the exit code (spec §4.6)."""
+    validator = SessionValidator(args.session)
+    validator.check_manifest()
+    with ui.progress(f"validating {validator.stream_count} streams", total=validator.stream_count) as advance:
+        validator.check_streams(advance)
+    report = validator.finish()
+    if ui.json_mode:
+        ui.emit_json(report.to_model().model_dump(mode="json", exclude_none=True))
+    else:
+        for line in render_text(report, errors_only=ui.quiet):
+            print(line)
+    return report.exit_code
+
+
+def render_text(report: ValidationReport, errors_only: bool = False) -> list[str]:
+    """The human report: one heading per trial and file, then the findings, then a summary line."""
+    lines: list[str] = []
+    last_trial: object = object()
+    for trial, file, findings in report.groups():
+        shown = [f for f in findings if f.is_error or not errors_only]
+        if not shown:
+            continue
+        if trial != last_trial:
+            if lines:
+                lines.append("")
+            lines.append(f"trial {trial}" if trial is not None else "session")
+            last_trial = trial
+        lines.append(f"  {file}")
+        for f in shown:
+            lines.extend("    " + part for part in _finding_lines(f))
+    if not errors_only:
+        verdict = {0: "valid", 1: "INVALID", 2: "could not be validated"}[report.exit_code]
+        summary = (f"{report.session}: {verdict} — {len(report.errors)} error(s), {len(report.warnings)} warning(s), "
+                   f"{report.streams_checked} stream(s) checked")
+        lines.extend(["", summary] if lines else [summary])
+    return lines
+
+
+def _finding_lines(f: Any) -> list[str]:
+    where = []
+    if f.pointer:
+        where.append(f"#{f.pointer}")
+    if f.column:
+        where.append(f"[{f.column}]")
+    if f.time_range:
+        where.append(f"t={f.time_range[0]:.6g}–{f.time_range[1]:.6g} s")
+    out = [f"{f.code} {f.severity}: {f.message}" + (f"  ({' '.join(where)})" if where else "")]
+    if f.expected is not None or f.found is not None:
+        out.append(f"  expected {f.expected!r}, found {f.found!r}")
+    out.append(f"  hint: {f.hint} (spec §{f.spec_section})")
+    return out

@@ -1,0 +1,873 @@
+"""Validation of a session folder (spec chapter 4).
+
+:func:`validate_session` checks a session folder against chapters 1–3 and reports **every** problem
+it finds as a coded :class:`~haptify.errors.Finding` (codes from ``schemas/<v>/codes.json``), grouped by
+trial and file. It never raises for bad input and never reads anything outside the session folder:
+paths are resolved lexically, symbolic link by symbolic link, and a path that would leave the folder is
+reported (E108/E109) before anything is opened (spec §4.2).
+
+The checks run in the order of spec §4.3: the manifest (well-formedness, JSON Schema with all errors,
+device file, ids, cross references), then the trials (protocol requirements, rendering, label,
+powered flag), then every stream (path safety, file, size limits, checksum, readability, columns and
+units, frame, rows, time, rate, NaN policy, infinities, quaternion norms, sensor ranges), and last the
+time overlap of the streams of each trial.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import stat
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path, PurePosixPath
+from typing import Any, Callable, Iterable, Literal
+
+import numpy as np
+import pandas as pd
+from jsonschema import Draft202012Validator
+from jsonschema.exceptions import ValidationError as SchemaError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from haptify import schemas
+from haptify.conventions import QUATERNION_NORM_TOLERANCE
+from haptify.errors import Finding, HaptifyError
+from haptify.session_format import (
+    ClockOffset,
+    Device,
+    Rig,
+    SensorRange,
+    Session,
+    Stream,
+    Trial,
+    expected_columns,
+    is_safe_relative_path,
+    kind_table,
+    quaternion_groups,
+)
+from haptify.storage import MANIFEST, pointer_of, pydantic_findings, read_table, sha256_file
+from haptify.versions import PACKAGE_VERSION, SPEC_VERSION
+
+# --- tolerances and limits of spec chapter 4 (§4.4, §4.5) ----------------------------------------
+RATE_TOLERANCE = 0.01                 # |actual mean rate / rate_hz − 1| allowed (E206)
+INTERVAL_LOW, INTERVAL_HIGH = 0.5, 1.5  # an interval outside [0.5, 1.5] / rate_hz is irregular (W402)
+OCCLUSION_WARNING_SHARE = 0.20        # share of occluded samples above which W405 is raised
+MANIFEST_MAX_BYTES = 16 * 2**20       # session.json larger than this is not read (E113)
+DEVICE_MAX_BYTES = 4 * 2**20          # device.json larger than this is not read (E113)
+STREAM_MAX_BYTES = 8 * 2**30          # spec §3.5: no stream file exceeds 8 GiB (E113)
+STREAM_BYTES_BASE = 64 * 2**10        # plausibility bound of a stream file's size from its declared
+STREAM_BYTES_PER_COLUMN = 2 * 2**10   # rows and columns: base + per column + per value (E113), so a
+STREAM_BYTES_PER_VALUE = 32           # tiny declared stream never makes the validator read gigabytes
+MAX_SYMLINK_HOPS = 40                 # as POSIX SYMLOOP_MAX
+
+MOCAP_KINDS = frozenset(k for k, v in schemas.load("stream-kinds.json")["kinds"].items() if v.get("nan_allowed"))
+EXIT_VALID, EXIT_INVALID, EXIT_CANNOT_RUN = 0, 1, 2
+
+
+# --- the report ----------------------------------------------------------------------------------
+
+@dataclass
+class ReportItem:
+    """A finding and the trial it belongs to (None for session-level findings)."""
+
+    finding: Finding
+    trial: str | None = None
+
+
+@dataclass
+class ValidationReport:
+    """Everything validation found in one session folder (spec §4.6)."""
+
+    session: str
+    items: list[ReportItem] = field(default_factory=list)
+    streams_checked: int = 0
+
+    @property
+    def findings(self) -> list[Finding]:
+        return [i.finding for i in self.items]
+
+    @property
+    def codes(self) -> list[str]:
+        """The distinct codes found, sorted."""
+        return sorted({f.code for f in self.findings})
+
+    @property
+    def errors(self) -> list[Finding]:
+        return [f for f in self.findings if f.is_error]
+
+    @property
+    def warnings(self) -> list[Finding]:
+        return [f for f in self.findings if not f.is_error]
+
+    @property
+    def valid(self) -> bool:
+        """True when no finding is an error (warnings allowed)."""
+        return not self.errors
+
+    @property
+    def exit_code(self) -> int:
+        """0 valid, 1 invalid, 2 validation could not run (no session folder, internal error) — spec §4.6."""
+        if any(f.code in ("E101", "E999") for f in self.findings):
+            return EXIT_CANNOT_RUN
+        return EXIT_VALID if self.valid else EXIT_INVALID
+
+    def groups(self) -> list[tuple[str | None, str, list[Finding]]]:
+        """Findings grouped as ``(trial, file, findings)``: session-level first, then trial by trial."""
+        order: dict[tuple[str | None, str], list[Finding]] = {}
+        for item in self.items:
+            order.setdefault((item.trial, item.finding.file or MANIFEST), []).append(item.finding)
+        trial_rank = {t: n for n, t in enumerate(dict.fromkeys(i.trial for i in self.items))}
+        keys = sorted(order, key=lambda k: (k[0] is not None, trial_rank[k[0]], k[1] != MANIFEST))
+        return [(trial, file, order[(trial, file)]) for trial, file in keys]
+
+    def to_model(self) -> "ValidationReportModel":
+        """The machine-readable report (``validation-report.schema.json``)."""
+        return ValidationReportModel(
+            spec_version=SPEC_VERSION, haptify_version=PACKAGE_VERSION, session=self.session,
+            valid=self.valid, exit_code=self.exit_code, errors=len(self.errors), warnings=len(self.warnings),
+            streams_checked=self.streams_checked,
+            findings=[FindingModel(trial=i.trial, **_jsonable(i.finding.to_dict())) for i in self.items],
+        )
+
+
+class FindingModel(BaseModel):
+    """One finding of a validation report (spec §4.6)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    code: str = Field(pattern=r"^[EW][0-9]{3}$", description="Stable code from codes.json.")
+    name: str = Field(description="The code's short name, e.g. 'time-not-increasing'.")
+    severity: Literal["error", "warning"]
+    message: str
+    hint: str
+    spec_section: str = Field(description="The spec section the rule comes from, e.g. '2.6'.")
+    trial: str | None = Field(None, description="The trial the finding belongs to; absent for session-level findings.")
+    file: str | None = Field(None, description="Path of the file, relative to the session folder.")
+    pointer: str | None = Field(None, description="JSON pointer (RFC 6901) into that file when it is JSON.")
+    column: str | None = Field(None, description="The stream column concerned.")
+    time_range: list[float] | None = Field(None, min_length=2, max_length=2, description="First and last affected sample time, s.")
+    expected: Any = None
+    found: Any = None
+
+
+class ValidationReportModel(BaseModel):
+    """The ``--json`` output of ``haptify validate`` (spec §4.6)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    spec_version: Literal[SPEC_VERSION]  # type: ignore[valid-type]
+    haptify_version: str
+    session: str = Field(description="The session folder as given on the command line.")
+    valid: bool = Field(description="True when no finding is an error.")
+    exit_code: Literal[0, 1, 2]
+    errors: int = Field(ge=0)
+    warnings: int = Field(ge=0)
+    streams_checked: int = Field(ge=0)
+    findings: list[FindingModel] = Field(description="Every finding, grouped: session-level first, then by trial and file.")
+
+
+def _jsonable(value: Any) -> Any:
+    """A JSON-safe copy: numpy scalars to Python, tuples to lists, non-finite floats to strings."""
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    return str(value)
+
+
+def _short(value: Any) -> Any:
+    """A short printable stand-in for a found value (containers summarised, long text cut)."""
+    if isinstance(value, dict):
+        return "<object>"
+    if isinstance(value, list):
+        return f"<array of {len(value)}>"
+    if isinstance(value, str) and len(value) > 80:
+        return value[:77] + "..."
+    return value
+
+
+# --- schema validation (spec §4.3.1) -------------------------------------------------------------
+
+@lru_cache(maxsize=None)
+def _schema_validator(name: str) -> Draft202012Validator:
+    """The Draft 2020-12 validator of ``<name>.schema.json``; from the pydantic model when not yet generated."""
+    try:
+        schema = schemas.schema(name)
+    except FileNotFoundError:
+        schema = {"session": Session, "device": Device}[name].model_json_schema()
+    return Draft202012Validator(schema)
+
+
+def _branch_errors(err: SchemaError) -> list[SchemaError]:
+    """The leaf errors of the branch of an ``anyOf``/``oneOf`` that the instance was meant to match.
+
+    A ``discriminator`` (pydantic's tagged unions) names the branch; otherwise branches whose type
+    does not fit the instance are dropped and the one with the fewest errors is taken.
+    """
+    if err.validator not in ("anyOf", "oneOf") or not err.context:
+        return [err]
+    by_branch: dict[int, list[SchemaError]] = {}
+    for sub in err.context:
+        by_branch.setdefault(sub.relative_schema_path[0], []).append(sub)
+    options = err.validator_value
+    disc = err.schema.get("discriminator") if isinstance(err.schema, dict) else None
+    if disc and isinstance(err.instance, dict):
+        tag = err.instance.get(disc.get("propertyName"))
+        target = disc.get("mapping", {}).get(tag) if isinstance(tag, str) else None
+        if target is None:
+            return [err]
+        chosen = [i for i, o in enumerate(options) if o.get("$ref") == target]
+        if not chosen or chosen[0] not in by_branch:
+            return [err]
+        branch = by_branch[chosen[0]]
+    else:
+        fitting = {i: errs for i, errs in by_branch.items()
+                   if not any(e.validator == "type" and not e.relative_path for e in errs)}
+        if not fitting:
+            return [err]
+        branch = min(fitting.values(), key=len)
+    out: list[SchemaError] = []
+    for sub in branch:
+        out.extend(_branch_errors(sub))
+    return out
+
+
+_SIZE_FIELDS = {"rows", "rate_hz", "loop_rate_hz"}
+
+
+def _code_for(err: SchemaError, default: str) -> str:
+    """Map a schema error to its catalogue code: E301 unknown protocol, E113 absurd size, else ``default``."""
+    path = list(err.absolute_path)
+    if default != "E104":
+        return default
+    if len(path) == 3 and path[0] == "trials" and path[2] == "protocol" and err.validator == "enum":
+        return "E301"
+    if path and path[-1] in _SIZE_FIELDS and err.validator in ("maximum", "exclusiveMaximum"):
+        return "E113"
+    return default
+
+
+def schema_findings(instance: Any, schema_name: str, code: str, label: str) -> list[Finding]:
+    """Every JSON Schema error of ``instance`` against ``<schema_name>.schema.json`` as findings (spec §4.3.1)."""
+    validator = _schema_validator(schema_name)
+    out: list[Finding] = []
+    for top in validator.iter_errors(instance):
+        for err in _branch_errors(top):
+            expected = err.validator_value if err.validator not in ("anyOf", "oneOf", "$ref", "additionalProperties") else None
+            if isinstance(expected, (dict, list)) and len(json.dumps(expected, default=str)) > 200:
+                expected = None
+            message = err.message if len(err.message) <= 300 else err.message[:297] + "..."
+            out.append(Finding(_code_for(err, code), f"{schema_name}.schema.json: {message}", file=label,
+                               pointer=pointer_of(err.absolute_path), expected=_jsonable(expected) if expected is not None else err.validator,
+                               found=_jsonable(_short(err.instance))))
+    out.sort(key=lambda f: f.pointer or "")
+    return out
+
+
+# --- files inside the folder (spec §4.2) ---------------------------------------------------------
+
+def resolve_contained(root: Path, relative: str, *, label: str | None = None) -> Path:
+    """The path of ``relative`` inside ``root`` with every symbolic link resolved lexically (spec §4.2).
+
+    Each component is examined with ``lstat`` inside the folder; a link's target is read with
+    ``readlink`` and resolved against the folder, never against the file system, so nothing outside
+    ``root`` is ever touched. Raises E108 for an unsafe declared path, E109 when a link leads out.
+    """
+    label = label or relative
+    if not is_safe_relative_path(relative):
+        raise HaptifyError(Finding("E108", f"path {relative!r} is absolute or leaves the session folder", file=label,
+                                   expected="a relative POSIX path inside the session folder", found=relative))
+    current: list[str] = []
+    pending = relative.split("/")
+    hops = 0
+    while pending:
+        part = pending.pop(0)
+        if part in ("", "."):
+            continue
+        if part == "..":
+            if not current:
+                raise HaptifyError(Finding("E109", f"{relative!r} resolves outside the session folder", file=label,
+                                           expected="a link target inside the session folder", found=relative))
+            current.pop()
+            continue
+        candidate = root.joinpath(*current, part)
+        if candidate.is_symlink():
+            hops += 1
+            target = os.readlink(candidate)
+            if hops > MAX_SYMLINK_HOPS or PurePosixPath(target).is_absolute() or "\\" in target:
+                raise HaptifyError(Finding("E109", f"{relative!r} is a symbolic link that leads outside the session folder",
+                                           file=label, expected="a link target inside the session folder", found=target))
+            pending = target.split("/") + pending
+            continue
+        current.append(part)
+    return root.joinpath(*current)
+
+
+def _regular_file(path: Path, label: str, missing_code: str, missing_text: str, limit: int) -> int:
+    """``lstat`` a resolved path: its size when it is a regular file within ``limit``; coded errors otherwise."""
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        raise HaptifyError(Finding(missing_code, missing_text, file=label)) from None
+    except OSError as exc:
+        raise HaptifyError(Finding("E112", f"{label!r} cannot be examined: {exc.strerror}", file=label)) from None
+    if not stat.S_ISREG(st.st_mode):
+        raise HaptifyError(Finding("E112", f"{label!r} is not a regular file", file=label,
+                                   expected="a regular file", found="a folder" if stat.S_ISDIR(st.st_mode) else "a special file"))
+    if st.st_size > limit:
+        raise HaptifyError(Finding("E113", f"{label!r} is {st.st_size} bytes, more than the {limit} bytes allowed", file=label,
+                                   expected=f"at most {limit} bytes", found=st.st_size))
+    return st.st_size
+
+
+class _NonFinite(ValueError):
+    pass
+
+
+def _reject_constant(name: str) -> float:
+    raise _NonFinite(f"{name} is not a JSON number")
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise _NonFinite(f"the number {text} overflows a 64-bit float")
+    return value
+
+
+def load_strict_json(path: Path, code: str, label: str) -> Any:
+    """Parse a JSON file strictly: UTF-8, no NaN/Infinity literals, no numbers that overflow (spec §4.3)."""
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise HaptifyError(Finding(code, f"{label} is not UTF-8 text: {exc.reason} at byte {exc.start}", file=label,
+                                   expected="UTF-8 JSON", found=f"byte 0x{exc.object[exc.start]:02x}")) from None
+    except OSError as exc:
+        raise HaptifyError(Finding(code, f"{label} cannot be read: {exc.strerror}", file=label)) from None
+    try:
+        return json.loads(text, parse_constant=_reject_constant, parse_float=_finite_float)
+    except json.JSONDecodeError as exc:
+        raise HaptifyError(Finding(code, f"{label} is not well-formed JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})",
+                                   file=label, expected="JSON", found=text[max(0, exc.pos - 20): exc.pos + 20])) from None
+    except _NonFinite as exc:
+        raise HaptifyError(Finding(code, f"{label} is not well-formed JSON: {exc}", file=label, expected="a finite JSON number")) from None
+    except RecursionError:
+        raise HaptifyError(Finding(code, f"{label} nests too deeply to be a Haptify document", file=label)) from None
+
+
+# --- the validator -------------------------------------------------------------------------------
+
+@dataclass
+class _StreamEntry:
+    trial: str | None
+    pointer: str
+    stream: Stream
+    span: tuple[float, float] | None = None
+
+
+def _time_span(t: np.ndarray, mask: np.ndarray) -> tuple[float, float] | None:
+    """First and last time (s) of the samples selected by ``mask`` (finite times only)."""
+    idx = np.flatnonzero(mask)
+    if idx.size == 0:
+        return None
+    times = t[idx]
+    times = times[np.isfinite(times)]
+    if times.size == 0:
+        return None
+    return (float(times[0]), float(times[-1]))
+
+
+def _range_limit(column: str, rng: SensorRange) -> float | None:
+    """The symmetric range (stream units) of a wrench/accel column, from the rig's SensorRange (spec §2.4)."""
+    base = column.split("_")[-1]
+    axis = "xyz".find(base[-1:]) if len(base) == 2 else -1
+    if axis < 0:
+        return None
+    table = {"f": rng.force_N, "t": rng.torque_Nm, "a": rng.accel_m_per_s2}.get(base[0])
+    return None if table is None else float(table[axis])
+
+
+class SessionValidator:
+    """Validate one session folder in two phases: :meth:`check_manifest`, then :meth:`check_streams`.
+
+    The split lets a caller show progress over the streams (their number is known after the first
+    phase); :func:`validate_session` runs both.
+    """
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        self.root = Path(path)
+        self.report = ValidationReport(session=str(path))
+        self.raw: Any = None
+        self.rig: Rig | None = None
+        self.trials: list[tuple[int, dict, Trial | None]] = []
+        self.entries: list[_StreamEntry] = []
+        self.offsets: dict[str, float] = {}
+        self._manifest_ok = False
+
+    # -- bookkeeping --------------------------------------------------------------------------
+    def add(self, finding: Finding, trial: str | None = None) -> None:
+        self.report.items.append(ReportItem(finding, trial))
+
+    def add_all(self, findings: Iterable[Finding], trial: str | None = None) -> None:
+        for f in findings:
+            self.add(f, trial)
+
+    @property
+    def stream_count(self) -> int:
+        return len(self.entries)
+
+    def _guard(self, step: Callable[[], None], trial: str | None = None, file: str | None = None) -> None:
+        """Run one check; coded errors become findings, anything unexpected becomes E999 (never a traceback)."""
+        try:
+            step()
+        except HaptifyError as err:
+            self.add_all(err.findings, trial)
+        except (MemoryError, RecursionError) as exc:
+            self.add(Finding("E112", f"{file or 'the input'} is too large or too deeply nested to check: {type(exc).__name__}", file=file), trial)
+        except Exception as exc:  # a bug in the validator: report it, coded, and go on
+            self.add(Finding("E999", f"{type(exc).__name__}: {exc}", file=file), trial)
+
+    # -- phase 1: the manifest ------------------------------------------------------------------
+    def check_manifest(self) -> None:
+        """Folder, session.json, schema, device, ids, references, trials (spec §4.3.1–4.3.3)."""
+        if not self.root.is_dir():
+            self.add(Finding("E101", f"{str(self.root)!r} is not a session folder", file=str(self.root),
+                             expected="a folder holding session.json", found="missing" if not self.root.exists() else "not a folder"))
+            return
+        self._guard(self._load_manifest, file=MANIFEST)
+        if self.raw is None:
+            return
+        self._guard(self._check_schema, file=MANIFEST)
+        if not self._manifest_ok:
+            return
+        self._guard(self._check_device, file=MANIFEST)
+        self._guard(self._check_ids, file=MANIFEST)
+        self._guard(self._check_static_quaternions, file=MANIFEST)
+        for index, raw_trial, trial in self.trials:
+            if trial is not None:
+                self._guard(lambda: self._check_trial(index, trial), trial=trial.id, file=MANIFEST)
+
+    def _load_manifest(self) -> None:
+        path = resolve_contained(self.root, MANIFEST)
+        _regular_file(path, MANIFEST, "E102", f"no {MANIFEST} in {str(self.root)!r}", MANIFEST_MAX_BYTES)
+        raw = load_strict_json(path, "E103", MANIFEST)
+        if isinstance(raw, dict) and "spec_version" in raw and raw["spec_version"] != SPEC_VERSION:
+            raise HaptifyError(Finding("E105", f"spec version {raw['spec_version']!r} is not supported", file=MANIFEST,
+                                       pointer="/spec_version", expected=SPEC_VERSION, found=_short(raw["spec_version"])))
+        self.raw = raw
+
+    def _check_schema(self) -> None:
+        findings = schema_findings(self.raw, "session", "E104", MANIFEST)
+        self.add_all(findings)
+        raw = self.raw
+        if not isinstance(raw, dict):
+            return
+        self._manifest_ok = True
+        if not findings:
+            try:
+                manifest = Session.model_validate(raw)
+            except ValidationError as exc:  # the model is stricter than its schema somewhere
+                self.add_all(pydantic_findings(exc, "E104", MANIFEST))
+                manifest = None
+            if manifest is not None:
+                self.rig = manifest.rig
+                self.trials = [(i, raw["trials"][i], t) for i, t in enumerate(manifest.trials)]
+                self.offsets = self._offsets(manifest.calibration)
+                self._collect_streams()
+                return
+        # Partial manifest: validate what can be validated piece by piece, so that every stream whose
+        # own description is sound is still checked (spec §4.1: report everything).
+        self.rig = _try(Rig, raw.get("rig"))
+        trials = raw.get("trials")
+        self.trials = []
+        if isinstance(trials, list):
+            for i, t in enumerate(trials):
+                self.trials.append((i, t, _try(Trial, t)))
+        calib = raw.get("calibration")
+        records = []
+        if isinstance(calib, list):
+            for rec in calib:
+                if isinstance(rec, dict) and rec.get("kind") == "clock_offset":
+                    parsed = _try(ClockOffset, rec)
+                    if parsed is not None:
+                        records.append(parsed)
+        self.offsets = self._offsets(records)
+        self._collect_streams()
+
+    @staticmethod
+    def _offsets(records: Iterable[Any]) -> dict[str, float]:
+        out: dict[str, float] = {}
+        for rec in records:
+            if getattr(rec, "kind", None) == "clock_offset":
+                out[rec.stream_file] = out.get(rec.stream_file, 0.0) + rec.offset_s
+        return out
+
+    def _collect_streams(self) -> None:
+        for index, raw_trial, trial in self.trials:
+            trial_id = trial.id if trial is not None else _str_or_none(raw_trial, "id")
+            raw_streams = trial.streams if trial is not None else (raw_trial.get("streams") if isinstance(raw_trial, dict) else None)
+            if not isinstance(raw_streams, list):
+                continue
+            for j, s in enumerate(raw_streams):
+                stream = s if isinstance(s, Stream) else _try(Stream, s)
+                if stream is not None:
+                    self.entries.append(_StreamEntry(trial_id, f"/trials/{index}/streams/{j}", stream))
+
+    def _check_device(self) -> None:
+        dev = self.raw.get("device")
+        if not (isinstance(dev, dict) and set(dev) == {"file"} and isinstance(dev["file"], str)):
+            return
+        label = dev["file"]
+        try:
+            path = resolve_contained(self.root, label)
+            _regular_file(path, label, "E106", f"device file {label!r} does not exist", DEVICE_MAX_BYTES)
+            data = load_strict_json(path, "E106", label)
+        except HaptifyError as err:
+            for f in err.findings:
+                if f.file == label and f.pointer is None and f.code in ("E108", "E109"):
+                    f.pointer = "/device/file"
+            self.add_all(err.findings)
+            return
+        self.add_all(schema_findings(data, "device", "E106", label))
+
+    def _check_ids(self) -> None:
+        raw = self.raw
+        seen: dict[str, str] = {}
+        for index, raw_trial, trial in self.trials:
+            tid = trial.id if trial is not None else _str_or_none(raw_trial, "id")
+            if tid is None:
+                continue
+            if tid in seen:
+                self.add(Finding("E107", f"trial id {tid!r} is used twice", file=MANIFEST, pointer=f"/trials/{index}/id",
+                                 expected="a unique trial id", found=tid), tid)
+            seen.setdefault(tid, f"/trials/{index}")
+        calib = raw.get("calibration") if isinstance(raw.get("calibration"), list) else []
+        cids: set[str] = set()
+        for i, rec in enumerate(calib):
+            cid = _str_or_none(rec, "id")
+            if cid is not None and cid in cids:
+                self.add(Finding("E107", f"calibration id {cid!r} is used twice", file=MANIFEST, pointer=f"/calibration/{i}/id",
+                                 expected="a unique calibration id", found=cid))
+            if cid is not None:
+                cids.add(cid)
+        files: dict[str, str] = {}
+        for e in self.entries:
+            key = PurePosixPath(e.stream.file).as_posix()
+            if key in files:
+                self.add(Finding("E107", f"stream file {e.stream.file!r} is named twice (also at {files[key]})", file=MANIFEST,
+                                 pointer=f"{e.pointer}/file", expected="one stream per file", found=e.stream.file), e.trial)
+            files.setdefault(key, e.pointer)
+        stream_files = set(files)
+        for i, rec in enumerate(calib):
+            if not isinstance(rec, dict):
+                continue
+            src = rec.get("source_trial")
+            if isinstance(src, str) and src not in seen:
+                self.add(Finding("E114", f"calibration {rec.get('id')!r} names trial {src!r}, which the session does not hold",
+                                 file=MANIFEST, pointer=f"/calibration/{i}/source_trial", expected=sorted(seen), found=src))
+            sf = rec.get("stream_file")
+            if rec.get("kind") == "clock_offset" and isinstance(sf, str) and sf not in stream_files:
+                self.add(Finding("E114", f"clock offset {rec.get('id')!r} names stream file {sf!r}, which no stream uses",
+                                 file=MANIFEST, pointer=f"/calibration/{i}/stream_file", expected="a stream file of this session", found=sf))
+
+    def _check_static_quaternions(self) -> None:
+        """Unit norm of the quaternions inside session.json itself (spec §1.3)."""
+        for pointer, q in _quaternions_in(self.raw, ""):
+            if not (isinstance(q, list) and len(q) == 4 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in q)):
+                continue
+            norm = math.sqrt(sum(float(v) ** 2 for v in q))
+            if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
+                self.add(Finding("E207", f"quaternion has norm {norm:.6g}", file=MANIFEST, pointer=pointer,
+                                 expected=f"norm 1 ± {QUATERNION_NORM_TOLERANCE}", found=q))
+
+    def _check_trial(self, index: int, trial: Trial) -> None:
+        """Protocol requirements, rendering, label, powered flag, one stream per kind (spec §4.3.3)."""
+        where = f"/trials/{index}"
+        proto = schemas.load("protocols.json")["protocols"][trial.protocol]
+        kinds = [s.kind for s in trial.streams]
+        for j, kind in enumerate(kinds):
+            if kind in kinds[:j]:
+                self.add(Finding("E306", f"trial {trial.id!r} has two {kind} streams", file=MANIFEST, pointer=f"{where}/streams/{j}/kind",
+                                 expected=f"one {kind} stream", found=kinds.count(kind)), trial.id)
+        for kind in proto["required"]:
+            if kind not in kinds:
+                self.add(Finding("E302", f"{trial.protocol} trial {trial.id!r} has no {kind} stream", file=MANIFEST,
+                                 pointer=f"{where}/streams", expected=proto["required"], found=kinds), trial.id)
+        for kind in proto["recommended"]:
+            if kind not in kinds:
+                self.add(Finding("W404", f"{trial.protocol} trial {trial.id!r} has no {kind} stream", file=MANIFEST,
+                                 pointer=f"{where}/streams", expected=proto["recommended"], found=kinds), trial.id)
+        passive = proto["passive"]
+        if passive is False and trial.rendering is None:
+            self.add(Finding("E303", f"active {trial.protocol} trial {trial.id!r} has no rendering parameters", file=MANIFEST,
+                             pointer=f"{where}/rendering", expected="a rendering object", found=None), trial.id)
+        if trial.protocol == "other" and not (trial.label or "").strip():
+            self.add(Finding("E304", f"trial {trial.id!r} of protocol 'other' has no label", file=MANIFEST,
+                             pointer=f"{where}/label", expected="a label such as 'figure_eight'", found=trial.label), trial.id)
+        if passive is not None and trial.powered == passive:
+            self.add(Finding("W403", f"{'passive' if passive else 'active'} protocol {trial.protocol!r} recorded with powered={str(trial.powered).lower()}",
+                             file=MANIFEST, pointer=f"{where}/powered", expected=not passive, found=trial.powered), trial.id)
+
+    # -- phase 2: the streams --------------------------------------------------------------------
+    def check_streams(self, advance: Callable[[int], Any] | None = None) -> None:
+        """Check every stream's file and data, then the time overlap per trial (spec §4.3.4–4.3.5)."""
+        for entry in self.entries:
+            self._guard(lambda: self._check_stream(entry), trial=entry.trial, file=entry.stream.file)
+            self.report.streams_checked += 1
+            if advance is not None:
+                advance(1)
+        self._guard(self._check_overlap, file=MANIFEST)
+
+    def _check_stream(self, entry: _StreamEntry) -> None:
+        s, trial, label = entry.stream, entry.trial, entry.stream.file
+        add = lambda f: self.add(f, trial)  # noqa: E731
+        spec = kind_table(s.kind)
+        # declared metadata: columns, units, entities, frame, rate
+        declared = [c.name for c in s.columns]
+        if "entity_columns" in spec:
+            entities = s.entities or []
+            if not entities:
+                add(Finding("E201", f"{s.kind} stream names no entities", file=MANIFEST, pointer=f"{entry.pointer}/entities",
+                            expected="the marker or link names, in column order", found=s.entities))
+            dups = sorted({e for e in entities if entities.count(e) > 1})
+            if dups:
+                add(Finding("E107", f"{s.kind} stream lists entities {dups} more than once", file=MANIFEST,
+                            pointer=f"{entry.pointer}/entities", expected="distinct entities", found=dups))
+            known = self._known_entities(s.kind)
+            if known is not None:
+                for k, ent in enumerate(entities):
+                    if ent not in known:
+                        add(Finding("E213", f"{s.kind} stream names {ent!r}, which the rig does not describe", file=MANIFEST,
+                                    pointer=f"{entry.pointer}/entities/{k}", expected=sorted(known), found=ent))
+        expected = expected_columns(s.kind, s.entities, declared)
+        names_ok = [n for n, _ in expected] == declared
+        if not names_ok:
+            add(Finding("E201", f"{s.kind} stream declares columns that differ from its kind's", file=MANIFEST,
+                        pointer=f"{entry.pointer}/columns", expected=[n for n, _ in expected], found=declared))
+        else:
+            for k, ((name, unit), col) in enumerate(zip(expected, s.columns)):
+                if col.unit != unit:
+                    add(Finding("E202", f"column {name!r} is declared in {col.unit!r}", file=MANIFEST,
+                                pointer=f"{entry.pointer}/columns/{k}/unit", column=name, expected=unit, found=col.unit))
+        if s.frame not in spec["frames"]:
+            add(Finding("E209", f"{s.kind} stream is declared in frame {s.frame!r}", file=MANIFEST, pointer=f"{entry.pointer}/frame",
+                        expected=spec["frames"], found=s.frame))
+        if s.rate_hz < spec["recommended_rate_hz"]:
+            add(Finding("W406", f"{s.kind} stream at {s.rate_hz:g} Hz is below the recommended {spec['recommended_rate_hz']} Hz",
+                        file=MANIFEST, pointer=f"{entry.pointer}/rate_hz", expected=spec["recommended_rate_hz"], found=s.rate_hz))
+        # the file: path safety, existence, size, checksum, readability
+        path = resolve_contained(self.root, s.file)
+        size_limit = min(STREAM_MAX_BYTES, STREAM_BYTES_BASE + len(declared) * (STREAM_BYTES_PER_COLUMN + STREAM_BYTES_PER_VALUE * s.rows))
+        _regular_file(path, label, "E110", f"stream file {label!r} does not exist", size_limit)
+        digest = sha256_file(path)
+        if digest != s.sha256:
+            add(Finding("E111", f"checksum of {label!r} does not match session.json", file=label, expected=s.sha256, found=digest))
+        table = read_table(path, s.format, declared, label=label)
+        if list(table.columns) != declared:
+            add(Finding("E201", f"the file's columns differ from the columns declared in session.json", file=label,
+                        expected=declared, found=[str(c) for c in table.columns]))
+            return
+        n = len(table)
+        if n != s.rows:
+            add(Finding("E208", f"{label!r} holds {n} rows, session.json declares {s.rows}", file=label, expected=s.rows, found=n))
+        if n < 2:
+            add(Finding("E205", f"{s.kind} stream holds {n} sample{'s' if n != 1 else ''}", file=label, expected="at least 2 samples", found=n))
+            return
+        self._check_data(entry, table, add)
+
+    def _known_entities(self, kind: str) -> set[str] | None:
+        mocap = self.rig.motion_capture if self.rig is not None else None
+        if mocap is None:
+            return set()
+        if kind == "markers":
+            return set(mocap.markers) | {m for rb in mocap.rigid_bodies for m in rb.markers}
+        if kind == "link_poses":
+            return {rb.name for rb in mocap.rigid_bodies}
+        return None
+
+    def _check_data(self, entry: _StreamEntry, table: pd.DataFrame, add: Callable[[Finding], None]) -> None:
+        """Time, rate, NaN policy, infinities, quaternions and sensor ranges of one stream (spec §4.4)."""
+        s, label = entry.stream, entry.stream.file
+        spec = kind_table(s.kind)
+        t = table["t"].to_numpy()
+        data_cols = [c for c in table.columns if c != "t"]
+        # time
+        finite_t = np.isfinite(t)
+        time_ok = True
+        if not finite_t.all():
+            time_ok = False
+            add(Finding("E203", f"time column holds {int((~finite_t).sum())} non-finite values", file=label, column="t",
+                        time_range=_time_span(t, ~finite_t) or _neighbour_span(t, ~finite_t), expected="finite seconds", found="NaN or infinity"))
+        dt = np.diff(t)
+        bad = ~(dt > 0) & np.isfinite(dt)
+        if bad.any():
+            time_ok = False
+            k = int(np.flatnonzero(bad)[0])
+            add(Finding("E203", f"time does not strictly increase at {int(bad.sum())} intervals (first at row {k + 1})", file=label,
+                        column="t", time_range=(float(t[k]), float(t[k + 1])), expected="t[i+1] > t[i]",
+                        found=f"t[{k}]={t[k]!r}, t[{k + 1}]={t[k + 1]!r}"))
+        if time_ok:
+            offset = self.offsets.get(s.file, 0.0)
+            entry.span = (float(t[0]) + offset, float(t[-1]) + offset)
+            duration = float(t[-1] - t[0])
+            actual = (len(t) - 1) / duration
+            if abs(actual / s.rate_hz - 1.0) > RATE_TOLERANCE:
+                add(Finding("E206", f"actual mean rate {actual:.6g} Hz differs from the declared {s.rate_hz:g} Hz by more than "
+                            f"{RATE_TOLERANCE:.0%}", file=label, column="t", time_range=(float(t[0]), float(t[-1])),
+                            expected=s.rate_hz, found=round(actual, 6)))
+            nominal = 1.0 / s.rate_hz
+            odd = (dt < INTERVAL_LOW * nominal) | (dt > INTERVAL_HIGH * nominal)
+            if odd.any():
+                idx = np.flatnonzero(odd)
+                add(Finding("W402", f"{idx.size} sample intervals lie outside [{INTERVAL_LOW}, {INTERVAL_HIGH}] × {nominal:.6g} s "
+                            f"(largest {dt.max():.6g} s, smallest {dt.min():.6g} s)", file=label, column="t",
+                            time_range=(float(t[idx[0]]), float(t[idx[-1] + 1])), expected=nominal, found=int(idx.size)))
+        # values: infinities, NaN policy
+        values = table[data_cols].to_numpy(dtype=np.float64, copy=False) if data_cols else np.empty((len(t), 0))
+        nan = np.isnan(values)
+        inf = np.isinf(values)
+        for k in np.flatnonzero(inf.any(axis=0)):
+            add(Finding("E210", f"column {data_cols[k]!r} holds {int(inf[:, k].sum())} infinite values", file=label,
+                        column=data_cols[k], time_range=_time_span(t, inf[:, k]), expected="finite values", found="inf"))
+        if s.kind in MOCAP_KINDS:
+            self._check_occlusion(s, t, data_cols, nan, add)
+        else:
+            for k in np.flatnonzero(nan.any(axis=0)):
+                add(Finding("E204", f"column {data_cols[k]!r} holds {int(nan[:, k].sum())} NaN values; {s.kind} allows none",
+                            file=label, column=data_cols[k], time_range=_time_span(t, nan[:, k]), expected="no NaN", found="NaN"))
+        # quaternions
+        col_index = {c: k for k, c in enumerate(data_cols)}
+        for group in quaternion_groups(s.kind, s.entities):
+            if not all(c in col_index for c in group):
+                continue
+            q = values[:, [col_index[c] for c in group]]
+            ok = np.isfinite(q).all(axis=1)
+            norm = np.sqrt(np.einsum("ij,ij->i", q, q))
+            off = ok & (np.abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE)
+            if off.any():
+                worst = float(norm[off][np.argmax(np.abs(norm[off] - 1.0))])
+                add(Finding("E207", f"{int(off.sum())} quaternions ({', '.join(group)}) are not unit; worst norm {worst:.6g}",
+                            file=label, column=group[0], time_range=_time_span(t, off),
+                            expected=f"norm 1 ± {QUATERNION_NORM_TOLERANCE}", found=worst))
+        # sensor ranges
+        rng_spec = spec.get("range")
+        rng = self._rig_range(rng_spec["rig_field"]) if rng_spec else None
+        if rng is not None:
+            for k, col in enumerate(data_cols):
+                limit = _range_limit(col, rng)
+                if limit is None:
+                    continue
+                with np.errstate(invalid="ignore"):
+                    over = np.abs(values[:, k]) > limit
+                if over.any():
+                    peak = float(np.nanmax(np.abs(values[over, k])))
+                    add(Finding("W401", f"column {col!r} exceeds the declared ±{limit:g} range at {int(over.sum())} samples (peak {peak:.6g})",
+                                file=label, column=col, time_range=_time_span(t, over), expected=f"|value| ≤ {limit:g}", found=peak))
+
+    def _check_occlusion(self, s: Stream, t: np.ndarray, cols: list[str], nan: np.ndarray, add: Callable[[Finding], None]) -> None:
+        """Mocap NaN policy (spec §2.7): whole entities NaN together; warn above the occlusion share."""
+        spec = kind_table(s.kind)
+        if "entity_columns" in spec:
+            width = len(spec["entity_columns"])
+            groups = [(ent, list(range(k * width, (k + 1) * width))) for k, ent in enumerate(s.entities or [])]
+        else:
+            groups = [(s.kind, list(range(len(cols))))]
+        for name, idx in groups:
+            if not idx or idx[-1] >= len(cols):
+                continue
+            g = nan[:, idx]
+            partial = g.any(axis=1) & ~g.all(axis=1)
+            if partial.any():
+                add(Finding("E204", f"{name}: {int(partial.sum())} samples have some but not all of {[cols[i] for i in idx]} NaN",
+                            file=s.file, column=cols[idx[0]], time_range=_time_span(t, partial),
+                            expected="all columns of an occluded entity NaN together", found="partial NaN"))
+            share = float(g.all(axis=1).mean())
+            if share > OCCLUSION_WARNING_SHARE:
+                add(Finding("W405", f"{name} is occluded in {share:.0%} of the samples", file=s.file, column=cols[idx[0]],
+                            time_range=_time_span(t, g.all(axis=1)), expected=f"at most {OCCLUSION_WARNING_SHARE:.0%}", found=round(share, 4)))
+
+    def _rig_range(self, dotted: str) -> SensorRange | None:
+        node: Any = self.rig
+        for part in dotted.split("."):
+            node = getattr(node, part, None) if node is not None else None
+        return node if isinstance(node, SensorRange) else None
+
+    def _check_overlap(self) -> None:
+        """The streams of one trial share a time interval of positive length (spec §4.3.5)."""
+        by_trial: dict[str | None, list[_StreamEntry]] = {}
+        for e in self.entries:
+            if e.span is not None:
+                by_trial.setdefault(e.trial, []).append(e)
+        for trial, entries in by_trial.items():
+            if len(entries) < 2:
+                continue
+            late = max(entries, key=lambda e: e.span[0])
+            early = min(entries, key=lambda e: e.span[1])
+            if late.span[0] >= early.span[1]:
+                self.add(Finding("E305", f"{early.stream.kind} ends at t={early.span[1]:.6g} s before {late.stream.kind} starts at "
+                                 f"t={late.span[0]:.6g} s (session clock)", file=late.stream.file, column="t",
+                                 time_range=(early.span[1], late.span[0]), expected="overlapping time spans",
+                                 found={early.stream.kind: list(early.span), late.stream.kind: list(late.span)}), trial)
+
+    def finish(self) -> ValidationReport:
+        return self.report
+
+
+def _neighbour_span(t: np.ndarray, mask: np.ndarray) -> tuple[float, float] | None:
+    """Times of the finite samples around the first masked one (for NaN times)."""
+    k = int(np.flatnonzero(mask)[0])
+    before = t[:k][np.isfinite(t[:k])]
+    after = t[k + 1:][np.isfinite(t[k + 1:])]
+    if before.size == 0 and after.size == 0:
+        return None
+    lo = float(before[-1]) if before.size else float(after[0])
+    hi = float(after[0]) if after.size else float(before[-1])
+    return (lo, hi)
+
+
+def _quaternions_in(node: Any, pointer: str) -> Iterable[tuple[str, Any]]:
+    """Every ``quaternion`` member inside a JSON tree, with its pointer."""
+    if isinstance(node, dict):
+        for k, v in node.items():
+            p = f"{pointer}/{str(k).replace('~', '~0').replace('/', '~1')}"
+            if k == "quaternion":
+                yield p, v
+            else:
+                yield from _quaternions_in(v, p)
+    elif isinstance(node, list):
+        for i, v in enumerate(node):
+            yield from _quaternions_in(v, f"{pointer}/{i}")
+
+
+def _try(model: type[BaseModel], value: Any) -> Any:
+    try:
+        return model.model_validate(value)
+    except ValidationError:
+        return None
+
+
+def _str_or_none(node: Any, key: str) -> str | None:
+    value = node.get(key) if isinstance(node, dict) else None
+    return value if isinstance(value, str) else None
+
+
+def validate_session(path: str | os.PathLike, advance: Callable[[int], Any] | None = None) -> ValidationReport:
+    """Validate a session folder and return every finding (spec chapter 4); never raises for bad input.
+
+    ``advance(n)`` is called after each stream (for a progress bar). The report's ``exit_code`` is
+    0 when valid (warnings allowed), 1 when invalid, 2 when validation could not run.
+    """
+    v = SessionValidator(path)
+    try:
+        v.check_manifest()
+        v.check_streams(advance)
+    except Exception as exc:  # the last guard: a validator bug is a coded finding, never a traceback
+        v.add(Finding("E999", f"{type(exc).__name__}: {exc}"))
+    return v.finish()
