@@ -1,0 +1,161 @@
+"""``haptify view``: inspect a session, its results and a simulated counterpart in rerun (issue 7).
+
+``--save out.rrd`` writes a recording without any display; ``--web`` serves rerun's built-in web
+viewer on 127.0.0.1 only (the ``rerun`` CLI with ``--bind 127.0.0.1``; rerun's Python serve
+functions would listen on every interface); with neither, the native viewer is started when a
+display exists, and otherwise the command says how to use ``--save`` or ``--web``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.error
+import urllib.parse
+import urllib.request
+from pathlib import Path
+
+from haptify.errors import fail
+from haptify.storage import open_session
+from haptify_tools.viewer.recording import build, load_results
+
+LOOPBACK = "127.0.0.1"
+DEFAULT_WEB_PORT = 9090  # rerun's own default web-viewer port
+SERVE_TIMEOUT_S = 20.0  # how long to wait for the web viewer to answer
+STOP_TIMEOUT_S = 5.0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``view`` sub-command (entry point ``view = "haptify_tools.viewer.cmd_view:register"``)."""
+    p = subparsers.add_parser(
+        "view", help="inspect a session in 3-D and in time (rerun viewer)",
+        description="Show a session, its results and optionally a simulated counterpart in the rerun viewer.")
+    p.add_argument("session", metavar="SESSION", help="session folder")
+    p.add_argument("--trial", metavar="ID", help="show only this trial")
+    p.add_argument("--results", metavar="RESULTS", help="results.json whose metrics are shown as a table")
+    p.add_argument("--compare", metavar="OTHER", help="a second session (e.g. simulated) overlaid on the first")
+    p.add_argument("--save", metavar="OUT.rrd", help="write the recording to this .rrd file (no display needed)")
+    p.add_argument("--web", action="store_true", help=f"serve rerun's web viewer on {LOOPBACK} only")
+    p.add_argument("--port", type=int, metavar="N", help=f"HTTP port of the web viewer (with --web; default {DEFAULT_WEB_PORT})")
+    p.set_defaults(func=run)
+
+
+def display_available() -> bool:
+    """True when a native window can open: macOS/Windows, or DISPLAY / WAYLAND_DISPLAY set."""
+    if sys.platform in ("darwin", "win32"):
+        return True
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def rerun_command(*args: str) -> list[str]:
+    """The rerun CLI of this Python environment (``python -m rerun``) with ``args``."""
+    return [sys.executable, "-m", "rerun", *args]
+
+
+def free_port() -> int:
+    """A currently free TCP port on the loopback interface."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((LOOPBACK, 0))
+        return int(s.getsockname()[1])
+
+
+def web_url(web_port: int, grpc_port: int) -> str:
+    """The address that opens the web viewer connected to the served recording."""
+    proxy = f"rerun+http://{LOOPBACK}:{grpc_port}/proxy"
+    return f"http://{LOOPBACK}:{web_port}/?url={urllib.parse.quote(proxy, safe='')}"
+
+
+def serve_web(rrd: str | os.PathLike, web_port: int, grpc_port: int | None = None) -> tuple[subprocess.Popen, str]:
+    """Start the rerun CLI serving ``rrd`` to its web viewer on 127.0.0.1 only; returns (process, url)."""
+    grpc_port = grpc_port or free_port()
+    proc = subprocess.Popen(
+        rerun_command(str(rrd), "--serve-web", "--bind", LOOPBACK, "--web-viewer-port", str(web_port),
+                      "--port", str(grpc_port)),
+        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+    return proc, web_url(web_port, grpc_port)
+
+
+def wait_until_serving(proc: subprocess.Popen, web_port: int, timeout_s: float = SERVE_TIMEOUT_S) -> None:
+    """Poll the web viewer's HTTP root until it answers 200; E904 when the process dies or time runs out."""
+    deadline = time.monotonic() + timeout_s
+    url = f"http://{LOOPBACK}:{web_port}/"
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
+            raise fail("E904", f"the rerun web viewer exited with code {proc.returncode}: {err.strip()[-400:]}",
+                       expected=f"a web viewer on {url}", found=f"exit code {proc.returncode}")
+        try:
+            with urllib.request.urlopen(url, timeout=1.0) as resp:
+                if resp.status == 200:
+                    return
+        except (urllib.error.URLError, ConnectionError, TimeoutError):
+            pass
+        time.sleep(0.1)
+    stop(proc)
+    raise fail("E904", f"the rerun web viewer did not answer on {url} within {timeout_s:g} s",
+               expected=f"HTTP 200 from {url}", found="no answer")
+
+
+def stop(proc: subprocess.Popen) -> None:
+    """Terminate a viewer process started here (SIGTERM, then SIGKILL after a grace period)."""
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout=STOP_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=STOP_TIMEOUT_S)
+    if proc.stderr:
+        proc.stderr.close()
+
+
+def run(args: argparse.Namespace, ui) -> int:
+    """Build the recording, then save, serve or show it (issue 7)."""
+    if args.port is not None and not args.web:
+        raise fail("E903", "--port is only meaningful with --web", expected="--web --port N", found=f"--port {args.port}")
+    if args.port is not None and not 0 < args.port < 65536:
+        raise fail("E903", f"--port {args.port} is not a TCP port", expected="1..65535", found=args.port)
+    if not (args.save or args.web or display_available()):
+        ui.warn("No display here (neither DISPLAY nor WAYLAND_DISPLAY is set), so the native viewer cannot open.\n"
+                f"  haptify view {args.session} --save out.rrd     writes a recording to open elsewhere (rerun out.rrd)\n"
+                f"  haptify view {args.session} --web [--port N]   serves the web viewer on http://{LOOPBACK}:N")
+        ui.emit_json({"ok": False, "reason": "no display; use --save or --web"})
+        return 2
+    session = open_session(args.session)
+    other = open_session(args.compare) if args.compare else None
+    results = load_results(args.results) if args.results else None
+    with tempfile.TemporaryDirectory(prefix="haptify-view-") as tmp:
+        out = Path(args.save) if args.save else Path(tmp) / f"{session.session_id}.rrd"
+        try:
+            plan = build(session, out, trial_id=args.trial, results=results, other=other)
+        except OSError as exc:
+            raise fail("E902", f"cannot write {str(out)!r}: {exc.strerror or exc}", file=str(out)) from None
+        summary = {"ok": True, "rrd": str(out) if args.save else None, "trials": [tp.trial.id for tp in plan.trials],
+                   "entities": len(plan.entries), "rows": sum(e.rows for e in plan.entries)}
+        if args.save:
+            ui.say(f"wrote {out} ({len(plan.trials)} trial(s), {summary['entities']} entities); open it with: rerun {out}")
+        if args.web:
+            port = args.port or DEFAULT_WEB_PORT
+            proc, url = serve_web(out, port)
+            try:
+                wait_until_serving(proc, port)
+                summary["url"] = url
+                ui.emit_json(summary)
+                ui.say(f"web viewer: {url}\n(serving on {LOOPBACK} only; Ctrl-C stops it)")
+                proc.wait()
+            except KeyboardInterrupt:
+                ui.say("stopped the web viewer")
+            finally:
+                stop(proc)
+            return 0
+        if args.save:
+            ui.emit_json(summary)
+            return 0
+        ui.say(f"opening the rerun viewer on {session.session_id} …")
+        ui.emit_json(summary)
+        return subprocess.call(rerun_command(str(out)))

@@ -1,0 +1,551 @@
+"""A Haptify session as a rerun recording (.rrd): scene graph, time series, blueprints (issue 7).
+
+The recording is built in two steps. :func:`plan_recording` reads the session (and optionally a
+results file and a second session to compare with) and turns every stream into :class:`Entry`
+objects — an entity path, its static archetypes and its time-indexed component columns. The
+blueprint is derived from the plan (:mod:`haptify_tools.viewer.blueprints`) and
+:func:`write_rrd` sends everything with bulk ``send_columns`` to an .rrd file.
+
+Every sample is placed on one timeline, ``time`` (a duration on the session clock, spec §1.4), at
+its exact integer-nanosecond timestamp ``round(t · 10⁹)``. Time series hold one row per stream
+sample; NaN samples (motion-capture occlusions, spec §2.7) stay as NaN rows. 3-D entities skip
+samples whose pose is unknown.
+
+Entity paths (``<trial>`` is the escaped trial id, ``<role>`` is ``measured`` or ``compare``)::
+
+    /world                                    ViewCoordinates RIGHT_HAND_Z_UP (world frame W)
+    /world/plate                              the force plate as a box (top surface at z = 0)
+    /world/plate/corners                      the four corner sensors
+    /world/device                             the device base frame (device_placement)
+    /world/<trial>/<role>/handle              handle pose (Transform3D) with axes
+    /world/<trial>/<role>/trajectory          the gimbal-centre path
+    /world/<trial>/<role>/hand_force/raw      raw F/T force rotated to W, arrow at the handle
+    /world/<trial>/<role>/markers/<link>      motion-capture markers, one colour per link
+    /world/<trial>/<role>/links/<link>        link frames from link_poses
+    /world/<trial>/<role>/force_field         free space: mean force per 1 cm voxel
+    /world/<trial>/<role>/workspace/points    workspace: the measured point cloud
+    /world/<trial>/<role>/virtual_surface     active trials: the rendered plane
+    /series/<trial>/<role>/...                time series (see ``SERIES`` below)
+    /session, /results                        markdown documents
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import rerun as rr
+from pydantic import ValidationError
+
+from haptify.conventions import quat_multiply, quat_rotate, quat_slerp
+from haptify.errors import HaptifyError, fail
+from haptify.results import ResultsFile
+from haptify.session_format import Trial
+from haptify.storage import SessionFolder, pydantic_findings
+
+APP_ID = "haptify"
+TIMELINE = "time"
+ROLES = ("measured", "compare")
+
+# Display constants (visual only; no metric depends on them).
+HAND_FORCE_M_PER_N = 0.02  # arrow length per newton of hand force
+PLATE_FORCE_M_PER_N = 0.005  # arrow length per newton of plate force
+FIELD_VOXEL_M = 0.01  # pitch of the free-space force-field bins
+HANDLE_AXIS_M = 0.03  # length of the handle's frame axes
+LINK_AXIS_M = 0.02  # length of each link frame's axes
+PLATE_THICKNESS_M = 0.02  # drawn thickness when the rig gives no corner-sensor depth
+SURFACE_MARGIN_M = 0.02  # margin of the virtual-surface rectangle around the trajectory
+SURFACE_MIN_HALF_M = 0.05  # smallest half side of the virtual-surface rectangle
+
+# Per-axis line colours (x, y, z, then more) of the measured and the compared session.
+SERIES_COLORS = {
+    "measured": [(214, 39, 40), (44, 160, 44), (31, 119, 180), (148, 103, 189), (140, 86, 75), (227, 119, 194)],
+    "compare": [(255, 152, 150), (152, 223, 138), (174, 199, 232), (197, 176, 213), (196, 156, 148), (247, 182, 210)],
+}
+ROLE_COLORS = {"measured": (31, 119, 180), "compare": (255, 127, 14)}
+FORCE_COLORS = {"measured": (214, 39, 40), "compare": (255, 152, 150)}
+PLATE_FORCE_COLOR = (148, 103, 189)
+LINK_PALETTE = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
+                (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207)]
+
+# Time series the viewer can show: relative path under /series/<trial>/<role> → (title, unit).
+SERIES = {
+    "handle/position": ("handle position in W", "m"),
+    "handle/force_raw": ("handle F/T force, raw, sensor frame", "N"),
+    "handle/torque_raw": ("handle F/T torque, raw, sensor frame", "N*m"),
+    "hand_force/raw_world": ("raw F/T force rotated to W (bias and weight not removed)", "N"),
+    "accel/raw": ("accelerometer specific force, raw, sensor frame", "m/s^2"),
+    "plate/corner_force_raw": ("plate corner forces, raw, corner-sensor frames", "N"),
+    "plate/corner_torque_raw": ("plate corner torques, raw, corner-sensor frames", "N*m"),
+    "commanded/force": ("commanded force in W", "N"),
+    "commanded/torque": ("commanded torque in W", "N*m"),
+    "penetration": ("handle depth below the virtual surface (+ inside)", "m"),
+}
+
+
+@dataclass
+class Entry:
+    """One entity of the recording: static archetypes and/or time-indexed component columns."""
+
+    path: str
+    static: list[Any] = field(default_factory=list)
+    times_ns: np.ndarray | None = None  # int64 ns on the session clock
+    columns: Any = None  # a rerun ComponentColumnList, one row per entry of times_ns
+    series: str | None = None  # for time series: the relative series key (a key of SERIES)
+    stream: str | None = None  # the stream kind the rows come from
+
+    @property
+    def rows(self) -> int:
+        return 0 if self.times_ns is None else int(len(self.times_ns))
+
+
+@dataclass
+class TrialPlan:
+    """The trial shown, its protocol and the roles (measured/compare) that have data for it."""
+
+    trial: Trial
+    key: str
+    counterpart: dict[str, str] = field(default_factory=dict)  # role → trial id in that role's session
+
+
+@dataclass
+class Plan:
+    """Everything the recording will hold, before any of it is written."""
+
+    recording_id: str
+    entries: list[Entry] = field(default_factory=list)
+    trials: list[TrialPlan] = field(default_factory=list)
+    has_results: bool = False
+
+    def paths(self) -> set[str]:
+        return {e.path for e in self.entries}
+
+    def add(self, entry: Entry) -> None:
+        self.entries.append(entry)
+
+
+# --- small numeric helpers -----------------------------------------------------------------------
+
+def time_ns(t: np.ndarray) -> np.ndarray:
+    """Session-clock seconds → exact integer nanoseconds (int64), ``round(t · 10⁹)`` (spec §1.4)."""
+    return np.round(np.asarray(t, dtype=np.float64) * 1e9).astype(np.int64)
+
+
+def time_column(ns: np.ndarray) -> rr.TimeColumn:
+    """The ``time`` timeline column from integer nanoseconds (no float truncation)."""
+    return rr.TimeColumn(TIMELINE, duration=np.asarray(ns, dtype=np.int64).astype("timedelta64[ns]"))
+
+
+def xyzw(q_wxyz: np.ndarray) -> np.ndarray:
+    """Our quaternions [w, x, y, z] (spec §1.3) → rerun's [x, y, z, w]."""
+    q = np.asarray(q_wxyz, dtype=np.float64)
+    return np.concatenate([q[..., 1:], q[..., :1]], axis=-1)
+
+
+def pose_at(t_pose: np.ndarray, p: np.ndarray, q: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Position (m) and orientation (wxyz) of a pose stream at times ``t`` (s).
+
+    Linear in position and slerp in orientation between the two neighbouring samples; NaN outside
+    the stream's time span and next to an occluded (NaN) sample (spec §1.3, §2.7).
+    """
+    t_pose = np.asarray(t_pose, dtype=np.float64)
+    t = np.asarray(t, dtype=np.float64)
+    n = len(t_pose)
+    if n < 2:
+        return np.full((len(t), 3), np.nan), np.full((len(t), 4), np.nan)
+    i0 = np.clip(np.searchsorted(t_pose, t, side="right") - 1, 0, n - 2)
+    i1 = i0 + 1
+    s = (t - t_pose[i0]) / (t_pose[i1] - t_pose[i0])
+    inside = (t >= t_pose[0]) & (t <= t_pose[-1])
+    with np.errstate(invalid="ignore"):
+        pos = p[i0] + s[:, None] * (p[i1] - p[i0])
+        quat = quat_slerp(q[i0], q[i1], s)
+    pos[~inside] = np.nan
+    quat[~inside] = np.nan
+    return pos, quat
+
+
+def finite_rows(*arrays: np.ndarray) -> np.ndarray:
+    """Boolean mask of rows where every given array is finite."""
+    mask = np.ones(len(arrays[0]), dtype=bool)
+    for a in arrays:
+        mask &= np.all(np.isfinite(np.asarray(a).reshape(len(a), -1)), axis=1)
+    return mask
+
+
+def nan_split(points: np.ndarray) -> list[np.ndarray]:
+    """Split a polyline at NaN rows into runs of at least two finite points."""
+    ok = finite_rows(points)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
+    return [points[a:b] for a, b in zip(edges[::2], edges[1::2]) if b - a >= 2]
+
+
+def voxel_means(points: np.ndarray, values: np.ndarray, pitch: float) -> tuple[np.ndarray, np.ndarray]:
+    """Mean point and mean value per occupied cubic voxel of side ``pitch`` (m)."""
+    cells = np.floor(points / pitch).astype(np.int64)
+    _, inverse, counts = np.unique(cells, axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.ravel()
+    mean_p = np.stack([np.bincount(inverse, weights=points[:, k]) for k in range(3)], axis=1) / counts[:, None]
+    mean_v = np.stack([np.bincount(inverse, weights=values[:, k]) for k in range(values.shape[1])], axis=1) / counts[:, None]
+    return mean_p, mean_v
+
+
+def plane_rectangle(point: np.ndarray, normal: np.ndarray, around: np.ndarray | None) -> np.ndarray:
+    """Four corners (m, W) of a rectangle in the plane through ``point`` with ``normal``.
+
+    Centred on the projection of the finite points ``around`` (else on ``point``), large enough to
+    hold their projections plus ``SURFACE_MARGIN_M``, at least ``2·SURFACE_MIN_HALF_M`` a side.
+    """
+    n = np.asarray(normal, dtype=np.float64)
+    n = n / np.linalg.norm(n)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(n, helper)
+    u /= np.linalg.norm(u)
+    v = np.cross(n, u)
+    point = np.asarray(point, dtype=np.float64)
+    centre = point
+    hu = hv = SURFACE_MIN_HALF_M
+    if around is not None and len(around):
+        rel = around - point
+        centre = point + rel.mean(axis=0) @ np.outer(u, u) + rel.mean(axis=0) @ np.outer(v, v)
+        d = around - centre
+        hu = max(hu, float(np.max(np.abs(d @ u))) + SURFACE_MARGIN_M)
+        hv = max(hv, float(np.max(np.abs(d @ v))) + SURFACE_MARGIN_M)
+    return np.array([centre - hu * u - hv * v, centre + hu * u - hv * v, centre + hu * u + hv * v, centre - hu * u + hv * v])
+
+
+# --- entries ---------------------------------------------------------------------------------------
+
+def series_entry(path: str, key: str, t: np.ndarray, values: np.ndarray, names: list[str], role: str, stream: str) -> Entry:
+    """A time series: one row of ``len(names)`` scalars per sample, at the samples' exact times."""
+    values = np.asarray(values, dtype=np.float64).reshape(len(t), len(names))
+    palette = SERIES_COLORS[role]
+    suffix = "" if role == "measured" else f" ({role})"
+    lines = rr.SeriesLines(names=[f"{n}{suffix}" for n in names],
+                           colors=[palette[i % len(palette)] for i in range(len(names))])
+    return Entry(path, static=[lines], times_ns=time_ns(t), columns=rr.Scalars.columns(scalars=values),
+                 series=key, stream=stream)
+
+
+class TrialPlanner:
+    """Turns one trial of one session (one role) into entries (issue 7, spec chapter 2 streams)."""
+
+    def __init__(self, session: SessionFolder, trial: Trial, role: str, key: str, plan: Plan) -> None:
+        self.session = session
+        self.trial = trial
+        self.role = role
+        self.plan = plan
+        self.world = f"/world/{key}/{role}"
+        self.series = f"/series/{key}/{role}"
+        self.kinds = {s.kind for s in trial.streams}
+        self.rig = session.manifest.rig
+
+    def read(self, kind: str) -> pd.DataFrame | None:
+        if kind not in self.kinds:
+            return None
+        return self.session.read(self.trial.id, kind)
+
+    def add_series(self, key: str, t: np.ndarray, values: np.ndarray, names: list[str], stream: str) -> None:
+        self.plan.add(series_entry(f"{self.series}/{key}", key, t, values, names, self.role, stream))
+
+    def run(self) -> None:
+        pose = self.read("handle_pose")
+        p = q = t_pose = None
+        if pose is not None:
+            t_pose = pose["t"].to_numpy()
+            p = pose[["px", "py", "pz"]].to_numpy()
+            q = pose[["qw", "qx", "qy", "qz"]].to_numpy()
+            self.handle(t_pose, p, q)
+        self.wrench(t_pose, p, q)
+        self.accel()
+        self.plate()
+        self.commanded()
+        self.markers()
+        self.links()
+        if p is not None and self.trial.protocol == "workspace":
+            ok = finite_rows(p)
+            self.plan.add(Entry(f"{self.world}/workspace/points",
+                                static=[rr.Points3D(p[ok], radii=0.0015, colors=ROLE_COLORS[self.role])]))
+        if self.trial.rendering is not None:
+            self.surface(t_pose, p)
+
+    def handle(self, t: np.ndarray, p: np.ndarray, q: np.ndarray) -> None:
+        """Handle pose with axes, the gimbal-centre path and the position time series."""
+        ok = finite_rows(p, q)
+        self.plan.add(Entry(f"{self.world}/handle", static=[rr.TransformAxes3D(HANDLE_AXIS_M)],
+                            times_ns=time_ns(t[ok]),
+                            columns=rr.Transform3D.columns(translation=p[ok], quaternion=xyzw(q[ok])),
+                            stream="handle_pose"))
+        strips = nan_split(p)
+        if strips:
+            self.plan.add(Entry(f"{self.world}/trajectory",
+                                static=[rr.LineStrips3D(strips, radii=0.0008, colors=ROLE_COLORS[self.role])]))
+        self.add_series("handle/position", t, p, ["px", "py", "pz"], "handle_pose")
+
+    def wrench(self, t_pose: np.ndarray | None, p: np.ndarray | None, q: np.ndarray | None) -> None:
+        """Raw F/T series; with a pose and the sensor's mounting, the force in W as arrow and field."""
+        w = self.read("handle_wrench")
+        if w is None:
+            return
+        t = w["t"].to_numpy()
+        f = w[["fx", "fy", "fz"]].to_numpy()
+        self.add_series("handle/force_raw", t, f, ["fx", "fy", "fz"], "handle_wrench")
+        self.add_series("handle/torque_raw", t, w[["tx", "ty", "tz"]].to_numpy(), ["tx", "ty", "tz"], "handle_wrench")
+        if t_pose is None or self.rig.handle is None:
+            return
+        pos, quat = pose_at(t_pose, p, q, t)
+        q_sensor = np.asarray(self.rig.handle.ft_sensor.pose.quaternion, dtype=np.float64)
+        with np.errstate(invalid="ignore"):
+            f_w = quat_rotate(quat_multiply(quat, q_sensor), f)
+        self.add_series("hand_force/raw_world", t, f_w, ["fx", "fy", "fz"], "handle_wrench")
+        ok = finite_rows(pos, f_w)
+        self.plan.add(Entry(f"{self.world}/hand_force/raw", times_ns=time_ns(t[ok]),
+                            static=[rr.Arrows3D.from_fields(colors=FORCE_COLORS[self.role], radii=0.001)],
+                            columns=rr.Arrows3D.columns(origins=pos[ok], vectors=f_w[ok] * HAND_FORCE_M_PER_N),
+                            stream="handle_wrench"))
+        if self.trial.protocol == "free_space" and ok.any():
+            centres, forces = voxel_means(pos[ok], f_w[ok], FIELD_VOXEL_M)
+            self.plan.add(Entry(f"{self.world}/force_field",
+                                static=[rr.Arrows3D(origins=centres, vectors=forces * HAND_FORCE_M_PER_N,
+                                                    colors=FORCE_COLORS[self.role], radii=0.0006)]))
+
+    def accel(self) -> None:
+        a = self.read("handle_accel")
+        if a is not None:
+            self.add_series("accel/raw", a["t"].to_numpy(), a[["ax", "ay", "az"]].to_numpy(), ["ax", "ay", "az"], "handle_accel")
+
+    def plate(self) -> None:
+        w = self.read("plate_wrench")
+        if w is None:
+            return
+        t = w["t"].to_numpy()
+        names_f = [f"c{i}_f{a}" for i in range(1, 5) for a in "xyz"]
+        names_t = [f"c{i}_t{a}" for i in range(1, 5) for a in "xyz"]
+        self.add_series("plate/corner_force_raw", t, w[names_f].to_numpy(), names_f, "plate_wrench")
+        self.add_series("plate/corner_torque_raw", t, w[names_t].to_numpy(), names_t, "plate_wrench")
+
+    def commanded(self) -> None:
+        c = self.read("commanded_wrench")
+        if c is None:
+            return
+        t = c["t"].to_numpy()
+        self.add_series("commanded/force", t, c[["fx", "fy", "fz"]].to_numpy(), ["fx", "fy", "fz"], "commanded_wrench")
+        self.add_series("commanded/torque", t, c[["tx", "ty", "tz"]].to_numpy(), ["tx", "ty", "tz"], "commanded_wrench")
+
+    def markers(self) -> None:
+        """Marker clouds grouped by the rigid body (link) each marker belongs to, a colour per link."""
+        stream = self.session.stream(self.trial.id, "markers")
+        if stream is None:
+            return
+        frame = self.session.read_stream(stream)
+        t = frame["t"].to_numpy()
+        owner = {}
+        if self.rig.motion_capture is not None:
+            for body in self.rig.motion_capture.rigid_bodies:
+                for m in body.markers:
+                    owner.setdefault(m, body.name)
+        groups: dict[str, list[str]] = {}
+        for m in stream.entities or []:
+            groups.setdefault(owner.get(m, "unassigned"), []).append(m)
+        for i, (link, names) in enumerate(groups.items()):
+            xyz = np.stack([frame[[f"{m}_x", f"{m}_y", f"{m}_z"]].to_numpy() for m in names], axis=1)  # (n, m, 3)
+            ok = np.all(np.isfinite(xyz), axis=2)
+            keep = ok.any(axis=1)
+            lengths = ok[keep].sum(axis=1)
+            color = LINK_PALETTE[i % len(LINK_PALETTE)]
+            labels = np.broadcast_to(np.array(names), ok.shape)[keep][ok[keep]]
+            self.plan.add(Entry(f"{self.world}/markers/{rr.escape_entity_path_part(link)}",
+                                static=[rr.Points3D.from_fields(colors=color, radii=0.002)],
+                                times_ns=time_ns(t[keep]),
+                                columns=rr.Points3D.columns(positions=xyz[keep][ok[keep]], labels=labels).partition(lengths),
+                                stream="markers"))
+
+    def links(self) -> None:
+        stream = self.session.stream(self.trial.id, "link_poses")
+        if stream is None:
+            return
+        frame = self.session.read_stream(stream)
+        t = frame["t"].to_numpy()
+        for link in stream.entities or []:
+            p = frame[[f"{link}_p{a}" for a in "xyz"]].to_numpy()
+            q = frame[[f"{link}_q{a}" for a in "wxyz"]].to_numpy()
+            ok = finite_rows(p, q)
+            self.plan.add(Entry(f"{self.world}/links/{rr.escape_entity_path_part(link)}",
+                                static=[rr.TransformAxes3D(LINK_AXIS_M)], times_ns=time_ns(t[ok]),
+                                columns=rr.Transform3D.columns(translation=p[ok], quaternion=xyzw(q[ok])),
+                                stream="link_poses"))
+
+    def surface(self, t_pose: np.ndarray | None, p: np.ndarray | None) -> None:
+        """The rendered plane as a translucent rectangle, and the handle's penetration series."""
+        r = self.trial.rendering
+        point = np.asarray(r.surface_point_m, dtype=np.float64)
+        normal = np.asarray(r.surface_normal, dtype=np.float64)
+        normal = normal / np.linalg.norm(normal)
+        around = p[finite_rows(p)] if p is not None else None
+        corners = plane_rectangle(point, normal, around)
+        self.plan.add(Entry(f"{self.world}/virtual_surface", static=[rr.Mesh3D(
+            vertex_positions=corners, triangle_indices=[[0, 1, 2], [0, 2, 3]], vertex_normals=np.tile(normal, (4, 1)),
+            albedo_factor=(*ROLE_COLORS[self.role], 90))]))
+        if p is not None:
+            depth = (point - p) @ normal
+            self.add_series("penetration", t_pose, depth, ["depth"], "handle_pose")
+
+
+# --- session level ---------------------------------------------------------------------------------
+
+def rig_entries(session: SessionFolder) -> list[Entry]:
+    """World frame, force plate, corner sensors and device base (static)."""
+    m = session.manifest
+    out = [Entry("/world", static=[rr.ViewCoordinates.RIGHT_HAND_Z_UP])]
+    plate = m.rig.force_plate
+    if plate is not None:
+        zs = [c.pose.position[2] for c in plate.corners]
+        depth = -min(zs) if min(zs) < 0 else PLATE_THICKNESS_M
+        sx, sy = plate.size_m
+        out.append(Entry("/world/plate", static=[rr.Boxes3D(centers=[[0.0, 0.0, -depth / 2]], half_sizes=[[sx / 2, sy / 2, depth / 2]],
+                                                            colors=[(160, 160, 160)], fill_mode="solid")]))
+        out.append(Entry("/world/plate/corners", static=[rr.Points3D([c.pose.position for c in plate.corners],
+                                                                     labels=[c.id for c in plate.corners],
+                                                                     radii=0.006, colors=(90, 90, 90))]))
+    placement = m.device_placement
+    out.append(Entry("/world/device", static=[rr.Transform3D(translation=placement.position, quaternion=xyzw(placement.quaternion)),
+                                              rr.TransformAxes3D(0.05)]))
+    return out
+
+
+def load_results(path: str | os.PathLike) -> ResultsFile:
+    """Read and validate ``results.json`` (spec §15.1); E903 when missing, E104 when invalid."""
+    path = Path(path)
+    if not path.is_file():
+        raise fail("E903", f"results file {str(path)!r} does not exist", file=str(path))
+    try:
+        return ResultsFile.model_validate_json(path.read_bytes())
+    except ValidationError as exc:
+        raise HaptifyError(*pydantic_findings(exc, "E104", str(path))) from None
+
+
+def _cell(text: Any) -> str:
+    return str(text).replace("|", "\\|").replace("\n", " ")
+
+
+def _num(v: Any) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, list):
+        return "[" + ", ".join(_num(x) for x in v) + "]"
+    return f"{v:.4g}"
+
+
+def results_markdown(results: ResultsFile, session_id: str) -> str:
+    """The metrics of a results file as markdown tables (spec §15.2)."""
+    lines = [f"# Results — session `{results.session_id}`",
+             f"{results.implementation.name} {results.implementation.version}, spec {results.spec_version}", ""]
+    if results.session_id != session_id:
+        lines += [f"**Warning:** these results are for session `{results.session_id}`, not `{session_id}`.", ""]
+    lines += ["| metric | value | unit | n | sd | trials | warnings |", "|---|---:|---|---:|---:|---|---|"]
+    for m in results.metrics:
+        lines.append(f"| {_cell(m.id)} | {_num(m.value)} | {_cell(m.unit)} | {m.n} | {_num(m.sd)} | "
+                     f"{_cell(', '.join(m.trials))} | {_cell(', '.join(m.warnings))} |")
+    if results.unavailable:
+        lines += ["", "## Unavailable", "", "| metric | code | reason |", "|---|---|---|"]
+        lines += [f"| {_cell(u.id)} | {u.code} | {_cell(u.reason)} |" for u in results.unavailable]
+    if results.warnings:
+        lines += ["", "## Warnings", "", "| code | metric | trial | message |", "|---|---|---|---|"]
+        lines += [f"| {w.code} | {_cell(w.metric or '')} | {_cell(w.trial or '')} | {_cell(w.message)} |" for w in results.warnings]
+    return "\n".join(lines) + "\n"
+
+
+def session_markdown(session: SessionFolder, trials: list[TrialPlan], other: SessionFolder | None) -> str:
+    """A summary of the session (and the compared one) and how to read the 3-D view."""
+    m = session.manifest
+    dev = session.device()
+    lines = [f"# Session `{m.session_id}`", "",
+             f"{dev.manufacturer} {dev.model} · {m.date} · lab `{m.lab.id}` · examiner `{m.examiner.id}`", ""]
+    if other is not None:
+        od = other.device()
+        lines += [f"Compared with session `{other.session_id}` ({od.manufacturer} {od.model}), drawn in lighter colours "
+                  "under the `compare` entities.", ""]
+    lines += ["| trial | protocol | powered | streams | compared with |", "|---|---|---|---|---|"]
+    for tp in trials:
+        t = tp.trial
+        kinds = ", ".join(f"{s.kind} ({s.rows} @ {s.rate_hz:g} Hz)" for s in t.streams)
+        lines.append(f"| {_cell(t.id)} | {t.protocol} | {'yes' if t.powered else 'no'} | {_cell(kinds)} | "
+                     f"{_cell(tp.counterpart.get('compare', '—' if other is not None else ''))} |")
+    lines += ["", "World frame W: origin at the centre of the plate's top surface, z up, right-handed (spec §1.2).",
+              f"Arrows: hand force {HAND_FORCE_M_PER_N * 100:g} cm per N; plate force {PLATE_FORCE_M_PER_N * 100:g} cm per N.",
+              f"Free-space force field: mean force per {FIELD_VOXEL_M * 100:g} cm voxel."]
+    return "\n".join(lines) + "\n"
+
+
+def counterpart(other: SessionFolder, trial: Trial) -> Trial | None:
+    """The trial of ``other`` matching ``trial``: same id, else same protocol and repetition."""
+    for t in other.trials:
+        if t.id == trial.id:
+            return t
+    return next((t for t in other.trials if t.protocol == trial.protocol and t.repetition == trial.repetition), None)
+
+
+def plan_recording(session: SessionFolder, *, trial_id: str | None = None, results: ResultsFile | None = None,
+                   other: SessionFolder | None = None) -> Plan:
+    """Every entity of the recording of ``session`` (one trial or all), optionally compared with ``other``."""
+    trials = [session.trial(trial_id)] if trial_id else list(session.trials)
+    rec_id = session.session_id + (f"/{trial_id}" if trial_id else "") + (f"+{other.session_id}" if other else "")
+    plan = Plan(recording_id=rec_id, has_results=results is not None)
+    plan.entries.extend(rig_entries(session))
+    for trial in trials:
+        key = rr.escape_entity_path_part(trial.id)
+        tp = TrialPlan(trial, key, {"measured": trial.id})
+        TrialPlanner(session, trial, "measured", key, plan).run()
+        if other is not None:
+            match = counterpart(other, trial)
+            if match is not None:
+                tp.counterpart["compare"] = match.id
+                TrialPlanner(other, match, "compare", key, plan).run()
+        plan.trials.append(tp)
+    plan.add(Entry("/session", static=[rr.TextDocument(session_markdown(session, plan.trials, other),
+                                                       media_type=rr.MediaType.MARKDOWN)]))
+    if results is not None:
+        plan.add(Entry("/results", static=[rr.TextDocument(results_markdown(results, session.session_id),
+                                                           media_type=rr.MediaType.MARKDOWN)]))
+    return plan
+
+
+def write_rrd(plan: Plan, path: str | os.PathLike, blueprint: Any) -> Path:
+    """Write the plan to an .rrd file atomically (temp file + rename, spec §3.6) with its blueprint."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    previous = rr.strict_mode()
+    rr.set_strict_mode(True)
+    try:
+        rec = rr.RecordingStream(APP_ID, recording_id=plan.recording_id, send_properties=False)
+        rec.save(tmp, default_blueprint=blueprint)
+        for e in plan.entries:
+            if e.static:
+                rec.log(e.path, *e.static, static=True, strict=True)
+            if e.times_ns is not None and e.rows:
+                rec.send_columns(e.path, [time_column(e.times_ns)], e.columns, strict=True)
+        rec.disconnect()
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    finally:
+        rr.set_strict_mode(previous)
+    return path
+
+
+def build(session: SessionFolder, out: str | os.PathLike, *, trial_id: str | None = None,
+          results: ResultsFile | None = None, other: SessionFolder | None = None) -> Plan:
+    """Plan, derive the blueprint and write ``out``; returns the plan (for summaries and tests)."""
+    from haptify_tools.viewer.blueprints import blueprint_for
+
+    plan = plan_recording(session, trial_id=trial_id, results=results, other=other)
+    write_rrd(plan, out, blueprint_for(plan))
+    return plan
