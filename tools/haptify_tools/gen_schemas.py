@@ -22,6 +22,8 @@ MODELS: dict[str, str] = {
     "rig": "haptify.session_format:Rig",
     "metric-definition": "haptify.metric_definitions:MetricFamily",
     "results": "haptify.results:ResultsFile",
+    "conformance-cases": "haptify_conform.cases:CaseFile",
+    "conform-report": "haptify_conform.report:ConformReport",
 }
 
 REPO = Path(__file__).resolve().parents[2]

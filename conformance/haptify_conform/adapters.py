@@ -1,0 +1,264 @@
+"""How the runner talks to an implementation (spec §16.4): a command per case, a persistent JSON-lines
+process, or an in-process Python function. Every adapter turns one case into an :class:`Answer`.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import queue
+import shlex
+import subprocess
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+from haptify_conform import PROTOCOL_VERSION
+from haptify_conform.cases import Case
+
+
+@dataclass
+class Answer:
+    """What the implementation said: ``results`` (accepted), ``findings`` (rejected), skipped, or an error."""
+
+    kind: str  # "results" | "rejected" | "skipped" | "error"
+    payload: Any = None
+    message: str = ""
+    duration_s: float = 0.0
+    implementation: dict = field(default_factory=dict)
+
+
+def classify(document: Any) -> Answer:
+    """Read an implementation's output document: a results.json, or a findings report."""
+    if not isinstance(document, dict):
+        return Answer("error", message=f"output is not a JSON object but {type(document).__name__}")
+    if "metrics" in document:
+        return Answer("results", document)
+    if "findings" in document:
+        findings = document["findings"] if isinstance(document["findings"], list) else []
+        errors = [f for f in findings if isinstance(f, dict) and f.get("severity", "error") == "error"]
+        return Answer("rejected", errors) if errors else Answer("results", {"metrics": [], "findings": findings})
+    return Answer("error", message="output has neither 'metrics' (results) nor 'findings' (rejection)")
+
+
+class CmdAdapter:
+    """``--cmd "PROGRAM {session} {out}"``: one process per case (placeholders: {session} {out} {metric} {case} {params})."""
+
+    name = "cmd"
+
+    def __init__(self, template: str, timeout_s: float) -> None:
+        self.argv = shlex.split(template)
+        if not any("{session}" in a for a in self.argv) or not any("{out}" in a for a in self.argv):
+            raise ValueError("the --cmd template must contain {session} and {out}")
+        self.timeout_s = timeout_s
+
+    def run(self, case: Case, session: Path) -> Answer:
+        with tempfile.TemporaryDirectory(prefix="haptify-conform-") as tmp:
+            out = Path(tmp) / "out.json"
+            params = Path(tmp) / "params.json"
+            params.write_text(json.dumps(case.parameters))
+            subst = {"{session}": str(session), "{out}": str(out), "{metric}": case.metric, "{case}": case.id,
+                     "{params}": str(params)}
+            argv = []
+            for a in self.argv:
+                for k, v in subst.items():
+                    a = a.replace(k, v)
+                argv.append(a)
+            start = time.perf_counter()
+            try:
+                proc = subprocess.run(argv, capture_output=True, text=True, timeout=self.timeout_s, stdin=subprocess.DEVNULL)
+            except subprocess.TimeoutExpired:
+                return Answer("error", message=f"timed out after {self.timeout_s} s", duration_s=self.timeout_s)
+            except OSError as exc:
+                return Answer("error", message=f"cannot start {argv[0]!r}: {exc.strerror}")
+            elapsed = time.perf_counter() - start
+            if not out.exists():
+                tail = (proc.stderr or proc.stdout).strip().splitlines()[-3:]
+                return Answer("error", message=f"exit {proc.returncode}, wrote no output; {' / '.join(tail)}", duration_s=elapsed)
+            try:
+                answer = classify(json.loads(out.read_text(encoding="utf-8")))
+            except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+                return Answer("error", message=f"output is not JSON: {exc}", duration_s=elapsed)
+            answer.duration_s = elapsed
+            return answer
+
+    def close(self) -> None:
+        pass
+
+
+class JsonlAdapter:
+    """``--jsonl "PROGRAM"``: one persistent process speaking the JSON-lines protocol (spec §16.4.2)."""
+
+    name = "jsonl"
+
+    def __init__(self, command: str, timeout_s: float, max_restarts: int = 3) -> None:
+        self.argv = shlex.split(command)
+        self.timeout_s = timeout_s
+        self.max_restarts = max_restarts
+        self.restarts = 0
+        self.seq = 0
+        self.proc: subprocess.Popen | None = None
+        self.lines: queue.Queue = queue.Queue()
+        self.implementation: dict = {}
+
+    # -- process management ---------------------------------------------------------------------
+    def _start(self) -> None:
+        self.proc = subprocess.Popen(self.argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                                     text=True, bufsize=1)
+        self.lines = queue.Queue()
+        threading.Thread(target=self._pump, args=(self.proc, self.lines), daemon=True).start()
+        hello = self.request({"op": "hello", "protocol": PROTOCOL_VERSION})
+        if hello.get("status") != "ok" or hello.get("protocol") != PROTOCOL_VERSION:
+            raise RuntimeError(f"handshake failed: {hello}")
+        self.implementation = hello.get("implementation", {})
+
+    @staticmethod
+    def _pump(proc: subprocess.Popen, lines: queue.Queue) -> None:
+        for line in proc.stdout:
+            lines.put(line)
+        lines.put(None)
+
+    def _kill(self) -> None:
+        if self.proc and self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait(timeout=5)
+        self.proc = None
+
+    def request(self, message: dict) -> dict:
+        """Send one request and wait for the reply with the same ``seq`` (raises TimeoutError / RuntimeError)."""
+        self.seq += 1
+        message = {"seq": self.seq, **message}
+        assert self.proc is not None and self.proc.stdin is not None
+        try:
+            self.proc.stdin.write(json.dumps(message) + "\n")
+            self.proc.stdin.flush()
+        except (BrokenPipeError, OSError) as exc:
+            raise RuntimeError(f"implementation closed its input: {exc}") from None
+        deadline = time.monotonic() + self.timeout_s
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise TimeoutError(f"no reply within {self.timeout_s} s")
+            try:
+                line = self.lines.get(timeout=remaining)
+            except queue.Empty:
+                raise TimeoutError(f"no reply within {self.timeout_s} s") from None
+            if line is None:
+                raise RuntimeError("implementation exited")
+            try:
+                reply = json.loads(line)
+            except json.JSONDecodeError:
+                raise RuntimeError(f"reply is not JSON: {line[:200]!r}") from None
+            if not isinstance(reply, dict) or reply.get("seq") != self.seq:
+                raise RuntimeError(f"reply out of sequence: expected seq {self.seq}, got {line[:200]!r}")
+            return reply
+
+    # -- cases ----------------------------------------------------------------------------------
+    def run(self, case: Case, session: Path) -> Answer:
+        if self.proc is None or self.proc.poll() is not None:
+            if self.proc is not None:
+                self.restarts += 1
+            if self.restarts > self.max_restarts:
+                return Answer("error", message=f"implementation crashed more than {self.max_restarts} times; not restarted")
+            try:
+                self._start()
+            except (RuntimeError, TimeoutError, OSError) as exc:
+                self._kill()
+                self.restarts += 1
+                return Answer("error", message=f"cannot start the implementation: {exc}")
+        start = time.perf_counter()
+        try:
+            reply = self.request({"op": "run", "case": case.id, "session": str(session), "metric": case.metric,
+                                  "parameters": case.parameters})
+        except (TimeoutError, RuntimeError) as exc:
+            self._kill()  # crash isolation: the next case gets a fresh process
+            return Answer("error", message=str(exc), duration_s=time.perf_counter() - start)
+        elapsed = time.perf_counter() - start
+        status = reply.get("status")
+        if status == "ok":
+            answer = classify(reply.get("results"))
+        elif status == "error":
+            answer = Answer("rejected", reply.get("findings") or [], message=str(reply.get("message", "")))
+        elif status == "skipped":
+            answer = Answer("skipped", message=str(reply.get("reason", "")))
+        else:
+            answer = Answer("error", message=f"unknown reply status {status!r}")
+        answer.duration_s = elapsed
+        return answer
+
+    def close(self) -> None:
+        if self.proc and self.proc.poll() is None:
+            try:
+                self.request({"op": "bye"})
+            except (TimeoutError, RuntimeError):
+                pass
+            try:
+                self.proc.stdin.close()
+                self.proc.wait(timeout=5)
+            except (OSError, subprocess.TimeoutExpired):
+                self._kill()
+
+
+class PythonAdapter:
+    """``--python module:function``: ``function(session, metric, parameters) -> dict`` called in-process."""
+
+    name = "python"
+
+    def __init__(self, target: str) -> None:
+        module, _, func = target.partition(":")
+        if not module or not func:
+            raise ValueError("--python takes module:function")
+        self.func: Callable[[str, str, dict], dict] = getattr(importlib.import_module(module), func)
+
+    def run(self, case: Case, session: Path) -> Answer:
+        start = time.perf_counter()
+        try:
+            document = self.func(str(session), case.metric, dict(case.parameters))
+        except Exception as exc:  # crash isolation for in-process implementations
+            return Answer("error", message=f"{type(exc).__name__}: {exc}", duration_s=time.perf_counter() - start)
+        answer = classify(document)
+        answer.duration_s = time.perf_counter() - start
+        return answer
+
+    def close(self) -> None:
+        pass
+
+
+def serve_jsonl(analyse: Callable[[str, str, dict], dict], implementation: dict, stdin=None, stdout=None) -> int:
+    """Serve the JSON-lines protocol for a Python ``analyse`` function (used by the reference server)."""
+    import sys
+
+    stdin = stdin or sys.stdin
+    stdout = stdout or sys.stdout
+
+    def reply(obj: dict) -> None:
+        stdout.write(json.dumps(obj, default=str) + "\n")
+        stdout.flush()
+
+    for line in stdin:
+        try:
+            msg = json.loads(line)
+            seq = msg["seq"]
+            op = msg["op"]
+        except (json.JSONDecodeError, KeyError, TypeError):
+            reply({"seq": None, "status": "error", "message": "malformed request", "findings": []})
+            continue
+        if op == "hello":
+            reply({"seq": seq, "status": "ok", "protocol": PROTOCOL_VERSION, "implementation": implementation})
+        elif op == "bye":
+            reply({"seq": seq, "status": "ok"})
+            return 0
+        elif op == "run":
+            document = analyse(msg.get("session", ""), msg.get("metric", ""), msg.get("parameters") or {})
+            answer = classify(document)
+            if answer.kind == "rejected":
+                reply({"seq": seq, "status": "error", "findings": answer.payload})
+            else:
+                reply({"seq": seq, "status": "ok", "results": document})
+        else:
+            reply({"seq": seq, "status": "error", "message": f"unknown op {op!r}", "findings": []})
+    return 0
+

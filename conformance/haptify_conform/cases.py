@@ -1,0 +1,100 @@
+"""Conformance cases as data (spec §16.2): the case model, loading and selection."""
+
+from __future__ import annotations
+
+import json
+from functools import lru_cache
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+SUITE_ROOT = Path(__file__).resolve().parents[1]  # conformance/
+REPO_ROOT = SUITE_ROOT.parent
+
+
+class Tolerance(BaseModel):
+    """A case passes when ``|actual − expected| ≤ abs + rel·|expected|`` for every component."""
+
+    model_config = ConfigDict(extra="forbid")
+    abs: float = Field(ge=0, description="Absolute part, in the metric's unit.")
+    rel: float = Field(ge=0, description="Relative part (dimensionless).")
+
+
+class Expected(BaseModel):
+    """The expected answer: a value with unit, or error codes (for negative cases)."""
+
+    model_config = ConfigDict(extra="forbid")
+    value: float | list[float] | None = None
+    unit: str | None = None
+    codes: list[str] | None = Field(None, description="Codes the implementation must report (negative cases).")
+    valid: bool | None = Field(None, description="For 'validate' cases on valid sessions: must be accepted.")
+
+
+class Provenance(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    kind: Literal["analytic", "generated", "paper", "spec"]
+    note: str
+
+
+class Case(BaseModel):
+    """One conformance case (``case.schema.json`` is generated from this model)."""
+
+    model_config = ConfigDict(extra="forbid")
+    id: str = Field(pattern=r"^[a-z0-9][a-z0-9._-]*$", description="Permanent; never reused for another case.")
+    metric: str = Field(description="A metric id from schemas/<v>/metrics, or 'validate'.")
+    spec_section: str
+    level: Literal["MUST", "SHOULD"]
+    fixture: str = Field(description="Session folder, relative to the repository's fixtures/ folder.")
+    parameters: dict[str, Any] = Field(default_factory=dict)
+    expected: Expected
+    tolerance: Tolerance | None = None
+    provenance: Provenance
+    spec_versions: list[str] = Field(min_length=1)
+    description: str
+
+
+class CaseFile(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    description: str
+    cases: list[Case]
+
+
+def case_files(root: Path = SUITE_ROOT) -> list[Path]:
+    return sorted((root / "cases").glob("*.json"))
+
+
+@lru_cache(maxsize=4)
+def _load(root: Path) -> tuple[Case, ...]:
+    out: list[Case] = []
+    for path in case_files(root):
+        data = json.loads(path.read_text(encoding="utf-8"))
+        try:
+            out.extend(CaseFile.model_validate(data).cases)
+        except ValidationError as exc:
+            raise ValueError(f"{path}: {exc}") from None
+    return tuple(out)
+
+
+def load_cases(root: Path = SUITE_ROOT) -> list[Case]:
+    """Every case of the suite, in file order."""
+    return list(_load(root))
+
+
+def select(cases: list[Case], *, level: str | None = None, metrics: set[str] | None = None,
+           spec_version: str | None = None) -> list[Case]:
+    """Cases filtered by ``--level``, ``--metric`` and spec version; the suite itself never skips."""
+    out = []
+    for c in cases:
+        if level == "MUST" and c.level != "MUST":
+            continue
+        if metrics and c.metric not in metrics:
+            continue
+        if spec_version and spec_version not in c.spec_versions:
+            continue
+        out.append(c)
+    return out
+
+
+def fixture_path(case: Case, repo: Path = REPO_ROOT) -> Path:
+    return repo / "fixtures" / case.fixture

@@ -1,0 +1,95 @@
+"""``haptify-conform``: run an implementation against the Haptify conformance suite (spec chapter 16).
+
+Exit codes: 0 every selected case passed (or was skip-listed by the implementation), 1 a case failed or
+errored, 2 the run could not start (bad arguments, unreadable skip list, a suite that does not lint).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from haptify.storage import atomic_write_text
+from haptify.versions import SPEC_VERSION
+from haptify_conform import PROTOCOL_VERSION
+from haptify_conform.adapters import CmdAdapter, JsonlAdapter, PythonAdapter
+from haptify_conform.cases import load_cases, select
+from haptify_conform.lint import lint
+from haptify_conform.report import build_report, header, to_junit, to_table
+from haptify_conform.runner import load_skips, run_cases
+from haptify_conform.selftest import self_test
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="haptify-conform", description="Check an implementation against the Haptify conformance suite.")
+    how = p.add_mutually_exclusive_group()
+    how.add_argument("--cmd", help='a command per case, e.g. "mytool {session} {out}" (also {metric} {case} {params})')
+    how.add_argument("--jsonl", help="a program speaking the JSON-lines protocol on stdin/stdout")
+    how.add_argument("--python", help="an in-process implementation, module:function(session, metric, parameters)")
+    how.add_argument("--lint", action="store_true", help="check the suite itself and exit")
+    p.add_argument("--self-test", action="store_true", help="only check that the implementation speaks the protocol")
+    p.add_argument("--level", choices=["MUST", "SHOULD"], help="MUST: only the MUST cases")
+    p.add_argument("--metric", action="append", help="only cases of this metric id (repeatable; 'validate' for negative cases)")
+    p.add_argument("--skip-file", type=Path, help='the implementation\'s skip list: {"skips": {"case id": "reason"}}')
+    p.add_argument("--timeout", type=float, default=120.0, help="seconds per case (default 120)")
+    p.add_argument("--max-restarts", type=int, default=3, help="restarts of a crashed --jsonl process (default 3)")
+    p.add_argument("--json-report", type=Path, help="write the JSON report here")
+    p.add_argument("--junit", type=Path, help="write a JUnit XML report here")
+    p.add_argument("--quiet", action="store_true", help="print only the summary line")
+    return p
+
+
+def make_adapter(args):
+    if args.cmd:
+        return CmdAdapter(args.cmd, args.timeout)
+    if args.jsonl:
+        return JsonlAdapter(args.jsonl, args.timeout, args.max_restarts)
+    return PythonAdapter(args.python)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        return 0 if exc.code == 0 else 2
+    if args.lint:
+        problems = lint()
+        for line in problems:
+            print(line)
+        print(f"suite lint: {len(problems)} problem(s)")
+        return 1 if problems else 0
+    if not (args.cmd or args.jsonl or args.python):
+        parser.print_usage(sys.stderr)
+        print("haptify-conform: give --cmd, --jsonl or --python", file=sys.stderr)
+        return 2
+    try:
+        adapter = make_adapter(args)
+        skips = load_skips(args.skip_file)
+    except (ValueError, OSError, ImportError, AttributeError, json.JSONDecodeError) as exc:
+        print(f"haptify-conform: {exc}", file=sys.stderr)
+        return 2
+    if args.self_test:
+        ok, lines = self_test(adapter)
+        print("\n".join(lines))
+        return 0 if ok else 1
+    cases = select(load_cases(), level=args.level, metrics=set(args.metric) if args.metric else None,
+                   spec_version=SPEC_VERSION)
+    started = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    verdicts = run_cases(cases, adapter, skips)
+    implementation = getattr(adapter, "implementation", {}) or {"command": args.cmd or args.jsonl or args.python}
+    report = build_report(header(adapter.name, implementation, started), verdicts)
+    if args.json_report:
+        atomic_write_text(args.json_report, report.model_dump_json(indent=2) + "\n")
+    if args.junit:
+        atomic_write_text(args.junit, to_junit(report))
+    text = to_table(report)
+    print(text.splitlines()[-1] if args.quiet else text, end="\n" if args.quiet else "")
+    return 0 if report.summary.conforms else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,95 @@
+"""Judging an implementation's answer against a case (spec §16.3)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from haptify_conform.cases import Case
+
+
+@dataclass
+class Verdict:
+    """The outcome of one case: ``passed``/``failed``/``skipped``/``error`` with the evidence."""
+
+    case_id: str
+    metric: str
+    status: str
+    message: str = ""
+    actual: Any = None
+    max_abs_error: float | None = None
+    max_rel_error: float | None = None
+    duration_s: float = 0.0
+    spec_section: str = ""
+    level: str = "MUST"
+    extra: dict = field(default_factory=dict)
+
+
+def _components(value: Any) -> list[float] | None:
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, (int, float)):
+        return [float(value)]
+    if isinstance(value, list) and value and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+        return [float(v) for v in value]
+    return None
+
+
+def judge_metric(case: Case, results: dict) -> Verdict:
+    """Compare the metric record in ``results`` (a results.json object) with the case's expectation."""
+    base = dict(case_id=case.id, metric=case.metric, spec_section=case.spec_section, level=case.level)
+    if case.expected.codes:
+        return Verdict(status="failed", message=f"expected the session to be rejected with {case.expected.codes}, "
+                       "but the implementation returned results", **base)
+    records = [m for m in results.get("metrics", []) if isinstance(m, dict) and m.get("id") == case.metric]
+    if not records:
+        why = next((u for u in results.get("unavailable", []) if isinstance(u, dict) and u.get("id") == case.metric), None)
+        msg = f"metric {case.metric} missing from the results"
+        if why:
+            msg += f" (reported unavailable: {why.get('code')} {why.get('reason')})"
+        return Verdict(status="failed", message=msg, **base)
+    record = records[0]
+    if record.get("unit") != case.expected.unit:
+        return Verdict(status="failed", message=f"unit mismatch: expected {case.expected.unit!r}, found {record.get('unit')!r}",
+                       actual=record.get("value"), **base)
+    actual = _components(record.get("value"))
+    expected = _components(case.expected.value)
+    if actual is None or expected is None or len(actual) != len(expected):
+        return Verdict(status="failed", message=f"value has the wrong shape: expected {case.expected.value!r}, found "
+                       f"{record.get('value')!r}", actual=record.get("value"), **base)
+    if any(math.isnan(a) or math.isinf(a) for a in actual):
+        return Verdict(status="failed", message="value is NaN or infinite", actual=record.get("value"), **base)
+    tol = case.tolerance
+    abs_err = [abs(a - e) for a, e in zip(actual, expected)]
+    rel_err = [d / abs(e) if e else (0.0 if d == 0 else math.inf) for d, e in zip(abs_err, expected)]
+    ok = all(d <= tol.abs + tol.rel * abs(e) for d, e in zip(abs_err, expected))
+    verdict = Verdict(status="passed" if ok else "failed", actual=record.get("value"),
+                      max_abs_error=max(abs_err), max_rel_error=max(rel_err), **base)
+    if not ok:
+        verdict.message = (f"expected {case.expected.value} ± ({tol.abs} + {tol.rel}·|expected|) {case.expected.unit}, "
+                           f"found {record.get('value')}")
+    return verdict
+
+
+def judge_rejection(case: Case, findings: list[dict]) -> Verdict:
+    """The implementation rejected the session with ``findings``: right when the case expects it."""
+    base = dict(case_id=case.id, metric=case.metric, spec_section=case.spec_section, level=case.level)
+    codes = sorted({str(f.get("code")) for f in findings if isinstance(f, dict)})
+    if not case.expected.codes:
+        return Verdict(status="failed", message=f"the session was rejected ({', '.join(codes) or 'no codes'}) but the "
+                       "case expects it to be accepted", actual=codes, **base)
+    missing = sorted(set(case.expected.codes) - set(codes))
+    if missing:
+        return Verdict(status="failed", message=f"expected codes {case.expected.codes}, found {codes} (missing {missing})",
+                       actual=codes, **base)
+    return Verdict(status="passed", actual=codes, **base)
+
+
+def judge_acceptance(case: Case, report: dict) -> Verdict:
+    """A 'validate' case on a valid session: the implementation must accept it (no error findings)."""
+    base = dict(case_id=case.id, metric=case.metric, spec_section=case.spec_section, level=case.level)
+    if case.expected.codes:
+        return Verdict(status="failed", message=f"expected rejection with {case.expected.codes}, but the session was accepted",
+                       **base)
+    return Verdict(status="passed", **base)

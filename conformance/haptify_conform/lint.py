@@ -1,0 +1,49 @@
+"""The suite linter (spec §16.7): cases validate, ids are unique, every metric has cases, fixtures exist."""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from pathlib import Path
+
+from pydantic import ValidationError
+
+from haptify.metric_definitions import all_families
+from haptify_conform.cases import REPO_ROOT, SUITE_ROOT, CaseFile, case_files
+
+MIN_CASES_PER_METRIC = 3
+
+
+def lint(root: Path = SUITE_ROOT, repo: Path = REPO_ROOT) -> list[str]:
+    """Every problem of the suite as a readable line; empty when the suite is sound."""
+    problems: list[str] = []
+    cases = []
+    for path in case_files(root):
+        try:
+            cases += CaseFile.model_validate(json.loads(path.read_text(encoding="utf-8"))).cases
+        except (json.JSONDecodeError, ValidationError) as exc:
+            problems.append(f"{path.name}: invalid case file: {exc}")
+    ids = Counter(c.id for c in cases)
+    problems += [f"case id {i!r} is used {n} times" for i, n in ids.items() if n > 1]
+    metric_ids = {m.id for f in all_families() for m in f.metrics}
+    per_metric = Counter(c.metric for c in cases)
+    for m in sorted(metric_ids):
+        if per_metric[m] < MIN_CASES_PER_METRIC:
+            problems.append(f"metric {m} has {per_metric[m]} case(s); at least {MIN_CASES_PER_METRIC} are required")
+    for c in cases:
+        if c.metric != "validate" and c.metric not in metric_ids:
+            problems.append(f"case {c.id}: unknown metric {c.metric!r}")
+        if c.metric != "validate" and (c.tolerance is None or c.expected.value is None or c.expected.unit is None):
+            problems.append(f"case {c.id}: a metric case needs expected value, unit and tolerance")
+        if c.metric == "validate" and c.expected.codes is None and c.expected.valid is not True:
+            problems.append(f"case {c.id}: a validate case needs expected codes or valid: true")
+        if not (repo / "fixtures" / c.fixture / "session.json").exists() and not (repo / "fixtures" / c.fixture).is_dir():
+            problems.append(f"case {c.id}: fixture {c.fixture} does not exist")
+    invalid_dir = repo / "fixtures" / "invalid"
+    if invalid_dir.is_dir():
+        covered = {c.fixture for c in cases if c.metric == "validate"}
+        for sidecar in sorted(invalid_dir.glob("*.expected.json")):
+            name = f"invalid/{sidecar.name.removesuffix('.expected.json')}"
+            if name not in covered:
+                problems.append(f"invalid fixture {name} has no negative case")
+    return problems

@@ -1,0 +1,102 @@
+"""Conformance reports: a readable table, JSON (``conform-report.schema.json``) and JUnit XML (spec §16.6)."""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from collections import Counter
+from dataclasses import asdict
+
+from pydantic import BaseModel, ConfigDict
+
+from haptify.versions import SPEC_VERSION
+from haptify_conform import PROTOCOL_VERSION, SUITE_VERSION
+from haptify_conform.judge import Verdict
+
+
+class ReportHeader(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    suite_version: str
+    spec_version: str
+    protocol_version: int
+    adapter: str
+    implementation: dict
+    started: str
+
+
+class CaseRecord(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    case_id: str
+    metric: str
+    status: str
+    level: str
+    spec_section: str
+    message: str
+    actual: object = None
+    max_abs_error: float | None = None
+    max_rel_error: float | None = None
+    duration_s: float
+
+
+class Summary(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    total: int
+    passed: int
+    failed: int
+    error: int
+    skipped: int
+    conforms: bool
+
+
+class ConformReport(BaseModel):
+    """The JSON report of one run (its schema is generated from this model)."""
+
+    model_config = ConfigDict(extra="forbid")
+    header: ReportHeader
+    cases: list[CaseRecord]
+    summary: Summary
+
+
+def build_report(header: ReportHeader, verdicts: list[Verdict]) -> ConformReport:
+    counts = Counter(v.status for v in verdicts)
+    records = [CaseRecord(**{k: v for k, v in asdict(verdict).items() if k != "extra"}) for verdict in verdicts]
+    summary = Summary(total=len(verdicts), passed=counts["passed"], failed=counts["failed"], error=counts["error"],
+                      skipped=counts["skipped"], conforms=counts["failed"] == 0 and counts["error"] == 0)
+    return ConformReport(header=header, cases=records, summary=summary)
+
+
+def _err(value: float | None) -> str:
+    return "—" if value is None else f"{value:.3g}"
+
+
+def to_table(report: ConformReport) -> str:
+    """One line per case: status, id, metric, max abs/rel error; failures name the spec section."""
+    lines = [f"{'status':8} {'case':44} {'metric':32} {'max abs err':>12} {'max rel err':>12}"]
+    for c in report.cases:
+        lines.append(f"{c.status.upper():8} {c.case_id:44} {c.metric:32} {_err(c.max_abs_error):>12} {_err(c.max_rel_error):>12}")
+        if c.status in ("failed", "error") or (c.status == "skipped" and c.message):
+            lines.append(f"         {c.message} (spec §{c.spec_section})")
+    s = report.summary
+    lines.append(f"\n{s.passed} passed, {s.failed} failed, {s.error} errors, {s.skipped} skipped of {s.total} cases — "
+                 + ("CONFORMS" if s.conforms else "DOES NOT CONFORM") + f" to Haptify {report.header.spec_version}")
+    return "\n".join(lines) + "\n"
+
+
+def to_junit(report: ConformReport) -> str:
+    s = report.summary
+    suite = ET.Element("testsuite", name=f"haptify-conform {report.header.suite_version}", tests=str(s.total),
+                       failures=str(s.failed), errors=str(s.error), skipped=str(s.skipped),
+                       time=f"{sum(c.duration_s for c in report.cases):.3f}")
+    for c in report.cases:
+        case = ET.SubElement(suite, "testcase", classname=c.metric, name=c.case_id, time=f"{c.duration_s:.3f}")
+        if c.status == "failed":
+            ET.SubElement(case, "failure", message=c.message).text = f"spec §{c.spec_section}"
+        elif c.status == "error":
+            ET.SubElement(case, "error", message=c.message).text = f"spec §{c.spec_section}"
+        elif c.status == "skipped":
+            ET.SubElement(case, "skipped", message=c.message)
+    return ET.tostring(ET.ElementTree(suite).getroot(), encoding="unicode", xml_declaration=True) + "\n"
+
+
+def header(adapter: str, implementation: dict, started: str) -> ReportHeader:
+    return ReportHeader(suite_version=SUITE_VERSION, spec_version=SPEC_VERSION, protocol_version=PROTOCOL_VERSION,
+                        adapter=adapter, implementation=implementation, started=started)
