@@ -1,0 +1,438 @@
+"""The rerun session viewer (issue 7): .rrd completeness, entity paths, exact rows and timestamps,
+blueprints per protocol, --compare, results table, the CLI, web-viewer smoke and screenshot tests.
+
+Every expectation comes from the analytic session built here (known by construction), never from a
+previous run of the viewer.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import subprocess
+import sys
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rerun.blueprint as rrb
+from rerun.chunk import RrdReader
+
+from haptify.cli import UI
+from haptify.errors import HaptifyError
+from haptify.results import Implementation, MetricResult, ResultsFile, Unavailable
+from haptify.storage import open_session
+from haptify_tools.example_session import example_writer
+from haptify_tools.viewer import blueprints, cmd_view
+from haptify_tools.viewer.recording import (
+    HAND_FORCE_M_PER_N,
+    load_results,
+    nan_split,
+    plane_rectangle,
+    plan_recording,
+    pose_at,
+    results_markdown,
+    time_ns,
+    voxel_means,
+    write_rrd,
+)
+
+CHROMIUM = Path("/usr/bin/chromium")
+SURFACE_Z = 0.05
+OCCLUDED = slice(40, 47)  # pose/marker rows set to NaN in the stiffness trial
+
+
+def rich_writer(session_id: str = "viewer-0001", force_scale: float = 1.0):
+    """The example free-space trial plus a workspace trial and a stiffness trial with every stream."""
+    w = example_writer(session_id=session_id, duration_s=1.0)
+    mc = w.manifest["rig"]["motion_capture"]
+    mc["rigid_bodies"].append({"name": "link2", "markers": ["l2a", "l2b"]})
+    mc["markers"] += ["l2a", "l2b"]
+    # workspace: a circle of radius 5 cm at 100 Hz
+    t = np.arange(300) / 100.0
+    ang = 2 * np.pi * t / 3.0
+    w.add_trial("workspace-1", "workspace", powered=False)
+    w.add_stream("workspace-1", "handle_pose", {"t": t, "px": 0.05 * np.cos(ang), "py": 0.05 * np.sin(ang), "pz": 0.1 + 0 * t,
+                                                "qw": 1 + 0 * t, "qx": 0 * t, "qy": 0 * t, "qz": 0 * t}, rate_hz=100)
+    # stiffness: presses into the plane z = SURFACE_Z; the handle is turned 90° about z
+    w.add_trial("stiffness-1", "stiffness", powered=True,
+                rendering={"surface_point_m": [0.0, 0.0, SURFACE_Z], "surface_normal": [0.0, 0.0, 1.0], "stiffness_N_per_m": 500.0})
+    t100 = np.arange(100) / 100.0
+    pz = SURFACE_Z - 0.003 * np.sin(2 * np.pi * t100)
+    c, s = math.cos(math.pi / 4), math.sin(math.pi / 4)
+    pose = {"t": t100, "px": 0 * t100, "py": 0 * t100, "pz": pz, "qw": c + 0 * t100, "qx": 0 * t100, "qy": 0 * t100, "qz": s + 0 * t100}
+    for k in ("px", "py", "pz", "qw", "qx", "qy", "qz"):
+        pose[k] = pose[k].copy()
+        pose[k][OCCLUDED] = np.nan
+    w.add_stream("stiffness-1", "handle_pose", pose, rate_hz=100)
+    t1k = np.arange(1000) / 1000.0
+    wrench = {"t": t1k, "fx": force_scale * (1.0 + 0 * t1k), "fy": 0 * t1k, "fz": force_scale * 2.0 * np.sin(2 * np.pi * t1k),
+              "tx": 0 * t1k, "ty": 0 * t1k, "tz": 0.01 + 0 * t1k}
+    w.add_stream("stiffness-1", "handle_wrench", wrench, rate_hz=1000)
+    w.add_stream("stiffness-1", "commanded_wrench", {"t": t1k, "fx": 0 * t1k, "fy": 0 * t1k, "fz": 1.5 + 0 * t1k,
+                                                     "tx": 0 * t1k, "ty": 0 * t1k, "tz": 0 * t1k}, rate_hz=1000)
+    markers = {"t": t100}
+    for name, off in (("h1", 0.01), ("h2", 0.02), ("h3", 0.03), ("l2a", -0.05), ("l2b", -0.06)):
+        markers[f"{name}_x"] = off + 0 * t100
+        markers[f"{name}_y"] = 0 * t100
+        markers[f"{name}_z"] = pz.copy()
+    markers["h2_x"][OCCLUDED] = np.nan
+    w.add_stream("stiffness-1", "markers", markers, rate_hz=100, entities=["h1", "h2", "h3", "l2a", "l2b"])
+    links = {"t": t100}
+    for link in ("link1", "link2"):
+        links.update({f"{link}_px": 0 * t100, f"{link}_py": 0 * t100, f"{link}_pz": 0.1 + 0 * t100,
+                      f"{link}_qw": 1 + 0 * t100, f"{link}_qx": 0 * t100, f"{link}_qy": 0 * t100, f"{link}_qz": 0 * t100})
+    w.add_stream("stiffness-1", "link_poses", links, rate_hz=100, entities=["link1", "link2"])
+    return w
+
+
+@pytest.fixture(scope="module")
+def sessions(tmp_path_factory):
+    root = tmp_path_factory.mktemp("viewer")
+    main = rich_writer().write(root / "main")
+    other = rich_writer("viewer-sim", force_scale=0.5).write(root / "sim")
+    return open_session(main), open_session(other), root
+
+
+def results_for(session_id: str) -> ResultsFile:
+    return ResultsFile(
+        implementation=Implementation(name="haptify-reference", version="0.1.0"), session_id=session_id,
+        manifest_sha256="0" * 64,
+        metrics=[MetricResult(id="workspace.volume", value=0.000123456, unit="m^3", n=1, definition_version="1.0", trials=["workspace-1"]),
+                 MetricResult(id="stiffness.k_mean", value=[480.0, 470.0], unit="N/m", n=2, sd=7.07, definition_version="1.0",
+                              warnings=["W401"])],
+        unavailable=[Unavailable(id="vibration.rms", code="E302", reason="no handle_accel | stream")])
+
+
+@pytest.fixture(scope="module")
+def recorded(sessions):
+    main, other, root = sessions
+    results = results_for(main.session_id)
+    plan = plan_recording(main, results=results, other=other)
+    out = write_rrd(plan, root / "all.rrd", blueprints.blueprint_for(plan))
+    return plan, out
+
+
+def chunks_of(path: Path, entity: str, component: str):
+    return list(RrdReader(path).stream().filter(content=entity, is_static=False, components=component))
+
+
+def temporal(path: Path, entity: str, component: str) -> tuple[np.ndarray, list]:
+    """(time in int64 ns, component values per row) of an entity's temporal rows, in time order."""
+    times, values = [], []
+    for ch in chunks_of(path, entity, component):
+        rb = ch.to_record_batch()
+        times.append(rb.column("time").cast("int64").to_numpy())
+        values += rb.column(component).to_pylist()
+    t = np.concatenate(times) if times else np.empty(0, np.int64)
+    order = np.argsort(t, kind="stable")
+    return t[order], [values[i] for i in order]
+
+
+def static_text(path: Path, entity: str) -> str:
+    [ch] = list(RrdReader(path).stream().filter(content=entity, is_static=True, components="TextDocument:text"))
+    return ch.to_record_batch().column("TextDocument:text").to_pylist()[0][0]
+
+
+# --- the .rrd file -----------------------------------------------------------------------------------
+
+def test_rrd_verifies_with_the_rerun_cli(recorded):
+    _, out = recorded
+    proc = subprocess.run([sys.executable, "-m", "rerun", "rrd", "verify", str(out)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+
+
+def test_rrd_verify_rejects_a_truncated_file(recorded, tmp_path):
+    """The completeness check can fail: a file cut short loses its footer."""
+    _, out = recorded
+    cut = tmp_path / "cut.rrd"
+    cut.write_bytes(out.read_bytes()[: out.stat().st_size // 2])
+    proc = subprocess.run([sys.executable, "-m", "rerun", "rrd", "verify", str(cut)], capture_output=True, timeout=60)
+    assert proc.returncode != 0
+
+
+def test_expected_entity_paths(recorded):
+    _, out = recorded
+    [entry] = RrdReader(out).recordings()
+    assert entry.recording_id == "viewer-0001+viewer-sim"
+    paths = set(RrdReader(out).store().schema().entity_paths())
+    expected = {
+        "/world", "/world/plate", "/world/plate/corners", "/world/device", "/session", "/results",
+        "/world/workspace-1/measured/workspace/points", "/world/workspace-1/measured/trajectory",
+        "/world/free_space-1/measured/handle", "/world/free_space-1/measured/hand_force/raw",
+        "/world/free_space-1/measured/force_field",
+        "/world/stiffness-1/measured/virtual_surface", "/world/stiffness-1/measured/markers/handle",
+        "/world/stiffness-1/measured/markers/link2", "/world/stiffness-1/measured/links/link1",
+        "/world/stiffness-1/measured/links/link2",
+        "/series/free_space-1/measured/handle/force_raw", "/series/free_space-1/measured/handle/torque_raw",
+        "/series/free_space-1/measured/hand_force/raw_world", "/series/free_space-1/measured/accel/raw",
+        "/series/free_space-1/measured/plate/corner_force_raw", "/series/free_space-1/measured/plate/corner_torque_raw",
+        "/series/stiffness-1/measured/commanded/force", "/series/stiffness-1/measured/penetration",
+        "/series/stiffness-1/compare/handle/force_raw", "/world/stiffness-1/compare/handle",
+    }
+    assert expected <= paths, sorted(expected - paths)
+    assert not any("/world/stiffness-1/measured/force_field" == p for p in paths)  # only for free space
+
+
+def test_each_series_has_one_row_per_sample_at_exact_ns(recorded, sessions):
+    plan, out = recorded
+    main, other, _ = sessions
+    series = [e for e in plan.entries if e.series is not None]
+    assert len(series) >= 15
+    truncation_would_differ = False
+    for e in series:
+        role, trial_id = e.path.split("/")[3], e.path.split("/")[2]
+        session = main if role == "measured" else other
+        frame = session.read(trial_id, e.stream)
+        declared = session.stream(trial_id, e.stream).rows
+        t_ns, rows = temporal(out, e.path, "Scalars:scalars")
+        assert len(t_ns) == declared == len(frame), e.path
+        expected = np.round(frame["t"].to_numpy() * 1e9).astype(np.int64)
+        np.testing.assert_array_equal(t_ns, expected, err_msg=e.path)
+        truncation_would_differ |= bool(np.any(np.trunc(frame["t"].to_numpy() * 1e9).astype(np.int64) != expected))
+        assert all(len(r) == len(rows[0]) for r in rows)
+    assert truncation_would_differ  # the data would expose float truncation of timestamps
+
+
+def test_series_values_are_the_stream_values(recorded, sessions):
+    _, out = recorded
+    main, other, _ = sessions
+    _, rows = temporal(out, "/series/stiffness-1/measured/handle/force_raw", "Scalars:scalars")
+    w = main.read("stiffness-1", "handle_wrench")
+    np.testing.assert_array_equal(np.array(rows), w[["fx", "fy", "fz"]].to_numpy())
+    _, rows = temporal(out, "/series/stiffness-1/compare/handle/force_raw", "Scalars:scalars")
+    np.testing.assert_array_equal(np.array(rows)[:, 0], 0.5 * np.ones(1000))
+    _, rows = temporal(out, "/series/stiffness-1/measured/penetration", "Scalars:scalars")
+    depth = np.array(rows)[:, 0]
+    t100 = np.arange(100) / 100.0
+    expected = 0.003 * np.sin(2 * np.pi * t100)
+    expected[OCCLUDED] = np.nan
+    np.testing.assert_allclose(depth, expected, atol=1e-15)
+
+
+def test_raw_force_is_rotated_to_the_world_frame(recorded):
+    """The handle is turned +90° about z: sensor x (1 N) points along world y."""
+    _, out = recorded
+    _, rows = temporal(out, "/series/stiffness-1/measured/hand_force/raw_world", "Scalars:scalars")
+    f = np.array(rows, dtype=float)
+    ok = np.all(np.isfinite(f), axis=1)
+    assert ok.sum() > 800
+    np.testing.assert_allclose(f[ok, 0], 0.0, atol=1e-12)
+    np.testing.assert_allclose(f[ok, 1], 1.0, atol=1e-12)
+    t_ns, vecs = temporal(out, "/world/stiffness-1/measured/hand_force/raw", "Arrows3D:vectors")
+    assert len(t_ns) == ok.sum()
+    np.testing.assert_allclose(np.array(vecs)[:, 0, 1], HAND_FORCE_M_PER_N, atol=1e-7)
+
+
+def test_three_d_entities_skip_unknown_poses(recorded):
+    _, out = recorded
+    t_ns, _ = temporal(out, "/world/stiffness-1/measured/handle", "Transform3D:translation")
+    all_ns = time_ns(np.arange(100) / 100.0)
+    np.testing.assert_array_equal(t_ns, np.delete(all_ns, np.arange(100)[OCCLUDED]))
+    t_ns, pts = temporal(out, "/world/stiffness-1/measured/markers/handle", "Points3D:positions")
+    np.testing.assert_array_equal(t_ns, all_ns)
+    counts = np.array([len(p) for p in pts])
+    assert set(counts[OCCLUDED]) == {2} and (np.delete(counts, np.arange(100)[OCCLUDED]) == 3).all()
+    _, pts = temporal(out, "/world/stiffness-1/measured/markers/link2", "Points3D:positions")
+    assert all(len(p) == 2 for p in pts)
+
+
+def test_session_and_results_documents(recorded):
+    _, out = recorded
+    md = static_text(out, "/results")
+    assert "| workspace.volume | 0.0001235 | m^3 | 1 |" in md
+    assert "| stiffness.k_mean | [480, 470] | N/m | 2 | 7.07 |" in md
+    assert "no handle_accel \\| stream" in md
+    text = static_text(out, "/session")
+    assert "viewer-0001" in text and "viewer-sim" in text and "stiffness-1" in text
+
+
+def test_results_markdown_warns_about_another_session():
+    md = results_markdown(results_for("someone-else"), "viewer-0001")
+    assert "not `viewer-0001`" in md
+
+
+def test_load_results_errors(tmp_path):
+    with pytest.raises(HaptifyError) as err:
+        load_results(tmp_path / "missing.json")
+    assert err.value.findings[0].code == "E903"
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"session_id": "x"}))
+    with pytest.raises(HaptifyError) as err:
+        load_results(bad)
+    assert {f.code for f in err.value.findings} == {"E104"}
+    good = tmp_path / "good.json"
+    good.write_text(results_for("viewer-0001").model_dump_json())
+    assert load_results(good).metrics[0].id == "workspace.volume"
+
+
+# --- blueprints -------------------------------------------------------------------------------------
+
+def test_blueprint_per_protocol(recorded):
+    plan, _ = recorded
+    tabs = {tp.trial.protocol: blueprints.trial_tab(plan, tp) for tp in plan.trials}
+    stiff = tabs["stiffness"]
+    assert isinstance(stiff.contents[0], rrb.Vertical) and isinstance(stiff.contents[1], rrb.Spatial3DView)
+    first = stiff.contents[0].contents[0]
+    assert first.origin == "/series/stiffness-1"
+    assert "+ $origin/measured/commanded/force" in first.contents and "+ $origin/compare/commanded/force" in first.contents
+    ws = tabs["workspace"]
+    assert isinstance(ws.contents[0], rrb.Spatial3DView)
+    assert list(ws.contents[0].contents) == ["+ /world", "+ /world/plate/**", "+ /world/device/**", "+ /world/workspace-1/**"]
+    assert ws.column_shares == [3.0, 1.0]
+    free = tabs["free_space"]
+    names = [v.name for v in free.contents[1].contents if isinstance(v, rrb.TimeSeriesView)]
+    assert names[:2] == ["hand force in W", "F/T force (raw, sensor frame)"]
+    for protocol in blueprints.LAYOUTS:  # every protocol has a layout naming only known views
+        assert set(blueprints.LAYOUTS[protocol].views) <= set(blueprints.VIEWS)
+
+
+def test_every_protocol_has_a_layout():
+    from haptify.session_format import PROTOCOLS
+
+    assert set(PROTOCOLS) == set(blueprints.LAYOUTS)
+
+
+# --- helpers known by construction ---------------------------------------------------------------------
+
+def test_pose_at_interpolates_linearly_and_by_slerp():
+    t = np.array([0.0, 1.0, 2.0])
+    p = np.array([[0, 0, 0], [1, 0, 0], [2, 2, 0]], float)
+    half = [math.cos(math.pi / 4), 0, 0, math.sin(math.pi / 4)]  # 90° about z
+    q = np.array([[1, 0, 0, 0], half, [0, 0, 0, 1]], float)
+    pos, quat = pose_at(t, p, q, np.array([0.5, 1.5, 2.0, -0.1, 2.1]))
+    np.testing.assert_allclose(pos[:3], [[0.5, 0, 0], [1.5, 1, 0], [2, 2, 0]])
+    np.testing.assert_allclose(quat[0], [math.cos(math.pi / 8), 0, 0, math.sin(math.pi / 8)], atol=1e-12)
+    assert np.isnan(pos[3:]).all() and np.isnan(quat[3:]).all()
+    p[1] = np.nan
+    pos, _ = pose_at(t, p, q, np.array([0.5, 1.5]))
+    assert np.isnan(pos).all()
+
+
+def test_time_ns_rounds_to_the_nearest_nanosecond():
+    assert time_ns(np.array([0.29, 1e-9, 140.0]))[0] == 290_000_000
+    assert time_ns(np.array([0.29, 1e-9, 140.0])).tolist() == [290_000_000, 1, 140_000_000_000]
+
+
+def test_voxel_means_and_nan_split():
+    pts = np.array([[0.001, 0.001, 0.001], [0.003, 0.001, 0.001], [0.015, 0.001, 0.001]])
+    vals = np.array([[1.0, 0, 0], [3.0, 0, 0], [5.0, 0, 0]])
+    centres, means = voxel_means(pts, vals, 0.01)
+    order = np.argsort(centres[:, 0])
+    np.testing.assert_allclose(centres[order, 0], [0.002, 0.015])
+    np.testing.assert_allclose(means[order, 0], [2.0, 5.0])
+    line = np.array([[0, 0, 0], [1, 0, 0], [np.nan] * 3, [2, 0, 0], [np.nan] * 3, [3, 0, 0], [4, 0, 0], [5, 0, 0]], float)
+    assert [len(s) for s in nan_split(line)] == [2, 3]
+
+
+def test_plane_rectangle_lies_in_the_plane_and_covers_the_path():
+    normal = np.array([0.0, 1.0, 1.0]) / math.sqrt(2)
+    point = np.array([0.1, 0.0, 0.0])
+    rng = np.random.default_rng(1)
+    around = rng.uniform(-0.2, 0.2, (50, 3))
+    corners = plane_rectangle(point, normal, around)
+    np.testing.assert_allclose((corners - point) @ normal, 0.0, atol=1e-12)
+    e1, e2 = corners[1] - corners[0], corners[3] - corners[0]
+    assert abs(e1 @ e2) < 1e-12
+    proj = around - np.outer((around - point) @ normal, normal)
+    a = (proj - corners[0]) @ e1 / (e1 @ e1)
+    b = (proj - corners[0]) @ e2 / (e2 @ e2)
+    assert (a > 0).all() and (a < 1).all() and (b > 0).all() and (b < 1).all()
+
+
+# --- the command -------------------------------------------------------------------------------------
+
+def view_args(*argv: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser()
+    cmd_view.register(parser.add_subparsers())
+    return parser.parse_args(["view", *argv])
+
+
+def test_cli_save_one_trial_with_results(sessions, tmp_path, capsys):
+    main, _, root = sessions
+    res = tmp_path / "results.json"
+    res.write_text(results_for(main.session_id).model_dump_json())
+    out = tmp_path / "one.rrd"
+    args = view_args(str(main.root), "--trial", "workspace-1", "--results", str(res), "--save", str(out))
+    assert args.func(args, UI()) == 0
+    assert f"wrote {out}" in capsys.readouterr().out
+    paths = set(RrdReader(out).store().schema().entity_paths())
+    assert "/world/workspace-1/measured/workspace/points" in paths and "/results" in paths
+    assert not any(p.startswith("/world/stiffness-1") for p in paths)
+
+
+def test_cli_without_display_explains_save_and_web(sessions, monkeypatch, capsys):
+    main, _, _ = sessions
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.setattr(cmd_view.sys, "platform", "linux")
+    args = view_args(str(main.root))
+    assert args.func(args, UI()) == 2
+    err = capsys.readouterr().err
+    assert "--save" in err and "--web" in err
+
+
+def test_cli_usage_errors(sessions):
+    main, _, _ = sessions
+    for argv, code in ((["--port", "9000", "--save", "x.rrd"], "E903"), (["--web", "--port", "70000"], "E903"),
+                       (["--trial", "nope", "--save", "x.rrd"], "E903")):
+        args = view_args(str(main.root), *argv)
+        with pytest.raises(HaptifyError) as err:
+            args.func(args, UI())
+        assert err.value.findings[0].code == code
+
+
+# --- serving --------------------------------------------------------------------------------------------
+
+def test_web_viewer_answers_on_loopback_and_stops(recorded):
+    _, out = recorded
+    port = cmd_view.free_port()
+    proc, url = cmd_view.serve_web(out, port)
+    try:
+        cmd_view.wait_until_serving(proc, port, timeout_s=20)
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=5) as resp:
+            assert resp.status == 200
+            assert b"<html" in resp.read(4096).lower()
+        assert url.startswith(f"http://127.0.0.1:{port}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A")
+    finally:
+        cmd_view.stop(proc)
+    assert proc.poll() is not None
+
+
+def test_web_viewer_on_a_busy_port_is_a_coded_error(recorded):
+    import socket
+
+    _, out = recorded
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen(1)
+        port = s.getsockname()[1]
+        proc, _ = cmd_view.serve_web(out, port)
+        try:
+            with pytest.raises(HaptifyError) as err:
+                cmd_view.wait_until_serving(proc, port, timeout_s=20)
+            assert err.value.findings[0].code == "E904"
+        finally:
+            cmd_view.stop(proc)
+
+
+@pytest.mark.skipif(not CHROMIUM.exists(), reason=f"screenshot test needs Chromium at {CHROMIUM} (not installed here)")
+def test_web_viewer_screenshot(recorded, tmp_path):
+    from matplotlib.image import imread
+
+    _, out = recorded
+    port = cmd_view.free_port()
+    proc, url = cmd_view.serve_web(out, port)
+    shot = tmp_path / "viewer.png"
+    try:
+        cmd_view.wait_until_serving(proc, port, timeout_s=20)
+        subprocess.run([str(CHROMIUM), "--headless=new", "--no-sandbox", "--disable-gpu", "--use-angle=swiftshader",
+                        "--enable-unsafe-swiftshader", "--window-size=1280,800", "--virtual-time-budget=15000",
+                        f"--screenshot={shot}", url], capture_output=True, timeout=45, check=False)
+    finally:
+        cmd_view.stop(proc)
+    assert shot.is_file() and shot.stat().st_size > 0, "Chromium wrote no screenshot"
+    img = imread(shot)
+    assert len(np.unique(img.reshape(-1, img.shape[-1]), axis=0)) > 16, "the screenshot is blank"
