@@ -98,11 +98,16 @@ class JsonlAdapter:
         self.argv = shlex.split(command)
         self.timeout_s = timeout_s
         self.max_restarts = max_restarts
-        self.restarts = 0
+        self.starts = 0
         self.seq = 0
         self.proc: subprocess.Popen | None = None
         self.lines: queue.Queue = queue.Queue()
         self.implementation: dict = {}
+
+    @property
+    def restarts(self) -> int:
+        """How often the process was started again after the first start."""
+        return max(0, self.starts - 1)
 
     # -- process management ---------------------------------------------------------------------
     def _start(self) -> None:
@@ -159,15 +164,13 @@ class JsonlAdapter:
     # -- cases ----------------------------------------------------------------------------------
     def run(self, case: Case, session: Path) -> Answer:
         if self.proc is None or self.proc.poll() is not None:
-            if self.proc is not None:
-                self.restarts += 1
-            if self.restarts > self.max_restarts:
-                return Answer("error", message=f"implementation crashed more than {self.max_restarts} times; not restarted")
+            if self.starts > self.max_restarts:
+                return Answer("error", message=f"implementation failed more than {self.max_restarts} restarts; not restarted")
+            self.starts += 1
             try:
                 self._start()
             except (RuntimeError, TimeoutError, OSError) as exc:
                 self._kill()
-                self.restarts += 1
                 return Answer("error", message=f"cannot start the implementation: {exc}")
         start = time.perf_counter()
         try:

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 from haptify_conform.adapters import Answer
-from haptify_conform.cases import Case, fixture_path
+from haptify_conform.cases import REPO_ROOT, Case, fixture_path
 from haptify_conform.judge import Verdict, judge_acceptance, judge_metric, judge_rejection
 
 
@@ -40,8 +40,11 @@ def judge(case: Case, answer: Answer) -> Verdict:
 
 
 def run_cases(cases: Iterable[Case], adapter, skips: dict[str, str] | None = None,
-              on_verdict: Callable[[Verdict], None] | None = None) -> list[Verdict]:
-    """Run every case (skip-listed ones are reported as skipped, never silently dropped)."""
+              on_verdict: Callable[[Verdict], None] | None = None, repo: Path = REPO_ROOT) -> list[Verdict]:
+    """Run every case (skip-listed ones are reported as skipped, never silently dropped).
+
+    Fixtures are looked up under ``repo/fixtures``.
+    """
     skips = skips or {}
     verdicts = []
     try:
@@ -50,7 +53,7 @@ def run_cases(cases: Iterable[Case], adapter, skips: dict[str, str] | None = Non
                 v = Verdict(case_id=case.id, metric=case.metric, status="skipped", spec_section=case.spec_section,
                             level=case.level, message=f"skip list: {skips[case.id]}")
             else:
-                session = fixture_path(case)
+                session = fixture_path(case, repo)
                 if not session.exists():
                     v = Verdict(case_id=case.id, metric=case.metric, status="error", spec_section=case.spec_section,
                                 level=case.level, message=f"fixture {case.fixture} is missing from the suite")

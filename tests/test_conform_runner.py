@@ -1,0 +1,131 @@
+"""The conformance runner itself (spec chapter 16): judging, adapters, crash isolation, reports."""
+
+from __future__ import annotations
+
+import json
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import jsonschema
+import pytest
+
+from haptify import schemas
+from haptify_conform.adapters import CmdAdapter, JsonlAdapter, PythonAdapter
+from haptify_conform.cases import Case, Expected, Provenance, Tolerance
+from haptify_conform.judge import judge_metric
+from haptify_conform.report import build_report, header, to_junit, to_table
+from haptify_conform.runner import run_cases
+
+TOY = Path(__file__).parent / "conform_impls" / "toy_jsonl.py"
+
+
+def case(cid: str, fixture: str, value=1.5, unit="N", tol=(0.01, 0.0), codes=None, metric="x.y") -> Case:
+    return Case(id=cid, metric=metric, spec_section="9.9", level="MUST", fixture=fixture,
+                expected=Expected(value=None if codes else value, unit=None if codes else unit, codes=codes),
+                tolerance=None if codes else Tolerance(abs=tol[0], rel=tol[1]),
+                provenance=Provenance(kind="analytic", note="test"), spec_versions=["1.0"], description="t")
+
+
+def results(value, unit="N", metric="x.y"):
+    return {"metrics": [{"id": metric, "value": value, "unit": unit}]}
+
+
+@pytest.mark.parametrize("value,unit,status", [
+    (1.505, "N", "passed"), (1.52, "N", "failed"), (1.5, "kN", "failed"), (float("nan"), "N", "failed"),
+    ([1.5, 1.5], "N", "failed"), ("1.5", "N", "failed")])
+def test_tolerance_rule_and_failures_of_their_own(value, unit, status):
+    assert judge_metric(case("c", "f"), results(value, unit)).status == status
+
+
+def test_relative_tolerance_and_vectors():
+    c = case("c", "f", value=[10.0, -20.0], tol=(0.0, 0.01))
+    assert judge_metric(c, results([10.09, -20.19])).status == "passed"
+    v = judge_metric(c, results([10.0, -20.3]))
+    assert v.status == "failed" and v.max_abs_error == pytest.approx(0.3) and v.max_rel_error == pytest.approx(0.015)
+
+
+def test_missing_metric_says_why():
+    v = judge_metric(case("c", "f"), {"metrics": [], "unavailable": [{"id": "x.y", "code": "E302", "reason": "no stream"}]})
+    assert v.status == "failed" and "E302" in v.message
+
+
+def _fixtures(tmp_path: Path, *names: str) -> Path:
+    for n in names:
+        (tmp_path / "fixtures" / n).mkdir(parents=True)
+    return tmp_path
+
+
+def test_jsonl_adapter_isolates_crashes_hangs_and_garbage(tmp_path):
+    repo = _fixtures(tmp_path, "v1.5", "crash", "hang", "garbage", "skip", "reject", "v2.0")
+    cases = [case("a", "v1.5"), case("b", "crash"), case("c", "hang"), case("d", "garbage"), case("e", "skip"),
+             case("f", "reject", codes=["E203"]), case("g", "v2.0"), case("h", "missing")]
+    adapter = JsonlAdapter(f"{sys.executable} {TOY}", timeout_s=2.0)
+    verdicts = {v.case_id: v for v in run_cases(cases, adapter, repo=repo)}
+    assert verdicts["a"].status == "passed"
+    assert verdicts["b"].status == "error" and "exited" in verdicts["b"].message
+    assert verdicts["c"].status == "error" and "no reply" in verdicts["c"].message
+    assert verdicts["d"].status == "error" and "not JSON" in verdicts["d"].message
+    assert verdicts["e"].status == "skipped"
+    assert verdicts["f"].status == "passed"
+    assert verdicts["g"].status == "failed"  # a fresh process after the crashes still answers, wrongly: 2.0 ≠ 1.5
+    assert verdicts["h"].status == "error" and "fixture" in verdicts["h"].message
+    assert adapter.restarts == 3
+
+
+def test_jsonl_restarts_are_bounded(tmp_path):
+    repo = _fixtures(tmp_path, "crash")
+    adapter = JsonlAdapter(f"{sys.executable} {TOY}", timeout_s=2.0, max_restarts=1)
+    verdicts = run_cases([case(f"c{i}", "crash") for i in range(4)], adapter, repo=repo)
+    assert [v.status for v in verdicts] == ["error"] * 4
+    assert "not restarted" in verdicts[-1].message
+
+
+def test_cmd_adapter_reads_out_file_and_reports_no_output(tmp_path):
+    repo = _fixtures(tmp_path, "s")
+    prog = tmp_path / "impl.py"
+    prog.write_text("import json, sys\njson.dump({'metrics': [{'id': 'x.y', 'value': 1.5, 'unit': 'N'}]}, open(sys.argv[2], 'w'))\n")
+    verdicts = run_cases([case("a", "s")], CmdAdapter(f"{sys.executable} {prog} {{session}} {{out}}", 10), repo=repo)
+    assert verdicts[0].status == "passed"
+    silent = tmp_path / "silent.py"
+    silent.write_text("import sys\nprint('boom', file=sys.stderr)\nsys.exit(4)\n")
+    verdicts = run_cases([case("a", "s")], CmdAdapter(f"{sys.executable} {silent} {{session}} {{out}}", 10), repo=repo)
+    assert verdicts[0].status == "error" and "exit 4" in verdicts[0].message and "boom" in verdicts[0].message
+    with pytest.raises(ValueError):
+        CmdAdapter("tool {session}", 10)
+
+
+def test_skip_list_is_reported_not_dropped(tmp_path):
+    repo = _fixtures(tmp_path, "v1.5")
+    verdicts = run_cases([case("a", "v1.5")], JsonlAdapter(f"{sys.executable} {TOY}", 2.0), skips={"a": "not yet"}, repo=repo)
+    assert verdicts[0].status == "skipped" and "not yet" in verdicts[0].message
+
+
+def test_reports_validate_and_parse(tmp_path):
+    repo = _fixtures(tmp_path, "v1.5", "v9")
+    verdicts = run_cases([case("a", "v1.5"), case("b", "v9")], JsonlAdapter(f"{sys.executable} {TOY}", 2.0), repo=repo)
+    report = build_report(header("jsonl", {"name": "toy"}, "2026-11-22T00:00:00Z"), verdicts)
+    jsonschema.validate(json.loads(report.model_dump_json()), schemas.schema("conform-report"))
+    assert report.summary.passed == 1 and report.summary.failed == 1 and not report.summary.conforms
+    table = to_table(report)
+    assert "FAILED" in table and "spec §9.9" in table and "DOES NOT CONFORM" in table
+    suite = ET.fromstring(to_junit(report).split("?>", 1)[1])
+    assert suite.get("tests") == "2" and suite.get("failures") == "1"
+    assert suite.find("testcase[@name='b']/failure") is not None
+
+
+@pytest.mark.parametrize("how", ["jsonl", "cmd"])
+def test_reference_passes_the_protocol_self_test(how):
+    from haptify_conform.cli import main
+
+    server = f"{sys.executable} -m haptify_conform.reference"
+    args = ["--jsonl", server] if how == "jsonl" else ["--cmd", server + " {session} {out}"]
+    assert main(args + ["--self-test"]) == 0
+
+
+def test_self_test_fails_an_implementation_that_accepts_everything(tmp_path):
+    from haptify_conform.cli import main
+
+    prog = tmp_path / "yes.py"
+    prog.write_text("import json, sys\njson.dump({'metrics': []}, open(sys.argv[2], 'w'))\n")
+    assert main(["--cmd", f"{sys.executable} {prog} {{session}} {{out}}", "--self-test"]) == 1
