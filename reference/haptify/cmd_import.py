@@ -1,0 +1,137 @@
+"""``haptify import c3d|csv FILE -o SESSION [--map MAP.json]`` (spec §5.8).
+
+With ``--map`` the map supplies every fact the source does not hold; the options below override the
+map's fields (one map, many files). Without a map (C3D only) the options must supply them: ``--device``,
+``--lab``, ``--examiner``, ``--date``, ``--placement`` and ``--powered``; the file's markers (and its
+first force platform) become an ``other`` trial labelled with the file's name. ``--list`` describes a C3D
+file (labels, units, rates, platforms) without writing anything.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from haptify.errors import fail
+from haptify.importers import import_c3d, import_csv, load_map, read_c3d
+
+# option name -> the map field it fills (for the error that lists what is missing without a map)
+_OPTION_OF_FIELD = {"/session/date": "--date", "/session/lab": "--lab", "/session/examiner": "--examiner",
+                    "/session/device": "--device", "/session/device_placement": "--placement",
+                    "/trial/powered": "--powered", "/session": "--device, --lab, --examiner, --date, --placement",
+                    "/trial": "--powered"}
+
+
+def register(sub) -> None:
+    p = sub.add_parser("import", help="import a C3D file or a CSV log as a session",
+                       description=__doc__.splitlines()[0])
+    kinds = p.add_subparsers(dest="import_kind", metavar="FORMAT", required=True)
+    for fmt, text in (("c3d", "a C3D motion-capture file (Vicon, Qualisys, …)"),
+                      ("csv", "a column-mapped CSV log (ATI F/T log, CHAI3D log, …)")):
+        q = kinds.add_parser(fmt, help=f"import {text}")
+        q.add_argument("file", type=Path, help=f"the {fmt.upper()} file")
+        q.add_argument("-o", "--output", type=Path, help="the session folder to create")
+        q.add_argument("--map", type=Path, required=(fmt == "csv"), help="import map (JSON; import-map.schema.json)")
+        q.add_argument("--overwrite", action="store_true", help="replace an existing session folder")
+        g = q.add_argument_group("session facts (override the map; required for a C3D without --map)")
+        g.add_argument("--device", type=Path, help="device description (device.json), copied into the session")
+        g.add_argument("--lab", help="pseudonymous lab id")
+        g.add_argument("--examiner", help="pseudonymous examiner id")
+        g.add_argument("--date", help="recording date, YYYY-MM-DD")
+        g.add_argument("--placement", help="device frame in W: 'x,y,z' in m, optionally ',qw,qx,qy,qz' (default orientation: aligned with W)")
+        g.add_argument("--powered", choices=["yes", "no"], help="was the device powered during the trial")
+        g.add_argument("--session-id", help="session id (default: the file's name)")
+        g.add_argument("--trial-id", help="trial id (default: the file's name)")
+        g.add_argument("--repetition", type=int, help="repetition number of the trial")
+        if fmt == "c3d":
+            g.add_argument("--plate", help="force platform that defines W: a number, or 'none' (default: 1 when present)")
+            q.add_argument("--list", action="store_true", help="describe the file (labels, units, rates, platforms) and exit")
+        q.set_defaults(func=run)
+
+
+def _placement(text: str) -> dict:
+    try:
+        vals = [float(v) for v in text.replace(" ", ",").split(",") if v]
+    except ValueError:
+        vals = []
+    if len(vals) not in (3, 7):
+        raise fail("E903", "--placement takes 'x,y,z' or 'x,y,z,qw,qx,qy,qz'", expected="3 or 7 numbers", found=text)
+    return {"position": vals[:3], "quaternion": vals[3:] if len(vals) == 7 else [1.0, 0.0, 0.0, 0.0]}
+
+
+def overrides_from(args) -> dict:
+    """The map fields the command-line options set (spec §5.8)."""
+    session: dict = {}
+    trial: dict = {}
+    if args.device is not None:
+        session["device"] = {"file": str(args.device.resolve())}
+    for opt, key in (("lab", "lab"), ("examiner", "examiner")):
+        if getattr(args, opt) is not None:
+            session[key] = {"id": getattr(args, opt)}
+    if args.date is not None:
+        session["date"] = args.date
+    if args.placement is not None:
+        session["device_placement"] = _placement(args.placement)
+    if args.session_id is not None:
+        session["session_id"] = args.session_id
+    if args.powered is not None:
+        trial["powered"] = args.powered == "yes"
+    if args.trial_id is not None:
+        trial["id"] = args.trial_id
+    if args.repetition is not None:
+        trial["repetition"] = args.repetition
+    out: dict = {}
+    if session:
+        out["session"] = session
+    if trial or args.map is None:
+        out["trial"] = trial
+    plate = getattr(args, "plate", None)
+    if plate is not None:
+        out["force_plate"] = "none" if plate == "none" else (int(plate) if plate.isdigit() else plate)
+    return out
+
+
+def _load(args, fmt: str):
+    from haptify.errors import HaptifyError
+
+    try:
+        return load_map(args.map, fmt, overrides_from(args))
+    except HaptifyError as err:
+        if args.map is not None:
+            raise
+        missing = sorted({_OPTION_OF_FIELD.get(f.pointer or "", f.pointer or "") for f in err.findings
+                          if "missing" in (f.expected, f.found)})
+        if missing:
+            raise fail("E903", "without --map, give the session facts on the command line", expected=missing,
+                       found="missing") from None
+        raise fail("E903", "; ".join(f"{f.pointer}: {f.message}" for f in err.findings), found="invalid option") from None
+
+
+def run(args, ui) -> int:
+    fmt = args.import_kind
+    if fmt == "c3d" and args.list:
+        summary = read_c3d(args.file).summary()
+        if ui.json_mode:
+            ui.emit_json(summary)
+        else:
+            mk, an = summary["markers"], summary["analog"]
+            ui.say(f"{summary['file']} ({summary['manufacturer'] or 'unknown system'})")
+            ui.say(f"markers: {mk['count']} at {mk['rate_hz']:g} Hz, {mk['frames']} frames, units {mk['units']}")
+            ui.say("  " + ", ".join(mk["labels"]))
+            ui.say(f"analog: {an['count']} channels at {an['rate_hz']:g} Hz, {an['samples']} samples")
+            ui.say("  " + ", ".join(f"{c['label']} [{c['unit']}]" for c in an["channels"]))
+            for p in summary["force_platforms"]:
+                ui.say(f"force platform {p['number']}: type {p['type']}")
+        return 0
+    if args.output is None:
+        raise fail("E903", f"haptify import {fmt} needs -o SESSION", expected="-o SESSION", found=None)
+    loaded = _load(args, fmt)
+    importer = import_c3d if fmt == "c3d" else import_csv
+    result = importer(args.file, args.output, loaded, overwrite=args.overwrite)
+    if ui.json_mode:
+        ui.emit_json(result.to_dict())
+        return 0
+    ui.say(f"wrote {result.session} (session {result.session_id}, trial {result.trial_id})")
+    for s in result.streams:
+        ui.say(f"  {s['kind']:16s} {s['rows']:8d} rows at {s['rate_hz']:g} Hz, {s['columns']} columns")
+    ui.say(f"  {result.world_frame}")
+    return 0

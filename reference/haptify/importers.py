@@ -1,0 +1,899 @@
+"""Importers: C3D motion-capture files and column-mapped CSV logs into sessions (spec chapter 5).
+
+A C3D file (Vicon, Qualisys, …; read with ezc3d) or a CSV log (an ATI-style F/T log, a CHAI3D log of
+commanded force) becomes one trial of a new session. What the source does not hold — the device, the
+lab and examiner ids, the recording date, the trial's protocol — comes from an **import map**
+(:class:`ImportMap`, JSON; ``schemas/1.0/import-map.schema.json``), which also says which source
+channel fills which stream column and in which unit. Units are converted to SI by the table of §5.3;
+the session is written atomically through :class:`~haptify.storage.SessionWriter`.
+
+Errors (spec §5.1–5.2): E501 the source cannot be read, E502 the map is malformed or invalid, E503 the
+map names a label, column or platform the source does not have (the message lists those it has), E504
+a unit cannot be converted; E901 the output exists. Every check runs before anything is written.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Annotated, Any, Callable, Literal, Union
+
+import numpy as np
+import pandas as pd
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from haptify import schemas
+from haptify.conventions import STANDARD_GRAVITY, matrix_to_quat, quat_to_matrix
+from haptify.errors import HaptifyError, fail
+from haptify.session_format import (
+    PROTOCOLS,
+    Device,
+    Id,
+    Party,
+    Pose,
+    Rendering,
+    Rig,
+    RigidBody,
+    expected_columns,
+    kind_table,
+)
+from haptify.storage import SessionWriter, parse_json_file, pydantic_findings
+from haptify.versions import PACKAGE_VERSION
+
+# --- units (spec §5.3) ---------------------------------------------------------------------------
+
+LBF_N = 0.45359237 * STANDARD_GRAVITY  # pound-force in newtons, exact by definition of lb and g_n
+INCH_M = 0.0254  # inch in metres, exact by definition
+
+
+@dataclass(frozen=True)
+class Unit:
+    """A source unit: its dimension and the conversion ``si = value · mul / div`` (spec §5.3)."""
+
+    dimension: str
+    mul: float = 1.0
+    div: float = 1.0
+
+    def to_si(self, values: np.ndarray) -> np.ndarray:
+        """Convert ``values`` to SI: one multiplication and/or one division, in that order."""
+        out = np.asarray(values, dtype=np.float64)
+        if self.mul != 1.0:
+            out = out * self.mul
+        if self.div != 1.0:
+            out = out / self.div
+        return out
+
+
+def _spellings(unit: Unit, *names: str) -> dict[str, Unit]:
+    return {n: unit for n in names}
+
+
+# Every accepted spelling of a source unit. Decimal sub-units divide by an integer power of ten, so a
+# value converts to the correctly rounded SI double (mm → m is x / 1000, not x · 0.001).
+UNITS: dict[str, Unit] = {
+    **_spellings(Unit("length"), "m"),
+    **_spellings(Unit("length", div=100.0), "cm"),
+    **_spellings(Unit("length", div=1000.0), "mm"),
+    **_spellings(Unit("force"), "N"),
+    **_spellings(Unit("force", mul=1000.0), "kN"),
+    **_spellings(Unit("force", mul=LBF_N), "lbf"),
+    **_spellings(Unit("torque"), "N*m", "N.m", "N·m", "Nm", "N-m"),
+    **_spellings(Unit("torque", div=1000.0), "N*mm", "N.mm", "N·mm", "Nmm", "N-mm"),
+    **_spellings(Unit("torque", mul=LBF_N * INCH_M), "lbf*in", "lbf.in", "lbf-in"),
+    **_spellings(Unit("acceleration"), "m/s^2", "m/s2", "m/s²"),
+    **_spellings(Unit("acceleration", div=1000.0), "mm/s^2", "mm/s2", "mm/s²"),
+    **_spellings(Unit("acceleration", mul=STANDARD_GRAVITY), "g"),
+    **_spellings(Unit("angle"), "rad"),
+    **_spellings(Unit("angle", mul=math.pi / 180.0), "deg", "°"),
+    **_spellings(Unit("time"), "s"),
+    **_spellings(Unit("time", div=1000.0), "ms"),
+    **_spellings(Unit("time", div=1_000_000.0), "us", "µs"),
+    **_spellings(Unit("dimensionless"), "1"),
+    **_spellings(Unit("voltage"), "V"),
+    **_spellings(Unit("voltage", div=1000.0), "mV"),
+}
+
+# The dimension of each SI unit a stream column may declare (spec §1.1).
+SI_DIMENSION = {"m": "length", "N": "force", "N*m": "torque", "m/s^2": "acceleration", "rad": "angle",
+                "s": "time", "1": "dimensionless"}
+
+
+def unit_conversion(unit: str | None, target: str, **where: Any) -> Unit:
+    """The conversion from source ``unit`` to the SI ``target`` unit of a column (spec §5.3).
+
+    E504 when ``unit`` is not in the table or has another dimension than ``target``; ``where`` names
+    the file and column for the error.
+    """
+    dim = SI_DIMENSION[target]
+    spelled = (unit or "").strip()
+    known = UNITS.get(spelled)
+    accepted = sorted(n for n, u in UNITS.items() if u.dimension == dim)
+    if known is None:
+        raise fail("E504", f"unit {spelled!r} is not in the conversion table (spec §5.3)",
+                   expected=accepted, found=spelled, **where)
+    if known.dimension != dim:
+        raise fail("E504", f"unit {spelled!r} is a {known.dimension}, the column needs a {dim} ({target})",
+                   expected=accepted, found=spelled, **where)
+    return known
+
+
+# --- the import map (spec §5.2) -------------------------------------------------------------------
+
+FIXED_KINDS: tuple[str, ...] = tuple(k for k, v in schemas.load("stream-kinds.json")["kinds"].items()
+                                     if "entity_columns" not in v)
+SOURCES = ("c3d", "csv")
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class ChannelMap(_Strict):
+    """Where one stream column comes from: a source ``source`` channel, or a constant ``value``.
+
+    The SI value is ``convert(scale · raw + offset)`` from ``unit`` (default for C3D: the channel's
+    ANALOG:UNITS; CSV columns and constants must state it). ``threshold`` turns the value into a 0/1
+    trigger (1 where value ≥ threshold, in ``unit``) and is allowed only for dimensionless columns.
+    """
+
+    source: str | None = Field(None, description="C3D analog label or CSV column header.")
+    value: float | None = Field(None, description="A constant, for a quantity the source does not log because it is zero by construction (e.g. the torque of a 3-DOF force command).")
+    unit: str | None = Field(None, description="Unit of scale·raw+offset; one of the spellings of spec §5.3.")
+    scale: float = Field(1.0, description="Multiplies the raw value first (e.g. a sensor gain in unit per volt).")
+    offset: float = Field(0.0, description="Added after scaling, in `unit`.")
+    threshold: float | None = Field(None, description="For the sync trigger only: 1 where the value is ≥ threshold, else 0.")
+
+    @model_validator(mode="after")
+    def _one_origin(self) -> "ChannelMap":
+        if (self.source is None) == (self.value is None):
+            raise ValueError("give exactly one of 'source' and 'value'")
+        return self
+
+
+class StreamMap(_Strict):
+    """One output stream: the kind's columns (``t`` excluded) mapped to source channels."""
+
+    columns: dict[str, Union[ChannelMap, str]] = Field(description="Column name → channel; a string is short for {\"source\": string}.")
+    rate_hz: float | None = Field(None, gt=0, description="Nominal rate; C3D: must equal ANALOG:RATE when given; CSV: default 1/median(Δt) to 6 significant digits.")
+    format: Literal["parquet", "csv"] = "parquet"
+    frame: str | None = Field(None, description="Default: the kind's frame.")
+
+
+class MarkerMap(_Strict):
+    """Which C3D point labels become markers, and their entity ids."""
+
+    include: list[str] | None = Field(None, description="Labels or shell patterns ('boite:*'); default every label; [] imports no markers.")
+    exclude: list[str] = Field(default_factory=list, description="Labels or shell patterns to leave out.")
+    rename: dict[str, Id] = Field(default_factory=dict, description="C3D label → entity id; other labels are sanitised (§5.4).")
+    rigid_bodies: list[RigidBody] = Field(default_factory=list, description="Rigid bodies of the rig, by entity id.")
+    system: str | None = Field(None, description="Motion-capture system; default MANUFACTURER:COMPANY and SOFTWARE.")
+    format: Literal["parquet", "csv"] = "parquet"
+
+
+class DeviceFile(_Strict):
+    file: str = Field(description="Path of a device.json, relative to the map file's folder; copied into the session as device.json.")
+
+
+class SessionFields(_Strict):
+    """The session-level facts a source file does not hold (spec §5.2)."""
+
+    session_id: Id | None = Field(None, description="Default: the source file's name, sanitised (§5.4).")
+    date: str | None = Field(None, pattern=r"^\d{4}-\d{2}-\d{2}$", description="ISO date of the recording; required, but usually given per file on the command line (--date) so that one map serves many recordings.")
+    lab: Party
+    examiner: Party
+    device: Union[Device, DeviceFile]
+    device_placement: Pose = Field(description="The device frame in W.")
+    rig: Rig = Field(default_factory=Rig, description="Rig parts the source does not describe (handle sensors, ranges); the importer adds motion_capture and the force plate from a C3D.")
+
+
+class TrialFields(_Strict):
+    """The imported trial (spec §2.5)."""
+
+    id: Id | None = Field(None, description="Default: the source file's name, sanitised (§5.4).")
+    protocol: Literal[PROTOCOLS] = Field("other", description="Default 'other'.")  # type: ignore[valid-type]
+    label: str | None = Field(None, description="Default for 'other': the source file's name.")
+    repetition: int = Field(1, ge=1)
+    powered: bool
+    rendering: Rendering | None = None
+    notes: str | None = None
+
+
+class CsvTime(_Strict):
+    source: str = Field(description="Header of the time column.")
+    unit: str = Field(description="s, ms or us.")
+
+
+class CsvOptions(_Strict):
+    delimiter: str = Field(",", min_length=1, max_length=1)
+    skip_rows: int = Field(0, ge=0, description="Lines before the header row.")
+    comment: str | None = Field(None, min_length=1, max_length=1, description="Lines starting with this character are ignored.")
+
+
+class ImportMap(_Strict):
+    """An import map (spec §5.2): how one C3D or CSV file becomes one trial of a session."""
+
+    source: Literal["c3d", "csv"] = Field(description="The importer this map is for.")
+    session: SessionFields
+    trial: TrialFields
+    time_offset_s: float = Field(0.0, description="Added to every imported time, s (puts the source on the session clock).")
+    streams: dict[Literal[FIXED_KINDS], StreamMap] = Field(default_factory=dict)  # type: ignore[valid-type]
+    markers: MarkerMap | None = Field(None, description="C3D only; default: every point label.")
+    force_plate: Union[Annotated[int, Field(ge=1)], Literal["auto", "none"]] = Field("auto", description="C3D only: the FORCE_PLATFORM number (1-based) that becomes the rig's plate and defines W; 'auto' = 1 when the file has platforms.")
+    lab_to_world: Pose | None = Field(None, description="C3D only, without a force plate: the C3D lab frame in W (default: W is the lab frame).")
+    time: CsvTime | None = Field(None, description="CSV only, required: the time column and its unit.")
+    csv: CsvOptions | None = Field(None, description="CSV only: parsing options.")
+
+
+def _deep_merge(base: Any, over: Any) -> Any:
+    if isinstance(base, dict) and isinstance(over, dict):
+        out = dict(base)
+        for k, v in over.items():
+            out[k] = _deep_merge(base.get(k), v) if k in base else v
+        return out
+    return over
+
+
+@dataclass
+class LoadedMap:
+    """A validated import map and the folder its relative paths refer to."""
+
+    map: ImportMap
+    base_dir: Path
+    label: str
+
+
+def load_map(path: str | Path | None, source: str, overrides: dict | None = None) -> LoadedMap:
+    """Read and validate an import map (spec §5.2); ``overrides`` is deep-merged over the file's JSON.
+
+    E502 on a missing or malformed file, a schema violation (one finding per problem, with JSON
+    pointer) or a map written for the other importer.
+    """
+    if path is None:
+        raw: Any = {"source": source}
+        base, label = Path.cwd(), "command line"
+    else:
+        p = Path(path)
+        label = str(p)
+        if not p.is_file():
+            raise fail("E502", f"import map {label!r} does not exist", file=label)
+        raw = parse_json_file(p, "E502", label)
+        base = p.resolve().parent
+    if not isinstance(raw, dict):
+        raise fail("E502", "an import map is a JSON object", file=label, expected="object", found=type(raw).__name__)
+    raw = _deep_merge(raw, overrides or {})
+    try:
+        m = ImportMap.model_validate(raw)
+    except ValidationError as exc:
+        raise HaptifyError(*pydantic_findings(exc, "E502", label)) from None
+    if m.session.date is None:
+        raise fail("E502", "the recording date is missing: give session.date in the map or --date", file=label,
+                   pointer="/session/date", expected="YYYY-MM-DD", found="missing")
+    if m.source != source:
+        raise fail("E502", f"the map is for the {m.source} importer, not {source}", file=label, pointer="/source",
+                   expected=source, found=m.source)
+    wrong = {"c3d": ("time", "csv"), "csv": ("markers", "lab_to_world")}[source]
+    for key in wrong:
+        if getattr(m, key) is not None:
+            raise fail("E502", f"{key!r} does not apply to {source} imports", file=label, pointer=f"/{key}",
+                       expected=None, found=key)
+    if source == "csv":
+        if m.force_plate != "auto":
+            raise fail("E502", "'force_plate' does not apply to csv imports", file=label, pointer="/force_plate")
+        if m.time is None:
+            raise fail("E502", "a csv map needs 'time' (the time column and its unit)", file=label, pointer="/time",
+                       expected={"source": "<header>", "unit": "s|ms|us"}, found=None)
+    return LoadedMap(m, base, label)
+
+
+# --- ids (spec §5.4) ------------------------------------------------------------------------------
+
+_ID_BAD = re.compile(r"[^A-Za-z0-9._-]")
+
+
+def sanitize_id(text: str, fallback: str) -> str:
+    """An id (spec §2.2) from a free label: ':' → '.', other characters outside [A-Za-z0-9._-] → '_',
+    prefix 'm' when the first character is not a letter or digit, cut to 64 characters; ``fallback``
+    for an empty label (spec §5.4)."""
+    text = text.strip()
+    if not text:
+        return fallback
+    out = _ID_BAD.sub("_", text.replace(":", "."))
+    if not out[0].isalnum() or not out[0].isascii():
+        out = "m" + out
+    return out[:64]
+
+
+# --- C3D reading (spec §5.5) ----------------------------------------------------------------------
+
+@dataclass
+class C3DPlatform:
+    """One FORCE_PLATFORM entry: number (1-based), type, corners (4 × 3, POINT units, lab), origin (3)."""
+
+    number: int
+    type: int | None
+    corners: np.ndarray | None
+    origin: np.ndarray | None
+
+
+@dataclass
+class C3DContent:
+    """What the importer uses from a C3D file, as ezc3d reads it (analog values already scaled)."""
+
+    path: Path
+    manufacturer: str
+    point_labels: list[str]
+    point_units: str | None
+    point_rate: float
+    point_first_frame: int
+    points: np.ndarray  # (n_frames, n_markers, 3), POINT units, NaN where residual < 0 or invalid
+    analog_labels: list[str]
+    analog_units: list[str]
+    analog_rate: float
+    analog_first_sample: int
+    analogs: np.ndarray  # (n_channels, n_samples)
+    platforms: list[C3DPlatform] = field(default_factory=list)
+
+    def summary(self) -> dict:
+        """A JSON-able description of the file (what ``haptify import c3d --list`` prints)."""
+        return {
+            "file": self.path.name, "manufacturer": self.manufacturer,
+            "markers": {"count": len(self.point_labels), "rate_hz": self.point_rate, "frames": int(self.points.shape[0]),
+                        "units": self.point_units, "labels": list(self.point_labels)},
+            "analog": {"count": len(self.analog_labels), "rate_hz": self.analog_rate,
+                       "samples": int(self.analogs.shape[1]),
+                       "channels": [{"label": l, "unit": u} for l, u in zip(self.analog_labels, self.analog_units)]},
+            "force_platforms": [{"number": p.number, "type": p.type,
+                                 "corners": None if p.corners is None else p.corners.tolist(),
+                                 "origin": None if p.origin is None else p.origin.tolist()} for p in self.platforms],
+        }
+
+
+def _param(params: Any, group: str, name: str, default: Any = None) -> Any:
+    try:
+        return params[group][name]["value"]
+    except (KeyError, TypeError):
+        return default
+
+
+def _strings(values: Any, n: int) -> list[str]:
+    vals = [str(v).strip() for v in (values if values is not None else [])]
+    return (vals + [""] * n)[:n]
+
+
+def read_c3d(path: str | Path) -> C3DContent:
+    """Read a C3D file with ezc3d (spec §5.5); E501 when it is missing, not a C3D or truncated."""
+    import ezc3d
+
+    p = Path(path)
+    label = str(p)
+    if not p.is_file():
+        raise fail("E501", f"{label!r} does not exist or is not a file", file=label)
+    with open(p, "rb") as fh:
+        head = fh.read(2)
+    if len(head) < 2 or head[1] != 0x50:
+        raise fail("E501", f"{label!r} is not a C3D file (its second byte is not 0x50)", file=label,
+                   expected="0x50", found=head[1:2].hex() or "end of file")
+    try:
+        c = ezc3d.c3d(str(p), extract_forceplat_data=False)
+    except (OSError, RuntimeError, ValueError) as exc:
+        raise fail("E501", f"{label!r} cannot be read as C3D: {exc}", file=label) from None
+    params, header, data = c["parameters"], c["header"], c["data"]
+    pts = np.asarray(data["points"], dtype=np.float64)  # (4, n_markers, n_frames)
+    n_markers, n_frames = pts.shape[1], pts.shape[2]
+    declared_frames = int(header["points"]["last_frame"]) - int(header["points"]["first_frame"]) + 1
+    if n_frames != declared_frames:
+        raise fail("E501", f"{label!r} is truncated: its header declares {declared_frames} frames, the file holds {n_frames}",
+                   file=label, expected=declared_frames, found=n_frames)
+    xyz = pts[:3].transpose(2, 1, 0).copy()  # (n_frames, n_markers, 3)
+    residuals = np.asarray(data["meta_points"]["residuals"], dtype=np.float64)[0].T if n_markers else np.zeros((n_frames, 0))
+    invalid = (residuals < 0) | ~np.isfinite(xyz).all(axis=2)
+    xyz[invalid] = np.nan
+    an = np.asarray(data["analogs"], dtype=np.float64)
+    analogs = an[0] if an.ndim == 3 and an.shape[0] == 1 else an.reshape(an.shape[-2], -1)
+    n_ch = analogs.shape[0]
+    company = _strings(_param(params, "MANUFACTURER", "COMPANY"), 1)[0]
+    software = _strings(_param(params, "MANUFACTURER", "SOFTWARE"), 1)[0]
+    if software.startswith(company):
+        company = ""
+    units = _strings(_param(params, "POINT", "UNITS"), 1)[0] or None
+    platforms = []
+    n_plates = int(np.asarray(_param(params, "FORCE_PLATFORM", "USED", [0])).ravel()[0] if np.size(_param(params, "FORCE_PLATFORM", "USED", [0])) else 0)
+    corners = np.asarray(_param(params, "FORCE_PLATFORM", "CORNERS", []), dtype=np.float64)
+    origins = np.asarray(_param(params, "FORCE_PLATFORM", "ORIGIN", []), dtype=np.float64)
+    types = np.asarray(_param(params, "FORCE_PLATFORM", "TYPE", []), dtype=np.int64).ravel()
+    for i in range(n_plates):
+        cor = corners[:, :, i].T.copy() if corners.ndim == 3 and corners.shape[:2] == (3, 4) and corners.shape[2] > i else None
+        org = origins[:, i].copy() if origins.ndim == 2 and origins.shape[0] == 3 and origins.shape[1] > i else None
+        platforms.append(C3DPlatform(i + 1, int(types[i]) if types.size > i else None, cor, org))
+    return C3DContent(
+        path=p, manufacturer=" ".join(s for s in (company, software) if s),
+        point_labels=_strings(_param(params, "POINT", "LABELS"), n_markers), point_units=units,
+        point_rate=float(header["points"]["frame_rate"]), point_first_frame=int(header["points"]["first_frame"]),
+        points=xyz,
+        analog_labels=_strings(_param(params, "ANALOG", "LABELS"), n_ch),
+        analog_units=_strings(_param(params, "ANALOG", "UNITS"), n_ch),
+        analog_rate=float(header["analogs"]["frame_rate"]), analog_first_sample=int(header["analogs"]["first_frame"]),
+        analogs=analogs, platforms=platforms,
+    )
+
+
+# --- geometry: the world frame from a force platform (spec §5.6) ----------------------------------
+
+PLATE_RECTANGLE_TOLERANCE_M = 0.001  # corners must form a flat rectangle to within 1 mm (§5.6)
+
+
+@dataclass
+class WorldFrame:
+    """``p_W = R · (p_lab − centre)``; ``description`` says how W was chosen (kept in the trial notes)."""
+
+    rotation: np.ndarray
+    centre: np.ndarray
+    description: str
+
+    def apply(self, p: np.ndarray) -> np.ndarray:
+        return (p - self.centre) @ self.rotation.T
+
+
+def plate_frame(corners_m: np.ndarray, *, file: str, number: int) -> tuple[WorldFrame, np.ndarray, list[float]]:
+    """W from a C3D platform's corners (metres, lab frame), spec §5.6.
+
+    C3D numbers corners by the plate's own quadrants (+x+y, −x+y, −x−y, +x−y) and its z axis points
+    into the plate. W's origin is the centre of the four corners, x the plate's x, z up (−plate z),
+    y = z × x. Returns W, the plate axes in W (3 × 3, columns x, y, z) and the size [x, y] in m.
+    """
+    c = corners_m
+    x = (c[0] + c[3]) / 2 - (c[1] + c[2]) / 2
+    y_raw = (c[0] + c[1]) / 2 - (c[2] + c[3]) / 2
+    size = [float(np.linalg.norm(x)), float(np.linalg.norm(y_raw))]
+    if min(size) <= PLATE_RECTANGLE_TOLERANCE_M:
+        raise fail("E501", f"force platform {number} has degenerate corners", file=file,
+                   pointer="/FORCE_PLATFORM/CORNERS", expected="four corners of a rectangle", found=c.tolist())
+    x /= size[0]
+    z_plate = np.cross(x, y_raw)
+    z_plate /= np.linalg.norm(z_plate)
+    y_plate = np.cross(z_plate, x)
+    zw = -z_plate
+    yw = np.cross(zw, x)
+    rotation = np.stack([x, yw, zw])
+    centre = c.mean(axis=0)
+    local = (c - centre) @ rotation.T
+    ideal = np.array([[1, -1], [-1, -1], [-1, 1], [1, 1]]) * np.array(size) / 2
+    deviation = float(max(np.abs(local[:, :2] - ideal).max(), np.abs(local[:, 2]).max()))
+    if deviation > PLATE_RECTANGLE_TOLERANCE_M:
+        raise fail("E501", f"the corners of force platform {number} are not a flat rectangle "
+                   f"(deviation {deviation * 1000:.3g} mm)", file=file, pointer="/FORCE_PLATFORM/CORNERS",
+                   expected=f"≤ {PLATE_RECTANGLE_TOLERANCE_M * 1000:g} mm", found=f"{deviation * 1000:.3g} mm")
+    axes_in_w = rotation @ np.stack([x, y_plate, z_plate], axis=1)
+    desc = (f"W: centre of C3D force platform {number}'s corners, x along the platform's x axis, "
+            f"z up (opposite to the platform's z)")
+    return WorldFrame(rotation, centre, desc), axes_in_w, size
+
+
+# Haptify names corner sensors by their quadrant of W (spec §5.6); C3D numbers them in the platform's
+# own frame, whose y axis is W's −y, so C3D corner 1 becomes c4, 2 → c3, 3 → c2, 4 → c1.
+CORNER_QUADRANTS = {"c1": (1.0, 1.0), "c2": (-1.0, 1.0), "c3": (-1.0, -1.0), "c4": (1.0, -1.0)}
+
+
+def plate_description(platform: C3DPlatform, to_m: Unit, *, file: str) -> tuple[WorldFrame, dict]:
+    """W and the rig's ``force_plate`` from a C3D platform (spec §5.6): one corner sensor at each C3D
+    corner, named by its quadrant of W (``CORNER_QUADRANTS``), lowered to the depth |ORIGIN z| of the
+    platform's sensing origin and oriented as the platform's frame."""
+    if platform.corners is None:
+        raise fail("E503", f"force platform {platform.number} has no FORCE_PLATFORM:CORNERS", file=file,
+                   pointer="/FORCE_PLATFORM/CORNERS", expected="corners", found=None)
+    corners = to_m.to_si(platform.corners)
+    world, axes, size = plate_frame(corners, file=file, number=platform.number)
+    depth = float(abs(to_m.to_si(platform.origin)[2])) if platform.origin is not None else 0.0
+    q = [float(v) for v in matrix_to_quat(axes)]
+    in_w = world.apply(corners)
+    sensors = []
+    for cid, (sx, sy) in CORNER_QUADRANTS.items():
+        corner = next(c for c in in_w if np.sign(c[0]) == sx and np.sign(c[1]) == sy)
+        sensors.append({"id": cid, "pose": {"position": [float(corner[0]), float(corner[1]), -depth], "quaternion": q}})
+    return world, {"size_m": size, "corners": sensors}
+
+
+def pose_frame(pose: Pose) -> WorldFrame:
+    """W from a ``lab_to_world`` pose (the lab frame in W): ``p_W = R · p_lab + position``."""
+    rotation = quat_to_matrix(np.asarray(pose.quaternion, dtype=np.float64))
+    centre = -rotation.T @ np.asarray(pose.position, dtype=np.float64)
+    return WorldFrame(rotation, centre, "W: the C3D lab frame placed in W by the map's lab_to_world pose")
+
+
+# --- building streams from channels (spec §5.3) ---------------------------------------------------
+
+SourceReader = Callable[[str], tuple[np.ndarray, str | None]]
+
+
+def _as_channel(spec: ChannelMap | str) -> ChannelMap:
+    return ChannelMap(source=spec) if isinstance(spec, str) else spec
+
+
+def build_stream_columns(kind: str, smap: StreamMap, n: int, read: SourceReader, *, label: str,
+                         unit_required: bool) -> dict[str, np.ndarray]:
+    """The SI columns (``t`` excluded) of one mapped stream (spec §5.3).
+
+    ``read(source)`` returns a channel's raw values and its unit as the source states it (None when the
+    source states none; raises E503 for an unknown channel).
+    """
+    pointer = f"/streams/{kind}/columns"
+    allowed = [c for c, _ in expected_columns(kind, present=list(smap.columns))][1:]
+    unknown = [c for c in smap.columns if c not in allowed]
+    if unknown:
+        raise fail("E502", f"{kind} has no column {unknown[0]!r}", file=label, pointer=f"{pointer}/{unknown[0]}",
+                   expected=allowed, found=unknown[0])
+    missing = [c for c in allowed if c not in smap.columns]
+    if missing:
+        raise fail("E502", f"the {kind} map lacks columns {missing}", file=label, pointer=pointer,
+                   expected=allowed, found=list(smap.columns))
+    units = dict(expected_columns(kind, present=list(smap.columns)))
+    nan_allowed = kind_table(kind)["nan_allowed"]
+    out: dict[str, np.ndarray] = {}
+    for col in allowed:
+        ch = _as_channel(smap.columns[col])
+        where = {"file": label, "pointer": f"{pointer}/{col}", "column": col}
+        if ch.value is not None:
+            raw, stated = np.full(n, ch.value, dtype=np.float64), None
+        else:
+            raw, stated = read(ch.source)
+        unit = ch.unit if ch.unit is not None else stated
+        if unit is None and (unit_required or ch.value is not None):
+            raise fail("E502", f"column {col!r} of {kind} needs a 'unit' (this source states none)",
+                       expected="a unit of spec §5.3", found=None, **where)
+        values = raw if (ch.scale == 1.0 and ch.offset == 0.0) else raw * ch.scale + ch.offset
+        target = units[col]
+        if ch.threshold is not None:
+            if target != "1":
+                raise fail("E502", f"'threshold' applies only to dimensionless columns; {col!r} is in {target}",
+                           expected="1", found=target, **where)
+            if (unit or "").strip() not in UNITS:
+                raise fail("E504", f"unit {unit!r} is not in the conversion table (spec §5.3)",
+                           expected=sorted(UNITS), found=unit, **where)
+            values = np.where(values >= ch.threshold, 1.0, 0.0)
+        else:
+            values = unit_conversion(unit, target, **where).to_si(values)
+        if not nan_allowed:
+            bad = ~np.isfinite(values)
+            if bad.any():
+                i = int(np.argmax(bad))
+                code = "E204" if np.isnan(values[i]) else "E210"
+                raise fail(code, f"{kind} column {col!r} (from {ch.source!r}) holds a non-finite value at sample {i}",
+                           file=label, column=col, expected="finite values", found=str(values[i]))
+        out[col] = values
+    return out
+
+
+def _check_trial_streams(m: ImportMap, kinds: list[str], label: str) -> None:
+    """The protocol's required streams, rendering and label rules (spec §2.5), checked before writing."""
+    proto = schemas.load("protocols.json")["protocols"][m.trial.protocol]
+    missing = [k for k in proto["required"] if k not in kinds]
+    if missing:
+        raise fail("E502", f"protocol {m.trial.protocol!r} requires streams {missing} the map does not produce",
+                   file=label, pointer="/streams", expected=proto["required"], found=sorted(kinds))
+    if proto["passive"] is False and m.trial.rendering is None:
+        raise fail("E502", f"protocol {m.trial.protocol!r} is active: the trial needs 'rendering'", file=label,
+                   pointer="/trial/rendering", expected="rendering parameters", found=None)
+
+
+def _resolve_device(m: ImportMap, base: Path, label: str) -> tuple[dict, dict[str, str]]:
+    """The manifest's device member and the extra files (device.json) to write with the session."""
+    dev = m.session.device
+    if isinstance(dev, Device):
+        return dev.model_dump(mode="json", exclude_none=True), {}
+    path = (base / dev.file) if not Path(dev.file).is_absolute() else Path(dev.file)
+    where = {"file": label, "pointer": "/session/device/file"}
+    if not path.is_file():
+        raise fail("E502", f"device file {str(path)!r} does not exist", expected="a device.json", found=dev.file, **where)
+    data = parse_json_file(path, "E502", str(path))
+    try:
+        Device.model_validate(data)
+    except ValidationError as exc:
+        raise HaptifyError(*pydantic_findings(exc, "E502", str(path))) from None
+    return {"file": "device.json"}, {"device.json": path.read_text(encoding="utf-8")}
+
+
+@dataclass
+class ImportResult:
+    """What an import wrote: the session path, ids, streams and the source's description."""
+
+    session: Path
+    session_id: str
+    trial_id: str
+    streams: list[dict]
+    world_frame: str
+    source: dict
+
+    def to_dict(self) -> dict:
+        return {"ok": True, "session": str(self.session), "session_id": self.session_id, "trial_id": self.trial_id,
+                "streams": self.streams, "world_frame": self.world_frame, "source": self.source}
+
+
+def _writer_for(m: ImportMap, source: Path, rig: dict, device: dict, extra: dict[str, str], recorder: str) -> tuple[SessionWriter, str]:
+    stem = sanitize_id(source.stem, "import")
+    manifest = {
+        "session_id": m.session.session_id or stem, "date": m.session.date,
+        "lab": m.session.lab.model_dump(), "examiner": m.session.examiner.model_dump(),
+        "device": device, "device_placement": m.session.device_placement.model_dump(),
+        "rig": rig, "recorder": recorder,
+    }
+    return SessionWriter(manifest=manifest, extra_files=extra), stem
+
+
+def _add_trial(writer: SessionWriter, m: ImportMap, stem: str, source: Path, provenance: str) -> str:
+    t = m.trial
+    trial_id = t.id or stem
+    label = t.label if t.label is not None else (source.stem if t.protocol == "other" else None)
+    notes = f"{t.notes}\n{provenance}" if t.notes else provenance
+    writer.add_trial(trial_id, t.protocol, powered=t.powered, repetition=t.repetition, label=label,
+                     rendering=t.rendering.model_dump(exclude_none=True) if t.rendering else None, notes=notes)
+    return trial_id
+
+
+def _precheck_output(out: Path, overwrite: bool) -> None:
+    if out.exists() and not overwrite:
+        raise fail("E901", f"{str(out)!r} already exists", file=str(out), expected="a new path or --overwrite",
+                   found="exists")
+
+
+def _stream_summary(stream: dict) -> dict:
+    return {"kind": stream["kind"], "file": stream["file"], "rows": stream["rows"], "rate_hz": stream["rate_hz"],
+            "columns": len(stream["columns"]) - 1}
+
+
+# --- C3D import (spec §5.5) -----------------------------------------------------------------------
+
+def _select_markers(c3d: C3DContent, mm: MarkerMap, label: str) -> tuple[list[int], list[str]]:
+    """Indices of the imported point labels and their entity ids (spec §5.4)."""
+    labels = c3d.point_labels
+    where = {"file": label}
+
+    def matches(pattern: str) -> list[int]:
+        return [i for i, lab in enumerate(labels) if fnmatch.fnmatchcase(lab, pattern)]
+
+    for key, patterns in (("include", mm.include or []), ("exclude", mm.exclude)):
+        for j, pat in enumerate(patterns):
+            if not matches(pat):
+                raise fail("E503", f"marker {key} {pat!r} matches no point label of {c3d.path.name}",
+                           pointer=f"/markers/{key}/{j}", expected=labels, found=pat, **where)
+    chosen = sorted({i for pat in mm.include for i in matches(pat)}) if mm.include is not None else list(range(len(labels)))
+    dropped = {i for pat in mm.exclude for i in matches(pat)}
+    chosen = [i for i in chosen if i not in dropped]
+    for old in mm.rename:
+        if old not in [labels[i] for i in chosen]:
+            raise fail("E503", f"rename names {old!r}, which is not an imported point label", pointer=f"/markers/rename/{old}",
+                       expected=[labels[i] for i in chosen], found=old, **where)
+    ids: list[str] = []
+    seen: dict[str, str] = {}
+    for i in chosen:
+        ent = mm.rename.get(labels[i]) or sanitize_id(labels[i], f"m{i + 1}")
+        if ent in seen:
+            raise fail("E503", f"point labels {seen[ent]!r} and {labels[i]!r} both become entity {ent!r}; rename one",
+                       pointer="/markers/rename", expected="distinct entity ids", found=ent, **where)
+        seen[ent] = labels[i]
+        ids.append(ent)
+    return chosen, ids
+
+
+def _analog_reader(c3d: C3DContent, label: str) -> SourceReader:
+    def read(name: str) -> tuple[np.ndarray, str | None]:
+        hits = [i for i, lab in enumerate(c3d.analog_labels) if lab == name]
+        if len(hits) != 1:
+            why = "no" if not hits else f"{len(hits)} channels labelled"
+            raise fail("E503", f"{c3d.path.name} has {why} analog channel {name!r}", file=label,
+                       expected=c3d.analog_labels, found=name)
+        i = hits[0]
+        return c3d.analogs[i], c3d.analog_units[i] or None
+    return read
+
+
+def import_c3d(path: str | Path, out: str | Path, mapping: str | Path | LoadedMap | None = None, *,
+               overrides: dict | None = None, overwrite: bool = False) -> ImportResult:
+    """Import a C3D file as one trial of a new session at ``out`` (spec §5.5).
+
+    Markers become a ``markers`` stream (POINT:UNITS → m, residual < 0 → NaN), in W (§5.6); analog
+    channels become the streams the map names (§5.3); a chosen force platform becomes the rig's plate.
+    ``mapping`` is a map file, an already loaded map, or None (then ``overrides`` must hold every
+    required session and trial field). Nothing is written when any check fails.
+    """
+    out = Path(out)
+    _precheck_output(out, overwrite)
+    loaded = mapping if isinstance(mapping, LoadedMap) else load_map(mapping, "c3d", overrides)
+    m, label = loaded.map, loaded.label
+    c3d = read_c3d(path)
+    src = str(c3d.path)
+    mm = m.markers or MarkerMap()
+
+    # world frame
+    plate_number = None
+    if isinstance(m.force_plate, int):
+        if m.force_plate > len(c3d.platforms):
+            raise fail("E503", f"{c3d.path.name} has no force platform {m.force_plate}", file=label, pointer="/force_plate",
+                       expected=[p.number for p in c3d.platforms], found=m.force_plate)
+        plate_number = m.force_plate
+    elif m.force_plate == "auto" and c3d.platforms and m.lab_to_world is None:
+        plate_number = 1
+    if plate_number is not None and m.lab_to_world is not None:
+        raise fail("E502", "give either a force platform or lab_to_world: the platform defines W", file=label,
+                   pointer="/lab_to_world", expected="one of them", found="both")
+    rig = m.session.rig.model_dump(mode="json", exclude_none=True)
+    point_unit = None
+    chosen, entities = _select_markers(c3d, mm, label)
+    if chosen or plate_number is not None:
+        point_unit = unit_conversion(c3d.point_units, "m", file=src, pointer="/POINT/UNITS")
+    world: WorldFrame | None = None
+    if plate_number is not None:
+        if "force_plate" in rig:
+            raise fail("E502", "the map's rig has a force_plate and the C3D platform would replace it; set force_plate to 'none' or remove one",
+                       file=label, pointer="/session/rig/force_plate", expected="one plate description", found="two")
+        world, rig["force_plate"] = plate_description(c3d.platforms[plate_number - 1], point_unit, file=src)
+    elif m.lab_to_world is not None:
+        world = pose_frame(m.lab_to_world)
+    frame_note = world.description if world else "W: the C3D lab frame as recorded (no force platform, no lab_to_world)"
+
+    # markers
+    marker_data = None
+    if chosen:
+        if c3d.points.shape[0] < 2:
+            raise fail("E205", f"{c3d.path.name} holds {c3d.points.shape[0]} frame(s); a stream needs two", file=src,
+                       expected="≥ 2 frames", found=c3d.points.shape[0])
+        if "motion_capture" in rig:
+            raise fail("E502", "the importer writes rig.motion_capture from the C3D; give rigid bodies and the system under 'markers'",
+                       file=label, pointer="/session/rig/motion_capture", expected=None, found="motion_capture")
+        for j, body in enumerate(mm.rigid_bodies):
+            unknown = [e for e in body.markers if e not in entities]
+            if unknown:
+                raise fail("E503", f"rigid body {body.name!r} names markers that are not imported: {unknown}", file=label,
+                           pointer=f"/markers/rigid_bodies/{j}/markers", expected=entities, found=unknown)
+        pos = point_unit.to_si(c3d.points[:, chosen, :])
+        if world is not None:
+            pos = world.apply(pos)
+        t = (c3d.point_first_frame + np.arange(pos.shape[0])) / c3d.point_rate + m.time_offset_s
+        marker_data = {"t": t}
+        for j, ent in enumerate(entities):
+            for k, axis in enumerate("xyz"):
+                marker_data[f"{ent}_{axis}"] = pos[:, j, k]
+        rig["motion_capture"] = {"system": mm.system or c3d.manufacturer or None, "rate_hz": c3d.point_rate,
+                                 "rigid_bodies": [b.model_dump() for b in mm.rigid_bodies], "markers": entities}
+        if rig["motion_capture"]["system"] is None:
+            del rig["motion_capture"]["system"]
+
+    # analog streams
+    analog_streams: dict[str, dict[str, np.ndarray]] = {}
+    if m.streams:
+        n = c3d.analogs.shape[1]
+        if n < 2:
+            raise fail("E503", f"{c3d.path.name} holds {n} analog sample(s); mapped streams need two", file=label,
+                       pointer="/streams", expected="≥ 2 analog samples", found=n)
+        t_an = (c3d.analog_first_sample + np.arange(n)) / c3d.analog_rate + m.time_offset_s
+        reader = _analog_reader(c3d, label)
+        for kind, smap in m.streams.items():
+            if smap.rate_hz is not None and smap.rate_hz != c3d.analog_rate:
+                raise fail("E502", f"{kind} rate_hz {smap.rate_hz} differs from the file's ANALOG:RATE {c3d.analog_rate}",
+                           file=label, pointer=f"/streams/{kind}/rate_hz", expected=c3d.analog_rate, found=smap.rate_hz)
+            analog_streams[kind] = {"t": t_an, **build_stream_columns(kind, smap, n, reader, label=label, unit_required=False)}
+
+    kinds = (["markers"] if marker_data else []) + list(analog_streams)
+    if not kinds:
+        raise fail("E502", f"nothing to import from {c3d.path.name}: no markers selected and no streams mapped", file=label,
+                   pointer="/streams", expected="markers or mapped analog streams", found=None)
+    _check_trial_streams(m, kinds, label)
+    device, extra = _resolve_device(m, loaded.base_dir, label)
+    recorder = f"haptify {PACKAGE_VERSION} import c3d" + (f" ({c3d.manufacturer})" if c3d.manufacturer else "")
+    writer, stem = _writer_for(m, c3d.path, rig, device, extra, recorder)
+    provenance = f"Imported from {c3d.path.name} by haptify {PACKAGE_VERSION}. {frame_note}."
+    trial_id = _add_trial(writer, m, stem, c3d.path, provenance)
+    written = []
+    if marker_data:
+        written.append(writer.add_stream(trial_id, "markers", marker_data, rate_hz=c3d.point_rate, fmt=mm.format,
+                                         entities=entities))
+    for kind, cols in analog_streams.items():
+        smap = m.streams[kind]
+        written.append(writer.add_stream(trial_id, kind, cols, rate_hz=c3d.analog_rate, fmt=smap.format, frame=smap.frame))
+    writer.write(out, overwrite=overwrite)
+    return ImportResult(out, writer.manifest["session_id"], trial_id, [_stream_summary(s) for s in written],
+                        frame_note, c3d.summary())
+
+
+# --- CSV import (spec §5.7) -----------------------------------------------------------------------
+
+RATE_SIGNIFICANT_DIGITS = 6  # a CSV stream's default nominal rate: 1/median(Δt) to 6 significant digits
+
+
+def _round_significant(x: float, digits: int) -> float:
+    return float(f"{x:.{digits}g}")
+
+
+def read_csv_columns(path: Path, names: list[str], opts: CsvOptions, *, map_label: str) -> dict[str, np.ndarray]:
+    """The named columns of a CSV log as float64 arrays (spec §5.7).
+
+    E501 when the file is missing or unreadable or a cell is not a number (row named); E503 when a
+    column is not in the header (the header is listed).
+    """
+    label = str(path)
+    if not path.is_file():
+        raise fail("E501", f"{label!r} does not exist or is not a file", file=label)
+    common = {"sep": opts.delimiter, "skiprows": opts.skip_rows, "comment": opts.comment, "skipinitialspace": True,
+              "engine": "c", "encoding": "utf-8"}
+    try:
+        header = [str(h).strip() for h in pd.read_csv(path, nrows=0, **common).columns]
+    except (OSError, UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError, ValueError) as exc:
+        raise fail("E501", f"{label!r} cannot be read as CSV: {exc}", file=label) from None
+    for name in names:
+        if name not in header:
+            raise fail("E503", f"{path.name} has no column {name!r}", file=map_label, expected=header, found=name)
+    try:
+        table = pd.read_csv(path, dtype=str, keep_default_na=False, **common)
+    except (OSError, UnicodeDecodeError, pd.errors.ParserError, ValueError) as exc:
+        raise fail("E501", f"{label!r} cannot be read as CSV: {exc}", file=label) from None
+    table.columns = [str(c).strip() for c in table.columns]
+    out = {}
+    first_data_line = opts.skip_rows + 2  # 1-based line number of the first data row (comments aside)
+    for name in names:
+        text = table[name].str.strip()
+        try:
+            out[name] = text.astype("float64").to_numpy()
+        except ValueError:
+            parsed = pd.to_numeric(text, errors="coerce")
+            bad = int(np.flatnonzero(parsed.isna() & ~text.str.lower().isin(["nan"]))[0])
+            raise fail("E501", f"{path.name} column {name!r}, data row {bad + 1} (line ≈{first_data_line + bad}) is not a number",
+                       file=label, column=name, expected="a number", found=text.iloc[bad]) from None
+    return out
+
+
+def import_csv(path: str | Path, out: str | Path, mapping: str | Path | LoadedMap, *, overrides: dict | None = None,
+               overwrite: bool = False) -> ImportResult:
+    """Import a column-mapped CSV log as one trial of a new session at ``out`` (spec §5.7).
+
+    One time column (s, ms or us, plus ``time_offset_s``) serves every mapped stream; each column is
+    converted to SI by §5.3. Nothing is written when any check fails.
+    """
+    out = Path(out)
+    _precheck_output(out, overwrite)
+    loaded = mapping if isinstance(mapping, LoadedMap) else load_map(mapping, "csv", overrides)
+    m, label = loaded.map, loaded.label
+    src_path = Path(path)
+    src = str(src_path)
+    if not m.streams:
+        raise fail("E502", "a csv map needs at least one stream", file=label, pointer="/streams",
+                   expected="streams", found={})
+    opts = m.csv or CsvOptions()
+    wanted = [m.time.source] + sorted({_as_channel(c).source for s in m.streams.values() for c in s.columns.values()
+                                       if _as_channel(c).source is not None} - {m.time.source})
+    data = read_csv_columns(src_path, wanted, opts, map_label=label)
+    time_unit = unit_conversion(m.time.unit, "s", file=label, pointer="/time/unit", column=m.time.source)
+    t = time_unit.to_si(data[m.time.source])
+    if m.time_offset_s != 0.0:
+        t = t + m.time_offset_s
+    if t.size < 2:
+        raise fail("E205", f"{src_path.name} holds {t.size} row(s); a stream needs two", file=src, expected="≥ 2 rows",
+                   found=int(t.size))
+    steps = np.diff(t)
+    if not np.isfinite(t).all() or (steps <= 0).any():
+        i = int(np.argmax(~np.isfinite(t))) if not np.isfinite(t).all() else int(np.argmax(steps <= 0)) + 1
+        raise fail("E203", f"time column {m.time.source!r} of {src_path.name} is not finite and strictly increasing "
+                   f"at data row {i + 1}", file=src, column=m.time.source, expected="strictly increasing",
+                   found=f"{data[m.time.source][i - 1] if i else ''} → {data[m.time.source][i]}")
+
+    def read(name: str) -> tuple[np.ndarray, str | None]:
+        return data[name], None
+
+    streams = {kind: build_stream_columns(kind, smap, t.size, read, label=label, unit_required=True)
+               for kind, smap in m.streams.items()}
+    _check_trial_streams(m, list(streams), label)
+    device, extra = _resolve_device(m, loaded.base_dir, label)
+    writer, stem = _writer_for(m, src_path, m.session.rig.model_dump(mode="json", exclude_none=True), device, extra,
+                               f"haptify {PACKAGE_VERSION} import csv")
+    trial_id = _add_trial(writer, m, stem, src_path, f"Imported from {src_path.name} by haptify {PACKAGE_VERSION}.")
+    default_rate = _round_significant(1.0 / float(np.median(steps)), RATE_SIGNIFICANT_DIGITS)
+    written = []
+    for kind, cols in streams.items():
+        smap = m.streams[kind]
+        written.append(writer.add_stream(trial_id, kind, {"t": t, **cols}, rate_hz=smap.rate_hz or default_rate,
+                                         fmt=smap.format, frame=smap.frame))
+    writer.write(out, overwrite=overwrite)
+    return ImportResult(out, writer.manifest["session_id"], trial_id, [_stream_summary(s) for s in written],
+                        "W: as the map's rig states (CSV logs carry no frame)",
+                        {"file": src_path.name, "rows": int(t.size), "columns": wanted})
