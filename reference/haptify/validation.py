@@ -56,8 +56,8 @@ OCCLUSION_WARNING_SHARE = 0.20        # share of occluded samples above which W4
 MANIFEST_MAX_BYTES = 16 * 2**20       # session.json larger than this is not read (E113)
 DEVICE_MAX_BYTES = 4 * 2**20          # device.json larger than this is not read (E113)
 STREAM_MAX_BYTES = 8 * 2**30          # spec §3.5: no stream file exceeds 8 GiB (E113)
-STREAM_BYTES_BASE = 64 * 2**10        # plausibility bound of a stream file's size from its declared
-STREAM_BYTES_PER_COLUMN = 2 * 2**10   # rows and columns: base + per column + per value (E113), so a
+STREAM_BYTES_BASE = 16 * 2**10        # plausibility bound of a stream file's size from its declared
+STREAM_BYTES_PER_COLUMN = 2**10       # rows and columns: base + per column + per value (E113), so a
 STREAM_BYTES_PER_VALUE = 32           # tiny declared stream never makes the validator read gigabytes
 MAX_SYMLINK_HOPS = 40                 # as POSIX SYMLOOP_MAX
 
@@ -287,24 +287,30 @@ def resolve_contained(root: Path, relative: str, *, label: str | None = None) ->
     current: list[str] = []
     pending = relative.split("/")
     hops = 0
+    link = last_target = ""
+
+    def escape(target: str) -> HaptifyError:
+        return HaptifyError(Finding("E109", f"{relative!r} passes through the symbolic link {link!r} → {target!r}, "
+                                            "which leads outside the session folder", file=label,
+                                    expected="a link target inside the session folder", found=target))
+
     while pending:
         part = pending.pop(0)
         if part in ("", "."):
             continue
         if part == "..":
             if not current:
-                raise HaptifyError(Finding("E109", f"{relative!r} resolves outside the session folder", file=label,
-                                           expected="a link target inside the session folder", found=relative))
+                raise escape(last_target)
             current.pop()
             continue
         candidate = root.joinpath(*current, part)
         if candidate.is_symlink():
             hops += 1
-            target = os.readlink(candidate)
-            if hops > MAX_SYMLINK_HOPS or PurePosixPath(target).is_absolute() or "\\" in target:
-                raise HaptifyError(Finding("E109", f"{relative!r} is a symbolic link that leads outside the session folder",
-                                           file=label, expected="a link target inside the session folder", found=target))
-            pending = target.split("/") + pending
+            link = "/".join([*current, part])
+            last_target = os.readlink(candidate)
+            if hops > MAX_SYMLINK_HOPS or PurePosixPath(last_target).is_absolute() or "\\" in last_target:
+                raise escape(last_target)
+            pending = last_target.split("/") + pending
             continue
         current.append(part)
     return root.joinpath(*current)
@@ -465,8 +471,9 @@ class SessionValidator:
 
     def _check_schema(self) -> None:
         findings = schema_findings(self.raw, "session", "E104", MANIFEST)
-        self.add_all(findings)
         raw = self.raw
+        for f in findings:
+            self.add(f, _trial_of_pointer(raw, f.pointer))
         if not isinstance(raw, dict):
             return
         self._manifest_ok = True
@@ -711,8 +718,8 @@ class SessionValidator:
             time_ok = False
             k = int(np.flatnonzero(bad)[0])
             add(Finding("E203", f"time does not strictly increase at {int(bad.sum())} intervals (first at row {k + 1})", file=label,
-                        column="t", time_range=(float(t[k]), float(t[k + 1])), expected="t[i+1] > t[i]",
-                        found=f"t[{k}]={t[k]!r}, t[{k + 1}]={t[k + 1]!r}"))
+                        column="t", time_range=(float(min(t[k], t[k + 1])), float(max(t[k], t[k + 1]))),
+                        expected="t[i+1] > t[i]", found=f"t[{k}]={float(t[k])!r}, t[{k + 1}]={float(t[k + 1])!r}"))
         if time_ok:
             offset = self.offsets.get(s.file, 0.0)
             entry.span = (float(t[0]) + offset, float(t[-1]) + offset)
@@ -765,7 +772,7 @@ class SessionValidator:
                 if limit is None:
                     continue
                 with np.errstate(invalid="ignore"):
-                    over = np.abs(values[:, k]) > limit
+                    over = np.isfinite(values[:, k]) & (np.abs(values[:, k]) > limit)
                 if over.any():
                     peak = float(np.nanmax(np.abs(values[over, k])))
                     add(Finding("W401", f"column {col!r} exceeds the declared ±{limit:g} range at {int(over.sum())} samples (peak {peak:.6g})",
@@ -844,6 +851,16 @@ def _quaternions_in(node: Any, pointer: str) -> Iterable[tuple[str, Any]]:
     elif isinstance(node, list):
         for i, v in enumerate(node):
             yield from _quaternions_in(v, f"{pointer}/{i}")
+
+
+def _trial_of_pointer(raw: Any, pointer: str | None) -> str | None:
+    """The id of the trial a manifest pointer (``/trials/<i>/…``) lies in, when it has a string id."""
+    parts = (pointer or "").split("/")
+    if len(parts) > 2 and parts[1] == "trials" and parts[2].isdigit() and isinstance(raw, dict) and isinstance(raw.get("trials"), list):
+        i = int(parts[2])
+        if i < len(raw["trials"]):
+            return _str_or_none(raw["trials"][i], "id")
+    return None
 
 
 def _try(model: type[BaseModel], value: Any) -> Any:
