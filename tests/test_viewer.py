@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import subprocess
 import sys
 import urllib.request
@@ -73,6 +74,9 @@ def rich_writer(session_id: str = "viewer-0001", force_scale: float = 1.0):
     w.add_stream("stiffness-1", "handle_wrench", wrench, rate_hz=1000)
     w.add_stream("stiffness-1", "commanded_wrench", {"t": t1k, "fx": 0 * t1k, "fy": 0 * t1k, "fz": 1.5 + 0 * t1k,
                                                      "tx": 0 * t1k, "ty": 0 * t1k, "tz": 0 * t1k}, rate_hz=1000)
+    w.add_stream("stiffness-1", "device_joint_angles", {"t": t1k, "q1": 0.1 + 0 * t1k, "q2": 0.5 + 0 * t1k,
+                                                        "q3": -0.8 + 0 * t1k}, rate_hz=1000)
+    w.add_stream("stiffness-1", "sync", {"t": t1k, "trigger": (t1k >= 0.25).astype(float)}, rate_hz=1000)
     markers = {"t": t100}
     for name, off in (("h1", 0.01), ("h2", 0.02), ("h3", 0.03), ("l2a", -0.05), ("l2b", -0.06)):
         markers[f"{name}_x"] = off + 0 * t100
@@ -170,6 +174,7 @@ def test_expected_entity_paths(recorded):
         "/series/free_space-1/measured/hand_force/raw_world", "/series/free_space-1/measured/accel/raw",
         "/series/free_space-1/measured/plate/corner_force_raw", "/series/free_space-1/measured/plate/corner_torque_raw",
         "/series/stiffness-1/measured/commanded/force", "/series/stiffness-1/measured/penetration",
+        "/series/stiffness-1/measured/device/joint_angles", "/series/stiffness-1/measured/sync/trigger",
         "/series/stiffness-1/compare/handle/force_raw", "/world/stiffness-1/compare/handle",
     }
     assert expected <= paths, sorted(expected - paths)
@@ -389,16 +394,20 @@ def test_cli_usage_errors(sessions):
 def test_web_viewer_answers_on_loopback_and_stops(recorded):
     _, out = recorded
     port = cmd_view.free_port()
-    proc, url = cmd_view.serve_web(out, port)
+    viewer = cmd_view.serve_web(out, port)
     try:
-        cmd_view.wait_until_serving(proc, port, timeout_s=20)
+        viewer.wait_until_serving(timeout_s=20)
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=5) as resp:
             assert resp.status == 200
             assert b"<html" in resp.read(4096).lower()
-        assert url.startswith(f"http://127.0.0.1:{port}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A")
+        assert viewer.url.startswith(f"http://127.0.0.1:{port}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A")
     finally:
-        cmd_view.stop(proc)
-    assert proc.poll() is not None
+        viewer.stop()
+    assert viewer.proc.poll() is not None
+    with pytest.raises(ProcessLookupError):  # the rerun binary (not only its Python wrapper) is gone
+        os.killpg(viewer.proc.pid, 0)
+    with pytest.raises(OSError):
+        urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=2)
 
 
 def test_web_viewer_on_a_busy_port_is_a_coded_error(recorded):
@@ -409,13 +418,11 @@ def test_web_viewer_on_a_busy_port_is_a_coded_error(recorded):
         s.bind(("127.0.0.1", 0))
         s.listen(1)
         port = s.getsockname()[1]
-        proc, _ = cmd_view.serve_web(out, port)
-        try:
-            with pytest.raises(HaptifyError) as err:
-                cmd_view.wait_until_serving(proc, port, timeout_s=20)
-            assert err.value.findings[0].code == "E904"
-        finally:
-            cmd_view.stop(proc)
+        viewer = cmd_view.serve_web(out, port)
+        with pytest.raises(HaptifyError) as err:
+            viewer.wait_until_serving(timeout_s=20)
+        assert err.value.findings[0].code == "E904"
+        assert viewer.proc.poll() is not None
 
 
 @pytest.mark.skipif(not CHROMIUM.exists(), reason=f"screenshot test needs Chromium at {CHROMIUM} (not installed here)")
@@ -424,15 +431,15 @@ def test_web_viewer_screenshot(recorded, tmp_path):
 
     _, out = recorded
     port = cmd_view.free_port()
-    proc, url = cmd_view.serve_web(out, port)
+    viewer = cmd_view.serve_web(out, port)
     shot = tmp_path / "viewer.png"
     try:
-        cmd_view.wait_until_serving(proc, port, timeout_s=20)
+        viewer.wait_until_serving(timeout_s=20)
         subprocess.run([str(CHROMIUM), "--headless=new", "--no-sandbox", "--disable-gpu", "--use-angle=swiftshader",
                         "--enable-unsafe-swiftshader", "--window-size=1280,800", "--virtual-time-budget=15000",
-                        f"--screenshot={shot}", url], capture_output=True, timeout=45, check=False)
+                        f"--screenshot={shot}", viewer.url], capture_output=True, timeout=45, check=False)
     finally:
-        cmd_view.stop(proc)
+        viewer.stop()
     assert shot.is_file() and shot.stat().st_size > 0, "Chromium wrote no screenshot"
     img = imread(shot)
     assert len(np.unique(img.reshape(-1, img.shape[-1]), axis=0)) > 16, "the screenshot is blank"

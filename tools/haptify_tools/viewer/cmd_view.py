@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -18,7 +19,9 @@ import time
 import urllib.error
 import urllib.parse
 import urllib.request
+from dataclasses import dataclass
 from pathlib import Path
+from typing import IO
 
 from haptify.errors import fail
 from haptify.storage import open_session
@@ -70,48 +73,78 @@ def web_url(web_port: int, grpc_port: int) -> str:
     return f"http://{LOOPBACK}:{web_port}/?url={urllib.parse.quote(proxy, safe='')}"
 
 
-def serve_web(rrd: str | os.PathLike, web_port: int, grpc_port: int | None = None) -> tuple[subprocess.Popen, str]:
-    """Start the rerun CLI serving ``rrd`` to its web viewer on 127.0.0.1 only; returns (process, url)."""
+def _signal_group(pid: int, sig: int) -> bool:
+    """Send ``sig`` to the process group ``pid`` (a viewer started here); False when the group is gone."""
+    try:
+        os.killpg(pid, sig)
+        return True
+    except (ProcessLookupError, PermissionError):
+        return False
+
+
+@dataclass
+class WebViewer:
+    """A rerun web viewer serving one .rrd on 127.0.0.1, started by :func:`serve_web`."""
+
+    proc: subprocess.Popen
+    url: str
+    web_port: int
+    log: IO[bytes]  # the viewer's stderr (a file, so a long session can never block on a full pipe)
+
+    def log_tail(self, limit: int = 400) -> str:
+        self.log.seek(0)
+        return self.log.read().decode(errors="replace").strip()[-limit:]
+
+    def wait_until_serving(self, timeout_s: float = SERVE_TIMEOUT_S) -> None:
+        """Poll the HTTP root until it answers 200; E904 (after stopping) when it dies or time runs out."""
+        deadline = time.monotonic() + timeout_s
+        root = f"http://{LOOPBACK}:{self.web_port}/"
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                code, tail = self.proc.returncode, self.log_tail()
+                self.stop()
+                raise fail("E904", f"the rerun web viewer exited with code {code}: {tail}",
+                           expected=f"a web viewer on {root}", found=f"exit code {code}")
+            try:
+                with urllib.request.urlopen(root, timeout=1.0) as resp:
+                    if resp.status == 200:
+                        return
+            except (urllib.error.URLError, ConnectionError, TimeoutError):
+                pass
+            time.sleep(0.1)
+        self.stop()
+        raise fail("E904", f"the rerun web viewer did not answer on {root} within {timeout_s:g} s",
+                   expected=f"HTTP 200 from {root}", found="no answer")
+
+    def stop(self) -> None:
+        """Stop the ``python -m rerun`` wrapper AND the rerun binary it runs.
+
+        The viewer runs in its own session (process group): the group gets SIGTERM, then SIGKILL after
+        a grace period. On Windows the wrapper is terminated.
+        """
+        if os.name != "posix":
+            if self.proc.poll() is None:
+                self.proc.terminate()
+        else:
+            _signal_group(self.proc.pid, signal.SIGTERM)
+            deadline = time.monotonic() + STOP_TIMEOUT_S
+            while _signal_group(self.proc.pid, 0) and time.monotonic() < deadline:
+                self.proc.poll()  # reap the wrapper so the group can disappear
+                time.sleep(0.05)
+            _signal_group(self.proc.pid, signal.SIGKILL)
+        self.proc.wait(timeout=STOP_TIMEOUT_S)
+        self.log.close()
+
+
+def serve_web(rrd: str | os.PathLike, web_port: int, grpc_port: int | None = None) -> WebViewer:
+    """Start the rerun CLI serving ``rrd`` to its built-in web viewer, listening on 127.0.0.1 only."""
     grpc_port = grpc_port or free_port()
+    log = tempfile.TemporaryFile()
     proc = subprocess.Popen(
         rerun_command(str(rrd), "--serve-web", "--bind", LOOPBACK, "--web-viewer-port", str(web_port),
                       "--port", str(grpc_port)),
-        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
-    return proc, web_url(web_port, grpc_port)
-
-
-def wait_until_serving(proc: subprocess.Popen, web_port: int, timeout_s: float = SERVE_TIMEOUT_S) -> None:
-    """Poll the web viewer's HTTP root until it answers 200; E904 when the process dies or time runs out."""
-    deadline = time.monotonic() + timeout_s
-    url = f"http://{LOOPBACK}:{web_port}/"
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
-            raise fail("E904", f"the rerun web viewer exited with code {proc.returncode}: {err.strip()[-400:]}",
-                       expected=f"a web viewer on {url}", found=f"exit code {proc.returncode}")
-        try:
-            with urllib.request.urlopen(url, timeout=1.0) as resp:
-                if resp.status == 200:
-                    return
-        except (urllib.error.URLError, ConnectionError, TimeoutError):
-            pass
-        time.sleep(0.1)
-    stop(proc)
-    raise fail("E904", f"the rerun web viewer did not answer on {url} within {timeout_s:g} s",
-               expected=f"HTTP 200 from {url}", found="no answer")
-
-
-def stop(proc: subprocess.Popen) -> None:
-    """Terminate a viewer process started here (SIGTERM, then SIGKILL after a grace period)."""
-    if proc.poll() is None:
-        proc.terminate()
-        try:
-            proc.wait(timeout=STOP_TIMEOUT_S)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=STOP_TIMEOUT_S)
-    if proc.stderr:
-        proc.stderr.close()
+        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=log, start_new_session=True)
+    return WebViewer(proc, web_url(web_port, grpc_port), web_port, log)
 
 
 def run(args: argparse.Namespace, ui) -> int:
@@ -141,17 +174,17 @@ def run(args: argparse.Namespace, ui) -> int:
             ui.say(f"wrote {out} ({len(plan.trials)} trial(s), {summary['entities']} entities); open it with: rerun {out}")
         if args.web:
             port = args.port or DEFAULT_WEB_PORT
-            proc, url = serve_web(out, port)
+            viewer = serve_web(out, port)
+            viewer.wait_until_serving()
             try:
-                wait_until_serving(proc, port)
-                summary["url"] = url
+                summary["url"] = viewer.url
                 ui.emit_json(summary)
-                ui.say(f"web viewer: {url}\n(serving on {LOOPBACK} only; Ctrl-C stops it)")
-                proc.wait()
+                ui.say(f"web viewer: {viewer.url}\n(serving on {LOOPBACK} only; Ctrl-C stops it)")
+                viewer.proc.wait()
             except KeyboardInterrupt:
                 ui.say("stopped the web viewer")
             finally:
-                stop(proc)
+                viewer.stop()
             return 0
         if args.save:
             ui.emit_json(summary)

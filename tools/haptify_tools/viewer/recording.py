@@ -85,6 +85,8 @@ SERIES = {
     "commanded/force": ("commanded force in W", "N"),
     "commanded/torque": ("commanded torque in W", "N*m"),
     "penetration": ("handle depth below the virtual surface (+ inside)", "m"),
+    "device/joint_angles": ("joint angles reported by the device", "rad"),
+    "sync/trigger": ("synchronisation trigger", "1"),
 }
 
 
@@ -265,6 +267,7 @@ class TrialPlanner:
         self.accel()
         self.plate()
         self.commanded()
+        self.device_and_sync()
         self.markers()
         self.links()
         if p is not None and self.trial.protocol == "workspace":
@@ -336,6 +339,16 @@ class TrialPlanner:
         t = c["t"].to_numpy()
         self.add_series("commanded/force", t, c[["fx", "fy", "fz"]].to_numpy(), ["fx", "fy", "fz"], "commanded_wrench")
         self.add_series("commanded/torque", t, c[["tx", "ty", "tz"]].to_numpy(), ["tx", "ty", "tz"], "commanded_wrench")
+
+    def device_and_sync(self) -> None:
+        """The device's own joint angles (diagnostic, spec §2.6) and the sync trigger, as they are."""
+        q = self.read("device_joint_angles")
+        if q is not None:
+            names = [c for c in q.columns if c != "t"]
+            self.add_series("device/joint_angles", q["t"].to_numpy(), q[names].to_numpy(), names, "device_joint_angles")
+        s = self.read("sync")
+        if s is not None:
+            self.add_series("sync/trigger", s["t"].to_numpy(), s[["trigger"]].to_numpy(), ["trigger"], "sync")
 
     def markers(self) -> None:
         """Marker clouds grouped by the rigid body (link) each marker belongs to, a colour per link."""
