@@ -48,14 +48,18 @@ def family_modules() -> list[tuple[str, str]]:
 
 
 def compute_session(session: SessionFolder, metrics: Iterable[str] | None = None,
-                    progress: Callable[[int], None] | None = None) -> ResultsFile:
-    """Compute every metric (or those in ``metrics``) that the session's trials allow."""
+                    progress: Callable[[int], None] | None = None, ctx: ComputeContext | None = None) -> ResultsFile:
+    """Compute every metric (or those in ``metrics``) that the session's trials allow.
+
+    Pass ``ctx`` to share its cache with later work on the same session (the report's figures).
+    """
     wanted = set(metrics) if metrics else None
     known = {m.id for f in all_families() for m in f.metrics}
     if wanted and not wanted <= known:
         unknown = sorted(wanted - known)
         raise HaptifyError(Finding("E903", f"unknown metric id(s) {unknown}", expected=sorted(known), found=unknown))
-    ctx = ComputeContext(session=session, wanted=wanted)
+    ctx = ctx or ComputeContext(session=session)
+    ctx.wanted = wanted
     device = session.device()
     out = ResultsFile(implementation=Implementation(name="haptify-reference", version=PACKAGE_VERSION),
                       session_id=session.session_id,

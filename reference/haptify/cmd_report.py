@@ -1,0 +1,39 @@
+"""``haptify report SESSION -o DIR [--results results.json] [--wav-scale A] [--overwrite]`` (spec §15.6)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from haptify.cmd_compare import load_results
+from haptify.compute import ComputeContext, compute_session, family_modules
+from haptify.errors import fail
+from haptify.storage import open_session
+from haptify.report import write_report
+
+
+def register(sub) -> None:
+    p = sub.add_parser("report", help="an HTML report with figures and vibration sounds")
+    p.add_argument("session", type=Path)
+    p.add_argument("-o", "--output", type=Path, required=True, help="report folder to create")
+    p.add_argument("--results", type=Path, help="use these results instead of computing them")
+    p.add_argument("--wav-scale", type=float, help="divide vibration audio by this (m/s^2), as the paper did, "
+                                                    "to compare devices; default: this session's largest amplitude")
+    p.add_argument("--overwrite", action="store_true")
+    p.set_defaults(func=run)
+
+
+def run(args, ui) -> int:
+    session = open_session(args.session)
+    ctx = ComputeContext(session=session)
+    if args.results:
+        results = load_results(args.results)
+        if results.session_id != session.session_id:
+            raise fail("E903", "the results belong to another session", file=str(args.results),
+                       expected=session.session_id, found=results.session_id)
+    else:
+        with ui.progress("computing metrics", total=len(family_modules())) as advance:
+            results = compute_session(session, progress=advance, ctx=ctx)
+    out = write_report(ctx, results, args.output, wav_scale=args.wav_scale, overwrite=args.overwrite)
+    ui.say(f"wrote {out / 'index.html'}")
+    ui.emit_json({"report": str(out / "index.html")})
+    return 0
