@@ -1,0 +1,361 @@
+"""Rig metrics and the rig check against the paper's requirements (spec chapter 14, §14.4–14.8).
+
+Metrics (``schemas/<v>/metrics/rig.json``): ``rig.plate_natural_frequency``, ``rig.cop_error``,
+``rig.handle_calibration_rms``, ``rig.sync_offset``. :func:`check_rig` turns them and the rig
+description into PASS / FAIL / WARN / SKIP lines for ``haptify rig-check``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+from haptify import calibration, force_plate, signals
+from haptify.conventions import quat_to_matrix
+from haptify.errors import HaptifyError, fail
+from haptify.metric_definitions import family, param
+from haptify.repetitions import TrialValue, aggregate, definition_of, per_trial, unavailable
+from haptify.results import MetricResult, Unavailable
+
+FAMILY = "rig"
+
+
+def rp(key: str) -> Any:
+    """A parameter of the rig family."""
+    return param(FAMILY, key)
+
+
+def _session_of(ctx_or_session: Any) -> Any:
+    return getattr(ctx_or_session, "session", ctx_or_session)
+
+
+def _cached(ctx_or_session: Any, key: Any, build: Callable[[], Any]) -> Any:
+    if hasattr(ctx_or_session, "cached"):
+        return ctx_or_session.cached(key, build)
+    return build()
+
+
+# --- per-trial computations --------------------------------------------------------------------
+
+def impact_frequencies(ctx_or_session: Any, trial_id: str) -> np.ndarray:
+    """Natural frequency per axis (Hz) of one ``rig.plate_impact`` trial (spec §14.4).
+
+    Uses the total plate force without bias (the window's mean is removed anyway).
+    """
+    session = _session_of(ctx_or_session)
+    df = session.read(trial_id, "plate_wrench")
+    pos, rot = force_plate.corner_geometry(session.manifest.rig)
+    force, _ = force_plate.total_wrench(df[force_plate.PLATE_COLUMNS].to_numpy(), pos, rot)
+    t = df["t"].to_numpy()
+    return force_plate.natural_frequencies(t, force, signals.nominal_rate(t))
+
+
+def calibration_fit(ctx_or_session: Any, trial_id: str) -> calibration.HandleCalibration:
+    """The eqs. 1–3 fit of one calibration trial (spec §6.2–6.3), cached on a context."""
+    return _cached(ctx_or_session, ("handle_calibration_fit", trial_id),
+                   lambda: calibration.fit_trial(_session_of(ctx_or_session), trial_id))
+
+
+def _gravity_dirs_h(raw: np.ndarray, bias: np.ndarray, r_hs: np.ndarray, sign: float) -> np.ndarray:
+    v = sign * (np.asarray(raw, float) - bias) @ r_hs.T
+    return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-300)
+
+
+def _best_lag(score: Callable[[float], float], max_lag: float, coarse: float, fine: float, label: str) -> float:
+    """Lag (s) maximising ``score``: a coarse search over ±max_lag, a fine one around the coarse best, a parabola."""
+    def search(centre: float, half: float, step: float) -> tuple[np.ndarray, np.ndarray]:
+        lags = centre + np.arange(-int(round(half / step)), int(round(half / step)) + 1) * step
+        return lags, np.array([score(float(x)) for x in lags])
+
+    lags, c = search(0.0, max_lag, coarse)
+    k = int(np.nanargmax(c))
+    if k == 0 or k == len(c) - 1:
+        raise fail("E624", f"{label}: the best alignment lies at the edge of the ±{max_lag} s search",
+                   expected=f"a delay within ±{max_lag} s", found=float(lags[k]))
+    lags, c = search(float(lags[k]), coarse, fine)
+    k = int(np.nanargmax(c))
+    a, b, d = c[k - 1:k + 2] if 0 < k < len(c) - 1 else (np.nan, np.nan, np.nan)
+    denom = a - 2 * b + d
+    if not denom < 0:
+        raise fail("E624", f"{label}: the alignment score has no peak (did the handle rotate?)", expected="a peaked score", found="flat")
+    return float(lags[k] + 0.5 * (a - d) / denom * fine)
+
+
+def recorder_delays(ctx_or_session: Any, trial_id: str) -> dict[str, float]:
+    """Delays (s) of the accelerometer and of motion capture against the F/T recorder (spec §14.6).
+
+    In a ``rig.handle_calibration`` trial all three recorders observe the direction of gravity in the
+    handle frame: the F/T sensor as its connector load ``F − b_F``, the accelerometer as ``−(a − b_a)``
+    and motion capture as ``R_WHᵀ (0, 0, −1)``. With u_F low-passed and resampled on a ``sync_rate_hz``
+    grid, the delay of recorder X is the lag τ in ±``sync_max_lag_s`` that maximises the mean of
+    ``u_F(t) · u_X(t + τ)``: searched in steps of ``sync_coarse_step_s``, then in steps of 1/``sync_rate_hz``
+    within one coarse step of the best, then refined by a parabola through the best three. A positive
+    delay means X's time stamps are late. E624 when the score has no interior peak.
+    """
+    session = _session_of(ctx_or_session)
+    cal = calibration_fit(ctx_or_session, trial_id)
+    w = session.read(trial_id, "handle_wrench")
+    a = session.read(trial_id, "handle_accel")
+    track = signals.mocap_track(ctx_or_session, trial_id)
+    rate = float(rp("sync_rate_hz"))
+    max_lag = float(rp("sync_max_lag_s"))
+    t0 = max(w["t"].iloc[0], a["t"].iloc[0], track.t[0]) + max_lag
+    t1 = min(w["t"].iloc[-1], a["t"].iloc[-1], track.t[-1]) - max_lag
+    grid = signals.uniform_grid(float(t0), float(t1), rate)
+    if len(grid) < 10:
+        raise fail("E624", f"trial {trial_id!r} is too short for the sync check", expected=f"> {2 * max_lag} s of overlap", found=len(grid))
+    r_hs = calibration.sensor_rotation(session, "ft_sensor")
+    r_ha = calibration.sensor_rotation(session, "accelerometer")
+    f_grid = signals.lowpass_resample(w["t"].to_numpy(), w[["fx", "fy", "fz"]].to_numpy(), grid, float(signals.sp("wrench_cutoff_hz")))
+    u_f = _gravity_dirs_h(f_grid, cal.force_bias_N, r_hs, 1.0)
+    t_a = a["t"].to_numpy()
+    acc_f = signals.lowpass(a[["ax", "ay", "az"]].to_numpy(), signals.nominal_rate(t_a), float(signals.sp("accel_cutoff_hz")))
+    m = track.quaternion  # NaN outside segments
+    down_h = np.einsum("nji,j->ni", quat_to_matrix(np.where(np.isfinite(m), m, 1.0)), np.array([0.0, 0.0, -1.0]))
+    down_h[~track.valid] = np.nan
+
+    def score_accel(tau: float) -> float:
+        u = _gravity_dirs_h(signals.interp_columns(t_a, acc_f, grid + tau), cal.accel_bias_m_per_s2, r_ha, -1.0)
+        return float(np.mean(np.sum(u_f * u, axis=1)))
+
+    def score_mocap(tau: float) -> float:
+        u = signals.interp_columns(track.t, down_h, grid + tau)  # NaN next to unusable samples
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
+        return float(np.nanmean(np.sum(u_f * u, axis=1)))
+
+    coarse, fine = float(rp("sync_coarse_step_s")), 1.0 / rate
+    return {"accel_minus_ft_s": _best_lag(score_accel, max_lag, coarse, fine, f"trial {trial_id!r} accelerometer"),
+            "mocap_minus_ft_s": _best_lag(score_mocap, max_lag, coarse, fine, f"trial {trial_id!r} motion capture")}
+
+
+# --- metric records -----------------------------------------------------------------------------
+
+def _vector_result(metric_id: str, per_trial_values: dict[str, np.ndarray], diagnostics: dict[str, Any]) -> MetricResult:
+    vals = np.array(list(per_trial_values.values()), float)
+    return MetricResult(id=metric_id, value=[float(x) for x in vals.mean(axis=0)], unit=definition_of(FAMILY, metric_id).unit,
+                        per_repetition=[[float(x) for x in row] for row in vals], trials=list(per_trial_values), n=len(vals),
+                        sd=[float(x) for x in vals.std(axis=0, ddof=1)] if len(vals) >= 2 else None,
+                        diagnostics=diagnostics, definition_version=family(FAMILY).version)
+
+
+def _no_trials(metric_id: str, protocol: str) -> Unavailable:
+    return Unavailable(id=metric_id, code="E310", reason=f"the session has no {protocol} trial")
+
+
+def natural_frequency_metric(ctx: Any) -> MetricResult | Unavailable:
+    """``rig.plate_natural_frequency`` (spec §14.4)."""
+    mid = "rig.plate_natural_frequency"
+    trials = [t.id for t in _session_of(ctx).trials_of("rig.plate_impact")]
+    if not trials:
+        return _no_trials(mid, "rig.plate_impact")
+    got, err = per_trial(ctx, trials, lambda tid: impact_frequencies(ctx, tid), mid)
+    if not got:
+        return unavailable(mid, err)
+    return _vector_result(mid, got, {"axes": ["x", "y", "z"]})
+
+
+def cop_error_metric(ctx: Any) -> MetricResult | Unavailable:
+    """``rig.cop_error`` (spec §14.5): mean over all placements, sd over placements."""
+    mid = "rig.cop_error"
+    trials = [t.id for t in _session_of(ctx).trials_of("rig.plate_cop")]
+    if not trials:
+        return _no_trials(mid, "rig.plate_cop")
+    got, err = per_trial(ctx, trials, lambda tid: force_plate.cop_trial_placements(ctx, tid), mid)
+    if not got:
+        return unavailable(mid, err)
+    errors = np.array([p.error for ps in got.values() for p in ps])
+    per_rep = [float(np.mean([p.error for p in ps])) for ps in got.values()]
+    return MetricResult(id=mid, value=float(errors.mean()), unit=definition_of(FAMILY, mid).unit, per_repetition=per_rep,
+                        trials=list(got), n=int(len(errors)), sd=float(errors.std(ddof=1)) if len(errors) >= 2 else None,
+                        diagnostics={"placements": [{"trial": tid, "t": [p.t0, p.t1], "cop_m": p.cop.tolist(), "mocap_m": p.mocap.tolist(),
+                                                     "error_m": p.error} for tid, ps in got.items() for p in ps],
+                                     "bias_source": force_plate.plate_bias(ctx)[1]},
+                        definition_version=family(FAMILY).version)
+
+
+def calibration_rms_metric(ctx: Any) -> MetricResult | Unavailable:
+    """``rig.handle_calibration_rms`` (spec §6.2–6.3, §14.7): force, acceleration, torque fit RMS."""
+    mid = "rig.handle_calibration_rms"
+    trials = [t.id for t in _session_of(ctx).trials_of("rig.handle_calibration")]
+    if not trials:
+        return _no_trials(mid, "rig.handle_calibration")
+    got, err = per_trial(ctx, trials, lambda tid: calibration_fit(ctx, tid), mid)
+    if not got:
+        return unavailable(mid, err)
+    rms = {tid: np.array([c.rms_force_N, c.rms_accel_m_per_s2, c.rms_torque_Nm]) for tid, c in got.items()}
+    diag = {"components": ["force_N", "accel_m_per_s2", "torque_Nm"],
+            "fits": {tid: {**c.to_record(f"fit-{tid}", tid), "n_samples": c.n_samples, **c.diagnostics} for tid, c in got.items()}}
+    return _vector_result(mid, rms, diag)
+
+
+def sync_offset_metric(ctx: Any) -> MetricResult | Unavailable:
+    """``rig.sync_offset`` (spec §14.6): largest |delay| over recorder pairs, mean over repetitions."""
+    mid = "rig.sync_offset"
+    trials = [t.id for t in _session_of(ctx).trials_of("rig.handle_calibration")]
+    if not trials:
+        return _no_trials(mid, "rig.handle_calibration")
+    got, err = per_trial(ctx, trials, lambda tid: recorder_delays(ctx, tid), mid)
+    if not got:
+        return unavailable(mid, err)
+    vals = [TrialValue(tid, max(abs(v) for v in d.values())) for tid, d in got.items()]
+    return aggregate(FAMILY, mid, vals, diagnostics={"delays_s": got})
+
+
+METRICS: dict[str, Callable[[Any], MetricResult | Unavailable]] = {
+    "rig.plate_natural_frequency": natural_frequency_metric,
+    "rig.cop_error": cop_error_metric,
+    "rig.handle_calibration_rms": calibration_rms_metric,
+    "rig.sync_offset": sync_offset_metric,
+}
+
+
+def compute(ctx: Any) -> list[MetricResult | Unavailable]:
+    """Every rig metric the session allows (spec §14; called by ``haptify compute``)."""
+    out: list[MetricResult | Unavailable] = []
+    for mid, fn in METRICS.items():
+        if not ctx.wants(mid):
+            continue
+        try:
+            out.append(fn(ctx))
+        except HaptifyError as exc:  # a coded problem shared by every trial (e.g. no plate in the rig)
+            out.append(unavailable(mid, exc))
+    return out
+
+
+# --- the rig check (spec §14.8) ------------------------------------------------------------------
+
+@dataclass
+class Check:
+    """One line of ``haptify rig-check``: status PASS, FAIL, WARN (advisory shortfall) or SKIP (no data)."""
+
+    name: str
+    status: str
+    value: Any
+    requirement: str
+    detail: str = ""
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def _axis_capacity(range_vec: np.ndarray, rotations: np.ndarray, axis: np.ndarray, share: float) -> float:
+    """Largest load along ``axis`` (W) that keeps every corner within range when each carries ``share`` of it."""
+    caps = []
+    for r in rotations:
+        c = np.abs(r.T @ axis) * share
+        caps.append(np.min(np.where(c > 1e-12, range_vec / np.maximum(c, 1e-300), np.inf)))
+    return float(min(caps))
+
+
+def plate_capacity(rig: Any) -> tuple[np.ndarray, np.ndarray] | None:
+    """Plate force range (N, per world axis) and moment range (N·m, about x, y, z) from the corner ranges (spec §14.8).
+
+    Forces: each corner carries a quarter of a force along a world axis. Moments about x and y: the
+    lever rule on the corners' vertical forces; about z: tangential horizontal corner forces. The
+    corners' own torque capacity is not counted (conservative). None when ranges are not described.
+    """
+    plate = rig.force_plate
+    if plate is None or plate.corner_range is None or plate.corner_range.force_N is None:
+        return None
+    pos, rot = force_plate.corner_geometry(rig)
+    frange = np.asarray(plate.corner_range.force_N, float)
+    force = np.array([_axis_capacity(frange, rot, e, 0.25) for e in np.eye(3)])
+    moments = []
+    for lever_axis in (1, 0):  # Mx from y levers, My from x levers
+        arm = pos[:, lever_axis]
+        moments.append(min(_axis_capacity(frange, rot[i:i + 1], np.array([0.0, 0.0, 1.0]), abs(arm[i]) / np.sum(arm ** 2))
+                           for i in range(4) if abs(arm[i]) > 0))
+    rad = np.linalg.norm(pos[:, :2], axis=1)
+    mz = []
+    for i in range(4):
+        tangent = np.array([-pos[i, 1], pos[i, 0], 0.0]) / rad[i]
+        mz.append(_axis_capacity(frange, rot[i:i + 1], tangent, rad[i] / np.sum(rad ** 2)))
+    moments.append(min(mz))
+    return force, np.array(moments)
+
+
+def _status(ok: bool) -> str:
+    return "PASS" if ok else "FAIL"
+
+
+def _range_checks(session: Any, ctx: Any) -> list[Check]:
+    rig = session.manifest.rig
+    out: list[Check] = []
+    cap = plate_capacity(rig)
+    if cap is None:
+        out.append(Check("plate force/moment range (Table I)", "SKIP", None, "rig.force_plate.corner_range", "the rig does not describe the plate's corner ranges"))
+    else:
+        force, moment = cap
+        note = ""
+        try:
+            bias, _ = force_plate.plate_bias(ctx)
+            pos, rot = force_plate.corner_geometry(rig)
+            f, _ = force_plate.total_wrench(bias[None, :], pos, rot)
+            force[2] = force[2] - abs(float(f[0, 2]))
+            note = f"vertical range reduced by the plate's own weight {abs(float(f[0, 2])):.1f} N"
+        except HaptifyError:
+            note = "plate weight unknown (no bias); vertical range not reduced by it"
+        req_f = np.asarray(rp("req_plate_force_N"), float)
+        req_m = np.asarray(rp("req_plate_moment_Nm"), float)
+        out.append(Check("plate force range (Table I)", _status(bool(np.all(force >= req_f))), force.round(1).tolist(),
+                         f">= {req_f.tolist()} N", note))
+        out.append(Check("plate moment range (Table I)", _status(bool(np.all(moment >= req_m))), moment.round(1).tolist(),
+                         f">= {req_m.tolist()} N*m"))
+    handle = rig.handle
+    items = [("handle F/T force range (Table I)", handle and handle.ft_sensor.range and handle.ft_sensor.range.force_N, "req_handle_force_N", "N", "FAIL"),
+             ("handle F/T torque range (Table I)", handle and handle.ft_sensor.range and handle.ft_sensor.range.torque_Nm, "req_handle_torque_Nm", "N*m", "WARN"),
+             ("accelerometer range (Table I)", handle and handle.accelerometer.range and handle.accelerometer.range.accel_m_per_s2, "req_accel_m_per_s2", "m/s^2", "FAIL")]
+    for name, rng, key, unit, shortfall in items:
+        req = float(np.max(rp(key)))
+        if not rng:
+            out.append(Check(name, "SKIP", None, f">= {req} {unit} on every axis", "the rig does not describe this range"))
+            continue
+        ok = float(np.min(rng)) >= req  # the handle turns, so every sensor axis must cover the requirement
+        detail = "" if ok or shortfall == "FAIL" else "advisory: the paper's own Mini27 (±4/±4/±2 N*m) is below Table I too"
+        out.append(Check(name, "PASS" if ok else shortfall, list(rng), f">= {req} {unit} on every axis", detail))
+    return out
+
+
+def _metric_check(ctx: Any, mid: str, name: str, requirement: str, judge: Callable[[Any], bool], show: Callable[[Any], Any]) -> Check:
+    res = METRICS[mid](ctx)
+    if isinstance(res, Unavailable):
+        return Check(name, "SKIP", None, requirement, f"{res.code}: {res.reason}")
+    return Check(name, _status(judge(res)), show(res), requirement)
+
+
+def check_rig(ctx: Any) -> list[Check]:
+    """Every rig-check line for a session (spec §14.8): Table I ranges, plate natural frequency, COP
+    error, calibration residuals and sensor pose, recorder synchronisation.
+
+    ``ctx`` is a ComputeContext or a session (then a context is made for it).
+    """
+    if not hasattr(ctx, "warn"):
+        from haptify.compute import ComputeContext
+
+        ctx = ComputeContext(session=ctx)
+    session = _session_of(ctx)
+    checks = _range_checks(session, ctx)
+    fmin = float(rp("req_natural_frequency_hz"))
+    checks.append(_metric_check(ctx, "rig.plate_natural_frequency", "plate natural frequency (Appendix 1)", f">= {fmin} Hz on every axis",
+                                lambda r: min(r.value) >= fmin, lambda r: [round(x, 1) for x in r.value]))
+    cmax = float(rp("req_cop_error_m"))
+    checks.append(_metric_check(ctx, "rig.cop_error", "COP error (Appendix 2)", f"mean <= {cmax * 1000:.1f} mm (Kistler 9281B11)",
+                                lambda r: r.value <= cmax, lambda r: {"mean_mm": round(r.value * 1000, 2), "sd_mm": round((r.sd or 0.0) * 1000, 2), "n": r.n}))
+    rmax = [float(x) for x in rp("req_calibration_rms")]
+    checks.append(_metric_check(ctx, "rig.handle_calibration_rms", "handle calibration RMS (§III-C)",
+                                f"<= {rmax} (N, m/s^2, N*m)", lambda r: all(v <= m for v, m in zip(r.value, rmax)),
+                                lambda r: [float(f"{x:.3g}") for x in r.value]))
+    res = METRICS["rig.handle_calibration_rms"](ctx)
+    omax = float(rp("req_orientation_error_deg"))
+    if isinstance(res, MetricResult):
+        errs = [f.get("orientation_error_deg") for f in res.diagnostics["fits"].values()]
+        errs = [e for e in errs if e is not None]
+        checks.append(Check("F/T sensor pose vs motion capture", _status(max(errs) <= omax), round(max(errs), 2), f"<= {omax} deg RMS")
+                      if errs else Check("F/T sensor pose vs motion capture", "SKIP", None, f"<= {omax} deg RMS", "no usable handle_pose in the calibration trials"))
+    smax = float(rp("req_sync_offset_s"))
+    checks.append(_metric_check(ctx, "rig.sync_offset", "recorder synchronisation", f"|delay| <= {smax * 1000:.1f} ms",
+                                lambda r: r.value <= smax, lambda r: {"max_abs_ms": round(r.value * 1000, 2),
+                                                                       **{tid: {k: round(v * 1000, 2) for k, v in d.items()} for tid, d in r.diagnostics["delays_s"].items()}}))
+    return checks
