@@ -17,6 +17,7 @@ from __future__ import annotations
 import fnmatch
 import math
 import re
+import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Callable, Literal, Union
@@ -264,13 +265,20 @@ def load_map(path: str | Path | None, source: str, overrides: dict | None = None
     if not isinstance(raw, dict):
         raise fail("E502", "an import map is a JSON object", file=label, expected="object", found=type(raw).__name__)
     raw = _deep_merge(raw, overrides or {})
+    session = raw.get("session")
+    no_date = None
+    if not isinstance(session, dict) or session.get("date") is None:
+        no_date = fail("E502", "the recording date is missing: give session.date in the map or --date", file=label,
+                       pointer="/session/date", expected="YYYY-MM-DD", found="missing")
     try:
         m = ImportMap.model_validate(raw)
     except ValidationError as exc:
-        raise HaptifyError(*pydantic_findings(exc, "E502", label)) from None
-    if m.session.date is None:
-        raise fail("E502", "the recording date is missing: give session.date in the map or --date", file=label,
-                   pointer="/session/date", expected="YYYY-MM-DD", found="missing")
+        findings = pydantic_findings(exc, "E502", label)
+        if no_date is not None and not any(f.pointer == "/session" for f in findings):
+            findings += no_date.findings
+        raise HaptifyError(*findings) from None
+    if no_date is not None:
+        raise no_date
     if m.source != source:
         raise fail("E502", f"the map is for the {m.source} importer, not {source}", file=label, pointer="/source",
                    expected=source, found=m.source)
@@ -363,6 +371,34 @@ def _strings(values: Any, n: int) -> list[str]:
     return (vals + [""] * n)[:n]
 
 
+C3D_BLOCK = 512  # bytes per C3D block
+
+
+def _check_complete(path: Path, bytes_per_value: int) -> None:
+    """E501 when the file is shorter than its header's frame count implies (ezc3d reads a truncated
+    file silently and shortens its frame count). Header words (16-bit, 1-based): 2 points, 3 analog
+    values per frame, 4–5 first and last frame, 9 first data block; byte order from the processor
+    type in the parameter section (86 = MIPS, big-endian)."""
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        head = fh.read(C3D_BLOCK)
+        if len(head) < 18:
+            raise fail("E501", f"{str(path)!r} is too short for a C3D header", file=str(path),
+                       expected=f"≥ {C3D_BLOCK} bytes", found=len(head))
+        fh.seek((head[0] - 1) * C3D_BLOCK + 3)
+        processor = fh.read(1)
+    order = ">" if processor == bytes([86]) else "<"
+    words = struct.unpack(f"{order}9H", head[:18])
+    n_points, analog_per_frame, first, last, data_block = words[1], words[2], words[3], words[4], words[8]
+    frames = last - first + 1
+    frame_bytes = (4 * n_points + analog_per_frame) * bytes_per_value
+    data_start = (data_block - 1) * C3D_BLOCK
+    if frames > 0 and frame_bytes > 0 and size < data_start + frames * frame_bytes:
+        held = max(0, (size - data_start) // frame_bytes)
+        raise fail("E501", f"{str(path)!r} is truncated: its header declares {frames} frames, the file holds {held}",
+                   file=str(path), expected=frames, found=held)
+
+
 def read_c3d(path: str | Path) -> C3DContent:
     """Read a C3D file with ezc3d (spec §5.5); E501 when it is missing, not a C3D or truncated."""
     import ezc3d
@@ -381,12 +417,10 @@ def read_c3d(path: str | Path) -> C3DContent:
     except (OSError, RuntimeError, ValueError) as exc:
         raise fail("E501", f"{label!r} cannot be read as C3D: {exc}", file=label) from None
     params, header, data = c["parameters"], c["header"], c["data"]
+    scale = float(np.asarray(_param(params, "POINT", "SCALE", [-1.0]), dtype=np.float64).ravel()[0])
+    _check_complete(p, 4 if scale < 0 else 2)
     pts = np.asarray(data["points"], dtype=np.float64)  # (4, n_markers, n_frames)
     n_markers, n_frames = pts.shape[1], pts.shape[2]
-    declared_frames = int(header["points"]["last_frame"]) - int(header["points"]["first_frame"]) + 1
-    if n_frames != declared_frames:
-        raise fail("E501", f"{label!r} is truncated: its header declares {declared_frames} frames, the file holds {n_frames}",
-                   file=label, expected=declared_frames, found=n_frames)
     xyz = pts[:3].transpose(2, 1, 0).copy()  # (n_frames, n_markers, 3)
     residuals = np.asarray(data["meta_points"]["residuals"], dtype=np.float64)[0].T if n_markers else np.zeros((n_frames, 0))
     invalid = (residuals < 0) | ~np.isfinite(xyz).all(axis=2)
