@@ -1,0 +1,267 @@
+"""Known answers for the Hammerstein–Wiener model (spec §11.2–11.5): maps, prediction, file formats, fitting."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.io import loadmat
+from scipy.signal import lfilter
+
+from haptify.errors import HaptifyError
+from haptify.local_dynamics import (
+    Channel,
+    FitOptions,
+    HWModelFile,
+    PiecewiseLinearMap,
+    TransferFunction,
+    UnitGainMap,
+    export_mat,
+    fit,
+    load_model,
+    place_breakpoints,
+    predict,
+    pwl_basis,
+    pwl_eval,
+    rmse,
+    save_model,
+)
+
+
+# ---------------------------------------------------------------------------------------------
+# helpers: a known model and smooth random inputs
+# ---------------------------------------------------------------------------------------------
+
+def smooth_inputs(rng: np.random.Generator, n: int, k: int) -> np.ndarray:
+    """Low-passed white noise (first-order, pole 0.9), standard deviation ≈ 0.57."""
+    return lfilter([0.1], [1.0, -0.9], rng.standard_normal((n, k)), axis=0) * 2.5
+
+
+def known_model(rng: np.random.Generator, nu: int, ny: int, input_map: bool = True, output_map: bool = True,
+                nk: int = 0) -> HWModelFile:
+    """A H-W model: saturating input maps, expanding output maps, stable 2nd-order blocks."""
+    bpi = np.linspace(-1.5, 1.5, 9)
+    bpo = np.linspace(-2.0, 2.0, 9)
+    ins = [PiecewiseLinearMap(breakpoints=bpi.tolist(), values=(bpi + 0.5 * np.tanh(2 * bpi)).tolist())
+           if input_map else UnitGainMap() for _ in range(nu)]
+    outs = [PiecewiseLinearMap(breakpoints=bpo.tolist(), values=(bpo + 0.2 * bpo * np.abs(bpo)).tolist())
+            if output_map else UnitGainMap() for _ in range(ny)]
+    lin = [[TransferFunction(b=(0.4 * rng.standard_normal(2)).tolist(), f=[-0.6, 0.2], nk=nk) for _ in range(nu)]
+           for _ in range(ny)]
+    return HWModelFile(sample_rate_hz=100.0, inputs=[Channel(name=f"u{i}", unit="1") for i in range(nu)],
+                       outputs=[Channel(name=f"y{j}", unit="N") for j in range(ny)],
+                       input_maps=ins, output_maps=outs, linear=lin)
+
+
+def reference_simulation(model: HWModelFile, u: np.ndarray) -> np.ndarray:
+    """Spec §11.3 written as explicit loops over samples (an independent implementation)."""
+    n = len(u)
+    w = np.zeros_like(u)
+    for i, m in enumerate(model.input_maps):
+        w[:, i] = u[:, i] if m.type == "unit_gain" else np.array([_pwl_scalar(m, x) for x in u[:, i]])
+    y = np.zeros((n, model.ny))
+    for j in range(model.ny):
+        x = np.zeros(n)
+        for i, tf in enumerate(model.linear[j]):
+            z = np.zeros(n)
+            for t in range(n):
+                acc = sum(b * w[t - tf.nk - k, i] for k, b in enumerate(tf.b) if t - tf.nk - k >= 0)
+                acc -= sum(f * z[t - l - 1] for l, f in enumerate(tf.f) if t - l - 1 >= 0)
+                z[t] = acc
+            x += z
+        m = model.output_maps[j]
+        y[:, j] = x if m.type == "unit_gain" else np.array([_pwl_scalar(m, v) for v in x])
+    return y
+
+
+def _pwl_scalar(m: PiecewiseLinearMap, x: float) -> float:
+    bp, v = m.breakpoints, m.values
+    k = 0
+    while k < len(bp) - 2 and x >= bp[k + 1]:
+        k += 1
+    return v[k] + (x - bp[k]) * (v[k + 1] - v[k]) / (bp[k + 1] - bp[k])
+
+
+# ---------------------------------------------------------------------------------------------
+# static maps
+# ---------------------------------------------------------------------------------------------
+
+def test_pwl_interpolates_and_extends_linearly():
+    bp = np.array([-1.0, 0.0, 2.0])
+    v = np.array([3.0, 1.0, 5.0])
+    x = np.array([-3.0, -1.0, -0.5, 0.0, 1.0, 2.0, 4.0])
+    # slopes: -2 on the first segment, +2 on the second; extended beyond the ends
+    assert np.allclose(pwl_eval(bp, v, x), [7.0, 3.0, 2.0, 1.0, 3.0, 5.0, 9.0])
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(-5, 5), min_size=1, max_size=30),
+       st.lists(st.floats(-3, 3), min_size=4, max_size=4))
+def test_basis_times_values_is_the_map(xs, values):
+    bp = np.array([-1.0, -0.2, 0.5, 2.0])
+    x = np.array(xs)
+    assert np.allclose(pwl_basis(bp, x) @ np.array(values), pwl_eval(bp, np.array(values), x), atol=1e-9)
+    assert np.allclose(pwl_basis(bp, x).sum(axis=1), 1.0)  # the basis reproduces constants
+
+
+def test_breakpoints_follow_quantiles_and_stay_increasing():
+    x = np.arange(1001.0)
+    assert np.allclose(place_breakpoints(x, 5, (0.0, 1.0)), [0, 250, 500, 750, 1000])
+    const = place_breakpoints(np.full(50, 3.0), 10, (0.01, 0.99))
+    assert np.all(np.diff(const) > 0) and abs(const.mean() - 3.0) < 1e-12
+    lumpy = place_breakpoints(np.r_[np.zeros(90), np.linspace(1, 2, 10)], 10, (0.01, 0.99))
+    assert np.all(np.diff(lumpy) > 0)
+
+
+# ---------------------------------------------------------------------------------------------
+# prediction and the parameter file
+# ---------------------------------------------------------------------------------------------
+
+def test_prediction_is_the_difference_equation_of_the_spec():
+    rng = np.random.default_rng(3)
+    model = known_model(rng, nu=2, ny=2, nk=1)
+    model.linear[1][0] = TransferFunction(b=[0.3, -0.1, 0.05], f=[-0.5], nk=2)   # orders differ per pair
+    model.input_maps[1] = UnitGainMap()
+    u = smooth_inputs(rng, 150, 2)
+    assert np.allclose(predict(model, u), reference_simulation(model, u), rtol=0, atol=1e-12)
+
+
+def test_parameter_file_reproduces_its_outputs_exactly(tmp_path):
+    rng = np.random.default_rng(4)
+    model = known_model(rng, nu=3, ny=2)
+    u = smooth_inputs(rng, 500, 3)
+    path = save_model(model, tmp_path / "model.json")
+    again = load_model(path)
+    assert again == model
+    assert np.array_equal(predict(again, u), predict(model, u))
+
+
+def test_mat_export_holds_the_same_model(tmp_path):
+    """Rebuild the model from the .mat with MATLAB's conventions (B with nk leading zeros, F with its 1)."""
+    rng = np.random.default_rng(5)
+    model = known_model(rng, nu=2, ny=2, nk=1)
+    model.output_maps[0] = UnitGainMap()
+    u = smooth_inputs(rng, 300, 2)
+    s = loadmat(export_mat(model, tmp_path / "model.mat"), squeeze_me=True, struct_as_record=False)["model"]
+    assert s.Ts == pytest.approx(0.01)
+    assert list(s.InputName) == ["u0", "u1"] and list(s.OutputUnit) == ["N", "N"]
+
+    def apply(nl, x):
+        return x if nl.Type == "unit_gain" else pwl_eval(nl.BreakPoints[0], nl.BreakPoints[1], x)
+
+    w = np.column_stack([apply(s.InputNonlinearity[i], u[:, i]) for i in range(2)])
+    y = np.column_stack([apply(s.OutputNonlinearity[j], sum(lfilter(np.atleast_1d(s.B[j, i]), np.atleast_1d(s.F[j, i]), w[:, i])
+                                                            for i in range(2))) for j in range(2)])
+    assert np.allclose(y, predict(model, u), atol=1e-12)
+    assert s.nk[0, 0] == 1 and np.atleast_1d(s.B[0, 0])[0] == 0.0 and np.atleast_1d(s.F[0, 0])[0] == 1.0
+
+
+def test_invalid_model_file_is_a_coded_error(tmp_path):
+    rng = np.random.default_rng(6)
+    data = json.loads(known_model(rng, 2, 1).model_dump_json())
+    data["input_maps"][1]["breakpoints"][3] = -10.0            # no longer increasing
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(data))
+    with pytest.raises(HaptifyError) as err:
+        load_model(bad)
+    assert err.value.code == "E702" and err.value.findings[0].pointer.startswith("/input_maps/1")
+    data = json.loads(known_model(rng, 2, 1).model_dump_json())
+    data["linear"][0].pop()                                   # ny × nu block with a missing entry
+    bad.write_text(json.dumps(data))
+    with pytest.raises(HaptifyError, match="linear must be"):
+        load_model(bad)
+    with pytest.raises(HaptifyError) as err:
+        load_model(tmp_path / "missing.json")
+    assert err.value.code == "E702"
+
+
+def test_inputs_that_do_not_fit_the_model_are_rejected():
+    model = known_model(np.random.default_rng(7), 2, 1)
+    with pytest.raises(HaptifyError) as err:
+        predict(model, np.zeros((10, 3)))
+    assert err.value.code == "E703"
+    u = np.zeros((10, 2))
+    u[4, 1] = np.nan
+    with pytest.raises(HaptifyError, match="sample 4"):
+        predict(model, u)
+
+
+def test_quaternion_sign_does_not_change_the_prediction():
+    """q and −q are one orientation: the hemisphere rule makes the prediction identical (spec §11.3)."""
+    rng = np.random.default_rng(8)
+    n = 2000
+    ang = 0.3 * np.sin(np.arange(n) / 50.0)
+    q = np.column_stack([np.cos(ang / 2), np.sin(ang / 2), np.zeros(n), np.zeros(n)])
+    u = np.column_stack([q, smooth_inputs(rng, n, 1)])
+    y = np.column_stack([np.sin(ang) + u[:, 4]])
+    model, _ = fit(u, y, sample_rate_hz=100.0, quaternion_columns=[0, 1, 2, 3])
+    flipped = u.copy()
+    flipped[::3, :4] *= -1.0
+    assert np.array_equal(predict(model, flipped), predict(model, u))
+
+
+# ---------------------------------------------------------------------------------------------
+# fitting: data from a known model with known white noise
+# ---------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("input_map, output_map", [(True, True), (True, False), (False, True)],
+                         ids=["hammerstein-wiener", "pure-hammerstein", "pure-wiener"])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_fit_reaches_the_noise_floor_on_held_out_data(input_map, output_map, seed):
+    """Held-out RMSE within 10 % of the known noise σ, for the matching structure and for the default H-W."""
+    rng = np.random.default_rng(seed)
+    truth = known_model(rng, nu=3, ny=2, input_map=input_map, output_map=output_map)
+    u_train, u_test = smooth_inputs(rng, 4000, 3), smooth_inputs(rng, 2000, 3)
+    y_train0, y_test0 = predict(truth, u_train), predict(truth, u_test)
+    sigma = 0.1 * y_train0.std(axis=0)
+    y_train = y_train0 + sigma * rng.standard_normal(y_train0.shape)
+    y_test = y_test0 + sigma * rng.standard_normal(y_test0.shape)
+    structure = FitOptions.from_definition(input_map="piecewise_linear" if input_map else "unit_gain",
+                                           output_map="piecewise_linear" if output_map else "unit_gain")
+    for options in (structure, FitOptions.from_definition()):
+        model, report = fit(u_train, y_train, sample_rate_hz=100.0, options=options)
+        ratio = rmse(y_test, predict(model, u_test)) / sigma
+        assert np.all(np.abs(ratio - 1.0) < 0.10), (options.input_map, options.output_map, ratio)
+        assert report.cost_history == sorted(report.cost_history, reverse=True)      # LM never goes uphill
+        assert model.fit.samples == 4000 and len(model.fit.rmse) == 2
+
+
+def test_fit_of_several_records_matches_one_long_record():
+    """Records split by a gap are each simulated from rest; the fit still reaches the noise floor."""
+    rng = np.random.default_rng(11)
+    truth = known_model(rng, nu=2, ny=1)
+    parts = [smooth_inputs(rng, 2000, 2), smooth_inputs(rng, 1500, 2)]
+    sigma = 0.05
+    ys = [predict(truth, p) + sigma * rng.standard_normal((len(p), 1)) for p in parts]
+    model, _ = fit(parts, ys, sample_rate_hz=100.0)
+    u_test = smooth_inputs(rng, 2000, 2)
+    y_test = predict(truth, u_test) + sigma * rng.standard_normal((2000, 1))
+    assert abs(rmse(y_test, predict(model, u_test))[0] / sigma - 1.0) < 0.10
+    assert model.fit.samples == 3500
+
+
+def test_fitted_model_is_stable_and_valid_against_its_schema():
+    rng = np.random.default_rng(12)
+    u = smooth_inputs(rng, 3000, 2)
+    y = np.cumsum(u[:, :1], axis=0) * 0.02 + 0.01 * rng.standard_normal((3000, 1))   # near-integrator
+    model, _ = fit(u, y, sample_rate_hz=100.0)
+    radius = FitOptions.from_definition().stability_radius
+    for tf in model.linear[0]:
+        poles = np.roots(np.r_[1.0, tf.f]) if tf.f else np.zeros(0)
+        assert np.all(np.abs(poles) < radius)
+    HWModelFile.model_validate_json(model.model_dump_json())
+
+
+def test_training_data_must_be_finite_and_paired():
+    u = np.zeros((100, 2))
+    with pytest.raises(HaptifyError) as err:
+        fit(u, np.zeros((99, 1)), sample_rate_hz=100.0)
+    assert err.value.code == "E703"
+    y = np.zeros((100, 1))
+    y[5] = np.inf
+    with pytest.raises(HaptifyError) as err:
+        fit(u, y, sample_rate_hz=100.0)
+    assert err.value.code == "E703"

@@ -1,0 +1,164 @@
+"""The dynamics family on a whole session (spec §11.7, §11.8): compute(ctx), the commands, coded failures.
+
+The session is built by construction: the handle calibration is the identity (no bias, no connector
+mass), the handle orientation is a slow rotation about z, and the device's force on the hand is the
+linear law F = −m a − c v (+ a small white noise), expressed in the sensor frame as the rig would
+record it. A linear law lies inside the model class, so the training force error is known to be of
+the order of the (filtered) noise.
+"""
+
+from __future__ import annotations
+
+import json
+from argparse import Namespace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from haptify.compute import ComputeContext
+from haptify.conventions import GRAVITY_W, quat_conjugate, quat_from_axis_angle, quat_rotate
+from haptify.errors import HaptifyError
+from haptify.local_dynamics import compute, line_fit, load_model, predict, trial_data
+from haptify.storage import SessionWriter, open_session
+from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
+
+MASS, DAMPING, NOISE = 0.15, 0.8, 0.01
+pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
+
+
+def _trial_signals(rng: np.random.Generator, seconds: float, amplitude: float, centre: np.ndarray, freq: float) -> dict:
+    """Analytic motion on a 1 kHz clock: oscillation in x, y, z with rising frequency, slow yaw."""
+    t = np.arange(int(seconds * 1000)) / 1000.0
+    chirp = 2 * np.pi * (freq * t + 0.02 * t ** 2)
+    dphase = 2 * np.pi * (freq + 0.04 * t)
+    ddphase = 2 * np.pi * 0.04
+    amp = amplitude * np.array([1.0, 0.7, 0.5])
+    shift = np.array([0.0, 1.1, 2.3])
+    ph = chirp[:, None] + shift
+    pos = centre + amp * np.sin(ph)
+    vel = amp * np.cos(ph) * dphase[:, None]
+    acc = -amp * np.sin(ph) * dphase[:, None] ** 2 + amp * np.cos(ph) * ddphase
+    yaw = 0.3 * np.sin(2 * np.pi * 0.05 * t)
+    q = quat_from_axis_angle(np.tile([0.0, 0.0, 1.0], (len(t), 1)), yaw)
+    force_w = -MASS * acc - DAMPING * vel + NOISE * rng.standard_normal((len(t), 3))
+    return {"t": t, "pos": pos, "q": q, "acc": acc, "force_w": force_w}
+
+
+def _add_trial(w: SessionWriter, rng, trial_id: str, protocol: str, repetition: int, **motion) -> None:
+    s = _trial_signals(rng, **motion)
+    w.add_trial(trial_id, protocol, powered=False, repetition=repetition, label="figure_eight" if protocol == "other" else None)
+    t, q = s["t"], s["q"]
+    p_sensor = np.array([0.0, 0.0, -0.03])                     # example_rig: F/T sensor below the gimbal centre
+    f_h = quat_rotate(quat_conjugate(q), s["force_w"])          # handle frame = sensor frame (identity rotation)
+    tau_s = -np.cross(p_sensor, f_h)                            # zero torque about the gimbal centre
+    wrench = {"t": t, **{c: f_h[:, k] for k, c in enumerate(("fx", "fy", "fz"))},
+              **{c: tau_s[:, k] for k, c in enumerate(("tx", "ty", "tz"))}}
+    w.add_stream(trial_id, "handle_wrench", wrench, rate_hz=1000)
+    a_h = quat_rotate(quat_conjugate(q), s["acc"] - GRAVITY_W)  # specific force: +g up at rest
+    w.add_stream(trial_id, "handle_accel", {"t": t, "ax": a_h[:, 0], "ay": a_h[:, 1], "az": a_h[:, 2]}, rate_hz=1000)
+    k = slice(None, None, 10)
+    pose = {"t": t[k], "px": s["pos"][k, 0], "py": s["pos"][k, 1], "pz": s["pos"][k, 2],
+            "qw": q[k, 0], "qx": q[k, 1], "qy": q[k, 2], "qz": q[k, 3]}
+    w.add_stream(trial_id, "handle_pose", pose, rate_hz=100)
+
+
+def build_session(path: Path, tests: bool = True, train_s: float = 30.0) -> Path:
+    rng = np.random.default_rng(0)
+    calib = {"kind": "handle_gravity", "id": "cal-1", "force_bias_N": [0.0, 0.0, 0.0], "connector_mass_kg": 0.0,
+             "connector_com_m": [0.0, 0.0, 0.0], "torque_bias_Nm": [0.0, 0.0, 0.0],
+             "accel_bias_m_per_s2": [0.0, 0.0, 0.0], "gravity_m_per_s2": float(-GRAVITY_W[2])}
+    w = SessionWriter(manifest={"session_id": "dyn-0001", "date": "2026-11-22", "lab": {"id": "lab"}, "examiner": {"id": "ex"},
+                                "device": TOUCH_DEVICE, "device_placement": IDENTITY, "rig": example_rig(),
+                                "calibration": [calib]})
+    centre = np.array([0.0, 0.0, 0.15])
+    _add_trial(w, rng, "ld-1", "local_dynamic", 1, seconds=train_s, amplitude=0.03, centre=centre, freq=0.8)
+    if tests:
+        _add_trial(w, rng, "ld-2", "local_dynamic", 2, seconds=10.5, amplitude=0.03, centre=centre, freq=0.9)
+        _add_trial(w, rng, "fs-1", "free_space", 1, seconds=10.5, amplitude=0.06, centre=centre + [0.08, 0.0, 0.0], freq=0.1)
+    return w.write(path)
+
+
+@pytest.fixture(scope="module")
+def session_path(tmp_path_factory) -> Path:
+    return build_session(tmp_path_factory.mktemp("dyn") / "session")
+
+
+@pytest.fixture(scope="module")
+def results(session_path):
+    ctx = ComputeContext(session=open_session(session_path))
+    items = compute(ctx)
+    return {i.id: i for i in items}, ctx
+
+
+def test_training_errors_are_near_the_noise(results):
+    items, _ = results
+    force = items["dynamics.force_rmse"]
+    assert force.unit == "N" and len(force.value) == 3 and force.trials == ["ld-1"]
+    # the force law is linear in the inputs; what remains is the low-passed noise and start-up transients
+    assert max(force.value) < 2 * NOISE
+    assert items["dynamics.force_rmse_mean"].value == pytest.approx(np.mean(force.value))
+    torque = items["dynamics.torque_rmse"]
+    assert torque.unit == "N*m" and max(torque.value) < 0.01
+    assert items["dynamics.torque_rmse_mean"].value == pytest.approx(np.mean(torque.value))
+
+
+def test_error_vs_distance_segments_and_line(results):
+    items, _ = results
+    evd = items["dynamics.error_vs_distance"]
+    rows = evd.diagnostics["segments"]
+    by_set = {}
+    for r in rows:
+        by_set.setdefault(r["set"], []).append(r)
+    assert len(by_set["training"]) == 6 and len(by_set["local_dynamic"]) == 2 and len(by_set["free_space"]) == 2
+    assert all(r["distance"] < 1e-6 for r in by_set["training"])            # every window matches itself
+    assert max(r["distance"] for r in by_set["local_dynamic"]) < min(r["distance"] for r in by_set["free_space"])
+    slope, intercept = line_fit(np.array([r["distance"] for r in rows]), np.array([r["force_error"] for r in rows]))
+    assert evd.value == pytest.approx([slope, intercept])
+    assert evd.n == 10 and evd.trials == ["ld-1", "ld-2", "fs-1"]
+
+
+def test_without_test_trials_the_line_is_unavailable(tmp_path, results):
+    ctx = ComputeContext(session=open_session(build_session(tmp_path / "s", tests=False)))
+    # the training trial is built identically (same seed, built first): reuse the fitted model
+    ctx.cached(("dynamics_model", "ld-1"), lambda: results[1].cached(("dynamics_model", "ld-1"), None))
+    items = {i.id: i for i in compute(ctx)}
+    assert items["dynamics.error_vs_distance"].code == "E701"
+    assert hasattr(items["dynamics.force_rmse"], "value")
+
+
+def test_short_training_trial_is_unavailable_not_nan(tmp_path):
+    ctx = ComputeContext(session=open_session(build_session(tmp_path / "s", tests=False, train_s=8.0)))
+    items = compute(ctx)
+    assert {i.id for i in items} == {"dynamics.force_rmse", "dynamics.force_rmse_mean", "dynamics.torque_rmse",
+                                     "dynamics.torque_rmse_mean", "dynamics.error_vs_distance"}
+    assert all(i.code == "E701" for i in items)
+
+
+def test_no_local_dynamic_trial(example_session):
+    items = compute(ComputeContext(session=open_session(example_session)))
+    assert items and all(i.code == "E302" for i in items)
+
+
+def test_fit_and_predict_commands(session_path, tmp_path):
+    from haptify.cli import UI
+    from haptify.cmd_dynamics import run_fit, run_predict
+
+    ui = UI(quiet=True)
+    model_path, mat_path, pred_path = tmp_path / "m.json", tmp_path / "m.mat", tmp_path / "p.parquet"
+    args = Namespace(session=session_path, trial=None, output=model_path, mat=mat_path, overwrite=False)
+    assert run_fit(args, ui) == 0
+    assert mat_path.stat().st_size > 0
+    model = load_model(model_path)
+    assert model.fit.trial_id == "ld-1" and [c.name for c in model.inputs][:4] == ["qw", "qx", "qy", "qz"]
+    with pytest.raises(HaptifyError) as err:                     # no silent overwrite
+        run_fit(args, ui)
+    assert err.value.code == "E901"
+    assert run_predict(Namespace(model=model_path, session=session_path, trial="ld-2", output=pred_path, overwrite=False), ui) == 0
+    table = pd.read_parquet(pred_path)
+    assert list(table.columns[:7]) == ["t", "fx", "fy", "fz", "tx", "ty", "tz"]
+    data = trial_data(open_session(session_path), "ld-2")
+    expected = predict(model, data.u[data.valid])               # one valid run: the whole trial
+    assert np.allclose(table[["fx", "fy", "fz", "tx", "ty", "tz"]].to_numpy()[data.valid], expected, atol=1e-12)
+    assert json.loads(model_path.read_text())["format"] == "haptify-hw-model"
