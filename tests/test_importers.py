@@ -365,8 +365,8 @@ finite = st.floats(min_value=-1e6, max_value=1e6, allow_nan=False, allow_infinit
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.lists(st.tuples(finite, finite, finite), min_size=2, max_size=12),
-       st.sampled_from([("N", 1.0, 1.0), ("kN", 1000.0, 1.0), ("lbf", 0.45359237 * 9.80665, 1.0)]),
-       st.sampled_from([("N*m", 1.0, 1.0), ("N-mm", 1.0, 1000.0), ("Nmm", 1.0, 1000.0)]))
+       st.sampled_from([("N", 1.0, 1.0), ("kN", 1000.0, 1.0), ("lbf", 4.4482216152605, 1.0)]),
+       st.sampled_from([("N*m", 1.0, 1.0), ("N-mm", 1.0, 1000.0), ("Nmm", 1.0, 1000.0), ("lbf-in", 0.1129848290276167, 1.0)]))
 def test_csv_import_is_exact_under_unit_scaling(tmp_path_factory, values, force_unit, torque_unit):
     tmp = tmp_path_factory.mktemp("h")
     rows = [[i / 1000.0 * 1000.0, f, t, g] for i, (f, t, g) in enumerate(values)]  # time in ms: 0, 1, 2, …
@@ -511,3 +511,16 @@ def test_sanitised_ids():
 def test_example_maps_are_valid_import_maps():
     for name in ("vicon-map.json", "qualisys-map.json", "ati-map.json", "chai3d-map.json"):
         ImportMap.model_validate_json((FIX / name).read_text())
+
+
+def test_spec_unit_table_matches_the_normative_json():
+    text = (REPO / "spec" / "05-import.md").read_text(encoding="utf-8")
+    block = text.split("<!-- units table:")[1].split("<!-- end of units table -->")[0]
+    rows = [[c.strip() for c in line.strip().strip("|").split("|")] for line in block.splitlines()[3:] if line.startswith("|")]
+    table = json.loads((REPO / "schemas" / "1.0" / "import-units.json").read_text(encoding="utf-8"))["units"]
+    assert len(rows) == len(table)
+    for row, unit in zip(rows, table):
+        assert row[0] == unit["dimension"]
+        assert row[1] == ", ".join(f"`{s}`" for s in unit["spellings"])
+        assert float(row[2]) == unit["mul"] and float(row[3]) == unit["div"]
+        assert row[4] == unit.get("note", "")

@@ -27,7 +27,7 @@ import pandas as pd
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from haptify import schemas
-from haptify.conventions import STANDARD_GRAVITY, matrix_to_quat, quat_to_matrix
+from haptify.conventions import matrix_to_quat, quat_to_matrix
 from haptify.errors import HaptifyError, fail
 from haptify.session_format import (
     PROTOCOLS,
@@ -46,20 +46,16 @@ from haptify.versions import PACKAGE_VERSION
 
 # --- units (spec §5.3) ---------------------------------------------------------------------------
 
-LBF_N = 0.45359237 * STANDARD_GRAVITY  # pound-force in newtons, exact by definition of lb and g_n
-INCH_M = 0.0254  # inch in metres, exact by definition
-
-
 @dataclass(frozen=True)
 class Unit:
-    """A source unit: its dimension and the conversion ``si = value · mul / div`` (spec §5.3)."""
+    """A source unit: its dimension and the conversion ``si = (value · mul) / div`` (spec §5.3)."""
 
     dimension: str
     mul: float = 1.0
     div: float = 1.0
 
     def to_si(self, values: np.ndarray) -> np.ndarray:
-        """Convert ``values`` to SI: one multiplication and/or one division, in that order."""
+        """Convert ``values`` to SI: one multiplication, then one division, each skipped when it is by 1."""
         out = np.asarray(values, dtype=np.float64)
         if self.mul != 1.0:
             out = out * self.mul
@@ -68,38 +64,17 @@ class Unit:
         return out
 
 
-def _spellings(unit: Unit, *names: str) -> dict[str, Unit]:
-    return {n: unit for n in names}
+def _unit_table() -> tuple[dict[str, Unit], dict[str, str]]:
+    table = schemas.load("import-units.json")
+    units = {name: Unit(row["dimension"], float(row["mul"]), float(row["div"]))
+             for row in table["units"] for name in row["spellings"]}
+    return units, dict(table["si_units"])
 
 
-# Every accepted spelling of a source unit. Decimal sub-units divide by an integer power of ten, so a
-# value converts to the correctly rounded SI double (mm → m is x / 1000, not x · 0.001).
-UNITS: dict[str, Unit] = {
-    **_spellings(Unit("length"), "m"),
-    **_spellings(Unit("length", div=100.0), "cm"),
-    **_spellings(Unit("length", div=1000.0), "mm"),
-    **_spellings(Unit("force"), "N"),
-    **_spellings(Unit("force", mul=1000.0), "kN"),
-    **_spellings(Unit("force", mul=LBF_N), "lbf"),
-    **_spellings(Unit("torque"), "N*m", "N.m", "N·m", "Nm", "N-m"),
-    **_spellings(Unit("torque", div=1000.0), "N*mm", "N.mm", "N·mm", "Nmm", "N-mm"),
-    **_spellings(Unit("torque", mul=LBF_N * INCH_M), "lbf*in", "lbf.in", "lbf-in"),
-    **_spellings(Unit("acceleration"), "m/s^2", "m/s2", "m/s²"),
-    **_spellings(Unit("acceleration", div=1000.0), "mm/s^2", "mm/s2", "mm/s²"),
-    **_spellings(Unit("acceleration", mul=STANDARD_GRAVITY), "g"),
-    **_spellings(Unit("angle"), "rad"),
-    **_spellings(Unit("angle", mul=math.pi / 180.0), "deg", "°"),
-    **_spellings(Unit("time"), "s"),
-    **_spellings(Unit("time", div=1000.0), "ms"),
-    **_spellings(Unit("time", div=1_000_000.0), "us", "µs"),
-    **_spellings(Unit("dimensionless"), "1"),
-    **_spellings(Unit("voltage"), "V"),
-    **_spellings(Unit("voltage", div=1000.0), "mV"),
-}
-
-# The dimension of each SI unit a stream column may declare (spec §1.1).
-SI_DIMENSION = {"m": "length", "N": "force", "N*m": "torque", "m/s^2": "acceleration", "rad": "angle",
-                "s": "time", "1": "dimensionless"}
+# Every accepted spelling of a source unit, and the dimension of each SI column unit (spec §1.1, §5.3),
+# from schemas/<v>/import-units.json. Decimal sub-units divide by an integer power of ten, so a value
+# converts to the correctly rounded SI double (mm → m is x / 1000, not x · 0.001).
+UNITS, SI_DIMENSION = _unit_table()
 
 
 def unit_conversion(unit: str | None, target: str, **where: Any) -> Unit:
@@ -799,8 +774,8 @@ def import_c3d(path: str | Path, out: str | Path, mapping: str | Path | LoadedMa
     if m.streams:
         n = c3d.analogs.shape[1]
         if n < 2:
-            raise fail("E503", f"{c3d.path.name} holds {n} analog sample(s); mapped streams need two", file=label,
-                       pointer="/streams", expected="≥ 2 analog samples", found=n)
+            raise fail("E205", f"{c3d.path.name} holds {n} analog sample(s); a stream needs two", file=src,
+                       expected="≥ 2 analog samples", found=n)
         t_an = (c3d.analog_first_sample + np.arange(n)) / c3d.analog_rate + m.time_offset_s
         reader = _analog_reader(c3d, label)
         for kind, smap in m.streams.items():
