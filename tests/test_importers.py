@@ -331,6 +331,25 @@ def test_chai3d_fixture_degrees_offset_and_constant_torques(tmp_path):
     assert session.stream("chai3d-plane", "commanded_wrench").rate_hz == 1000.0
 
 
+def test_chai3d_forces_in_the_device_frame_rotate_into_world(tmp_path):
+    # device frame D turned +90° about z in W: D's x axis is W's y axis, so a logged (0, 0, 0.75 k) N stays
+    # vertical and a logged force along D's x appears along W's y.
+    m = json.loads((FIX / "chai3d-map.json").read_text())
+    h = math.sqrt(0.5)
+    m["session"]["device_placement"] = {"position": [0.0, 0.0, 0.0], "quaternion": [h, 0.0, 0.0, h]}
+    m["session"]["device"] = {"file": str(FIX / "touch-device.json")}
+    m["streams"]["commanded_wrench"]["columns"]["fx"] = {"source": "force_z", "unit": "N"}
+    m["streams"]["commanded_wrench"]["columns"]["fz"] = {"value": 0.0, "unit": "N"}
+    import_csv(FIX / "chai3d-log.csv", tmp_path / "c", write_map(tmp_path, "m.json", m))
+    assert_valid(tmp_path / "c")
+    cw = open_session(tmp_path / "c").read("chai3d-plane", "commanded_wrench")
+    k = np.arange(20.0)
+    np.testing.assert_allclose(cw["fy"].to_numpy(), 0.75 * k, rtol=1e-14, atol=1e-12)
+    np.testing.assert_allclose(cw[["fx", "fz"]].to_numpy(), 0.0, atol=1e-12)
+    m["streams"]["device_joint_angles"]["from_frame"] = "device"
+    expect_code(tmp_path, "E502", import_csv, FIX / "chai3d-log.csv", tmp_path / "d", write_map(tmp_path, "m.json", m))
+
+
 def csv_map(columns: dict, kind: str = "handle_accel", time_unit: str = "s", **extra) -> dict:
     return {"source": "csv", **FACTS, "trial": {"id": "t1", "powered": False},
             "time": {"source": "time", "unit": time_unit}, "streams": {kind: {"columns": columns, "format": "csv"}}, **extra}
@@ -508,9 +527,18 @@ def test_sanitised_ids():
     assert len(sanitize_id("x" * 100, "m1")) == 64
 
 
-def test_example_maps_are_valid_import_maps():
+def test_example_maps_are_valid_import_maps_and_the_schema_agrees():
+    import jsonschema
+
+    schema = ImportMap.model_json_schema(mode="validation")
+    jsonschema.Draft202012Validator.check_schema(schema)
     for name in ("vicon-map.json", "qualisys-map.json", "ati-map.json", "chai3d-map.json"):
-        ImportMap.model_validate_json((FIX / name).read_text())
+        doc = json.loads((FIX / name).read_text())
+        ImportMap.model_validate(doc)
+        jsonschema.Draft202012Validator(schema).validate(doc)
+    bad = json.loads((FIX / "ati-map.json").read_text())
+    bad["streams"]["handle_wrench"]["colums"] = {}
+    assert list(jsonschema.Draft202012Validator(schema).iter_errors(bad))
 
 
 def test_spec_unit_table_matches_the_normative_json():

@@ -100,7 +100,6 @@ def unit_conversion(unit: str | None, target: str, **where: Any) -> Unit:
 
 FIXED_KINDS: tuple[str, ...] = tuple(k for k, v in schemas.load("stream-kinds.json")["kinds"].items()
                                      if "entity_columns" not in v)
-SOURCES = ("c3d", "csv")
 
 
 class _Strict(BaseModel):
@@ -136,6 +135,7 @@ class StreamMap(_Strict):
     rate_hz: float | None = Field(None, gt=0, description="Nominal rate; C3D: must equal ANALOG:RATE when given; CSV: default 1/median(Δt) to 6 significant digits.")
     format: Literal["parquet", "csv"] = "parquet"
     frame: str | None = Field(None, description="Default: the kind's frame.")
+    from_frame: Literal["device"] | None = Field(None, description="commanded_wrench only: the log holds the vectors in the device frame D (as CHAI3D logs them); the importer rotates them into W by session.device_placement.")
 
 
 class MarkerMap(_Strict):
@@ -409,7 +409,8 @@ def read_c3d(path: str | Path) -> C3DContent:
         company = ""
     units = _strings(_param(params, "POINT", "UNITS"), 1)[0] or None
     platforms = []
-    n_plates = int(np.asarray(_param(params, "FORCE_PLATFORM", "USED", [0])).ravel()[0] if np.size(_param(params, "FORCE_PLATFORM", "USED", [0])) else 0)
+    used = np.asarray(_param(params, "FORCE_PLATFORM", "USED", []), dtype=np.int64).ravel()
+    n_plates = int(used[0]) if used.size else 0
     corners = np.asarray(_param(params, "FORCE_PLATFORM", "CORNERS", []), dtype=np.float64)
     origins = np.asarray(_param(params, "FORCE_PLATFORM", "ORIGIN", []), dtype=np.float64)
     types = np.asarray(_param(params, "FORCE_PLATFORM", "TYPE", []), dtype=np.int64).ravel()
@@ -572,6 +573,35 @@ def build_stream_columns(kind: str, smap: StreamMap, n: int, read: SourceReader,
                 raise fail(code, f"{kind} column {col!r} (from {ch.source!r}) holds a non-finite value at sample {i}",
                            file=label, column=col, expected="finite values", found=str(values[i]))
         out[col] = values
+    return out
+
+
+VECTOR_TRIPLETS = {"commanded_wrench": (("fx", "fy", "fz"), ("tx", "ty", "tz"))}
+
+
+def rotate_into_world(kind: str, columns: dict[str, np.ndarray], placement: Pose, *, label: str) -> dict[str, np.ndarray]:
+    """Express a stream logged in the device frame D in W (spec §5.2 ``from_frame``): every vector
+    triplet of the kind is rotated by the quaternion of ``device_placement`` (D → W). A wrench's
+    reference point does not move, so its torque rotates like its force."""
+    if kind not in VECTOR_TRIPLETS:
+        raise fail("E502", f"from_frame applies to {sorted(VECTOR_TRIPLETS)}, not {kind}", file=label,
+                   pointer=f"/streams/{kind}/from_frame", expected=sorted(VECTOR_TRIPLETS), found=kind)
+    rotation = quat_to_matrix(np.asarray(placement.quaternion, dtype=np.float64))
+    out = dict(columns)
+    for triplet in VECTOR_TRIPLETS[kind]:
+        v = np.stack([columns[c] for c in triplet], axis=1) @ rotation.T
+        out.update({c: v[:, i] for i, c in enumerate(triplet)})
+    return out
+
+
+def _mapped_streams(m: ImportMap, n: int, read: SourceReader, *, label: str, unit_required: bool) -> dict[str, dict[str, np.ndarray]]:
+    """Every mapped stream's SI columns (``t`` excluded), rotated into W where ``from_frame`` asks."""
+    out = {}
+    for kind, smap in m.streams.items():
+        cols = build_stream_columns(kind, smap, n, read, label=label, unit_required=unit_required)
+        if smap.from_frame == "device":
+            cols = rotate_into_world(kind, cols, m.session.device_placement, label=label)
+        out[kind] = cols
     return out
 
 
@@ -777,12 +807,12 @@ def import_c3d(path: str | Path, out: str | Path, mapping: str | Path | LoadedMa
             raise fail("E205", f"{c3d.path.name} holds {n} analog sample(s); a stream needs two", file=src,
                        expected="≥ 2 analog samples", found=n)
         t_an = (c3d.analog_first_sample + np.arange(n)) / c3d.analog_rate + m.time_offset_s
-        reader = _analog_reader(c3d, label)
         for kind, smap in m.streams.items():
             if smap.rate_hz is not None and smap.rate_hz != c3d.analog_rate:
                 raise fail("E502", f"{kind} rate_hz {smap.rate_hz} differs from the file's ANALOG:RATE {c3d.analog_rate}",
                            file=label, pointer=f"/streams/{kind}/rate_hz", expected=c3d.analog_rate, found=smap.rate_hz)
-            analog_streams[kind] = {"t": t_an, **build_stream_columns(kind, smap, n, reader, label=label, unit_required=False)}
+        mapped = _mapped_streams(m, n, _analog_reader(c3d, label), label=label, unit_required=False)
+        analog_streams = {kind: {"t": t_an, **cols} for kind, cols in mapped.items()}
 
     kinds = (["markers"] if marker_data else []) + list(analog_streams)
     if not kinds:
@@ -889,8 +919,7 @@ def import_csv(path: str | Path, out: str | Path, mapping: str | Path | LoadedMa
     def read(name: str) -> tuple[np.ndarray, str | None]:
         return data[name], None
 
-    streams = {kind: build_stream_columns(kind, smap, t.size, read, label=label, unit_required=True)
-               for kind, smap in m.streams.items()}
+    streams = _mapped_streams(m, t.size, read, label=label, unit_required=True)
     _check_trial_streams(m, list(streams), label)
     device, extra = _resolve_device(m, loaded.base_dir, label)
     writer, stem = _writer_for(m, src_path, m.session.rig.model_dump(mode="json", exclude_none=True), device, extra,
@@ -904,5 +933,5 @@ def import_csv(path: str | Path, out: str | Path, mapping: str | Path | LoadedMa
                                          fmt=smap.format, frame=smap.frame))
     writer.write(out, overwrite=overwrite)
     return ImportResult(out, writer.manifest["session_id"], trial_id, [_stream_summary(s) for s in written],
-                        "W: as the map's rig states (CSV logs carry no frame)",
+                        "CSV values are stored as logged (rotated into W only where from_frame says so)",
                         {"file": src_path.name, "rows": int(t.size), "columns": wanted})
