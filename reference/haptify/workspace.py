@@ -1,0 +1,321 @@
+"""Workspace shape and volume (spec chapter 8).
+
+One deterministic volume operator (§8.4) turns a point cloud — the gimbal-centre positions of a
+boundary sweep, or dense samples of the device's kinematic model — into a voxel solid with sub-voxel
+fractions, and the same operator serves the measured and the modeled workspace (paper §IV-A, §VI-A).
+Parameters: ``schemas/<v>/metrics/workspace.json``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import ndimage as ndi
+from scipy.spatial import ConvexHull, QhullError, cKDTree
+
+from haptify.conventions import pose_apply
+from haptify.errors import HaptifyError, fail
+from haptify.kinematics import configurations_from_unit, forward_positions, joint_limits
+from haptify.metric_definitions import param
+from haptify.repetitions import TrialValue, aggregate, per_trial, single, unavailable
+from haptify.session_format import Kinematics
+
+FAMILY = "workspace"
+PROTOCOL = "workspace"
+
+
+def wp(key: str) -> Any:
+    """A parameter of the workspace family (spec §8.1)."""
+    return param(FAMILY, key)
+
+
+@dataclass(frozen=True)
+class VoxelSolid:
+    """A solid on the W-anchored lattice of pitch ``pitch`` (m): ``fraction[i, j, k]`` ∈ [0, 1] is the share of
+    voxel ``origin + (i, j, k)`` inside the solid (spec §8.4)."""
+
+    origin: tuple[int, int, int]
+    pitch: float
+    fraction: np.ndarray
+    hull_volume: float
+    n_points: int
+
+    @property
+    def volume(self) -> float:
+        """Volume in m³: h³ · Σ fraction."""
+        return float(self.fraction.sum(dtype=np.float64)) * self.pitch ** 3
+
+    @property
+    def closed(self) -> bool:
+        """True when the shell closed: volume ≥ ``min_hull_fraction`` × convex-hull volume (spec §8.4 step 7)."""
+        return self.hull_volume > 0 and self.volume >= float(wp("min_hull_fraction")) * self.hull_volume
+
+    def centres(self, threshold: float = 0.5) -> np.ndarray:
+        """Centres (m, W) of the voxels whose fraction is at least ``threshold`` — for figures."""
+        idx = np.argwhere(self.fraction >= threshold)
+        return (idx + np.asarray(self.origin) + 0.5) * self.pitch
+
+
+def volume_solid(points: np.ndarray, *, pitch: float | None = None, closing_radius: float | None = None) -> VoxelSolid:
+    """Apply the volume operator (spec §8.4) to ``points (N, 3)`` in m; every parameter else from workspace.json.
+
+    Steps: (1) occupied voxels of the W-anchored lattice; (2) dilation by the ball of radius r
+    (Euclidean distance transform); (3) hole filling; (4) erosion by r (distance > r/h + offset);
+    (5) sub-voxel fractions in a band around the boundary from the boundary samples' signed distance
+    along the outward normal; (6) volume = h³ Σ fraction; (7) closure check against the convex hull.
+    """
+    h = float(wp("voxel_pitch_m") if pitch is None else pitch)
+    r = float(wp("closing_radius_m") if closing_radius is None else closing_radius)
+    pts = np.asarray(points, dtype=float)
+    if pts.ndim != 2 or pts.shape[1] != 3 or not np.all(np.isfinite(pts)):
+        raise ValueError("volume_solid needs finite points of shape (N, 3)")
+    if len(pts) < int(wp("min_points")):
+        raise fail("E313", f"a workspace cloud needs at least {wp('min_points')} finite points", expected=f">= {wp('min_points')}", found=len(pts))
+    band = int(wp("band_voxels"))
+    rv = r / h
+    idx = np.floor(pts / h).astype(np.int64)
+    pad = int(math.ceil(rv)) + band + 3
+    lo = idx.min(axis=0) - pad
+    shape = tuple(int(s) for s in idx.max(axis=0) - lo + pad + 1)
+    n_vox = math.prod(shape)
+    if n_vox > int(wp("max_grid_voxels")):
+        extent = (pts.max(axis=0) - pts.min(axis=0)).round(3).tolist()
+        raise fail("E313", f"the cloud spans {extent} m: its {n_vox} voxels exceed the grid limit",
+                   expected=f"<= {wp('max_grid_voxels')} voxels", found=n_vox)
+    flat = np.ravel_multi_index((idx - lo).T, shape)
+    uniq, inv, counts = np.unique(flat, return_inverse=True, return_counts=True)
+    means = np.stack([np.bincount(inv, weights=pts[:, k], minlength=len(uniq)) / counts for k in range(3)], axis=1)
+
+    occupied = np.zeros(shape, dtype=bool)
+    occupied.flat[uniq] = True
+    dilated = ndi.distance_transform_edt(~occupied) <= rv
+    filled = ndi.binary_fill_holes(dilated)
+    solid = ndi.distance_transform_edt(filled) > rv + float(wp("erosion_offset_voxels"))
+
+    fraction = solid.astype(np.float32)
+    band_mask = ndi.binary_dilation(solid, iterations=band) & ~ndi.binary_erosion(solid, iterations=band)
+    fraction[band_mask] = _band_fractions(solid, band_mask, lo, h, means[band_mask.flat[uniq]])
+    return VoxelSolid(origin=tuple(int(x) for x in lo), pitch=h, fraction=fraction,
+                      hull_volume=_hull_volume(idx, pts), n_points=len(pts))
+
+
+def _band_fractions(solid: np.ndarray, band_mask: np.ndarray, lo: np.ndarray, h: float, samples: np.ndarray) -> np.ndarray:
+    """Sub-voxel inside-fractions of the band voxels (spec §8.4 step 5).
+
+    ``samples`` are the sample means of the occupied band voxels. Each sample's normal: the eigenvector
+    of the smallest eigenvalue of the covariance of its ``normal_neighbours`` nearest samples within
+    ``normal_radius_voxels`` (a local plane fit), oriented along the outward direction −∇ of the solid's
+    indicator smoothed by a Gaussian; with fewer than ``min_normal_neighbours`` neighbours, −∇ itself.
+    A band voxel with centre c takes the nearest sample p within ``surface_search_voxels`` and its normal
+    n: signed depth s = (p − c)·n, fraction clip(1/2 + s / (h‖n‖₁), 0, 1). Without a sample in reach
+    the voxel keeps its solid indicator (0 or 1).
+    """
+    bi = np.nonzero(band_mask)
+    inside = solid[bi].astype(np.float32)
+    if len(samples) < 3:
+        return inside
+    smooth = ndi.gaussian_filter(solid.astype(np.float32), float(wp("normal_smoothing_voxels")))
+    ijk = np.floor(samples / h).astype(np.int64) - lo
+    outward = np.empty((len(samples), 3))
+    for axis in range(3):
+        up, dn = ijk.copy(), ijk.copy()
+        up[:, axis] += 1
+        dn[:, axis] -= 1
+        outward[:, axis] = (smooth[tuple(dn.T)] - smooth[tuple(up.T)]) / 2.0
+    outward /= np.maximum(np.linalg.norm(outward, axis=1, keepdims=True), 1e-12)
+
+    tree = cKDTree(samples)
+    k = min(int(wp("normal_neighbours")), len(samples))
+    dist, j = tree.query(samples, k=k, distance_upper_bound=float(wp("normal_radius_voxels")) * h)
+    dist, j = dist.reshape(len(samples), k), j.reshape(len(samples), k)
+    w = np.isfinite(dist).astype(float)
+    count = w.sum(axis=1)
+    nb = samples[np.where(w > 0, j, 0)]
+    mean = (nb * w[..., None]).sum(axis=1) / count[:, None]
+    dev = (nb - mean[:, None, :]) * w[..., None]
+    _, vecs = np.linalg.eigh(np.einsum("nki,nkj->nij", dev, dev))
+    normal = vecs[:, :, 0]
+    normal = np.where((np.sum(normal * outward, axis=1) < 0)[:, None], -normal, normal)
+    normal = np.where((count < int(wp("min_normal_neighbours")))[:, None], outward, normal)
+
+    centres = (np.stack(bi, axis=1) + lo + 0.5) * h
+    dist, near = tree.query(centres, k=1, distance_upper_bound=float(wp("surface_search_voxels")) * h)
+    ok = np.isfinite(dist)
+    near = np.where(ok, near, 0)
+    n = normal[near]
+    s = np.einsum("nj,nj->n", samples[near] - centres, n)
+    l1 = np.abs(n).sum(axis=1)
+    ok &= l1 > 0.5  # a unit normal has 1 ≤ ‖n‖₁ ≤ √3; 0 where no normal is defined
+    frac = np.clip(0.5 + s / (h * np.where(ok, l1, 1.0)), 0.0, 1.0)
+    return np.where(ok, frac, inside).astype(np.float32)
+
+
+def _hull_volume(idx: np.ndarray, pts: np.ndarray) -> float:
+    """Convex-hull volume (m³) of the sample means of the occupied blocks of ``hull_block_voxels``³ voxels
+    (spec §8.4 step 7); 0 for degenerate (flat) clouds."""
+    block = idx // int(wp("hull_block_voxels"))
+    block -= block.min(axis=0)
+    flat = np.ravel_multi_index(block.T, tuple(int(x) + 1 for x in block.max(axis=0)))
+    _, inv, counts = np.unique(flat, return_inverse=True, return_counts=True)
+    means = np.stack([np.bincount(inv, weights=pts[:, k]) / counts for k in range(3)], axis=1)
+    if len(means) < 4:
+        return 0.0
+    try:
+        return float(ConvexHull(means).volume)
+    except QhullError:
+        return 0.0
+
+
+def overlap_volume(a: VoxelSolid, b: VoxelSolid) -> float:
+    """Volume (m³) of the intersection of two solids on the same lattice: h³ Σ min(fa, fb) (spec §8.5)."""
+    if not math.isclose(a.pitch, b.pitch, rel_tol=1e-12):
+        raise ValueError("overlap_volume needs solids of the same pitch")
+    lo = np.maximum(a.origin, b.origin)
+    hi = np.minimum(np.add(a.origin, a.fraction.shape), np.add(b.origin, b.fraction.shape))
+    if np.any(hi <= lo):
+        return 0.0
+    sa = tuple(slice(int(l - o), int(u - o)) for l, u, o in zip(lo, hi, a.origin))
+    sb = tuple(slice(int(l - o), int(u - o)) for l, u, o in zip(lo, hi, b.origin))
+    return float(np.minimum(a.fraction[sa], b.fraction[sb]).sum(dtype=np.float64)) * a.pitch ** 3
+
+
+# --- the modeled workspace (spec §8.3) ---------------------------------------------------------
+
+def _levers(kin: Kinematics) -> list[float]:
+    """Upper bound (m) of the distance from joint j's axis to the gimbal centre: Σ_{i ≥ j} (|a_i| + |d_i|)."""
+    lengths = [abs(j.a) + abs(j.d) for j in kin.joints]
+    return [sum(lengths[i:]) for i in range(len(lengths))]
+
+
+def _joint_ranges(kin: Kinematics) -> np.ndarray:
+    """Largest range (rad) of each joint over a 5-per-joint lattice of the unit cube (coupled limits evaluated)."""
+    n = len(kin.joints)
+    axes = [np.linspace(0.0, 1.0, 5)] * n
+    unit = np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
+    q = configurations_from_unit(kin, unit)
+    q = q[~np.isnan(q).any(axis=1)]
+    lower, upper = joint_limits(kin, q)
+    return np.max(upper - lower, axis=0)
+
+
+def _counts(kin: Kinematics, step: float) -> list[int]:
+    """Samples per joint so that neighbouring samples are at most ``step`` apart in space (spec §8.3)."""
+    return [int(math.ceil(rng * lever / step)) + 1 for rng, lever in zip(_joint_ranges(kin), _levers(kin))]
+
+
+def _lattice(counts: list[int]) -> np.ndarray:
+    axes = [np.linspace(0.0, 1.0, c) for c in counts]
+    return np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
+
+
+def _boundary_lattice(counts: list[int]) -> np.ndarray:
+    """Unit-cube samples on the cube's faces: each face a full lattice of the other joints' counts."""
+    n = len(counts)
+    faces = []
+    for axis in range(n):
+        others = [c for i, c in enumerate(counts) if i != axis]
+        sub = _lattice(others) if others else np.zeros((1, 0))
+        for value in (0.0, 1.0):
+            face = np.empty((len(sub), n))
+            face[:, [i for i in range(n) if i != axis]] = sub
+            face[:, axis] = value
+            faces.append(face)
+    return np.concatenate(faces)
+
+
+def modeled_points(kin: Kinematics, *, step: float | None = None, interior_step: float | None = None) -> np.ndarray:
+    """Deterministic samples (m, device frame) of the modeled reachable workspace (spec §8.3).
+
+    The faces of the joint-limit box (unit cube mapped through the coupled limits joint by joint) at
+    ``model_max_step_m``, plus the whole box at ``model_interior_step_m``, through the DH forward kinematics.
+    """
+    step = float(wp("model_max_step_m") if step is None else step)
+    interior_step = float(wp("model_interior_step_m") if interior_step is None else interior_step)
+    unit = np.concatenate([_boundary_lattice(_counts(kin, step)), _lattice(_counts(kin, interior_step))])
+    q = configurations_from_unit(kin, unit)
+    q = q[~np.isnan(q).any(axis=1)]
+    return forward_positions(kin, q)
+
+
+def modeled_solid(kin: Kinematics, placement_position: Any = (0.0, 0.0, 0.0),
+                  placement_quaternion: Any = (1.0, 0.0, 0.0, 0.0)) -> VoxelSolid:
+    """The modeled workspace as a solid in W: :func:`modeled_points` placed by ``device_placement`` (spec §8.3)."""
+    pts = pose_apply(np.asarray(placement_position, float), np.asarray(placement_quaternion, float), modeled_points(kin))
+    return volume_solid(pts)
+
+
+def spec_box_volume(box: Any) -> float:
+    """Volume (m³) of the datasheet's rectangular workspace (spec §8.6)."""
+    return float(np.prod(np.asarray(box, dtype=float)))
+
+
+# --- session level (spec §8.7) -------------------------------------------------------------------
+
+def measured_points(session: Any, trial_id: str) -> np.ndarray:
+    """The finite gimbal-centre positions (m, W) of a workspace trial's handle_pose stream (spec §8.2)."""
+    pose = session.read(trial_id, "handle_pose")
+    p = pose[["px", "py", "pz"]].to_numpy()
+    return p[np.all(np.isfinite(p), axis=1)]
+
+
+def compute(ctx: Any) -> list:
+    """Every workspace metric the session allows (spec §8.7)."""
+    session = ctx.session
+    out: list = []
+    device = session.device()
+    placement = session.manifest.device_placement
+
+    model: VoxelSolid | None = None
+    model_error: HaptifyError | None = None
+    if device.kinematics is None:
+        model_error = fail("E311", f"device {device.manufacturer} {device.model} has no kinematics", pointer="/device/kinematics")
+    elif any(ctx.wants(m) for m in ("workspace.modeled_volume", "workspace.volume_ratio", "workspace.coverage")):
+        try:
+            model = ctx.cached(("workspace_model",), lambda: modeled_solid(device.kinematics, placement.position, placement.quaternion))
+        except HaptifyError as exc:
+            model_error = exc
+    if model is not None:
+        out.append(single(FAMILY, "workspace.modeled_volume", model.volume,
+                          diagnostics={"voxels": int(model.fraction.size), "samples": model.n_points,
+                                       "hull_volume_m3": model.hull_volume},
+                          warnings=[] if model.closed else ["W410"]))
+    elif model_error is not None:
+        out.append(unavailable("workspace.modeled_volume", model_error))
+
+    box = device.datasheet.workspace_box_m
+    if box is not None:
+        out.append(single(FAMILY, "workspace.spec_box_volume", spec_box_volume(box), diagnostics={"box_m": list(box)}))
+    else:
+        out.append(unavailable("workspace.spec_box_volume",
+                               fail("E312", "the device datasheet has no workspace_box_m", pointer="/device/datasheet/workspace_box_m")))
+
+    trials = [t.id for t in session.trials_of(PROTOCOL)]
+    measured_ids = ("workspace.measured_volume", "workspace.volume_ratio", "workspace.coverage")
+    if not trials:
+        err = fail("E310", "the session has no workspace trial", expected="a trial of protocol 'workspace'", found=None)
+        return out + [unavailable(m, err) for m in measured_ids]
+    solids, first_error = per_trial(ctx, trials, lambda tid: ctx.cached(("workspace_solid", tid), lambda: volume_solid(measured_points(session, tid))),
+                                    "workspace.measured_volume")
+    if not solids:
+        return out + [unavailable(m, first_error) for m in measured_ids]
+    codes = {tid: [] if s.closed else ["W410"] for tid, s in solids.items()}
+    for tid, s in solids.items():
+        if not s.closed:
+            ctx.warn("W410", f"the boundary sweep of trial {tid!r} did not close: volume {s.volume * 1e6:.0f} cm³ is "
+                     f"{s.volume / s.hull_volume if s.hull_volume else 0:.0%} of its convex hull", metric="workspace.measured_volume", trial=tid)
+    out.append(aggregate(FAMILY, "workspace.measured_volume",
+                         [TrialValue(tid, s.volume, codes[tid]) for tid, s in solids.items()],
+                         diagnostics={"hull_volume_m3": [s.hull_volume for s in solids.values()],
+                                      "points": [s.n_points for s in solids.values()]}))
+    if model is None:
+        if model_error is None:  # neither ratio nor coverage was asked for
+            return out
+        return out + [unavailable(m, model_error) for m in ("workspace.volume_ratio", "workspace.coverage")]
+    out.append(aggregate(FAMILY, "workspace.volume_ratio",
+                         [TrialValue(tid, s.volume / model.volume, codes[tid]) for tid, s in solids.items()]))
+    out.append(aggregate(FAMILY, "workspace.coverage",
+                         [TrialValue(tid, overlap_volume(s, model) / model.volume, codes[tid]) for tid, s in solids.items()]))
+    return out

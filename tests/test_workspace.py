@@ -1,0 +1,324 @@
+"""Workspace volume operator and metrics (spec chapter 8): answers known by construction."""
+
+from __future__ import annotations
+
+import copy
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial import ConvexHull
+
+from haptify.compute import ComputeContext
+from haptify.conventions import pose_apply, quat_from_axis_angle, quat_rotate
+from haptify.kinematics import configurations_from_unit, forward_positions
+from haptify.results import MetricResult, Unavailable
+from haptify.session_format import Device
+from haptify.storage import SessionWriter, open_session
+from haptify.workspace import compute, modeled_solid, overlap_volume, volume_solid
+from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
+
+DEG = math.pi / 180
+RNG_SEED = 20261122
+
+
+def touch_x_device() -> dict:
+    """The Touch X of the paper's Table II (upper q3 limit −20° − 0.85·q2)."""
+    dev = copy.deepcopy(TOUCH_DEVICE)
+    dev["model"] = "Touch X"
+    j1, j2, j3 = dev["kinematics"]["joints"]
+    j1["lower"]["constant"], j1["upper"]["constant"] = -52 * DEG, 52 * DEG
+    j2["a"], j2["upper"]["constant"] = 0.133, 100 * DEG
+    j3["a"], j3["upper"]["constant"] = 0.133, -20 * DEG
+    dev["datasheet"]["workspace_box_m"] = [0.16, 0.12, 0.12]
+    return dev
+
+
+def kin(dev: dict):
+    return Device.model_validate(dev).kinematics
+
+
+def sphere_surface(n: int, radius: float, centre, rng) -> np.ndarray:
+    v = rng.normal(size=(n, 3))
+    return radius * v / np.linalg.norm(v, axis=1, keepdims=True) + np.asarray(centre)
+
+
+def box_surface(n: int, edges, rng, rotation=None, centre=(0.0131, -0.0217, 0.2033)) -> np.ndarray:
+    a = np.asarray(edges, float)
+    areas = np.array([a[1] * a[2], a[0] * a[2], a[0] * a[1]] * 2)
+    face = rng.choice(6, size=n, p=areas / areas.sum())
+    u = rng.random((n, 3)) * a
+    axis = face % 3
+    u[np.arange(n), axis] = np.where(face < 3, 0.0, a[axis])
+    u -= a / 2
+    if rotation is not None:
+        u = quat_rotate(rotation, u)
+    return u + np.asarray(centre)
+
+
+def pappus_volume(dev: dict, n: int = 1500) -> float:
+    """Exact reference: the reachable set is a solid of revolution about the q1 axis of the planar (r, z)
+    region swept by (q2, q3); V = Δq1 · ∬ |r| dA with dA = a2·a3·|sin q3| dq2 dq3 (midpoint rule; the
+    map is one-to-one because sin q3 keeps its sign inside the limits)."""
+    j1, j2, j3 = dev["kinematics"]["joints"]
+    a2, a3 = j2["a"], j3["a"]
+    q2 = j2["lower"]["constant"] + (np.arange(n) + 0.5) / n * (j2["upper"]["constant"] - j2["lower"]["constant"])
+    dq2 = (j2["upper"]["constant"] - j2["lower"]["constant"]) / n
+    s = (np.arange(n) + 0.5) / n
+    lo3 = j3["lower"]["constant"] + 0 * q2
+    hi3 = j3["upper"]["constant"] + j3["upper"].get("coefficients", {}).get("q2", 0.0) * q2
+    Q2 = q2[:, None]
+    Q3 = lo3[:, None] + s[None, :] * (hi3 - lo3)[:, None]
+    dq3 = ((hi3 - lo3) / n)[:, None]
+    r = a2 * np.cos(Q2) + a3 * np.cos(Q2 + Q3)
+    area = a2 * a3 * np.abs(np.sin(Q3)) * dq2 * dq3
+    return (j1["upper"]["constant"] - j1["lower"]["constant"]) * float(np.sum(np.abs(r) * area))
+
+
+# --- the operator on analytic shapes (spec §8.4) ------------------------------------------------
+
+@pytest.mark.parametrize("n", [20_000, 200_000])
+def test_sphere_sampled_on_its_boundary(n):
+    rng = np.random.default_rng(RNG_SEED)
+    solid = volume_solid(sphere_surface(n, 0.1, [0.013, -0.021, 0.2], rng))
+    assert solid.closed
+    assert solid.volume == pytest.approx(4 / 3 * math.pi * 0.1 ** 3, rel=0.01)
+
+
+@pytest.mark.parametrize("rotation", [None, quat_from_axis_angle(np.array([1.0, 2.0, 3.0]), np.array(0.7))])
+def test_box_sampled_on_its_faces(rotation):
+    rng = np.random.default_rng(RNG_SEED)
+    edges = (0.16, 0.12, 0.12)
+    solid = volume_solid(box_surface(60_000, edges, rng, rotation))
+    assert solid.closed
+    assert solid.volume == pytest.approx(math.prod(edges), rel=0.02)
+
+
+def two_lobes(n: int, rng, radius=0.06, gap=0.1):
+    """Two overlapping spheres (centres ``gap`` apart): samples on the boundary of their union only."""
+    c1, c2 = np.array([0.0, 0.0, 0.1]), np.array([gap, 0.0, 0.1])
+    p = np.concatenate([sphere_surface(n, radius, c1, rng), sphere_surface(n, radius, c2, rng)])
+    keep = (np.linalg.norm(p - c1, axis=1) >= radius - 1e-12) & (np.linalg.norm(p - c2, axis=1) >= radius - 1e-12)
+    cap = math.pi * (radius - gap / 2) ** 2 * (3 * radius - (radius - gap / 2)) / 3  # one lens half
+    return p[keep], 2 * (4 / 3 * math.pi * radius ** 3) - 2 * cap
+
+
+def test_two_lobes_non_convex_volume_is_not_the_hull():
+    rng = np.random.default_rng(RNG_SEED)
+    pts, exact = two_lobes(40_000, rng)
+    solid = volume_solid(pts)
+    assert solid.closed
+    # the closing fills a fillet of radius r into the crease between the lobes: a small excess
+    assert solid.volume == pytest.approx(exact, rel=0.015)
+    assert exact < 0.9 * ConvexHull(pts).volume  # a convex hull would be >10 % off: it bridges the waist
+
+
+def test_open_shell_is_flagged_not_silently_tiny():
+    rng = np.random.default_rng(RNG_SEED)
+    p = sphere_surface(40_000, 0.1, [0.0, 0.0, 0.2], rng)
+    p = p[p[:, 2] < 0.2 + 0.05]  # a cap of 60° half-angle cut away: the hole is far wider than 2r
+    solid = volume_solid(p)
+    assert not solid.closed
+    assert solid.volume < 0.5 * solid.hull_volume
+
+
+def test_sparse_sweep_seals_with_the_closing_radius():
+    rng = np.random.default_rng(RNG_SEED)
+    sparse = sphere_surface(2_000, 0.1, [0.0, 0.0, 0.2], rng)  # ~8 mm between samples, well below 2r
+    solid = volume_solid(sparse)
+    assert solid.closed
+    assert solid.volume == pytest.approx(4 / 3 * math.pi * 0.1 ** 3, rel=0.015)
+
+
+def test_the_lattice_is_anchored_at_the_world_origin():
+    rng = np.random.default_rng(RNG_SEED)
+    pts = sphere_surface(5_000, 0.05, [0.3, 0.2, 0.1], rng)
+    a = volume_solid(pts)
+    b = volume_solid(pts + 7 * a.pitch)  # a whole number of voxels: the same voxelisation, shifted
+    np.testing.assert_array_equal(np.add(a.origin, 7), b.origin)
+    np.testing.assert_allclose(a.fraction, b.fraction, atol=1e-5)
+
+
+@settings(max_examples=4, deadline=None)
+@given(st.floats(-3.0, 3.0), st.floats(-3.0, 3.0), st.floats(-3.0, 3.0), st.floats(0.0, math.pi),
+       st.floats(-0.2, 0.2), st.floats(-0.2, 0.2))
+def test_volume_does_not_depend_on_the_world_frame(ax, ay, az, angle, dx, dy):
+    if ax * ax + ay * ay + az * az < 1e-6:
+        ax = 1.0
+    rng = np.random.default_rng(RNG_SEED)
+    pts = box_surface(30_000, (0.12, 0.1, 0.08), rng)
+    moved = quat_rotate(quat_from_axis_angle(np.array([ax, ay, az]), np.array(angle)), pts) + [dx, dy, 0.0]
+    assert volume_solid(moved).volume == pytest.approx(volume_solid(pts).volume, rel=0.02)
+
+
+def test_coverage_of_half_a_sphere():
+    rng = np.random.default_rng(RNG_SEED)
+    whole = volume_solid(sphere_surface(30_000, 0.08, [0.0, 0.0, 0.2], rng))
+    half_pts = sphere_surface(30_000, 0.08, [0.0, 0.0, 0.2], rng)
+    half_pts = half_pts[half_pts[:, 2] >= 0.2]
+    disc = rng.random((20_000, 2)) * 2 - 1
+    disc = disc[np.sum(disc ** 2, axis=1) <= 1] * 0.08
+    half = volume_solid(np.concatenate([half_pts, np.column_stack([disc, np.full(len(disc), 0.2)])]))
+    assert half.volume == pytest.approx(whole.volume / 2, rel=0.02)
+    assert overlap_volume(half, whole) / whole.volume == pytest.approx(0.5, abs=0.01)
+    assert overlap_volume(whole, whole) == pytest.approx(whole.volume, rel=1e-12)
+
+
+def test_too_few_points_and_absurd_extent_are_coded_errors():
+    from haptify.errors import HaptifyError
+
+    with pytest.raises(HaptifyError) as few:
+        volume_solid(np.zeros((10, 3)))
+    assert few.value.code == "E313"
+    rng = np.random.default_rng(RNG_SEED)
+    pts = sphere_surface(1_000, 0.1, [0.0, 0.0, 0.2], rng)
+    pts[0] = [5.0, 5.0, 5.0]  # one marker swap throws a point metres away
+    with pytest.raises(HaptifyError) as far:
+        volume_solid(pts)
+    assert far.value.code == "E313"
+
+
+# --- the modeled workspace (spec §8.3) ----------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def touch_model():
+    return modeled_solid(kin(TOUCH_DEVICE))
+
+
+def test_pappus_reference_reproduces_the_notes():
+    assert pappus_volume(TOUCH_DEVICE) == pytest.approx(13.40e-3, rel=0.005)
+
+
+def test_touch_model_matches_the_paper_and_pappus(touch_model):
+    assert touch_model.closed
+    assert touch_model.volume == pytest.approx(13_223e-6, rel=0.03)  # paper §VI-A
+    assert touch_model.volume == pytest.approx(pappus_volume(TOUCH_DEVICE), rel=0.015)
+
+
+def test_touch_x_model_matches_the_paper():
+    dev = touch_x_device()
+    solid = modeled_solid(kin(dev))
+    assert solid.volume == pytest.approx(10_279e-6, rel=0.03)
+    assert solid.volume == pytest.approx(pappus_volume(dev), rel=0.015)
+
+
+def test_table_ii_sign_reading():
+    """Table II lost its signs: only the upper limit −10° − 0.85·θ2 reproduces the paper's 13 223 cm³."""
+    plus = copy.deepcopy(TOUCH_DEVICE)
+    plus["kinematics"]["joints"][2]["upper"]["coefficients"] = {"q2": 0.85}
+    assert pappus_volume(plus) > 1.3 * 13_223e-6
+    assert pappus_volume(TOUCH_DEVICE) == pytest.approx(13_223e-6, rel=0.03)
+
+
+def mini_device(scale: float = 0.45) -> dict:
+    """The Touch scaled down (links × ``scale``): the same shape, a smaller grid, fast tests."""
+    dev = copy.deepcopy(TOUCH_DEVICE)
+    for j in dev["kinematics"]["joints"]:
+        j["a"] *= scale
+    return dev
+
+
+@pytest.fixture(scope="module")
+def mini_model():
+    return modeled_solid(kin(mini_device()))
+
+
+def test_model_volume_scales_with_the_cube_of_the_links(mini_model):
+    assert mini_model.volume == pytest.approx(pappus_volume(mini_device()), rel=0.015)
+    assert pappus_volume(mini_device()) == pytest.approx(0.45 ** 3 * pappus_volume(TOUCH_DEVICE), rel=1e-9)
+
+
+def test_model_placement_moves_the_solid_not_its_volume(mini_model):
+    q = quat_from_axis_angle(np.array([0.0, 0.0, 1.0]), np.array(math.pi / 2))
+    placed = modeled_solid(kin(mini_device()), [0.05, -0.02, 0.03], q)
+    assert placed.volume == pytest.approx(mini_model.volume, rel=0.01)
+    assert overlap_volume(placed, mini_model) < 0.9 * mini_model.volume
+
+
+# --- session level (spec §8.7) ------------------------------------------------------------------
+
+PLACEMENT = {"position": [0.0, 0.05, 0.0], "quaternion": list(quat_from_axis_angle(np.array([0.0, 0.0, 1.0]), np.array(0.3)))}
+
+
+def boundary_sweep(dev: dict, n: int, rng, drop_lower_lobe: bool = False) -> np.ndarray:
+    """An examiner sweeping the faces of the joint-limit box (paper §IV-A), in W via PLACEMENT."""
+    k = kin(dev)
+    s = rng.random((n, 3))
+    s[np.arange(n), rng.integers(0, 3, n)] = rng.integers(0, 2, n)
+    q = configurations_from_unit(k, s)
+    p = forward_positions(k, q[~np.isnan(q).any(axis=1)])
+    if drop_lower_lobe:  # the base blocks the lower lobe: the examiner slides along it (paper Fig. 5)
+        p[:, 2] = np.maximum(p[:, 2], -0.5 * max(j["a"] for j in dev["kinematics"]["joints"]))
+    return pose_apply(np.array(PLACEMENT["position"]), np.array(PLACEMENT["quaternion"]), p)
+
+
+def workspace_session(tmp_path: Path, device: dict, clouds: list[np.ndarray]) -> Path:
+    w = SessionWriter(manifest={"session_id": "ws-test", "date": "2026-11-22", "lab": {"id": "lab"}, "examiner": {"id": "ex"},
+                                "device": device, "device_placement": PLACEMENT, "rig": example_rig()})
+    for i, cloud in enumerate(clouds, start=1):
+        w.add_trial(f"workspace-{i}", "workspace", powered=False, repetition=i)
+        t = np.arange(len(cloud)) / 100.0
+        cloud = cloud.copy()
+        cloud[::97] = np.nan  # occlusions
+        w.add_stream(f"workspace-{i}", "handle_pose", {"t": t, "px": cloud[:, 0], "py": cloud[:, 1], "pz": cloud[:, 2],
+                                                       "qw": 1 + 0 * t, "qx": 0 * t, "qy": 0 * t, "qz": 0 * t}, rate_hz=100)
+    return w.write(tmp_path / "session")
+
+
+def by_id(items):
+    return {m.id: m for m in items}
+
+
+def test_session_metrics_for_a_full_sweep_and_a_missing_lobe(tmp_path, mini_model):
+    rng = np.random.default_rng(RNG_SEED)
+    dev = mini_device()
+    full = boundary_sweep(dev, 15_000, rng)
+    lobeless = boundary_sweep(dev, 15_000, rng, drop_lower_lobe=True)
+    ctx = ComputeContext(session=open_session(workspace_session(tmp_path, dev, [full, lobeless])))
+    res = by_id(compute(ctx))
+    assert all(isinstance(m, MetricResult) for m in res.values())
+    modeled = res["workspace.modeled_volume"].value
+    assert modeled == pytest.approx(mini_model.volume, rel=0.01)  # placement changes nothing
+    assert res["workspace.spec_box_volume"].value == pytest.approx(0.16 * 0.12 * 0.07)
+    measured = res["workspace.measured_volume"]
+    assert measured.n == 2 and measured.trials == ["workspace-1", "workspace-2"]
+    assert measured.per_repetition[0] == pytest.approx(modeled, rel=0.02)
+    assert measured.per_repetition[1] < 0.97 * modeled
+    assert measured.value == pytest.approx(np.mean(measured.per_repetition))
+    assert measured.sd == pytest.approx(np.std(measured.per_repetition, ddof=1))
+    cov = res["workspace.coverage"].per_repetition
+    assert cov[0] == pytest.approx(1.0, abs=0.02)
+    assert cov[1] < cov[0] - 0.02
+    ratio = res["workspace.volume_ratio"].per_repetition
+    assert ratio[0] == pytest.approx(measured.per_repetition[0] / modeled)
+    assert not ctx.warnings
+
+
+def test_missing_kinematics_trials_and_datasheet_are_unavailable_with_codes(tmp_path):
+    dev = copy.deepcopy(TOUCH_DEVICE)
+    del dev["kinematics"]
+    dev["datasheet"] = {}
+    w = SessionWriter(manifest={"session_id": "ws-none", "date": "2026-11-22", "lab": {"id": "lab"}, "examiner": {"id": "ex"},
+                                "device": dev, "device_placement": IDENTITY, "rig": example_rig()})
+    w.add_trial("other-1", "other", powered=False, label="nothing")
+    res = by_id(compute(ComputeContext(session=open_session(w.write(tmp_path / "s")))))
+    assert all(isinstance(m, Unavailable) for m in res.values())
+    assert res["workspace.modeled_volume"].code == "E311"
+    assert res["workspace.spec_box_volume"].code == "E312"
+    assert res["workspace.measured_volume"].code == "E310"
+    assert set(res) == {"workspace.modeled_volume", "workspace.spec_box_volume", "workspace.measured_volume",
+                        "workspace.volume_ratio", "workspace.coverage"}
+
+
+def test_an_open_sweep_is_reported_with_w410(tmp_path):
+    rng = np.random.default_rng(RNG_SEED)
+    sparse_top = sphere_surface(3_000, 0.1, [0.0, 0.0, 0.2], rng)
+    sparse_top = sparse_top[sparse_top[:, 2] > 0.23]
+    ctx = ComputeContext(session=open_session(workspace_session(tmp_path, mini_device(), [sparse_top])),
+                         wanted={"workspace.measured_volume"})
+    res = by_id(compute(ctx))
+    assert "W410" in res["workspace.measured_volume"].warnings
+    assert any(w.code == "W410" and w.trial == "workspace-1" for w in ctx.warnings)
