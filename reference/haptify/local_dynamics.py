@@ -460,13 +460,13 @@ class _Structure:
         return np.arange(self.n_shared)
 
 
-def _inputs_mapped(st: _Structure, theta: np.ndarray, u: np.ndarray, basis: list) -> np.ndarray:
-    return np.column_stack([u[:, i] if basis[i] is None else basis[i] @ theta[st.v_idx[i]] for i in range(st.nu)])
+def _inputs_mapped(st: _Structure, theta: np.ndarray, u: np.ndarray, basis_t: list) -> np.ndarray:
+    return np.column_stack([u[:, i] if basis_t[i] is None else theta[st.v_idx[i]] @ basis_t[i] for i in range(st.nu)])
 
 
-def _simulate(st: _Structure, theta: np.ndarray, u: np.ndarray, basis: list) -> np.ndarray:
+def _simulate(st: _Structure, theta: np.ndarray, u: np.ndarray, basis_t: list) -> np.ndarray:
     """ŷ (N, ny) of the model under fit (same algorithm as :func:`predict`)."""
-    w = _inputs_mapped(st, theta, u, basis)
+    w = _inputs_mapped(st, theta, u, basis_t)
     zeros = np.zeros(st.nk)
     y = np.empty((len(u), st.ny))
     for j in range(st.ny):
@@ -479,43 +479,51 @@ def _simulate(st: _Structure, theta: np.ndarray, u: np.ndarray, basis: list) -> 
     return y
 
 
-def _output_jacobian(st: _Structure, theta: np.ndarray, u: np.ndarray, basis: list, j: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """ŷ_j and its analytic derivatives (spec §11.4.3): w.r.t. the shared input-map values and w.r.t. output j's own parameters."""
+def _add_lagged(dst: np.ndarray, src: np.ndarray, d: int, gain: float = 1.0) -> None:
+    """dst[..., t] += gain · src[..., t − d] for t ≥ d (a delay along the last axis)."""
+    n = src.shape[-1]
+    if d < n:
+        dst[..., d:] += gain * src[..., : n - d]
+
+
+def _output_jacobian(st: _Structure, theta: np.ndarray, u: np.ndarray, basis_t: list, j: int) -> tuple[np.ndarray, np.ndarray]:
+    """ŷ_j and its analytic Jacobian (spec §11.4.3), transposed: one row per parameter in the order
+    ``[shared input-map values, output j's own B, F and output-map values]``, one column per sample."""
     n = len(u)
+    own_rows = st.nu * (st.nb + st.nf) + (0 if st.c_idx[j] is None else len(st.c_idx[j]))
+    jac_t = np.zeros((st.n_shared + own_rows, n))
     x = np.zeros(n)
-    j_shared = np.zeros((n, st.n_shared))
-    own_cols = st.nu * (st.nb + st.nf) + (0 if st.c_idx[j] is None else len(st.c_idx[j]))
-    j_own = np.zeros((n, own_cols))
-    col = 0
+    r = st.n_shared
     for i in range(st.nu):
         a = np.concatenate([[1.0], theta[st.f_idx[j, i]]])
         b = theta[st.b_idx[j, i]]
-        if basis[i] is None:
+        if basis_t[i] is None:
             p = None
             s = lfilter([1.0], a, u[:, i])
         else:
-            p = lfilter([1.0], a, basis[i], axis=0)          # Φ_i filtered by 1/F_ji
-            s = p @ theta[st.v_idx[i]]                       # w_i filtered by 1/F_ji
-        lagged = np.column_stack([_delayed(s, st.nk + k) for k in range(st.nb)])
-        z = lagged @ b
+            p = lfilter([1.0], a, basis_t[i], axis=-1)       # Φ_i filtered by 1/F_ji, (K, N)
+            s = theta[st.v_idx[i]] @ p                       # w_i filtered by 1/F_ji
+        for k in range(st.nb):                               # ∂z/∂b_k = q^-(nk+k-1) w/F
+            _add_lagged(jac_t[r + k], s, st.nk + k)
+        z = b @ jac_t[r: r + st.nb]
         x += z
-        j_own[:, col: col + st.nb] = lagged                  # ∂z/∂b_k = q^-(nk+k-1) w/F
-        col += st.nb
-        if st.nf:
+        r += st.nb
+        if st.nf:                                            # ∂z/∂f_l = −q^-l z/F
             zf = lfilter([1.0], a, z)
-            j_own[:, col: col + st.nf] = -np.column_stack([_delayed(zf, l) for l in range(1, st.nf + 1)])
-            col += st.nf                                     # ∂z/∂f_l = −q^-l z/F
+            for l in range(1, st.nf + 1):
+                _add_lagged(jac_t[r + l - 1], zf, l, -1.0)
+            r += st.nf
         if p is not None:                                    # ∂z/∂v_ik = q^-nk B/F φ_ik
-            j_shared[:, st.v_idx[i]] = sum(b[k] * _delayed(p, st.nk + k) for k in range(st.nb))
+            rows = jac_t[st.v_idx[i][0]: st.v_idx[i][-1] + 1]
+            for k in range(st.nb):
+                _add_lagged(rows, p, st.nk + k, b[k])
     bp = st.out_bp[j]
     if bp is None:
-        return x, j_shared, j_own
+        return x, jac_t
     c = theta[st.c_idx[j]]
-    g = pwl_slope(bp, c, x)
-    j_shared *= g[:, None]
-    j_own[:, :col] *= g[:, None]
-    j_own[:, col:] = pwl_basis(bp, x)
-    return pwl_eval(bp, c, x), j_shared, j_own
+    jac_t[:r] *= pwl_slope(bp, c, x)
+    jac_t[r:] = pwl_basis(bp, x).T
+    return pwl_eval(bp, c, x), jac_t
 
 
 def _max_pole_modulus(st: _Structure, theta: np.ndarray) -> float:
@@ -625,7 +633,8 @@ def fit(u: np.ndarray | Sequence[np.ndarray], y: np.ndarray | Sequence[np.ndarra
             theta0[st.c_idx[j]] = mu_y[j] + sd_y[j] * out_bp[j]
             scale[st.c_idx[j]] = 1.0 / sd_y[j]
 
-    bases = [[None if bp is None else pwl_basis(bp, a[:, i]) for i, bp in enumerate(in_bp)] for a in us]
+    bases = [[None if bp is None else np.ascontiguousarray(pwl_basis(bp, a[:, i]).T) for i, bp in enumerate(in_bp)]
+             for a in us]
     wy = 1.0 / (sd_y * math.sqrt(n))                          # residual weights (spec §11.4.2)
     d2 = opts.ridge * scale ** 2
 
@@ -650,11 +659,10 @@ def fit(u: np.ndarray | Sequence[np.ndarray], y: np.ndarray | Sequence[np.ndarra
         grad = d2 * (theta - theta0)                           # half the gradient of the cost
         for a, b, basis in zip(us, ys, bases):
             for j in range(ny):
-                yhat, js, jo = _output_jacobian(st, theta, a, basis, j)
-                e = (b[:, j] - yhat) * wy[j]
-                jac = np.hstack([js, jo]) * wy[j]
-                hess[np.ix_(own[j], own[j])] += jac.T @ jac
-                grad[own[j]] -= jac.T @ e
+                yhat, jac_t = _output_jacobian(st, theta, a, basis, j)
+                jac_t *= wy[j]
+                hess[np.ix_(own[j], own[j])] += jac_t @ jac_t.T
+                grad[own[j]] -= jac_t @ ((b[:, j] - yhat) * wy[j])
         accepted = False
         while mu <= mu_max:
             try:
