@@ -228,9 +228,13 @@ def open_session(path: str | os.PathLike) -> SessionFolder:
 # --- writing -----------------------------------------------------------------------------------
 
 def write_table(path: Path, frame: pd.DataFrame, fmt: str) -> None:
-    """Write a float64 table as Parquet (zstd) or CSV (shortest round-trip decimal, NaN as 'NaN')."""
+    """Write a float64 table as Parquet (zstd) or CSV (shortest round-trip decimal, NaN as 'NaN').
+
+    Parquet columns are PLAIN-encoded: dictionary encoding never pays off for measured floats and makes
+    files larger and reading ~2x slower (benchmarks/bench_io.py).
+    """
     if fmt == "parquet":
-        pq.write_table(pa.Table.from_pandas(frame, preserve_index=False), path, compression="zstd")
+        pq.write_table(pa.Table.from_pandas(frame, preserve_index=False), path, compression="zstd", use_dictionary=False)
     else:
         frame.to_csv(path, index=False, na_rep="NaN", float_format=None, lineterminator="\n")
 
