@@ -162,3 +162,84 @@ def plate_stream(t: np.ndarray, raw: np.ndarray) -> dict:
 
 def write(w: SessionWriter, tmp: Path, name: str = "s") -> Path:
     return w.write(tmp / name)
+
+
+PLATE_BIAS_WEIGHT_N = 160.0  # the paper's plate weight, carried equally by the corners
+
+
+def plate_bias_vector(rig: dict) -> np.ndarray:
+    """Corner readings of the unloaded plate: its weight on the four corners plus a small offset per channel."""
+    raw = corner_readings(rig, np.array([[0.0, 0.0, -PLATE_BIAS_WEIGHT_N]]), np.zeros((1, 3)))[0]
+    return raw + 0.01 * np.arange(24)
+
+
+def add_plate_bias_trial(w: SessionWriter, rng: np.random.Generator, trial_id: str = "plate-bias-1") -> np.ndarray:
+    rig = w.manifest["rig"]
+    bias = plate_bias_vector(rig)
+    t = np.arange(2000) / 1000.0
+    raw = bias + rng.normal(0, 0.01, (len(t), 24))
+    w.add_trial(trial_id, "rig.plate_bias", powered=False)
+    w.add_stream(trial_id, "plate_wrench", plate_stream(t, raw), rate_hz=1000)
+    return bias
+
+
+def damped(t: np.ndarray, f_hz: float, zeta: float, t0: float, amp: float) -> np.ndarray:
+    """``amp · e^{−ζω(t−t0)} sin(ω_d (t − t0))`` after ``t0``, zero before (ω = 2π f, ω_d = ω√(1−ζ²))."""
+    w = 2 * np.pi * f_hz
+    tau = t - t0
+    return np.where(tau >= 0, amp * np.exp(-zeta * w * np.maximum(tau, 0)) * np.sin(w * np.sqrt(1 - zeta ** 2) * np.maximum(tau, 0)), 0.0)
+
+
+def add_impact_trial(w: SessionWriter, rng: np.random.Generator, modes=(205.0, 206.0, 182.0), zeta: float = 0.03,
+                     trial_id: str = "impact-1", repetition: int = 1) -> None:
+    """A ball dropped at the plate centre: each axis rings at its mode frequency (plus the plate bias and noise)."""
+    rig = w.manifest["rig"]
+    t = np.arange(3000) / 1000.0
+    force = np.column_stack([damped(t, modes[0], zeta, 1.0, 4.0), damped(t, modes[1], zeta, 1.0, 3.0),
+                             damped(t, modes[2], zeta, 1.0, 20.0)])
+    raw = corner_readings(rig, force, np.zeros_like(force), plate_bias_vector(rig)) + rng.normal(0, 0.01, (len(t), 24))
+    w.add_trial(trial_id, "rig.plate_impact", powered=False, repetition=repetition)
+    w.add_stream(trial_id, "plate_wrench", plate_stream(t, raw), rate_hz=1000)
+
+
+def add_cop_trial(w: SessionWriter, rng: np.random.Generator, positions: np.ndarray, offsets: np.ndarray,
+                  weight_N: float = 9.81, trial_id: str = "cop-1") -> None:
+    """A weight put down at each of ``positions`` (m, plate plane) for 1 s, with 0.3 s unloaded between.
+
+    Motion capture sees the weight's marker at position + ``offsets`` (the COP error by construction);
+    the marker is occluded (NaN) while the weight is lifted.
+    """
+    rig = w.manifest["rig"]
+    t = np.arange(int((0.3 + 1.3 * len(positions)) * 1000)) / 1000.0
+    tm = np.arange(int(t[-1] * 100) + 1) / 100.0
+    force = np.zeros((len(t), 3))
+    point = np.zeros((len(t), 3))
+    marker = np.full((len(tm), 3), np.nan)
+    for k, (p, o) in enumerate(zip(positions, offsets)):
+        a = 0.3 + 1.3 * k
+        on = (t >= a) & (t < a + 1.0)
+        force[on, 2] = -weight_N
+        point[on, :2] = p
+        onm = (tm >= a) & (tm < a + 1.0)
+        marker[onm] = [p[0] + o[0], p[1] + o[1], 0.05]
+    raw = corner_readings(rig, force, point, plate_bias_vector(rig)) + rng.normal(0, 0.005, (len(t), 24))
+    w.add_trial(trial_id, "rig.plate_cop", powered=False)
+    w.add_stream(trial_id, "plate_wrench", plate_stream(t, raw), rate_hz=1000)
+    w.add_stream(trial_id, "markers", {"t": tm, "w1_x": marker[:, 0], "w1_y": marker[:, 1], "w1_z": marker[:, 2]},
+                 rate_hz=100, entities=["w1"])
+
+
+def full_rig_session(tmp: Path, rng: np.random.Generator, *, accel_delay_s: float = 0.0, mocap_delay_s: float = 0.0,
+                     cop_offset_m: float = 0.005, rig: dict | None = None) -> Path:
+    """Every rig trial: handle calibration, plate bias, impact, COP (5 placements, each off by cop_offset_m)."""
+    rig = rig or rotated_rig()
+    rig["motion_capture"]["markers"] = sorted(set(rig["motion_capture"]["markers"]) | {"w1"})
+    w = writer(rig=rig)
+    add_calibration_trial(w, HandleTruth(), rng, duration_s=16.0, accel_delay_s=accel_delay_s, mocap_delay_s=mocap_delay_s)
+    add_plate_bias_trial(w, rng)
+    add_impact_trial(w, rng)
+    pos = np.array([[0.0, 0.0], [0.2, 0.1], [-0.15, 0.2], [-0.2, -0.2], [0.1, -0.25]])
+    ang = np.linspace(0, 2 * np.pi, len(pos), endpoint=False)
+    off = cop_offset_m * np.column_stack([np.cos(ang), np.sin(ang)])
+    add_cop_trial(w, rng, pos, off)
+    return w.write(tmp / "rig-session")

@@ -65,7 +65,9 @@ def lowpass(x: np.ndarray, rate_hz: float, cutoff_hz: float, *, order: int | Non
 
     ``x (N, ...)`` sampled at ``rate_hz``; ``cutoff_hz`` is the −3 dB frequency of one pass (the
     forward–backward pair is −6 dB there). The cut-off is first limited by :func:`effective_cutoff`.
-    Odd padding of ``min(3·(2·sections + 1), N − 1)`` samples at each end.
+    The chord from the first to the last sample is subtracted before filtering and added back after,
+    so straight lines pass unchanged and the ends start at zero (no edge transient from a slope);
+    then odd padding of ``min(3·(2·sections + 1), N − 1)`` samples at each end.
     """
     x = np.asarray(x, float)
     order = int(sp("filter_order")) if order is None else order
@@ -74,7 +76,9 @@ def lowpass(x: np.ndarray, rate_hz: float, cutoff_hz: float, *, order: int | Non
     if len(x) < 2:
         return x.copy()
     padlen = min(3 * (2 * len(sos) + 1), len(x) - 1)
-    return sosfiltfilt(sos, x, axis=0, padtype="odd", padlen=padlen)
+    ramp = np.linspace(0.0, 1.0, len(x)).reshape((-1,) + (1,) * (x.ndim - 1))
+    chord = x[0] + ramp * (x[-1] - x[0])
+    return sosfiltfilt(sos, x - chord, axis=0, padtype="odd", padlen=padlen) + chord
 
 
 def interp_columns(t_src: np.ndarray, x_src: np.ndarray, t_dst: np.ndarray) -> np.ndarray:

@@ -1,0 +1,38 @@
+"""``haptify rig-check SESSION [--json]``: the rig against the paper's requirements (spec §14.8).
+
+One line per check — PASS, FAIL, WARN (an advisory shortfall the paper's own rig shares) or SKIP (the
+session lacks the trial or description the check needs). Exit 1 when any check FAILs, else 0.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from haptify.compute import ComputeContext
+from haptify.rig_checks import check_rig
+from haptify.storage import open_session
+
+
+def register(sub) -> None:
+    p = sub.add_parser("rig-check", help="check the rig against the paper's requirements (Table I, Appendix)")
+    p.add_argument("session", type=Path)
+    p.add_argument("--json", dest="rig_check_json", action="store_true", help="machine-readable output on stdout")
+    p.set_defaults(func=run)
+
+
+def run(args, ui) -> int:
+    if getattr(args, "rig_check_json", False):
+        ui.json_mode = True
+    session = open_session(args.session)
+    checks = check_rig(ComputeContext(session=session))
+    failed = [c for c in checks if c.status == "FAIL"]
+    if ui.json_mode:
+        ui.emit_json({"session_id": session.session_id, "ok": not failed, "checks": [c.to_dict() for c in checks]})
+    else:
+        for c in checks:
+            line = f"{c.status:4s}  {c.name}: {c.value if c.value is not None else '-'}  (required {c.requirement})"
+            if c.detail:
+                line += f"  [{c.detail}]"
+            ui.say(line)
+        ui.say(f"{len(checks) - len(failed)} of {len(checks)} checks did not fail" + (f"; {len(failed)} FAILED" if failed else ""))
+    return 1 if failed else 0
