@@ -88,6 +88,7 @@ def test_vicon_without_map_imports_every_marker_in_metres(tmp_path, capsys):
                               "--placement", "0,0,0.1", "--powered", "no"], capsys)
     assert code == 0, err
     report = json.loads(out)
+    assert report["validation"]["valid"] and report["session_id"] == "Vicon"
     assert report["source"]["markers"]["count"] == 51 and report["source"]["markers"]["rate_hz"] == 100.0
     assert report["source"]["analog"]["count"] == 38 and report["source"]["analog"]["rate_hz"] == 2000.0
     assert report["source"]["force_platforms"] == []
@@ -178,7 +179,7 @@ def test_vicon_map_and_cli_overrides(tmp_path, capsys):
                               str(FIX / "vicon-map.json"), "--date", "2026-11-22", "--trial-id", "box-2",
                               "--repetition", "2"], capsys)
     assert code == 0, err
-    assert "markers" in out and "580 rows" in out
+    assert "markers" in out and "580 rows" in out and "the session validates" in out
     assert_valid(tmp_path / "v")
     session = open_session(tmp_path / "v")
     assert session.session_id == "vicon-demo" and session.manifest.date == "2026-11-22"

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from haptify.errors import fail
 from haptify.importers import import_c3d, import_csv, load_map, read_c3d
+from haptify.validation import validate_session
 
 # option name -> the map field it fills (for the error that lists what is missing without a map)
 _OPTION_OF_FIELD = {"/session/date": "--date", "/session/lab": "--lab", "/session/examiner": "--examiner",
@@ -126,12 +127,19 @@ def run(args, ui) -> int:
         raise fail("E903", f"haptify import {fmt} needs -o SESSION", expected="-o SESSION", found=None)
     loaded = _load(args, fmt)
     importer = import_c3d if fmt == "c3d" else import_csv
-    result = importer(args.file, args.output, loaded, overwrite=args.overwrite)
+    with ui.progress(f"importing {args.file.name}", total=None):
+        result = importer(args.file, args.output, loaded, overwrite=args.overwrite)
+        report = validate_session(result.session)
     if ui.json_mode:
-        ui.emit_json(result.to_dict())
-        return 0
+        ui.emit_json({**result.to_dict(), "validation": {"valid": report.valid,
+                                                         "findings": [f.to_dict() for f in report.findings]}})
+        return report.exit_code
     ui.say(f"wrote {result.session} (session {result.session_id}, trial {result.trial_id})")
     for s in result.streams:
         ui.say(f"  {s['kind']:16s} {s['rows']:8d} rows at {s['rate_hz']:g} Hz, {s['columns']} columns")
     ui.say(f"  {result.world_frame}")
-    return 0
+    for f in report.findings:
+        ui.warn(str(f))
+    ui.say("the session validates" + (f" ({len(report.warnings)} warnings)" if report.warnings else "")
+           if report.valid else "the session does NOT validate (see above)")
+    return report.exit_code
