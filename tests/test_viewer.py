@@ -23,17 +23,19 @@ from rerun.chunk import RrdReader
 
 from haptify.cli import UI
 from haptify.errors import HaptifyError
+from haptify.session_format import STREAM_KINDS
 from haptify.results import Implementation, MetricResult, ResultsFile, Unavailable
 from haptify.storage import open_session
 from haptify_tools.example_session import example_writer
 from haptify_tools.viewer import blueprints, cmd_view
 from haptify_tools.viewer.recording import (
     HAND_FORCE_M_PER_N,
+    PLATE_FORCE_M_PER_N,
     load_results,
     nan_split,
     plane_rectangle,
     plan_recording,
-    pose_at,
+    raw_pose_at,
     results_markdown,
     time_ns,
     voxel_means,
@@ -42,12 +44,18 @@ from haptify_tools.viewer.recording import (
 
 CHROMIUM = Path("/usr/bin/chromium")
 SURFACE_Z = 0.05
-OCCLUDED = slice(40, 47)  # pose/marker rows set to NaN in the stiffness trial
+OCCLUDED = slice(40, 47)  # pose/marker rows set to NaN in the stiffness trial (70 ms: longer than any bridged gap)
+FORCE_BIAS = 0.25  # N, the handle_gravity record's force bias on the sensor's x axis
 
 
 def rich_writer(session_id: str = "viewer-0001", force_scale: float = 1.0):
     """The example free-space trial plus a workspace trial and a stiffness trial with every stream."""
     w = example_writer(session_id=session_id, duration_s=1.0)
+    w.manifest["calibration"] = [  # known parameters: 0.25 N force bias on x, no connector weight, zero plate bias
+        {"kind": "handle_gravity", "id": "hg", "force_bias_N": [FORCE_BIAS, 0.0, 0.0], "connector_mass_kg": 0.0,
+         "connector_com_m": [0.0, 0.0, 0.0], "torque_bias_Nm": [0.0, 0.0, 0.0], "accel_bias_m_per_s2": [0.0, 0.0, 0.0],
+         "gravity_m_per_s2": 9.81},
+        {"kind": "plate_bias", "id": "pb", "bias": [0.0] * 24}]
     mc = w.manifest["rig"]["motion_capture"]
     mc["rigid_bodies"].append({"name": "link2", "markers": ["l2a", "l2b"]})
     mc["markers"] += ["l2a", "l2b"]
@@ -165,8 +173,11 @@ def test_expected_entity_paths(recorded):
     expected = {
         "/world", "/world/plate", "/world/plate/corners", "/world/device", "/session", "/results",
         "/world/workspace-1/measured/workspace/points", "/world/workspace-1/measured/trajectory",
-        "/world/free_space-1/measured/handle", "/world/free_space-1/measured/hand_force/raw",
-        "/world/free_space-1/measured/force_field",
+        "/world/free_space-1/measured/handle", "/world/free_space-1/measured/hand_force/calibrated",
+        "/world/free_space-1/measured/force_field", "/world/free_space-1/measured/plate_force",
+        "/series/free_space-1/measured/hand_force/calibrated", "/series/free_space-1/measured/hand_torque/calibrated",
+        "/series/free_space-1/measured/accel/world", "/series/free_space-1/measured/plate/force",
+        "/series/free_space-1/measured/plate/cop",
         "/world/stiffness-1/measured/virtual_surface", "/world/stiffness-1/measured/markers/handle",
         "/world/stiffness-1/measured/markers/link2", "/world/stiffness-1/measured/links/link1",
         "/world/stiffness-1/measured/links/link2",
@@ -184,13 +195,15 @@ def test_expected_entity_paths(recorded):
 def test_each_series_has_one_row_per_sample_at_exact_ns(recorded, sessions):
     plan, out = recorded
     main, other, _ = sessions
-    series = [e for e in plan.entries if e.series is not None]
+    series = [e for e in plan.entries if e.series is not None and e.stream in STREAM_KINDS]
     assert len(series) >= 15
     truncation_would_differ = False
     for e in series:
         role, trial_id = e.path.split("/")[3], e.path.split("/")[2]
         session = main if role == "measured" else other
         frame = session.read(trial_id, e.stream)
+        if e.stream == "plate_wrench" and e.series in ("plate/force", "plate/cop"):
+            assert e.rows == len(frame)
         declared = session.stream(trial_id, e.stream).rows
         t_ns, rows = temporal(out, e.path, "Scalars:scalars")
         assert len(t_ns) == declared == len(frame), e.path
@@ -226,9 +239,6 @@ def test_raw_force_is_rotated_to_the_world_frame(recorded):
     assert ok.sum() > 800
     np.testing.assert_allclose(f[ok, 0], 0.0, atol=1e-12)
     np.testing.assert_allclose(f[ok, 1], 1.0, atol=1e-12)
-    t_ns, vecs = temporal(out, "/world/stiffness-1/measured/hand_force/raw", "Arrows3D:vectors")
-    assert len(t_ns) == ok.sum()
-    np.testing.assert_allclose(np.array(vecs)[:, 0, 1], HAND_FORCE_M_PER_N, atol=1e-7)
 
 
 def test_three_d_entities_skip_unknown_poses(recorded):
@@ -289,7 +299,10 @@ def test_blueprint_per_protocol(recorded):
     assert ws.column_shares == [3.0, 1.0]
     free = tabs["free_space"]
     names = [v.name for v in free.contents[1].contents if isinstance(v, rrb.TimeSeriesView)]
-    assert names[:2] == ["hand force in W", "F/T force (raw, sensor frame)"]
+    assert names[:2] == ["hand force in W (calibrated, raw)", "hand torque in W (calibrated)"]
+    felt = stiff.contents[0].contents[0]
+    assert "+ $origin/measured/hand_force/calibrated" in felt.contents  # felt = calibrated when available
+    assert "+ $origin/measured/hand_force/raw_world" not in felt.contents
     for protocol in blueprints.LAYOUTS:  # every protocol has a layout naming only known views
         assert set(blueprints.LAYOUTS[protocol].views) <= set(blueprints.VIEWS)
 
@@ -302,18 +315,17 @@ def test_every_protocol_has_a_layout():
 
 # --- helpers known by construction ---------------------------------------------------------------------
 
-def test_pose_at_interpolates_linearly_and_by_slerp():
+def test_raw_pose_at_interpolates_without_filtering():
     t = np.array([0.0, 1.0, 2.0])
     p = np.array([[0, 0, 0], [1, 0, 0], [2, 2, 0]], float)
     half = [math.cos(math.pi / 4), 0, 0, math.sin(math.pi / 4)]  # 90° about z
     q = np.array([[1, 0, 0, 0], half, [0, 0, 0, 1]], float)
-    pos, quat = pose_at(t, p, q, np.array([0.5, 1.5, 2.0, -0.1, 2.1]))
-    np.testing.assert_allclose(pos[:3], [[0.5, 0, 0], [1.5, 1, 0], [2, 2, 0]])
-    np.testing.assert_allclose(quat[0], [math.cos(math.pi / 8), 0, 0, math.sin(math.pi / 8)], atol=1e-12)
-    assert np.isnan(pos[3:]).all() and np.isnan(quat[3:]).all()
+    pose = raw_pose_at(t, p, q, np.array([0.5, 1.5, 2.0, -0.1, 2.1]))
+    np.testing.assert_allclose(pose.position[:3], [[0.5, 0, 0], [1.5, 1, 0], [2, 2, 0]])
+    np.testing.assert_allclose(pose.quaternion[0], [math.cos(math.pi / 8), 0, 0, math.sin(math.pi / 8)], atol=1e-12)
+    assert np.isnan(pose.position[3:]).all() and np.isnan(pose.quaternion[3:]).all()
     p[1] = np.nan
-    pos, _ = pose_at(t, p, q, np.array([0.5, 1.5]))
-    assert np.isnan(pos).all()
+    assert np.isnan(raw_pose_at(t, p, q, np.array([0.5, 1.5])).position).all()
 
 
 def test_time_ns_rounds_to_the_nearest_nanosecond():
@@ -345,6 +357,54 @@ def test_plane_rectangle_lies_in_the_plane_and_covers_the_path():
     a = (proj - corners[0]) @ e1 / (e1 @ e1)
     b = (proj - corners[0]) @ e2 / (e2 @ e2)
     assert (a > 0).all() and (a < 1).all() and (b > 0).all() and (b < 1).all()
+
+
+def test_calibrated_hand_force_on_the_signal_grid(recorded):
+    """Calibrated: bias removed, then rotated by the handle's 90° yaw: (1 − 0.25, 0, ·) N → (0, 0.75, ·) N in W."""
+    plan, out = recorded
+    t_ns, rows = temporal(out, "/series/stiffness-1/measured/hand_force/calibrated", "Scalars:scalars")
+    np.testing.assert_array_equal(t_ns, 10_000_000 * np.arange(100))  # the 100 Hz grid over the overlap 0 … 0.99 s
+    f = np.array(rows, dtype=float)
+    valid = np.all(np.isfinite(f), axis=1)
+    assert not valid[OCCLUDED].any() and valid.sum() >= 80
+    np.testing.assert_allclose(f[valid, 0], 0.0, atol=1e-9)
+    np.testing.assert_allclose(f[valid, 1], 1.0 - FORCE_BIAS, atol=1e-9)
+    arrows_ns, _ = temporal(out, "/world/stiffness-1/measured/hand_force/calibrated", "Arrows3D:vectors")
+    np.testing.assert_array_equal(arrows_ns, t_ns[valid])
+    assert "/world/stiffness-1/measured/hand_force/raw" not in plan.paths()  # calibrated replaces the raw arrow
+
+
+def test_plate_force_and_cop(recorded):
+    """Four equal corner loads summing to 18.5 N downward: force (0, 0, −18.5) N at the plate centre."""
+    _, out = recorded
+    t_ns, rows = temporal(out, "/series/free_space-1/measured/plate/force", "Scalars:scalars")
+    assert len(t_ns) == 1000
+    np.testing.assert_allclose(np.array(rows), np.tile([0.0, 0.0, -18.5], (1000, 1)), atol=1e-12)
+    _, cop = temporal(out, "/series/free_space-1/measured/plate/cop", "Scalars:scalars")
+    np.testing.assert_allclose(np.array(cop), 0.0, atol=1e-12)
+    _, origins = temporal(out, "/world/free_space-1/measured/plate_force", "Arrows3D:origins")
+    np.testing.assert_allclose(np.array(origins)[:, 0], np.tile([0.0, 0.0, 18.5 * PLATE_FORCE_M_PER_N], (1000, 1)), atol=1e-6)
+
+
+def test_missing_calibration_is_reported_not_hidden(sessions, tmp_path):
+    w = rich_writer("viewer-nocal")
+    w.manifest["calibration"] = []
+    session = open_session(w.write(tmp_path / "nocal"))
+    plan = plan_recording(session)
+    assert "/series/stiffness-1/measured/hand_force/raw_world" in plan.paths()
+    assert "/world/stiffness-1/measured/hand_force/raw" in plan.paths()
+    assert not any("calibrated" in p for p in plan.paths())
+    assert any("E601" in n for n in plan.notes) and any("E621" in n for n in plan.notes)
+    out = write_rrd(plan, tmp_path / "nocal.rrd", blueprints.blueprint_for(plan))
+    _, rows = temporal(out, "/series/stiffness-1/measured/hand_force/raw_world", "Scalars:scalars")
+    ok = np.all(np.isfinite(np.array(rows, dtype=float)), axis=1)
+    t_ns, vecs = temporal(out, "/world/stiffness-1/measured/hand_force/raw", "Arrows3D:vectors")
+    assert len(t_ns) == ok.sum()
+    np.testing.assert_allclose(np.array(vecs)[:, 0, 1], HAND_FORCE_M_PER_N, atol=1e-7)  # 1 N along world y
+    commanded_vs_felt = blueprints.trial_tab(plan, plan.trials[2]).contents[0].contents[0]
+    assert list(commanded_vs_felt.contents) == ["+ $origin/measured/commanded/force", "+ $origin/measured/hand_force/raw_world"]
+    doc = next(e for e in plan.entries if e.path == "/session").static[0]
+    assert "E601" in str(doc.text.as_arrow_array().to_pylist())
 
 
 # --- the command -------------------------------------------------------------------------------------

@@ -16,14 +16,18 @@ import rerun.blueprint as rrb
 from haptify_tools.viewer.recording import ROLES, SERIES, TIMELINE, Plan, TrialPlan
 
 # Time-series views: name → (title, series keys overlaid in that view).
-VIEWS: dict[str, tuple[str, list[str]]] = {
-    "hand_force": ("hand force in W", ["hand_force/raw_world"]),
+VIEWS: dict[str, tuple[str, list[str | tuple[str, ...]]]] = {
+    "hand_force": ("hand force in W (calibrated, raw)", ["hand_force/calibrated", "hand_force/raw_world"]),
+    "hand_torque": ("hand torque in W (calibrated)", ["hand_torque/calibrated"]),
     "ft_force": ("F/T force (raw, sensor frame)", ["handle/force_raw"]),
     "ft_torque": ("F/T torque (raw, sensor frame)", ["handle/torque_raw"]),
-    "accel": ("accelerometer (raw)", ["accel/raw"]),
-    "plate_force": ("plate corner forces (raw)", ["plate/corner_force_raw"]),
-    "plate_torque": ("plate corner torques (raw)", ["plate/corner_torque_raw"]),
-    "commanded_vs_felt": ("commanded vs felt force (W)", ["commanded/force", "hand_force/raw_world"]),
+    "accel": ("acceleration (raw sensor; calibrated W)", ["accel/raw", "accel/world"]),
+    "plate_force": ("plate force (W)", ["plate/force"]),
+    "plate_cop": ("plate centre of pressure", ["plate/cop"]),
+    "plate_corners": ("plate corner forces (raw)", ["plate/corner_force_raw"]),
+    "plate_corner_torques": ("plate corner torques (raw)", ["plate/corner_torque_raw"]),
+    # felt = the calibrated hand force, or the raw force in W when the session cannot be calibrated
+    "commanded_vs_felt": ("commanded vs felt force (W)", ["commanded/force", ("hand_force/calibrated", "hand_force/raw_world")]),
     "commanded_torque": ("commanded torque (W)", ["commanded/torque"]),
     "penetration": ("penetration of the virtual surface", ["penetration"]),
     "position": ("handle position (W)", ["handle/position"]),
@@ -39,15 +43,15 @@ class Layout:
     shares: tuple[float, float] = (1.0, 1.0)
 
 
-PASSIVE_MOTION = Layout(("hand_force", "ft_force", "ft_torque", "accel", "plate_force"))
-PLATE_RIG = Layout(("plate_force", "plate_torque"))
+PASSIVE_MOTION = Layout(("hand_force", "hand_torque", "accel", "plate_force", "ft_force"))
+PLATE_RIG = Layout(("plate_force", "plate_cop", "plate_corners"))
 LAYOUTS: dict[str, Layout] = {
     "workspace": Layout(("position",), shares=(3.0, 1.0)),
     "free_space": PASSIVE_MOTION,
     "local_dynamic": PASSIVE_MOTION,
-    "frictionless_surface": Layout(("commanded_vs_felt", "penetration", "accel")),
+    "frictionless_surface": Layout(("commanded_vs_felt", "penetration", "accel", "plate_force")),
     "stiffness": Layout(("commanded_vs_felt", "penetration"), spatial_first=False),
-    "rig.handle_calibration": Layout(("ft_force", "ft_torque", "accel")),
+    "rig.handle_calibration": Layout(("ft_force", "ft_torque", "accel", "hand_force")),
     "rig.plate_bias": PLATE_RIG,
     "rig.plate_impact": PLATE_RIG,
     "rig.plate_cop": PLATE_RIG,
@@ -56,10 +60,18 @@ LAYOUTS: dict[str, Layout] = {
 }
 
 
-def series_view(plan: Plan, tp: TrialPlan, title: str, keys: list[str]) -> rrb.TimeSeriesView | None:
-    """A time-series view overlaying ``keys`` of every role, or None when none of them was recorded."""
+def series_view(plan: Plan, tp: TrialPlan, title: str, keys: list[str | tuple[str, ...]]) -> rrb.TimeSeriesView | None:
+    """A time-series view overlaying ``keys`` of every role, or None when none of them was recorded.
+
+    A tuple of keys stands for alternatives: per role, the first one that was recorded.
+    """
     paths = plan.paths()
-    contents = [f"+ $origin/{role}/{k}" for k in keys for role in ROLES if f"/series/{tp.key}/{role}/{k}" in paths]
+    contents = []
+    for key in keys:
+        for role in ROLES:
+            present = [k for k in ((key,) if isinstance(key, str) else key) if f"/series/{tp.key}/{role}/{k}" in paths]
+            if present:
+                contents.append(f"+ $origin/{role}/{present[0]}")
     if not contents:
         return None
     return rrb.TimeSeriesView(origin=f"/series/{tp.key}", contents=contents, name=title)
@@ -75,7 +87,7 @@ def trial_tab(plan: Plan, tp: TrialPlan) -> rrb.Container:
     """The tab of one trial, laid out for its protocol (issue 7)."""
     layout = LAYOUTS[tp.trial.protocol]
     chosen = [v for v in (series_view(plan, tp, *VIEWS[name]) for name in layout.views) if v is not None]
-    shown = {k for name in layout.views for k in VIEWS[name][1]}
+    shown = {k for name in layout.views for key in VIEWS[name][1] for k in ((key,) if isinstance(key, str) else key)}
     rest = [v for v in (series_view(plan, tp, SERIES[k][0], [k]) for k in SERIES if k not in shown) if v is not None]
     column = chosen + ([rrb.Tabs(*rest, name="more series")] if rest else [])
     spatial = spatial_view(tp)

@@ -42,10 +42,11 @@ import pandas as pd
 import rerun as rr
 from pydantic import ValidationError
 
-from haptify.conventions import quat_multiply, quat_rotate, quat_slerp
+from haptify import force_plate, signals
+from haptify.conventions import quat_multiply, quat_rotate
 from haptify.errors import HaptifyError, fail
 from haptify.results import ResultsFile
-from haptify.session_format import Trial
+from haptify.session_format import Stream, Trial
 from haptify.storage import SessionFolder, pydantic_findings
 
 APP_ID = "haptify"
@@ -79,7 +80,12 @@ SERIES = {
     "handle/force_raw": ("handle F/T force, raw, sensor frame", "N"),
     "handle/torque_raw": ("handle F/T torque, raw, sensor frame", "N*m"),
     "hand_force/raw_world": ("raw F/T force rotated to W (bias and weight not removed)", "N"),
+    "hand_force/calibrated": ("force the device applies to the hand, W (calibrated)", "N"),
+    "hand_torque/calibrated": ("torque on the hand about the gimbal centre, W (calibrated)", "N*m"),
     "accel/raw": ("accelerometer specific force, raw, sensor frame", "m/s^2"),
+    "accel/world": ("handle acceleration, W, bias and gravity removed", "m/s^2"),
+    "plate/force": ("force the load exerts on the plate, W", "N"),
+    "plate/cop": ("centre of pressure on the plate, W", "m"),
     "plate/corner_force_raw": ("plate corner forces, raw, corner-sensor frames", "N"),
     "plate/corner_torque_raw": ("plate corner torques, raw, corner-sensor frames", "N*m"),
     "commanded/force": ("commanded force in W", "N"),
@@ -99,7 +105,7 @@ class Entry:
     times_ns: np.ndarray | None = None  # int64 ns on the session clock
     columns: Any = None  # a rerun ComponentColumnList, one row per entry of times_ns
     series: str | None = None  # for time series: the relative series key (a key of SERIES)
-    stream: str | None = None  # the stream kind the rows come from
+    stream: str | None = None  # the stream kind whose samples are the rows, or "handle_signals" (its grid)
 
     @property
     def rows(self) -> int:
@@ -123,12 +129,31 @@ class Plan:
     entries: list[Entry] = field(default_factory=list)
     trials: list[TrialPlan] = field(default_factory=list)
     has_results: bool = False
+    notes: list[str] = field(default_factory=list)  # what could not be shown, and why (coded)
 
     def paths(self) -> set[str]:
         return {e.path for e in self.entries}
 
     def add(self, entry: Entry) -> None:
         self.entries.append(entry)
+
+
+class CachedStreams(SessionFolder):
+    """A session whose stream tables are read once per recording (spec §3.2 reading, unchanged).
+
+    The planner and the reference functions it calls (``haptify.signals``, ``haptify.force_plate``)
+    read the same streams; each caller gets a shallow copy, so replacing a column never leaks.
+    """
+
+    def __init__(self, session: SessionFolder) -> None:
+        super().__init__(session.root, session.manifest, session.raw)
+        self._tables: dict[tuple, pd.DataFrame] = {}
+
+    def read_stream(self, stream: Stream, *, verify: bool = False, session_clock: bool = True) -> pd.DataFrame:
+        key = (stream.file, verify, session_clock)
+        if key not in self._tables:
+            self._tables[key] = super().read_stream(stream, verify=verify, session_clock=session_clock)
+        return self._tables[key].copy(deep=False)
 
 
 # --- small numeric helpers -----------------------------------------------------------------------
@@ -149,27 +174,17 @@ def xyzw(q_wxyz: np.ndarray) -> np.ndarray:
     return np.concatenate([q[..., 1:], q[..., :1]], axis=-1)
 
 
-def pose_at(t_pose: np.ndarray, p: np.ndarray, q: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Position (m) and orientation (wxyz) of a pose stream at times ``t`` (s).
+def raw_pose_at(t_pose: np.ndarray, p: np.ndarray, q: np.ndarray, t: np.ndarray) -> signals.PoseOnGrid:
+    """The unfiltered pose stream at times ``t`` (s): linear in position, slerp in orientation (spec §7.4).
 
-    Linear in position and slerp in orientation between the two neighbouring samples; NaN outside
-    the stream's time span and next to an occluded (NaN) sample (spec §1.3, §2.7).
+    Every finite sample counts as one segment, so a time is valid only between two finite samples;
+    nothing is bridged or filtered (the viewer's "raw" quantities stay raw).
     """
-    t_pose = np.asarray(t_pose, dtype=np.float64)
-    t = np.asarray(t, dtype=np.float64)
-    n = len(t_pose)
-    if n < 2:
-        return np.full((len(t), 3), np.nan), np.full((len(t), 4), np.nan)
-    i0 = np.clip(np.searchsorted(t_pose, t, side="right") - 1, 0, n - 2)
-    i1 = i0 + 1
-    s = (t - t_pose[i0]) / (t_pose[i1] - t_pose[i0])
-    inside = (t >= t_pose[0]) & (t <= t_pose[-1])
-    with np.errstate(invalid="ignore"):
-        pos = p[i0] + s[:, None] * (p[i1] - p[i0])
-        quat = quat_slerp(q[i0], q[i1], s)
-    pos[~inside] = np.nan
-    quat[~inside] = np.nan
-    return pos, quat
+    ok = finite_rows(p, q)
+    nan3 = np.full((len(t_pose), 3), np.nan)
+    track = signals.MocapTrack(t=np.asarray(t_pose, dtype=np.float64), position=p, quaternion=q, velocity=nan3,
+                               angular_velocity=nan3, segment=np.where(ok, 0, -1))
+    return signals.resample_track(track, t)
 
 
 def finite_rows(*arrays: np.ndarray) -> np.ndarray:
@@ -246,6 +261,8 @@ class TrialPlanner:
         self.series = f"/series/{key}/{role}"
         self.kinds = {s.kind for s in trial.streams}
         self.rig = session.manifest.rig
+        self._signals: signals.HandleSignals | None = None
+        self._signals_tried = False
 
     def read(self, kind: str) -> pd.DataFrame | None:
         if kind not in self.kinds:
@@ -290,8 +307,35 @@ class TrialPlanner:
                                 static=[rr.LineStrips3D(strips, radii=0.0008, colors=ROLE_COLORS[self.role])]))
         self.add_series("handle/position", t, p, ["px", "py", "pz"], "handle_pose")
 
+    def note(self, what: str, err: HaptifyError) -> None:
+        """Record why a derived quantity is missing (shown in the /session document)."""
+        f = err.findings[0]
+        self.plan.notes.append(f"{self.trial.id} ({self.role}): {what} not shown — {f.code} {f.message}")
+
+    def handle_signals(self) -> signals.HandleSignals | None:
+        """The calibrated handle signals (spec §7.5), once per trial; None (with a note) when unavailable."""
+        if not self._signals_tried:
+            self._signals_tried = True
+            if "handle_pose" in self.kinds and self.kinds & {"handle_wrench", "handle_accel"}:
+                try:
+                    self._signals = signals.handle_signals(self.session, self.trial.id)
+                except HaptifyError as err:
+                    self.note("calibrated handle force and acceleration", err)
+        return self._signals
+
+    def force_arrows(self, path: str, t: np.ndarray, origins: np.ndarray, force: np.ndarray, stream: str) -> None:
+        ok = finite_rows(origins, force)
+        self.plan.add(Entry(path, times_ns=time_ns(t[ok]),
+                            static=[rr.Arrows3D.from_fields(colors=FORCE_COLORS[self.role], radii=0.001)],
+                            columns=rr.Arrows3D.columns(origins=origins[ok], vectors=force[ok] * HAND_FORCE_M_PER_N),
+                            stream=stream))
+
     def wrench(self, t_pose: np.ndarray | None, p: np.ndarray | None, q: np.ndarray | None) -> None:
-        """Raw F/T series; with a pose and the sensor's mounting, the force in W as arrow and field."""
+        """Raw F/T series; the raw force rotated to W; the calibrated wrench; the hand-force arrow and field.
+
+        The 3-D arrow (and the free-space field) show the calibrated force when the session's
+        calibration allows it (spec §7.5), else the raw force rotated to W.
+        """
         w = self.read("handle_wrench")
         if w is None:
             return
@@ -299,20 +343,26 @@ class TrialPlanner:
         f = w[["fx", "fy", "fz"]].to_numpy()
         self.add_series("handle/force_raw", t, f, ["fx", "fy", "fz"], "handle_wrench")
         self.add_series("handle/torque_raw", t, w[["tx", "ty", "tz"]].to_numpy(), ["tx", "ty", "tz"], "handle_wrench")
-        if t_pose is None or self.rig.handle is None:
+        shown = None  # (t, origins, force, stream) of the arrow
+        if t_pose is not None and self.rig.handle is not None:
+            pose = raw_pose_at(t_pose, p, q, t)
+            q_sensor = np.asarray(self.rig.handle.ft_sensor.pose.quaternion, dtype=np.float64)
+            with np.errstate(invalid="ignore"):
+                f_w = quat_rotate(quat_multiply(pose.quaternion, q_sensor), f)
+            self.add_series("hand_force/raw_world", t, f_w, ["fx", "fy", "fz"], "handle_wrench")
+            shown = (t, pose.position, f_w, "handle_wrench", "raw")
+        hs = self.handle_signals()
+        if hs is not None and hs.force is not None:
+            self.add_series("hand_force/calibrated", hs.t, hs.force, ["fx", "fy", "fz"], "handle_signals")
+            self.add_series("hand_torque/calibrated", hs.t, hs.torque, ["tx", "ty", "tz"], "handle_signals")
+            shown = (hs.t, hs.position, hs.force, "handle_signals", "calibrated")
+        if shown is None:
             return
-        pos, quat = pose_at(t_pose, p, q, t)
-        q_sensor = np.asarray(self.rig.handle.ft_sensor.pose.quaternion, dtype=np.float64)
-        with np.errstate(invalid="ignore"):
-            f_w = quat_rotate(quat_multiply(quat, q_sensor), f)
-        self.add_series("hand_force/raw_world", t, f_w, ["fx", "fy", "fz"], "handle_wrench")
-        ok = finite_rows(pos, f_w)
-        self.plan.add(Entry(f"{self.world}/hand_force/raw", times_ns=time_ns(t[ok]),
-                            static=[rr.Arrows3D.from_fields(colors=FORCE_COLORS[self.role], radii=0.001)],
-                            columns=rr.Arrows3D.columns(origins=pos[ok], vectors=f_w[ok] * HAND_FORCE_M_PER_N),
-                            stream="handle_wrench"))
+        t_a, origins, force, stream, label = shown
+        self.force_arrows(f"{self.world}/hand_force/{label}", t_a, origins, force, stream)
+        ok = finite_rows(origins, force)
         if self.trial.protocol == "free_space" and ok.any():
-            centres, forces = voxel_means(pos[ok], f_w[ok], FIELD_VOXEL_M)
+            centres, forces = voxel_means(origins[ok], force[ok], FIELD_VOXEL_M)
             self.plan.add(Entry(f"{self.world}/force_field",
                                 static=[rr.Arrows3D(origins=centres, vectors=forces * HAND_FORCE_M_PER_N,
                                                     colors=FORCE_COLORS[self.role], radii=0.0006)]))
@@ -321,6 +371,9 @@ class TrialPlanner:
         a = self.read("handle_accel")
         if a is not None:
             self.add_series("accel/raw", a["t"].to_numpy(), a[["ax", "ay", "az"]].to_numpy(), ["ax", "ay", "az"], "handle_accel")
+            hs = self.handle_signals()
+            if hs is not None and hs.acceleration is not None:
+                self.add_series("accel/world", hs.t, hs.acceleration, ["ax", "ay", "az"], "handle_signals")
 
     def plate(self) -> None:
         w = self.read("plate_wrench")
@@ -331,6 +384,20 @@ class TrialPlanner:
         names_t = [f"c{i}_t{a}" for i in range(1, 5) for a in "xyz"]
         self.add_series("plate/corner_force_raw", t, w[names_f].to_numpy(), names_f, "plate_wrench")
         self.add_series("plate/corner_torque_raw", t, w[names_t].to_numpy(), names_t, "plate_wrench")
+        try:
+            ps = force_plate.plate_signals(self.session, self.trial.id)
+        except HaptifyError as err:
+            self.note("plate total force and COP", err)
+            return
+        self.add_series("plate/force", ps.t, ps.force, ["Fx", "Fy", "Fz"], "plate_wrench")
+        self.add_series("plate/cop", ps.t, ps.cop, ["x", "y"], "plate_wrench")
+        # The force on the plate drawn as an arrow whose head is at the COP (on the top surface, z = 0).
+        ok = ps.cop_valid & finite_rows(ps.force)
+        head = np.column_stack([ps.cop[ok], np.zeros(int(ok.sum()))])
+        vec = ps.force[ok] * PLATE_FORCE_M_PER_N
+        self.plan.add(Entry(f"{self.world}/plate_force", times_ns=time_ns(ps.t[ok]),
+                            static=[rr.Arrows3D.from_fields(colors=PLATE_FORCE_COLOR, radii=0.002)],
+                            columns=rr.Arrows3D.columns(origins=head - vec, vectors=vec), stream="plate_wrench"))
 
     def commanded(self) -> None:
         c = self.read("commanded_wrench")
@@ -473,7 +540,8 @@ def results_markdown(results: ResultsFile, session_id: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def session_markdown(session: SessionFolder, trials: list[TrialPlan], other: SessionFolder | None) -> str:
+def session_markdown(session: SessionFolder, trials: list[TrialPlan], other: SessionFolder | None,
+                     notes: list[str] = ()) -> str:
     """A summary of the session (and the compared one) and how to read the 3-D view."""
     m = session.manifest
     dev = session.device()
@@ -491,7 +559,10 @@ def session_markdown(session: SessionFolder, trials: list[TrialPlan], other: Ses
                      f"{_cell(tp.counterpart.get('compare', '—' if other is not None else ''))} |")
     lines += ["", "World frame W: origin at the centre of the plate's top surface, z up, right-handed (spec §1.2).",
               f"Arrows: hand force {HAND_FORCE_M_PER_N * 100:g} cm per N; plate force {PLATE_FORCE_M_PER_N * 100:g} cm per N.",
-              f"Free-space force field: mean force per {FIELD_VOXEL_M * 100:g} cm voxel."]
+              f"Free-space force field: mean force per {FIELD_VOXEL_M * 100:g} cm voxel.",
+              "The plate arrow is the force the load exerts on the plate, drawn with its head at the COP."]
+    if notes:
+        lines += ["", "## Not shown", ""] + [f"- {_cell(n)}" for n in notes]
     return "\n".join(lines) + "\n"
 
 
@@ -506,6 +577,8 @@ def counterpart(other: SessionFolder, trial: Trial) -> Trial | None:
 def plan_recording(session: SessionFolder, *, trial_id: str | None = None, results: ResultsFile | None = None,
                    other: SessionFolder | None = None) -> Plan:
     """Every entity of the recording of ``session`` (one trial or all), optionally compared with ``other``."""
+    session = CachedStreams(session)
+    other = CachedStreams(other) if other is not None else None
     trials = [session.trial(trial_id)] if trial_id else list(session.trials)
     rec_id = session.session_id + (f"/{trial_id}" if trial_id else "") + (f"+{other.session_id}" if other else "")
     plan = Plan(recording_id=rec_id, has_results=results is not None)
@@ -520,7 +593,7 @@ def plan_recording(session: SessionFolder, *, trial_id: str | None = None, resul
                 tp.counterpart["compare"] = match.id
                 TrialPlanner(other, match, "compare", key, plan).run()
         plan.trials.append(tp)
-    plan.add(Entry("/session", static=[rr.TextDocument(session_markdown(session, plan.trials, other),
+    plan.add(Entry("/session", static=[rr.TextDocument(session_markdown(session, plan.trials, other, plan.notes),
                                                        media_type=rr.MediaType.MARKDOWN)]))
     if results is not None:
         plan.add(Entry("/results", static=[rr.TextDocument(results_markdown(results, session.session_id),
