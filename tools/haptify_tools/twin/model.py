@@ -220,13 +220,14 @@ class DeviceVibration(Effect):
 class NoiseFloor(_Strict):
     """The rig's own acceleration noise floor (paper §VI-C: 0.0332 m/s² RMS, centroid 108.25 Hz with no device).
 
-    Band-limited noise: ``low_rms`` in ``low_band_hz`` plus ``high_rms`` in ``high_band_hz`` per world axis
-    (the two bands set the centroid). Not an effect (it is the instrument, not the device).
+    Band-limited noise on EACH world axis: RMS ``low_rms`` in ``low_band_hz`` plus RMS ``high_rms`` in
+    ``high_band_hz`` (the mix sets the centroid; the three-axis RMS is √3 times the per-axis RMS). Not an
+    effect (it is the instrument, not the device); the virtual rig adds it to every accelerometer sample.
     """
 
-    low_rms_m_per_s2: float = Field(ge=0)
+    low_rms_m_per_s2: float = Field(ge=0, description="RMS per axis of the low band, m/s².")
     low_band_hz: Annotated[list[float], Field(min_length=2, max_length=2)]
-    high_rms_m_per_s2: float = Field(ge=0)
+    high_rms_m_per_s2: float = Field(ge=0, description="RMS per axis of the high band, m/s².")
     high_band_hz: Annotated[list[float], Field(min_length=2, max_length=2)]
     sources: dict[str, str] = Field(default_factory=dict)
 
@@ -436,15 +437,6 @@ def write_twin(twin: TwinFile, path: str | Path) -> Path:
     path = Path(path)
     atomic_write_json(path, twin_to_dict(twin))
     return path
-
-
-def twin_schema() -> dict:
-    """The JSON Schema (draft 2020-12) of the twin file, generated from :class:`TwinFile`."""
-    body = TwinFile.model_json_schema(mode="validation", by_alias=True)
-    doc = {"$schema": "https://json-schema.org/draft/2020-12/schema",
-           "$id": f"https://haptify.org/tools/twin/{TWIN_VERSION}/twin.schema.json"}
-    doc.update(body)
-    return doc
 
 
 # --- editing (for --disable / --set) -------------------------------------------------------------

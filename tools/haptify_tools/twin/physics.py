@@ -32,10 +32,13 @@ from haptify import kinematics as ref
 from haptify.conventions import quat_conjugate, quat_multiply, quat_to_matrix
 from haptify.session_format import Kinematics, Rendering
 
+from haptify_tools.twin.examiner import band_noise as _band_noise
 from haptify_tools.twin.kinematics import (
     gimbal_angles, hand_to_joints, link_transforms, nominal_kinematics, placement_matrix, true_kinematics,
 )
 from haptify_tools.twin.model import TwinFile
+
+DEFAULT_LOOP_HZ = 1000.0   # CHAI3D's haptic loop rate when the rendering does not say (paper §V-D)
 
 # --- small helpers ------------------------------------------------------------------------------
 
@@ -452,30 +455,29 @@ class _ScalarChain:
         self.p = list(kin.base.position)
 
     def fk_jac(self, q):
-        r = self.r
-        p = self.p
-        origins = [p]
-        axes = [[r[0][2], r[1][2], r[2][2]]]
+        """Gimbal-centre position ``[x, y, z]`` and Jacobian rows ``jac[i] = ∂p/∂q_i`` (device frame)."""
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = self.r
+        px, py, pz = self.p
+        origins = [(px, py, pz)]
+        axes = [(r02, r12, r22)]
         for (a, ca, sa, d, off), qi in zip(self.j, q):
             th = qi + off
             ct, st = math.cos(th), math.sin(th)
-            # local DH transform columns
-            x = (ct, st, 0.0)
-            y = (-st * ca, ct * ca, sa)
-            z = (st * sa, -ct * sa, ca)
-            t = (a * ct, a * st, d)
-            p = [p[k] + r[k][0] * t[0] + r[k][1] * t[1] + r[k][2] * t[2] for k in range(3)]
-            r = [[r[k][0] * x[0] + r[k][1] * x[1] + r[k][2] * x[2],
-                  r[k][0] * y[0] + r[k][1] * y[1] + r[k][2] * y[2],
-                  r[k][0] * z[0] + r[k][1] * z[1] + r[k][2] * z[2]] for k in range(3)]
-            origins.append(p)
-            axes.append([r[0][2], r[1][2], r[2][2]])
+            tx, ty = a * ct, a * st
+            px, py, pz = (px + r00 * tx + r01 * ty + r02 * d, py + r10 * tx + r11 * ty + r12 * d,
+                          pz + r20 * tx + r21 * ty + r22 * d)
+            yx, yy = -st * ca, ct * ca
+            zx, zy = st * sa, -ct * sa
+            r00, r01, r02 = r00 * ct + r01 * st, r00 * yx + r01 * yy + r02 * sa, r00 * zx + r01 * zy + r02 * ca
+            r10, r11, r12 = r10 * ct + r11 * st, r10 * yx + r11 * yy + r12 * sa, r10 * zx + r11 * zy + r12 * ca
+            r20, r21, r22 = r20 * ct + r21 * st, r20 * yx + r21 * yy + r22 * sa, r20 * zx + r21 * zy + r22 * ca
+            origins.append((px, py, pz))
+            axes.append((r02, r12, r22))
         jac = []
-        for i in range(len(self.j)):
-            zx, zy, zz = axes[i]
-            dx, dy, dz = (p[0] - origins[i][0], p[1] - origins[i][1], p[2] - origins[i][2])
+        for (ox, oy, oz), (zx, zy, zz) in zip(origins[:-1], axes[:-1]):
+            dx, dy, dz = px - ox, py - oy, pz - oz
             jac.append((zy * dz - zz * dy, zz * dx - zx * dz, zx * dy - zy * dx))
-        return p, jac
+        return (px, py, pz), jac
 
 
 def _inv3(m: np.ndarray) -> list[list[float]]:
@@ -486,13 +488,16 @@ def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, 
                     rendering: Rendering | dict) -> ActiveResult:
     """Simulate the powered device rendering a frictionless virtual plane (issue 3; CHAI3D plane example).
 
-    One loop iteration per sample of ``t`` (uniform; give 1 kHz samples for CHAI3D's rate):
+    The loop runs at ``rendering.loop_rate_hz`` (default 1 kHz, CHAI3D's rate) on the samples of ``t``
+    (uniform, a multiple of the loop rate, e.g. the examiner's 2 kHz); each iteration:
     motor encoders → nominal kinematics → device position p̂ → penetration ``δ = (p_s − p̂)·n`` →
     commanded ``F = k·max(δ, 0)·n`` (logged) → ``τ = Jᵀ(q̂)·F`` → drive axes → saturation
     (``drive.torque_saturation``) and cut-off (``drive.force_cutoff``) → motor rotors (reflected inertia,
     drive friction) → cables (``drive.series_elasticity``, ``drive.backlash``) → links → the force the hand
-    feels (through the same link and gimbal dynamics as :func:`simulate_passive`). With the series
-    elasticity off the cable is rigid, the motor follows the link, and the loop is evaluated vectorised.
+    feels (through the same link and gimbal dynamics as :func:`simulate_passive`). Loop outputs
+    (command, motor torque, flags) are held between iterations; the cable torque (a period average)
+    and the encoder angles are interpolated onto ``t``. With the series elasticity off the cable is
+    rigid, the motor follows the link, and the loop is evaluated vectorised.
     """
     if isinstance(rendering, dict):
         rendering = Rendering.model_validate(rendering)
@@ -523,25 +528,40 @@ def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, 
     cut = e.drive_force_cutoff
     j_refl = reflected_rotor_inertia(twin)
 
+    # the rendering loop runs at its own rate (CHAI3D: 1 kHz); the hand path may be sampled faster
+    loop_hz = rendering.loop_rate_hz or DEFAULT_LOOP_HZ
+    step = max(1, int(round(1.0 / (loop_hz * float(np.median(np.diff(t)))))) if n_s > 1 else 1)
+    ticks = np.arange(0, n_s, step)
+    hold_idx = np.minimum(np.arange(n_s) // step, len(ticks) - 1)     # zero-order hold of loop outputs
     if not e.drive_series_elasticity.enabled:
         # rigid cable: the encoders see the link-side drive angles
         enc_q = th_l @ c_inv.T
         p_enc = ref.forward_positions(nom, enc_q)
-        depth = np.maximum((ps_D - p_enc) @ n_D, 0.0)
-        f_cmd_D = k_r * depth[:, None] * n_D
-        tau_cmd = np.einsum("nik,ni->nk", ref.jacobian(nom, enc_q), f_cmd_D) @ c_inv
+        depth = np.maximum((ps_D - p_enc[ticks]) @ n_D, 0.0)
+        f_tick = k_r * depth[:, None] * n_D
+        tau_cmd = np.einsum("nik,ni->nk", ref.jacobian(nom, enc_q[ticks]), f_tick) @ c_inv
         motor = np.clip(tau_cmd, -tau_max, tau_max)
-        saturated = np.any(np.abs(tau_cmd) > tau_max, axis=1)
-        cut_flags = _cutoff_latch(k_r * depth, cut) if cut.enabled else np.zeros(n_s, bool)
-        motor[cut_flags] = 0.0
+        sat_tick = np.any(np.abs(tau_cmd) > tau_max, axis=1)
+        cut_tick = _cutoff_latch(k_r * depth, cut) if cut.enabled else np.zeros(len(ticks), bool)
+        motor[cut_tick] = 0.0
+        motor, f_cmd_D, saturated, cut_flags = motor[hold_idx], f_tick[hold_idx], sat_tick[hold_idx], cut_tick[hold_idx]
         cable = motor + drive_friction(twin, thd_l) - j_refl * thdd_l
     else:
         se = e.drive_series_elasticity
         k = np.asarray(se.stiffness_Nm_per_rad)
         b = np.asarray(se.damping_Nms_per_rad)
         half_gap = 0.5 * np.asarray(e.drive_backlash.width_rad) if e.drive_backlash.enabled else np.zeros(n_j)
-        motor, cable, enc_q, f_cmd_D, saturated, cut_flags = _render_loop(
-            twin, t, th_l, thd_l, nom, c_inv, ps_D, n_D, k_r, tau_max, cut, j_refl, k, b, half_gap)
+        motor_t, cable_t, enc_t, f_t, sat_t, cut_t = _render_loop(
+            twin, t[ticks], th_l[ticks], thd_l[ticks], nom, c_inv, ps_D, n_D, k_r, tau_max, cut, j_refl, k, b, half_gap)
+        motor, f_cmd_D, saturated, cut_flags = motor_t[hold_idx], f_t[hold_idx], sat_t[hold_idx], cut_t[hold_idx]
+        if step == 1:
+            cable, enc_q = cable_t, enc_t
+        else:
+            # the cable torque is a period average (centre of the period); encoders are read at the ticks
+            t_tick = t[ticks]
+            period = np.diff(t_tick, append=t_tick[-1] + step * (t[1] - t[0]))
+            cable = np.stack([np.interp(t, t_tick + period / 2, cable_t[:, a]) for a in range(n_j)], axis=1)
+            enc_q = np.stack([np.interp(t, t_tick, enc_t[:, a]) for a in range(n_j)], axis=1)
         p_enc = ref.forward_positions(nom, enc_q)
 
     tau_joint = cable @ c
@@ -568,30 +588,88 @@ def _cutoff_latch(f_cmd_mag: np.ndarray, cut) -> np.ndarray:
     return out
 
 
+class _Command:
+    """One evaluation of the rendering software at motor angles ``θ_m`` (plain floats, drive-axis units)."""
+
+    def __init__(self, chain: _ScalarChain, c_inv, ps_D, n_D, k_r, tau_max):
+        self.chain, self.ci, self.k_r, self.tmax = chain, c_inv.tolist(), k_r, tau_max.tolist()
+        self.n = n_D.tolist()
+        self.s = ps_D.tolist()
+        self.rj = range(len(self.tmax))
+
+    def __call__(self, th_m):
+        """(drive torques after saturation, force magnitude, force vector, encoder q, A = C⁻ᵀJᵀn, saturated?)."""
+        ci, rj = self.ci, self.rj
+        nx, ny, nz = self.n
+        qe = [sum(ci[r][cc] * th_m[cc] for cc in rj) for r in rj]
+        p, jac = self.chain.fk_jac(qe)
+        depth = (self.s[0] - p[0]) * nx + (self.s[1] - p[1]) * ny + (self.s[2] - p[2]) * nz
+        fmag = self.k_r * depth if depth > 0.0 else 0.0
+        jn = [jac[r][0] * nx + jac[r][1] * ny + jac[r][2] * nz for r in rj]          # Jᵀ n per joint
+        a_vec = [sum(ci[r][cc] * jn[r] for r in rj) for cc in rj]                    # C⁻ᵀ Jᵀ n per axis
+        ta = [fmag * a for a in a_vec]
+        sat = False
+        for a_ in rj:
+            lim = self.tmax[a_]
+            if ta[a_] > lim:
+                ta[a_], sat = lim, True
+            elif ta[a_] < -lim:
+                ta[a_], sat = -lim, True
+        if depth <= 0.0:
+            a_vec = [0.0] * len(a_vec)
+        return ta, fmag, (fmag * nx, fmag * ny, fmag * nz), qe, a_vec, sat
+
+
+def _exact_step(j: float, b: float, k: float, h: float) -> tuple[float, ...]:
+    """Exact discretisation over ``h`` of ``J·z̈ + b·ż + k·z = 0``: (h, Φ00, Φ01, Φ10, Φ11, Ψ00, Ψ01, Ψ10, Ψ11),
+    with Φ = exp(A·h) and Ψ = (1/h)∫₀ʰ exp(A·s) ds (the period average)."""
+    from scipy.linalg import expm
+
+    a = np.array([[0.0, 1.0], [-k / j, -b / j]])
+    m = np.zeros((4, 4))          # Van Loan: expm([[A, I], [0, 0]]·h) holds ∫exp(As)ds
+    m[:2, :2] = a * h
+    m[:2, 2:] = np.eye(2) * h
+    big = expm(m)
+    phi = big[:2, :2]
+    psi = big[:2, 2:] / h
+    return (h, phi[0, 0], phi[0, 1], phi[1, 0], phi[1, 1], psi[0, 0], psi[0, 1], psi[1, 0], psi[1, 1])
+
+
+def _dead_zone(d: float, g: float) -> float:
+    return d - g if d > g else (d + g if d < -g else 0.0)
+
+
 def _render_loop(twin, t, th_l, thd_l, nom, c_inv, ps_D, n_D, k_r, tau_max, cut, j_refl, k, b, half_gap):
-    """The sequential 1 kHz loop with an elastic cable: motor state integrated semi-implicitly."""
+    """The sequential loop with an elastic cable.
+
+    Rotors with inertia: semi-implicit Euler, 4 sub-steps per loop period, command held (zero-order hold).
+    Massless rotors (``inertia`` off): the motor is in quasi-static balance with the cable at every
+    period, ``k·dz(θ_m − θ_l) = τ(θ_m) + friction(θ̇_l)``, solved by Newton's method (the loop settles
+    within one period).
+    """
     n_s, n_j = th_l.shape
-    chain = _ScalarChain(nom)
-    ci = c_inv.tolist()
+    command = _Command(_ScalarChain(nom), c_inv, ps_D, n_D, k_r, tau_max)
     th_l_l, thd_l_l = th_l.tolist(), thd_l.tolist()
     kk, bb, gap = k.tolist(), b.tolist(), half_gap.tolist()
-    tmax = tau_max.tolist()
     jr = j_refl.tolist()
+    massless = any(v <= 0.0 for v in jr)
     e = twin.effects
-    coul = e.friction_coulomb
-    visc = e.friction_viscous
-    strb = e.friction_stribeck
+    coul, visc, strb = e.friction_coulomb, e.friction_viscous, e.friction_stribeck
     tc = coul.torque_Nm if coul.enabled else [0.0] * n_j
     ws = coul.zero_crossing_velocity_rad_per_s
     bv = visc.damping_Nms_per_rad if visc.enabled else [0.0] * n_j
     ts = strb.excess_torque_Nm if strb.enabled else [0.0] * n_j
     wst, wss = strb.stribeck_velocity_rad_per_s, strb.zero_crossing_velocity_rad_per_s
-    nx, ny, nz = n_D.tolist()
-    sx, sy, sz = ps_D.tolist()
+
+    def friction(a_, w):
+        fr = -tc[a_] * math.tanh(w / ws) - bv[a_] * w
+        if ts[a_]:
+            fr -= ts[a_] * math.exp(-(w / wst) ** 2) * math.tanh(w / wss)
+        return fr
+
     trip, rearm = (cut.trip_force_N, cut.rearm_force_N) if cut.enabled else (math.inf, -1.0)
     dt_all = np.diff(t, append=t[-1] + (t[-1] - t[-2] if n_s > 1 else 1e-3)).tolist()
-    # motor state starts at rest on the link (cable relaxed)
-    th_m = list(th_l_l[0])
+    th_m = list(th_l_l[0])          # the motors start at rest on the links (cables relaxed)
     w_m = list(thd_l_l[0])
     motor = np.zeros((n_s, n_j))
     cable = np.zeros((n_s, n_j))
@@ -600,85 +678,96 @@ def _render_loop(twin, t, th_l, thd_l, nom, c_inv, ps_D, n_D, k_r, tau_max, cut,
     sat = np.zeros(n_s, bool)
     cutf = np.zeros(n_s, bool)
     latched = False
-    substeps = 4
-    rng_j = range(n_j)
+    substeps = 8
+    rj = range(n_j)
+    dt0 = dt_all[0]
+    exact = [_exact_step(jr[a_], bb[a_], kk[a_], dt0) if jr[a_] > 0 else None for a_ in rj]
+    # stay in the sub-stepped branch while within a few µrad of the gap edge (where the linear model switches)
+    backlash_margin = [0.0 if gap[a_] == 0.0 else 0.25 * gap[a_] for a_ in rj]
     for i in range(n_s):
-        # encoders → nominal kinematics
-        qe = [sum(ci[r][cc] * th_m[cc] for cc in rng_j) for r in rng_j]
-        p, jac = chain.fk_jac(qe)
-        depth = (sx - p[0]) * nx + (sy - p[1]) * ny + (sz - p[2]) * nz
-        fmag = k_r * depth if depth > 0.0 else 0.0
-        fx, fy, fz = fmag * nx, fmag * ny, fmag * nz
-        tj = [jac[r][0] * fx + jac[r][1] * fy + jac[r][2] * fz for r in rng_j]
-        # drive-axis torques: τ_axis = C^{-T} τ_joint
-        ta = [sum(ci[r][cc] * tj[r] for r in rng_j) for cc in rng_j]
-        s_flag = False
-        for a_ in rng_j:
-            if ta[a_] > tmax[a_]:
-                ta[a_] = tmax[a_]
-                s_flag = True
-            elif ta[a_] < -tmax[a_]:
-                ta[a_] = -tmax[a_]
-                s_flag = True
+        tl, wl = th_l_l[i], thd_l_l[i]
+        if massless:
+            # Newton on r(x) = k·dz(x − θ_l) − τ(x) − friction; Jacobian K + k_r·A·Aᵀ (Sherman–Morrison)
+            fr = [friction(a_, wl[a_]) for a_ in rj]
+            for _ in range(6):
+                ta, fmag, fv, qe, a_vec, s_flag = command(th_m)
+                if latched or fmag > trip:
+                    ta = [0.0] * n_j
+                    a_vec = [0.0] * n_j
+                res = [kk[a_] * _dead_zone(th_m[a_] - tl[a_], gap[a_]) - ta[a_] - fr[a_] for a_ in rj]
+                if s_flag:
+                    a_vec = [0.0] * n_j
+                kinv_r = [res[a_] / kk[a_] for a_ in rj]
+                kinv_a = [a_vec[a_] / kk[a_] for a_ in rj]
+                denom = 1.0 + k_r * sum(a_vec[a_] * kinv_a[a_] for a_ in rj)
+                proj = k_r * sum(a_vec[a_] * kinv_r[a_] for a_ in rj) / denom
+                step = [kinv_r[a_] - kinv_a[a_] * proj for a_ in rj]
+                th_m = [th_m[a_] - step[a_] for a_ in rj]
+                if max(abs(x) for x in step) < 1e-12:
+                    break
+            ta, fmag, fv, qe, a_vec, s_flag = command(th_m)
+        else:
+            ta, fmag, fv, qe, a_vec, s_flag = command(th_m)
         if latched and fmag < rearm:
             latched = False
         elif not latched and fmag > trip:
             latched = True
         if latched:
             ta = [0.0] * n_j
-        # integrate the rotors for one loop period, holding the command (zero-order hold)
-        h = dt_all[i] / substeps
-        tl, wl = th_l_l[i], thd_l_l[i]
-        tl_next = th_l_l[i + 1] if i + 1 < n_s else tl
-        tau_c_avg = [0.0] * n_j
-        for s in range(substeps):
-            frac = (s + 0.5) / substeps
-            for a_ in rng_j:
-                link_angle = tl[a_] + frac * (tl_next[a_] - tl[a_])
-                defl = th_m[a_] - link_angle
+        if massless:
+            tau_c = [kk[a_] * _dead_zone(th_m[a_] - tl[a_], gap[a_]) for a_ in rj]
+            if latched:    # the motor relaxes onto the link within the period
+                th_m = [tl[a_] + (friction(a_, wl[a_]) / kk[a_]) for a_ in rj]
+                tau_c = [friction(a_, wl[a_]) for a_ in rj]
+        else:
+            # one loop period with the command held; friction acts at the link-side drive speed
+            tl_next = th_l_l[i + 1] if i + 1 < n_s else tl
+            dt = dt_all[i]
+            tau_c = [0.0] * n_j
+            for a_ in rj:
+                w_l = (tl_next[a_] - tl[a_]) / dt if dt > 0 else wl[a_]
+                u = ta[a_] + friction(a_, wl[a_])
+                d = th_m[a_] - tl[a_]
+                dd = w_m[a_] - w_l
                 g = gap[a_]
-                if defl > g:
-                    spring = kk[a_] * (defl - g) + bb[a_] * (w_m[a_] - wl[a_])
-                elif defl < -g:
-                    spring = kk[a_] * (defl + g) + bb[a_] * (w_m[a_] - wl[a_])
+                if abs(d) > g + backlash_margin[a_] and abs(dt - exact[a_][0]) < 1e-12:
+                    # engaged on one side all period: exact solution of J·d̈ + b·ḋ + k·(d ∓ g) = u
+                    _, p00, p01, p10, p11, s00, s01, s10, s11 = exact[a_]
+                    off = (g if d > 0 else -g) + u / kk[a_]
+                    z0, z1 = d - off, dd
+                    d_new = off + p00 * z0 + p01 * z1
+                    dd_new = p10 * z0 + p11 * z1
+                    d_avg = off + s00 * z0 + s01 * z1
+                    dd_avg = s10 * z0 + s11 * z1
+                    tau_c[a_] = kk[a_] * (d_avg - (g if d > 0 else -g)) + bb[a_] * dd_avg
                 else:
-                    spring = 0.0
-                wm = w_m[a_]
-                fr = -tc[a_] * math.tanh(wm / ws) - bv[a_] * wm
-                if ts[a_]:
-                    fr -= ts[a_] * math.exp(-(wm / wst) ** 2) * math.tanh(wm / wss)
-                if jr[a_] > 0.0:
-                    w_m[a_] = wm + h * (ta[a_] - spring + fr) / jr[a_]
-                    th_m[a_] += h * w_m[a_]
-                else:   # massless rotor: quasi-static balance of motor torque, friction ignored
-                    th_m[a_] = link_angle + (ta[a_] / kk[a_] + (g if ta[a_] > 0 else -g if ta[a_] < 0 else 0.0))
-                    w_m[a_] = wl[a_]
-                tau_c_avg[a_] += spring / substeps
+                    # near or inside the backlash gap: semi-implicit Euler sub-steps
+                    h = dt / substeps
+                    acc_tau = 0.0
+                    for _ in range(substeps):
+                        if d > g:
+                            spring = kk[a_] * (d - g) + bb[a_] * dd
+                        elif d < -g:
+                            spring = kk[a_] * (d + g) + bb[a_] * dd
+                        else:
+                            spring = 0.0
+                        dd += h * (u - spring) / jr[a_]
+                        d += h * dd
+                        acc_tau += spring / substeps
+                    d_new, dd_new = d, dd
+                    tau_c[a_] = acc_tau
+                th_m[a_] = tl_next[a_] + d_new
+                w_m[a_] = w_l + dd_new
         motor[i] = ta
-        cable[i] = tau_c_avg
+        cable[i] = tau_c
         enc[i] = qe
-        fcmd[i] = (fx, fy, fz)
+        fcmd[i] = fv
         sat[i] = s_flag
         cutf[i] = latched
     return motor, cable, enc, fcmd, sat, cutf
 
 
 # --- vibration ----------------------------------------------------------------------------------
-
-
-def _band_noise(rng: np.random.Generator, n: int, fs: float, band: list[float], order: int = 4) -> np.ndarray:
-    """Unit-RMS Gaussian noise ``(n, 3)`` band-limited to ``band`` Hz (Butterworth, zero phase)."""
-    lo, hi = band
-    nyq = fs / 2.0
-    hi = min(hi, 0.95 * nyq)
-    x = rng.standard_normal((n, 3))
-    if lo <= 0:
-        sos = signal.butter(order, hi, "lowpass", fs=fs, output="sos")
-    else:
-        sos = signal.butter(order, [lo, hi], "bandpass", fs=fs, output="sos")
-    y = signal.sosfiltfilt(sos, x, axis=0) if n > 3 * (2 * order + 1) * 2 else x
-    rms = np.sqrt(np.mean(y ** 2, axis=0))
-    return y / np.where(rms > 0, rms, 1.0)
 
 
 def _resonance_noise(rng: np.random.Generator, n: int, fs: float, f0: float, q_factor: float) -> np.ndarray:
@@ -715,24 +804,10 @@ def device_vibration(twin: TwinFile, t: np.ndarray, speed: np.ndarray, rng: np.r
     for src in eff.broadband:
         w = np.asarray(src.axis_weights, dtype=float)
         w = w / np.linalg.norm(w)
-        out += src.rms_at_ref_speed_m_per_s2 * w * _band_noise(rng, len(t), fs, src.band_hz) * law[:, None]
+        band = _band_noise(rng, len(t), fs, src.band_hz[0], min(src.band_hz[1], fs / 2), dims=3)
+        out += src.rms_at_ref_speed_m_per_s2 * w * band * law[:, None]
     for src in eff.resonances:
         w = np.asarray(src.axis_weights, dtype=float)
         w = w / np.linalg.norm(w)
         out += src.rms_at_ref_speed_m_per_s2 * w * _resonance_noise(rng, len(t), fs, src.frequency_hz, src.q_factor) * law[:, None]
-    return out
-
-
-def rig_accel_floor(twin: TwinFile, t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """The rig's own acceleration noise ``(N, 3)`` at the accelerometer, m/s² (twin ``rig.accel_floor``).
-
-    Two bands of Gaussian noise whose three-axis RMS and mix reproduce the paper's no-device
-    measurement (0.0332 m/s² after the 10 Hz high-pass, centroid 108 Hz). The virtual rig adds it to
-    every accelerometer sample (it stands for the sensor's noise and the table's vibration together).
-    """
-    fl = twin.rig.accel_floor
-    t = np.asarray(t, dtype=float)
-    fs = _sample_rate(t)
-    out = fl.low_rms_m_per_s2 / math.sqrt(3) * _band_noise(rng, len(t), fs, fl.low_band_hz)
-    out += fl.high_rms_m_per_s2 / math.sqrt(3) * _band_noise(rng, len(t), fs, fl.high_band_hz)
     return out
