@@ -22,6 +22,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from haptify.conventions import GRAVITY_W, STANDARD_GRAVITY, quat_rotate, quat_to_matrix
+from haptify.caching import cached, session_of
 from haptify.errors import fail
 from haptify.metric_definitions import param
 from haptify.session_format import HandleGravityCalibration, Pose
@@ -165,7 +166,7 @@ def fit_from_samples(force: np.ndarray, torque: np.ndarray, accel: np.ndarray, *
                              diagnostics={"force_coverage": fs.coverage, "accel_coverage": acc.coverage})
 
 
-def fit_trial(session: Any, trial_id: str) -> HandleCalibration:
+def fit_trial(ctx_or_session: Any, trial_id: str) -> HandleCalibration:
     """Fit eqs. 1–3 from a ``rig.handle_calibration`` trial (spec §6.2–6.3).
 
     The raw wrench and acceleration are low-passed as in spec §7.2 and resampled (linear interpolation)
@@ -175,6 +176,7 @@ def fit_trial(session: Any, trial_id: str) -> HandleCalibration:
     """
     from haptify import signals  # chapter 7 builds on chapter 6; imported here to avoid a cycle
 
+    session = session_of(ctx_or_session)
     rate = float(param(FAMILY, "fit_rate_hz"))
     w = session.read(trial_id, "handle_wrench")
     a = session.read(trial_id, "handle_accel")
@@ -189,7 +191,7 @@ def fit_trial(session: Any, trial_id: str) -> HandleCalibration:
     cal = fit_from_samples(wr[:, :3], wr[:, 3:], ac, source=f"trial:{trial_id}")
     if session.stream(trial_id, "handle_pose") is not None:
         try:
-            mocap = signals.pose_on_grid(session, trial_id, grid)
+            mocap = signals.pose_on_grid(ctx_or_session, trial_id, grid)
         except Exception as exc:  # noqa: BLE001 - the diagnostic is optional; the fit stands without it
             if getattr(exc, "code", None) != "E611":
                 raise
@@ -206,9 +208,6 @@ def fit_trial(session: Any, trial_id: str) -> HandleCalibration:
 
 # --- which parameters apply (spec §6.4) ----------------------------------------------------------
 
-def _session_of(ctx_or_session: Any) -> Any:
-    return getattr(ctx_or_session, "session", ctx_or_session)
-
 
 def handle_calibration(ctx_or_session: Any) -> HandleCalibration:
     """The handle calibration that applies to the session (spec §6.4).
@@ -217,7 +216,7 @@ def handle_calibration(ctx_or_session: Any) -> HandleCalibration:
     ``rig.handle_calibration`` trial (highest repetition); otherwise E601. Cached on a ComputeContext.
     """
     def build() -> HandleCalibration:
-        session = _session_of(ctx_or_session)
+        session = session_of(ctx_or_session)
         records = [c for c in session.manifest.calibration if c.kind == "handle_gravity"]
         if records:
             return HandleCalibration.from_record(records[-1])
@@ -226,11 +225,14 @@ def handle_calibration(ctx_or_session: Any) -> HandleCalibration:
             raise fail("E601", f"session {session.session_id!r} has no handle_gravity record and no rig.handle_calibration trial",
                        file="session.json", pointer="/calibration", expected="a handle_gravity record or a rig.handle_calibration trial",
                        found=None)
-        return fit_trial(session, trials[-1].id)
+        return trial_fit(ctx_or_session, trials[-1].id)
 
-    if hasattr(ctx_or_session, "cached"):
-        return ctx_or_session.cached(("handle_calibration",), build)
-    return build()
+    return cached(ctx_or_session, ("handle_calibration",), build)
+
+
+def trial_fit(ctx_or_session: Any, trial_id: str) -> HandleCalibration:
+    """:func:`fit_trial`, cached on a context under ``("handle_calibration_fit", trial_id)``."""
+    return cached(ctx_or_session, ("handle_calibration_fit", trial_id), lambda: fit_trial(ctx_or_session, trial_id))
 
 
 # --- applying it (spec §6.5, §6.6) ---------------------------------------------------------------

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from haptify.conventions import quat_to_matrix
+from haptify.caching import cached, session_of
 from haptify.errors import fail
 from haptify.metric_definitions import param
 
@@ -28,14 +29,6 @@ AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
 PLATE_COLUMNS = [f"{c}_{a}" for c in CORNERS for a in AXES]
 
 
-def _session_of(ctx_or_session: Any) -> Any:
-    return getattr(ctx_or_session, "session", ctx_or_session)
-
-
-def _cached(ctx_or_session: Any, key: Any, build: Any) -> Any:
-    if hasattr(ctx_or_session, "cached"):
-        return ctx_or_session.cached(key, build)
-    return build()
 
 
 def corner_geometry(rig: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -93,7 +86,7 @@ def plate_bias(ctx_or_session: Any) -> tuple[np.ndarray, str]:
     ``rig.plate_bias`` trial (highest repetition); otherwise E621. Cached on a context.
     """
     def build() -> tuple[np.ndarray, str]:
-        session = _session_of(ctx_or_session)
+        session = session_of(ctx_or_session)
         recs = [c for c in session.manifest.calibration if c.kind == "plate_bias"]
         if recs:
             return np.asarray(recs[-1].bias, float), f"record:{recs[-1].id}"
@@ -104,7 +97,7 @@ def plate_bias(ctx_or_session: Any) -> tuple[np.ndarray, str]:
         df = session.read(trials[-1].id, "plate_wrench")
         return df[PLATE_COLUMNS].to_numpy().mean(axis=0), f"trial:{trials[-1].id}"
 
-    return _cached(ctx_or_session, ("plate_bias",), build)
+    return cached(ctx_or_session, ("plate_bias",), build)
 
 
 @dataclass
@@ -127,7 +120,7 @@ def plate_signals(ctx_or_session: Any, trial_id: str) -> PlateSignals:
     Raises E302 when the trial has no plate_wrench, E603 without a plate in the rig, E621 without a bias.
     """
     def build() -> PlateSignals:
-        session = _session_of(ctx_or_session)
+        session = session_of(ctx_or_session)
         df = session.read(trial_id, "plate_wrench")
         pos, rot = corner_geometry(session.manifest.rig)
         bias, source = plate_bias(ctx_or_session)
@@ -138,7 +131,7 @@ def plate_signals(ctx_or_session: Any, trial_id: str) -> PlateSignals:
         return PlateSignals(trial_id=trial_id, t=t, force=force, moment=moment, cop=cop, cop_valid=ok,
                             bias_source=source, rate_hz=rate)
 
-    return _cached(ctx_or_session, ("plate_signals", trial_id), build)
+    return cached(ctx_or_session, ("plate_signals", trial_id), build)
 
 
 # --- natural frequency (spec §14.4) --------------------------------------------------------------
@@ -235,7 +228,7 @@ def placements(t: np.ndarray, force: np.ndarray, cop: np.ndarray, cop_valid: np.
 
 def cop_trial_placements(ctx_or_session: Any, trial_id: str) -> list[Placement]:
     """The placements of a ``rig.plate_cop`` trial (spec §14.5); E623 when there are none."""
-    session = _session_of(ctx_or_session)
+    session = session_of(ctx_or_session)
     ps = plate_signals(ctx_or_session, trial_id)
     mk = session.read(trial_id, "markers")
     ents = session.stream(trial_id, "markers").entities or []

@@ -14,6 +14,7 @@ import numpy as np
 
 from haptify import calibration, force_plate, signals
 from haptify.conventions import quat_to_matrix
+from haptify.caching import cached, session_of
 from haptify.errors import HaptifyError, fail
 from haptify.metric_definitions import family, param
 from haptify.repetitions import TrialValue, aggregate, definition_of, per_trial, unavailable
@@ -27,14 +28,6 @@ def rp(key: str) -> Any:
     return param(FAMILY, key)
 
 
-def _session_of(ctx_or_session: Any) -> Any:
-    return getattr(ctx_or_session, "session", ctx_or_session)
-
-
-def _cached(ctx_or_session: Any, key: Any, build: Callable[[], Any]) -> Any:
-    if hasattr(ctx_or_session, "cached"):
-        return ctx_or_session.cached(key, build)
-    return build()
 
 
 # --- per-trial computations --------------------------------------------------------------------
@@ -44,18 +37,12 @@ def impact_frequencies(ctx_or_session: Any, trial_id: str) -> np.ndarray:
 
     Uses the total plate force without bias (the window's mean is removed anyway).
     """
-    session = _session_of(ctx_or_session)
+    session = session_of(ctx_or_session)
     df = session.read(trial_id, "plate_wrench")
     pos, rot = force_plate.corner_geometry(session.manifest.rig)
     force, _ = force_plate.total_wrench(df[force_plate.PLATE_COLUMNS].to_numpy(), pos, rot)
     t = df["t"].to_numpy()
     return force_plate.natural_frequencies(t, force, signals.nominal_rate(t))
-
-
-def calibration_fit(ctx_or_session: Any, trial_id: str) -> calibration.HandleCalibration:
-    """The eqs. 1–3 fit of one calibration trial (spec §6.2–6.3), cached on a context."""
-    return _cached(ctx_or_session, ("handle_calibration_fit", trial_id),
-                   lambda: calibration.fit_trial(_session_of(ctx_or_session), trial_id))
 
 
 def _gravity_dirs_h(raw: np.ndarray, bias: np.ndarray, r_hs: np.ndarray, sign: float) -> np.ndarray:
@@ -94,8 +81,8 @@ def recorder_delays(ctx_or_session: Any, trial_id: str) -> dict[str, float]:
     within one coarse step of the best, then refined by a parabola through the best three. A positive
     delay means X's time stamps are late. E624 when the score has no interior peak.
     """
-    session = _session_of(ctx_or_session)
-    cal = calibration_fit(ctx_or_session, trial_id)
+    session = session_of(ctx_or_session)
+    cal = calibration.trial_fit(ctx_or_session, trial_id)
     w = session.read(trial_id, "handle_wrench")
     a = session.read(trial_id, "handle_accel")
     track = signals.mocap_track(ctx_or_session, trial_id)
@@ -140,31 +127,24 @@ def _vector_result(metric_id: str, per_trial_values: dict[str, np.ndarray], diag
                         diagnostics=diagnostics, definition_version=family(FAMILY).version)
 
 
-def _no_trials(metric_id: str, protocol: str) -> Unavailable:
-    return Unavailable(id=metric_id, code="E310", reason=f"the session has no {protocol} trial")
-
-
-def natural_frequency_metric(ctx: Any) -> MetricResult | Unavailable:
-    """``rig.plate_natural_frequency`` (spec §14.4)."""
-    mid = "rig.plate_natural_frequency"
-    trials = [t.id for t in _session_of(ctx).trials_of("rig.plate_impact")]
+def _trial_results(ctx: Any, metric_id: str, compute_one: Callable[[str], Any]) -> dict[str, Any] | Unavailable:
+    """``compute_one`` on every trial of the metric's protocol (its definition's first); Unavailable
+    (E310) without such trials, or with the first trial's error when none worked (each failure is W413)."""
+    protocol = definition_of(FAMILY, metric_id).protocols[0]
+    trials = [t.id for t in session_of(ctx).trials_of(protocol)]
     if not trials:
-        return _no_trials(mid, "rig.plate_impact")
-    got, err = per_trial(ctx, trials, lambda tid: impact_frequencies(ctx, tid), mid)
-    if not got:
-        return unavailable(mid, err)
+        return Unavailable(id=metric_id, code="E310", reason=f"the session has no {protocol} trial")
+    got, err = per_trial(ctx, trials, compute_one, metric_id)
+    return got if got else unavailable(metric_id, err)
+
+
+def _natural_frequency(ctx: Any, mid: str, got: dict[str, np.ndarray]) -> MetricResult:
+    """``rig.plate_natural_frequency`` (spec §14.4): per axis, mean over repetitions."""
     return _vector_result(mid, got, {"axes": ["x", "y", "z"]})
 
 
-def cop_error_metric(ctx: Any) -> MetricResult | Unavailable:
+def _cop_error(ctx: Any, mid: str, got: dict[str, list]) -> MetricResult:
     """``rig.cop_error`` (spec §14.5): mean over all placements, sd over placements."""
-    mid = "rig.cop_error"
-    trials = [t.id for t in _session_of(ctx).trials_of("rig.plate_cop")]
-    if not trials:
-        return _no_trials(mid, "rig.plate_cop")
-    got, err = per_trial(ctx, trials, lambda tid: force_plate.cop_trial_placements(ctx, tid), mid)
-    if not got:
-        return unavailable(mid, err)
     errors = np.array([p.error for ps in got.values() for p in ps])
     per_rep = [float(np.mean([p.error for p in ps])) for ps in got.values()]
     return MetricResult(id=mid, value=float(errors.mean()), unit=definition_of(FAMILY, mid).unit, per_repetition=per_rep,
@@ -175,50 +155,44 @@ def cop_error_metric(ctx: Any) -> MetricResult | Unavailable:
                         definition_version=family(FAMILY).version)
 
 
-def calibration_rms_metric(ctx: Any) -> MetricResult | Unavailable:
+def _calibration_rms(ctx: Any, mid: str, got: dict[str, calibration.HandleCalibration]) -> MetricResult:
     """``rig.handle_calibration_rms`` (spec §6.2–6.3, §14.7): force, acceleration, torque fit RMS."""
-    mid = "rig.handle_calibration_rms"
-    trials = [t.id for t in _session_of(ctx).trials_of("rig.handle_calibration")]
-    if not trials:
-        return _no_trials(mid, "rig.handle_calibration")
-    got, err = per_trial(ctx, trials, lambda tid: calibration_fit(ctx, tid), mid)
-    if not got:
-        return unavailable(mid, err)
     rms = {tid: np.array([c.rms_force_N, c.rms_accel_m_per_s2, c.rms_torque_Nm]) for tid, c in got.items()}
     diag = {"components": ["force_N", "accel_m_per_s2", "torque_Nm"],
             "fits": {tid: {**c.to_record(f"fit-{tid}", tid), "n_samples": c.n_samples, **c.diagnostics} for tid, c in got.items()}}
     return _vector_result(mid, rms, diag)
 
 
-def sync_offset_metric(ctx: Any) -> MetricResult | Unavailable:
+def _sync_offset(ctx: Any, mid: str, got: dict[str, dict[str, float]]) -> MetricResult:
     """``rig.sync_offset`` (spec §14.6): largest |delay| over recorder pairs, mean over repetitions."""
-    mid = "rig.sync_offset"
-    trials = [t.id for t in _session_of(ctx).trials_of("rig.handle_calibration")]
-    if not trials:
-        return _no_trials(mid, "rig.handle_calibration")
-    got, err = per_trial(ctx, trials, lambda tid: recorder_delays(ctx, tid), mid)
-    if not got:
-        return unavailable(mid, err)
     vals = [TrialValue(tid, max(abs(v) for v in d.values())) for tid, d in got.items()]
     return aggregate(FAMILY, mid, vals, diagnostics={"delays_s": got})
 
 
-METRICS: dict[str, Callable[[Any], MetricResult | Unavailable]] = {
-    "rig.plate_natural_frequency": natural_frequency_metric,
-    "rig.cop_error": cop_error_metric,
-    "rig.handle_calibration_rms": calibration_rms_metric,
-    "rig.sync_offset": sync_offset_metric,
+# metric id → (what is computed per trial, how the per-trial results become the metric)
+METRIC_STEPS: dict[str, tuple[Callable[[Any, str], Any], Callable[[Any, str, dict], MetricResult]]] = {
+    "rig.plate_natural_frequency": (impact_frequencies, _natural_frequency),
+    "rig.cop_error": (force_plate.cop_trial_placements, _cop_error),
+    "rig.handle_calibration_rms": (calibration.trial_fit, _calibration_rms),
+    "rig.sync_offset": (recorder_delays, _sync_offset),
 }
+
+
+def metric(ctx: Any, metric_id: str) -> MetricResult | Unavailable:
+    """One rig metric for the session behind ``ctx`` (spec §14.4–14.7)."""
+    per_trial_step, summarise = METRIC_STEPS[metric_id]
+    got = _trial_results(ctx, metric_id, lambda tid: per_trial_step(ctx, tid))
+    return got if isinstance(got, Unavailable) else summarise(ctx, metric_id, got)
 
 
 def compute(ctx: Any) -> list[MetricResult | Unavailable]:
     """Every rig metric the session allows (spec §14; called by ``haptify compute``)."""
     out: list[MetricResult | Unavailable] = []
-    for mid, fn in METRICS.items():
+    for mid in METRIC_STEPS:
         if not ctx.wants(mid):
             continue
         try:
-            out.append(fn(ctx))
+            out.append(metric(ctx, mid))
         except HaptifyError as exc:  # a coded problem shared by every trial (e.g. no plate in the rig)
             out.append(unavailable(mid, exc))
     return out
@@ -319,7 +293,7 @@ def _range_checks(session: Any, ctx: Any) -> list[Check]:
 
 
 def _metric_check(ctx: Any, mid: str, name: str, requirement: str, judge: Callable[[Any], bool], show: Callable[[Any], Any]) -> Check:
-    res = METRICS[mid](ctx)
+    res = metric(ctx, mid)
     if isinstance(res, Unavailable):
         return Check(name, "SKIP", None, requirement, f"{res.code}: {res.reason}")
     return Check(name, _status(judge(res)), show(res), requirement)
@@ -335,7 +309,7 @@ def check_rig(ctx: Any) -> list[Check]:
         from haptify.compute import ComputeContext
 
         ctx = ComputeContext(session=ctx)
-    session = _session_of(ctx)
+    session = session_of(ctx)
     checks = _range_checks(session, ctx)
     fmin = float(rp("req_natural_frequency_hz"))
     checks.append(_metric_check(ctx, "rig.plate_natural_frequency", "plate natural frequency (Appendix 1)", f">= {fmin} Hz on every axis",
@@ -347,7 +321,7 @@ def check_rig(ctx: Any) -> list[Check]:
     checks.append(_metric_check(ctx, "rig.handle_calibration_rms", "handle calibration RMS (§III-C)",
                                 f"<= {rmax} (N, m/s^2, N*m)", lambda r: all(v <= m for v, m in zip(r.value, rmax)),
                                 lambda r: [float(f"{x:.3g}") for x in r.value]))
-    res = METRICS["rig.handle_calibration_rms"](ctx)
+    res = metric(ctx, "rig.handle_calibration_rms")
     omax = float(rp("req_orientation_error_deg"))
     if isinstance(res, MetricResult):
         errs = [f.get("orientation_error_deg") for f in res.diagnostics["fits"].values()]

@@ -24,6 +24,7 @@ from scipy.signal import butter, sosfiltfilt
 
 from haptify import calibration as cal_mod
 from haptify.conventions import quat_multiply, quat_normalize, quat_slerp
+from haptify.caching import cached, session_of
 from haptify.errors import fail
 from haptify.metric_definitions import param
 
@@ -132,14 +133,21 @@ def angular_velocity(t: np.ndarray, q: np.ndarray) -> np.ndarray:
 # --- motion capture (spec §7.4) --------------------------------------------------------------------
 
 @dataclass
-class MocapTrack:
-    """Processed motion capture at its native samples: NaN (and ``segment`` −1) where unusable."""
+class Kinematics:
+    """Handle motion in W at times ``t`` (s): position (m), unit quaternion body → world, velocity (m/s),
+    angular velocity (rad/s, world frame). NaN rows where the data are not usable."""
 
     t: np.ndarray
     position: np.ndarray
     quaternion: np.ndarray
     velocity: np.ndarray
     angular_velocity: np.ndarray
+
+
+@dataclass
+class MocapTrack(Kinematics):
+    """Processed motion capture at its native samples: NaN (and ``segment`` −1) where unusable."""
+
     segment: np.ndarray  # segment index per sample, −1 outside every usable segment
 
     @property
@@ -212,14 +220,9 @@ def process_mocap(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray) -
 
 
 @dataclass
-class PoseOnGrid:
+class PoseOnGrid(Kinematics):
     """Motion-capture quantities on a time grid; NaN where ``valid`` is False."""
 
-    t: np.ndarray
-    position: np.ndarray
-    quaternion: np.ndarray
-    velocity: np.ndarray
-    angular_velocity: np.ndarray
     valid: np.ndarray
 
 
@@ -256,11 +259,11 @@ def resample_track(track: MocapTrack, grid: np.ndarray) -> PoseOnGrid:
 def mocap_track(ctx_or_session: Any, trial_id: str) -> MocapTrack:
     """The processed ``handle_pose`` of a trial at its native samples (spec §7.4); cached on a context."""
     def build() -> MocapTrack:
-        session = _session_of(ctx_or_session)
+        session = session_of(ctx_or_session)
         pose = session.read(trial_id, "handle_pose")
         return process_mocap(pose["t"].to_numpy(), pose[POSE_COLUMNS[:3]].to_numpy(), pose[POSE_COLUMNS[3:]].to_numpy())
 
-    return _cached(ctx_or_session, ("mocap_track", trial_id), build)
+    return cached(ctx_or_session, ("mocap_track", trial_id), build)
 
 
 def pose_on_grid(ctx_or_session: Any, trial_id: str, grid: np.ndarray) -> PoseOnGrid:
@@ -268,7 +271,7 @@ def pose_on_grid(ctx_or_session: Any, trial_id: str, grid: np.ndarray) -> PoseOn
     track = mocap_track(ctx_or_session, trial_id)
     out = resample_track(track, grid)
     if not out.valid.any():
-        session = _session_of(ctx_or_session)
+        session = session_of(ctx_or_session)
         stream = session.stream(trial_id, "handle_pose")
         raise fail("E611", f"trial {trial_id!r}: no usable motion-capture samples in the analysed time span",
                    file=stream.file if stream else None, expected=f"valid runs of at least {sp('min_segment_s')} s", found="none")
@@ -278,7 +281,7 @@ def pose_on_grid(ctx_or_session: Any, trial_id: str, grid: np.ndarray) -> PoseOn
 # --- the calibrated handle signals (spec §7.5) ------------------------------------------------------
 
 @dataclass
-class HandleSignals:
+class HandleSignals(Kinematics):
     """A trial's handle signals on one uniform grid, world frame W, SI units (spec §7.5).
 
     ``force``/``torque``: the wrench the device applies to the hand, torque about the gimbal centre
@@ -289,11 +292,6 @@ class HandleSignals:
 
     trial_id: str
     rate_hz: float
-    t: np.ndarray
-    position: np.ndarray
-    quaternion: np.ndarray
-    velocity: np.ndarray
-    angular_velocity: np.ndarray
     acceleration: np.ndarray | None
     force: np.ndarray | None
     torque: np.ndarray | None
@@ -310,14 +308,6 @@ class HandleSignals:
         return np.linalg.norm(self.angular_velocity, axis=1)
 
 
-def _session_of(ctx_or_session: Any) -> Any:
-    return getattr(ctx_or_session, "session", ctx_or_session)
-
-
-def _cached(ctx_or_session: Any, key: Any, build: Any) -> Any:
-    if hasattr(ctx_or_session, "cached"):
-        return ctx_or_session.cached(key, build)
-    return build()
 
 
 def build_handle_signals(session: Any, trial_id: str, rate_hz: float, calibration: Any = None) -> HandleSignals:
@@ -359,7 +349,7 @@ def handle_signals(ctx_or_session: Any, trial_id: str, rate_hz: float | None = N
     Cached on a ComputeContext under ``("handle_signals", trial_id, rate_hz)``.
     """
     rate = float(sp("rate_hz")) if rate_hz is None else float(rate_hz)
-    session = _session_of(ctx_or_session)
+    session = session_of(ctx_or_session)
 
     def build() -> HandleSignals:
         cal = None
@@ -367,7 +357,7 @@ def handle_signals(ctx_or_session: Any, trial_id: str, rate_hz: float | None = N
             cal = cal_mod.handle_calibration(ctx_or_session)
         return build_handle_signals(session, trial_id, rate, cal)
 
-    return _cached(ctx_or_session, ("handle_signals", trial_id, rate), build)
+    return cached(ctx_or_session, ("handle_signals", trial_id, rate), build)
 
 
 @dataclass
@@ -389,7 +379,7 @@ def handle_accel_native(ctx_or_session: Any, trial_id: str) -> NativeAccel:
     motion capture (§7.4), NaN where motion capture is unusable or absent. Cached on a context.
     """
     def build() -> NativeAccel:
-        session = _session_of(ctx_or_session)
+        session = session_of(ctx_or_session)
         a = session.read(trial_id, "handle_accel")
         t = a["t"].to_numpy()
         cal = cal_mod.handle_calibration(ctx_or_session)
@@ -403,4 +393,4 @@ def handle_accel_native(ctx_or_session: Any, trial_id: str) -> NativeAccel:
             world[valid] = cal_mod.compensate_accel(raw, pose.quaternion[valid], cal, cal_mod.sensor_pose(session, "accelerometer"))
         return NativeAccel(t=t, acceleration=world, sensor=sensor, valid=valid, rate_hz=nominal_rate(t))
 
-    return _cached(ctx_or_session, ("handle_accel_native", trial_id), build)
+    return cached(ctx_or_session, ("handle_accel_native", trial_id), build)
