@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
+from haptify.caching import cached, session_of
 from haptify.errors import fail
 from haptify.metric_definitions import param
 from haptify.repetitions import TrialValue, aggregate, per_trial, unavailable
@@ -125,15 +126,11 @@ def combine(t: np.ndarray, accel: np.ndarray, trial_id: str = "") -> CombinedVib
 
 def trial_vibration(ctx_or_session: Any, trial_id: str) -> CombinedVibration:
     """:func:`combine` on a trial's raw ``handle_accel`` stream (spec §10.6); cached on a ComputeContext."""
-    session = getattr(ctx_or_session, "session", ctx_or_session)
-
     def build() -> CombinedVibration:
-        df = session.read(trial_id, "handle_accel")
+        df = session_of(ctx_or_session).read(trial_id, "handle_accel")
         return combine(df["t"].to_numpy(), df[ACCEL_COLUMNS].to_numpy(), trial_id)
 
-    if hasattr(ctx_or_session, "cached"):
-        return ctx_or_session.cached(("vibration", trial_id), build)
-    return build()
+    return cached(ctx_or_session, ("vibration", trial_id), build)
 
 
 def compute(ctx: Any) -> list:

@@ -1,0 +1,174 @@
+"""Global free-space forces (spec chapter 9).
+
+From the slow free-space wandering with the device off (paper §IV-B, §V-B): statistics of the force the
+device applies to the hand, the force-plate force about its mean weight, the examiner's speeds with
+protocol-compliance warnings, and the spatial force field (mean force vector per position bin).
+Parameters: ``schemas/<v>/metrics/free_space.json``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from haptify.caching import cached
+from haptify.errors import fail
+from haptify.force_plate import plate_signals
+from haptify.metric_definitions import param
+from haptify.repetitions import TrialValue, aggregate, per_trial, unavailable
+from haptify.signals import handle_signals, lowpass_resample, mocap_track, sp, uniform_grid
+
+FAMILY = "free_space"
+PROTOCOL = "free_space"
+FORCE_IDS = ("free_space.force_mean", "free_space.force_sd", "free_space.force_min", "free_space.force_max")
+SPEED_IDS = ("free_space.speed_mean", "free_space.angular_speed_mean")
+PLATE_ID = "free_space.plate_force_mean"
+
+
+def fp(key: str) -> Any:
+    """A parameter of the free-space family (spec §9.1)."""
+    return param(FAMILY, key)
+
+
+def magnitude_stats(force: np.ndarray) -> dict[str, float]:
+    """Mean, sample sd (ddof = 1), min and max of |F| over the rows of ``force (N, 3)`` in N (spec §9.2)."""
+    mag = np.linalg.norm(np.asarray(force, dtype=float), axis=1)
+    if len(mag) < 2:
+        raise fail("E611", "fewer than two usable force samples", expected=">= 2", found=len(mag))
+    return {"mean": float(mag.mean()), "sd": float(mag.std(ddof=1)), "min": float(mag.min()), "max": float(mag.max())}
+
+
+def plate_force_about_weight(force: np.ndarray) -> np.ndarray:
+    """Plate force minus (0, 0, mean P_z) — the weight of the device parts resting on the plate (spec §9.3)."""
+    force = np.asarray(force, dtype=float)
+    return force - np.array([0.0, 0.0, force[:, 2].mean()])
+
+
+def exceedance(values: np.ndarray, limit: float) -> float:
+    """Share of ``values`` above ``limit`` (spec §9.4)."""
+    values = np.asarray(values, dtype=float)
+    return float(np.mean(values > limit)) if len(values) else 0.0
+
+
+@dataclass
+class ForceField:
+    """Mean force vector per position bin (spec §9.5): bin centres (m, W), mean force (N), sample counts."""
+
+    bin_m: float
+    centres: np.ndarray
+    mean_force: np.ndarray
+    counts: np.ndarray
+
+    def to_dict(self) -> dict:
+        return {"bin_m": self.bin_m,
+                "bins": [{"centre_m": [round(float(x), 6) for x in c], "mean_force_N": [round(float(x), 6) for x in f], "n": int(n)}
+                         for c, f, n in zip(self.centres, self.mean_force, self.counts)]}
+
+
+def force_field(position: np.ndarray, force: np.ndarray, *, bin_m: float | None = None, min_samples: int | None = None) -> ForceField:
+    """Bin ``force (N, 3)`` by ``position (N, 3)`` on the W-anchored lattice of edge ``force_field_bin_m`` and
+    average each bin holding at least ``force_field_min_samples`` samples (spec §9.5); bins sorted by index."""
+    b = float(fp("force_field_bin_m") if bin_m is None else bin_m)
+    k_min = int(fp("force_field_min_samples") if min_samples is None else min_samples)
+    position = np.asarray(position, dtype=float)
+    force = np.asarray(force, dtype=float)
+    if len(position) == 0:
+        return ForceField(b, np.empty((0, 3)), np.empty((0, 3)), np.empty(0, dtype=int))
+    idx = np.floor(position / b).astype(np.int64)
+    keys, inv, counts = np.unique(idx, axis=0, return_inverse=True, return_counts=True)
+    inv = inv.ravel()
+    sums = np.stack([np.bincount(inv, weights=force[:, k], minlength=len(keys)) for k in range(3)], axis=1)
+    keep = counts >= k_min
+    return ForceField(b, (keys[keep] + 0.5) * b, sums[keep] / counts[keep, None], counts[keep])
+
+
+# --- session level (spec §9.6) -------------------------------------------------------------------
+
+def hand_force_samples(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
+    """Calibrated hand force (N) and gimbal position (m), W, at a trial's usable samples (chapter 7)."""
+    hs = handle_signals(ctx, trial_id)
+    if hs.force is None:
+        raise fail("E302", f"trial {trial_id!r} has no handle_wrench stream", file="session.json", expected="handle_wrench", found=None)
+    ok = hs.valid & np.all(np.isfinite(hs.force), axis=1)
+    if ok.sum() < 2:
+        raise fail("E611", f"trial {trial_id!r} has no usable samples with motion capture and force", expected=">= 2 samples", found=int(ok.sum()))
+    return hs.force[ok], hs.position[ok]
+
+
+def plate_force_samples(ctx: Any, trial_id: str) -> np.ndarray:
+    """Bias-removed total plate force (N, W) low-passed at the handle-force cut-off and resampled onto the
+    trial's uniform grid at the common rate (spec §9.3; chapter 7 rules)."""
+    def build() -> np.ndarray:
+        plate = plate_signals(ctx, trial_id)
+        grid = uniform_grid(float(plate.t[0]), float(plate.t[-1]), float(sp("rate_hz")))
+        return lowpass_resample(plate.t, plate.force, grid, float(sp("wrench_cutoff_hz")))
+
+    return cached(ctx, ("free_space_plate", trial_id), build)
+
+
+def speeds(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
+    """Speed (m/s) and angular speed (rad/s) at the usable motion-capture samples of a trial (chapter 7)."""
+    track = mocap_track(ctx, trial_id)
+    ok = track.valid & np.all(np.isfinite(track.velocity), axis=1) & np.all(np.isfinite(track.angular_velocity), axis=1)
+    if not ok.any():
+        raise fail("E611", f"trial {trial_id!r} has no usable motion-capture samples", expected="usable handle_pose samples", found=0)
+    return np.linalg.norm(track.velocity[ok], axis=1), np.linalg.norm(track.angular_velocity[ok], axis=1)
+
+
+def _speed_summary(ctx: Any, trial_id: str) -> dict:
+    v, w = speeds(ctx, trial_id)
+    out = {"speed": float(v.mean()), "angular": float(w.mean()), "codes": [],
+           "over_speed": exceedance(v, float(fp("speed_limit_m_per_s"))),
+           "over_angular": exceedance(w, float(fp("angular_speed_limit_rad_per_s")))}
+    limit = float(fp("max_fraction_over_limit"))
+    if out["over_speed"] > limit:
+        out["codes"].append("W411")
+        ctx.warn("W411", f"trial {trial_id!r}: {out['over_speed']:.0%} of the samples exceed {fp('speed_limit_m_per_s')} m/s",
+                 metric="free_space.speed_mean", trial=trial_id)
+    if out["over_angular"] > limit:
+        out["codes"].append("W412")
+        ctx.warn("W412", f"trial {trial_id!r}: {out['over_angular']:.0%} of the samples exceed "
+                 f"{np.degrees(float(fp('angular_speed_limit_rad_per_s'))):.3g} deg/s", metric="free_space.angular_speed_mean", trial=trial_id)
+    return out
+
+
+def compute(ctx: Any) -> list:
+    """Every free-space metric the session allows (spec §9.6)."""
+    trials = [t.id for t in ctx.session.trials_of(PROTOCOL)]
+    ids = FORCE_IDS + (PLATE_ID,) + SPEED_IDS
+    if not trials:
+        err = fail("E310", "the session has no free_space trial", expected="a trial of protocol 'free_space'", found=None)
+        return [unavailable(m, err) for m in ids if ctx.wants(m)]
+    out: list = []
+    compliance: dict[str, list[str]] = {}
+    if any(ctx.wants(m) for m in SPEED_IDS + FORCE_IDS):
+        done, first = per_trial(ctx, trials, lambda tid: _speed_summary(ctx, tid), "free_space.speed_mean")
+        compliance = {tid: d["codes"] for tid, d in done.items()}
+        if done:
+            diag = {"share_over_speed_limit": [d["over_speed"] for d in done.values()],
+                    "share_over_angular_speed_limit": [d["over_angular"] for d in done.values()]}
+            out.append(aggregate(FAMILY, "free_space.speed_mean", [TrialValue(t, d["speed"], d["codes"]) for t, d in done.items()], diagnostics=diag))
+            out.append(aggregate(FAMILY, "free_space.angular_speed_mean", [TrialValue(t, d["angular"], d["codes"]) for t, d in done.items()], diagnostics=diag))
+        else:
+            out += [unavailable(m, first) for m in SPEED_IDS]
+    if any(ctx.wants(m) for m in FORCE_IDS):
+        done, first = per_trial(ctx, trials, lambda tid: hand_force_samples(ctx, tid), "free_space.force_mean")
+        if done:
+            stats = {tid: magnitude_stats(f) for tid, (f, _) in done.items()}
+            field = force_field(np.concatenate([p for _, p in done.values()]), np.concatenate([f for f, _ in done.values()]))
+            for metric_id in FORCE_IDS:
+                key = metric_id.rsplit("_", 1)[1]
+                diag = {"force_field": field.to_dict()} if key == "mean" else {}
+                out.append(aggregate(FAMILY, metric_id, [TrialValue(t, s[key], compliance.get(t, [])) for t, s in stats.items()], diagnostics=diag))
+        else:
+            out += [unavailable(m, first) for m in FORCE_IDS]
+    if ctx.wants(PLATE_ID):
+        done, first = per_trial(ctx, trials, lambda tid: plate_force_samples(ctx, tid), PLATE_ID)
+        if done:
+            out.append(aggregate(FAMILY, PLATE_ID, [TrialValue(t, float(np.linalg.norm(plate_force_about_weight(f), axis=1).mean()), compliance.get(t, []))
+                                                    for t, f in done.items()]))
+        else:
+            out.append(unavailable(PLATE_ID, first))
+    return out
