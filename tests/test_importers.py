@@ -553,3 +553,86 @@ def test_spec_unit_table_matches_the_normative_json():
         assert row[1] == ", ".join(f"`{s}`" for s in unit["spellings"])
         assert float(row[2]) == unit["mul"] and float(row[3]) == unit["div"]
         assert row[4] == unit.get("note", "")
+
+
+# --- appending a trial to an existing session (spec §5.9) ----------------------------------------
+
+def unchanged(folder: Path):
+    """A snapshot of a folder's files and bytes, to show a refused append changed nothing."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@needs_c3d
+def test_append_a_second_recording_as_another_trial(tmp_path, capsys):
+    out = tmp_path / "q"
+    import_c3d(QUALISYS, out, FIX / "qualisys-map.json", overrides=DATE)
+    before = unchanged(out)
+    code, _, err = run_cli(["import", "c3d", str(QUALISYS), "-o", str(out), "--map", str(FIX / "qualisys-map.json"),
+                            "--append", "--date", "2026-11-22", "--trial-id", "gait-2", "--repetition", "2"], capsys)
+    assert code == 0, err
+    assert_valid(out)
+    after = unchanged(out)
+    assert all(after[name] == data for name, data in before.items() if name != "session.json")
+    session = open_session(out)
+    assert [(t.id, t.repetition) for t in session.trials] == [("qualisys-gait", 1), ("gait-2", 2)]
+    first, second = (session.read(t, "markers") for t in ("qualisys-gait", "gait-2"))
+    assert first.equals(second)
+    assert json.loads(before["session.json"])["rig"] == session.raw["rig"]
+
+
+@needs_c3d
+def test_refused_appends_change_nothing(tmp_path):
+    out = tmp_path / "q"
+    import_c3d(QUALISYS, out, FIX / "qualisys-map.json", overrides=DATE)
+    before = unchanged(out)
+    cases = [
+        ("E107", QUALISYS, {**DATE}),  # the trial id exists
+        ("E502", QUALISYS, {"session": {"date": "2026-11-23"}, "trial": {"id": "t2"}}),  # another sitting
+        ("E502", VICON, {"session": {"date": "2026-11-22", "session_id": "qualisys-demo"},  # no platform: its
+                         "trial": {"id": "t3"}}),                              # markers would not be in the session's W
+    ]
+    for code, source, overrides in cases:
+        with pytest.raises(HaptifyError) as err:
+            import_c3d(source, out, FIX / ("vicon-map.json" if source == VICON else "qualisys-map.json"),
+                       overrides=overrides, append=True)
+        assert err.value.code == code, str(err.value)
+        if source == VICON:
+            assert "lab frame" in str(err.value)
+        assert unchanged(out) == before
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["q"]  # no staging folder left
+    with pytest.raises(HaptifyError) as err:
+        import_c3d(QUALISYS, tmp_path / "absent", FIX / "qualisys-map.json", overrides=DATE, append=True)
+    assert err.value.code == "E101"
+    with pytest.raises(HaptifyError) as err:
+        import_c3d(QUALISYS, out, FIX / "qualisys-map.json", overrides=DATE, append=True, overwrite=True)
+    assert err.value.code == "E903"
+
+
+def test_append_unites_marker_lists_and_adds_rig_parts(tmp_path, synthetic):
+    path, truth = synthetic
+    base = {"source": "c3d", **FACTS, "trial": {"id": "a", "powered": False}, "markers": {"include": ["rig:h1"]}}
+    import_c3d(path, tmp_path / "s", write_map(tmp_path, "a.json", base))
+    second = {"source": "c3d", "trial": {"id": "b", "powered": False}, "markers": {"include": ["h2", "[*]3"]},
+              "session": {"rig": {"handle": example_rig()["handle"]}}}
+    import_c3d(path, tmp_path / "s", write_map(tmp_path, "b.json", second), append=True)
+    assert_valid(tmp_path / "s")
+    session = open_session(tmp_path / "s")
+    assert session.manifest.rig.motion_capture.markers == ["rig.h1", "h2", "m_3"]
+    assert session.manifest.rig.handle is not None and session.manifest.rig.force_plate is not None
+    assert session.stream("b", "markers").entities == ["h2", "m_3"]
+    other_rate = {**second, "trial": {"id": "c", "powered": False},
+                  "session": {"rig": {"handle": {**example_rig()["handle"], "ft_sensor": {
+                      "pose": {"position": [0.0, 0.0, -0.04], "quaternion": [1.0, 0.0, 0.0, 0.0]}}}}}}
+    err = expect_code(tmp_path, "E502", import_c3d, path, tmp_path / "s", write_map(tmp_path, "c.json", other_rate),
+                      append=True)
+    assert err.findings[0].pointer == "/session/rig/handle"
+
+
+def test_append_csv_log_to_a_csv_session(tmp_path):
+    import_csv(FIX / "chai3d-log.csv", tmp_path / "s", FIX / "chai3d-map.json")
+    import_csv(FIX / "ati-log.csv", tmp_path / "s", FIX / "ati-map.json",
+               overrides={"session": {"session_id": "chai3d-log-demo"}}, append=True)
+    assert_valid(tmp_path / "s")
+    session = open_session(tmp_path / "s")
+    assert [t.id for t in session.trials] == ["chai3d-plane", "ati-log"]
+    assert session.manifest.rig.handle is not None

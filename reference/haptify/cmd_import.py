@@ -3,16 +3,17 @@
 With ``--map`` the map supplies every fact the source does not hold; the options below override the
 map's fields (one map, many files). Without a map (C3D only) the options must supply them: ``--device``,
 ``--lab``, ``--examiner``, ``--date``, ``--placement`` and ``--powered``; the file's markers (and its
-first force platform) become an ``other`` trial labelled with the file's name. ``--list`` describes a C3D
-file (labels, units, rates, platforms) without writing anything.
+first force platform) become an ``other`` trial labelled with the file's name. ``--append`` adds the
+file as one more trial of an existing session, whose facts fill what the map and options leave out.
+``--list`` describes a C3D file (labels, units, rates, platforms) without writing anything.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from haptify.errors import fail
-from haptify.importers import import_c3d, import_csv, load_map, read_c3d
+from haptify.errors import HaptifyError, fail
+from haptify.importers import Destination, import_c3d, import_csv, load_map, read_c3d
 from haptify.validation import validate_session
 
 # option name -> the map field it fills (for the error that lists what is missing without a map)
@@ -33,6 +34,8 @@ def register(sub) -> None:
         q.add_argument("-o", "--output", type=Path, help="the session folder to create")
         q.add_argument("--map", type=Path, required=(fmt == "csv"), help="import map (JSON; import-map.schema.json)")
         q.add_argument("--overwrite", action="store_true", help="replace an existing session folder")
+        q.add_argument("--append", action="store_true",
+                       help="add the file as one more trial of the existing session SESSION (its facts need not be repeated)")
         g = q.add_argument_group("session facts (override the map; required for a C3D without --map)")
         g.add_argument("--device", type=Path, help="device description (device.json), copied into the session")
         g.add_argument("--lab", help="pseudonymous lab id")
@@ -91,11 +94,9 @@ def overrides_from(args) -> dict:
     return out
 
 
-def _load(args, fmt: str):
-    from haptify.errors import HaptifyError
-
+def _load(args, fmt: str, facts: dict | None):
     try:
-        return load_map(args.map, fmt, overrides_from(args))
+        return load_map(args.map, fmt, overrides_from(args), facts)
     except HaptifyError as err:
         if args.map is not None:
             raise
@@ -125,10 +126,11 @@ def run(args, ui) -> int:
         return 0
     if args.output is None:
         raise fail("E903", f"haptify import {fmt} needs -o SESSION", expected="-o SESSION", found=None)
-    loaded = _load(args, fmt)
+    dest = Destination.of(args.output, overwrite=args.overwrite, append=args.append)
+    loaded = _load(args, fmt, dest.session_facts())
     importer = import_c3d if fmt == "c3d" else import_csv
     with ui.progress(f"importing {args.file.name}", total=None):
-        result = importer(args.file, args.output, loaded, overwrite=args.overwrite)
+        result = importer(args.file, dest, loaded)
         report = validate_session(result.session)
     if ui.json_mode:
         ui.emit_json({**result.to_dict(), "validation": {"valid": report.valid,

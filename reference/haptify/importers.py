@@ -15,9 +15,12 @@ a unit cannot be converted; E901 the output exists. Every check runs before anyt
 from __future__ import annotations
 
 import fnmatch
+import json
 import math
 import re
+import shutil
 import struct
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Callable, Literal, Union
@@ -38,10 +41,21 @@ from haptify.session_format import (
     Rendering,
     Rig,
     RigidBody,
+    Session,
     expected_columns,
     kind_table,
 )
-from haptify.storage import SessionWriter, parse_json_file, pydantic_findings
+from haptify.storage import (
+    MANIFEST,
+    SessionFolder,
+    SessionWriter,
+    atomic_write_json,
+    open_session,
+    parse_json_file,
+    pydantic_findings,
+    replace_folder_atomically,
+    resolve_inside,
+)
 from haptify.versions import PACKAGE_VERSION
 
 # --- units (spec §5.3) ---------------------------------------------------------------------------
@@ -221,11 +235,13 @@ class LoadedMap:
     label: str
 
 
-def load_map(path: str | Path | None, source: str, overrides: dict | None = None) -> LoadedMap:
+def load_map(path: str | Path | None, source: str, overrides: dict | None = None,
+             session_facts: dict | None = None) -> LoadedMap:
     """Read and validate an import map (spec §5.2); ``overrides`` is deep-merged over the file's JSON.
 
-    E502 on a missing or malformed file, a schema violation (one finding per problem, with JSON
-    pointer) or a map written for the other importer.
+    ``session_facts`` (appending, §5.9) fill the ``session`` members the map leaves out. E502 on a
+    missing or malformed file, a schema violation (one finding per problem, with JSON pointer) or a
+    map written for the other importer.
     """
     if path is None:
         raw: Any = {"source": source}
@@ -240,6 +256,9 @@ def load_map(path: str | Path | None, source: str, overrides: dict | None = None
     if not isinstance(raw, dict):
         raise fail("E502", "an import map is a JSON object", file=label, expected="object", found=type(raw).__name__)
     raw = _deep_merge(raw, overrides or {})
+    if session_facts is not None:
+        given = raw.get("session") if isinstance(raw.get("session"), dict) else {}
+        raw["session"] = {**{k: v for k, v in session_facts.items() if k not in given}, **given}
     session = raw.get("session")
     no_date = None
     if not isinstance(session, dict) or session.get("date") is None:
@@ -617,21 +636,21 @@ def _check_trial_streams(m: ImportMap, kinds: list[str], label: str) -> None:
                    pointer="/trial/rendering", expected="rendering parameters", found=None)
 
 
-def _resolve_device(m: ImportMap, base: Path, label: str) -> tuple[dict, dict[str, str]]:
-    """The manifest's device member and the extra files (device.json) to write with the session."""
+def _resolve_device(m: ImportMap, base: Path, label: str) -> tuple[Device, dict, dict[str, str]]:
+    """The device, the manifest's device member and the extra files (device.json) to write with it."""
     dev = m.session.device
     if isinstance(dev, Device):
-        return dev.model_dump(mode="json", exclude_none=True), {}
+        return dev, dev.model_dump(mode="json", exclude_none=True), {}
     path = (base / dev.file) if not Path(dev.file).is_absolute() else Path(dev.file)
     where = {"file": label, "pointer": "/session/device/file"}
     if not path.is_file():
         raise fail("E502", f"device file {str(path)!r} does not exist", expected="a device.json", found=dev.file, **where)
     data = parse_json_file(path, "E502", str(path))
     try:
-        Device.model_validate(data)
+        model = Device.model_validate(data)
     except ValidationError as exc:
         raise HaptifyError(*pydantic_findings(exc, "E502", str(path))) from None
-    return {"file": "device.json"}, {"device.json": path.read_text(encoding="utf-8")}
+    return model, {"file": "device.json"}, {"device.json": path.read_text(encoding="utf-8")}
 
 
 @dataclass
@@ -650,15 +669,165 @@ class ImportResult:
                 "streams": self.streams, "world_frame": self.world_frame, "source": self.source}
 
 
-def _writer_for(m: ImportMap, source: Path, rig: dict, device: dict, extra: dict[str, str], recorder: str) -> tuple[SessionWriter, str]:
-    stem = sanitize_id(source.stem, "import")
-    manifest = {
-        "session_id": m.session.session_id or stem, "date": m.session.date,
-        "lab": m.session.lab.model_dump(), "examiner": m.session.examiner.model_dump(),
-        "device": device, "device_placement": m.session.device_placement.model_dump(),
-        "rig": rig, "recorder": recorder,
-    }
-    return SessionWriter(manifest=manifest, extra_files=extra), stem
+@dataclass
+class Destination:
+    """Where an import goes (spec §5.8–5.9): a new session folder, or one more trial of an existing one."""
+
+    out: Path
+    overwrite: bool = False
+    existing: SessionFolder | None = None
+
+    @classmethod
+    def of(cls, out: str | Path, *, overwrite: bool = False, append: bool = False) -> "Destination":
+        """Check the output before any work: E901 when a new session's folder exists (unless
+        ``overwrite``); when appending, the folder must hold a readable session (E101–E105)."""
+        out = Path(out)
+        if append:
+            if overwrite:
+                raise fail("E903", "append and overwrite exclude each other", expected="one of them", found="both")
+            return cls(out, existing=open_session(out))
+        if out.exists() and not overwrite:
+            raise fail("E901", f"{str(out)!r} already exists", file=str(out), expected="a new path or --overwrite",
+                       found="exists")
+        return cls(out, overwrite=overwrite)
+
+    def session_facts(self) -> dict | None:
+        """The existing session's facts, which fill what the map leaves out when appending (§5.9)."""
+        if self.existing is None:
+            return None
+        man = self.existing.manifest
+        return {"session_id": man.session_id, "date": man.date, "lab": man.lab.model_dump(),
+                "examiner": man.examiner.model_dump(), "device": self.existing.device().model_dump(mode="json", exclude_none=True),
+                "device_placement": man.device_placement.model_dump()}
+
+    def check_facts(self, m: ImportMap, device: Device, label: str) -> None:
+        """Appending: every session fact the map states must be the session's own (E502)."""
+        if self.existing is None:
+            return
+        man = self.existing.manifest
+        for key in ("session_id", "date", "lab", "examiner", "device_placement"):
+            mine, theirs = getattr(m.session, key), getattr(man, key)
+            if mine != theirs:
+                raise fail("E502", f"the map's session.{key} differs from the session it appends to", file=label,
+                           pointer=f"/session/{key}", expected=_plain(theirs), found=_plain(mine))
+        if device != self.existing.device():
+            raise fail("E502", "the map's device differs from the session's device", file=label,
+                       pointer="/session/device", expected=self.existing.device().model, found=device.model)
+
+    def rig(self, new_rig: dict, world_rule: str | None, label: str) -> dict:
+        """The rig to write: a new session's own, or the existing rig with this import's parts merged."""
+        if self.existing is None:
+            return new_rig
+        return merge_rig(self.existing, new_rig, world_rule, label)
+
+    def writer(self, m: ImportMap, source: Path, rig: dict, device: dict, extra: dict[str, str],
+               recorder: str) -> tuple[SessionWriter, str]:
+        """A writer holding the session-level manifest; the trial and streams are added by the caller."""
+        stem = sanitize_id(source.stem, "import")
+        if self.existing is not None:
+            manifest = {k: v for k, v in self.existing.raw.items() if k not in ("spec_version", "trials")}
+            return SessionWriter(manifest={**manifest, "rig": rig}), stem
+        manifest = {
+            "session_id": m.session.session_id or stem, "date": m.session.date,
+            "lab": m.session.lab.model_dump(), "examiner": m.session.examiner.model_dump(),
+            "device": device, "device_placement": m.session.device_placement.model_dump(),
+            "rig": rig, "recorder": recorder,
+        }
+        return SessionWriter(manifest=manifest, extra_files=extra), stem
+
+    def write(self, writer: SessionWriter, trial_id: str) -> Path:
+        """Write atomically: a new folder, or the existing one with the trial appended (§3.6, §5.9)."""
+        if self.existing is None:
+            return writer.write(self.out, overwrite=self.overwrite)
+        if any(t.id == trial_id for t in self.existing.trials):
+            raise fail("E107", f"the session already has a trial {trial_id!r}", file=MANIFEST, pointer="/trials",
+                       expected="a new trial id (--trial-id)", found=trial_id)
+        return append_trial(writer, self.existing)
+
+
+def _plain(value: Any) -> Any:
+    return value.model_dump() if isinstance(value, BaseModel) else value
+
+
+def merge_rig(existing: SessionFolder, new_rig: dict, world_rule: str | None, label: str) -> dict:
+    """The existing session's rig with an appended import's rig parts (spec §5.9).
+
+    A part the session already describes must be identical (E502), except ``motion_capture``, whose
+    marker lists and rigid bodies are united (same rate and system required). W must not change:
+    a platform cannot be added to a session whose trials already hold world-frame streams, and a
+    C3D file imported in its lab frame cannot join a session whose W is its force plate (E502).
+    """
+    old = existing.manifest.rig.model_dump(mode="json", exclude_none=True)
+    if "force_plate" in old and world_rule == "lab":
+        raise fail("E502", "the session's W is the centre of its force plate; this file would be imported in its lab "
+                   "frame: choose its force platform or give lab_to_world", file=label, pointer="/force_plate",
+                   expected="a platform or lab_to_world", found="none")
+    merged = dict(old)
+    world_streams = [s.file for t in existing.trials for s in t.streams if s.frame == "world"]
+    for key, part in new_rig.items():
+        pointer = f"/session/rig/{key}"
+        if key == "motion_capture" and key in old:
+            merged[key] = _merge_motion_capture(old[key], part, label)
+        elif key in old and old[key] != part:
+            raise fail("E502", f"rig.{key} of this import differs from the session's", file=label, pointer=pointer,
+                       expected=old[key], found=part)
+        elif key == "force_plate" and key not in old and world_streams:
+            raise fail("E502", "this import's force platform would define W, but the session's world-frame streams "
+                       "use a W without a plate", file=label, pointer=pointer, expected="force_plate 'none'",
+                       found=world_streams[0])
+        else:
+            merged[key] = part
+    return merged
+
+
+def _merge_motion_capture(old: dict, new: dict, label: str) -> dict:
+    pointer = "/session/rig/motion_capture"
+    for key in ("rate_hz", "system"):
+        if key in old and key in new and old[key] != new[key]:
+            raise fail("E502", f"motion-capture {key} differs from the session's", file=label, pointer=f"{pointer}/{key}",
+                       expected=old[key], found=new[key])
+    bodies = {b["name"]: b for b in old.get("rigid_bodies", [])}
+    for body in new.get("rigid_bodies", []):
+        if body["name"] in bodies and bodies[body["name"]] != body:
+            raise fail("E502", f"rigid body {body['name']!r} differs from the session's", file=label,
+                       pointer=f"/markers/rigid_bodies", expected=bodies[body["name"]], found=body)
+        bodies.setdefault(body["name"], body)
+    markers = list(old.get("markers", []))
+    markers += [e for e in new.get("markers", []) if e not in markers]
+    return {**new, **old, "markers": markers, "rigid_bodies": list(bodies.values())}
+
+
+def append_trial(writer: SessionWriter, existing: SessionFolder) -> Path:
+    """Append the writer's single trial to ``existing`` atomically (spec §5.9): the new trial is written
+    alone to a staging folder (streams, checksums, manifest check), the session is copied beside itself,
+    the new stream files are added, the manifest is re-validated and the copy replaces the original."""
+    target = existing.root
+    staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.new-", dir=target.parent))
+    build = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
+    try:
+        writer.write(staging / "trial")
+        [trial] = json.loads((staging / "trial" / MANIFEST).read_text(encoding="utf-8"))["trials"]
+        shutil.copytree(target, build, symlinks=True, dirs_exist_ok=True)
+        for stream in trial["streams"]:
+            dst = resolve_inside(build, stream["file"])
+            if dst.exists():
+                raise fail("E107", f"the session already holds a file {stream['file']!r}", file=stream["file"],
+                           expected="a new stream file", found=stream["file"])
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(staging / "trial" / stream["file"], dst)
+        manifest = {**existing.raw, "rig": writer.manifest["rig"], "trials": [*existing.raw["trials"], trial]}
+        try:
+            Session.model_validate(manifest)
+        except ValidationError as exc:
+            raise HaptifyError(*pydantic_findings(exc, "E104", MANIFEST)) from None
+        atomic_write_json(build / MANIFEST, manifest)
+        replace_folder_atomically(build, target, overwrite=True)
+    except BaseException:
+        shutil.rmtree(build, ignore_errors=True)
+        raise
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return target
 
 
 def _add_trial(writer: SessionWriter, m: ImportMap, stem: str, source: Path, provenance: str) -> str:
@@ -669,12 +838,6 @@ def _add_trial(writer: SessionWriter, m: ImportMap, stem: str, source: Path, pro
     writer.add_trial(trial_id, t.protocol, powered=t.powered, repetition=t.repetition, label=label,
                      rendering=t.rendering.model_dump(exclude_none=True) if t.rendering else None, notes=notes)
     return trial_id
-
-
-def _precheck_output(out: Path, overwrite: bool) -> None:
-    if out.exists() and not overwrite:
-        raise fail("E901", f"{str(out)!r} already exists", file=str(out), expected="a new path or --overwrite",
-                   found="exists")
 
 
 def _stream_summary(stream: dict) -> dict:
@@ -728,18 +891,27 @@ def _analog_reader(c3d: C3DContent, label: str) -> SourceReader:
     return read
 
 
-def import_c3d(path: str | Path, out: str | Path, mapping: str | Path | LoadedMap | None = None, *,
-               overrides: dict | None = None, overwrite: bool = False) -> ImportResult:
-    """Import a C3D file as one trial of a new session at ``out`` (spec §5.5).
+def _prepare(out: str | Path | Destination, mapping: str | Path | LoadedMap | None, source: str, overrides: dict | None,
+             overwrite: bool, append: bool) -> tuple[Destination, LoadedMap, Device, dict, dict[str, str]]:
+    """Destination, map and device of an import, all checked before the source is read."""
+    dest = out if isinstance(out, Destination) else Destination.of(out, overwrite=overwrite, append=append)
+    loaded = mapping if isinstance(mapping, LoadedMap) else load_map(mapping, source, overrides, dest.session_facts())
+    model, device, extra = _resolve_device(loaded.map, loaded.base_dir, loaded.label)
+    dest.check_facts(loaded.map, model, loaded.label)
+    return dest, loaded, model, device, extra
+
+
+def import_c3d(path: str | Path, out: str | Path | Destination, mapping: str | Path | LoadedMap | None = None, *,
+               overrides: dict | None = None, overwrite: bool = False, append: bool = False) -> ImportResult:
+    """Import a C3D file as one trial of a new session at ``out`` (spec §5.5), or append it as one
+    more trial to the session at ``out`` (``append``, §5.9).
 
     Markers become a ``markers`` stream (POINT:UNITS → m, residual < 0 → NaN), in W (§5.6); analog
     channels become the streams the map names (§5.3); a chosen force platform becomes the rig's plate.
     ``mapping`` is a map file, an already loaded map, or None (then ``overrides`` must hold every
     required session and trial field). Nothing is written when any check fails.
     """
-    out = Path(out)
-    _precheck_output(out, overwrite)
-    loaded = mapping if isinstance(mapping, LoadedMap) else load_map(mapping, "c3d", overrides)
+    dest, loaded, _, device, extra = _prepare(out, mapping, "c3d", overrides, overwrite, append)
     m, label = loaded.map, loaded.label
     c3d = read_c3d(path)
     src = str(c3d.path)
@@ -819,9 +991,10 @@ def import_c3d(path: str | Path, out: str | Path, mapping: str | Path | LoadedMa
         raise fail("E502", f"nothing to import from {c3d.path.name}: no markers selected and no streams mapped", file=label,
                    pointer="/streams", expected="markers or mapped analog streams", found=None)
     _check_trial_streams(m, kinds, label)
-    device, extra = _resolve_device(m, loaded.base_dir, label)
+    world_rule = ("plate" if plate_number is not None else "pose" if world is not None else "lab") if chosen else None
+    rig = dest.rig(rig, world_rule, label)
     recorder = f"haptify {PACKAGE_VERSION} import c3d" + (f" ({c3d.manufacturer})" if c3d.manufacturer else "")
-    writer, stem = _writer_for(m, c3d.path, rig, device, extra, recorder)
+    writer, stem = dest.writer(m, c3d.path, rig, device, extra, recorder)
     provenance = f"Imported from {c3d.path.name} by haptify {PACKAGE_VERSION}. {frame_note}."
     trial_id = _add_trial(writer, m, stem, c3d.path, provenance)
     written = []
@@ -831,8 +1004,8 @@ def import_c3d(path: str | Path, out: str | Path, mapping: str | Path | LoadedMa
     for kind, cols in analog_streams.items():
         smap = m.streams[kind]
         written.append(writer.add_stream(trial_id, kind, cols, rate_hz=c3d.analog_rate, fmt=smap.format, frame=smap.frame))
-    writer.write(out, overwrite=overwrite)
-    return ImportResult(out, writer.manifest["session_id"], trial_id, [_stream_summary(s) for s in written],
+    dest.write(writer, trial_id)
+    return ImportResult(dest.out, writer.manifest["session_id"], trial_id, [_stream_summary(s) for s in written],
                         frame_note, c3d.summary())
 
 
@@ -882,16 +1055,15 @@ def read_csv_columns(path: Path, names: list[str], opts: CsvOptions, *, map_labe
     return out
 
 
-def import_csv(path: str | Path, out: str | Path, mapping: str | Path | LoadedMap, *, overrides: dict | None = None,
-               overwrite: bool = False) -> ImportResult:
-    """Import a column-mapped CSV log as one trial of a new session at ``out`` (spec §5.7).
+def import_csv(path: str | Path, out: str | Path | Destination, mapping: str | Path | LoadedMap, *,
+               overrides: dict | None = None, overwrite: bool = False, append: bool = False) -> ImportResult:
+    """Import a column-mapped CSV log as one trial of a new session at ``out`` (spec §5.7), or append
+    it as one more trial to the session at ``out`` (``append``, §5.9).
 
     One time column (s, ms or us, plus ``time_offset_s``) serves every mapped stream; each column is
     converted to SI by §5.3. Nothing is written when any check fails.
     """
-    out = Path(out)
-    _precheck_output(out, overwrite)
-    loaded = mapping if isinstance(mapping, LoadedMap) else load_map(mapping, "csv", overrides)
+    dest, loaded, _, device, extra = _prepare(out, mapping, "csv", overrides, overwrite, append)
     m, label = loaded.map, loaded.label
     src_path = Path(path)
     src = str(src_path)
@@ -921,9 +1093,8 @@ def import_csv(path: str | Path, out: str | Path, mapping: str | Path | LoadedMa
 
     streams = _mapped_streams(m, t.size, read, label=label, unit_required=True)
     _check_trial_streams(m, list(streams), label)
-    device, extra = _resolve_device(m, loaded.base_dir, label)
-    writer, stem = _writer_for(m, src_path, m.session.rig.model_dump(mode="json", exclude_none=True), device, extra,
-                               f"haptify {PACKAGE_VERSION} import csv")
+    rig = dest.rig(m.session.rig.model_dump(mode="json", exclude_none=True), None, label)
+    writer, stem = dest.writer(m, src_path, rig, device, extra, f"haptify {PACKAGE_VERSION} import csv")
     trial_id = _add_trial(writer, m, stem, src_path, f"Imported from {src_path.name} by haptify {PACKAGE_VERSION}.")
     default_rate = _round_significant(1.0 / float(np.median(steps)), RATE_SIGNIFICANT_DIGITS)
     written = []
@@ -931,7 +1102,7 @@ def import_csv(path: str | Path, out: str | Path, mapping: str | Path | LoadedMa
         smap = m.streams[kind]
         written.append(writer.add_stream(trial_id, kind, {"t": t, **cols}, rate_hz=smap.rate_hz or default_rate,
                                          fmt=smap.format, frame=smap.frame))
-    writer.write(out, overwrite=overwrite)
-    return ImportResult(out, writer.manifest["session_id"], trial_id, [_stream_summary(s) for s in written],
+    dest.write(writer, trial_id)
+    return ImportResult(dest.out, writer.manifest["session_id"], trial_id, [_stream_summary(s) for s in written],
                         "CSV values are stored as logged (rotated into W only where from_frame says so)",
                         {"file": src_path.name, "rows": int(t.size), "columns": wanted})
