@@ -543,6 +543,7 @@ class SessionValidator:
             self.add_all(err.findings)
             return
         self.add_all(schema_findings(data, "device", "E106", label))
+        self._check_static_quaternions(data, label)
 
     def _check_ids(self) -> None:
         raw = self.raw
@@ -584,14 +585,14 @@ class SessionValidator:
                 self.add(Finding("E114", f"clock offset {rec.get('id')!r} names stream file {sf!r}, which no stream uses",
                                  file=MANIFEST, pointer=f"/calibration/{i}/stream_file", expected="a stream file of this session", found=sf))
 
-    def _check_static_quaternions(self) -> None:
-        """Unit norm of the quaternions inside session.json itself (spec §1.3)."""
-        for pointer, q in _quaternions_in(self.raw, ""):
+    def _check_static_quaternions(self, document: Any = None, label: str = MANIFEST) -> None:
+        """Unit norm of the quaternions inside session.json (or device.json) itself (spec §1.3, §4.3.3)."""
+        for pointer, q in _quaternions_in(self.raw if document is None else document, ""):
             if not (isinstance(q, list) and len(q) == 4 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in q)):
                 continue
             norm = math.sqrt(sum(float(v) ** 2 for v in q))
             if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
-                self.add(Finding("E207", f"quaternion has norm {norm:.6g}", file=MANIFEST, pointer=pointer,
+                self.add(Finding("E207", f"quaternion has norm {norm:.6g}", file=label, pointer=pointer,
                                  expected=f"norm 1 ± {QUATERNION_NORM_TOLERANCE}", found=q))
 
     def _check_trial(self, index: int, trial: Trial) -> None:

@@ -32,7 +32,7 @@ import pyarrow.parquet as pq
 
 from haptify.session_format import is_safe_relative_path
 from haptify.storage import MANIFEST, SessionWriter, atomic_write_json, read_table, sha256_file, write_table
-from haptify_tools.example_session import example_writer
+from haptify_tools.example_session import TOUCH_DEVICE, example_writer
 
 REPO = Path(__file__).resolve().parents[2]
 DURATION_S = 0.2
@@ -465,6 +465,9 @@ CASES: list[Case] = [
     Case("device-file-missing", ["E106"], "device refers to device.json, which is absent.", _device_file(None)),
     Case("device-file-escape", ["E108"], "device refers to '../device.json', outside the folder.", _device_file(None, "../device.json")),
     Case("device-file-invalid", ["E106"], "device.json gives dof as the string 'six'.", _device_file({"dof": "six"})),
+    Case("device-file-quaternion-not-unit", ["E207"], "device.json's DH base quaternion is [0.5, 0, 0, 0] (norm 0.5).",
+         _device_file({"kinematics": {**TOUCH_DEVICE["kinematics"],
+                                      "base": {"position": [0.0, 0.0, 0.0], "quaternion": [0.5, 0.0, 0.0, 0.0]}}})),
     Case("rig-quaternion-not-unit", ["E207"], "The handle F/T sensor pose in the rig has quaternion [1, 1, 0, 0].",
          lambda f: edit(f, lambda m: m["rig"]["handle"]["ft_sensor"]["pose"].update(quaternion=[1.0, 1.0, 0.0, 0.0]))),
     Case("clock-offset-unknown-file", ["E114"], "A clock_offset record names a stream file no stream uses.",
@@ -504,13 +507,18 @@ def sidecar(case: Case) -> dict:
     return {"codes": sorted(set(case.codes)), "exit_code": case.exit_code, "description": case.description}
 
 
-def build_all(out: Path) -> None:
-    """(Re)build ``out/valid/<name>`` and ``out/invalid/<name>`` with sidecars, replacing the old ones."""
+def build_all(out: Path, only: set[str] | None = None) -> None:
+    """(Re)build ``out/valid/<name>`` and ``out/invalid/<name>`` with sidecars, replacing the old ones.
+
+    ``only`` restricts the build to the named fixtures (the others are left as they are).
+    """
     out.mkdir(parents=True, exist_ok=True)
     for group, cases in (("valid", VALID), ("invalid", CASES)):
         folder = out / group
         folder.mkdir(exist_ok=True)
         for case in cases:
+            if only is not None and case.name not in only:
+                continue
             target = folder / case.name
             if target.is_symlink() or target.is_file():
                 target.unlink()
@@ -550,10 +558,18 @@ def logical_snapshot(root: Path) -> dict:
         elif path.is_dir():
             continue
         elif path.suffix == ".json":
+            raw = path.read_bytes()
             try:
-                data = json.loads(path.read_text(encoding="utf-8"))
-            except (UnicodeDecodeError, json.JSONDecodeError):
-                snap[rel] = {"bytes": hashlib.sha256(path.read_bytes()).hexdigest()}
+                data = json.loads(raw.decode("utf-8"))
+            except UnicodeDecodeError:  # the deliberately non-UTF-8 manifest
+                try:
+                    data = {"latin-1": json.loads(raw.decode("latin-1"))}
+                except json.JSONDecodeError:
+                    data = None
+            except json.JSONDecodeError:
+                data = None
+            if data is None:
+                snap[rel] = {"bytes": hashlib.sha256(raw).hexdigest()}
                 continue
             snap[rel] = _checksums_as_matches(data, path.parent) if path.name == MANIFEST else data
         elif path.suffix == ".parquet":
@@ -564,25 +580,38 @@ def logical_snapshot(root: Path) -> dict:
 
 
 def _checksums_as_matches(manifest_data: Any, folder: Path) -> Any:
+    """Replace the sha256 of Parquet streams (whose bytes depend on the writer's version) by whether it
+    matches the file; CSV bytes are deterministic and keep their checksum."""
     if not isinstance(manifest_data, dict):
         return manifest_data
     data = json.loads(json.dumps(manifest_data))
+    if "latin-1" in data:
+        return {"latin-1": _checksums_as_matches(data["latin-1"], folder)}
     for trial in data.get("trials", []) if isinstance(data.get("trials"), list) else []:
         for s in trial.get("streams", []) if isinstance(trial, dict) else []:
-            if isinstance(s, dict) and isinstance(s.get("sha256"), str) and isinstance(s.get("file"), str):
-                path = folder / s["file"]
-                safe = is_safe_relative_path(s["file"]) and not path.is_symlink() and path.is_file()
-                if safe and s.get("format") == "parquet":
-                    s["sha256"] = "matches" if sha256_file(path) == s["sha256"] else "differs"
+            if not (isinstance(s, dict) and isinstance(s.get("sha256"), str) and isinstance(s.get("file"), str)):
+                continue
+            path = folder / s["file"]
+            readable = is_safe_relative_path(s["file"]) and not path.is_symlink() and path.is_file()
+            if readable and s.get("format") == "parquet":
+                s["sha256"] = "matches" if sha256_file(path) == s["sha256"] else "differs"
+            elif s.get("format") == "parquet":
+                s["sha256"] = "no readable file"
     return data
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=REPO / "fixtures", help="fixtures folder (default: the repository's)")
+    parser.add_argument("--only", nargs="+", metavar="NAME", help="rebuild only these fixtures")
     args = parser.parse_args(argv)
-    build_all(args.out)
-    print(f"built {len(VALID)} valid and {len(CASES)} invalid fixtures under {args.out}")
+    known = {c.name for c in VALID + CASES}
+    unknown = sorted(set(args.only or ()) - known)
+    if unknown:
+        parser.error(f"unknown fixture(s) {unknown}; known: {sorted(known)}")
+    build_all(args.out, set(args.only) if args.only else None)
+    built = len(args.only) if args.only else len(VALID) + len(CASES)
+    print(f"built {built} fixture(s) under {args.out}")
     return 0
 
 
