@@ -5,7 +5,8 @@ commanded force) becomes one trial of a new session. What the source does not ho
 lab and examiner ids, the recording date, the trial's protocol — comes from an **import map**
 (:class:`ImportMap`, JSON; ``schemas/1.0/import-map.schema.json``), which also says which source
 channel fills which stream column and in which unit. Units are converted to SI by the table of §5.3;
-the session is written atomically through :class:`~haptify.storage.SessionWriter`.
+the session is written atomically through :class:`~haptify.storage.SessionWriter`, or the trial is
+appended atomically to an existing session (:class:`Destination`, §5.9).
 
 Errors (spec §5.1–5.2): E501 the source cannot be read, E502 the map is malformed or invalid, E503 the
 map names a label, column or platform the source does not have (the message lists those it has), E504
@@ -541,7 +542,7 @@ def _as_channel(spec: ChannelMap | str) -> ChannelMap:
     return ChannelMap(source=spec) if isinstance(spec, str) else spec
 
 
-def build_stream_columns(kind: str, smap: StreamMap, n: int, read: SourceReader, *, label: str,
+def build_stream_columns(kind: str, smap: StreamMap, n: int, read: SourceReader, *, label: str, source_file: str,
                          unit_required: bool) -> dict[str, np.ndarray]:
     """The SI columns (``t`` excluded) of one mapped stream (spec §5.3).
 
@@ -590,7 +591,7 @@ def build_stream_columns(kind: str, smap: StreamMap, n: int, read: SourceReader,
                 i = int(np.argmax(bad))
                 code = "E204" if np.isnan(values[i]) else "E210"
                 raise fail(code, f"{kind} column {col!r} (from {ch.source!r}) holds a non-finite value at sample {i}",
-                           file=label, column=col, expected="finite values", found=str(values[i]))
+                           file=source_file, column=ch.source, expected="finite values", found=str(values[i]))
         out[col] = values
     return out
 
@@ -613,11 +614,13 @@ def rotate_into_world(kind: str, columns: dict[str, np.ndarray], placement: Pose
     return out
 
 
-def _mapped_streams(m: ImportMap, n: int, read: SourceReader, *, label: str, unit_required: bool) -> dict[str, dict[str, np.ndarray]]:
+def _mapped_streams(m: ImportMap, n: int, read: SourceReader, *, label: str, source_file: str,
+                    unit_required: bool) -> dict[str, dict[str, np.ndarray]]:
     """Every mapped stream's SI columns (``t`` excluded), rotated into W where ``from_frame`` asks."""
     out = {}
     for kind, smap in m.streams.items():
-        cols = build_stream_columns(kind, smap, n, read, label=label, unit_required=unit_required)
+        cols = build_stream_columns(kind, smap, n, read, label=label, source_file=source_file,
+                                    unit_required=unit_required)
         if smap.from_frame == "device":
             cols = rotate_into_world(kind, cols, m.session.device_placement, label=label)
         out[kind] = cols
@@ -625,7 +628,7 @@ def _mapped_streams(m: ImportMap, n: int, read: SourceReader, *, label: str, uni
 
 
 def _check_trial_streams(m: ImportMap, kinds: list[str], label: str) -> None:
-    """The protocol's required streams, rendering and label rules (spec §2.5), checked before writing."""
+    """The protocol's required streams and an active protocol's rendering (spec §2.5), checked before writing."""
     proto = schemas.load("protocols.json")["protocols"][m.trial.protocol]
     missing = [k for k in proto["required"] if k not in kinds]
     if missing:
@@ -983,7 +986,7 @@ def import_c3d(path: str | Path, out: str | Path | Destination, mapping: str | P
             if smap.rate_hz is not None and smap.rate_hz != c3d.analog_rate:
                 raise fail("E502", f"{kind} rate_hz {smap.rate_hz} differs from the file's ANALOG:RATE {c3d.analog_rate}",
                            file=label, pointer=f"/streams/{kind}/rate_hz", expected=c3d.analog_rate, found=smap.rate_hz)
-        mapped = _mapped_streams(m, n, _analog_reader(c3d, label), label=label, unit_required=False)
+        mapped = _mapped_streams(m, n, _analog_reader(c3d, label), label=label, source_file=src, unit_required=False)
         analog_streams = {kind: {"t": t_an, **cols} for kind, cols in mapped.items()}
 
     kinds = (["markers"] if marker_data else []) + list(analog_streams)
@@ -1091,7 +1094,7 @@ def import_csv(path: str | Path, out: str | Path | Destination, mapping: str | P
     def read(name: str) -> tuple[np.ndarray, str | None]:
         return data[name], None
 
-    streams = _mapped_streams(m, t.size, read, label=label, unit_required=True)
+    streams = _mapped_streams(m, t.size, read, label=label, source_file=src, unit_required=True)
     _check_trial_streams(m, list(streams), label)
     rig = dest.rig(m.session.rig.model_dump(mode="json", exclude_none=True), None, label)
     writer, stem = dest.writer(m, src_path, rig, device, extra, f"haptify {PACKAGE_VERSION} import csv")
