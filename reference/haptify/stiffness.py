@@ -1,0 +1,153 @@
+"""Stiffness rendering (spec chapter 13).
+
+Repeated presses into the rendered stiff plane (paper §IV-F, §V-E): presses are the contact runs of
+chapter 12's rule; each press contributes its rising-phase samples between two shares of its peak force
+to one least-squares line of measured normal force against measured penetration per trial; the slope
+is the measured stiffness, and each press's largest normal force its peak.
+Parameters: ``schemas/<v>/metrics/stiffness.json`` (contact rule: ``surface.json``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from haptify.caching import cached
+from haptify.errors import fail
+from haptify.metric_definitions import param
+from haptify.repetitions import TrialValue, aggregate, per_trial, unavailable
+from haptify.surface import contact_signals
+
+FAMILY = "stiffness"
+PROTOCOL = "stiffness"
+IDS = ("stiffness.measured", "stiffness.accuracy", "stiffness.peak_force")
+
+
+def stp(key: str) -> Any:
+    """A parameter of the stiffness family (spec §13.1)."""
+    return param(FAMILY, key)
+
+
+def runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """Maximal runs ``[start, stop)`` of True in ``mask``."""
+    edges = np.flatnonzero(np.diff(np.r_[0, np.asarray(mask, dtype=np.int8), 0]))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+
+
+@dataclass
+class Press:
+    """One qualifying press (spec §13.2): its sample range, peak normal force (N) and fit samples (indices)."""
+
+    start: int
+    stop: int
+    peak_force: float
+    max_penetration: float
+    fit: np.ndarray
+
+
+@dataclass
+class StiffnessFit:
+    """One trial's fit (spec §13.3): slope (N/m), intercept (N), the presses and the pooled fit samples."""
+
+    stiffness: float
+    intercept: float
+    r2: float
+    presses: list[Press]
+    penetration: np.ndarray = field(repr=False)
+    normal_force: np.ndarray = field(repr=False)
+
+    @property
+    def peak_force(self) -> float:
+        """Mean of the presses' peak normal forces (spec §13.4), N."""
+        return float(np.mean([p.peak_force for p in self.presses]))
+
+
+def find_presses(t: np.ndarray, penetration: np.ndarray, normal_force: np.ndarray, contact: np.ndarray) -> list[Press]:
+    """Qualifying presses of a trial (spec §13.2).
+
+    A press is a maximal run of ``contact`` samples lasting at least ``min_press_s`` and reaching a
+    penetration of at least ``min_press_depth_m``. Its peak is the largest normal force in the run, at
+    sample k*. Its fit samples are those from the run's start to k* (the rising phase) whose normal
+    force lies within [fit_low_fraction, fit_high_fraction] × peak; a press with fewer than
+    ``min_fit_samples`` of them does not qualify.
+    """
+    out = []
+    for a, b in runs(contact):
+        if t[b - 1] - t[a] < float(stp("min_press_s")) - 1e-12:
+            continue
+        depth = float(np.max(penetration[a:b]))
+        if depth < float(stp("min_press_depth_m")):
+            continue
+        k = a + int(np.argmax(normal_force[a:b]))
+        peak = float(normal_force[k])
+        if not peak > 0:
+            continue
+        rising = np.arange(a, k + 1)
+        f = normal_force[rising]
+        fit = rising[(f >= float(stp("fit_low_fraction")) * peak) & (f <= float(stp("fit_high_fraction")) * peak)]
+        if len(fit) >= int(stp("min_fit_samples")):
+            out.append(Press(a, b, peak, depth, fit))
+    return out
+
+
+def fit_stiffness(t: np.ndarray, penetration: np.ndarray, normal_force: np.ndarray, contact: np.ndarray, trial_id: str = "") -> StiffnessFit:
+    """Least-squares line normal_force = k · penetration + c through the fit samples of every press (spec §13.3).
+
+    Inputs on one time grid: ``t`` (s), ``penetration`` (m), ``normal_force`` (N), ``contact`` (bool).
+    E315 when no press qualifies or the fit samples span no penetration.
+    """
+    presses = find_presses(t, penetration, normal_force, contact)
+    if not presses:
+        raise fail("E315", f"trial {trial_id!r}: no press qualifies (>= {stp('min_press_s')} s of contact, "
+                   f">= {stp('min_press_depth_m')} m deep, >= {stp('min_fit_samples')} rising samples)", expected="at least one press", found=0)
+    idx = np.concatenate([p.fit for p in presses])
+    x, y = penetration[idx], normal_force[idx]
+    if float(np.ptp(x)) <= 0:
+        raise fail("E315", f"trial {trial_id!r}: the fit samples do not span any penetration", expected="varying penetration", found=float(x[0]))
+    a = np.column_stack([x, np.ones_like(x)])
+    (k, c), *_ = np.linalg.lstsq(a, y, rcond=None)
+    resid = y - (k * x + c)
+    ss = float(np.sum((y - y.mean()) ** 2))
+    r2 = 1.0 - float(np.sum(resid ** 2)) / ss if ss > 0 else 1.0
+    return StiffnessFit(float(k), float(c), r2, presses, x, y)
+
+
+def trial_fit(ctx: Any, trial_id: str) -> StiffnessFit:
+    """:func:`fit_stiffness` on a stiffness trial's contact signals (spec §13.5); cached on a ComputeContext."""
+    def build() -> StiffnessFit:
+        cs = contact_signals(ctx, trial_id)
+        ok = cs.valid
+        return fit_stiffness(cs.t[ok], cs.penetration[ok], cs.normal_force[ok], cs.contact[ok], trial_id)
+
+    return cached(ctx, ("stiffness_fit", trial_id), build)
+
+
+def compute(ctx: Any) -> list:
+    """stiffness.measured, stiffness.accuracy and stiffness.peak_force (spec §13.5)."""
+    if not any(ctx.wants(m) for m in IDS):
+        return []
+    trials = [t.id for t in ctx.session.trials_of(PROTOCOL)]
+    if not trials:
+        err = fail("E310", "the session has no stiffness trial", expected="a trial of protocol 'stiffness'", found=None)
+        return [unavailable(m, err) for m in IDS]
+    done, first = per_trial(ctx, trials, lambda tid: trial_fit(ctx, tid), "stiffness.measured")
+    if not done:
+        return [unavailable(m, first) for m in IDS]
+    codes: dict[str, list[str]] = {}
+    for tid, f in done.items():
+        codes[tid] = []
+        if len(f.presses) < int(stp("recommended_presses")):
+            codes[tid].append("W414")
+            ctx.warn("W414", f"trial {tid!r}: {len(f.presses)} press(es) qualified, {stp('recommended_presses')} recommended",
+                     metric="stiffness.measured", trial=tid)
+    commanded = {tid: contact_signals(ctx, tid).stiffness_N_per_m for tid in done}
+    diag = {"intercept_N": [f.intercept for f in done.values()], "r2": [f.r2 for f in done.values()],
+            "presses": [len(f.presses) for f in done.values()], "commanded_N_per_m": list(commanded.values()),
+            "press_peaks_N": [[p.peak_force for p in f.presses] for f in done.values()]}
+    return [
+        aggregate(FAMILY, "stiffness.measured", [TrialValue(t, f.stiffness, codes[t]) for t, f in done.items()], diagnostics=diag),
+        aggregate(FAMILY, "stiffness.accuracy", [TrialValue(t, 100.0 * f.stiffness / commanded[t], codes[t]) for t, f in done.items()]),
+        aggregate(FAMILY, "stiffness.peak_force", [TrialValue(t, f.peak_force, codes[t]) for t, f in done.items()]),
+    ]
