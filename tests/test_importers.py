@@ -483,6 +483,8 @@ def test_bad_csv_rows(tmp_path):
     expect_code(tmp_path, "E203", import_csv, back, tmp_path / "s", m)
     (tmp_path / "text.csv").write_text("time,a\n0.0,1.0\n0.1,heavy\n")
     assert "row 2" in str(expect_code(tmp_path, "E501", import_csv, tmp_path / "text.csv", tmp_path / "s", m))
+    (tmp_path / "empty.csv").write_text("time,a\n0.0,1.0\n0.1,\n")
+    assert "row 2" in str(expect_code(tmp_path, "E501", import_csv, tmp_path / "empty.csv", tmp_path / "s", m))
     (tmp_path / "nan.csv").write_text("time,a\n0.0,1.0\n0.1,NaN\n")
     expect_code(tmp_path, "E204", import_csv, tmp_path / "nan.csv", tmp_path / "s", m)
 

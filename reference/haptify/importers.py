@@ -1033,29 +1033,32 @@ def read_csv_columns(path: Path, names: list[str], opts: CsvOptions, *, map_labe
     common = {"sep": opts.delimiter, "skiprows": opts.skip_rows, "comment": opts.comment, "skipinitialspace": True,
               "engine": "c", "encoding": "utf-8"}
     try:
-        header = [str(h).strip() for h in pd.read_csv(path, nrows=0, **common).columns]
+        raw_header = [str(h) for h in pd.read_csv(path, nrows=0, **common).columns]
     except (OSError, UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError, ValueError) as exc:
         raise fail("E501", f"{label!r} cannot be read as CSV: {exc}", file=label) from None
+    header = [h.strip() for h in raw_header]
     for name in names:
         if name not in header:
             raise fail("E503", f"{path.name} has no column {name!r}", file=map_label, expected=header, found=name)
-    try:
-        table = pd.read_csv(path, dtype=str, keep_default_na=False, **common)
-    except (OSError, UnicodeDecodeError, pd.errors.ParserError, ValueError) as exc:
+    columns = {raw_header[header.index(name)]: name for name in names}
+    numeric = {"usecols": list(columns), "na_values": ["NaN", "nan"], "keep_default_na": False, **common}
+    try:  # the fast path: the C parser, correctly rounded (pandas ≥ 3)
+        table = pd.read_csv(path, dtype={c: "float64" for c in columns}, **numeric)
+    except (OSError, UnicodeDecodeError, pd.errors.ParserError) as exc:
         raise fail("E501", f"{label!r} cannot be read as CSV: {exc}", file=label) from None
-    table.columns = [str(c).strip() for c in table.columns]
-    out = {}
-    first_data_line = opts.skip_rows + 2  # 1-based line number of the first data row (comments aside)
-    for name in names:
-        text = table[name].str.strip()
-        try:
-            out[name] = text.astype("float64").to_numpy()
-        except ValueError:
-            parsed = pd.to_numeric(text, errors="coerce")
-            bad = int(np.flatnonzero(parsed.isna() & ~text.str.lower().isin(["nan"]))[0])
-            raise fail("E501", f"{path.name} column {name!r}, data row {bad + 1} (line ≈{first_data_line + bad}) is not a number",
-                       file=label, column=name, expected="a number", found=text.iloc[bad]) from None
-    return out
+    except ValueError:  # some cell is not a number: find it for the message
+        text = pd.read_csv(path, dtype=str, **numeric)
+        first_data_line = opts.skip_rows + 2  # 1-based line of the first data row (comment lines aside)
+        for raw_name, name in columns.items():
+            cells = text[raw_name].fillna("").str.strip()
+            parsed = pd.to_numeric(cells, errors="coerce")
+            bad = np.flatnonzero(parsed.isna() & ~cells.str.lower().isin(["nan"]))
+            if bad.size:
+                i = int(bad[0])
+                raise fail("E501", f"{path.name} column {name!r}, data row {i + 1} (line ≈{first_data_line + i}) is not "
+                           "a number", file=label, column=name, expected="a number", found=cells.iloc[i]) from None
+        raise fail("E501", f"{label!r} cannot be read as numbers", file=label) from None
+    return {name: table[raw].to_numpy(dtype=np.float64) for raw, name in columns.items()}
 
 
 def import_csv(path: str | Path, out: str | Path | Destination, mapping: str | Path | LoadedMap, *,
