@@ -226,22 +226,42 @@ class PoseOnGrid(Kinematics):
     valid: np.ndarray
 
 
-def resample_track(track: MocapTrack, grid: np.ndarray) -> PoseOnGrid:
-    """Interpolate a processed track at ``grid`` (spec §7.4): linear, quaternions by slerp.
-
-    A grid time is valid only between two samples of the same segment (or exactly on a segment sample).
-    """
+def _brackets(track: MocapTrack, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """For each grid time: the bracketing sample indices ``k``, ``k1``, the fraction ``s`` and validity (§7.4 step 5)."""
     t = track.t
-    grid = np.asarray(grid, float)
     k = np.clip(np.searchsorted(t, grid, side="right") - 1, 0, max(len(t) - 2, 0))
     inside = (grid >= t[0]) & (grid <= t[-1]) if len(t) else np.zeros(len(grid), bool)
     k1 = np.minimum(k + 1, len(t) - 1)
     same = (track.segment[k] >= 0) & (track.segment[k] == track.segment[k1])
     on_sample = (grid == t[k]) & (track.segment[k] >= 0)
     on_last = (grid == t[k1]) & (track.segment[k1] >= 0)
-    valid = inside & (same | on_sample | on_last)
     span = np.where(t[k1] > t[k], t[k1] - t[k], 1.0)
-    s = np.clip((grid - t[k]) / span, 0.0, 1.0)
+    return k, k1, np.clip((grid - t[k]) / span, 0.0, 1.0), inside & (same | on_sample | on_last)
+
+
+def _slerp_rows(track: MocapTrack, k: np.ndarray, k1: np.ndarray, s: np.ndarray) -> np.ndarray:
+    qa, qb = track.quaternion[k], track.quaternion[k1]
+    return quat_slerp(qa, np.where(np.isfinite(qb), qb, qa), s)
+
+
+def orientation_at(track: MocapTrack, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Orientation (slerp, NaN where invalid) and validity at ``times`` — §7.4 step 5 for the quaternion only."""
+    times = np.asarray(times, float)
+    k, k1, s, valid = _brackets(track, times)
+    q = np.full((len(times), 4), np.nan)
+    v = np.flatnonzero(valid)
+    if len(v):
+        q[v] = _slerp_rows(track, k[v], k1[v], s[v])
+    return q, valid
+
+
+def resample_track(track: MocapTrack, grid: np.ndarray) -> PoseOnGrid:
+    """Interpolate a processed track at ``grid`` (spec §7.4): linear, quaternions by slerp.
+
+    A grid time is valid only between two samples of the same segment (or exactly on a segment sample).
+    """
+    grid = np.asarray(grid, float)
+    k, k1, s, valid = _brackets(track, grid)
     n = len(grid)
     out = {name: np.full((n, d), np.nan) for name, d in (("p", 3), ("v", 3), ("w", 3), ("q", 4))}
     v = np.flatnonzero(valid)
@@ -250,9 +270,7 @@ def resample_track(track: MocapTrack, grid: np.ndarray) -> PoseOnGrid:
         for name, arr in (("p", track.position), ("v", track.velocity), ("w", track.angular_velocity)):
             a, b = arr[kk], arr[kn]
             out[name][v] = np.where(np.isfinite(b), a + ss * (b - a), a)
-        qa, qb = track.quaternion[kk], track.quaternion[kn]
-        qb = np.where(np.isfinite(qb), qb, qa)
-        out["q"][v] = quat_slerp(qa, qb, s[v])
+        out["q"][v] = _slerp_rows(track, kk, kn, s[v])
     return PoseOnGrid(t=grid, position=out["p"], quaternion=out["q"], velocity=out["v"], angular_velocity=out["w"], valid=valid)
 
 
@@ -387,10 +405,9 @@ def handle_accel_native(ctx_or_session: Any, trial_id: str) -> NativeAccel:
         world = np.full_like(sensor, np.nan)
         valid = np.zeros(len(t), bool)
         if session.stream(trial_id, "handle_pose") is not None:
-            pose = resample_track(mocap_track(ctx_or_session, trial_id), t)
-            valid = pose.valid
+            q, valid = orientation_at(mocap_track(ctx_or_session, trial_id), t)
             raw = a[ACCEL_COLUMNS].to_numpy()[valid]
-            world[valid] = cal_mod.compensate_accel(raw, pose.quaternion[valid], cal, cal_mod.sensor_pose(session, "accelerometer"))
+            world[valid] = cal_mod.compensate_accel(raw, q[valid], cal, cal_mod.sensor_pose(session, "accelerometer"))
         return NativeAccel(t=t, acceleration=world, sensor=sensor, valid=valid, rate_hz=nominal_rate(t))
 
     return cached(ctx_or_session, ("handle_accel_native", trial_id), build)
