@@ -187,6 +187,13 @@ def test_vicon_map_and_cli_overrides(tmp_path, capsys):
     assert (trial.id, trial.repetition) == ("box-2", 2)
     assert session.manifest.rig.motion_capture.system == "Vicon Nexus 2.4"
     assert (tmp_path / "v" / "device.json").read_text() == (FIX / "touch-device.json").read_text()
+    inline = {**json.loads((FIX / "vicon-map.json").read_text()), "session": {**FACTS["session"]}}
+    minimal = write_map(tmp_path, "minimal-device.json", {"manufacturer": "Force Dimension", "model": "omega.3",
+                                                          "dof": 3, "mechanism": "parallel"})
+    code, out, err = run_cli(["import", "c3d", str(VICON), "-o", str(tmp_path / "w"), "--map",
+                              str(write_map(tmp_path, "inline.json", inline)), "--device", str(minimal)], capsys)
+    assert code == 0, err  # --device replaces the map's inline device as a whole
+    assert open_session(tmp_path / "w").device().model == "omega.3"
 
 
 # --- a synthetic C3D with known values -----------------------------------------------------------

@@ -218,11 +218,15 @@ class ImportMap(_Strict):
     csv: CsvOptions | None = Field(None, description="CSV only: parsing options.")
 
 
+# Members an override replaces as a whole (a device given as a file replaces an inline one).
+_REPLACED_WHOLE = {"device"}
+
+
 def _deep_merge(base: Any, over: Any) -> Any:
     if isinstance(base, dict) and isinstance(over, dict):
         out = dict(base)
         for k, v in over.items():
-            out[k] = _deep_merge(base.get(k), v) if k in base else v
+            out[k] = _deep_merge(base[k], v) if k in base and k not in _REPLACED_WHOLE else v
         return out
     return over
 
