@@ -16,6 +16,7 @@ Every parameter comes from ``schemas/<v>/metrics/dynamics.json``.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import tempfile
@@ -494,15 +495,12 @@ def _output_jacobian(st: _Structure, theta: np.ndarray, u: np.ndarray, basis_t: 
     jac_t = np.zeros((st.n_shared + own_rows, n))
     x = np.zeros(n)
     r = st.n_shared
+    w = _inputs_mapped(st, theta, u, basis_t)
+    lead = np.zeros(st.nk)
     for i in range(st.nu):
         a = np.concatenate([[1.0], theta[st.f_idx[j, i]]])
         b = theta[st.b_idx[j, i]]
-        if basis_t[i] is None:
-            p = None
-            s = lfilter([1.0], a, u[:, i])
-        else:
-            p = lfilter([1.0], a, basis_t[i], axis=-1)       # Φ_i filtered by 1/F_ji, (K, N)
-            s = theta[st.v_idx[i]] @ p                       # w_i filtered by 1/F_ji
+        s = lfilter([1.0], a, w[:, i])                       # w_i filtered by 1/F_ji
         for k in range(st.nb):                               # ∂z/∂b_k = q^-(nk+k-1) w/F
             _add_lagged(jac_t[r + k], s, st.nk + k)
         z = b @ jac_t[r: r + st.nb]
@@ -513,10 +511,9 @@ def _output_jacobian(st: _Structure, theta: np.ndarray, u: np.ndarray, basis_t: 
             for l in range(1, st.nf + 1):
                 _add_lagged(jac_t[r + l - 1], zf, l, -1.0)
             r += st.nf
-        if p is not None:                                    # ∂z/∂v_ik = q^-nk B/F φ_ik
-            rows = jac_t[st.v_idx[i][0]: st.v_idx[i][-1] + 1]
-            for k in range(st.nb):
-                _add_lagged(rows, p, st.nk + k, b[k])
+        if basis_t[i] is not None:                           # ∂z/∂v_ik = q^-nk B/F φ_ik
+            rows = slice(st.v_idx[i][0], st.v_idx[i][-1] + 1)
+            jac_t[rows] = lfilter(np.concatenate([lead, b]), a, basis_t[i], axis=-1)
     bp = st.out_bp[j]
     if bp is None:
         return x, jac_t
@@ -576,7 +573,29 @@ def fit(u: np.ndarray | Sequence[np.ndarray], y: np.ndarray | Sequence[np.ndarra
     linear initialisation, then Levenberg–Marquardt on the normalised simulation error with an
     analytic Jacobian. Returns the parameter file model and a :class:`FitReport`.
     """
-    opts = options or FitOptions.from_definition()
+    with _one_blas_thread():
+        return _fit(u, y, sample_rate_hz=sample_rate_hz, options=options or FitOptions.from_definition(),
+                    input_names=input_names, input_units=input_units, output_names=output_names, output_units=output_units,
+                    quaternion_columns=quaternion_columns, session_id=session_id, trial_id=trial_id)
+
+
+def _one_blas_thread():
+    """BLAS limited to one thread while fitting, when ``threadpoolctl`` is installed.
+
+    The fit's matrix products are tall and thin (≈ 200 × 14 000); a threaded BLAS gains little on them
+    and collapses when the cores are shared (measured: 83 s instead of 14 s for the 140 s benchmark on a
+    loaded 2-core machine). Results do not depend on it beyond floating-point rounding.
+    """
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - the dependency is declared; this only guards odd installs
+        return contextlib.nullcontext()
+    return threadpool_limits(limits=1, user_api="blas")
+
+
+def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_names, output_units,
+         quaternion_columns, session_id, trial_id) -> tuple[HWModelFile, FitReport]:
+    opts = options
     us = _as_records(u, "inputs")
     ys = _as_records(y, "outputs")
     if len(us) != len(ys) or any(len(a) != len(b) for a, b in zip(us, ys)) \
@@ -773,14 +792,14 @@ def window_features(position: np.ndarray, velocity: np.ndarray, acceleration: np
 
 def pair_distance(a: WindowFeatures, b: WindowFeatures, scales: DistanceScales) -> np.ndarray:
     """Δ of paper eq. 9 between every window of ``a`` and every window of ``b``: (len(a), len(b))."""
-    def norm(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        d = x[:, None, :] - y[None, :, :]
-        return np.sqrt(np.einsum("ijk,ijk->ij", d, d))
+    from scipy.spatial.distance import cdist
 
     dot = np.abs(a.orientation @ b.orientation.T)
-    angle = 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
-    return (norm(a.position, b.position) / scales.p + norm(a.velocity, b.velocity) / scales.v
-            + norm(a.acceleration, b.acceleration) / scales.a + angle / scales.theta)
+    out = (2.0 / scales.theta) * np.arccos(np.clip(dot, 0.0, 1.0))
+    out += cdist(a.position, b.position) / scales.p
+    out += cdist(a.velocity, b.velocity) / scales.v
+    out += cdist(a.acceleration, b.acceleration) / scales.a
+    return out
 
 
 def nearest_distances(test: WindowFeatures, train: WindowFeatures, scales: DistanceScales,
@@ -793,11 +812,12 @@ def nearest_distances(test: WindowFeatures, train: WindowFeatures, scales: Dista
     if len(train) == 0:
         raise fail("E701", "the training set has no complete distance window", expected="≥ 1 window", found=0)
     out = np.empty(len(test))
-    for start in range(0, len(test), chunk):
-        stop = min(start + chunk, len(test))
-        part = WindowFeatures(test.position[start:stop], test.velocity[start:stop],
-                              test.acceleration[start:stop], test.orientation[start:stop])
-        out[start:stop] = pair_distance(part, train, scales).min(axis=1)
+    with _one_blas_thread():
+        for start in range(0, len(test), chunk):
+            stop = min(start + chunk, len(test))
+            part = WindowFeatures(test.position[start:stop], test.velocity[start:stop],
+                                  test.acceleration[start:stop], test.orientation[start:stop])
+            out[start:stop] = pair_distance(part, train, scales).min(axis=1)
     return out
 
 
