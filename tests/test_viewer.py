@@ -8,6 +8,8 @@ previous run of the viewer.
 from __future__ import annotations
 
 import argparse
+import copy
+import functools
 import json
 import math
 import os
@@ -18,6 +20,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 import rerun.blueprint as rrb
 from rerun.chunk import RrdReader
 
@@ -26,7 +31,7 @@ from haptify.errors import HaptifyError
 from haptify.session_format import STREAM_KINDS
 from haptify.results import Implementation, MetricResult, ResultsFile, Unavailable
 from haptify.storage import open_session
-from haptify_tools.example_session import example_writer
+from haptify_tools.example_session import TOUCH_DEVICE, example_writer
 from haptify_tools.viewer import blueprints, cmd_view
 from haptify_tools.viewer.recording import (
     HAND_FORCE_M_PER_N,
@@ -45,12 +50,24 @@ from haptify_tools.viewer.recording import (
 CHROMIUM = Path("/usr/bin/chromium")
 SURFACE_Z = 0.05
 OCCLUDED = slice(40, 47)  # pose/marker rows set to NaN in the stiffness trial (70 ms: longer than any bridged gap)
+SPHERE_R, SPHERE_C = 0.04, np.array([0.0, 0.0, 0.1])  # the workspace trial sweeps this sphere (m)
 FORCE_BIAS = 0.25  # N, the handle_gravity record's force bias on the sensor's x axis
+
+
+def small_device() -> dict:
+    """The Touch with 3 cm links and q1 within ±0.5 rad: a modeled workspace that is quick to voxelise."""
+    device = copy.deepcopy(TOUCH_DEVICE)
+    for joint in device["kinematics"]["joints"][1:]:
+        joint["a"] = 0.03
+    device["kinematics"]["joints"][0]["lower"] = {"constant": -0.5}
+    device["kinematics"]["joints"][0]["upper"] = {"constant": 0.5}
+    return device
 
 
 def rich_writer(session_id: str = "viewer-0001", force_scale: float = 1.0):
     """The example free-space trial plus a workspace trial and a stiffness trial with every stream."""
     w = example_writer(session_id=session_id, duration_s=1.0)
+    w.manifest["device"] = small_device()
     w.manifest["calibration"] = [  # known parameters: 0.25 N force bias on x, no connector weight, zero plate bias
         {"kind": "handle_gravity", "id": "hg", "force_bias_N": [FORCE_BIAS, 0.0, 0.0], "connector_mass_kg": 0.0,
          "connector_com_m": [0.0, 0.0, 0.0], "torque_bias_Nm": [0.0, 0.0, 0.0], "accel_bias_m_per_s2": [0.0, 0.0, 0.0],
@@ -59,11 +76,14 @@ def rich_writer(session_id: str = "viewer-0001", force_scale: float = 1.0):
     mc = w.manifest["rig"]["motion_capture"]
     mc["rigid_bodies"].append({"name": "link2", "markers": ["l2a", "l2b"]})
     mc["markers"] += ["l2a", "l2b"]
-    # workspace: a circle of radius 5 cm at 100 Hz
-    t = np.arange(300) / 100.0
-    ang = 2 * np.pi * t / 3.0
+    # workspace: a spiral sweep over a sphere of radius SPHERE_R centred at SPHERE_C, 100 Hz
+    n = 600
+    t = np.arange(n) / 100.0
+    z = 1 - 2 * (np.arange(n) + 0.5) / n
+    phi = np.sqrt(n * np.pi) * np.arcsin(z)
+    xyz = SPHERE_C + SPHERE_R * np.column_stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z])
     w.add_trial("workspace-1", "workspace", powered=False)
-    w.add_stream("workspace-1", "handle_pose", {"t": t, "px": 0.05 * np.cos(ang), "py": 0.05 * np.sin(ang), "pz": 0.1 + 0 * t,
+    w.add_stream("workspace-1", "handle_pose", {"t": t, "px": xyz[:, 0], "py": xyz[:, 1], "pz": xyz[:, 2],
                                                 "qw": 1 + 0 * t, "qx": 0 * t, "qy": 0 * t, "qz": 0 * t}, rate_hz=100)
     # stiffness: presses into the plane z = SURFACE_Z; the handle is turned 90° about z
     w.add_trial("stiffness-1", "stiffness", powered=True,
@@ -127,15 +147,21 @@ def recorded(sessions):
     return plan, out
 
 
-def chunks_of(path: Path, entity: str, component: str):
-    return list(RrdReader(path).stream().filter(content=entity, is_static=False, components=component))
+@functools.lru_cache(maxsize=4)
+def temporal_batches(path: Path) -> dict[str, list]:
+    """Every temporal chunk of an .rrd as a record batch, grouped by entity path (read once per file)."""
+    out: dict[str, list] = {}
+    for ch in RrdReader(path).stream().filter(is_static=False):
+        out.setdefault(ch.entity_path, []).append(ch.to_record_batch())
+    return out
 
 
 def temporal(path: Path, entity: str, component: str) -> tuple[np.ndarray, list]:
     """(time in int64 ns, component values per row) of an entity's temporal rows, in time order."""
     times, values = [], []
-    for ch in chunks_of(path, entity, component):
-        rb = ch.to_record_batch()
+    for rb in temporal_batches(path).get(entity, []):
+        if component not in rb.schema.names:
+            continue
         times.append(rb.column("time").cast("int64").to_numpy())
         values += rb.column(component).to_pylist()
     t = np.concatenate(times) if times else np.empty(0, np.int64)
@@ -173,6 +199,8 @@ def test_expected_entity_paths(recorded):
     expected = {
         "/world", "/world/plate", "/world/plate/corners", "/world/device", "/session", "/results",
         "/world/workspace-1/measured/workspace/points", "/world/workspace-1/measured/trajectory",
+        "/world/workspace-1/measured/workspace/measured", "/world/workspace-1/measured/workspace/modeled",
+        "/world/workspace-1/compare/workspace/measured",
         "/world/free_space-1/measured/handle", "/world/free_space-1/measured/hand_force/calibrated",
         "/world/free_space-1/measured/force_field", "/world/free_space-1/measured/plate_force",
         "/series/free_space-1/measured/hand_force/calibrated", "/series/free_space-1/measured/hand_torque/calibrated",
@@ -405,6 +433,53 @@ def test_missing_calibration_is_reported_not_hidden(sessions, tmp_path):
     assert list(commanded_vs_felt.contents) == ["+ $origin/measured/commanded/force", "+ $origin/measured/hand_force/raw_world"]
     doc = next(e for e in plan.entries if e.path == "/session").static[0]
     assert "E601" in str(doc.text.as_arrow_array().to_pylist())
+
+
+def test_workspace_meshes_enclose_the_solids(recorded, sessions):
+    """The drawn surfaces enclose exactly the voxels the volume operator counts as inside (spec §8.4),
+    and the measured one is close to the swept sphere's 4/3·π·r³."""
+    plan, _ = recorded
+    main, _, _ = sessions
+    from haptify import workspace
+
+    from haptify_tools.viewer.voxel_mesh import SurfaceMesh
+
+    solid = workspace.volume_solid(workspace.measured_points(main, "workspace-1"))
+    for name, expected in (("measured", solid), ("modeled", None)):
+        [entry] = [e for e in plan.entries if e.path == f"/world/workspace-1/measured/workspace/{name}"]
+        mesh = entry.static[0]
+        vertices = np.array(mesh.vertex_positions.as_arrow_array().to_pylist(), dtype=float)
+        triangles = np.array(mesh.triangle_indices.as_arrow_array().to_pylist(), dtype=np.int64)
+        volume = SurfaceMesh(vertices, triangles, vertices).enclosed_volume()
+        if expected is not None:
+            inside = float((expected.fraction >= 0.5).sum()) * expected.pitch ** 3
+            assert volume == pytest.approx(inside, rel=1e-4)  # float32 vertices in the archetype
+            assert volume == pytest.approx(expected.volume, rel=0.05)
+            assert volume == pytest.approx(4 / 3 * np.pi * SPHERE_R ** 3, rel=0.10)
+        else:
+            assert volume > 0
+
+
+@settings(max_examples=40, deadline=None)
+@given(arrays(np.bool_, st.tuples(st.integers(1, 5), st.integers(1, 5), st.integers(1, 5))),
+       st.tuples(st.integers(-50, 50), st.integers(-50, 50), st.integers(-50, 50)))
+def test_voxel_boundary_mesh_is_closed_and_outward(grid, origin):
+    from haptify_tools.viewer.voxel_mesh import boundary_mesh
+
+    pitch = 0.004
+    mesh = boundary_mesh(grid, origin, pitch)
+    assert mesh.enclosed_volume() == pytest.approx(grid.sum() * pitch ** 3, rel=1e-9, abs=1e-15)
+    padded = np.pad(grid, 1)
+    exposed = sum(int((padded & ~np.roll(padded, s, axis=a)).sum()) for a in range(3) for s in (1, -1))
+    assert len(mesh.triangles) == 2 * exposed
+    # every edge is used once in each direction (closed and consistently wound)
+    keys = np.round(mesh.vertices / pitch).astype(np.int64)
+    edges = {}
+    for tri in mesh.triangles:
+        for a, b in ((0, 1), (1, 2), (2, 0)):
+            e = (tuple(keys[tri[a]]), tuple(keys[tri[b]]))
+            edges[e] = edges.get(e, 0) + 1
+    assert all(edges.get((b, a), 0) == n for (a, b), n in edges.items())
 
 
 # --- the command -------------------------------------------------------------------------------------

@@ -24,6 +24,8 @@ Entity paths (``<trial>`` is the escaped trial id, ``<role>`` is ``measured`` or
     /world/<trial>/<role>/links/<link>        link frames from link_poses
     /world/<trial>/<role>/force_field         free space: mean force per 1 cm voxel
     /world/<trial>/<role>/workspace/points    workspace: the measured point cloud
+    /world/<trial>/<role>/workspace/measured  workspace: the measured workspace (volume operator) as a mesh
+    /world/<trial>/<role>/workspace/modeled   workspace: the modeled workspace (DH model) as a mesh
     /world/<trial>/<role>/virtual_surface     active trials: the rendered plane
     /series/<trial>/<role>/...                time series (see ``SERIES`` below)
     /session, /results                        markdown documents
@@ -31,6 +33,7 @@ Entity paths (``<trial>`` is the escaped trial id, ``<role>`` is ``measured`` or
 
 from __future__ import annotations
 
+import functools
 import os
 import tempfile
 from dataclasses import dataclass, field
@@ -42,12 +45,13 @@ import pandas as pd
 import rerun as rr
 from pydantic import ValidationError
 
-from haptify import force_plate, signals
+from haptify import force_plate, signals, workspace
 from haptify.conventions import quat_multiply, quat_rotate
 from haptify.errors import HaptifyError, fail
 from haptify.results import ResultsFile
-from haptify.session_format import Stream, Trial
+from haptify.session_format import Kinematics, Stream, Trial
 from haptify.storage import SessionFolder, pydantic_findings
+from haptify_tools.viewer.voxel_mesh import boundary_mesh
 
 APP_ID = "haptify"
 TIMELINE = "time"
@@ -69,6 +73,8 @@ SERIES_COLORS = {
     "compare": [(255, 152, 150), (152, 223, 138), (174, 199, 232), (197, 176, 213), (196, 156, 148), (247, 182, 210)],
 }
 ROLE_COLORS = {"measured": (31, 119, 180), "compare": (255, 127, 14)}
+MODELED_COLOR = (44, 160, 44)
+MESH_ALPHA = 70  # translucency of the workspace meshes (0–255)
 FORCE_COLORS = {"measured": (214, 39, 40), "compare": (255, 152, 150)}
 PLATE_FORCE_COLOR = (148, 103, 189)
 LINK_PALETTE = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
@@ -288,11 +294,31 @@ class TrialPlanner:
         self.markers()
         self.links()
         if p is not None and self.trial.protocol == "workspace":
-            ok = finite_rows(p)
-            self.plan.add(Entry(f"{self.world}/workspace/points",
-                                static=[rr.Points3D(p[ok], radii=0.0015, colors=ROLE_COLORS[self.role])]))
+            self.workspace(p[finite_rows(p)])
         if self.trial.rendering is not None:
             self.surface(t_pose, p)
+
+    def workspace(self, points: np.ndarray) -> None:
+        """The measured cloud, and the measured and modeled workspaces as meshes (spec §8.2–8.4)."""
+        self.plan.add(Entry(f"{self.world}/workspace/points",
+                            static=[rr.Points3D(points, radii=0.0015, colors=ROLE_COLORS[self.role])]))
+        try:
+            solid = workspace.volume_solid(points)
+        except HaptifyError as err:
+            self.note("measured workspace mesh", err)
+        else:
+            self.add_solid("measured workspace mesh", f"{self.world}/workspace/measured", solid, ROLE_COLORS[self.role])
+        kin = self.session.device().kinematics
+        if kin is None:
+            self.note("modeled workspace mesh", fail("E311", "the device has no kinematics", pointer="/device/kinematics"))
+            return
+        place = self.session.manifest.device_placement
+        try:
+            model = modeled_solid(kin.model_dump_json(), tuple(place.position), tuple(place.quaternion))
+        except HaptifyError as err:
+            self.note("modeled workspace mesh", err)
+        else:
+            self.add_solid("modeled workspace mesh", f"{self.world}/workspace/modeled", model, MODELED_COLOR)
 
     def handle(self, t: np.ndarray, p: np.ndarray, q: np.ndarray) -> None:
         """Handle pose with axes, the gimbal-centre path and the position time series."""
@@ -311,6 +337,14 @@ class TrialPlanner:
         """Record why a derived quantity is missing (shown in the /session document)."""
         f = err.findings[0]
         self.plan.notes.append(f"{self.trial.id} ({self.role}): {what} not shown — {f.code} {f.message}")
+
+    def add_solid(self, what: str, path: str, solid: workspace.VoxelSolid, color: tuple[int, int, int]) -> None:
+        """A voxel solid as a mesh, or a W410 note when nothing is inside (the sweep did not close)."""
+        entry = solid_entry(path, solid, color)
+        if entry is None:
+            self.plan.notes.append(f"{self.trial.id} ({self.role}): {what} not shown — W410 the points enclose no volume")
+        else:
+            self.plan.add(entry)
 
     def handle_signals(self) -> signals.HandleSignals | None:
         """The calibrated handle signals (spec §7.5), once per trial; None (with a note) when unavailable."""
@@ -474,6 +508,22 @@ class TrialPlanner:
         if p is not None:
             depth = (point - p) @ normal
             self.add_series("penetration", t_pose, depth, ["depth"], "handle_pose")
+
+
+@functools.lru_cache(maxsize=4)
+def modeled_solid(kinematics_json: str, position: tuple, quaternion: tuple) -> workspace.VoxelSolid:
+    """``haptify.workspace.modeled_solid`` (spec §8.3), computed once per device model and placement."""
+    kin = Kinematics.model_validate_json(kinematics_json)
+    return workspace.modeled_solid(kin, position, quaternion)
+
+
+def solid_entry(path: str, solid: workspace.VoxelSolid, color: tuple[int, int, int]) -> Entry | None:
+    """A voxel solid's boundary (voxels with fraction ≥ 0.5) as a translucent static mesh; None when empty."""
+    mesh = boundary_mesh(solid.fraction >= 0.5, solid.origin, solid.pitch)
+    if not len(mesh.triangles):
+        return None
+    return Entry(path, static=[rr.Mesh3D(vertex_positions=mesh.vertices, triangle_indices=mesh.triangles,
+                                         vertex_normals=mesh.normals, albedo_factor=(*color, MESH_ALPHA))])
 
 
 # --- session level ---------------------------------------------------------------------------------
