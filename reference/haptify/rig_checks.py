@@ -75,8 +75,8 @@ def recorder_delays(ctx_or_session: Any, trial_id: str) -> dict[str, float]:
 
     In a ``rig.handle_calibration`` trial all three recorders observe the direction of gravity in the
     handle frame: the F/T sensor as its connector load ``F − b_F``, the accelerometer as ``−(a − b_a)``
-    and motion capture as ``R_WHᵀ (0, 0, −1)``. With u_F low-passed and resampled on a ``sync_rate_hz``
-    grid, the delay of recorder X is the lag τ in ±``sync_max_lag_s`` that maximises the mean of
+    and motion capture as ``R_WHᵀ (0, 0, −1)``. With F and a low-passed at ``sync_cutoff_hz`` and u_F resampled on a
+    ``sync_rate_hz`` grid, the delay of recorder X is the lag τ in ±``sync_max_lag_s`` that maximises the mean of
     ``u_F(t) · u_X(t + τ)``: searched in steps of ``sync_coarse_step_s``, then in steps of 1/``sync_rate_hz``
     within one coarse step of the best, then refined by a parabola through the best three. A positive
     delay means X's time stamps are late. E624 when the score has no interior peak.
@@ -95,10 +95,11 @@ def recorder_delays(ctx_or_session: Any, trial_id: str) -> dict[str, float]:
         raise fail("E624", f"trial {trial_id!r} is too short for the sync check", expected=f"> {2 * max_lag} s of overlap", found=len(grid))
     r_hs = calibration.sensor_rotation(session, "ft_sensor")
     r_ha = calibration.sensor_rotation(session, "accelerometer")
-    f_grid = signals.lowpass_resample(w["t"].to_numpy(), w[["fx", "fy", "fz"]].to_numpy(), grid, float(signals.sp("wrench_cutoff_hz")))
+    fc = float(rp("sync_cutoff_hz"))
+    f_grid = signals.lowpass_resample(w["t"].to_numpy(), w[["fx", "fy", "fz"]].to_numpy(), grid, fc)
     u_f = _gravity_dirs_h(f_grid, cal.force_bias_N, r_hs, 1.0)
     t_a = a["t"].to_numpy()
-    acc_f = signals.lowpass(a[["ax", "ay", "az"]].to_numpy(), signals.nominal_rate(t_a), float(signals.sp("accel_cutoff_hz")))
+    acc_f = signals.lowpass(a[["ax", "ay", "az"]].to_numpy(), signals.nominal_rate(t_a), fc)
     m = track.quaternion  # NaN outside segments
     down_h = np.einsum("nji,j->ni", quat_to_matrix(np.where(np.isfinite(m), m, 1.0)), np.array([0.0, 0.0, -1.0]))
     down_h[~track.valid] = np.nan
