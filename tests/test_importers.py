@@ -551,19 +551,6 @@ def test_example_maps_are_valid_import_maps_and_the_schema_agrees():
     assert list(jsonschema.Draft202012Validator(schema).iter_errors(bad))
 
 
-def test_spec_unit_table_matches_the_normative_json():
-    text = (REPO / "spec" / "05-import.md").read_text(encoding="utf-8")
-    block = text.split("<!-- units table:")[1].split("<!-- end of units table -->")[0]
-    rows = [[c.strip() for c in line.strip().strip("|").split("|")] for line in block.splitlines()[3:] if line.startswith("|")]
-    table = json.loads((REPO / "schemas" / "1.0" / "import-units.json").read_text(encoding="utf-8"))["units"]
-    assert len(rows) == len(table)
-    for row, unit in zip(rows, table):
-        assert row[0] == unit["dimension"]
-        assert row[1] == ", ".join(f"`{s}`" for s in unit["spellings"])
-        assert float(row[2]) == unit["mul"] and float(row[3]) == unit["div"]
-        assert row[4] == unit.get("note", "")
-
-
 # --- appending a trial to an existing session (spec §5.9) ----------------------------------------
 
 def unchanged(folder: Path):

@@ -2,7 +2,7 @@
 
 A spec chapter marks a generated block with ``<!-- BEGIN GENERATED: <what> [arg] -->`` …
 ``<!-- END GENERATED -->``. ``<what>`` is ``params <family>`` (a metric family's parameters and
-metrics), ``stream-kinds``, ``protocols`` or ``codes``. ``--check`` exits 1 when a chapter's tables
+metrics), ``stream-kinds``, ``protocols``, ``codes`` or ``import-units``. ``--check`` exits 1 when a chapter's tables
 differ from the data, so prose tables cannot drift from the definition files.
 """
 
@@ -73,10 +73,17 @@ def codes_table() -> str:
     return _table(["code", "name", "severity", "spec", "meaning", "hint"], rows)
 
 
+def import_units_table() -> str:
+    rows = [[u["dimension"], ", ".join(f"`{s}`" for s in u["spellings"]), u["mul"], u["div"], u.get("note", "")]
+            for u in schemas.load("import-units.json")["units"]]
+    return _table(["dimension", "spellings", "mul", "div", "note"], rows)
+
+
 def render_block(what: str, arg: str | None) -> str:
     if what == "params" and arg:
         return params_table(arg)
-    return {"stream-kinds": stream_kinds_table, "protocols": protocols_table, "codes": codes_table}[what]()
+    return {"stream-kinds": stream_kinds_table, "protocols": protocols_table, "codes": codes_table,
+            "import-units": import_units_table}[what]()
 
 
 def regenerate(text: str) -> str:

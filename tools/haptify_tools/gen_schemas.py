@@ -22,6 +22,7 @@ MODELS: dict[str, str] = {
     "rig": "haptify.session_format:Rig",
     "metric-definition": "haptify.metric_definitions:MetricFamily",
     "results": "haptify.results:ResultsFile",
+    "import-map": "haptify.importers:ImportMap",
     "conformance-cases": "haptify_conform.cases:CaseFile",
     "conform-report": "haptify_conform.report:ConformReport",
 }
