@@ -255,7 +255,7 @@ def spec_box_volume(box: Any) -> float:
 # --- session level (spec §8.7) -------------------------------------------------------------------
 
 def measured_points(session: Any, trial_id: str) -> np.ndarray:
-    """The finite gimbal-centre positions (m, W) of a workspace trial's handle_pose stream (spec §8.2)."""
+    """The finite gimbal-centre positions (m, W) of a workspace trial's handle_pose stream (spec §8.7)."""
     pose = session.read(trial_id, "handle_pose")
     p = pose[["px", "py", "pz"]].to_numpy()
     return p[np.all(np.isfinite(p), axis=1)]
