@@ -127,3 +127,21 @@ def test_rig_without_plate_is_coded():
     with pytest.raises(HaptifyError) as e:
         force_plate.corner_geometry(Rig.model_validate(rig))
     assert e.value.code == "E603"
+
+
+@settings(max_examples=30, deadline=None)
+@given(scale=st.floats(0.01, 100.0), seed=st.integers(0, 2 ** 16))
+def test_unit_scaled_readings_scale_the_wrench_and_keep_the_cop(scale, seed):
+    """Readings (and bias) multiplied by s give s·F and s·M; the COP, a ratio, does not change."""
+    rng = np.random.default_rng(seed)
+    rig_dict = turned_corner_rig()
+    pos, rot = force_plate.corner_geometry(Rig.model_validate(rig_dict))
+    raw = rng.normal(0, 1, (5, 24))
+    raw[:, 2::6] -= 10.0  # a vertical load on every corner so the COP is defined
+    bias = rng.normal(0, 0.1, 24)
+    f1, m1 = force_plate.total_wrench(raw, pos, rot, bias)
+    f2, m2 = force_plate.total_wrench(scale * raw, pos, rot, scale * bias)
+    assert np.allclose(f2, scale * f1) and np.allclose(m2, scale * m1)
+    c1, ok1 = force_plate.center_of_pressure(f1, m1, min_force_N=0.0)
+    c2, ok2 = force_plate.center_of_pressure(f2, m2, min_force_N=0.0)
+    assert np.allclose(c1, c2)

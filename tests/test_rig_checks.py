@@ -90,3 +90,14 @@ def test_rig_check_skips_what_the_session_cannot_show(example_session, capsys):
     assert _run(example_session) == 0
     out = capsys.readouterr().out
     assert "SKIP  COP error" in out and "E310" in out
+
+
+def test_rig_check_plugin_parses_its_own_json_flag(good, capsys):
+    """``haptify rig-check SESSION --json`` (the plugin's parser, as the CLI registers it)."""
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers(dest="command")
+    cmd_rig_check.register(sub)
+    args = parser.parse_args(["rig-check", str(good), "--json"])
+    assert args.func(args, UI()) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["ok"] is True and len(report["checks"]) == 10
