@@ -23,7 +23,7 @@ from scipy.optimize import least_squares
 
 from haptify.conventions import GRAVITY_W, STANDARD_GRAVITY, quat_rotate, quat_to_matrix
 from haptify.caching import cached, session_of
-from haptify.errors import fail
+from haptify.errors import HaptifyError, fail
 from haptify.metric_definitions import param
 from haptify.session_format import HandleGravityCalibration, Pose
 
@@ -192,8 +192,8 @@ def fit_trial(ctx_or_session: Any, trial_id: str) -> HandleCalibration:
     if session.stream(trial_id, "handle_pose") is not None:
         try:
             mocap = signals.pose_on_grid(ctx_or_session, trial_id, grid)
-        except Exception as exc:  # noqa: BLE001 - the diagnostic is optional; the fit stands without it
-            if getattr(exc, "code", None) != "E611":
+        except HaptifyError as exc:  # no usable motion capture: the diagnostic is optional, the fit stands
+            if exc.code != "E611":
                 raise
         else:
             rs = sensor_rotation(session, "ft_sensor")

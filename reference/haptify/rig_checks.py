@@ -293,11 +293,15 @@ def _range_checks(session: Any, ctx: Any) -> list[Check]:
     return out
 
 
-def _metric_check(ctx: Any, mid: str, name: str, requirement: str, judge: Callable[[Any], bool], show: Callable[[Any], Any]) -> Check:
-    res = metric(ctx, mid)
-    if isinstance(res, Unavailable):
-        return Check(name, "SKIP", None, requirement, f"{res.code}: {res.reason}")
-    return Check(name, _status(judge(res)), show(res), requirement)
+def _safe_metric(ctx: Any, mid: str) -> MetricResult | Unavailable:
+    try:
+        return metric(ctx, mid)
+    except HaptifyError as exc:  # a problem shared by every trial, e.g. the rig lacks a part
+        return unavailable(mid, exc)
+
+
+def _orientation_errors(res: MetricResult) -> list[float]:
+    return [f["orientation_error_deg"] for f in res.diagnostics["fits"].values() if f.get("orientation_error_deg") is not None]
 
 
 def check_rig(ctx: Any) -> list[Check]:
@@ -310,27 +314,29 @@ def check_rig(ctx: Any) -> list[Check]:
         from haptify.compute import ComputeContext
 
         ctx = ComputeContext(session=ctx)
-    session = session_of(ctx)
-    checks = _range_checks(session, ctx)
-    fmin = float(rp("req_natural_frequency_hz"))
-    checks.append(_metric_check(ctx, "rig.plate_natural_frequency", "plate natural frequency (Appendix 1)", f">= {fmin} Hz on every axis",
-                                lambda r: min(r.value) >= fmin, lambda r: [round(x, 1) for x in r.value]))
-    cmax = float(rp("req_cop_error_m"))
-    checks.append(_metric_check(ctx, "rig.cop_error", "COP error (Appendix 2)", f"mean <= {cmax * 1000:.1f} mm (Kistler 9281B11)",
-                                lambda r: r.value <= cmax, lambda r: {"mean_mm": round(r.value * 1000, 2), "sd_mm": round((r.sd or 0.0) * 1000, 2), "n": r.n}))
+    results = {mid: _safe_metric(ctx, mid) for mid in METRIC_STEPS}
+    fmin, cmax = float(rp("req_natural_frequency_hz")), float(rp("req_cop_error_m"))
     rmax = [float(x) for x in rp("req_calibration_rms")]
-    checks.append(_metric_check(ctx, "rig.handle_calibration_rms", "handle calibration RMS (§III-C)",
-                                f"<= {rmax} (N, m/s^2, N*m)", lambda r: all(v <= m for v, m in zip(r.value, rmax)),
-                                lambda r: [float(f"{x:.3g}") for x in r.value]))
-    res = metric(ctx, "rig.handle_calibration_rms")
-    omax = float(rp("req_orientation_error_deg"))
-    if isinstance(res, MetricResult):
-        errs = [f.get("orientation_error_deg") for f in res.diagnostics["fits"].values()]
-        errs = [e for e in errs if e is not None]
-        checks.append(Check("F/T sensor pose vs motion capture", _status(max(errs) <= omax), round(max(errs), 2), f"<= {omax} deg RMS")
-                      if errs else Check("F/T sensor pose vs motion capture", "SKIP", None, f"<= {omax} deg RMS", "no usable handle_pose in the calibration trials"))
-    smax = float(rp("req_sync_offset_s"))
-    checks.append(_metric_check(ctx, "rig.sync_offset", "recorder synchronisation", f"|delay| <= {smax * 1000:.1f} ms",
-                                lambda r: r.value <= smax, lambda r: {"max_abs_ms": round(r.value * 1000, 2),
-                                                                       **{tid: {k: round(v * 1000, 2) for k, v in d.items()} for tid, d in r.diagnostics["delays_s"].items()}}))
+    omax, smax = float(rp("req_orientation_error_deg")), float(rp("req_sync_offset_s"))
+    # (metric, line name, requirement, pass?, shown value, why the line is skipped although the metric exists)
+    lines: list[tuple[str, str, str, Callable[[Any], bool], Callable[[Any], Any], Callable[[Any], str | None]]] = [
+        ("rig.plate_natural_frequency", "plate natural frequency (Appendix 1)", f">= {fmin} Hz on every axis",
+         lambda r: min(r.value) >= fmin, lambda r: [round(x, 1) for x in r.value], lambda r: None),
+        ("rig.cop_error", "COP error (Appendix 2)", f"mean <= {cmax * 1000:.1f} mm (Kistler 9281B11)", lambda r: r.value <= cmax,
+         lambda r: {"mean_mm": round(r.value * 1000, 2), "sd_mm": round((r.sd or 0.0) * 1000, 2), "n": r.n}, lambda r: None),
+        ("rig.handle_calibration_rms", "handle calibration RMS (§III-C)", f"<= {rmax} (N, m/s^2, N*m)",
+         lambda r: all(v <= m for v, m in zip(r.value, rmax)), lambda r: [float(f"{x:.3g}") for x in r.value], lambda r: None),
+        ("rig.handle_calibration_rms", "F/T sensor pose vs motion capture", f"<= {omax} deg RMS",
+         lambda r: max(_orientation_errors(r)) <= omax, lambda r: round(max(_orientation_errors(r)), 2),
+         lambda r: None if _orientation_errors(r) else "no usable handle_pose in the calibration trials"),
+        ("rig.sync_offset", "recorder synchronisation", f"|delay| <= {smax * 1000:.1f} ms", lambda r: r.value <= smax,
+         lambda r: {"max_abs_ms": round(r.value * 1000, 2),
+                    **{tid: {k: round(v * 1000, 2) for k, v in d.items()} for tid, d in r.diagnostics["delays_s"].items()}},
+         lambda r: None),
+    ]
+    checks = _range_checks(session_of(ctx), ctx)
+    for mid, name, requirement, judge, show, skip in lines:
+        res = results[mid]
+        why = f"{res.code}: {res.reason}" if isinstance(res, Unavailable) else skip(res)
+        checks.append(Check(name, "SKIP", None, requirement, why) if why else Check(name, _status(judge(res)), show(res), requirement))
     return checks
