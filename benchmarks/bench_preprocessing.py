@@ -15,11 +15,11 @@ from __future__ import annotations
 import argparse
 import json
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
+from bench_import import best_of
 from bench_io import build
 from haptify import calibration, force_plate, signals
 from haptify.conventions import STANDARD_GRAVITY
@@ -28,15 +28,6 @@ from haptify.storage import atomic_write_json, open_session
 RECORD = {"kind": "handle_gravity", "id": "bench", "force_bias_N": [0.1, -0.2, 0.3], "connector_mass_kg": 0.05,
           "connector_com_m": [0.0, 0.0, 0.02], "torque_bias_Nm": [0.0, 0.0, 0.0], "accel_bias_m_per_s2": [0.0, 0.0, 0.0],
           "gravity_m_per_s2": STANDARD_GRAVITY}
-
-
-def best(fn, repeat: int) -> float:
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return min(times)
 
 
 def main() -> None:
@@ -49,12 +40,12 @@ def main() -> None:
         manifest["calibration"] = [RECORD]
         atomic_write_json(path / "session.json", manifest)
         trial = "local_dynamic-1"
-        s_hs = best(lambda: signals.handle_signals(open_session(path), trial), args.repeat)
-        s_acc = best(lambda: signals.handle_accel_native(open_session(path), trial), args.repeat)
+        s_hs = best_of(args.repeat, lambda: signals.handle_signals(open_session(path), trial))
+        s_acc = best_of(args.repeat, lambda: signals.handle_accel_native(open_session(path), trial))
         rec = {"kind": "plate_bias", "id": "pb", "bias": [0.0] * 24}
         manifest["calibration"].append(rec)
         atomic_write_json(path / "session.json", manifest)
-        s_plate = best(lambda: force_plate.plate_signals(open_session(path), trial), args.repeat)
+        s_plate = best_of(args.repeat, lambda: force_plate.plate_signals(open_session(path), trial))
     rng = np.random.default_rng(0)
     n = 2400  # 24 s at the 100 Hz fit rate
     u = rng.normal(size=(n, 3))
@@ -62,7 +53,7 @@ def main() -> None:
     force = 0.3 + 0.5 * u + rng.normal(0, 0.004, (n, 3))
     torque = 0.01 + np.cross([0.0, 0.0, 0.02], 0.5 * u) + rng.normal(0, 1e-4, (n, 3))
     accel = 0.1 - 9.81 * u + rng.normal(0, 0.05, (n, 3))
-    s_fit = best(lambda: calibration.fit_from_samples(force, torque, accel), args.repeat)
+    s_fit = best_of(args.repeat, lambda: calibration.fit_from_samples(force, torque, accel))
     print(f"handle_signals, 140 s trial at 100 Hz: {s_hs:.3f} s (share of the < 10 s dossier target)")
     print(f"handle_accel_native, 140 s at 2 kHz: {s_acc:.3f} s")
     print(f"plate_signals, 140 s at 1 kHz: {s_plate:.3f} s")
