@@ -186,7 +186,8 @@ def read_table(path: Path, fmt: str, columns: list[str], *, label: str) -> pd.Da
     try:
         if fmt == "parquet":
             table = pq.read_table(path)
-            frame = table.to_pandas()
+            # the columns are the data (spec §3.2); pandas' own metadata is neither needed nor trusted
+            frame = table.to_pandas(ignore_metadata=True)
         else:
             with open(path, encoding="utf-8") as fh:
                 header = fh.readline().rstrip("\r\n").split(",")
