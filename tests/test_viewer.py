@@ -43,7 +43,6 @@ from haptify_tools.viewer.recording import (
     raw_pose_at,
     results_markdown,
     time_ns,
-    voxel_means,
     write_rrd,
 )
 
@@ -51,6 +50,7 @@ CHROMIUM = Path("/usr/bin/chromium")
 SURFACE_Z = 0.05
 OCCLUDED = slice(40, 47)  # pose/marker rows set to NaN in the stiffness trial (70 ms: longer than any bridged gap)
 SPHERE_R, SPHERE_C = 0.04, np.array([0.0, 0.0, 0.1])  # the workspace trial sweeps this sphere (m)
+FREE_SPACE_S = 2.5  # duration of the example free-space trial: long enough for the vibration chapter's trimming
 FORCE_BIAS = 0.25  # N, the handle_gravity record's force bias on the sensor's x axis
 
 
@@ -66,7 +66,7 @@ def small_device() -> dict:
 
 def rich_writer(session_id: str = "viewer-0001", force_scale: float = 1.0):
     """The example free-space trial plus a workspace trial and a stiffness trial with every stream."""
-    w = example_writer(session_id=session_id, duration_s=1.0)
+    w = example_writer(session_id=session_id, duration_s=FREE_SPACE_S)
     w.manifest["device"] = small_device()
     w.manifest["calibration"] = [  # known parameters: 0.25 N force bias on x, no connector weight, zero plate bias
         {"kind": "handle_gravity", "id": "hg", "force_bias_N": [FORCE_BIAS, 0.0, 0.0], "connector_mass_kg": 0.0,
@@ -311,6 +311,18 @@ def test_load_results_errors(tmp_path):
     assert load_results(good).metrics[0].id == "workspace.volume"
 
 
+def view_named(container, name: str):
+    """The view called ``name`` anywhere inside a blueprint container."""
+    for item in container.contents:
+        if getattr(item, "name", None) == name and not hasattr(item, "column_shares"):
+            return item
+        if hasattr(item, "column_shares"):
+            found = view_named(item, name)
+            if found is not None:
+                return found
+    return None
+
+
 # --- blueprints -------------------------------------------------------------------------------------
 
 def test_blueprint_per_protocol(recorded):
@@ -319,8 +331,8 @@ def test_blueprint_per_protocol(recorded):
     stiff = tabs["stiffness"]
     assert isinstance(stiff.contents[0], rrb.Vertical) and isinstance(stiff.contents[1], rrb.Spatial3DView)
     first = stiff.contents[0].contents[0]
-    assert first.origin == "/series/stiffness-1"
-    assert "+ $origin/measured/commanded/force" in first.contents and "+ $origin/compare/commanded/force" in first.contents
+    assert first.origin == "/series/stiffness-1" and first.name == "normal force: commanded vs felt"
+    assert list(first.contents) == ["+ $origin/measured/contact/normal_force", "+ $origin/compare/contact/normal_force"]
     ws = tabs["workspace"]
     assert isinstance(ws.contents[0], rrb.Spatial3DView)
     assert list(ws.contents[0].contents) == ["+ /world", "+ /world/plate/**", "+ /world/device/**", "+ /world/workspace-1/**"]
@@ -328,7 +340,8 @@ def test_blueprint_per_protocol(recorded):
     free = tabs["free_space"]
     names = [v.name for v in free.contents[1].contents if isinstance(v, rrb.TimeSeriesView)]
     assert names[:2] == ["hand force in W (calibrated, raw)", "hand torque in W (calibrated)"]
-    felt = stiff.contents[0].contents[0]
+    felt = view_named(stiff, "commanded vs felt force (W)")
+    assert "+ $origin/measured/commanded/force" in felt.contents and "+ $origin/compare/commanded/force" in felt.contents
     assert "+ $origin/measured/hand_force/calibrated" in felt.contents  # felt = calibrated when available
     assert "+ $origin/measured/hand_force/raw_world" not in felt.contents
     for protocol in blueprints.LAYOUTS:  # every protocol has a layout naming only known views
@@ -361,13 +374,7 @@ def test_time_ns_rounds_to_the_nearest_nanosecond():
     assert time_ns(np.array([0.29, 1e-9, 140.0])).tolist() == [290_000_000, 1, 140_000_000_000]
 
 
-def test_voxel_means_and_nan_split():
-    pts = np.array([[0.001, 0.001, 0.001], [0.003, 0.001, 0.001], [0.015, 0.001, 0.001]])
-    vals = np.array([[1.0, 0, 0], [3.0, 0, 0], [5.0, 0, 0]])
-    centres, means = voxel_means(pts, vals, 0.01)
-    order = np.argsort(centres[:, 0])
-    np.testing.assert_allclose(centres[order, 0], [0.002, 0.015])
-    np.testing.assert_allclose(means[order, 0], [2.0, 5.0])
+def test_nan_split():
     line = np.array([[0, 0, 0], [1, 0, 0], [np.nan] * 3, [2, 0, 0], [np.nan] * 3, [3, 0, 0], [4, 0, 0], [5, 0, 0]], float)
     assert [len(s) for s in nan_split(line)] == [2, 3]
 
@@ -400,18 +407,36 @@ def test_calibrated_hand_force_on_the_signal_grid(recorded):
     arrows_ns, _ = temporal(out, "/world/stiffness-1/measured/hand_force/calibrated", "Arrows3D:vectors")
     np.testing.assert_array_equal(arrows_ns, t_ns[valid])
     assert "/world/stiffness-1/measured/hand_force/raw" not in plan.paths()  # calibrated replaces the raw arrow
+    # along the rendered normal (0, 0, 1): commanded 1.5 N throughout; penetration 3 mm · sin(2πt) on the grid
+    _, normal = temporal(out, "/series/stiffness-1/measured/contact/normal_force", "Scalars:scalars")
+    np.testing.assert_allclose(np.array(normal, dtype=float)[:, 0], 1.5, atol=1e-12)
+    _, depth = temporal(out, "/series/stiffness-1/measured/contact/penetration", "Scalars:scalars")
+    depth = np.array(depth, dtype=float)[:, 0]
+    np.testing.assert_allclose(depth[valid], 0.003 * np.sin(2 * np.pi * np.arange(100)[valid] / 100.0), atol=5e-5)
 
 
 def test_plate_force_and_cop(recorded):
     """Four equal corner loads summing to 18.5 N downward: force (0, 0, −18.5) N at the plate centre."""
     _, out = recorded
+    n = int(FREE_SPACE_S * 1000)
     t_ns, rows = temporal(out, "/series/free_space-1/measured/plate/force", "Scalars:scalars")
-    assert len(t_ns) == 1000
-    np.testing.assert_allclose(np.array(rows), np.tile([0.0, 0.0, -18.5], (1000, 1)), atol=1e-12)
+    assert len(t_ns) == n
+    np.testing.assert_allclose(np.array(rows), np.tile([0.0, 0.0, -18.5], (n, 1)), atol=1e-12)
     _, cop = temporal(out, "/series/free_space-1/measured/plate/cop", "Scalars:scalars")
     np.testing.assert_allclose(np.array(cop), 0.0, atol=1e-12)
     _, origins = temporal(out, "/world/free_space-1/measured/plate_force", "Arrows3D:origins")
-    np.testing.assert_allclose(np.array(origins)[:, 0], np.tile([0.0, 0.0, 18.5 * PLATE_FORCE_M_PER_N], (1000, 1)), atol=1e-6)
+    np.testing.assert_allclose(np.array(origins)[:, 0], np.tile([0.0, 0.0, 18.5 * PLATE_FORCE_M_PER_N], (n, 1)), atol=1e-6)
+
+
+def test_dft321_of_a_single_axis_tone(recorded):
+    """Only ax carries a 150 Hz tone (0.05 m/s²); ay, az are constant: DFT321 returns the high-passed ax,
+    i.e. the tone itself, on the accelerometer samples left after trimming 0.5 s at each end (spec §10.2–10.3)."""
+    _, out = recorded
+    t_ns, rows = temporal(out, "/series/free_space-1/measured/accel/dft321", "Scalars:scalars")
+    t = np.arange(int(FREE_SPACE_S * 2000)) / 2000.0
+    kept = t[1000:-1000]
+    np.testing.assert_array_equal(t_ns, np.round(kept * 1e9).astype(np.int64))
+    np.testing.assert_allclose(np.array(rows)[:, 0], 0.05 * np.sin(2 * np.pi * 150 * kept), atol=2e-3)
 
 
 def test_missing_calibration_is_reported_not_hidden(sessions, tmp_path):
@@ -429,7 +454,7 @@ def test_missing_calibration_is_reported_not_hidden(sessions, tmp_path):
     t_ns, vecs = temporal(out, "/world/stiffness-1/measured/hand_force/raw", "Arrows3D:vectors")
     assert len(t_ns) == ok.sum()
     np.testing.assert_allclose(np.array(vecs)[:, 0, 1], HAND_FORCE_M_PER_N, atol=1e-7)  # 1 N along world y
-    commanded_vs_felt = blueprints.trial_tab(plan, plan.trials[2]).contents[0].contents[0]
+    commanded_vs_felt = view_named(blueprints.trial_tab(plan, plan.trials[2]), "commanded vs felt force (W)")
     assert list(commanded_vs_felt.contents) == ["+ $origin/measured/commanded/force", "+ $origin/measured/hand_force/raw_world"]
     doc = next(e for e in plan.entries if e.path == "/session").static[0]
     assert "E601" in str(doc.text.as_arrow_array().to_pylist())

@@ -22,6 +22,8 @@ VIEWS: dict[str, tuple[str, list[str | tuple[str, ...]]]] = {
     "ft_force": ("F/T force (raw, sensor frame)", ["handle/force_raw"]),
     "ft_torque": ("F/T torque (raw, sensor frame)", ["handle/torque_raw"]),
     "accel": ("acceleration (raw sensor; calibrated W)", ["accel/raw", "accel/world"]),
+    "vibration": ("vibration: DFT321 of the high-passed acceleration", ["accel/dft321"]),
+    "normal_force": ("normal force: commanded vs felt", ["contact/normal_force"]),
     "plate_force": ("plate force (W)", ["plate/force"]),
     "plate_cop": ("plate centre of pressure", ["plate/cop"]),
     "plate_corners": ("plate corner forces (raw)", ["plate/corner_force_raw"]),
@@ -29,7 +31,7 @@ VIEWS: dict[str, tuple[str, list[str | tuple[str, ...]]]] = {
     # felt = the calibrated hand force, or the raw force in W when the session cannot be calibrated
     "commanded_vs_felt": ("commanded vs felt force (W)", ["commanded/force", ("hand_force/calibrated", "hand_force/raw_world")]),
     "commanded_torque": ("commanded torque (W)", ["commanded/torque"]),
-    "penetration": ("penetration of the virtual surface", ["penetration"]),
+    "penetration": ("penetration of the virtual surface", ["penetration", "contact/penetration"]),
     "position": ("handle position (W)", ["handle/position"]),
 }
 
@@ -43,19 +45,19 @@ class Layout:
     shares: tuple[float, float] = (1.0, 1.0)
 
 
-PASSIVE_MOTION = Layout(("hand_force", "hand_torque", "accel", "plate_force", "ft_force"))
+PASSIVE_MOTION = Layout(("hand_force", "hand_torque", "accel", "vibration", "plate_force"))
 PLATE_RIG = Layout(("plate_force", "plate_cop", "plate_corners"))
 LAYOUTS: dict[str, Layout] = {
     "workspace": Layout(("position",), shares=(3.0, 1.0)),
     "free_space": PASSIVE_MOTION,
     "local_dynamic": PASSIVE_MOTION,
-    "frictionless_surface": Layout(("commanded_vs_felt", "penetration", "accel", "plate_force")),
-    "stiffness": Layout(("commanded_vs_felt", "penetration"), spatial_first=False),
+    "frictionless_surface": Layout(("commanded_vs_felt", "normal_force", "penetration", "accel")),
+    "stiffness": Layout(("normal_force", "penetration", "commanded_vs_felt"), spatial_first=False),
     "rig.handle_calibration": Layout(("ft_force", "ft_torque", "accel", "hand_force")),
     "rig.plate_bias": PLATE_RIG,
     "rig.plate_impact": PLATE_RIG,
     "rig.plate_cop": PLATE_RIG,
-    "rig.baseline_vibration": Layout(("accel", "position")),
+    "rig.baseline_vibration": Layout(("accel", "vibration", "position")),
     "other": Layout(tuple(VIEWS)),
 }
 

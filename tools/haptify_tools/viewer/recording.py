@@ -22,7 +22,7 @@ Entity paths (``<trial>`` is the escaped trial id, ``<role>`` is ``measured`` or
     /world/<trial>/<role>/hand_force/raw      raw F/T force rotated to W, arrow at the handle
     /world/<trial>/<role>/markers/<link>      motion-capture markers, one colour per link
     /world/<trial>/<role>/links/<link>        link frames from link_poses
-    /world/<trial>/<role>/force_field         free space: mean force per 1 cm voxel
+    /world/<trial>/<role>/force_field         free space: mean force per bin (haptify.free_space)
     /world/<trial>/<role>/workspace/points    workspace: the measured point cloud
     /world/<trial>/<role>/workspace/measured  workspace: the measured workspace (volume operator) as a mesh
     /world/<trial>/<role>/workspace/modeled   workspace: the modeled workspace (DH model) as a mesh
@@ -45,7 +45,7 @@ import pandas as pd
 import rerun as rr
 from pydantic import ValidationError
 
-from haptify import force_plate, signals, workspace
+from haptify import force_plate, free_space, signals, surface, vibration, workspace
 from haptify.conventions import quat_multiply, quat_rotate
 from haptify.errors import HaptifyError, fail
 from haptify.results import ResultsFile
@@ -60,7 +60,6 @@ ROLES = ("measured", "compare")
 # Display constants (visual only; no metric depends on them).
 HAND_FORCE_M_PER_N = 0.02  # arrow length per newton of hand force
 PLATE_FORCE_M_PER_N = 0.005  # arrow length per newton of plate force
-FIELD_VOXEL_M = 0.01  # pitch of the free-space force-field bins
 HANDLE_AXIS_M = 0.03  # length of the handle's frame axes
 LINK_AXIS_M = 0.02  # length of each link frame's axes
 PLATE_THICKNESS_M = 0.02  # drawn thickness when the rig gives no corner-sensor depth
@@ -90,6 +89,10 @@ SERIES = {
     "hand_torque/calibrated": ("torque on the hand about the gimbal centre, W (calibrated)", "N*m"),
     "accel/raw": ("accelerometer specific force, raw, sensor frame", "m/s^2"),
     "accel/world": ("handle acceleration, W, bias and gravity removed", "m/s^2"),
+    "accel/dft321": ("DFT321 of the high-passed raw acceleration (spec §10.3)", "m/s^2"),
+    "contact/normal_force": ("force along the surface normal: commanded vs felt (spec §12.2)", "N"),
+    "contact/penetration": ("penetration on the signal grid, (p0 − p)·n (spec §13.2)", "m"),
+    "contact/state": ("contact (commanded rule) and guarded samples used by the metrics", "1"),
     "plate/force": ("force the load exerts on the plate, W", "N"),
     "plate/cop": ("centre of pressure on the plate, W", "m"),
     "plate/corner_force_raw": ("plate corner forces, raw, corner-sensor frames", "N"),
@@ -111,7 +114,7 @@ class Entry:
     times_ns: np.ndarray | None = None  # int64 ns on the session clock
     columns: Any = None  # a rerun ComponentColumnList, one row per entry of times_ns
     series: str | None = None  # for time series: the relative series key (a key of SERIES)
-    stream: str | None = None  # the stream kind whose samples are the rows, or "handle_signals" (its grid)
+    stream: str | None = None  # the stream kind whose samples are the rows, or the derivation ("handle_signals", "vibration")
 
     @property
     def rows(self) -> int:
@@ -206,16 +209,6 @@ def nan_split(points: np.ndarray) -> list[np.ndarray]:
     ok = finite_rows(points)
     edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
     return [points[a:b] for a, b in zip(edges[::2], edges[1::2]) if b - a >= 2]
-
-
-def voxel_means(points: np.ndarray, values: np.ndarray, pitch: float) -> tuple[np.ndarray, np.ndarray]:
-    """Mean point and mean value per occupied cubic voxel of side ``pitch`` (m)."""
-    cells = np.floor(points / pitch).astype(np.int64)
-    _, inverse, counts = np.unique(cells, axis=0, return_inverse=True, return_counts=True)
-    inverse = inverse.ravel()
-    mean_p = np.stack([np.bincount(inverse, weights=points[:, k]) for k in range(3)], axis=1) / counts[:, None]
-    mean_v = np.stack([np.bincount(inverse, weights=values[:, k]) for k in range(values.shape[1])], axis=1) / counts[:, None]
-    return mean_p, mean_v
 
 
 def plane_rectangle(point: np.ndarray, normal: np.ndarray, around: np.ndarray | None) -> np.ndarray:
@@ -396,10 +389,11 @@ class TrialPlanner:
         self.force_arrows(f"{self.world}/hand_force/{label}", t_a, origins, force, stream)
         ok = finite_rows(origins, force)
         if self.trial.protocol == "free_space" and ok.any():
-            centres, forces = voxel_means(origins[ok], force[ok], FIELD_VOXEL_M)
-            self.plan.add(Entry(f"{self.world}/force_field",
-                                static=[rr.Arrows3D(origins=centres, vectors=forces * HAND_FORCE_M_PER_N,
-                                                    colors=FORCE_COLORS[self.role], radii=0.0006)]))
+            field_ = free_space.force_field(origins[ok], force[ok])  # the spec's binning (§9.5)
+            if len(field_.centres):
+                self.plan.add(Entry(f"{self.world}/force_field",
+                                    static=[rr.Arrows3D(origins=field_.centres, vectors=field_.mean_force * HAND_FORCE_M_PER_N,
+                                                        colors=FORCE_COLORS[self.role], radii=0.0006)]))
 
     def accel(self) -> None:
         a = self.read("handle_accel")
@@ -408,6 +402,12 @@ class TrialPlanner:
             hs = self.handle_signals()
             if hs is not None and hs.acceleration is not None:
                 self.add_series("accel/world", hs.t, hs.acceleration, ["ax", "ay", "az"], "handle_signals")
+            try:
+                vib = vibration.trial_vibration(self.session, self.trial.id)
+            except HaptifyError as err:
+                self.note("DFT321 vibration signal", err)
+            else:
+                self.add_series("accel/dft321", vib.t, vib.signal, ["dft321"], "vibration")
 
     def plate(self) -> None:
         w = self.read("plate_wrench")
@@ -498,8 +498,7 @@ class TrialPlanner:
         """The rendered plane as a translucent rectangle, and the handle's penetration series."""
         r = self.trial.rendering
         point = np.asarray(r.surface_point_m, dtype=np.float64)
-        normal = np.asarray(r.surface_normal, dtype=np.float64)
-        normal = normal / np.linalg.norm(normal)
+        normal = surface.unit_normal(r.surface_normal, self.trial.id)
         around = p[finite_rows(p)] if p is not None else None
         corners = plane_rectangle(point, normal, around)
         self.plan.add(Entry(f"{self.world}/virtual_surface", static=[rr.Mesh3D(
@@ -508,6 +507,17 @@ class TrialPlanner:
         if p is not None:
             depth = (point - p) @ normal
             self.add_series("penetration", t_pose, depth, ["depth"], "handle_pose")
+        if "commanded_wrench" in self.kinds and "handle_wrench" in self.kinds and "handle_pose" in self.kinds:
+            try:
+                cs = surface.contact_signals(self.session, self.trial.id)
+            except HaptifyError as err:
+                self.note("contact signals (normal force, contact)", err)
+                return
+            self.add_series("contact/normal_force", cs.t, np.column_stack([cs.commanded_normal, cs.normal_force]),
+                            ["commanded Fn", "felt Fn"], "handle_signals")
+            self.add_series("contact/penetration", cs.t, cs.penetration, ["depth"], "handle_signals")
+            self.add_series("contact/state", cs.t, np.column_stack([cs.contact, cs.used]).astype(np.float64),
+                            ["contact", "used"], "handle_signals")
 
 
 @functools.lru_cache(maxsize=4)
@@ -609,7 +619,8 @@ def session_markdown(session: SessionFolder, trials: list[TrialPlan], other: Ses
                      f"{_cell(tp.counterpart.get('compare', '—' if other is not None else ''))} |")
     lines += ["", "World frame W: origin at the centre of the plate's top surface, z up, right-handed (spec §1.2).",
               f"Arrows: hand force {HAND_FORCE_M_PER_N * 100:g} cm per N; plate force {PLATE_FORCE_M_PER_N * 100:g} cm per N.",
-              f"Free-space force field: mean force per {FIELD_VOXEL_M * 100:g} cm voxel.",
+              f"Free-space force field: mean hand force per {free_space.fp('force_field_bin_m') * 100:g} cm bin "
+              f"holding at least {free_space.fp('force_field_min_samples')} samples (spec §9.5).",
               "The plate arrow is the force the load exerts on the plate, drawn with its head at the COP."]
     if notes:
         lines += ["", "## Not shown", ""] + [f"- {_cell(n)}" for n in notes]
