@@ -157,3 +157,17 @@ def test_rotating_the_world_about_vertical_rotates_outputs_and_keeps_magnitudes(
     a1 = calibration.compensate_accel(raw[:, :3], q, cal, pose)
     a2 = calibration.compensate_accel(raw[:, :3], q2, cal, pose)
     assert np.allclose(np.linalg.norm(a1, axis=1), np.linalg.norm(a2, axis=1))
+
+
+def test_a_wrong_sensor_pose_in_the_rig_shows_as_orientation_error(tmp_path):
+    """Data recorded with the true sensor pose, described with one turned 10° about x: a direction at angle θ
+    from the x axis is off by ≈ 10°·sin θ, so over directions covering the sphere the RMS is
+    10°·sqrt(E[sin²θ]) = 10°·sqrt(2/3) ≈ 8.2° (spec §6.3); the fitted parameters do not depend on the pose."""
+    w = rb.writer()
+    rb.add_calibration_trial(w, rb.HandleTruth(), np.random.default_rng(12), duration_s=12.0)
+    wrong = quat_multiply(np.asarray(w.manifest["rig"]["handle"]["ft_sensor"]["pose"]["quaternion"]),
+                          quat_from_axis_angle(np.array([1.0, 0.0, 0.0]), np.array(np.radians(10.0))))
+    w.manifest["rig"]["handle"]["ft_sensor"]["pose"]["quaternion"] = wrong.tolist()
+    c = calibration.fit_trial(open_session(w.write(tmp_path / "s")), "cal-1")
+    assert c.diagnostics["orientation_error_deg"] == pytest.approx(10.0 * np.sqrt(2 / 3), abs=0.5)
+    assert c.connector_mass_kg == pytest.approx(rb.HandleTruth().mass, abs=1e-4)

@@ -145,3 +145,24 @@ def test_unit_scaled_readings_scale_the_wrench_and_keep_the_cop(scale, seed):
     c1, ok1 = force_plate.center_of_pressure(f1, m1, min_force_N=0.0)
     c2, ok2 = force_plate.center_of_pressure(f2, m2, min_force_N=0.0)
     assert np.allclose(c1, c2)
+
+
+@settings(max_examples=30, deadline=None)
+@given(yaw=st.floats(-np.pi, np.pi), seed=st.integers(0, 2 ** 16))
+def test_rotating_the_world_about_vertical_rotates_wrench_and_cop(yaw, seed):
+    """The same raw readings with the world frame (corner poses) turned about z: F, M and the COP turn
+    with it and their magnitudes stay the same."""
+    rng = np.random.default_rng(seed)
+    rig_dict = turned_corner_rig()
+    pos, rot = force_plate.corner_geometry(Rig.model_validate(rig_dict))
+    c, s = np.cos(yaw), np.sin(yaw)
+    rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    raw = rng.normal(0, 1, (6, 24))
+    raw[:, 2::6] -= 10.0
+    f1, m1 = force_plate.total_wrench(raw, pos, rot)
+    f2, m2 = force_plate.total_wrench(raw, pos @ rz.T, np.einsum("ij,cjk->cik", rz, rot))
+    assert np.allclose(f2, f1 @ rz.T) and np.allclose(m2, m1 @ rz.T)
+    assert np.allclose(np.linalg.norm(f2, axis=1), np.linalg.norm(f1, axis=1))
+    c1, _ = force_plate.center_of_pressure(f1, m1, min_force_N=0.0)
+    c2, _ = force_plate.center_of_pressure(f2, m2, min_force_N=0.0)
+    assert np.allclose(c2, c1 @ rz[:2, :2].T)

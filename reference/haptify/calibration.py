@@ -191,19 +191,29 @@ def fit_trial(ctx_or_session: Any, trial_id: str) -> HandleCalibration:
     cal = fit_from_samples(wr[:, :3], wr[:, 3:], ac, source=f"trial:{trial_id}")
     if session.stream(trial_id, "handle_pose") is not None:
         try:
-            mocap = signals.pose_on_grid(ctx_or_session, trial_id, grid)
-        except HaptifyError as exc:  # no usable motion capture: the diagnostic is optional, the fit stands
-            if exc.code != "E611":
+            err = orientation_error_deg(ctx_or_session, trial_id, grid, wr[:, :3] - cal.force_bias_N)
+        except HaptifyError as exc:  # the diagnostic is optional; the fit stands without it
+            if exc.code not in ("E611", "E603"):  # no usable motion capture, or no sensor pose in the rig
                 raise
         else:
-            rs = sensor_rotation(session, "ft_sensor")
-            g_s = gravity_in_sensor(mocap.quaternion[mocap.valid], rs)
-            load = wr[mocap.valid, :3] - cal.force_bias_N
-            if len(load):
-                cosang = np.sum(g_s * load, axis=1) / (np.linalg.norm(g_s, axis=1) * np.linalg.norm(load, axis=1))
-                ang = np.degrees(np.arccos(np.clip(cosang, -1.0, 1.0)))
-                cal.diagnostics["orientation_error_deg"] = float(np.sqrt(np.mean(ang ** 2)))
+            cal.diagnostics["orientation_error_deg"] = err
     return cal
+
+
+def orientation_error_deg(ctx_or_session: Any, trial_id: str, grid: np.ndarray, load_s: np.ndarray) -> float:
+    """RMS angle (deg) between the measured connector load ``load_s (N, 3)`` (F − b_F, frame S, on ``grid``)
+    and the gravity direction motion capture predicts in S at the same times (spec §6.3 diagnostic).
+
+    E611 without usable motion capture, E603 without the sensor pose in the rig.
+    """
+    from haptify import signals
+
+    session = session_of(ctx_or_session)
+    mocap = signals.pose_on_grid(ctx_or_session, trial_id, grid)
+    g_s = gravity_in_sensor(mocap.quaternion[mocap.valid], sensor_rotation(session, "ft_sensor"))
+    load = load_s[mocap.valid]
+    cosang = np.sum(g_s * load, axis=1) / (np.linalg.norm(g_s, axis=1) * np.linalg.norm(load, axis=1))
+    return float(np.sqrt(np.mean(np.degrees(np.arccos(np.clip(cosang, -1.0, 1.0))) ** 2)))
 
 
 # --- which parameters apply (spec §6.4) ----------------------------------------------------------
