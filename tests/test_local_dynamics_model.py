@@ -265,3 +265,24 @@ def test_training_data_must_be_finite_and_paired():
     with pytest.raises(HaptifyError) as err:
         fit(u, y, sample_rate_hz=100.0)
     assert err.value.code == "E703"
+
+
+coefficients = st.lists(st.floats(-1.0, 1.0), min_size=1, max_size=3)
+poles = st.lists(st.floats(-0.9, 0.9), min_size=0, max_size=2)
+
+
+@settings(max_examples=40, deadline=None)
+@given(coefficients, poles, st.integers(0, 3), st.integers(1, 20), st.floats(-3.0, 3.0))
+def test_unit_gain_model_is_linear_and_time_invariant(b, p, nk, shift, gain):
+    """With unit-gain maps the model is the LTI block: superposition and delay-shift hold exactly (spec §11.3)."""
+    f = np.poly(p)[1:].tolist() if p else []
+    model = HWModelFile(sample_rate_hz=100.0, inputs=[Channel(name="u", unit="1"), Channel(name="v", unit="1")],
+                        outputs=[Channel(name="y", unit="1")], input_maps=[UnitGainMap(), UnitGainMap()],
+                        output_maps=[UnitGainMap()],
+                        linear=[[TransferFunction(b=b, f=f, nk=nk), TransferFunction(b=b[::-1], f=f, nk=0)]])
+    rng = np.random.default_rng(len(b) + nk)
+    u1, u2 = rng.standard_normal((60, 2)), rng.standard_normal((60, 2))
+    y1, y2 = predict(model, u1), predict(model, u2)
+    assert np.allclose(predict(model, u1 + gain * u2), y1 + gain * y2, atol=1e-9)
+    delayed = np.vstack([np.zeros((shift, 2)), u1])[:60]
+    assert np.allclose(predict(model, delayed)[shift:], y1[: 60 - shift], atol=1e-9)
