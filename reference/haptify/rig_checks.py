@@ -14,7 +14,7 @@ import numpy as np
 
 from haptify import calibration, force_plate, signals
 from haptify.conventions import quat_to_matrix
-from haptify.caching import cached, session_of
+from haptify.caching import session_of
 from haptify.errors import HaptifyError, fail
 from haptify.metric_definitions import family, param
 from haptify.repetitions import TrialValue, aggregate, definition_of, per_trial, unavailable
