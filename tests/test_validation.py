@@ -77,8 +77,9 @@ def test_valid_fixtures_have_no_findings(name: str):
     assert report.streams_checked >= 4
 
 
-def test_committed_fixtures_are_current(tmp_path: Path):
+def test_committed_fixtures_are_current(tmp_path: Path, monkeypatch):
     """Rebuilding gives the same logical content (JSON, table bits, symlink targets) as the committed tree."""
+    monkeypatch.setattr(os, "fsync", lambda fd: None)  # content matters here, not durability: 2x faster
     fx.build_all(tmp_path)
     built = fx.logical_snapshot(tmp_path / "invalid")
     committed = fx.logical_snapshot(INVALID)
