@@ -56,25 +56,10 @@ def render_text(report: ValidationReport, errors_only: bool = False) -> list[str
             last_trial = trial
         lines.append(f"  {file}")
         for f in shown:
-            lines.extend("    " + part for part in _finding_lines(f))
+            lines.extend("    " + part for part in str(f).splitlines())
     if not errors_only:
         verdict = {0: "valid", 1: "INVALID", 2: "could not be validated"}[report.exit_code]
         summary = (f"{report.session}: {verdict} — {len(report.errors)} error(s), {len(report.warnings)} warning(s), "
                    f"{report.streams_checked} stream(s) checked")
         lines.extend(["", summary] if lines else [summary])
     return lines
-
-
-def _finding_lines(f: Any) -> list[str]:
-    where = []
-    if f.pointer:
-        where.append(f"#{f.pointer}")
-    if f.column:
-        where.append(f"[{f.column}]")
-    if f.time_range:
-        where.append(f"t={f.time_range[0]:.6g}–{f.time_range[1]:.6g} s")
-    out = [f"{f.code} {f.severity}: {f.message}" + (f"  ({' '.join(where)})" if where else "")]
-    if f.expected is not None or f.found is not None:
-        out.append(f"  expected {f.expected!r}, found {f.found!r}")
-    out.append(f"  hint: {f.hint} (spec §{f.spec_section})")
-    return out

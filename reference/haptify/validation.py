@@ -419,6 +419,7 @@ class SessionValidator:
 
     # -- bookkeeping --------------------------------------------------------------------------
     def add(self, finding: Finding, trial: str | None = None) -> None:
+        """Record one finding, attributed to ``trial`` (None: the session as a whole)."""
         self.report.items.append(ReportItem(finding, trial))
 
     def add_all(self, findings: Iterable[Finding], trial: str | None = None) -> None:
@@ -825,6 +826,7 @@ class SessionValidator:
                                  found={early.stream.kind: list(early.span), late.stream.kind: list(late.span)}), trial)
 
     def finish(self) -> ValidationReport:
+        """The report of everything checked so far (spec §4.6)."""
         return self.report
 
 
