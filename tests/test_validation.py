@@ -162,6 +162,13 @@ def test_clock_offset_records_put_streams_on_the_session_clock(tmp_path: Path):
     assert validate_session(folder).codes == []
 
 
+def test_a_stream_without_time_column_is_a_column_finding_not_a_crash(tmp_path: Path):
+    folder = _session(tmp_path)
+    fx.rewrite_data(folder, "handle_wrench", lambda df: df.drop(columns=["t"]))
+    fx.edit(folder, lambda m: fx.stream_of(m, "handle_wrench")["columns"].pop(0))
+    assert validate_session(folder).codes == ["E201"]
+
+
 def test_all_findings_are_reported_not_only_the_first():
     report = validate_session(INVALID / "several-problems")
     assert [f.code for f in report.findings].count("W404") == 1

@@ -689,6 +689,8 @@ class SessionValidator:
         if n < 2:
             add(Finding("E205", f"{s.kind} stream holds {n} sample{'s' if n != 1 else ''}", file=label, expected="at least 2 samples", found=n))
             return
+        if not names_ok or len(set(declared)) != len(declared):
+            return  # the columns' meaning is unknown (E201/E107 above): data checks would mislead
         self._check_data(entry, table, add)
 
     def _known_entities(self, kind: str) -> set[str] | None:
