@@ -320,7 +320,7 @@ def _regular_file(path: Path, label: str, missing_code: str, missing_text: str, 
     """``lstat`` a resolved path: its size when it is a regular file within ``limit``; coded errors otherwise."""
     try:
         st = os.lstat(path)
-    except FileNotFoundError:
+    except (FileNotFoundError, NotADirectoryError):
         raise HaptifyError(Finding(missing_code, missing_text, file=label)) from None
     except OSError as exc:
         raise HaptifyError(Finding("E112", f"{label!r} cannot be examined: {exc.strerror}", file=label)) from None
