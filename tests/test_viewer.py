@@ -206,8 +206,8 @@ def test_expected_entity_paths(recorded):
         "/series/free_space-1/measured/hand_force/calibrated", "/series/free_space-1/measured/hand_torque/calibrated",
         "/series/free_space-1/measured/accel/world", "/series/free_space-1/measured/plate/force",
         "/series/free_space-1/measured/plate/cop",
-        "/world/stiffness-1/measured/virtual_surface", "/world/stiffness-1/measured/markers/handle",
-        "/world/stiffness-1/measured/markers/link2", "/world/stiffness-1/measured/links/link1",
+        "/world/stiffness-1/measured/virtual_surface", "/world/stiffness-1/measured/markers/handle/h3",
+        "/world/stiffness-1/measured/markers/link2/l2a", "/world/stiffness-1/measured/links/link1",
         "/world/stiffness-1/measured/links/link2",
         "/series/free_space-1/measured/handle/force_raw", "/series/free_space-1/measured/handle/torque_raw",
         "/series/free_space-1/measured/hand_force/raw_world", "/series/free_space-1/measured/accel/raw",
@@ -274,12 +274,13 @@ def test_three_d_entities_skip_unknown_poses(recorded):
     t_ns, _ = temporal(out, "/world/stiffness-1/measured/handle", "Transform3D:translation")
     all_ns = time_ns(np.arange(100) / 100.0)
     np.testing.assert_array_equal(t_ns, np.delete(all_ns, np.arange(100)[OCCLUDED]))
-    t_ns, pts = temporal(out, "/world/stiffness-1/measured/markers/handle", "Points3D:positions")
+    t_ns, pts = temporal(out, "/world/stiffness-1/measured/markers/handle/h1", "Points3D:positions")
     np.testing.assert_array_equal(t_ns, all_ns)
-    counts = np.array([len(p) for p in pts])
-    assert set(counts[OCCLUDED]) == {2} and (np.delete(counts, np.arange(100)[OCCLUDED]) == 3).all()
-    _, pts = temporal(out, "/world/stiffness-1/measured/markers/link2", "Points3D:positions")
-    assert all(len(p) == 2 for p in pts)
+    t_ns, pts = temporal(out, "/world/stiffness-1/measured/markers/handle/h2", "Points3D:positions")  # occluded
+    np.testing.assert_array_equal(t_ns, np.delete(all_ns, np.arange(100)[OCCLUDED]))
+    assert all(len(p) == 1 for p in pts) and pts[0][0][0] == pytest.approx(0.02)
+    t_ns, _ = temporal(out, "/world/stiffness-1/measured/markers/link2/l2b", "Points3D:positions")
+    assert len(t_ns) == 100
 
 
 def test_session_and_results_documents(recorded):

@@ -20,7 +20,7 @@ Entity paths (``<trial>`` is the escaped trial id, ``<role>`` is ``measured`` or
     /world/<trial>/<role>/handle              handle pose (Transform3D) with axes
     /world/<trial>/<role>/trajectory          the gimbal-centre path
     /world/<trial>/<role>/hand_force/raw      raw F/T force rotated to W, arrow at the handle
-    /world/<trial>/<role>/markers/<link>      motion-capture markers, one colour per link
+    /world/<trial>/<role>/markers/<link>/<m>  motion-capture marker m, one colour per link
     /world/<trial>/<role>/links/<link>        link frames from link_poses
     /world/<trial>/<role>/force_field         free space: mean force per bin (haptify.free_space)
     /world/<trial>/<role>/workspace/points    workspace: the measured point cloud
@@ -46,6 +46,7 @@ import rerun as rr
 from pydantic import ValidationError
 
 from haptify import force_plate, free_space, signals, surface, vibration, workspace
+from haptify.compute import ComputeContext
 from haptify.conventions import quat_multiply, quat_rotate
 from haptify.errors import HaptifyError, fail
 from haptify.results import ResultsFile
@@ -251,15 +252,16 @@ def series_entry(path: str, key: str, t: np.ndarray, values: np.ndarray, names: 
 class TrialPlanner:
     """Turns one trial of one session (one role) into entries (issue 7, spec chapter 2 streams)."""
 
-    def __init__(self, session: SessionFolder, trial: Trial, role: str, key: str, plan: Plan) -> None:
-        self.session = session
+    def __init__(self, ctx: ComputeContext, trial: Trial, role: str, key: str, plan: Plan) -> None:
+        self.ctx = ctx  # shares calibration, handle and plate signals between the reference functions
+        self.session = ctx.session
         self.trial = trial
         self.role = role
         self.plan = plan
         self.world = f"/world/{key}/{role}"
         self.series = f"/series/{key}/{role}"
         self.kinds = {s.kind for s in trial.streams}
-        self.rig = session.manifest.rig
+        self.rig = self.session.manifest.rig
         self._signals: signals.HandleSignals | None = None
         self._signals_tried = False
 
@@ -345,7 +347,7 @@ class TrialPlanner:
             self._signals_tried = True
             if "handle_pose" in self.kinds and self.kinds & {"handle_wrench", "handle_accel"}:
                 try:
-                    self._signals = signals.handle_signals(self.session, self.trial.id)
+                    self._signals = signals.handle_signals(self.ctx, self.trial.id)
                 except HaptifyError as err:
                     self.note("calibrated handle force and acceleration", err)
         return self._signals
@@ -403,7 +405,7 @@ class TrialPlanner:
             if hs is not None and hs.acceleration is not None:
                 self.add_series("accel/world", hs.t, hs.acceleration, ["ax", "ay", "az"], "handle_signals")
             try:
-                vib = vibration.trial_vibration(self.session, self.trial.id)
+                vib = vibration.trial_vibration(self.ctx, self.trial.id)
             except HaptifyError as err:
                 self.note("DFT321 vibration signal", err)
             else:
@@ -419,7 +421,7 @@ class TrialPlanner:
         self.add_series("plate/corner_force_raw", t, w[names_f].to_numpy(), names_f, "plate_wrench")
         self.add_series("plate/corner_torque_raw", t, w[names_t].to_numpy(), names_t, "plate_wrench")
         try:
-            ps = force_plate.plate_signals(self.session, self.trial.id)
+            ps = force_plate.plate_signals(self.ctx, self.trial.id)
         except HaptifyError as err:
             self.note("plate total force and COP", err)
             return
@@ -467,17 +469,14 @@ class TrialPlanner:
         for m in stream.entities or []:
             groups.setdefault(owner.get(m, "unassigned"), []).append(m)
         for i, (link, names) in enumerate(groups.items()):
-            xyz = np.stack([frame[[f"{m}_x", f"{m}_y", f"{m}_z"]].to_numpy() for m in names], axis=1)  # (n, m, 3)
-            ok = np.all(np.isfinite(xyz), axis=2)
-            keep = ok.any(axis=1)
-            lengths = ok[keep].sum(axis=1)
             color = LINK_PALETTE[i % len(LINK_PALETTE)]
-            labels = np.broadcast_to(np.array(names), ok.shape)[keep][ok[keep]]
-            self.plan.add(Entry(f"{self.world}/markers/{rr.escape_entity_path_part(link)}",
-                                static=[rr.Points3D.from_fields(colors=color, radii=0.002)],
-                                times_ns=time_ns(t[keep]),
-                                columns=rr.Points3D.columns(positions=xyz[keep][ok[keep]], labels=labels).partition(lengths),
-                                stream="markers"))
+            for m in names:
+                xyz = frame[[f"{m}_x", f"{m}_y", f"{m}_z"]].to_numpy()
+                ok = finite_rows(xyz)
+                self.plan.add(Entry(
+                    f"{self.world}/markers/{rr.escape_entity_path_part(link)}/{rr.escape_entity_path_part(m)}",
+                    static=[rr.Points3D.from_fields(colors=color, radii=0.002, labels=[m])],
+                    times_ns=time_ns(t[ok]), columns=rr.Points3D.columns(positions=xyz[ok]), stream="markers"))
 
     def links(self) -> None:
         stream = self.session.stream(self.trial.id, "link_poses")
@@ -509,7 +508,7 @@ class TrialPlanner:
             self.add_series("penetration", t_pose, depth, ["depth"], "handle_pose")
         if "commanded_wrench" in self.kinds and "handle_wrench" in self.kinds and "handle_pose" in self.kinds:
             try:
-                cs = surface.contact_signals(self.session, self.trial.id)
+                cs = surface.contact_signals(self.ctx, self.trial.id)
             except HaptifyError as err:
                 self.note("contact signals (normal force, contact)", err)
                 return
@@ -638,8 +637,8 @@ def counterpart(other: SessionFolder, trial: Trial) -> Trial | None:
 def plan_recording(session: SessionFolder, *, trial_id: str | None = None, results: ResultsFile | None = None,
                    other: SessionFolder | None = None) -> Plan:
     """Every entity of the recording of ``session`` (one trial or all), optionally compared with ``other``."""
-    session = CachedStreams(session)
-    other = CachedStreams(other) if other is not None else None
+    ctx = ComputeContext(session=CachedStreams(session))
+    other_ctx = ComputeContext(session=CachedStreams(other)) if other is not None else None
     trials = [session.trial(trial_id)] if trial_id else list(session.trials)
     rec_id = session.session_id + (f"/{trial_id}" if trial_id else "") + (f"+{other.session_id}" if other else "")
     plan = Plan(recording_id=rec_id, has_results=results is not None)
@@ -647,12 +646,12 @@ def plan_recording(session: SessionFolder, *, trial_id: str | None = None, resul
     for trial in trials:
         key = rr.escape_entity_path_part(trial.id)
         tp = TrialPlan(trial, key, {"measured": trial.id})
-        TrialPlanner(session, trial, "measured", key, plan).run()
+        TrialPlanner(ctx, trial, "measured", key, plan).run()
         if other is not None:
             match = counterpart(other, trial)
             if match is not None:
                 tp.counterpart["compare"] = match.id
-                TrialPlanner(other, match, "compare", key, plan).run()
+                TrialPlanner(other_ctx, match, "compare", key, plan).run()
         plan.trials.append(tp)
     plan.add(Entry("/session", static=[rr.TextDocument(session_markdown(session, plan.trials, other, plan.notes),
                                                        media_type=rr.MediaType.MARKDOWN)]))
