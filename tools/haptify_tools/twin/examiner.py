@@ -46,7 +46,9 @@ TREMOR_BAND_HZ = (8.0, 12.0)         # physiological tremor band
 # Tremor acceleration RMS per axis (m/s²). Kept small: the paper's rig-only vibration floor after a 10 Hz
 # high-pass is 0.0332 m/s² RMS (§VI-C) and includes the hand, so the tremor must stay below it.
 TREMOR_ACCEL_RMS = 0.01
-TREMOR_ANGLE_RMS = 0.02 * DEG        # rad per axis
+# Tremor rotation RMS per axis (rad): the sensors sit 3–5 cm from the gimbal centre, where 0.002° at 10 Hz
+# already gives ≈ 0.007 m/s² of tangential acceleration.
+TREMOR_ANGLE_RMS = 0.002 * DEG
 
 
 # --- helpers -------------------------------------------------------------------------------------
@@ -208,6 +210,36 @@ class Reach:
             p[bad, 2] += 0.001
         return p
 
+    def radial_stop(self, s: np.ndarray, coarse: int = 16, iterations: int = 14) -> np.ndarray:
+        """Gimbal positions (W) for unit joint coordinates ``s``, stopped at the first collision on the way out.
+
+        The examiner moves from the centre of the joint box (``s = ½``, assumed free) straight out (in
+        joint space) towards ``s``; where the end-effector meets the base first, the hand stops there
+        (coarse march for the first colliding step, then bisection). Points whose way is free are
+        returned unchanged. For a collision-free set that is star-shaped about the centre, this maps the
+        box's boundary continuously onto the boundary of the reachable set.
+        """
+        s = np.atleast_2d(np.asarray(s, dtype=float))
+        p = self.unit_to_W(s)
+        c = np.full(3, 0.5)
+        lam = np.linspace(0.0, 1.0, coarse + 1)[1:]
+        rays = c[None, None, :] + lam[None, :, None] * (s - c)[:, None, :]
+        hit = self.collides(self.unit_to_W(rays.reshape(-1, 3))).reshape(len(s), coarse)
+        blocked = hit.any(axis=1)
+        if not blocked.any():
+            return p
+        first = np.argmax(hit[blocked], axis=1)
+        lo = np.where(first > 0, lam[np.maximum(first - 1, 0)], 0.0)      # free
+        hi = lam[first]                                                    # colliding
+        sb = s[blocked]
+        for _ in range(iterations):
+            mid = 0.5 * (lo + hi)
+            h = self.collides(self.unit_to_W(c + mid[:, None] * (sb - c)))
+            hi = np.where(h, mid, hi)
+            lo = np.where(h, lo, mid)
+        p[blocked] = self.unit_to_W(c + lo[:, None] * (sb - c))
+        return p
+
     def centre(self) -> np.ndarray:
         """The workspace centre: the gimbal position at the middle of the joint-limit box (s = ½, ½, ½)."""
         return self.unit_to_W(np.full((1, 3), 0.5))[0]
@@ -298,68 +330,21 @@ def _finish(rng: np.random.Generator, t: np.ndarray, rate_hz: float, position: n
                           label=label, meta=meta)
 
 
-def _arc_table(path: Callable[[np.ndarray], np.ndarray], tau_max: float, grid: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Pseudo-time grid, the path's points on it and the cumulative arc length (m)."""
-    tau = np.linspace(0.0, tau_max, grid)
-    pts = path(tau)
-    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
-    return tau, pts, arc
-
-
-def _retime(path: Callable[[np.ndarray], np.ndarray], tau_max: float, t: np.ndarray, speed: np.ndarray,
-            grid: int = 20000, max_lateral_accel: float | None = None) -> np.ndarray:
-    """Pseudo-times ``tau(t)`` such that ``path(tau(t))`` moves with ``speed(t)`` (m/s) along the path.
-
-    ``path(tau)`` maps pseudo-time in [0, tau_max] to positions; the arc length is tabulated on ``grid``
-    points and inverted. The motion stops at the path's end if the speed profile asks for more length.
-    With ``max_lateral_accel`` (m/s²) the speed is lowered where the path bends sharply (v ≤ √(a/κ)),
-    like a hand slowing down in a tight turn; the lowered profile is smoothed over 0.2 s.
-    """
-    tau, pts, arc = _arc_table(path, tau_max, grid)
-    dt = np.diff(t, prepend=t[0])
-    v = np.asarray(speed, float)
-    if max_lateral_accel is not None:
-        # curvature on the grid: |d²p/ds²| with s the arc length
-        ds = np.maximum(np.gradient(arc), 1e-12)
-        tangent = np.gradient(pts, axis=0) / ds[:, None]
-        kappa = np.linalg.norm(np.gradient(tangent, axis=0) / ds[:, None], axis=1)
-        rate = 1.0 / max(t[1] - t[0], 1e-12)
-        width = max(1, int(0.2 * rate))
-        for _ in range(3):
-            s_now = np.minimum(np.cumsum(v * dt), arc[-1])
-            k_now = np.interp(s_now, arc, kappa)
-            cap = np.sqrt(max_lateral_accel / np.maximum(k_now, 1e-9))
-            if np.all(v <= cap * 1.001):
-                break
-            v = np.minimum(v, cap)
-            v = -_moving_max(-v, width)                         # widen the slow-downs before smoothing
-            kernel = np.hanning(2 * width + 1)
-            v = np.convolve(np.pad(v, width, mode="edge"), kernel / kernel.sum(), mode="valid")
-    s = np.cumsum(v * dt)
-    return np.interp(np.minimum(s, arc[-1]), arc, tau)
-
-
-def _moving_max(x: np.ndarray, half: int) -> np.ndarray:
-    """Running maximum of ``x`` over a window of ±``half`` samples."""
-    from scipy.ndimage import maximum_filter1d
-
-    return maximum_filter1d(x, size=2 * half + 1, mode="nearest")
-
-
 # --- protocol generators -------------------------------------------------------------------------
 
-def boundary_sweep(rng: np.random.Generator, reach: Reach, duration_s: float = 60.0, *, rate_hz: float = DEFAULT_RATE_HZ,
-                   lines_per_face: int = 4, min_stroke_m: float = 0.03, t0: float = 0.0) -> HandTrajectory:
+def boundary_sweep(rng: np.random.Generator, reach: Reach, duration_s: float = 75.0, *, rate_hz: float = DEFAULT_RATE_HZ,
+                   line_spacing_m: float = 0.03, min_stroke_m: float = 0.03, t0: float = 0.0) -> HandTrajectory:
     """Workspace protocol (paper §IV-A, §V-A): corners, edges and faces of the joint-limit box.
 
     Each of the six faces of the unit joint box is covered by a boustrophedon raster of
-    ``lines_per_face`` lines (the first and last lines are edges, their ends corners); faces are joined
+    lines no more than ``line_spacing_m`` apart in space (so a volume operator can close the shell; the
+    first and last lines are edges, their ends corners), stroking along the face's longer direction; faces are joined
     along cube edges so the hand never leaves the boundary. Where the box boundary collides with the
     base the hand is stopped at the base and slides along it (:meth:`Reach.push_out`). Each straight
     stroke is a minimum-jerk movement (the hand stops at every corner); strokes share ``duration_s``
     in proportion to their length plus ``min_stroke_m``.
     """
-    waypoints = _face_raster_waypoints(lines_per_face, rng)
+    waypoints, lines = _face_raster_waypoints(reach, line_spacing_m, rng)
     seg = np.linalg.norm(np.diff(waypoints, axis=0), axis=1)
     u = np.concatenate([[0.0], np.cumsum(seg)])
 
@@ -368,8 +353,8 @@ def boundary_sweep(rng: np.random.Generator, reach: Reach, duration_s: float = 6
 
     t = clock(duration_s, rate_hz, t0)
     rel = t - t0
-    tau_grid = np.linspace(0.0, u[-1], max(20000, 400 * len(waypoints)))
-    pts = reach.push_out(reach.unit_to_W(path_s(tau_grid)))
+    tau_grid = np.linspace(0.0, u[-1], 20000)
+    pts = reach.radial_stop(path_s(tau_grid))
     tau_grid, pts = _lift_over_jumps(reach, tau_grid, pts)
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
     length = float(arc[-1])
@@ -390,7 +375,8 @@ def boundary_sweep(rng: np.random.Generator, reach: Reach, duration_s: float = 6
     position = np.stack([np.interp(target, arc, pts[:, j]) for j in range(3)], axis=1)
     base = hand_base_orientation(reach, reach.centre())
     quat = natural_orientation(rng, t - t0, rate_hz, base_quat=base, mean_rate=6 * DEG, max_rate=30 * DEG)
-    meta = {"path_length_m": length, "lines_per_face": lines_per_face, "mean_speed_m_per_s": length / duration_s,
+    meta = {"path_length_m": length, "lines_per_face": lines, "line_spacing_m": line_spacing_m,
+            "mean_speed_m_per_s": length / duration_s,
             "strokes": int(len(strokes))}
     return _finish(rng, t, rate_hz, position, quat, "workspace", None, meta)
 
@@ -426,17 +412,36 @@ def _lift_over_jumps(reach: Reach, tau: np.ndarray, pts: np.ndarray, jump_m: flo
     return np.concatenate(taus), np.concatenate(segs)
 
 
-def _face_raster_waypoints(lines: int, rng: np.random.Generator) -> np.ndarray:
-    """Waypoints in the unit cube: a raster on each of the 6 faces, joined along cube edges."""
-    lines = max(2, int(lines))
-    rasters = []
+def _face_raster_waypoints(reach: Reach, spacing: float, rng: np.random.Generator) -> tuple[np.ndarray, list[int]]:
+    """Waypoints in the unit joint cube: a raster on each of the 6 faces, joined along cube edges.
+
+    On each face the strokes run along the direction whose edges are longer in space, and the number of
+    lines makes the largest spacing between neighbouring lines at most ``spacing`` metres.
+    """
+    u = np.linspace(0.0, 1.0, 41)
+
+    def span(axis: int, side: float, along: int, other: int) -> float:
+        """Largest spatial length of the face's curves running along ``along`` (``other`` held)."""
+        best = 0.0
+        for o in (0.0, 0.5, 1.0):
+            p = np.zeros((len(u), 3))
+            p[:, axis], p[:, along], p[:, other] = side, u, o
+            x = reach.unit_to_W(p)
+            if np.all(np.isfinite(x)):
+                best = max(best, float(np.sum(np.linalg.norm(np.diff(x, axis=0), axis=1))))
+        return best
+
+    rasters, counts = [], []
     for axis in range(3):
         for side in (0.0, 1.0):
-            i, j = [k for k in range(3) if k != axis]
+            a, b = [k for k in range(3) if k != axis]
+            la, lb = span(axis, side, a, b), span(axis, side, b, a)
+            i, j, across = (a, b, lb) if la >= lb else (b, a, la)     # stroke along i, step along j
+            lines = max(2, int(math.ceil(across / spacing)) + 1)
+            counts.append(lines)
             pts = []
             for n, v in enumerate(np.linspace(0.0, 1.0, lines)):
-                a, b = (0.0, 1.0) if n % 2 == 0 else (1.0, 0.0)
-                for w in (a, b):
+                for w in ((0.0, 1.0) if n % 2 == 0 else (1.0, 0.0)):
                     p = np.zeros(3)
                     p[axis], p[i], p[j] = side, w, v
                     pts.append(p)
@@ -447,7 +452,7 @@ def _face_raster_waypoints(lines: int, rng: np.random.Generator) -> np.ndarray:
         start, goal = out[-1][-1], rasters[k][0]
         out.append(_corner_path(start, goal)[1:])
         out.append(rasters[k])
-    return np.concatenate(out)
+    return np.concatenate(out), counts
 
 
 def _corner_path(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -462,82 +467,68 @@ def _corner_path(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.array(pts)
 
 
-def free_space_wander(rng: np.random.Generator, reach: Reach | None, duration_s: float = 60.0, *,
+def free_space_wander(rng: np.random.Generator, reach: Reach | None, duration_s: float = 40.0, *,
                       rate_hz: float = DEFAULT_RATE_HZ, mean_speed: float = FREE_SPACE_MEAN_SPEED,
                       max_speed: float = 0.75 * FREE_SPACE_MAX_SPEED, mean_angular: float = FREE_SPACE_MEAN_ANGULAR,
                       max_angular: float = 0.75 * FREE_SPACE_MAX_ANGULAR, margin: float = 0.15, t0: float = 0.0,
                       protocol: str = "free_space", centre_W: np.ndarray | None = None,
-                      extent_m: float = 0.05, clearance_m: float = 0.01, max_lateral_accel: float = 0.5) -> HandTrajectory:
+                      extent_m: float = 0.05, clearance_m: float = 0.01, components: int = 5) -> HandTrajectory:
     """Free-space protocol (paper §V-B): slow wandering through the workspace interior, device off.
 
-    The path is a smooth random curve in the joint box shrunk by ``margin`` on every side (so the hand
-    never touches the workspace boundary; the wander shrinks about the centre until it keeps
-    ``clearance_m`` from the base), moved with a smoothly varying speed whose mean is
-    ``mean_speed`` and whose peak stays below ``max_speed`` (paper: < 0.16 m/s, average ≈ 0.05 m/s);
-    the hand slows down in tight turns (lateral acceleration ≤ ``max_lateral_accel``, m/s²) and its
-    orientation wanders naturally (< 16 °/s, average ≈ 4 °/s). With ``reach=None`` (the rig's
-    baseline-vibration trial, no device) the path wanders within ``extent_m`` of ``centre_W``.
+    The path is a smooth random curve — per joint, a sum of ``components`` slow sinusoids — in the joint
+    box shrunk by ``margin`` on every side (so the hand never touches the workspace boundary; the
+    wander shrinks about the centre until it keeps ``clearance_m`` from the base), mapped through the
+    device's forward kinematics. One common time scale sets the mean speed to ``mean_speed`` unless
+    the peak would exceed ``max_speed`` (paper: < 0.16 m/s, average ≈ 0.05 m/s); being a smooth
+    function of time the path has small accelerations (no broadband content for the accelerometer).
+    The hand orientation wanders naturally (< 16 °/s, average ≈ 4 °/s). With ``reach=None`` (the rig's
+    baseline-vibration trial, no device) the same wander is a Cartesian path within ``extent_m`` of
+    ``centre_W``.
     """
     t = clock(duration_s, rate_hz, t0)
     rel = t - t0
-    # A speed profile: mean_speed modulated slowly, eased in/out, peak held below max_speed.
-    mod = 1.0 + 0.45 * smooth_noise(rng, rel, 0.02, 0.15)[:, 0].clip(-1.8, 1.8) / 1.8
-    ramp = minimum_jerk(np.minimum(1.0, np.minimum(rel, rel[-1] - rel) / 1.5).clip(0.0, 1.0))
-    speed = mod * ramp
-    speed *= mean_speed / np.mean(speed)
-    speed = np.minimum(speed, max_speed)
-    needed = float(np.sum(speed) / rate_hz)
-    seeds = rng.uniform(0.0, 1.0, 6)
-    freqs = rng.uniform(0.6, 1.4, 6)
-
+    freqs = rng.uniform(0.05, 0.2, (3, components))
+    phases = rng.uniform(0.0, 2 * np.pi, (3, components))
+    weights = rng.uniform(0.5, 1.0, (3, components))
+    weights /= weights.sum(axis=1, keepdims=True)
+    ease = minimum_jerk(np.minimum(1.0, np.minimum(rel, rel[-1] - rel) / 2.0).clip(0.0, 1.0))
     amp = [1.0]
-    if reach is not None:
-        lo, hi = margin, 1.0 - margin
 
-        def path(tau: np.ndarray) -> np.ndarray:
-            s = np.stack([0.5 + amp[0] * (hi - lo) * (0.25 * np.sin(2 * np.pi * (freqs[k] * tau + seeds[k]))
-                                                      + 0.25 * np.sin(2 * np.pi * (freqs[k + 3] * 0.37 * tau + seeds[k + 3])))
-                          for k in range(3)], axis=1)
-            return reach.unit_to_W(s)
-        base = hand_base_orientation(reach, reach.centre())
+    def shape(lam: float, tt: np.ndarray = rel, ee: np.ndarray = ease) -> np.ndarray:
+        """Wander ``(N, 3)`` at time scale ``lam``; starts and ends at the centre, peaks near ±1 per axis."""
+        arg = 2 * np.pi * freqs[None, :, :] * lam * tt[:, None, None] + phases[None, :, :]
+        return ee[:, None] * np.sum(weights[None] * (np.sin(arg) - np.sin(phases)[None]), axis=2) / norm
+
+    norm = 1.0
+    norm = np.maximum(np.max(np.abs(shape(1.0)), axis=0), 1e-6)
+
+    if reach is not None:
+        half = 0.5 - margin
+
+        def path(lam: float, sub: int = 1) -> np.ndarray:
+            return reach.unit_to_W(0.5 + amp[0] * half * shape(lam, rel[::sub], ease[::sub]))
     else:
         c = np.asarray(centre_W if centre_W is not None else [0.0, 0.0, 0.3], dtype=float)
 
-        def path(tau: np.ndarray) -> np.ndarray:
-            return c[None, :] + extent_m * np.stack([0.5 * np.sin(2 * np.pi * (freqs[k] * tau + seeds[k]))
-                                                     + 0.5 * np.sin(2 * np.pi * (freqs[k + 3] * 0.37 * tau + seeds[k + 3]))
-                                                     for k in range(3)], axis=1)
-        base = np.array([1.0, 0.0, 0.0, 0.0])
+        def path(lam: float, sub: int = 1) -> np.ndarray:
+            return c[None, :] + amp[0] * extent_m * shape(lam, rel[::sub], ease[::sub])
 
-    def long_enough() -> float:
-        """The pseudo-time range whose path is long enough for the speed profile."""
-        tau_max = 1.0
-        while True:
-            pts = path(np.linspace(0, tau_max, 4000))
-            if np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)) >= needed * 1.6 or tau_max > 1e4:
-                return tau_max
-            tau_max *= 2.0
+    sub = max(1, int(rate_hz // 200))          # speed and clearance checks on a 200 Hz grid
 
-    tau_max = long_enough()
-    # Keep clear of the base: shrink the wander about the workspace centre until it never comes close.
-    while reach is not None and amp[0] > 0.1:
-        if np.min(reach.clearance(path(np.linspace(0, tau_max, 20000)))) >= clearance_m:
-            break
+    def speeds(lam: float) -> np.ndarray:
+        return np.linalg.norm(derivative(path(lam, sub), rate_hz / sub), axis=1)
+
+    lam = 1.0
+    while reach is not None and amp[0] > 0.1 and np.min(reach.clearance(path(lam, sub))) < clearance_m:
         amp[0] *= 0.85
-        tau_max = long_enough()
-    grid = max(20000, int(tau_max * 400))
-    tau = _retime(path, tau_max, t, speed, grid=grid, max_lateral_accel=max_lateral_accel)
-    position = path(tau)
-    for _ in range(3):   # the slow-downs in turns lowered the mean: raise the profile, keep the peak limit
-        realised = float(np.mean(np.linalg.norm(np.diff(position, axis=0), axis=1)) * rate_hz)
-        if realised <= 0 or abs(realised / mean_speed - 1.0) < 0.03:
-            break
-        speed = np.minimum(speed * mean_speed / realised, max_speed)
-        tau = _retime(path, tau_max, t, speed, grid=grid, max_lateral_accel=max_lateral_accel)
-        position = path(tau)
+    for _ in range(4):                 # the time scale that gives the mean speed (speed ∝ lam, nearly)
+        v = speeds(lam)
+        lam *= min(mean_speed / max(np.mean(v), 1e-9), max_speed / max(np.max(v), 1e-9))
+    position = path(lam)
+    base = hand_base_orientation(reach, position[0]) if reach is not None else np.array([1.0, 0.0, 0.0, 0.0])
     quat = natural_orientation(rng, rel, rate_hz, base_quat=base, mean_rate=mean_angular, max_rate=max_angular)
     meta = {"mean_speed_m_per_s": mean_speed, "max_speed_m_per_s": max_speed, "mean_angular_rad_per_s": mean_angular,
-            "max_angular_rad_per_s": max_angular, "margin_unit": margin, "wander_scale": amp[0]}
+            "max_angular_rad_per_s": max_angular, "margin_unit": margin, "wander_scale": amp[0], "time_scale": lam}
     return _finish(rng, t, rate_hz, position, quat, protocol, None, meta)
 
 
@@ -660,8 +651,8 @@ def surface_circles(rng: np.random.Generator, reach: Reach, surface_z: float, du
     return _finish(rng, t, rate_hz, position, quat, "frictionless_surface", None, meta)
 
 
-def surface_presses(rng: np.random.Generator, reach: Reach, surface_z: float, duration_s: float = 25.0, *,
-                    rate_hz: float = DEFAULT_RATE_HZ, presses: int | None = None, press_speed: float = 0.03,
+def surface_presses(rng: np.random.Generator, reach: Reach, surface_z: float, duration_s: float = 30.0, *,
+                    rate_hz: float = DEFAULT_RATE_HZ, presses: int | None = None, press_speed: float = 0.04,
                     above_m: float = 0.01, edge_margin: float = 0.002, t0: float = 0.0) -> HandTrajectory:
     """Stiffness protocol (paper §V-E): repeated presses down (−z) into the surface up to the workspace edge.
 
@@ -784,11 +775,13 @@ def cop_grid(nx: int = 6, ny: int = 5, half_extent_m: tuple[float, float] = (0.2
 
 
 COP_MARKERS = ("cop_w1", "cop_w2", "cop_w3")
+COP_DWELL_S = 1.0      # s the weight rests at each position
+COP_MOVE_S = 0.6       # s to carry it to the next position
 COP_MARKER_OFFSETS = np.array([[0.02, 0.0, 0.06], [-0.01, 0.017, 0.06], [-0.01, -0.017, 0.06]])  # on the weight's top
 
 
-def weight_placements(rng: np.random.Generator, *, rate_hz: float = 1000.0, mass_kg: float = 2.0, dwell_s: float = 1.5,
-                      move_s: float = 0.6, positions: np.ndarray | None = None, position_jitter_m: float = 0.003,
+def weight_placements(rng: np.random.Generator, *, rate_hz: float = 1000.0, mass_kg: float = 2.0, dwell_s: float = COP_DWELL_S,
+                      move_s: float = COP_MOVE_S, positions: np.ndarray | None = None, position_jitter_m: float = 0.003,
                       t0: float = 0.0) -> PlateLoad:
     """COP trial (paper Appendix 2): a weight set down at 30 equally spaced positions in turn.
 

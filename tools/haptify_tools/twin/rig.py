@@ -32,7 +32,7 @@ from haptify.conventions import (
     quat_rotate,
     quat_to_matrix,
 )
-from haptify_tools.twin.examiner import derivative, rotation_vector_to_quat
+from haptify_tools.twin.examiner import band_noise, derivative, rotation_vector_to_quat
 
 DEG = math.pi / 180.0
 
@@ -46,7 +46,8 @@ class RigConfig:
     0.0002 N·m after low-pass filtering, §III-C); Mini40 plate corners (resolution 1/100 N); the MPU-9250
     at ±4 g full scale with 16-bit output (LSB = 8 g / 2¹⁶), range ±40 m/s² (paper Table I); plate
     modes 205 / 206 / 182 Hz (paper Appendix, Fig. 12); plate weight 160 N (paper §II); corner
-    centre-to-centre distance L = 0.6 m (paper Appendix).
+    centre-to-centre distance L = 0.6 m (paper Appendix). The corner sensors' gain and mounting
+    errors (2 %, 3 mm) are chosen so the COP error comes out near the paper's 4.8 ± 3.8 mm.
     """
 
     mocap_rate_hz: float = 100.0
@@ -73,6 +74,8 @@ class RigConfig:
     plate_weight_N: float = 160.0
     plate_modes_hz: tuple[float, float, float] = (205.0, 206.0, 182.0)
     plate_damping_ratio: float = 0.03
+    plate_gain_sd: float = 0.02               # per corner and axis: relative gain error of the corner sensors
+    plate_position_sd_m: float = 0.003        # per corner, x and y: mounting error vs the described position
     plate_force_noise_N: float = 0.01
     plate_torque_noise_Nm: float = 0.0003
     plate_range_force_N: tuple[float, float, float] = (40.0, 40.0, 120.0)  # ATI Mini40 SI-40-2 (per corner)
@@ -266,6 +269,20 @@ def handle_wrench(rng: np.random.Generator, cfg: RigConfig, *, position_W: np.nd
 
 # --- accelerometer (paper §II, §IV-C) --------------------------------------------------------------
 
+def noise_floor(rng: np.random.Generator, n: int, rate_hz: float, floor) -> np.ndarray:
+    """The rig's acceleration noise floor ``(n, 3)`` in m/s² on each world axis (twin ``rig.accel_floor``).
+
+    Two band-limited Gaussian components with RMS ``low_rms`` in ``low_band_hz`` and ``high_rms`` in
+    ``high_band_hz`` per axis (paper §VI-C: 0.0332 m/s² RMS, centroid 108.25 Hz without a device).
+    """
+    nyq = rate_hz / 2
+    out = np.zeros((n, 3))
+    for rms, band in ((floor.low_rms_m_per_s2, floor.low_band_hz), (floor.high_rms_m_per_s2, floor.high_band_hz)):
+        if rms > 0:
+            out += rms * band_noise(rng, n, rate_hz, band[0], min(band[1], nyq), dims=3)
+    return out
+
+
 def handle_accel(rng: np.random.Generator, cfg: RigConfig, *, position_W: np.ndarray, quaternion_W: np.ndarray,
                  rate_hz: float, vibration_W: np.ndarray | None, floor_W: np.ndarray | None, bias: np.ndarray) -> dict:
     """Raw ``handle_accel`` columns at ``cfg.accel_rate_hz`` (specific force in the accelerometer frame A).
@@ -306,44 +323,64 @@ def plate_mode_filter(f_hz: float, zeta: float, rate_hz: float) -> tuple[np.ndar
     return b, a
 
 
-def corner_loads(cfg: RigConfig, force_W: np.ndarray, moment_W: np.ndarray) -> np.ndarray:
-    """Share a load wrench among the four corners of a rigid plate on four equal supports → ``(N, 4, 3)`` forces in W.
+def corner_loads(positions: np.ndarray, force_W: np.ndarray, moment_W: np.ndarray) -> np.ndarray:
+    """Share a load wrench among four corner supports of a rigid plate → ``(N, 4, 3)`` forces in W.
 
-    ``force_W`` and ``moment_W`` (about the W origin, the centre of the plate's top surface) are what the
-    load applies to the plate. Horizontal force is shared equally, the vertical moment by tangential
-    forces, and the vertical force and tilting moments (corrected for the corner depth) by the lever
-    rule, so the four corner forces reproduce the whole wrench exactly.
+    ``positions (4, 3)``: the supports' true positions (m, W); ``force_W``/``moment_W`` ``(N, 3)``: what
+    the load applies to the plate, moment about the W origin. Equal supports: horizontal force shared
+    equally plus tangential forces for the vertical moment; vertical forces linear in the support
+    position (``a + b x + c y``), solved so the four corner forces reproduce the whole wrench exactly
+    (the horizontal forces act at the supports' depth).
     """
-    h = cfg.plate_half_side_m
-    zc = -cfg.plate_sensor_depth_m
-    pos = corner_positions(cfg)
+    x, y, z = positions[:, 0], positions[:, 1], positions[:, 2]
     fx, fy, fz = force_W.T
-    mx = moment_W[:, 0] + zc * fy
-    my = moment_W[:, 1] - zc * fx
-    k = moment_W[:, 2] / (8 * h * h)
+    xm, ym = x.mean(), y.mean()
+    k = (moment_W[:, 2] - xm * fy + ym * fx) / np.sum((x - xm) * x + (y - ym) * y)
     out = np.empty((len(force_W), 4, 3))
-    for i, (x, y, _) in enumerate(pos):
-        out[:, i, 0] = fx / 4 - k * y
-        out[:, i, 1] = fy / 4 + k * x
-        out[:, i, 2] = fz / 4 + mx * y / (4 * h * h) - my * x / (4 * h * h)
+    out[:, :, 0] = fx[:, None] / 4 - k[:, None] * (y - ym)[None, :]
+    out[:, :, 1] = fy[:, None] / 4 + k[:, None] * (x - xm)[None, :]
+    a_mat = np.array([[4.0, x.sum(), y.sum()], [x.sum(), (x * x).sum(), (x * y).sum()], [y.sum(), (x * y).sum(), (y * y).sum()]])
+    rhs = np.stack([fz, out[:, :, 0] @ z - moment_W[:, 1], moment_W[:, 0] + out[:, :, 1] @ z], axis=1)
+    abc = np.linalg.solve(a_mat, rhs.T).T
+    out[:, :, 2] = abc[:, :1] + abc[:, 1:2] * x[None, :] + abc[:, 2:3] * y[None, :]
     return out
 
 
+@dataclass
+class PlateErrors:
+    """The force plate's hidden imperfections: true corner positions ``(4, 3)`` and gains ``(4, 3)``."""
+
+    positions: np.ndarray
+    gains: np.ndarray
+
+    @classmethod
+    def draw(cls, rng: np.random.Generator, cfg: RigConfig) -> "PlateErrors":
+        """Random mounting and gain errors with the configured standard deviations."""
+        pos = corner_positions(cfg).copy()
+        pos[:, :2] += rng.normal(0.0, cfg.plate_position_sd_m, (4, 2))
+        return cls(positions=pos, gains=1.0 + rng.normal(0.0, cfg.plate_gain_sd, (4, 3)))
+
+    @classmethod
+    def ideal(cls, cfg: RigConfig) -> "PlateErrors":
+        return cls(positions=corner_positions(cfg), gains=np.ones((4, 3)))
+
+
 def plate_wrench(rng: np.random.Generator, cfg: RigConfig, *, force_W: np.ndarray, moment_W: np.ndarray,
-                 bias_force: np.ndarray) -> dict:
+                 bias_force: np.ndarray, errors: PlateErrors | None = None) -> dict:
     """Raw ``plate_wrench`` columns at ``cfg.plate_rate_hz`` (spec §2.6).
 
     ``force_W``/``moment_W`` ``(N, 3)``: every external load on the plate (device base reaction, weights,
     impacts), moment about the W origin, on the plate clock. The plate's own weight is added; each
     world axis of the corner loads passes through the plate mode of that axis (a unit-DC-gain
     resonance at ``plate_modes_hz``, started at rest under the first sample's load); each corner then
-    reports in its own frame, plus its bias and noise. The corner torques carry only noise (the
+    reports in its own frame with its gain error (``errors``; None = ideal), plus its bias and noise. The corner torques carry only noise (the
     corners carry the plate through point-like contacts).
     """
     n = len(force_W)
     plate = np.zeros((n, 3))
     plate[:, 2] = -cfg.plate_weight_N
-    loads = corner_loads(cfg, force_W + plate, moment_W)
+    errors = errors or PlateErrors.ideal(cfg)
+    loads = corner_loads(errors.positions, force_W + plate, moment_W)
     for axis in range(3):
         b, a = plate_mode_filter(cfg.plate_modes_hz[axis], cfg.plate_damping_ratio, cfg.plate_rate_hz)
         zi = signal.lfilter_zi(b, a)
@@ -353,7 +390,7 @@ def plate_wrench(rng: np.random.Generator, cfg: RigConfig, *, force_W: np.ndarra
     cols: dict[str, np.ndarray] = {}
     for c, q in enumerate(corner_quaternions(cfg)):
         r = quat_to_matrix(q)
-        f = loads[:, c, :] @ r + bias_force + rng.normal(0.0, cfg.plate_force_noise_N, (n, 3))   # Rᵀ f per row
+        f = (loads[:, c, :] @ r) * errors.gains[c] + bias_force + rng.normal(0.0, cfg.plate_force_noise_N, (n, 3))
         tq = rng.normal(0.0, cfg.plate_torque_noise_Nm, (n, 3))
         for k, a in enumerate("xyz"):
             cols[f"c{c + 1}_f{a}"] = f[:, k]
