@@ -453,20 +453,27 @@ class TrialPlanner:
         if s is not None:
             self.add_series("sync/trigger", s["t"].to_numpy(), s[["trigger"]].to_numpy(), ["trigger"], "sync")
 
-    def markers(self) -> None:
-        """Marker clouds grouped by the rigid body (link) each marker belongs to, a colour per link."""
-        stream = self.session.stream(self.trial.id, "markers")
+    def read_entities(self, kind: str) -> tuple[list[str], pd.DataFrame, np.ndarray] | None:
+        """Entity names, table and time column of a per-entity stream (markers, link_poses), or None."""
+        stream = self.session.stream(self.trial.id, kind)
         if stream is None:
-            return
+            return None
         frame = self.session.read_stream(stream)
-        t = frame["t"].to_numpy()
+        return list(stream.entities or []), frame, frame["t"].to_numpy()
+
+    def markers(self) -> None:
+        """Each marker as its own entity under the rigid body (link) it belongs to, a colour per link."""
+        found = self.read_entities("markers")
+        if found is None:
+            return
+        entities, frame, t = found
         owner = {}
         if self.rig.motion_capture is not None:
             for body in self.rig.motion_capture.rigid_bodies:
                 for m in body.markers:
                     owner.setdefault(m, body.name)
         groups: dict[str, list[str]] = {}
-        for m in stream.entities or []:
+        for m in entities:
             groups.setdefault(owner.get(m, "unassigned"), []).append(m)
         for i, (link, names) in enumerate(groups.items()):
             color = LINK_PALETTE[i % len(LINK_PALETTE)]
@@ -479,12 +486,12 @@ class TrialPlanner:
                     times_ns=time_ns(t[ok]), columns=rr.Points3D.columns(positions=xyz[ok]), stream="markers"))
 
     def links(self) -> None:
-        stream = self.session.stream(self.trial.id, "link_poses")
-        if stream is None:
+        """Each link's frame from link_poses, with axes."""
+        found = self.read_entities("link_poses")
+        if found is None:
             return
-        frame = self.session.read_stream(stream)
-        t = frame["t"].to_numpy()
-        for link in stream.entities or []:
+        entities, frame, t = found
+        for link in entities:
             p = frame[[f"{link}_p{a}" for a in "xyz"]].to_numpy()
             q = frame[[f"{link}_q{a}" for a in "wxyz"]].to_numpy()
             ok = finite_rows(p, q)
