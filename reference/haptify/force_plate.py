@@ -22,6 +22,7 @@ from haptify.conventions import quat_to_matrix
 from haptify.caching import cached, session_of
 from haptify.errors import fail
 from haptify.metric_definitions import param
+from haptify.signals import nominal_rate
 
 FAMILY = "rig"
 CORNERS = ("c1", "c2", "c3", "c4")
@@ -127,9 +128,8 @@ def plate_signals(ctx_or_session: Any, trial_id: str) -> PlateSignals:
         force, moment = total_wrench(df[PLATE_COLUMNS].to_numpy(), pos, rot, bias)
         cop, ok = center_of_pressure(force, moment)
         t = df["t"].to_numpy()
-        rate = float((len(t) - 1) / (t[-1] - t[0])) if len(t) > 1 else float("nan")
         return PlateSignals(trial_id=trial_id, t=t, force=force, moment=moment, cop=cop, cop_valid=ok,
-                            bias_source=source, rate_hz=rate)
+                            bias_source=source, rate_hz=nominal_rate(t))
 
     return cached(ctx_or_session, ("plate_signals", trial_id), build)
 
