@@ -324,6 +324,24 @@ def view_named(container, name: str):
     return None
 
 
+def test_write_is_atomic_with_ordinary_permissions(tmp_path):
+    import rerun as rr
+
+    from haptify_tools.viewer.recording import Entry, Plan
+
+    good = Plan("atomic-ok")
+    good.add(Entry("/a", times_ns=np.array([0, 1, 2]), columns=rr.Scalars.columns(scalars=np.ones(3))))
+    out = write_rrd(good, tmp_path / "ok.rrd", None)
+    umask = os.umask(0)
+    os.umask(umask)
+    assert out.stat().st_mode & 0o777 == 0o666 & ~umask
+    bad = Plan("atomic-bad")  # 3 timestamps for 5 values: strict mode raises half-way
+    bad.add(Entry("/a", times_ns=np.array([0, 1, 2]), columns=rr.Scalars.columns(scalars=np.ones(5))))
+    with pytest.raises(ValueError):
+        write_rrd(bad, tmp_path / "bad.rrd", None)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ok.rrd"]  # no partial file, no temp file
+
+
 # --- blueprints -------------------------------------------------------------------------------------
 
 def test_blueprint_per_protocol(recorded):

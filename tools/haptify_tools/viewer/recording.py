@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import functools
 import os
-import tempfile
+import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -672,8 +672,7 @@ def write_rrd(plan: Plan, path: str | os.PathLike, blueprint: Any) -> Path:
     """Write the plan to an .rrd file atomically (temp file + rename, spec §3.6) with its blueprint."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
+    tmp = path.parent / f".{path.name}.{uuid.uuid4().hex[:12]}.tmp"  # created by rerun, with the usual permissions
     previous = rr.strict_mode()
     rr.set_strict_mode(True)
     try:
