@@ -45,7 +45,8 @@ def _trial_signals(rng: np.random.Generator, seconds: float, amplitude: float, c
     return {"t": t, "pos": pos, "q": q, "acc": acc, "force_w": force_w}
 
 
-def _add_trial(w: SessionWriter, rng, trial_id: str, protocol: str, repetition: int, **motion) -> None:
+def _add_trial(w: SessionWriter, rng, trial_id: str, protocol: str, repetition: int,
+               gap: tuple[float, float] | None = None, **motion) -> None:
     s = _trial_signals(rng, **motion)
     w.add_trial(trial_id, protocol, powered=False, repetition=repetition, label="figure_eight" if protocol == "other" else None)
     t, q = s["t"], s["q"]
@@ -60,10 +61,14 @@ def _add_trial(w: SessionWriter, rng, trial_id: str, protocol: str, repetition: 
     k = slice(None, None, 10)
     pose = {"t": t[k], "px": s["pos"][k, 0], "py": s["pos"][k, 1], "pz": s["pos"][k, 2],
             "qw": q[k, 0], "qx": q[k, 1], "qy": q[k, 2], "qz": q[k, 3]}
+    if gap is not None:                                         # a motion-capture occlusion
+        hidden = (pose["t"] >= gap[0]) & (pose["t"] < gap[1])
+        for c in ("px", "py", "pz", "qw", "qx", "qy", "qz"):
+            pose[c] = np.where(hidden, np.nan, pose[c])
     w.add_stream(trial_id, "handle_pose", pose, rate_hz=100)
 
 
-def build_session(path: Path, tests: bool = True, train_s: float = 21.0) -> Path:
+def build_session(path: Path, tests: bool = True, train_s: float = 21.0, gap: tuple[float, float] | None = None) -> Path:
     rng = np.random.default_rng(0)
     calib = {"kind": "handle_gravity", "id": "cal-1", "force_bias_N": [0.0, 0.0, 0.0], "connector_mass_kg": 0.0,
              "connector_com_m": [0.0, 0.0, 0.0], "torque_bias_Nm": [0.0, 0.0, 0.0],
@@ -74,7 +79,7 @@ def build_session(path: Path, tests: bool = True, train_s: float = 21.0) -> Path
     centre = np.array([0.0, 0.0, 0.15])
     _add_trial(w, rng, "ld-1", "local_dynamic", 1, seconds=train_s, amplitude=0.03, centre=centre, freq=0.8)
     if tests:
-        _add_trial(w, rng, "ld-2", "local_dynamic", 2, seconds=10.5, amplitude=0.03, centre=centre, freq=0.9)
+        _add_trial(w, rng, "ld-2", "local_dynamic", 2, seconds=10.5, amplitude=0.03, centre=centre, freq=0.9, gap=gap)
         _add_trial(w, rng, "fs-1", "free_space", 1, seconds=10.5, amplitude=0.06, centre=centre + [0.08, 0.0, 0.0], freq=0.1)
     return w.write(path)
 
@@ -125,6 +130,20 @@ def test_without_test_trials_the_line_is_unavailable(tmp_path, results):
     items = {i.id: i for i in compute(ctx)}
     assert items["dynamics.error_vs_distance"].code == "E701"
     assert hasattr(items["dynamics.force_rmse"], "value")
+
+
+def test_an_occlusion_splits_runs_and_drops_its_segment(tmp_path, results):
+    """ld-2 loses motion capture for 0.5 s at t = 2 s: its first segment is dropped, the rest is predicted."""
+    session = open_session(build_session(tmp_path / "s", gap=(2.0, 2.5)))
+    ctx = ComputeContext(session=session)
+    ctx.cached(("dynamics_model", "ld-1"), lambda: results[1].cached(("dynamics_model", "ld-1"), None))
+    items = {i.id: i for i in compute(ctx)}
+    data = trial_data(session, "ld-2")
+    runs = data.runs()
+    assert len(runs) == 2 and not data.valid[210:240].any()
+    rows = [r for r in items["dynamics.error_vs_distance"].diagnostics["segments"] if r["trial"] == "ld-2"]
+    assert [r["start_s"] for r in rows] == [pytest.approx(data.t[500])]
+    assert all(np.isfinite(r["force_error"]) for r in rows)
 
 
 def test_short_training_trial_is_unavailable_not_nan(tmp_path):

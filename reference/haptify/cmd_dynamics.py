@@ -96,7 +96,7 @@ def run_predict(args, ui) -> int:
         frame[f"measured_{name}"] = np.where(data.valid, data.y[:, k], np.nan)
     table = pd.DataFrame(frame)
     _atomic_write_with(args.output, lambda tmp: table.to_parquet(tmp, index=False))
-    ok = data.valid
+    ok = data.valid & np.all(np.isfinite(predicted), axis=1)
     errors = rmse(data.y[ok], predicted[ok]) if ok.any() else np.full(len(OUTPUT_NAMES), np.nan)
     ui.emit_json({"trial": trial_id, "output": str(args.output), "samples": int(ok.sum()),
                   "rmse": {n: (float(e) if np.isfinite(e) else None) for n, e in zip(OUTPUT_NAMES, errors)}})

@@ -873,7 +873,7 @@ class TrialData:
     valid: np.ndarray
 
     def runs(self) -> list[slice]:
-        """Contiguous valid runs, each simulated from zero initial conditions (spec §11.3)."""
+        """Contiguous valid runs of at least 2 rows, each simulated from zero initial conditions (spec §11.1, §11.3)."""
         return valid_runs(self.valid)
 
 
@@ -939,6 +939,18 @@ def fit_trial(ctx_or_session: Any, trial_id: str, options: FitOptions | None = N
     return model, data
 
 
+def given_model_trial(ctx_or_session: Any, trial_id: str, relative: str) -> tuple[HWModelFile, TrialData]:
+    """A parameter file inside the session folder used instead of fitting (spec §16.2 ``parameters.model``):
+    the metrics then measure the given model's prediction (§11.3) on the trial. E702 when the path is unsafe."""
+    from haptify.session_format import is_safe_relative_path
+
+    session = getattr(ctx_or_session, "session", ctx_or_session)
+    if not isinstance(relative, str) or not is_safe_relative_path(relative):
+        raise fail("E702", f"model file {relative!r} is not a relative path inside the session folder", file=str(relative))
+    model = load_model(session.root / relative)
+    return model, trial_data(ctx_or_session, trial_id, model.sample_rate_hz)
+
+
 def _window_valid(valid: np.ndarray, window: int) -> np.ndarray:
     n = len(valid) // window
     return valid[: n * window].reshape(n, window).all(axis=1)
@@ -1000,18 +1012,22 @@ def compute(ctx: Any) -> list:
         missing = [k for k in REQUIRED_STREAMS if session.stream(train.id, k) is None]
         if missing:
             raise fail("E302", f"training trial {train.id!r} lacks {missing}", expected=list(REQUIRED_STREAMS), found=missing)
-        model, data = ctx.cached(("dynamics_model", train.id), lambda: fit_trial(ctx, train.id))
+        given = (getattr(ctx, "parameters", None) or {}).get("model")
+        if given:
+            model, data = ctx.cached(("dynamics_given_model", train.id, given), lambda: given_model_trial(ctx, train.id, given))
+        else:
+            model, data = ctx.cached(("dynamics_model", train.id), lambda: fit_trial(ctx, train.id))
     except HaptifyError as err:
         return _unavailable_all(err.code, err.findings[0].message, ids)
 
     unit = {m.id: m.unit for m in fam.metrics}
     out: list = []
     predicted = predict_trial(model, data)
-    ok = data.valid
+    ok = data.valid & np.all(np.isfinite(predicted), axis=1)     # runs of one row have no prediction
     err_rmse = rmse(data.y[ok], predicted[ok])
     n = int(ok.sum())
-    summary = {"iterations": model.fit.iterations, "stop_reason": model.fit.stop_reason,
-               "fit_percent": model.fit.fit_percent, "samples": n}
+    summary = ({"iterations": model.fit.iterations, "stop_reason": model.fit.stop_reason,
+                "fit_percent": model.fit.fit_percent, "samples": n} if model.fit else {"model": given, "samples": n})
     for name, cols in (("force", slice(0, 3)), ("torque", slice(3, 6))):
         vec = [float(v) for v in err_rmse[cols]]
         mid = f"dynamics.{name}_rmse"
