@@ -40,7 +40,8 @@ def classify(document: Any) -> Answer:
     if "findings" in document:
         findings = document["findings"] if isinstance(document["findings"], list) else []
         errors = [f for f in findings if isinstance(f, dict) and f.get("severity", "error") == "error"]
-        return Answer("rejected", errors) if errors else Answer("results", {"metrics": [], "findings": findings})
+        # a rejection keeps its warnings too: a negative case may expect them beside the errors (spec §16.3)
+        return Answer("rejected", findings) if errors else Answer("results", {"metrics": [], "findings": findings})
     return Answer("error", message="output has neither 'metrics' (results) nor 'findings' (rejection)")
 
 

@@ -76,7 +76,7 @@ def judge_rejection(case: Case, findings: list[dict]) -> Verdict:
     """The implementation rejected the session with ``findings``: right when the case expects it."""
     base = dict(case_id=case.id, metric=case.metric, spec_section=case.spec_section, level=case.level)
     codes = sorted({str(f.get("code")) for f in findings if isinstance(f, dict)})
-    if not case.expected.codes:
+    if not case.expected.codes or case.expected.valid:
         return Verdict(status="failed", message=f"the session was rejected ({', '.join(codes) or 'no codes'}) but the "
                        "case expects it to be accepted", actual=codes, **base)
     missing = sorted(set(case.expected.codes) - set(codes))
@@ -87,9 +87,21 @@ def judge_rejection(case: Case, findings: list[dict]) -> Verdict:
 
 
 def judge_acceptance(case: Case, report: dict) -> Verdict:
-    """A 'validate' case on a valid session: the implementation must accept it (no error findings)."""
+    """A 'validate' case on a valid session: the implementation must accept it (no error findings).
+
+    With ``valid: true`` and ``codes`` (a session that is valid but deserves warnings) the accepted
+    document's findings (or results warnings) must hold at least those codes.
+    """
     base = dict(case_id=case.id, metric=case.metric, spec_section=case.spec_section, level=case.level)
-    if case.expected.codes:
+    if case.expected.codes and not case.expected.valid:
         return Verdict(status="failed", message=f"expected rejection with {case.expected.codes}, but the session was accepted",
                        **base)
+    if case.expected.codes:
+        notes = [*(report.get("findings") or []), *(report.get("warnings") or [])]
+        codes = sorted({str(f.get("code")) for f in notes if isinstance(f, dict)})
+        missing = sorted(set(case.expected.codes) - set(codes))
+        if missing:
+            return Verdict(status="failed", message=f"accepted, but expected warnings {case.expected.codes}, found {codes} "
+                           f"(missing {missing})", actual=codes, **base)
+        return Verdict(status="passed", actual=codes, **base)
     return Verdict(status="passed", **base)

@@ -4,31 +4,59 @@
 asked-for metric with the reference; it is what ``--python haptify_conform.reference:analyse`` calls.
 ``python -m haptify_conform.reference`` serves the JSON-lines protocol; with two arguments
 (``SESSION OUT``) it behaves as a ``--cmd`` program and writes its answer to OUT.
+
+Work shared by the cases of one fixture (the modeled workspace, a fitted dynamic model, calibrated
+signals) is kept in a per-session :class:`~haptify.compute.ComputeContext`, keyed by the session folder,
+the manifest's checksum and the case parameters, for the few most recent sessions.
 """
 
 from __future__ import annotations
 
 import json
 import sys
+from collections import OrderedDict
 from pathlib import Path
 
-from haptify.compute import compute_session
+from haptify.compute import ComputeContext, compute_session
 from haptify.errors import HaptifyError
-from haptify.storage import atomic_write_text, open_session
+from haptify.storage import MANIFEST, atomic_write_text, open_session, sha256_file
 from haptify.validation import validate_session
 from haptify.versions import PACKAGE_VERSION
 
 IMPLEMENTATION = {"name": "haptify-reference", "version": PACKAGE_VERSION}
+CONTEXTS_KEPT = 4
+_contexts: OrderedDict = OrderedDict()
 
 
-def analyse(session: str, metric: str = "", parameters: dict | None = None) -> dict:
-    """A results document, or ``{"findings": [...]}`` when the session is rejected."""
+def _context(session: str, parameters: dict, cache: bool) -> ComputeContext:
+    folder = open_session(session)
+    if not cache:
+        return ComputeContext(session=folder, parameters=dict(parameters))
+    key = (str(Path(session).resolve()), sha256_file(folder.root / MANIFEST), json.dumps(parameters, sort_keys=True))
+    if key not in _contexts:
+        _contexts[key] = ComputeContext(session=folder, parameters=dict(parameters))
+        while len(_contexts) > CONTEXTS_KEPT:
+            _contexts.popitem(last=False)
+    _contexts.move_to_end(key)
+    ctx = _contexts[key]
+    ctx.warnings = []
+    return ctx
+
+
+def analyse(session: str, metric: str = "", parameters: dict | None = None, *, cache: bool = True) -> dict:
+    """A results document, or ``{"findings": [...]}`` when the session is rejected (or ``metric == "validate"``).
+
+    ``parameters`` are the case's (spec §16.2); ``{"model": "<file in the session>"}`` makes the dynamics
+    metrics use that parameter file instead of fitting (§11.3, §16.2). ``cache=False`` computes afresh.
+    """
+    parameters = parameters or {}
     report = validate_session(Path(session))
     findings = [f.to_dict() for f in report.findings]
     if not report.valid or metric == "validate":
         return {"findings": findings}
     try:
-        results = compute_session(open_session(session), [metric] if metric else None)
+        ctx = _context(session, parameters, cache)
+        results = compute_session(ctx.session, [metric] if metric else None, ctx=ctx)
     except HaptifyError as err:
         return {"findings": [f.to_dict() for f in err.findings]}
     return results.model_dump(mode="json")

@@ -25,6 +25,7 @@ class ComputeContext:
 
     session: SessionFolder
     wanted: set[str] | None = None  # metric ids asked for (None: all)
+    parameters: dict[str, Any] = field(default_factory=dict)  # case parameters (spec §16.2), e.g. {"model": file}
     warnings: list[ResultWarning] = field(default_factory=list)
     _cache: dict[Any, Any] = field(default_factory=dict)
 

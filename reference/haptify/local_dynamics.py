@@ -284,7 +284,7 @@ def pwl_basis(breakpoints: np.ndarray, u: np.ndarray) -> np.ndarray:
 
 
 def pwl_slope(breakpoints: np.ndarray, values: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Slope of the map at ``u`` (that of the segment :func:`_segments` picks)."""
+    """Slope of the map at ``u`` (output units per input unit): that of the segment step 2 of spec §11.3 picks."""
     bp = np.asarray(breakpoints, dtype=float)
     v = np.asarray(values, dtype=float)
     k, _ = _segments(bp, np.asarray(u, dtype=float))
@@ -757,6 +757,7 @@ class DistanceScales:
 
     @classmethod
     def from_definition(cls) -> "DistanceScales":
+        """R_p, R_v, R_a, R_θ from the definition file (R_θ converted from degrees; spec §11.6.2)."""
         return cls(p=param(FAMILY, "R_p"), v=param(FAMILY, "R_v"), a=param(FAMILY, "R_a"),
                    theta=math.radians(param(FAMILY, "R_theta")))
 
@@ -791,7 +792,8 @@ def window_features(position: np.ndarray, velocity: np.ndarray, acceleration: np
 
 
 def pair_distance(a: WindowFeatures, b: WindowFeatures, scales: DistanceScales) -> np.ndarray:
-    """Δ of paper eq. 9 between every window of ``a`` and every window of ``b``: (len(a), len(b))."""
+    """Δ (dimensionless) of paper eq. 9 between every window of ``a`` and every window of ``b``:
+    an array (len(a), len(b)) (spec §11.6.2)."""
     from scipy.spatial.distance import cdist
 
     dot = np.abs(a.orientation @ b.orientation.T)
@@ -917,7 +919,7 @@ def training_trial(session: Any) -> Any:
     return trials[0]
 
 
-def test_trials(session: Any, train_id: str) -> list[Any]:
+def held_out_trials(session: Any, train_id: str) -> list[Any]:
     """Test trials (spec §11.7): every other unpowered local_dynamic, free_space or other trial with all three handle streams."""
     return [t for t in session.trials if t.id != train_id and t.protocol in TEST_PROTOCOLS and not t.powered
             and all(session.stream(t.id, k) is not None for k in REQUIRED_STREAMS)]
@@ -1040,7 +1042,7 @@ def compute(ctx: Any) -> list:
     eid = "dynamics.error_vs_distance"
     if not ctx.wants(eid):
         return out
-    tests = test_trials(session, train.id)
+    tests = held_out_trials(session, train.id)
     if not tests:
         return out + _unavailable_all("E701", "no test trial (another local_dynamic repetition, free_space or an unpowered "
                                       "'other' trial) with handle pose, wrench and acceleration", [eid])

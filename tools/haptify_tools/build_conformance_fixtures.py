@@ -1,0 +1,1195 @@
+"""Build the conformance suite's metric fixtures and case files (spec chapter 16) from seeds.
+
+Every session under ``fixtures/conformance/<name>/`` is generated from stated truth — analytic shapes,
+analytic signals, springs, damped plate modes, a known Hammerstein–Wiener model — and every expected
+value in ``conformance/cases/*.json`` is computed HERE from that truth (closed forms, the spec's own
+formulas applied to exactly known inputs, quadratures of analytic integrals), never by running the
+reference implementation. ``validate.json`` turns every fixture of ``fixtures/invalid`` and
+``fixtures/valid`` into a validate case with the codes of its sidecar.
+
+    python -m haptify_tools.build_conformance_fixtures           # (re)build fixtures and case files
+    python -m haptify_tools.build_conformance_fixtures --check   # exit 1 when committed files are stale
+
+``--check`` compares logical content (parsed JSON, Parquet column bits, CSV bytes), not timestamps or
+the Parquet writer's byte layout.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import math
+import shutil
+import sys
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+from scipy.signal import lfilter
+
+from haptify.conventions import quat_from_axis_angle, quat_multiply, quat_rotate
+from haptify.metric_definitions import param
+from haptify.storage import SessionWriter
+from haptify.versions import SPEC_VERSION
+from haptify_tools.build_invalid_fixtures import logical_snapshot
+from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
+
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO / "tests"))  # the truth-session builders shared with the unit tests
+import _rig_builders as rb  # noqa: E402
+
+FIXTURE_DIR = "conformance"
+CASES_DIR = REPO / "conformance" / "cases"
+SEED = 20261122
+Z = np.array([0.0, 0.0, 1.0])
+Fn = Callable[[np.ndarray], np.ndarray]
+
+
+# --- case records ----------------------------------------------------------------------------------
+
+@dataclass
+class Fixture:
+    """One fixture: its folder name, the function that writes it, and the cases that run on it."""
+
+    name: str
+    build: Callable[[Path], None]
+    cases: list[dict] = field(default_factory=list)
+
+
+def case(cid: str, metric: str, section: str, fixture: str, value: Any, unit: str, abs_tol: float, rel_tol: float,
+         kind: str, note: str, description: str, parameters: dict | None = None, level: str = "MUST") -> dict:
+    """A metric case (spec §16.2) with both tolerance parts stated."""
+    value = [float(v) for v in value] if isinstance(value, (list, tuple, np.ndarray)) else float(value)
+    return {"id": cid, "metric": metric, "spec_section": section, "level": level, "fixture": f"{FIXTURE_DIR}/{fixture}",
+            "parameters": parameters or {}, "expected": {"value": value, "unit": unit},
+            "tolerance": {"abs": abs_tol, "rel": rel_tol}, "provenance": {"kind": kind, "note": note},
+            "spec_versions": [SPEC_VERSION], "description": description}
+
+
+# --- shared truth helpers ----------------------------------------------------------------------------
+
+QUIET = rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0)
+
+
+def rotated_rig_full() -> dict:
+    """The rotated handle rig of the unit tests, with the four plate sensors yawed by 0°, 90°, 180°, 270° too."""
+    rig = rb.rotated_rig()
+    for k, corner in enumerate(rig["force_plate"]["corners"]):
+        q = quat_from_axis_angle(Z, np.array(k * math.pi / 2))
+        corner["pose"]["quaternion"] = [float(v) for v in q]
+    return rig
+
+
+def manifest(sid: str, rig: dict, *, device: dict | None = None, placement: dict | None = None,
+             truth: rb.HandleTruth = QUIET, plate_bias: np.ndarray | None = None) -> SessionWriter:
+    cal: list = [truth.record("hg-1")]
+    if plate_bias is not None:
+        cal.append({"kind": "plate_bias", "id": "plate-bias-1", "bias": [float(v) for v in plate_bias]})
+    return SessionWriter(manifest={"session_id": sid, "date": "2026-11-22", "lab": {"id": "lab-conformance"},
+                                   "examiner": {"id": "ex-conformance"}, "device": device or TOUCH_DEVICE,
+                                   "device_placement": placement or IDENTITY, "rig": rig, "calibration": cal,
+                                   "recorder": "haptify_tools.build_conformance_fixtures"})
+
+
+def clock(duration_s: float, rate: float) -> np.ndarray:
+    return np.arange(int(round(duration_s * rate)) + 1) / rate
+
+
+def fixed(q: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    return lambda t: np.tile(np.asarray(q, float), (len(t), 1))
+
+
+def spin(rate: float, axis=(0.3, -0.2, 1.0), tilt: float = 0.4) -> Fn:
+    """Orientation turning at ``rate`` rad/s about a fixed world axis from a tilted start (exact angular speed)."""
+    q0 = quat_from_axis_angle(np.array([1.0, 0.0, 0.0]), np.array(tilt))
+    ax = np.asarray(axis, float)
+    return lambda t: quat_multiply(quat_from_axis_angle(np.broadcast_to(ax, (len(t), 3)), rate * t), np.broadcast_to(q0, (len(t), 4)))
+
+
+def circle(radius: float, omega: float, centre=(0.0, 0.05, 0.12)) -> Fn:
+    c = np.asarray(centre, float)
+    return lambda t: c + np.column_stack([radius * np.cos(omega * t), radius * np.sin(omega * t), 0 * t])
+
+
+def handle_trial(w: SessionWriter, tid: str, protocol: str, *, duration_s: float, position: Fn, quaternion: Fn,
+                 force_w: Fn, truth: rb.HandleTruth = QUIET, rates=(500.0, 500.0, 100.0), fmt: str = "parquet",
+                 repetition: int = 1, powered: bool = False, rendering: dict | None = None, commanded_w: Fn | None = None,
+                 occluded: Callable[[np.ndarray], np.ndarray] | None = None, accel_extra: Fn | None = None,
+                 plate_force_w: Fn | None = None, plate_bias: np.ndarray | None = None, rng=None) -> None:
+    """A trial whose raw streams realise the truth: ``force_w`` (N, on the hand, W; zero torque about the
+    gimbal centre), the pose, and ``accel_extra`` (m/s², added in the accelerometer frame: vibrations)."""
+    rig = w.manifest["rig"]
+    rng = rng or np.random.default_rng(SEED)
+    ft_rate, acc_rate, mocap_rate = rates
+    w.add_trial(tid, protocol, powered=powered, repetition=repetition, rendering=rendering)
+    t_ft, t_acc, t_m = clock(duration_s, ft_rate), clock(duration_s, acc_rate), clock(duration_s, mocap_rate)
+    f_w = force_w(t_ft)
+    wrench, accel = rb.raw_handle(truth, rig, t_ft, quaternion(t_ft), t_acc, quaternion(t_acc), rng,
+                                  hand_force_w=f_w, hand_torque_g_w=np.zeros_like(f_w))
+    if accel_extra is not None:
+        extra = accel_extra(t_acc)
+        for k, c in enumerate(("ax", "ay", "az")):
+            accel[c] = accel[c] + extra[:, k]
+    w.add_stream(tid, "handle_wrench", wrench, rate_hz=ft_rate, fmt=fmt)
+    w.add_stream(tid, "handle_accel", accel, rate_hz=acc_rate, fmt=fmt)
+    p, q = position(t_m), quaternion(t_m)
+    if occluded is not None:
+        gone = occluded(t_m)
+        p, q = p.copy(), q.copy()
+        p[gone], q[gone] = np.nan, np.nan
+    w.add_stream(tid, "handle_pose", {"t": t_m, "px": p[:, 0], "py": p[:, 1], "pz": p[:, 2],
+                                      "qw": q[:, 0], "qx": q[:, 1], "qy": q[:, 2], "qz": q[:, 3]}, rate_hz=mocap_rate, fmt=fmt)
+    if commanded_w is not None:
+        c = commanded_w(t_ft)
+        w.add_stream(tid, "commanded_wrench", {"t": t_ft, "fx": c[:, 0], "fy": c[:, 1], "fz": c[:, 2], "tx": 0 * t_ft,
+                                               "ty": 0 * t_ft, "tz": 0 * t_ft}, rate_hz=ft_rate, fmt=fmt)
+    if plate_force_w is not None:
+        pf = plate_force_w(t_ft)
+        raw = rb.corner_readings(rig, pf, np.zeros_like(pf), plate_bias)
+        w.add_stream(tid, "plate_wrench", rb.plate_stream(t_ft, raw), rate_hz=ft_rate, fmt=fmt)
+
+
+def grid(duration_s: float, rate: float = 100.0) -> np.ndarray:
+    """The common grid of spec §7.3 for streams that all start at 0 and end at ``duration_s``."""
+    return clock(duration_s, rate)
+
+
+def lowpass_noise_ratio(fc: float, fs: float, order: int) -> float:
+    """Variance gain of white noise through the zero-phase Butterworth low-pass of spec §7.2:
+    (2/fs)·∫₀^{fs/2} |H(f)|⁴ df with |H|² = 1 / (1 + Ω^(2N)), Ω = tan(πf/fs) / tan(πfc/fs) (midpoint rule)."""
+    f = (np.arange(200_000) + 0.5) / 200_000 * fs / 2
+    omega = np.tan(np.pi * f / fs) / np.tan(np.pi * fc / fs)
+    return float(np.mean((1.0 / (1.0 + omega ** (2 * order))) ** 2))
+
+
+# --- workspace (spec chapter 8) ---------------------------------------------------------------------
+
+def sphere_cloud(n: int, radius: float, centre, rng) -> np.ndarray:
+    v = rng.normal(size=(n, 3))
+    return radius * v / np.linalg.norm(v, axis=1, keepdims=True) + np.asarray(centre, float)
+
+
+def sphere_spiral(n: int, radius: float, centre) -> np.ndarray:
+    """A sweep path on a sphere: the generalised spiral (points in sweep order, ~equal spacing)."""
+    k = np.arange(n) + 0.5
+    z = 1 - 2 * k / n
+    phi = math.pi * (3 - math.sqrt(5)) * k
+    r = np.sqrt(1 - z ** 2)
+    return radius * np.column_stack([r * np.cos(phi), r * np.sin(phi), z]) + np.asarray(centre, float)
+
+
+def box_cloud(n: int, edges, rng, rotation, centre) -> np.ndarray:
+    a = np.asarray(edges, float)
+    areas = np.array([a[1] * a[2], a[0] * a[2], a[0] * a[1]] * 2)
+    face = rng.choice(6, size=n, p=areas / areas.sum())
+    u = rng.random((n, 3)) * a
+    axis = face % 3
+    u[np.arange(n), axis] = np.where(face < 3, 0.0, a[axis])
+    return quat_rotate(rotation, u - a / 2) + np.asarray(centre, float)
+
+
+def lens_volume(radius: float, d: float) -> float:
+    """Volume of the intersection of two balls of equal radius whose centres are d apart."""
+    return math.pi * (4 * radius + d) * (2 * radius - d) ** 2 / 12 if d < 2 * radius else 0.0
+
+
+def pose_cloud(w: SessionWriter, tid: str, cloud: np.ndarray, fmt: str, repetition: int = 1, rate: float = 100.0) -> None:
+    w.add_trial(tid, "workspace", powered=False, repetition=repetition)
+    t = np.arange(len(cloud)) / rate
+    seen = np.where(np.all(np.isfinite(cloud), axis=1), 1.0, np.nan)  # an occluded frame has no orientation either
+    w.add_stream(tid, "handle_pose", {"t": t, "px": cloud[:, 0], "py": cloud[:, 1], "pz": cloud[:, 2],
+                                      "qw": seen, "qx": 0 * seen, "qy": 0 * seen, "qz": 0 * seen}, rate_hz=rate, fmt=fmt)
+
+
+def scaled_device(scale: float, box=None) -> dict:
+    """The Touch with its links scaled (same shape; a smaller voxel grid keeps the fixtures fast)."""
+    dev = copy.deepcopy(TOUCH_DEVICE)
+    dev["model"] = f"Touch x{scale:g} (conformance)"
+    for j in dev["kinematics"]["joints"]:
+        j["a"] *= scale
+    if box is not None:
+        dev["datasheet"]["workspace_box_m"] = list(box)
+    return dev
+
+
+def limits(dev: dict) -> tuple:
+    j1, j2, j3 = dev["kinematics"]["joints"]
+    c = j3["upper"].get("coefficients", {}).get("q2", 0.0)
+    return (j1["lower"]["constant"], j1["upper"]["constant"], j2["lower"]["constant"], j2["upper"]["constant"],
+            j3["lower"]["constant"], j3["upper"]["constant"], c, j2["a"], j3["a"])
+
+
+def pappus_volume(dev: dict, q1_range: tuple[float, float] | None = None, n: int = 2000) -> float:
+    """Exact volume of the Touch-type reachable set (spec §8.3) as a solid of revolution about the q1 axis:
+    V = Δq1 · ∬ |r| a2 a3 |sin q3| dq2 dq3 over the coupled (q2, q3) limits (midpoint rule, n² cells)."""
+    q1lo, q1hi, q2lo, q2hi, q3lo, q3hi0, c, a2, a3 = limits(dev)
+    if q1_range is not None:
+        q1lo, q1hi = q1_range
+    q2 = q2lo + (np.arange(n) + 0.5) / n * (q2hi - q2lo)
+    s = (np.arange(n) + 0.5) / n
+    hi3 = q3hi0 + c * q2
+    q3 = q3lo + s[None, :] * (hi3 - q3lo)[:, None]
+    r = a2 * np.cos(q2)[:, None] + a3 * np.cos(q2[:, None] + q3)
+    area = a2 * a3 * np.abs(np.sin(q3)) * ((q2hi - q2lo) / n) * ((hi3 - q3lo) / n)[:, None]
+    return (q1hi - q1lo) * float(np.sum(np.abs(r) * area))
+
+
+def joint_box_sweep(dev: dict, n: int, rng, q1_range: tuple[float, float] | None = None) -> np.ndarray:
+    """Gimbal-centre positions (device frame) on the faces of the coupled joint-limit box: one joint at a
+    limit, the others uniform — the examiner's boundary sweep (paper §IV-A). Forward kinematics of the
+    Touch-type DH chain written out: p = (r cos q1, r sin q1, s), r = a2 cos q2 + a3 cos(q2+q3), s = a2 sin q2 + a3 sin(q2+q3)."""
+    q1lo, q1hi, q2lo, q2hi, q3lo, q3hi0, c, a2, a3 = limits(dev)
+    if q1_range is not None:
+        q1lo, q1hi = q1_range
+    u = rng.random((n, 3))
+    u[np.arange(n), rng.integers(0, 3, n)] = rng.integers(0, 2, n)
+    q1 = q1lo + u[:, 0] * (q1hi - q1lo)
+    q2 = q2lo + u[:, 1] * (q2hi - q2lo)
+    q3 = q3lo + u[:, 2] * (q3hi0 + c * q2 - q3lo)
+    r = a2 * np.cos(q2) + a3 * np.cos(q2 + q3)
+    s = a2 * np.sin(q2) + a3 * np.sin(q2 + q3)
+    return np.column_stack([r * np.cos(q1), r * np.sin(q1), s])
+
+
+def placement_of(position, yaw: float, tilt: float = 0.0) -> dict:
+    q = quat_multiply(quat_from_axis_angle(Z, np.array(yaw)), quat_from_axis_angle(np.array([1.0, 0.0, 0.0]), np.array(tilt)))
+    return {"position": [float(v) for v in position], "quaternion": [float(v) for v in q]}
+
+
+def workspace_fixtures() -> list[Fixture]:
+    out: list[Fixture] = []
+    pitch = param("workspace", "voxel_pitch_m")
+    cr = param("workspace", "closing_radius_m")
+    model_bias = ("the operator is −0.7 % on the full-size Touch models (spec §8.8); the links here are scaled by 0.45, so "
+                  "the voxels are 2.2× coarser relative to the solid and the bias grows to about −1.5 %: tolerance 2.5 %")
+    bias = ("tolerance covers the operator's stated bias (spec §8.8: sub-voxel boundary within 0.5 %; "
+            f"h = {pitch} m, r = {cr} m)")
+    tiny = scaled_device(0.45)
+
+    # Sphere, Parquet, the Touch's datasheet box.
+    R, C = 0.07, (0.013, -0.021, 0.16)
+
+    def sphere(path: Path) -> None:
+        w = manifest("conf-ws-sphere", example_rig(), device=tiny)
+        pose_cloud(w, "workspace-1", sphere_cloud(6000, R, C, np.random.default_rng(SEED)), "parquet")
+        w.write(path)
+
+    fx = Fixture("ws-sphere", sphere)
+    v_sphere = 4 / 3 * math.pi * R ** 3
+    fx.cases += [
+        case("workspace.measured_volume.sphere", "workspace.measured_volume", "8.4", fx.name, v_sphere, "m^3", 0.0, 0.01,
+             "analytic", f"4/3·π·R³ of the sphere (R = {R} m) whose surface the 6 000 positions sample; " + bias,
+             "Typical: a convex cloud sampled on its boundary."),
+        case("workspace.spec_box_volume.touch", "workspace.spec_box_volume", "8.6", fx.name, 0.16 * 0.12 * 0.07, "m^3",
+             1e-12, 1e-9, "paper", "product of the Touch's datasheet box 16 × 12 × 7 cm (paper §IV-A, Table II)",
+             "Typical: the manufacturer's box."),
+        case("workspace.modeled_volume.touch-0.45", "workspace.modeled_volume", "8.3", fx.name, pappus_volume(tiny), "m^3",
+             0.0, 0.025, "analytic", "Pappus integral of the coupled joint limits of the Touch with links × 0.45 "
+             "(V = Δq1·∬|r| a2 a3 |sin q3| dq2 dq3); " + model_bias,
+             "Typical: the DH model's reachable set within coupled joint limits."),
+    ]
+    out.append(fx)
+
+    # Rotated box, CSV, another datasheet box.
+    edges, q_box = (0.12, 0.09, 0.06), quat_from_axis_angle(np.array([0.3, -0.5, 0.8]), np.array(0.7))
+    box_dev = scaled_device(0.45, box=(0.16, 0.12, 0.12))
+
+    def box(path: Path) -> None:
+        w = manifest("conf-ws-box", rotated_rig_full(), device=box_dev)
+        pose_cloud(w, "workspace-1", box_cloud(12_000, edges, np.random.default_rng(SEED + 1), q_box, (0.02, 0.01, 0.15)), "csv")
+        w.write(path)
+
+    fx = Fixture("ws-box-rotated-csv", box)
+    fx.cases += [
+        case("workspace.measured_volume.box-rotated-csv", "workspace.measured_volume", "8.4", fx.name, math.prod(edges), "m^3",
+             0.0, 0.015, "analytic", f"edges {edges} m multiplied; the box is turned 0.7 rad about (0.3, −0.5, 0.8) so no face "
+             "is parallel to the voxel lattice; " + bias, "Tricky: rotated faces, CSV streams."),
+        case("workspace.spec_box_volume.touch-x", "workspace.spec_box_volume", "8.6", fx.name, 0.16 * 0.12 * 0.12, "m^3",
+             1e-12, 1e-9, "paper", "product of the Touch X box 16 × 12 × 12 cm (paper §IV-A)", "Typical: another datasheet box."),
+    ]
+    out.append(fx)
+
+    # Two lobes: non-convex (a convex hull bridges the waist).
+    RL, D = 0.05, 0.08
+
+    def lobes(path: Path) -> None:
+        rng = np.random.default_rng(SEED + 2)
+        a = np.array([0.0, 0.0, 0.15])
+        b = a + [D, 0.0, 0.0]
+        pts = np.concatenate([sphere_cloud(9000, RL, a, rng), sphere_cloud(9000, RL, b, rng)])
+        keep = (np.linalg.norm(pts - a, axis=1) >= RL - 1e-12) & (np.linalg.norm(pts - b, axis=1) >= RL - 1e-12)
+        w = manifest("conf-ws-lobes", example_rig(), device=scaled_device(0.45, box=(0.1, 0.1, 0.1)))
+        pose_cloud(w, "workspace-1", pts[keep], "parquet")
+        w.write(path)
+
+    fx = Fixture("ws-two-lobes", lobes)
+    fx.cases += [
+        case("workspace.measured_volume.two-lobes", "workspace.measured_volume", "8.4", fx.name,
+             2 * 4 / 3 * math.pi * RL ** 3 - lens_volume(RL, D), "m^3", 0.0, 0.02, "analytic",
+             f"union of two balls R = {RL} m, centres {D} m apart: 2·(4/3)πR³ − π(4R+d)(2R−d)²/12; the closing fills the "
+             "waist's crease with a fillet of radius r (spec §8.8: +0.5 % on two R = 6 cm lobes); the convex hull is ~9 % larger",
+             "Tricky: a non-convex workspace."),
+        case("workspace.spec_box_volume.cube", "workspace.spec_box_volume", "8.6", fx.name, 1e-3, "m^3", 1e-12, 1e-9,
+             "analytic", "a 10 cm datasheet cube", "Edge: a cubic datasheet box."),
+    ]
+    out.append(fx)
+
+    # Occluded sweep: long runs of NaN rows (occlusion) must be dropped, nothing interpolated.
+    RO, CO = 0.06, (0.0, 0.03, 0.14)
+
+    def occluded(path: Path) -> None:
+        pts = sphere_spiral(9000, RO, CO)
+        k = np.arange(len(pts))
+        pts[(k % 600) < 90] = np.nan  # 15 % of the sweep occluded, in runs of 90 frames
+        w = manifest("conf-ws-occluded", example_rig(), device=tiny)
+        pose_cloud(w, "workspace-1", pts, "parquet", rate=120.0)
+        w.write(path)
+
+    fx = Fixture("ws-sphere-occluded", occluded)
+    fx.cases += [
+        case("workspace.measured_volume.occluded", "workspace.measured_volume", "8.7", fx.name, 4 / 3 * math.pi * RO ** 3, "m^3",
+             0.0, 0.015, "analytic", f"sphere R = {RO} m swept along a spiral at 120 Hz; 15 % of the frames are NaN in runs "
+             "of 90; the finite rows still sample the whole surface more densely than 2r; " + bias,
+             "Tricky: occlusion gaps (NaN rows are dropped, never interpolated)."),
+    ]
+    out.append(fx)
+
+    # The model swept through its whole boundary, device placed turned and moved (rotated frames).
+    mid = scaled_device(0.45)
+    placement = placement_of((0.04, -0.03, 0.01), yaw=2.2, tilt=0.15)
+
+    def swept(path: Path) -> None:
+        pts = joint_box_sweep(mid, 20_000, np.random.default_rng(SEED + 3))
+        pts = quat_rotate(np.asarray(placement["quaternion"]), pts) + np.asarray(placement["position"])
+        w = manifest("conf-ws-swept", rotated_rig_full(), device=mid, placement=placement)
+        pose_cloud(w, "workspace-1", pts, "parquet")
+        w.write(path)
+
+    fx = Fixture("ws-model-swept-placed", swept)
+    fx.cases += [
+        case("workspace.modeled_volume.placed", "workspace.modeled_volume", "8.3", fx.name, pappus_volume(mid), "m^3", 0.0, 0.025,
+             "analytic", "Pappus integral of the model's joint limits; a placement (turned 2.2 rad about z, tilted 0.15 rad) "
+             "moves the solid, not its volume; " + model_bias, "Tricky: rotated device placement."),
+        case("workspace.volume_ratio.full-sweep", "workspace.volume_ratio", "8.5", fx.name, 1.0, "1", 0.03, 0.0, "analytic",
+             "the measured positions are the model's own boundary (joint-limit faces) placed by device_placement; both "
+             "solids come from the same operator, so the ratio is 1 within the two samplings' biases (the random sweep "
+             "+0.3 %, the model's lattice about −1.5 % at this scale)",
+             "Typical: a complete boundary sweep."),
+        case("workspace.coverage.full-sweep", "workspace.coverage", "8.5", fx.name, 1.0, "1", 0.02, 0.0, "analytic",
+             "the measured sweep covers the placed model entirely; an implementation that ignores device_placement "
+             "(turned 2.2 rad) finds far less overlap", "Tricky: coverage needs the placement applied."),
+        case("workspace.measured_volume.model-sweep", "workspace.measured_volume", "8.4", fx.name, pappus_volume(mid), "m^3",
+             0.0, 0.02, "analytic", "the measured sweep of the model's boundary encloses the model's reachable set (Pappus); "
+             "non-convex (the coupled q3 limit carves the inner side)", "Typical: a device-shaped, non-convex sweep."),
+    ]
+    out.append(fx)
+
+    # Half the model swept (q1 ≥ 0): by Pappus the volume is exactly Δq1-proportional, so ratio = coverage = 1/2.
+    def half(path: Path) -> None:
+        q1hi = limits(mid)[1]
+        pts = joint_box_sweep(mid, 14_000, np.random.default_rng(SEED + 4), q1_range=(0.0, q1hi))
+        w = manifest("conf-ws-half", example_rig(), device=mid)
+        pose_cloud(w, "workspace-1", pts, "csv")
+        w.write(path)
+
+    fx = Fixture("ws-model-half-csv", half)
+    q1lo, q1hi = limits(mid)[:2]
+    half_share = q1hi / (q1hi - q1lo)
+    fx.cases += [
+        case("workspace.volume_ratio.half", "workspace.volume_ratio", "8.5", fx.name, half_share, "1", 0.015, 0.0, "analytic",
+             "the examiner swept only q1 ∈ [0, 56°] of [−56°, 56°]; the volume of a solid of revolution is proportional to "
+             "its angle (Pappus), so measured/modeled = 1/2", "Edge: half of the workspace reached."),
+        case("workspace.coverage.half", "workspace.coverage", "8.5", fx.name, half_share, "1", 0.015, 0.0, "analytic",
+             "the half solid lies inside the model: the overlap is the half solid itself, 1/2 of the model",
+             "Edge: partial coverage."),
+        case("workspace.modeled_volume.csv", "workspace.modeled_volume", "8.3", fx.name, pappus_volume(mid), "m^3", 0.0, 0.025,
+             "analytic", "Pappus integral of the model's joint limits (identity placement, CSV session); " + model_bias,
+             "Edge: the model of a CSV session."),
+    ]
+    out.append(fx)
+
+    # Ratio below and above 1 by construction: a ball inside the model of known volume.
+    def ball(path: Path) -> None:
+        w = manifest("conf-ws-ball", example_rig(), device=mid)
+        pose_cloud(w, "workspace-1", sphere_cloud(6000, 0.02, (0.07, 0.0, 0.02), np.random.default_rng(SEED + 5)), "parquet")
+        w.write(path)
+
+    fx = Fixture("ws-ball-in-model", ball)
+    v_ball = 4 / 3 * math.pi * 0.02 ** 3
+    fx.cases += [
+        case("workspace.volume_ratio.ball", "workspace.volume_ratio", "8.5", fx.name, v_ball / pappus_volume(mid), "1", 0.0,
+             0.03, "analytic", "a ball R = 2 cm (4/3πR³) divided by the model's Pappus volume; tolerance = both operators' biases",
+             "Tricky: a small measured solid against the model."),
+        case("workspace.coverage.ball", "workspace.coverage", "8.5", fx.name, v_ball / pappus_volume(mid), "1", 0.0, 0.05,
+             "analytic", "the ball (centre (7, 0, 2) cm, R = 2 cm) lies inside the reachable set, so the overlap is the ball",
+             "Tricky: coverage of an interior solid."),
+    ]
+    out.append(fx)
+    return out
+
+
+# --- free space (spec chapter 9) ---------------------------------------------------------------------
+
+def felt(t: np.ndarray) -> np.ndarray:
+    """|F| = √(0.5² + 0.4² + (0.3 + 0.2 sin 0.5t)²): min at sin = −1, max at sin = +1 (both reached in 12 s)."""
+    return np.column_stack([0.5 + 0 * t, -0.4 + 0 * t, 0.3 + 0.2 * np.sin(0.5 * t)])
+
+
+def plate_truth(t: np.ndarray) -> np.ndarray:
+    return np.column_stack([0.2 * np.cos(0.3 * t), 0 * t, -17.4 + 0.3 * np.sin(0.5 * t)])
+
+
+def free_space_fixtures() -> list[Fixture]:
+    out: list[Fixture] = []
+    sec_f, sec_p, sec_s = "9.2", "9.3", "9.4"
+    truth = rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0, mass=0.06)
+    T = 12.0
+    tg = grid(T)
+    mag = np.linalg.norm(felt(tg), axis=1)
+    P = plate_truth(tg)
+    plate_dev = np.linalg.norm(P - np.array([0.0, 0.0, P[:, 2].mean()]), axis=1)
+
+    def typical(path: Path) -> None:
+        rig = example_rig()
+        bias = rb.plate_bias_vector(rig)
+        w = manifest("conf-fs-typical", rig, truth=truth, plate_bias=bias)
+        handle_trial(w, "free_space-1", "free_space", duration_s=T, position=circle(0.05, 1.0), quaternion=spin(0.07),
+                     force_w=felt, truth=truth, plate_force_w=plate_truth, plate_bias=bias)
+        w.write(path)
+
+    fx = Fixture("fs-typical", typical)
+    weight = (f"the raw F/T stream holds a {truth.mass} kg connector's weight and a bias, removed by the handle_gravity record "
+              "(spec §6.5)")
+    fx.cases += [
+        case("free_space.force_mean.typical", "free_space.force_mean", sec_f, fx.name, mag.mean(), "N", 0.0, 2e-3, "analytic",
+             "mean over the 100 Hz grid (t = 0 … 12 s) of |(0.5, −0.4, 0.3 + 0.2 sin 0.5t)| N; " + weight,
+             "Typical: a slowly varying force on the hand."),
+        case("free_space.force_sd.typical", "free_space.force_sd", sec_f, fx.name, mag.std(ddof=1), "N", 0.0, 2e-2, "analytic",
+             "sample SD (ddof 1) of the same magnitudes on the grid", "Typical."),
+        case("free_space.force_min.typical", "free_space.force_min", sec_f, fx.name, math.hypot(0.5, 0.4, 0.1), "N", 0.0, 2e-3,
+             "analytic", "|(0.5, −0.4, 0.1)|: sin 0.5t reaches −1 at t = 3π", "Typical."),
+        case("free_space.force_max.typical", "free_space.force_max", sec_f, fx.name, math.hypot(0.5, 0.4, 0.5), "N", 0.0, 2e-3,
+             "analytic", "|(0.5, −0.4, 0.5)|: sin 0.5t reaches +1 at t = π", "Typical."),
+        case("free_space.plate_force_mean.typical", "free_space.plate_force_mean", sec_p, fx.name, plate_dev.mean(), "N", 0.0,
+             5e-3, "analytic", "mean on the grid of |P − (0, 0, mean P_z)| for P = (0.2 cos 0.3t, 0, −17.4 + 0.3 sin 0.5t) N, "
+             "split over the four corner sensors (statically determinate) on top of the recorded plate bias", "Typical."),
+        case("free_space.speed_mean.typical", "free_space.speed_mean", sec_s, fx.name, 0.05, "m/s", 0.0, 1e-3, "analytic",
+             "gimbal centre on a circle of radius 0.05 m at 1 rad/s: speed r·ω", "Typical: uniform circular motion."),
+        case("free_space.angular_speed_mean.typical", "free_space.angular_speed_mean", sec_s, fx.name, 0.07, "rad/s", 0.0, 1e-3,
+             "analytic", "handle turning at a constant 0.07 rad/s about a fixed axis", "Typical."),
+    ]
+    out.append(fx)
+
+    # Rotated rig frames, CSV, unusual rates, constant force (SD zero, min = max = mean).
+    F0 = np.array([0.3, 0.6, -0.9])
+
+    def rotated(path: Path) -> None:
+        rig = rotated_rig_full()
+        bias = rb.plate_bias_vector(rig)
+        w = manifest("conf-fs-rotated", rig, truth=truth, plate_bias=bias,
+                     placement=placement_of((0.02, 0.0, 0.0), yaw=1.0))
+        handle_trial(w, "free_space-1", "free_space", duration_s=10.0, position=circle(0.04, 2.0, (0.01, 0.0, 0.15)),
+                     quaternion=spin(0.11, axis=(1.0, 0.4, 0.2), tilt=2.5), force_w=lambda t: np.tile(F0, (len(t), 1)),
+                     truth=truth, rates=(400.0, 250.0, 120.0), fmt="csv",
+                     plate_force_w=lambda t: np.column_stack([0 * t, 0.4 + 0 * t, -15.0 + 0 * t]), plate_bias=bias)
+        w.write(path)
+
+    fx = Fixture("fs-rotated-csv", rotated)
+    f0 = float(np.linalg.norm(F0))
+    rot = "handle F/T and accelerometer frames turned (90° about z, 180° about x), corner sensors yawed 0/90/180/270°"
+    fx.cases += [
+        case("free_space.force_mean.rotated-csv", "free_space.force_mean", sec_f, fx.name, f0, "N", 0.0, 2e-3, "analytic",
+             f"constant force (0.3, 0.6, −0.9) N on the hand in W; {rot}; F/T at 500 Hz, mocap at 120 Hz", "Tricky: rotated rig frames, CSV, unusual rates."),
+        case("free_space.force_sd.constant", "free_space.force_sd", sec_f, fx.name, 0.0, "N", 2e-3, 0.0, "analytic",
+             "a constant force has SD 0 (tolerance: the rounding of the calibration under rotation)", "Edge: zero spread."),
+        case("free_space.force_min.constant", "free_space.force_min", sec_f, fx.name, f0, "N", 0.0, 2e-3, "analytic",
+             "min = |F| of a constant force", "Edge."),
+        case("free_space.force_max.constant", "free_space.force_max", sec_f, fx.name, f0, "N", 0.0, 2e-3, "analytic",
+             "max = |F| of a constant force", "Edge."),
+        case("free_space.plate_force_mean.rotated-corners", "free_space.plate_force_mean", sec_p, fx.name, 0.4, "N", 0.0, 5e-3,
+             "analytic", "constant plate force (0, 0.4, −15) N; removing the mean vertical leaves |(0, 0.4, 0)|; corner sensors "
+             "yawed by 0/90/180/270° must be rotated into W", "Tricky: rotated corner frames."),
+        case("free_space.speed_mean.rotated-csv", "free_space.speed_mean", sec_s, fx.name, 0.08, "m/s", 0.0, 1e-3, "analytic",
+             "circle r = 0.04 m at 2 rad/s sampled at 120 Hz: speed 0.08 m/s", "Tricky: unusual mocap rate."),
+        case("free_space.angular_speed_mean.rotated-csv", "free_space.angular_speed_mean", sec_s, fx.name, 0.11, "rad/s", 0.0,
+             1e-3, "analytic", "constant rotation at 0.11 rad/s about (1, 0.4, 0.2) from a 2.5 rad tilt", "Tricky: large tilt."),
+    ]
+    out.append(fx)
+
+    # Occlusion gaps: one long gap (never interpolated across) and short ones (bridged).
+    def occlusion(path: Path) -> None:
+        rig = example_rig()
+        bias = rb.plate_bias_vector(rig)
+        w = manifest("conf-fs-occluded", rig, truth=truth, plate_bias=bias)
+
+        def gone(t: np.ndarray) -> np.ndarray:
+            k = np.round(t * 100).astype(int)
+            return ((t > 3.0) & (t < 6.0)) | (k % 150 == 77) | (k % 150 == 78)
+
+        handle_trial(w, "free_space-1", "free_space", duration_s=12.0, position=circle(0.05, 1.0), quaternion=spin(0.2),
+                     force_w=lambda t: np.column_stack([0.2 + 0 * t, 0.1 * np.sin(t), 0 * t]), truth=truth, occluded=gone,
+                     plate_force_w=lambda t: np.column_stack([0 * t, 0 * t, -16.0 + 0.5 * np.sin(2 * t)]), plate_bias=bias)
+        w.write(path)
+
+    fx = Fixture("fs-occlusion-gaps", occlusion)
+    tg = grid(12.0)
+    usable = ~((tg > 3.0 + 1e-9) & (tg < 6.0 - 1e-9))  # the samples at 3.00 s and 6.00 s are valid
+    m_occ = np.hypot(0.2, 0.1 * np.sin(tg[usable]))
+    fx.cases += [
+        case("free_space.speed_mean.occlusion", "free_space.speed_mean", sec_s, fx.name, 0.05, "m/s", 0.0, 2e-3, "analytic",
+             "circle r = 0.05 m at 1 rad/s; motion capture lost for 3 s (t = 3 … 6 s: a 3 rad arc whose chord is 30 % shorter) "
+             "and for two frames every 1.5 s; only the short gaps may be bridged (spec §7.4), so the speed is r·ω",
+             "Tricky: occlusion gaps (interpolating across the long one lowers the speed)."),
+        case("free_space.angular_speed_mean.occlusion", "free_space.angular_speed_mean", sec_s, fx.name, 0.2, "rad/s", 0.0,
+             2e-3, "analytic", "constant rotation at 0.2 rad/s; the rows of the 3 s gap are excluded, the two-frame gaps bridged "
+             "by slerp", "Tricky: occlusion gaps."),
+        case("free_space.force_mean.occlusion", "free_space.force_mean", sec_f, fx.name, m_occ.mean(), "N", 0.0, 3e-3, "analytic",
+             "mean of |(0.2, 0.1 sin t, 0)| over the grid rows where motion capture is usable (t outside the 3 s gap): the "
+             "force is used only where the handle orientation is known (spec §7.5)", "Tricky: usable samples only."),
+        case("free_space.force_sd.occlusion", "free_space.force_sd", sec_f, fx.name, m_occ.std(ddof=1), "N", 0.0, 2e-2,
+             "analytic", "sample SD (ddof 1) of |(0.2, 0.1 sin t, 0)| over the usable grid rows", "Tricky: usable samples only."),
+        case("free_space.force_min.occlusion", "free_space.force_min", sec_f, fx.name, m_occ.min(), "N", 0.0, 2e-3, "analytic",
+             "minimum of |(0.2, 0.1 sin t, 0)| over the usable rows (0.2 N where sin t = 0)", "Tricky: usable samples only."),
+        case("free_space.force_max.occlusion", "free_space.force_max", sec_f, fx.name, m_occ.max(), "N", 0.0, 2e-3, "analytic",
+             "maximum of |(0.2, 0.1 sin t, 0)| over the usable rows (√0.05 N where sin t = ±1)", "Tricky: usable samples only."),
+        case("free_space.plate_force_mean.sinusoid", "free_space.plate_force_mean", sec_p, fx.name,
+             float(np.mean(np.abs(0.5 * np.sin(2 * grid(12.0)) - np.mean(0.5 * np.sin(2 * grid(12.0)))))), "N", 0.0, 1e-2,
+             "analytic", "vertical plate force −16 + 0.5 sin 2t N: mean of |P_z − mean P_z| over the grid; the plate stream "
+             "has no occlusion", "Edge: a purely vertical oscillation."),
+    ]
+    out.append(fx)
+    return out
+
+
+# --- vibration (spec chapter 10) --------------------------------------------------------------------
+
+def hp_gain(f: float) -> float:
+    """Net amplitude gain of the zero-phase high-pass of spec §10.2 at f: 1 / (1 + (fc/f)^(2·order))."""
+    fc, order = param("vibration", "highpass_cutoff_hz"), param("vibration", "highpass_order")
+    return 1.0 / (1.0 + (fc / f) ** (2 * order))
+
+
+def tones_rms(tones: list[tuple[float, float]]) -> float:
+    return math.sqrt(sum((a * hp_gain(f)) ** 2 / 2 for f, a in tones))
+
+
+def tones_centroid(tones: list[tuple[float, float]]) -> float:
+    p = [(a * hp_gain(f)) ** 2 for f, a in tones]
+    return sum(pi * f for pi, (f, _) in zip(p, tones)) / sum(p)
+
+
+def vibration_fixtures() -> list[Fixture]:
+    out: list[Fixture] = []
+    variants = [
+        # name, fmt, accel rate, seconds, free-space tones per axis, baseline tones, rig
+        ("vib-tones", "parquet", 2000.0, 6.0, {0: [(150.0, 0.05)], 2: [(230.0, 0.02)]}, {0: [(110.0, 0.03)]}, "example",
+         "Typical: two tones on two axes (DFT321 combines them)."),
+        ("vib-two-tone", "parquet", 2000.0, 6.0, {1: [(100.0, 0.1), (300.0, 0.2)]}, {2: [(60.0, 0.04), (180.0, 0.08)]}, "rotated",
+         "Tricky: two tones on one axis; a magnitude-weighted centroid differs from the power-weighted one."),
+        ("vib-near-cutoff-csv", "csv", 1500.0, 4.0, {0: [(12.0, 0.2)], 1: [(400.0, 0.02)]}, {0: [(15.0, 0.1)]}, "rotated",
+         "Edge: a tone just above the 10 Hz cut-off, an unusual 1.5 kHz rate, CSV (a single-pass filter shows here)."),
+    ]
+    note_filter = ("zero-phase Butterworth high-pass gain 1/(1+(10/f)^8) per tone (spec §10.2); every tone falls on a DFT "
+                   "bin of the trimmed signal")
+    for name, fmt, rate, secs, fs_tones, base_tones, rig_kind, desc in variants:
+        def build(path: Path, fmt=fmt, rate=rate, secs=secs, fs_tones=fs_tones, base_tones=base_tones, rig_kind=rig_kind,
+                  name=name) -> None:
+            rig = example_rig() if rig_kind == "example" else rotated_rig_full()
+
+            def extra(tones):
+                def fn(t: np.ndarray) -> np.ndarray:
+                    a = np.zeros((len(t), 3))
+                    for axis, ts in tones.items():
+                        for f, amp in ts:
+                            a[:, axis] += amp * np.sin(2 * np.pi * f * t)
+                    return a
+                return fn
+
+            w = manifest(f"conf-{name}", rig)
+            handle_trial(w, "free_space-1", "free_space", duration_s=secs - 1 / rate, position=circle(0.03, 0.5), quaternion=spin(0.05),
+                         force_w=lambda t: np.tile([0.1, 0.0, -0.2], (len(t), 1)), rates=(250.0, rate, 100.0), fmt=fmt,
+                         accel_extra=extra(fs_tones))
+            tb = clock(secs, rate)[:-1]
+            a_base = rb.HandleTruth().accel_bias + np.array([0.0, 0.0, 9.81]) + extra(base_tones)(tb)
+            w.add_trial("baseline-1", "rig.baseline_vibration", powered=False)
+            w.add_stream("baseline-1", "handle_accel", {"t": tb, "ax": a_base[:, 0], "ay": a_base[:, 1], "az": a_base[:, 2]},
+                         rate_hz=rate, fmt=fmt)
+            w.write(path)
+
+        fx = Fixture(name, build)
+        all_fs = [tone for ts in fs_tones.values() for tone in ts]
+        all_base = [tone for ts in base_tones.values() for tone in ts]
+        short = name.removeprefix("vib-")
+        fmt_tones = lambda ts: ", ".join(f"{a} m/s² at {f:g} Hz" for f, a in ts)  # noqa: E731
+        fx.cases += [
+            case(f"vibration.rms.{short}", "vibration.rms", "10.4", name, tones_rms(all_fs), "m/s^2", 0.0, 2e-3, "analytic",
+                 f"√(Σ (A·g(f))²/2) for {fmt_tones(all_fs)} at {rate:g} Hz; {note_filter}; DFT321 preserves energy", desc),
+            case(f"vibration.spectral_centroid.{short}", "vibration.spectral_centroid", "10.5", name, tones_centroid(all_fs), "Hz",
+                 0.0, 2e-3, "analytic", f"power-weighted mean frequency Σ f·(A g)² / Σ (A g)² of {fmt_tones(all_fs)}", desc),
+            case(f"vibration.baseline_rms.{short}", "vibration.baseline_rms", "10.6", name, tones_rms(all_base), "m/s^2", 0.0,
+                 2e-3, "analytic", f"baseline trial (no device): {fmt_tones(all_base)} on top of gravity and bias; {note_filter}",
+                 desc),
+            case(f"vibration.baseline_centroid.{short}", "vibration.baseline_centroid", "10.6", name, tones_centroid(all_base),
+                 "Hz", 0.0, 2e-3, "analytic", f"power-weighted mean frequency of {fmt_tones(all_base)}", desc),
+        ]
+        out.append(fx)
+    return out
+
+
+# --- frictionless surface (spec chapter 12) ----------------------------------------------------------
+
+def tangent_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    u = np.cross(n, [1.0, 0.0, 0.0])
+    u /= np.linalg.norm(u)
+    return u, np.cross(n, u)
+
+
+def surface_fixtures() -> list[Fixture]:
+    out: list[Fixture] = []
+    guard = param("surface", "contact_guard_s")
+    variants = [
+        ("surf-typical", "parquet", "example", [0.0, 0.0, 1.0], (0.0, 0.05, 0.10), (1.0, 9.0), 10.0,
+         lambda t: 0.53 + 0.1 * np.sin(2 * np.pi * 0.5 * t), (1000.0, 500.0, 100.0), "Typical: a horizontal surface."),
+        ("surf-tilted-rotated-csv", "csv", "rotated", [0.0, 0.2, 1.0], (0.0, 0.05, 0.12), (1.5, 8.5), 10.0,
+         lambda t: 0.4 + 0.15 * np.cos(2 * np.pi * 0.25 * t), (400.0, 250.0, 150.0),
+         "Tricky: a tilted surface normal, rotated sensor frames, CSV, unusual rates."),
+        ("surf-constant", "parquet", "example", [0.3, 0.0, 1.0], (0.01, 0.0, 0.10), (0.8, 5.2), 6.0, lambda t: 0.25 + 0 * t,
+         (1000.0, 500.0, 100.0), "Edge: a constant planar force (SD 0), short trial."),
+    ]
+    for name, fmt, rig_kind, normal_raw, point, (t_on, t_off), secs, planar, rates, desc in variants:
+        outside = None if name == "surf-constant" else 2.0  # the planar force outside contact (a step at contact)
+        n = np.asarray(normal_raw, float) / np.linalg.norm(normal_raw)
+        u, v = tangent_basis(n)
+        pp = np.asarray(point, float)
+
+        def contact(t, t_on=t_on, t_off=t_off):
+            return (t >= t_on) & (t <= t_off)
+
+        def position(t, u=u, v=v, n=n, pp=pp, contact=contact):
+            depth = np.where(contact(t), 0.002, -0.01)
+            return pp + 0.03 * (np.cos(2 * t)[:, None] * u + np.sin(2 * t)[:, None] * v) - depth[:, None] * n
+
+        def force(t, u=u, v=v, n=n, contact=contact, planar=planar, outside=outside):
+            d = np.sin(2 * t)[:, None] * u - np.cos(2 * t)[:, None] * v
+            mag = np.where(contact(t), planar(t), outside if outside is not None else planar(t))
+            return mag[:, None] * d + np.where(contact(t), 1.5, 0.0)[:, None] * n
+
+        def commanded(t, n=n, contact=contact):
+            return np.where(contact(t), 1.5, 0.0)[:, None] * n
+
+        rendering = {"surface_point_m": list(point), "surface_normal": list(normal_raw), "stiffness_N_per_m": 750.0}
+
+        def build(path: Path, name=name, rig_kind=rig_kind, secs=secs, position=position, force=force, commanded=commanded,
+                  rendering=rendering, rates=rates, fmt=fmt) -> None:
+            rig = example_rig() if rig_kind == "example" else rotated_rig_full()
+            w = manifest(f"conf-{name}", rig)
+            handle_trial(w, "surface-1", "frictionless_surface", duration_s=secs, position=position, quaternion=spin(0.05),
+                         force_w=force, powered=True, rendering=rendering, commanded_w=commanded, rates=rates, fmt=fmt)
+            w.write(path)
+
+        fx = Fixture(name, build)
+        tg = grid(secs)
+        used = (tg >= t_on + guard - 1e-9) & (tg <= t_off - guard + 1e-9)
+        truth = planar(tg[used])
+        short = name.removeprefix("surf-")
+        how = (f"planar force of the stated magnitude against the motion plus 1.5 N along the normal {normal_raw}, in contact "
+               f"from {t_on} s to {t_off} s (commanded normal force 1.5 N), statistics over the 100 Hz grid rows inside the "
+               f"contact minus the {guard} s guard at both ends (spec §12.2)")
+        sd_abs = 2e-3 if truth.std() == 0 else 0.0
+        fx.cases += [
+            case(f"surface.planar_force_mean.{short}", "surface.planar_force_mean", "12.2", name, truth.mean(), "N", 0.0, 5e-3,
+                 "analytic", how, desc),
+            case(f"surface.planar_force_sd.{short}", "surface.planar_force_sd", "12.2", name,
+                 truth.std(ddof=1) if len(truth) > 1 else 0.0, "N", sd_abs, 3e-2, "analytic", how, desc),
+        ]
+        out.append(fx)
+    return out
+
+
+# --- stiffness (spec chapter 13) -------------------------------------------------------------------------
+
+K_CMD = 750.0
+
+
+def press_depth(t: np.ndarray, depth=0.012, press_s=1.2, gap_s=0.5, presses=5) -> np.ndarray:
+    """Penetration (m): presses of depth·sin²(π τ / press_s) separated by gap_s hovering 5 mm above."""
+    period = press_s + gap_s
+    tau = np.mod(t - gap_s, period)
+    inside = (t >= gap_s) & (tau < press_s) & (t < gap_s + presses * period)
+    return np.where(inside, depth * np.sin(np.pi * tau / press_s) ** 2, -0.005)
+
+
+def stiffness_fixtures() -> list[Fixture]:
+    out: list[Fixture] = []
+    duration = 0.5 + 5 * 1.7 + 0.5
+    variants = [
+        ("stiff-saturating", "parquet", "example", [0.0, -0.15, 1.0], (0.01, 0.04, 0.11), 360.0, 2.7, None,
+         (1000.0, 500.0, 100.0), "Typical: a linear spring that saturates (the Touch, paper §VI-F)."),
+        ("stiff-rotated-csv", "csv", "rotated", [0.2, 0.1, 1.0], (0.0, 0.02, 0.09), 520.0, 4.0, None, (400.0, 250.0, 150.0),
+         "Tricky: rotated sensor frames, a tilted surface, CSV and unusual rates."),
+        ("stiff-giving-way", "parquet", "example", [0.0, 0.0, 1.0], (0.0, 0.0, 0.10), 600.0, 5.7, 1.0, (1000.0, 500.0, 100.0),
+         "Edge: a spring that gives way after its peak (the Touch X, paper §VI-F)."),
+    ]
+    for name, fmt, rig_kind, normal_raw, point, k, peak, after, rates, desc in variants:
+        n = np.asarray(normal_raw, float) / np.linalg.norm(normal_raw)
+        pp = np.asarray(point, float)
+
+        def law(t, k=k, peak=peak, after=after):
+            d = press_depth(t)
+            if after is None:
+                return np.clip(k * d, 0.0, peak)
+            # gives way: once k·d reaches the peak the force drops to `after` for the rest of that press
+            tau = np.mod(t - 0.5, 1.7)
+            tau_peak = 1.2 / np.pi * np.arcsin(np.sqrt(peak / (k * 0.012)))
+            return np.where(d <= 0, 0.0, np.where(tau < tau_peak, k * d, after))
+
+        def position(t, n=n, pp=pp):
+            return pp - press_depth(t)[:, None] * n
+
+        def force(t, n=n, law=law):
+            side = np.array([0.1, 0.0, 0.0]) - (np.array([0.1, 0.0, 0.0]) @ n) * n  # a small planar force
+            return law(t)[:, None] * n + side
+
+        def commanded(t, n=n):
+            return (K_CMD * np.maximum(press_depth(t), 0.0))[:, None] * n
+
+        rendering = {"surface_point_m": list(point), "surface_normal": list(normal_raw), "stiffness_N_per_m": K_CMD}
+
+        def build(path: Path, name=name, rig_kind=rig_kind, position=position, force=force, commanded=commanded,
+                  rendering=rendering, rates=rates, fmt=fmt) -> None:
+            rig = example_rig() if rig_kind == "example" else rotated_rig_full()
+            w = manifest(f"conf-{name}", rig)
+            handle_trial(w, "stiffness-1", "stiffness", duration_s=duration, position=position, quaternion=spin(0.03),
+                         force_w=force, powered=True, rendering=rendering, commanded_w=commanded, rates=rates, fmt=fmt)
+            w.write(path)
+
+        fx = Fixture(name, build)
+        short = name.removeprefix("stiff-")
+        how = (f"five presses 12 mm deep into a rendered {K_CMD:g} N/m surface (normal {normal_raw}); the device's force is "
+               f"{k:g} N/m × penetration " + (f"saturating at {peak} N" if after is None else f"up to {peak} N, then {after} N until the press ends")
+               + "; the fit window [0.2, 0.8] × peak lies on the linear part")
+        fx.cases += [
+            case(f"stiffness.measured.{short}", "stiffness.measured", "13.3", name, k, "N/m", 0.0, 0.02, "analytic", how, desc),
+            case(f"stiffness.accuracy.{short}", "stiffness.accuracy", "13.4", name, 100 * k / K_CMD, "%", 0.0, 0.02, "analytic",
+                 how + f"; accuracy = 100·{k:g}/{K_CMD:g}", desc),
+        ]
+        if after is None:
+            fx.cases.append(case(f"stiffness.peak_force.{short}", "stiffness.peak_force", "13.4", name, peak, "N", 0.0, 0.01,
+                                 "analytic", how + "; every press reaches the saturation plateau", desc))
+        out.append(fx)
+    # A third peak-force case: a press that never saturates, so its peak is k·depth.
+    def shallow(path: Path) -> None:
+        n = np.array([0.0, 0.0, 1.0])
+        w = manifest("conf-stiff-linear", example_rig())
+        handle_trial(w, "stiffness-1", "stiffness", duration_s=duration, position=lambda t: np.array([0.0, 0.01, 0.1]) - press_depth(t)[:, None] * n,
+                     quaternion=spin(0.03), force_w=lambda t: np.clip(300.0 * press_depth(t), 0.0, None)[:, None] * n,
+                     powered=True, rendering={"surface_point_m": [0.0, 0.01, 0.1], "surface_normal": [0.0, 0.0, 1.0],
+                                              "stiffness_N_per_m": K_CMD},
+                     commanded_w=lambda t: (K_CMD * np.maximum(press_depth(t), 0.0))[:, None] * n)
+        w.write(path)
+
+    fx = Fixture("stiff-linear", shallow)
+    fx.cases += [
+        case("stiffness.peak_force.linear", "stiffness.peak_force", "13.4", fx.name, 300.0 * 0.012, "N", 0.0, 0.01, "analytic",
+             "a purely linear 300 N/m spring pressed 12 mm deep: the peak is 3.6 N (the sin² press is smooth at its bottom, "
+             "so the 20 Hz low-pass leaves the peak)", "Edge: no saturation."),
+        case("stiffness.measured.linear", "stiffness.measured", "13.3", fx.name, 300.0, "N/m", 0.0, 0.02, "analytic",
+             "a purely linear 300 N/m spring", "Edge: no saturation."),
+    ]
+    out.append(fx)
+    return out
+
+
+# --- rig (spec chapter 14) ---------------------------------------------------------------------------------
+
+def damped_peak(f_n: float, zeta: float) -> float:
+    """Frequency of the maximum of |Fourier transform| of e^(−ζωt) sin(ω_d t): ω_n √(1 − 2ζ²) / 2π."""
+    return f_n * math.sqrt(1 - 2 * zeta ** 2)
+
+
+def rig_fixtures() -> list[Fixture]:
+    out: list[Fixture] = []
+    variants = [
+        # name, rig, modes, zeta, accel delay, mocap delay, cop offset, truth, seed
+        ("rig-rotated", "rotated", (205.0, 206.0, 182.0), 0.03, 0.003, -0.001, 0.005, rb.HandleTruth(), SEED + 10,
+         "Typical: the paper's plate modes, rotated handle sensors."),
+        ("rig-late-mocap", "example", (150.0, 163.0, 121.0), 0.02, -0.002, 0.004, 0.008, rb.HandleTruth(force_noise=0.006),
+         SEED + 11, "Tricky: late motion capture, an early accelerometer, a weaker plate."),
+        ("rig-quiet", "rotated-plate", (240.0, 230.0, 260.0), 0.04, 0.0, 0.0, 0.002, QUIET, SEED + 12,
+         "Edge: noise-free handle sensors (residuals vanish), synchronous recorders, yawed corner sensors."),
+    ]
+    for name, rig_kind, modes, zeta, acc_d, moc_d, cop_off, truth, seed, desc in variants:
+        def build(path: Path, rig_kind=rig_kind, modes=modes, zeta=zeta, acc_d=acc_d, moc_d=moc_d, cop_off=cop_off, truth=truth,
+                  seed=seed, name=name) -> None:
+            rng = np.random.default_rng(seed)
+            rig = {"rotated": rb.rotated_rig, "example": example_rig, "rotated-plate": rotated_rig_full}[rig_kind]()
+            rig["motion_capture"]["markers"] = sorted(set(rig["motion_capture"]["markers"]) | {"w1"})
+            w = rb.writer(rig=rig, sid=f"conf-{name}")
+            rb.add_calibration_trial(w, truth, rng, duration_s=12.0, accel_delay_s=acc_d, mocap_delay_s=moc_d)
+            rb.add_plate_bias_trial(w, rng)
+            rb.add_impact_trial(w, rng, modes=modes, zeta=zeta)
+            pos = np.array([[0.0, 0.0], [0.2, 0.1], [-0.2, -0.2]])
+            ang = np.linspace(0, 2 * np.pi, len(pos), endpoint=False)
+            rb.add_cop_trial(w, rng, pos, cop_off * np.column_stack([np.cos(ang), np.sin(ang)]))
+            w.write(path)
+
+        fx = Fixture(name, build)
+        short = name.removeprefix("rig-")
+        peaks = [damped_peak(f, zeta) for f in modes]
+        ft_var = lowpass_noise_ratio(param("signals", "wrench_cutoff_hz"), 1000.0, param("signals", "filter_order"))
+        acc_var = lowpass_noise_ratio(param("signals", "accel_cutoff_hz"), 2000.0, param("signals", "filter_order"))
+        # torque residual τ − (b + c × F): the force noise enters through c × n_F, E|c × n|² = 2|c|²σ_F² (per axis ⅔|c|²σ_F²)
+        torque_sigma = math.sqrt(truth.torque_noise ** 2 + 2 / 3 * float(truth.com @ truth.com) * truth.force_noise ** 2)
+        expected_rms = [truth.force_noise * math.sqrt(ft_var), truth.accel_noise * math.sqrt(acc_var),
+                        torque_sigma * math.sqrt(ft_var)]
+        quiet = truth.force_noise == 0.0
+        fx.cases += [
+            case(f"rig.plate_natural_frequency.{short}", "rig.plate_natural_frequency", "14.4", name, peaks, "Hz", 0.6, 0.0,
+                 "analytic", f"a ball drop rings each axis as e^(−ζωt) sin(ω_d t) with f_n = {modes} Hz, ζ = {zeta}: the "
+                 "magnitude spectrum peaks at f_n √(1 − 2ζ²); tolerance = the 0.5 s window's zero-padded bin (0.24 Hz) "
+                 "refined by a parabola, plus 0.01 N noise", desc),
+            case(f"rig.cop_error.{short}", "rig.cop_error", "14.5", name, cop_off, "m", 5e-4, 0.0, "analytic",
+                 f"three placements of a 1 kg weight whose marker is offset by {cop_off} m from the load point in three "
+                 "directions; corner readings split the load statically (spec §14.1); noise 5 mN per channel", desc),
+            case(f"rig.sync_offset.{short}", "rig.sync_offset", "14.6", name, max(abs(acc_d), abs(moc_d)), "s", 3e-4, 0.0,
+                 "analytic", f"accelerometer time stamps late by {acc_d} s, motion capture by {moc_d} s against the F/T "
+                 "recorder; the value is the larger |delay|; tolerance = a third of the 1 ms grid step", desc),
+            case(f"rig.handle_calibration_rms.{short}", "rig.handle_calibration_rms", "14.7", name, expected_rms,
+                 "[N, m/s^2, N*m]", 2e-4 if quiet else 0.0, 0.0 if quiet else 0.15, "analytic",
+                 ("noise-free sensors: the residuals are only the filters' end effects on the tumbling gravity (< 2e-4)"
+                  if quiet else
+                  f"white noise σ = ({truth.force_noise} N, {truth.accel_noise} m/s², {truth.torque_noise} N·m) per axis, "
+                  "low-passed at 20 Hz (zero phase, order 4: variance × (2/fs)∫|H|⁴ df) before the fits: the radial residual "
+                  "of an isotropic error has the per-axis σ; the torque residual adds the force noise through the centre of "
+                  "mass, √(σ_τ² + ⅔|c|²σ_F²); tolerance 15 % = the sampling spread of an RMS over a few hundred "
+                  "independent samples"), desc),
+        ]
+        out.append(fx)
+    return out
+
+
+# --- local dynamics (spec chapter 11) --------------------------------------------------------------------
+
+INPUTS = ["qw", "qx", "qy", "qz", "px", "py", "pz", "vx", "vy", "vz", "ax", "ay", "az"]
+IN_UNITS = ["1"] * 4 + ["m"] * 3 + ["m/s"] * 3 + ["m/s^2"] * 3
+OUTPUTS = ["fx", "fy", "fz", "tx", "ty", "tz"]
+OUT_UNITS = ["N"] * 3 + ["N*m"] * 3
+
+
+def hw_model(variant: str) -> dict:
+    """A Hammerstein–Wiener parameter file (spec §11.5) with nonlinear maps on the channels that move."""
+    zero = {"b": [0.0, 0.0], "f": [0.0, 0.0], "nk": 0}
+    linear = [[dict(zero) for _ in INPUTS] for _ in OUTPUTS]
+    in_maps: list[dict] = [{"type": "unit_gain"} for _ in INPUTS]
+    out_maps: list[dict] = [{"type": "unit_gain"} for _ in OUTPUTS]
+    if variant == "a":
+        in_maps[4] = {"type": "piecewise_linear", "breakpoints": [-0.05, 0.0, 0.02, 0.06], "values": [0.5, 0.0, 0.4, -0.2]}
+        linear[0][4] = {"b": [1.5, -0.7], "f": [-0.6, 0.08], "nk": 0}
+        linear[0][0] = {"b": [0.4, 0.0], "f": [0.0, 0.0], "nk": 0}
+        out_maps[0] = {"type": "piecewise_linear", "breakpoints": [-1.0, 0.0, 0.5, 1.5], "values": [-0.5, 0.1, 0.2, 1.4]}
+        linear[1][7] = {"b": [2.0, 1.0], "f": [-0.5, 0.0], "nk": 1}
+        linear[3][6] = {"b": [0.01, 0.0], "f": [-0.9, 0.0], "nk": 0}
+    else:
+        in_maps[7] = {"type": "piecewise_linear", "breakpoints": [-0.05, 0.0, 0.05], "values": [0.2, 0.0, 0.3]}
+        linear[2][7] = {"b": [0.5, 0.5], "f": [-0.2, 0.0], "nk": 0}
+        linear[2][4] = {"b": [3.0, 0.0], "f": [0.0, 0.0], "nk": 0}
+        linear[4][0] = {"b": [0.02, 0.0], "f": [-0.5, 0.0], "nk": 0}
+    return {"format": "haptify-hw-model", "spec_version": SPEC_VERSION, "sample_rate_hz": 100.0,
+            "inputs": [{"name": n, "unit": u} for n, u in zip(INPUTS, IN_UNITS)],
+            "outputs": [{"name": n, "unit": u} for n, u in zip(OUTPUTS, OUT_UNITS)],
+            "input_maps": in_maps, "output_maps": out_maps, "linear": linear,
+            "quaternion_hemisphere": {"columns": [0, 1, 2, 3], "reference": [1.0, 0.0, 0.0, 0.0]}}
+
+
+def pwl(m: dict, u: np.ndarray) -> np.ndarray:
+    """Spec §11.3 step 2, written out: linear between breakpoints, the end segments extended."""
+    if m["type"] == "unit_gain":
+        return u
+    x, v = np.asarray(m["breakpoints"]), np.asarray(m["values"])
+    k = np.clip(np.searchsorted(x, u, side="right") - 1, 0, len(x) - 2)
+    return v[k] + (u - x[k]) / (x[k + 1] - x[k]) * (v[k + 1] - v[k])
+
+
+def hw_predict(model: dict, u: np.ndarray) -> np.ndarray:
+    """Spec §11.3 applied to inputs u (N, 13): hemisphere rule, input maps, lfilter blocks from rest, output maps."""
+    u = u.copy()
+    hemi = model.get("quaternion_hemisphere")
+    if hemi:
+        cols = hemi["columns"]
+        flip = u[:, cols] @ np.asarray(hemi["reference"]) < 0
+        u[np.ix_(flip, cols)] *= -1
+    w = np.column_stack([pwl(m, u[:, i]) for i, m in enumerate(model["input_maps"])])
+    y = np.zeros((len(u), len(model["outputs"])))
+    for j, row in enumerate(model["linear"]):
+        x = np.zeros(len(u))
+        for i, tf in enumerate(row):
+            x = x + lfilter([0.0] * tf["nk"] + tf["b"], [1.0] + tf["f"], w[:, i])
+        y[:, j] = pwl(model["output_maps"][j], x)
+    return y
+
+
+@dataclass
+class LineMotion:
+    """Straight-line motion at constant velocity with a fixed orientation: the §7.2 filters pass it unchanged
+    (chord removal), so the model inputs on the 100 Hz grid are known exactly."""
+
+    p0: np.ndarray
+    v: np.ndarray
+    q: np.ndarray
+    f0: np.ndarray
+    f1: np.ndarray
+
+    def position(self, t: np.ndarray) -> np.ndarray:
+        return self.p0 + np.outer(t, self.v)
+
+    def force(self, t: np.ndarray) -> np.ndarray:
+        """Measured hand force: linear in time (passes the zero-phase low-pass unchanged)."""
+        return self.f0 + np.outer(t, self.f1)
+
+    def inputs(self, t: np.ndarray) -> np.ndarray:
+        n = len(t)
+        return np.column_stack([np.tile(self.q, (n, 1)), self.position(t), np.tile(self.v, (n, 1)), np.zeros((n, 3))])
+
+
+def dynamics_fixtures() -> list[Fixture]:
+    out: list[Fixture] = []
+    T = 25.0
+    seg = int(round(param("dynamics", "segment_s") * 100))
+    R_p = param("dynamics", "R_p")
+
+    def expectations(model: dict, train: LineMotion, test: LineMotion) -> dict:
+        tg = grid(T)
+        y_hat = hw_predict(model, train.inputs(tg))
+        meas = np.column_stack([train.force(tg), np.zeros((len(tg), 3))])
+        err = meas - y_hat
+        rm = np.sqrt(np.mean(err ** 2, axis=0))
+        y_test = hw_predict(model, test.inputs(tg))
+        err_test = np.column_stack([test.force(tg), np.zeros((len(tg), 3))]) - y_test
+
+        def seg_errors(e):
+            nseg = len(tg) // seg
+            return [float(np.mean(np.sqrt(np.mean(e[s * seg:(s + 1) * seg, :3] ** 2, axis=0)))) for s in range(nseg)]
+
+        tr, te = seg_errors(err), seg_errors(err_test)
+        d_test = float(np.linalg.norm(test.p0 - train.p0) / R_p)
+        x = np.array([0.0] * len(tr) + [d_test] * len(te))
+        yv = np.array(tr + te)
+        slope, intercept = np.polyfit(x, yv, 1)
+        return {"force": rm[:3], "torque": rm[3:], "line": [float(slope), float(intercept)], "distance": d_test}
+
+    q_tilt = quat_from_axis_angle(np.array([0.2, 1.0, 0.1]), np.array(0.6))
+    variants = [
+        ("dyn-predict", "parquet", "example", LineMotion(np.array([-0.04, 0.01, 0.15]), np.array([0.003, 0.0, 0.0]),
+                                                         np.array([1.0, 0.0, 0.0, 0.0]), np.array([0.2, -0.1, 0.3]),
+                                                         np.array([0.01, 0.004, 0.0])),
+         np.array([0.0, 0.0, R_p]), np.array([0.5, 0.2, -0.1]), "Typical: a given model, a test trial one R_p away."),
+        ("dyn-predict-hemisphere-csv", "csv", "rotated",
+         LineMotion(np.array([0.05, -0.02, 0.12]), np.array([-0.002, 0.001, 0.0005]), -q_tilt, np.array([-0.3, 0.2, 0.1]),
+                    np.array([0.0, -0.01, 0.006])),
+         0.5 * R_p * np.array([1.0, 2.0, 0.0]) / math.sqrt(5.0), np.array([0.1, 0.0, 0.2]),
+         "Tricky: the motion-capture quaternion is stored as −q (hemisphere rule), rotated sensor frames, CSV."),
+    ]
+    for name, fmt, rig_kind, train, shift, df0, desc in variants:
+        test = LineMotion(train.p0 + shift, train.v, train.q, train.f0 + df0, train.f1)
+
+        def build(path: Path, name=name, fmt=fmt, rig_kind=rig_kind, train=train, test=test) -> None:
+            rig = example_rig() if rig_kind == "example" else rb.rotated_rig()
+            w = manifest(f"conf-{name}", rig, truth=rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0))
+            for tid, rep, m in (("local_dynamic-1", 1, train), ("local_dynamic-2", 2, test)):
+                handle_trial(w, tid, "local_dynamic", duration_s=T, position=m.position, quaternion=fixed(m.q), force_w=m.force,
+                             truth=rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0),
+                             rates=(100.0, 100.0, 100.0), fmt=fmt, repetition=rep)
+            w.write(path)
+            for variant in ("a", "b"):
+                (path / f"model-{variant}.json").write_text(json.dumps(hw_model(variant), indent=1) + "\n", encoding="utf-8")
+
+        fx = Fixture(name, build)
+        short = name.removeprefix("dyn-")
+        how = ("the handle moves on a straight line at constant velocity with a fixed orientation and the hand force is "
+               "linear in time, so the §7.2 filters (chord removed) pass every signal unchanged and the model inputs on "
+               "the 100 Hz grid are known exactly; the value is spec §11.3 applied to them (lfilter from rest, maps with "
+               "linear extension) against the measured force")
+        for variant in ("a", "b"):
+            e = expectations(hw_model(variant), train, test)
+            params = {"model": f"model-{variant}.json"}
+            sfx = f"{short}.model-{variant}"
+            fx.cases += [
+                case(f"dynamics.force_rmse.{sfx}", "dynamics.force_rmse", "11.3", name, e["force"], "N", 1e-7, 1e-7, "spec",
+                     how + f"; model file model-{variant}.json given in parameters.model", desc, parameters=params),
+                case(f"dynamics.force_rmse_mean.{sfx}", "dynamics.force_rmse_mean", "11.7", name, float(np.mean(e["force"])),
+                     "N", 1e-7, 1e-7, "spec", how, desc, parameters=params),
+                case(f"dynamics.torque_rmse.{sfx}", "dynamics.torque_rmse", "11.3", name, e["torque"], "N*m", 1e-8, 1e-7,
+                     "spec", how + "; the measured torque about the gimbal centre is zero", desc, parameters=params),
+                case(f"dynamics.torque_rmse_mean.{sfx}", "dynamics.torque_rmse_mean", "11.7", name,
+                     float(np.mean(e["torque"])), "N*m", 1e-8, 1e-7, "spec", how, desc, parameters=params),
+                case(f"dynamics.error_vs_distance.{sfx}", "dynamics.error_vs_distance", "11.6", name, e["line"], "N", 1e-6,
+                     1e-6, "spec", how + f"; the test trial repeats the motion {e['distance']:g}·R_p away (every window's "
+                     f"nearest training window is its twin: distance {e['distance']:g}), training segments at distance 0; "
+                     "the least-squares line through (distance, mean per-axis RMS error) of the 5 s segments",
+                     desc, parameters=params),
+            ]
+        out.append(fx)
+
+    # Fitting quality (spec §11.4.5): data from a known linear law inside the model class, known noise.
+    mass, damping, sigma = 0.15, 0.8, 0.01
+
+    def fitdata(path: Path) -> None:
+        rng = np.random.default_rng(SEED + 20)
+        w = manifest("conf-dyn-fit", example_rig())
+        t = clock(22.0, 1000.0)
+        chirp = 2 * np.pi * (0.8 * t + 0.02 * t ** 2)
+        dph = 2 * np.pi * (0.8 + 0.04 * t)
+        amp, shift = 0.03 * np.array([1.0, 0.7, 0.5]), np.array([0.0, 1.1, 2.3])
+        ph = chirp[:, None] + shift
+        centre = np.array([0.0, 0.0, 0.15])
+        pos = centre + amp * np.sin(ph)
+        vel = amp * np.cos(ph) * dph[:, None]
+        acc = -amp * np.sin(ph) * dph[:, None] ** 2 + amp * np.cos(ph) * 2 * np.pi * 0.04
+        q = quat_from_axis_angle(np.tile(Z, (len(t), 1)), 0.3 * np.sin(2 * np.pi * 0.05 * t))
+        force = -mass * acc - damping * vel + sigma * rng.standard_normal((len(t), 3))
+        w.add_trial("local_dynamic-1", "local_dynamic", powered=False, repetition=1)
+        wrench, accel = rb.raw_handle(QUIET, w.manifest["rig"], t, q, t, q, rng, hand_force_w=force,
+                                      hand_torque_g_w=np.zeros_like(force), lin_acc_w=acc)
+        w.add_stream("local_dynamic-1", "handle_wrench", wrench, rate_hz=1000.0)
+        w.add_stream("local_dynamic-1", "handle_accel", accel, rate_hz=1000.0)
+        k = slice(None, None, 10)
+        w.add_stream("local_dynamic-1", "handle_pose", {"t": t[k], "px": pos[k, 0], "py": pos[k, 1], "pz": pos[k, 2], "qw": q[k, 0],
+                                                        "qx": q[k, 1], "qy": q[k, 2], "qz": q[k, 3]}, rate_hz=100.0)
+        w.write(path)
+
+    fx = Fixture("dyn-fit-linear-law", fitdata)
+    sigma_f = sigma * math.sqrt(lowpass_noise_ratio(param("signals", "wrench_cutoff_hz"), 1000.0, param("signals", "filter_order")))
+    law = (f"force on the hand F = −{mass} a − {damping} v + white noise σ = {sigma} N per axis at 1 kHz ({sigma_f:.4f} N "
+           "after the 20 Hz zero-phase low-pass); the force amplitude is ~0.1 N. A linear law lies inside the model class, "
+           "so a converged fit leaves only the noise and the pipeline's velocity and acceleration estimates: the quality "
+           f"bound is the raw noise σ = {sigma} N (an unfitted or diverged model is ~10× above it; spec §11.4.5 judges "
+           "quality, not parameters)")
+    fx.cases += [
+        case("dynamics.force_rmse.fit-quality", "dynamics.force_rmse", "11.4.5", fx.name, [0.0] * 3, "N", sigma, 0.0,
+             "generated", law, "Typical: H-W fitting on data from a known model with known noise."),
+        case("dynamics.force_rmse_mean.fit-quality", "dynamics.force_rmse_mean", "11.4.5", fx.name, 0.0, "N", sigma, 0.0,
+             "generated", law, "Typical: fit quality."),
+        case("dynamics.torque_rmse.fit-quality", "dynamics.torque_rmse", "11.4.5", fx.name, [0.0, 0.0, 0.0], "N*m", 2e-3, 0.0,
+             "generated", "the law applies no torque about the gimbal centre and the torque channel has no noise: a fitted "
+             "model predicts (nearly) zero torque", "Edge: a silent output channel.", level="SHOULD"),
+        case("dynamics.torque_rmse_mean.fit-quality", "dynamics.torque_rmse_mean", "11.4.5", fx.name, 0.0, "N*m", 2e-3, 0.0,
+             "generated", "as dynamics.torque_rmse.fit-quality", "Edge.", level="SHOULD"),
+    ]
+    out.append(fx)
+    return out
+
+
+# --- validate cases from fixtures/invalid and fixtures/valid --------------------------------------------------
+
+def validate_cases(fixtures_root: Path) -> list[dict]:
+    cases = []
+    for group in ("valid", "invalid"):
+        for sidecar in sorted((fixtures_root / group).glob("*.expected.json")):
+            name = sidecar.name.removesuffix(".expected.json")
+            meta = json.loads(sidecar.read_text(encoding="utf-8"))
+            codes = sorted(meta.get("codes", []))
+            accepted = meta.get("exit_code", 1) == 0
+            expected: dict[str, Any] = {}
+            if codes:
+                expected["codes"] = codes
+            if accepted:
+                expected["valid"] = True
+            section = "4" if group == "invalid" else "2"
+            cases.append({"id": f"validate.{group}.{name}", "metric": "validate", "spec_section": section,
+                          "level": "MUST" if (not accepted or group == "valid") else "SHOULD", "fixture": f"{group}/{name}",
+                          "parameters": {}, "expected": expected, "tolerance": None,
+                          "provenance": {"kind": "spec", "note": f"built by tools/haptify_tools/build_invalid_fixtures.py with "
+                                         f"one known defect; the codes are the sidecar {group}/{sidecar.name}"},
+                          "spec_versions": [SPEC_VERSION], "description": meta.get("description", name)})
+    return cases
+
+
+# --- building and checking ------------------------------------------------------------------------------------
+
+FAMILIES: dict[str, Callable[[], list[Fixture]]] = {
+    "workspace": workspace_fixtures, "free_space": free_space_fixtures, "vibration": vibration_fixtures,
+    "surface": surface_fixtures, "stiffness": stiffness_fixtures, "rig": rig_fixtures, "dynamics": dynamics_fixtures,
+}
+FAMILY_TEXT = {
+    "workspace": "Workspace volumes (spec chapter 8): analytic shapes sampled on their boundary and the DH model's Pappus volume.",
+    "free_space": "Free-space forces and speeds (spec chapter 9): constant and analytic forces on the hand, circles and spins.",
+    "vibration": "Free-space vibrations (spec chapter 10): tones of known amplitude and frequency through the specified high-pass.",
+    "surface": "Frictionless surface (spec chapter 12): planar forces of known magnitude during rendered contact.",
+    "stiffness": "Stiffness (spec chapter 13): linear springs with saturation and giving way, pressed five times.",
+    "rig": "Rig checks (spec chapter 14): damped plate modes, offset COP markers, known recorder delays and sensor noise.",
+    "dynamics": "Local dynamics (spec chapter 11): H-W prediction from a given parameter file, and fitting quality on a known law.",
+}
+
+
+def all_fixtures() -> dict[str, list[Fixture]]:
+    return {fam: fn() for fam, fn in FAMILIES.items()}
+
+
+def case_documents(fixtures: dict[str, list[Fixture]], fixtures_root: Path) -> dict[str, str]:
+    """File name → text of every case file."""
+    docs = {}
+    for fam, fxs in fixtures.items():
+        docs[f"{fam}.json"] = {"description": FAMILY_TEXT[fam], "cases": [c for fx in fxs for c in fx.cases]}
+    docs["validate.json"] = {"description": "Validation (spec chapters 2–4): every invalid session of fixtures/invalid must be "
+                             "rejected (or warned about) with its codes; every fixture of fixtures/valid must be accepted.",
+                             "cases": validate_cases(fixtures_root)}
+    for doc in docs.values():
+        for c in doc["cases"]:
+            if c.get("tolerance") is None:
+                c.pop("tolerance", None)
+    return {name: json.dumps(doc, indent=2, ensure_ascii=False) + "\n" for name, doc in docs.items()}
+
+
+def build_fixture(fx: Fixture, target: Path) -> None:
+    if target.exists():
+        shutil.rmtree(target)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fx.build(target)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--fixtures", type=Path, default=REPO / "fixtures", help="fixtures folder (default: the repository's)")
+    parser.add_argument("--cases", type=Path, default=CASES_DIR, help="case folder (default: conformance/cases)")
+    parser.add_argument("--check", action="store_true", help="only check that the committed fixtures and cases are current")
+    parser.add_argument("--only", nargs="+", metavar="NAME", help="rebuild only these fixtures (case files are always written)")
+    args = parser.parse_args(argv)
+    fixtures = all_fixtures()
+    flat = {fx.name: fx for fxs in fixtures.values() for fx in fxs}
+    unknown = sorted(set(args.only or ()) - set(flat))
+    if unknown:
+        parser.error(f"unknown fixture(s) {unknown}; known: {sorted(flat)}")
+    docs = case_documents(fixtures, args.fixtures)
+    root = args.fixtures / FIXTURE_DIR
+    if args.check:
+        stale = []
+        with tempfile.TemporaryDirectory(prefix="haptify-conformance-") as tmp:
+            for name, fx in flat.items():
+                fresh = Path(tmp) / name
+                build_fixture(fx, fresh)
+                if not (root / name).is_dir() or logical_snapshot(fresh) != logical_snapshot(root / name):
+                    stale.append(f"fixture {FIXTURE_DIR}/{name}")
+        extra = sorted(p.name for p in root.iterdir() if p.is_dir() and p.name not in flat) if root.is_dir() else []
+        stale += [f"fixture {FIXTURE_DIR}/{n} is not built by this script" for n in extra]
+        for fname, text in docs.items():
+            path = args.cases / fname
+            if not path.is_file() or path.read_text(encoding="utf-8") != text:
+                stale.append(f"case file {fname}")
+        for line in stale:
+            print(f"stale: {line}")
+        print(f"conformance fixtures and cases: {'stale' if stale else 'current'} ({len(flat)} fixtures, {len(docs)} case files)")
+        return 1 if stale else 0
+    for name in args.only or flat:
+        build_fixture(flat[name], root / name)
+    args.cases.mkdir(parents=True, exist_ok=True)
+    for fname, text in docs.items():
+        (args.cases / fname).write_text(text, encoding="utf-8")
+    print(f"built {len(args.only or flat)} fixture(s) under {root} and {len(docs)} case files under {args.cases}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
