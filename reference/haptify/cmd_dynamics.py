@@ -16,7 +16,7 @@ import pandas as pd
 from haptify.errors import fail
 from haptify.local_dynamics import (
     OUTPUT_NAMES,
-    _atomic_write_with,
+    write_atomically,
     export_mat,
     fit_trial,
     load_model,
@@ -95,7 +95,7 @@ def run_predict(args, ui) -> int:
     for k, name in enumerate(OUTPUT_NAMES):
         frame[f"measured_{name}"] = np.where(data.valid, data.y[:, k], np.nan)
     table = pd.DataFrame(frame)
-    _atomic_write_with(args.output, lambda tmp: table.to_parquet(tmp, index=False))
+    write_atomically(args.output, lambda tmp: table.to_parquet(tmp, index=False))
     ok = data.valid & np.all(np.isfinite(predicted), axis=1)
     errors = rmse(data.y[ok], predicted[ok]) if ok.any() else np.full(len(OUTPUT_NAMES), np.nan)
     ui.emit_json({"trial": trial_id, "output": str(args.output), "samples": int(ok.sum()),

@@ -182,7 +182,7 @@ def save_model(model: HWModelFile, path: str | os.PathLike) -> Path:
     return p
 
 
-def _atomic_write_with(path: Path, writer) -> None:
+def write_atomically(path: Path, writer) -> None:
     """Run ``writer(tmp_path)`` and rename the result onto ``path`` (spec §3.6)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp" + path.suffix, dir=path.parent)
@@ -245,7 +245,7 @@ def export_mat(model: HWModelFile, path: str | os.PathLike) -> Path:
 
     p = Path(path)
     payload = {"model": model_to_mat_dict(model)}
-    _atomic_write_with(p, lambda tmp: savemat(tmp, payload, do_compression=True, oned_as="row"))
+    write_atomically(p, lambda tmp: savemat(tmp, payload, do_compression=True, oned_as="row"))
     return p
 
 
