@@ -15,6 +15,7 @@ import math
 import os
 import subprocess
 import sys
+import time
 import urllib.request
 from pathlib import Path
 
@@ -602,6 +603,46 @@ def test_web_viewer_on_a_busy_port_is_a_coded_error(recorded):
             viewer.wait_until_serving(timeout_s=20)
         assert err.value.findings[0].code == "E904"
         assert viewer.proc.poll() is not None
+
+
+def test_view_web_command_serves_until_interrupted(sessions, tmp_path):
+    """`haptify view SESSION --web --port N` end to end: prints the address, answers, and Ctrl-C stops
+    the viewer (no rerun process keeps the port)."""
+    import signal
+    import socket
+
+    main, _, _ = sessions
+    port = cmd_view.free_port()
+    code = ("import argparse, sys; from haptify.cli import UI; from haptify_tools.viewer import cmd_view; "
+            "p = argparse.ArgumentParser(); cmd_view.register(p.add_subparsers()); "
+            "a = p.parse_args(sys.argv[1:]); sys.exit(a.func(a, UI()))")
+    proc = subprocess.Popen([sys.executable, "-c", code, "view", str(main.root), "--trial", "free_space-1", "--web",
+                             "--port", str(port)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = ""
+        deadline = time.monotonic() + 40
+        while "web viewer:" not in line and time.monotonic() < deadline and proc.poll() is None:
+            line = proc.stdout.readline()
+        assert f"http://127.0.0.1:{port}/?url=" in line, proc.stderr.read() if proc.poll() is not None else line
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=5) as resp:
+            assert resp.status == 200
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=20) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    with socket.socket() as s:  # the port is free again: the rerun binary is gone
+        s.bind(("127.0.0.1", port))
+
+
+def test_a_simulate_output_folder_opens_as_its_session(sessions, tmp_path):
+    main, _, _ = sessions
+    dossier = tmp_path / "dossier"
+    dossier.mkdir()
+    (dossier / "session").symlink_to(main.root, target_is_directory=True)
+    assert cmd_view.open_session_or_dossier(str(dossier)).session_id == main.session_id
+    assert cmd_view.open_session_or_dossier(str(main.root)).session_id == main.session_id
 
 
 @pytest.mark.skipif(not CHROMIUM.exists(), reason=f"screenshot test needs Chromium at {CHROMIUM} (not installed here)")

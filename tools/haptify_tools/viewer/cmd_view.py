@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import IO
 
 from haptify.errors import fail
-from haptify.storage import open_session
+from haptify.storage import MANIFEST, SessionFolder, open_session
 from haptify_tools.viewer.recording import build, load_results
 
 LOOPBACK = "127.0.0.1"
@@ -38,10 +38,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "view", help="inspect a session in 3-D and in time (rerun viewer)",
         description="Show a session, its results and optionally a simulated counterpart in the rerun viewer.")
-    p.add_argument("session", metavar="SESSION", help="session folder")
+    p.add_argument("session", metavar="SESSION", help="session folder (or a 'haptify simulate' output folder)")
     p.add_argument("--trial", metavar="ID", help="show only this trial")
     p.add_argument("--results", metavar="RESULTS", help="results.json whose metrics are shown as a table")
-    p.add_argument("--compare", metavar="OTHER", help="a second session (e.g. simulated) overlaid on the first")
+    p.add_argument("--compare", metavar="OTHER", help="a second session (e.g. simulated, or a 'haptify simulate' output "
+                                                       "folder) overlaid on the first")
     p.add_argument("--save", metavar="OUT.rrd", help="write the recording to this .rrd file (no display needed)")
     p.add_argument("--web", action="store_true", help=f"serve rerun's web viewer on {LOOPBACK} only")
     p.add_argument("--port", type=int, metavar="N", help=f"HTTP port of the web viewer (with --web; default {DEFAULT_WEB_PORT})")
@@ -147,6 +148,14 @@ def serve_web(rrd: str | os.PathLike, web_port: int, grpc_port: int | None = Non
     return WebViewer(proc, web_url(web_port, grpc_port), web_port, log)
 
 
+def open_session_or_dossier(path: str) -> SessionFolder:
+    """Open a session folder, or the ``session/`` inside a folder written by ``haptify simulate``."""
+    root = Path(path)
+    if not (root / MANIFEST).is_file() and (root / "session" / MANIFEST).is_file():
+        root = root / "session"
+    return open_session(root)
+
+
 def run(args: argparse.Namespace, ui) -> int:
     """Build the recording, then save, serve or show it (issue 7)."""
     if args.port is not None and not args.web:
@@ -159,8 +168,8 @@ def run(args: argparse.Namespace, ui) -> int:
                 f"  haptify view {args.session} --web [--port N]   serves the web viewer on http://{LOOPBACK}:N")
         ui.emit_json({"ok": False, "reason": "no display; use --save or --web"})
         return 2
-    session = open_session(args.session)
-    other = open_session(args.compare) if args.compare else None
+    session = open_session_or_dossier(args.session)
+    other = open_session_or_dossier(args.compare) if args.compare else None
     results = load_results(args.results) if args.results else None
     with tempfile.TemporaryDirectory(prefix="haptify-view-") as tmp:
         out = Path(args.save) if args.save else Path(tmp) / f"{session.session_id}.rrd"
