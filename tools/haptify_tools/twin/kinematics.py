@@ -39,6 +39,16 @@ def true_kinematics(twin: TwinFile) -> Kinematics:
     return kin.model_copy(update={"joints": joints})
 
 
+def rows_times(x: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """``x @ m`` for a tall ``x (N, k)`` and a small ``m (k, j)`` or ``(k,)`` without BLAS.
+
+    NumPy hands 2-D products to BLAS, whose threads make this tall-and-thin case several times slower
+    on a loaded machine (or in worker processes) than a plain ``einsum``.
+    """
+    m = np.asarray(m, dtype=float)
+    return np.einsum("...k,k->...", x, m) if m.ndim == 1 else np.einsum("...k,kj->...j", x, m)
+
+
 # --- frames -------------------------------------------------------------------------------------
 
 
@@ -50,13 +60,13 @@ def placement_matrix(twin: TwinFile) -> tuple[np.ndarray, np.ndarray]:
 def world_to_device(twin: TwinFile, p_W: np.ndarray) -> np.ndarray:
     """Points ``(N, 3)`` from W to the device frame D."""
     r, t = placement_matrix(twin)
-    return (np.atleast_2d(p_W) - t) @ r
+    return rows_times(np.atleast_2d(p_W) - t, r)
 
 
 def device_to_world(twin: TwinFile, p_D: np.ndarray) -> np.ndarray:
     """Points ``(N, 3)`` from the device frame D to W."""
     r, t = placement_matrix(twin)
-    return np.atleast_2d(p_D) @ r.T + t
+    return rows_times(np.atleast_2d(p_D), r.T) + t
 
 
 def link_transforms(kin: Kinematics, q: np.ndarray) -> list[np.ndarray]:
@@ -149,7 +159,7 @@ def inverse_kinematics(kin: Kinematics, p_D: np.ndarray, q_hint: np.ndarray | No
     n = p_D.shape[0]
     if _analytic_ok(kin):
         r = quat_to_matrix(np.asarray(kin.base.quaternion))
-        p_B = (p_D - np.asarray(kin.base.position)) @ r
+        p_B = rows_times(p_D - np.asarray(kin.base.position), r)
         sols, reach = _candidates(kin, p_B)
         viol = np.stack([limit_violation(kin, s) for s in sols])
         viol = np.where(reach, viol, np.inf)
@@ -177,7 +187,7 @@ def _primitive_distance(prim, p: np.ndarray) -> np.ndarray:
     if isinstance(prim, HalfSpace):
         nrm = np.asarray(prim.normal, dtype=float)
         nrm = nrm / np.linalg.norm(nrm)
-        return -(p - np.asarray(prim.point_m)) @ nrm
+        return -rows_times(p - np.asarray(prim.point_m), nrm)
     if isinstance(prim, Cylinder):
         d = p - np.asarray(prim.center_m)
         dr = np.hypot(d[:, 0], d[:, 1]) - prim.radius_m
@@ -186,7 +196,7 @@ def _primitive_distance(prim, p: np.ndarray) -> np.ndarray:
         return outside + np.minimum(np.maximum(dr, dz), 0.0)
     if isinstance(prim, Box):
         r = quat_to_matrix(np.asarray(prim.quaternion))
-        d = np.abs((p - np.asarray(prim.center_m)) @ r) - np.asarray(prim.half_extents_m)
+        d = np.abs(rows_times(p - np.asarray(prim.center_m), r)) - np.asarray(prim.half_extents_m)
         outside = np.linalg.norm(np.maximum(d, 0.0), axis=1)
         return outside + np.minimum(np.max(d, axis=1), 0.0)
     raise TypeError(f"unknown primitive {prim!r}")

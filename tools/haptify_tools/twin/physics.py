@@ -34,7 +34,7 @@ from haptify.session_format import Kinematics, Rendering
 
 from haptify_tools.twin.examiner import band_noise as _band_noise
 from haptify_tools.twin.kinematics import (
-    gimbal_angles, hand_to_joints, link_transforms, nominal_kinematics, placement_matrix, true_kinematics,
+    gimbal_angles, hand_to_joints, link_transforms, nominal_kinematics, placement_matrix, rows_times, true_kinematics,
 )
 from haptify_tools.twin.model import TwinFile
 
@@ -223,12 +223,12 @@ def potential_energy(twin: TwinFile, q: np.ndarray, quaternion_W: np.ndarray | N
     e = np.zeros(q.shape[0])
     for i, link in enumerate(twin.links):
         c = frames[i + 1][:, :3, 3] + np.einsum("nij,j->ni", frames[i + 1][:, :3, :3], np.asarray(link.com_m))
-        e -= link.mass_kg * (c @ g)
+        e -= link.mass_kg * rows_times(c, g)
     gb = twin.gimbal_body
     if gb.mass_kg > 0:
         tip = frames[-1][:, :3, 3]
         offset = 0.0 if quaternion_W is None else _gimbal_com_offset_D(twin, quaternion_W)
-        e -= gb.mass_kg * ((tip + offset) @ g)
+        e -= gb.mass_kg * rows_times(tip + offset, g)
     return e
 
 
@@ -266,7 +266,7 @@ def _gimbal_body_terms(twin: TwinFile, t, frames, angles, quat_W, a_tip_D, g_D) 
     w_W, dw_W = _handle_rates(t, quat_W)
     if not twin.on("inertia"):
         w_W, dw_W, a_tip_D = np.zeros_like(w_W), np.zeros_like(dw_W), np.zeros_like(a_tip_D)
-    w, dw = w_W @ r_wd, dw_W @ r_wd
+    w, dw = rows_times(w_W, r_wd), rows_times(dw_W, r_wd)
     rc = _gimbal_com_offset_D(twin, quat_W) if gb.mass_kg > 0 else np.zeros((n_s, 3))
     a_c = a_tip_D + _cross(dw, rc) + _cross(w, _cross(w, rc))
     f_g = gb.mass_kg * (a_c - g_D)
@@ -375,8 +375,8 @@ def _hand_wrench_from_drive(twin, kin, t, q, qd, qdd, quat_W, tau_drive_joint, f
 
 def _to_world(twin: TwinFile, force_D, torque_D, about_origin_D: bool = True):
     r_wd, t_wd = placement_matrix(twin)
-    f = force_D @ r_wd.T
-    m = torque_D @ r_wd.T
+    f = rows_times(force_D, r_wd.T)
+    m = rows_times(torque_D, r_wd.T)
     if about_origin_D:
         m = m + _cross(t_wd, f)
     return f, m
@@ -401,9 +401,9 @@ def simulate_passive(twin: TwinFile, t: np.ndarray, position_W: np.ndarray, quat
     qd = _diff(t, q)
     qdd = _diff(t, qd)
     c = _coupling(twin)
-    th_d, th_dd = qd @ c.T, qdd @ c.T
+    th_d, th_dd = rows_times(qd, c.T), rows_times(qdd, c.T)
     tau_axis = drive_friction(twin, th_d) - reflected_rotor_inertia(twin) * th_dd
-    tau_joint = tau_axis @ c
+    tau_joint = rows_times(tau_axis, c)
     fh, th, fp, tp, jt = _hand_wrench_from_drive(twin, kin, t, q, qd, qdd, quaternion_W, tau_joint, frames, gimbal)
     f_w, m_w = _to_world(twin, fh, th, about_origin_D=False)
     bf_w, bm_w = _to_world(twin, fp, tp)
@@ -515,7 +515,7 @@ def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, 
     qdd = _diff(t, qd)
     c = _coupling(twin)
     c_inv = np.linalg.inv(c)
-    th_l, thd_l, thdd_l = q @ c.T, qd @ c.T, qdd @ c.T
+    th_l, thd_l, thdd_l = rows_times(q, c.T), rows_times(qd, c.T), rows_times(qdd, c.T)
     r_wd, t_wd = placement_matrix(twin)
     nrm = np.asarray(rendering.surface_normal, dtype=float)
     nrm = nrm / np.linalg.norm(nrm)
@@ -535,11 +535,11 @@ def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, 
     hold_idx = np.minimum(np.arange(n_s) // step, len(ticks) - 1)     # zero-order hold of loop outputs
     if not e.drive_series_elasticity.enabled:
         # rigid cable: the encoders see the link-side drive angles
-        enc_q = th_l @ c_inv.T
+        enc_q = rows_times(th_l, c_inv.T)
         p_enc = ref.forward_positions(nom, enc_q)
-        depth = np.maximum((ps_D - p_enc[ticks]) @ n_D, 0.0)
+        depth = np.maximum(rows_times(ps_D - p_enc[ticks], n_D), 0.0)
         f_tick = k_r * depth[:, None] * n_D
-        tau_cmd = np.einsum("nik,ni->nk", ref.jacobian(nom, enc_q[ticks]), f_tick) @ c_inv
+        tau_cmd = rows_times(np.einsum("nik,ni->nk", ref.jacobian(nom, enc_q[ticks]), f_tick), c_inv)
         motor = np.clip(tau_cmd, -tau_max, tau_max)
         sat_tick = np.any(np.abs(tau_cmd) > tau_max, axis=1)
         cut_tick = _cutoff_latch(k_r * depth, cut) if cut.enabled else np.zeros(len(ticks), bool)
@@ -564,12 +564,12 @@ def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, 
             enc_q = np.stack([np.interp(t, t_tick, enc_t[:, a]) for a in range(n_j)], axis=1)
         p_enc = ref.forward_positions(nom, enc_q)
 
-    tau_joint = cable @ c
+    tau_joint = rows_times(cable, c)
     fh, th, fp, tp, _ = _hand_wrench_from_drive(twin, kin, t, q, qd, qdd, quat_W, tau_joint, frames, gimbal)
     f_w, m_w = _to_world(twin, fh, th, about_origin_D=False)
     bf_w, bm_w = _to_world(twin, fp, tp)
-    commanded = np.concatenate([f_cmd_D @ r_wd.T, np.zeros((n_s, 3))], axis=1)
-    p_enc_W = p_enc @ r_wd.T + t_wd
+    commanded = np.concatenate([rows_times(f_cmd_D, r_wd.T), np.zeros((n_s, 3))], axis=1)
+    p_enc_W = rows_times(p_enc, r_wd.T) + t_wd
     return ActiveResult(t, q, gimbal, f_w, m_w, bf_w, bm_w, ok, commanded, enc_q, p_enc_W, motor, cable,
                         saturated, cut_flags)
 
