@@ -21,8 +21,9 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(PY) -m haptify_tools.demo --out $(OUT)
 
+# One BLAS thread per test worker: two workers on two cores must not oversubscribe them.
 test: $(STAMP)
-	$(PY) -m pytest -q -n 2 tests
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) -m pytest -q -n 2 tests
 
 bench: $(STAMP)
 	$(PY) benchmarks/run.py

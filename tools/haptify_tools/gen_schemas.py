@@ -23,6 +23,7 @@ MODELS: dict[str, str] = {
     "metric-definition": "haptify.metric_definitions:MetricFamily",
     "results": "haptify.results:ResultsFile",
     "import-map": "haptify.importers:ImportMap",
+    "hw-model": "haptify.local_dynamics:HWModelFile",
     "conformance-cases": "haptify_conform.cases:CaseFile",
     "conform-report": "haptify_conform.report:ConformReport",
 }
