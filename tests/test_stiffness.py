@@ -155,7 +155,7 @@ def test_session_metrics(tmp_path):
 
 def test_few_presses_warn_and_no_trial_is_unavailable(tmp_path):
     w = writer("stiffness-short")
-    short = GAP_S + 2 * (PRESS_S + GAP_S)
+    short = GAP_S + 1 * (PRESS_S + GAP_S)  # one press, two recommended
     add_handle_trial(w, "stiff-1", "stiffness", duration_s=short, powered=True, rendering=RENDERING,
                      position=position, quaternion=spin(0.03), force_w=felt, commanded_w=commanded, accel=False)
     ctx = ComputeContext(session=open_session(w.write(tmp_path / "s")))

@@ -15,6 +15,7 @@ from scipy.spatial import ConvexHull
 from haptify.compute import ComputeContext
 from haptify.conventions import pose_apply, quat_from_axis_angle, quat_rotate
 from haptify.kinematics import configurations_from_unit, forward_positions
+from haptify.metric_definitions import param
 from haptify.results import MetricResult, Unavailable
 from haptify.session_format import Device
 from haptify.storage import SessionWriter, open_session
@@ -112,7 +113,7 @@ def test_two_lobes_non_convex_volume_is_not_the_hull():
     solid = volume_solid(pts)
     assert solid.closed
     # the closing fills a fillet of radius r into the crease between the lobes: a small excess
-    assert solid.volume == pytest.approx(exact, rel=0.015)
+    assert solid.volume == pytest.approx(exact, rel=0.012)
     assert exact < 0.9 * ConvexHull(pts).volume  # a convex hull would be >10 % off: it bridges the waist
 
 
@@ -137,8 +138,9 @@ def test_the_lattice_is_anchored_at_the_world_origin():
     rng = np.random.default_rng(RNG_SEED)
     pts = sphere_surface(5_000, 0.05, [0.3, 0.2, 0.1], rng)
     a = volume_solid(pts)
-    b = volume_solid(pts + 7 * a.pitch)  # a whole number of voxels: the same voxelisation, shifted
-    np.testing.assert_array_equal(np.add(a.origin, 7), b.origin)
+    k = 3 * param("workspace", "closing_coarsening")  # a whole number of coarse voxels: the same voxelisation
+    b = volume_solid(pts + k * a.pitch)
+    np.testing.assert_array_equal(np.add(a.origin, k), b.origin)
     np.testing.assert_allclose(a.fraction, b.fraction, atol=1e-5)
 
 
@@ -311,6 +313,18 @@ def test_missing_kinematics_trials_and_datasheet_are_unavailable_with_codes(tmp_
     assert res["workspace.measured_volume"].code == "E310"
     assert set(res) == {"workspace.modeled_volume", "workspace.spec_box_volume", "workspace.measured_volume",
                         "workspace.volume_ratio", "workspace.coverage"}
+
+
+def test_an_open_sweep_is_left_out_when_a_closed_one_exists(tmp_path):
+    rng = np.random.default_rng(RNG_SEED)
+    dev = mini_device()
+    full = boundary_sweep(dev, 15_000, rng)
+    open_top = full[full[:, 2] > np.median(full[:, 2])]
+    ctx = ComputeContext(session=open_session(workspace_session(tmp_path, dev, [full, open_top])), wanted={"workspace.measured_volume"})
+    res = by_id(compute(ctx))
+    measured = res["workspace.measured_volume"]
+    assert measured.trials == ["workspace-1"] and not measured.warnings
+    assert {(w.code, w.trial) for w in ctx.warnings} == {("W410", "workspace-2"), ("W413", "workspace-2")}
 
 
 def test_an_open_sweep_is_reported_with_w410(tmp_path):

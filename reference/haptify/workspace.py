@@ -62,24 +62,26 @@ class VoxelSolid:
 def volume_solid(points: np.ndarray, *, pitch: float | None = None, closing_radius: float | None = None) -> VoxelSolid:
     """Apply the volume operator (spec §8.4) to ``points (N, 3)`` in m; every parameter else from workspace.json.
 
-    Steps: (1) occupied voxels of the W-anchored lattice; (2) dilation by the ball of radius r
-    (Euclidean distance transform); (3) hole filling; (4) erosion by r (distance > r/h + offset);
-    (5) sub-voxel fractions in a band around the boundary from the boundary samples' signed distance
-    along the outward normal; (6) volume = h³ Σ fraction; (7) closure check against the convex hull.
+    Steps: (1) occupied voxels of the W-anchored lattice; (2)–(4) closing by a ball of radius r with hole
+    filling between dilation and erosion, on the coarse lattice of pitch c·h; (5) sub-voxel fractions on
+    the fine lattice in a band around the boundary, from the boundary samples' signed depth along their
+    normals; (6) volume = h³ Σ fraction; (7) closure check against the convex hull.
     """
     h = float(wp("voxel_pitch_m") if pitch is None else pitch)
     r = float(wp("closing_radius_m") if closing_radius is None else closing_radius)
+    c = int(wp("closing_coarsening"))
     pts = np.asarray(points, dtype=float)
     if pts.ndim != 2 or pts.shape[1] != 3 or not np.all(np.isfinite(pts)):
         raise ValueError("volume_solid needs finite points of shape (N, 3)")
     if len(pts) < int(wp("min_points")):
         raise fail("E313", f"a workspace cloud needs at least {wp('min_points')} finite points", expected=f">= {wp('min_points')}", found=len(pts))
     band = int(wp("band_voxels"))
-    rv = r / h
+    rc = r / (c * h)  # closing radius in coarse voxels
     idx = np.floor(pts / h).astype(np.int64)
-    pad = int(math.ceil(rv)) + band + 3
-    lo = idx.min(axis=0) - pad
-    shape = tuple(int(s) for s in idx.max(axis=0) - lo + pad + 1)
+    pad = int(math.ceil(rc)) + band + 3  # coarse voxels
+    lo_c = np.floor_divide(idx.min(axis=0), c) - pad
+    shape_c = tuple(int(x) for x in np.floor_divide(idx.max(axis=0), c) - lo_c + pad + 1)
+    lo, shape = lo_c * c, tuple(c * x for x in shape_c)
     n_vox = math.prod(shape)
     if n_vox > int(wp("max_grid_voxels")):
         extent = (pts.max(axis=0) - pts.min(axis=0)).round(3).tolist()
@@ -88,18 +90,20 @@ def volume_solid(points: np.ndarray, *, pitch: float | None = None, closing_radi
     flat = np.ravel_multi_index((idx - lo).T, shape)
     uniq, inv, counts = np.unique(flat, return_inverse=True, return_counts=True)
     means = np.stack([np.bincount(inv, weights=pts[:, k], minlength=len(uniq)) / counts for k in range(3)], axis=1)
+    vox = np.stack(np.unravel_index(uniq, shape), axis=1)
 
-    occupied = np.zeros(shape, dtype=bool)
-    occupied.flat[uniq] = True
-    dilated = ndi.distance_transform_edt(~occupied) <= rv
+    occupied = np.zeros(shape_c, dtype=bool)
+    occupied[tuple((vox // c).T)] = True
+    dilated = ndi.distance_transform_edt(~occupied) <= rc
     filled = ndi.binary_fill_holes(dilated)
-    solid = ndi.distance_transform_edt(filled) > rv + float(wp("erosion_offset_voxels"))
+    coarse = ndi.distance_transform_edt(filled) > rc + float(wp("erosion_offset_voxels"))
+    solid = coarse.repeat(c, axis=0).repeat(c, axis=1).repeat(c, axis=2)
 
     fraction = solid.astype(np.float32)
     band_mask = ndi.binary_dilation(solid, iterations=band) & ~ndi.binary_erosion(solid, iterations=band)
     fraction[band_mask] = _band_fractions(solid, band_mask, lo, h, means[band_mask.flat[uniq]])
     return VoxelSolid(origin=tuple(int(x) for x in lo), pitch=h, fraction=fraction,
-                      hull_volume=_hull_volume(idx, pts), n_points=len(pts))
+                      hull_volume=_hull_volume(vox, means, counts), n_points=len(pts))
 
 
 def _band_fractions(solid: np.ndarray, band_mask: np.ndarray, lo: np.ndarray, h: float, samples: np.ndarray) -> np.ndarray:
@@ -153,18 +157,18 @@ def _band_fractions(solid: np.ndarray, band_mask: np.ndarray, lo: np.ndarray, h:
     return np.where(ok, frac, inside).astype(np.float32)
 
 
-def _hull_volume(idx: np.ndarray, pts: np.ndarray) -> float:
+def _hull_volume(vox: np.ndarray, means: np.ndarray, counts: np.ndarray) -> float:
     """Convex-hull volume (m³) of the sample means of the occupied blocks of ``hull_block_voxels``³ voxels
-    (spec §8.4 step 7); 0 for degenerate (flat) clouds."""
-    block = idx // int(wp("hull_block_voxels"))
-    block -= block.min(axis=0)
+    (spec §8.4 step 7), from the occupied voxels' indices, sample means and counts; 0 for flat clouds."""
+    block = vox // int(wp("hull_block_voxels"))
     flat = np.ravel_multi_index(block.T, tuple(int(x) + 1 for x in block.max(axis=0)))
-    _, inv, counts = np.unique(flat, return_inverse=True, return_counts=True)
-    means = np.stack([np.bincount(inv, weights=pts[:, k]) / counts for k in range(3)], axis=1)
-    if len(means) < 4:
+    _, inv, = np.unique(flat, return_inverse=True)
+    weight = np.bincount(inv, weights=counts)
+    block_means = np.stack([np.bincount(inv, weights=means[:, k] * counts) / weight for k in range(3)], axis=1)
+    if len(block_means) < 4:
         return 0.0
     try:
-        return float(ConvexHull(means).volume)
+        return float(ConvexHull(block_means).volume)
     except QhullError:
         return 0.0
 
@@ -230,14 +234,20 @@ def modeled_points(kin: Kinematics, *, step: float | None = None, interior_step:
     """Deterministic samples (m, device frame) of the modeled reachable workspace (spec §8.3).
 
     The faces of the joint-limit box (unit cube mapped through the coupled limits joint by joint) at
-    ``model_max_step_m``, plus the whole box at ``model_interior_step_m``, through the DH forward kinematics.
+    ``model_max_step_m``, plus the whole box at ``model_interior_step_m`` without the interior samples that
+    lie within ``model_interior_clearance_m`` of a face sample, through the DH forward kinematics.
     """
     step = float(wp("model_max_step_m") if step is None else step)
     interior_step = float(wp("model_interior_step_m") if interior_step is None else interior_step)
-    unit = np.concatenate([_boundary_lattice(_counts(kin, step)), _lattice(_counts(kin, interior_step))])
+    faces = _positions(kin, _boundary_lattice(_counts(kin, step)))
+    interior = _positions(kin, _lattice(_counts(kin, interior_step)))
+    dist, _ = cKDTree(faces).query(interior, k=1, distance_upper_bound=float(wp("model_interior_clearance_m")))
+    return np.concatenate([faces, interior[~np.isfinite(dist)]])
+
+
+def _positions(kin: Kinematics, unit: np.ndarray) -> np.ndarray:
     q = configurations_from_unit(kin, unit)
-    q = q[~np.isnan(q).any(axis=1)]
-    return forward_positions(kin, q)
+    return forward_positions(kin, q[~np.isnan(q).any(axis=1)])
 
 
 def modeled_solid(kin: Kinematics, placement_position: Any = (0.0, 0.0, 0.0),
@@ -301,11 +311,16 @@ def compute(ctx: Any) -> list:
                                     "workspace.measured_volume")
     if not solids:
         return out + [unavailable(m, first_error) for m in measured_ids]
-    codes = {tid: [] if s.closed else ["W410"] for tid, s in solids.items()}
     for tid, s in solids.items():
         if not s.closed:
             ctx.warn("W410", f"the boundary sweep of trial {tid!r} did not close: volume {s.volume * 1e6:.0f} cm³ is "
                      f"{s.volume / s.hull_volume if s.hull_volume else 0:.0%} of its convex hull", metric="workspace.measured_volume", trial=tid)
+    closed = {tid: s for tid, s in solids.items() if s.closed}
+    if closed:  # open sweeps are left out when a closed one exists (spec §8.7)
+        for tid in solids.keys() - closed.keys():
+            ctx.warn("W413", f"workspace.measured_volume: trial {tid!r} skipped (W410: its sweep did not close)", trial=tid)
+        solids = closed
+    codes = {tid: [] if s.closed else ["W410"] for tid, s in solids.items()}
     out.append(aggregate(FAMILY, "workspace.measured_volume",
                          [TrialValue(tid, s.volume, codes[tid]) for tid, s in solids.items()],
                          diagnostics={"hull_volume_m3": [s.hull_volume for s in solids.values()],
