@@ -1,0 +1,86 @@
+"""The conformance suite's content (spec chapter 16, issue 6): the reference passes every case, every
+known-bad implementation fails a case of the metric it breaks, the suite lints clean, the committed
+fixtures and case files are what the builder makes, and a JavaScript implementation passes its cases."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from conform_impls import bad_impls
+from haptify_conform.adapters import JsonlAdapter, PythonAdapter
+from haptify_conform.cases import REPO_ROOT, load_cases, select
+from haptify_conform.lint import lint
+from haptify_conform.runner import load_skips, run_cases
+from haptify_tools import build_conformance_fixtures as builder
+
+JS_DIR = REPO_ROOT / "conformance" / "examples" / "js"
+
+
+def test_the_reference_passes_every_case_over_json_lines(tmp_path):
+    """One run of the whole suite through the JSON-lines protocol (also the speed check's workload)."""
+    report = tmp_path / "report.json"
+    proc = subprocess.run([sys.executable, "-m", "haptify_conform.cli", "--jsonl", f"{sys.executable} -m haptify_conform.reference",
+                           "--json-report", str(report), "--quiet"], capture_output=True, text=True, timeout=600)
+    data = json.loads(report.read_text())
+    bad = [(c["case_id"], c["status"], c["message"]) for c in data["cases"] if c["status"] != "passed"]
+    assert not bad, bad
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert data["summary"]["total"] == len(load_cases()) and data["summary"]["conforms"]
+
+
+@pytest.mark.parametrize("name", sorted(bad_impls.BREAKS))
+def test_each_known_bad_implementation_fails_a_case_of_the_metric_it_breaks(name):
+    metric = bad_impls.BREAKS[name]
+    cases = select(load_cases(), metrics={metric})
+    assert len(cases) >= 3
+    verdicts = run_cases(cases, PythonAdapter(f"conform_impls.bad_impls:{name}"))
+    failed = [v for v in verdicts if v.status == "failed" and v.metric == metric]
+    assert failed, f"{name}: no case of {metric} caught it: {[(v.case_id, v.status) for v in verdicts]}"
+    assert all(v.spec_section for v in failed)
+
+
+def test_the_suite_lints_clean_and_covers_every_metric_three_times():
+    assert lint() == []
+
+
+def test_every_invalid_and_valid_fixture_is_a_validate_case():
+    by_fixture = {c.fixture: c for c in load_cases() if c.metric == "validate"}
+    for group in ("invalid", "valid"):
+        for sidecar in (REPO_ROOT / "fixtures" / group).glob("*.expected.json"):
+            meta = json.loads(sidecar.read_text())
+            c = by_fixture[f"{group}/{sidecar.name.removesuffix('.expected.json')}"]
+            assert sorted(c.expected.codes or []) == sorted(meta["codes"])
+            assert bool(c.expected.valid) == (meta["exit_code"] == 0)
+
+
+def test_metric_cases_state_both_tolerance_parts_and_how_the_value_is_known():
+    for c in load_cases():
+        if c.metric == "validate":
+            continue
+        assert c.tolerance is not None and (c.tolerance.abs > 0 or c.tolerance.rel > 0), c.id
+        assert c.provenance.kind in ("analytic", "generated", "paper", "spec") and len(c.provenance.note) > 30, c.id
+
+
+def test_committed_fixtures_and_cases_are_current(capsys):
+    assert builder.main(["--check"]) == 0, capsys.readouterr().out
+
+
+def test_javascript_implementation_passes_its_cases_over_json_lines():
+    node = shutil.which("node")
+    if node is None:
+        pytest.skip("node (Node.js) is not installed: the JavaScript example implementation cannot run")
+    skips = load_skips(JS_DIR / "skips.json")
+    cases = load_cases()
+    adapter = JsonlAdapter(f"{node} {JS_DIR / 'haptify.js'}", timeout_s=60.0)
+    verdicts = run_cases(cases, adapter, skips)
+    ran = [v for v in verdicts if v.case_id not in skips]
+    assert {v.metric for v in ran} >= {"workspace.spec_box_volume", "vibration.rms", "vibration.spectral_centroid"}
+    assert [(v.case_id, v.message) for v in ran if v.status != "passed"] == []
+    assert len(ran) >= 7
+    assert adapter.implementation.get("name") == "haptify-js-example"
