@@ -19,7 +19,9 @@ Entity paths (``<trial>`` is the escaped trial id, ``<role>`` is ``measured`` or
     /world/device                             the device base frame (device_placement)
     /world/<trial>/<role>/handle              handle pose (Transform3D) with axes
     /world/<trial>/<role>/trajectory          the gimbal-centre path
-    /world/<trial>/<role>/hand_force/raw      raw F/T force rotated to W, arrow at the handle
+    /world/<trial>/<role>/hand_force/calibrated  hand force (haptify.signals), arrow at the handle
+    /world/<trial>/<role>/hand_force/raw      without calibration: raw F/T force rotated to W
+    /world/<trial>/<role>/plate_force         plate force (haptify.force_plate), arrow ending at the COP
     /world/<trial>/<role>/markers/<link>/<m>  motion-capture marker m, one colour per link
     /world/<trial>/<role>/links/<link>        link frames from link_poses
     /world/<trial>/<role>/force_field         free space: mean force per bin (haptify.free_space)
@@ -239,10 +241,13 @@ def plane_rectangle(point: np.ndarray, normal: np.ndarray, around: np.ndarray | 
 # --- entries ---------------------------------------------------------------------------------------
 
 def series_entry(path: str, key: str, t: np.ndarray, values: np.ndarray, names: list[str], role: str, stream: str) -> Entry:
-    """A time series: one row of ``len(names)`` scalars per sample, at the samples' exact times."""
+    """A time series: one row of ``len(names)`` scalars per sample, at the samples' exact times.
+
+    Legend entries read ``name [unit]`` (unit from ``SERIES``), with ``(compare)`` for the compared session.
+    """
     values = np.asarray(values, dtype=np.float64).reshape(len(t), len(names))
     palette = SERIES_COLORS[role]
-    suffix = "" if role == "measured" else f" ({role})"
+    suffix = f" [{SERIES[key][1]}]" + ("" if role == "measured" else f" ({role})")
     lines = rr.SeriesLines(names=[f"{n}{suffix}" for n in names],
                            colors=[palette[i % len(palette)] for i in range(len(names))])
     return Entry(path, static=[lines], times_ns=time_ns(t), columns=rr.Scalars.columns(scalars=values),
