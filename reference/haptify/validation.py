@@ -432,14 +432,7 @@ class SessionValidator:
 
     def _guard(self, step: Callable[[], None], trial: str | None = None, file: str | None = None) -> None:
         """Run one check; coded errors become findings, anything unexpected becomes E999 (never a traceback)."""
-        try:
-            step()
-        except HaptifyError as err:
-            self.add_all(err.findings, trial)
-        except (MemoryError, RecursionError) as exc:
-            self.add(Finding("E112", f"{file or 'the input'} is too large or too deeply nested to check: {type(exc).__name__}", file=file), trial)
-        except Exception as exc:  # a bug in the validator: report it, coded, and go on
-            self.add(Finding("E999", f"{type(exc).__name__}: {exc}", file=file), trial)
+        self.add_all(_collect(step, file), trial)
 
     # -- phase 1: the manifest ------------------------------------------------------------------
     def check_manifest(self) -> None:
@@ -626,17 +619,18 @@ class SessionValidator:
 
     # -- phase 2: the streams --------------------------------------------------------------------
     def check_streams(self, advance: Callable[[int], Any] | None = None) -> None:
-        """Check every stream's file and data, then the time overlap per trial (spec §4.3.4–4.3.5)."""
+        """Check every stream's file and data, then the time overlap per trial (spec §4.3.5–4.3.6)."""
         for entry in self.entries:
-            self._guard(lambda: self._check_stream(entry), trial=entry.trial, file=entry.stream.file)
+            found: list[Finding] = []
+            raised = _collect(lambda: self._check_stream(entry, found.append), entry.stream.file)
+            self.add_all(found + raised, entry.trial)
             self.report.streams_checked += 1
             if advance is not None:
                 advance(1)
         self._guard(self._check_overlap, file=MANIFEST)
 
-    def _check_stream(self, entry: _StreamEntry) -> None:
-        s, trial, label = entry.stream, entry.trial, entry.stream.file
-        add = lambda f: self.add(f, trial)  # noqa: E731
+    def _check_stream(self, entry: _StreamEntry, add: Callable[[Finding], None]) -> None:
+        s, label = entry.stream, entry.stream.file
         spec = kind_table(s.kind)
         # declared metadata: columns, units, entities, frame, rate
         declared = [c.name for c in s.columns]
@@ -830,6 +824,20 @@ class SessionValidator:
     def finish(self) -> ValidationReport:
         """The report of everything checked so far (spec §4.6)."""
         return self.report
+
+
+def _collect(step: Callable[[], None], file: str | None) -> list[Finding]:
+    """Run ``step``; the findings of a coded error it raises, E112 when the input exhausts memory or
+    nesting, E999 for anything else (a validator bug, reported rather than raised)."""
+    try:
+        step()
+    except HaptifyError as err:
+        return list(err.findings)
+    except (MemoryError, RecursionError) as exc:
+        return [Finding("E112", f"{file or 'the input'} is too large or too deeply nested to check: {type(exc).__name__}", file=file)]
+    except Exception as exc:  # a bug in the validator: report it, coded, and go on
+        return [Finding("E999", f"{type(exc).__name__}: {exc}", file=file)]
+    return []
 
 
 def _neighbour_span(t: np.ndarray, mask: np.ndarray) -> tuple[float, float] | None:
