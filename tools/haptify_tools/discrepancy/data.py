@@ -1,0 +1,142 @@
+"""Measured trials on the residual grid and their re-simulation with a twin (issue 8, step 1 "where").
+
+Every trial with a ``handle_wrench`` stream is read once through the reference's calibrated handle
+signals (spec §7.5, default 100 Hz grid). The measured handle pose drives the twin: motion-capture
+gaps are bridged by linear interpolation, the path is low-passed at :data:`POSE_CUTOFF_HZ` (the
+twin's inverse dynamics differentiates it twice), passive trials are simulated on the 100 Hz grid
+itself and active trials on a 1 kHz grid (the rendering loop's rate, CHAI3D) from a cubic spline of
+the same path. The calibrated force still holds the sensing handle's connector inertia (the paper's
+eqs. 1–3 remove only its weight; spec §6.1), so the twin's prediction of the measured signal is the
+device's force minus ``m_c·a`` when the twin's ``handle.connector_mass`` is on. Measured and simulated forces are then low-passed alike at
+:data:`RESIDUAL_CUTOFF_HZ` so that both carry the same filter; the residual is their difference.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from haptify.compute import ComputeContext
+from haptify.errors import fail
+from haptify.signals import handle_signals, lowpass
+from haptify.storage import SessionFolder
+from haptify.surface import contact_of, unit_normal
+
+from haptify_tools.twin.model import TwinFile
+from haptify_tools.twin.physics import simulate_active, simulate_passive
+
+POSE_CUTOFF_HZ = 8.0          # above the local-dynamic protocol's 4 Hz oscillations (paper §V-C)
+RESIDUAL_CUTOFF_HZ = 5.0      # both forces are compared below this frequency
+ACTIVE_RATE_HZ = 1000.0       # the rendering loop's rate (paper §V-D)
+FORCE_PROTOCOLS = ("free_space", "local_dynamic", "other", "frictionless_surface", "stiffness")
+
+
+@dataclass
+class MeasuredTrial:
+    """One trial on its uniform residual grid (W frame, SI units).
+
+    ``position``/``quaternion``: the smoothed, gap-free hand path that drives the twin; ``force``:
+    the measured calibrated hand force, low-passed; ``valid``: rows whose measured force and motion
+    capture are usable; ``contact``: rows in contact with the rendered plane (active trials, from the
+    commanded force, spec §12.2); ``speed``: gimbal-centre speed, m/s.
+    """
+
+    trial_id: str
+    protocol: str
+    rendering: dict | None
+    t: np.ndarray
+    rate_hz: float
+    position: np.ndarray
+    quaternion: np.ndarray
+    force: np.ndarray
+    valid: np.ndarray
+    contact: np.ndarray
+    speed: np.ndarray
+
+    @property
+    def active(self) -> bool:
+        return self.rendering is not None
+
+
+def _fill(t: np.ndarray, x: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    out = np.array(x, dtype=float)
+    for k in range(out.shape[1]):
+        out[:, k] = np.interp(t, t[ok], out[ok, k])
+    return out
+
+
+def load_measured(session: SessionFolder, ctx: ComputeContext | None = None) -> list[MeasuredTrial]:
+    """The measured session's force trials (protocols :data:`FORCE_PROTOCOLS`) ready for re-simulation.
+
+    E302 when the session has no trial with a ``handle_wrench`` stream (nothing to compare).
+    """
+    ctx = ctx or ComputeContext(session=session)
+    out = []
+    for trial in session.trials:
+        if trial.protocol not in FORCE_PROTOCOLS or session.stream(trial.id, "handle_wrench") is None:
+            continue
+        hs = handle_signals(ctx, trial.id)
+        ok = hs.valid & np.all(np.isfinite(hs.force), axis=1) & np.all(np.isfinite(hs.position), axis=1)
+        if ok.sum() < 20:
+            continue
+        rate = hs.rate_hz
+        pos = lowpass(_fill(hs.t, hs.position, ok), rate, POSE_CUTOFF_HZ)
+        quat = _fill(hs.t, hs.quaternion, ok)
+        quat = quat * np.where(np.sum(quat * quat[:1], axis=1) < 0, -1.0, 1.0)[:, None]
+        quat = lowpass(quat, rate, POSE_CUTOFF_HZ)
+        quat /= np.linalg.norm(quat, axis=1)[:, None]
+        force = lowpass(_fill(hs.t, hs.force, ok), rate, RESIDUAL_CUTOFF_HZ)
+        speed = np.linalg.norm(np.gradient(pos, hs.t, axis=0), axis=1)
+        rendering = trial.rendering.model_dump(mode="json") if trial.powered and trial.rendering is not None else None
+        contact = np.zeros(len(hs.t), bool)
+        if rendering is not None and session.stream(trial.id, "commanded_wrench") is not None:
+            cmd = session.read(trial.id, "commanded_wrench")
+            n = unit_normal(rendering["surface_normal"], trial.id)
+            cmd_n = cmd[["fx", "fy", "fz"]].to_numpy() @ n
+            contact = contact_of(np.interp(hs.t, cmd["t"].to_numpy(), cmd_n))
+        out.append(MeasuredTrial(trial.id, trial.protocol, rendering, hs.t, rate, pos, quat, force, ok, contact, speed))
+    if not out:
+        raise fail("E302", "the measured session has no trial with a handle_wrench stream to compare with the twin",
+                   file="session.json", expected="a free-space, local-dynamic, figure-eight, surface or stiffness trial",
+                   found=[t.id for t in session.trials])
+    return out
+
+
+def simulate_trial(twin: TwinFile, trial: MeasuredTrial) -> np.ndarray:
+    """The force ``(N, 3)`` the twin applies to the hand along the measured path, on the trial's grid,
+    low-passed like the measured force (N, W frame)."""
+    if trial.active:
+        dt = 1.0 / ACTIVE_RATE_HZ
+        fine = np.arange(trial.t[0], trial.t[-1] + 0.5 * dt, dt)
+        pos = CubicSpline(trial.t, trial.position, axis=0)(fine)
+        quat = CubicSpline(trial.t, trial.quaternion, axis=0)(fine)
+        quat /= np.linalg.norm(quat, axis=1)[:, None]
+        res = simulate_active(twin, fine, pos, quat, trial.rendering)
+        force = lowpass(res.force_W - connector_force(twin, fine, pos), ACTIVE_RATE_HZ, RESIDUAL_CUTOFF_HZ)
+        return np.stack([np.interp(trial.t, fine, force[:, k]) for k in range(3)], axis=1)
+    res = simulate_passive(twin, trial.t, trial.position, trial.quaternion)
+    return lowpass(res.force_W - connector_force(twin, trial.t, trial.position), trial.rate_hz, RESIDUAL_CUTOFF_HZ)
+
+
+def connector_force(twin: TwinFile, t: np.ndarray, position: np.ndarray) -> np.ndarray:
+    """``m_c·a`` (N, W): the connector's inertial force that the handle calibration leaves in the measured
+    force (zero when the twin's ``handle.connector_mass`` is off); ``a`` from the path, m/s²."""
+    c = twin.rig.connector_mass
+    if not c.enabled or c.mass_kg == 0:
+        return np.zeros_like(position)
+    return c.mass_kg * np.gradient(np.gradient(position, t, axis=0), t, axis=0)
+
+
+def simulate_all(twin: TwinFile, trials: list[MeasuredTrial], only_active: bool = False,
+                 base: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
+    """:func:`simulate_trial` for every trial (trial id → force); with ``only_active`` the passive trials
+    are copied from ``base`` (effects that act only while the motors render)."""
+    out = {}
+    for tr in trials:
+        if only_active and not tr.active and base is not None:
+            out[tr.trial_id] = base[tr.trial_id]
+        else:
+            out[tr.trial_id] = simulate_trial(twin, tr)
+    return out

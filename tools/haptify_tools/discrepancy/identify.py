@@ -1,0 +1,169 @@
+"""Grouped forward selection of library effects (issue 8, steps 2–3; shared notes, method steps 2–4).
+
+Each round: simulate the current twin along the measured paths, form the residual, fit every
+available library candidate to it (:mod:`.library`), score the fits (:mod:`.stats`), take the one with
+the largest ΔBIC and accept it only when it clearly earns its parameter; an accepted effect is added to
+the twin with its identified value and the next round starts from the re-simulated residual. The
+first rejection (or ``max_effects``) ends the search; the residual left is then checked for structure.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from haptify_tools.discrepancy import stats as st
+from haptify_tools.discrepancy.data import MeasuredTrial, simulate_all
+from haptify_tools.discrepancy.library import LIBRARY, Candidate
+from haptify_tools.twin.model import TwinFile
+
+REFINEMENTS = 2          # parabolic steps in log p after the grid
+EXTENSIONS = 2           # grid extensions when the best grid point is at an end
+SLOPE_STEP = 0.05        # relative step of the numerical slope for the standard error
+
+
+@dataclass
+class Fit:
+    """A candidate fitted to one residual: identified value, its standard error, predicted residual, scores."""
+
+    candidate: Candidate
+    value: float
+    stderr: float
+    predicted: dict[str, np.ndarray]
+    score: st.Score
+    simulations: int
+
+
+@dataclass
+class Round:
+    """One round of the selection: the residual it started from and every candidate's fit."""
+
+    residual: dict[str, np.ndarray]
+    design: st.Design
+    fits: list[Fit]
+    chosen: Fit | None
+    accepted: bool
+    near_ties: list[str] = field(default_factory=list)
+
+
+@dataclass
+class Selection:
+    """Outcome of the search: the rounds, the accepted fits in order, the final twin and its simulation."""
+
+    rounds: list[Round]
+    accepted: list[Fit]
+    twin: TwinFile
+    initial_sim: dict[str, np.ndarray]
+    final_sim: dict[str, np.ndarray]
+    structure: dict
+
+
+def _minus(a: dict, b: dict) -> dict:
+    return {k: a[k] - b[k] for k in a}
+
+
+def _sse(design: st.Design, residual: dict, predicted: dict) -> float:
+    e = design.stack(residual, "train") - design.stack(predicted, "train")
+    return float(np.dot(e, e))
+
+
+def fit_candidate(cand: Candidate, twin: TwinFile, trials: list[MeasuredTrial], design: st.Design,
+                  residual: dict, base: dict) -> Fit:
+    """Fit one candidate to ``residual`` (measured − ``base``, the current twin's simulation)."""
+    only_active = cand.scope == "active"
+    zero = {k: np.zeros_like(v) for k, v in base.items()}
+
+    def delta(p: float) -> dict:
+        return _minus(simulate_all(cand.apply(twin, p), trials, only_active, base), base)
+
+    probe = cand.probe(twin)
+    if only_active and not any(tr.active for tr in trials):
+        return Fit(cand, probe, float("inf"), zero, st.score(design, residual, zero), 0)
+    if cand.kind == "affine":
+        p1, p2 = probe, 2.0 * probe
+        d1, d2 = delta(p1), delta(p2)
+        b = {k: (d2[k] - d1[k]) / (p2 - p1) for k in d1}
+        a = {k: d1[k] - p1 * b[k] for k in d1}
+        p, se = st.affine_fit(design, residual, a, b)
+        p = max(p, cand.lower + 1e-12 * probe)
+        pred = {k: a[k] + p * b[k] for k in a}
+        return Fit(cand, p, se, pred, st.score(design, residual, pred), 2)
+    # 1-D search on a logarithmic grid, then parabolic refinement in log p
+    evals: dict[float, tuple[float, dict]] = {}
+
+    def ev(p: float) -> float:
+        if p not in evals:
+            d = delta(p)
+            evals[p] = (_sse(design, residual, d), d)
+        return evals[p][0]
+
+    for f in cand.grid_factors:
+        ev(probe * f)
+    step = np.log(cand.grid_factors[-1] / cand.grid_factors[-2])
+    for _ in range(EXTENSIONS):
+        ps = sorted(evals)
+        best = min(ps, key=lambda x: evals[x][0])
+        if best == ps[0]:
+            ev(ps[0] * np.exp(-step))
+        elif best == ps[-1]:
+            ev(ps[-1] * np.exp(step))
+        else:
+            break
+    for _ in range(REFINEMENTS):
+        ps = sorted(evals)
+        i = min(range(len(ps)), key=lambda j: evals[ps[j]][0])
+        if i == 0 or i == len(ps) - 1:
+            break
+        x = np.log([ps[i - 1], ps[i], ps[i + 1]])
+        y = [evals[ps[j]][0] for j in (i - 1, i, i + 1)]
+        den = (x[1] - x[0]) * (y[1] - y[2]) - (x[1] - x[2]) * (y[1] - y[0])
+        if den == 0:
+            break
+        xv = x[1] - 0.5 * ((x[1] - x[0]) ** 2 * (y[1] - y[2]) - (x[1] - x[2]) ** 2 * (y[1] - y[0])) / den
+        pv = float(np.exp(np.clip(xv, x[0], x[2])))
+        if any(abs(pv / q - 1.0) < 1e-3 for q in ps):
+            break
+        ev(pv)
+    p = min(evals, key=lambda x: evals[x][0])
+    pred = evals[p][1]
+    d_hi = delta(p * (1.0 + SLOPE_STEP))
+    slope = {k: (d_hi[k] - pred[k]) / (p * SLOPE_STEP) for k in pred}
+    se = st.standard_error(design, residual, pred, slope)
+    return Fit(cand, p, se, pred, st.score(design, residual, pred), len(evals) + 1)
+
+
+def select_effects(twin: TwinFile, trials: list[MeasuredTrial], max_effects: int = 5,
+                   library: tuple[Candidate, ...] = LIBRARY, log: Callable[[str], object] | None = None) -> Selection:
+    """Forward selection (see the module docstring); deterministic for a given twin and session."""
+    measured = {tr.trial_id: tr.force for tr in trials}
+    current = twin
+    base = simulate_all(current, trials)
+    initial = base
+    rounds, accepted = [], []
+    while True:
+        residual = _minus(measured, base)
+        design = st.make_design(trials, residual)
+        cands = [c for c in library if c.available(current)]
+        if len(accepted) >= max_effects or not cands:
+            rounds.append(Round(residual, design, [], None, False))
+            break
+        fits = [fit_candidate(c, current, trials, design, residual, base) for c in cands]
+        fits.sort(key=lambda f: -f.score.delta_bic)
+        best = fits[0]
+        ok = best.score.accepted()
+        ties = [f.candidate.effect_id for f in fits[1:] if f.score.accepted()
+                and f.score.delta_bic >= 0.9 * best.score.delta_bic]
+        rounds.append(Round(residual, design, fits, best, ok, ties))
+        if log:
+            log(f"round {len(rounds)}: best {best.candidate.effect_id} = {best.value:.4g} {best.candidate.unit}, "
+                f"ΔBIC {best.score.delta_bic:.1f}, p {best.score.p_value:.2g}, "
+                f"validation −{100 * best.score.validation_improvement:.0f} % → {'accepted' if ok else 'rejected'}")
+        if not ok:
+            break
+        accepted.append(best)
+        current = best.candidate.apply(current, best.value)
+        base = simulate_all(current, trials)
+    structure = st.structure_left(rounds[-1].design, rounds[-1].residual)
+    return Selection(rounds, accepted, current, initial, base, structure)

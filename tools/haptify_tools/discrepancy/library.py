@@ -1,0 +1,104 @@
+"""The library of candidate effects (issue 8, step 2 "name"): one entry per simulator effect id.
+
+Every candidate is the twin's own component (:mod:`haptify_tools.twin.model`), switched on with ONE
+identified parameter — the same value on every drive axis — while its other parameters keep the values
+stored in the twin file (a disabled component still carries them). Its prediction of the residual is
+always obtained by simulation along the measured path, ``δ(p) = sim(twin + effect(p)) − sim(twin)``:
+
+- ``affine`` candidates (weights, inertia, friction levels, link length): δ is affine in the parameter,
+  ``δ(p) = a + p·b``, so two simulations give the regressor and least squares gives ``p``;
+- ``search`` candidates (series-elastic stiffness, torque limit, cut-off trip force, backlash width): a
+  logarithmic grid of simulations and two parabolic refinements in ``log p`` (a 1-D search).
+
+Effects the calibrated hand force cannot see are listed in :data:`NOT_OBSERVABLE` with the reason.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Literal
+
+import numpy as np
+
+from haptify_tools.twin.model import TwinFile, set_param
+
+#: Effect ids of the simulator that the hand-force residual cannot reveal, and why (reported as such).
+NOT_OBSERVABLE: dict[str, str] = {
+    "sensor.bias": "removed by the session's own handle calibration (spec §6.4) before any comparison",
+    "vibration.device": "acts above the force comparison band; judged by the vibration benchmark, not the force residual",
+}
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One library effect: its id, the identified parameter (twin-file name, unit), how δ(p) is found,
+    which trials it acts in (``all`` or only ``active`` ones) and how to make the twin that has it."""
+
+    effect_id: str
+    parameter: str
+    unit: str
+    kind: Literal["affine", "search"]
+    scope: Literal["all", "active"]
+    probe: Callable[[TwinFile], float]          # affine: a typical value; search: the grid's centre
+    grid_factors: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0, 4.0)
+    lower: float = 0.0
+
+    def apply(self, twin: TwinFile, value: float) -> TwinFile:
+        """A copy of ``twin`` with this effect on and its parameter set to ``value`` (every axis)."""
+        t = set_param(twin, f"{self.effect_id}.{self.parameter}", float(value))
+        if self.effect_id == "drive.force_cutoff":
+            rearm = min(t.effects.drive_force_cutoff.rearm_force_N, 0.5 * float(value))
+            t = set_param(t, "drive.force_cutoff.rearm_force_N", rearm)
+        return set_param(t, f"{self.effect_id}.enabled", True)
+
+    def available(self, twin: TwinFile) -> bool:
+        """True when the twin lacks this effect (the library proposes only what the twin does not have)."""
+        if self.effect_id == "drive.backlash" and not twin.on("drive.series_elasticity"):
+            return False           # without an elastic cable the twin's drive has no play to model
+        if self.effect_id == "kinematics.link_length":
+            e = twin.effects.kinematics_link_length
+            return not e.enabled or not any(e.delta_a_m)
+        return not twin.on(self.effect_id)
+
+    def value_in(self, twin: TwinFile) -> float | list[float]:
+        """The parameter's value in ``twin`` (a list for per-axis parameters)."""
+        v = getattr(twin.effect(self.effect_id), self.parameter)
+        return [float(x) for x in v] if isinstance(v, list) else float(v)
+
+
+def _mean_of(effect_id: str, parameter: str, fallback: float) -> Callable[[TwinFile], float]:
+    def probe(twin: TwinFile) -> float:
+        v = getattr(twin.effect(effect_id), parameter)
+        m = float(np.mean(np.abs(v))) if isinstance(v, list) else float(v)
+        return m if m > 0 else fallback
+    return probe
+
+
+#: The library, in the order of the simulator's effect ids (issue 8).
+LIBRARY: tuple[Candidate, ...] = (
+    Candidate("gravity", "g_m_per_s2", "m/s²", "affine", "all", _mean_of("gravity", "g_m_per_s2", 9.80665)),
+    Candidate("inertia", "rotor_inertia_kg_m2", "kg·m²", "affine", "all", _mean_of("inertia", "rotor_inertia_kg_m2", 1e-6)),
+    Candidate("friction.coulomb", "torque_Nm", "N·m", "affine", "all", _mean_of("friction.coulomb", "torque_Nm", 0.03)),
+    Candidate("friction.viscous", "damping_Nms_per_rad", "N·m·s/rad", "affine", "all",
+              _mean_of("friction.viscous", "damping_Nms_per_rad", 0.01)),
+    Candidate("friction.stribeck", "excess_torque_Nm", "N·m", "affine", "all", _mean_of("friction.stribeck", "excess_torque_Nm", 0.01)),
+    Candidate("drive.series_elasticity", "stiffness_Nm_per_rad", "N·m/rad", "search", "active",
+              _mean_of("drive.series_elasticity", "stiffness_Nm_per_rad", 10.0)),
+    Candidate("drive.torque_saturation", "max_torque_Nm", "N·m", "search", "active",
+              _mean_of("drive.torque_saturation", "max_torque_Nm", 0.3)),
+    Candidate("drive.force_cutoff", "trip_force_N", "N", "search", "active", lambda twin: 2.0,
+              grid_factors=(0.25, 0.5, 1.0, 2.0, 4.0)),
+    Candidate("drive.backlash", "width_rad", "rad", "search", "active", _mean_of("drive.backlash", "width_rad", 0.002)),
+    Candidate("kinematics.link_length", "delta_a_m", "m", "affine", "all", lambda twin: 0.005),
+    Candidate("handle.connector_mass", "mass_kg", "kg", "affine", "all", _mean_of("handle.connector_mass", "mass_kg", 0.03)),
+)
+
+LIBRARY_IDS: tuple[str, ...] = tuple(c.effect_id for c in LIBRARY) + ("kinematics.base_collision",)
+
+
+def candidate(effect_id: str) -> Candidate:
+    """The library entry of ``effect_id`` (KeyError when the id has no force-residual candidate)."""
+    for c in LIBRARY:
+        if c.effect_id == effect_id:
+            return c
+    raise KeyError(effect_id)

@@ -1,0 +1,203 @@
+"""Statistics of the discrepancy workflow (issue 8; method of shared notes "finding the missing effect").
+
+- Contiguous blocks: each trial's rows are cut into five consecutive blocks, roles
+  train · validation · train · test · train (60 / 20 / 20 %); neighbouring samples are correlated, so
+  random splits would leak.
+- Decimation: the residual is kept every ``D``-th row, ``D`` the lag at which the baseline residual's
+  autocorrelation (mean over trials and channels) first falls below 1/e; every count below (BIC, F
+  test) uses the decimated rows, so correlated samples are not counted as independent evidence.
+- Scores (training rows): ``ΔBIC = n·ln(RSS₀/RSS₁) − k·ln n`` (k = 1 identified parameter), nested F
+  test ``F = (RSS₀ − RSS₁)/k ÷ RSS₁/(n − k)``; validation improvement ``1 − RSS₁/RSS₀`` on the
+  validation rows; share explained on the test rows.
+- Structure left: a generic, non-physical regression of the residual on the state (position and its
+  square, velocity, a smooth sign of velocity, acceleration, penetration in contact, a constant) fitted
+  on training rows; when it removes a clear share of the held-out residual the residual is not noise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats as sps
+
+from haptify_tools.discrepancy.data import MeasuredTrial
+
+ROLES = ("train", "validation", "train", "test", "train")
+BIC_MIN = 10.0              # "very strong" evidence on Kass & Raftery's scale
+P_MAX = 1e-3                # nested F test
+VALIDATION_MIN = 0.10       # the held-out validation residual energy must fall by at least 10 %
+STRUCTURE_SHARE = 0.25      # generic regression removing ≥ 25 % of held-out energy → structure left
+MAX_DECIMATION = 50
+
+
+@dataclass
+class Design:
+    """Rows of the stacked residual: per trial the decimated valid row indices and their roles."""
+
+    trials: list[MeasuredTrial]
+    rows: dict[str, np.ndarray]
+    roles: dict[str, np.ndarray]
+    decimation: int
+
+    def stack(self, per_trial: dict[str, np.ndarray], role: str | None = None) -> np.ndarray:
+        """Flattened values ``(rows × 3)`` of ``per_trial`` arrays at the design rows (of one role)."""
+        parts = []
+        for tr in self.trials:
+            idx = self.rows[tr.trial_id]
+            if role is not None:
+                idx = idx[self.roles[tr.trial_id] == role]
+            parts.append(np.asarray(per_trial[tr.trial_id])[idx].ravel())
+        return np.concatenate(parts) if parts else np.zeros(0)
+
+
+def block_roles(n: int) -> np.ndarray:
+    """Role of each of ``n`` consecutive rows (five contiguous blocks, :data:`ROLES`)."""
+    b = np.minimum((np.arange(n) * len(ROLES)) // max(n, 1), len(ROLES) - 1)
+    return np.asarray(ROLES)[b]
+
+
+def correlation_lag(residual: dict[str, np.ndarray], trials: list[MeasuredTrial]) -> int:
+    """Lag (rows) at which the mean autocorrelation of the residual first falls below 1/e (≥ 1)."""
+    acfs = []
+    for tr in trials:
+        r = residual[tr.trial_id][tr.valid]
+        for k in range(3):
+            x = r[:, k] - r[:, k].mean()
+            den = float(np.dot(x, x))
+            if den <= 0 or len(x) < 4 * MAX_DECIMATION:
+                continue
+            acfs.append([float(np.dot(x[:-m], x[m:])) / den for m in range(1, MAX_DECIMATION + 1)])
+    if not acfs:
+        return 1
+    mean = np.mean(acfs, axis=0)
+    below = np.nonzero(mean < np.exp(-1.0))[0]
+    return int(below[0] + 1) if len(below) else MAX_DECIMATION
+
+
+def make_design(trials: list[MeasuredTrial], residual: dict[str, np.ndarray]) -> Design:
+    """The design of the baseline residual: decimation from its correlation, contiguous block roles."""
+    d = correlation_lag(residual, trials)
+    rows, roles = {}, {}
+    for tr in trials:
+        n = len(tr.t)
+        role = block_roles(n)
+        idx = np.arange(0, n, d)
+        idx = idx[tr.valid[idx]]
+        rows[tr.trial_id] = idx
+        roles[tr.trial_id] = role[idx]
+    return Design(trials, rows, roles, d)
+
+
+@dataclass
+class Score:
+    """A fitted candidate's scores against the current residual."""
+
+    delta_bic: float
+    f_stat: float
+    p_value: float
+    validation_improvement: float
+    test_share: float
+    rss_train: tuple[float, float]
+    rss_validation: tuple[float, float]
+    rss_test: tuple[float, float]
+    n_train: int
+
+    def accepted(self) -> bool:
+        """True when the effect clearly earns its parameter: ΔBIC, F test and validation all agree."""
+        return (self.delta_bic > BIC_MIN and self.p_value < P_MAX
+                and self.validation_improvement >= VALIDATION_MIN)
+
+
+def score(design: Design, residual: dict[str, np.ndarray], predicted: dict[str, np.ndarray], k: int = 1) -> Score:
+    """Scores of the model ``residual ≈ predicted`` against ``residual ≈ 0`` (k new parameters)."""
+    def rss(role):
+        r = design.stack(residual, role)
+        e = r - design.stack(predicted, role)
+        return float(np.dot(r, r)), float(np.dot(e, e)), len(r)
+
+    r0, r1, n = rss("train")
+    v0, v1, _ = rss("validation")
+    t0, t1, _ = rss("test")
+    tiny = 1e-300
+    dbic = n * np.log(max(r0, tiny) / max(r1, tiny)) - k * np.log(max(n, 2))
+    f = ((r0 - r1) / k) / max(r1 / max(n - k, 1), tiny)
+    p = float(sps.f.sf(f, k, max(n - k, 1))) if f > 0 else 1.0
+    return Score(float(dbic), float(f), p, 1.0 - v1 / v0 if v0 > 0 else 0.0, 1.0 - t1 / t0 if t0 > 0 else 0.0,
+                 (r0, r1), (v0, v1), (t0, t1), n)
+
+
+def affine_fit(design: Design, residual: dict, a: dict, b: dict) -> tuple[float, float]:
+    """Least-squares ``p`` of ``residual ≈ a + p·b`` on the training rows, and its standard error."""
+    r = design.stack(residual, "train") - design.stack(a, "train")
+    bb = design.stack(b, "train")
+    den = float(np.dot(bb, bb))
+    if den <= 0:
+        return 0.0, float("inf")
+    p = float(np.dot(bb, r)) / den
+    e = r - p * bb
+    sigma2 = float(np.dot(e, e)) / max(len(e) - 1, 1)
+    return p, float(np.sqrt(sigma2 / den))
+
+
+def standard_error(design: Design, residual: dict, predicted: dict, slope: dict) -> float:
+    """Standard error of a 1-D parameter from the local slope ``∂δ/∂p`` (Gauss–Newton), training rows."""
+    e = design.stack(residual, "train") - design.stack(predicted, "train")
+    bb = design.stack(slope, "train")
+    den = float(np.dot(bb, bb))
+    if den <= 0:
+        return float("inf")
+    return float(np.sqrt(float(np.dot(e, e)) / max(len(e) - 1, 1) / den))
+
+
+def state_features(tr: MeasuredTrial) -> np.ndarray:
+    """Generic state regressors ``(N, m)`` of one trial for the structure check (no physics in them)."""
+    v = np.gradient(tr.position, tr.t, axis=0)
+    a = np.gradient(v, tr.t, axis=0)
+    p = tr.position - tr.position.mean(axis=0)
+    cols = [np.ones(len(tr.t)), *p.T, *(p ** 2).T, *v.T, *np.tanh(v / 0.005).T, *a.T]
+    if tr.active:
+        n = np.asarray(tr.rendering["surface_normal"], float)
+        n = n / np.linalg.norm(n)
+        pen = (np.asarray(tr.rendering["surface_point_m"], float) - tr.position) @ n
+        cols.append(np.where(tr.contact, pen, 0.0))
+        cols.append(tr.contact.astype(float))
+    return np.column_stack(cols)
+
+
+def structure_left(design: Design, residual: dict[str, np.ndarray]) -> dict:
+    """Generic regression of the residual on the state (per trial and channel, training rows), judged on
+    validation + test rows: share of held-out energy it removes, F test, and Ljung–Box whiteness p-value."""
+    held0 = held1 = 0.0
+    q_stats, dof = 0.0, 0
+    n_tr, k_tot, r0_tr, r1_tr = 0, 0, 0.0, 0.0
+    for tr in design.trials:
+        idx, role = design.rows[tr.trial_id], design.roles[tr.trial_id]
+        x = state_features(tr)[idx]
+        r = residual[tr.trial_id][idx]
+        tr_rows, ho = role == "train", role != "train"
+        if tr_rows.sum() <= x.shape[1] + 2 or ho.sum() < 2:
+            continue
+        for k in range(3):
+            coef, *_ = np.linalg.lstsq(x[tr_rows], r[tr_rows, k], rcond=None)
+            e = r[:, k] - x @ coef
+            held0 += float(np.sum(r[ho, k] ** 2))
+            held1 += float(np.sum(e[ho] ** 2))
+            r0_tr += float(np.sum(r[tr_rows, k] ** 2))
+            r1_tr += float(np.sum(e[tr_rows] ** 2))
+            n_tr += int(tr_rows.sum())
+            k_tot += x.shape[1]
+            # Ljung–Box on the decimated held-out residual (its own mean removed)
+            y = r[ho, k] - r[ho, k].mean()
+            m = min(10, len(y) // 4)
+            den = float(np.dot(y, y))
+            if m >= 1 and den > 0:
+                rho = np.array([np.dot(y[:-h], y[h:]) / den for h in range(1, m + 1)])
+                q_stats += len(y) * (len(y) + 2) * float(np.sum(rho ** 2 / (len(y) - np.arange(1, m + 1))))
+                dof += m
+    share = 1.0 - held1 / held0 if held0 > 0 else 0.0
+    f = ((r0_tr - r1_tr) / max(k_tot, 1)) / max(r1_tr / max(n_tr - k_tot, 1), 1e-300)
+    p_f = float(sps.f.sf(f, max(k_tot, 1), max(n_tr - k_tot, 1))) if f > 0 else 1.0
+    p_lb = float(sps.chi2.sf(q_stats, dof)) if dof else 1.0
+    return {"heldout_share": float(share), "f_p_value": p_f, "ljung_box_p_value": p_lb,
+            "structured": bool(share >= STRUCTURE_SHARE and p_f < P_MAX)}
