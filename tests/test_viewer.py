@@ -52,6 +52,7 @@ SURFACE_Z = 0.05
 OCCLUDED = slice(40, 47)  # pose/marker rows set to NaN in the stiffness trial (70 ms: longer than any bridged gap)
 SPHERE_R, SPHERE_C = 0.04, np.array([0.0, 0.0, 0.1])  # the workspace trial sweeps this sphere (m)
 FREE_SPACE_S = 2.5  # duration of the example free-space trial: long enough for the vibration chapter's trimming
+COMPARE_LAG_S = 3.25  # clock offset of the compared session's stiffness trial
 FORCE_BIAS = 0.25  # N, the handle_gravity record's force bias on the sensor's x axis
 
 
@@ -125,7 +126,12 @@ def rich_writer(session_id: str = "viewer-0001", force_scale: float = 1.0):
 def sessions(tmp_path_factory):
     root = tmp_path_factory.mktemp("viewer")
     main = rich_writer().write(root / "main")
-    other = rich_writer("viewer-sim", force_scale=0.5).write(root / "sim")
+    sim = rich_writer("viewer-sim", force_scale=0.5)
+    sim.manifest["calibration"] += [  # the simulated stiffness trial runs 3.25 s later on its session clock
+        {"kind": "clock_offset", "id": f"late-{i}", "stream_file": f"trials/stiffness-1/{kind}.parquet", "offset_s": COMPARE_LAG_S}
+        for i, kind in enumerate(("handle_pose", "handle_wrench", "commanded_wrench", "device_joint_angles", "sync",
+                                  "markers", "link_poses"))]
+    other = sim.write(root / "sim")
     return open_session(main), open_session(other), root
 
 
@@ -235,6 +241,8 @@ def test_each_series_has_one_row_per_sample_at_exact_ns(recorded, sessions):
         t_ns, rows = temporal(out, e.path, "Scalars:scalars")
         assert len(t_ns) == declared == len(frame), e.path
         expected = np.round(frame["t"].to_numpy() * 1e9).astype(np.int64)
+        if role == "compare" and trial_id == "stiffness-1":  # aligned with the measured trial's start
+            expected = expected - round(COMPARE_LAG_S * 1e9)
         np.testing.assert_array_equal(t_ns, expected, err_msg=e.path)
         truncation_would_differ |= bool(np.any(np.trunc(frame["t"].to_numpy() * 1e9).astype(np.int64) != expected))
         assert all(len(r) == len(rows[0]) for r in rows)
@@ -247,8 +255,9 @@ def test_series_values_are_the_stream_values(recorded, sessions):
     _, rows = temporal(out, "/series/stiffness-1/measured/handle/force_raw", "Scalars:scalars")
     w = main.read("stiffness-1", "handle_wrench")
     np.testing.assert_array_equal(np.array(rows), w[["fx", "fy", "fz"]].to_numpy())
-    _, rows = temporal(out, "/series/stiffness-1/compare/handle/force_raw", "Scalars:scalars")
+    t_ns, rows = temporal(out, "/series/stiffness-1/compare/handle/force_raw", "Scalars:scalars")
     np.testing.assert_array_equal(np.array(rows)[:, 0], 0.5 * np.ones(1000))
+    np.testing.assert_array_equal(t_ns, time_ns(np.arange(1000) / 1000.0))  # aligned with the measured trial
     _, rows = temporal(out, "/series/stiffness-1/measured/penetration", "Scalars:scalars")
     depth = np.array(rows)[:, 0]
     t100 = np.arange(100) / 100.0
@@ -290,6 +299,7 @@ def test_session_and_results_documents(recorded):
     assert "no handle_accel \\| stream" in md
     text = static_text(out, "/session")
     assert "viewer-0001" in text and "viewer-sim" in text and "stiffness-1" in text
+    assert "stiffness-1 (compare) shifted by -3.25 s" in text
 
 
 def test_results_markdown_warns_about_another_session():

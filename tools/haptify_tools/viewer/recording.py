@@ -638,6 +638,11 @@ def session_markdown(session: SessionFolder, trials: list[TrialPlan], other: Ses
     return "\n".join(lines) + "\n"
 
 
+def trial_start_ns(session: SessionFolder, trial: Trial) -> int:
+    """The first sample time of a trial over all its streams, integer ns on the session clock (spec §1.4)."""
+    return min(int(time_ns(session.read_stream(s)["t"].to_numpy()[:1])[0]) for s in trial.streams if s.rows)
+
+
 def counterpart(other: SessionFolder, trial: Trial) -> Trial | None:
     """The trial of ``other`` matching ``trial``: same id, else same protocol and repetition."""
     for t in other.trials:
@@ -648,7 +653,11 @@ def counterpart(other: SessionFolder, trial: Trial) -> Trial | None:
 
 def plan_recording(session: SessionFolder, *, trial_id: str | None = None, results: ResultsFile | None = None,
                    other: SessionFolder | None = None) -> Plan:
-    """Every entity of the recording of ``session`` (one trial or all), optionally compared with ``other``."""
+    """Every entity of the recording of ``session`` (one trial or all), optionally compared with ``other``.
+
+    A compared trial is shifted in time by a whole number of nanoseconds so that it starts with the
+    measured trial (their first samples coincide); the shift is listed in the session document.
+    """
     ctx = ComputeContext(session=CachedStreams(session))
     other_ctx = ComputeContext(session=CachedStreams(other)) if other is not None else None
     trials = [session.trial(trial_id)] if trial_id else list(session.trials)
@@ -663,7 +672,14 @@ def plan_recording(session: SessionFolder, *, trial_id: str | None = None, resul
             match = counterpart(other, trial)
             if match is not None:
                 tp.counterpart["compare"] = match.id
+                first = len(plan.entries)
                 TrialPlanner(other_ctx, match, "compare", key, plan).run()
+                shift = trial_start_ns(ctx.session, trial) - trial_start_ns(other_ctx.session, match)
+                if shift:
+                    for e in plan.entries[first:]:
+                        if e.times_ns is not None:
+                            e.times_ns = e.times_ns + shift
+                    plan.notes.append(f"{match.id} (compare) shifted by {shift / 1e9:+.9g} s to start with {trial.id} (measured)")
         plan.trials.append(tp)
     plan.add(Entry("/session", static=[rr.TextDocument(session_markdown(session, plan.trials, other, plan.notes),
                                                        media_type=rr.MediaType.MARKDOWN)]))
