@@ -263,8 +263,9 @@ def workspace_fixtures() -> list[Fixture]:
     out: list[Fixture] = []
     pitch = param("workspace", "voxel_pitch_m")
     cr = param("workspace", "closing_radius_m")
-    model_bias = ("the operator is −0.7 % on the full-size Touch models (spec §8.8); the links here are scaled by 0.45, so "
-                  "the voxels are 2.2× coarser relative to the solid and the bias grows to about −1.5 %: tolerance 2.5 %")
+    model_bias = ("the operator reproduces the full-size Touch models' Pappus volumes closely (spec §8.8); the links here "
+                  "are scaled by 0.45, so the voxels are 2.2× coarser relative to the solid (measured: within 0.5 %): "
+                  "tolerance 1.5 %")
     bias = ("tolerance covers the operator's stated bias (spec §8.8: sub-voxel boundary within 0.5 %; "
             f"h = {pitch} m, r = {cr} m)")
     tiny = scaled_device(0.45)
@@ -287,7 +288,7 @@ def workspace_fixtures() -> list[Fixture]:
              1e-12, 1e-9, "paper", "product of the Touch's datasheet box 16 × 12 × 7 cm (paper §IV-A, Table II)",
              "Typical: the manufacturer's box."),
         case("workspace.modeled_volume.touch-0.45", "workspace.modeled_volume", "8.3", fx.name, pappus_volume(tiny), "m^3",
-             0.0, 0.025, "analytic", "Pappus integral of the coupled joint limits of the Touch with links × 0.45 "
+             0.0, 0.015, "analytic", "Pappus integral of the coupled joint limits of the Touch with links × 0.45 "
              "(V = Δq1·∬|r| a2 a3 |sin q3| dq2 dq3); " + model_bias,
              "Typical: the DH model's reachable set within coupled joint limits."),
     ]
@@ -333,7 +334,7 @@ def workspace_fixtures() -> list[Fixture]:
              "waist's crease with a fillet of radius r (spec §8.8: +0.5 % on two R = 6 cm lobes); the convex hull is ~9 % larger",
              "Tricky: a non-convex workspace."),
         case("workspace.spec_box_volume.cube", "workspace.spec_box_volume", "8.6", fx.name, 1e-3, "m^3", 1e-12, 1e-9,
-             "analytic", "a 10 cm datasheet cube", "Edge: a cubic datasheet box."),
+             "analytic", "the datasheet box of this device is a 10 cm cube: 0.1³ m³", "Edge: a cubic datasheet box."),
     ]
     out.append(fx)
 
@@ -370,13 +371,13 @@ def workspace_fixtures() -> list[Fixture]:
 
     fx = Fixture("ws-model-swept-placed", swept)
     fx.cases += [
-        case("workspace.modeled_volume.placed", "workspace.modeled_volume", "8.3", fx.name, pappus_volume(mid), "m^3", 0.0, 0.025,
+        case("workspace.modeled_volume.placed", "workspace.modeled_volume", "8.3", fx.name, pappus_volume(mid), "m^3", 0.0, 0.015,
              "analytic", "Pappus integral of the model's joint limits; a placement (turned 2.2 rad about z, tilted 0.15 rad) "
              "moves the solid, not its volume; " + model_bias, "Tricky: rotated device placement."),
-        case("workspace.volume_ratio.full-sweep", "workspace.volume_ratio", "8.5", fx.name, 1.0, "1", 0.03, 0.0, "analytic",
+        case("workspace.volume_ratio.full-sweep", "workspace.volume_ratio", "8.5", fx.name, 1.0, "1", 0.02, 0.0, "analytic",
              "the measured positions are the model's own boundary (joint-limit faces) placed by device_placement; both "
-             "solids come from the same operator, so the ratio is 1 within the two samplings' biases (the random sweep "
-             "+0.3 %, the model's lattice about −1.5 % at this scale)",
+             "solids come from the same operator, so the ratio is 1 within the two samplings' biases (each below 0.5 % "
+             "at this scale)",
              "Typical: a complete boundary sweep."),
         case("workspace.coverage.full-sweep", "workspace.coverage", "8.5", fx.name, 1.0, "1", 0.02, 0.0, "analytic",
              "the measured sweep covers the placed model entirely; an implementation that ignores device_placement "
@@ -405,7 +406,7 @@ def workspace_fixtures() -> list[Fixture]:
         case("workspace.coverage.half", "workspace.coverage", "8.5", fx.name, half_share, "1", 0.015, 0.0, "analytic",
              "the half solid lies inside the model: the overlap is the half solid itself, 1/2 of the model",
              "Edge: partial coverage."),
-        case("workspace.modeled_volume.csv", "workspace.modeled_volume", "8.3", fx.name, pappus_volume(mid), "m^3", 0.0, 0.025,
+        case("workspace.modeled_volume.csv", "workspace.modeled_volume", "8.3", fx.name, pappus_volume(mid), "m^3", 0.0, 0.015,
              "analytic", "Pappus integral of the model's joint limits (identity placement, CSV session); " + model_bias,
              "Edge: the model of a CSV session."),
     ]
@@ -506,9 +507,9 @@ def free_space_fixtures() -> list[Fixture]:
         case("free_space.force_sd.constant", "free_space.force_sd", sec_f, fx.name, 0.0, "N", 2e-3, 0.0, "analytic",
              "a constant force has SD 0 (tolerance: the rounding of the calibration under rotation)", "Edge: zero spread."),
         case("free_space.force_min.constant", "free_space.force_min", sec_f, fx.name, f0, "N", 0.0, 2e-3, "analytic",
-             "min = |F| of a constant force", "Edge."),
+             "min of |F| over the trial equals |F| = |(0.3, 0.6, −0.9)| N of the constant force", "Edge."),
         case("free_space.force_max.constant", "free_space.force_max", sec_f, fx.name, f0, "N", 0.0, 2e-3, "analytic",
-             "max = |F| of a constant force", "Edge."),
+             "max of |F| over the trial equals |F| = |(0.3, 0.6, −0.9)| N of the constant force", "Edge."),
         case("free_space.plate_force_mean.rotated-corners", "free_space.plate_force_mean", sec_p, fx.name, 0.4, "N", 0.0, 5e-3,
              "analytic", "constant plate force (0, 0.4, −15) N; removing the mean vertical leaves |(0, 0.4, 0)|; corner sensors "
              "yawed by 0/90/180/270° must be rotated into W", "Tricky: rotated corner frames."),
@@ -797,7 +798,8 @@ def stiffness_fixtures() -> list[Fixture]:
              "a purely linear 300 N/m spring pressed 12 mm deep: the peak is 3.6 N (the sin² press is smooth at its bottom, "
              "so the 20 Hz low-pass leaves the peak)", "Edge: no saturation."),
         case("stiffness.measured.linear", "stiffness.measured", "13.3", fx.name, 300.0, "N/m", 0.0, 0.02, "analytic",
-             "a purely linear 300 N/m spring", "Edge: no saturation."),
+             "a purely linear 300 N/m spring pressed five times 12 mm deep: the least-squares slope of force against "
+             "penetration over the fit window is the spring constant", "Edge: no saturation."),
     ]
     out.append(fx)
     return out
@@ -1076,7 +1078,8 @@ def dynamics_fixtures() -> list[Fixture]:
              "generated", "the law applies no torque about the gimbal centre and the torque channel has no noise: a fitted "
              "model predicts (nearly) zero torque", "Edge: a silent output channel.", level="SHOULD"),
         case("dynamics.torque_rmse_mean.fit-quality", "dynamics.torque_rmse_mean", "11.4.5", fx.name, 0.0, "N*m", 2e-3, 0.0,
-             "generated", "as dynamics.torque_rmse.fit-quality", "Edge.", level="SHOULD"),
+             "generated", "the mean of the three torque RMS errors of dynamics.torque_rmse.fit-quality: no torque about the "
+             "gimbal centre, no torque noise, so a fitted model predicts (nearly) zero torque", "Edge.", level="SHOULD"),
     ]
     out.append(fx)
     return out
