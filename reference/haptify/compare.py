@@ -10,7 +10,6 @@ from __future__ import annotations
 import csv
 import html
 import io
-import math
 from dataclasses import dataclass
 
 from haptify import schemas
@@ -26,13 +25,18 @@ class Table:
     notes: list[str]
 
 
+def _num(value: float, significant: int) -> str:
+    """``significant`` digits, never in exponent form for values of 1000 and more (11799, not 1.2e+04)."""
+    return f"{value:.0f}" if abs(value) >= 10 ** significant else f"{value:.{significant}g}"
+
+
 def _fmt(value: float | None, sd: float | None = None) -> str:
+    """A table cell: the value to 5 significant digits (the paper's precision), ± sd to 2."""
     if value is None:
         return "—"
-    digits = 4 if abs(value) < 1 else (3 if abs(value) < 100 else 0)
-    text = f"{value:.{digits}g}" if abs(value) < 1 else f"{value:.{max(0, digits - int(math.log10(abs(value))) - 1)}f}"
+    text = _num(value, 5)
     if sd is not None:
-        text += f" ± {sd:.2g}"
+        text += f" ± {_num(sd, 2)}"
     return text
 
 
