@@ -97,32 +97,39 @@ def volume_solid(points: np.ndarray, *, pitch: float | None = None, closing_radi
     dilated = ndi.distance_transform_edt(~occupied) <= rc
     filled = ndi.binary_fill_holes(dilated)
     coarse = ndi.distance_transform_edt(filled) > rc + float(wp("erosion_offset_voxels"))
-    solid = coarse.repeat(c, axis=0).repeat(c, axis=1).repeat(c, axis=2)
+    band_c = ndi.binary_dilation(coarse, iterations=band) & ~ndi.binary_erosion(coarse, iterations=band)
 
-    fraction = solid.astype(np.float32)
-    band_mask = ndi.binary_dilation(solid, iterations=band) & ~ndi.binary_erosion(solid, iterations=band)
-    fraction[band_mask] = _band_fractions(solid, band_mask, lo, h, means[band_mask.flat[uniq]])
+    fraction = _refine(coarse, c).astype(np.float32)
+    band_mask = _refine(band_c, c)
+    in_band = band_c[tuple((vox // c).T)]
+    fraction[band_mask] = _band_fractions(coarse, c, band_mask, lo, h, means[in_band])
     return VoxelSolid(origin=tuple(int(x) for x in lo), pitch=h, fraction=fraction,
                       hull_volume=_hull_volume(vox, means, counts), n_points=len(pts))
 
 
-def _band_fractions(solid: np.ndarray, band_mask: np.ndarray, lo: np.ndarray, h: float, samples: np.ndarray) -> np.ndarray:
+def _refine(coarse: np.ndarray, c: int) -> np.ndarray:
+    """The fine-lattice array in which every coarse voxel becomes its block of c³ fine voxels."""
+    return coarse.repeat(c, axis=0).repeat(c, axis=1).repeat(c, axis=2)
+
+
+def _band_fractions(coarse: np.ndarray, c: int, band_mask: np.ndarray, lo: np.ndarray, h: float, samples: np.ndarray) -> np.ndarray:
     """Sub-voxel inside-fractions of the band voxels (spec §8.4 step 5).
 
     ``samples`` are the sample means of the occupied band voxels. Each sample's normal: the eigenvector
     of the smallest eigenvalue of the covariance of its ``normal_neighbours`` nearest samples within
-    ``normal_radius_voxels`` (a local plane fit), oriented along the outward direction −∇ of the solid's
-    indicator smoothed by a Gaussian; with fewer than ``min_normal_neighbours`` neighbours, −∇ itself.
+    ``normal_radius_voxels`` (a local plane fit), oriented along the outward direction −∇ of the coarse
+    solid's indicator smoothed by a Gaussian (central differences at the sample's coarse voxel); with
+    fewer than ``min_normal_neighbours`` neighbours, −∇ itself.
     A band voxel with centre c takes the nearest sample p within ``surface_search_voxels`` and its normal
     n: signed depth s = (p − c)·n, fraction clip(1/2 + s / (h‖n‖₁), 0, 1). Without a sample in reach
     the voxel keeps its solid indicator (0 or 1).
     """
     bi = np.nonzero(band_mask)
-    inside = solid[bi].astype(np.float32)
+    inside = coarse[tuple(np.stack(bi) // c)].astype(np.float32)
     if len(samples) < 3:
         return inside
-    smooth = ndi.gaussian_filter(solid.astype(np.float32), float(wp("normal_smoothing_voxels")))
-    ijk = np.floor(samples / h).astype(np.int64) - lo
+    smooth = ndi.gaussian_filter(coarse.astype(np.float32), float(wp("normal_smoothing_voxels")))
+    ijk = (np.floor(samples / h).astype(np.int64) - lo) // c
     outward = np.empty((len(samples), 3))
     for axis in range(3):
         up, dn = ijk.copy(), ijk.copy()
