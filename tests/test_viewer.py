@@ -215,7 +215,7 @@ def test_expected_entity_paths(recorded):
         "/world/stiffness-1/measured/markers/link2/l2a", "/world/stiffness-1/measured/links/link1",
         "/world/stiffness-1/measured/links/link2",
         "/series/free_space-1/measured/handle/force_raw", "/series/free_space-1/measured/handle/torque_raw",
-        "/series/free_space-1/measured/hand_force/raw_world", "/series/free_space-1/measured/accel/raw",
+        "/series/free_space-1/measured/accel/raw",
         "/series/free_space-1/measured/plate/corner_force_raw", "/series/free_space-1/measured/plate/corner_torque_raw",
         "/series/stiffness-1/measured/commanded/force", "/series/stiffness-1/measured/penetration",
         "/series/stiffness-1/measured/device/joint_angles", "/series/stiffness-1/measured/sync/trigger",
@@ -264,17 +264,6 @@ def test_series_values_are_the_stream_values(recorded, sessions):
     expected = 0.003 * np.sin(2 * np.pi * t100)
     expected[OCCLUDED] = np.nan
     np.testing.assert_allclose(depth, expected, atol=1e-15)
-
-
-def test_raw_force_is_rotated_to_the_world_frame(recorded):
-    """The handle is turned +90° about z: sensor x (1 N) points along world y."""
-    _, out = recorded
-    _, rows = temporal(out, "/series/stiffness-1/measured/hand_force/raw_world", "Scalars:scalars")
-    f = np.array(rows, dtype=float)
-    ok = np.all(np.isfinite(f), axis=1)
-    assert ok.sum() > 800
-    np.testing.assert_allclose(f[ok, 0], 0.0, atol=1e-12)
-    np.testing.assert_allclose(f[ok, 1], 1.0, atol=1e-12)
 
 
 def test_three_d_entities_skip_unknown_poses(recorded):
@@ -367,7 +356,8 @@ def test_blueprint_per_protocol(recorded):
     assert ws.column_shares == [3.0, 1.0]
     free = tabs["free_space"]
     names = [v.name for v in free.contents[1].contents if isinstance(v, rrb.TimeSeriesView)]
-    assert names[:2] == ["hand force in W (calibrated, raw)", "hand torque in W (calibrated)"]
+    assert names[:2] == ["hand force in W", "hand torque in W (calibrated)"]
+    assert "/series/free_space-1/measured/hand_force/raw_world" not in plan.paths()  # calibrated instead
     felt = view_named(stiff, "commanded vs felt force (W)")
     assert "+ $origin/measured/commanded/force" in felt.contents and "+ $origin/compare/commanded/force" in felt.contents
     assert "+ $origin/measured/hand_force/calibrated" in felt.contents  # felt = calibrated when available
@@ -478,7 +468,10 @@ def test_missing_calibration_is_reported_not_hidden(sessions, tmp_path):
     assert any("E601" in n for n in plan.notes) and any("E621" in n for n in plan.notes)
     out = write_rrd(plan, tmp_path / "nocal.rrd", blueprints.blueprint_for(plan))
     _, rows = temporal(out, "/series/stiffness-1/measured/hand_force/raw_world", "Scalars:scalars")
-    ok = np.all(np.isfinite(np.array(rows, dtype=float)), axis=1)
+    f = np.array(rows, dtype=float)
+    ok = np.all(np.isfinite(f), axis=1)
+    assert len(f) == 1000 and ok.sum() > 800  # one row per F/T sample; NaN where the pose is unknown
+    np.testing.assert_allclose(f[ok, :2], np.tile([0.0, 1.0], (ok.sum(), 1)), atol=1e-12)  # +90° yaw: sensor x → W y
     t_ns, vecs = temporal(out, "/world/stiffness-1/measured/hand_force/raw", "Arrows3D:vectors")
     assert len(t_ns) == ok.sum()
     np.testing.assert_allclose(np.array(vecs)[:, 0, 1], HAND_FORCE_M_PER_N, atol=1e-7)  # 1 N along world y

@@ -17,7 +17,8 @@ from haptify_tools.viewer.recording import ROLES, SERIES, TIMELINE, Plan, TrialP
 
 # Time-series views: name → (title, series keys overlaid in that view).
 VIEWS: dict[str, tuple[str, list[str | tuple[str, ...]]]] = {
-    "hand_force": ("hand force in W (calibrated, raw)", ["hand_force/calibrated", "hand_force/raw_world"]),
+    # the calibrated hand force, or the raw force in W when the session cannot be calibrated
+    "hand_force": ("hand force in W", [("hand_force/calibrated", "hand_force/raw_world")]),
     "hand_torque": ("hand torque in W (calibrated)", ["hand_torque/calibrated"]),
     "ft_force": ("F/T force (raw, sensor frame)", ["handle/force_raw"]),
     "ft_torque": ("F/T torque (raw, sensor frame)", ["handle/torque_raw"]),
@@ -28,7 +29,6 @@ VIEWS: dict[str, tuple[str, list[str | tuple[str, ...]]]] = {
     "plate_cop": ("plate centre of pressure", ["plate/cop"]),
     "plate_corners": ("plate corner forces (raw)", ["plate/corner_force_raw"]),
     "plate_corner_torques": ("plate corner torques (raw)", ["plate/corner_torque_raw"]),
-    # felt = the calibrated hand force, or the raw force in W when the session cannot be calibrated
     "commanded_vs_felt": ("commanded vs felt force (W)", ["commanded/force", ("hand_force/calibrated", "hand_force/raw_world")]),
     "commanded_torque": ("commanded torque (W)", ["commanded/torque"]),
     "penetration": ("penetration of the virtual surface", ["penetration", "contact/penetration"]),

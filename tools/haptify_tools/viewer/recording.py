@@ -365,10 +365,10 @@ class TrialPlanner:
                             stream=stream))
 
     def wrench(self, t_pose: np.ndarray | None, p: np.ndarray | None, q: np.ndarray | None) -> None:
-        """Raw F/T series; the raw force rotated to W; the calibrated wrench; the hand-force arrow and field.
+        """Raw F/T series (sensor frame), and the hand force in W as series, arrow and free-space field.
 
-        The 3-D arrow (and the free-space field) show the calibrated force when the session's
-        calibration allows it (spec §7.5), else the raw force rotated to W.
+        The hand force is the calibrated wrench when the session's calibration allows it (spec §7.5);
+        otherwise the raw F/T force rotated to W with the unfiltered pose (bias and weight still in).
         """
         w = self.read("handle_wrench")
         if w is None:
@@ -377,19 +377,20 @@ class TrialPlanner:
         f = w[["fx", "fy", "fz"]].to_numpy()
         self.add_series("handle/force_raw", t, f, ["fx", "fy", "fz"], "handle_wrench")
         self.add_series("handle/torque_raw", t, w[["tx", "ty", "tz"]].to_numpy(), ["tx", "ty", "tz"], "handle_wrench")
-        shown = None  # (t, origins, force, stream) of the arrow
-        if t_pose is not None and self.rig.handle is not None:
+        hs = self.handle_signals()
+        if hs is not None and hs.force is not None:
+            self.add_series("hand_force/calibrated", hs.t, hs.force, ["fx", "fy", "fz"], "handle_signals")
+            self.add_series("hand_torque/calibrated", hs.t, hs.torque, ["tx", "ty", "tz"], "handle_signals")
+            shown = (hs.t, hs.position, hs.force, "handle_signals", "calibrated")
+        elif t_pose is not None and self.rig.handle is not None:
             pose = raw_pose_at(t_pose, p, q, t)
             q_sensor = np.asarray(self.rig.handle.ft_sensor.pose.quaternion, dtype=np.float64)
             with np.errstate(invalid="ignore"):
                 f_w = quat_rotate(quat_multiply(pose.quaternion, q_sensor), f)
             self.add_series("hand_force/raw_world", t, f_w, ["fx", "fy", "fz"], "handle_wrench")
             shown = (t, pose.position, f_w, "handle_wrench", "raw")
-        hs = self.handle_signals()
-        if hs is not None and hs.force is not None:
-            self.add_series("hand_force/calibrated", hs.t, hs.force, ["fx", "fy", "fz"], "handle_signals")
-            self.add_series("hand_torque/calibrated", hs.t, hs.torque, ["tx", "ty", "tz"], "handle_signals")
-            shown = (hs.t, hs.position, hs.force, "handle_signals", "calibrated")
+        else:
+            shown = None
         if shown is None:
             return
         t_a, origins, force, stream, label = shown
