@@ -7,7 +7,8 @@ unit quaternions ``[w, x, y, z]`` rotating the handle body frame H to W (spec §
 
 Where a generator needs the device's reach it asks a :class:`Reach`: joint-limit box in unit
 coordinates (``s ∈ [0, 1]³`` mapped through the coupled limits, reference ``configurations_from_unit``),
-forward kinematics into W, inverse kinematics and the base-collision test of the twin.
+forward kinematics into W, inverse kinematics and the base-collision clearance of the twin (its TRUE
+kinematics: the examiner moves the real device, link-length errors and all).
 
 Protocol limits (paper §V): free-space wandering below 0.16 m/s and 16 °/s (averages ≈ 0.05 m/s and
 ≈ 4 °/s, §VI-B); local dynamic oscillations from 0.5 to 4 Hz in x, y, z and the diagonals for about
@@ -49,6 +50,10 @@ TREMOR_ACCEL_RMS = 0.01
 # Tremor rotation RMS per axis (rad): the sensors sit 3–5 cm from the gimbal centre, where 0.002° at 10 Hz
 # already gives ≈ 0.007 m/s² of tangential acceleration.
 TREMOR_ANGLE_RMS = 0.002 * DEG
+# The examiner's natural grip: the handle frame parallel to W. The twins align their gimbals so that every
+# gimbal angle is zero in this grip at the centre of the joint-limit box, so a hand that keeps it stays far
+# from the gimbal's singularity; the natural orientation changes wander about it.
+NATURAL_GRIP = np.array([1.0, 0.0, 0.0, 0.0])
 
 
 # --- helpers -------------------------------------------------------------------------------------
@@ -170,45 +175,16 @@ class Reach:
     limits) to gimbal positions in W (NaN where infeasible); ``reachable(p)`` says whether positions
     ``p (N, 3)`` in W are reachable (inverse kinematics within the limits) and free of collisions;
     ``clearance(p)`` is the signed distance (m) of the end-effector from the base (negative inside, +inf
-    without collision geometry); ``base_W`` is the device base origin in W.
+    without collision geometry).
     """
 
     unit_to_W: Callable[[np.ndarray], np.ndarray]
     reachable: Callable[[np.ndarray], np.ndarray]
     clearance: Callable[[np.ndarray], np.ndarray]
-    base_W: np.ndarray
 
     def collides(self, p_W: np.ndarray) -> np.ndarray:
-        """True where gimbal positions ``p_W (N, 3)`` would put the end-effector into the base (E: clearance < 0)."""
+        """True where gimbal positions ``p_W (N, 3)`` would put the end-effector into the base (clearance < 0)."""
         return self.clearance(p_W) < 0.0
-
-    def push_out(self, p_W: np.ndarray, iterations: int = 6, step: float = 1e-5) -> np.ndarray:
-        """Move colliding points out to the nearest collision surface (steps along the clearance gradient).
-
-        The examiner pushing the end-effector into the base is stopped at its surface and slides along
-        it, so the path stays continuous (except across the medial axis deep inside an obstacle). Where
-        the gradient is ill-defined (on a ridge of the distance field) the point moves straight up.
-        """
-        p = np.array(p_W, dtype=float)
-        for _ in range(iterations):
-            c = self.clearance(p)
-            bad = np.isfinite(c) & (c < 0)
-            if not np.any(bad):
-                break
-            q = p[bad]
-            grad = np.stack([(self.clearance(q + e) - self.clearance(q - e)) / (2 * step)
-                             for e in np.eye(3) * step], axis=1)
-            norm = np.linalg.norm(grad, axis=1)
-            unit = np.where((norm > 0.3)[:, None], grad / np.maximum(norm, 1e-12)[:, None], [0.0, 0.0, 1.0])
-            p[bad] = q - (c[bad] - 1e-6)[:, None] * unit
-        # Where the gradient steps did not lead out (e.g. a box standing on the table), lift straight up.
-        for _ in range(300):
-            c = self.clearance(p)
-            bad = np.isfinite(c) & (c < 0)
-            if not np.any(bad):
-                break
-            p[bad, 2] += 0.001
-        return p
 
     def radial_stop(self, s: np.ndarray, coarse: int = 16, iterations: int = 14) -> np.ndarray:
         """Gimbal positions (W) for unit joint coordinates ``s``, stopped at the first collision on the way out.
@@ -281,7 +257,7 @@ def reach_from_kinematics(kin, placement_position=(0.0, 0.0, 0.0), placement_qua
         _, ok = inverse_kinematics(kin, to_D(p_W))
         return ok & ~(clearance(p_W) < 0)
 
-    return Reach(unit_to_W=unit_to_W, reachable=reachable, clearance=clearance, base_W=t_wd)
+    return Reach(unit_to_W=unit_to_W, reachable=reachable, clearance=clearance)
 
 
 def reach_from_twin(twin) -> Reach:
@@ -309,15 +285,6 @@ def natural_orientation(rng: np.random.Generator, t: np.ndarray, rate_hz: float,
     return quat_normalize(q)
 
 
-def hand_base_orientation(reach: Reach, point_W: np.ndarray) -> np.ndarray:
-    """The examiner's natural grip: the handle frame parallel to W (the twins' gimbal reference at the workspace centre).
-
-    The twins align the gimbal so that all gimbal angles are zero with the handle parallel to W at the
-    centre of the joint-limit box; a hand that keeps this grip stays far from the gimbal's singularity.
-    """
-    return np.array([1.0, 0.0, 0.0, 0.0])
-
-
 def _finish(rng: np.random.Generator, t: np.ndarray, rate_hz: float, position: np.ndarray, quaternion: np.ndarray,
             protocol: str, label: str | None, meta: dict, *, tremor_accel_rms: float = TREMOR_ACCEL_RMS,
             tremor_angle_rms: float = TREMOR_ANGLE_RMS) -> HandTrajectory:
@@ -340,7 +307,8 @@ def boundary_sweep(rng: np.random.Generator, reach: Reach, duration_s: float = 7
     lines no more than ``line_spacing_m`` apart in space (so a volume operator can close the shell; the
     first and last lines are edges, their ends corners), stroking along the face's longer direction; faces are joined
     along cube edges so the hand never leaves the boundary. Where the box boundary collides with the
-    base the hand is stopped at the base and slides along it (:meth:`Reach.push_out`). Each straight
+    base the hand is stopped at the first contact on its way out from the centre of the box
+    (:meth:`Reach.radial_stop`); where that makes the path jump, the hand lifts over the base. Each straight
     stroke is a minimum-jerk movement (the hand stops at every corner); strokes share ``duration_s``
     in proportion to their length plus ``min_stroke_m``.
     """
@@ -373,7 +341,7 @@ def boundary_sweep(rng: np.random.Generator, reach: Reach, duration_s: float = 7
     frac = minimum_jerk((rel - starts[k]) / (ends[k] - starts[k]))
     target = np.where(rel < 0.5, 0.0, a_start[k] + strokes[k] * frac)
     position = np.stack([np.interp(target, arc, pts[:, j]) for j in range(3)], axis=1)
-    base = hand_base_orientation(reach, reach.centre())
+    base = NATURAL_GRIP
     quat = natural_orientation(rng, t - t0, rate_hz, base_quat=base, mean_rate=6 * DEG, max_rate=30 * DEG)
     meta = {"path_length_m": length, "lines_per_face": lines, "line_spacing_m": line_spacing_m,
             "mean_speed_m_per_s": length / duration_s,
@@ -525,7 +493,7 @@ def free_space_wander(rng: np.random.Generator, reach: Reach | None, duration_s:
         v = speeds(lam)
         lam *= min(mean_speed / max(np.mean(v), 1e-9), max_speed / max(np.max(v), 1e-9))
     position = path(lam)
-    base = hand_base_orientation(reach, position[0]) if reach is not None else np.array([1.0, 0.0, 0.0, 0.0])
+    base = NATURAL_GRIP
     quat = natural_orientation(rng, rel, rate_hz, base_quat=base, mean_rate=mean_angular, max_rate=max_angular)
     meta = {"mean_speed_m_per_s": mean_speed, "max_speed_m_per_s": max_speed, "mean_angular_rad_per_s": mean_angular,
             "max_angular_rad_per_s": max_angular, "margin_unit": margin, "wander_scale": amp[0], "time_scale": lam}
@@ -575,7 +543,7 @@ def local_oscillations(rng: np.random.Generator, reach: Reach, duration_s: float
     ease = minimum_jerk(np.minimum(1.0, np.minimum(rel, T - rel) / 2.0).clip(0.0, 1.0))
     disp = (amp * ease * np.sin(phase))[:, None] * d
     position = centre[None, :] + disp
-    base = hand_base_orientation(reach, centre)
+    base = NATURAL_GRIP
     quat = natural_orientation(rng, rel, rate_hz, base_quat=base, mean_rate=8 * DEG, max_rate=40 * DEG,
                                f_band=(0.05, 0.5))
     meta = {"band_hz": list(band_hz), "directions": names, "centre_W": centre.tolist(),
@@ -609,7 +577,7 @@ def figure_eight(rng: np.random.Generator, reach: Reach, duration_s: float = 30.
                 0.8 * min(reach.free_distance(centre, v), reach.free_distance(centre, -v)) / (height / 2))
     a = ease * scale
     position = centre + (a * width / 2 * np.sin(phase))[:, None] * u + (a * height / 2 * np.sin(2 * phase))[:, None] * v
-    quat = natural_orientation(rng, rel, rate_hz, base_quat=hand_base_orientation(reach, centre), mean_rate=6 * DEG,
+    quat = natural_orientation(rng, rel, rate_hz, base_quat=NATURAL_GRIP, mean_rate=6 * DEG,
                                max_rate=30 * DEG)
     meta = {"width_m": width * scale, "height_m": height * scale, "period_range_s": list(period_range_s),
             "plane_tilt_rad": tilt, "plane_yaw_rad": yaw}
@@ -645,7 +613,7 @@ def surface_circles(rng: np.random.Generator, reach: Reach, surface_z: float, du
     down = minimum_jerk(np.minimum(rel / approach_s, (T - rel) / approach_s).clip(0.0, 1.0))
     z = surface_z + 0.01 * (1 - down) - depth * down
     position = np.stack([x, y, z], axis=1)
-    quat = natural_orientation(rng, rel, rate_hz, base_quat=hand_base_orientation(reach, centre), mean_rate=4 * DEG,
+    quat = natural_orientation(rng, rel, rate_hz, base_quat=NATURAL_GRIP, mean_rate=4 * DEG,
                                max_rate=16 * DEG)
     meta = {"radius_m": r, "depth_m": depth_m, "period_range_s": list(period_range_s), "surface_z_m": surface_z}
     return _finish(rng, t, rate_hz, position, quat, "frictionless_surface", None, meta)
@@ -689,7 +657,7 @@ def surface_presses(rng: np.random.Generator, reach: Reach, surface_z: float, du
         dz[m] = a + (b - a) * minimum_jerk((rel[m] - start) / dur)
     position = np.repeat(top[None, :], len(rel), axis=0)
     position[:, 2] += dz
-    quat = natural_orientation(rng, rel, rate_hz, base_quat=hand_base_orientation(reach, centre), mean_rate=3 * DEG,
+    quat = natural_orientation(rng, rel, rate_hz, base_quat=NATURAL_GRIP, mean_rate=3 * DEG,
                                max_rate=12 * DEG)
     meta = {"surface_z_m": surface_z, "edge_distance_m": edge, "press_depths_m": [full * f - above_m for f in depth_frac],
             "press_count": len(depth_frac), "press_speed_m_per_s": press_speed}

@@ -17,7 +17,7 @@ are :class:`RigConfig` (numbers and their sources below).
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 
 import numpy as np
 from scipy import signal
@@ -410,12 +410,3 @@ def sync_trigger(cfg: RigConfig, t: np.ndarray, t0: float) -> dict:
 def clock_offset(rng: np.random.Generator, cfg: RigConfig) -> float:
     """A recorder's clock offset (s): add it to the stream's ``t`` to reach the session clock (spec §2.8)."""
     return float(rng.uniform(-cfg.max_clock_offset_s, cfg.max_clock_offset_s)) if cfg.clock_offsets else 0.0
-
-
-@dataclass
-class RigTruth:
-    """The rig's true parameters for ``truth.json``."""
-
-    config: dict
-    marker_layout: dict = field(default_factory=dict)
-    clock_offsets_s: dict = field(default_factory=dict)

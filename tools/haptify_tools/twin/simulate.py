@@ -21,6 +21,8 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+import time
+import zipfile
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,6 +30,7 @@ from typing import Callable
 
 import numpy as np
 
+from haptify.conventions import matrix_to_quat, pose_apply, quat_to_matrix
 from haptify.errors import fail
 from haptify.storage import SessionWriter, atomic_write_json
 from haptify.versions import PACKAGE_VERSION
@@ -386,8 +389,6 @@ class DossierSimulator:
         base_p = np.broadcast_to(np.asarray(self.twin.placement.position, float), (n, 3))
         base_q = np.broadcast_to(np.asarray(self.twin.placement.quaternion, float), (n, 4))
         bodies["base"] = (base_p, base_q)
-        from haptify.conventions import matrix_to_quat, pose_apply
-
         for i, name in enumerate(self.link_names):
             f = frames[i + 1]
             p_w = device_to_world(self.twin, f[:, :3, 3])
@@ -423,8 +424,6 @@ class DossierSimulator:
 
 
 def _rot(q) -> np.ndarray:
-    from haptify.conventions import quat_to_matrix
-
     return quat_to_matrix(np.asarray(q, float))
 
 
@@ -463,8 +462,6 @@ def simulate_dossier(twin: TwinFile, out_dir: str | os.PathLike, options: Simula
     trials_truth, arrays, clock_records = [], {}, []
     recorded = 0.0
     planned = plan(opt)
-    import time
-
     clock0 = time.perf_counter()
     for p, res in zip(planned, _run_all(sim, planned, opt.workers)):
         writer.add_trial(p.trial_id, p.protocol, powered=res.powered, repetition=p.repetition, label=p.label,
@@ -561,8 +558,6 @@ def _run_all(sim: DossierSimulator, planned: list[PlannedTrial], workers: int):
 
 def write_npz(path: Path, arrays: dict[str, np.ndarray], level: int = 1) -> None:
     """Write arrays as a deflate-compressed ``.npz`` (readable by ``numpy.load``) at a fast compression level."""
-    import zipfile
-
     with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=level) as zf:
         for name, arr in arrays.items():
             with zf.open(name + ".npy", "w", force_zip64=True) as fh:
