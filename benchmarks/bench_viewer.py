@@ -19,9 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from haptify.storage import open_session
+from haptify.storage import SessionWriter, open_session
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
-from haptify.storage import SessionWriter
 from haptify_tools.viewer.recording import build
 
 DURATION_S = 140.0
