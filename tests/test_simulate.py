@@ -50,9 +50,10 @@ def test_truth_holds_every_effect_and_the_true_signals(dossier):
     assert truth["rig"]["config"]["mocap_noise_m"] == pytest.approx(0.15e-3)
     arrays = np.load(res.truth_npz)
     s = open_session(res.session)
-    # round trip: the stored commanded wrench is the rendering loop's command, bit for bit
+    # round trip: the stored commanded wrench is the rendering loop's command (truth kept in float32)
     cmd = s.read("stiffness-1", "commanded_wrench")
-    assert np.array_equal(cmd[["fx", "fy", "fz"]].to_numpy(), arrays["stiffness-1/commanded_W"][:, :3])
+    assert np.array_equal(cmd[["fx", "fy", "fz"]].to_numpy().astype(np.float32), arrays["stiffness-1/commanded_W"][:, :3])
+    assert np.array_equal(cmd["t"].to_numpy(), arrays["stiffness-1/t"])
     assert cmd["fz"].max() > 1.0
     # motion capture = truth + its configured noise
     pose = s.read("free_space-1", "handle_pose")
