@@ -40,7 +40,8 @@ class MeasuredTrial:
     ``position``/``quaternion``: the smoothed, gap-free hand path that drives the twin; ``force``:
     the measured calibrated hand force, low-passed; ``valid``: rows whose measured force and motion
     capture are usable; ``contact``: rows in contact with the rendered plane (active trials, from the
-    commanded force, spec §12.2); ``speed``: gimbal-centre speed, m/s.
+    commanded force, spec §12.2); ``speed``: gimbal-centre speed, m/s;
+    ``commanded_max_N``: largest commanded force magnitude (active trials), N.
     """
 
     trial_id: str
@@ -54,6 +55,7 @@ class MeasuredTrial:
     valid: np.ndarray
     contact: np.ndarray
     speed: np.ndarray
+    commanded_max_N: float = 0.0
 
     @property
     def active(self) -> bool:
@@ -91,12 +93,15 @@ def load_measured(session: SessionFolder, ctx: ComputeContext | None = None) -> 
         speed = np.linalg.norm(np.gradient(pos, hs.t, axis=0), axis=1)
         rendering = trial.rendering.model_dump(mode="json") if trial.powered and trial.rendering is not None else None
         contact = np.zeros(len(hs.t), bool)
+        cmd_max = 0.0
         if rendering is not None and session.stream(trial.id, "commanded_wrench") is not None:
             cmd = session.read(trial.id, "commanded_wrench")
             n = unit_normal(rendering["surface_normal"], trial.id)
             cmd_n = cmd[["fx", "fy", "fz"]].to_numpy() @ n
             contact = contact_of(np.interp(hs.t, cmd["t"].to_numpy(), cmd_n))
-        out.append(MeasuredTrial(trial.id, trial.protocol, rendering, hs.t, rate, pos, quat, force, ok, contact, speed))
+            cmd_max = float(np.max(np.linalg.norm(cmd[["fx", "fy", "fz"]].to_numpy(), axis=1)))
+        out.append(MeasuredTrial(trial.id, trial.protocol, rendering, hs.t, rate, pos, quat, force, ok, contact, speed,
+                                 cmd_max))
     if not out:
         raise fail("E302", "the measured session has no trial with a handle_wrench stream to compare with the twin",
                    file="session.json", expected="a free-space, local-dynamic, figure-eight, surface or stiffness trial",

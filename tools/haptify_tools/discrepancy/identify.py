@@ -75,10 +75,17 @@ def fit_candidate(cand: Candidate, twin: TwinFile, trials: list[MeasuredTrial], 
     only_active = cand.scope == "active"
     zero = {k: np.zeros_like(v) for k, v in base.items()}
 
+    probe = cand.probe(twin)
+    ceiling = np.inf
+    if cand.commanded_scale:
+        ceiling = max((tr.commanded_max_N for tr in trials if tr.active), default=0.0)
+        probe = ceiling if ceiling > 0 else probe
+
     def delta(p: float) -> dict:
+        if p >= ceiling:
+            return zero
         return _minus(simulate_all(cand.apply(twin, p), trials, only_active, base), base)
 
-    probe = cand.probe(twin)
     if only_active and not any(tr.active for tr in trials):
         return Fit(cand, probe, float("inf"), zero, st.score(design, residual, zero), 0)
     if cand.kind == "affine":
@@ -107,7 +114,7 @@ def fit_candidate(cand: Candidate, twin: TwinFile, trials: list[MeasuredTrial], 
         best = min(ps, key=lambda x: evals[x][0])
         if best == ps[0]:
             ev(ps[0] * np.exp(-step))
-        elif best == ps[-1]:
+        elif best == ps[-1] and ps[-1] * np.exp(step) < ceiling:
             ev(ps[-1] * np.exp(step))
         else:
             break

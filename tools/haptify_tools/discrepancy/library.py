@@ -42,13 +42,17 @@ class Candidate:
     probe: Callable[[TwinFile], float]          # affine: a typical value; search: the grid's centre
     grid_factors: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0, 4.0)
     lower: float = 0.0
+    #: the parameter is a force level compared with the commanded force: the grid is relative to the largest
+    #: commanded force of the active trials, and values above it (the cut-off never trips) need no simulation
+    commanded_scale: bool = False
 
     def apply(self, twin: TwinFile, value: float) -> TwinFile:
         """A copy of ``twin`` with this effect on and its parameter set to ``value`` (every axis)."""
-        t = set_param(twin, f"{self.effect_id}.{self.parameter}", float(value))
-        if self.effect_id == "drive.force_cutoff":
+        t = twin
+        if self.effect_id == "drive.force_cutoff":      # keep the re-arm level below the new trip level
             rearm = min(t.effects.drive_force_cutoff.rearm_force_N, 0.5 * float(value))
             t = set_param(t, "drive.force_cutoff.rearm_force_N", rearm)
+        t = set_param(t, f"{self.effect_id}.{self.parameter}", float(value))
         return set_param(t, f"{self.effect_id}.enabled", True)
 
     def available(self, twin: TwinFile) -> bool:
@@ -87,7 +91,7 @@ LIBRARY: tuple[Candidate, ...] = (
     Candidate("drive.torque_saturation", "max_torque_Nm", "N·m", "search", "active",
               _mean_of("drive.torque_saturation", "max_torque_Nm", 0.3)),
     Candidate("drive.force_cutoff", "trip_force_N", "N", "search", "active", lambda twin: 2.0,
-              grid_factors=(0.25, 0.5, 1.0, 2.0, 4.0)),
+              grid_factors=(0.3, 0.45, 0.65, 0.9), commanded_scale=True),
     Candidate("drive.backlash", "width_rad", "rad", "search", "active", _mean_of("drive.backlash", "width_rad", 0.002)),
     Candidate("kinematics.link_length", "delta_a_m", "m", "affine", "all", lambda twin: 0.005),
     Candidate("handle.connector_mass", "mass_kg", "kg", "affine", "all", _mean_of("handle.connector_mass", "mass_kg", 0.03)),

@@ -1,8 +1,9 @@
 """Statistics of the discrepancy workflow (issue 8; method of shared notes "finding the missing effect").
 
-- Contiguous blocks: each trial's rows are cut into five consecutive blocks, roles
-  train · validation · train · test · train (60 / 20 / 20 %); neighbouring samples are correlated, so
-  random splits would leak.
+- Contiguous blocks: each trial's rows are cut into ten consecutive blocks, roles
+  train · validation · train · test · train, twice (60 / 20 / 20 %), so that every held-out role sees
+  both halves of a trial (presses come and go); neighbouring samples are correlated, so random splits
+  would leak.
 - Decimation: the residual is kept every ``D``-th row, ``D`` the lag at which the baseline residual's
   autocorrelation (mean over trials and channels) first falls below 1/e; every count below (BIC, F
   test) uses the decimated rows, so correlated samples are not counted as independent evidence.
@@ -23,7 +24,7 @@ from scipy import stats as sps
 
 from haptify_tools.discrepancy.data import MeasuredTrial
 
-ROLES = ("train", "validation", "train", "test", "train")
+ROLES = ("train", "validation", "train", "test", "train") * 2
 BIC_MIN = 10.0              # "very strong" evidence on Kass & Raftery's scale
 P_MAX = 1e-3                # nested F test
 VALIDATION_MIN = 0.10       # the held-out validation residual energy must fall by at least 10 %
@@ -52,7 +53,7 @@ class Design:
 
 
 def block_roles(n: int) -> np.ndarray:
-    """Role of each of ``n`` consecutive rows (five contiguous blocks, :data:`ROLES`)."""
+    """Role of each of ``n`` consecutive rows (ten contiguous blocks, :data:`ROLES`)."""
     b = np.minimum((np.arange(n) * len(ROLES)) // max(n, 1), len(ROLES) - 1)
     return np.asarray(ROLES)[b]
 

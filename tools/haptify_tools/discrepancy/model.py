@@ -1,0 +1,118 @@
+"""``discrepancy.json``: the result of the discrepancy workflow (issue 8, step 4 "show").
+
+Class path for the schema generator: ``haptify_tools.discrepancy.model.DiscrepancyFile``.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class _M(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class Place(_M):
+    """One place where twin and measurement disagree: residual RMS there and its share of the residual energy."""
+
+    kind: Literal["benchmark", "trial", "contact", "speed_band", "region"]
+    label: str
+    rms_before_N: float = Field(description="RMS of the force residual (all three axes) before, N.")
+    rms_after_N: float = Field(description="The same with the updated twin, N.")
+    energy_share_before: float = Field(description="Share of the whole residual energy (before) found here, 0–1.")
+    samples: int
+
+
+class CandidateFit(_M):
+    """A library effect fitted to one round's residual."""
+
+    effect_id: str
+    parameter: str
+    value: float
+    stderr: float | None = Field(description="Standard error of value (null when not estimable).")
+    unit: str
+    delta_bic: float
+    p_value: float
+    validation_improvement: float = Field(description="1 − RSS₁/RSS₀ on the validation blocks.")
+    test_share: float = Field(description="Share of the test blocks' residual energy the effect explains.")
+    simulations: int
+    accepted: bool
+
+
+class RoundResult(_M):
+    number: int
+    decimation: int = Field(description="Rows kept every D-th sample for the statistics (correlation lag).")
+    candidates: list[CandidateFit] = Field(description="Every fitted candidate, best ΔBIC first.")
+    near_ties: list[str] = Field(default_factory=list, description="Other accepted candidates within 10 % of the best ΔBIC (ambiguous).")
+
+
+class AcceptedEffect(_M):
+    """An effect the workflow added to the twin, in the order it was accepted."""
+
+    order: int
+    effect_id: str
+    parameter: str
+    value: float
+    stderr: float | None
+    unit: str
+    delta_bic: float
+    p_value: float
+    share_explained: float = Field(description="Share of the held-out (test) residual energy it explained when added.")
+    near_ties: list[str] = Field(default_factory=list)
+
+
+class Structure(_M):
+    """What is left after the last accepted effect (spec: 'no effect in the library explains this')."""
+
+    heldout_share: float = Field(description="Share of held-out residual energy a generic state regression removes.")
+    f_p_value: float
+    ljung_box_p_value: float
+    structured: bool
+
+
+class SignalGap(_M):
+    """Force residual of one trial and axis, before and after (N); held-out = validation + test blocks."""
+
+    trial_id: str
+    protocol: str
+    channel: Literal["fx", "fy", "fz"]
+    rms_before_N: float
+    rms_after_N: float
+    heldout_rms_before_N: float
+    heldout_rms_after_N: float
+
+
+class BenchmarkGap(_M):
+    """A benchmark computed from the measured force and from the twin's force on the same path."""
+
+    metric: str
+    trial_id: str
+    unit: str
+    measured: float
+    twin_before: float
+    twin_after: float
+
+
+class DiscrepancyFile(_M):
+    """The whole result of ``haptify discrepancy`` (issue 8)."""
+
+    format: Literal["haptify-discrepancy"] = "haptify-discrepancy"
+    version: Literal["1.0"] = "1.0"
+    session_id: str
+    twin_name: str
+    verdict: Literal["explained", "unexplained residual", "no discrepancy"] = Field(
+        description="explained: effects accepted and no structure left; unexplained residual: structure left that "
+                    "no library effect explains; no discrepancy: nothing accepted and no structure left.")
+    accepted: list[AcceptedEffect]
+    rounds: list[RoundResult]
+    structure: Structure
+    where: list[Place] = Field(description="Places ranked by residual RMS before (largest first).")
+    signal_gaps: list[SignalGap]
+    benchmark_gaps: list[BenchmarkGap]
+    heldout_gap_before_N: float = Field(description="RMS force residual on the held-out blocks, all trials, before.")
+    heldout_gap_after_N: float
+    not_observable: dict[str, str] = Field(description="Library effect ids the force residual cannot reveal, and why.")
+    settings: dict[str, float]
+    files: dict[str, str] = Field(default_factory=dict, description="Outputs written beside this file.")

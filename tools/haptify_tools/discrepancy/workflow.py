@@ -1,0 +1,220 @@
+"""The discrepancy workflow end to end (issue 8): where → name → add → show.
+
+:func:`run_discrepancy` reads the measured session, re-simulates every force trial with the twin
+along the measured path, names missing effects by forward selection (:mod:`.identify`), writes the
+updated twin and shows the gap before and after: ``discrepancy.json`` (:class:`.model.DiscrepancyFile`),
+``report.html`` with its figures, and ``twin.json``. The output folder is built beside the target and
+renamed into place (spec §3.6 style), so an interrupted run leaves nothing half-written.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from haptify.errors import HaptifyError
+from haptify.free_space import magnitude_stats
+from haptify.stiffness import fit_stiffness
+from haptify.storage import atomic_write_json, open_session, replace_folder_atomically
+from haptify.surface import planar_stats
+
+from haptify_tools.discrepancy import data as dt
+from haptify_tools.discrepancy import stats as st
+from haptify_tools.discrepancy.identify import Selection, select_effects
+from haptify_tools.discrepancy.library import NOT_OBSERVABLE
+from haptify_tools.discrepancy.model import (
+    AcceptedEffect, BenchmarkGap, CandidateFit, DiscrepancyFile, Place, RoundResult, SignalGap, Structure,
+)
+from haptify_tools.twin.model import TwinFile, twin_from_dict, twin_to_dict, write_twin
+
+SPEED_BANDS_M_PER_S = (0.0, 0.02, 0.05, 0.1, 0.2, np.inf)
+MIN_PLACE_SHARE = 0.01          # regions holding fewer rows than this share are not ranked
+CHANNELS = ("fx", "fy", "fz")
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
+
+
+def localise(trials: list[dt.MeasuredTrial], before: dict, after: dict) -> list[Place]:
+    """Rank the places of disagreement (benchmark, trial, contact/free space, speed band, workspace
+    region = tertiles of the path along each world axis) by residual RMS before (spec-free, issue 8 step 1)."""
+    rows = []
+    for tr in trials:
+        v = tr.valid
+        rb, ra = (tr.force - before[tr.trial_id])[v], (tr.force - after[tr.trial_id])[v]
+        rows.append((tr, v, rb, ra))
+    total = sum(float(np.sum(rb ** 2)) for _, _, rb, _ in rows) or 1.0
+    n_all = sum(len(rb) for _, _, rb, _ in rows)
+    pos_all = np.concatenate([tr.position[v] for tr, v, _, _ in rows])
+    cuts = [np.quantile(pos_all[:, k], [1 / 3, 2 / 3]) for k in range(3)]
+    groups: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]] = {}
+
+    def add(kind, label, rb, ra):
+        groups.setdefault((kind, label), []).append((rb, ra))
+
+    for tr, v, rb, ra in rows:
+        add("benchmark", tr.protocol, rb, ra)
+        add("trial", tr.trial_id, rb, ra)
+        c = tr.contact[v]
+        if tr.active:
+            add("contact", "in contact with the rendered surface", rb[c], ra[c])
+            add("contact", "powered, not in contact", rb[~c], ra[~c])
+        else:
+            add("contact", "free space (unpowered)", rb, ra)
+        sp = tr.speed[v]
+        for lo, hi in zip(SPEED_BANDS_M_PER_S[:-1], SPEED_BANDS_M_PER_S[1:]):
+            m = (sp >= lo) & (sp < hi)
+            add("speed_band", f"{lo:g}–{hi:g} m/s", rb[m], ra[m])
+        p = tr.position[v]
+        cell = np.stack([np.searchsorted(cuts[k], p[:, k]) for k in range(3)], axis=1)
+        names = ("low", "mid", "high")
+        for key in {tuple(r) for r in cell.tolist()}:
+            m = np.all(cell == key, axis=1)
+            add("region", "x " + names[key[0]] + ", y " + names[key[1]] + ", z " + names[key[2]], rb[m], ra[m])
+    places = []
+    for (kind, label), parts in groups.items():
+        rb = np.concatenate([a for a, _ in parts])
+        ra = np.concatenate([b for _, b in parts])
+        if len(rb) == 0 or (kind in ("region", "speed_band") and len(rb) < MIN_PLACE_SHARE * n_all):
+            continue
+        places.append(Place(kind=kind, label=label, rms_before_N=float(np.sqrt(np.mean(np.sum(rb ** 2, axis=1)))),
+                            rms_after_N=float(np.sqrt(np.mean(np.sum(ra ** 2, axis=1)))),
+                            energy_share_before=float(np.sum(rb ** 2) / total), samples=int(len(rb))))
+    places.sort(key=lambda p: (-p.rms_before_N, p.kind, p.label))
+    return places
+
+
+def signal_gaps(design: st.Design, trials: list[dt.MeasuredTrial], before: dict, after: dict) -> list[SignalGap]:
+    """Per trial and axis: residual RMS over every usable row and over the held-out blocks, before and after."""
+    out = []
+    for tr in trials:
+        v = tr.valid
+        held = v & (st.block_roles(len(tr.t)) != "train")
+        for k, ch in enumerate(CHANNELS):
+            rb, ra = tr.force[:, k] - before[tr.trial_id][:, k], tr.force[:, k] - after[tr.trial_id][:, k]
+            rms = lambda x, m: float(np.sqrt(np.mean(x[m] ** 2))) if m.any() else 0.0  # noqa: E731
+            out.append(SignalGap(trial_id=tr.trial_id, protocol=tr.protocol, channel=ch, rms_before_N=rms(rb, v),
+                                 rms_after_N=rms(ra, v), heldout_rms_before_N=rms(rb, held), heldout_rms_after_N=rms(ra, held)))
+    return out
+
+
+def heldout_gap(trials: list[dt.MeasuredTrial], sim: dict) -> float:
+    """RMS force residual (N, three axes pooled) over the validation and test blocks of every trial."""
+    parts = [(tr.force - sim[tr.trial_id])[tr.valid & (st.block_roles(len(tr.t)) != "train")] for tr in trials]
+    r = np.concatenate(parts)
+    return float(np.sqrt(np.mean(r ** 2))) if len(r) else 0.0
+
+
+def _penetration(tr: dt.MeasuredTrial) -> tuple[np.ndarray, np.ndarray]:
+    n = np.asarray(tr.rendering["surface_normal"], float)
+    n = n / np.linalg.norm(n)
+    return (np.asarray(tr.rendering["surface_point_m"], float) - tr.position) @ n, n
+
+
+def benchmark_values(tr: dt.MeasuredTrial, force: np.ndarray) -> dict[str, tuple[float, str]]:
+    """The reference's benchmark operators applied to ``force`` on the trial's grid: free-space mean force
+    (spec §9.2), planar force on the surface (§12.3), rendered stiffness and peak force (§13.3)."""
+    v = tr.valid
+    out: dict[str, tuple[float, str]] = {}
+    try:
+        if tr.protocol in ("free_space", "local_dynamic", "other"):
+            out["free_space.force_mean" if tr.protocol == "free_space" else "force_mean"] = (magnitude_stats(force[v])["mean"], "N")
+        if tr.active:
+            pen, n = _penetration(tr)
+            c = v & tr.contact
+            if tr.protocol == "frictionless_surface" and c.sum() >= 2:
+                out["surface.planar_force_mean"] = (planar_stats(force[c], n)["mean"], "N")
+            if tr.protocol == "stiffness":
+                fit = fit_stiffness(tr.t[v], pen[v], force[v] @ n, tr.contact[v], tr.trial_id)
+                out["stiffness.measured"] = (fit.stiffness, "N/m")
+                out["stiffness.peak_force"] = (float(np.max((force @ n)[c])) if c.any() else 0.0, "N")
+    except HaptifyError:
+        pass
+    return out
+
+
+def benchmark_gaps(trials: list[dt.MeasuredTrial], before: dict, after: dict) -> list[BenchmarkGap]:
+    """Benchmarks from the measured force and from the twin's force before and after, per trial."""
+    out = []
+    for tr in trials:
+        m = benchmark_values(tr, tr.force)
+        b = benchmark_values(tr, before[tr.trial_id])
+        a = benchmark_values(tr, after[tr.trial_id])
+        for key in m:
+            if key in b and key in a:
+                out.append(BenchmarkGap(metric=key, trial_id=tr.trial_id, unit=m[key][1], measured=m[key][0],
+                                        twin_before=b[key][0], twin_after=a[key][0]))
+    return out
+
+
+def annotate_twin(twin: TwinFile, sel: Selection) -> TwinFile:
+    """The updated twin with each identified parameter's uncertainty and evidence in the effect's ``sources``."""
+    data = twin_to_dict(twin)
+    for f in sel.accepted:
+        c = f.candidate
+        holder = data["rig"] if c.effect_id == "handle.connector_mass" else data["effects"]
+        se = f"{f.stderr:.3g}" if np.isfinite(f.stderr) else "n/a"
+        holder[c.effect_id].setdefault("sources", {})[c.parameter] = (
+            f"identified by haptify discrepancy: {f.value:.6g} ± {se} {c.unit} (1 s.e.), "
+            f"ΔBIC {f.score.delta_bic:.1f}, p {f.score.p_value:.2g}")
+    return twin_from_dict(data)
+
+
+def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial], sel: Selection) -> DiscrepancyFile:
+    """Assemble :class:`DiscrepancyFile` from a finished selection."""
+    rounds = []
+    for i, r in enumerate(sel.rounds):
+        cands = [CandidateFit(effect_id=f.candidate.effect_id, parameter=f.candidate.parameter, value=f.value,
+                              stderr=_finite(f.stderr), unit=f.candidate.unit, delta_bic=f.score.delta_bic,
+                              p_value=f.score.p_value, validation_improvement=f.score.validation_improvement,
+                              test_share=f.score.test_share, simulations=f.simulations,
+                              accepted=bool(r.accepted and f is r.chosen)) for f in r.fits]
+        rounds.append(RoundResult(number=i + 1, decimation=r.design.decimation, candidates=cands, near_ties=r.near_ties))
+    accepted = [AcceptedEffect(order=i + 1, effect_id=f.candidate.effect_id, parameter=f.candidate.parameter, value=f.value,
+                               stderr=_finite(f.stderr), unit=f.candidate.unit, delta_bic=f.score.delta_bic,
+                               p_value=f.score.p_value, share_explained=f.score.test_share,
+                               near_ties=sel.rounds[i].near_ties) for i, f in enumerate(sel.accepted)]
+    s = sel.structure
+    verdict = "unexplained residual" if s["structured"] else ("explained" if accepted else "no discrepancy")
+    design = sel.rounds[0].design
+    return DiscrepancyFile(
+        session_id=session_id, twin_name=twin.name, verdict=verdict, accepted=accepted, rounds=rounds,
+        structure=Structure(**s), where=localise(trials, sel.initial_sim, sel.final_sim),
+        signal_gaps=signal_gaps(design, trials, sel.initial_sim, sel.final_sim),
+        benchmark_gaps=benchmark_gaps(trials, sel.initial_sim, sel.final_sim),
+        heldout_gap_before_N=heldout_gap(trials, sel.initial_sim), heldout_gap_after_N=heldout_gap(trials, sel.final_sim),
+        not_observable=dict(NOT_OBSERVABLE),
+        settings={"pose_cutoff_hz": dt.POSE_CUTOFF_HZ, "residual_cutoff_hz": dt.RESIDUAL_CUTOFF_HZ,
+                  "active_rate_hz": dt.ACTIVE_RATE_HZ, "bic_min": st.BIC_MIN, "p_max": st.P_MAX,
+                  "validation_min": st.VALIDATION_MIN, "structure_share": st.STRUCTURE_SHARE})
+
+
+def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | None = None, *, max_effects: int = 5,
+                    overwrite: bool = False, log: Callable[[str], object] | None = None,
+                    report: bool = True) -> tuple[DiscrepancyFile, Selection]:
+    """Run the workflow; with ``out`` write ``discrepancy.json``, ``twin.json`` and ``report.html`` there.
+
+    Returns the result and the selection (its simulations, for callers that draw or test).
+    """
+    session = open_session(session_path)
+    trials = dt.load_measured(session)
+    sel = select_effects(twin, trials, max_effects=max_effects, log=log)
+    result = build_result(session.session_id, twin, trials, sel)
+    if out is not None:
+        target = Path(out)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        build = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
+        files = {"twin": "twin.json"}
+        write_twin(annotate_twin(sel.twin, sel), build / "twin.json")
+        if report:
+            from haptify_tools.discrepancy.report import write_report
+
+            files.update(write_report(build, result, trials, sel))
+        result.files = files
+        atomic_write_json(build / "discrepancy.json", result.model_dump(mode="json"))
+        replace_folder_atomically(build, target, overwrite)
+    return result, sel
