@@ -362,6 +362,9 @@ def test_blueprint_per_protocol(recorded):
     assert "+ $origin/measured/commanded/force" in felt.contents and "+ $origin/compare/commanded/force" in felt.contents
     assert "+ $origin/measured/hand_force/calibrated" in felt.contents  # felt = calibrated when available
     assert "+ $origin/measured/hand_force/raw_world" not in felt.contents
+    free_tp = next(tp for tp in plan.trials if tp.trial.protocol == "free_space")
+    assert blueprints.series_view(plan, free_tp, *blueprints.VIEWS["hand_force"]) is not None
+    assert blueprints.series_view(plan, free_tp, *blueprints.VIEWS["commanded_vs_felt"]) is None  # nothing commanded
     for protocol in blueprints.LAYOUTS:  # every protocol has a layout naming only known views
         assert set(blueprints.LAYOUTS[protocol].views) <= set(blueprints.VIEWS)
 

@@ -63,19 +63,20 @@ LAYOUTS: dict[str, Layout] = {
 
 
 def series_view(plan: Plan, tp: TrialPlan, title: str, keys: list[str | tuple[str, ...]]) -> rrb.TimeSeriesView | None:
-    """A time-series view overlaying ``keys`` of every role, or None when none of them was recorded.
+    """A time-series view overlaying ``keys`` of every role; None when the first key (the view's subject,
+    e.g. the commanded force of "commanded vs felt") was not recorded for any role.
 
     A tuple of keys stands for alternatives: per role, the first one that was recorded.
     """
     paths = plan.paths()
     contents = []
-    for key in keys:
+    for i, key in enumerate(keys):
         for role in ROLES:
             present = [k for k in ((key,) if isinstance(key, str) else key) if f"/series/{tp.key}/{role}/{k}" in paths]
             if present:
                 contents.append(f"+ $origin/{role}/{present[0]}")
-    if not contents:
-        return None
+        if i == 0 and not contents:
+            return None
     return rrb.TimeSeriesView(origin=f"/series/{tp.key}", contents=contents, name=title)
 
 
