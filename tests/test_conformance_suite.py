@@ -84,3 +84,19 @@ def test_javascript_implementation_passes_its_cases_over_json_lines():
     assert [(v.case_id, v.message) for v in ran if v.status != "passed"] == []
     assert len(ran) >= 7
     assert adapter.implementation.get("name") == "haptify-js-example"
+
+
+def test_the_linter_reports_a_fixture_edited_by_hand(tmp_path):
+    from haptify_conform.lint import _stale_fixtures
+
+    src = REPO_ROOT / "fixtures" / "conformance"
+    root = tmp_path / "conformance"
+    root.mkdir()
+    shutil.copy(src / builder.DIGESTS, root / builder.DIGESTS)
+    shutil.copytree(src / "ws-sphere", root / "ws-sphere")
+    assert _stale_fixtures(root, {"conformance/ws-sphere"}) == []
+    assert _stale_fixtures(root, set()) == ["fixture conformance/ws-sphere is used by no case"]
+    manifest = json.loads((root / "ws-sphere" / "session.json").read_text())
+    manifest["device"]["datasheet"]["workspace_box_m"] = [0.2, 0.12, 0.07]
+    (root / "ws-sphere" / "session.json").write_text(json.dumps(manifest))
+    assert "differs from what its builder recorded" in _stale_fixtures(root, {"conformance/ws-sphere"})[0]

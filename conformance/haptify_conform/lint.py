@@ -39,6 +39,7 @@ def lint(root: Path = SUITE_ROOT, repo: Path = REPO_ROOT) -> list[str]:
             problems.append(f"case {c.id}: a validate case needs expected codes or valid: true")
         if not (repo / "fixtures" / c.fixture / "session.json").exists() and not (repo / "fixtures" / c.fixture).is_dir():
             problems.append(f"case {c.id}: fixture {c.fixture} does not exist")
+    problems += _stale_fixtures(repo / "fixtures" / "conformance", {c.fixture for c in cases})
     invalid_dir = repo / "fixtures" / "invalid"
     if invalid_dir.is_dir():
         covered = {c.fixture for c in cases if c.metric == "validate"}
@@ -47,3 +48,26 @@ def lint(root: Path = SUITE_ROOT, repo: Path = REPO_ROOT) -> list[str]:
             if name not in covered:
                 problems.append(f"invalid fixture {name} has no negative case")
     return problems
+
+
+def _stale_fixtures(root: Path, used: set[str]) -> list[str]:
+    """Every metric fixture must match the logical digest its builder recorded (``digests.json``): a
+    fixture edited by hand, or rebuilt without its record, is reported (spec §16.7)."""
+    if not root.is_dir():
+        return []
+    from haptify_tools.build_conformance_fixtures import DIGESTS, snapshot_digest
+
+    path = root / DIGESTS
+    if not path.is_file():
+        return [f"fixtures/{root.name}/{DIGESTS} is missing: run python -m haptify_tools.build_conformance_fixtures"]
+    recorded = json.loads(path.read_text(encoding="utf-8")).get("digests", {})
+    out = []
+    for folder in sorted(p for p in root.iterdir() if p.is_dir()):
+        name = f"{root.name}/{folder.name}"
+        if folder.name not in recorded:
+            out.append(f"fixture {name} has no recorded digest (not built by the fixture builder)")
+        elif snapshot_digest(folder) != recorded[folder.name]:
+            out.append(f"fixture {name} differs from what its builder recorded (edited by hand?); rebuild it")
+        elif name not in used:
+            out.append(f"fixture {name} is used by no case")
+    return out

@@ -2,8 +2,8 @@
 
 ``analyse(session, metric, parameters)`` validates the session and, when it is valid, computes the
 asked-for metric with the reference; it is what ``--python haptify_conform.reference:analyse`` calls.
-``python -m haptify_conform.reference`` serves the JSON-lines protocol; with two arguments
-(``SESSION OUT``) it behaves as a ``--cmd`` program and writes its answer to OUT.
+``python -m haptify_conform.reference`` serves the JSON-lines protocol; with arguments
+``SESSION OUT [METRIC [PARAMS]]`` it behaves as a ``--cmd`` program and writes its answer to OUT.
 
 Work shared by the cases of one fixture (the modeled workspace, a fitted dynamic model, calibrated
 signals) is kept in a per-session :class:`~haptify.compute.ComputeContext`, keyed by the session folder,
@@ -66,8 +66,10 @@ def main(argv: list[str] | None = None) -> int:
     from haptify_conform.adapters import serve_jsonl
 
     argv = sys.argv[1:] if argv is None else argv
-    if len(argv) == 2:
-        atomic_write_text(Path(argv[1]), json.dumps(analyse(argv[0])) + "\n")
+    if len(argv) in (2, 3, 4):  # SESSION OUT [METRIC [PARAMS.json]]: the --cmd form (spec §16.4.1)
+        metric = argv[2] if len(argv) > 2 else ""
+        params = json.loads(Path(argv[3]).read_text(encoding="utf-8")) if len(argv) > 3 else {}
+        atomic_write_text(Path(argv[1]), json.dumps(analyse(argv[0], metric, params)) + "\n")
         return 0
     return serve_jsonl(analyse, IMPLEMENTATION)
 

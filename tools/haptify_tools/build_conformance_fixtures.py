@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import hashlib
 import json
 import math
 import shutil
@@ -1146,6 +1147,21 @@ def case_documents(fixtures: dict[str, list[Fixture]], fixtures_root: Path) -> d
     return {name: json.dumps(doc, indent=2, ensure_ascii=False) + "\n" for name, doc in docs.items()}
 
 
+DIGESTS = "digests.json"
+
+
+def snapshot_digest(folder: Path) -> str:
+    """sha256 of a fixture's logical content (what ``--check`` compares; see build_invalid_fixtures.logical_snapshot)."""
+    return hashlib.sha256(json.dumps(logical_snapshot(folder), sort_keys=True).encode()).hexdigest()
+
+
+def write_digests(root: Path, names: list[str]) -> None:
+    """``fixtures/conformance/digests.json``: the logical digest of every fixture, for the suite linter (spec §16.7)."""
+    digests = {n: snapshot_digest(root / n) for n in sorted(names)}
+    (root / DIGESTS).write_text(json.dumps({"$comment": "written by haptify_tools.build_conformance_fixtures; checked by "
+                                            "haptify-conform --lint", "digests": digests}, indent=1) + "\n", encoding="utf-8")
+
+
 def build_fixture(fx: Fixture, target: Path) -> None:
     if target.exists():
         shutil.rmtree(target)
@@ -1177,6 +1193,9 @@ def main(argv: list[str] | None = None) -> int:
                     stale.append(f"fixture {FIXTURE_DIR}/{name}")
         extra = sorted(p.name for p in root.iterdir() if p.is_dir() and p.name not in flat) if root.is_dir() else []
         stale += [f"fixture {FIXTURE_DIR}/{n} is not built by this script" for n in extra]
+        recorded = json.loads((root / DIGESTS).read_text(encoding="utf-8"))["digests"] if (root / DIGESTS).is_file() else {}
+        if recorded != {n: snapshot_digest(root / n) for n in sorted(flat) if (root / n).is_dir()}:
+            stale.append(f"{FIXTURE_DIR}/{DIGESTS}")
         for fname, text in docs.items():
             path = args.cases / fname
             if not path.is_file() or path.read_text(encoding="utf-8") != text:
@@ -1187,6 +1206,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1 if stale else 0
     for name in args.only or flat:
         build_fixture(flat[name], root / name)
+    write_digests(root, [n for n in flat if (root / n).is_dir()])
     args.cases.mkdir(parents=True, exist_ok=True)
     for fname, text in docs.items():
         (args.cases / fname).write_text(text, encoding="utf-8")
