@@ -118,3 +118,16 @@ def test_cli_twin_export_and_simulate(tmp_path):
     with pytest.raises(Exception) as err:
         cmd_simulate.run_simulate(_args(preset="touch", set_params=["friction.coulomb"], out=str(tmp_path / "x")), UI(quiet=True))
     assert getattr(err.value, "findings", None) and err.value.findings[0].code == "E903"
+
+
+def test_rig_effects_switch_off():
+    from haptify_tools.twin.model import disable
+    from haptify_tools.twin.simulate import DossierSimulator
+
+    on = DossierSimulator(preset("touch"), SimulationOptions())
+    assert on.conn_m > 0 and np.any(on.bias_f != 0) and np.any(on.bias_a != 0) and np.any(on.bias_p != 0)
+    twin = disable(disable(preset("touch"), "sensor.bias"), "handle.connector_mass")
+    off = DossierSimulator(twin, SimulationOptions())
+    assert off.conn_m == 0.0
+    for b in (off.bias_f, off.bias_t, off.bias_a, off.bias_p):
+        assert np.array_equal(b, np.zeros(3))
