@@ -14,7 +14,6 @@ from pathlib import Path
 
 from haptify.storage import atomic_write_text
 from haptify.versions import SPEC_VERSION
-from haptify_conform import PROTOCOL_VERSION
 from haptify_conform.adapters import CmdAdapter, JsonlAdapter, PythonAdapter
 from haptify_conform.cases import load_cases, select
 from haptify_conform.lint import lint

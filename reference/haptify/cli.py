@@ -124,6 +124,9 @@ def main(argv: list[str] | None = None) -> int:
     except HaptifyError as err:
         _print_findings(ui, err.findings)
         return EXIT_CANNOT_RUN
+    except BrokenPipeError:  # e.g. `haptify … | head`: the reader left; not an error of ours
+        sys.stderr.close()
+        return EXIT_OK
     except KeyboardInterrupt:
         ui.warn("interrupted; nothing half-written was left behind")
         return EXIT_CANNOT_RUN

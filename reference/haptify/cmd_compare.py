@@ -4,12 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pydantic import ValidationError
-
 from haptify.compare import build_table, to_csv, to_html, to_markdown
-from haptify.errors import HaptifyError, fail
 from haptify.results import ResultsFile
-from haptify.storage import atomic_write_text, parse_json_file, pydantic_findings
+from haptify.storage import atomic_write_text, read_json_model
 
 RENDERERS = {"md": to_markdown, "csv": to_csv, "html": to_html}
 
@@ -24,14 +21,8 @@ def register(sub) -> None:
 
 
 def load_results(path: Path) -> ResultsFile:
-    """Read and check a results.json (E103-style JSON errors as E104 findings naming the file)."""
-    if not path.is_file():
-        raise fail("E101", f"{str(path)!r} does not exist", file=str(path))
-    data = parse_json_file(path, "E104", str(path))
-    try:
-        return ResultsFile.model_validate(data)
-    except ValidationError as exc:
-        raise HaptifyError(*pydantic_findings(exc, "E104", str(path))) from None
+    """Read and check a results.json (E104 names the file and every invalid field)."""
+    return read_json_model(path, ResultsFile, "E104")
 
 
 def run(args, ui) -> int:

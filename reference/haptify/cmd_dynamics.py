@@ -16,7 +16,6 @@ import pandas as pd
 from haptify.errors import fail
 from haptify.local_dynamics import (
     OUTPUT_NAMES,
-    write_atomically,
     export_mat,
     fit_trial,
     load_model,
@@ -26,7 +25,7 @@ from haptify.local_dynamics import (
     trial_data,
     training_trial,
 )
-from haptify.storage import open_session
+from haptify.storage import open_session, write_atomically
 
 
 def register(sub) -> None:

@@ -14,7 +14,7 @@ from typing import Any, Callable, Iterable
 
 from haptify.errors import Finding, HaptifyError
 from haptify.metric_definitions import all_families
-from haptify.results import DeviceSummary, Implementation, MetricResult, ResultsFile, ResultWarning, Unavailable
+from haptify.results import DeviceSummary, Implementation, MetricResult, ResultsFile, ResultWarning
 from haptify.storage import MANIFEST, SessionFolder, sha256_file
 from haptify.versions import PACKAGE_VERSION
 

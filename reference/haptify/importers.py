@@ -796,7 +796,7 @@ def _merge_motion_capture(old: dict, new: dict, label: str) -> dict:
     for body in new.get("rigid_bodies", []):
         if body["name"] in bodies and bodies[body["name"]] != body:
             raise fail("E502", f"rigid body {body['name']!r} differs from the session's", file=label,
-                       pointer=f"/markers/rigid_bodies", expected=bodies[body["name"]], found=body)
+                       pointer="/markers/rigid_bodies", expected=bodies[body["name"]], found=body)
         bodies.setdefault(body["name"], body)
     markers = list(old.get("markers", []))
     markers += [e for e in new.get("markers", []) if e not in markers]

@@ -19,13 +19,12 @@ from __future__ import annotations
 import contextlib
 import math
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal, Sequence, Union
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 from scipy.signal import lfilter
 
 from haptify.conventions import quat_mean
@@ -161,16 +160,9 @@ class HWModelFile(_Strict):
 
 def load_model(path: str | os.PathLike) -> HWModelFile:
     """Read and validate a parameter file (spec §11.5); E702 names the field when it is invalid."""
-    from haptify.storage import parse_json_file, pydantic_findings
+    from haptify.storage import read_json_model
 
-    p = Path(path)
-    if not p.is_file():
-        raise fail("E702", f"model file {str(p)!r} does not exist", file=str(p))
-    data = parse_json_file(p, "E702", str(p))
-    try:
-        return HWModelFile.model_validate(data)
-    except ValidationError as exc:
-        raise HaptifyError(*pydantic_findings(exc, "E702", str(p))) from None
+    return read_json_model(path, HWModelFile, "E702")
 
 
 def save_model(model: HWModelFile, path: str | os.PathLike) -> Path:
@@ -180,19 +172,6 @@ def save_model(model: HWModelFile, path: str | os.PathLike) -> Path:
     p = Path(path)
     atomic_write_text(p, model.model_dump_json(indent=2) + "\n")
     return p
-
-
-def write_atomically(path: Path, writer) -> None:
-    """Run ``writer(tmp_path)`` and rename the result onto ``path`` (spec §3.6)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp" + path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
-        writer(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def _cell(items: list) -> np.ndarray:
@@ -245,6 +224,8 @@ def export_mat(model: HWModelFile, path: str | os.PathLike) -> Path:
 
     p = Path(path)
     payload = {"model": model_to_mat_dict(model)}
+    from haptify.storage import write_atomically
+
     write_atomically(p, lambda tmp: savemat(tmp, payload, do_compression=True, oned_as="row"))
     return p
 

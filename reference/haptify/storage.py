@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import shutil
 import tempfile
 import uuid
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any, Iterable, Mapping
+from pathlib import Path, PurePosixPath
+from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
 import pandas as pd
@@ -39,6 +40,7 @@ from haptify.session_format import (
 from haptify.versions import SPEC_VERSION
 
 MANIFEST = "session.json"
+MAX_SYMLINK_HOPS = 40  # as POSIX SYMLOOP_MAX
 HASH_CHUNK = 1 << 20
 
 
@@ -51,19 +53,47 @@ def sha256_file(path: Path) -> str:
     return h.hexdigest()
 
 
-def resolve_inside(root: Path, relative: str, *, file_label: str | None = None) -> Path:
-    """The path of ``relative`` inside ``root``; raises E108/E109 when it would leave the folder (§3.3)."""
-    label = file_label or relative
+def resolve_inside(root: Path, relative: str, *, label: str | None = None) -> Path:
+    """The path of ``relative`` inside ``root`` with every symbolic link resolved lexically (spec §3.3).
+
+    Each component is examined with ``lstat`` inside the folder; a link's target is read with
+    ``readlink`` and resolved against the folder, never against the file system, so nothing outside
+    ``root`` is ever touched. Raises E108 for an unsafe declared path, E109 when a link leads out.
+    """
+    label = label or relative
     if not is_safe_relative_path(relative):
-        raise fail("E108", f"path {relative!r} is absolute or leaves the session folder", file=label,
-                   expected="a relative path inside the session folder", found=relative)
-    candidate = root / relative
-    real_root = root.resolve()
-    real = candidate.resolve()
-    if real != real_root and real_root not in real.parents:
-        raise fail("E109", f"{relative!r} resolves outside the session folder", file=label,
-                   expected=f"a file under {real_root}", found=str(real))
-    return candidate
+        raise HaptifyError(Finding("E108", f"path {relative!r} is absolute or leaves the session folder", file=label,
+                                   expected="a relative POSIX path inside the session folder", found=relative))
+    current: list[str] = []
+    pending = relative.split("/")
+    hops = 0
+    link = last_target = ""
+
+    def escape(target: str) -> HaptifyError:
+        return HaptifyError(Finding("E109", f"{relative!r} passes through the symbolic link {link!r} → {target!r}, "
+                                            "which leads outside the session folder", file=label,
+                                    expected="a link target inside the session folder", found=target))
+
+    while pending:
+        part = pending.pop(0)
+        if part in ("", "."):
+            continue
+        if part == "..":
+            if not current:
+                raise escape(last_target)
+            current.pop()
+            continue
+        candidate = root.joinpath(*current, part)
+        if candidate.is_symlink():
+            hops += 1
+            link = "/".join([*current, part])
+            last_target = os.readlink(candidate)
+            if hops > MAX_SYMLINK_HOPS or PurePosixPath(last_target).is_absolute() or "\\" in last_target:
+                raise escape(last_target)
+            pending = last_target.split("/") + pending
+            continue
+        current.append(part)
+    return root.joinpath(*current)
 
 
 def pointer_of(loc: Iterable[Any]) -> str:
@@ -72,19 +102,39 @@ def pointer_of(loc: Iterable[Any]) -> str:
     return "/" + "/".join(parts) if parts else ""
 
 
+class _NonFinite(ValueError):
+    pass
+
+
+def _reject_constant(name: str) -> float:
+    raise _NonFinite(f"{name} is not a JSON number")
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise _NonFinite(f"the number {text} overflows a 64-bit float")
+    return value
+
+
 def parse_json_file(path: Path, code: str, label: str) -> Any:
-    """Parse a JSON file; malformed JSON raises ``code`` with line and column."""
+    """Parse a JSON file strictly: UTF-8, no NaN/Infinity literals, no numbers that overflow (spec §3.1, §4.3)."""
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_bytes().decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise fail(code, f"{label} is not UTF-8 text: {exc.reason} at byte {exc.start}", file=label) from None
+        raise HaptifyError(Finding(code, f"{label} is not UTF-8 text: {exc.reason} at byte {exc.start}", file=label,
+                                   expected="UTF-8 JSON", found=f"byte 0x{exc.object[exc.start]:02x}")) from None
     except OSError as exc:
-        raise fail(code, f"{label} cannot be read: {exc.strerror}", file=label) from None
+        raise HaptifyError(Finding(code, f"{label} cannot be read: {exc.strerror}", file=label)) from None
     try:
-        return json.loads(text)
+        return json.loads(text, parse_constant=_reject_constant, parse_float=_finite_float)
     except json.JSONDecodeError as exc:
-        raise fail(code, f"{label} is not well-formed JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})",
-                   file=label, expected="JSON", found=text[max(0, exc.pos - 20): exc.pos + 20]) from None
+        raise HaptifyError(Finding(code, f"{label} is not well-formed JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})",
+                                   file=label, expected="JSON", found=text[max(0, exc.pos - 20): exc.pos + 20])) from None
+    except _NonFinite as exc:
+        raise HaptifyError(Finding(code, f"{label} is not well-formed JSON: {exc}", file=label, expected="a finite JSON number")) from None
+    except RecursionError:
+        raise HaptifyError(Finding(code, f"{label} nests too deeply to be a Haptify document", file=label)) from None
 
 
 def pydantic_findings(exc: ValidationError, code: str, label: str) -> list[Finding]:
@@ -97,6 +147,22 @@ def pydantic_findings(exc: ValidationError, code: str, label: str) -> list[Findi
         out.append(Finding(code, f"{err['msg']}", file=label, pointer=pointer_of(err["loc"]),
                            expected=err.get("ctx", {}).get("expected", err["type"]), found=found))
     return out
+
+
+def read_json_model(path: str | os.PathLike, model: type, code: str):
+    """Read a JSON file into a pydantic ``model``; a missing, malformed or invalid file is ``code``.
+
+    Used for every standalone document (results files, model parameter files): the finding names the
+    file, the JSON pointer of each invalid field, what was expected and what was found.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise fail(code, f"{str(p)!r} does not exist or is not a file", file=str(p))
+    data = parse_json_file(p, code, str(p))
+    try:
+        return model.model_validate(data)
+    except ValidationError as exc:
+        raise HaptifyError(*pydantic_findings(exc, code, str(p))) from None
 
 
 class SessionFolder:
@@ -240,19 +306,33 @@ def write_table(path: Path, frame: pd.DataFrame, fmt: str) -> None:
         frame.to_csv(path, index=False, na_rep="NaN", float_format=None, lineterminator="\n")
 
 
-def atomic_write_text(path: Path, text: str) -> None:
-    """Write a text file atomically (temp file in the same folder, then rename; spec §3.6)."""
+def write_atomically(path: Path, writer: Callable[[str], Any]) -> None:
+    """Run ``writer(tmp_path)`` on a temporary file beside ``path``, then rename it onto ``path`` (spec §3.6).
+
+    An exception (or an interruption) leaves ``path`` as it was and removes the temporary file.
+    """
+    path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp" + path.suffix, dir=path.parent)
+    os.close(fd)
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
+        writer(tmp)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    """Write a text file atomically, flushed to disk before the rename (spec §3.6)."""
+
+    def write(tmp: str) -> None:
+        with open(tmp, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+
+    write_atomically(path, write)
 
 
 def atomic_write_json(path: Path, payload: Any) -> None:

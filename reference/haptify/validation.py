@@ -42,11 +42,18 @@ from haptify.session_format import (
     Stream,
     Trial,
     expected_columns,
-    is_safe_relative_path,
     kind_table,
     quaternion_groups,
 )
-from haptify.storage import MANIFEST, pointer_of, pydantic_findings, read_table, sha256_file
+from haptify.storage import (
+    MANIFEST,
+    parse_json_file,
+    pointer_of,
+    pydantic_findings,
+    read_table,
+    resolve_inside,
+    sha256_file,
+)
 from haptify.versions import PACKAGE_VERSION, SPEC_VERSION
 
 # --- tolerances and limits of spec chapter 4 (§4.4, §4.5) ----------------------------------------
@@ -59,7 +66,6 @@ STREAM_MAX_BYTES = 8 * 2**30          # spec §3.5: no stream file exceeds 8 GiB
 STREAM_BYTES_BASE = 16 * 2**10        # plausibility bound of a stream file's size from its declared
 STREAM_BYTES_PER_COLUMN = 2**10       # rows and columns: base + per column + per value (E113), so a
 STREAM_BYTES_PER_VALUE = 32           # tiny declared stream never makes the validator read gigabytes
-MAX_SYMLINK_HOPS = 40                 # as POSIX SYMLOOP_MAX
 
 MOCAP_KINDS = frozenset(k for k, v in schemas.load("stream-kinds.json")["kinds"].items() if v.get("nan_allowed"))
 EXIT_VALID, EXIT_INVALID, EXIT_CANNOT_RUN = 0, 1, 2
@@ -273,49 +279,6 @@ def schema_findings(instance: Any, schema_name: str, code: str, label: str) -> l
 
 # --- files inside the folder (spec §4.2) ---------------------------------------------------------
 
-def resolve_contained(root: Path, relative: str, *, label: str | None = None) -> Path:
-    """The path of ``relative`` inside ``root`` with every symbolic link resolved lexically (spec §4.2).
-
-    Each component is examined with ``lstat`` inside the folder; a link's target is read with
-    ``readlink`` and resolved against the folder, never against the file system, so nothing outside
-    ``root`` is ever touched. Raises E108 for an unsafe declared path, E109 when a link leads out.
-    """
-    label = label or relative
-    if not is_safe_relative_path(relative):
-        raise HaptifyError(Finding("E108", f"path {relative!r} is absolute or leaves the session folder", file=label,
-                                   expected="a relative POSIX path inside the session folder", found=relative))
-    current: list[str] = []
-    pending = relative.split("/")
-    hops = 0
-    link = last_target = ""
-
-    def escape(target: str) -> HaptifyError:
-        return HaptifyError(Finding("E109", f"{relative!r} passes through the symbolic link {link!r} → {target!r}, "
-                                            "which leads outside the session folder", file=label,
-                                    expected="a link target inside the session folder", found=target))
-
-    while pending:
-        part = pending.pop(0)
-        if part in ("", "."):
-            continue
-        if part == "..":
-            if not current:
-                raise escape(last_target)
-            current.pop()
-            continue
-        candidate = root.joinpath(*current, part)
-        if candidate.is_symlink():
-            hops += 1
-            link = "/".join([*current, part])
-            last_target = os.readlink(candidate)
-            if hops > MAX_SYMLINK_HOPS or PurePosixPath(last_target).is_absolute() or "\\" in last_target:
-                raise escape(last_target)
-            pending = last_target.split("/") + pending
-            continue
-        current.append(part)
-    return root.joinpath(*current)
-
-
 def _regular_file(path: Path, label: str, missing_code: str, missing_text: str, limit: int) -> int:
     """``lstat`` a resolved path: its size when it is a regular file within ``limit``; coded errors otherwise."""
     try:
@@ -331,41 +294,6 @@ def _regular_file(path: Path, label: str, missing_code: str, missing_text: str, 
         raise HaptifyError(Finding("E113", f"{label!r} is {st.st_size} bytes, more than the {limit} bytes allowed", file=label,
                                    expected=f"at most {limit} bytes", found=st.st_size))
     return st.st_size
-
-
-class _NonFinite(ValueError):
-    pass
-
-
-def _reject_constant(name: str) -> float:
-    raise _NonFinite(f"{name} is not a JSON number")
-
-
-def _finite_float(text: str) -> float:
-    value = float(text)
-    if not math.isfinite(value):
-        raise _NonFinite(f"the number {text} overflows a 64-bit float")
-    return value
-
-
-def load_strict_json(path: Path, code: str, label: str) -> Any:
-    """Parse a JSON file strictly: UTF-8, no NaN/Infinity literals, no numbers that overflow (spec §4.3)."""
-    try:
-        text = path.read_bytes().decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise HaptifyError(Finding(code, f"{label} is not UTF-8 text: {exc.reason} at byte {exc.start}", file=label,
-                                   expected="UTF-8 JSON", found=f"byte 0x{exc.object[exc.start]:02x}")) from None
-    except OSError as exc:
-        raise HaptifyError(Finding(code, f"{label} cannot be read: {exc.strerror}", file=label)) from None
-    try:
-        return json.loads(text, parse_constant=_reject_constant, parse_float=_finite_float)
-    except json.JSONDecodeError as exc:
-        raise HaptifyError(Finding(code, f"{label} is not well-formed JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})",
-                                   file=label, expected="JSON", found=text[max(0, exc.pos - 20): exc.pos + 20])) from None
-    except _NonFinite as exc:
-        raise HaptifyError(Finding(code, f"{label} is not well-formed JSON: {exc}", file=label, expected="a finite JSON number")) from None
-    except RecursionError:
-        raise HaptifyError(Finding(code, f"{label} nests too deeply to be a Haptify document", file=label)) from None
 
 
 # --- the validator -------------------------------------------------------------------------------
@@ -455,9 +383,9 @@ class SessionValidator:
                 self._guard(lambda: self._check_trial(index, trial), trial=trial.id, file=MANIFEST)
 
     def _load_manifest(self) -> None:
-        path = resolve_contained(self.root, MANIFEST)
+        path = resolve_inside(self.root, MANIFEST)
         _regular_file(path, MANIFEST, "E102", f"no {MANIFEST} in {str(self.root)!r}", MANIFEST_MAX_BYTES)
-        raw = load_strict_json(path, "E103", MANIFEST)
+        raw = parse_json_file(path, "E103", MANIFEST)
         if isinstance(raw, dict) and "spec_version" in raw and raw["spec_version"] != SPEC_VERSION:
             raise HaptifyError(Finding("E105", f"spec version {raw['spec_version']!r} is not supported", file=MANIFEST,
                                        pointer="/spec_version", expected=SPEC_VERSION, found=_short(raw["spec_version"])))
@@ -527,9 +455,9 @@ class SessionValidator:
             return
         label = dev["file"]
         try:
-            path = resolve_contained(self.root, label)
+            path = resolve_inside(self.root, label)
             _regular_file(path, label, "E106", f"device file {label!r} does not exist", DEVICE_MAX_BYTES)
-            data = load_strict_json(path, "E106", label)
+            data = parse_json_file(path, "E106", label)
         except HaptifyError as err:
             for f in err.findings:
                 if f.file == label and f.pointer is None and f.code in ("E108", "E109"):
@@ -666,7 +594,7 @@ class SessionValidator:
             add(Finding("W406", f"{s.kind} stream at {s.rate_hz:g} Hz is below the recommended {spec['recommended_rate_hz']} Hz",
                         file=MANIFEST, pointer=f"{entry.pointer}/rate_hz", expected=spec["recommended_rate_hz"], found=s.rate_hz))
         # the file: path safety, existence, size, checksum, readability
-        path = resolve_contained(self.root, s.file)
+        path = resolve_inside(self.root, s.file)
         size_limit = min(STREAM_MAX_BYTES, STREAM_BYTES_BASE + len(declared) * (STREAM_BYTES_PER_COLUMN + STREAM_BYTES_PER_VALUE * s.rows))
         _regular_file(path, label, "E110", f"stream file {label!r} does not exist", size_limit)
         digest = sha256_file(path)
@@ -674,7 +602,7 @@ class SessionValidator:
             add(Finding("E111", f"checksum of {label!r} does not match session.json", file=label, expected=s.sha256, found=digest))
         table = read_table(path, s.format, declared, label=label)
         if list(table.columns) != declared:
-            add(Finding("E201", f"the file's columns differ from the columns declared in session.json", file=label,
+            add(Finding("E201", "the file's columns differ from the columns declared in session.json", file=label,
                         expected=declared, found=[str(c) for c in table.columns]))
             return
         n = len(table)

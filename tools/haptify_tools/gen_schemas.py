@@ -24,6 +24,7 @@ MODELS: dict[str, str] = {
     "results": "haptify.results:ResultsFile",
     "import-map": "haptify.importers:ImportMap",
     "hw-model": "haptify.local_dynamics:HWModelFile",
+    "validation-report": "haptify.validation:ValidationReportModel",
     "conformance-cases": "haptify_conform.cases:CaseFile",
     "conform-report": "haptify_conform.report:ConformReport",
 }
