@@ -700,6 +700,7 @@ def write_rrd(plan: Plan, path: str | os.PathLike, blueprint: Any) -> Path:
     try:
         rec = rr.RecordingStream(APP_ID, recording_id=plan.recording_id, send_properties=False)
         rec.save(tmp, default_blueprint=blueprint)
+        rec.send_recording_name(plan.recording_id)
         for e in plan.entries:
             if e.static:
                 rec.log(e.path, *e.static, static=True, strict=True)
