@@ -153,6 +153,19 @@ def handle_trial(w: SessionWriter, tid: str, protocol: str, *, duration_s: float
         w.add_stream(tid, "plate_wrench", rb.plate_stream(t_ft, raw), rate_hz=ft_rate, fmt=fmt)
 
 
+def active_session(name: str, rig_kind: str, tid: str, protocol: str, duration_s: float, spin_rate: float, position: Fn,
+                   force: Fn, commanded: Fn, rendering: dict, rates, fmt: str) -> Callable[[Path], None]:
+    """The builder of a one-trial session of a rendering protocol (surface, stiffness): powered, with the
+    commanded wrench, in the example rig or the fully rotated one."""
+    def build(path: Path) -> None:
+        rig = example_rig() if rig_kind == "example" else rotated_rig_full()
+        w = manifest(f"conf-{name}", rig)
+        handle_trial(w, tid, protocol, duration_s=duration_s, position=position, quaternion=spin(spin_rate), force_w=force,
+                     powered=True, rendering=rendering, commanded_w=commanded, rates=rates, fmt=fmt)
+        w.write(path)
+    return build
+
+
 def grid(duration_s: float, rate: float = 100.0) -> np.ndarray:
     """The common grid of spec §7.3 for streams that all start at 0 and end at ``duration_s``."""
     return clock(duration_s, rate)
@@ -684,15 +697,8 @@ def surface_fixtures() -> list[Fixture]:
 
         rendering = {"surface_point_m": list(point), "surface_normal": list(normal_raw), "stiffness_N_per_m": 750.0}
 
-        def build(path: Path, name=name, rig_kind=rig_kind, secs=secs, position=position, force=force, commanded=commanded,
-                  rendering=rendering, rates=rates, fmt=fmt) -> None:
-            rig = example_rig() if rig_kind == "example" else rotated_rig_full()
-            w = manifest(f"conf-{name}", rig)
-            handle_trial(w, "surface-1", "frictionless_surface", duration_s=secs, position=position, quaternion=spin(0.05),
-                         force_w=force, powered=True, rendering=rendering, commanded_w=commanded, rates=rates, fmt=fmt)
-            w.write(path)
-
-        fx = Fixture(name, build)
+        fx = Fixture(name, active_session(name, rig_kind, "surface-1", "frictionless_surface", secs, 0.05, position, force,
+                                          commanded, rendering, rates, fmt))
         tg = grid(secs)
         used = (tg >= t_on + guard - 1e-9) & (tg <= t_off - guard + 1e-9)
         truth = planar(tg[used])
@@ -760,15 +766,8 @@ def stiffness_fixtures() -> list[Fixture]:
 
         rendering = {"surface_point_m": list(point), "surface_normal": list(normal_raw), "stiffness_N_per_m": K_CMD}
 
-        def build(path: Path, name=name, rig_kind=rig_kind, position=position, force=force, commanded=commanded,
-                  rendering=rendering, rates=rates, fmt=fmt) -> None:
-            rig = example_rig() if rig_kind == "example" else rotated_rig_full()
-            w = manifest(f"conf-{name}", rig)
-            handle_trial(w, "stiffness-1", "stiffness", duration_s=duration, position=position, quaternion=spin(0.03),
-                         force_w=force, powered=True, rendering=rendering, commanded_w=commanded, rates=rates, fmt=fmt)
-            w.write(path)
-
-        fx = Fixture(name, build)
+        fx = Fixture(name, active_session(name, rig_kind, "stiffness-1", "stiffness", duration, 0.03, position, force,
+                                          commanded, rendering, rates, fmt))
         short = name.removeprefix("stiff-")
         how = (f"five presses 12 mm deep into a rendered {K_CMD:g} N/m surface (normal {normal_raw}); the device's force is "
                f"{k:g} N/m × penetration " + (f"saturating at {peak} N" if after is None else f"up to {peak} N, then {after} N until the press ends")
@@ -783,17 +782,14 @@ def stiffness_fixtures() -> list[Fixture]:
                                  "analytic", how + "; every press reaches the saturation plateau", desc))
         out.append(fx)
     # A third peak-force case: a press that never saturates, so its peak is k·depth.
-    def shallow(path: Path) -> None:
-        n = np.array([0.0, 0.0, 1.0])
-        w = manifest("conf-stiff-linear", example_rig())
-        handle_trial(w, "stiffness-1", "stiffness", duration_s=duration, position=lambda t: np.array([0.0, 0.01, 0.1]) - press_depth(t)[:, None] * n,
-                     quaternion=spin(0.03), force_w=lambda t: np.clip(300.0 * press_depth(t), 0.0, None)[:, None] * n,
-                     powered=True, rendering={"surface_point_m": [0.0, 0.01, 0.1], "surface_normal": [0.0, 0.0, 1.0],
-                                              "stiffness_N_per_m": K_CMD},
-                     commanded_w=lambda t: (K_CMD * np.maximum(press_depth(t), 0.0))[:, None] * n)
-        w.write(path)
-
-    fx = Fixture("stiff-linear", shallow)
+    up = np.array([0.0, 0.0, 1.0])
+    fx = Fixture("stiff-linear", active_session(
+        "stiff-linear", "example", "stiffness-1", "stiffness", duration, 0.03,
+        lambda t: np.array([0.0, 0.01, 0.1]) - press_depth(t)[:, None] * up,
+        lambda t: np.clip(300.0 * press_depth(t), 0.0, None)[:, None] * up,
+        lambda t: (K_CMD * np.maximum(press_depth(t), 0.0))[:, None] * up,
+        {"surface_point_m": [0.0, 0.01, 0.1], "surface_normal": [0.0, 0.0, 1.0], "stiffness_N_per_m": K_CMD},
+        (500.0, 500.0, 100.0), "parquet"))
     fx.cases += [
         case("stiffness.peak_force.linear", "stiffness.peak_force", "13.4", fx.name, 300.0 * 0.012, "N", 0.0, 0.01, "analytic",
              "a purely linear 300 N/m spring pressed 12 mm deep: the peak is 3.6 N (the sin² press is smooth at its bottom, "
