@@ -4,14 +4,18 @@ from __future__ import annotations
 
 import math
 
+import matplotlib
 import numpy as np
 import pytest
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from haptify.compute import ComputeContext
 from haptify.conventions import quat_from_axis_angle, quat_to_matrix
-from haptify.free_space import compute, exceedance, force_field, magnitude_stats, plate_force_about_weight
+from haptify.free_space import compute, exceedance, force_field, magnitude_stats, plate_force_about_weight, report_figures
 from haptify.results import MetricResult, Unavailable
 from haptify.storage import open_session
 from metric_sessions import add_handle_trial, circle, spin, writer
@@ -119,6 +123,13 @@ def test_session_values_match_the_truth(session):
     for b in bins:
         assert b["mean_force_N"][0] == pytest.approx(0.5, abs=5e-3)
         assert b["mean_force_N"][1] == pytest.approx(-0.4, abs=5e-3)
+
+    class Results:  # the part of a ResultsFile the figures read
+        def get(self, metric_id):
+            return res.get(metric_id)
+
+    assert [f.name for f in report_figures(ctx, Results())] == ["free_space_fs-1", "free_space_force_field"]
+    plt.close("all")
 
 
 def test_no_free_space_trial_gives_e310(tmp_path):

@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import math
 
+import matplotlib
 import numpy as np
 import pytest
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -13,7 +17,7 @@ from haptify.compute import ComputeContext
 from haptify.conventions import quat_from_axis_angle, quat_to_matrix
 from haptify.errors import HaptifyError
 from haptify.results import MetricResult, Unavailable
-from haptify.stiffness import compute, find_presses, fit_stiffness, runs
+from haptify.stiffness import compute, find_presses, fit_stiffness, report_figures, runs
 from haptify.storage import open_session
 from haptify.surface import contact_of, unit_normal
 from metric_sessions import add_handle_trial, spin, writer
@@ -151,6 +155,9 @@ def test_session_metrics(tmp_path):
     assert res["stiffness.peak_force"].value == pytest.approx(F_SAT, rel=0.01)
     assert res["stiffness.measured"].diagnostics["presses"] == [N_PRESSES, N_PRESSES]
     assert res["stiffness.peak_force"].n == 2 and not ctx.warnings
+    figures = report_figures(ctx, None)
+    assert [f.name for f in figures] == ["stiffness"]
+    plt.close("all")
 
 
 def test_few_presses_warn_and_no_trial_is_unavailable(tmp_path):

@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import math
 
+import matplotlib
 import numpy as np
 import pytest
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -15,7 +19,7 @@ from haptify.errors import HaptifyError
 from haptify.metric_definitions import param
 from haptify.results import MetricResult, Unavailable
 from haptify.storage import open_session
-from haptify.surface import compute, contact_of, guarded, planar_force, planar_stats, unit_normal
+from haptify.surface import compute, contact_of, guarded, planar_force, planar_stats, report_figures, unit_normal
 from metric_sessions import add_handle_trial, spin, writer
 
 NORMAL = unit_normal([0.0, 0.2, 1.0])
@@ -121,6 +125,8 @@ def test_planar_force_over_the_contact_samples_only(session):
     assert mean.diagnostics["normal_force_mean_N"][0] == pytest.approx(1.5, rel=5e-3)
     # the trial whose renderer never touched the surface is skipped with its own code
     assert any(w.code == "W413" and w.trial == "surf-3" and "E314" in w.message for w in ctx.warnings)
+    assert [f.name for f in report_figures(ctx, None)] == ["surface_surf-1", "surface_surf-2"]
+    plt.close("all")
 
 
 def test_no_surface_trial_gives_e310(tmp_path):

@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import math
 
+import matplotlib
 import numpy as np
 import pytest
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -15,7 +19,8 @@ from haptify.errors import HaptifyError
 from haptify.metric_definitions import param
 from haptify.results import MetricResult, Unavailable
 from haptify.storage import SessionWriter, open_session
-from haptify.vibration import combine, compute, dft321, highpass, power_spectrum, rms, spectral_centroid
+from haptify.vibration import (combine, compute, dft321, highpass, power_spectrum, report_audio, report_figures, rms,
+                               spectral_centroid)
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
 
 RATE = 2000.0
@@ -204,6 +209,12 @@ def test_session_metrics_aggregate_repetitions(tmp_path):
     assert res["vibration.baseline_rms"].value == pytest.approx(0.03, rel=0.02)
     assert res["vibration.baseline_centroid"].value == pytest.approx(110.0, rel=0.02)
     assert res["vibration.spectral_centroid"].unit == "Hz"
+    ctx = ComputeContext(session=session)
+    audio = report_audio(ctx)
+    assert [a.name for a in audio] == ["vibration_fs-1", "vibration_fs-2", "vibration_fs-3", "vibration_base-1"]
+    assert audio[0].rate_hz == pytest.approx(RATE) and len(audio[0].samples) == len(times(6.0)) - 2 * int(TRIM * RATE)
+    assert len(report_figures(ctx, None)) == 4
+    plt.close("all")
 
 
 def test_missing_baseline_is_unavailable_with_a_code(tmp_path):

@@ -3,11 +3,16 @@
 from __future__ import annotations
 
 import copy
+import functools
 import math
 from pathlib import Path
 
+import matplotlib
 import numpy as np
 import pytest
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import ConvexHull
@@ -19,7 +24,7 @@ from haptify.metric_definitions import param
 from haptify.results import MetricResult, Unavailable
 from haptify.session_format import Device
 from haptify.storage import SessionWriter, open_session
-from haptify.workspace import compute, modeled_solid, overlap_volume, volume_solid
+from haptify.workspace import compute, modeled_solid, overlap_volume, report_figures, volume_solid
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
 
 DEG = math.pi / 180
@@ -81,7 +86,7 @@ def pappus_volume(dev: dict, n: int = 1500) -> float:
 
 # --- the operator on analytic shapes (spec §8.4) ------------------------------------------------
 
-@pytest.mark.parametrize("n", [20_000, 200_000])
+@pytest.mark.parametrize("n", [20_000, 100_000])
 def test_sphere_sampled_on_its_boundary(n):
     rng = np.random.default_rng(RNG_SEED)
     solid = volume_solid(sphere_surface(n, 0.1, [0.013, -0.021, 0.2], rng))
@@ -150,10 +155,15 @@ def test_the_lattice_is_anchored_at_the_world_origin():
 def test_volume_does_not_depend_on_the_world_frame(ax, ay, az, angle, dx, dy):
     if ax * ax + ay * ay + az * az < 1e-6:
         ax = 1.0
-    rng = np.random.default_rng(RNG_SEED)
-    pts = box_surface(30_000, (0.12, 0.1, 0.08), rng)
+    pts, base = box_reference()
     moved = quat_rotate(quat_from_axis_angle(np.array([ax, ay, az]), np.array(angle)), pts) + [dx, dy, 0.0]
-    assert volume_solid(moved).volume == pytest.approx(volume_solid(pts).volume, rel=0.02)
+    assert volume_solid(moved).volume == pytest.approx(base, rel=0.01)
+
+
+@functools.lru_cache(maxsize=1)
+def box_reference():
+    pts = box_surface(30_000, (0.12, 0.1, 0.08), np.random.default_rng(RNG_SEED))
+    return pts, volume_solid(pts).volume
 
 
 def test_coverage_of_half_a_sphere():
@@ -297,6 +307,8 @@ def test_session_metrics_for_a_full_sweep_and_a_missing_lobe(tmp_path, mini_mode
     ratio = res["workspace.volume_ratio"].per_repetition
     assert ratio[0] == pytest.approx(measured.per_repetition[0] / modeled)
     assert not ctx.warnings
+    assert [f.name for f in report_figures(ctx, None)] == ["workspace"]
+    plt.close("all")
 
 
 def test_missing_kinematics_trials_and_datasheet_are_unavailable_with_codes(tmp_path):

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from haptify.caching import cached
-from haptify.errors import fail
+from haptify.errors import HaptifyError, fail
 from haptify.force_plate import plate_signals
 from haptify.metric_definitions import param
 from haptify.repetitions import TrialValue, aggregate, per_trial, unavailable
@@ -97,13 +97,13 @@ def hand_force_samples(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]
     return hs.force[ok], hs.position[ok]
 
 
-def plate_force_samples(ctx: Any, trial_id: str) -> np.ndarray:
-    """Bias-removed total plate force (N, W) low-passed at the handle-force cut-off and resampled onto the
-    trial's uniform grid at the common rate (spec §9.3; chapter 7 rules)."""
-    def build() -> np.ndarray:
+def plate_force_samples(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
+    """Times (s) and bias-removed total plate force (N, W), low-passed at the handle-force cut-off and
+    resampled onto the uniform grid of the plate stream's span at the common rate (spec §9.3; chapter 7)."""
+    def build() -> tuple[np.ndarray, np.ndarray]:
         plate = plate_signals(ctx, trial_id)
         grid = uniform_grid(float(plate.t[0]), float(plate.t[-1]), float(sp("rate_hz")))
-        return lowpass_resample(plate.t, plate.force, grid, float(sp("wrench_cutoff_hz")))
+        return grid, lowpass_resample(plate.t, plate.force, grid, float(sp("wrench_cutoff_hz")))
 
     return cached(ctx, ("free_space_plate", trial_id), build)
 
@@ -168,7 +168,58 @@ def compute(ctx: Any) -> list:
         done, first = per_trial(ctx, trials, lambda tid: plate_force_samples(ctx, tid), PLATE_ID)
         if done:
             out.append(aggregate(FAMILY, PLATE_ID, [TrialValue(t, float(np.linalg.norm(plate_force_about_weight(f), axis=1).mean()), compliance.get(t, []))
-                                                    for t, f in done.items()]))
+                                                    for t, (_, f) in done.items()]))
         else:
             out.append(unavailable(PLATE_ID, first))
     return out
+
+
+# --- report figures (spec §15.6; paper Fig. 6) ----------------------------------------------------
+
+def report_figures(ctx: Any, results: Any) -> list:
+    """Speeds and forces over time for the first usable free-space trial, and the force field (top view)."""
+    import matplotlib.pyplot as plt
+
+    from haptify.report import ReportFigure
+
+    figures = []
+    for trial in ctx.session.trials_of(PROTOCOL):
+        try:
+            hs = handle_signals(ctx, trial.id)
+            track = mocap_track(ctx, trial.id)
+        except HaptifyError:
+            continue
+        fig, axes = plt.subplots(3, 1, figsize=(10, 8), sharex=True)
+        axes[0].plot(track.t, np.linalg.norm(track.velocity, axis=1))
+        axes[0].axhline(float(fp("speed_limit_m_per_s")), color="r", ls="--", lw=0.8)
+        axes[0].set_ylabel("speed (m/s)")
+        axes[1].plot(track.t, np.degrees(np.linalg.norm(track.angular_velocity, axis=1)))
+        axes[1].axhline(np.degrees(float(fp("angular_speed_limit_rad_per_s"))), color="r", ls="--", lw=0.8)
+        axes[1].set_ylabel("angular speed (°/s)")
+        if hs.force is not None:
+            axes[2].plot(hs.t, np.linalg.norm(hs.force, axis=1), label="hand |F|")
+        try:
+            t_plate, p = plate_force_samples(ctx, trial.id)
+            axes[2].plot(t_plate, np.linalg.norm(plate_force_about_weight(p), axis=1), label="plate |P − mean P_z|", alpha=0.7)
+        except HaptifyError:
+            pass
+        axes[2].set_ylabel("force (N)")
+        axes[2].set_xlabel("t (s)")
+        axes[2].legend(fontsize=8, loc="upper right")
+        figures.append(ReportFigure(f"free_space_{trial.id}", f"Speeds and forces in free-space trial {trial.id} "
+                                    "(paper Fig. 6; spec §9.2–9.4).", fig))
+        break
+    record = results.get("free_space.force_mean") if results is not None else None
+    bins = (record.diagnostics.get("force_field", {}).get("bins", []) if record is not None else [])
+    if bins:
+        c = np.array([b["centre_m"] for b in bins])
+        f = np.array([b["mean_force_N"] for b in bins])
+        fig, ax = plt.subplots(figsize=(7, 6))
+        q = ax.quiver(c[:, 0], c[:, 1], f[:, 0], f[:, 1], np.linalg.norm(f, axis=1), cmap="viridis")
+        fig.colorbar(q, ax=ax, label="|mean F| (N)")
+        ax.set_xlabel("x (m, W)")
+        ax.set_ylabel("y (m, W)")
+        ax.set_aspect("equal")
+        figures.append(ReportFigure("free_space_force_field", "Free-space force field: mean force on the hand per "
+                                    f"{fp('force_field_bin_m') * 100:g} cm bin, top view (spec §9.5).", fig))
+    return figures
