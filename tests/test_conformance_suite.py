@@ -99,3 +99,12 @@ def test_the_linter_reports_a_fixture_edited_by_hand(tmp_path):
     manifest["device"]["datasheet"]["workspace_box_m"] = [0.2, 0.12, 0.07]
     (root / "ws-sphere" / "session.json").write_text(json.dumps(manifest))
     assert "differs from what its builder recorded" in _stale_fixtures(root, {"conformance/ws-sphere"})[0]
+
+
+@pytest.mark.parametrize("model", ["../ws-sphere/session.json", "/etc/passwd", "missing.json"])
+def test_a_case_model_outside_the_session_or_missing_is_e702(model):
+    from haptify_conform.reference import analyse
+
+    doc = analyse(str(REPO_ROOT / "fixtures" / "conformance" / "dyn-predict"), "dynamics.force_rmse", {"model": model})
+    assert [(u["id"], u["code"]) for u in doc["unavailable"]] == [("dynamics.force_rmse", "E702")]
+    assert doc["metrics"] == []
