@@ -16,19 +16,11 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench_workspace import best
 from haptify.compute import ComputeContext, compute_session
 from haptify.storage import open_session
 
 FAMILIES = ("workspace", "free_space", "vibration", "surface", "stiffness")
-
-
-def best(repeat: int, fn):
-    runs = []
-    for _ in range(repeat):
-        w, c = time.perf_counter(), time.process_time()
-        out = fn()
-        runs.append((time.perf_counter() - w, time.process_time() - c, out))
-    return min(runs, key=lambda r: r[0])
 
 
 def main() -> None:

@@ -21,7 +21,7 @@ from haptify_tools.example_session import TOUCH_DEVICE
 
 
 def best(repeat: int, fn):
-    """(best wall s, CPU s of that run, result)."""
+    """Run ``fn`` ``repeat`` times: (wall s, CPU s, result) of the fastest run (wall clock)."""
     runs = []
     for _ in range(repeat):
         w, c = time.perf_counter(), time.process_time()

@@ -311,6 +311,8 @@ def compute(ctx: Any) -> list:
 
     trials = [t.id for t in session.trials_of(PROTOCOL)]
     measured_ids = ("workspace.measured_volume", "workspace.volume_ratio", "workspace.coverage")
+    if not any(ctx.wants(m) for m in measured_ids):
+        return out
     if not trials:
         err = fail("E310", "the session has no workspace trial", expected="a trial of protocol 'workspace'", found=None)
         return out + [unavailable(m, err) for m in measured_ids]
