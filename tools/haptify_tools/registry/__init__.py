@@ -1,0 +1,1 @@
+"""The Haptify results registry: labs submit verified device results; everyone compares devices (issue 9)."""
