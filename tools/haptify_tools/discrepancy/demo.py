@@ -19,9 +19,8 @@ def demo_session(folder: Path, seed: int = 0) -> Path:
     truth = preset("touch")
     for key, value in DEMO_TRUTH.items():
         truth = set_param(truth, key, value)
-    opts = SimulationOptions(protocols=("free_space", "stiffness"), reps=1, seed=seed, durations=DEMO_DURATIONS,
-                             rig_trials=False, workers=1)
-    opts.protocols = ("free_space", "stiffness", "rig.handle_calibration")
+    opts = SimulationOptions(protocols=("free_space", "stiffness", "rig.handle_calibration"), reps=1, seed=seed,
+                             durations=DEMO_DURATIONS, rig_trials=False, workers=1)
     return simulate_dossier(truth, folder / "measured", opts).session
 
 
