@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import _rig_builders as rb
+from haptify_tools import rig_builders as rb
 from haptify import calibration
 from haptify.conventions import STANDARD_GRAVITY, quat_from_axis_angle, quat_multiply, quat_normalize
 from haptify.errors import HaptifyError

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import _rig_builders as rb
+from haptify_tools import rig_builders as rb
 from haptify import force_plate
 from haptify.conventions import quat_from_axis_angle
 from haptify.errors import HaptifyError

@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-import _rig_builders as rb
+from haptify_tools import rig_builders as rb
 from haptify import cmd_rig_check, rig_checks
 from haptify.cli import UI
 from haptify.compute import compute_session

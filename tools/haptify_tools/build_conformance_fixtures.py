@@ -36,11 +36,10 @@ from haptify.metric_definitions import param
 from haptify.storage import SessionWriter
 from haptify.versions import SPEC_VERSION
 from haptify_tools.build_invalid_fixtures import logical_snapshot
+from haptify_tools import rig_builders as rb
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
 
 REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO / "tests"))  # the truth-session builders shared with the unit tests
-import _rig_builders as rb  # noqa: E402
 
 FIXTURE_DIR = "conformance"
 CASES_DIR = REPO / "conformance" / "cases"

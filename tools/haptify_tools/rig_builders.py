@@ -1,8 +1,9 @@
 """Sessions with known answers for the calibration, signal, force-plate and rig tests.
 
-Every stream is generated from stated truth (bias, connector mass and centre of mass, plate mode
-frequencies, weight positions, recorder delays) with the sign conventions of spec §6.1 and §14.1, so
-the tests can state the expected values. Independent of the simulator on purpose.
+Shared by the unit tests and the conformance fixture builder. Every stream is generated from stated
+truth (bias, connector mass and centre of mass, plate mode frequencies, weight positions, recorder
+delays) with the sign conventions of spec §6.1 and §14.1, so the tests can state the expected values.
+Independent of the simulator on purpose.
 """
 
 from __future__ import annotations
