@@ -33,7 +33,7 @@ def main() -> int:
         session = simulate_dossier(truth, Path(tmp) / "measured", opt).session
         start = disable(disable(preset("touch"), "drive.series_elasticity"), "friction.coulomb")
         t0 = time.perf_counter()
-        result, _ = run_discrepancy(session, start, Path(tmp) / "out")
+        result, _ = run_discrepancy(session, start, Path(tmp) / "out", workers=0)
         wall = time.perf_counter() - t0
     recorded = sum(v for k, v in DURATIONS.items() if not k.startswith("rig."))
     print(f"discrepancy run on a {recorded:.0f} s dossier (5 device trials): {wall:.1f} s wall (target < {TARGET_S:.0f} s)")

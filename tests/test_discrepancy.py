@@ -43,7 +43,7 @@ def test_hidden_coulomb_friction_is_named_identified_and_the_gap_shrinks(tmp_pat
     if seed == 11:       # once through the command line: every output written, the twin updated
         twin_file = tmp_path / "start.json"
         write_twin(start, twin_file)
-        args = argparse.Namespace(session=str(session), twin=str(twin_file), out=str(tmp_path / "out"), max_effects=5,
+        args = argparse.Namespace(session=str(session), twin=str(twin_file), out=str(tmp_path / "out"), max_effects=5, workers=1,
                                   overwrite=False)
         assert cmd_discrepancy.run(args, UI(quiet=True)) == 0
         result = DiscrepancyFile.model_validate(json.loads((tmp_path / "out" / "discrepancy.json").read_text()))

@@ -33,7 +33,7 @@ def demo(out: str | Path | None = None, print_fn=print) -> dict:
         start = disable(disable(preset("touch"), "drive.series_elasticity"), "friction.coulomb")
         print_fn("hidden: " + ", ".join(f"{k} = {v}" for k, v in DEMO_TRUTH.items()) + "; the twin starts without both")
         result, _ = run_discrepancy(session, start, out, overwrite=True, log=lambda m: print_fn("  " + m),
-                                    report=out is not None)
+                                    report=out is not None, workers=0)
     for a in result.accepted:
         se = f" ± {a.stderr:.2g}" if a.stderr is not None else ""
         print_fn(f"named #{a.order}: {a.effect_id} {a.parameter} = {a.value:.4g}{se} {a.unit} "

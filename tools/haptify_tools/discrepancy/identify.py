@@ -9,6 +9,9 @@ first rejection (or ``max_effects``) ends the search; the residual left is then 
 
 from __future__ import annotations
 
+import multiprocessing as mp
+import os
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -21,7 +24,6 @@ from haptify_tools.twin.model import TwinFile
 
 REFINEMENTS = 2          # parabolic steps in log p after the grid
 EXTENSIONS = 2           # grid extensions when the best grid point is at an end
-SLOPE_STEP = 0.05        # relative step of the numerical slope for the standard error
 
 
 @dataclass
@@ -135,15 +137,43 @@ def fit_candidate(cand: Candidate, twin: TwinFile, trials: list[MeasuredTrial], 
         ev(pv)
     p = min(evals, key=lambda x: evals[x][0])
     pred = evals[p][1]
-    d_hi = delta(p * (1.0 + SLOPE_STEP))
-    slope = {k: (d_hi[k] - pred[k]) / (p * SLOPE_STEP) for k in pred}
-    se = st.standard_error(design, residual, pred, slope)
-    return Fit(cand, p, se, pred, st.score(design, residual, pred), len(evals) + 1)
+    se = _curvature_error(evals, p, st.score(design, residual, pred).n_train)
+    return Fit(cand, p, se, pred, st.score(design, residual, pred), len(evals))
+
+
+def _curvature_error(evals: dict[float, tuple[float, dict]], p: float, n: int) -> float:
+    """Standard error of a searched parameter from the curvature of the training SSE at its minimum:
+    ``SSE(p) ≈ SSE_min + c·(p − p̂)²`` through the best point and its two neighbours gives
+    ``c = Σ(∂δ/∂p)²`` (Gauss–Newton), so ``s.e. = √(SSE_min/(n − 1) / c)``; ∞ when the minimum is not bracketed."""
+    ps = sorted(evals)
+    i = ps.index(p)
+    if i == 0 or i == len(ps) - 1:
+        return float("inf")
+    x = np.array(ps[i - 1:i + 2])
+    y = np.array([evals[q][0] for q in x])
+    c = np.polyfit(x, y, 2)[0]
+    if c <= 0:
+        return float("inf")
+    return float(np.sqrt(evals[p][0] / max(n - 1, 1) / c))
 
 
 def select_effects(twin: TwinFile, trials: list[MeasuredTrial], max_effects: int = 5,
-                   library: tuple[Candidate, ...] = LIBRARY, log: Callable[[str], object] | None = None) -> Selection:
-    """Forward selection (see the module docstring); deterministic for a given twin and session."""
+                   library: tuple[Candidate, ...] = LIBRARY, log: Callable[[str], object] | None = None,
+                   workers: int = 1) -> Selection:
+    """Forward selection (see the module docstring); deterministic for a given twin and session.
+
+    ``workers`` > 1 fits the candidates of a round in that many processes (0: one per CPU, at most 4);
+    the result does not depend on it.
+    """
+    n = workers or min(4, os.cpu_count() or 1)
+    if n <= 1:
+        return _select(twin, trials, max_effects, library, log, None)
+    ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
+    with ProcessPoolExecutor(max_workers=n, mp_context=ctx) as pool:
+        return _select(twin, trials, max_effects, library, log, pool)
+
+
+def _select(twin, trials, max_effects, library, log, pool) -> Selection:
     measured = {tr.trial_id: tr.force for tr in trials}
     current = twin
     base = simulate_all(current, trials)
@@ -156,7 +186,13 @@ def select_effects(twin: TwinFile, trials: list[MeasuredTrial], max_effects: int
         if len(accepted) >= max_effects or not cands:
             rounds.append(Round(residual, design, [], None, False))
             break
-        fits = [fit_candidate(c, current, trials, design, residual, base) for c in cands]
+        if pool is None:
+            fits = [fit_candidate(c, current, trials, design, residual, base) for c in cands]
+        else:
+            # the slowest fits (searches over the active trials) first keeps every worker busy
+            order = sorted(range(len(cands)), key=lambda i: cands[i].kind != "search")
+            futures = {i: pool.submit(fit_candidate, cands[i], current, trials, design, residual, base) for i in order}
+            fits = [futures[i].result() for i in range(len(cands))]
         fits.sort(key=lambda f: -f.score.delta_bic)
         best = fits[0]
         ok = best.score.accepted()

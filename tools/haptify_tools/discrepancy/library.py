@@ -70,12 +70,31 @@ class Candidate:
         return [float(x) for x in v] if isinstance(v, list) else float(v)
 
 
-def _mean_of(effect_id: str, parameter: str, fallback: float) -> Callable[[TwinFile], float]:
-    def probe(twin: TwinFile) -> float:
-        v = getattr(twin.effect(effect_id), parameter)
+@dataclass(frozen=True)
+class _MeanOf:
+    """Probe: the mean magnitude of the parameter stored in the twin file, or ``fallback`` when it is zero."""
+
+    effect_id: str
+    parameter: str
+    fallback: float
+
+    def __call__(self, twin: TwinFile) -> float:
+        v = getattr(twin.effect(self.effect_id), self.parameter)
         m = float(np.mean(np.abs(v))) if isinstance(v, list) else float(v)
-        return m if m > 0 else fallback
-    return probe
+        return m if m > 0 else self.fallback
+
+
+@dataclass(frozen=True)
+class _Fixed:
+    """Probe: a fixed typical value."""
+
+    value: float
+
+    def __call__(self, twin: TwinFile) -> float:
+        return self.value
+
+
+_mean_of = _MeanOf
 
 
 #: The library, in the order of the simulator's effect ids (issue 8).
@@ -90,10 +109,10 @@ LIBRARY: tuple[Candidate, ...] = (
               _mean_of("drive.series_elasticity", "stiffness_Nm_per_rad", 10.0)),
     Candidate("drive.torque_saturation", "max_torque_Nm", "N·m", "search", "active",
               _mean_of("drive.torque_saturation", "max_torque_Nm", 0.3)),
-    Candidate("drive.force_cutoff", "trip_force_N", "N", "search", "active", lambda twin: 2.0,
+    Candidate("drive.force_cutoff", "trip_force_N", "N", "search", "active", _Fixed(2.0),
               grid_factors=(0.3, 0.45, 0.65, 0.9), commanded_scale=True),
     Candidate("drive.backlash", "width_rad", "rad", "search", "active", _mean_of("drive.backlash", "width_rad", 0.002)),
-    Candidate("kinematics.link_length", "delta_a_m", "m", "affine", "all", lambda twin: 0.005),
+    Candidate("kinematics.link_length", "delta_a_m", "m", "affine", "all", _Fixed(0.005)),
     Candidate("handle.connector_mass", "mass_kg", "kg", "affine", "all", _mean_of("handle.connector_mass", "mass_kg", 0.03)),
 )
 

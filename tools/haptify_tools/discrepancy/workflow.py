@@ -195,14 +195,15 @@ def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial]
 
 def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | None = None, *, max_effects: int = 5,
                     overwrite: bool = False, log: Callable[[str], object] | None = None,
-                    report: bool = True) -> tuple[DiscrepancyFile, Selection]:
+                    report: bool = True, workers: int = 1) -> tuple[DiscrepancyFile, Selection]:
     """Run the workflow; with ``out`` write ``discrepancy.json``, ``twin.json`` and ``report.html`` there.
 
-    Returns the result and the selection (its simulations, for callers that draw or test).
+    ``workers``: processes fitting candidates in parallel (0: one per CPU, at most 4; results do not
+    depend on it). Returns the result and the selection (its simulations, for callers that draw or test).
     """
     session = open_session(session_path)
     trials = dt.load_measured(session)
-    sel = select_effects(twin, trials, max_effects=max_effects, log=log)
+    sel = select_effects(twin, trials, max_effects=max_effects, log=log, workers=workers)
     result = build_result(session.session_id, twin, trials, sel)
     if out is not None:
         target = Path(out)
