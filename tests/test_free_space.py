@@ -137,3 +137,14 @@ def test_no_free_space_trial_gives_e310(tmp_path):
     w.add_trial("other-1", "other", powered=False, label="nothing")
     res = compute(ComputeContext(session=open_session(w.write(tmp_path / "s"))))
     assert len(res) == 7 and all(isinstance(m, Unavailable) and m.code == "E310" for m in res)
+
+
+def test_without_calibration_forces_are_unavailable_but_speeds_are_not(tmp_path):
+    w = writer("no-calibration")
+    w.manifest = {k: v for k, v in w.manifest.items() if k != "calibration"}
+    add_handle_trial(w, "fs-1", "free_space", duration_s=6.0, position=circle(0.05, 1.0), quaternion=spin(0.07), force_w=felt)
+    ctx = ComputeContext(session=open_session(w.write(tmp_path / "s")))
+    res = {m.id: m for m in compute(ctx)}
+    assert res["free_space.force_mean"].code == "E601"  # no handle calibration (spec chapter 6)
+    assert res["free_space.speed_mean"].value == pytest.approx(0.05, rel=1e-3)
+    assert res["free_space.plate_force_mean"].code == "E302"  # the trial has no plate stream
