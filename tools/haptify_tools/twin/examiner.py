@@ -487,11 +487,14 @@ def free_space_wander(rng: np.random.Generator, reach: Reach | None, duration_s:
         return np.linalg.norm(derivative(path(lam, sub), rate_hz / sub), axis=1)
 
     lam = 1.0
-    while reach is not None and amp[0] > 0.1 and np.min(reach.clearance(path(lam, sub))) < clearance_m:
+    for _ in range(30):
+        for _ in range(4):             # the time scale that gives the mean speed (speed ∝ lam, nearly)
+            v = speeds(lam)
+            lam *= min(mean_speed / max(np.mean(v), 1e-9), max_speed / max(np.max(v), 1e-9))
+        # keep clear of the base: shrink the wander about the centre (the time scale changes the path)
+        if reach is None or amp[0] <= 0.1 or np.min(reach.clearance(path(lam, sub))) >= clearance_m:
+            break
         amp[0] *= 0.85
-    for _ in range(4):                 # the time scale that gives the mean speed (speed ∝ lam, nearly)
-        v = speeds(lam)
-        lam *= min(mean_speed / max(np.mean(v), 1e-9), max_speed / max(np.max(v), 1e-9))
     position = path(lam)
     base = NATURAL_GRIP
     quat = natural_orientation(rng, rel, rate_hz, base_quat=base, mean_rate=mean_angular, max_rate=max_angular)
