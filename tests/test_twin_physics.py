@@ -91,8 +91,10 @@ def test_static_balance_of_the_whole_device_on_the_plate():
 
 # --- friction -----------------------------------------------------------------------------------
 
-def test_pure_coulomb_friction_opposes_the_motion_with_known_magnitude():
+@pytest.mark.parametrize("ripple", [0.0, 0.5])
+def test_pure_coulomb_friction_opposes_the_motion_with_known_magnitude(ripple):
     tw = massless(only(preset("touch"), "friction.coulomb"))
+    tw = set_param(tw, "friction.coulomb.ripple_fraction", ripple)
     tw = set_param(tw, "friction.coulomb.gimbal_torque_Nm", [0.0, 0.0, 0.0])
     tau_c = 0.02
     tw = set_param(tw, "friction.coulomb.torque_Nm", tau_c)
@@ -108,7 +110,9 @@ def test_pure_coulomb_friction_opposes_the_motion_with_known_magnitude():
     rho = np.hypot(p[:, 0] - base[0], p[:, 1] - base[1])
     mid = slice(100, 900)
     mag = np.linalg.norm(res.force_W[mid], axis=1)
-    assert mag == pytest.approx(tau_c / rho[mid], rel=1e-6)
+    ripple = 1.0 + tw.effects.friction_coulomb.ripple_fraction * np.sin(
+        2 * np.pi * tw.effects.friction_coulomb.ripple_cycles_per_rad * q[mid, 0])
+    assert mag == pytest.approx(tau_c * ripple / rho[mid], rel=1e-6)
     cosang = np.sum(res.force_W[mid] * v[mid], axis=1) / (mag * np.linalg.norm(v[mid], axis=1))
     assert cosang == pytest.approx(-1.0, abs=1e-6)
 
@@ -125,6 +129,50 @@ def test_friction_only_dissipates():
     res = ph.simulate_passive(tw, t, p, np.tile([1.0, 0, 0, 0], (len(t), 1)))
     power_hand = np.sum(-res.force_W * np.gradient(p, t, axis=0), axis=1)
     assert np.all(power_hand[5:-5] >= -1e-9)
+
+
+def test_passive_elastic_drive_tends_to_the_rigid_one():
+    """Rotors on very stiff cables without backlash act like rigidly coupled rotors (same friction and inertia)."""
+    base = massless(only(preset("touch"), "inertia", "friction.coulomb", "friction.viscous", "drive.series_elasticity"))
+    base = set_param(base, "friction.coulomb.ripple_fraction", 0.0)
+    kin = tk.true_kinematics(base)
+    t = np.arange(0, 2.0, 1e-3)
+    qc = centre_q(base)
+    q = qc + 0.15 * np.stack([np.sin(2 * np.pi * 1.0 * t), np.sin(2 * np.pi * 0.7 * t), np.sin(2 * np.pi * 1.3 * t)], axis=1)
+    p = tk.device_to_world(base, ref.forward_positions(kin, q))
+    quat = np.tile([1.0, 0, 0, 0], (len(t), 1))
+    stiff = set_param(set_param(base, "drive.series_elasticity.stiffness_Nm_per_rad", 2000.0),
+                      "drive.series_elasticity.damping_Nms_per_rad", 1.0)
+    elastic = ph.simulate_passive(stiff, t, p, quat)
+    rigid = ph.simulate_passive(disable(base, "drive.series_elasticity"), t, p, quat)
+    sl = slice(200, -200)
+    scale = np.max(np.abs(rigid.force_W[sl]))
+    assert np.max(np.abs(elastic.force_W[sl] - rigid.force_W[sl])) < 0.05 * scale
+    # a compliant, backlashed drive differs (the rotors lag and ring)
+    soft = set_param(base, "drive.series_elasticity.stiffness_Nm_per_rad", 2.0)
+    assert np.max(np.abs(ph.simulate_passive(soft, t, p, quat).force_W[sl] - rigid.force_W[sl])) > 0.1 * scale
+
+
+def test_rendering_loop_runs_at_its_own_rate_on_a_faster_hand_clock():
+    """A 2 kHz hand path with a 1 kHz loop: the command changes only every second sample, and the
+    rendered stiffness is still the series value."""
+    tw = massless(only(preset("touch"), "drive.series_elasticity", "inertia"))
+    q = centre_q(tw)
+    rate = 2000.0
+    t, p, quat = hold(tw, q, n=int(4.0 * rate), rate=rate)
+    surface = p[0].copy()
+    s = t / t[-1]
+    p = p.copy()
+    p[:, 2] = surface[2] + 0.002 - 0.005 * 0.5 * (1 - np.cos(np.pi * s))
+    rend = {"surface_point_m": surface.tolist(), "surface_normal": [0.0, 0.0, 1.0], "stiffness_N_per_m": 750.0,
+            "loop_rate_hz": 1000.0}
+    res = ph.simulate_active(tw, t, p, quat, rend)
+    fz = res.commanded_W[:, 2]
+    assert np.all(fz[0::2] == fz[1::2])
+    depth = surface[2] - p[:, 2]
+    i, j = np.argmax(depth > 0.0005), len(t) - 1
+    slope = (res.force_W[j, 2] - res.force_W[i, 2]) / (depth[j] - depth[i])
+    assert slope == pytest.approx(series_value(tw, q), rel=0.02)
 
 
 # --- energy -------------------------------------------------------------------------------------

@@ -80,11 +80,14 @@ class InertiaEffect(Effect):
 
 
 class CoulombFriction(Effect):
-    """``τ = −τ_c · tanh(ω/ω_s)`` per drive axis (a smooth zero crossing), and the same at the gimbal joints."""
+    """``τ = −τ_c·(1 + r·sin(2π·c·θ))·tanh(ω/ω_s)`` per drive axis (a smooth zero crossing; the level may
+    ripple along the drive angle θ), and ``−τ_g·tanh(ω/ω_s)`` at the gimbal joints."""
 
     torque_Nm: PerJoint = Field(description="Coulomb friction torque per drive axis at the capstan output, N·m.")
     zero_crossing_velocity_rad_per_s: float = Field(gt=0, description="ω_s of the tanh zero crossing, rad/s.")
     gimbal_torque_Nm: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0], description="Coulomb torque of the three gimbal joints, N·m.")
+    ripple_fraction: float = Field(0.0, ge=0, le=1, description="Relative variation of the drive Coulomb torque along the drive angle (cable winding on the capstan drum, motor brushes): τ_c·(1 + r·sin(2π·c·θ)).")
+    ripple_cycles_per_rad: float = Field(10.0, gt=0, description="c: ripple cycles per radian of drive angle (capstan output side).")
 
 
 class ViscousFriction(Effect):

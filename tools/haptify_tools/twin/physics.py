@@ -7,8 +7,10 @@ and the handle orientation are given, and the simulator computes what the device
   of the links (gravity, link inertia), the motor rotors reflected through the capstans, drive friction
   (Coulomb with a smooth zero crossing, viscous, Stribeck) and the gimbal body → the force and torque
   the device applies to the hand at the gimbal centre, and the wrench the device applies to the force
-  plate. The cable is treated as rigid here: its drive mode (tens of Hz) lies far above the hand's
-  motion, which keeps passive trials fully vectorised. Backlash has no effect in passive trials.
+  plate. The rotors hang on the elastic, backlashed cables (the same drive model as the active loop,
+  with zero motor torque), so fast reversals make them lag, cross the backlash gap and ring; with
+  ``drive.series_elasticity`` off the cables are rigid and the rotors' inertia and friction reach the
+  links directly (then everything is vectorised).
 - Active: a rendering loop like CHAI3D's plane example. The device's own position comes from the MOTOR
   encoders through the NOMINAL kinematics; penetration δ into the virtual plane gives the commanded
   force ``F = k·δ·n`` (logged); ``τ = Jᵀ F`` per joint, mapped to the drive axes, saturated and cut off,
@@ -86,18 +88,22 @@ def reflected_rotor_inertia(twin: TwinFile) -> np.ndarray:
     return n * n * np.asarray(twin.effects.inertia.rotor_inertia_kg_m2)
 
 
-def drive_friction(twin: TwinFile, omega: np.ndarray) -> np.ndarray:
+def drive_friction(twin: TwinFile, omega: np.ndarray, theta: np.ndarray | None = None) -> np.ndarray:
     """Friction torque ``(N, n)`` on the drive axes at drive speeds ``omega`` (rad/s), N·m; opposes motion.
 
-    Sum of the enabled components ``friction.coulomb`` (τ_c·tanh(ω/ω_s)), ``friction.viscous`` (b·ω) and
-    ``friction.stribeck`` (Δτ·exp(−(ω/ω_st)²)·tanh(ω/ω_s)), with a minus sign.
+    Sum of the enabled components ``friction.coulomb`` (τ_c·(1 + r·sin(2π·c·θ))·tanh(ω/ω_s); the ripple
+    needs the drive angles ``theta``, rad), ``friction.viscous`` (b·ω) and ``friction.stribeck``
+    (Δτ·exp(−(ω/ω_st)²)·tanh(ω/ω_s)), with a minus sign.
     """
     omega = np.atleast_2d(omega)
     tau = np.zeros_like(omega)
     e = twin.effects
     if e.friction_coulomb.enabled:
         c = e.friction_coulomb
-        tau -= np.asarray(c.torque_Nm) * np.tanh(omega / c.zero_crossing_velocity_rad_per_s)
+        level = np.asarray(c.torque_Nm)
+        if c.ripple_fraction > 0 and theta is not None:
+            level = level * (1.0 + c.ripple_fraction * np.sin(2 * np.pi * c.ripple_cycles_per_rad * np.atleast_2d(theta)))
+        tau -= level * np.tanh(omega / c.zero_crossing_velocity_rad_per_s)
     if e.friction_viscous.enabled:
         tau -= np.asarray(e.friction_viscous.damping_Nms_per_rad) * omega
     if e.friction_stribeck.enabled:
@@ -402,7 +408,11 @@ def simulate_passive(twin: TwinFile, t: np.ndarray, position_W: np.ndarray, quat
     qdd = _diff(t, qd)
     c = _coupling(twin)
     th_d, th_dd = rows_times(qd, c.T), rows_times(qdd, c.T)
-    tau_axis = drive_friction(twin, th_d) - reflected_rotor_inertia(twin) * th_dd
+    j_refl = reflected_rotor_inertia(twin)
+    if twin.on("drive.series_elasticity") and np.all(j_refl > 0) and len(t) > 2:
+        tau_axis = _passive_drive(twin, t, rows_times(q, c.T), th_d)
+    else:   # rigid cables (or massless rotors): friction and rotor inertia reach the links directly
+        tau_axis = drive_friction(twin, th_d, rows_times(q, c.T)) - j_refl * th_dd
     tau_joint = rows_times(tau_axis, c)
     fh, th, fp, tp, jt = _hand_wrench_from_drive(twin, kin, t, q, qd, qdd, quaternion_W, tau_joint, frames, gimbal)
     f_w, m_w = _to_world(twin, fh, th, about_origin_D=False)
@@ -545,7 +555,7 @@ def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, 
         cut_tick = _cutoff_latch(k_r * depth, cut) if cut.enabled else np.zeros(len(ticks), bool)
         motor[cut_tick] = 0.0
         motor, f_cmd_D, saturated, cut_flags = motor[hold_idx], f_tick[hold_idx], sat_tick[hold_idx], cut_tick[hold_idx]
-        cable = motor + drive_friction(twin, thd_l) - j_refl * thdd_l
+        cable = motor + drive_friction(twin, thd_l, th_l) - j_refl * thdd_l
     else:
         se = e.drive_series_elasticity
         k = np.asarray(se.stiffness_Nm_per_rad)
@@ -635,6 +645,81 @@ def _exact_step(j: float, b: float, k: float, h: float) -> tuple[float, ...]:
     return (h, phi[0, 0], phi[0, 1], phi[1, 0], phi[1, 1], psi[0, 0], psi[0, 1], psi[1, 0], psi[1, 1])
 
 
+def _axis_period(d, dd, u, k, b, g, j, exact, margin, dt, substeps):
+    """Advance one drive axis over a period ``dt`` with a constant input torque ``u`` on the rotor.
+
+    State: cable deflection ``d = θ_motor − θ_link`` and its rate ``ḋ`` (the link-side angle moves
+    linearly within the period). Engaged on one side of the backlash gap (``|d| > g + margin``) the
+    exact solution of ``J·d̈ + b·ḋ + k·(d ∓ g) = u`` is used (``exact`` from :func:`_exact_step`);
+    near or inside the gap, semi-implicit Euler sub-steps. Returns ``(d, ḋ, period-average cable torque)``.
+    """
+    if exact is not None and abs(d) > g + margin:
+        _, p00, p01, p10, p11, s00, s01, s10, s11 = exact
+        side = g if d > 0 else -g
+        off = side + u / k
+        z0 = d - off
+        d_avg = off + s00 * z0 + s01 * dd
+        dd_avg = s10 * z0 + s11 * dd
+        return off + p00 * z0 + p01 * dd, p10 * z0 + p11 * dd, k * (d_avg - side) + b * dd_avg
+    h = dt / substeps
+    acc = 0.0
+    for _ in range(substeps):
+        if d > g:
+            spring = k * (d - g) + b * dd
+        elif d < -g:
+            spring = k * (d + g) + b * dd
+        else:
+            spring = 0.0
+        dd += h * (u - spring) / j
+        d += h * dd
+        acc += spring
+    return d, dd, acc / substeps
+
+
+def _passive_drive(twin: TwinFile, t: np.ndarray, th_l: np.ndarray, thd_l: np.ndarray) -> np.ndarray:
+    """Cable torques ``(N, n)`` on the links of an unpowered drive whose rotors hang on elastic, backlashed
+    cables (``drive.series_elasticity``, ``drive.backlash``) while the hand moves the links.
+
+    The rotors are driven by the link motion through the cables and braked by the drive friction
+    (evaluated at the link-side speed, as in the active loop); the zero motor torque makes this the
+    active loop without its rendering part.
+    """
+    n_s, n_j = th_l.shape
+    se = twin.effects.drive_series_elasticity
+    bl = twin.effects.drive_backlash
+    kk, bb = list(se.stiffness_Nm_per_rad), list(se.damping_Nms_per_rad)
+    gap = [0.5 * w for w in bl.width_rad] if bl.enabled else [0.0] * n_j
+    jr = reflected_rotor_inertia(twin).tolist()
+    fr_all = drive_friction(twin, thd_l, th_l)
+    dt_all = np.diff(t, append=t[-1] + (t[-1] - t[-2] if n_s > 1 else 1e-3))
+    dt0 = float(dt_all[0])
+    uniform = bool(np.allclose(dt_all, dt0, rtol=1e-6, atol=1e-12))
+    out = np.zeros((n_s, n_j))
+    substeps = 8
+    for a_ in range(n_j):
+        k, b, g, j = kk[a_], bb[a_], gap[a_], jr[a_]
+        exact = _exact_step(j, b, k, dt0) if uniform else None
+        margin = 0.25 * g
+        tl = th_l[:, a_].tolist()
+        fr = fr_all[:, a_].tolist()
+        dts = dt_all.tolist()
+        w_l0 = float(thd_l[0, a_])
+        # start at rest relative to the link, the cable carrying the friction (quasi-static)
+        d = fr[0] / k + (g if fr[0] > 0 else -g if fr[0] < 0 else 0.0)
+        dd = 0.0
+        col = out[:, a_]
+        for i in range(n_s):
+            dt = dts[i]
+            w_l = (tl[i + 1] - tl[i]) / dt if i + 1 < n_s else w_l0
+            if i + 1 >= n_s:
+                w_l = (tl[i] - tl[i - 1]) / dts[i - 1] if n_s > 1 else 0.0
+            d, dd, col[i] = _axis_period(d, dd, fr[i], k, b, g, j, exact, margin, dt, substeps)
+            if i + 1 < n_s:
+                w_next = (tl[i + 2] - tl[i + 1]) / dts[i + 1] if i + 2 < n_s else w_l
+                dd += w_l - w_next          # the link's velocity step at the period boundary
+    return out
+
+
 def _dead_zone(d: float, g: float) -> float:
     return d - g if d > g else (d + g if d < -g else 0.0)
 
@@ -653,20 +738,7 @@ def _render_loop(twin, t, th_l, thd_l, nom, c_inv, ps_D, n_D, k_r, tau_max, cut,
     kk, bb, gap = k.tolist(), b.tolist(), half_gap.tolist()
     jr = j_refl.tolist()
     massless = any(v <= 0.0 for v in jr)
-    e = twin.effects
-    coul, visc, strb = e.friction_coulomb, e.friction_viscous, e.friction_stribeck
-    tc = coul.torque_Nm if coul.enabled else [0.0] * n_j
-    ws = coul.zero_crossing_velocity_rad_per_s
-    bv = visc.damping_Nms_per_rad if visc.enabled else [0.0] * n_j
-    ts = strb.excess_torque_Nm if strb.enabled else [0.0] * n_j
-    wst, wss = strb.stribeck_velocity_rad_per_s, strb.zero_crossing_velocity_rad_per_s
-
-    def friction(a_, w):
-        fr = -tc[a_] * math.tanh(w / ws) - bv[a_] * w
-        if ts[a_]:
-            fr -= ts[a_] * math.exp(-(w / wst) ** 2) * math.tanh(w / wss)
-        return fr
-
+    fr_all = drive_friction(twin, thd_l, th_l).tolist()   # at the link-side speed and angle
     trip, rearm = (cut.trip_force_N, cut.rearm_force_N) if cut.enabled else (math.inf, -1.0)
     dt_all = np.diff(t, append=t[-1] + (t[-1] - t[-2] if n_s > 1 else 1e-3)).tolist()
     th_m = list(th_l_l[0])          # the motors start at rest on the links (cables relaxed)
@@ -688,7 +760,7 @@ def _render_loop(twin, t, th_l, thd_l, nom, c_inv, ps_D, n_D, k_r, tau_max, cut,
         tl, wl = th_l_l[i], thd_l_l[i]
         if massless:
             # Newton on r(x) = k·dz(x − θ_l) − τ(x) − friction; Jacobian K + k_r·A·Aᵀ (Sherman–Morrison)
-            fr = [friction(a_, wl[a_]) for a_ in rj]
+            fr = fr_all[i]
             for _ in range(6):
                 ta, fmag, fv, qe, a_vec, s_flag = command(th_m)
                 if latched or fmag > trip:
@@ -717,8 +789,8 @@ def _render_loop(twin, t, th_l, thd_l, nom, c_inv, ps_D, n_D, k_r, tau_max, cut,
         if massless:
             tau_c = [kk[a_] * _dead_zone(th_m[a_] - tl[a_], gap[a_]) for a_ in rj]
             if latched:    # the motor relaxes onto the link within the period
-                th_m = [tl[a_] + (friction(a_, wl[a_]) / kk[a_]) for a_ in rj]
-                tau_c = [friction(a_, wl[a_]) for a_ in rj]
+                th_m = [tl[a_] + fr_all[i][a_] / kk[a_] for a_ in rj]
+                tau_c = list(fr_all[i])
         else:
             # one loop period with the command held; friction acts at the link-side drive speed
             tl_next = th_l_l[i + 1] if i + 1 < n_s else tl
@@ -726,36 +798,10 @@ def _render_loop(twin, t, th_l, thd_l, nom, c_inv, ps_D, n_D, k_r, tau_max, cut,
             tau_c = [0.0] * n_j
             for a_ in rj:
                 w_l = (tl_next[a_] - tl[a_]) / dt if dt > 0 else wl[a_]
-                u = ta[a_] + friction(a_, wl[a_])
-                d = th_m[a_] - tl[a_]
-                dd = w_m[a_] - w_l
-                g = gap[a_]
-                if abs(d) > g + backlash_margin[a_] and abs(dt - exact[a_][0]) < 1e-12:
-                    # engaged on one side all period: exact solution of J·d̈ + b·ḋ + k·(d ∓ g) = u
-                    _, p00, p01, p10, p11, s00, s01, s10, s11 = exact[a_]
-                    off = (g if d > 0 else -g) + u / kk[a_]
-                    z0, z1 = d - off, dd
-                    d_new = off + p00 * z0 + p01 * z1
-                    dd_new = p10 * z0 + p11 * z1
-                    d_avg = off + s00 * z0 + s01 * z1
-                    dd_avg = s10 * z0 + s11 * z1
-                    tau_c[a_] = kk[a_] * (d_avg - (g if d > 0 else -g)) + bb[a_] * dd_avg
-                else:
-                    # near or inside the backlash gap: semi-implicit Euler sub-steps
-                    h = dt / substeps
-                    acc_tau = 0.0
-                    for _ in range(substeps):
-                        if d > g:
-                            spring = kk[a_] * (d - g) + bb[a_] * dd
-                        elif d < -g:
-                            spring = kk[a_] * (d + g) + bb[a_] * dd
-                        else:
-                            spring = 0.0
-                        dd += h * (u - spring) / jr[a_]
-                        d += h * dd
-                        acc_tau += spring / substeps
-                    d_new, dd_new = d, dd
-                    tau_c[a_] = acc_tau
+                u = ta[a_] + fr_all[i][a_]
+                d_new, dd_new, tau_c[a_] = _axis_period(
+                    th_m[a_] - tl[a_], w_m[a_] - w_l, u, kk[a_], bb[a_], gap[a_], jr[a_],
+                    exact[a_] if abs(dt - exact[a_][0]) < 1e-12 else None, backlash_margin[a_], dt, substeps)
                 th_m[a_] = tl_next[a_] + d_new
                 w_m[a_] = w_l + dd_new
         motor[i] = ta
