@@ -40,6 +40,16 @@ def test_short_session_is_valid_and_truth_lies_beside_it(dossier):
     assert fig.protocol == "other" and fig.label == "figure_eight"
     stiff = s.trial("stiffness-1")
     assert stiff.powered and stiff.rendering.stiffness_N_per_m == 750.0
+    # every trial lasts what was asked for and starts after the previous one on the one session clock
+    truth = json.loads(res.truth_json.read_text())["trials"]
+    for tr, prev in zip(truth, [None] + truth[:-1]):
+        if tr["id"].startswith("rig.plate_cop"):
+            continue                                  # its length follows the 30-position schedule
+        name = tr["label"] or tr["protocol"]
+        assert tr["t_end_s"] - tr["t_start_s"] == pytest.approx(SHORT[name], abs=1.5e-3)   # t_end: the last sample
+        assert prev is None or tr["t_start_s"] > prev["t_end_s"]
+        sync = s.read(tr["id"], "sync")
+        assert sync["t"].iloc[0] == pytest.approx(tr["t_start_s"]) and sync["trigger"].sum() > 0
 
 
 def test_truth_holds_every_effect_and_the_true_signals(dossier):
