@@ -1,0 +1,239 @@
+"""The registry's HTTP service (spec §17.5): a FastAPI app with a JSON API and OpenAPI docs at ``/docs``.
+
+``create_app(settings)`` opens (and migrates) the database, sweeps what an interrupted submission left,
+and returns the app. ``app.state.registry`` is the :class:`~haptify_tools.registry.service.Registry`;
+the web pages are added by :func:`haptify_tools.registry.web.register` when that module exists, so the
+pages and the API share one process, one database and one set of queries.
+
+Every refusal is a JSON body ``{"status": "refused", "findings": [...]}`` whose findings carry a code
+from ``codes.json``, the field (``file`` and ``pointer``), ``expected`` and ``found``.
+"""
+
+from __future__ import annotations
+
+import importlib
+from contextlib import asynccontextmanager
+from typing import Any
+
+from fastapi import FastAPI, Header, Query, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import FileResponse, JSONResponse, PlainTextResponse, Response
+from pydantic import BaseModel, ConfigDict, Field
+from starlette.concurrency import run_in_threadpool
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from haptify import compare
+from haptify.errors import Finding, HaptifyError
+from haptify.versions import PACKAGE_VERSION, SPEC_VERSION
+from haptify_tools.registry.service import Registry, Settings
+
+API = "/api/v1"
+
+STATUS = {"E960": 413, "E970": 401, "E971": 403, "E972": 429, "E973": 404, "E974": 409, "E975": 400, "E977": 403,
+          "E978": 503, "E999": 500}
+
+
+def http_status(err: HaptifyError) -> int:
+    """The HTTP status of a refusal: by its first code; content problems are 422."""
+    return STATUS.get(err.findings[0].code, 422)
+
+
+def refusal(err: HaptifyError) -> JSONResponse:
+    headers = {}
+    wait = getattr(err, "retry_after", None)
+    if wait is not None:
+        headers["Retry-After"] = str(max(1, int(wait + 0.999)))
+    return JSONResponse({"status": "refused", "findings": [f.to_dict() for f in err.findings]},
+                        status_code=http_status(err), headers=headers)
+
+
+class WithdrawBody(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    reason: str = Field(min_length=1, max_length=2000, description="Why the submission is withdrawn (kept with the record).")
+
+
+class TokenBody(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    lab: str
+    scope: str = "submit"
+    rate_per_minute: int | None = Field(None, ge=1, le=100_000)
+
+
+def create_app(settings: Settings | None = None, *, registry: Registry | None = None) -> FastAPI:
+    """The registry app for ``settings`` (spec §17.5); migrations and the orphan sweep run here, at start-up."""
+    reg = registry or Registry(settings or Settings())
+    swept = reg.sweep()
+
+    @asynccontextmanager
+    async def lifespan(_app: FastAPI):
+        yield
+        reg.close()
+
+    app = FastAPI(title="Haptify results registry", version=PACKAGE_VERSION, lifespan=lifespan,
+                  description="Labs submit verified device results; everyone compares devices (Haptify spec chapter 17).")
+    app.state.registry = reg
+    app.state.swept = swept
+
+    @app.exception_handler(HaptifyError)
+    async def _coded(_request: Request, err: HaptifyError) -> JSONResponse:
+        return refusal(err)
+
+    @app.exception_handler(RequestValidationError)
+    async def _invalid(_request: Request, exc: RequestValidationError) -> JSONResponse:
+        findings = [Finding("E975", e.get("msg", "invalid"), file=str(e.get("loc", ["request"])[0]),
+                            pointer="/" + "/".join(str(p) for p in e.get("loc", [])[1:]),
+                            expected=e.get("type"), found=_short(e.get("input"))) for e in exc.errors()]
+        return refusal(HaptifyError(*findings))
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http(_request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        code = "E973" if exc.status_code == 404 else "E975"
+        return JSONResponse({"status": "refused", "findings": [Finding(code, str(exc.detail)).to_dict()]},
+                            status_code=exc.status_code)
+
+    @app.exception_handler(Exception)
+    async def _internal(_request: Request, exc: Exception) -> JSONResponse:
+        return JSONResponse({"status": "error", "findings": [Finding("E999", f"{type(exc).__name__}: {exc}").to_dict()]},
+                            status_code=500)
+
+    @app.get(f"{API}/health", tags=["service"])
+    def health() -> dict:
+        """Liveness, versions and what the start-up sweep removed."""
+        return {"ok": True, "version": PACKAGE_VERSION, "spec_versions": [SPEC_VERSION],
+                "database": reg.engine.dialect.name, "swept": app.state.swept}
+
+    @app.post(f"{API}/submissions", tags=["submissions"], status_code=201,
+              openapi_extra={"requestBody": {"required": True, "content": {"application/gzip": {"schema": {"type": "string", "format": "binary"}}}}})
+    async def submit(request: Request, response: Response, dry_run: bool = Query(False, description="check only; store nothing"),
+                     authorization: str | None = Header(None)) -> dict:
+        """Submit a bundle (the request body is the ``.tar.gz``; spec §17.2). 201 accepted, 200 duplicate or dry run."""
+        caller = await run_in_threadpool(reg.authenticate, authorization, "submit")
+        declared = request.headers.get("content-length")
+        limit = reg.settings.limits.max_archive_bytes
+        if declared and declared.isdigit() and int(declared) > limit:
+            raise HaptifyError(Finding("E960", "the bundle archive is larger than the registry accepts", file="<upload>",
+                                       expected=f"≤ {limit} bytes", found=f"{declared} bytes"))
+        chunks: list[bytes] = []
+        total = 0
+        async for chunk in request.stream():
+            total += len(chunk)
+            if total > limit:
+                raise HaptifyError(Finding("E960", "the bundle archive is larger than the registry accepts", file="<upload>",
+                                           expected=f"≤ {limit} bytes", found=f"> {limit} bytes"))
+            chunks.append(chunk)
+        if total == 0:
+            raise HaptifyError(Finding("E961", "the request has no body", file="<upload>", expected="a .tar.gz bundle", found="0 bytes"))
+        upload = await run_in_threadpool(reg.receive, chunks)
+        outcome = await run_in_threadpool(reg.submit, upload, caller, dry_run=dry_run)
+        if outcome.status != "accepted":
+            response.status_code = 200
+        return outcome.to_dict()
+
+    @app.get(f"{API}/submissions", tags=["submissions"])
+    def list_submissions(lab: str | None = None, device: str | None = None,
+                         state: str = Query("all", pattern="^(all|current|superseded|withdrawn)$"),
+                         limit: int = Query(100, ge=1, le=1000), offset: int = Query(0, ge=0)) -> list[dict]:
+        """Submissions, newest first; ``state`` current, superseded, withdrawn or all."""
+        return reg.submissions(lab=lab, device=device, state=state, limit=limit, offset=offset)
+
+    @app.get(f"{API}/submissions/{{sid}}", tags=["submissions"])
+    def get_submission(sid: str) -> dict:
+        """One submission: state, verification per metric, results and bundle manifest."""
+        return reg.submission(sid)
+
+    @app.get(f"{API}/submissions/{{sid}}/bundle", tags=["submissions"], response_class=FileResponse)
+    def get_bundle(sid: str) -> FileResponse:
+        """The submitted archive, byte for byte."""
+        return FileResponse(reg.archive(sid), media_type="application/gzip", filename=f"{sid}.tar.gz")
+
+    @app.post(f"{API}/submissions/{{sid}}/withdraw", tags=["submissions"])
+    def withdraw(sid: str, body: WithdrawBody, authorization: str | None = Header(None)) -> dict:
+        """Withdraw a submission with a reason (own lab with a submit token, any with admin); the record stays."""
+        caller = reg.authenticate(authorization, "submit")
+        return reg.withdraw(sid, body.reason, caller)
+
+    @app.post(f"{API}/tokens", tags=["service"], status_code=201)
+    def create_token(body: TokenBody, authorization: str | None = Header(None)) -> dict:
+        """Create a lab token (admin only). The token is shown once; the registry keeps only its sha256."""
+        reg.authenticate(authorization, "admin")
+        return {"lab": body.lab, "scope": body.scope, "token": reg.create_token(body.lab, body.scope, body.rate_per_minute)}
+
+    @app.get(f"{API}/labs", tags=["labs"])
+    def labs() -> list[dict]:
+        return reg.labs()
+
+    @app.get(f"{API}/labs/{{lab_id}}", tags=["labs"])
+    def lab(lab_id: str) -> dict:
+        return reg.lab(lab_id)
+
+    @app.get(f"{API}/devices", tags=["devices"])
+    def devices() -> list[dict]:
+        return reg.devices()
+
+    @app.get(f"{API}/devices/{{slug}}", tags=["devices"])
+    def device(slug: str, verified_only: bool = False) -> dict:
+        """A device's aggregated results: per metric mean and spread over labs and repetitions (spec §17.5)."""
+        return reg.device_results(slug, verified_only=verified_only)
+
+    @app.get(f"{API}/compare", tags=["devices"])
+    def compare_devices(devices: str = Query(..., description="comma-separated device slugs"),
+                        format: str = Query("json", pattern="^(json|csv|md|html)$"), paper: bool = False,
+                        verified_only: bool = False) -> Any:
+        """The paper's Table III for any number of devices (``haptify.compare``; spec §15.5)."""
+        slugs = [s for s in devices.split(",") if s]
+        if not slugs:
+            raise HaptifyError(Finding("E975", "no device given", file="query", pointer="/devices", expected="slug,slug,…", found=devices))
+        table = compare.build_table(reg.comparison(slugs, verified_only=verified_only), with_paper=paper)
+        if format == "csv":
+            return PlainTextResponse(compare.to_csv(table), media_type="text/csv")
+        if format == "md":
+            return PlainTextResponse(compare.to_markdown(table), media_type="text/markdown")
+        if format == "html":
+            return Response(compare.to_html(table), media_type="text/html")
+        return {"devices": slugs, "header": table.header, "rows": table.rows, "notes": table.notes}
+
+    @app.get(f"{API}/export.csv", tags=["devices"], response_class=PlainTextResponse)
+    def export_csv(device: str | None = None, state: str = Query("current", pattern="^(all|current|superseded|withdrawn)$")) -> Response:
+        """Every metric of every submission (filtered), one row each, as CSV."""
+        return PlainTextResponse(to_csv(reg.export_rows(device=device, state=state)), media_type="text/csv")
+
+    _add_web(app)
+    return app
+
+
+EXPORT_COLUMNS = ["submission", "state", "verification", "lab", "device", "manufacturer", "model", "serial",
+                  "implementation", "metric", "value", "unit", "n", "sd", "received_at"]
+
+
+def to_csv(rows: list[dict]) -> str:
+    """The export rows as CSV with a header line (values of vector metrics as JSON lists)."""
+    import csv
+    import io
+
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=EXPORT_COLUMNS, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    return buf.getvalue()
+
+
+def _short(value: Any) -> Any:
+    if isinstance(value, (dict, list)):
+        return f"<{type(value).__name__}>"
+    if isinstance(value, (bytes, str)) and len(value) > 200:
+        return value[:200]
+    return value
+
+
+def _add_web(app: FastAPI) -> None:
+    """Mount the web pages (``haptify_tools.registry.web.register(app)``) when that module is present."""
+    try:
+        web = importlib.import_module("haptify_tools.registry.web")
+    except ModuleNotFoundError as exc:
+        if exc.name != "haptify_tools.registry.web":
+            raise
+        return
+    web.register(app)
+
+
+__all__ = ["create_app", "Settings"]
