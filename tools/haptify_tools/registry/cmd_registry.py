@@ -1,0 +1,65 @@
+"""``haptify registry serve [--db URL] [--data DIR] [--host 127.0.0.1] [--port 8080]`` and
+``haptify registry token create --lab LAB [--scope submit|admin] [--rate N]`` (spec §17.6, §17.7)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from haptify_tools.registry.service import DEFAULT_RATE_PER_MINUTE, SCOPES, Registry, Settings
+
+DEFAULT_DATA = Path("haptify-registry")
+
+
+def _store_options(p) -> None:
+    p.add_argument("--db", help="database URL (default: SQLite in the data folder); e.g. postgresql://user@host/db")
+    p.add_argument("--data", type=Path, default=DEFAULT_DATA, help="data folder for archives (and the SQLite file)")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("registry", help="run a results registry or manage its API tokens")
+    rsub = p.add_subparsers(dest="registry_command", metavar="ACTION", required=True)
+    serve = rsub.add_parser("serve", help="serve the registry (JSON API, OpenAPI docs at /docs, web pages)")
+    _store_options(serve)
+    serve.add_argument("--host", default="127.0.0.1")
+    serve.add_argument("--port", type=int, default=8080)
+    serve.add_argument("--no-verify", action="store_true", help="do not re-compute metrics of bundles with raw streams")
+    serve.set_defaults(func=run_serve)
+    token = rsub.add_parser("token", help="API tokens")
+    tsub = token.add_subparsers(dest="token_command", metavar="ACTION", required=True)
+    create = tsub.add_parser("create", help="create a token for a lab (printed once; stored only as its sha256)")
+    _store_options(create)
+    create.add_argument("--lab", required=True, help="the lab id (as in the sessions' lab.id)")
+    create.add_argument("--scope", choices=SCOPES, default="submit")
+    create.add_argument("--rate", type=int, default=DEFAULT_RATE_PER_MINUTE, help="requests per minute allowed")
+    create.set_defaults(func=run_token_create)
+
+
+def _settings(args) -> Settings:
+    return Settings(data_dir=args.data, db_url=args.db, verify_raw=not getattr(args, "no_verify", False))
+
+
+def run_serve(args, ui) -> int:
+    import uvicorn
+
+    from haptify_tools.registry.app import create_app
+
+    app = create_app(_settings(args))
+    swept = app.state.swept
+    ui.say(f"registry on http://{args.host}:{args.port} (API docs /docs); database {app.state.registry.engine.dialect.name}; "
+           f"start-up sweep removed {swept['tmp']} temporary and {swept['orphans']} orphan file(s)")
+    uvicorn.run(app, host=args.host, port=args.port, log_level="warning")
+    return 0
+
+
+def run_token_create(args, ui) -> int:
+    registry = Registry(_settings(args), lock=False)
+    try:
+        token = registry.create_token(args.lab, args.scope, args.rate)
+    finally:
+        registry.close()
+    if ui.json_mode:
+        ui.emit_json({"lab": args.lab, "scope": args.scope, "rate_per_minute": args.rate, "token": token})
+    else:
+        print(token)
+        ui.warn(f"token for lab {args.lab} (scope {args.scope}); it is shown once and stored only as its sha256")
+    return 0

@@ -1,0 +1,109 @@
+"""``haptify submit SESSION --results results.json [--conformance report.json] [--include-raw] --registry URL
+--token TOKEN [--supersedes ID] [--dry-run] [--keep FILE]`` (spec §17.2, §17.5).
+
+Packs the submission bundle and uploads it. ``--dry-run`` runs the registry's own checks locally (limits,
+documents, consistency, conformance, and with ``--include-raw`` the re-computation) and prints what the
+registry would say; with ``--registry`` it also asks the registry (``?dry_run=true``), which adds the
+checks only the registry can make: the token, the lab, a conformance report on file, supersession.
+The token may come from the environment variable ``HAPTIFY_REGISTRY_TOKEN`` instead of the command line.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+from haptify.errors import Finding, HaptifyError, fail
+from haptify_tools.registry.bundle import build_bundle, pack, submission_id, unpack
+from haptify_tools.registry.checks import check_bundle
+
+TOKEN_ENV = "HAPTIFY_REGISTRY_TOKEN"
+TIMEOUT_S = 300
+
+
+def register(sub) -> None:
+    p = sub.add_parser("submit", help="pack a submission bundle and upload it to a results registry")
+    p.add_argument("session", type=Path, help="the session folder the results were computed from")
+    p.add_argument("--results", type=Path, required=True, help="results.json of the session")
+    p.add_argument("--conformance", type=Path, help="haptify-conform --json-report of the implementation")
+    p.add_argument("--include-raw", action="store_true", help="include the stream files (the registry re-computes and verifies)")
+    p.add_argument("--supersedes", help="id of this lab's earlier submission that this one corrects")
+    p.add_argument("--registry", help="registry base URL, e.g. http://127.0.0.1:8080")
+    p.add_argument("--token", help=f"API token (default: ${TOKEN_ENV})")
+    p.add_argument("--dry-run", action="store_true", help="check locally (and at the registry, if given); store nothing")
+    p.add_argument("--keep", type=Path, help="also write the bundle archive to this file")
+    p.set_defaults(func=run)
+
+
+def post_bundle(registry: str, token: str, archive: Path, *, dry_run: bool = False) -> dict:
+    """POST the archive to ``REGISTRY/api/v1/submissions``; the registry's refusal becomes a HaptifyError."""
+    url = registry.rstrip("/") + "/api/v1/submissions" + ("?dry_run=true" if dry_run else "")
+    request = urllib.request.Request(url, data=archive.read_bytes(), method="POST",
+                                     headers={"Content-Type": "application/gzip", "Authorization": f"Bearer {token}"})
+    try:
+        with urllib.request.urlopen(request, timeout=TIMEOUT_S) as response:
+            return json.loads(response.read().decode("utf-8"))
+    except urllib.error.HTTPError as exc:
+        body = exc.read().decode("utf-8", "replace")
+        try:
+            findings = json.loads(body)["findings"]
+            raise HaptifyError(*[Finding(f["code"], f["message"], file=f.get("file"), pointer=f.get("pointer"),
+                                         expected=f.get("expected"), found=f.get("found")) for f in findings]) from None
+        except (ValueError, KeyError, TypeError):
+            raise fail("E978", f"the registry answered HTTP {exc.code}: {body[:300]}", file=url) from None
+    except (urllib.error.URLError, OSError) as exc:
+        raise fail("E978", f"cannot reach the registry at {registry}: {getattr(exc, 'reason', exc)}", file=url) from None
+
+
+def describe(outcome: dict) -> list[str]:
+    """Human lines for a registry answer (or a local dry run)."""
+    v = outcome["verification"]
+    lines = [f"{outcome['status']}: submission {outcome['id']} (digest {outcome['digest']})",
+             f"verification: {v['status']}" + (f" — {v['note']}" if v.get("note") else "")]
+    for c in v.get("checks", []):
+        if c["status"] != "agrees":
+            lines.append(f"  {c['metric']}: {c['status']} — {c['message']}")
+    if outcome.get("supersedes"):
+        lines.append(f"supersedes {outcome['supersedes']}")
+    return lines
+
+
+def run(args, ui) -> int:
+    token = args.token or os.environ.get(TOKEN_ENV)
+    if not args.dry_run and not (args.registry and token):
+        raise fail("E903", "uploading needs --registry and --token (or $" + TOKEN_ENV + ")",
+                   expected="--registry URL --token TOKEN", found={"registry": args.registry, "token": bool(token)})
+    work = Path(tempfile.mkdtemp(prefix="haptify-submit-"))
+    try:
+        bundle, files = build_bundle(args.session, args.results, args.conformance, include_raw=args.include_raw,
+                                     supersedes=args.supersedes)
+        archive = work / "bundle.tar.gz"
+        digest = pack(bundle, files, archive)
+        if args.keep:
+            shutil.copyfile(archive, args.keep)
+        if args.dry_run:
+            checked = check_bundle(unpack(archive, work / "unpacked"))
+            outcome = {"id": submission_id(digest), "digest": digest, "status": "would-accept",
+                       "supersedes": args.supersedes, "verification": checked.verification.to_dict(), "checked": "locally"}
+            lines = describe(outcome)
+            if checked.conformance is None:
+                lines.append("no conformance report included: the registry accepts it only with a passing report "
+                             "of this implementation on file")
+            if args.registry and token:
+                outcome = {**post_bundle(args.registry, token, archive, dry_run=True), "checked": "locally and by the registry"}
+                lines += ["the registry says:"] + describe(outcome)
+        else:
+            outcome = post_bundle(args.registry, token, archive)
+            lines = describe(outcome)
+        if ui.json_mode:
+            ui.emit_json(outcome)
+        for line in lines:
+            ui.say(line)
+        return 0 if outcome["verification"]["status"] != "disagrees" else 1
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
