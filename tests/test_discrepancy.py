@@ -81,7 +81,7 @@ def test_two_hidden_effects_series_elasticity_and_coulomb_are_both_found(tmp_pat
     """The demo's case and the paper's story: the drive's series elasticity explains the soft stiffness."""
     session = demo_session(tmp_path, seed=3)
     start = disable(disable(preset("touch"), "drive.series_elasticity"), "friction.coulomb")
-    result, _ = run_discrepancy(session, start, None, max_effects=2)
+    result, _ = run_discrepancy(session, start, None, max_effects=2, workers=2)
     named = {a.effect_id: a.value for a in result.accepted}
     assert set(named) == {"drive.series_elasticity", "friction.coulomb"}
     assert _rel(named["drive.series_elasticity"], DEMO_TRUTH["drive.series_elasticity.stiffness_Nm_per_rad"]) < 0.15

@@ -69,10 +69,10 @@ def _fill(t: np.ndarray, x: np.ndarray, ok: np.ndarray) -> np.ndarray:
     return out
 
 
-def load_measured(session: SessionFolder, ctx: ComputeContext | None = None) -> list[MeasuredTrial]:
+def load_measured(session: SessionFolder, ctx: ComputeContext | None = None, required: bool = True) -> list[MeasuredTrial]:
     """The measured session's force trials (protocols :data:`FORCE_PROTOCOLS`) ready for re-simulation.
 
-    E302 when the session has no trial with a ``handle_wrench`` stream (nothing to compare).
+    E302 when the session has no trial with a ``handle_wrench`` stream and ``required``.
     """
     ctx = ctx or ComputeContext(session=session)
     out = []
@@ -102,7 +102,7 @@ def load_measured(session: SessionFolder, ctx: ComputeContext | None = None) -> 
             cmd_max = float(np.max(np.linalg.norm(cmd[["fx", "fy", "fz"]].to_numpy(), axis=1)))
         out.append(MeasuredTrial(trial.id, trial.protocol, rendering, hs.t, rate, pos, quat, force, ok, contact, speed,
                                  cmd_max))
-    if not out:
+    if not out and required:
         raise fail("E302", "the measured session has no trial with a handle_wrench stream to compare with the twin",
                    file="session.json", expected="a free-space, local-dynamic, figure-eight, surface or stiffness trial",
                    found=[t.id for t in session.trials])

@@ -18,12 +18,40 @@ from typing import Callable
 import numpy as np
 
 from haptify_tools.discrepancy import stats as st
+from haptify_tools.discrepancy import workspace as ws
 from haptify_tools.discrepancy.data import MeasuredTrial, simulate_all
 from haptify_tools.discrepancy.library import LIBRARY, Candidate
 from haptify_tools.twin.model import TwinFile
 
 REFINEMENTS = 2          # parabolic steps in log p after the grid
 EXTENSIONS = 2           # grid extensions when the best grid point is at an end
+
+
+@dataclass
+class Dataset:
+    """What a candidate is fitted to: the force trials (N) or the workspace sweeps (m), and how the twin
+    predicts them (:func:`.data.simulate_all` or the examiner's radial stop, :mod:`.workspace`)."""
+
+    kind: str                       # "force" or "workspace"
+    items: list
+    commands: dict | None = None    # workspace: trial id → (face commands, ok)
+
+    @property
+    def measured(self) -> dict[str, np.ndarray]:
+        return {it.trial_id: (it.force if self.kind == "force" else it.position) for it in self.items}
+
+    def simulate(self, twin: TwinFile, only_active: bool = False, base: dict | None = None) -> dict[str, np.ndarray]:
+        if self.kind == "force":
+            return simulate_all(twin, self.items, only_active, base)
+        return ws.sweep_predictions(twin, self.items, self.commands)
+
+    @staticmethod
+    def sweeps(twin: TwinFile, sweeps: list) -> "Dataset":
+        """The workspace dataset; points outside the twin's joint box are left out (``valid``)."""
+        commands = {sw.trial_id: ws.face_commands(twin, sw.position) for sw in sweeps}
+        for sw in sweeps:
+            sw.valid = commands[sw.trial_id][1]
+        return Dataset("workspace", sweeps, commands)
 
 
 @dataclass
@@ -48,6 +76,7 @@ class Round:
     chosen: Fit | None
     accepted: bool
     near_ties: list[str] = field(default_factory=list)
+    workspace_residual: dict[str, np.ndarray] | None = None
 
 
 @dataclass
@@ -60,6 +89,9 @@ class Selection:
     initial_sim: dict[str, np.ndarray]
     final_sim: dict[str, np.ndarray]
     structure: dict
+    sweeps: Dataset | None = None
+    initial_sweep: dict[str, np.ndarray] | None = None
+    final_sweep: dict[str, np.ndarray] | None = None
 
 
 def _minus(a: dict, b: dict) -> dict:
@@ -71,11 +103,12 @@ def _sse(design: st.Design, residual: dict, predicted: dict) -> float:
     return float(np.dot(e, e))
 
 
-def fit_candidate(cand: Candidate, twin: TwinFile, trials: list[MeasuredTrial], design: st.Design,
+def fit_candidate(cand: Candidate, twin: TwinFile, data: Dataset, design: st.Design,
                   residual: dict, base: dict) -> Fit:
-    """Fit one candidate to ``residual`` (measured − ``base``, the current twin's simulation)."""
+    """Fit one candidate to ``residual`` (measured − ``base``, the current twin's prediction of ``data``)."""
     only_active = cand.scope == "active"
     zero = {k: np.zeros_like(v) for k, v in base.items()}
+    trials = data.items
 
     probe = cand.probe(twin)
     ceiling = np.inf
@@ -86,7 +119,7 @@ def fit_candidate(cand: Candidate, twin: TwinFile, trials: list[MeasuredTrial], 
     def delta(p: float) -> dict:
         if p >= ceiling:
             return zero
-        return _minus(simulate_all(cand.apply(twin, p), trials, only_active, base), base)
+        return _minus(data.simulate(cand.apply(twin, p), only_active, base), base)
 
     if only_active and not any(tr.active for tr in trials):
         return Fit(cand, probe, float("inf"), zero, st.score(design, residual, zero), 0)
@@ -159,46 +192,54 @@ def _curvature_error(evals: dict[float, tuple[float, dict]], p: float, n: int) -
 
 def select_effects(twin: TwinFile, trials: list[MeasuredTrial], max_effects: int = 5,
                    library: tuple[Candidate, ...] = LIBRARY, log: Callable[[str], object] | None = None,
-                   workers: int = 1) -> Selection:
+                   workers: int = 1, sweeps: list | None = None) -> Selection:
     """Forward selection (see the module docstring); deterministic for a given twin and session.
 
-    ``workers`` > 1 fits the candidates of a round in that many processes (0: one per CPU, at most 4);
-    the result does not depend on it.
+    ``sweeps``: the measured workspace sweeps (:func:`.workspace.load_sweeps`) for the workspace
+    candidate. ``workers`` > 1 fits the candidates of a round in that many processes (0: one per CPU,
+    at most 4); the result does not depend on it.
     """
     n = workers or min(4, os.cpu_count() or 1)
     if n <= 1:
-        return _select(twin, trials, max_effects, library, log, None)
+        return _select(twin, trials, sweeps or [], max_effects, library, log, None)
     ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
     with ProcessPoolExecutor(max_workers=n, mp_context=ctx) as pool:
-        return _select(twin, trials, max_effects, library, log, pool)
+        return _select(twin, trials, sweeps or [], max_effects, library, log, pool)
 
 
-def _select(twin, trials, max_effects, library, log, pool) -> Selection:
-    measured = {tr.trial_id: tr.force for tr in trials}
+def _select(twin, trials, sweeps, max_effects, library, log, pool) -> Selection:
+    forces = Dataset("force", trials)
     current = twin
-    base = simulate_all(current, trials)
-    initial = base
+    base = forces.simulate(current) if trials else {}
+    sweep_data = Dataset.sweeps(current, sweeps) if sweeps else None
+    base_w = sweep_data.simulate(current) if sweep_data else {}
+    initial, initial_w = base, base_w
     rounds, accepted = [], []
     while True:
-        residual = _minus(measured, base)
+        residual = _minus(forces.measured, base)
         design = st.make_design(trials, residual)
-        cands = [c for c in library if c.available(current)]
+        residual_w = _minus(sweep_data.measured, base_w) if sweep_data else None
+        design_w = st.make_design(sweeps, residual_w) if sweep_data else None
+        cands = [c for c in library if c.available(current)
+                 and (sweep_data is not None if c.scope == "workspace" else bool(trials))]
         if len(accepted) >= max_effects or not cands:
-            rounds.append(Round(residual, design, [], None, False))
+            rounds.append(Round(residual, design, [], None, False, workspace_residual=residual_w))
             break
+        jobs = [(c, current, sweep_data, design_w, residual_w, base_w) if c.scope == "workspace"
+                else (c, current, forces, design, residual, base) for c in cands]
         if pool is None:
-            fits = [fit_candidate(c, current, trials, design, residual, base) for c in cands]
+            fits = [fit_candidate(*job) for job in jobs]
         else:
             # the slowest fits (searches over the active trials) first keeps every worker busy
             order = sorted(range(len(cands)), key=lambda i: cands[i].kind != "search")
-            futures = {i: pool.submit(fit_candidate, cands[i], current, trials, design, residual, base) for i in order}
+            futures = {i: pool.submit(fit_candidate, *jobs[i]) for i in order}
             fits = [futures[i].result() for i in range(len(cands))]
         fits.sort(key=lambda f: -f.score.delta_bic)
         best = fits[0]
         ok = best.score.accepted()
         ties = [f.candidate.effect_id for f in fits[1:] if f.score.accepted()
                 and f.score.delta_bic >= 0.9 * best.score.delta_bic]
-        rounds.append(Round(residual, design, fits, best, ok, ties))
+        rounds.append(Round(residual, design, fits, best, ok, ties, workspace_residual=residual_w))
         if log:
             log(f"round {len(rounds)}: best {best.candidate.effect_id} = {best.value:.4g} {best.candidate.unit}, "
                 f"ΔBIC {best.score.delta_bic:.1f}, p {best.score.p_value:.2g}, "
@@ -207,6 +248,13 @@ def _select(twin, trials, max_effects, library, log, pool) -> Selection:
             break
         accepted.append(best)
         current = best.candidate.apply(current, best.value)
-        base = simulate_all(current, trials)
-    structure = st.structure_left(rounds[-1].design, rounds[-1].residual)
-    return Selection(rounds, accepted, current, initial, base, structure)
+        if best.candidate.scope == "workspace":
+            base_w = sweep_data.simulate(current)
+        else:
+            base = forces.simulate(current)
+            if best.candidate.effect_id == "kinematics.link_length" and sweep_data:
+                sweep_data = Dataset.sweeps(current, sweeps)
+                base_w = sweep_data.simulate(current)
+    structure = (st.structure_left(rounds[-1].design, rounds[-1].residual) if trials else
+                 {"heldout_share": 0.0, "f_p_value": 1.0, "ljung_box_p_value": 1.0, "structured": False})
+    return Selection(rounds, accepted, current, initial, base, structure, sweep_data, initial_w, base_w)

@@ -7,8 +7,10 @@ always obtained by simulation along the measured path, ``δ(p) = sim(twin + effe
 
 - ``affine`` candidates (weights, inertia, friction levels, link length): δ is affine in the parameter,
   ``δ(p) = a + p·b``, so two simulations give the regressor and least squares gives ``p``;
-- ``search`` candidates (series-elastic stiffness, torque limit, cut-off trip force, backlash width): a
-  logarithmic grid of simulations and two parabolic refinements in ``log p`` (a 1-D search).
+- ``search`` candidates (series-elastic stiffness, torque limit, cut-off trip force, backlash width, the
+  base-collision box's top height): a logarithmic grid of simulations and two parabolic refinements in
+  ``log p`` (a 1-D search). The base collision is fitted to the workspace sweep (:mod:`.workspace`),
+  every other candidate to the hand-force residual.
 
 Effects the calibrated hand force cannot see are listed in :data:`NOT_OBSERVABLE` with the reason.
 """
@@ -20,6 +22,7 @@ from typing import Callable, Literal
 
 import numpy as np
 
+from haptify_tools.discrepancy import workspace as ws
 from haptify_tools.twin.model import TwinFile, set_param
 
 #: Effect ids of the simulator that the hand-force residual cannot reveal, and why (reported as such).
@@ -38,7 +41,7 @@ class Candidate:
     parameter: str
     unit: str
     kind: Literal["affine", "search"]
-    scope: Literal["all", "active"]
+    scope: Literal["all", "active", "workspace"]
     probe: Callable[[TwinFile], float]          # affine: a typical value; search: the grid's centre
     grid_factors: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0, 4.0)
     lower: float = 0.0
@@ -48,6 +51,8 @@ class Candidate:
 
     def apply(self, twin: TwinFile, value: float) -> TwinFile:
         """A copy of ``twin`` with this effect on and its parameter set to ``value`` (every axis)."""
+        if self.effect_id == ws.EFFECT_ID:
+            return ws.apply(twin, value)
         t = twin
         if self.effect_id == "drive.force_cutoff":      # keep the re-arm level below the new trip level
             rearm = min(t.effects.drive_force_cutoff.rearm_force_N, 0.5 * float(value))
@@ -57,6 +62,8 @@ class Candidate:
 
     def available(self, twin: TwinFile) -> bool:
         """True when the twin lacks this effect (the library proposes only what the twin does not have)."""
+        if self.effect_id == ws.EFFECT_ID:
+            return ws.available(twin)
         if self.effect_id == "drive.backlash" and not twin.on("drive.series_elasticity"):
             return False           # without an elastic cable the twin's drive has no play to model
         if self.effect_id == "kinematics.link_length":
@@ -66,6 +73,8 @@ class Candidate:
 
     def value_in(self, twin: TwinFile) -> float | list[float]:
         """The parameter's value in ``twin`` (a list for per-axis parameters)."""
+        if self.effect_id == ws.EFFECT_ID:
+            return ws.box_top(twin)[0]
         v = getattr(twin.effect(self.effect_id), self.parameter)
         return [float(x) for x in v] if isinstance(v, list) else float(v)
 
@@ -97,6 +106,14 @@ class _Fixed:
 _mean_of = _MeanOf
 
 
+@dataclass(frozen=True)
+class _BoxTop:
+    """Probe: the stored top height of the collision box (device frame, m)."""
+
+    def __call__(self, twin: TwinFile) -> float:
+        return ws.box_top(twin)[0]
+
+
 #: The library, in the order of the simulator's effect ids (issue 8).
 LIBRARY: tuple[Candidate, ...] = (
     Candidate("gravity", "g_m_per_s2", "m/s²", "affine", "all", _mean_of("gravity", "g_m_per_s2", 9.80665)),
@@ -110,13 +127,14 @@ LIBRARY: tuple[Candidate, ...] = (
     Candidate("drive.torque_saturation", "max_torque_Nm", "N·m", "search", "active",
               _mean_of("drive.torque_saturation", "max_torque_Nm", 0.3)),
     Candidate("drive.force_cutoff", "trip_force_N", "N", "search", "active", _Fixed(2.0),
-              grid_factors=(0.3, 0.45, 0.65, 0.9), commanded_scale=True),
+              grid_factors=(0.02, 0.05, 0.1, 0.2, 0.4, 0.8), commanded_scale=True),
     Candidate("drive.backlash", "width_rad", "rad", "search", "active", _mean_of("drive.backlash", "width_rad", 0.002)),
     Candidate("kinematics.link_length", "delta_a_m", "m", "affine", "all", _Fixed(0.005)),
     Candidate("handle.connector_mass", "mass_kg", "kg", "affine", "all", _mean_of("handle.connector_mass", "mass_kg", 0.03)),
+    Candidate(ws.EFFECT_ID, ws.PARAMETER, "m", "search", "workspace", _BoxTop(), grid_factors=ws.GRID_FACTORS),
 )
 
-LIBRARY_IDS: tuple[str, ...] = tuple(c.effect_id for c in LIBRARY) + ("kinematics.base_collision",)
+LIBRARY_IDS: tuple[str, ...] = tuple(c.effect_id for c in LIBRARY)
 
 
 def candidate(effect_id: str) -> Candidate:

@@ -95,6 +95,27 @@ class BenchmarkGap(_M):
     twin_after: float
 
 
+class WorkspaceRegion(_M):
+    """Position residual of the workspace sweep in one region (tertiles of the sweep per world axis), m."""
+
+    label: str
+    rms_before_m: float
+    rms_after_m: float
+    samples: int
+
+
+class WorkspaceGap(_M):
+    """The workspace sweep against the twin's examiner rule (radial stop), before and after (m, m³)."""
+
+    trial_id: str
+    rms_before_m: float = Field(description="RMS distance measured − predicted sweep point, before, m.")
+    rms_after_m: float
+    measured_volume_m3: float = Field(description="The reference's volume operator (spec §8.4) on the measured points.")
+    twin_before_volume_m3: float = Field(description="The same operator on the twin's predicted points, before.")
+    twin_after_volume_m3: float
+    regions: list[WorkspaceRegion] = Field(description="Regions ranked by residual RMS before (largest first).")
+
+
 class DiscrepancyFile(_M):
     """The whole result of ``haptify discrepancy`` (issue 8)."""
 
@@ -111,6 +132,7 @@ class DiscrepancyFile(_M):
     where: list[Place] = Field(description="Places ranked by residual RMS before (largest first).")
     signal_gaps: list[SignalGap]
     benchmark_gaps: list[BenchmarkGap]
+    workspace_gaps: list[WorkspaceGap] = Field(default_factory=list)
     heldout_gap_before_N: float = Field(description="RMS force residual on the held-out blocks, all trials, before.")
     heldout_gap_after_N: float
     not_observable: dict[str, str] = Field(description="Library effect ids the force residual cannot reveal, and why.")

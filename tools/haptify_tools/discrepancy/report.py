@@ -35,6 +35,21 @@ def _figures(trials: list[MeasuredTrial], sel: Selection) -> list[tuple[str, str
         res["z"].append(tr.position[v, 2])
         res["rb"].append(np.linalg.norm(tr.force - before[tr.trial_id], axis=1)[v])
         res["ra"].append(np.linalg.norm(tr.force - after[tr.trial_id], axis=1)[v])
+    if sel.sweeps is not None:
+        fig, axes = plt.subplots(1, 3, figsize=(13, 4), sharex=True, sharey=True)
+        for ax, (title, pts) in zip(axes, (("measured sweep", None), ("twin before", sel.initial_sweep),
+                                           ("twin after", sel.final_sweep))):
+            for sw in sel.sweeps.items:
+                p = sw.position if pts is None else pts[sw.trial_id]
+                ax.plot(p[sw.valid, 0], p[sw.valid, 2], ".", ms=1.5, color="k" if pts is None else "C0")
+            ax.set_title(title)
+            ax.set_xlabel("x (m)")
+            ax.set_aspect("equal")
+        axes[0].set_ylabel("z (m)")
+        figs.append(("workspace_before_after", "Workspace (x–z projection): the measured sweep and the twin's sweep "
+                                               "(examiner's radial stop toward the same commands) before and after.", fig))
+    if not trials:
+        return figs
     res = {k: np.concatenate(v) for k, v in res.items()}
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
     for ax, key, label in ((axes[0], "speed", "handle speed (m/s)"), (axes[1], "z", "height z (m)")):
@@ -112,6 +127,12 @@ def write_report(folder: Path, result: DiscrepancyFile, trials: list[MeasuredTri
     sig = _table(["trial", "axis", "RMS before", "RMS after", "held-out before", "held-out after"],
                  [[g.trial_id, g.channel, g.rms_before_N, g.rms_after_N, g.heldout_rms_before_N, g.heldout_rms_after_N]
                   for g in result.signal_gaps])
+    wsp = "".join(f"<h3>{html.escape(w.trial_id)}</h3><p>position residual RMS {1000 * w.rms_before_m:.2f} mm → "
+                  f"{1000 * w.rms_after_m:.2f} mm; volume measured {1e6 * w.measured_volume_m3:.0f} cm³, twin before "
+                  f"{1e6 * w.twin_before_volume_m3:.0f} cm³, after {1e6 * w.twin_after_volume_m3:.0f} cm³</p>" + _table(
+                      ["region", "RMS before (m)", "RMS after (m)", "samples"],
+                      [[r.label, r.rms_before_m, r.rms_after_m, r.samples] for r in w.regions[:10]])
+                  for w in result.workspace_gaps)
     s = result.structure
     fig_html = "".join(f"<figure><img src=\"{html.escape(n)}.png\" alt=\"{html.escape(c)}\"><figcaption>{html.escape(c)}"
                        "</figcaption></figure>" for n, c, _ in figs)
@@ -128,6 +149,7 @@ verdict: <b>{html.escape(result.verdict)}</b> · held-out force gap {result.held
 (F test p = {s.f_p_value:.2g}; Ljung–Box p = {s.ljung_box_p_value:.2g}) → {'structure left that no library effect explains'
 if s.structured else 'no clear structure left'}.</p>
 <h2>Where the twin and the measurement disagree</h2>{where}
+{f'<h2>Workspace</h2>{wsp}' if wsp else ''}
 <h2>Benchmarks</h2>{bench}
 <h2>Signals</h2>{sig}
 <h2>Every round</h2>{rounds}

@@ -23,10 +23,12 @@ from haptify.surface import planar_stats
 
 from haptify_tools.discrepancy import data as dt
 from haptify_tools.discrepancy import stats as st
+from haptify_tools.discrepancy import workspace as ws
 from haptify_tools.discrepancy.identify import Selection, select_effects
 from haptify_tools.discrepancy.library import NOT_OBSERVABLE
 from haptify_tools.discrepancy.model import (
-    AcceptedEffect, BenchmarkGap, CandidateFit, DiscrepancyFile, Place, RoundResult, SignalGap, Structure,
+    AcceptedEffect, BenchmarkGap, CandidateFit, DiscrepancyFile, Place, RoundResult, SignalGap, Structure, WorkspaceGap,
+    WorkspaceRegion,
 )
 from haptify_tools.twin.model import TwinFile, twin_from_dict, twin_to_dict, write_twin
 
@@ -47,6 +49,8 @@ def localise(trials: list[dt.MeasuredTrial], before: dict, after: dict) -> list[
         v = tr.valid
         rb, ra = (tr.force - before[tr.trial_id])[v], (tr.force - after[tr.trial_id])[v]
         rows.append((tr, v, rb, ra))
+    if not rows:
+        return []
     total = sum(float(np.sum(rb ** 2)) for _, _, rb, _ in rows) or 1.0
     n_all = sum(len(rb) for _, _, rb, _ in rows)
     pos_all = np.concatenate([tr.position[v] for tr, v, _, _ in rows])
@@ -105,7 +109,7 @@ def signal_gaps(design: st.Design, trials: list[dt.MeasuredTrial], before: dict,
 def heldout_gap(trials: list[dt.MeasuredTrial], sim: dict) -> float:
     """RMS force residual (N, three axes pooled) over the validation and test blocks of every trial."""
     parts = [(tr.force - sim[tr.trial_id])[tr.valid & (st.block_roles(len(tr.t)) != "train")] for tr in trials]
-    r = np.concatenate(parts)
+    r = np.concatenate(parts) if parts else np.zeros((0, 3))
     return float(np.sqrt(np.mean(r ** 2))) if len(r) else 0.0
 
 
@@ -151,14 +155,54 @@ def benchmark_gaps(trials: list[dt.MeasuredTrial], before: dict, after: dict) ->
     return out
 
 
+def _tertile_labels(points: np.ndarray) -> list[str]:
+    cuts = [np.quantile(points[:, k], [1 / 3, 2 / 3]) for k in range(3)]
+    names = ("low", "mid", "high")
+    cell = np.stack([np.searchsorted(cuts[k], points[:, k]) for k in range(3)], axis=1)
+    return [f"x {names[a]}, y {names[b]}, z {names[c]}" for a, b, c in cell.tolist()]
+
+
+def workspace_gaps(sel: Selection) -> list[WorkspaceGap]:
+    """Per workspace trial: residual RMS and volumes (reference operator) measured / twin before / after,
+    and the regions where the sweep and the twin disagree (issue 8: the missing lobe)."""
+    from haptify.workspace import volume_solid
+
+    out = []
+    if sel.sweeps is None:
+        return out
+    for sw in sel.sweeps.items:
+        ok = sw.valid
+        before, after = sel.initial_sweep[sw.trial_id], sel.final_sweep[sw.trial_id]
+        rb = np.linalg.norm(sw.position - before, axis=1)[ok]
+        ra = np.linalg.norm(sw.position - after, axis=1)[ok]
+        labels = np.asarray(_tertile_labels(sw.position[ok]))
+        regions = []
+        for lab in sorted(set(labels.tolist())):
+            m = labels == lab
+            if m.sum() >= MIN_PLACE_SHARE * len(labels):
+                regions.append(WorkspaceRegion(label=lab, rms_before_m=float(np.sqrt(np.mean(rb[m] ** 2))),
+                                               rms_after_m=float(np.sqrt(np.mean(ra[m] ** 2))), samples=int(m.sum())))
+        regions.sort(key=lambda r: -r.rms_before_m)
+        vol = lambda p: float(volume_solid(p[np.all(np.isfinite(p), axis=1)]).volume)  # noqa: E731
+        out.append(WorkspaceGap(trial_id=sw.trial_id, rms_before_m=float(np.sqrt(np.mean(rb ** 2))),
+                                rms_after_m=float(np.sqrt(np.mean(ra ** 2))), measured_volume_m3=vol(sw.position),
+                                twin_before_volume_m3=vol(before), twin_after_volume_m3=vol(after), regions=regions))
+    return out
+
+
 def annotate_twin(twin: TwinFile, sel: Selection) -> TwinFile:
     """The updated twin with each identified parameter's uncertainty and evidence in the effect's ``sources``."""
     data = twin_to_dict(twin)
     for f in sel.accepted:
         c = f.candidate
         holder = data["rig"] if c.effect_id == "handle.connector_mass" else data["effects"]
+        if c.effect_id == ws.EFFECT_ID:
+            box = next(p for p in holder[c.effect_id]["primitives"] if p["shape"] == "box")
+            key = f"primitives.{box['name']}.top"
+        else:
+            key = c.parameter
         se = f"{f.stderr:.3g}" if np.isfinite(f.stderr) else "n/a"
-        holder[c.effect_id].setdefault("sources", {})[c.parameter] = (
+        holder[c.effect_id].setdefault("sources", {})[key] = (
             f"identified by haptify discrepancy: {f.value:.6g} ± {se} {c.unit} (1 s.e.), "
             f"ΔBIC {f.score.delta_bic:.1f}, p {f.score.p_value:.2g}")
     return twin_from_dict(data)
@@ -181,11 +225,15 @@ def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial]
     s = sel.structure
     verdict = "unexplained residual" if s["structured"] else ("explained" if accepted else "no discrepancy")
     design = sel.rounds[0].design
+    wgaps = workspace_gaps(sel)
+    bench = benchmark_gaps(trials, sel.initial_sim, sel.final_sim) + [
+        BenchmarkGap(metric="workspace.measured_volume", trial_id=w.trial_id, unit="m^3", measured=w.measured_volume_m3,
+                     twin_before=w.twin_before_volume_m3, twin_after=w.twin_after_volume_m3) for w in wgaps]
     return DiscrepancyFile(
         session_id=session_id, twin_name=twin.name, verdict=verdict, accepted=accepted, rounds=rounds,
         structure=Structure(**s), where=localise(trials, sel.initial_sim, sel.final_sim),
         signal_gaps=signal_gaps(design, trials, sel.initial_sim, sel.final_sim),
-        benchmark_gaps=benchmark_gaps(trials, sel.initial_sim, sel.final_sim),
+        benchmark_gaps=bench, workspace_gaps=wgaps,
         heldout_gap_before_N=heldout_gap(trials, sel.initial_sim), heldout_gap_after_N=heldout_gap(trials, sel.final_sim),
         not_observable=dict(NOT_OBSERVABLE),
         settings={"pose_cutoff_hz": dt.POSE_CUTOFF_HZ, "residual_cutoff_hz": dt.RESIDUAL_CUTOFF_HZ,
@@ -202,8 +250,9 @@ def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | 
     depend on it). Returns the result and the selection (its simulations, for callers that draw or test).
     """
     session = open_session(session_path)
-    trials = dt.load_measured(session)
-    sel = select_effects(twin, trials, max_effects=max_effects, log=log, workers=workers)
+    sweeps = ws.load_sweeps(session)
+    trials = dt.load_measured(session, required=not sweeps)
+    sel = select_effects(twin, trials, max_effects=max_effects, log=log, workers=workers, sweeps=sweeps)
     result = build_result(session.session_id, twin, trials, sel)
     if out is not None:
         target = Path(out)
