@@ -351,3 +351,32 @@ def test_resonant_vibration_peaks_at_its_frequency():
     kernel = np.ones(41) / 41
     peak = f[np.argmax(np.convolve(spec, kernel, mode="same"))]
     assert peak == pytest.approx(f0, rel=0.05)
+
+
+# --- bad input ----------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("case", ["short", "shape", "nan", "backwards", "friction"])
+def test_bad_hand_paths_are_e903(case):
+    from haptify.errors import HaptifyError
+
+    tw = preset("touch")
+    t, p, quat = hold(tw, centre_q(tw), n=50)
+    rend = {"surface_point_m": p[0].tolist(), "surface_normal": [0.0, 0.0, 1.0], "stiffness_N_per_m": 750.0}
+    if case == "short":
+        t, p, quat = t[:2], p[:2], quat[:2]
+    elif case == "shape":
+        p = p[:, :2]
+    elif case == "nan":
+        p = p.copy()
+        p[7, 1] = np.nan
+    elif case == "backwards":
+        t = t.copy()
+        t[10] = t[9]
+    elif case == "friction":
+        rend["dynamic_friction"] = 0.3
+    with pytest.raises(HaptifyError) as err:
+        ph.simulate_active(tw, t, p, quat, rend)
+    assert err.value.findings[0].code == "E903"
+    if case != "friction":
+        with pytest.raises(HaptifyError):
+            ph.simulate_passive(tw, t, p, quat)

@@ -28,10 +28,12 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from pydantic import ValidationError
 from scipy import signal
 
 from haptify import kinematics as ref
 from haptify.conventions import quat_conjugate, quat_multiply, quat_to_matrix
+from haptify.errors import fail
 from haptify.session_format import Kinematics, Rendering
 
 from haptify_tools.twin.examiner import band_noise as _band_noise
@@ -57,6 +59,27 @@ def _diff(t: np.ndarray, x: np.ndarray) -> np.ndarray:
     if len(t) < 3:
         return np.zeros_like(x)
     return np.gradient(x, t, axis=0, edge_order=2)
+
+
+def _check_path(t: np.ndarray, position_W: np.ndarray, quaternion_W: np.ndarray, uniform: bool = False):
+    """Validate a hand path: E903 naming what is wrong (shapes, finite values, increasing time)."""
+    t = np.asarray(t, dtype=float)
+    p = np.atleast_2d(np.asarray(position_W, dtype=float))
+    q = np.atleast_2d(np.asarray(quaternion_W, dtype=float))
+    if t.ndim != 1 or len(t) < 3:
+        raise fail("E903", "the time vector must be one-dimensional with at least 3 samples", expected="(N,), N >= 3", found=list(t.shape))
+    if p.shape != (len(t), 3) or q.shape != (len(t), 4):
+        raise fail("E903", "hand positions must be (N, 3) and quaternions (N, 4) for N time samples",
+                   expected=[[len(t), 3], [len(t), 4]], found=[list(p.shape), list(q.shape)])
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(p)) and np.all(np.isfinite(q))):
+        raise fail("E903", "the hand path holds NaN or infinite values", expected="finite values", found="NaN/inf")
+    dt = np.diff(t)
+    if np.any(dt <= 0):
+        raise fail("E903", "time must increase strictly", expected="t[i+1] > t[i]", found=int(np.argmin(dt > 0)))
+    if uniform and np.max(np.abs(dt - dt[0])) > 1e-6 * dt[0]:
+        raise fail("E903", "the active loop needs uniformly sampled time", expected=f"steps of {dt[0]:g} s",
+                   found=[float(dt.min()), float(dt.max())])
+    return t, p, q
 
 
 def _unwrap(q: np.ndarray) -> np.ndarray:
@@ -391,14 +414,12 @@ def _to_world(twin: TwinFile, force_D, torque_D, about_origin_D: bool = True):
 def simulate_passive(twin: TwinFile, t: np.ndarray, position_W: np.ndarray, quaternion_W: np.ndarray) -> PassiveResult:
     """Simulate the powered-off device moved by the examiner's hand (issue 3, design §4).
 
-    ``t (N,)`` s, strictly increasing; ``position_W (N, 3)`` gimbal-centre path in W, m;
+    ``t (N,)`` s, strictly increasing (E903 otherwise); ``position_W (N, 3)`` gimbal-centre path in W, m;
     ``quaternion_W (N, 4)`` handle orientation (wxyz, handle → W). Velocities and accelerations are
     second-order finite differences, so give a smooth path sampled at ≥ 500 Hz. Drive friction and the
     reflected rotor inertia act on the drive axes ``θ = C·q`` and reach the joints as ``Cᵀ·τ``.
     """
-    t = np.asarray(t, dtype=float)
-    position_W = np.atleast_2d(np.asarray(position_W, dtype=float))
-    quaternion_W = np.atleast_2d(np.asarray(quaternion_W, dtype=float))
+    t, position_W, quaternion_W = _check_path(t, position_W, quaternion_W)
     kin = true_kinematics(twin)
     q, _, ok = hand_to_joints(twin, position_W, None)
     q = _unwrap(q)
@@ -490,10 +511,6 @@ class _ScalarChain:
         return (px, py, pz), jac
 
 
-def _inv3(m: np.ndarray) -> list[list[float]]:
-    return np.linalg.inv(m).tolist()
-
-
 def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, hand_quaternion_W: np.ndarray,
                     rendering: Rendering | dict) -> ActiveResult:
     """Simulate the powered device rendering a frictionless virtual plane (issue 3; CHAI3D plane example).
@@ -510,10 +527,16 @@ def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, 
     rigid, the motor follows the link, and the loop is evaluated vectorised.
     """
     if isinstance(rendering, dict):
-        rendering = Rendering.model_validate(rendering)
-    t = np.asarray(t, dtype=float)
-    pos_W = np.atleast_2d(np.asarray(hand_position_W, dtype=float))
-    quat_W = np.atleast_2d(np.asarray(hand_quaternion_W, dtype=float))
+        try:
+            rendering = Rendering.model_validate(rendering)
+        except ValidationError as err:
+            raise fail("E903", f"invalid rendering: {err.errors()[0]['msg']}", expected="a session-format Rendering",
+                       found=str(err.errors()[0]["loc"])) from None
+    if rendering.static_friction or rendering.dynamic_friction:
+        raise fail("E903", "the twin renders frictionless planes only (CHAI3D plane example with zero friction)",
+                   expected="static_friction = dynamic_friction = 0",
+                   found=[rendering.static_friction, rendering.dynamic_friction])
+    t, pos_W, quat_W = _check_path(t, hand_position_W, hand_quaternion_W, uniform=True)
     n_s = len(t)
     kin = true_kinematics(twin)
     nom = nominal_kinematics(twin)
