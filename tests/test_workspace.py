@@ -348,3 +348,16 @@ def test_an_open_sweep_is_reported_with_w410(tmp_path):
     res = by_id(compute(ctx))
     assert "W410" in res["workspace.measured_volume"].warnings
     assert any(w.code == "W410" and w.trial == "workspace-1" for w in ctx.warnings)
+
+
+def test_degenerate_kinematics_give_e311_not_a_division_by_zero(tmp_path):
+    dev = mini_device()
+    joints = dev["kinematics"]["joints"]
+    joints[1]["upper"]["constant"] = joints[1]["lower"]["constant"]  # the shoulder cannot move: a surface, no volume
+    joints[2]["upper"] = {"constant": joints[2]["lower"]["constant"]}
+    rng = np.random.default_rng(RNG_SEED)
+    cloud = sphere_surface(3_000, 0.05, [0.1, 0.0, 0.1], rng)
+    res = by_id(compute(ComputeContext(session=open_session(workspace_session(tmp_path, dev, [cloud])))))
+    assert res["workspace.modeled_volume"].code == "E311"
+    assert res["workspace.volume_ratio"].code == "E311" and res["workspace.coverage"].code == "E311"
+    assert isinstance(res["workspace.measured_volume"], MetricResult)

@@ -294,6 +294,9 @@ def compute(ctx: Any) -> list:
             model = ctx.cached(("workspace_model",), lambda: modeled_solid(device.kinematics, placement.position, placement.quaternion))
         except HaptifyError as exc:
             model_error = exc
+        if model is not None and not model.volume > 0:
+            model, model_error = None, fail("E311", "the device's kinematics reach no volume (empty or degenerate joint ranges)",
+                                            pointer="/device/kinematics", expected="a modeled volume > 0", found=0.0)
     if model is not None:
         out.append(single(FAMILY, "workspace.modeled_volume", model.volume,
                           diagnostics={"voxels": int(model.fraction.size), "samples": model.n_points,
