@@ -1,0 +1,166 @@
+"""Shared builders for the registry tests: sessions, results, conformance reports, bundles, hostile
+archives, a registry app on SQLite or a throwaway PostgreSQL server."""
+
+from __future__ import annotations
+
+import gzip
+import io
+import json
+import os
+import shutil
+import socket
+import subprocess
+import tarfile
+import tempfile
+import time
+from pathlib import Path
+
+import pytest
+
+from haptify.compute import compute_session
+from haptify.storage import open_session
+from haptify_conform.cases import load_cases, select
+from haptify_conform.judge import Verdict
+from haptify_conform.report import ConformReport, build_report, header
+from haptify_tools.example_session import write_example
+from haptify_tools.registry.bundle import build_bundle, pack
+
+FAST_METRICS = ["free_space.speed_mean", "free_space.angular_speed_mean", "vibration.rms", "vibration.spectral_centroid",
+                "workspace.spec_box_volume"]
+PG_BIN = Path("/usr/local/bin")
+
+
+def example_session(root: Path, lab: str = "lab-example", session_id: str = "example-0001",
+                    manufacturer: str | None = None, model: str | None = None) -> Path:
+    """The analytic example session, optionally re-labelled (lab, id, device) by editing its manifest."""
+    path = write_example(root)
+    manifest = json.loads((path / "session.json").read_text())
+    manifest["lab"]["id"] = lab
+    manifest["session_id"] = session_id
+    if manufacturer:
+        manifest["device"]["manufacturer"] = manufacturer
+    if model:
+        manifest["device"]["model"] = model
+    (path / "session.json").write_text(json.dumps(manifest, indent=2))
+    return path
+
+
+def write_results(session: Path, target: Path, *, metrics=FAST_METRICS, edit=None) -> Path:
+    """results.json of the reference for ``session``; ``edit(dict)`` may change it before writing."""
+    results = compute_session(open_session(session), metrics=metrics).model_dump(mode="json")
+    if edit:
+        edit(results)
+    target.write_text(json.dumps(results, indent=2))
+    return target
+
+
+def passing_report(target: Path, implementation: dict, *, fail_case: str | None = None, spec_version: str = "1.0") -> Path:
+    """A conformance report in which every case of the suite passed (or ``fail_case`` failed)."""
+    verdicts = [Verdict(case_id=c.id, metric=c.metric, status="failed" if c.id == fail_case else "passed",
+                        message="", level=c.level, spec_section=c.spec_section, duration_s=0.01)
+                for c in select(load_cases(), spec_version="1.0")]
+    report = build_report(header("python", implementation, "2026-11-22T12:00:00Z"), verdicts)
+    data = report.model_dump(mode="json")
+    data["header"]["spec_version"] = spec_version
+    ConformReport.model_validate(data)
+    target.write_text(json.dumps(data, indent=2))
+    return target
+
+
+def bundle_for(session: Path, results: Path, conformance: Path | None, target: Path, **kw) -> tuple[Path, str]:
+    """Pack a bundle; returns (archive, digest)."""
+    bundle, files = build_bundle(session, results, conformance, **kw)
+    digest = pack(bundle, files, target)
+    return target, digest
+
+
+def tar_gz(members: list[tuple[tarfile.TarInfo, bytes | None]]) -> bytes:
+    """A .tar.gz from hand-made members (for hostile archives)."""
+    buf = io.BytesIO()
+    with gzip.GzipFile(fileobj=buf, mode="wb", mtime=0) as gz, tarfile.open(fileobj=gz, mode="w", format=tarfile.PAX_FORMAT) as tar:
+        for info, data in members:
+            if data is not None:
+                info.size = len(data)
+                tar.addfile(info, io.BytesIO(data))
+            else:
+                tar.addfile(info)
+    return buf.getvalue()
+
+
+def member(name: str, kind: bytes = tarfile.REGTYPE, linkname: str = "") -> tarfile.TarInfo:
+    info = tarfile.TarInfo(name)
+    info.type = kind
+    info.linkname = linkname
+    return info
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class PostgresServer:
+    """A throwaway PostgreSQL 15 server in a temporary folder on a loopback port (trust authentication)."""
+
+    def __init__(self) -> None:
+        self.root = Path(tempfile.mkdtemp(prefix="haptify-pg-"))
+        self.port = free_port()
+        self.prefix: list[str] = []
+        if os.geteuid() == 0:  # initdb refuses to run as root: run the server as the 'postgres' user
+            shutil.chown(self.root, "postgres", "postgres")
+            self.prefix = ["runuser", "-u", "postgres", "--"]
+
+    def _run(self, *cmd: str) -> None:
+        subprocess.run([*self.prefix, *cmd], check=True, capture_output=True, timeout=60)
+
+    def start(self) -> str:
+        data = self.root / "data"
+        self._run(str(PG_BIN / "initdb"), "-D", str(data), "-A", "trust", "-U", "postgres", "--no-sync")
+        self._run(str(PG_BIN / "pg_ctl"), "-D", str(data), "-l", str(self.root / "log"), "-w", "-o",
+                  f"-p {self.port} -k {self.root} -c listen_addresses=127.0.0.1 -c fsync=off", "start")
+        return f"postgresql://postgres@127.0.0.1:{self.port}/postgres"
+
+    def new_database(self, name: str) -> str:
+        import psycopg
+
+        with psycopg.connect(f"postgresql://postgres@127.0.0.1:{self.port}/postgres", autocommit=True) as conn:
+            conn.execute(f'CREATE DATABASE "{name}"')
+        return f"postgresql://postgres@127.0.0.1:{self.port}/{name}"
+
+    def stop(self) -> None:
+        try:
+            self._run(str(PG_BIN / "pg_ctl"), "-D", str(self.root / "data"), "-m", "immediate", "stop")
+        except Exception:
+            pass
+        shutil.rmtree(self.root, ignore_errors=True)
+
+
+def postgres_or_skip() -> PostgresServer:
+    """Start a PostgreSQL server, or skip the test with the reason."""
+    if not (PG_BIN / "initdb").exists():
+        pytest.skip(f"PostgreSQL not available: no initdb in {PG_BIN}")
+    if os.geteuid() == 0 and shutil.which("runuser") is None:
+        pytest.skip("PostgreSQL cannot start: running as root without runuser")
+    server = PostgresServer()
+    try:
+        server.start()
+    except (subprocess.SubprocessError, OSError, KeyError, LookupError) as exc:
+        server.stop()
+        detail = getattr(exc, "stderr", b"") or b""
+        pytest.skip(f"PostgreSQL could not be started: {exc} {detail.decode(errors='replace')[:300]}")
+    return server
+
+
+def wait_http(url: str, timeout: float = 20.0) -> None:
+    import urllib.request
+
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            with urllib.request.urlopen(url, timeout=1):
+                return
+        except Exception:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.05)
