@@ -155,3 +155,19 @@ def test_bad_files_are_e802_with_pointers(tmp_path):
 def test_twin_file_is_a_superset_of_the_device_description():
     fields = set(TwinFile.model_fields)
     assert "device" in fields and TwinFile.model_fields["device"].annotation is Device
+
+
+@pytest.mark.parametrize("name", PRESETS)
+def test_presets_validate_against_the_generated_json_schema(name):
+    """The JSON Schema generated from TwinFile (what twin.schema.json holds) accepts the preset files."""
+    import jsonschema
+
+    from haptify_tools.twin.model import PRESET_DIR
+
+    schema = TwinFile.model_json_schema(mode="validation", by_alias=True)
+    data = json.loads((PRESET_DIR / f"{name}.json").read_text(encoding="utf-8"))
+    jsonschema.validate(data, schema)
+    bad = json.loads(json.dumps(data))
+    bad["effects"]["drive.backlash"]["width_rad"] = "wide"
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(bad, schema)

@@ -38,7 +38,8 @@ from haptify.session_format import Kinematics, Rendering
 
 from haptify_tools.twin.examiner import band_noise as _band_noise
 from haptify_tools.twin.kinematics import (
-    gimbal_angles, hand_to_joints, link_transforms, nominal_kinematics, placement_matrix, rows_times, true_kinematics,
+    gimbal_angles, hand_to_joints, in_collision, link_transforms, nominal_kinematics, placement_matrix, rows_times,
+    true_kinematics, world_to_device,
 )
 from haptify_tools.twin.model import TwinFile
 
@@ -344,8 +345,8 @@ class PassiveResult:
     ``force_W``/``torque_W``: force and torque the device applies to the hand at the gimbal centre.
     ``base_force_W``/``base_torque_W``: wrench the whole device (base included, with its full weight)
     applies to the force plate, torque about the W origin. ``q``: true joint angles; ``gimbal``: gimbal
-    angles; ``ok``: False where the hand pose is out of the device's reach (values there are
-    extrapolations). ``joint_torque``: torque the hand's force produces at each joint, N·m.
+    angles; ``ok``: False where the hand pose is out of the device's reach or puts the end-effector
+    into the base (the hard stops are not modelled: values there are extrapolations). ``joint_torque``: torque the hand's force produces at each joint, N·m.
     """
 
     t: np.ndarray
@@ -422,6 +423,7 @@ def simulate_passive(twin: TwinFile, t: np.ndarray, position_W: np.ndarray, quat
     t, position_W, quaternion_W = _check_path(t, position_W, quaternion_W)
     kin = true_kinematics(twin)
     q, _, ok = hand_to_joints(twin, position_W, None)
+    ok = ok & ~in_collision(twin, world_to_device(twin, position_W))
     q = _unwrap(q)
     frames = link_transforms(kin, q)
     gimbal = gimbal_angles(twin, q, quaternion_W, frames)
@@ -541,6 +543,7 @@ def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, 
     kin = true_kinematics(twin)
     nom = nominal_kinematics(twin)
     q, _, ok = hand_to_joints(twin, pos_W, None)
+    ok = ok & ~in_collision(twin, world_to_device(twin, pos_W))
     q = _unwrap(q)
     frames = link_transforms(kin, q)
     gimbal = gimbal_angles(twin, q, quat_W, frames)
