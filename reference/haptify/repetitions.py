@@ -85,15 +85,18 @@ def unavailable(metric_id: str, error: HaptifyError) -> Unavailable:
 def per_trial(ctx: Any, trial_ids: Sequence[str], compute_one: Callable[[str], Any], what: str) -> tuple[dict[str, Any], HaptifyError | None]:
     """Run ``compute_one`` on every trial; return the results of those that worked and the first coded error.
 
-    A metric rests on the trials that worked; each trial that failed is reported on ``ctx`` as W413
-    (naming its own error), and when none worked the first error explains why the metric is unavailable.
+    A metric rests on the trials that worked, and each trial that failed is then reported on ``ctx`` as
+    W413 naming its own error. When none worked, nothing is warned: the first error makes the metric
+    unavailable (spec §15.2).
     """
     out: dict[str, Any] = {}
-    first: HaptifyError | None = None
+    failed: dict[str, HaptifyError] = {}
     for tid in trial_ids:
         try:
             out[tid] = compute_one(tid)
         except HaptifyError as exc:
-            first = first or exc
+            failed[tid] = exc
+    if out:
+        for tid, exc in failed.items():
             ctx.warn("W413", f"{what}: trial {tid!r} skipped ({exc.findings[0].code}: {exc.findings[0].message})", trial=tid)
-    return out, first
+    return out, next(iter(failed.values()), None)
