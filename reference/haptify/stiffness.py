@@ -117,9 +117,8 @@ def fit_stiffness(t: np.ndarray, penetration: np.ndarray, normal_force: np.ndarr
 def trial_fit(ctx: Any, trial_id: str) -> StiffnessFit:
     """:func:`fit_stiffness` on a stiffness trial's contact signals (spec §13.5); cached on a ComputeContext."""
     def build() -> StiffnessFit:
-        cs = contact_signals(ctx, trial_id)
-        ok = cs.valid
-        return fit_stiffness(cs.t[ok], cs.penetration[ok], cs.normal_force[ok], cs.contact[ok], trial_id)
+        cs = contact_signals(ctx, trial_id)  # contact is False wherever the sample is not valid
+        return fit_stiffness(cs.t, cs.penetration, cs.normal_force, cs.contact, trial_id)
 
     return cached(ctx, ("stiffness_fit", trial_id), build)
 
