@@ -143,7 +143,7 @@ def compute(ctx: Any) -> list:
         return [unavailable(m, err) for m in ids if ctx.wants(m)]
     out: list = []
     compliance: dict[str, list[str]] = {}
-    if any(ctx.wants(m) for m in SPEED_IDS + FORCE_IDS):
+    if any(ctx.wants(m) for m in ids):  # the compliance codes concern every free-space value of a trial
         done, first = per_trial(ctx, trials, lambda tid: _speed_summary(ctx, tid), "free_space.speed_mean")
         compliance = {tid: d["codes"] for tid, d in done.items()}
         if done:
