@@ -29,6 +29,7 @@ import json
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from haptify.conventions import STANDARD_GRAVITY
@@ -358,8 +359,6 @@ class TwinFile(_Strict):
                 raise ValueError(f"{key}: expected {n} values (one per joint), found {len(values)}")
         if len(self.drive.coupling) != n or any(len(r) != n for r in self.drive.coupling):
             raise ValueError(f"drive.coupling: expected a {n}×{n} matrix")
-        import numpy as np
-
         if abs(np.linalg.det(np.asarray(self.drive.coupling))) < 1e-9:
             raise ValueError("drive.coupling must be invertible")
         if self.effects.drive_force_cutoff.rearm_force_N > self.effects.drive_force_cutoff.trip_force_N:
