@@ -25,6 +25,8 @@ from haptify.results import MetricResult, Unavailable
 from haptify.session_format import Device
 from haptify.storage import SessionWriter, open_session
 from haptify.workspace import compute, modeled_solid, overlap_volume, report_figures, volume_solid
+from haptify_tools.build_conformance_fixtures import box_cloud
+from haptify_tools.build_conformance_fixtures import sphere_cloud as sphere_surface
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
 
 DEG = math.pi / 180
@@ -47,22 +49,9 @@ def kin(dev: dict):
     return Device.model_validate(dev).kinematics
 
 
-def sphere_surface(n: int, radius: float, centre, rng) -> np.ndarray:
-    v = rng.normal(size=(n, 3))
-    return radius * v / np.linalg.norm(v, axis=1, keepdims=True) + np.asarray(centre)
-
-
 def box_surface(n: int, edges, rng, rotation=None, centre=(0.0131, -0.0217, 0.2033)) -> np.ndarray:
-    a = np.asarray(edges, float)
-    areas = np.array([a[1] * a[2], a[0] * a[2], a[0] * a[1]] * 2)
-    face = rng.choice(6, size=n, p=areas / areas.sum())
-    u = rng.random((n, 3)) * a
-    axis = face % 3
-    u[np.arange(n), axis] = np.where(face < 3, 0.0, a[axis])
-    u -= a / 2
-    if rotation is not None:
-        u = quat_rotate(rotation, u)
-    return u + np.asarray(centre)
+    """Samples on the faces of a box (area-weighted), rotated about its centre by ``rotation`` (wxyz)."""
+    return box_cloud(n, edges, rng, np.array([1.0, 0.0, 0.0, 0.0]) if rotation is None else rotation, centre)
 
 
 def pappus_volume(dev: dict, n: int = 1500) -> float:
