@@ -20,7 +20,6 @@ from haptify.results import MetricResult, Unavailable
 from haptify.storage import open_session
 from metric_sessions import add_handle_trial, circle, spin, writer
 
-vec = st.floats(-5, 5, allow_nan=False)
 
 
 def test_magnitude_statistics_of_a_known_force():

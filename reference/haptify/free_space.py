@@ -17,7 +17,7 @@ from haptify.caching import cached
 from haptify.errors import HaptifyError, fail
 from haptify.force_plate import plate_signals
 from haptify.metric_definitions import param
-from haptify.repetitions import TrialValue, aggregate, per_trial, unavailable
+from haptify.repetitions import TrialValue, aggregate, no_trials, per_trial, unavailable
 from haptify.signals import handle_signals, lowpass_resample, mocap_track, sp, uniform_grid
 
 FAMILY = "free_space"
@@ -139,7 +139,7 @@ def compute(ctx: Any) -> list:
     trials = [t.id for t in ctx.session.trials_of(PROTOCOL)]
     ids = FORCE_IDS + (PLATE_ID,) + SPEED_IDS
     if not trials:
-        err = fail("E310", "the session has no free_space trial", expected="a trial of protocol 'free_space'", found=None)
+        err = no_trials(PROTOCOL)
         return [unavailable(m, err) for m in ids if ctx.wants(m)]
     out: list = []
     compliance: dict[str, list[str]] = {}

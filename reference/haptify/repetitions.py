@@ -15,7 +15,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from haptify.errors import HaptifyError
+from haptify.errors import HaptifyError, fail
 from haptify.metric_definitions import family
 from haptify.results import MetricResult, Unavailable
 
@@ -80,6 +80,11 @@ def unavailable(metric_id: str, error: HaptifyError) -> Unavailable:
     """The record of a metric stopped by a coded error (its first finding's code and message)."""
     finding = error.findings[0]
     return Unavailable(id=metric_id, code=finding.code, reason=finding.message)
+
+
+def no_trials(protocol: str) -> HaptifyError:
+    """The E310 error of a metric whose protocol has no trial in the session (spec §15.2)."""
+    return fail("E310", f"the session has no {protocol} trial", expected=f"a trial of protocol {protocol!r}", found=None)
 
 
 def per_trial(ctx: Any, trial_ids: Sequence[str], compute_one: Callable[[str], Any], what: str) -> tuple[dict[str, Any], HaptifyError | None]:

@@ -17,7 +17,7 @@ import numpy as np
 from haptify.caching import cached
 from haptify.errors import fail
 from haptify.metric_definitions import param
-from haptify.repetitions import TrialValue, aggregate, per_trial, unavailable
+from haptify.repetitions import TrialValue, aggregate, no_trials, per_trial, unavailable
 from haptify.surface import contact_signals
 
 FAMILY = "stiffness"
@@ -129,7 +129,7 @@ def compute(ctx: Any) -> list:
         return []
     trials = [t.id for t in ctx.session.trials_of(PROTOCOL)]
     if not trials:
-        err = fail("E310", "the session has no stiffness trial", expected="a trial of protocol 'stiffness'", found=None)
+        err = no_trials(PROTOCOL)
         return [unavailable(m, err) for m in IDS]
     done, first = per_trial(ctx, trials, lambda tid: trial_fit(ctx, tid), "stiffness.measured")
     if not done:

@@ -16,7 +16,7 @@ import numpy as np
 from haptify.caching import cached, session_of
 from haptify.errors import fail
 from haptify.metric_definitions import param
-from haptify.repetitions import TrialValue, aggregate, per_trial, unavailable
+from haptify.repetitions import TrialValue, aggregate, no_trials, per_trial, unavailable
 from haptify.signals import handle_signals, interp_columns
 
 FAMILY = "surface"
@@ -151,7 +151,7 @@ def compute(ctx: Any) -> list:
         return []
     trials = [t.id for t in ctx.session.trials_of(PROTOCOL)]
     if not trials:
-        err = fail("E310", "the session has no frictionless_surface trial", expected="a trial of protocol 'frictionless_surface'", found=None)
+        err = no_trials(PROTOCOL)
         return [unavailable(m, err) for m in IDS]
     done, first = per_trial(ctx, trials, lambda tid: _trial(ctx, tid), "surface.planar_force_mean")
     if not done:

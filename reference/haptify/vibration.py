@@ -16,7 +16,7 @@ from scipy.signal import butter, sosfiltfilt
 from haptify.caching import cached, session_of
 from haptify.errors import HaptifyError, fail
 from haptify.metric_definitions import param
-from haptify.repetitions import TrialValue, aggregate, per_trial, unavailable
+from haptify.repetitions import TrialValue, aggregate, no_trials, per_trial, unavailable
 from haptify.signals import nominal_rate
 
 FAMILY = "vibration"
@@ -142,7 +142,7 @@ def compute(ctx: Any) -> list:
             continue
         trials = [t.id for t in ctx.session.trials_of(protocol)]
         if not trials:
-            err = fail("E310", f"the session has no {protocol} trial", expected=f"a trial of protocol {protocol!r}", found=None)
+            err = no_trials(protocol)
             out += [unavailable(rms_id, err), unavailable(centroid_id, err)]
             continue
         done, first = per_trial(ctx, trials, lambda tid: _summary(ctx, tid), rms_id)

@@ -20,7 +20,7 @@ from haptify.conventions import pose_apply
 from haptify.errors import HaptifyError, fail
 from haptify.kinematics import configurations_from_unit, forward_positions, joint_limits
 from haptify.metric_definitions import param
-from haptify.repetitions import TrialValue, aggregate, per_trial, single, unavailable
+from haptify.repetitions import TrialValue, aggregate, no_trials, per_trial, single, unavailable
 from haptify.session_format import Kinematics
 
 FAMILY = "workspace"
@@ -317,7 +317,7 @@ def compute(ctx: Any) -> list:
     if not any(ctx.wants(m) for m in measured_ids):
         return out
     if not trials:
-        err = fail("E310", "the session has no workspace trial", expected="a trial of protocol 'workspace'", found=None)
+        err = no_trials(PROTOCOL)
         return out + [unavailable(m, err) for m in measured_ids]
     solids, first_error = per_trial(ctx, trials, lambda tid: ctx.cached(("workspace_solid", tid), lambda: volume_solid(measured_points(session, tid))),
                                     "workspace.measured_volume")
