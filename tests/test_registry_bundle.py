@@ -242,3 +242,20 @@ def test_tolerance_is_the_loosest_case_tolerance_per_metric():
     assert agrees(1.0019, 1.0, {"abs": 0.0, "rel": 0.002}) and not agrees(1.0021, 1.0, {"abs": 0.0, "rel": 0.002})
     assert agrees([1.0, 2.0, 3.0], [1.0, 2.0, 3.001], {"abs": 0.002, "rel": 0.0})
     assert not agrees([1.0, 2.0], [1.0, 2.0, 3.0], {"abs": 1.0, "rel": 1.0})
+
+
+def test_metric_records_must_match_their_definitions(material):
+    from haptify.results import ResultsFile
+    from haptify_tools.registry.checks import metric_findings
+
+    root, session, results, report = material
+    data = json.loads(results.read_text())
+    assert metric_findings(ResultsFile.model_validate(data)) == []
+    data["metrics"][0]["unit"] = "km/h"
+    data["metrics"][1]["id"] = "vibration.loudness"
+    data["metrics"][2]["value"] = [1.0, 2.0]
+    data["metrics"][3]["definition_version"] = "0.9.0"
+    data["metrics"].append(dict(data["metrics"][4]))
+    found = {(f.pointer, str(f.found)) for f in metric_findings(ResultsFile.model_validate(data))}
+    assert found == {("/metrics/0/unit", "km/h"), ("/metrics/1/id", "vibration.loudness"), ("/metrics/2/value", "list of 2"),
+                     ("/metrics/3/definition_version", "0.9.0"), ("/metrics/5", data["metrics"][4]["id"])}

@@ -113,17 +113,7 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
         if declared and declared.isdigit() and int(declared) > limit:
             raise HaptifyError(Finding("E960", "the bundle archive is larger than the registry accepts", file="<upload>",
                                        expected=f"≤ {limit} bytes", found=f"{declared} bytes"))
-        chunks: list[bytes] = []
-        total = 0
-        async for chunk in request.stream():
-            total += len(chunk)
-            if total > limit:
-                raise HaptifyError(Finding("E960", "the bundle archive is larger than the registry accepts", file="<upload>",
-                                           expected=f"≤ {limit} bytes", found=f"> {limit} bytes"))
-            chunks.append(chunk)
-        if total == 0:
-            raise HaptifyError(Finding("E961", "the request has no body", file="<upload>", expected="a .tar.gz bundle", found="0 bytes"))
-        upload = await run_in_threadpool(reg.receive, chunks)
+        upload = await reg.receive(request.stream())
         outcome = await run_in_threadpool(reg.submit, upload, caller, dry_run=dry_run)
         if outcome.status != "accepted":
             response.status_code = 200

@@ -20,6 +20,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from haptify.errors import Finding, HaptifyError, fail
+from haptify.metric_definitions import MetricDefinition, all_families
 from haptify.results import ResultsFile
 from haptify.storage import MANIFEST, open_session, parse_json_file, pydantic_findings, sha256_file
 from haptify.versions import SPEC_VERSION
@@ -125,6 +126,7 @@ def check_bundle(unpacked: Unpacked, limits: Limits = Limits(), *, verify_raw: b
     if not results.metrics:
         findings.append(Finding("E966", "the results contain no metric", file=RESULTS_JSON, pointer="/metrics",
                                 expected="at least one metric", found=0))
+    findings += metric_findings(results)
     if findings:
         raise HaptifyError(*findings)
     if conformance is not None:
@@ -132,6 +134,45 @@ def check_bundle(unpacked: Unpacked, limits: Limits = Limits(), *, verify_raw: b
     verification = verify(unpacked.root / SESSION_DIR, results) if bundle.includes_raw and verify_raw else Verification(
         "unverified", note="no raw streams included" if not bundle.includes_raw else "re-computation switched off")
     return Checked(bundle=bundle, digest=bundle_digest(bundle), results=results, conformance=conformance, verification=verification)
+
+
+@lru_cache(maxsize=1)
+def _definitions() -> dict[str, tuple[MetricDefinition, str]]:
+    """Every metric definition of this spec version with its family's definition version."""
+    return {m.id: (m, f.version) for f in all_families() for m in f.metrics}
+
+
+SHAPE_LENGTH = {"vector3": 3, "vector6": 6}
+
+
+def metric_findings(results: ResultsFile) -> list[Finding]:
+    """E966 for each metric record that is not a defined metric in its unit, shape and definition version
+    (results computed with other definitions are not comparable; spec §17.3)."""
+    out: list[Finding] = []
+    defs = _definitions()
+    seen: set[str] = set()
+    for i, m in enumerate(results.metrics):
+        where = {"file": RESULTS_JSON, "pointer": f"/metrics/{i}"}
+        if m.id in seen:
+            out.append(Finding("E966", f"metric {m.id} is reported twice", **where, expected="each metric once", found=m.id))
+        seen.add(m.id)
+        if m.id not in defs:
+            out.append(Finding("E966", f"{m.id!r} is not a metric of spec {SPEC_VERSION}", file=RESULTS_JSON,
+                               pointer=f"/metrics/{i}/id", expected="an id from schemas/<v>/metrics", found=m.id))
+            continue
+        definition, version = defs[m.id]
+        if m.unit != definition.unit:
+            out.append(Finding("E966", f"{m.id} is reported in the wrong unit", file=RESULTS_JSON,
+                               pointer=f"/metrics/{i}/unit", expected=definition.unit, found=m.unit))
+        if m.definition_version != version:
+            out.append(Finding("E966", f"{m.id} was computed with another definition version", file=RESULTS_JSON,
+                               pointer=f"/metrics/{i}/definition_version", expected=version, found=m.definition_version))
+        length = SHAPE_LENGTH.get(definition.shape)
+        found = len(m.value) if isinstance(m.value, list) else None
+        if definition.shape == "scalar" and found is not None or length is not None and found != length:
+            out.append(Finding("E966", f"{m.id} has the wrong shape", file=RESULTS_JSON, pointer=f"/metrics/{i}/value",
+                               expected=definition.shape, found="scalar" if found is None else f"list of {found}"))
+    return out
 
 
 @lru_cache(maxsize=4)

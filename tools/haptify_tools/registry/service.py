@@ -31,12 +31,13 @@ import time
 import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, AsyncIterator
 
 from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError, OperationalError
 from sqlalchemy.orm import Session as DBSession
 from sqlalchemy.orm import selectinload
+from starlette.concurrency import run_in_threadpool
 
 from haptify.errors import Finding, HaptifyError, fail
 from haptify.results import DeviceSummary, Implementation, MetricResult, ResultsFile
@@ -231,21 +232,25 @@ class Registry:
         return caller
 
     # --- submissions -------------------------------------------------------------------------
-    def receive(self, chunks: Iterable[bytes]) -> Path:
-        """Stream an upload to ``tmp/`` (E960 past the archive limit) and fsync it; returns its path."""
+    async def receive(self, chunks: AsyncIterator[bytes]) -> Path:
+        """Stream an upload to ``tmp/`` (E960 as soon as it passes the archive limit) and fsync it.
+
+        Memory stays bounded by one chunk; the file is removed when anything goes wrong."""
         self.tmp.mkdir(parents=True, exist_ok=True)
         path = self.tmp / f"upload-{uuid.uuid4().hex}.tar.gz"
         limit, total = self.settings.limits.max_archive_bytes, 0
         try:
             with open(path, "wb") as fh:
-                for chunk in chunks:
+                async for chunk in chunks:
                     total += len(chunk)
                     if total > limit:
                         raise fail("E960", "the bundle archive is larger than the registry accepts", file="<upload>",
                                    expected=f"≤ {limit} bytes", found=f"> {limit} bytes")
                     fh.write(chunk)
+                if total == 0:
+                    raise fail("E961", "the request has no body", file="<upload>", expected="a .tar.gz bundle", found="0 bytes")
                 fh.flush()
-                os.fsync(fh.fileno())
+                await run_in_threadpool(os.fsync, fh.fileno())
         except BaseException:
             path.unlink(missing_ok=True)
             raise
