@@ -196,6 +196,8 @@ def test_device_page_shows_spread_over_labs_and_repetitions(registry):
 
 def test_withdrawn_submission_leaves_the_aggregates(fresh_registry):
     registry = fresh_registry
+    before = registry.client.get("/devices/3d-systems-touch").text  # the pages' read cache now holds this state
+    assert "lab-b" in re.search(r'<tr data-metric="vibration.rms">(.*?)</tr>', before, re.S).group(1)
     sid = registry.ids[1]  # lab-b's Touch
     r = registry.client.post(f"/api/v1/submissions/{sid}/withdraw", json={"reason": "wrong calibration file"},
                              headers={"Authorization": f"Bearer {registry.tokens['lab-b']}"})
@@ -204,6 +206,8 @@ def test_withdrawn_submission_leaves_the_aggregates(fresh_registry):
     row = re.search(r'<tr data-metric="vibration.rms">(.*?)</tr>', html, re.S).group(1)
     assert _fmt(fmean(PLAN[0][3])) in row and "lab-b" not in row
     assert "withdrawn: wrong calibration file" in html  # the record stays, with its reason
+    board = registry.client.get("/api/v1/leaderboard/vibration.rms").json()["rows"]
+    assert next(r for r in board if r["device"] == "3d-systems-touch")["mean"] == pytest.approx(fmean(PLAN[0][3]))
 
 
 def test_compare_page_is_table_iii_for_the_chosen_devices(registry):

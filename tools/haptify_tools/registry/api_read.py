@@ -1,22 +1,82 @@
-"""Read-side JSON endpoints the web pages need beyond the core API (issue 9, spec §17.5).
+"""Read side for the web pages: a cache over the core's queries and the leaderboard endpoints (issue 9, spec §17.5).
 
 The core API (``app.py``) already serves devices, per-device aggregates, the comparison and the CSV
 export. This router adds the leaderboard of one metric (devices ranked by their mean, see
 :mod:`haptify_tools.registry.leaderboard`) and the list of metrics that have a leaderboard.
+
+:class:`ReadCache` keeps the answers of the core's read queries (``Registry.devices``,
+``device_results``, ``submissions``, ``comparison``) for the pages. Records are append-only (no row of
+``submissions`` or ``withdrawals`` is ever updated or deleted, spec §17.5), so the pair (number of
+submissions, number of withdrawals) changes with every change a reader can see: one count query per
+request tells whether the cached answers still hold.
 """
 
 from __future__ import annotations
 
+import threading
+from collections.abc import Callable
 from functools import lru_cache
+from typing import Any
 
 from fastapi import APIRouter, Request
+from sqlalchemy import func, select
 
 from haptify.metric_definitions import MetricDefinition, family
 from haptify.schemas import list_dir
+from haptify_tools.registry import db
 from haptify_tools.registry.leaderboard import leaderboard, rule_text
 from haptify_tools.registry.service import Registry
 
 API = "/api/v1"
+MAX_CACHED = 512  # answers kept per version (comparisons of many device sets)
+MAX_LISTED = 1_000_000  # submissions listed at once
+
+
+class ReadCache:
+    """Answers of the registry's read queries, valid while no submission or withdrawal was added."""
+
+    def __init__(self, reg: Registry) -> None:
+        self.reg = reg
+        self._version: tuple[int, int] | None = None
+        self._store: dict[Any, Any] = {}
+        self._lock = threading.Lock()
+
+    def version(self) -> tuple[int, int]:
+        """(submissions, withdrawals) now: both tables only grow, so any change changes this pair."""
+        with self.reg.engine.connect() as conn:
+            return tuple(conn.execute(select(select(func.count()).select_from(db.Submission).scalar_subquery(),
+                                             select(func.count()).select_from(db.Withdrawal).scalar_subquery())).one())
+
+    def get(self, key: Any, compute: Callable[[], Any]) -> Any:
+        """The cached answer for ``key``, or ``compute()`` (run outside the lock; errors are not cached)."""
+        version = self.version()
+        with self._lock:
+            if version != self._version:
+                self._store, self._version = {}, version
+            if key in self._store:
+                return self._store[key]
+        value = compute()
+        with self._lock:
+            if self._version == version and len(self._store) < MAX_CACHED:
+                self._store[key] = value
+        return value
+
+    def devices(self) -> list[dict]:
+        return self.get("devices", self.reg.devices)
+
+    def device_results(self, slug: str) -> dict:
+        return self.get(("device", slug), lambda: self.reg.device_results(slug))
+
+    def all_device_results(self) -> list[dict]:
+        """:meth:`Registry.device_results` of every device (those without current results have no metrics)."""
+        return self.get("all-devices", lambda: [self.device_results(d["slug"]) for d in self.devices()])
+
+    def submissions(self) -> list[dict]:
+        """Every submission summary (all states), newest first."""
+        return self.get("submissions", lambda: self.reg.submissions(state="all", limit=MAX_LISTED))
+
+    def comparison(self, slugs: tuple[str, ...]) -> list:
+        return self.get(("compare", slugs), lambda: self.reg.comparison(list(slugs)))
 
 
 @lru_cache(maxsize=1)
@@ -29,13 +89,13 @@ def metric_definitions() -> dict[str, MetricDefinition]:
     return out
 
 
-def registry(request: Request) -> Registry:
-    return request.app.state.registry
-
-
-def all_device_results(reg: Registry) -> list[dict]:
-    """:meth:`Registry.device_results` of every device (those without current results have no metrics)."""
-    return [reg.device_results(d["slug"]) for d in reg.devices()]
+def reads(request: Request) -> ReadCache:
+    """The app's read cache over ``app.state.registry`` (made on first use)."""
+    state = request.app.state
+    cache = getattr(state, "read_cache", None)
+    if cache is None or cache.reg is not state.registry:
+        cache = state.read_cache = ReadCache(state.registry)
+    return cache
 
 
 def leaderboard_menu(results: list[dict]) -> list[dict]:
@@ -57,11 +117,11 @@ router = APIRouter(prefix=API, tags=["devices"])
 @router.get("/leaderboards", name="api_leaderboards", summary="Metrics that have a leaderboard")
 def api_leaderboards(request: Request) -> list[dict]:
     """Every scalar metric with current results: id, title and how many devices have it."""
-    return leaderboard_menu(all_device_results(registry(request)))
+    return leaderboard_menu(reads(request).all_device_results())
 
 
 @router.get("/leaderboard/{metric_id}", name="api_leaderboard", summary="Devices ranked by one metric")
 def api_leaderboard(metric_id: str, request: Request) -> dict:
     """Devices with current results for ``metric_id``, best first, with each device's mean and spread."""
-    rows = leaderboard(metric_id, all_device_results(registry(request)))
+    rows = leaderboard(metric_id, reads(request).all_device_results())
     return {"metric": metric_id, "rule": rule_text(metric_id), "rows": [r.as_dict() for r in rows]}

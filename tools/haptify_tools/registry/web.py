@@ -33,7 +33,6 @@ _HERE = resources.files("haptify_tools.registry")
 templates = Jinja2Templates(directory=str(_HERE / "templates"))
 templates.env.globals["spec_version"] = SPEC_VERSION
 MAX_COMPARED = 50  # devices in one comparison
-MAX_LISTED = 100_000  # submissions listed on one page
 
 
 def num(value) -> str:
@@ -68,16 +67,16 @@ def _label(device: dict) -> str:
 
 @router.get("/", name="page_index", response_class=HTMLResponse)
 def page_index(request: Request) -> HTMLResponse:
-    reg = api_read.registry(request)
-    current = reg.submissions(state="current", limit=MAX_LISTED)
+    reads = api_read.reads(request)
+    current = [s for s in reads.submissions() if s["state"] == "current"]
     by_device: dict[str, list[dict]] = {}
     for s in current:
         by_device.setdefault(s["device"]["slug"], []).append(s)
     devices = [{"slug": d["slug"], "label": _label(d), "labs": sorted({s["lab"] for s in by_device[d["slug"]]}),
                 "submissions": len(by_device[d["slug"]]),
                 "verified": sum(s["verification"] == "verified" for s in by_device[d["slug"]])}
-               for d in reg.devices() if d["slug"] in by_device]
-    menu = api_read.leaderboard_menu(api_read.all_device_results(reg))
+               for d in reads.devices() if d["slug"] in by_device]
+    menu = api_read.leaderboard_menu(reads.all_device_results())
     return _render(request, "index.html", devices=devices, metrics=menu,
                    n_labs=len({s["lab"] for s in current}), n_submissions=len(current))
 
@@ -86,7 +85,7 @@ def page_index(request: Request) -> HTMLResponse:
 def page_leaderboard_redirect(request: Request, metric: str | None = None) -> Response:
     """``/leaderboard?metric=ID`` (the metric picker) → ``/leaderboard/ID``; without a metric, the first one."""
     if metric is None:
-        menu = api_read.leaderboard_menu(api_read.all_device_results(api_read.registry(request)))
+        menu = api_read.leaderboard_menu(api_read.reads(request).all_device_results())
         if not menu:
             return RedirectResponse(request.url_for("page_index"), status_code=303)
         metric = menu[0]["id"]
@@ -95,7 +94,7 @@ def page_leaderboard_redirect(request: Request, metric: str | None = None) -> Re
 
 @router.get("/leaderboard/{metric_id}", name="page_leaderboard", response_class=HTMLResponse)
 def page_leaderboard(metric_id: str, request: Request) -> HTMLResponse:
-    results = api_read.all_device_results(api_read.registry(request))
+    results = api_read.reads(request).all_device_results()
     defs = api_read.metric_definitions()
     if metric_id not in defs:
         return _error_page(request, fail("E973", f"there is no metric {metric_id!r}", pointer="/metric",
@@ -109,15 +108,15 @@ def page_leaderboard(metric_id: str, request: Request) -> HTMLResponse:
 
 @router.get("/devices/{slug}", name="page_device", response_class=HTMLResponse)
 def page_device(slug: str, request: Request) -> HTMLResponse:
-    reg = api_read.registry(request)
+    reads = api_read.reads(request)
     try:
-        agg = reg.device_results(slug)
+        agg = reads.device_results(slug)
     except HaptifyError as err:
         return _error_page(request, err)
     defs = api_read.metric_definitions()
     order = {mid: i for i, mid in enumerate(defs)}
     metrics = sorted(agg["metrics"], key=lambda m: (order.get(m["metric"], len(order)), m["metric"]))
-    submissions = reg.submissions(device=slug, state="all", limit=MAX_LISTED)
+    submissions = [s for s in reads.submissions() if s["device"]["slug"] == slug]
     current = [s for s in submissions if s["state"] == "current"]
     return _render(request, "device.html", device=agg["device"], label=_label(agg["device"]), metrics=metrics,
                    titles={k: v.title for k, v in defs.items()}, submissions=submissions,
@@ -127,7 +126,7 @@ def page_device(slug: str, request: Request) -> HTMLResponse:
 
 @router.get("/compare", name="page_compare", response_class=HTMLResponse)
 def page_compare(request: Request, device: list[str] = Query(default=[]), paper: bool = False) -> HTMLResponse:
-    reg = api_read.registry(request)
+    reads = api_read.reads(request)
     chosen = list(dict.fromkeys(device))
     table_html = csv_url = json_url = None
     if len(chosen) > MAX_COMPARED:
@@ -135,14 +134,14 @@ def page_compare(request: Request, device: list[str] = Query(default=[]), paper:
                                          expected=f"≤ {MAX_COMPARED}", found=len(chosen)))
     if chosen:
         try:
-            table = build_table(reg.comparison(chosen), with_paper=paper)
+            table = build_table(reads.comparison(tuple(chosen)), with_paper=paper)
         except HaptifyError as err:
             return _error_page(request, err)
         table_html = to_html(table)
         query = urlencode({"devices": ",".join(chosen), "paper": "true" if paper else "false"})
         csv_url = f"{api_read.API}/compare?{query}&format=csv"
         json_url = f"{api_read.API}/compare?{query}"
-    devices = [{"slug": d["slug"], "label": _label(d)} for d in reg.devices()]
+    devices = [{"slug": d["slug"], "label": _label(d)} for d in reads.devices()]
     return _render(request, "compare.html", devices=devices, chosen_slugs=set(chosen), with_paper=paper,
                    table_html=table_html, csv_url=csv_url, json_url=json_url)
 
