@@ -722,27 +722,36 @@ def _passive_drive(twin: TwinFile, t: np.ndarray, th_l: np.ndarray, thd_l: np.nd
     uniform = bool(np.allclose(dt_all, dt0, rtol=1e-6, atol=1e-12))
     out = np.zeros((n_s, n_j))
     substeps = 8
+    w_per = np.diff(th_l, axis=0) / dt_all[:-1, None] if n_s > 1 else np.zeros((0, n_j))
+    w_per = np.concatenate([w_per, w_per[-1:] if len(w_per) else np.zeros((1, n_j))])
+    # the link's velocity step at the end of each period, seen in the rotor's relative coordinate
+    jumps = np.concatenate([w_per[:-1] - w_per[1:], np.zeros((1, n_j))])
     for a_ in range(n_j):
         k, b, g, j = kk[a_], bb[a_], gap[a_], jr[a_]
         exact = _exact_step(j, b, k, dt0) if uniform else None
-        margin = 0.25 * g
-        tl = th_l[:, a_].tolist()
+        edge = 1.25 * g                     # engaged beyond this deflection: exact linear step
         fr = fr_all[:, a_].tolist()
+        jump = jumps[:, a_].tolist()
         dts = dt_all.tolist()
-        w_l0 = float(thd_l[0, a_])
         # start at rest relative to the link, the cable carrying the friction (quasi-static)
         d = fr[0] / k + (g if fr[0] > 0 else -g if fr[0] < 0 else 0.0)
         dd = 0.0
-        col = out[:, a_]
+        col = [0.0] * n_s
+        if exact is not None:
+            _, p00, p01, p10, p11, s00, s01, s10, s11 = exact
+        kinv = 1.0 / k
         for i in range(n_s):
-            dt = dts[i]
-            w_l = (tl[i + 1] - tl[i]) / dt if i + 1 < n_s else w_l0
-            if i + 1 >= n_s:
-                w_l = (tl[i] - tl[i - 1]) / dts[i - 1] if n_s > 1 else 0.0
-            d, dd, col[i] = _axis_period(d, dd, fr[i], k, b, g, j, exact, margin, dt, substeps)
-            if i + 1 < n_s:
-                w_next = (tl[i + 2] - tl[i + 1]) / dts[i + 1] if i + 2 < n_s else w_l
-                dd += w_l - w_next          # the link's velocity step at the period boundary
+            u = fr[i]
+            if exact is not None and (d > edge or d < -edge):
+                side = g if d > 0 else -g
+                off = side + u * kinv
+                z0 = d - off
+                col[i] = k * (off + s00 * z0 + s01 * dd - side) + b * (s10 * z0 + s11 * dd)
+                d, dd = off + p00 * z0 + p01 * dd, p10 * z0 + p11 * dd
+            else:
+                d, dd, col[i] = _axis_period(d, dd, u, k, b, g, j, None, 0.0, dts[i], substeps)
+            dd += jump[i]
+        out[:, a_] = col
     return out
 
 
