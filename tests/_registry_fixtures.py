@@ -4,11 +4,13 @@ archives, a registry app on SQLite or a throwaway PostgreSQL server."""
 from __future__ import annotations
 
 import gzip
+import hashlib
 import io
 import json
 import os
 import shutil
 import socket
+import statistics
 import subprocess
 import tarfile
 import tempfile
@@ -164,3 +166,44 @@ def wait_http(url: str, timeout: float = 20.0) -> None:
             if time.monotonic() > deadline:
                 raise
             time.sleep(0.05)
+
+
+@pytest.fixture(scope="session")
+def base(tmp_path_factory):
+    root = tmp_path_factory.mktemp("api")
+    session = example_session(root / "s-base", lab="lab-a", session_id="base")
+    results = write_results(session, root / "results.json")
+    impl = json.loads(results.read_text())["implementation"]
+    report = passing_report(root / "conformance.json", impl)
+    return root, session, results, report, impl
+
+
+def variant(base, tmp: Path, name: str, *, lab: str = "lab-a", model: str | None = None, rms: list[float] | None = None,
+            scale: float | None = None) -> tuple[Path, Path]:
+    """A copy of the base session re-labelled (lab, device model) with results edited to known values.
+
+    The results' manifest_sha256 follows the edited manifest, so the bundle is consistent (no raw streams)."""
+    root, session, results, report, impl = base
+    target = tmp / name
+    shutil.copytree(session, target)
+    manifest = json.loads((target / "session.json").read_text())
+    manifest["lab"]["id"], manifest["session_id"] = lab, name
+    if model:
+        manifest["device"]["model"] = model
+    (target / "session.json").write_text(json.dumps(manifest, indent=2))
+    data = json.loads(results.read_text())
+    data["session_id"] = name
+    data["manifest_sha256"] = hashlib.sha256((target / "session.json").read_bytes()).hexdigest()
+    if model:
+        data["device"]["model"] = model
+    for m in data["metrics"]:
+        if rms is not None and m["id"] == "vibration.rms":
+            m["per_repetition"], m["value"], m["n"] = rms, statistics.fmean(rms), len(rms)
+            m["sd"] = statistics.stdev(rms) if len(rms) > 1 else None
+            m["trials"] = [f"t{i}" for i in range(len(rms))]
+        if scale is not None and m["id"] == "vibration.rms":
+            m["value"] *= scale
+            m["per_repetition"] = [v * scale for v in m["per_repetition"]]
+    out = tmp / f"{name}.results.json"
+    out.write_text(json.dumps(data))
+    return target, out

@@ -4,9 +4,7 @@ append-only records, aggregation with known answers, concurrency, rate limits.""
 
 from __future__ import annotations
 
-import hashlib
 import json
-import shutil
 import statistics
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -15,52 +13,11 @@ import pytest
 from fastapi.testclient import TestClient
 from sqlalchemy import text
 
-from _registry_fixtures import bundle_for, example_session, passing_report, postgres_or_skip, write_results
+from _registry_fixtures import base, bundle_for, passing_report, postgres_or_skip, variant  # noqa: F401  (base: fixture)
 from haptify_tools.registry.app import create_app
 from haptify_tools.registry.service import Settings
 
 API = "/api/v1"
-
-
-@pytest.fixture(scope="module")
-def base(tmp_path_factory):
-    root = tmp_path_factory.mktemp("api")
-    session = example_session(root / "s-base", lab="lab-a", session_id="base")
-    results = write_results(session, root / "results.json")
-    impl = json.loads(results.read_text())["implementation"]
-    report = passing_report(root / "conformance.json", impl)
-    return root, session, results, report, impl
-
-
-def variant(base, tmp: Path, name: str, *, lab: str = "lab-a", model: str | None = None, rms: list[float] | None = None,
-            scale: float | None = None) -> tuple[Path, Path]:
-    """A copy of the base session re-labelled (lab, device model) with results edited to known values.
-
-    The results' manifest_sha256 follows the edited manifest, so the bundle is consistent (no raw streams)."""
-    root, session, results, report, impl = base
-    target = tmp / name
-    shutil.copytree(session, target)
-    manifest = json.loads((target / "session.json").read_text())
-    manifest["lab"]["id"], manifest["session_id"] = lab, name
-    if model:
-        manifest["device"]["model"] = model
-    (target / "session.json").write_text(json.dumps(manifest, indent=2))
-    data = json.loads(results.read_text())
-    data["session_id"] = name
-    data["manifest_sha256"] = hashlib.sha256((target / "session.json").read_bytes()).hexdigest()
-    if model:
-        data["device"]["model"] = model
-    for m in data["metrics"]:
-        if rms is not None and m["id"] == "vibration.rms":
-            m["per_repetition"], m["value"], m["n"] = rms, statistics.fmean(rms), len(rms)
-            m["sd"] = statistics.stdev(rms) if len(rms) > 1 else None
-            m["trials"] = [f"t{i}" for i in range(len(rms))]
-        if scale is not None and m["id"] == "vibration.rms":
-            m["value"] *= scale
-            m["per_repetition"] = [v * scale for v in m["per_repetition"]]
-    out = tmp / f"{name}.results.json"
-    out.write_text(json.dumps(data))
-    return target, out
 
 
 @pytest.fixture(scope="module")
