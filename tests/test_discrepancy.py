@@ -21,11 +21,12 @@ from haptify_tools.discrepancy.workflow import run_discrepancy
 from haptify_tools.twin.model import disable, load_twin, preset, set_param, write_twin
 from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
 
-FREE = {"free_space": 8.0, "rig.handle_calibration": 12.0}
+FREE = {"free_space": 16.0, "figure_eight": 16.0, "stiffness": 8.0, "workspace": 60.0, "rig.handle_calibration": 12.0}
 
 
 def _session(folder, truth, seed, durations=FREE, protocols=("free_space",), reps=1):
-    opt = SimulationOptions(protocols=(*protocols, "rig.handle_calibration"), reps=reps, seed=seed, durations=durations,
+    rig = () if protocols == ("workspace",) else ("rig.handle_calibration",)
+    opt = SimulationOptions(protocols=(*protocols, *rig), reps=reps, seed=seed, durations=durations,
                             rig_trials=False, workers=1)
     return simulate_dossier(truth, folder / f"measured-{seed}", opt).session
 
@@ -75,6 +76,41 @@ def test_hidden_gravity_is_named_with_its_acceleration(tmp_path):
     assert result.accepted[0].effect_id == "gravity"
     assert _rel(result.accepted[0].value, truth.effects.gravity.g_m_per_s2) < 0.15
     assert result.heldout_gap_after_N <= 0.5 * result.heldout_gap_before_N
+
+
+@pytest.mark.parametrize("effect, parameter, low, high, protocols", [
+    ("friction.viscous", "damping_Nms_per_rad", 0.005, 0.02, ("figure_eight",)),
+    ("kinematics.link_length", "delta_a_m", 0.003, 0.01, ("free_space",)),
+    ("drive.torque_saturation", "max_torque_Nm", 0.12, 0.22, ("stiffness",)),
+    ("drive.force_cutoff", "trip_force_N", 1.5, 2.5, ("stiffness",)),
+])
+def test_hidden_effect_is_named_first_and_identified(tmp_path, effect, parameter, low, high, protocols):
+    """One library effect hidden with a random plausible value; the twin starts from the preset without it
+    (its stored, different value is only the search's starting point)."""
+    value = float(np.random.default_rng(7).uniform(low, high))
+    truth = set_param(set_param(preset("touch"), f"{effect}.{parameter}", value), f"{effect}.enabled", True)
+    result, _ = run_discrepancy(_session(tmp_path, truth, 7, protocols=protocols), disable(preset("touch"), effect), None,
+                                max_effects=1)
+    assert result.accepted[0].effect_id == effect
+    assert _rel(result.accepted[0].value, value) < 0.15
+    assert result.heldout_gap_after_N <= 0.5 * result.heldout_gap_before_N
+
+
+def test_hidden_base_collision_explains_the_missing_workspace_lobe(tmp_path):
+    """The paper's Fig. 5 story: the twin without the base predicts a lower lobe the sweep never reaches."""
+    from haptify_tools.discrepancy import workspace as ws
+
+    top = float(np.random.default_rng(8).uniform(0.075, 0.125))
+    truth = ws.apply(preset("touch"), top)
+    start = disable(preset("touch"), "kinematics.base_collision")
+    result, _ = run_discrepancy(_session(tmp_path, truth, 8, protocols=("workspace",)), start, None)
+    assert [a.effect_id for a in result.accepted] == ["kinematics.base_collision"]
+    assert _rel(result.accepted[0].value, top) < 0.15
+    gap = result.workspace_gaps[0]
+    assert gap.rms_after_m <= 0.5 * gap.rms_before_m
+    # the twin's volume comes down to the measured one; the worst region before is low in the workspace
+    assert abs(gap.twin_after_volume_m3 - gap.measured_volume_m3) < 0.5 * abs(gap.twin_before_volume_m3 - gap.measured_volume_m3)
+    assert "z low" in gap.regions[0].label
 
 
 def test_two_hidden_effects_series_elasticity_and_coulomb_are_both_found(tmp_path):

@@ -28,8 +28,12 @@ from haptify_tools.twin.model import TwinFile
 from haptify_tools.twin.physics import simulate_active, simulate_passive
 
 POSE_CUTOFF_HZ = 8.0          # above the local-dynamic protocol's 4 Hz oscillations (paper §V-C)
+#: slower protocols get a lower cut-off: free-space wandering stays under 0.16 m/s (paper §V-B)
+POSE_CUTOFF_BY_PROTOCOL_HZ = {"free_space": 4.0}
+ORIENTATION_CUTOFF_HZ = 1.5   # the hand's orientation wanders slowly (under 16°/s in free space, paper §V-B);
+                              # gimbal friction turns orientation noise into force noise
 RESIDUAL_CUTOFF_HZ = 5.0      # both forces are compared below this frequency
-ACTIVE_RATE_HZ = 1000.0       # the rendering loop's rate (paper §V-D)
+SIM_RATE_HZ = 1000.0          # the rendering loop's rate (paper §V-D); the cable model needs it in passive trials too
 FORCE_PROTOCOLS = ("free_space", "local_dynamic", "other", "frictionless_surface", "stiffness")
 
 
@@ -84,10 +88,10 @@ def load_measured(session: SessionFolder, ctx: ComputeContext | None = None, req
         if ok.sum() < 20:
             continue
         rate = hs.rate_hz
-        pos = lowpass(_fill(hs.t, hs.position, ok), rate, POSE_CUTOFF_HZ)
+        pos = lowpass(_fill(hs.t, hs.position, ok), rate, POSE_CUTOFF_BY_PROTOCOL_HZ.get(trial.protocol, POSE_CUTOFF_HZ))
         quat = _fill(hs.t, hs.quaternion, ok)
         quat = quat * np.where(np.sum(quat * quat[:1], axis=1) < 0, -1.0, 1.0)[:, None]
-        quat = lowpass(quat, rate, POSE_CUTOFF_HZ)
+        quat = lowpass(quat, rate, ORIENTATION_CUTOFF_HZ)
         quat /= np.linalg.norm(quat, axis=1)[:, None]
         force = lowpass(_fill(hs.t, hs.force, ok), rate, RESIDUAL_CUTOFF_HZ)
         speed = np.linalg.norm(np.gradient(pos, hs.t, axis=0), axis=1)
@@ -109,20 +113,26 @@ def load_measured(session: SessionFolder, ctx: ComputeContext | None = None, req
     return out
 
 
+def fine_path(trial: MeasuredTrial) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The trial's smoothed hand path on a :data:`SIM_RATE_HZ` grid (cubic spline): ``t``, position, quaternion."""
+    dt = 1.0 / SIM_RATE_HZ
+    fine = np.arange(trial.t[0], trial.t[-1] + 0.5 * dt, dt)
+    fine = fine[fine <= trial.t[-1]]
+    pos = CubicSpline(trial.t, trial.position, axis=0)(fine)
+    quat = CubicSpline(trial.t, trial.quaternion, axis=0)(fine)
+    return fine, pos, quat / np.linalg.norm(quat, axis=1)[:, None]
+
+
 def simulate_trial(twin: TwinFile, trial: MeasuredTrial) -> np.ndarray:
     """The force ``(N, 3)`` the twin applies to the hand along the measured path, on the trial's grid,
     low-passed like the measured force (N, W frame)."""
+    fine, pos, quat = fine_path(trial)
     if trial.active:
-        dt = 1.0 / ACTIVE_RATE_HZ
-        fine = np.arange(trial.t[0], trial.t[-1] + 0.5 * dt, dt)
-        pos = CubicSpline(trial.t, trial.position, axis=0)(fine)
-        quat = CubicSpline(trial.t, trial.quaternion, axis=0)(fine)
-        quat /= np.linalg.norm(quat, axis=1)[:, None]
         res = simulate_active(twin, fine, pos, quat, trial.rendering)
-        force = lowpass(res.force_W - connector_force(twin, fine, pos), ACTIVE_RATE_HZ, RESIDUAL_CUTOFF_HZ)
-        return np.stack([np.interp(trial.t, fine, force[:, k]) for k in range(3)], axis=1)
-    res = simulate_passive(twin, trial.t, trial.position, trial.quaternion)
-    return lowpass(res.force_W - connector_force(twin, trial.t, trial.position), trial.rate_hz, RESIDUAL_CUTOFF_HZ)
+    else:
+        res = simulate_passive(twin, fine, pos, quat)
+    force = lowpass(res.force_W - connector_force(twin, fine, pos), SIM_RATE_HZ, RESIDUAL_CUTOFF_HZ)
+    return np.stack([np.interp(trial.t, fine, force[:, k]) for k in range(3)], axis=1)
 
 
 def connector_force(twin: TwinFile, t: np.ndarray, position: np.ndarray) -> np.ndarray:

@@ -170,14 +170,16 @@ def fit_candidate(cand: Candidate, twin: TwinFile, data: Dataset, design: st.Des
         ev(pv)
     p = min(evals, key=lambda x: evals[x][0])
     pred = evals[p][1]
-    se = _curvature_error(evals, p, st.score(design, residual, pred).n_train)
+    n_rows = len(design.stack(residual, "train"))
+    se = _curvature_error(evals, p, n_rows) * np.sqrt(design.decimation)
     return Fit(cand, p, se, pred, st.score(design, residual, pred), len(evals))
 
 
 def _curvature_error(evals: dict[float, tuple[float, dict]], p: float, n: int) -> float:
     """Standard error of a searched parameter from the curvature of the training SSE at its minimum:
     ``SSE(p) ≈ SSE_min + c·(p − p̂)²`` through the best point and its two neighbours gives
-    ``c = Σ(∂δ/∂p)²`` (Gauss–Newton), so ``s.e. = √(SSE_min/(n − 1) / c)``; ∞ when the minimum is not bracketed."""
+    ``c = Σ(∂δ/∂p)²`` (Gauss–Newton), so ``s.e. = √(SSE_min/(n − 1) / c)`` over ``n`` rows (the caller
+    inflates it by √D for correlated rows); ∞ when the minimum is not bracketed."""
     ps = sorted(evals)
     i = ps.index(p)
     if i == 0 or i == len(ps) - 1:

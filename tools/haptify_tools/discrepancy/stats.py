@@ -4,9 +4,11 @@
   train · validation · train · test · train, twice (60 / 20 / 20 %), so that every held-out role sees
   both halves of a trial (presses come and go); neighbouring samples are correlated, so random splits
   would leak.
-- Decimation: the residual is kept every ``D``-th row, ``D`` the lag at which the baseline residual's
-  autocorrelation (mean over trials and channels) first falls below 1/e; every count below (BIC, F
-  test) uses the decimated rows, so correlated samples are not counted as independent evidence.
+- Effective sample size: every usable row enters the fits, but the counts of the statistics (BIC, F
+  test) are ``n_eff = n / D``, ``D`` the lag at which the round's residual autocorrelation (mean over
+  trials and channels) first falls below 1/e — correlated samples are not counted as independent
+  evidence (the "decimated sample count" of the method). Fitting on decimated rows instead would throw
+  away short events (a press's rise lasts a fraction of a second).
 - Scores (training rows): ``ΔBIC = n·ln(RSS₀/RSS₁) − k·ln n`` (k = 1 identified parameter), nested F
   test ``F = (RSS₀ − RSS₁)/k ÷ RSS₁/(n − k)``; validation improvement ``1 − RSS₁/RSS₀`` on the
   validation rows; share explained on the test rows.
@@ -37,7 +39,8 @@ MAX_DECIMATION = 50
 
 @dataclass
 class Design:
-    """Rows of the stacked residual: per trial the decimated valid row indices and their roles."""
+    """Rows of the stacked residual: per trial the usable row indices and their roles; ``decimation``: the
+    correlation lag D that turns row counts into effective sample counts."""
 
     trials: list[MeasuredTrial]
     rows: dict[str, np.ndarray]
@@ -80,14 +83,13 @@ def correlation_lag(residual: dict[str, np.ndarray], trials: list[MeasuredTrial]
 
 
 def make_design(trials: list[MeasuredTrial], residual: dict[str, np.ndarray]) -> Design:
-    """The design of the baseline residual: decimation from its correlation, contiguous block roles."""
+    """The design of a residual: every usable row, its contiguous block role, and the correlation lag ``D``."""
     d = correlation_lag(residual, trials)
     rows, roles = {}, {}
     for tr in trials:
         n = len(tr.t)
         role = block_roles(n)
-        idx = np.arange(0, n, d)
-        idx = idx[tr.valid[idx]]
+        idx = np.flatnonzero(tr.valid)
         rows[tr.trial_id] = idx
         roles[tr.trial_id] = role[idx]
     return Design(trials, rows, roles, d)
@@ -120,9 +122,10 @@ def score(design: Design, residual: dict[str, np.ndarray], predicted: dict[str, 
         e = r - design.stack(predicted, role)
         return float(np.dot(r, r)), float(np.dot(e, e)), len(r)
 
-    r0, r1, n = rss("train")
+    r0, r1, n_rows = rss("train")
     v0, v1, _ = rss("validation")
     t0, t1, _ = rss("test")
+    n = max(n_rows // design.decimation, k + 2)        # effective (decorrelated) sample count
     tiny = 1e-300
     dbic = n * np.log(max(r0, tiny) / max(r1, tiny)) - k * np.log(max(n, 2))
     f = ((r0 - r1) / k) / max(r1 / max(n - k, 1), tiny)
@@ -132,7 +135,8 @@ def score(design: Design, residual: dict[str, np.ndarray], predicted: dict[str, 
 
 
 def affine_fit(design: Design, residual: dict, a: dict, b: dict) -> tuple[float, float]:
-    """Least-squares ``p`` of ``residual ≈ a + p·b`` on the training rows, and its standard error."""
+    """Least-squares ``p`` of ``residual ≈ a + p·b`` on the training rows, and its standard error
+    (inflated by √D for the correlated rows)."""
     r = design.stack(residual, "train") - design.stack(a, "train")
     bb = design.stack(b, "train")
     den = float(np.dot(bb, bb))
@@ -141,17 +145,7 @@ def affine_fit(design: Design, residual: dict, a: dict, b: dict) -> tuple[float,
     p = float(np.dot(bb, r)) / den
     e = r - p * bb
     sigma2 = float(np.dot(e, e)) / max(len(e) - 1, 1)
-    return p, float(np.sqrt(sigma2 / den))
-
-
-def standard_error(design: Design, residual: dict, predicted: dict, slope: dict) -> float:
-    """Standard error of a 1-D parameter from the local slope ``∂δ/∂p`` (Gauss–Newton), training rows."""
-    e = design.stack(residual, "train") - design.stack(predicted, "train")
-    bb = design.stack(slope, "train")
-    den = float(np.dot(bb, bb))
-    if den <= 0:
-        return float("inf")
-    return float(np.sqrt(float(np.dot(e, e)) / max(len(e) - 1, 1) / den))
+    return p, float(np.sqrt(design.decimation * sigma2 / den))
 
 
 def state_features(tr: MeasuredTrial) -> np.ndarray:
