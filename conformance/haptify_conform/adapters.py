@@ -46,7 +46,7 @@ def classify(document: Any) -> Answer:
 
 
 class CmdAdapter:
-    """``--cmd "PROGRAM {session} {out}"``: one process per case (placeholders: {session} {out} {metric} {case} {params})."""
+    """``--cmd "PROGRAM {session} {out}"``: one process per case (substituted: {session} {out} {metric} {case} {params})."""
 
     name = "cmd"
 

@@ -941,7 +941,7 @@ def _window_valid(valid: np.ndarray, window: int) -> np.ndarray:
 
 def trial_features(data: TrialData, window: int) -> tuple[WindowFeatures, np.ndarray]:
     """Window features of a trial and which windows are wholly valid (spec §11.6.1)."""
-    filled = np.where(data.valid[:, None], data.u, np.r_[1.0, np.zeros(12)])   # placeholder rows are masked out
+    filled = np.where(data.valid[:, None], data.u, np.r_[1.0, np.zeros(12)])   # rows outside valid stretches are masked out
     feats = window_features(filled[:, 4:7], filled[:, 7:10], filled[:, 10:13], filled[:, 0:4], window)
     return feats, _window_valid(data.valid, window)
 

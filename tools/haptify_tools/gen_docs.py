@@ -8,13 +8,13 @@ differ from the data, so prose tables cannot drift from the definition files.
 
 from __future__ import annotations
 
-import argparse
 import re
 import sys
 from pathlib import Path
 
 from haptify import schemas
 from haptify.metric_definitions import family
+from haptify_tools.generated_files import generator_main
 
 REPO = Path(__file__).resolve().parents[2]
 SPEC_DIR = REPO / "spec"
@@ -90,24 +90,12 @@ def regenerate(text: str) -> str:
     return BLOCK.sub(lambda m: m.group(1) + render_block(m.group("what"), m.group("arg")) + m.group(5), text)
 
 
+def targets() -> dict[Path, str]:
+    return {path: regenerate(path.read_text(encoding="utf-8")) for path in sorted(SPEC_DIR.glob("*.md"))}
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--check", action="store_true", help="exit 1 when a chapter's generated tables are stale")
-    args = parser.parse_args(argv)
-    stale = []
-    for path in sorted(SPEC_DIR.glob("*.md")):
-        text = path.read_text(encoding="utf-8")
-        new = regenerate(text)
-        if new != text:
-            stale.append(path)
-            if not args.check:
-                path.write_text(new, encoding="utf-8")
-    if args.check and stale:
-        print("stale generated tables (run python -m haptify_tools.gen_docs):", *map(str, stale), sep="\n  ")
-        return 1
-    if not args.check:
-        print(f"updated {len(stale)} chapter(s)")
-    return 0
+    return generator_main(argv, __doc__.splitlines()[0], "haptify_tools.gen_docs", "spec chapter(s)", targets)
 
 
 if __name__ == "__main__":

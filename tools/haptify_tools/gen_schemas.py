@@ -7,13 +7,13 @@ stale. Run ``python -m haptify_tools.gen_schemas`` after changing a model.
 
 from __future__ import annotations
 
-import argparse
 import importlib
 import json
 import sys
 from pathlib import Path
 
 from haptify.versions import SCHEMA_VERSION, SPEC_VERSION, schema_id
+from haptify_tools.generated_files import generator_main
 
 # schema name -> "module:Class"; the file is schemas/<spec>/<name>.schema.json unless a path is given.
 MODELS: dict[str, str] = {
@@ -49,22 +49,7 @@ def targets() -> dict[Path, str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--check", action="store_true", help="exit 1 when a committed schema is stale")
-    args = parser.parse_args(argv)
-    stale = []
-    for path, text in targets().items():
-        current = path.read_text(encoding="utf-8") if path.exists() else None
-        if current != text:
-            stale.append(path)
-            if not args.check:
-                path.write_text(text, encoding="utf-8")
-    if args.check and stale:
-        print("stale schemas (run python -m haptify_tools.gen_schemas):", *map(str, stale), sep="\n  ")
-        return 1
-    if not args.check:
-        print(f"wrote {len(stale)} schema(s)")
-    return 0
+    return generator_main(argv, __doc__.splitlines()[0], "haptify_tools.gen_schemas", "schema(s)", targets)
 
 
 if __name__ == "__main__":
