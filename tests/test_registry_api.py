@@ -72,6 +72,10 @@ def test_raw_bundle_is_verified_and_a_replay_is_idempotent(base, tmp_path):
         assert stored.content == archive.read_bytes()
         detail = client.get(f"{API}/submissions/{body['id']}").json()
         assert detail["state"] == "current" and detail["has_raw"] and detail["lab"] == "lab-a"
+        folder = app.state.registry.session_folder(body["id"])  # for report figures and the viewer
+        assert (folder / "session.json").read_bytes() == (session / "session.json").read_bytes()
+        assert sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*.parquet")) == \
+            sorted(p.relative_to(session).as_posix() for p in session.rglob("*.parquet"))
 
 
 def test_a_disagreeing_metric_is_named(base, tmp_path):

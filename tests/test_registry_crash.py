@@ -18,6 +18,7 @@ import pytest
 
 from _registry_fixtures import base, bundle_for, free_port, variant, wait_http  # noqa: F401  (base: fixture)
 from haptify.cli import UI
+from haptify.errors import HaptifyError
 from haptify_tools.registry import cmd_registry, cmd_submit
 from haptify_tools.registry.service import Registry, Settings
 
@@ -118,8 +119,6 @@ def test_orphans_are_swept_at_start_up(tmp_path):
 def test_one_process_per_data_folder(tmp_path):
     first = Registry(Settings(data_dir=tmp_path / "d"))
     try:
-        from haptify.errors import HaptifyError
-
         with pytest.raises(HaptifyError) as e:
             Registry(Settings(data_dir=tmp_path / "d"))
         assert e.value.findings[0].code == "E978"
@@ -153,11 +152,13 @@ def test_submit_and_registry_commands_end_to_end(base, tmp_path, capsys):
         out = capsys.readouterr().out
         assert out.startswith("accepted: submission ")
         args = _parse(["submit", str(session), "--results", str(results), "--registry", url, "--token", "hpt_wrong"])
-        from haptify.errors import HaptifyError
-
-        with pytest.raises(HaptifyError) as e:
+        assert args.func(args, UI()) == 1  # refused: the findings go to stderr
+        assert "E970" in capsys.readouterr().err
+        args = _parse(["submit", str(session), "--results", str(results), "--registry", f"http://127.0.0.1:{free_port()}",
+                       "--token", token])
+        with pytest.raises(HaptifyError) as e:  # nobody listens there: the command could not run (exit 2)
             args.func(args, UI())
-        assert e.value.findings[0].code == "E970"
+        assert e.value.findings[0].code == "E978"
     finally:
         proc.terminate()
         proc.wait()

@@ -6,6 +6,10 @@ documents, consistency, conformance, and with ``--include-raw`` the re-computati
 registry would say; with ``--registry`` it also asks the registry (``?dry_run=true``), which adds the
 checks only the registry can make: the token, the lab, a conformance report on file, supersession.
 The token may come from the environment variable ``HAPTIFY_REGISTRY_TOKEN`` instead of the command line.
+
+Exit codes: 0 accepted (or would be), also as a duplicate; 1 refused (the findings are printed) or a
+metric disagrees with the registry's re-computation; 2 the command could not run (usage, registry
+unreachable: E903, E978).
 """
 
 from __future__ import annotations
@@ -13,6 +17,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import sys
 import tempfile
 import urllib.error
 import urllib.request
@@ -73,7 +78,25 @@ def describe(outcome: dict) -> list[str]:
     return lines
 
 
+CANNOT_RUN = ("E903", "E978", "E999")
+
+
 def run(args, ui) -> int:
+    try:
+        return _run(args, ui)
+    except HaptifyError as err:
+        if err.findings[0].code in CANNOT_RUN:
+            raise
+        if ui.json_mode:
+            ui.emit_json({"status": "refused", "findings": [f.to_dict() for f in err.findings]})
+        else:
+            print("refused:", file=sys.stderr)
+            for f in err.findings:
+                print(str(f), file=sys.stderr)
+        return 1
+
+
+def _run(args, ui) -> int:
     token = args.token or os.environ.get(TOKEN_ENV)
     if not args.dry_run and not (args.registry and token):
         raise fail("E903", "uploading needs --registry and --token (or $" + TOKEN_ENV + ")",

@@ -152,8 +152,9 @@ def make_engine(url: str) -> Engine:
     Writers open their transaction with ``engine.execution_options(sqlite_immediate=True)`` so two
     writers never deadlock on a lock upgrade; readers use plain ``BEGIN`` and read the WAL snapshot.
     """
-    if url.startswith("postgresql://"):
-        url = "postgresql+psycopg://" + url[len("postgresql://"):]
+    for alias in ("postgresql://", "postgres://"):
+        if url.startswith(alias):
+            url = "postgresql+psycopg://" + url[len(alias):]
     if not url.startswith("sqlite"):
         return create_engine(url, pool_pre_ping=True, pool_size=10, max_overflow=20)
     engine = create_engine(url, connect_args={"check_same_thread": False, "timeout": SQLITE_BUSY_TIMEOUT_MS / 1000},

@@ -44,7 +44,7 @@ from haptify.results import DeviceSummary, Implementation, MetricResult, Results
 from haptify.versions import PACKAGE_VERSION
 from haptify_conform.report import ConformReport
 from haptify_tools.registry import db
-from haptify_tools.registry.bundle import Limits, read_manifest, submission_id, unpack
+from haptify_tools.registry.bundle import SESSION_DIR, Limits, read_manifest, submission_id, unpack
 from haptify_tools.registry.checks import Checked, check_bundle, check_conformance
 
 log = logging.getLogger("haptify.registry")
@@ -489,6 +489,21 @@ class Registry:
             if row is None:
                 raise fail("E973", f"no submission {sid!r}", expected="an existing submission id", found=sid)
             return self.data / row.archive_path
+
+    def session_folder(self, sid: str) -> Path:
+        """The submission's ``session/`` folder (manifest, and streams when included), unpacked once under the
+        limits into ``DATA/cache/<digest>/`` — for report figures and the viewer. Derived data: safe to delete."""
+        archive = self.archive(sid)
+        target = self.data / "cache" / archive.name[: -len(".tar.gz")]
+        if not target.is_dir():
+            work = self.tmp / f"cache-{uuid.uuid4().hex}"
+            unpack(archive, work, self.settings.limits)
+            target.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                os.replace(work, target)
+            except OSError:  # another request unpacked it first
+                shutil.rmtree(work, ignore_errors=True)
+        return target / SESSION_DIR
 
     def labs(self) -> list[dict]:
         with DBSession(self.engine) as s:
