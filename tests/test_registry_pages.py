@@ -285,3 +285,21 @@ def test_pages_in_a_real_headless_browser(tmp_path, bundles):
         pop.app.state.registry.close()
         shutil.rmtree(profile, ignore_errors=True)
     assert shot.stat().st_size > 10_000 and shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_live_server_binds_loopback_only(tmp_path):
+    from haptify_tools.registry.live import serve_in_thread
+
+    app = create_app(Settings(data_dir=tmp_path / "r"))
+    try:
+        with pytest.raises(ValueError, match="loopback"):
+            with serve_in_thread(app, host="0.0.0.0"):
+                pass
+        with serve_in_thread(app) as base:
+            assert base.startswith("http://127.0.0.1:")
+            import urllib.request
+
+            with urllib.request.urlopen(f"{base}/api/v1/health", timeout=10) as r:
+                assert json.loads(r.read())["ok"] is True
+    finally:
+        app.state.registry.close()
