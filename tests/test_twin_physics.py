@@ -380,3 +380,19 @@ def test_bad_hand_paths_are_e903(case):
     if case != "friction":
         with pytest.raises(HaptifyError):
             ph.simulate_passive(tw, t, p, quat)
+
+
+def test_backlash_delays_the_force_but_keeps_the_series_slope():
+    """With play in the drive the force starts later, then rises with the series stiffness; massless
+    (quasi-static Newton) and massive (dynamic) rotors agree on a slow press."""
+    results = []
+    for keep in [("drive.series_elasticity", "drive.backlash"), ("drive.series_elasticity", "drive.backlash", "inertia")]:
+        tw = set_param(massless(only(preset("touch"), *keep)), "drive.backlash.width_rad", 0.01)
+        res, depth, q = press(tw, 0.006)
+        results.append(res.force_W[:, 2])
+        touching = depth > 0.0002
+        assert np.all(np.abs(res.force_W[touching & (depth < 0.0005), 2]) < 1e-3)   # lost motion first
+        i, j = np.argmax(depth > 0.003), len(depth) - 1
+        slope = (res.force_W[j, 2] - res.force_W[i, 2]) / (depth[j] - depth[i])
+        assert slope == pytest.approx(series_value(tw, q), rel=0.03)
+    assert results[0] == pytest.approx(results[1], abs=0.02)
