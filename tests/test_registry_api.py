@@ -147,6 +147,8 @@ def test_refusals_are_coded(registry, base, tmp_path):
     assert codes(client.get(f"{API}/devices/no-such-device")) == ["E973"]
     # nothing was stored by any refusal
     assert client.get(f"{API}/submissions").json() == []
+    paths = client.get("/openapi.json").json()["paths"]  # the API describes itself
+    assert {f"{API}/submissions", f"{API}/devices/{{slug}}", f"{API}/compare", f"{API}/export.csv"} <= set(paths)
     data = Path(app.state.registry.data)
     assert list((data / "tmp").iterdir()) == [] and [p for p in (data / "bundles").rglob("*") if p.is_file()] == []
     # a dry run checks everything and stores nothing

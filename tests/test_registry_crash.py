@@ -22,13 +22,15 @@ from haptify.errors import HaptifyError
 from haptify_tools.registry import cmd_registry, cmd_submit
 from haptify_tools.registry.service import Registry, Settings
 
-SERVE = "import sys, uvicorn; from pathlib import Path; from haptify_tools.registry.app import create_app; " \
-        "from haptify_tools.registry.service import Settings; " \
-        "uvicorn.run(create_app(Settings(data_dir=Path(sys.argv[1]))), host='127.0.0.1', port=int(sys.argv[2]), log_level='error')"
+SERVE = "import argparse, sys; from haptify.cli import UI; from haptify_tools.registry import cmd_registry; " \
+        "p = argparse.ArgumentParser(); cmd_registry.register(p.add_subparsers()); a = p.parse_args(sys.argv[1:]); " \
+        "sys.exit(a.func(a, UI(quiet=True)))"
 
 
 def start(data: Path, port: int) -> subprocess.Popen:
-    proc = subprocess.Popen([sys.executable, "-c", SERVE, str(data), str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    """``haptify registry serve --data DATA --port PORT`` in a subprocess, once it answers."""
+    proc = subprocess.Popen([sys.executable, "-c", SERVE, "registry", "serve", "--data", str(data), "--port", str(port)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     wait_http(f"http://127.0.0.1:{port}/api/v1/health")
     return proc
 
