@@ -72,7 +72,7 @@ class Checked:
     digest: str
     results: ResultsFile
     conformance: ConformReport | None
-    verification: Verification
+    verification: Verification = field(default_factory=lambda: Verification("unverified", note="not re-computed yet"))
 
 
 def _doc(unpacked: Unpacked, path: str, model: type, limits: Limits):
@@ -91,8 +91,9 @@ def _mismatch(what: str, file: str, pointer: str, expected: Any, found: Any) -> 
                    expected=expected, found=found)
 
 
-def check_bundle(unpacked: Unpacked, limits: Limits = Limits(), *, verify_raw: bool = True) -> Checked:
-    """Run the checks of spec §17.3 (all but the token and the registry's records); raises the findings."""
+def check_bundle(unpacked: Unpacked, limits: Limits = Limits()) -> Checked:
+    """Run the checks of spec §17.3 steps 2–4 (manifest, documents, an included conformance report); raises
+    the findings. The re-computation (step 7) is :func:`verify_bundle`, run after the cheaper checks."""
     bundle = read_manifest(unpacked, limits)
     if bundle.spec_version not in SUPPORTED_SPEC_VERSIONS:
         raise fail("E968", f"spec version {bundle.spec_version!r} is not accepted", file="bundle.json", pointer="/spec_version",
@@ -131,9 +132,16 @@ def check_bundle(unpacked: Unpacked, limits: Limits = Limits(), *, verify_raw: b
         raise HaptifyError(*findings)
     if conformance is not None:
         check_conformance(conformance, results, bundle.spec_version)
-    verification = verify(unpacked.root / SESSION_DIR, results) if bundle.includes_raw and verify_raw else Verification(
-        "unverified", note="no raw streams included" if not bundle.includes_raw else "re-computation switched off")
-    return Checked(bundle=bundle, digest=bundle_digest(bundle), results=results, conformance=conformance, verification=verification)
+    return Checked(bundle=bundle, digest=bundle_digest(bundle), results=results, conformance=conformance)
+
+
+def verify_bundle(checked: Checked, unpacked: Unpacked, enabled: bool = True) -> Verification:
+    """Step 7 of spec §17.3: :func:`verify` when the bundle includes raw streams, else ``unverified``."""
+    if not checked.bundle.includes_raw:
+        return Verification("unverified", note="no raw streams included")
+    if not enabled:
+        return Verification("unverified", note="re-computation switched off on this registry")
+    return verify(unpacked.root / SESSION_DIR, checked.results, checked.bundle.spec_version)
 
 
 @lru_cache(maxsize=1)

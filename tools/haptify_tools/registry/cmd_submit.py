@@ -25,7 +25,7 @@ from pathlib import Path
 
 from haptify.errors import Finding, HaptifyError, fail
 from haptify_tools.registry.bundle import build_bundle, pack, submission_id, unpack
-from haptify_tools.registry.checks import check_bundle
+from haptify_tools.registry.checks import check_bundle, verify_bundle
 
 TOKEN_ENV = "HAPTIFY_REGISTRY_TOKEN"
 TIMEOUT_S = 300
@@ -110,7 +110,9 @@ def _run(args, ui) -> int:
         if args.keep:
             shutil.copyfile(archive, args.keep)
         if args.dry_run:
-            checked = check_bundle(unpack(archive, work / "unpacked"))
+            unpacked = unpack(archive, work / "unpacked")
+            checked = check_bundle(unpacked)
+            checked.verification = verify_bundle(checked, unpacked)
             outcome = {"id": submission_id(digest), "digest": digest, "status": "would-accept",
                        "supersedes": args.supersedes, "verification": checked.verification.to_dict(), "checked": "locally"}
             lines = describe(outcome)

@@ -45,7 +45,7 @@ from haptify.versions import PACKAGE_VERSION
 from haptify_conform.report import ConformReport
 from haptify_tools.registry import db
 from haptify_tools.registry.bundle import SESSION_DIR, Limits, read_manifest, submission_id, unpack
-from haptify_tools.registry.checks import Checked, check_bundle, check_conformance
+from haptify_tools.registry.checks import Checked, check_bundle, check_conformance, verify_bundle
 
 log = logging.getLogger("haptify.registry")
 
@@ -275,7 +275,7 @@ class Registry:
             existing = self._existing(digest)
             if existing is not None:
                 return existing
-            checked = check_bundle(unpacked, self.settings.limits, verify_raw=self.settings.verify_raw)
+            checked = check_bundle(unpacked, self.settings.limits)
             report = checked.conformance or self._report_on_file(checked)
             if report is None:
                 impl = checked.results.implementation
@@ -285,6 +285,7 @@ class Registry:
             if checked.conformance is None:
                 check_conformance(report, checked.results, checked.bundle.spec_version, file="(report on file)")
             self._check_supersede(checked, caller)
+            checked.verification = verify_bundle(checked, unpacked, self.settings.verify_raw)
             sid = submission_id(digest)
             if dry_run:
                 return Outcome(sid, digest, "would-accept", checked.verification.to_dict(), bundle.supersedes)
