@@ -9,10 +9,12 @@ import tarfile
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from _registry_fixtures import base, bundle_for, member, tar_gz  # noqa: F401  (base: fixture)
 from haptify.errors import HaptifyError
-from haptify_tools.registry.bundle import Bundle, Limits, bundle_digest, canonical_json, read_manifest, unpack
+from haptify_tools.registry.bundle import Bundle, Limits, _member_name_problem, bundle_digest, canonical_json, read_manifest, unpack
 from haptify_tools.registry.checks import agrees, check_bundle, tolerances
 
 
@@ -254,3 +256,16 @@ def test_metric_records_must_match_their_definitions(material):
     found = {(f.pointer, str(f.found)) for f in metric_findings(ResultsFile.model_validate(data))}
     assert found == {("/metrics/0/unit", "km/h"), ("/metrics/1/id", "vibration.loudness"), ("/metrics/2/value", "list of 2"),
                      ("/metrics/3/definition_version", "0.9.0"), ("/metrics/5", data["metrics"][4]["id"])}
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.sampled_from(["a", "b", ".", "..", "", "/", "\\", "C:", "x.json", "\x00"]), min_size=1, max_size=8))
+def test_an_accepted_member_name_never_leaves_the_bundle_folder(parts):
+    """Property: whatever a member is called, a name that passes the check resolves inside the folder."""
+    import os.path
+
+    name = "".join(p if p in ("/", "\\") else p + "/" for p in parts).rstrip("/") or "/"
+    if _member_name_problem(name) is None:
+        root = "/bundle-root"
+        resolved = os.path.normpath(os.path.join(root, *name.split("/")))
+        assert resolved.startswith(root + "/") and "\\" not in name and "\x00" not in name
