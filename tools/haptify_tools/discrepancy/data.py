@@ -33,7 +33,8 @@ POSE_CUTOFF_BY_PROTOCOL_HZ = {"free_space": 4.0}
 ORIENTATION_CUTOFF_HZ = 1.5   # the hand's orientation wanders slowly (under 16°/s in free space, paper §V-B);
                               # gimbal friction turns orientation noise into force noise
 RESIDUAL_CUTOFF_HZ = 5.0      # both forces are compared below this frequency
-SIM_RATE_HZ = 1000.0          # the rendering loop's rate (paper §V-D); the cable model needs it in passive trials too
+SIM_RATE_HZ = 1000.0          # active trials: the rendering loop's rate (paper §V-D)
+PASSIVE_RATE_HZ = 250.0       # passive trials: the cable model is resolved (force within 0.1 mN of 1 kHz)
 FORCE_PROTOCOLS = ("free_space", "local_dynamic", "other", "frictionless_surface", "stiffness")
 
 
@@ -113,9 +114,14 @@ def load_measured(session: SessionFolder, ctx: ComputeContext | None = None, req
     return out
 
 
+def sim_rate(trial: MeasuredTrial) -> float:
+    """Simulation rate (Hz) of a trial: :data:`SIM_RATE_HZ` when active, :data:`PASSIVE_RATE_HZ` otherwise."""
+    return SIM_RATE_HZ if trial.active else PASSIVE_RATE_HZ
+
+
 def fine_path(trial: MeasuredTrial) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The trial's smoothed hand path on a :data:`SIM_RATE_HZ` grid (cubic spline): ``t``, position, quaternion."""
-    dt = 1.0 / SIM_RATE_HZ
+    """The trial's smoothed hand path on its simulation grid (cubic spline): ``t``, position, quaternion."""
+    dt = 1.0 / sim_rate(trial)
     fine = np.arange(trial.t[0], trial.t[-1] + 0.5 * dt, dt)
     fine = fine[fine <= trial.t[-1]]
     pos = CubicSpline(trial.t, trial.position, axis=0)(fine)
@@ -131,7 +137,7 @@ def simulate_trial(twin: TwinFile, trial: MeasuredTrial) -> np.ndarray:
         res = simulate_active(twin, fine, pos, quat, trial.rendering)
     else:
         res = simulate_passive(twin, fine, pos, quat)
-    force = lowpass(res.force_W - connector_force(twin, fine, pos), SIM_RATE_HZ, RESIDUAL_CUTOFF_HZ)
+    force = lowpass(res.force_W - connector_force(twin, fine, pos), sim_rate(trial), RESIDUAL_CUTOFF_HZ)
     return np.stack([np.interp(trial.t, fine, force[:, k]) for k in range(3)], axis=1)
 
 
