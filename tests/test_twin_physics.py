@@ -396,3 +396,23 @@ def test_backlash_delays_the_force_but_keeps_the_series_slope():
         slope = (res.force_W[j, 2] - res.force_W[i, 2]) / (depth[j] - depth[i])
         assert slope == pytest.approx(series_value(tw, q), rel=0.03)
     assert results[0] == pytest.approx(results[1], abs=0.02)
+
+
+def test_a_twin_without_effects_does_nothing_to_the_hand():
+    """Every device effect off: the hand feels nothing along any path, the plate only the base's weight
+    (and nothing once gravity is off too)."""
+    tw = only(preset("touch-x"), "gravity")
+    tw = set_param(massless(tw), "base.mass_kg", 1.5)
+    for i in range(3):
+        tw = set_param(tw, f"links.{i}.inertia_kg_m2", [0.0] * 6)
+    kin = tk.true_kinematics(tw)
+    rng = np.random.default_rng(9)
+    t = np.arange(0, 1.0, 1e-3)
+    q = centre_q(tw) + 0.2 * np.sin(2 * np.pi * np.outer(t, rng.uniform(0.5, 3.0, 3)) + rng.uniform(0, 6, 3))
+    p = tk.device_to_world(tw, ref.forward_positions(kin, q))
+    quat = quat_from_axis_angle(np.array([0.2, 1.0, 0.3]), 0.4 * np.sin(2 * np.pi * t))
+    res = ph.simulate_passive(tw, t, p, quat)
+    assert np.max(np.abs(res.force_W)) < 1e-12 and np.max(np.abs(res.torque_W)) < 1e-12
+    assert res.base_force_W == pytest.approx(np.tile([0.0, 0.0, -1.5 * G], (len(t), 1)), abs=1e-12)
+    res = ph.simulate_passive(disable(tw, "gravity"), t, p, quat)
+    assert np.max(np.abs(res.base_force_W)) < 1e-12
