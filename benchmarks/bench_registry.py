@@ -198,6 +198,12 @@ def read_all(base: str, paths: list[tuple[str, str]], deadline_s: float, n_threa
     return latencies, by_kind, wall
 
 
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process (Linux /proc), in seconds."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def pct(values: list[float], q: float) -> float:
     ordered = sorted(values)
     return ordered[min(len(ordered) - 1, int(round(q / 100 * (len(ordered) - 1))))] * 1000
@@ -269,10 +275,13 @@ def main() -> int:
             paths = read_paths(sorted(expected), args.reads)
             for _, p in set(paths):  # warm-up: one read of each path (first-use imports, template compilation)
                 httpx.get(base + p, timeout=60)
+            cpu0 = cpu_seconds(proc.pid)
             latencies, by_kind, rwall = read_all(base, paths, deadline_s=600, n_threads=args.threads)
+            server_cpu = cpu_seconds(proc.pid) - cpu0
             p50, p99 = pct(latencies, 50), pct(latencies, 99)
             print(f"reads: {len(latencies)} from {args.threads} threads in {rwall:.1f} s ({len(latencies) / rwall:.0f}/s); "
                   f"p50 {p50:.1f} ms, p99 {p99:.1f} ms (target p99 < {TARGET_P99_MS:g} ms: {'met' if p99 < TARGET_P99_MS else 'NOT met'})")
+            print(f"server CPU time per read: {server_cpu / len(latencies) * 1000:.2f} ms (all kinds; the service time without queueing)")
             for kind, lats in sorted(by_kind.items()):
                 print(f"  {kind:34} n={len(lats):5d}  p50 {pct(lats, 50):6.1f} ms  p99 {pct(lats, 99):6.1f} ms")
             print(f"load average after the run: {os.getloadavg()[0]:.1f}")
