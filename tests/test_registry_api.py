@@ -145,6 +145,9 @@ def test_refusals_are_coded(registry, base, tmp_path):
     r = client.post(f"{API}/submissions", content=b"garbage", headers=auth(tokens["a"]))
     assert r.status_code == 422 and codes(r) == ["E961"]
     assert codes(client.get(f"{API}/devices/no-such-device")) == ["E973"]
+    r = client.post(f"{API}/submissions/abc/withdraw", content=b'{"reason": ', headers={"Authorization": f"Bearer {tokens['a']}",
+                                                                                      "Content-Type": "application/json"})
+    assert r.status_code == 400 and codes(r) == ["E975"]  # malformed JSON body
     # nothing was stored by any refusal
     assert client.get(f"{API}/submissions").json() == []
     paths = client.get("/openapi.json").json()["paths"]  # the API describes itself

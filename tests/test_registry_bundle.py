@@ -269,3 +269,21 @@ def test_an_accepted_member_name_never_leaves_the_bundle_folder(parts):
         root = "/bundle-root"
         resolved = os.path.normpath(os.path.join(root, *name.split("/")))
         assert resolved.startswith(root + "/") and "\\" not in name and "\x00" not in name
+
+
+@pytest.mark.parametrize("edit, code, pointer", [
+    (lambda d: d.update(spec_version="2.0"), "E968", "/spec_version"),
+    (lambda d: d.update(manifest_sha256="0" * 64), "E966", "/manifest_sha256"),
+    (lambda d: d["device"].update(model="Falcon"), "E966", "/device"),
+    (lambda d: d.update(metrics=[]), "E966", "/metrics"),
+])
+def test_documents_must_agree(material, tmp_path, edit, code, pointer):
+    root, session, results, report = material
+    data = json.loads(results.read_text())
+    edit(data)
+    (tmp_path / "results.json").write_text(json.dumps(data))
+    archive, _ = bundle_for(session, tmp_path / "results.json", report, tmp_path / "a.tar.gz")
+    with pytest.raises(HaptifyError) as e:
+        check_bundle(unpack(archive, tmp_path / "u"))
+    f = next(f for f in e.value.findings if f.code == code)
+    assert f.pointer == pointer and f.expected != f.found
