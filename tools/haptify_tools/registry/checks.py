@@ -50,6 +50,7 @@ class MetricCheck:
     recomputed: Any = None
     tolerance: dict | None = None
     message: str = ""
+    code: str | None = None  # W969 when the metric disagrees
 
 
 @dataclass
@@ -276,13 +277,13 @@ def verify(session_root: Path, results: ResultsFile, spec_version: str = SPEC_VE
             why = unavailable.get(m.id)
             checks.append(MetricCheck(m.id, "disagrees", m.value, None, tol,
                                       f"the reference cannot compute it from the included streams: "
-                                      f"{why.code + ' ' + why.reason if why else 'not computed'}"))
+                                      f"{why.code + ' ' + why.reason if why else 'not computed'}", "W969"))
         elif agrees(m.value, ref.value, tol):
             checks.append(MetricCheck(m.id, "agrees", m.value, ref.value, tol))
         else:
             checks.append(MetricCheck(m.id, "disagrees", m.value, ref.value, tol,
-                                      f"W969: submitted {m.value!r}, the reference computes {ref.value!r}; "
-                                      f"allowed |difference| ≤ {tol['abs']:g} + {tol['rel']:g}·|reference|"))
+                                      f"submitted {m.value!r}, the reference computes {ref.value!r}; "
+                                      f"allowed |difference| ≤ {tol['abs']:g} + {tol['rel']:g}·|reference|", "W969"))
     status = "verified" if all(c.status == "agrees" for c in checks) else "disagrees"
     if status == "disagrees" and not any(c.status == "disagrees" for c in checks):
         status = "unverified"

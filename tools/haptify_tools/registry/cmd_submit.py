@@ -72,7 +72,7 @@ def describe(outcome: dict) -> list[str]:
              f"verification: {v['status']}" + (f" — {v['note']}" if v.get("note") else "")]
     for c in v.get("checks", []):
         if c["status"] != "agrees":
-            lines.append(f"  {c['metric']}: {c['status']} — {c['message']}")
+            lines.append(f"  {c['metric']}: {c['status']}{' (' + c['code'] + ')' if c.get('code') else ''} — {c['message']}")
     if outcome.get("supersedes"):
         lines.append(f"supersedes {outcome['supersedes']}")
     return lines
