@@ -272,3 +272,16 @@ def test_two_labs_submitting_at_once(registry, base, tmp_path):
     assert sorted(s["id"] for s in listed) == sorted(set(ids))
     files = [p for p in (Path(app.state.registry.data) / "bundles").rglob("*.tar.gz")]
     assert len(files) == 12
+
+
+def test_migrations_build_exactly_the_orm_models(registry):
+    """Alembic's migrated schema and the SQLAlchemy models agree (autogenerate finds nothing to do)."""
+    from alembic.autogenerate import compare_metadata
+    from alembic.migration import MigrationContext
+
+    from haptify_tools.registry.db import Base
+
+    client, app, tokens = registry
+    with app.state.registry.engine.connect() as conn:
+        diff = compare_metadata(MigrationContext.configure(conn), Base.metadata)
+    assert diff == []
