@@ -44,11 +44,11 @@ def test_hidden_coulomb_friction_is_named_identified_and_the_gap_shrinks(tmp_pat
     if seed == 11:       # once through the command line: every output written, the twin updated
         twin_file = tmp_path / "start.json"
         write_twin(start, twin_file)
-        args = argparse.Namespace(session=str(session), twin=str(twin_file), out=str(tmp_path / "out"), max_effects=5, workers=1,
+        args = argparse.Namespace(session=str(session), twin=str(twin_file), out=str(tmp_path / "out"), max_effects=5, workers=1, no_overlay=False,
                                   overwrite=False)
         assert cmd_discrepancy.run(args, UI(quiet=True)) == 0
         result = DiscrepancyFile.model_validate(json.loads((tmp_path / "out" / "discrepancy.json").read_text()))
-        for name in ("twin.json", "report.html", "residual_vs_state.png", "workspace_residual.png"):
+        for name in ("twin.json", "report.html", "residual_vs_state.png", "workspace_residual.png", "overlay.rrd"):
             assert (tmp_path / "out" / name).is_file()
         updated = load_twin(tmp_path / "out" / "twin.json")
         assert updated.on("friction.coulomb")

@@ -28,6 +28,7 @@ def register(subparsers) -> None:
     p.add_argument("-o", "--out", required=True, metavar="OUT", help="output folder")
     p.add_argument("--max-effects", type=int, default=5, metavar="N", help="accept at most N effects (default 5)")
     p.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
+    p.add_argument("--no-overlay", action="store_true", help="do not write OUT/overlay.rrd (the viewer recording)")
     p.add_argument("--workers", type=int, default=0, help="processes fitting candidates in parallel (default: one per CPU, at most 4)")
     p.set_defaults(func=run)
 
@@ -41,7 +42,8 @@ def run(args: argparse.Namespace, ui) -> int:
         raise fail("E901", f"{str(out)!r} already exists", file=str(out))
     twin = load_twin(args.twin)
     result, _ = run_discrepancy(args.session, twin, out, max_effects=args.max_effects, overwrite=args.overwrite,
-                                log=ui.say, workers=args.workers)
+                                log=ui.say, workers=args.workers,
+                                overlay=not args.no_overlay)
     named = ", ".join(f"{a.effect_id} {a.parameter}={a.value:.4g} {a.unit}" for a in result.accepted) or "none"
     ui.say(f"{result.verdict}: effects named: {named}; held-out force gap {result.heldout_gap_before_N:.4g} N → "
            f"{result.heldout_gap_after_N:.4g} N; wrote {out}")

@@ -244,10 +244,10 @@ def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial]
 
 def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | None = None, *, max_effects: int = 5,
                     overwrite: bool = False, log: Callable[[str], object] | None = None,
-                    report: bool = True, workers: int = 1) -> tuple[DiscrepancyFile, Selection]:
+                    report: bool = True, workers: int = 1, overlay: bool = True) -> tuple[DiscrepancyFile, Selection]:
     """Run the workflow; with ``out`` write ``discrepancy.json``, ``twin.json`` and ``report.html`` there.
 
-    ``workers``: processes fitting candidates in parallel (0: one per CPU, at most 4; results do not
+    ``overlay``: also write ``overlay.rrd`` for the viewer (when ``report``). ``workers``: processes fitting candidates in parallel (0: one per CPU, at most 4; results do not
     depend on it). Returns the result and the selection (its simulations, for callers that draw or test).
     """
     session = open_session(session_path)
@@ -259,12 +259,18 @@ def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | 
         target = Path(out)
         target.parent.mkdir(parents=True, exist_ok=True)
         build = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
+        build.chmod(0o755)          # an ordinary folder once renamed into place
         files = {"twin": "twin.json"}
         write_twin(annotate_twin(sel.twin, sel), build / "twin.json")
         if report:
             from haptify_tools.discrepancy.report import write_report
 
             files.update(write_report(build, result, trials, sel))
+            if overlay:
+                from haptify_tools.discrepancy.overlay import write_overlay
+
+                write_overlay(session, trials, sel.final_sim, result, build / "overlay.rrd")
+                files["overlay"] = "overlay.rrd"
         result.files = files
         atomic_write_json(build / "discrepancy.json", result.model_dump(mode="json"))
         replace_folder_atomically(build, target, overwrite)

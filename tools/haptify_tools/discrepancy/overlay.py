@@ -1,0 +1,48 @@
+"""``overlay.rrd``: the measured session with the updated twin's hand force overlaid, for ``haptify view``
+(issue 8, step 4). Built on the viewer's own recording plan (:mod:`haptify_tools.viewer.recording`): the
+measured session is planned as usual (only the compared trials are kept) and, for every compared trial, the twin's force (after the update)
+is added as the ``compare`` role of ``hand_force/calibrated`` — so the viewer's hand-force views overlay
+measured and simulated; a markdown note ``/discrepancy`` says what the compared lines are.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from haptify.storage import SessionFolder
+
+from haptify_tools.discrepancy.data import MeasuredTrial
+from haptify_tools.discrepancy.model import DiscrepancyFile
+
+
+def write_overlay(session: SessionFolder, trials: list[MeasuredTrial], twin_force: dict[str, np.ndarray],
+                  result: DiscrepancyFile, path: Path) -> Path:
+    """Write the overlay recording to ``path`` (atomically, by the viewer's :func:`write_rrd`)."""
+    import rerun as rr
+
+    from haptify_tools.viewer.blueprints import blueprint_for
+    from haptify_tools.viewer.recording import Entry, plan_recording, series_entry, write_rrd
+
+    plan = plan_recording(session)
+    compared = {tr.trial_id for tr in trials}
+    dropped = {tp.key for tp in plan.trials if tp.trial.id not in compared}    # keep the recording small
+    plan.entries = [e for e in plan.entries if not any(e.path.startswith((f"/world/{k}/", f"/series/{k}/")) for k in dropped)]
+    plan.trials = [tp for tp in plan.trials if tp.trial.id in compared]
+    by_id = {tp.trial.id: tp for tp in plan.trials}
+    for tr in trials:
+        tp = by_id.get(tr.trial_id)
+        if tp is None:
+            continue
+        tp.counterpart["compare"] = f"{tr.trial_id} (twin after the update)"
+        force = np.where(tr.valid[:, None], twin_force[tr.trial_id], np.nan)
+        plan.add(series_entry(f"/series/{tp.key}/compare/hand_force/calibrated", "hand_force/calibrated", tr.t, force,
+                              ["fx", "fy", "fz"], "compare", "haptify discrepancy"))
+    named = ", ".join(f"{a.effect_id} {a.parameter} = {a.value:.4g} {a.unit}" for a in result.accepted) or "none"
+    note = ("# Twin versus measurement\n\nLines marked *(compare)* in the hand-force views are the updated twin's "
+            f"force along the measured path (low-passed at the workflow's comparison band).\n\nEffects added: {named}.\n\n"
+            f"Verdict: {result.verdict}; held-out force gap {result.heldout_gap_before_N:.4g} N → "
+            f"{result.heldout_gap_after_N:.4g} N.")
+    plan.add(Entry("/discrepancy", static=[rr.TextDocument(note, media_type=rr.MediaType.MARKDOWN)]))
+    return write_rrd(plan, path, blueprint_for(plan))
