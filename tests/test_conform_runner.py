@@ -129,3 +129,13 @@ def test_self_test_fails_an_implementation_that_accepts_everything(tmp_path):
     prog = tmp_path / "yes.py"
     prog.write_text("import json, sys\njson.dump({'metrics': []}, open(sys.argv[2], 'w'))\n")
     assert main(["--cmd", f"{sys.executable} {prog} {{session}} {{out}}", "--self-test"]) == 1
+
+
+def test_cmd_adapter_names_the_implementation_from_its_results(tmp_path):
+    repo = _fixtures(tmp_path, "s")
+    prog = tmp_path / "impl.py"
+    prog.write_text("import json, sys\njson.dump({'implementation': {'name': 'acme-haptify', 'version': '2.1'}, "
+                    "'metrics': [{'id': 'x.y', 'value': 1.5, 'unit': 'N'}]}, open(sys.argv[2], 'w'))\n")
+    adapter = CmdAdapter(f"{sys.executable} {prog} {{session}} {{out}}", 10)
+    run_cases([case("a", "s")], adapter, repo=repo)
+    assert adapter.implementation == {"name": "acme-haptify", "version": "2.1"}

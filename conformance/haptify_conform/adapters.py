@@ -31,6 +31,15 @@ class Answer:
     implementation: dict = field(default_factory=dict)
 
 
+def note_implementation(adapter: Any, answer: Answer) -> Answer:
+    """Remember the ``implementation`` a results document names, for the report header (spec §16.6)."""
+    if not getattr(adapter, "implementation", None) and answer.kind == "results":
+        named = answer.payload.get("implementation") if isinstance(answer.payload, dict) else None
+        if isinstance(named, dict) and named.get("name") and named.get("version"):
+            adapter.implementation = {"name": str(named["name"]), "version": str(named["version"])}
+    return answer
+
+
 def classify(document: Any) -> Answer:
     """Read an implementation's output document: a results.json, or a findings report."""
     if not isinstance(document, dict):
@@ -51,6 +60,7 @@ class CmdAdapter:
     name = "cmd"
 
     def __init__(self, template: str, timeout_s: float) -> None:
+        self.implementation: dict = {}
         self.argv = shlex.split(template)
         if not any("{session}" in a for a in self.argv) or not any("{out}" in a for a in self.argv):
             raise ValueError("the --cmd template must contain {session} and {out}")
@@ -84,7 +94,7 @@ class CmdAdapter:
             except (json.JSONDecodeError, UnicodeDecodeError) as exc:
                 return Answer("error", message=f"output is not JSON: {exc}", duration_s=elapsed)
             answer.duration_s = elapsed
-            return answer
+            return note_implementation(self, answer)
 
     def close(self) -> None:
         pass
@@ -216,6 +226,7 @@ class PythonAdapter:
         if not module or not func:
             raise ValueError("--python takes module:function")
         self.func: Callable[[str, str, dict], dict] = getattr(importlib.import_module(module), func)
+        self.implementation: dict = {}
 
     def run(self, case: Case, session: Path) -> Answer:
         start = time.perf_counter()
@@ -225,7 +236,7 @@ class PythonAdapter:
             return Answer("error", message=f"{type(exc).__name__}: {exc}", duration_s=time.perf_counter() - start)
         answer = classify(document)
         answer.duration_s = time.perf_counter() - start
-        return answer
+        return note_implementation(self, answer)
 
     def close(self) -> None:
         pass

@@ -25,6 +25,7 @@ MODELS: dict[str, str] = {
     "import-map": "haptify.importers:ImportMap",
     "hw-model": "haptify.local_dynamics:HWModelFile",
     "validation-report": "haptify.validation:ValidationReportModel",
+    "bundle": "haptify_tools.registry.bundle:Bundle",
     "conformance-cases": "haptify_conform.cases:CaseFile",
     "conform-report": "haptify_conform.report:ConformReport",
 }
