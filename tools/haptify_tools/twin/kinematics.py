@@ -276,7 +276,8 @@ def hand_to_joints(twin: TwinFile, position_W: np.ndarray, quaternion_W: np.ndar
                    strict: bool = False) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
     """Arm angles ``(N, n)``, gimbal angles ``(N, 3)`` (None without orientation) and ``ok (N,)`` for a hand path.
 
-    Uses the TRUE kinematics; solutions are chosen for continuity along the path. With ``strict`` an
+    Uses the TRUE kinematics and the IK solution inside the joint limits (unique for the structure of
+    paper eq. 4, whose limits keep the elbow down and the shoulder forward). With ``strict`` an
     unreachable sample raises E803 naming the first bad sample.
     """
     kin = true_kinematics(twin)
