@@ -21,7 +21,7 @@ from statistics import fmean, stdev
 import pytest
 from fastapi.testclient import TestClient
 
-from _registry_fixtures import bundle_for, example_session, passing_report, postgres_or_skip
+from _registry_fixtures import base, bundle_for, example_session, passing_report, postgres_or_skip  # noqa: F401 (base: fixture)
 from haptify.compare import _fmt
 from haptify.metric_definitions import family
 from haptify.results import Implementation, MetricResult, ResultsFile
@@ -242,6 +242,43 @@ def test_empty_registry_pages(tmp_path):
         assert "No device has a current value" in client.get("/leaderboard/vibration.rms").text
         assert "Choose one or more devices" in client.get("/compare").text
         assert client.get("/static/registry.css").status_code == 200
+
+
+def test_raw_submission_has_report_figures_and_a_recording(base, tmp_path):  # noqa: F811 (base is a fixture)
+    root, session, results, report, impl = base
+    archive, digest = bundle_for(session, results, report, tmp_path / "raw.tar.gz", include_raw=True)
+    app = create_app(Settings(data_dir=tmp_path / "registry"))
+    token = app.state.registry.create_token("lab-a")
+    with TestClient(app) as client:
+        r = client.post("/api/v1/submissions", content=archive.read_bytes(),
+                        headers={"Authorization": f"Bearer {token}", "Content-Type": "application/gzip"})
+        assert r.status_code == 201 and r.json()["verification"]["status"] == "verified", r.text
+        sid = r.json()["id"]
+        page = client.get("/devices/3d-systems-touch").text
+        assert f'/submissions/{sid}/report/index.html">Draw the report' in page and "no-figures" not in page
+        assert not (tmp_path / "registry" / "cache").exists()  # showing the page unpacks nothing
+        assert f'/submissions/{sid}/recording.rrd">download the recording' in page
+        rrd = client.get(f"/submissions/{sid}/recording.rrd")
+        assert rrd.status_code == 200 and rrd.content[:4] == b"RRF2" and len(rrd.content) > 10_000
+        index = client.get(f"/submissions/{sid}/report/index.html")
+        assert index.status_code == 200 and "Haptify report" in index.text
+        pngs = re.findall(r'<img src="([^"]+\.png)"', index.text)
+        assert pngs, "the report has no figure"
+        figure = client.get(f"/submissions/{sid}/report/{pngs[0]}")
+        assert figure.status_code == 200 and figure.content[:8] == b"\x89PNG\r\n\x1a\n"
+        page = client.get("/devices/3d-systems-touch").text  # the figures now show on the device page
+        assert f'<img src="http://testserver/submissions/{sid}/report/{pngs[0]}"' in page
+        for bad in ("..", ".hidden", "session.json", "a%2Fb"):
+            assert client.get(f"/submissions/{sid}/report/{bad}").status_code == 404, bad
+        assert client.get("/submissions/00000000000000000000/recording.rrd").status_code == 404
+    app.state.registry.close()
+
+
+def test_results_only_submission_has_no_report(registry):
+    sid = registry.ids[0]
+    for url in (f"/submissions/{sid}/report/index.html", f"/submissions/{sid}/recording.rrd"):
+        r = registry.client.get(url)
+        assert r.status_code == 404 and "E973" in r.text and "no raw streams" in r.text
 
 
 # --- a real browser against a live server --------------------------------------------------------

@@ -6,7 +6,12 @@
   the figures of ``haptify report`` when a submission shipped them, and how to open its recording in
   the viewer;
 * ``/compare?device=a&device=b…`` — the paper's Table III for the chosen devices
-  (``haptify.compare.build_table`` / ``to_html`` over :meth:`Registry.comparison`).
+  (``haptify.compare.build_table`` / ``to_html`` over :meth:`Registry.comparison`);
+* ``/submissions/{id}/report/index.html`` — for a submission with raw streams, the output of
+  ``haptify report`` (figures, sounds) drawn by the reference from its session and results on first
+  request, and ``/submissions/{id}/recording.rrd`` — its recording for the viewer (rerun), built with
+  ``haptify_tools.viewer.recording.build``. Both are derived data, kept next to the unpacked session
+  (:meth:`Registry.session_folder`) and written atomically.
 
 Every number comes from the same queries as the JSON API (``app.state.registry``).
 ``register(app)`` adds the pages, the read-side endpoints of :mod:`~haptify_tools.registry.api_read`
@@ -15,11 +20,16 @@ and the stylesheet; ``create_app`` calls it.
 
 from __future__ import annotations
 
+import os
+import re
+import threading
+import uuid
 from importlib import resources
+from pathlib import Path
 from urllib.parse import urlencode
 
 from fastapi import APIRouter, FastAPI, Query, Request
-from fastapi.responses import HTMLResponse, RedirectResponse, Response
+from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Response
 from fastapi.staticfiles import StaticFiles
 from fastapi.templating import Jinja2Templates
 
@@ -45,6 +55,8 @@ def num(value) -> str:
 templates.env.filters["num"] = num
 
 STATUS_OF_CODE = {"E973": 404, "E975": 400}
+REPORT_FILE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,200}$")  # a file of a report folder (no '/', no '..')
+_derive_lock = threading.Lock()  # one report or recording built at a time (matplotlib's pyplot is not thread-safe)
 
 router = APIRouter(include_in_schema=False)
 
@@ -121,7 +133,8 @@ def page_device(slug: str, request: Request) -> HTMLResponse:
     return _render(request, "device.html", device=agg["device"], label=_label(agg["device"]), metrics=metrics,
                    titles={k: v.title for k, v in defs.items()}, submissions=submissions,
                    labs=sorted({s["lab"] for s in current}), current=current,
-                   raw=[s for s in current if s["has_raw"]])
+                   raw=[s for s in current if s["has_raw"]],
+                   figures=report_figures(reads.reg, [s for s in current if s["has_raw"]]))
 
 
 @router.get("/compare", name="page_compare", response_class=HTMLResponse)
@@ -144,6 +157,100 @@ def page_compare(request: Request, device: list[str] = Query(default=[]), paper:
     devices = [{"slug": d["slug"], "label": _label(d)} for d in reads.devices()]
     return _render(request, "compare.html", devices=devices, chosen_slugs=set(chosen), with_paper=paper,
                    table_html=table_html, csv_url=csv_url, json_url=json_url)
+
+
+def _raw_submission(reg, sid: str) -> dict:
+    """The submission ``sid`` when it includes raw streams (E973 when unknown or without them)."""
+    sub = reg.submission(sid)
+    if not sub["has_raw"]:
+        raise fail("E973", f"submission {sid} has no raw streams, so there is no report or recording of it",
+                   expected="a submission made with --include-raw", found="results only")
+    return sub
+
+
+def derived_folder(reg, sid: str) -> Path:
+    """The folder of a submission's derived data: where :meth:`Registry.session_folder` unpacks its session
+    (``DATA/cache/<archive name>/``); computed without unpacking anything."""
+    return reg.data / "cache" / reg.archive(sid).name[: -len(".tar.gz")]
+
+
+def report_folder(reg, sid: str) -> Path:
+    """Where the report of submission ``sid`` is (or will be): next to its unpacked session."""
+    return derived_folder(reg, sid) / "report"
+
+
+def ensure_report(reg, sid: str) -> Path:
+    """The ``haptify report`` folder of a submission with raw streams, drawn once (spec §15.6)."""
+    sub = _raw_submission(reg, sid)
+    out = report_folder(reg, sid)
+    if out.is_dir():
+        return out
+    from haptify.compute import ComputeContext
+    from haptify.report import write_report
+    from haptify.results import ResultsFile
+    from haptify.storage import open_session
+
+    with _derive_lock:
+        if not out.is_dir():
+            session = open_session(reg.session_folder(sid))
+            write_report(ComputeContext(session=session), ResultsFile.model_validate(sub["results"]), out)
+    return out
+
+
+def ensure_recording(reg, sid: str) -> Path:
+    """The viewer recording (.rrd) of a submission with raw streams, built once (written to a temporary name, then renamed)."""
+    sub = _raw_submission(reg, sid)
+    out = derived_folder(reg, sid) / "recording.rrd"
+    if out.is_file():
+        return out
+    from haptify.results import ResultsFile
+    from haptify.storage import open_session
+    from haptify_tools.viewer.recording import build
+
+    with _derive_lock:
+        if not out.is_file():
+            tmp = out.with_name(f".recording-{uuid.uuid4().hex}.rrd")
+            try:
+                build(open_session(reg.session_folder(sid)), tmp, results=ResultsFile.model_validate(sub["results"]))
+                os.replace(tmp, out)
+            finally:
+                tmp.unlink(missing_ok=True)
+    return out
+
+
+def report_figures(reg, submissions: list[dict]) -> dict[str, list[str]]:
+    """PNG names of the reports already drawn, by submission id (the device page shows them inline)."""
+    out = {}
+    for s in submissions:
+        folder = report_folder(reg, s["id"])
+        if folder.is_dir():
+            out[s["id"]] = sorted(p.name for p in folder.glob("*.png"))
+    return out
+
+
+@router.get("/submissions/{sid}/report/{name}", name="page_report")
+def page_report(sid: str, name: str, request: Request) -> Response:
+    """A file of the submission's ``haptify report`` (``index.html``, figures, sounds), drawn on first request."""
+    reg = api_read.reads(request).reg
+    try:
+        if not REPORT_FILE.match(name):
+            raise fail("E973", f"{name!r} is not a file of a report", pointer="/name", expected="index.html or a figure", found=name)
+        path = ensure_report(reg, sid) / name
+        if not path.is_file():
+            raise fail("E973", f"the report of {sid} has no file {name!r}", pointer="/name", expected="index.html or a figure", found=name)
+    except HaptifyError as err:
+        return _error_page(request, err)
+    return FileResponse(path)
+
+
+@router.get("/submissions/{sid}/recording.rrd", name="page_recording")
+def page_recording(sid: str, request: Request) -> Response:
+    """The submission's recording for the viewer: open it with ``rerun FILE.rrd``."""
+    try:
+        path = ensure_recording(api_read.reads(request).reg, sid)
+    except HaptifyError as err:
+        return _error_page(request, err)
+    return FileResponse(path, media_type="application/octet-stream", filename=f"{sid}.rrd")
 
 
 def register(app: FastAPI) -> None:
