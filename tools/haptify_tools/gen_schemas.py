@@ -15,7 +15,8 @@ from pathlib import Path
 from haptify.versions import SCHEMA_VERSION, SPEC_VERSION, schema_id
 from haptify_tools.generated_files import generator_main
 
-# schema name -> "module:Class"; the file is schemas/<spec>/<name>.schema.json unless a path is given.
+# schema name -> "module:Class"; the file is schemas/<spec>/<name>.schema.json, except for the tools' own
+# files (OUTSIDE_THE_STANDARD).
 MODELS: dict[str, str] = {
     "session": "haptify.session_format:Session",
     "device": "haptify.session_format:Device",
@@ -28,10 +29,13 @@ MODELS: dict[str, str] = {
     "bundle": "haptify_tools.registry.bundle:Bundle",
     "conformance-cases": "haptify_conform.cases:CaseFile",
     "conform-report": "haptify_conform.report:ConformReport",
+    "twin": "haptify_tools.twin.model:TwinFile",
 }
 
 REPO = Path(__file__).resolve().parents[2]
 SCHEMA_DIR = REPO / "schemas" / SPEC_VERSION
+# Files of the tools are not part of the standard: their schemas live beside the tool.
+OUTSIDE_THE_STANDARD = {"twin": REPO / "tools" / "haptify_tools" / "twin" / "twin.schema.json"}
 
 
 def render(name: str, target: str) -> str:
@@ -46,7 +50,8 @@ def render(name: str, target: str) -> str:
 
 
 def targets() -> dict[Path, str]:
-    return {SCHEMA_DIR / f"{name}.schema.json": render(name, target) for name, target in MODELS.items()}
+    return {OUTSIDE_THE_STANDARD.get(name, SCHEMA_DIR / f"{name}.schema.json"): render(name, target)
+            for name, target in MODELS.items()}
 
 
 def main(argv: list[str] | None = None) -> int:
