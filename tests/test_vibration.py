@@ -175,6 +175,15 @@ def test_too_short_and_too_slow_signals_are_coded_errors():
     assert slow.value.code == "E316"
 
 
+@pytest.mark.parametrize("n", [1, 2, 5, 15])
+def test_a_few_samples_are_e316_not_a_filter_padding_error(n):
+    # sosfiltfilt needs more samples than its padding (15 for order 4): the length is checked first (spec §10.2)
+    t = np.arange(n) / RATE
+    with pytest.raises(HaptifyError) as err:
+        combine(t, np.ones((n, 3)), "short")
+    assert err.value.code == "E316"
+
+
 # --- session level (spec §10.6) -----------------------------------------------------------------
 
 def vibration_session(tmp_path, *, with_baseline: bool):

@@ -114,13 +114,15 @@ def combine(t: np.ndarray, accel: np.ndarray, trial_id: str = "") -> CombinedVib
     ``accel (N, 3)`` (m/s², any fixed sensor frame, bias and gravity included) at times ``t (N,)`` in s."""
     t = np.asarray(t, dtype=float)
     rate = nominal_rate(t)
-    filtered = highpass(accel, rate)
-    trim = int(round(float(vp("edge_trim_s")) * rate))
-    keep = slice(trim, len(t) - trim)
-    if (len(t) - 2 * trim) / rate < float(vp("min_duration_s")):
-        raise fail("E316", f"trial {trial_id!r}: {len(t) / rate:.3g} s of acceleration leave less than "
+    # the length is checked before filtering: a short signal is E316, not the filter's padding error
+    trim = int(round(float(vp("edge_trim_s")) * rate)) if np.isfinite(rate) else len(t)
+    if len(t) - 2 * trim < 1 or (len(t) - 2 * trim) / rate < float(vp("min_duration_s")):
+        duration = float(t[-1] - t[0]) if len(t) else 0.0
+        raise fail("E316", f"trial {trial_id!r}: {duration:.3g} s of acceleration leave less than "
                    f"{vp('min_duration_s')} s after trimming {vp('edge_trim_s')} s at each end",
-                   expected=f">= {2 * float(vp('edge_trim_s')) + float(vp('min_duration_s'))} s", found=len(t) / rate)
+                   expected=f">= {2 * float(vp('edge_trim_s')) + float(vp('min_duration_s'))} s", found=duration)
+    filtered = highpass(accel, rate)
+    keep = slice(trim, len(t) - trim)
     return CombinedVibration(trial_id=trial_id, t=t[keep], signal=dft321(filtered[keep]), rate_hz=rate)
 
 
