@@ -197,3 +197,10 @@ def test_trial_without_usable_mocap_is_a_coded_error(tmp_path):
     with pytest.raises(HaptifyError) as e:
         signals.handle_signals(open_session(w.write(tmp_path / "s")), "ws-1")
     assert e.value.code == "E611"
+
+
+def test_lowpass_resample_of_one_sample_holds_it():
+    # one sample has no rate (nominal_rate is inf): the low-pass passes it through, interpolation holds it (spec §7.2)
+    x = np.array([[1.0, -2.0, 3.0]])
+    out = signals.lowpass_resample(np.array([0.5]), x, np.array([0.0, 0.5, 1.0]), 20.0)
+    assert np.array_equal(out, np.repeat(x, 3, axis=0))

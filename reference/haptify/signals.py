@@ -71,11 +71,11 @@ def lowpass(x: np.ndarray, rate_hz: float, cutoff_hz: float, *, order: int | Non
     then odd padding of ``min(3·(2·sections + 1), N − 1)`` samples at each end.
     """
     x = np.asarray(x, float)
+    if len(x) < 2:  # nothing to filter; also no rate (nominal_rate of one sample is inf)
+        return x.copy()
     order = int(sp("filter_order")) if order is None else order
     fc = effective_cutoff(cutoff_hz, rate_hz)
     sos = butter(order, fc, btype="low", fs=rate_hz, output="sos")
-    if len(x) < 2:
-        return x.copy()
     padlen = min(3 * (2 * len(sos) + 1), len(x) - 1)
     ramp = np.linspace(0.0, 1.0, len(x)).reshape((-1,) + (1,) * (x.ndim - 1))
     chord = x[0] + ramp * (x[-1] - x[0])
