@@ -305,6 +305,15 @@ def test_pages_in_a_real_headless_browser(tmp_path, bundles):
                 ranked = page.locator("#leaderboard tbody tr td:nth-child(2)").all_inner_texts()
                 assert ranked == ["3D Systems Touch X", "Novint Falcon", "3D Systems Touch"]
                 assert page.locator("#leaderboard tbody tr td.rank").all_inner_texts() == ["1", "2", "3"]
+                page.select_option("select[name=metric]", "workspace.measured_volume")  # the metric picker (no script)
+                page.get_by_role("button", name="Show").click()
+                page.wait_for_url(f"{base}/leaderboard/workspace.measured_volume")
+                ranked = page.locator("#leaderboard tbody tr td:nth-child(2)").all_inner_texts()
+                assert ranked == ["3D Systems Touch", "3D Systems Touch X", "Novint Falcon"]  # larger is better
+                page.get_by_role("link", name="3D Systems Touch X").click()
+                page.wait_for_url(f"{base}/devices/3d-systems-touch-x")
+                cells = page.locator('#device-metrics tr[data-metric="vibration.rms"] td').all_inner_texts()
+                assert cells[1] == _fmt(fmean(all_reps("Touch X", 3))) and cells[2] == "m/s^2"
                 page.goto(f"{base}/")
                 page.check('input[value="3d-systems-touch"]')
                 page.check('input[value="3d-systems-touch-x"]')
