@@ -130,8 +130,20 @@ def fit_candidate(cand: Candidate, twin: TwinFile, data: Dataset, design: st.Des
         a = {k: d1[k] - p1 * b[k] for k in d1}
         p, se = st.affine_fit(design, residual, a, b)
         p = max(p, cand.lower + 1e-12 * probe)
+        sims = 2
+        pts = [(p1, d1), (p2, d2)]
+        for _ in range(cand.relinearise):
+            # secant (Gauss–Newton) steps for an effect that is only nearly affine: re-linearise at p̂
+            pts.append((p, delta(p)))
+            sims += 1
+            (pa, da), (pb, db) = sorted(pts, key=lambda x: abs(x[0] - p))[:2]
+            if pa == pb:
+                break
+            b = {k: (db[k] - da[k]) / (pb - pa) for k in da}
+            a = {k: da[k] - pa * b[k] for k in da}
+            p, se = st.affine_fit(design, residual, a, b)
         pred = {k: a[k] + p * b[k] for k in a}
-        return Fit(cand, p, se, pred, st.score(design, residual, pred), 2)
+        return Fit(cand, p, se, pred, st.score(design, residual, pred), sims)
     # 1-D search on a logarithmic grid, then parabolic refinement in log p
     evals: dict[float, tuple[float, dict]] = {}
 
@@ -221,7 +233,7 @@ def _select(twin, trials, sweeps, max_effects, library, log, pool) -> Selection:
         residual = _minus(forces.measured, base)
         design = st.make_design(trials, residual)
         residual_w = _minus(sweep_data.measured, base_w) if sweep_data else None
-        design_w = st.make_design(sweeps, residual_w) if sweep_data else None
+        design_w = st.make_design(sweeps, residual_w, st.SWEEP_REPEATS) if sweep_data else None
         cands = [c for c in library if c.available(current)
                  and (sweep_data is not None if c.scope == "workspace" else bool(trials))]
         if len(accepted) >= max_effects or not cands:

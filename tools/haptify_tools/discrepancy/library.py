@@ -48,6 +48,8 @@ class Candidate:
     #: the parameter is a force level compared with the commanded force: the grid is relative to the largest
     #: commanded force of the active trials, and values above it (the cut-off never trips) need no simulation
     commanded_scale: bool = False
+    #: secant re-linearisations of an affine fit (for effects that are affine only to first order)
+    relinearise: int = 0
 
     def apply(self, twin: TwinFile, value: float) -> TwinFile:
         """A copy of ``twin`` with this effect on and its parameter set to ``value`` (every axis)."""
@@ -129,7 +131,8 @@ LIBRARY: tuple[Candidate, ...] = (
     Candidate("drive.force_cutoff", "trip_force_N", "N", "search", "active", _Fixed(2.0),
               grid_factors=(0.02, 0.05, 0.1, 0.2, 0.4, 0.8), commanded_scale=True),
     Candidate("drive.backlash", "width_rad", "rad", "search", "active", _mean_of("drive.backlash", "width_rad", 0.002)),
-    Candidate("kinematics.link_length", "delta_a_m", "m", "affine", "all", _Fixed(0.005)),
+    Candidate("kinematics.link_length", "delta_a_m", "m", "affine", "all", _Fixed(0.005), relinearise=2,
+              lower=-np.inf),
     Candidate("handle.connector_mass", "mass_kg", "kg", "affine", "all", _mean_of("handle.connector_mass", "mass_kg", 0.03)),
     Candidate(ws.EFFECT_ID, ws.PARAMETER, "m", "search", "workspace", _BoxTop(), grid_factors=ws.GRID_FACTORS),
 )

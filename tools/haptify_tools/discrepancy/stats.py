@@ -2,8 +2,8 @@
 
 - Contiguous blocks: each trial's rows are cut into ten consecutive blocks, roles
   train · validation · train · test · train, twice (60 / 20 / 20 %), so that every held-out role sees
-  both halves of a trial (presses come and go); neighbouring samples are correlated, so random splits
-  would leak.
+  both halves of a trial (presses come and go); a workspace sweep, which visits the regions one after
+  the other, into thirty. Neighbouring samples are correlated, so random splits would leak.
 - Effective sample size: every usable row enters the fits, but the counts of the statistics (BIC, F
   test) are ``n_eff = n / D``, ``D`` the lag at which the round's residual autocorrelation (mean over
   trials and channels) first falls below 1/e — correlated samples are not counted as independent
@@ -29,7 +29,9 @@ from scipy import stats as sps
 
 from haptify_tools.discrepancy.data import MeasuredTrial
 
-ROLES = ("train", "validation", "train", "test", "train") * 2
+ROLES = ("train", "validation", "train", "test", "train")
+FORCE_REPEATS = 2           # force trials: ten blocks
+SWEEP_REPEATS = 6           # workspace sweeps visit regions one after the other: thirty blocks
 BIC_MIN = 10.0              # "very strong" evidence on Kass & Raftery's scale
 P_MAX = 1e-3                # nested F test
 VALIDATION_MIN = 0.10       # the held-out validation residual energy must fall by at least 10 %
@@ -58,10 +60,11 @@ class Design:
         return np.concatenate(parts) if parts else np.zeros(0)
 
 
-def block_roles(n: int) -> np.ndarray:
-    """Role of each of ``n`` consecutive rows (ten contiguous blocks, :data:`ROLES`)."""
-    b = np.minimum((np.arange(n) * len(ROLES)) // max(n, 1), len(ROLES) - 1)
-    return np.asarray(ROLES)[b]
+def block_roles(n: int, repeats: int = FORCE_REPEATS) -> np.ndarray:
+    """Role of each of ``n`` consecutive rows: ``5·repeats`` contiguous blocks, roles :data:`ROLES` repeated."""
+    roles = ROLES * repeats
+    b = np.minimum((np.arange(n) * len(roles)) // max(n, 1), len(roles) - 1)
+    return np.asarray(roles)[b]
 
 
 def correlation_lag(residual: dict[str, np.ndarray], trials: list[MeasuredTrial]) -> int:
@@ -82,13 +85,13 @@ def correlation_lag(residual: dict[str, np.ndarray], trials: list[MeasuredTrial]
     return int(below[0] + 1) if len(below) else MAX_DECIMATION
 
 
-def make_design(trials: list[MeasuredTrial], residual: dict[str, np.ndarray]) -> Design:
+def make_design(trials: list[MeasuredTrial], residual: dict[str, np.ndarray], repeats: int = FORCE_REPEATS) -> Design:
     """The design of a residual: every usable row, its contiguous block role, and the correlation lag ``D``."""
     d = correlation_lag(residual, trials)
     rows, roles = {}, {}
     for tr in trials:
         n = len(tr.t)
-        role = block_roles(n)
+        role = block_roles(n, repeats)
         idx = np.flatnonzero(tr.valid)
         rows[tr.trial_id] = idx
         roles[tr.trial_id] = role[idx]
