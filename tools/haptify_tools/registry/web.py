@@ -79,6 +79,7 @@ def _label(device: dict) -> str:
 
 @router.get("/", name="page_index", response_class=HTMLResponse)
 def page_index(request: Request) -> HTMLResponse:
+    """The devices with current results (labs, submissions, verified ones) and the leaderboards (spec §17.5)."""
     reads = api_read.reads(request)
     current = [s for s in reads.submissions() if s["state"] == "current"]
     by_device: dict[str, list[dict]] = {}
@@ -106,6 +107,7 @@ def page_leaderboard_redirect(request: Request, metric: str | None = None) -> Re
 
 @router.get("/leaderboard/{metric_id}", name="page_leaderboard", response_class=HTMLResponse)
 def page_leaderboard(metric_id: str, request: Request) -> HTMLResponse:
+    """One metric's leaderboard: devices best first, each with its mean and spread (spec §17.5); E973 unknown metric."""
     results = api_read.reads(request).all_device_results()
     defs = api_read.metric_definitions()
     if metric_id not in defs:
@@ -120,6 +122,8 @@ def page_leaderboard(metric_id: str, request: Request) -> HTMLResponse:
 
 @router.get("/devices/{slug}", name="page_device", response_class=HTMLResponse)
 def page_device(slug: str, request: Request) -> HTMLResponse:
+    """A device: its metrics with spread over labs and repetitions, every submission (current, superseded,
+    withdrawn), the report figures and viewer recordings of submissions with raw streams (spec §17.5)."""
     reads = api_read.reads(request)
     try:
         agg = reads.device_results(slug)
@@ -139,6 +143,7 @@ def page_device(slug: str, request: Request) -> HTMLResponse:
 
 @router.get("/compare", name="page_compare", response_class=HTMLResponse)
 def page_compare(request: Request, device: list[str] = Query(default=[]), paper: bool = False) -> HTMLResponse:
+    """Table III (spec §15.5) for the chosen devices (``?device=a&device=b``, optionally ``&paper=true``)."""
     reads = api_read.reads(request)
     chosen = list(dict.fromkeys(device))
     table_html = csv_url = json_url = None
