@@ -15,6 +15,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from haptify.caching import session_of
 from haptify.errors import HaptifyError, fail
 from haptify.metric_definitions import family
 from haptify.results import MetricResult, Unavailable
@@ -105,3 +106,21 @@ def per_trial(ctx: Any, trial_ids: Sequence[str], compute_one: Callable[[str], A
         for tid, exc in failed.items():
             ctx.warn("W413", f"{what}: trial {tid!r} skipped ({exc.findings[0].code}: {exc.findings[0].message})", trial=tid)
     return out, next(iter(failed.values()), None)
+
+
+def protocol_trials(ctx: Any, protocol: str, metric_ids: Sequence[str], compute_one: Callable[[str], Any],
+                    what: str) -> tuple[dict[str, Any], list[Unavailable]]:
+    """:func:`per_trial` over every trial of ``protocol`` (spec §15.2).
+
+    Returns the per-trial results and an empty list, or — when the session has no trial of the protocol
+    (E310) or none of its trials worked (the first trial's error) — no results and one
+    :class:`Unavailable` per id of ``metric_ids``.
+    """
+    trials = [t.id for t in session_of(ctx).trials_of(protocol)]
+    if not trials:
+        err = no_trials(protocol)
+        return {}, [unavailable(m, err) for m in metric_ids]
+    done, first = per_trial(ctx, trials, compute_one, what)
+    if not done:
+        return {}, [unavailable(m, first) for m in metric_ids]
+    return done, []

@@ -17,7 +17,7 @@ from haptify.conventions import quat_to_matrix
 from haptify.caching import session_of
 from haptify.errors import HaptifyError, fail
 from haptify.metric_definitions import family, param
-from haptify.repetitions import TrialValue, aggregate, definition_of, per_trial, unavailable
+from haptify.repetitions import TrialValue, aggregate, definition_of, protocol_trials, unavailable
 from haptify.results import MetricResult, Unavailable
 
 FAMILY = "rig"
@@ -131,12 +131,8 @@ def _vector_result(metric_id: str, per_trial_values: dict[str, np.ndarray], diag
 def _trial_results(ctx: Any, metric_id: str, compute_one: Callable[[str], Any]) -> dict[str, Any] | Unavailable:
     """``compute_one`` on every trial of the metric's protocol (its definition's first); Unavailable
     (E310) without such trials, or with the first trial's error when none worked (each failure is W413)."""
-    protocol = definition_of(FAMILY, metric_id).protocols[0]
-    trials = [t.id for t in session_of(ctx).trials_of(protocol)]
-    if not trials:
-        return Unavailable(id=metric_id, code="E310", reason=f"the session has no {protocol} trial")
-    got, err = per_trial(ctx, trials, compute_one, metric_id)
-    return got if got else unavailable(metric_id, err)
+    got, missing = protocol_trials(ctx, definition_of(FAMILY, metric_id).protocols[0], (metric_id,), compute_one, metric_id)
+    return missing[0] if missing else got
 
 
 def _natural_frequency(ctx: Any, mid: str, got: dict[str, np.ndarray]) -> MetricResult:
@@ -188,15 +184,7 @@ def metric(ctx: Any, metric_id: str) -> MetricResult | Unavailable:
 
 def compute(ctx: Any) -> list[MetricResult | Unavailable]:
     """Every rig metric the session allows (spec §14; called by ``haptify compute``)."""
-    out: list[MetricResult | Unavailable] = []
-    for mid in METRIC_STEPS:
-        if not ctx.wants(mid):
-            continue
-        try:
-            out.append(metric(ctx, mid))
-        except HaptifyError as exc:  # a coded problem shared by every trial (e.g. no plate in the rig)
-            out.append(unavailable(mid, exc))
-    return out
+    return [_safe_metric(ctx, mid) for mid in METRIC_STEPS if ctx.wants(mid)]
 
 
 # --- the rig check (spec §14.8) ------------------------------------------------------------------
@@ -294,6 +282,7 @@ def _range_checks(session: Any, ctx: Any) -> list[Check]:
 
 
 def _safe_metric(ctx: Any, mid: str) -> MetricResult | Unavailable:
+    """:func:`metric`, or its Unavailable record when a problem shared by every trial stops it (spec §15.2)."""
     try:
         return metric(ctx, mid)
     except HaptifyError as exc:  # a problem shared by every trial, e.g. the rig lacks a part

@@ -17,7 +17,7 @@ import numpy as np
 from haptify.caching import cached
 from haptify.errors import fail
 from haptify.metric_definitions import param
-from haptify.repetitions import TrialValue, aggregate, no_trials, per_trial, unavailable
+from haptify.repetitions import TrialValue, aggregate, protocol_trials
 from haptify.surface import contact_signals
 
 FAMILY = "stiffness"
@@ -127,13 +127,9 @@ def compute(ctx: Any) -> list:
     """stiffness.measured, stiffness.accuracy and stiffness.peak_force (spec §13.5)."""
     if not any(ctx.wants(m) for m in IDS):
         return []
-    trials = [t.id for t in ctx.session.trials_of(PROTOCOL)]
-    if not trials:
-        err = no_trials(PROTOCOL)
-        return [unavailable(m, err) for m in IDS]
-    done, first = per_trial(ctx, trials, lambda tid: trial_fit(ctx, tid), "stiffness.measured")
-    if not done:
-        return [unavailable(m, first) for m in IDS]
+    done, missing = protocol_trials(ctx, PROTOCOL, IDS, lambda tid: trial_fit(ctx, tid), "stiffness.measured")
+    if missing:
+        return missing
     codes: dict[str, list[str]] = {}
     for tid, f in done.items():
         codes[tid] = []

@@ -16,7 +16,7 @@ import numpy as np
 from haptify.caching import cached, session_of
 from haptify.errors import fail
 from haptify.metric_definitions import param
-from haptify.repetitions import TrialValue, aggregate, no_trials, per_trial, unavailable
+from haptify.repetitions import TrialValue, aggregate, protocol_trials
 from haptify.signals import handle_signals, interp_columns
 
 FAMILY = "surface"
@@ -149,13 +149,9 @@ def compute(ctx: Any) -> list:
     """surface.planar_force_mean and surface.planar_force_sd (spec §12.4)."""
     if not any(ctx.wants(m) for m in IDS):
         return []
-    trials = [t.id for t in ctx.session.trials_of(PROTOCOL)]
-    if not trials:
-        err = no_trials(PROTOCOL)
-        return [unavailable(m, err) for m in IDS]
-    done, first = per_trial(ctx, trials, lambda tid: _trial(ctx, tid), "surface.planar_force_mean")
-    if not done:
-        return [unavailable(m, first) for m in IDS]
+    done, missing = protocol_trials(ctx, PROTOCOL, IDS, lambda tid: _trial(ctx, tid), "surface.planar_force_mean")
+    if missing:
+        return missing
     diag = {"contact_share": [d["contact_share"] for d in done.values()],
             "normal_force_mean_N": [d["normal_force_mean"] for d in done.values()]}
     return [aggregate(FAMILY, "surface.planar_force_mean", [TrialValue(t, d["mean"]) for t, d in done.items()], diagnostics=diag),

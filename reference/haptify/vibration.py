@@ -16,7 +16,7 @@ from scipy.signal import butter, sosfiltfilt
 from haptify.caching import cached, session_of
 from haptify.errors import HaptifyError, fail
 from haptify.metric_definitions import param
-from haptify.repetitions import TrialValue, aggregate, no_trials, per_trial, unavailable
+from haptify.repetitions import TrialValue, aggregate, protocol_trials
 from haptify.signals import nominal_rate
 
 FAMILY = "vibration"
@@ -142,14 +142,9 @@ def compute(ctx: Any) -> list:
     for protocol, (rms_id, centroid_id) in GROUPS.items():
         if not (ctx.wants(rms_id) or ctx.wants(centroid_id)):
             continue
-        trials = [t.id for t in ctx.session.trials_of(protocol)]
-        if not trials:
-            err = no_trials(protocol)
-            out += [unavailable(rms_id, err), unavailable(centroid_id, err)]
-            continue
-        done, first = per_trial(ctx, trials, lambda tid: _summary(ctx, tid), rms_id)
-        if not done:
-            out += [unavailable(rms_id, first), unavailable(centroid_id, first)]
+        done, missing = protocol_trials(ctx, protocol, (rms_id, centroid_id), lambda tid: _summary(ctx, tid), rms_id)
+        if missing:
+            out += missing
             continue
         diag = {"peak_abs_m_per_s2": [d["peak"] for d in done.values()], "duration_s": [d["duration"] for d in done.values()],
                 "rate_hz": [d["rate"] for d in done.values()]}
