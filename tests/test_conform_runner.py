@@ -139,3 +139,15 @@ def test_cmd_adapter_names_the_implementation_from_its_results(tmp_path):
     adapter = CmdAdapter(f"{sys.executable} {prog} {{session}} {{out}}", 10)
     run_cases([case("a", "s")], adapter, repo=repo)
     assert adapter.implementation == {"name": "acme-haptify", "version": "2.1"}
+
+
+@pytest.mark.parametrize("document", [{"metrics": None}, {"metrics": {"x.y": 1.5}}, {"metrics": [], "unavailable": None},
+                                      {"metrics": [], "warnings": 3}, {"findings": "E203"}, {"findings": None}])
+def test_a_document_whose_lists_are_not_arrays_is_an_error_of_the_implementation(document):
+    # before: {"metrics": null} stopped the whole run with a TypeError; {"findings": "E203"} passed as an acceptance
+    from haptify_conform.adapters import classify
+    from haptify_conform.runner import judge
+
+    answer = classify(document)
+    assert answer.kind == "error" and "must be JSON arrays" in answer.message
+    assert judge(case("c", "f"), answer).status == "error"

@@ -44,10 +44,13 @@ def classify(document: Any) -> Answer:
     """Read an implementation's output document: a results.json, or a findings report."""
     if not isinstance(document, dict):
         return Answer("error", message=f"output is not a JSON object but {type(document).__name__}")
+    not_lists = [k for k in ("metrics", "unavailable", "warnings", "findings") if k in document and not isinstance(document[k], list)]
+    if not_lists:  # judged as written, a malformed document would stop the runner or pass as an acceptance
+        return Answer("error", message=f"output field(s) {', '.join(map(repr, not_lists))} must be JSON arrays (spec §15.1, §16.4.1)")
     if "metrics" in document:
         return Answer("results", document)
     if "findings" in document:
-        findings = document["findings"] if isinstance(document["findings"], list) else []
+        findings = document["findings"]
         errors = [f for f in findings if isinstance(f, dict) and f.get("severity", "error") == "error"]
         # a rejection keeps its warnings too: a negative case may expect them beside the errors (spec §16.3)
         return Answer("rejected", findings) if errors else Answer("results", {"metrics": [], "findings": findings})
