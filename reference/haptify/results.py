@@ -37,7 +37,7 @@ class MetricResult(BaseModel):
     @field_validator("value", "per_repetition", "sd")
     @classmethod
     def _finite(cls, v: Any) -> Any:
-        """No metric silently returns NaN (spec §15.3)."""
+        """No metric silently returns NaN (spec §15.2)."""
         flat = v if isinstance(v, list) else [v]
         for x in flat:
             for y in (x if isinstance(x, list) else [x]):
