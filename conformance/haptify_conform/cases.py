@@ -61,6 +61,7 @@ class CaseFile(BaseModel):
 
 
 def case_files(root: Path = SUITE_ROOT) -> list[Path]:
+    """The suite's case files ``cases/*.json``, sorted by name (spec §16.1)."""
     return sorted((root / "cases").glob("*.json"))
 
 
@@ -97,4 +98,5 @@ def select(cases: list[Case], *, level: str | None = None, metrics: set[str] | N
 
 
 def fixture_path(case: Case, repo: Path = REPO_ROOT) -> Path:
+    """The session folder a case runs on: ``fixtures/<case.fixture>`` under ``repo`` (spec §16.1)."""
     return repo / "fixtures" / case.fixture

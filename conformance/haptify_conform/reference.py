@@ -63,6 +63,8 @@ def analyse(session: str, metric: str = "", parameters: dict | None = None, *, c
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The reference as a conformance implementation: ``SESSION OUT [METRIC [PARAMS.json]]`` (spec §16.4.1),
+    or no arguments to serve JSON lines on stdin/stdout (spec §16.4.2)."""
     from haptify_conform.adapters import serve_jsonl
 
     argv = sys.argv[1:] if argv is None else argv

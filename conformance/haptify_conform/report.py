@@ -57,6 +57,7 @@ class ConformReport(BaseModel):
 
 
 def build_report(header: ReportHeader, verdicts: list[Verdict]) -> ConformReport:
+    """The JSON report (spec §16.6): header, one record per case, counts; it conforms when none failed or errored."""
     counts = Counter(v.status for v in verdicts)
     records = [CaseRecord(**{k: v for k, v in asdict(verdict).items() if k != "extra"}) for verdict in verdicts]
     summary = Summary(total=len(verdicts), passed=counts["passed"], failed=counts["failed"], error=counts["error"],
@@ -82,6 +83,7 @@ def to_table(report: ConformReport) -> str:
 
 
 def to_junit(report: ConformReport) -> str:
+    """The report as JUnit XML, one ``testcase`` per case (``--junit``; spec §16.6)."""
     s = report.summary
     suite = ET.Element("testsuite", name=f"haptify-conform {report.header.suite_version}", tests=str(s.total),
                        failures=str(s.failed), errors=str(s.error), skipped=str(s.skipped),
@@ -98,5 +100,6 @@ def to_junit(report: ConformReport) -> str:
 
 
 def header(adapter: str, implementation: dict, started: str) -> ReportHeader:
+    """The report header: suite, spec and protocol versions, adapter, implementation, start time (spec §16.6)."""
     return ReportHeader(suite_version=SUITE_VERSION, spec_version=SPEC_VERSION, protocol_version=PROTOCOL_VERSION,
                         adapter=adapter, implementation=implementation, started=started)

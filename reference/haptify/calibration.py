@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
-from haptify.conventions import GRAVITY_W, STANDARD_GRAVITY, quat_rotate, quat_to_matrix
+from haptify.conventions import GRAVITY_W, STANDARD_GRAVITY, quat_conjugate, quat_rotate, quat_to_matrix
 from haptify.caching import cached, session_of
 from haptify.errors import HaptifyError, fail
 from haptify.metric_definitions import param
@@ -266,12 +266,8 @@ def gravity_in_sensor(q_handle: np.ndarray, r_sensor: np.ndarray) -> np.ndarray:
 
     ``q_handle (N, 4)`` handle body → world; ``r_sensor (3, 3)`` sensor → handle body.
     """
-    g_h = quat_rotate(_conj(q_handle), np.broadcast_to(GRAVITY_W, np.shape(q_handle)[:-1] + (3,)))
+    g_h = quat_rotate(quat_conjugate(q_handle), np.broadcast_to(GRAVITY_W, np.shape(q_handle)[:-1] + (3,)))
     return g_h @ r_sensor  # r_sensorᵀ · g_h for each row
-
-
-def _conj(q: np.ndarray) -> np.ndarray:
-    return np.asarray(q, float) * np.array([1.0, -1.0, -1.0, -1.0])
 
 
 def compensate_wrench(raw: np.ndarray, q_handle: np.ndarray, cal: HandleCalibration, pose: Pose) -> tuple[np.ndarray, np.ndarray]:

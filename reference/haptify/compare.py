@@ -41,6 +41,7 @@ def _fmt(value: float | None, sd: float | None = None) -> str:
 
 
 def column_label(results: ResultsFile, taken: set[str]) -> str:
+    """A device's column heading (spec §15.5): "manufacturer model #serial", plus the session id when already ``taken``."""
     label = results.device.label if results.device else results.session_id
     return label if label not in taken else f"{label} ({results.session_id})"
 
@@ -76,6 +77,7 @@ def build_table(results: list[ResultsFile], with_paper: bool = False) -> Table:
 
 
 def to_markdown(table: Table) -> str:
+    """The comparison table as a Markdown table with its notes as a list (``--format md``; spec §15.5)."""
     lines = ["| " + " | ".join(table.header) + " |", "|" + "---|" * len(table.header)]
     lines += ["| " + " | ".join(r) + " |" for r in table.rows]
     lines += [""] + [f"- {n}" for n in table.notes] if table.notes else []
@@ -83,6 +85,7 @@ def to_markdown(table: Table) -> str:
 
 
 def to_csv(table: Table) -> str:
+    """The comparison table as CSV, header row first (``--format csv``; spec §15.5)."""
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(table.header)
@@ -91,6 +94,7 @@ def to_csv(table: Table) -> str:
 
 
 def to_html(table: Table) -> str:
+    """The comparison table as an HTML fragment, every cell escaped (``--format html``; spec §15.5)."""
     head = "".join(f"<th>{html.escape(h)}</th>" for h in table.header)
     body = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>" for r in table.rows)
     notes = "".join(f"<li>{html.escape(n)}</li>" for n in table.notes)

@@ -14,11 +14,13 @@ QUATERNION_NORM_TOLERANCE = 1e-3  # |‖q‖ − 1| allowed in stored quaternion
 
 
 def quat_normalize(q: np.ndarray) -> np.ndarray:
+    """Quaternions ``(..., 4)`` [w, x, y, z] scaled to unit norm (spec §1.3: readers normalise before use)."""
     q = np.asarray(q, dtype=float)
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
 def quat_conjugate(q: np.ndarray) -> np.ndarray:
+    """Conjugates ``(..., 4)`` [w, −x, −y, −z]: for unit quaternions the inverse rotation, world→body (spec §1.3)."""
     q = np.asarray(q, dtype=float)
     return q * np.array([1.0, -1.0, -1.0, -1.0])
 

@@ -23,7 +23,7 @@ import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
 from haptify import calibration as cal_mod
-from haptify.conventions import quat_multiply, quat_normalize, quat_slerp
+from haptify.conventions import quat_conjugate, quat_multiply, quat_normalize, quat_slerp
 from haptify.caching import cached, session_of
 from haptify.errors import fail
 from haptify.metric_definitions import param
@@ -123,7 +123,7 @@ def angular_velocity(t: np.ndarray, q: np.ndarray) -> np.ndarray:
     n = len(q)
     if n < 2:
         return np.zeros((n, 3))
-    conj = q * np.array([1.0, -1.0, -1.0, -1.0])
+    conj = quat_conjugate(q)
     lo = np.r_[0, np.arange(n - 2), n - 2]
     hi = np.r_[1, np.arange(2, n), n - 1]
     rel = quat_multiply(q[hi], conj[lo])

@@ -336,6 +336,7 @@ def atomic_write_text(path: Path, text: str) -> None:
 
 
 def atomic_write_json(path: Path, payload: Any) -> None:
+    """Write ``payload`` as UTF-8 JSON (2-space indent, final newline) atomically (spec §3.6; via :func:`atomic_write_text`)."""
     atomic_write_text(path, json.dumps(payload, indent=2, ensure_ascii=False) + "\n")
 
 
