@@ -282,3 +282,14 @@ def test_no_traceback_reaches_the_user(name: str):
     assert proc.returncode == 1
     assert "Traceback" not in proc.stdout + proc.stderr
     assert proc.stderr == ""
+
+
+@pytest.mark.parametrize("q", [[1e308, 0.0, 0.0, 0.0], [10 ** 400, 0, 0, 0]])
+def test_a_huge_static_quaternion_is_e207_not_an_overflow(tmp_path: Path, q):
+    # squaring 1e308 overflowed (E999); an integer beyond the float range cannot even be converted (spec §1.3, §4.3.3)
+    folder = _session(tmp_path)
+    manifest = json.loads((folder / "session.json").read_text(encoding="utf-8"))
+    manifest["device_placement"]["quaternion"] = q
+    (folder / "session.json").write_text(json.dumps(manifest), encoding="utf-8")
+    codes = validate_session(folder).codes
+    assert "E207" in codes and "E999" not in codes

@@ -512,7 +512,10 @@ class SessionValidator:
         for pointer, q in _quaternions_in(self.raw if document is None else document, ""):
             if not (isinstance(q, list) and len(q) == 4 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in q)):
                 continue
-            norm = math.sqrt(sum(float(v) ** 2 for v in q))
+            try:
+                norm = math.hypot(*(float(v) for v in q))  # hypot: no overflow for components near 1e308
+            except OverflowError:  # an integer beyond the float range
+                norm = math.inf
             if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
                 self.add(Finding("E207", f"quaternion has norm {norm:.6g}", file=label, pointer=pointer,
                                  expected=f"norm 1 ± {QUATERNION_NORM_TOLERANCE}", found=q))
