@@ -21,7 +21,6 @@ is stopped (SIGTERM, then SIGKILL after 20 s) in every case. Exit status 1 when 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import signal
 import statistics

@@ -69,13 +69,13 @@ def set_metric(results: dict, metric_id: str, unit: str, reps: list[float]) -> N
     results["metrics"] = [x for x in results["metrics"] if x["id"] != metric_id] + [m]
 
 
-def build_bundles(root: Path, base: dict) -> list[tuple[str, Path]]:
+def build_bundles(root: Path, template: dict) -> list[tuple[str, Path]]:
     """One bundle per plan line: ``(lab, archive)``; the session's manifest is re-labelled per lab and device."""
     out = []
     for i, (lab, manufacturer, model, rms, volume) in enumerate(PLAN):
         folder = root / f"case{i}"
         session = example_session(folder / "session", lab=lab, session_id=f"sess-{i:03d}", manufacturer=manufacturer, model=model)
-        results = copy.deepcopy(base)
+        results = copy.deepcopy(template)
         results["session_id"] = f"sess-{i:03d}"
         results["device"] = {"manufacturer": manufacturer, "model": model, "serial": None}
         results["manifest_sha256"] = sha256_file(session / "session.json")
@@ -293,28 +293,28 @@ def test_pages_in_a_real_headless_browser(tmp_path, bundles):
     profile = tmp_path / "chromium-profile"
     shot = tmp_path / "compare.png"
     try:
-        with serve_in_thread(pop.app) as base, sync_api.sync_playwright() as pw:
+        with serve_in_thread(pop.app) as url, sync_api.sync_playwright() as pw:
             ctx = pw.chromium.launch_persistent_context(str(profile), executable_path=str(CHROMIUM), headless=True,
                                                         args=CHROMIUM_FLAGS, timeout=30_000)
             try:
                 page = ctx.new_page()
                 page.set_default_timeout(15_000)
-                page.goto(f"{base}/")
+                page.goto(f"{url}/")
                 page.get_by_role("link", name="Free-space vibration RMS").click()
-                page.wait_for_url(f"{base}/leaderboard/vibration.rms")
+                page.wait_for_url(f"{url}/leaderboard/vibration.rms")
                 ranked = page.locator("#leaderboard tbody tr td:nth-child(2)").all_inner_texts()
                 assert ranked == ["3D Systems Touch X", "Novint Falcon", "3D Systems Touch"]
                 assert page.locator("#leaderboard tbody tr td.rank").all_inner_texts() == ["1", "2", "3"]
                 page.select_option("select[name=metric]", "workspace.measured_volume")  # the metric picker (no script)
                 page.get_by_role("button", name="Show").click()
-                page.wait_for_url(f"{base}/leaderboard/workspace.measured_volume")
+                page.wait_for_url(f"{url}/leaderboard/workspace.measured_volume")
                 ranked = page.locator("#leaderboard tbody tr td:nth-child(2)").all_inner_texts()
                 assert ranked == ["3D Systems Touch", "3D Systems Touch X", "Novint Falcon"]  # larger is better
                 page.get_by_role("link", name="3D Systems Touch X").click()
-                page.wait_for_url(f"{base}/devices/3d-systems-touch-x")
+                page.wait_for_url(f"{url}/devices/3d-systems-touch-x")
                 cells = page.locator('#device-metrics tr[data-metric="vibration.rms"] td').all_inner_texts()
                 assert cells[1] == _fmt(fmean(all_reps("Touch X", 3))) and cells[2] == "m/s^2"
-                page.goto(f"{base}/")
+                page.goto(f"{url}/")
                 page.check('input[value="3d-systems-touch"]')
                 page.check('input[value="3d-systems-touch-x"]')
                 page.get_by_role("button", name="Compare the chosen devices").click()
@@ -341,11 +341,11 @@ def test_live_server_binds_loopback_only(tmp_path):
         with pytest.raises(ValueError, match="loopback"):
             with serve_in_thread(app, host="0.0.0.0"):
                 pass
-        with serve_in_thread(app) as base:
-            assert base.startswith("http://127.0.0.1:")
+        with serve_in_thread(app) as url:
+            assert url.startswith("http://127.0.0.1:")
             import urllib.request
 
-            with urllib.request.urlopen(f"{base}/api/v1/health", timeout=10) as r:
+            with urllib.request.urlopen(f"{url}/api/v1/health", timeout=10) as r:
                 assert json.loads(r.read())["ok"] is True
     finally:
         app.state.registry.close()
