@@ -23,7 +23,7 @@ from haptify_tools.discrepancy.workflow import run_discrepancy
 from haptify_tools.twin.model import disable, preset, set_param
 from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
 
-DURATIONS = {"free_space": 16.0, "figure_eight": 16.0, "stiffness": 8.0, "workspace": 60.0, "rig.handle_calibration": 12.0}
+DURATIONS = {"free_space": 16.0, "figure_eight": 16.0, "stiffness": 12.0, "workspace": 60.0, "rig.handle_calibration": 12.0}
 #: effect → (parameter, low, high, protocols): the hidden value is uniform in [low, high]
 CASES = {
     "gravity": ("g_m_per_s2", 9.0, 10.5, ("free_space",)),
