@@ -35,6 +35,14 @@ def _rel(a, b):
     return abs(a - b) / abs(b)
 
 
+def test_every_simulator_effect_is_a_candidate_or_reported_not_observable():
+    from haptify_tools.discrepancy.library import LIBRARY_IDS, NOT_OBSERVABLE
+    from haptify_tools.twin.model import EFFECT_IDS
+
+    assert set(LIBRARY_IDS) | set(NOT_OBSERVABLE) == set(EFFECT_IDS)
+    assert not set(LIBRARY_IDS) & set(NOT_OBSERVABLE)
+
+
 @pytest.mark.parametrize("seed", [11, 12])
 def test_hidden_coulomb_friction_is_named_identified_and_the_gap_shrinks(tmp_path, seed):
     torque = float(np.random.default_rng(seed).uniform(0.02, 0.06))

@@ -73,13 +73,6 @@ class Candidate:
             return not e.enabled or not any(e.delta_a_m)
         return not twin.on(self.effect_id)
 
-    def value_in(self, twin: TwinFile) -> float | list[float]:
-        """The parameter's value in ``twin`` (a list for per-axis parameters)."""
-        if self.effect_id == ws.EFFECT_ID:
-            return ws.box_top(twin)[0]
-        v = getattr(twin.effect(self.effect_id), self.parameter)
-        return [float(x) for x in v] if isinstance(v, list) else float(v)
-
 
 @dataclass(frozen=True)
 class _MeanOf:
