@@ -101,3 +101,33 @@ def test_rig_check_plugin_parses_its_own_json_flag(good, capsys):
     assert args.func(args, UI()) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["ok"] is True and len(report["checks"]) == 10
+
+
+def test_sync_offset_without_usable_motion_capture_is_coded(tmp_path):
+    # every handle_pose row occluded (a valid session: W405): the sync search had only NaN scores and
+    # numpy's nanargmax raised ValueError (E999); now E611, and the calibration residuals still stand (spec §14.6)
+    from haptify_tools import build_invalid_fixtures as fx
+    from haptify.validation import validate_session
+
+    w = rb.writer()
+    rb.add_calibration_trial(w, rb.HandleTruth(), np.random.default_rng(3), duration_s=12.0)
+    folder = rb.write(w, tmp_path)
+
+    def occlude(df):
+        for c in ("px", "py", "pz", "qw", "qx", "qy", "qz"):
+            df[c] = np.nan
+        return df
+
+    fx.rewrite_data(folder, "handle_pose", occlude, trial_id="cal-1")
+    assert not validate_session(folder).errors
+    res = compute_session(open_session(folder), ["rig.sync_offset", "rig.handle_calibration_rms"])
+    assert [(u.id, u.code) for u in res.unavailable] == [("rig.sync_offset", "E611")]
+    assert res.get("rig.handle_calibration_rms") is not None
+
+
+def test_best_lag_with_no_score_at_any_lag_is_e624():
+    from haptify.errors import HaptifyError
+
+    with pytest.raises(HaptifyError) as err:
+        rig_checks._best_lag(lambda tau: float("nan"), 0.1, 0.01, 0.001, "x")
+    assert err.value.code == "E624"

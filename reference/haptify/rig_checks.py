@@ -57,6 +57,9 @@ def _best_lag(score: Callable[[float], float], max_lag: float, coarse: float, fi
         return lags, np.array([score(float(x)) for x in lags])
 
     lags, c = search(0.0, max_lag, coarse)
+    if not np.isfinite(c).any():  # no lag pairs a usable sample with the F/T grid
+        raise fail("E624", f"{label}: no lag within ±{max_lag} s finds usable samples to align",
+                   expected="usable samples overlapping the F/T grid", found="none")
     k = int(np.nanargmax(c))
     if k == 0 or k == len(c) - 1:
         raise fail("E624", f"{label}: the best alignment lies at the edge of the ±{max_lag} s search",
@@ -79,13 +82,18 @@ def recorder_delays(ctx_or_session: Any, trial_id: str) -> dict[str, float]:
     ``sync_rate_hz`` grid, the delay of recorder X is the lag τ in ±``sync_max_lag_s`` that maximises the mean of
     ``u_F(t) · u_X(t + τ)``: searched in steps of ``sync_coarse_step_s``, then in steps of 1/``sync_rate_hz``
     within one coarse step of the best, then refined by a parabola through the best three. A positive
-    delay means X's time stamps are late. E624 when the score has no interior peak.
+    delay means X's time stamps are late. E624 when the score has no interior peak; E611 when motion
+    capture has no usable sample in the trial.
     """
     session = session_of(ctx_or_session)
     cal = calibration.trial_fit(ctx_or_session, trial_id)
     w = session.read(trial_id, "handle_wrench")
     a = session.read(trial_id, "handle_accel")
     track = signals.mocap_track(ctx_or_session, trial_id)
+    if not track.valid.any():
+        stream = session.stream(trial_id, "handle_pose")
+        raise fail("E611", f"trial {trial_id!r}: no usable motion-capture samples to align with the F/T recorder",
+                   file=stream.file if stream else None, expected=f"valid runs of at least {signals.sp('min_segment_s')} s", found="none")
     rate = float(rp("sync_rate_hz"))
     max_lag = float(rp("sync_max_lag_s"))
     t0 = max(w["t"].iloc[0], a["t"].iloc[0], track.t[0]) + max_lag
