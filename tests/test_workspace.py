@@ -350,3 +350,17 @@ def test_degenerate_kinematics_give_e311_not_a_division_by_zero(tmp_path):
     assert res["workspace.modeled_volume"].code == "E311"
     assert res["workspace.volume_ratio"].code == "E311" and res["workspace.coverage"].code == "E311"
     assert isinstance(res["workspace.measured_volume"], MetricResult)
+
+
+def test_joint_limits_admitting_no_configuration_give_e311_not_a_numpy_error(tmp_path):
+    # an upper limit below the lower one: every sampled range is empty, and np.max of nothing raised
+    # ValueError (E999); the model is unavailable with E311, the measured volume still stands (spec §8.3)
+    dev = mini_device()
+    joints = dev["kinematics"]["joints"]
+    joints[2]["upper"] = {"constant": joints[2]["lower"]["constant"] - 0.1}
+    rng = np.random.default_rng(RNG_SEED)
+    cloud = sphere_surface(3_000, 0.05, [0.1, 0.0, 0.1], rng)
+    res = by_id(compute(ComputeContext(session=open_session(workspace_session(tmp_path, dev, [cloud])))))
+    assert res["workspace.modeled_volume"].code == "E311"
+    assert res["workspace.volume_ratio"].code == "E311" and res["workspace.coverage"].code == "E311"
+    assert isinstance(res["workspace.measured_volume"], MetricResult)

@@ -208,6 +208,9 @@ def _joint_ranges(kin: Kinematics) -> np.ndarray:
     unit = np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
     q = configurations_from_unit(kin, unit)
     q = q[~np.isnan(q).any(axis=1)]
+    if len(q) == 0:  # every coupled range of the lattice is empty (e.g. an upper limit below the lower one)
+        raise fail("E311", "the device's joint limits admit no configuration (every sampled coupled range is empty)",
+                   file="session.json", pointer="/device/kinematics/joints", expected="lower <= upper for some configuration", found="none")
     lower, upper = joint_limits(kin, q)
     return np.max(upper - lower, axis=0)
 
