@@ -25,6 +25,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from haptify import compare
 from haptify.errors import Finding, HaptifyError
 from haptify.versions import PACKAGE_VERSION, SPEC_VERSION
+from haptify_tools.registry.api_read import reads
 from haptify_tools.registry.service import Registry, Settings
 
 API = "/api/v1"
@@ -127,9 +128,9 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
         return reg.submissions(lab=lab, device=device, state=state, limit=limit, offset=offset)
 
     @app.get(f"{API}/submissions/{{sid}}", tags=["submissions"])
-    def get_submission(sid: str) -> dict:
+    def get_submission(sid: str, request: Request) -> dict:
         """One submission: state, verification per metric, results and bundle manifest."""
-        return reg.submission(sid)
+        return reads(request).get(("submission", sid), lambda: reg.submission(sid))
 
     @app.get(f"{API}/submissions/{{sid}}/bundle", tags=["submissions"], response_class=FileResponse)
     def get_bundle(sid: str) -> FileResponse:
@@ -157,13 +158,18 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
         return reg.lab(lab_id)
 
     @app.get(f"{API}/devices", tags=["devices"])
-    def devices() -> list[dict]:
-        return reg.devices()
+    def devices(request: Request) -> list[dict]:
+        return reads(request).devices()
 
     @app.get(f"{API}/devices/{{slug}}", tags=["devices"])
-    def device(slug: str, verified_only: bool = False) -> dict:
-        """A device's aggregated results: per metric mean and spread over labs and repetitions (spec §17.5)."""
-        return reg.device_results(slug, verified_only=verified_only)
+    def device(slug: str, request: Request, verified_only: bool = False) -> dict:
+        """A device's aggregated results: per metric mean and spread over labs and repetitions (spec §17.5).
+
+        Records are append-only, so answers are cached until a submission or withdrawal is added."""
+        cache = reads(request)
+        if not verified_only:
+            return cache.device_results(slug)
+        return cache.get(("device-verified", slug), lambda: reg.device_results(slug, verified_only=True))
 
     @app.get(f"{API}/compare", tags=["devices"])
     def compare_devices(devices: str = Query(..., description="comma-separated device slugs"),
