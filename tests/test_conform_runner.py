@@ -11,7 +11,7 @@ import jsonschema
 import pytest
 
 from haptify import schemas
-from haptify_conform.adapters import CmdAdapter, JsonlAdapter, PythonAdapter
+from haptify_conform.adapters import CmdAdapter, JsonlAdapter
 from haptify_conform.cases import Case, Expected, Provenance, Tolerance
 from haptify_conform.judge import judge_metric
 from haptify_conform.report import build_report, header, to_junit, to_table
