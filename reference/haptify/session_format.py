@@ -225,7 +225,7 @@ class Trial(_Strict):
     powered: bool
     rendering: Rendering | None = None
     notes: str | None = None
-    streams: list[Stream] = Field(default_factory=list)
+    streams: list[Stream]
 
 
 class Party(_Strict):
@@ -237,7 +237,7 @@ class Session(_Strict):
 
     spec_version: Literal[SPEC_VERSION]  # type: ignore[valid-type]
     session_id: Id
-    date: str = Field(pattern=r"^\d{4}-\d{2}-\d{2}$", description="ISO date of the recording.")
+    date: str = Field(pattern=r"^\d{4}-(0[1-9]|1[0-2])-(0[1-9]|[12]\d|3[01])$", description="ISO date of the recording (YYYY-MM-DD).")
     lab: Party
     examiner: Party
     device: Union[Device, DeviceRef]
