@@ -3,7 +3,8 @@
 Simulates a full benchmarking dossier (every protocol, three repetitions, the rig's calibration trials)
 of the paper's two devices with the device twin, validates both sessions, computes every metric, lays
 the results out as the paper's Table III beside the published values, writes an HTML report with
-figures and sounds per device, and saves a viewer recording. Everything goes to ``--out``.
+figures and sounds per device, saves a viewer recording, and runs the discrepancy workflow on a session
+with hidden effects. Everything goes to ``--out``.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import time
 from pathlib import Path
 
 from haptify.cli import main as haptify
+from haptify_tools.discrepancy.demo import demo as discrepancy_demo
 
 DEVICES = (("touch", 1), ("touch-x", 2))  # preset and seed
 
@@ -53,9 +55,15 @@ def main(argv: list[str] | None = None) -> int:
     rrd = out / "touch-stiffness.rrd"
     step("viewer recording of the Touch's stiffness trial", ["view", str(out / "touch" / "session"), "--trial",
                                                             "stiffness-1", "--results", results[0], "--save", str(rrd)])
+    print("\n== the discrepancy workflow: a touch session with hidden series elasticity and Coulomb friction, "
+          "the twin started without both", flush=True)
+    start = time.perf_counter()
+    discrepancy_demo(out / "discrepancy")
+    print(f"   ({time.perf_counter() - start:.1f} s)")
     print(f"\nDone. Everything is in {out}/:\n"
           f"  table.md / table.csv / table.html — the benchmark table beside the paper's Table III\n"
           f"  touch-report/index.html, touch-x-report/index.html — figures, every metric, vibration sounds\n"
+          f"  discrepancy/ — the named effects, twin.json, report.html, overlay.rrd\n"
           f"  {rrd.name} — open with  .venv/bin/rerun {rrd}  (or: .venv/bin/haptify view {out}/touch/session --web)")
     return 0
 
