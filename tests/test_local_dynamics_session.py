@@ -192,3 +192,47 @@ def test_fit_and_predict_commands(session_path, tmp_path):
     with pytest.raises(HaptifyError) as err:
         _haptify(["dynamics", "predict", str(tmp_path / "none.json"), str(session_path), "-o", str(tmp_path / "q.parquet")])
     assert err.value.code == "E702"
+
+
+def _given_model_copy(tmp_path: Path, rate_hz: float) -> Path:
+    """The dyn-predict conformance fixture with its model-a.json re-declared at ``rate_hz`` (model-slow.json)."""
+    import shutil
+
+    folder = tmp_path / "dyn-predict"
+    shutil.copytree(Path(__file__).resolve().parents[1] / "fixtures" / "conformance" / "dyn-predict", folder)
+    model = json.loads((folder / "model-a.json").read_text(encoding="utf-8"))
+    model["sample_rate_hz"] = rate_hz
+    (folder / "model-slow.json").write_text(json.dumps(model), encoding="utf-8")
+    return folder
+
+
+def test_a_given_model_too_slow_for_distance_windows_leaves_the_rmse(tmp_path):
+    # at 2 Hz a 0.2 s window holds round(0.4) = 0 samples: a ZeroDivisionError (E999) before; now E701 (spec §11.6.1)
+    ctx = ComputeContext(session=open_session(_given_model_copy(tmp_path, 2.0)))
+    ctx.parameters = {"model": "model-slow.json"}
+    items = {i.id: i for i in compute(ctx)}
+    assert items["dynamics.error_vs_distance"].code == "E701"
+    assert all(np.isfinite(items["dynamics.force_rmse"].value))
+
+
+def test_a_given_model_with_only_single_row_runs_is_e701_not_nan(tmp_path):
+    # motion capture usable 0.21 s in every 0.5 s: on the 4 Hz grid of the model every valid row stands alone,
+    # so no run can be predicted; the RMS of nothing was NaN (a pydantic ValueError, E999) before (spec §11.1, §15.2)
+    from haptify_tools import build_invalid_fixtures as fx
+
+    folder = _given_model_copy(tmp_path, 4.0)
+
+    def occlude(df):
+        phase = np.mod(df["t"].to_numpy() - df["t"].iloc[0], 0.5)
+        keep = (phase >= 0.4 - 1e-9) | (phase <= 0.11 + 1e-9)
+        for c in ("px", "py", "pz", "qw", "qx", "qy", "qz"):
+            df[c] = np.where(keep, df[c], np.nan)
+        return df
+
+    fx.rewrite_data(folder, "handle_pose", occlude, trial_id="local_dynamic-1")
+    ctx = ComputeContext(session=open_session(folder))
+    ctx.parameters = {"model": "model-slow.json"}
+    data = trial_data(ctx, "local_dynamic-1", 4.0)
+    assert data.valid.any() and data.runs() == []
+    items = compute(ctx)
+    assert len(items) == 5 and all(i.code == "E701" for i in items)

@@ -955,6 +955,9 @@ def segment_table(model: HWModelFile, train: TrialData, tests: list[TrialData], 
     the training set and its force error (spec §11.6)."""
     rate = model.sample_rate_hz
     window = int(round(param(FAMILY, "window_s") * rate))
+    if window < 1:  # a parameter file at a few Hz: windows of round(window_s · rate) = 0 samples
+        raise fail("E701", f"at the model's {rate:g} Hz a {param(FAMILY, 'window_s')} s distance window holds no sample",
+                   expected="round(window_s · sample_rate_hz) >= 1", found=rate)
     per_segment = int(round(param(FAMILY, "segment_s") / param(FAMILY, "window_s")))
     scales = DistanceScales.from_definition()
     train_feats, train_ok = trial_features(train, window)
@@ -1007,8 +1010,11 @@ def compute(ctx: Any) -> list:
     out: list = []
     predicted = predict_trial(model, data)
     ok = data.valid & np.all(np.isfinite(predicted), axis=1)     # runs of one row have no prediction
-    err_rmse = rmse(data.y[ok], predicted[ok])
     n = int(ok.sum())
+    if n == 0:  # e.g. a given parameter file whose rate leaves single-row runs: no RMS, not NaN (spec §15.2)
+        return _unavailable_all("E701", f"training trial {train.id!r} has no valid run of at least 2 samples at "
+                                f"{model.sample_rate_hz:g} Hz to predict", ids)
+    err_rmse = rmse(data.y[ok], predicted[ok])
     summary = ({"iterations": model.fit.iterations, "stop_reason": model.fit.stop_reason,
                 "fit_percent": model.fit.fit_percent, "samples": n} if model.fit else {"model": given, "samples": n})
     for name, cols in (("force", slice(0, 3)), ("torque", slice(3, 6))):
