@@ -57,3 +57,11 @@ def test_report_folder_from_a_vibration_fixture(tmp_path, capsys):
     assert main(["report", str(session), "-o", str(out)]) == 2  # exists: refused, kept
     assert (out / "index.html").read_text() == html
     capsys.readouterr()
+
+
+def test_a_wav_scale_that_is_not_a_positive_amplitude_is_a_usage_error(tmp_path, capsys):
+    session = REPO / "fixtures" / "conformance" / "vib-tones"
+    for scale in ("0", "-0.8443", "nan", "inf"):
+        out = tmp_path / f"report-{scale}"
+        assert main(["report", str(session), "-o", str(out), f"--wav-scale={scale}"]) == 2
+        assert "E903" in capsys.readouterr().err and not out.exists()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from haptify.cmd_compare import load_results
@@ -23,6 +24,10 @@ def register(sub) -> None:
 
 
 def run(args, ui) -> int:
+    """Compute (or read) the results and write the report folder (spec §15.6)."""
+    if args.wav_scale is not None and not (math.isfinite(args.wav_scale) and args.wav_scale > 0):
+        # 0 silently meant "the default", a negative scale inverted the audio and NaN wrote NaN samples
+        raise fail("E903", "--wav-scale must be a positive amplitude in m/s^2", expected="> 0", found=args.wav_scale)
     session = open_session(args.session)
     ctx = ComputeContext(session=session)
     if args.results:
