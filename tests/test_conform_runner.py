@@ -151,3 +151,13 @@ def test_a_document_whose_lists_are_not_arrays_is_an_error_of_the_implementation
     answer = classify(document)
     assert answer.kind == "error" and "must be JSON arrays" in answer.message
     assert judge(case("c", "f"), answer).status == "error"
+
+
+def test_the_linter_reports_a_case_file_that_is_not_utf8(tmp_path):
+    # a Latin-1 case file stopped the linter with UnicodeDecodeError; it is one reported problem (spec §16.7)
+    from haptify_conform.lint import lint
+
+    (tmp_path / "cases").mkdir()
+    (tmp_path / "cases" / "bad.json").write_bytes('{"cases": [], "note": "café"}'.encode("latin-1"))
+    problems = lint(root=tmp_path, repo=tmp_path)
+    assert any(p.startswith("bad.json: invalid case file") for p in problems)

@@ -21,7 +21,7 @@ def lint(root: Path = SUITE_ROOT, repo: Path = REPO_ROOT) -> list[str]:
     for path in case_files(root):
         try:
             cases += CaseFile.model_validate(json.loads(path.read_text(encoding="utf-8"))).cases
-        except (json.JSONDecodeError, ValidationError) as exc:
+        except (UnicodeDecodeError, json.JSONDecodeError, ValidationError) as exc:  # not UTF-8, not JSON, not a case file
             problems.append(f"{path.name}: invalid case file: {exc}")
     ids = Counter(c.id for c in cases)
     problems += [f"case id {i!r} is used {n} times" for i, n in ids.items() if n > 1]
