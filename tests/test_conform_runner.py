@@ -161,3 +161,15 @@ def test_the_linter_reports_a_case_file_that_is_not_utf8(tmp_path):
     (tmp_path / "cases" / "bad.json").write_bytes('{"cases": [], "note": "café"}'.encode("latin-1"))
     problems = lint(root=tmp_path, repo=tmp_path)
     assert any(p.startswith("bad.json: invalid case file") for p in problems)
+
+
+def test_a_broken_suite_means_the_run_cannot_start(monkeypatch, capsys):
+    # a case file that does not load raised out of main (a traceback, exit 1); it is exit 2 (spec §16.6)
+    from haptify_conform import cli
+
+    def broken():
+        raise ValueError("cases/x.json: not a case file")
+
+    monkeypatch.setattr(cli, "load_cases", broken)
+    assert cli.main(["--python", "haptify_conform.reference:analyse"]) == 2
+    assert "not a case file" in capsys.readouterr().err

@@ -42,6 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def make_adapter(args):
+    """The adapter the arguments name: ``--cmd``, ``--jsonl`` or ``--python`` (spec §16.4)."""
     if args.cmd:
         return CmdAdapter(args.cmd, args.timeout)
     if args.jsonl:
@@ -65,7 +66,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_usage(sys.stderr)
         print("haptify-conform: give --cmd, --jsonl or --python", file=sys.stderr)
         return 2
-    try:
+    try:  # the suite first: a broken case file means the run cannot start (exit 2, spec §16.6)
+        cases = select(load_cases(), level=args.level, metrics=set(args.metric) if args.metric else None,
+                       spec_version=SPEC_VERSION)
         adapter = make_adapter(args)
         skips = load_skips(args.skip_file)
     except (ValueError, OSError, ImportError, AttributeError, json.JSONDecodeError) as exc:
@@ -75,8 +78,6 @@ def main(argv: list[str] | None = None) -> int:
         ok, lines = self_test(adapter)
         print("\n".join(lines))
         return 0 if ok else 1
-    cases = select(load_cases(), level=args.level, metrics=set(args.metric) if args.metric else None,
-                   spec_version=SPEC_VERSION)
     started = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     verdicts = run_cases(cases, adapter, skips)
     implementation = getattr(adapter, "implementation", {}) or {"command": args.cmd or args.jsonl or args.python}
