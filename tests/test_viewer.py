@@ -634,19 +634,38 @@ def test_a_simulate_output_folder_opens_as_its_session(sessions, tmp_path):
 
 @pytest.mark.skipif(not CHROMIUM.exists(), reason=f"screenshot test needs Chromium at {CHROMIUM} (not installed here)")
 def test_web_viewer_screenshot(recorded, tmp_path):
+    """The web viewer really draws the recording in a headless browser (software WebGL).
+
+    Chromium's ``--screenshot`` fires after *virtual* time, before the viewer's WebAssembly has compiled
+    in real time, so Playwright drives the system Chromium and screenshots until the UI has drawn
+    (thousands of distinct colours; the loading screen has a few hundred), within a bounded time.
+    """
     from matplotlib.image import imread
+    from playwright.sync_api import sync_playwright
 
     _, out = recorded
     port = cmd_view.free_port()
     viewer = cmd_view.serve_web(out, port)
     shot = tmp_path / "viewer.png"
+    colours = 0
     try:
         viewer.wait_until_serving(timeout_s=20)
-        subprocess.run([str(CHROMIUM), "--headless=new", "--no-sandbox", "--disable-gpu", "--use-angle=swiftshader",
-                        "--enable-unsafe-swiftshader", "--window-size=1280,800", "--virtual-time-budget=15000",
-                        f"--screenshot={shot}", viewer.url], capture_output=True, timeout=45, check=False)
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=[
+                "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-first-run",
+                "--disable-background-networking", "--disable-component-update", "--disable-sync"])
+            try:
+                page = browser.new_page(viewport={"width": 1280, "height": 800})
+                page.goto(viewer.url, timeout=30_000)
+                deadline = time.monotonic() + 120
+                while colours <= 1500 and time.monotonic() < deadline:
+                    page.wait_for_timeout(2000)
+                    page.screenshot(path=str(shot))
+                    img = imread(shot)
+                    colours = len(np.unique(img.reshape(-1, img.shape[-1]), axis=0))
+            finally:
+                browser.close()
     finally:
         viewer.stop()
     assert shot.is_file() and shot.stat().st_size > 0, "Chromium wrote no screenshot"
-    img = imread(shot)
-    assert len(np.unique(img.reshape(-1, img.shape[-1]), axis=0)) > 16, "the screenshot is blank"
+    assert colours > 1500, f"the viewer did not draw the recording within 120 s ({colours} colours: loading screen)"
