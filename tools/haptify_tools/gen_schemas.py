@@ -30,12 +30,14 @@ MODELS: dict[str, str] = {
     "conformance-cases": "haptify_conform.cases:CaseFile",
     "conform-report": "haptify_conform.report:ConformReport",
     "twin": "haptify_tools.twin.model:TwinFile",
+    "discrepancy": "haptify_tools.discrepancy.model:DiscrepancyFile",
 }
 
 REPO = Path(__file__).resolve().parents[2]
 SCHEMA_DIR = REPO / "schemas" / SPEC_VERSION
 # Files of the tools are not part of the standard: their schemas live beside the tool.
-OUTSIDE_THE_STANDARD = {"twin": REPO / "tools" / "haptify_tools" / "twin" / "twin.schema.json"}
+OUTSIDE_THE_STANDARD = {"twin": REPO / "tools" / "haptify_tools" / "twin" / "twin.schema.json",
+                        "discrepancy": REPO / "tools" / "haptify_tools" / "discrepancy" / "discrepancy.schema.json"}
 
 
 def render(name: str, target: str) -> str:
