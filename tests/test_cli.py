@@ -28,3 +28,8 @@ def test_console_script_runs_without_traceback():
     proc = subprocess.run([sys.executable, "-m", "haptify.cli", "--help"], capture_output=True, text=True)
     assert proc.returncode == 0
     assert "COMMAND" in proc.stdout and "Traceback" not in proc.stderr
+
+
+def test_compute_with_an_empty_metric_list_is_a_usage_error(example_session, capsys):
+    assert main(["--json", "compute", str(example_session), "--metrics", ","]) == 2
+    assert json.loads(capsys.readouterr().out)["findings"][0]["code"] == "E903"

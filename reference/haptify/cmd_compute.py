@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from haptify.compute import compute_session, family_modules
+from haptify.errors import fail
 from haptify.storage import atomic_write_text, open_session
 
 
@@ -18,7 +19,11 @@ def register(sub) -> None:
 
 def run(args, ui) -> int:
     session = open_session(args.session)
-    wanted = [m.strip() for m in args.metrics.split(",") if m.strip()] if args.metrics else None
+    wanted = None
+    if args.metrics is not None:
+        wanted = [m.strip() for m in args.metrics.split(",") if m.strip()]
+        if not wanted:
+            raise fail("E903", "--metrics names no metric id", expected="ID[,ID…]", found=args.metrics)
     out = args.output or args.session.parent / f"{session.session_id}.results.json"
     with ui.progress("computing metrics", total=len(family_modules())) as advance:
         results = compute_session(session, wanted, progress=advance)
