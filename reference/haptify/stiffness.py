@@ -71,7 +71,8 @@ def find_presses(t: np.ndarray, penetration: np.ndarray, normal_force: np.ndarra
     penetration of at least ``min_press_depth_m``. Its peak is the largest normal force in the run, at
     sample k*. Its fit samples are those from the run's start to k* (the rising phase) whose normal
     force lies within [fit_low_fraction, fit_high_fraction] × peak; a press with fewer than
-    ``min_fit_samples`` of them does not qualify.
+    ``min_fit_samples`` of them does not qualify, nor does a run that starts inside that window (the
+    remainder of a press an occlusion interrupted: its plateau or release, not a rise).
     """
     out = []
     for a, b in runs(contact):
@@ -83,6 +84,8 @@ def find_presses(t: np.ndarray, penetration: np.ndarray, normal_force: np.ndarra
         k = a + int(np.argmax(normal_force[a:b]))
         peak = float(normal_force[k])
         if not peak > 0:
+            continue
+        if normal_force[a] >= float(stp("fit_low_fraction")) * peak:
             continue
         rising = np.arange(a, k + 1)
         f = normal_force[rising]
