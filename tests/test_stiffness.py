@@ -72,15 +72,16 @@ def test_linear_spring_with_saturation_is_recovered_exactly():
 def test_the_remainder_of_a_press_cut_by_an_occlusion_is_not_a_press():
     """A press rises (f = K·d, 0 → 10 mm), motion capture drops out at its top, and the samples after the
     gap are its release with a friction bump at the reversal: the force rises while the hand withdraws.
-    That remainder starts inside the fit window and must not enter the fit (spec §13.2)."""
+    That remainder begins right after invalid samples and must not enter the fit (spec §13.2)."""
     rise_d = np.linspace(0.0, 0.010, 101)
     rel_d = np.linspace(0.0095, 0.005, 50)
     rel_f = np.concatenate([np.linspace(1.5, 2.0, 30), np.linspace(2.0, 1.2, 20)])
     d = np.concatenate([[-0.005] * 5, rise_d, [0.0099] * 5, rel_d, [-0.005] * 5])
     f = np.concatenate([[0.0] * 5, K_TRUE * rise_d, [K_TRUE * 0.0099] * 5, rel_f, [0.0] * 5])
-    contact = np.concatenate([[False] * 5, [True] * 101, [False] * 5, [True] * 50, [False] * 5])  # the gap: not valid
+    valid = np.concatenate([[True] * 106, [False] * 5, [True] * 55])  # the occlusion
+    contact = valid & (d > 0)
     t = np.arange(len(d)) / 100.0
-    fit = fit_stiffness(t, d, f, contact)
+    fit = fit_stiffness(t, d, f, contact, valid=valid)
     assert len(fit.presses) == 1
     assert fit.stiffness == pytest.approx(K_TRUE, rel=1e-9)
     assert fit.peak_force == pytest.approx(K_TRUE * 0.010, rel=1e-12)

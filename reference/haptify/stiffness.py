@@ -64,18 +64,21 @@ class StiffnessFit:
         return float(np.mean([p.peak_force for p in self.presses]))
 
 
-def find_presses(t: np.ndarray, penetration: np.ndarray, normal_force: np.ndarray, contact: np.ndarray) -> list[Press]:
+def find_presses(t: np.ndarray, penetration: np.ndarray, normal_force: np.ndarray, contact: np.ndarray,
+                 valid: np.ndarray | None = None) -> list[Press]:
     """Qualifying presses of a trial (spec §13.2).
 
     A press is a maximal run of ``contact`` samples lasting at least ``min_press_s`` and reaching a
     penetration of at least ``min_press_depth_m``. Its peak is the largest normal force in the run, at
     sample k*. Its fit samples are those from the run's start to k* (the rising phase) whose normal
     force lies within [fit_low_fraction, fit_high_fraction] × peak; a press with fewer than
-    ``min_fit_samples`` of them does not qualify, nor does a run that starts inside that window (the
-    remainder of a press an occlusion interrupted: its plateau or release, not a rise).
+    ``min_fit_samples`` of them does not qualify, nor does a run that starts right after samples that
+    are not ``valid`` (the remainder of a press an occlusion interrupted: its plateau or release).
     """
     out = []
     for a, b in runs(contact):
+        if valid is not None and a > 0 and not valid[a - 1]:
+            continue
         if t[b - 1] - t[a] < float(stp("min_press_s")) - 1e-12:
             continue
         depth = float(np.max(penetration[a:b]))
@@ -85,8 +88,6 @@ def find_presses(t: np.ndarray, penetration: np.ndarray, normal_force: np.ndarra
         peak = float(normal_force[k])
         if not peak > 0:
             continue
-        if normal_force[a] >= float(stp("fit_low_fraction")) * peak:
-            continue
         rising = np.arange(a, k + 1)
         f = normal_force[rising]
         fit = rising[(f >= float(stp("fit_low_fraction")) * peak) & (f <= float(stp("fit_high_fraction")) * peak)]
@@ -95,13 +96,15 @@ def find_presses(t: np.ndarray, penetration: np.ndarray, normal_force: np.ndarra
     return out
 
 
-def fit_stiffness(t: np.ndarray, penetration: np.ndarray, normal_force: np.ndarray, contact: np.ndarray, trial_id: str = "") -> StiffnessFit:
+def fit_stiffness(t: np.ndarray, penetration: np.ndarray, normal_force: np.ndarray, contact: np.ndarray, trial_id: str = "",
+                  valid: np.ndarray | None = None) -> StiffnessFit:
     """Least-squares line normal_force = k · penetration + c through the fit samples of every press (spec §13.3).
 
-    Inputs on one time grid: ``t`` (s), ``penetration`` (m), ``normal_force`` (N), ``contact`` (bool).
+    Inputs on one time grid: ``t`` (s), ``penetration`` (m), ``normal_force`` (N), ``contact`` (bool) and,
+    when known, ``valid`` (bool: motion capture and force usable; §12.2).
     E315 when no press qualifies or the fit samples span no penetration.
     """
-    presses = find_presses(t, penetration, normal_force, contact)
+    presses = find_presses(t, penetration, normal_force, contact, valid)
     if not presses:
         raise fail("E315", f"trial {trial_id!r}: no press qualifies (>= {stp('min_press_s')} s of contact, "
                    f">= {stp('min_press_depth_m')} m deep, >= {stp('min_fit_samples')} rising samples)", expected="at least one press", found=0)
@@ -121,7 +124,7 @@ def trial_fit(ctx: Any, trial_id: str) -> StiffnessFit:
     """:func:`fit_stiffness` on a stiffness trial's contact signals (spec §13.5); cached on a ComputeContext."""
     def build() -> StiffnessFit:
         cs = contact_signals(ctx, trial_id)  # contact is False wherever the sample is not valid
-        return fit_stiffness(cs.t, cs.penetration, cs.normal_force, cs.contact, trial_id)
+        return fit_stiffness(cs.t, cs.penetration, cs.normal_force, cs.contact, trial_id, cs.valid)
 
     return cached(ctx, ("stiffness_fit", trial_id), build)
 
