@@ -412,6 +412,21 @@ def _to_world(twin: TwinFile, force_D, torque_D, about_origin_D: bool = True):
     return f, m
 
 
+def _joint_path(twin, t: np.ndarray, position_W: np.ndarray, quaternion_W: np.ndarray):
+    """The arm's joint path under a hand path (both trial types): true kinematics, joint angles by IK,
+    reachability (limits and base collision), link frames, gimbal angles, joint velocity and acceleration
+    by finite differences, and the drive coupling matrix ``C`` (θ = C·q)."""
+    kin = true_kinematics(twin)
+    q, _, ok = hand_to_joints(twin, position_W, None)
+    ok = ok & ~in_collision(twin, world_to_device(twin, position_W))
+    q = _unwrap(q)
+    frames = link_transforms(kin, q)
+    gimbal = gimbal_angles(twin, q, quaternion_W, frames)
+    qd = _diff(t, q)
+    qdd = _diff(t, qd)
+    return kin, q, ok, frames, gimbal, qd, qdd, _coupling(twin)
+
+
 def simulate_passive(twin: TwinFile, t: np.ndarray, position_W: np.ndarray, quaternion_W: np.ndarray) -> PassiveResult:
     """Simulate the powered-off device moved by the examiner's hand (issue 3, design §4).
 
@@ -421,15 +436,7 @@ def simulate_passive(twin: TwinFile, t: np.ndarray, position_W: np.ndarray, quat
     reflected rotor inertia act on the drive axes ``θ = C·q`` and reach the joints as ``Cᵀ·τ``.
     """
     t, position_W, quaternion_W = _check_path(t, position_W, quaternion_W)
-    kin = true_kinematics(twin)
-    q, _, ok = hand_to_joints(twin, position_W, None)
-    ok = ok & ~in_collision(twin, world_to_device(twin, position_W))
-    q = _unwrap(q)
-    frames = link_transforms(kin, q)
-    gimbal = gimbal_angles(twin, q, quaternion_W, frames)
-    qd = _diff(t, q)
-    qdd = _diff(t, qd)
-    c = _coupling(twin)
+    kin, q, ok, frames, gimbal, qd, qdd, c = _joint_path(twin, t, position_W, quaternion_W)
     th_d, th_dd = rows_times(qd, c.T), rows_times(qdd, c.T)
     j_refl = reflected_rotor_inertia(twin)
     if twin.on("drive.series_elasticity") and np.all(j_refl > 0) and len(t) > 2:
@@ -540,16 +547,8 @@ def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, 
                    found=[rendering.static_friction, rendering.dynamic_friction])
     t, pos_W, quat_W = _check_path(t, hand_position_W, hand_quaternion_W, uniform=True)
     n_s = len(t)
-    kin = true_kinematics(twin)
     nom = nominal_kinematics(twin)
-    q, _, ok = hand_to_joints(twin, pos_W, None)
-    ok = ok & ~in_collision(twin, world_to_device(twin, pos_W))
-    q = _unwrap(q)
-    frames = link_transforms(kin, q)
-    gimbal = gimbal_angles(twin, q, quat_W, frames)
-    qd = _diff(t, q)
-    qdd = _diff(t, qd)
-    c = _coupling(twin)
+    kin, q, ok, frames, gimbal, qd, qdd, c = _joint_path(twin, t, pos_W, quat_W)
     c_inv = np.linalg.inv(c)
     th_l, thd_l, thdd_l = rows_times(q, c.T), rows_times(qd, c.T), rows_times(qdd, c.T)
     r_wd, t_wd = placement_matrix(twin)
