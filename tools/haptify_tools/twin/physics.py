@@ -339,26 +339,34 @@ def _gimbal_axes_D(twin: TwinFile, frames: list[np.ndarray], angles: np.ndarray)
 
 
 @dataclass
-class PassiveResult:
-    """What the powered-off device does along a hand path (W frame, SI units).
+class HandPathResult:
+    """What the device does along a hand path, passive or active (W frame, SI units).
 
     ``force_W``/``torque_W``: force and torque the device applies to the hand at the gimbal centre.
     ``base_force_W``/``base_torque_W``: wrench the whole device (base included, with its full weight)
     applies to the force plate, torque about the W origin. ``q``: true joint angles; ``gimbal``: gimbal
     angles; ``ok``: False where the hand pose is out of the device's reach or puts the end-effector
-    into the base (the hard stops are not modelled: values there are extrapolations). ``joint_torque``: torque the hand's force produces at each joint, N·m.
+    into the base (the hard stops are not modelled: values there are extrapolations).
     """
 
     t: np.ndarray
     q: np.ndarray
-    qd: np.ndarray
-    qdd: np.ndarray
     gimbal: np.ndarray
     force_W: np.ndarray
     torque_W: np.ndarray
     base_force_W: np.ndarray
     base_torque_W: np.ndarray
     ok: np.ndarray
+
+
+@dataclass
+class PassiveResult(HandPathResult):
+    """What the powered-off device does along a hand path: :class:`HandPathResult` plus the joint
+    velocities ``qd`` and accelerations ``qdd`` and ``joint_torque``, the torque the hand's force produces
+    at each joint, N·m."""
+
+    qd: np.ndarray
+    qdd: np.ndarray
     joint_torque: np.ndarray = field(repr=False)
 
 
@@ -447,31 +455,23 @@ def simulate_passive(twin: TwinFile, t: np.ndarray, position_W: np.ndarray, quat
     fh, th, fp, tp, jt = _hand_wrench_from_drive(twin, kin, t, q, qd, qdd, quaternion_W, tau_joint, frames, gimbal)
     f_w, m_w = _to_world(twin, fh, th, about_origin_D=False)
     bf_w, bm_w = _to_world(twin, fp, tp)
-    return PassiveResult(t, q, qd, qdd, gimbal, f_w, m_w, bf_w, bm_w, ok, jt)
+    return PassiveResult(t=t, q=q, gimbal=gimbal, force_W=f_w, torque_W=m_w, base_force_W=bf_w, base_torque_W=bm_w,
+                         ok=ok, qd=qd, qdd=qdd, joint_torque=jt)
 
 
 # --- active -------------------------------------------------------------------------------------
 
 
 @dataclass
-class ActiveResult:
-    """What the powered device does while rendering a virtual plane (W frame, SI units).
-
-    Everything in :class:`PassiveResult` plus: ``commanded_W (N, 6)`` the force and torque the
-    rendering loop commanded (the ``commanded_wrench`` stream); ``encoder_q`` joint angles the device
-    computes from its motor encoders; ``encoder_position_W`` its own idea of the gimbal-centre position;
-    ``motor_torque`` torque per drive axis after saturation and cut-off (capstan output, N·m);
-    ``cable_torque`` torque the cables transmit to the links; ``saturated``/``cut_off`` flags per sample.
+class ActiveResult(HandPathResult):
+    """What the powered device does while rendering a virtual plane: :class:`HandPathResult` plus
+    ``commanded_W (N, 6)`` the force and torque the rendering loop commanded (the ``commanded_wrench``
+    stream); ``encoder_q`` joint angles the device computes from its motor encoders; ``encoder_position_W``
+    its own idea of the gimbal-centre position; ``motor_torque`` torque per drive axis after saturation and
+    cut-off (capstan output, N·m); ``cable_torque`` torque the cables transmit to the links;
+    ``saturated``/``cut_off`` flags per sample.
     """
 
-    t: np.ndarray
-    q: np.ndarray
-    gimbal: np.ndarray
-    force_W: np.ndarray
-    torque_W: np.ndarray
-    base_force_W: np.ndarray
-    base_torque_W: np.ndarray
-    ok: np.ndarray
     commanded_W: np.ndarray
     encoder_q: np.ndarray
     encoder_position_W: np.ndarray
@@ -605,8 +605,9 @@ def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, 
     bf_w, bm_w = _to_world(twin, fp, tp)
     commanded = np.concatenate([rows_times(f_cmd_D, r_wd.T), np.zeros((n_s, 3))], axis=1)
     p_enc_W = rows_times(p_enc, r_wd.T) + t_wd
-    return ActiveResult(t, q, gimbal, f_w, m_w, bf_w, bm_w, ok, commanded, enc_q, p_enc_W, motor, cable,
-                        saturated, cut_flags)
+    return ActiveResult(t=t, q=q, gimbal=gimbal, force_W=f_w, torque_W=m_w, base_force_W=bf_w, base_torque_W=bm_w,
+                        ok=ok, commanded_W=commanded, encoder_q=enc_q, encoder_position_W=p_enc_W, motor_torque=motor,
+                        cable_torque=cable, saturated=saturated, cut_off=cut_flags)
 
 
 def _cutoff_latch(f_cmd_mag: np.ndarray, cut) -> np.ndarray:
