@@ -339,25 +339,22 @@ def test_an_open_sweep_is_reported_with_w410(tmp_path):
     assert any(w.code == "W410" and w.trial == "workspace-1" for w in ctx.warnings)
 
 
-def test_degenerate_kinematics_give_e311_not_a_division_by_zero(tmp_path):
-    dev = mini_device()
-    joints = dev["kinematics"]["joints"]
-    joints[1]["upper"]["constant"] = joints[1]["lower"]["constant"]  # the shoulder cannot move: a surface, no volume
+def _frozen_shoulder(joints: list) -> None:
+    """The shoulder cannot move: the reachable set is a surface, no volume (a division by zero once)."""
+    joints[1]["upper"]["constant"] = joints[1]["lower"]["constant"]
     joints[2]["upper"] = {"constant": joints[2]["lower"]["constant"]}
-    rng = np.random.default_rng(RNG_SEED)
-    cloud = sphere_surface(3_000, 0.05, [0.1, 0.0, 0.1], rng)
-    res = by_id(compute(ComputeContext(session=open_session(workspace_session(tmp_path, dev, [cloud])))))
-    assert res["workspace.modeled_volume"].code == "E311"
-    assert res["workspace.volume_ratio"].code == "E311" and res["workspace.coverage"].code == "E311"
-    assert isinstance(res["workspace.measured_volume"], MetricResult)
 
 
-def test_joint_limits_admitting_no_configuration_give_e311_not_a_numpy_error(tmp_path):
-    # an upper limit below the lower one: every sampled range is empty, and np.max of nothing raised
-    # ValueError (E999); the model is unavailable with E311, the measured volume still stands (spec §8.3)
-    dev = mini_device()
-    joints = dev["kinematics"]["joints"]
+def _empty_elbow_range(joints: list) -> None:
+    """An upper limit below the lower one: every sampled range is empty (np.max of nothing raised E999)."""
     joints[2]["upper"] = {"constant": joints[2]["lower"]["constant"] - 0.1}
+
+
+@pytest.mark.parametrize("break_limits", [_frozen_shoulder, _empty_elbow_range], ids=["no-volume", "no-configuration"])
+def test_degenerate_joint_limits_give_e311_and_the_measured_volume_stands(tmp_path, break_limits):
+    """The model is unavailable with E311; the measured volume still stands (spec §8.3)."""
+    dev = mini_device()
+    break_limits(dev["kinematics"]["joints"])
     rng = np.random.default_rng(RNG_SEED)
     cloud = sphere_surface(3_000, 0.05, [0.1, 0.0, 0.1], rng)
     res = by_id(compute(ComputeContext(session=open_session(workspace_session(tmp_path, dev, [cloud])))))
