@@ -154,11 +154,15 @@ def postgres_or_skip() -> PostgresServer:
     return server
 
 
-def wait_http(url: str, timeout: float = 20.0) -> None:
+def wait_http(url: str, timeout: float = 20.0, alive: subprocess.Popen | None = None) -> None:
+    """Poll ``url`` until it answers 200; with ``alive``, fail at once (with its stderr) if that server process exits."""
     import urllib.request
 
     deadline = time.monotonic() + timeout
     while True:
+        if alive is not None and alive.poll() is not None:
+            err = alive.stderr.read().decode(errors="replace") if alive.stderr else ""
+            raise RuntimeError(f"the server exited with {alive.returncode} before answering {url}: {err[-2000:]}")
         try:
             with urllib.request.urlopen(url, timeout=1):
                 return

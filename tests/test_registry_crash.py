@@ -27,12 +27,20 @@ SERVE = "import argparse, sys; from haptify.cli import UI; from haptify_tools.re
         "sys.exit(a.func(a, UI(quiet=True)))"
 
 
-def start(data: Path, port: int) -> subprocess.Popen:
-    """``haptify registry serve --data DATA --port PORT`` in a subprocess, once it answers."""
+def start(data: Path) -> tuple[subprocess.Popen, int]:
+    """``haptify registry serve --data DATA --port PORT`` in a subprocess on a fresh port, once it answers.
+
+    Every start takes a new port: a port given back by a killed server may be taken by a parallel test's
+    server (another xdist worker) before the restart binds it."""
+    port = free_port()
     proc = subprocess.Popen([sys.executable, "-c", SERVE, "registry", "serve", "--data", str(data), "--port", str(port)],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    wait_http(f"http://127.0.0.1:{port}/api/v1/health")
-    return proc
+    try:
+        wait_http(f"http://127.0.0.1:{port}/api/v1/health", alive=proc)
+    except Exception:
+        proc.kill()
+        raise
+    return proc, port
 
 
 def _parse(argv: list[str]):
@@ -55,8 +63,7 @@ def test_killed_mid_submission_loses_nothing_accepted_and_leaves_nothing_half(ba
     for i in range(12):
         s, r = variant(base, tmp_path, f"k{i}", rms=[1.0 + i, 2.0])
         archives.append(bundle_for(s, r, report, tmp_path / f"k{i}.tar.gz")[0])
-    port = free_port()
-    proc = start(data, port)
+    proc, port = start(data)
     acknowledged: list[str] = []
     lock = threading.Lock()
 
@@ -80,7 +87,7 @@ def test_killed_mid_submission_loses_nothing_accepted_and_leaves_nothing_half(ba
     for t in threads:
         t.join()
     assert 4 <= len(acknowledged) < 12, "the kill should land while submissions are in flight"
-    proc = start(data, port)  # restart: migrations, then the sweep
+    proc, port = start(data)  # restart: migrations, then the sweep
     try:
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/v1/health") as r:
             health = json.loads(r.read())
@@ -140,8 +147,7 @@ def test_submit_and_registry_commands_end_to_end(base, tmp_path, capsys):
     args = _parse(["submit", str(session), "--results", str(results), "--conformance", str(report), "--dry-run"])
     assert args.func(args, UI()) == 0
     assert "would-accept" in capsys.readouterr().out
-    port = free_port()
-    proc = start(data, port)
+    proc, port = start(data)
     try:
         url = f"http://127.0.0.1:{port}"
         args = _parse(["submit", str(session), "--results", str(results), "--conformance", str(report), "--registry", url,
