@@ -32,7 +32,8 @@ FAMILY = "calibration"
 
 @dataclass(frozen=True)
 class SphereFit:
-    """A fitted sphere: ``centre`` (input units), ``radius`` and the RMS of the radial residuals."""
+    """A fitted sphere: ``centre`` (input units), ``radius`` and the RMS of the radial residuals.
+    Spec §6.2 steps 1–4."""
 
     centre: np.ndarray
     radius: float
@@ -241,14 +242,16 @@ def handle_calibration(ctx_or_session: Any) -> HandleCalibration:
 
 
 def trial_fit(ctx_or_session: Any, trial_id: str) -> HandleCalibration:
-    """:func:`fit_trial`, cached on a context under ``("handle_calibration_fit", trial_id)``."""
+    """:func:`fit_trial`, cached on a context under ``("handle_calibration_fit", trial_id)``.
+    Spec §6.2–6.3."""
     return cached(ctx_or_session, ("handle_calibration_fit", trial_id), lambda: fit_trial(ctx_or_session, trial_id))
 
 
 # --- applying it (spec §6.5, §6.6) ---------------------------------------------------------------
 
 def sensor_pose(session: Any, part: str) -> Pose:
-    """Pose of the handle's ``ft_sensor`` or ``accelerometer`` frame in the handle body frame (E603 if absent)."""
+    """Pose of the handle's ``ft_sensor`` or ``accelerometer`` frame in the handle body frame (E603 if absent).
+    Position in m; spec §1.2, §2.4."""
     handle = session.manifest.rig.handle
     if handle is None:
         raise fail("E603", f"the rig of session {session.session_id!r} does not describe the handle sensors",
@@ -257,12 +260,14 @@ def sensor_pose(session: Any, part: str) -> Pose:
 
 
 def sensor_rotation(session: Any, part: str) -> np.ndarray:
-    """Rotation matrix (3, 3) of a handle sensor frame → handle body frame."""
+    """Rotation matrix (3, 3) of a handle sensor frame → handle body frame.
+    ``R_HS`` or ``R_HA`` of spec §6.1."""
     return quat_to_matrix(np.asarray(sensor_pose(session, part).quaternion, float))
 
 
 def gravity_in_sensor(q_handle: np.ndarray, r_sensor: np.ndarray) -> np.ndarray:
     """Standard gravitational acceleration g_W = (0, 0, −g0) expressed in a sensor frame, ``(N, 3)`` m/s².
+    ``g_X = R_WXᵀ g_W`` of spec §6.1.
 
     ``q_handle (N, 4)`` handle body → world; ``r_sensor (3, 3)`` sensor → handle body.
     """

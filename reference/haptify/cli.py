@@ -22,7 +22,7 @@ EXIT_OK, EXIT_INVALID, EXIT_CANNOT_RUN = 0, 1, 2
 
 
 class UI:
-    """Output policy of one invocation: human text (rich), ``--json`` or ``--quiet``."""
+    """Output policy of one invocation: human text (rich), ``--json`` or ``--quiet`` (spec §0.5)."""
 
     def __init__(self, json_mode: bool = False, quiet: bool = False) -> None:
         self.json_mode = json_mode
@@ -64,6 +64,7 @@ def _json_default(obj: Any) -> Any:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``haptify`` parser: ``--version``, ``--json``, ``--quiet`` and the plugin sub-commands (spec §0.5)."""
     parser = argparse.ArgumentParser(
         prog="haptify",
         description="Haptify: benchmark grounded force-feedback haptic devices from external measurements.",
@@ -102,7 +103,8 @@ def _print_findings(ui: UI, findings: list[Finding]) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``haptify`` console script; returns the process exit code."""
+    """Entry point of the ``haptify`` console script; returns the process exit code.
+    0, 1 or 2 as spec §0.5 defines."""
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

@@ -12,6 +12,7 @@ RENDERERS = {"md": to_markdown, "csv": to_csv, "html": to_html}
 
 
 def register(sub) -> None:
+    """Add the ``compare`` sub-command (spec §15.5)."""
     p = sub.add_parser("compare", help="lay out results of several devices side by side (the paper's Table III)")
     p.add_argument("results", nargs="+", type=Path, help="results.json files, one per device")
     p.add_argument("--paper", action="store_true", help="add the paper's published values")
@@ -21,11 +22,12 @@ def register(sub) -> None:
 
 
 def load_results(path: Path) -> ResultsFile:
-    """Read and check a results.json (E104 names the file and every invalid field)."""
+    """Read and check a results.json (E104 names the file and every invalid field; spec §15.1)."""
     return read_json_model(path, ResultsFile, "E104")
 
 
 def run(args, ui) -> int:
+    """Print, emit as JSON or write the Table III-style comparison of the results files (spec §15.5)."""
     table = build_table([load_results(p) for p in args.results], with_paper=args.paper)
     text = RENDERERS[args.format](table)
     if args.output:

@@ -10,6 +10,7 @@ from haptify.storage import atomic_write_text, open_session
 
 
 def register(sub) -> None:
+    """Add the ``compute`` sub-command (spec §15.4)."""
     p = sub.add_parser("compute", help="compute every metric the session's trials allow")
     p.add_argument("session", type=Path)
     p.add_argument("-o", "--output", type=Path, help="results file (default SESSION/../<id>.results.json)")
@@ -18,6 +19,7 @@ def register(sub) -> None:
 
 
 def run(args, ui) -> int:
+    """Compute the session's metrics and write ``results.json`` atomically (spec §15.4, §3.6)."""
     session = open_session(args.session)
     wanted = None
     if args.metrics is not None:

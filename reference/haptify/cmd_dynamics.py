@@ -29,6 +29,7 @@ from haptify.storage import open_session, write_atomically
 
 
 def register(sub) -> None:
+    """Add ``dynamics fit`` and ``dynamics predict`` (spec §11.8)."""
     p = sub.add_parser("dynamics", help="fit or run the local dynamic (Hammerstein–Wiener) model")
     verbs = p.add_subparsers(dest="verb", metavar="VERB")
     f = verbs.add_parser("fit", help="fit the model to a local_dynamic trial and write its parameter file")
@@ -59,7 +60,7 @@ def _check_free(paths: list[Path | None], overwrite: bool) -> None:
 
 
 def run_fit(args, ui) -> int:
-    """Fit and write the parameter file (and .mat); prints the training RMS errors."""
+    """Fit and write the parameter file (and .mat); prints the training RMS errors (N and N·m; spec §11.8)."""
     _check_free([args.output, args.mat], args.overwrite)
     session = open_session(args.session)
     trial_id = args.trial or training_trial(session).id
@@ -80,7 +81,8 @@ def run_fit(args, ui) -> int:
 
 
 def run_predict(args, ui) -> int:
-    """Simulate the model on a trial; write t, the predicted and the measured wrench as Parquet."""
+    """Simulate the model on a trial; write t, the predicted and the measured wrench as Parquet.
+    Units s, N, N·m; spec §11.8."""
     _check_free([args.output], args.overwrite)
     model = load_model(args.model)
     session = open_session(args.session)

@@ -24,6 +24,7 @@ _OPTION_OF_FIELD = {"/session/date": "--date", "/session/lab": "--lab", "/sessio
 
 
 def register(sub) -> None:
+    """Add ``import c3d`` and ``import csv`` with their options (spec §5.8)."""
     p = sub.add_parser("import", help="import a C3D file or a CSV log as a session",
                        description=__doc__.splitlines()[0])
     kinds = p.add_subparsers(dest="import_kind", metavar="FORMAT", required=True)
@@ -109,6 +110,7 @@ def _load(args, fmt: str, facts: dict | None):
 
 
 def run(args, ui) -> int:
+    """Import (or ``--list``) one source file; exit 0 valid, 1 imported but invalid (spec §5.8)."""
     fmt = args.import_kind
     if fmt == "c3d" and args.list:
         summary = read_c3d(args.file).summary()

@@ -13,6 +13,7 @@ from haptify.report import write_report
 
 
 def register(sub) -> None:
+    """Add the ``report`` sub-command; ``--wav-scale`` in m/s² (spec §15.6)."""
     p = sub.add_parser("report", help="an HTML report with figures and vibration sounds")
     p.add_argument("session", type=Path)
     p.add_argument("-o", "--output", type=Path, required=True, help="report folder to create")

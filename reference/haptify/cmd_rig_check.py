@@ -14,6 +14,7 @@ from haptify.storage import open_session
 
 
 def register(sub) -> None:
+    """Add the ``rig-check`` sub-command (spec §14.8)."""
     p = sub.add_parser("rig-check", help="check the rig against the paper's requirements (Table I, Appendix)")
     p.add_argument("session", type=Path)
     p.add_argument("--json", dest="rig_check_json", action="store_true", help="machine-readable output on stdout")
@@ -21,6 +22,7 @@ def register(sub) -> None:
 
 
 def run(args, ui) -> int:
+    """Print (or emit as JSON) one line per rig check; exit 1 when any check FAILs (spec §14.8)."""
     if getattr(args, "rig_check_json", False):
         ui.json_mode = True
     session = open_session(args.session)

@@ -14,7 +14,8 @@ from haptify.validation import ValidationReport, SessionValidator
 
 
 def register(subparsers: Any) -> None:
-    """Add the ``validate`` sub-command (entry point ``validate = "haptify.cmd_validate:register"``)."""
+    """Add the ``validate`` sub-command (entry point ``validate = "haptify.cmd_validate:register"``).
+    Spec §4.6."""
     parser = subparsers.add_parser(
         "validate", help="check a session folder against the Haptify spec",
         description="Check a session folder (session.json and its stream files) against the Haptify spec and "
@@ -42,7 +43,8 @@ def run(args: argparse.Namespace, ui: Any) -> int:
 
 
 def render_text(report: ValidationReport, errors_only: bool = False) -> list[str]:
-    """The human report: one heading per trial and file, then the findings, then a summary line."""
+    """The human report: one heading per trial and file, then the findings, then a summary line.
+    Spec §4.6."""
     lines: list[str] = []
     last_trial: object = object()
     for trial, file, findings in report.groups():

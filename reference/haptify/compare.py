@@ -18,7 +18,8 @@ from haptify.results import ResultsFile
 
 @dataclass
 class Table:
-    """A comparison table: header row and body rows of display strings."""
+    """A comparison table: header row and body rows of display strings.
+    In the paper's display units; spec §15.5."""
 
     header: list[str]
     rows: list[list[str]]

@@ -21,7 +21,8 @@ from haptify.versions import PACKAGE_VERSION
 
 @dataclass
 class ComputeContext:
-    """What a family's ``compute`` receives: the session, a per-run cache and a warning sink."""
+    """What a family's ``compute`` receives: the session, a per-run cache and a warning sink.
+    Spec §15.4; ``parameters`` as §16.8.2."""
 
     session: SessionFolder
     wanted: set[str] | None = None  # metric ids asked for (None: all)
@@ -44,13 +45,14 @@ class ComputeContext:
 
 
 def family_modules() -> list[tuple[str, str]]:
-    """``(family, module)`` for every definition file that names a computing module."""
+    """``(family, module)`` for every definition file that names a computing module.
+    Member ``module``, spec §15.4."""
     return [(f.family, f.module) for f in all_families() if f.module]
 
 
 def compute_session(session: SessionFolder, metrics: Iterable[str] | None = None,
                     progress: Callable[[int], None] | None = None, ctx: ComputeContext | None = None) -> ResultsFile:
-    """Compute every metric (or those in ``metrics``) that the session's trials allow.
+    """Compute every metric (or those in ``metrics``) that the session's trials allow (spec §15.4).
 
     Pass ``ctx`` to share its cache with later work on the same session (the report's figures).
     """

@@ -26,7 +26,7 @@ def quat_conjugate(q: np.ndarray) -> np.ndarray:
 
 
 def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product ``a ⊗ b`` (apply b first, then a)."""
+    """Hamilton product ``a ⊗ b`` (apply b first, then a; quaternions [w, x, y, z], spec §1.3)."""
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
     aw, ax, ay, az = np.moveaxis(a, -1, 0)
@@ -40,7 +40,7 @@ def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)``."""
+    """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)`` (spec §1.3)."""
     w, x, y, z = np.moveaxis(quat_normalize(q), -1, 0)
     return np.stack([
         np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
@@ -50,7 +50,7 @@ def quat_to_matrix(q: np.ndarray) -> np.ndarray:
 
 
 def matrix_to_quat(m: np.ndarray) -> np.ndarray:
-    """Unit quaternions (w ≥ 0) of rotation matrices ``(..., 3, 3)`` (Shepperd's method)."""
+    """Unit quaternions (w ≥ 0) of rotation matrices ``(..., 3, 3)`` (Shepperd's method; spec §1.3)."""
     m = np.asarray(m, dtype=float)
     flat = m.reshape(-1, 3, 3)
     out = np.empty((flat.shape[0], 4))
@@ -74,12 +74,13 @@ def matrix_to_quat(m: np.ndarray) -> np.ndarray:
 
 
 def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate vectors ``v (..., 3)`` from body to parent by quaternions ``q (..., 4)``."""
+    """Rotate vectors ``v (..., 3)`` from body to parent by quaternions ``q (..., 4)``.
+    ``v_parent = q ⊗ v ⊗ q*``, spec §1.3."""
     return np.einsum("...ij,...j->...i", quat_to_matrix(q), np.asarray(v, dtype=float))
 
 
 def quat_from_axis_angle(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """Quaternions of rotations by ``angle`` (rad) about unit ``axis``."""
+    """Quaternions of rotations by ``angle`` (rad) about unit ``axis`` (spec §1.3)."""
     axis = np.asarray(axis, dtype=float)
     axis = axis / np.linalg.norm(axis, axis=-1, keepdims=True)
     half = np.asarray(angle, dtype=float)[..., None] / 2.0
@@ -87,13 +88,13 @@ def quat_from_axis_angle(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
 
 
 def quat_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Angle (rad, in [0, π]) of the rotation that takes orientation ``a`` to ``b``."""
+    """Angle (rad, in [0, π]) of the rotation that takes orientation ``a`` to ``b`` (θ_ab of spec §11.6.2)."""
     dot = np.abs(np.sum(quat_normalize(a) * quat_normalize(b), axis=-1))
     return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
 
 
 def quat_slerp(a: np.ndarray, b: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """Spherical linear interpolation from ``a`` (s=0) to ``b`` (s=1) along the shorter arc."""
+    """Spherical linear interpolation from ``a`` (s=0) to ``b`` (s=1) along the shorter arc (spec §7.2)."""
     a = quat_normalize(a)
     b = quat_normalize(b)
     s = np.asarray(s, dtype=float)[..., None]
@@ -109,7 +110,8 @@ def quat_slerp(a: np.ndarray, b: np.ndarray, s: np.ndarray) -> np.ndarray:
 
 
 def quat_mean(q: np.ndarray) -> np.ndarray:
-    """The average orientation of quaternions ``(N, 4)`` (Markley et al. 2007: principal eigenvector of Σ q qᵀ)."""
+    """The average orientation of quaternions ``(N, 4)`` (Markley et al. 2007: principal eigenvector of Σ q qᵀ).
+    Spec §11.6.1."""
     q = quat_normalize(np.asarray(q, dtype=float))
     _, vecs = np.linalg.eigh(q.T @ q)
     mean = vecs[:, -1]
@@ -117,5 +119,6 @@ def quat_mean(q: np.ndarray) -> np.ndarray:
 
 
 def pose_apply(position: np.ndarray, quaternion: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Map ``points (..., 3)`` from a child frame to its parent, given the child's pose in the parent."""
+    """Map ``points (..., 3)`` from a child frame to its parent, given the child's pose in the parent.
+    Positions in m; spec §1.3."""
     return quat_rotate(quaternion, points) + np.asarray(position, dtype=float)

@@ -17,13 +17,14 @@ from haptify import schemas
 
 @lru_cache(maxsize=1)
 def catalogue() -> dict[str, dict]:
-    """The code catalogue, keyed by code (``"E203"``)."""
+    """The code catalogue ``schemas/1.0/codes.json``, keyed by code (``"E203"``; spec §0.4)."""
     return {c["code"]: c for c in schemas.load("codes.json")["codes"]}
 
 
 @dataclass
 class Finding:
-    """One coded problem: what, where (file, JSON pointer or column and time range), expected vs found."""
+    """One coded problem: what, where (file, JSON pointer or column and time range), expected vs found.
+    Spec §0.4, §4.6."""
 
     code: str
     message: str
@@ -81,7 +82,7 @@ class Finding:
 
 
 class HaptifyError(Exception):
-    """A coded failure that stops a command; holds the findings that explain it."""
+    """A coded failure that stops a command; holds the findings that explain it (spec §0.4)."""
 
     def __init__(self, *findings: Finding) -> None:
         if not findings:
@@ -95,5 +96,6 @@ class HaptifyError(Exception):
 
 
 def fail(code: str, message: str, **where: Any) -> HaptifyError:
-    """Build (not raise) a :class:`HaptifyError` with a single finding: ``raise fail("E110", ...)``."""
+    """Build (not raise) a :class:`HaptifyError` with a single finding: ``raise fail("E110", ...)``.
+    Spec §0.4."""
     return HaptifyError(Finding(code, message, **where))

@@ -34,6 +34,7 @@ PLATE_COLUMNS = [f"{c}_{a}" for c in CORNERS for a in AXES]
 
 def corner_geometry(rig: Any) -> tuple[np.ndarray, np.ndarray]:
     """Corner sensor positions ``(4, 3)`` (m, in W) and rotations ``(4, 3, 3)`` (C_i → W), ordered c1…c4.
+    Spec §14.1.
 
     Raises E603 when the rig has no force plate.
     """
@@ -189,7 +190,8 @@ def natural_frequencies(t: np.ndarray, force: np.ndarray, rate_hz: float) -> np.
 
 @dataclass
 class Placement:
-    """One static placement of the weight: time span, plate COP and mocap position (m), error (m)."""
+    """One static placement of the weight: time span, plate COP and mocap position (m), error (m).
+    Spec §14.5."""
 
     t0: float
     t1: float

@@ -177,7 +177,8 @@ def compute(ctx: Any) -> list:
 # --- report figures (spec §15.6; paper Fig. 6) ----------------------------------------------------
 
 def report_figures(ctx: Any, results: Any) -> list:
-    """Speeds and forces over time for the first usable free-space trial, and the force field (top view)."""
+    """Speeds and forces over time for the first usable free-space trial, and the force field (top view).
+    Spec §9.2–9.5, §15.6."""
     import matplotlib.pyplot as plt
 
     from haptify.report import ReportFigure

@@ -232,7 +232,7 @@ def _deep_merge(base: Any, over: Any) -> Any:
 
 @dataclass
 class LoadedMap:
-    """A validated import map and the folder its relative paths refer to."""
+    """A validated import map and the folder its relative paths refer to (spec §5.2)."""
 
     map: ImportMap
     base_dir: Path
@@ -316,7 +316,8 @@ def sanitize_id(text: str, fallback: str) -> str:
 
 @dataclass
 class C3DPlatform:
-    """One FORCE_PLATFORM entry: number (1-based), type, corners (4 × 3, POINT units, lab), origin (3)."""
+    """One FORCE_PLATFORM entry: number (1-based), type, corners (4 × 3, POINT units, lab), origin (3).
+    Spec §5.6."""
 
     number: int
     type: int | None
@@ -326,7 +327,8 @@ class C3DPlatform:
 
 @dataclass
 class C3DContent:
-    """What the importer uses from a C3D file, as ezc3d reads it (analog values already scaled)."""
+    """What the importer uses from a C3D file, as ezc3d reads it (analog values already scaled).
+    Spec §5.5."""
 
     path: Path
     manufacturer: str
@@ -460,7 +462,8 @@ PLATE_RECTANGLE_TOLERANCE_M = 0.001  # corners must form a flat rectangle to wit
 
 @dataclass
 class WorldFrame:
-    """``p_W = R · (p_lab − centre)``; ``description`` says how W was chosen (kept in the trial notes)."""
+    """``p_W = R · (p_lab − centre)``; ``description`` says how W was chosen (kept in the trial notes).
+    Positions in m; spec §5.6."""
 
     rotation: np.ndarray
     centre: np.ndarray
@@ -530,7 +533,8 @@ def plate_description(platform: C3DPlatform, to_m: Unit, *, file: str) -> tuple[
 
 
 def pose_frame(pose: Pose) -> WorldFrame:
-    """W from a ``lab_to_world`` pose (the lab frame in W): ``p_W = R · p_lab + position``."""
+    """W from a ``lab_to_world`` pose (the lab frame in W): ``p_W = R · p_lab + position``.
+    Spec §5.6 rule 2."""
     rotation = quat_to_matrix(np.asarray(pose.quaternion, dtype=np.float64))
     centre = -rotation.T @ np.asarray(pose.position, dtype=np.float64)
     return WorldFrame(rotation, centre, "W: the C3D lab frame placed in W by the map's lab_to_world pose")
@@ -661,7 +665,7 @@ def _resolve_device(m: ImportMap, base: Path, label: str) -> tuple[Device, dict,
 
 @dataclass
 class ImportResult:
-    """What an import wrote: the session path, ids, streams and the source's description."""
+    """What an import wrote: the session path, ids, streams and the source's description (spec §5.8)."""
 
     session: Path
     session_id: str

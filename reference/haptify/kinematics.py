@@ -34,13 +34,15 @@ def _dh_transforms(kin: Kinematics, q: np.ndarray) -> list[np.ndarray]:
 
 
 def forward_positions(kin: Kinematics, q: np.ndarray) -> np.ndarray:
-    """Gimbal-centre positions ``(N, 3)`` in the device frame for joint angles ``q (N, n)`` in rad."""
+    """Gimbal-centre positions ``(N, 3)`` in the device frame for joint angles ``q (N, n)`` in rad.
+    Positions in m; the DH chain of spec §2.3, §8.2."""
     tip = _dh_transforms(kin, q)[-1][:, :3, 3]
     return pose_apply(kin.base.position, kin.base.quaternion, tip)
 
 
 def jacobian(kin: Kinematics, q: np.ndarray) -> np.ndarray:
-    """Geometric position Jacobians ``∂p/∂q (N, 3, n)`` in the device frame (revolute joints)."""
+    """Geometric position Jacobians ``∂p/∂q (N, 3, n)`` in the device frame (revolute joints).
+    Units m/rad; the DH chain of spec §2.3."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     ts = _dh_transforms(kin, q)
     n = q.shape[0]
@@ -62,7 +64,8 @@ def _limit_value(limit: LinearLimit, q: np.ndarray, names: list[str]) -> np.ndar
 
 
 def joint_limits(kin: Kinematics, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Lower and upper limits ``(N, n)`` in rad at configurations ``q`` (coupled limits evaluated)."""
+    """Lower and upper limits ``(N, n)`` in rad at configurations ``q`` (coupled limits evaluated).
+    Spec §2.3, §8.2."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     names = [j.name for j in kin.joints]
     lower = np.stack([_limit_value(j.lower, q, names) for j in kin.joints], axis=1)
@@ -71,7 +74,7 @@ def joint_limits(kin: Kinematics, q: np.ndarray) -> tuple[np.ndarray, np.ndarray
 
 
 def within_limits(kin: Kinematics, q: np.ndarray, tol: float = 1e-12) -> np.ndarray:
-    """True where every joint lies within its (coupled) limits."""
+    """True where every joint lies within its (coupled) limits (``tol`` in rad; spec §8.2)."""
     lower, upper = joint_limits(kin, q)
     q = np.atleast_2d(np.asarray(q, dtype=float))
     return np.all((q >= lower - tol) & (q <= upper + tol), axis=1)
@@ -89,6 +92,7 @@ def check_limit_order(kin: Kinematics) -> None:
 
 def configurations_from_unit(kin: Kinematics, s: np.ndarray) -> np.ndarray:
     """Map unit-cube samples ``s (N, n)`` in [0, 1] to configurations within the coupled limits.
+    Spec §8.3 step 3.
 
     Joint by joint: ``q_j = lower_j(q_<j) + s_j · (upper_j(q_<j) − lower_j(q_<j))``; where the coupled
     range is empty the configuration is infeasible and returned as NaN.

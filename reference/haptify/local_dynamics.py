@@ -254,7 +254,8 @@ def pwl_eval(breakpoints: np.ndarray, values: np.ndarray, u: np.ndarray) -> np.n
 
 
 def pwl_basis(breakpoints: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """The ``(N, K)`` matrix Φ with ``pwl_eval(bp, v, u) == Φ @ v`` (hat functions, extended at the ends)."""
+    """The ``(N, K)`` matrix Φ with ``pwl_eval(bp, v, u) == Φ @ v`` (hat functions, extended at the ends).
+    Φ of spec §11.4.3."""
     bp = np.asarray(breakpoints, dtype=float)
     k, s = _segments(bp, np.asarray(u, dtype=float))
     phi = np.zeros((len(k), len(bp)))
@@ -517,7 +518,7 @@ def _max_pole_modulus(st: _Structure, theta: np.ndarray) -> float:
 
 @dataclass
 class FitReport:
-    """What :func:`fit` did: iterations, why it stopped, the cost history."""
+    """What :func:`fit` did: iterations, why it stopped, the cost history (spec §11.4.3)."""
 
     iterations: int
     stop_reason: str
@@ -861,7 +862,8 @@ class TrialData:
 
 
 def valid_runs(valid: np.ndarray, min_samples: int = 2) -> list[slice]:
-    """Slices of the contiguous True runs of ``valid`` with at least ``min_samples`` samples."""
+    """Slices of the contiguous True runs of ``valid`` with at least ``min_samples`` samples.
+    The runs of spec §11.1."""
     v = np.concatenate([[False], np.asarray(valid, dtype=bool), [False]])
     edges = np.flatnonzero(np.diff(v.astype(np.int8)))
     return [slice(a, b) for a, b in zip(edges[::2], edges[1::2]) if b - a >= min_samples]

@@ -50,12 +50,12 @@ class MetricFamily(BaseModel):
 
 @lru_cache(maxsize=None)
 def family(name: str) -> MetricFamily:
-    """The parsed definition file ``metrics/<name>.json``."""
+    """The parsed definition file ``metrics/<name>.json`` (spec §0.3)."""
     return MetricFamily.model_validate(schemas.load(f"metrics/{name}.json"))
 
 
 def param(family_name: str, key: str) -> Any:
-    """The value of parameter ``key`` of family ``family_name`` (units as its definition says)."""
+    """The value of parameter ``key`` of family ``family_name`` (units as its definition says; spec §0.3)."""
     return family(family_name).parameters[key].value
 
 

@@ -23,7 +23,8 @@ from haptify.results import MetricResult, Unavailable
 
 @dataclass
 class TrialValue:
-    """One repetition's value of one metric, with the trial it came from and that trial's warning codes."""
+    """One repetition's value of one metric, with the trial it came from and that trial's warning codes.
+    Spec §15.3."""
 
     trial: str
     value: float
@@ -31,7 +32,8 @@ class TrialValue:
 
 
 def definition_of(family_name: str, metric_id: str):
-    """The metric's definition record in ``metrics/<family_name>.json`` (KeyError when absent)."""
+    """The metric's definition record in ``metrics/<family_name>.json`` (KeyError when absent).
+    Spec §15.2."""
     for m in family(family_name).metrics:
         if m.id == metric_id:
             return m
@@ -69,7 +71,8 @@ def aggregate(family_name: str, metric_id: str, values: Sequence[TrialValue], *,
 
 def single(family_name: str, metric_id: str, value: float, *, n: int = 1, trials: Sequence[str] = (),
            diagnostics: dict[str, Any] | None = None, warnings: Sequence[str] = ()) -> MetricResult:
-    """A metric with one value that is not a mean over repetitions (e.g. the modeled workspace volume)."""
+    """A metric with one value that is not a mean over repetitions (e.g. the modeled workspace volume).
+    Its definition's ``aggregation``, spec §15.3."""
     return MetricResult(
         id=metric_id, value=float(value), unit=definition_of(family_name, metric_id).unit,
         per_repetition=[], trials=list(trials), n=n, sd=None, diagnostics=dict(diagnostics or {}),
@@ -78,7 +81,7 @@ def single(family_name: str, metric_id: str, value: float, *, n: int = 1, trials
 
 
 def unavailable(metric_id: str, error: HaptifyError) -> Unavailable:
-    """The record of a metric stopped by a coded error (its first finding's code and message)."""
+    """The record of a metric stopped by a coded error (its first finding's code and message; spec §15.2)."""
     finding = error.findings[0]
     return Unavailable(id=metric_id, code=finding.code, reason=finding.message)
 

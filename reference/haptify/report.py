@@ -29,7 +29,7 @@ WAV_RATE_HZ = 44_100  # the paper's audio rate (§VI-C)
 
 @dataclass
 class ReportFigure:
-    """One figure of the report: a file stem, a caption and the matplotlib figure."""
+    """One figure of the report: a file stem, a caption and the matplotlib figure (spec §15.6)."""
 
     name: str
     caption: str
@@ -38,7 +38,7 @@ class ReportFigure:
 
 @dataclass
 class ReportAudio:
-    """A signal to render as a WAV file: ``samples`` (SI units) at ``rate_hz``."""
+    """A signal to render as a WAV file: ``samples`` (SI units) at ``rate_hz`` (spec §15.6)."""
 
     name: str
     caption: str

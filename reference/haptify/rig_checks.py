@@ -24,7 +24,7 @@ FAMILY = "rig"
 
 
 def rp(key: str) -> Any:
-    """A parameter of the rig family."""
+    """A parameter of the rig family (units as its definition says; spec §14.7)."""
     return param(FAMILY, key)
 
 
@@ -199,7 +199,8 @@ def compute(ctx: Any) -> list[MetricResult | Unavailable]:
 
 @dataclass
 class Check:
-    """One line of ``haptify rig-check``: status PASS, FAIL, WARN (advisory shortfall) or SKIP (no data)."""
+    """One line of ``haptify rig-check``: status PASS, FAIL, WARN (advisory shortfall) or SKIP (no data).
+    Spec §14.8."""
 
     name: str
     status: str

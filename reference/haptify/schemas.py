@@ -31,5 +31,5 @@ def list_dir(sub: str) -> list[str]:
 
 
 def schema(name: str) -> dict:
-    """The JSON Schema called ``name`` (``"session"`` → ``session.schema.json``)."""
+    """The JSON Schema called ``name`` (``"session"`` → ``session.schema.json``; spec §0.3)."""
     return load(f"{name}.schema.json")

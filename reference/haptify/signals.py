@@ -42,7 +42,7 @@ def sp(key: str) -> Any:
 # --- primitives (spec §7.2) ----------------------------------------------------------------------
 
 def nominal_rate(t: np.ndarray) -> float:
-    """Mean sample rate of a time column, Hz: ``(n − 1) / (t_last − t_first)``."""
+    """Mean sample rate of a time column, Hz: ``(n − 1) / (t_last − t_first)`` (spec §2.6)."""
     t = np.asarray(t, float)
     return float((len(t) - 1) / (t[-1] - t[0])) if len(t) > 1 and t[-1] > t[0] else float("inf")
 
@@ -56,7 +56,8 @@ def uniform_grid(t0: float, t1: float, rate_hz: float) -> np.ndarray:
 
 
 def effective_cutoff(cutoff_hz: float, *rates_hz: float) -> float:
-    """``cutoff_hz`` lowered to ``max_cutoff_fraction`` of the lowest Nyquist frequency among ``rates_hz`` (Hz)."""
+    """``cutoff_hz`` lowered to ``max_cutoff_fraction`` of the lowest Nyquist frequency among ``rates_hz`` (Hz).
+    Spec §7.2."""
     frac = float(sp("max_cutoff_fraction"))
     return float(min([cutoff_hz] + [frac * r / 2.0 for r in rates_hz if np.isfinite(r)]))
 
@@ -83,7 +84,8 @@ def lowpass(x: np.ndarray, rate_hz: float, cutoff_hz: float, *, order: int | Non
 
 
 def interp_columns(t_src: np.ndarray, x_src: np.ndarray, t_dst: np.ndarray) -> np.ndarray:
-    """Linear interpolation of every column of ``x_src (N, k)`` at ``t_dst`` (values at the ends are held)."""
+    """Linear interpolation of every column of ``x_src (N, k)`` at ``t_dst`` (values at the ends are held).
+    Spec §7.2."""
     x_src = np.asarray(x_src, float)
     if x_src.ndim == 1:
         return np.interp(t_dst, t_src, x_src)
@@ -102,7 +104,8 @@ def lowpass_resample(t_src: np.ndarray, x_src: np.ndarray, t_dst: np.ndarray, cu
 
 
 def quat_log(q: np.ndarray) -> np.ndarray:
-    """Rotation vectors (rad) of unit quaternions ``(..., 4)``: angle·axis, angle in [0, π]."""
+    """Rotation vectors (rad) of unit quaternions ``(..., 4)``: angle·axis, angle in [0, π].
+    ``log`` of spec §7.4 step 4."""
     q = quat_normalize(q)
     q = np.where(q[..., :1] < 0, -q, q)
     v = q[..., 1:]
@@ -135,7 +138,7 @@ def angular_velocity(t: np.ndarray, q: np.ndarray) -> np.ndarray:
 @dataclass
 class Kinematics:
     """Handle motion in W at times ``t`` (s): position (m), unit quaternion body → world, velocity (m/s),
-    angular velocity (rad/s, world frame). NaN rows where the data are not usable."""
+    angular velocity (rad/s, world frame). NaN rows where the data are not usable (spec §7.4)."""
 
     t: np.ndarray
     position: np.ndarray
@@ -146,7 +149,8 @@ class Kinematics:
 
 @dataclass
 class MocapTrack(Kinematics):
-    """Processed motion capture at its native samples: NaN (and ``segment`` −1) where unusable."""
+    """Processed motion capture at its native samples: NaN (and ``segment`` −1) where unusable.
+    Spec §7.4 steps 1–4."""
 
     segment: np.ndarray  # segment index per sample, −1 outside every usable segment
 
@@ -183,7 +187,8 @@ def bridge_gaps(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray,
 
 
 def segments_of(t: np.ndarray, ok: np.ndarray, min_segment_s: float | None = None) -> np.ndarray:
-    """Segment index per sample: maximal runs of ``ok`` lasting at least ``min_segment_s``, else −1."""
+    """Segment index per sample: maximal runs of ``ok`` lasting at least ``min_segment_s``, else −1.
+    ``min_segment_s`` in s; spec §7.4 step 3."""
     min_segment_s = float(sp("min_segment_s")) if min_segment_s is None else min_segment_s
     seg = np.full(len(ok), -1)
     edges = np.flatnonzero(np.diff(np.r_[0, ok.astype(int), 0]))
@@ -221,7 +226,7 @@ def process_mocap(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray) -
 
 @dataclass
 class PoseOnGrid(Kinematics):
-    """Motion-capture quantities on a time grid; NaN where ``valid`` is False."""
+    """Motion-capture quantities on a time grid; NaN where ``valid`` is False (spec §7.4 step 5)."""
 
     valid: np.ndarray
 
@@ -285,7 +290,8 @@ def mocap_track(ctx_or_session: Any, trial_id: str) -> MocapTrack:
 
 
 def pose_on_grid(ctx_or_session: Any, trial_id: str, grid: np.ndarray) -> PoseOnGrid:
-    """The trial's handle pose, velocity and angular velocity at ``grid`` (E611 when nothing is usable)."""
+    """The trial's handle pose, velocity and angular velocity at ``grid`` (E611 when nothing is usable).
+    SI units; spec §7.4."""
     track = mocap_track(ctx_or_session, trial_id)
     out = resample_track(track, grid)
     if not out.valid.any():

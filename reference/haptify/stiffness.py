@@ -31,7 +31,7 @@ def stp(key: str) -> Any:
 
 
 def runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """Maximal runs ``[start, stop)`` of True in ``mask``."""
+    """Maximal runs ``[start, stop)`` of True in ``mask`` (sample indices; the runs of spec §13.2)."""
     edges = np.flatnonzero(np.diff(np.r_[0, np.asarray(mask, dtype=np.int8), 0]))
     return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
 

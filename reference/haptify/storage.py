@@ -97,7 +97,7 @@ def resolve_inside(root: Path, relative: str, *, label: str | None = None) -> Pa
 
 
 def pointer_of(loc: Iterable[Any]) -> str:
-    """A JSON pointer (RFC 6901) from a pydantic/jsonschema location tuple."""
+    """A JSON pointer (RFC 6901) from a pydantic/jsonschema location tuple (spec §4.6)."""
     parts = [str(p).replace("~", "~0").replace("/", "~1") for p in loc]
     return "/" + "/".join(parts) if parts else ""
 
@@ -138,7 +138,7 @@ def parse_json_file(path: Path, code: str, label: str) -> Any:
 
 
 def pydantic_findings(exc: ValidationError, code: str, label: str) -> list[Finding]:
-    """One finding per pydantic error, with JSON pointer and expected/found."""
+    """One finding per pydantic error, with JSON pointer and expected/found (spec §4.6)."""
     out = []
     for err in exc.errors(include_url=False):
         found = err.get("input")
@@ -151,6 +151,7 @@ def pydantic_findings(exc: ValidationError, code: str, label: str) -> list[Findi
 
 def read_json_model(path: str | os.PathLike, model: type, code: str):
     """Read a JSON file into a pydantic ``model``; a missing, malformed or invalid file is ``code``.
+    Spec §0.4.
 
     Used for every standalone document (results files, model parameter files): the finding names the
     file, the JSON pointer of each invalid field, what was expected and what was found.
@@ -248,7 +249,8 @@ class SessionFolder:
 
 
 def read_table(path: Path, fmt: str, columns: list[str], *, label: str) -> pd.DataFrame:
-    """Read a stream file as float64 columns; unreadable files raise E112, a wrong CSV header E211."""
+    """Read a stream file as float64 columns; unreadable files raise E112, a wrong CSV header E211.
+    Spec §3.2."""
     try:
         if fmt == "parquet":
             table = pq.read_table(path)
@@ -274,7 +276,7 @@ def read_table(path: Path, fmt: str, columns: list[str], *, label: str) -> pd.Da
 
 
 def open_session(path: str | os.PathLike) -> SessionFolder:
-    """Open a session folder and parse its manifest (E101–E105); streams are read lazily."""
+    """Open a session folder and parse its manifest (E101–E105); streams are read lazily (spec §3.1)."""
     root = Path(path)
     if not root.is_dir():
         raise fail("E101", f"{str(root)!r} is not a session folder", file=str(root))
@@ -295,7 +297,7 @@ def open_session(path: str | os.PathLike) -> SessionFolder:
 # --- writing -----------------------------------------------------------------------------------
 
 def write_table(path: Path, frame: pd.DataFrame, fmt: str) -> None:
-    """Write a float64 table as Parquet (zstd) or CSV (shortest round-trip decimal, NaN as 'NaN').
+    """Write a float64 table as Parquet (zstd) or CSV (shortest round-trip decimal, NaN as 'NaN'), spec §3.2.
 
     Parquet columns are PLAIN-encoded: dictionary encoding never pays off for measured floats and makes
     files larger and reading ~2x slower (benchmarks/bench_io.py).
@@ -341,7 +343,8 @@ def atomic_write_json(path: Path, payload: Any) -> None:
 
 
 def replace_folder_atomically(build: Path, target: Path, overwrite: bool) -> None:
-    """Move a fully written ``build`` folder to ``target`` (E901 when it exists and not ``overwrite``)."""
+    """Move a fully written ``build`` folder to ``target`` (E901 when it exists and not ``overwrite``).
+    Spec §3.6."""
     if target.exists():
         if not overwrite:
             shutil.rmtree(build, ignore_errors=True)

@@ -31,7 +31,8 @@ def sfp(key: str) -> Any:
 
 
 def unit_normal(normal: Any, trial_id: str = "") -> np.ndarray:
-    """The rendering's outward normal scaled to unit length (E303 when it is zero or not finite)."""
+    """The rendering's outward normal scaled to unit length (E303 when it is zero or not finite).
+    Spec §12.2."""
     n = np.asarray(normal, dtype=float)
     norm = float(np.linalg.norm(n))
     if not np.isfinite(norm) or norm < 1e-9:
