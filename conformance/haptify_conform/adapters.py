@@ -22,7 +22,8 @@ from haptify_conform.cases import Case
 
 @dataclass
 class Answer:
-    """What the implementation said: ``results`` (accepted), ``findings`` (rejected), skipped, or an error."""
+    """What the implementation said: ``results`` (accepted), ``findings`` (rejected), skipped, or an error.
+    Spec §16.4."""
 
     kind: str  # "results" | "rejected" | "skipped" | "error"
     payload: Any = None
@@ -41,7 +42,8 @@ def note_implementation(adapter: Any, answer: Answer) -> Answer:
 
 
 def classify(document: Any) -> Answer:
-    """Read an implementation's output document: a results.json, or a findings report."""
+    """Read an implementation's output document: a results.json, or a findings report.
+    Any other document is an error of the implementation, spec §16.4.1."""
     if not isinstance(document, dict):
         return Answer("error", message=f"output is not a JSON object but {type(document).__name__}")
     not_lists = [k for k in ("metrics", "unavailable", "warnings", "findings") if k in document and not isinstance(document[k], list)]
@@ -58,7 +60,8 @@ def classify(document: Any) -> Answer:
 
 
 class CmdAdapter:
-    """``--cmd "PROGRAM {session} {out}"``: one process per case (substituted: {session} {out} {metric} {case} {params})."""
+    """``--cmd "PROGRAM {session} {out}"``: one process per case (substituted: {session} {out} {metric} {case} {params}).
+    Spec §16.4.1."""
 
     name = "cmd"
 
@@ -220,7 +223,8 @@ class JsonlAdapter:
 
 
 class PythonAdapter:
-    """``--python module:function``: ``function(session, metric, parameters) -> dict`` called in-process."""
+    """``--python module:function``: ``function(session, metric, parameters) -> dict`` called in-process.
+    Spec §16.4.3."""
 
     name = "python"
 
@@ -246,7 +250,8 @@ class PythonAdapter:
 
 
 def serve_jsonl(analyse: Callable[[str, str, dict], dict], implementation: dict, stdin=None, stdout=None) -> int:
-    """Serve the JSON-lines protocol for a Python ``analyse`` function (used by the reference server)."""
+    """Serve the JSON-lines protocol for a Python ``analyse`` function (used by the reference server).
+    Protocol 1 of spec §16.4.2."""
     import sys
 
     stdin = stdin or sys.stdin

@@ -78,7 +78,7 @@ def _load(root: Path) -> tuple[Case, ...]:
 
 
 def load_cases(root: Path = SUITE_ROOT) -> list[Case]:
-    """Every case of the suite, in file order."""
+    """Every case of the suite, in file order (``conformance/cases/*.json``, spec §16.1–16.2)."""
     return list(_load(root))
 
 

@@ -23,6 +23,7 @@ from haptify_conform.selftest import self_test
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``haptify-conform`` options: adapters (spec §16.4), selection, timeouts (§16.5), reports (§16.6)."""
     p = argparse.ArgumentParser(prog="haptify-conform", description="Check an implementation against the Haptify conformance suite.")
     how = p.add_mutually_exclusive_group()
     how.add_argument("--cmd", help='a command per case, e.g. "mytool {session} {out}" (also {metric} {case} {params})')
@@ -51,6 +52,7 @@ def make_adapter(args):
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the suite, the linter or the self-test; exit 0, 1 or 2 as spec §16.6 says."""
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

@@ -11,7 +11,8 @@ from haptify_conform.cases import Case
 
 @dataclass
 class Verdict:
-    """The outcome of one case: ``passed``/``failed``/``skipped``/``error`` with the evidence."""
+    """The outcome of one case: ``passed``/``failed``/``skipped``/``error`` with the evidence.
+    Spec §16.3, §16.6."""
 
     case_id: str
     metric: str
@@ -37,7 +38,8 @@ def _components(value: Any) -> list[float] | None:
 
 
 def judge_metric(case: Case, results: dict) -> Verdict:
-    """Compare the metric record in ``results`` (a results.json object) with the case's expectation."""
+    """Compare the metric record in ``results`` (a results.json object) with the case's expectation.
+    Spec §16.3."""
     base = dict(case_id=case.id, metric=case.metric, spec_section=case.spec_section, level=case.level)
     if case.expected.codes:
         return Verdict(status="failed", message=f"expected the session to be rejected with {case.expected.codes}, "
@@ -73,7 +75,8 @@ def judge_metric(case: Case, results: dict) -> Verdict:
 
 
 def judge_rejection(case: Case, findings: list[dict]) -> Verdict:
-    """The implementation rejected the session with ``findings``: right when the case expects it."""
+    """The implementation rejected the session with ``findings``: right when the case expects it.
+    Spec §16.3."""
     base = dict(case_id=case.id, metric=case.metric, spec_section=case.spec_section, level=case.level)
     codes = sorted({str(f.get("code")) for f in findings if isinstance(f, dict)})
     if not case.expected.codes or case.expected.valid:
@@ -88,6 +91,7 @@ def judge_rejection(case: Case, findings: list[dict]) -> Verdict:
 
 def judge_acceptance(case: Case, report: dict) -> Verdict:
     """A 'validate' case on a valid session: the implementation must accept it (no error findings).
+    Spec §16.3.
 
     With ``valid: true`` and ``codes`` (a session that is valid but deserves warnings) the accepted
     document's findings (or results warnings) must hold at least those codes.

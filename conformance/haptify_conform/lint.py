@@ -15,7 +15,8 @@ MIN_CASES_PER_METRIC = 3
 
 
 def lint(root: Path = SUITE_ROOT, repo: Path = REPO_ROOT) -> list[str]:
-    """Every problem of the suite as a readable line; empty when the suite is sound."""
+    """Every problem of the suite as a readable line; empty when the suite is sound.
+    The checks of spec §16.7."""
     problems: list[str] = []
     cases = []
     for path in case_files(root):

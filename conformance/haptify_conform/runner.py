@@ -23,7 +23,7 @@ def load_skips(path: Path | None) -> dict[str, str]:
 
 
 def judge(case: Case, answer: Answer) -> Verdict:
-    """Turn an implementation's answer into a verdict for ``case``."""
+    """Turn an implementation's answer into a verdict for ``case`` (spec §16.3)."""
     base = dict(case_id=case.id, metric=case.metric, spec_section=case.spec_section, level=case.level)
     if answer.kind == "error":
         verdict = Verdict(status="error", message=answer.message, **base)
@@ -41,7 +41,7 @@ def judge(case: Case, answer: Answer) -> Verdict:
 
 def run_cases(cases: Iterable[Case], adapter, skips: dict[str, str] | None = None,
               on_verdict: Callable[[Verdict], None] | None = None, repo: Path = REPO_ROOT) -> list[Verdict]:
-    """Run every case (skip-listed ones are reported as skipped, never silently dropped).
+    """Run every case (skip-listed ones are reported as skipped, never silently dropped; spec §16.5).
 
     Fixtures are looked up under ``repo/fixtures``.
     """

@@ -14,7 +14,8 @@ PROBE = Case(id="self-test.missing-session", metric="validate", spec_section="16
 
 
 def self_test(adapter) -> tuple[bool, list[str]]:
-    """Run the protocol probes; returns (all passed, readable PASS/FAIL lines)."""
+    """Run the protocol probes; returns (all passed, readable PASS/FAIL lines).
+    The ``--self-test`` of spec §16.4.3."""
     lines: list[str] = []
 
     def check(ok: bool, what: str) -> bool:
