@@ -100,7 +100,8 @@ def band_noise(rng: np.random.Generator, n: int, rate_hz: float, f_lo: float, f_
 
 
 def derivative(x: np.ndarray, rate_hz: float, order: int = 1) -> np.ndarray:
-    """Finite-difference time derivative (second-order accurate, ``numpy.gradient``) along axis 0."""
+    """Finite-difference time derivative (second-order accurate, ``numpy.gradient``) along axis 0.
+    Units of ``x`` per s^order."""
     for _ in range(order):
         x = np.gradient(x, 1.0 / rate_hz, axis=0)
     return x
@@ -113,7 +114,7 @@ def angular_speed(quaternion: np.ndarray, rate_hz: float) -> np.ndarray:
 
 
 def rotation_vector_to_quat(r: np.ndarray) -> np.ndarray:
-    """Quaternions of rotation vectors ``r (N, 3)`` (axis × angle, rad)."""
+    """Quaternions of rotation vectors ``r (N, 3)`` (axis × angle, rad; [w, x, y, z], spec §1.3)."""
     ang = np.linalg.norm(r, axis=-1)
     axis = np.where(ang[:, None] > 1e-15, r / np.where(ang > 1e-15, ang, 1.0)[:, None], [1.0, 0.0, 0.0])
     return quat_from_axis_angle(axis, ang)
@@ -138,7 +139,8 @@ def tremor(rng: np.random.Generator, n: int, rate_hz: float, accel_rms: float = 
 
 @dataclass
 class HandTrajectory:
-    """A hand path: gimbal-centre position (m, W) and handle orientation (wxyz, H → W) on a uniform clock."""
+    """A hand path: gimbal-centre position (m, W) and handle orientation (wxyz, H → W) on a uniform clock.
+    Spec §1.3."""
 
     t: np.ndarray
     position_W: np.ndarray
@@ -694,7 +696,8 @@ def handle_rotation(rng: np.random.Generator, duration_s: float = 40.0, *, rate_
 
 @dataclass
 class PlateLoad:
-    """An external load on the force plate: force (N, W) applied at ``point_W`` (m) on the plate, per sample."""
+    """An external load on the force plate: force (N, W) applied at ``point_W`` (m) on the plate, per sample.
+    The ball and the weight of paper Appendix 1–2."""
 
     t: np.ndarray
     force_W: np.ndarray

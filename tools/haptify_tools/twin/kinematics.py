@@ -24,7 +24,8 @@ from haptify_tools.twin.model import Box, Cylinder, HalfSpace, Sphere, TwinFile
 
 
 def nominal_kinematics(twin: TwinFile) -> Kinematics:
-    """The nominal DH chain of the twin (what the device's software and the standard description use)."""
+    """The nominal DH chain of the twin (what the device's software and the standard description use).
+    ``device.kinematics``, spec §2.3."""
     return twin.device.kinematics
 
 
@@ -53,24 +54,26 @@ def rows_times(x: np.ndarray, m: np.ndarray) -> np.ndarray:
 
 
 def placement_matrix(twin: TwinFile) -> tuple[np.ndarray, np.ndarray]:
-    """Rotation ``R_WD (3, 3)`` and translation ``t_WD (3,)`` of the device frame in W."""
+    """Rotation ``R_WD (3, 3)`` and translation ``t_WD (3,)`` of the device frame in W.
+    ``t_WD`` in m; ``device_placement``, spec §1.2, §2.1."""
     return quat_to_matrix(np.asarray(twin.placement.quaternion)), np.asarray(twin.placement.position, dtype=float)
 
 
 def world_to_device(twin: TwinFile, p_W: np.ndarray) -> np.ndarray:
-    """Points ``(N, 3)`` from W to the device frame D."""
+    """Points ``(N, 3)`` from W to the device frame D (m; frames of spec §1.2)."""
     r, t = placement_matrix(twin)
     return rows_times(np.atleast_2d(p_W) - t, r)
 
 
 def device_to_world(twin: TwinFile, p_D: np.ndarray) -> np.ndarray:
-    """Points ``(N, 3)`` from the device frame D to W."""
+    """Points ``(N, 3)`` from the device frame D to W (m; frames of spec §1.2)."""
     r, t = placement_matrix(twin)
     return rows_times(np.atleast_2d(p_D), r.T) + t
 
 
 def link_transforms(kin: Kinematics, q: np.ndarray) -> list[np.ndarray]:
-    """Homogeneous transforms ``(N, 4, 4)`` of DH frames 0..n in the device frame (frame 0 = the DH base)."""
+    """Homogeneous transforms ``(N, 4, 4)`` of DH frames 0..n in the device frame (frame 0 = the DH base).
+    ``T_{i−1,i}`` of spec §2.3, translations in m."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     base = np.eye(4)
     base[:3, :3] = quat_to_matrix(np.asarray(kin.base.quaternion))
@@ -119,7 +122,8 @@ def _candidates(kin: Kinematics, p_B: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 
 def limit_violation(kin: Kinematics, q: np.ndarray) -> np.ndarray:
-    """Sum over joints of how far ``q (N, n)`` lies outside its coupled limits, rad (0 inside)."""
+    """Sum over joints of how far ``q (N, n)`` lies outside its coupled limits, rad (0 inside).
+    The coupled limits of spec §2.3."""
     lower, upper = ref.joint_limits(kin, q)
     q = np.atleast_2d(q)
     return np.sum(np.maximum(lower - q, 0.0) + np.maximum(q - upper, 0.0), axis=1)
@@ -216,20 +220,22 @@ def collision_clearance(twin: TwinFile, p_D: np.ndarray) -> np.ndarray:
 
 
 def in_collision(twin: TwinFile, p_D: np.ndarray) -> np.ndarray:
-    """True where the end-effector at gimbal-centre positions ``p_D (N, 3)`` would intersect the base or table."""
+    """True where the end-effector at gimbal-centre positions ``p_D (N, 3)`` would intersect the base or table.
+    ``p_D`` in m."""
     return collision_clearance(twin, p_D) < 0.0
 
 
 def reachable(twin: TwinFile, p_W: np.ndarray) -> np.ndarray:
     """True where the true device can put its gimbal centre at ``p_W (N, 3)``: IK solution within the
-    coupled joint limits and no base collision."""
+    coupled joint limits and no base collision; ``p_W`` in m."""
     p_D = world_to_device(twin, p_W)
     _, ok = inverse_kinematics(true_kinematics(twin), p_D)
     return ok & ~in_collision(twin, p_D)
 
 
 def random_reachable_points(twin: TwinFile, n: int, rng: np.random.Generator) -> np.ndarray:
-    """``n`` gimbal-centre points ``(n, 3)`` in W, uniform in joint space within the limits, collision-free."""
+    """``n`` gimbal-centre points ``(n, 3)`` in W, uniform in joint space within the limits, collision-free.
+    Positions in m."""
     kin = true_kinematics(twin)
     out = []
     while sum(len(o) for o in out) < n:
@@ -255,7 +261,8 @@ def gimbal_angles(twin: TwinFile, q: np.ndarray, quaternion_W: np.ndarray,
                   frames: list[np.ndarray] | None = None) -> np.ndarray:
     """The three passive gimbal angles ``(N, 3)`` in rad that give the handle orientation ``quaternion_W``
     (wxyz, handle → W) with the arm at ``q``; sequence ``gimbal_body.axes`` (intrinsic). ``frames``
-    (from :func:`link_transforms` of the true kinematics at ``q``) saves recomputing them."""
+    (from :func:`link_transforms` of the true kinematics at ``q``) saves recomputing them.
+    Quaternion convention of spec §1.3."""
     r_ref = _arm_end_rotation_W(twin, true_kinematics(twin), q, frames)
     r_h = quat_to_matrix(np.atleast_2d(quaternion_W))
     rel = np.swapaxes(r_ref, 1, 2) @ r_h
@@ -265,7 +272,8 @@ def gimbal_angles(twin: TwinFile, q: np.ndarray, quaternion_W: np.ndarray,
 
 
 def handle_quaternion(twin: TwinFile, q: np.ndarray, angles: np.ndarray) -> np.ndarray:
-    """Handle orientation ``(N, 4)`` wxyz in W from arm angles ``q`` and gimbal angles (inverse of :func:`gimbal_angles`)."""
+    """Handle orientation ``(N, 4)`` wxyz in W from arm angles ``q`` and gimbal angles (inverse of :func:`gimbal_angles`).
+    Spec §1.3."""
     r_ref = _arm_end_rotation_W(twin, true_kinematics(twin), q)
     rel = Rotation.from_euler(twin.gimbal_body.axes.upper(), np.atleast_2d(angles)).as_matrix()
     xyzw = Rotation.from_matrix(r_ref @ rel).as_quat()

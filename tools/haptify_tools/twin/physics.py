@@ -341,6 +341,7 @@ def _gimbal_axes_D(twin: TwinFile, frames: list[np.ndarray], angles: np.ndarray)
 @dataclass
 class HandPathResult:
     """What the device does along a hand path, passive or active (W frame, SI units).
+    The wrench on the hand as spec §1.5 defines it.
 
     ``force_W``/``torque_W``: force and torque the device applies to the hand at the gimbal centre.
     ``base_force_W``/``base_torque_W``: wrench the whole device (base included, with its full weight)

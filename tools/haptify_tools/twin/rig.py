@@ -93,7 +93,7 @@ class RigConfig:
 # --- geometry -------------------------------------------------------------------------------------
 
 def yaw_quat(yaw: float) -> np.ndarray:
-    """Unit quaternion of a rotation by ``yaw`` rad about z."""
+    """Unit quaternion of a rotation by ``yaw`` rad about z ([w, x, y, z], spec §1.3)."""
     return quat_from_axis_angle(np.array([0.0, 0.0, 1.0]), np.array(yaw))
 
 
@@ -105,12 +105,13 @@ def corner_positions(cfg: RigConfig) -> np.ndarray:
 
 
 def corner_quaternions(cfg: RigConfig) -> np.ndarray:
-    """Corner sensor frames in W: each turned about z so its cable points outwards (45°, 135°, 225°, 315°)."""
+    """Corner sensor frames in W: each turned about z so its cable points outwards (45°, 135°, 225°, 315°).
+    The ``rig.force_plate.corners`` poses of spec §2.4."""
     return np.array([yaw_quat(a * DEG) for a in (45.0, 135.0, 225.0, 315.0)])
 
 
 def marker_layout(links: list[str], link_lengths: list[float]) -> dict[str, np.ndarray]:
-    """Marker positions ``(3, 3)`` in each rigid body's frame: the base, every arm link, the handle.
+    """Marker positions ``(3, 3)`` in each rigid body's frame: the base, every arm link, the handle (m).
 
     Arm links use distal DH frames (the link lies along −x from the frame origin), so the three markers
     sit at 25 %, 50 % and 75 % of its length, lifted off the axis by 12–18 mm so they are not collinear.
@@ -176,6 +177,7 @@ def occlusion_mask(rng: np.random.Generator, n: int, rate_hz: float, gaps_per_s:
 
 def mocap_markers(rng: np.random.Generator, cfg: RigConfig, positions: dict[str, np.ndarray]) -> tuple[dict, dict[str, np.ndarray]]:
     """Noisy, occluded marker positions (``markers`` columns without ``t``) and each marker's occlusion mask.
+    Spec §2.6; NaN for occlusion as §2.7.
 
     ``positions`` maps a marker label to its true positions ``(N, 3)`` (m, W) at the mocap rate.
     """
@@ -207,7 +209,8 @@ def pose_noise(rng: np.random.Generator, cfg: RigConfig, position: np.ndarray, q
 
 
 def pose_columns(prefix: str, position: np.ndarray, quaternion: np.ndarray, occluded: np.ndarray) -> dict:
-    """Columns ``<prefix>px … <prefix>qz`` of a pose, NaN where ``occluded``."""
+    """Columns ``<prefix>px … <prefix>qz`` of a pose, NaN where ``occluded``.
+    Positions in m, unit quaternions; spec §2.6."""
     pos = position.copy()
     q = quaternion.copy()
     pos[occluded] = np.nan
@@ -222,6 +225,7 @@ def pose_columns(prefix: str, position: np.ndarray, quaternion: np.ndarray, occl
 @dataclass
 class HandleLoads:
     """What the rig needs to model the handle sensors, on the F/T clock: the device's wrench on the hand.
+    The reported wrench of spec §1.5.
 
     ``force_W`` (N) acts at the gimbal centre, ``torque_W`` (N·m) is about the gimbal centre, both in W.
     """
@@ -348,7 +352,8 @@ def corner_loads(positions: np.ndarray, force_W: np.ndarray, moment_W: np.ndarra
 
 @dataclass
 class PlateErrors:
-    """The force plate's hidden imperfections: true corner positions ``(4, 3)`` and gains ``(4, 3)``."""
+    """The force plate's hidden imperfections: true corner positions ``(4, 3)`` and gains ``(4, 3)``.
+    Positions in m, gains dimensionless."""
 
     positions: np.ndarray
     gains: np.ndarray
@@ -402,7 +407,8 @@ def plate_wrench(rng: np.random.Generator, cfg: RigConfig, *, force_W: np.ndarra
 # --- sync and clocks ------------------------------------------------------------------------------
 
 def sync_trigger(cfg: RigConfig, t: np.ndarray, t0: float) -> dict:
-    """The ``sync`` column: the multicontact switch closed once, ``sync_pulse_start_s`` after the trial start."""
+    """The ``sync`` column: the multicontact switch closed once, ``sync_pulse_start_s`` after the trial start.
+    The ``sync`` kind of spec §2.6, 0 or 1; times in s."""
     start = t0 + cfg.sync_pulse_start_s
     return {"trigger": ((t >= start) & (t < start + cfg.sync_pulse_length_s)).astype(float)}
 

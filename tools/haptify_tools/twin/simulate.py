@@ -80,7 +80,8 @@ class SimulationOptions:
 
 
 def parse_protocols(text: str) -> tuple[str, ...]:
-    """``all`` or a comma-separated list of device protocols / rig trial names (E903 for unknown names)."""
+    """``all`` or a comma-separated list of device protocols / rig trial names (E903 for unknown names).
+    Protocols of spec §2.5."""
     if text.strip() == "all":
         return DEVICE_PROTOCOLS
     names = tuple(n.strip() for n in text.split(",") if n.strip())
@@ -101,6 +102,7 @@ def trial_rng(seed: int, trial_id: str) -> tuple[np.random.Generator, np.random.
 
 @dataclass
 class PlannedTrial:
+    """A planned trial: id, trial name, standard protocol (spec §2.5), repetition, label, start ``t0`` (s)."""
     trial_id: str
     name: str           # device protocol or rig trial name
     protocol: str       # the standard protocol
@@ -152,7 +154,8 @@ def plan(options: SimulationOptions) -> list[PlannedTrial]:
 
 @dataclass
 class TrialOutput:
-    """The raw streams of one trial (kind → columns incl. ``t``), its truth and its clock offsets."""
+    """The raw streams of one trial (kind → columns incl. ``t``), its truth and its clock offsets.
+    Stream kinds of spec §2.6; offsets in s."""
 
     planned: PlannedTrial
     powered: bool
@@ -436,6 +439,7 @@ def _slug(text: str) -> str:
 
 @dataclass
 class DossierResult:
+    """What :func:`simulate_dossier` wrote: folders and files, trial ids, recorded time and timings (s)."""
     out_dir: Path
     session: Path
     truth_json: Path
