@@ -176,7 +176,8 @@ def time_ns(t: np.ndarray) -> np.ndarray:
 
 
 def time_column(ns: np.ndarray) -> rr.TimeColumn:
-    """The ``time`` timeline column from integer nanoseconds (no float truncation)."""
+    """The ``time`` timeline column from integer nanoseconds (no float truncation).
+    The session clock of spec §1.4."""
     return rr.TimeColumn(TIMELINE, duration=np.asarray(ns, dtype=np.int64).astype("timedelta64[ns]"))
 
 
@@ -216,6 +217,7 @@ def nan_split(points: np.ndarray) -> list[np.ndarray]:
 
 def plane_rectangle(point: np.ndarray, normal: np.ndarray, around: np.ndarray | None) -> np.ndarray:
     """Four corners (m, W) of a rectangle in the plane through ``point`` with ``normal``.
+    The trial's ``rendering`` plane, spec §2.5.
 
     Centred on the projection of the finite points ``around`` (else on ``point``), large enough to
     hold their projections plus ``SURFACE_MARGIN_M``, at least ``2·SURFACE_MIN_HALF_M`` a side.
@@ -242,6 +244,7 @@ def plane_rectangle(point: np.ndarray, normal: np.ndarray, around: np.ndarray | 
 
 def series_entry(path: str, key: str, t: np.ndarray, values: np.ndarray, names: list[str], role: str, stream: str) -> Entry:
     """A time series: one row of ``len(names)`` scalars per sample, at the samples' exact times.
+    ``t`` in s on the session clock, spec §1.4.
 
     Legend entries read ``name [unit]`` (unit from ``SERIES``), with ``(compare)`` for the compared session.
     """
@@ -540,7 +543,8 @@ def modeled_solid(kinematics_json: str, position: tuple, quaternion: tuple) -> w
 
 
 def solid_entry(path: str, solid: workspace.VoxelSolid, color: tuple[int, int, int]) -> Entry | None:
-    """A voxel solid's boundary (voxels with fraction ≥ 0.5) as a translucent static mesh; None when empty."""
+    """A voxel solid's boundary (voxels with fraction ≥ 0.5) as a translucent static mesh; None when empty.
+    The fractions of spec §8.4 step 5."""
     mesh = boundary_mesh(solid.fraction >= 0.5, solid.origin, solid.pitch)
     if not len(mesh.triangles):
         return None
@@ -551,7 +555,8 @@ def solid_entry(path: str, solid: workspace.VoxelSolid, color: tuple[int, int, i
 # --- session level ---------------------------------------------------------------------------------
 
 def rig_entries(session: SessionFolder) -> list[Entry]:
-    """World frame, force plate, corner sensors and device base (static)."""
+    """World frame, force plate, corner sensors and device base (static).
+    From the rig description, spec §1.2, §2.4."""
     m = session.manifest
     out = [Entry("/world", static=[rr.ViewCoordinates.RIGHT_HAND_Z_UP])]
     plate = m.rig.force_plate
