@@ -35,11 +35,13 @@ STATUS = {"E960": 413, "E970": 401, "E971": 403, "E972": 429, "E973": 404, "E974
 
 
 def http_status(err: HaptifyError) -> int:
-    """The HTTP status of a refusal: by its first code; content problems are 422."""
+    """The HTTP status of a refusal: by its first code; content problems are 422.
+    The mapping of spec §17.5.1."""
     return STATUS.get(err.findings[0].code, 422)
 
 
 def refusal(err: HaptifyError) -> JSONResponse:
+    """The refusal ``{"status": "refused", "findings": [...]}``, its HTTP status, ``Retry-After`` (s); spec §17.5.1."""
     headers = {}
     wait = getattr(err, "retry_after", None)
     if wait is not None:
@@ -49,11 +51,13 @@ def refusal(err: HaptifyError) -> JSONResponse:
 
 
 class WithdrawBody(BaseModel):
+    """The body of ``POST /api/v1/submissions/{id}/withdraw``: a non-empty ``reason`` (spec §17.5)."""
     model_config = ConfigDict(extra="forbid")
     reason: str = Field(min_length=1, max_length=2000, description="Why the submission is withdrawn (kept with the record).")
 
 
 class TokenBody(BaseModel):
+    """The body of ``POST /api/v1/tokens``: lab, scope and rate limit in requests per minute (spec §17.6)."""
     model_config = ConfigDict(extra="forbid")
     lab: str
     scope: str = "submit"
@@ -202,7 +206,8 @@ EXPORT_COLUMNS = ["submission", "state", "verification", "lab", "device", "manuf
 
 
 def to_csv(rows: list[dict]) -> str:
-    """The export rows as CSV with a header line (values of vector metrics as JSON lists)."""
+    """The export rows as CSV with a header line (values of vector metrics as JSON lists).
+    ``GET /export.csv`` of spec §17.5.1."""
     import csv
     import io
 

@@ -104,7 +104,8 @@ def bundle_digest(bundle: Bundle) -> str:
 
 
 def submission_id(digest: str) -> str:
-    """The registry id of a bundle: the first 20 hex digits of its digest (same digest → same id)."""
+    """The registry id of a bundle: the first 20 hex digits of its digest (same digest → same id).
+    Spec §17.1, §17.2.3."""
     return digest[:20]
 
 
@@ -141,6 +142,7 @@ def build_bundle(session_dir: str | os.PathLike, results_path: str | os.PathLike
                  conformance_path: str | os.PathLike | None = None, *, include_raw: bool = False,
                  supersedes: str | None = None) -> tuple[Bundle, list[tuple[str, Path]]]:
     """The bundle manifest and the ``(archive path, source file)`` list for a session and its results.
+    Spec §17.2.
 
     Reads the session manifest and the results only as far as needed to fill ``bundle.json``; the full
     checks are :func:`haptify_tools.registry.checks.check_bundle`'s (the registry runs the same).
@@ -241,7 +243,8 @@ class _CountingReader(io.RawIOBase):
 
 @dataclass
 class Unpacked:
-    """A bundle unpacked into ``root``: the member sizes and sha256 as actually read."""
+    """A bundle unpacked into ``root``: the member sizes and sha256 as actually read.
+    Sizes in bytes; spec §17.4."""
 
     root: Path
     members: dict[str, tuple[int, str]] = field(default_factory=dict)

@@ -55,7 +55,8 @@ class MetricCheck:
 
 @dataclass
 class Verification:
-    """``verified`` (every metric agrees), ``disagrees`` (at least one does not) or ``unverified`` (no raw streams)."""
+    """``verified`` (every metric agrees), ``disagrees`` (at least one does not) or ``unverified`` (no raw streams).
+    Spec §17.3.1."""
 
     status: str
     checks: list[MetricCheck] = field(default_factory=list)
@@ -67,7 +68,7 @@ class Verification:
 
 @dataclass
 class Checked:
-    """A bundle that passed every content check."""
+    """A bundle that passed every content check of :func:`check_bundle` (spec §17.3)."""
 
     bundle: Bundle
     digest: str

@@ -16,6 +16,7 @@ def _store_options(p) -> None:
 
 
 def register(sub) -> None:
+    """Add ``registry serve`` (spec §17.7) and ``registry token create`` (spec §17.6)."""
     p = sub.add_parser("registry", help="run a results registry or manage its API tokens")
     rsub = p.add_subparsers(dest="registry_command", metavar="ACTION", required=True)
     serve = rsub.add_parser("serve", help="serve the registry (JSON API, OpenAPI docs at /docs, web pages)")
@@ -39,6 +40,7 @@ def _settings(args) -> Settings:
 
 
 def run_serve(args, ui) -> int:
+    """Serve the registry (JSON API, web pages) on ``--host``/``--port`` until interrupted (spec §17.7)."""
     import uvicorn
 
     from haptify_tools.registry.app import create_app
@@ -52,6 +54,7 @@ def run_serve(args, ui) -> int:
 
 
 def run_token_create(args, ui) -> int:
+    """Create a lab token and print it once; only its sha256 is stored (spec §17.6)."""
     registry = Registry(_settings(args), lock=False)
     try:
         token = registry.create_token(args.lab, args.scope, args.rate)

@@ -32,6 +32,7 @@ TIMEOUT_S = 300
 
 
 def register(sub) -> None:
+    """Add the ``submit`` sub-command: pack the bundle (spec §17.2), check it, upload it (§17.3)."""
     p = sub.add_parser("submit", help="pack a submission bundle and upload it to a results registry")
     p.add_argument("session", type=Path, help="the session folder the results were computed from")
     p.add_argument("--results", type=Path, required=True, help="results.json of the session")
@@ -46,7 +47,8 @@ def register(sub) -> None:
 
 
 def post_bundle(registry: str, token: str, archive: Path, *, dry_run: bool = False) -> dict:
-    """POST the archive to ``REGISTRY/api/v1/submissions``; the registry's refusal becomes a HaptifyError."""
+    """POST the archive to ``REGISTRY/api/v1/submissions``; the registry's refusal becomes a HaptifyError.
+    Spec §17.5.1."""
     url = registry.rstrip("/") + "/api/v1/submissions" + ("?dry_run=true" if dry_run else "")
     request = urllib.request.Request(url, data=archive.read_bytes(), method="POST",
                                      headers={"Content-Type": "application/gzip", "Authorization": f"Bearer {token}"})
@@ -82,6 +84,7 @@ CANNOT_RUN = ("E903", "E978", "E999")
 
 
 def run(args, ui) -> int:
+    """Pack, check and upload (or ``--dry-run``) one submission bundle; refusals are reported (spec §17.3)."""
     try:
         return _run(args, ui)
     except HaptifyError as err:

@@ -60,7 +60,8 @@ class Token(Base):
 
 
 class Device(Base):
-    """A device model (manufacturer + model); serial numbers stay with each submission."""
+    """A device model (manufacturer + model); serial numbers stay with each submission.
+    The aggregation key of spec §17.5."""
 
     __tablename__ = "devices"
     __table_args__ = (UniqueConstraint("manufacturer", "model", name="uq_devices_manufacturer_model"),)
@@ -102,7 +103,8 @@ class Submission(Base):
 
 
 class MetricValue(Base):
-    """One metric of one submission, for aggregation queries (a copy of the results file's record)."""
+    """One metric of one submission, for aggregation queries (a copy of the results file's record).
+    Spec §17.5."""
 
     __tablename__ = "metric_values"
     submission_id: Mapped[str] = mapped_column(ForeignKey("submissions.id"), primary_key=True)
@@ -142,12 +144,13 @@ class ConformanceReport(Base):
 
 
 def default_db_url(data_dir: Path) -> str:
-    """The embedded default: SQLite in ``registry.sqlite3`` inside the data folder."""
+    """The embedded default: SQLite in ``registry.sqlite3`` inside the data folder (spec §17.7)."""
     return f"sqlite:///{Path(data_dir).resolve() / 'registry.sqlite3'}"
 
 
 def make_engine(url: str) -> Engine:
     """An engine for ``url``; SQLite gets WAL, full fsync, foreign keys and ``BEGIN IMMEDIATE`` for writers.
+    Spec §17.7.
 
     Writers open their transaction with ``engine.execution_options(sqlite_immediate=True)`` so two
     writers never deadlock on a lock upgrade; readers use plain ``BEGIN`` and read the WAL snapshot.

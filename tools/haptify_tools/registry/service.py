@@ -71,7 +71,8 @@ class Settings:
 
 
 def hash_token(token: str) -> str:
-    """The stored form of a token: its sha256 (hex). Tokens carry 256 random bits, so no slow hash is needed."""
+    """The stored form of a token: its sha256 (hex). Tokens carry 256 random bits, so no slow hash is needed.
+    Spec §17.6."""
     return hashlib.sha256(token.encode("utf-8")).hexdigest()
 
 
@@ -102,7 +103,7 @@ class RateLimiter:
 
 @dataclass
 class Caller:
-    """The authenticated caller of a request."""
+    """The authenticated caller of a request (token scope and lab, spec §17.6)."""
 
     token_id: int
     lab_id: str
@@ -111,7 +112,8 @@ class Caller:
 
 @dataclass
 class Outcome:
-    """What the registry says to a submission."""
+    """What the registry says to a submission.
+    ``accepted``, ``duplicate`` or a dry run's ``would-accept``; spec §17.5."""
 
     id: str
     digest: str
@@ -133,7 +135,8 @@ def _fsync_dir(path: Path) -> None:
 
 
 class Registry:
-    """One registry: its database, its data folder and its in-process state (rate buckets, digest locks)."""
+    """One registry: its database, its data folder and its in-process state (rate buckets, digest locks).
+    Spec §17.3, §17.5, §17.7."""
 
     def __init__(self, settings: Settings, *, lock: bool = True) -> None:
         self.settings = settings
@@ -635,6 +638,7 @@ def aggregate(metric: str, items: list[tuple[dict, db.MetricValue]]) -> dict:
 
 
 def findings_of(err: HaptifyError) -> list[dict]:
+    """The findings of a refusal as JSON objects: code, message, location, expected, found (spec §17.5.1)."""
     return [f.to_dict() for f in err.findings]
 
 
