@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 from haptify.errors import catalogue
 from haptify.session_format import expected_columns, kind_table, quaternion_groups
 from haptify.storage import MANIFEST, SessionWriter, open_session, read_table, sha256_file, write_table
-from haptify.validation import MOCAP_KINDS, validate_session
+from haptify.validation import ALLOWED_VALUES, MOCAP_KINDS, validate_session
 from haptify_tools.example_session import example_writer
 
 REPO = Path(__file__).resolve().parents[1]
@@ -51,7 +51,9 @@ def stream_data(draw, kind: str, t0: float) -> tuple[dict, float, list[str] | No
     n = draw(st.integers(2, 25))
     data = {"t": t0 + np.arange(n) / rate}
     for c in cols[1:]:
-        data[c] = np.array(draw(st.lists(finite, min_size=n, max_size=n)), dtype=np.float64)
+        allowed = ALLOWED_VALUES.get((kind, c))  # a closed value set (the sync trigger: 0 or 1, E214)
+        values = st.sampled_from(allowed) if allowed is not None else finite
+        data[c] = np.array(draw(st.lists(values, min_size=n, max_size=n)), dtype=np.float64)
     for group in quaternion_groups(kind, entities):
         raw = np.array(draw(st.lists(st.lists(st.floats(-1, 1), min_size=4, max_size=4), min_size=n, max_size=n)))
         raw[np.linalg.norm(raw, axis=1) < 1e-3] = [1.0, 0.0, 0.0, 0.0]

@@ -15,6 +15,7 @@ time overlap of the streams of each trial.
 
 from __future__ import annotations
 
+import datetime
 import json
 import math
 import os
@@ -36,6 +37,8 @@ from haptify.errors import Finding, HaptifyError
 from haptify.session_format import (
     ClockOffset,
     Device,
+    Kinematics,
+    LinearLimit,
     Rig,
     SensorRange,
     Session,
@@ -60,6 +63,9 @@ from haptify.versions import PACKAGE_VERSION, SPEC_VERSION
 RATE_TOLERANCE = 0.01                 # |actual mean rate / rate_hz − 1| allowed (E206)
 INTERVAL_LOW, INTERVAL_HIGH = 0.5, 1.5  # an interval outside [0.5, 1.5] / rate_hz is irregular (W402)
 OCCLUSION_WARNING_SHARE = 0.20        # share of occluded samples above which W405 is raised
+NORMAL_NORM_TOLERANCE = QUATERNION_NORM_TOLERANCE  # |‖n‖ − 1| allowed in a rendering's surface_normal (E307, spec §2.5)
+LIMIT_LATTICE_POINTS = 5              # per-joint lattice on which joint ranges must be non-empty (E115, spec §2.3, §8.3)
+ALLOWED_VALUES = {("sync", "trigger"): (0.0, 1.0)}  # columns with a closed set of values (E214, spec §2.6 kind table)
 MANIFEST_MAX_BYTES = 16 * 2**20       # session.json larger than this is not read (E113)
 DEVICE_MAX_BYTES = 4 * 2**20          # device.json larger than this is not read (E113)
 STREAM_MAX_BYTES = 8 * 2**30          # spec §3.5: no stream file exceeds 8 GiB (E113)
@@ -277,6 +283,66 @@ def schema_findings(instance: Any, schema_name: str, code: str, label: str) -> l
     return out
 
 
+# --- the device's kinematic chain (spec §2.3) ------------------------------------------------------
+
+def _limit_at(limit: LinearLimit, prefixes: np.ndarray, names: list[str]) -> np.ndarray:
+    """``constant + Σ c_k q_k`` (rad) at each row of ``prefixes`` (configurations of the joints ``names``)."""
+    value = np.full(prefixes.shape[0], float(limit.constant))
+    for joint, coeff in limit.coefficients.items():
+        value = value + coeff * prefixes[:, names.index(joint)]
+    return value
+
+
+def kinematics_findings(kin: Kinematics, file: str, base: str) -> list[Finding]:
+    """The rules of spec §2.3 on a DH chain, as findings located at ``file`` + ``base`` (a JSON pointer).
+
+    E116: the joints are named ``q1 … qn`` in chain order, and a limit names only earlier joints.
+    E115: every joint's range is non-empty — ``upper ≥ lower`` — at some configuration of the lattice of
+    spec §8.3 step 1 (``LIMIT_LATTICE_POINTS`` per joint, joint by joint within the earlier joints' coupled
+    limits); for constant limits simply ``upper ≥ lower``. This is exactly the condition under which the
+    modeled workspace (spec §8.3) has at least one configuration, so a session that validates never
+    fails ``workspace.modeled_volume`` for its limits.
+    """
+    out: list[Finding] = []
+    names = [j.name for j in kin.joints]
+    for i, joint in enumerate(kin.joints):
+        if joint.name != f"q{i + 1}":
+            out.append(Finding("E116", f"joint {i + 1} of the chain is named {joint.name!r}", file=file,
+                               pointer=f"{base}/joints/{i}/name", expected=f"q{i + 1}", found=joint.name))
+    if out:
+        return out
+    for i, joint in enumerate(kin.joints):
+        for side in ("lower", "upper"):
+            for other in getattr(joint, side).coefficients:
+                if other not in names[:i]:
+                    out.append(Finding("E116", f"the {side} limit of {joint.name} depends on {other}, which is not an earlier joint",
+                                       file=file, pointer=f"{base}/joints/{i}/{side}/coefficients/{other}",
+                                       expected=names[:i], found=other))
+    if out:
+        return out
+    referenced = [any(joint.name in j.lower.coefficients or joint.name in j.upper.coefficients for j in kin.joints[i + 1:])
+                  for i, joint in enumerate(kin.joints)]
+    unit = np.linspace(0.0, 1.0, LIMIT_LATTICE_POINTS)
+    prefixes = np.zeros((1, 0))  # feasible lattice configurations of the joints before the current one (rad)
+    for i, joint in enumerate(kin.joints):
+        lo, hi = _limit_at(joint.lower, prefixes, names), _limit_at(joint.upper, prefixes, names)
+        feasible = hi >= lo
+        if not feasible.any():
+            gap = float(np.max(hi - lo))
+            out.append(Finding("E115", f"the upper limit of {joint.name} lies below its lower limit (by at least {-gap:.6g} rad) "
+                               f"for every configuration of the earlier joints", file=file, pointer=f"{base}/joints/{i}",
+                               expected="upper ≥ lower for some configuration",
+                               found={"lower": joint.lower.model_dump(), "upper": joint.upper.model_dump()}))
+            return out
+        keep, lo, hi = prefixes[feasible], lo[feasible], hi[feasible]
+        q = lo[:, None] + unit[None, :] * (hi - lo)[:, None]
+        prefixes = np.concatenate([np.repeat(keep, unit.size, axis=0), q.reshape(-1, 1)], axis=1)
+        # a joint no later limit names only has to be feasible: forget its value, keep one row per distinct rest
+        prefixes[:, [k for k in range(i + 1) if not referenced[k]]] = 0.0
+        prefixes = np.unique(prefixes, axis=0)
+    return out
+
+
 # --- files inside the folder (spec §4.2) ---------------------------------------------------------
 
 def _regular_file(path: Path, label: str, missing_code: str, missing_text: str, limit: int) -> int:
@@ -378,6 +444,9 @@ class SessionValidator:
         self._guard(self._check_device, file=MANIFEST)
         self._guard(self._check_ids, file=MANIFEST)
         self._guard(self._check_static_quaternions, file=MANIFEST)
+        self._guard(self._check_date, file=MANIFEST)
+        self._guard(self._check_rig, file=MANIFEST)
+        self._guard(self._check_inline_device, file=MANIFEST)
         for index, raw_trial, trial in self.trials:
             if trial is not None:
                 self._guard(lambda: self._check_trial(index, trial), trial=trial.id, file=MANIFEST)
@@ -464,8 +533,43 @@ class SessionValidator:
                     f.pointer = "/device/file"
             self.add_all(err.findings)
             return
-        self.add_all(schema_findings(data, "device", "E106", label))
+        findings = schema_findings(data, "device", "E106", label)
+        self.add_all(findings)
         self._check_static_quaternions(data, label)
+        device = _try(Device, data) if not findings else None
+        if device is not None and device.kinematics is not None:
+            self.add_all(kinematics_findings(device.kinematics, label, "/kinematics"))
+
+    def _check_inline_device(self) -> None:
+        """The kinematic chain of a device given inline in session.json (spec §2.3)."""
+        dev = self.raw.get("device")
+        device = _try(Device, dev) if isinstance(dev, dict) and "file" not in dev else None
+        if device is not None and device.kinematics is not None:
+            self.add_all(kinematics_findings(device.kinematics, MANIFEST, "/device/kinematics"))
+
+    def _check_date(self) -> None:
+        """``date`` is a calendar date, not only ``YYYY-MM-DD``-shaped (spec §2.1)."""
+        date = self.raw.get("date")
+        if not isinstance(date, str) or len(date) != 10:
+            return  # absent or not of the pattern: the schema has said so (E104)
+        try:
+            datetime.date.fromisoformat(date)
+        except ValueError:
+            self.add(Finding("E104", f"date {date!r} is not a calendar date", file=MANIFEST, pointer="/date",
+                             expected="an existing date YYYY-MM-DD", found=date))
+
+    def _check_rig(self) -> None:
+        """The rig's corner sensors have distinct ids c1…c4 (spec §2.4, E107)."""
+        plate = self.rig.force_plate if self.rig is not None else None
+        if plate is None:
+            return
+        ids = [c.id for c in plate.corners]
+        for k, cid in enumerate(ids):
+            if cid in ids[:k]:
+                missing = sorted({"c1", "c2", "c3", "c4"} - set(ids))
+                self.add(Finding("E107", f"force-plate corner sensor id {cid!r} is used twice (missing: {', '.join(missing)})",
+                                 file=MANIFEST, pointer=f"/rig/force_plate/corners/{k}/id",
+                                 expected="the four distinct ids c1, c2, c3, c4", found=ids))
 
     def _check_ids(self) -> None:
         raw = self.raw
@@ -541,6 +645,15 @@ class SessionValidator:
         if passive is False and trial.rendering is None:
             self.add(Finding("E303", f"active {trial.protocol} trial {trial.id!r} has no rendering parameters", file=MANIFEST,
                              pointer=f"{where}/rendering", expected="a rendering object", found=None), trial.id)
+        if trial.rendering is not None:
+            n = trial.rendering.surface_normal
+            try:
+                norm = math.hypot(*n)  # hypot: no overflow for components near 1e308
+            except OverflowError:
+                norm = math.inf
+            if not abs(norm - 1.0) <= NORMAL_NORM_TOLERANCE:
+                self.add(Finding("E307", f"trial {trial.id!r}: the rendering's surface_normal has norm {norm:.6g}", file=MANIFEST,
+                                 pointer=f"{where}/rendering/surface_normal", expected=f"norm 1 ± {NORMAL_NORM_TOLERANCE}", found=list(n)), trial.id)
         if trial.protocol == "other" and not (trial.label or "").strip():
             self.add(Finding("E304", f"trial {trial.id!r} of protocol 'other' has no label", file=MANIFEST,
                              pointer=f"{where}/label", expected="a label such as 'figure_eight'", found=trial.label), trial.id)
@@ -580,6 +693,9 @@ class SessionValidator:
                     if ent not in known:
                         add(Finding("E213", f"{s.kind} stream names {ent!r}, which the rig does not describe", file=MANIFEST,
                                     pointer=f"{entry.pointer}/entities/{k}", expected=sorted(known), found=ent))
+        elif s.entities is not None:
+            add(Finding("E215", f"{s.kind} stream declares entities, which only markers and link_poses have", file=MANIFEST,
+                        pointer=f"{entry.pointer}/entities", expected="no 'entities' member", found=s.entities))
         expected = expected_columns(s.kind, s.entities, declared)
         names_ok = [n for n, _ in expected] == declared
         if not names_ok:
@@ -678,6 +794,17 @@ class SessionValidator:
             for k in np.flatnonzero(nan.any(axis=0)):
                 add(Finding("E204", f"column {data_cols[k]!r} holds {int(nan[:, k].sum())} NaN values; {s.kind} allows none",
                             file=label, column=data_cols[k], time_range=_time_span(t, nan[:, k]), expected="no NaN", found="NaN"))
+        # closed value sets (the sync trigger)
+        for k, col in enumerate(data_cols):
+            allowed = ALLOWED_VALUES.get((s.kind, col))
+            if allowed is None:
+                continue
+            other = np.isfinite(values[:, k]) & ~np.isin(values[:, k], allowed)
+            if other.any():
+                seen = np.unique(values[other, k])
+                add(Finding("E214", f"column {col!r} holds {int(other.sum())} values other than {' or '.join(f'{a:g}' for a in allowed)} "
+                            f"({seen.size} distinct, e.g. {float(seen[0])!r})", file=label, column=col, time_range=_time_span(t, other),
+                            expected=list(allowed), found=[float(v) for v in seen[:5]]))
         # quaternions
         col_index = {c: k for k, c in enumerate(data_cols)}
         for group in quaternion_groups(s.kind, s.entities):

@@ -694,7 +694,7 @@ def surface_fixtures() -> list[Fixture]:
         def commanded(t, n=n, contact=contact):
             return np.where(contact(t), 1.5, 0.0)[:, None] * n
 
-        rendering = {"surface_point_m": list(point), "surface_normal": list(normal_raw), "stiffness_N_per_m": 750.0}
+        rendering = {"surface_point_m": list(point), "surface_normal": [float(c) for c in n], "stiffness_N_per_m": 750.0}
 
         fx = Fixture(name, active_session(name, rig_kind, "surface-1", "frictionless_surface", secs, 0.05, position, force,
                                           commanded, rendering, rates, fmt))
@@ -763,7 +763,7 @@ def stiffness_fixtures() -> list[Fixture]:
         def commanded(t, n=n):
             return (K_CMD * np.maximum(press_depth(t), 0.0))[:, None] * n
 
-        rendering = {"surface_point_m": list(point), "surface_normal": list(normal_raw), "stiffness_N_per_m": K_CMD}
+        rendering = {"surface_point_m": list(point), "surface_normal": [float(c) for c in n], "stiffness_N_per_m": K_CMD}
 
         fx = Fixture(name, active_session(name, rig_kind, "stiffness-1", "stiffness", duration, 0.03, position, force,
                                           commanded, rendering, rates, fmt))

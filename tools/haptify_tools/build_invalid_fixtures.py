@@ -6,6 +6,7 @@ below. Its sidecar ``fixtures/invalid/<name>.expected.json`` states the codes va
 fixed by construction here, never copied from a validator run — the exit code, and what is broken.
 
     python -m haptify_tools.build_invalid_fixtures [--out FIXTURES_DIR]
+    python -m haptify_tools.build_invalid_fixtures --check   # exit 1 when the committed fixtures are stale
 
 The build is deterministic; :func:`logical_snapshot` describes a built tree by content (parsed JSON,
 table values bit for bit, symlink targets), so a test can check that the committed fixtures are current
@@ -20,6 +21,7 @@ import json
 import os
 import shutil
 import sys
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -356,6 +358,18 @@ def _markers_nan(rows: slice, columns: list[str]) -> Callable[[Path], None]:
     return fn
 
 
+def _joint(m: dict, name: str) -> dict:
+    return next(j for j in m["device"]["kinematics"]["joints"] if j["name"] == name)
+
+
+def _sync_trial(values: Callable[[np.ndarray], np.ndarray]) -> Callable[[SessionWriter], None]:
+    """Add a 1 kHz ``sync`` stream with ``trigger = values(t)`` to the free-space trial."""
+    def fn(w: SessionWriter) -> None:
+        t = _t(int(DURATION_S * 1000), 1000.0)
+        w.add_stream(TRIAL, "sync", {"t": t, "trigger": values(t)}, rate_hz=1000)
+    return fn
+
+
 CASES: list[Case] = [
     Case("malformed-json", ["E103"], "session.json is cut off in the middle (not well-formed JSON).", _manifest_malformed),
     Case("manifest-not-utf8", ["E103"], "session.json is Latin-1, not UTF-8 (an accented examiner id).", _manifest_latin1),
@@ -475,6 +489,20 @@ CASES: list[Case] = [
     Case("calibration-unknown-trial", ["E114"], "A plate_bias record names source trial 'plate-bias-9', which does not exist.",
          lambda f: edit(f, lambda m: m.setdefault("calibration", []).append(
              {"kind": "plate_bias", "id": "bias-1", "source_trial": "plate-bias-9", "bias": [0.0] * 24}))),
+    Case("plate-corner-duplicate-id", ["E107"], "The force plate's third corner sensor has id 'c1' (c1 twice, c3 missing).",
+         lambda f: edit(f, lambda m: m["rig"]["force_plate"]["corners"][2].update(id="c1"))),
+    Case("surface-normal-not-unit", ["E307"], "An active stiffness trial's rendering surface_normal is [0, 0.1, 1] (norm 1.005).",
+         extend=lambda w: add_active_trial(w, rendering={**RENDERING, "surface_normal": [0.0, 0.1, 1.0]})),
+    Case("sync-not-binary", ["E214"], "A sync stream holds the raw trigger voltage (0 V and 5 V), not 0 and 1.",
+         extend=_sync_trial(lambda t: 5.0 * ((t >= 0.05) & (t < 0.1)))),
+    Case("entities-on-plain-kind", ["E215"], "The handle_wrench stream declares entities ['h1'] (only markers and link_poses have them).",
+         lambda f: edit(f, lambda m: stream_of(m, "handle_wrench").update(entities=["h1"]))),
+    Case("joint-limits-empty", ["E115"], "The device's q2 range is [0, -0.5] rad: its upper limit lies below its lower one.",
+         lambda f: edit(f, lambda m: _joint(m, "q2").update(upper={"constant": -0.5}))),
+    Case("joint-limit-later-joint", ["E116"], "The device's q2 upper limit depends on q3, a later joint.",
+         lambda f: edit(f, lambda m: _joint(m, "q2").update(upper={"constant": 1.7, "coefficients": {"q3": -0.5}}))),
+    Case("date-not-calendar", ["E104"], "The session's date is 2026-02-30, which matches YYYY-MM-DD but does not exist.",
+         lambda f: edit(f, lambda m: m.update(date="2026-02-30"))),
     Case("several-problems", ["E110", "E203", "E204", "W404"],
          "Four independent problems in one trial, all reported: t decreases in handle_wrench, NaN in handle_accel, "
          "the handle_pose file is missing, and plate_wrench is absent.", _several),
@@ -599,15 +627,42 @@ def _checksums_as_matches(manifest_data: Any, folder: Path) -> Any:
     return data
 
 
+def stale_fixtures(fixtures: Path, scratch: Path) -> list[str]:
+    """The fixtures under ``fixtures/{valid,invalid}`` whose logical content (or sidecar) differs from a fresh
+    build into ``scratch``, plus fixture folders this script does not build; empty when all are current."""
+    build_all(scratch)
+    stale: list[str] = []
+    for group, cases in (("valid", VALID), ("invalid", CASES)):
+        built, committed = scratch / group, fixtures / group
+        names = {c.name for c in cases}
+        extra = sorted(p.name for p in committed.iterdir() if p.name.removesuffix(".expected.json") not in names) if committed.is_dir() else []
+        stale += [f"{group}/{n} is not built by this script" for n in extra]
+        for case in cases:
+            if not (committed / case.name).exists() or logical_snapshot(built / case.name) != logical_snapshot(committed / case.name):
+                stale.append(f"{group}/{case.name}")
+            side = committed / f"{case.name}.expected.json"
+            if (not side.is_file() or json.loads(side.read_text(encoding="utf-8")) != sidecar(case)):
+                stale.append(f"{group}/{case.name}.expected.json")
+    return stale
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=REPO / "fixtures", help="fixtures folder (default: the repository's)")
     parser.add_argument("--only", nargs="+", metavar="NAME", help="rebuild only these fixtures")
+    parser.add_argument("--check", action="store_true", help="only check that the committed fixtures are current")
     args = parser.parse_args(argv)
     known = {c.name for c in VALID + CASES}
     unknown = sorted(set(args.only or ()) - known)
     if unknown:
         parser.error(f"unknown fixture(s) {unknown}; known: {sorted(known)}")
+    if args.check:
+        with tempfile.TemporaryDirectory(prefix="haptify-fixtures-") as tmp:
+            stale = stale_fixtures(args.out, Path(tmp))
+        for line in stale:
+            print(f"stale: {line}")
+        print(f"bad-input and valid fixtures: {'stale' if stale else 'current'} ({len(VALID) + len(CASES)} fixtures)")
+        return 1 if stale else 0
     build_all(args.out, set(args.only) if args.only else None)
     built = len(args.only) if args.only else len(VALID) + len(CASES)
     print(f"built {built} fixture(s) under {args.out}")
