@@ -13,11 +13,11 @@ import pytest
 from haptify.cli import UI
 from haptify.storage import open_session
 from haptify_tools.discrepancy import cmd_discrepancy
-from haptify_tools.discrepancy.data import load_measured
+from haptify_tools.discrepancy.data import load_measured, simulate_all
 from haptify_tools.discrepancy.demo import DEMO_TRUTH, demo_session
 from haptify_tools.discrepancy.identify import select_effects
 from haptify_tools.discrepancy.model import DiscrepancyFile
-from haptify_tools.discrepancy.workflow import run_discrepancy
+from haptify_tools.discrepancy.workflow import gap_above_floor, heldout_gap, run_discrepancy
 from haptify_tools.twin.model import disable, load_twin, preset, set_param, write_twin
 from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
 
@@ -91,17 +91,30 @@ def test_hidden_gravity_is_named_with_its_acceleration(tmp_path):
     ("kinematics.link_length", "delta_a_m", 0.003, 0.01, ("free_space",)),
     ("drive.torque_saturation", "max_torque_Nm", 0.12, 0.22, ("stiffness",)),
     ("drive.force_cutoff", "trip_force_N", 1.5, 2.5, ("stiffness",)),
+    ("inertia", "rotor_inertia_kg_m2", 0.5e-6, 2e-6, ("local_dynamic",)),
+    ("handle.connector_mass", "mass_kg", 0.02, 0.06, ("figure_eight",)),
 ])
 def test_hidden_effect_is_named_first_and_identified(tmp_path, effect, parameter, low, high, protocols):
     """One library effect hidden with a random plausible value; the twin starts from the preset without it
-    (its stored, different value is only the search's starting point)."""
+    (its stored, different value is only the search's starting point). The gap must halve above the floor
+    the true twin itself leaves (a connector of 40 g adds ≈ 0.02 N to a 0.05 N path-reconstruction floor:
+    the raw gap cannot halve, the part above the floor can)."""
     value = float(np.random.default_rng(7).uniform(low, high))
     truth = set_param(set_param(preset("touch"), f"{effect}.{parameter}", value), f"{effect}.enabled", True)
-    result, _ = run_discrepancy(_session(tmp_path, truth, 7, protocols=protocols), disable(preset("touch"), effect), None,
-                                max_effects=1)
+    result, sel = run_discrepancy(_session(tmp_path, truth, 7, protocols=protocols), disable(preset("touch"), effect), None,
+                                  max_effects=1)
     assert result.accepted[0].effect_id == effect
     assert _rel(result.accepted[0].value, value) < 0.15
-    assert result.heldout_gap_after_N <= 0.5 * result.heldout_gap_before_N
+    trials = sel.rounds[0].design.trials
+    floor = heldout_gap(trials, simulate_all(truth, trials))
+    assert result.heldout_gap_after_N < result.heldout_gap_before_N
+    assert gap_above_floor(result.heldout_gap_after_N, floor) <= 0.5 * gap_above_floor(result.heldout_gap_before_N, floor)
+
+
+def test_gap_above_floor_is_the_energy_difference():
+    assert gap_above_floor(0.05, 0.03) == pytest.approx(0.04)
+    assert gap_above_floor(0.03, 0.05) == 0.0
+    assert gap_above_floor(0.02, 0.0) == pytest.approx(0.02)
 
 
 def test_hidden_base_collision_explains_the_missing_workspace_lobe(tmp_path):

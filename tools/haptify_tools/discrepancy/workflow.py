@@ -113,6 +113,15 @@ def heldout_gap(trials: list[dt.MeasuredTrial], sim: dict) -> float:
     return float(np.sqrt(np.mean(r ** 2))) if len(r) else 0.0
 
 
+def gap_above_floor(gap: float, floor: float) -> float:
+    """The part of a held-out gap (N) above a floor (N) that no twin can go below: ``√max(gap² − floor², 0)``.
+
+    The floor is the gap the right twin still leaves — the hand path rebuilt from motion capture (the
+    examiner's tremor smoothed away under the twin's friction) and the sensor noise; residuals that add in
+    energy make the difference of squares the gap the model can still close."""
+    return float(np.sqrt(max(gap * gap - floor * floor, 0.0)))
+
+
 def _penetration(tr: dt.MeasuredTrial) -> tuple[np.ndarray, np.ndarray]:
     n = np.asarray(tr.rendering["surface_normal"], float)
     n = n / np.linalg.norm(n)
