@@ -1,6 +1,7 @@
-"""Validation rules of spec chapters 2 and 4 added in the validator polish: plate corner ids (E107), the
+"""Validation rules of spec chapters 2–4 added in the validator polish: plate corner ids (E107), the
 rendering normal (E307), the sync trigger (E214), entities on plain kinds (E215), the device's joint
-limits and chain order (E115, E116) and calendar dates (E104). Answers are known by construction."""
+limits and chain order (E115, E116), calendar dates (E104) and the CSV grammar (E112). Answers are known
+by construction."""
 
 from __future__ import annotations
 
@@ -13,12 +14,16 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from haptify import validation
+from haptify.errors import HaptifyError
 from haptify.kinematics import configurations_from_unit
 from haptify.session_format import Kinematics
 from haptify.validation import (
     ALLOWED_VALUES,
+    CSV_CHUNK_BYTES,
     LIMIT_LATTICE_POINTS,
     NORMAL_NORM_TOLERANCE,
+    check_csv_grammar,
     kinematics_findings,
     validate_session,
 )
@@ -245,3 +250,53 @@ def test_the_date_is_a_calendar_date(tmp_path: Path, date: str, valid: bool):
     fx.edit(folder, lambda m: m.update(date=date))
     findings = validate_session(folder).findings
     assert [(f.code, f.pointer) for f in findings] == ([] if valid else [("E104", "/date")])
+
+
+# --- the CSV grammar (spec §3.2: E112) --------------------------------------------------------------
+
+def _grammar(tmp_path: Path, text: str, columns=("t", "x")):
+    path = tmp_path / "s.csv"
+    path.write_bytes(text.encode("utf-8"))
+    try:
+        check_csv_grammar(path, list(columns), "s.csv")
+    except HaptifyError as err:
+        (f,) = err.findings
+        return f
+    return None
+
+
+@pytest.mark.parametrize("chunk", [3, 64, CSV_CHUNK_BYTES])
+@pytest.mark.parametrize("text", ["t,x\n0,1\n1,NaN\n", "t,x\n0,1\n1,2", "t,x\r\n0,1\r\n1,-2.5e-3\r\n", "t,x\n0,1.\n1,1E+5\n",
+                                  "t,x\n-0,-1.e-300\n"])
+def test_csv_lines_of_the_grammar_pass(tmp_path: Path, monkeypatch, text: str, chunk: int):
+    monkeypatch.setattr(validation, "CSV_CHUNK_BYTES", chunk)
+    assert _grammar(tmp_path, text) is None
+
+
+@pytest.mark.parametrize("chunk", [3, CSV_CHUNK_BYTES])
+@pytest.mark.parametrize("text, line, column, found", [
+    ("t,x\n0,1\n1,nan\n", 3, "x", "nan"), ("t,x\n0,1\n1,inf\n", 3, "x", "inf"), ("t,x\n+0,1\n", 2, "t", "+0"),
+    ('t,x\n0,"1"\n', 2, "x", '"1"'), ("t,x\n0, 1\n", 2, "x", " 1"), ("t,x\n0,\n", 2, "x", ""), ("t,x\n0,.5\n", 2, "x", ".5"),
+    ("t,x\n0,1.2.3\n", 2, "x", "1.2.3"), ("t,x\n0,1\n\n1,2\n", 3, None, "a blank line"), ("t,x\n0,1\n1,2\n\n", 4, None, "a blank line"),
+    ("t,x\n0,1,2\n", 2, None, 3), ("t,x\n0,1\r1,2\n", 2, None, 3), ("t,x\r\n0,1\r\n1,2\r\r\n", 3, "x", "2\r")])
+def test_csv_lines_outside_the_grammar_are_e112_naming_line_and_column(tmp_path: Path, monkeypatch, text, line, column, found, chunk):
+    monkeypatch.setattr(validation, "CSV_CHUNK_BYTES", chunk)
+    f = _grammar(tmp_path, text)
+    assert (f.code, f.column, f.found) == ("E112", column, found)
+    assert f"line {line} " in f.message
+
+
+def test_a_lone_carriage_return_line_end_is_e112(tmp_path: Path):
+    assert _grammar(tmp_path, "t,x\r0,1\r1,2\r").code == "E112"
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(values=st.lists(st.lists(st.floats(allow_infinity=False), min_size=3, max_size=3), min_size=1, max_size=30),
+       crlf=st.booleans(), last_eol=st.booleans(), chunk=st.sampled_from([5, 17, CSV_CHUNK_BYTES]))
+def test_every_shortest_round_trip_float_and_nan_passes(tmp_path: Path, monkeypatch, values, crlf, last_eol, chunk):
+    """What spec §3.2 tells writers to print (Python's repr, NaN as 'NaN') always satisfies the grammar."""
+    monkeypatch.setattr(validation, "CSV_CHUNK_BYTES", chunk)
+    eol = "\r\n" if crlf else "\n"
+    rows = [",".join("NaN" if math.isnan(v) else repr(v) for v in row) for row in values]
+    text = "a,b,c" + eol + eol.join(rows) + (eol if last_eol else "")
+    assert _grammar(tmp_path, text, ("a", "b", "c")) is None

@@ -19,6 +19,7 @@ import datetime
 import json
 import math
 import os
+import re
 import stat
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -33,7 +34,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from haptify import schemas
 from haptify.conventions import QUATERNION_NORM_TOLERANCE
-from haptify.errors import Finding, HaptifyError
+from haptify.errors import Finding, HaptifyError, fail
 from haptify.session_format import (
     ClockOffset,
     Device,
@@ -281,6 +282,64 @@ def schema_findings(instance: Any, schema_name: str, code: str, label: str) -> l
                                found=_jsonable(_short(err.instance))))
     out.sort(key=lambda f: f.pointer or "")
     return out
+
+
+# --- CSV grammar (spec §3.2) --------------------------------------------------------------------------
+
+CSV_FIELD = re.compile(rb"(?<![^,\n])(?:NaN|-?[0-9]+(?:\.[0-9]*)?(?:[eE][+-]?[0-9]+)?)(?![^,\r\n])")
+CSV_FIELD_TEXT = re.compile(r"NaN|-?[0-9]+(?:\.[0-9]*)?(?:[eE][+-]?[0-9]+)?")
+CSV_CHUNK_BYTES = 8 * 2**20
+
+
+def check_csv_grammar(path: Path, columns: list[str], label: str) -> None:
+    r"""Raise E112 at the first CSV data line that breaks the grammar of spec §3.2.
+
+    Every line after the header holds exactly ``len(columns)`` fields, each ``NaN`` or a decimal number
+    ``-?[0-9]+(\.[0-9]*)?([eE][+-]?[0-9]+)?`` — no sign '+', quotes, spaces, empty fields, ``inf`` or
+    blank lines — and ends in ``\n`` or ``\r\n`` (the last line's end optional). The file is scanned in
+    chunks of whole lines: every valid field is replaced by ``x``, so a sound line reads ``x,x,…,x``.
+    """
+    sound = b",".join([b"x"] * len(columns))
+    allowed = {sound, sound + b"\r"}
+    with open(path, "rb") as fh:
+        header = fh.readline()  # its names were checked when the table was read (E211); here only its line end
+        if b"\r" in header.removesuffix(b"\n").removesuffix(b"\r"):
+            raise fail("E112", f"{label!r} ends a line with a lone carriage return", file=label,
+                       expected="lines ending in \\n or \\r\\n", found="\\r")
+        line_no, rest = 1, b""
+        while True:
+            block = fh.read(CSV_CHUNK_BYTES)
+            data = rest + block
+            if block:
+                cut = data.rfind(b"\n") + 1
+                data, rest = data[:cut], data[cut:]
+            else:
+                rest = b""
+            if data:
+                lines = CSV_FIELD.sub(b"x", data).split(b"\n")
+                if data.endswith(b"\n"):
+                    lines.pop()
+                if not set(lines) <= allowed:
+                    k = next(i for i, line in enumerate(lines) if line not in allowed)
+                    _csv_line_error(data.split(b"\n")[k], line_no + k + 1, columns, label)
+                line_no += len(lines)
+            if not block:
+                return
+
+
+def _csv_line_error(raw: bytes, line_no: int, columns: list[str], label: str) -> None:
+    """Raise E112 naming the line, the column and the first field of ``raw`` outside the grammar."""
+    text = raw.decode("utf-8", errors="replace").removesuffix("\r")
+    fields = text.split(",")
+    if text == "":
+        raise fail("E112", f"line {line_no} of {label!r} is blank", file=label, expected="one sample per line, no blank lines",
+                   found="a blank line")
+    if len(fields) != len(columns):
+        raise fail("E112", f"line {line_no} of {label!r} has {len(fields)} fields, not {len(columns)}", file=label,
+                   expected=len(columns), found=len(fields))
+    k = next((i for i, f in enumerate(fields) if not CSV_FIELD_TEXT.fullmatch(f)), 0)
+    raise fail("E112", f"line {line_no} of {label!r}: field {_short(fields[k])!r} is not a number as spec §3.2 writes it",
+               file=label, column=columns[k], expected="NaN or -?[0-9]+(.[0-9]*)?([eE][+-]?[0-9]+)?", found=_short(fields[k]))
 
 
 # --- the device's kinematic chain (spec §2.3) ------------------------------------------------------
@@ -724,6 +783,8 @@ class SessionValidator:
             add(Finding("E201", "the file's columns differ from the columns declared in session.json", file=label,
                         expected=declared, found=[str(c) for c in table.columns]))
             return
+        if s.format == "csv":
+            check_csv_grammar(path, declared, label)
         n = len(table)
         if n != s.rows:
             add(Finding("E208", f"{label!r} holds {n} rows, session.json declares {s.rows}", file=label, expected=s.rows, found=n))

@@ -295,6 +295,17 @@ def _csv_text_value(folder: Path) -> None:
     rehash(folder, "handle_accel")
 
 
+def _csv_edit_line(kind: str, row: int, fn: Callable[[str], str]) -> Callable[[Path], None]:
+    """Replace data line ``row`` (0 = first sample) of a CSV stream by ``fn(line)`` and rehash the file."""
+    def edit_line(folder: Path) -> None:
+        rel = stream_of(manifest(folder), kind)["file"]
+        lines = (folder / rel).read_text(encoding="utf-8").split("\n")
+        lines[1 + row] = fn(lines[1 + row])
+        (folder / rel).write_text("\n".join(lines), encoding="utf-8")
+        rehash(folder, kind)
+    return edit_line
+
+
 def _oversized(folder: Path) -> None:
     """A CSV handle_pose declared with 20 rows whose file is padded far beyond what 20 rows need."""
     rel = stream_of(manifest(folder), "handle_pose")["file"]
@@ -393,6 +404,10 @@ CASES: list[Case] = [
     Case("csv-wrong-header", ["E211"], "CSV session whose handle_wrench header reads time,Fx,... instead of t,fx,...",
          _csv_header, fmt="csv"),
     Case("csv-text-value", ["E112"], "CSV session with the text 'nine point eight' in a handle_accel cell.", _csv_text_value, fmt="csv"),
+    Case("csv-plus-sign", ["E112"], "CSV session whose handle_accel az at row 7 is written '+9.81' (spec §3.2 allows no '+' sign).",
+         _csv_edit_line("handle_accel", 7, lambda line: ",".join(line.split(",")[:3] + ["+" + line.split(",")[3]])), fmt="csv"),
+    Case("csv-blank-line", ["E112"], "CSV session whose handle_wrench has a blank line after row 10.",
+         _csv_edit_line("handle_wrench", 10, lambda line: line + "\n"), fmt="csv"),
     Case("column-not-float", ["E212"], "handle_wrench column fx is stored as 64-bit integers.", _int_column),
     Case("time-not-increasing", ["E203"], "Two handle_wrench samples are swapped, so t decreases once.",
          lambda f: rewrite_data(f, "handle_wrench", _swap_times)),
