@@ -300,3 +300,28 @@ def test_every_shortest_round_trip_float_and_nan_passes(tmp_path: Path, monkeypa
     rows = [",".join("NaN" if math.isnan(v) else repr(v) for v in row) for row in values]
     text = "a,b,c" + eol + eol.join(rows) + (eol if last_eol else "")
     assert _grammar(tmp_path, text, ("a", "b", "c")) is None
+
+
+# --- null members (spec §2.1: W407) ------------------------------------------------------------------
+
+def test_every_tolerated_null_is_w407_at_its_pointer_and_the_session_stays_valid(tmp_path: Path):
+    folder = _write(tmp_path)
+    fx.edit(folder, lambda m: (fx.trial_of(m).update(notes=None, label=None), m["rig"].update(name=None),
+                               fx.stream_of(m, "handle_wrench").update(entities=None)))
+    report = validate_session(folder)
+    assert sorted((f.code, f.pointer) for f in report.findings) == [
+        ("W407", "/rig/name"), ("W407", "/trials/0/label"), ("W407", "/trials/0/notes"), ("W407", "/trials/0/streams/0/entities")]
+    assert {i.trial for i in report.items if i.finding.pointer.startswith("/trials")} == {"free_space-1"}
+    assert report.exit_code == 0
+
+
+def test_a_null_the_schema_refuses_is_e104_alone(tmp_path: Path):
+    folder = _write(tmp_path)
+    fx.edit(folder, lambda m: m.update(calibration=None))
+    assert [(f.code, f.pointer) for f in validate_session(folder).findings] == [("E104", "/calibration")]
+
+
+def test_nulls_in_the_device_file_are_w407_in_that_file(tmp_path: Path):
+    folder = _write(tmp_path)
+    fx._device_file({"serial": None})(folder)
+    assert [(f.code, f.file, f.pointer) for f in validate_session(folder).findings] == [("W407", "device.json", "/serial")]

@@ -504,6 +504,7 @@ class SessionValidator:
         self._guard(self._check_ids, file=MANIFEST)
         self._guard(self._check_static_quaternions, file=MANIFEST)
         self._guard(self._check_date, file=MANIFEST)
+        self._guard(self._check_nulls, file=MANIFEST)
         self._guard(self._check_rig, file=MANIFEST)
         self._guard(self._check_inline_device, file=MANIFEST)
         for index, raw_trial, trial in self.trials:
@@ -595,6 +596,7 @@ class SessionValidator:
         findings = schema_findings(data, "device", "E106", label)
         self.add_all(findings)
         self._check_static_quaternions(data, label)
+        self._check_nulls(data, label)
         device = _try(Device, data) if not findings else None
         if device is not None and device.kinematics is not None:
             self.add_all(kinematics_findings(device.kinematics, label, "/kinematics"))
@@ -605,6 +607,14 @@ class SessionValidator:
         device = _try(Device, dev) if isinstance(dev, dict) and "file" not in dev else None
         if device is not None and device.kinematics is not None:
             self.add_all(kinematics_findings(device.kinematics, MANIFEST, "/device/kinematics"))
+
+    def _check_nulls(self, document: Any = None, label: str = MANIFEST) -> None:
+        """W407 at every ``null`` the schema tolerated: writers omit members without a value (spec §2.1)."""
+        judged = {f.pointer for f in self.report.findings if f.file == label and f.code in ("E104", "E106", "E113", "E301")}
+        for pointer, _, value in _json_members(self.raw if document is None else document):
+            if value is None and pointer not in judged:
+                self.add(Finding("W407", "a member is written as null; omit it instead", file=label, pointer=pointer,
+                                 expected="the member omitted", found=None), _trial_of_pointer(self.raw, pointer) if document is None else None)
 
     def _check_date(self) -> None:
         """``date`` is a calendar date, not only ``YYYY-MM-DD``-shaped (spec §2.1)."""
@@ -971,18 +981,18 @@ def _neighbour_span(t: np.ndarray, mask: np.ndarray) -> tuple[float, float] | No
     return (lo, hi)
 
 
+def _json_members(node: Any, pointer: str = "") -> Iterable[tuple[str, Any, Any]]:
+    """Every ``(pointer, key, value)`` inside a JSON tree, depth first (object keys and array indices)."""
+    items = node.items() if isinstance(node, dict) else enumerate(node) if isinstance(node, list) else ()
+    for k, v in items:
+        p = f"{pointer}/{str(k).replace('~', '~0').replace('/', '~1')}"
+        yield p, k, v
+        yield from _json_members(v, p)
+
+
 def _quaternions_in(node: Any, pointer: str) -> Iterable[tuple[str, Any]]:
     """Every ``quaternion`` member inside a JSON tree, with its pointer."""
-    if isinstance(node, dict):
-        for k, v in node.items():
-            p = f"{pointer}/{str(k).replace('~', '~0').replace('/', '~1')}"
-            if k == "quaternion":
-                yield p, v
-            else:
-                yield from _quaternions_in(v, p)
-    elif isinstance(node, list):
-        for i, v in enumerate(node):
-            yield from _quaternions_in(v, f"{pointer}/{i}")
+    return ((p, v) for p, k, v in _json_members(node, pointer) if k == "quaternion")
 
 
 def _trial_of_pointer(raw: Any, pointer: str | None) -> str | None:

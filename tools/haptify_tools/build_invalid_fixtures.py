@@ -518,6 +518,8 @@ CASES: list[Case] = [
          lambda f: edit(f, lambda m: _joint(m, "q2").update(upper={"constant": 1.7, "coefficients": {"q3": -0.5}}))),
     Case("date-not-calendar", ["E104"], "The session's date is 2026-02-30, which matches YYYY-MM-DD but does not exist.",
          lambda f: edit(f, lambda m: m.update(date="2026-02-30"))),
+    Case("null-member", ["W407"], "The trial's notes and the rig's name are written as null instead of being omitted (warning only).",
+         lambda f: edit(f, lambda m: (trial_of(m).update(notes=None), m["rig"].update(name=None)))),
     Case("several-problems", ["E110", "E203", "E204", "W404"],
          "Four independent problems in one trial, all reported: t decreases in handle_wrench, NaN in handle_accel, "
          "the handle_pose file is missing, and plate_wrench is absent.", _several),
