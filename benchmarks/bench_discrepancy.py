@@ -39,7 +39,7 @@ def main() -> int:
     print(f"discrepancy run on a {recorded:.0f} s dossier (5 device trials): {wall:.1f} s wall (target < {TARGET_S:.0f} s)")
     for a in result.accepted:
         print(f"  named {a.effect_id} {a.parameter} = {a.value:.4g} {a.unit}")
-    print(f"  verdict {result.verdict}; held-out gap {result.heldout_gap_before_N:.4f} N -> {result.heldout_gap_after_N:.4f} N")
+    print(f"  verdict {result.verdict}; {result.gap_summary()}")
     return 0 if wall < TARGET_S else 1
 
 

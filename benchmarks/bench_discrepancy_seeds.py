@@ -22,7 +22,8 @@ import numpy as np
 
 from haptify_tools.discrepancy import workspace as ws
 from haptify_tools.discrepancy.data import simulate_all
-from haptify_tools.discrepancy.workflow import gap_above_floor, heldout_gap, run_discrepancy
+from haptify_tools.discrepancy.floor import gap_above_floor, heldout_gap
+from haptify_tools.discrepancy.workflow import run_discrepancy
 from haptify_tools.twin.model import disable, preset, set_param
 from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
 

@@ -45,9 +45,9 @@ def run(args: argparse.Namespace, ui) -> int:
                                 log=ui.say, workers=args.workers,
                                 overlay=not args.no_overlay)
     named = ", ".join(f"{a.effect_id} {a.parameter}={a.value:.4g} {a.unit}" for a in result.accepted) or "none"
-    ui.say(f"{result.verdict}: effects named: {named}; held-out force gap {result.heldout_gap_before_N:.4g} N → "
-           f"{result.heldout_gap_after_N:.4g} N; wrote {out}")
+    ui.say(f"{result.verdict}: effects named: {named}; {result.gap_summary()}; wrote {out}")
     ui.emit_json({"ok": True, "out": str(out), "verdict": result.verdict,
                   "accepted": [a.model_dump(mode="json") for a in result.accepted],
-                  "heldout_gap_before_N": result.heldout_gap_before_N, "heldout_gap_after_N": result.heldout_gap_after_N})
+                  "heldout_gap_before_N": result.heldout_gap_before_N, "heldout_gap_after_N": result.heldout_gap_after_N,
+                  "floor_N": result.floor_N})
     return 0

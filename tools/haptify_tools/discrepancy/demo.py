@@ -38,8 +38,7 @@ def demo(out: str | Path | None = None, print_fn=print) -> dict:
         se = f" ± {a.stderr:.2g}" if a.stderr is not None else ""
         print_fn(f"named #{a.order}: {a.effect_id} {a.parameter} = {a.value:.4g}{se} {a.unit} "
                  f"(ΔBIC {a.delta_bic:.0f}, explains {100 * a.share_explained:.0f} % of the held-out residual)")
-    print_fn(f"verdict: {result.verdict}; held-out force gap {result.heldout_gap_before_N:.4f} N → "
-             f"{result.heldout_gap_after_N:.4f} N")
+    print_fn(f"verdict: {result.verdict}; {result.gap_summary()}")
     for b in result.benchmark_gaps:
         print_fn(f"  {b.metric} ({b.trial_id}): measured {b.measured:.4g} {b.unit}, twin before {b.twin_before:.4g}, "
                  f"after {b.twin_after:.4g}")

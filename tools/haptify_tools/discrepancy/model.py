@@ -135,6 +135,19 @@ class DiscrepancyFile(_M):
     workspace_gaps: list[WorkspaceGap] = Field(default_factory=list)
     heldout_gap_before_N: float = Field(description="RMS force residual on the held-out blocks, all trials, before.")
     heldout_gap_after_N: float
+    floor_N: float | None = Field(None, description="Held-out gap of the updated twin against a replay of the session's "
+                                  "force protocols that it generated itself through the virtual rig (the method's "
+                                  "resolution: path reconstruction and sensor noise); null when no trial can be replayed.")
+    heldout_gap_above_floor_before_N: float | None = Field(None, description="√max(gap² − floor², 0) before (N).")
+    heldout_gap_above_floor_after_N: float | None = Field(None, description="√max(gap² − floor², 0) after (N).")
     not_observable: dict[str, str] = Field(description="Library effect ids the force residual cannot reveal, and why.")
     settings: dict[str, float]
     files: dict[str, str] = Field(default_factory=dict, description="Outputs written beside this file.")
+
+    def gap_summary(self) -> str:
+        """One line: the held-out force gap before → after (N), and the same above the floor when known."""
+        text = f"held-out force gap {self.heldout_gap_before_N:.4g} N → {self.heldout_gap_after_N:.4g} N"
+        if self.floor_N is not None:
+            text += (f" (floor {self.floor_N:.4g} N; above it {self.heldout_gap_above_floor_before_N:.4g} N → "
+                     f"{self.heldout_gap_above_floor_after_N:.4g} N)")
+        return text

@@ -42,7 +42,6 @@ def write_overlay(session: SessionFolder, trials: list[MeasuredTrial], twin_forc
     named = ", ".join(f"{a.effect_id} {a.parameter} = {a.value:.4g} {a.unit}" for a in result.accepted) or "none"
     note = ("# Twin versus measurement\n\nLines marked *(compare)* in the hand-force views are the updated twin's "
             f"force along the measured path (low-passed at the workflow's comparison band).\n\nEffects added: {named}.\n\n"
-            f"Verdict: {result.verdict}; held-out force gap {result.heldout_gap_before_N:.4g} N → "
-            f"{result.heldout_gap_after_N:.4g} N.")
+            f"Verdict: {result.verdict}; {result.gap_summary()}.")
     plan.add(Entry("/discrepancy", static=[rr.TextDocument(note, media_type=rr.MediaType.MARKDOWN)]))
     return write_rrd(plan, path, blueprint_for(plan))

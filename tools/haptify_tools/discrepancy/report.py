@@ -142,8 +142,7 @@ def write_report(folder: Path, result: DiscrepancyFile, trials: list[MeasuredTri
 td,th{{border:1px solid #ccc;padding:3px 8px}}img{{max-width:100%}}</style></head><body>
 <h1>Twin versus measurement</h1>
 <p>Session <code>{html.escape(result.session_id)}</code> · twin <code>{html.escape(result.twin_name)}</code> ·
-verdict: <b>{html.escape(result.verdict)}</b> · held-out force gap {result.heldout_gap_before_N:.4g} N →
-{result.heldout_gap_after_N:.4g} N</p>
+verdict: <b>{html.escape(result.verdict)}</b> · {html.escape(result.gap_summary())}</p>
 <h2>Effects added to the twin</h2>{acc if result.accepted else '<p>None.</p>'}
 <h2>Residual left</h2><p>A generic state regression removes {100 * s.heldout_share:.1f} % of the held-out residual
 (F test p = {s.f_p_value:.2g}; Ljung–Box p = {s.ljung_box_p_value:.2g}) → {'structure left that no library effect explains'

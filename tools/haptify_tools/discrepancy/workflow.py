@@ -24,6 +24,7 @@ from haptify.surface import planar_stats
 from haptify_tools.discrepancy import data as dt
 from haptify_tools.discrepancy import stats as st
 from haptify_tools.discrepancy import workspace as ws
+from haptify_tools.discrepancy.floor import gap_above_floor, heldout_gap, replay_floor
 from haptify_tools.discrepancy.identify import Selection, select_effects
 from haptify_tools.discrepancy.library import NOT_OBSERVABLE
 from haptify_tools.discrepancy.model import (
@@ -104,22 +105,6 @@ def signal_gaps(design: st.Design, trials: list[dt.MeasuredTrial], before: dict,
             out.append(SignalGap(trial_id=tr.trial_id, protocol=tr.protocol, channel=ch, rms_before_N=rms(rb, v),
                                  rms_after_N=rms(ra, v), heldout_rms_before_N=rms(rb, held), heldout_rms_after_N=rms(ra, held)))
     return out
-
-
-def heldout_gap(trials: list[dt.MeasuredTrial], sim: dict) -> float:
-    """RMS force residual (N, three axes pooled) over the validation and test blocks of every trial."""
-    parts = [(tr.force - sim[tr.trial_id])[tr.valid & (st.block_roles(len(tr.t)) != "train")] for tr in trials]
-    r = np.concatenate(parts) if parts else np.zeros((0, 3))
-    return float(np.sqrt(np.mean(r ** 2))) if len(r) else 0.0
-
-
-def gap_above_floor(gap: float, floor: float) -> float:
-    """The part of a held-out gap (N) above a floor (N) that no twin can go below: ``√max(gap² − floor², 0)``.
-
-    The floor is the gap the right twin still leaves — the hand path rebuilt from motion capture (the
-    examiner's tremor smoothed away under the twin's friction) and the sensor noise; residuals that add in
-    energy make the difference of squares the gap the model can still close."""
-    return float(np.sqrt(max(gap * gap - floor * floor, 0.0)))
 
 
 def _penetration(tr: dt.MeasuredTrial) -> tuple[np.ndarray, np.ndarray]:
@@ -217,8 +202,9 @@ def annotate_twin(twin: TwinFile, sel: Selection) -> TwinFile:
     return twin_from_dict(data)
 
 
-def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial], sel: Selection) -> DiscrepancyFile:
-    """Assemble :class:`DiscrepancyFile` from a finished selection."""
+def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial], sel: Selection,
+                 floor: float | None = None) -> DiscrepancyFile:
+    """Assemble :class:`DiscrepancyFile` from a finished selection (``floor``: :func:`.floor.replay_floor`, N)."""
     rounds = []
     for i, r in enumerate(sel.rounds):
         cands = [CandidateFit(effect_id=f.candidate.effect_id, parameter=f.candidate.parameter, value=f.value,
@@ -235,6 +221,7 @@ def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial]
     verdict = "unexplained residual" if s["structured"] else ("explained" if accepted else "no discrepancy")
     design = sel.rounds[0].design
     wgaps = workspace_gaps(sel)
+    before, after = heldout_gap(trials, sel.initial_sim), heldout_gap(trials, sel.final_sim)
     bench = benchmark_gaps(trials, sel.initial_sim, sel.final_sim) + [
         BenchmarkGap(metric="workspace.measured_volume", trial_id=w.trial_id, unit="m^3", measured=w.measured_volume_m3,
                      twin_before=w.twin_before_volume_m3, twin_after=w.twin_after_volume_m3) for w in wgaps]
@@ -243,7 +230,9 @@ def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial]
         structure=Structure(**s), where=localise(trials, sel.initial_sim, sel.final_sim),
         signal_gaps=signal_gaps(design, trials, sel.initial_sim, sel.final_sim),
         benchmark_gaps=bench, workspace_gaps=wgaps,
-        heldout_gap_before_N=heldout_gap(trials, sel.initial_sim), heldout_gap_after_N=heldout_gap(trials, sel.final_sim),
+        heldout_gap_before_N=before, heldout_gap_after_N=after, floor_N=floor,
+        heldout_gap_above_floor_before_N=None if floor is None else gap_above_floor(before, floor),
+        heldout_gap_above_floor_after_N=None if floor is None else gap_above_floor(after, floor),
         not_observable=dict(NOT_OBSERVABLE),
         settings={"pose_cutoff_hz": dt.POSE_CUTOFF_HZ, "free_space_pose_cutoff_hz": dt.POSE_CUTOFF_BY_PROTOCOL_HZ["free_space"],
                   "orientation_cutoff_hz": dt.ORIENTATION_CUTOFF_HZ, "residual_cutoff_hz": dt.RESIDUAL_CUTOFF_HZ,
@@ -263,7 +252,8 @@ def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | 
     sweeps = ws.load_sweeps(session)
     trials = dt.load_measured(session, required=not sweeps)
     sel = select_effects(twin, trials, max_effects=max_effects, log=log, workers=workers, sweeps=sweeps)
-    result = build_result(session.session_id, twin, trials, sel)
+    floor = replay_floor(sel.twin, session, trials) if trials else None
+    result = build_result(session.session_id, twin, trials, sel, floor)
     if out is not None:
         target = Path(out)
         target.parent.mkdir(parents=True, exist_ok=True)
