@@ -64,6 +64,19 @@ def test_local_oscillations_band_directions_and_centre(reach):
     assert reach.reachable(tr.position_W).all()
 
 
+def test_local_oscillations_reach_the_papers_speeds_and_accelerations(reach):
+    """Paper §VI-D: its examiner's windows differ by up to R_v = 1.6 m/s and R_a = 38 m/s² — the fastest
+    oscillations come near both and never exceed the acceleration."""
+    from haptify.signals import lowpass
+
+    tr = ex.local_oscillations(np.random.default_rng(5), reach, 40.0, rate_hz=RATE)
+    p = lowpass(tr.position_W, RATE, 10.0)
+    v = np.gradient(p, 1 / RATE, axis=0)
+    a = np.linalg.norm(np.gradient(v, 1 / RATE, axis=0), axis=1)
+    assert 30.0 < a.max() < 38.0 * 1.05
+    assert 1.0 < np.linalg.norm(v, axis=1).max() < 1.6
+
+
 def _dominant_hz(x: np.ndarray, rate: float) -> float:
     spec = np.sum(np.abs(np.fft.rfft(x - x.mean(axis=0), n=8 * len(x), axis=0)) ** 2, axis=1)
     f = np.fft.rfftfreq(8 * len(x), 1 / rate)

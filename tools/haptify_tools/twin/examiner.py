@@ -513,7 +513,7 @@ OSCILLATION_DIRECTIONS = {
 
 def local_oscillations(rng: np.random.Generator, reach: Reach, duration_s: float = LOCAL_DYNAMIC_DURATION, *,
                        rate_hz: float = DEFAULT_RATE_HZ, band_hz: tuple[float, float] = OSCILLATION_BAND_HZ,
-                       max_amplitude: float = 0.04, max_accel: float = 20.0, passes: int = 2,
+                       max_amplitude: float = 0.06, max_accel: float = 38.0, passes: int = 2,
                        t0: float = 0.0) -> HandTrajectory:
     """Local dynamic protocol (paper §V-C): oscillations from 0.5 to 4 Hz in x, y, z and the diagonals.
 
@@ -521,7 +521,10 @@ def local_oscillations(rng: np.random.Generator, reach: Reach, duration_s: float
     fast as possible); the direction cycles ``passes`` times through x, y, z and the six diagonals,
     blending smoothly between directions. The amplitude is the smaller of ``max_amplitude``, the free
     distance from the workspace centre in that direction (× 0.8), and ``max_accel / (2πf)²``; it is
-    eased in and out so the path starts and ends at rest at the centre.
+    eased in and out so the path starts and ends at rest at the centre. ``max_accel`` (m/s²) and the
+    fastest speed this allows (≈ 1.5 m/s at 4 Hz with 6 cm, ``max_amplitude`` in m) are the paper's
+    representative distances between local-dynamic windows (§VI-D: R_a = 38 m/s², R_v = 1.6 m/s), i.e. what
+    its examiner reached.
     """
     t = clock(duration_s, rate_hz, t0)
     rel = t - t0
