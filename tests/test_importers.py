@@ -307,6 +307,21 @@ def test_synthetic_c3d_free_space_trial_validates(tmp_path, synthetic):
     assert not (tmp_path / "s").exists()
 
 
+def test_a_sync_trigger_in_volts_without_threshold_is_refused_before_writing(tmp_path, synthetic):
+    """The trigger column holds 0 or 1 (spec §2.6, E214); a raw 0–5 V channel needs the map's ``threshold``."""
+    path, truth = synthetic
+    m = full_map(truth["labels"])
+    m["trial"]["protocol"] = "other"
+    for kind in ("handle_wrench", "handle_accel", "plate_wrench"):
+        m["streams"].pop(kind)
+    m["streams"]["sync"]["columns"]["trigger"] = {"source": "TRIG", "unit": "1"}
+    with pytest.raises(HaptifyError) as err:
+        import_c3d(path, tmp_path / "s", write_map(tmp_path, "m.json", m))
+    f = err.value.findings[0]
+    assert f.code == "E214" and f.column == "TRIG" and f.expected == [0.0, 1.0] and f.found not in (0.0, 1.0)
+    assert not (tmp_path / "s").exists()
+
+
 # --- CSV logs --------------------------------------------------------------------------------
 
 def test_ati_fixture_converts_newton_millimetres_exactly(tmp_path):

@@ -253,6 +253,10 @@ def kind_table(kind: str) -> dict:
     return schemas.load("stream-kinds.json")["kinds"][kind]
 
 
+#: Columns whose values come from a closed set (spec §2.6 kind table): the sync trigger is 0 or 1 (E214).
+ALLOWED_VALUES: dict[tuple[str, str], tuple[float, ...]] = {("sync", "trigger"): (0.0, 1.0)}
+
+
 def expected_columns(kind: str, entities: list[str] | None = None, present: list[str] | None = None) -> list[tuple[str, str]]:
     """The ``(name, unit)`` columns a stream of ``kind`` must have, time column first (spec §2.6).
 

@@ -36,6 +36,7 @@ from haptify import schemas
 from haptify.conventions import QUATERNION_NORM_TOLERANCE
 from haptify.errors import Finding, HaptifyError, fail
 from haptify.session_format import (
+    ALLOWED_VALUES,
     ClockOffset,
     Device,
     Kinematics,
@@ -66,7 +67,6 @@ INTERVAL_LOW, INTERVAL_HIGH = 0.5, 1.5  # an interval outside [0.5, 1.5] / rate_
 OCCLUSION_WARNING_SHARE = 0.20        # share of occluded samples above which W405 is raised
 NORMAL_NORM_TOLERANCE = QUATERNION_NORM_TOLERANCE  # |‖n‖ − 1| allowed in a rendering's surface_normal (E307, spec §2.5)
 LIMIT_LATTICE_POINTS = 5              # per-joint lattice on which joint ranges must be non-empty (E115, spec §2.3, §8.3)
-ALLOWED_VALUES = {("sync", "trigger"): (0.0, 1.0)}  # columns with a closed set of values (E214, spec §2.6 kind table)
 MANIFEST_MAX_BYTES = 16 * 2**20       # session.json larger than this is not read (E113)
 DEVICE_MAX_BYTES = 4 * 2**20          # device.json larger than this is not read (E113)
 STREAM_MAX_BYTES = 8 * 2**30          # spec §3.5: no stream file exceeds 8 GiB (E113)
