@@ -34,7 +34,7 @@ CASES = {
     "friction.coulomb": ("torque_Nm", 0.02, 0.06, ("free_space",)),
     "friction.viscous": ("damping_Nms_per_rad", 0.005, 0.02, ("figure_eight",)),
     "kinematics.link_length": ("delta_a_m", 0.003, 0.01, ("free_space",)),
-    "handle.connector_mass": ("mass_kg", 0.02, 0.06, ("figure_eight",)),
+    "handle.connector_mass": ("mass_kg", 0.02, 0.06, ("local_dynamic",)),
     "inertia": ("rotor_inertia_kg_m2", 0.5e-6, 2e-6, ("local_dynamic",)),
     "friction.stribeck": ("excess_torque_Nm", 0.035, 0.105, ("free_space",)),   # ½–1½ × the preset's 0.07
     "kinematics.base_collision": ("base_top_m", 0.075, 0.125, ("workspace",)),

@@ -3,9 +3,11 @@
 Every trial with a ``handle_wrench`` stream is read once through the reference's calibrated handle
 signals (spec §7.5, default 100 Hz grid). The measured handle pose drives the twin: motion-capture
 gaps are bridged by linear interpolation, the path is low-passed at :data:`POSE_CUTOFF_HZ` (the
-twin's inverse dynamics differentiates it twice), passive trials are simulated on the 100 Hz grid
-itself and active trials on a 1 kHz grid (the rendering loop's rate, CHAI3D) from a cubic spline of
-the same path. The calibrated force still holds the sensing handle's connector inertia (the paper's
+twin's inverse dynamics differentiates it twice), and every trial is simulated on a 1 kHz grid (the
+rendering loop's rate, CHAI3D, at which the twin's drive model is defined) from a cubic spline of the
+same path: the drive's sharp friction reversals make the model converge only to first order in its
+step, and a hidden 5·10⁻⁷ kg·m² rotor inertia came out 20 % high with the passive trials at 250 Hz, 1 %
+at 1 kHz. The calibrated force still holds the sensing handle's connector inertia (the paper's
 eqs. 1–3 remove only its weight; spec §6.1), so the twin's prediction of the measured signal is the
 device's force minus ``m_c·a`` when the twin's ``handle.connector_mass`` is on. Measured and simulated forces are then low-passed alike at
 :data:`RESIDUAL_CUTOFF_HZ` so that both carry the same filter; the residual is their difference.
@@ -33,8 +35,7 @@ POSE_CUTOFF_BY_PROTOCOL_HZ = {"free_space": 4.0}
 ORIENTATION_CUTOFF_HZ = 1.5   # the hand's orientation wanders slowly (under 16°/s in free space, paper §V-B);
                               # gimbal friction turns orientation noise into force noise
 RESIDUAL_CUTOFF_HZ = 5.0      # both forces are compared below this frequency
-SIM_RATE_HZ = 1000.0          # active trials: the rendering loop's rate (paper §V-D)
-PASSIVE_RATE_HZ = 250.0       # passive trials: the cable model is resolved (force within 0.1 mN of 1 kHz)
+SIM_RATE_HZ = 1000.0          # the rendering loop's rate (paper §V-D), active and passive trials alike
 FORCE_PROTOCOLS = ("free_space", "local_dynamic", "other", "frictionless_surface", "stiffness")
 
 
@@ -114,14 +115,9 @@ def load_measured(session: SessionFolder, ctx: ComputeContext | None = None, req
     return out
 
 
-def sim_rate(trial: MeasuredTrial) -> float:
-    """Simulation rate (Hz) of a trial: :data:`SIM_RATE_HZ` when active, :data:`PASSIVE_RATE_HZ` otherwise."""
-    return SIM_RATE_HZ if trial.active else PASSIVE_RATE_HZ
-
-
 def fine_path(trial: MeasuredTrial) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The trial's smoothed hand path on its simulation grid (cubic spline): ``t``, position, quaternion."""
-    dt = 1.0 / sim_rate(trial)
+    dt = 1.0 / SIM_RATE_HZ
     fine = np.arange(trial.t[0], trial.t[-1] + 0.5 * dt, dt)
     fine = fine[fine <= trial.t[-1]]
     pos = CubicSpline(trial.t, trial.position, axis=0)(fine)
@@ -137,7 +133,7 @@ def simulate_trial(twin: TwinFile, trial: MeasuredTrial) -> np.ndarray:
         res = simulate_active(twin, fine, pos, quat, trial.rendering)
     else:
         res = simulate_passive(twin, fine, pos, quat)
-    force = lowpass(res.force_W - connector_force(twin, fine, pos), sim_rate(trial), RESIDUAL_CUTOFF_HZ)
+    force = lowpass(res.force_W - connector_force(twin, fine, pos), SIM_RATE_HZ, RESIDUAL_CUTOFF_HZ)
     return np.stack([np.interp(trial.t, fine, force[:, k]) for k in range(3)], axis=1)
 
 

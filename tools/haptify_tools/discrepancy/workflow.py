@@ -236,7 +236,7 @@ def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial]
         not_observable=dict(NOT_OBSERVABLE),
         settings={"pose_cutoff_hz": dt.POSE_CUTOFF_HZ, "free_space_pose_cutoff_hz": dt.POSE_CUTOFF_BY_PROTOCOL_HZ["free_space"],
                   "orientation_cutoff_hz": dt.ORIENTATION_CUTOFF_HZ, "residual_cutoff_hz": dt.RESIDUAL_CUTOFF_HZ,
-                  "active_rate_hz": dt.SIM_RATE_HZ, "passive_rate_hz": dt.PASSIVE_RATE_HZ, "bic_min": st.BIC_MIN, "p_max": st.P_MAX,
+                  "sim_rate_hz": dt.SIM_RATE_HZ, "bic_min": st.BIC_MIN, "p_max": st.P_MAX,
                   "validation_min": st.VALIDATION_MIN, "structure_share": st.STRUCTURE_SHARE})
 
 
