@@ -41,7 +41,7 @@ CASES = {
     "drive.torque_saturation": ("max_torque_Nm", 0.12, 0.22, ("stiffness",)),
     "drive.force_cutoff": ("trip_force_N", 1.5, 2.5, ("stiffness",)),
     "drive.series_elasticity": ("stiffness_Nm_per_rad", 6.0, 16.0, ("stiffness",)),
-    "drive.backlash": ("width_rad", 0.003, 0.008, ("stiffness",)),
+    "drive.backlash": ("width_rad", 0.003, 0.008, ("frictionless_surface",)),   # torque reversals in contact
 }
 
 

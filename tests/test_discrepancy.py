@@ -94,6 +94,8 @@ def test_hidden_gravity_is_named_with_its_acceleration(tmp_path):
     ("drive.force_cutoff", "trip_force_N", 1.5, 2.5, ("stiffness",)),
     ("inertia", "rotor_inertia_kg_m2", 0.5e-6, 2e-6, ("local_dynamic",)),
     ("handle.connector_mass", "mass_kg", 0.02, 0.06, ("local_dynamic",)),
+    # the play shows where the drive torque reverses while the motors render: sliding on the surface
+    ("drive.backlash", "width_rad", 0.003, 0.008, ("frictionless_surface",)),
 ])
 def test_hidden_effect_is_named_first_and_identified(tmp_path, effect, parameter, low, high, protocols):
     """One library effect hidden with a random plausible value; the twin starts from the preset without it
