@@ -36,7 +36,6 @@ def utcnow() -> datetime:
 
 class Base(DeclarativeBase):
     """The declarative base of the registry's tables (one schema for SQLite and PostgreSQL, spec §17.7)."""
-    pass
 
 
 class Lab(Base):
