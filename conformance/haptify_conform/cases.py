@@ -14,7 +14,7 @@ REPO_ROOT = SUITE_ROOT.parent
 
 
 class Tolerance(BaseModel):
-    """A case passes when ``|actual − expected| ≤ abs + rel·|expected|`` for every component."""
+    """A case passes when ``|actual − expected| ≤ abs + rel·|expected|`` for every component; abs in the metric's unit, rel dimensionless (spec §16.2)."""
 
     model_config = ConfigDict(extra="forbid")
     abs: float = Field(ge=0, description="Absolute part, in the metric's unit.")
@@ -22,7 +22,7 @@ class Tolerance(BaseModel):
 
 
 class Expected(BaseModel):
-    """The expected answer: a value with unit, or error codes (for negative cases)."""
+    """The expected answer: a value with its unit, or error codes (negative cases), or validity (spec §16.2, §16.3)."""
 
     model_config = ConfigDict(extra="forbid")
     value: float | list[float] | None = None
@@ -32,13 +32,15 @@ class Expected(BaseModel):
 
 
 class Provenance(BaseModel):
+    """How a case's expected value is known: analytic, generated from a known model, paper or spec, with a note (spec §16.2, §16.8.1)."""
+
     model_config = ConfigDict(extra="forbid")
     kind: Literal["analytic", "generated", "paper", "spec"]
     note: str
 
 
 class Case(BaseModel):
-    """One conformance case (``case.schema.json`` is generated from this model)."""
+    """One conformance case (spec §16.2; ``conformance-cases.schema.json`` is generated from the case-file model)."""
 
     model_config = ConfigDict(extra="forbid")
     id: str = Field(pattern=r"^[a-z0-9][a-z0-9._-]*$", description="Permanent; never reused for another case.")
@@ -55,6 +57,8 @@ class Case(BaseModel):
 
 
 class CaseFile(BaseModel):
+    """One case file ``conformance/cases/<name>.json``: a description and its cases (spec §16.1, §16.8.1)."""
+
     model_config = ConfigDict(extra="forbid")
     description: str
     cases: list[Case]

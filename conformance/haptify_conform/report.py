@@ -14,6 +14,8 @@ from haptify_conform.judge import Verdict
 
 
 class ReportHeader(BaseModel):
+    """Header of a JSON conformance report: suite, spec and protocol versions, adapter, implementation, start time (spec §16.6)."""
+
     model_config = ConfigDict(extra="forbid")
     suite_version: str
     spec_version: str
@@ -24,6 +26,8 @@ class ReportHeader(BaseModel):
 
 
 class CaseRecord(BaseModel):
+    """One case's outcome in the JSON report: status, level, spec section, message, maximum errors, duration in s (spec §16.6)."""
+
     model_config = ConfigDict(extra="forbid")
     case_id: str
     metric: str
@@ -38,6 +42,8 @@ class CaseRecord(BaseModel):
 
 
 class Summary(BaseModel):
+    """Case counts of a run; the implementation conforms when none failed or errored (spec §16.6)."""
+
     model_config = ConfigDict(extra="forbid")
     total: int
     passed: int
@@ -48,7 +54,7 @@ class Summary(BaseModel):
 
 
 class ConformReport(BaseModel):
-    """The JSON report of one run (its schema is generated from this model)."""
+    """The JSON report of one run: header, one record per case, summary (spec §16.6; its schema is generated from this model)."""
 
     model_config = ConfigDict(extra="forbid")
     header: ReportHeader

@@ -122,9 +122,9 @@ class _Strict(BaseModel):
 
 
 class ChannelMap(_Strict):
-    """Where one stream column comes from: a source ``source`` channel, or a constant ``value``.
+    """Where one stream column comes from (spec §5.2): a source ``source`` channel, or a constant ``value``.
 
-    The SI value is ``convert(scale · raw + offset)`` from ``unit`` (default for C3D: the channel's
+    The SI value is ``convert(scale · raw + offset)`` from ``unit`` (spec §5.3; default for C3D: the channel's
     ANALOG:UNITS; CSV columns and constants must state it). ``threshold`` turns the value into a 0/1
     trigger (1 where value ≥ threshold, in ``unit``) and is allowed only for dimensionless columns.
     """
@@ -144,7 +144,7 @@ class ChannelMap(_Strict):
 
 
 class StreamMap(_Strict):
-    """One output stream: the kind's columns (``t`` excluded) mapped to source channels."""
+    """One output stream (spec §5.2): the kind's columns (``t`` excluded) mapped to source channels; rate in Hz."""
 
     columns: dict[str, Union[ChannelMap, str]] = Field(description="Column name → channel; a string is short for {\"source\": string}.")
     rate_hz: float | None = Field(None, gt=0, description="Nominal rate; C3D: must equal ANALOG:RATE when given; CSV: default 1/median(Δt) to 6 significant digits.")
@@ -154,7 +154,7 @@ class StreamMap(_Strict):
 
 
 class MarkerMap(_Strict):
-    """Which C3D point labels become markers, and their entity ids."""
+    """Which C3D point labels become markers, and their entity ids (spec §5.4, §5.5)."""
 
     include: list[str] | None = Field(None, description="Labels or shell patterns ('boite:*'); default every label; [] imports no markers.")
     exclude: list[str] = Field(default_factory=list, description="Labels or shell patterns to leave out.")
@@ -165,6 +165,8 @@ class MarkerMap(_Strict):
 
 
 class DeviceFile(_Strict):
+    """The device given as a device.json file beside the map instead of inline (spec §5.2)."""
+
     file: str = Field(description="Path of a device.json, relative to the map file's folder; copied into the session as device.json.")
 
 
@@ -193,11 +195,15 @@ class TrialFields(_Strict):
 
 
 class CsvTime(_Strict):
+    """The time column of a CSV log: its header and unit, s, ms or us (spec §5.2, §5.7)."""
+
     source: str = Field(description="Header of the time column.")
     unit: str = Field(description="s, ms or us.")
 
 
 class CsvOptions(_Strict):
+    """How a CSV log is read: delimiter, lines before the header, comment character (spec §5.2, §5.7)."""
+
     delimiter: str = Field(",", min_length=1, max_length=1)
     skip_rows: int = Field(0, ge=0, description="Lines before the header row.")
     comment: str | None = Field(None, min_length=1, max_length=1, description="Lines starting with this character are ignored.")

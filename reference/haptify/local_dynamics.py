@@ -56,7 +56,7 @@ def _all_finite(values: Sequence[float], what: str) -> None:
 
 
 class PiecewiseLinearMap(_Strict):
-    """A static map through the points (breakpoints[k], values[k]), extended linearly beyond the ends."""
+    """A static map through the points (breakpoints[k], values[k]), extended linearly beyond the ends; in the channel's units (spec §11.2, §11.5.1)."""
 
     type: Literal["piecewise_linear"] = "piecewise_linear"
     breakpoints: list[float] = Field(min_length=2, description="Strictly increasing abscissae (input units).")
@@ -74,7 +74,7 @@ class PiecewiseLinearMap(_Strict):
 
 
 class UnitGainMap(_Strict):
-    """No map: the channel passes unchanged (MATLAB: an empty or unitgain nonlinearity)."""
+    """No map: the channel passes unchanged (MATLAB: an empty or unitgain nonlinearity) (spec §11.2, §11.5.1)."""
 
     type: Literal["unit_gain"] = "unit_gain"
 
@@ -97,19 +97,21 @@ class TransferFunction(_Strict):
 
 
 class Channel(_Strict):
+    """One model input or output channel: its name and SI unit, in channel order (spec §11.1, §11.5.1)."""
+
     name: str
     unit: str
 
 
 class QuaternionHemisphere(_Strict):
-    """Sign convention of the quaternion inputs: each sample q is replaced by sign(q·reference)·q."""
+    """Sign convention of the quaternion inputs: each sample q is replaced by sign(q·reference)·q (spec §11.5.1)."""
 
     columns: list[int] = Field(min_length=4, max_length=4, description="0-based input indices of w, x, y, z.")
     reference: list[float] = Field(min_length=4, max_length=4, description="Unit quaternion [w, x, y, z].")
 
 
 class FitSummary(_Strict):
-    """How the model was obtained (informative; prediction never reads it)."""
+    """How the model was obtained (informative; prediction never reads it); errors in output units (spec §11.5.1)."""
 
     session_id: str | None = None
     trial_id: str | None = None

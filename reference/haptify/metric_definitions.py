@@ -17,6 +17,8 @@ from haptify import schemas
 
 
 class Parameter(BaseModel):
+    """One parameter of a metric family: its value, SI unit ('1' dimensionless) and meaning (spec §0.3)."""
+
     model_config = ConfigDict(extra="forbid")
     value: Any = Field(description="The value, in 'unit'.")
     unit: str = Field(description="SI unit, or '1' for dimensionless, or '' for names and flags.")
@@ -24,6 +26,8 @@ class Parameter(BaseModel):
 
 
 class MetricDefinition(BaseModel):
+    """One metric of a family: id, SI unit, shape, the protocols and streams it reads, how repetitions aggregate (spec §0.3, §15.2–15.3)."""
+
     model_config = ConfigDict(extra="forbid")
     id: str = Field(pattern=r"^[a-z_]+(\.[a-z0-9_]+)+$")
     title: str

@@ -56,6 +56,8 @@ class Unavailable(BaseModel):
 
 
 class ResultWarning(BaseModel):
+    """A coded finding raised while computing, optionally tied to a metric and a trial (spec §15.1)."""
+
     model_config = ConfigDict(extra="forbid")
     code: str
     message: str
@@ -64,13 +66,15 @@ class ResultWarning(BaseModel):
 
 
 class Implementation(BaseModel):
+    """Name and version of the software that computed the results (spec §15.1)."""
+
     model_config = ConfigDict(extra="forbid")
     name: str
     version: str
 
 
 class DeviceSummary(BaseModel):
-    """Which device the results describe (copied from the session's device description)."""
+    """Which device the results describe (copied from the session's device description; spec §15.1)."""
 
     model_config = ConfigDict(extra="forbid")
     manufacturer: str

@@ -33,7 +33,7 @@ class _Strict(BaseModel):
 
 
 class Pose(_Strict):
-    """A rigid transform: ``position`` (m) of the child origin and ``quaternion`` (wxyz) child → parent."""
+    """A rigid transform (spec §1.3): ``position`` (m) of the child origin in the parent and ``quaternion`` (wxyz) child → parent."""
 
     position: Vec3
     quaternion: Quat
@@ -42,14 +42,14 @@ class Pose(_Strict):
 # --- device (spec §2.3) -------------------------------------------------------------------------
 
 class LinearLimit(_Strict):
-    """A joint limit ``constant + Σ coefficients[q_k] · q_k`` in rad; coefficients are keyed by joint name (``"q2"``)."""
+    """A joint limit ``constant + Σ coefficients[q_k] · q_k`` in rad, keyed by earlier joint names (``"q2"``) (spec §2.3)."""
 
     constant: float = Field(description="Offset in rad.")
     coefficients: dict[Annotated[str, Field(pattern=r"^q[1-9]$")], float] = Field(default_factory=dict, description="Dimensionless slope per other joint, e.g. {\"q2\": -0.85}.")
 
 
 class DHJoint(_Strict):
-    """One revolute joint of a standard (distal) Denavit–Hartenberg chain: Rot_z(θ+θ0)·Trans_z(d)·Trans_x(a)·Rot_x(α)."""
+    """One revolute joint of a standard (distal) Denavit–Hartenberg chain: Rot_z(θ+θ0)·Trans_z(d)·Trans_x(a)·Rot_x(α); a, d in m, α, θ0 in rad (spec §2.3)."""
 
     name: Annotated[str, Field(pattern=r"^q[1-9]$")]
     a: float = Field(description="Link length a_i in m.")
@@ -61,18 +61,22 @@ class DHJoint(_Strict):
 
 
 class Kinematics(_Strict):
+    """The device's equivalent serial chain: standard DH joints (m, rad) after a base pose in the device frame (spec §2.3)."""
+
     convention: Literal["dh_standard"] = "dh_standard"
     joints: list[DHJoint] = Field(min_length=1, max_length=9)
     base: Pose = Field(description="Pose of the DH base frame (joint 1 axis) in the device frame.")
 
 
 class Gimbal(_Strict):
+    """The passive wrist: its rotational DOF and the gimbal-centre-to-stylus-tip distance in m (spec §2.3)."""
+
     dof: int = Field(ge=0, le=3, description="Passive rotational DOF at the end of the arm.")
     tip_offset_m: float = Field(0.0, ge=0, description="Distance from gimbal centre to stylus tip along the stylus axis, m.")
 
 
 class Datasheet(_Strict):
-    """Manufacturer figures, SI units; any may be absent."""
+    """Manufacturer figures in SI units (m, N, N/m, kg); any may be absent (spec §2.3)."""
 
     workspace_box_m: Vec3 | None = None
     peak_force_N: float | None = None
@@ -97,13 +101,15 @@ class Device(_Strict):
 
 
 class DeviceRef(_Strict):
+    """A reference to the device description kept in a separate ``device.json`` in the session folder (spec §2.1, §2.3)."""
+
     file: str = Field(description="Relative path of a device.json inside the session folder.")
 
 
 # --- rig (spec §2.4) ----------------------------------------------------------------------------
 
 class SensorRange(_Strict):
-    """Symmetric measuring range per axis: ``|reading| ≤ range`` in the stream's units."""
+    """Symmetric measuring range per axis: ``|reading| ≤ range`` in N, N·m or m/s² (spec §2.4)."""
 
     force_N: Vec3 | None = None
     torque_Nm: Vec3 | None = None
@@ -111,33 +117,45 @@ class SensorRange(_Strict):
 
 
 class CornerSensor(_Strict):
+    """One of the force plate's four corner 6-axis sensors and the pose of its frame in W (spec §2.4, §1.2)."""
+
     id: Literal["c1", "c2", "c3", "c4"]
     pose: Pose = Field(description="Sensor frame in the world frame W.")
 
 
 class ForcePlate(_Strict):
+    """The force plate: its size in m (x, y), its four corner sensors and their optional ranges (spec §2.4)."""
+
     size_m: Annotated[list[float], Field(min_length=2, max_length=2)]
     corners: list[CornerSensor] = Field(min_length=4, max_length=4)
     corner_range: SensorRange | None = None
 
 
 class HandleSensor(_Strict):
+    """A sensor on the handle (F/T sensor or accelerometer): its frame's pose in the handle body frame H (spec §2.4)."""
+
     pose: Pose = Field(description="Sensor frame in the handle body frame (the frame of handle_pose).")
     range: SensorRange | None = None
     model: str | None = None
 
 
 class Handle(_Strict):
+    """The sensing end-effector: a 6-axis F/T sensor and an accelerometer, both required (spec §2.4)."""
+
     ft_sensor: HandleSensor
     accelerometer: HandleSensor
 
 
 class RigidBody(_Strict):
+    """A motion-capture rigid body: the device link it is attached to and its marker labels (spec §2.4)."""
+
     name: Id = Field(description="The link this rigid body is attached to, e.g. 'link2' or 'handle'.")
     markers: list[Id] = Field(min_length=1)
 
 
 class MotionCapture(_Strict):
+    """The motion-capture system: frame rate in Hz, marker labels and rigid bodies (spec §2.4)."""
+
     system: str | None = None
     rate_hz: float = Field(gt=0, le=MAX_RATE_HZ)
     rigid_bodies: list[RigidBody] = Field(default_factory=list)
@@ -170,6 +188,8 @@ class HandleGravityCalibration(_Strict):
 
 
 class PlateBiasCalibration(_Strict):
+    """Calibration record ``plate_bias``: the mean of the 24 plate_wrench columns at rest, N and N·m (spec §2.8)."""
+
     kind: Literal["plate_bias"] = "plate_bias"
     id: Id
     source_trial: Id | None = None
@@ -177,6 +197,8 @@ class PlateBiasCalibration(_Strict):
 
 
 class ClockOffset(_Strict):
+    """Calibration record ``clock_offset``: add ``offset_s`` (s) to one stream's t to put it on the session clock (spec §2.8)."""
+
     kind: Literal["clock_offset"] = "clock_offset"
     id: Id
     stream_file: str = Field(description="The stream whose time column is shifted.")
@@ -189,11 +211,15 @@ Calibration = Annotated[Union[HandleGravityCalibration, PlateBiasCalibration, Cl
 # --- trials and streams (spec §2.5–2.7) ----------------------------------------------------------
 
 class Column(_Strict):
+    """One column of a stream: its name and unit (``t`` in s first) (spec §2.6)."""
+
     name: str
     unit: str
 
 
 class Stream(_Strict):
+    """One recorded table of samples: kind, file, format, nominal rate in Hz, frame, columns, rows, checksum (spec §2.6)."""
+
     kind: Literal[STREAM_KINDS]  # type: ignore[valid-type]
     file: str = Field(description="Relative path inside the session folder.")
     format: Literal["parquet", "csv"]
@@ -218,6 +244,8 @@ class Rendering(_Strict):
 
 
 class Trial(_Strict):
+    """One recorded trial: its protocol, repetition, powered state, rendering and streams (spec §2.5)."""
+
     id: Id
     protocol: Literal[PROTOCOLS]  # type: ignore[valid-type]
     label: str | None = None
@@ -229,6 +257,8 @@ class Trial(_Strict):
 
 
 class Party(_Strict):
+    """The lab or the examiner, named by a pseudonymous id (spec §2.1, §2.2)."""
+
     id: Id = Field(description="A pseudonymous id, never a person's name.")
 
 

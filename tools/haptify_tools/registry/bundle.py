@@ -53,7 +53,7 @@ Role = Literal["results", "conformance", "session-manifest", "session-file", "st
 
 
 class BundleFile(BaseModel):
-    """One file of the bundle: where, what for, how big, which bytes."""
+    """One file of the bundle: path, role, size in bytes and sha256 (spec §17.2.1, §17.2.2)."""
 
     model_config = ConfigDict(extra="forbid")
     path: str = Field(description="Relative POSIX path inside the archive.")
@@ -63,11 +63,15 @@ class BundleFile(BaseModel):
 
 
 class BundleLab(BaseModel):
+    """The lab a bundle comes from: the session's lab.id, which must be the submitting token's lab (spec §17.2.2, §17.6)."""
+
     model_config = ConfigDict(extra="forbid")
     id: Id = Field(description="The session's lab.id; must be the lab of the submitting token.")
 
 
 class BundleDevice(BaseModel):
+    """The device a bundle's results describe, as in the session's device description (spec §17.2.2, §2.3)."""
+
     model_config = ConfigDict(extra="forbid")
     manufacturer: str = Field(min_length=1, max_length=200)
     model: str = Field(min_length=1, max_length=200)

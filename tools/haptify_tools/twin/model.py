@@ -59,7 +59,7 @@ class _Strict(BaseModel):
 
 
 class Effect(_Strict):
-    """Common part of every effect: the switch and where its numbers come from."""
+    """Common part of every twin effect: the switch and where its numbers come from (issue 3; twin/TWIN.md, Effects)."""
 
     enabled: bool = Field(True, description="False switches the effect off (as if the device did not have it).")
     description: str | None = Field(None, description="What the effect models, in one sentence.")
@@ -69,20 +69,23 @@ class Effect(_Strict):
 # --- dynamics effects ---------------------------------------------------------------------------
 
 class GravityEffect(Effect):
-    """Weight of every moving part (links and gimbal body) in the world's uniform field, −z."""
+    """Effect ``gravity``: weight of every moving part (links and gimbal body) in the world's uniform field, −z, m/s² (issue 3; TWIN.md, Effects)."""
 
     g_m_per_s2: float = Field(STANDARD_GRAVITY, gt=0, description="Gravitational acceleration, m/s².")
 
 
 class InertiaEffect(Effect):
-    """Inertial forces of the links, the gimbal body and the motor rotors (reflected through the capstans)."""
+    """Effect ``inertia``: inertial forces of the links, the gimbal body and the motor rotors (reflected through the capstans), kg·m² (issue 3; TWIN.md, Effects)."""
 
     rotor_inertia_kg_m2: PerJoint = Field(description="Rotor (plus capstan drum) inertia per motor, on the motor shaft, kg·m².")
 
 
 class CoulombFriction(Effect):
-    """``τ = −τ_c·(1 + r·sin(2π·c·θ))·tanh(ω/ω_s)`` per drive axis (a smooth zero crossing; the level may
-    ripple along the drive angle θ), and ``−τ_g·tanh(ω/ω_s)`` at the gimbal joints."""
+    """Effect ``friction.coulomb`` (issue 3; TWIN.md, Effects), torques in N·m, speeds in rad/s.
+
+    ``τ = −τ_c·(1 + r·sin(2π·c·θ))·tanh(ω/ω_s)`` per drive axis (a smooth zero crossing; the level may
+    ripple along the drive angle θ), and ``−τ_g·tanh(ω/ω_s)`` at the gimbal joints.
+    """
 
     torque_Nm: PerJoint = Field(description="Coulomb friction torque per drive axis at the capstan output, N·m.")
     zero_crossing_velocity_rad_per_s: float = Field(gt=0, description="ω_s of the tanh zero crossing, rad/s.")
@@ -92,14 +95,14 @@ class CoulombFriction(Effect):
 
 
 class ViscousFriction(Effect):
-    """``τ = −b · ω`` per drive axis and gimbal joint."""
+    """Effect ``friction.viscous``: ``τ = −b · ω`` per drive axis and gimbal joint, b in N·m·s/rad (issue 3; TWIN.md, Effects)."""
 
     damping_Nms_per_rad: PerJoint = Field(description="Viscous coefficient per drive axis, N·m·s/rad.")
     gimbal_damping_Nms_per_rad: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0], description="Viscous coefficient of the gimbal joints, N·m·s/rad.")
 
 
 class StribeckFriction(Effect):
-    """Extra friction near zero speed: ``τ = −Δτ_s · exp(−(ω/ω_st)²) · tanh(ω/ω_s)``."""
+    """Effect ``friction.stribeck``: extra friction near zero speed, ``τ = −Δτ_s · exp(−(ω/ω_st)²) · tanh(ω/ω_s)``; N·m, rad/s (issue 3; TWIN.md, Effects)."""
 
     excess_torque_Nm: PerJoint = Field(description="Breakaway torque minus Coulomb torque per drive axis, N·m.")
     stribeck_velocity_rad_per_s: float = Field(gt=0, description="ω_st: speed at which the excess has fallen to 1/e, rad/s.")
@@ -107,7 +110,8 @@ class StribeckFriction(Effect):
 
 
 class SeriesElasticity(Effect):
-    """Cable drive compliance between motor (encoder side) and link: ``τ = k·(θ_motor − θ_link) + c·(θ̇_motor − θ̇_link)``.
+    """Effect ``drive.series_elasticity`` (issue 3; TWIN.md, Effects): cable drive compliance between motor (encoder side) and
+    link, ``τ = k·(θ_motor − θ_link) + c·(θ̇_motor − θ̇_link)`` with k in N·m/rad, c in N·m·s/rad.
 
     When disabled the cable is rigid (the motor angle equals the link-side drive angle).
     """
@@ -117,21 +121,23 @@ class SeriesElasticity(Effect):
 
 
 class TorqueSaturation(Effect):
-    """Motor torque limit per drive axis (amplifier current limit × torque constant × capstan ratio)."""
+    """Effect ``drive.torque_saturation``: motor torque limit per drive axis in N·m (amplifier current limit × torque constant × capstan ratio); the Touch's force plateau, paper §VI-F (issue 3; TWIN.md, Effects)."""
 
     max_torque_Nm: PerJoint = Field(description="Largest torque per drive axis at the capstan output, N·m.")
 
 
 class ForceCutoff(Effect):
-    """Safety cut-off: when the commanded force magnitude exceeds ``trip_force_N`` the drive outputs zero
-    torque until the commanded force has fallen below ``rearm_force_N`` (the Touch X's sudden drop)."""
+    """Effect ``drive.force_cutoff`` (issue 3; TWIN.md, Effects): when the commanded force magnitude exceeds ``trip_force_N`` (N)
+    the drive outputs zero torque until the commanded force has fallen below ``rearm_force_N`` (N) — the Touch X's
+    sudden drop, paper §VI-F.
+    """
 
     trip_force_N: float = Field(gt=0, description="Commanded force magnitude that trips the cut-off, N.")
     rearm_force_N: float = Field(ge=0, description="Commanded force magnitude below which output resumes, N.")
 
 
 class Backlash(Effect):
-    """Dead band in the cable/capstan: no torque is transmitted within ``±width/2`` of the rest deflection."""
+    """Effect ``drive.backlash``: dead band in the cable/capstan, no torque is transmitted within ``±width/2`` (rad) of the rest deflection (issue 3; TWIN.md, Effects)."""
 
     width_rad: PerJoint = Field(description="Total play per drive axis at the capstan output, rad.")
 
@@ -139,7 +145,7 @@ class Backlash(Effect):
 # --- kinematic effects --------------------------------------------------------------------------
 
 class Box(_Strict):
-    """A box in the device frame: centre, half extents along its own axes, orientation."""
+    """A box primitive of ``kinematics.base_collision`` in the device frame: centre and half extents in m, orientation quaternion wxyz (issue 3; TWIN.md, Effects)."""
 
     shape: Literal["box"] = "box"
     name: str
@@ -149,7 +155,7 @@ class Box(_Strict):
 
 
 class Cylinder(_Strict):
-    """A cylinder with a vertical (device z) axis: centre of its axis segment, radius, half height."""
+    """A cylinder primitive of ``kinematics.base_collision`` with a vertical (device z) axis: centre of its axis segment, radius, half height, all m (issue 3; TWIN.md, Effects)."""
 
     shape: Literal["cylinder"] = "cylinder"
     name: str
@@ -159,6 +165,8 @@ class Cylinder(_Strict):
 
 
 class Sphere(_Strict):
+    """A sphere primitive of ``kinematics.base_collision`` in the device frame: centre and radius in m (issue 3; TWIN.md, Effects)."""
+
     shape: Literal["sphere"] = "sphere"
     name: str
     center_m: Vec3
@@ -166,7 +174,7 @@ class Sphere(_Strict):
 
 
 class HalfSpace(_Strict):
-    """Everything on the ``normal`` side of the plane through ``point_m`` is solid (e.g. the table: normal −z)."""
+    """A half-space primitive of ``kinematics.base_collision``: everything on the ``normal`` side of the plane through ``point_m`` (m, device frame) is solid, e.g. the table: normal −z (issue 3; TWIN.md, Effects)."""
 
     shape: Literal["half_space"] = "half_space"
     name: str
@@ -178,15 +186,17 @@ Primitive = Annotated[Union[Box, Cylinder, Sphere, HalfSpace], Field(discriminat
 
 
 class BaseCollision(Effect):
-    """The base and the table as solid primitives (device frame); the end-effector, a sphere of radius
-    ``clearance_m`` around the gimbal centre, cannot enter them (the Touch's missing lower lobe)."""
+    """Effect ``kinematics.base_collision`` (issue 3; TWIN.md, Effects): the base and the table as solid primitives (device
+    frame); the end-effector, a sphere of radius ``clearance_m`` (m) around the gimbal centre, cannot enter them (the
+    Touch's missing lower lobe, paper §VI-A, Fig. 5).
+    """
 
     primitives: list[Primitive] = Field(default_factory=list)
     clearance_m: float = Field(0.0, ge=0, description="Radius of the end-effector's collision sphere around the gimbal centre, m.")
 
 
 class LinkLength(Effect):
-    """True DH lengths differ from the nominal ones: ``a_true = a + delta_a``, ``d_true = d + delta_d``."""
+    """Effect ``kinematics.link_length``: true DH lengths differ from the nominal ones, ``a_true = a + delta_a``, ``d_true = d + delta_d``, in m (issue 3; TWIN.md, Effects)."""
 
     delta_a_m: PerJoint
     delta_d_m: PerJoint
@@ -195,7 +205,7 @@ class LinkLength(Effect):
 # --- vibration ----------------------------------------------------------------------------------
 
 class BroadbandSource(_Strict):
-    """Band-limited noise whose RMS grows with handle speed: ``rms(v) = rms_ref · (v / v_ref)^p``."""
+    """A broadband source of ``vibration.device``: band-limited noise whose RMS (m/s²) grows with handle speed, ``rms(v) = rms_ref · (v / v_ref)^p``; band in Hz (issue 3; TWIN.md, Effects)."""
 
     rms_at_ref_speed_m_per_s2: float = Field(ge=0)
     band_hz: Annotated[list[float], Field(min_length=2, max_length=2, description="Pass band [low, high], Hz.")]
@@ -203,7 +213,7 @@ class BroadbandSource(_Strict):
 
 
 class ResonantSource(_Strict):
-    """A lightly damped mode driven by speed-modulated noise."""
+    """A resonant source of ``vibration.device``: a lightly damped mode (frequency in Hz, Q dimensionless) driven by speed-modulated noise, RMS in m/s² (issue 3; TWIN.md, Effects)."""
 
     frequency_hz: float = Field(gt=0)
     q_factor: float = Field(gt=0.5)
@@ -212,7 +222,7 @@ class ResonantSource(_Strict):
 
 
 class DeviceVibration(Effect):
-    """Parasitic vibration the device adds at the handle (bearings, cable, backlash), world frame."""
+    """Effect ``vibration.device``: parasitic acceleration the device adds at the handle (bearings, cable, backlash), world frame, m/s² (issue 3; TWIN.md, Effects)."""
 
     ref_speed_m_per_s: float = Field(gt=0, description="v_ref of the speed law, m/s.")
     speed_exponent: float = Field(ge=0, description="p of the speed law.")
@@ -239,7 +249,7 @@ class NoiseFloor(_Strict):
 # --- rig effects (behaviour implemented by the virtual rig) --------------------------------------
 
 class SensorBias(Effect):
-    """Constant offsets of the raw sensors (the calibration must remove them)."""
+    """Rig effect ``sensor.bias``: constant offsets of the raw sensors in their own frames, N, N·m, m/s² (the calibration must remove them) (issue 3; TWIN.md, Effects)."""
 
     handle_force_N: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0], description="F/T force bias, sensor frame, N.")
     handle_torque_Nm: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0], description="F/T torque bias, sensor frame, N·m.")
@@ -255,7 +265,7 @@ class ConnectorMass(Effect):
 
 
 class RigTwin(_Strict):
-    """Rig-side parts of the twin: the two rig effects and the accelerometer noise floor."""
+    """Rig-side parts of the twin: the two rig effects and the accelerometer noise floor (issue 3; TWIN.md, section ``rig``)."""
 
     sensor_bias: SensorBias = Field(alias="sensor.bias")
     connector_mass: ConnectorMass = Field(alias="handle.connector_mass")
@@ -263,7 +273,7 @@ class RigTwin(_Strict):
 
 
 class Effects(_Strict):
-    """The device effects, keyed by effect id."""
+    """The device effects, keyed by effect id (issue 3; TWIN.md, Effects)."""
 
     gravity: GravityEffect
     inertia: InertiaEffect
@@ -282,7 +292,7 @@ class Effects(_Strict):
 # --- structure ----------------------------------------------------------------------------------
 
 class LinkDynamics(_Strict):
-    """Rigid-body data of one arm link in its own (distal DH) frame."""
+    """Rigid-body data of one arm link in its own (distal DH) frame: kg, m, kg·m² (issue 3; TWIN.md, section ``links``)."""
 
     name: str
     mass_kg: float = Field(ge=0)
@@ -292,7 +302,7 @@ class LinkDynamics(_Strict):
 
 
 class GimbalBody(_Strict):
-    """The parts that turn with the handle (stylus, last gimbal ring), in the handle frame."""
+    """The parts that turn with the handle (stylus, last gimbal ring), in the handle frame: kg, m, kg·m² (issue 3; TWIN.md, section ``gimbal_body``)."""
 
     mass_kg: float = Field(ge=0)
     com_m: Vec3 = Field(description="Centre of mass relative to the gimbal centre, handle frame, m.")
@@ -303,7 +313,7 @@ class GimbalBody(_Strict):
 
 
 class Drive(_Strict):
-    """The transmission: capstan ratios and which link-side angle each motor drives."""
+    """The transmission: capstan ratios (dimensionless) and the coupling θ = C·q of link-side drive angles, rad (issue 3; TWIN.md, section ``drive``)."""
 
     capstan_ratio: PerJoint = Field(description="Motor angle / drive angle per axis (dimensionless).")
     coupling: list[list[float]] = Field(description="Square matrix C: drive angles θ = C · q (rad).")
@@ -311,7 +321,7 @@ class Drive(_Strict):
 
 
 class BaseBody(_Strict):
-    """The static base: mass and centre of mass in the device frame (loads the force plate)."""
+    """The static base: mass in kg and centre of mass in m in the device frame (loads the force plate) (issue 3; TWIN.md, section ``base``)."""
 
     mass_kg: float = Field(ge=0)
     com_m: Vec3
