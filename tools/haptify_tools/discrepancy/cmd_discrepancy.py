@@ -34,7 +34,7 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace, ui) -> int:
-    """Run ``haptify discrepancy``; exit 0 when the outputs were written (whatever the verdict)."""
+    """Run ``haptify discrepancy`` (discrepancy README, command line; issue 8); exit 0 when the outputs were written (whatever the verdict)."""
     if args.max_effects < 0:
         raise fail("E903", "--max-effects must be at least 0", expected=">= 0", found=args.max_effects)
     out = Path(args.out)

@@ -76,7 +76,8 @@ def _fill(t: np.ndarray, x: np.ndarray, ok: np.ndarray) -> np.ndarray:
 
 
 def load_measured(session: SessionFolder, ctx: ComputeContext | None = None, required: bool = True) -> list[MeasuredTrial]:
-    """The measured session's force trials (protocols :data:`FORCE_PROTOCOLS`) ready for re-simulation.
+    """The measured session's force trials (protocols :data:`FORCE_PROTOCOLS`) ready for re-simulation: calibrated
+    handle signals on the 100 Hz grid of spec §7.5, forces in N, W frame (discrepancy README §1).
 
     E302 when the session has no trial with a ``handle_wrench`` stream and ``required``.
     """
@@ -116,7 +117,7 @@ def load_measured(session: SessionFolder, ctx: ComputeContext | None = None, req
 
 
 def fine_path(trial: MeasuredTrial) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The trial's smoothed hand path on its simulation grid (cubic spline): ``t``, position, quaternion."""
+    """The trial's smoothed hand path on its simulation grid (cubic spline): ``t`` (s), position (m, W), quaternion (wxyz) (discrepancy README §1)."""
     dt = 1.0 / SIM_RATE_HZ
     fine = np.arange(trial.t[0], trial.t[-1] + 0.5 * dt, dt)
     fine = fine[fine <= trial.t[-1]]
@@ -127,7 +128,8 @@ def fine_path(trial: MeasuredTrial) -> tuple[np.ndarray, np.ndarray, np.ndarray]
 
 def simulate_trial(twin: TwinFile, trial: MeasuredTrial) -> np.ndarray:
     """The force ``(N, 3)`` the twin applies to the hand along the measured path, on the trial's grid,
-    low-passed like the measured force (N, W frame)."""
+    low-passed like the measured force (N, W frame) (discrepancy README §1).
+    """
     fine, pos, quat = fine_path(trial)
     if trial.active:
         res = simulate_active(twin, fine, pos, quat, trial.rendering)
@@ -139,7 +141,8 @@ def simulate_trial(twin: TwinFile, trial: MeasuredTrial) -> np.ndarray:
 
 def connector_force(twin: TwinFile, t: np.ndarray, position: np.ndarray) -> np.ndarray:
     """``m_c·a`` (N, W): the connector's inertial force that the handle calibration leaves in the measured
-    force (zero when the twin's ``handle.connector_mass`` is off); ``a`` from the path, m/s²."""
+    force (zero when the twin's ``handle.connector_mass`` is off); ``a`` from the path, m/s² (discrepancy README §1; paper eqs. 1–3).
+    """
     c = twin.rig.connector_mass
     if not c.enabled or c.mass_kg == 0:
         return np.zeros_like(position)
@@ -148,8 +151,9 @@ def connector_force(twin: TwinFile, t: np.ndarray, position: np.ndarray) -> np.n
 
 def simulate_all(twin: TwinFile, trials: list[MeasuredTrial], only_active: bool = False,
                  base: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
-    """:func:`simulate_trial` for every trial (trial id → force); with ``only_active`` the passive trials
-    are copied from ``base`` (effects that act only while the motors render)."""
+    """:func:`simulate_trial` for every trial (trial id → force, N); with ``only_active`` the passive trials
+    are copied from ``base`` (effects that act only while the motors render) (discrepancy README §1, §2).
+    """
     out = {}
     for tr in trials:
         if only_active and not tr.active and base is not None:

@@ -15,7 +15,7 @@ DEMO_DURATIONS = {"free_space": 12.0, "stiffness": 12.0, "rig.handle_calibration
 
 
 def demo_session(folder: Path, seed: int = 0) -> Path:
-    """Simulate the demo's measured session (free-space and stiffness trials, hidden effects) into ``folder``."""
+    """Simulate the demo's measured session (free-space and stiffness trials, hidden effects) into ``folder`` (discrepancy README, demo; issue 8)."""
     truth = preset("touch")
     for key, value in DEMO_TRUTH.items():
         truth = set_param(truth, key, value)
@@ -25,7 +25,7 @@ def demo_session(folder: Path, seed: int = 0) -> Path:
 
 
 def demo(out: str | Path | None = None, print_fn=print) -> dict:
-    """Run the demo (≈ 1 min on 2 cores); writes the workflow's outputs into ``out`` (default: a temporary folder)."""
+    """Run the demo (≈ 1 min on 2 cores); writes the workflow's outputs into ``out`` (default: a temporary folder) (discrepancy README, demo; issue 8)."""
     from haptify_tools.discrepancy.workflow import run_discrepancy
 
     with tempfile.TemporaryDirectory() as tmp:

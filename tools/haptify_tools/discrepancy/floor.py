@@ -35,7 +35,7 @@ REPLAYABLE_OTHER_LABELS = ("figure_eight",)
 
 
 def heldout_gap(trials: list[dt.MeasuredTrial], sim: dict) -> float:
-    """RMS force residual (N, three axes pooled) over the validation and test blocks of every trial."""
+    """RMS force residual (N, three axes pooled) over the validation and test blocks of every trial (discrepancy README §3, §4)."""
     parts = [(tr.force - sim[tr.trial_id])[tr.valid & (st.block_roles(len(tr.t)) != "train")] for tr in trials]
     r = np.concatenate(parts) if parts else np.zeros((0, 3))
     return float(np.sqrt(np.mean(r ** 2))) if len(r) else 0.0
@@ -43,12 +43,13 @@ def heldout_gap(trials: list[dt.MeasuredTrial], sim: dict) -> float:
 
 def gap_above_floor(gap: float, floor: float) -> float:
     """The part of a held-out gap (N) above a floor (N): ``√max(gap² − floor², 0)`` — residuals that add in
-    energy make the difference of squares the gap a better twin can still close."""
+    energy make the difference of squares the gap a better twin can still close (discrepancy README §4, the floor).
+    """
     return float(np.sqrt(max(gap * gap - floor * floor, 0.0)))
 
 
 def replay_protocol(session: SessionFolder, trial_id: str) -> str | None:
-    """The simulator protocol that replays a measured trial, or None when the examiner has none for it."""
+    """The simulator protocol that replays a measured trial, or None when the examiner has none for it (discrepancy README §4, the floor)."""
     trial = next(t for t in session.trials if t.id == trial_id)
     if trial.protocol in REPLAYABLE:
         return trial.protocol
@@ -59,7 +60,8 @@ def replay_protocol(session: SessionFolder, trial_id: str) -> str | None:
 
 def replay_floor(twin: TwinFile, session: SessionFolder, trials: list[dt.MeasuredTrial]) -> float | None:
     """The held-out gap (N) of ``twin`` against a replay of the session's force protocols that ``twin``
-    itself generated (module docstring); None when no trial can be replayed."""
+    itself generated (module docstring; discrepancy README §4, the floor); None when no trial can be replayed.
+    """
     durations: dict[str, float] = {}
     for tr in trials:
         name = replay_protocol(session, tr.trial_id)

@@ -30,7 +30,8 @@ EXTENSIONS = 2           # grid extensions when the best grid point is at an end
 @dataclass
 class Dataset:
     """What a candidate is fitted to: the force trials (N) or the workspace sweeps (m), and how the twin
-    predicts them (:func:`.data.simulate_all` or the examiner's radial stop, :mod:`.workspace`)."""
+    predicts them (:func:`.data.simulate_all` or the examiner's radial stop, :mod:`.workspace`) (discrepancy README §1, §2).
+    """
 
     kind: str                       # "force" or "workspace"
     items: list
@@ -56,7 +57,7 @@ class Dataset:
 
 @dataclass
 class Fit:
-    """A candidate fitted to one residual: identified value, its standard error, predicted residual, scores."""
+    """A candidate fitted to one residual: identified value and its standard error (the parameter's unit), predicted residual, scores (discrepancy README §2, §3)."""
 
     candidate: Candidate
     value: float
@@ -68,7 +69,7 @@ class Fit:
 
 @dataclass
 class Round:
-    """One round of the selection: the residual it started from and every candidate's fit."""
+    """One round of the selection: the residual it started from (N, or m for sweeps) and every candidate's fit (discrepancy README §3)."""
 
     residual: dict[str, np.ndarray]
     design: st.Design
@@ -81,7 +82,7 @@ class Round:
 
 @dataclass
 class Selection:
-    """Outcome of the search: the rounds, the accepted fits in order, the final twin and its simulation."""
+    """Outcome of the search: the rounds, the accepted fits in order, the final twin and its simulated forces, N (discrepancy README §2, §3)."""
 
     rounds: list[Round]
     accepted: list[Fit]
@@ -105,7 +106,9 @@ def _sse(design: st.Design, residual: dict, predicted: dict) -> float:
 
 def fit_candidate(cand: Candidate, twin: TwinFile, data: Dataset, design: st.Design,
                   residual: dict, base: dict) -> Fit:
-    """Fit one candidate to ``residual`` (measured − ``base``, the current twin's prediction of ``data``)."""
+    """Fit one candidate to ``residual`` (measured − ``base``, the current twin's prediction of ``data``; N or m): affine by
+    least squares or searched on a logarithmic grid (discrepancy README §2).
+    """
     only_active = cand.scope == "active"
     zero = {k: np.zeros_like(v) for k, v in base.items()}
     trials = data.items
@@ -207,7 +210,7 @@ def _curvature_error(evals: dict[float, tuple[float, dict]], p: float, n: int) -
 def select_effects(twin: TwinFile, trials: list[MeasuredTrial], max_effects: int = 5,
                    library: tuple[Candidate, ...] = LIBRARY, log: Callable[[str], object] | None = None,
                    workers: int = 1, sweeps: list | None = None) -> Selection:
-    """Forward selection (see the module docstring); deterministic for a given twin and session.
+    """Forward selection (see the module docstring; discrepancy README §2, §3); deterministic for a given twin and session.
 
     ``sweeps``: the measured workspace sweeps (:func:`.workspace.load_sweeps`) for the workspace
     candidate. ``workers`` > 1 fits the candidates of a round in that many processes (0: one per CPU,

@@ -35,7 +35,8 @@ NOT_OBSERVABLE: dict[str, str] = {
 @dataclass(frozen=True)
 class Candidate:
     """One library effect: its id, the identified parameter (twin-file name, unit), how δ(p) is found,
-    which trials it acts in (``all`` or only ``active`` ones) and how to make the twin that has it."""
+    which trials it acts in (``all`` or only ``active`` ones) and how to make the twin that has it (discrepancy README §2).
+    """
 
     effect_id: str
     parameter: str
@@ -134,7 +135,7 @@ LIBRARY_IDS: tuple[str, ...] = tuple(c.effect_id for c in LIBRARY)
 
 
 def candidate(effect_id: str) -> Candidate:
-    """The library entry of ``effect_id`` (KeyError when the id has no force-residual candidate)."""
+    """The library entry of ``effect_id`` (KeyError when the id has no force-residual candidate) (discrepancy README §2)."""
     for c in LIBRARY:
         if c.effect_id == effect_id:
             return c

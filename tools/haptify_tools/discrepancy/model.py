@@ -15,7 +15,7 @@ class _M(BaseModel):
 
 
 class Place(_M):
-    """One place where twin and measurement disagree: residual RMS there and its share of the residual energy."""
+    """One place where twin and measurement disagree: force residual RMS there in N and its share (0–1) of the residual energy (discrepancy README §1, §4)."""
 
     kind: Literal["benchmark", "trial", "contact", "speed_band", "region"]
     label: str
@@ -26,7 +26,7 @@ class Place(_M):
 
 
 class CandidateFit(_M):
-    """A library effect fitted to one round's residual."""
+    """A library effect fitted to one round's residual: value ± s.e. in ``unit``, ΔBIC, F-test p, validation and test shares, 0–1 (discrepancy README §2, §3)."""
 
     effect_id: str
     parameter: str
@@ -42,6 +42,8 @@ class CandidateFit(_M):
 
 
 class RoundResult(_M):
+    """One round of the forward selection: the correlation lag D (rows), every candidate's fit and the near ties (discrepancy README §3)."""
+
     number: int
     decimation: int = Field(description="Rows kept every D-th sample for the statistics (correlation lag).")
     candidates: list[CandidateFit] = Field(description="Every fitted candidate, best ΔBIC first.")
@@ -49,7 +51,7 @@ class RoundResult(_M):
 
 
 class AcceptedEffect(_M):
-    """An effect the workflow added to the twin, in the order it was accepted."""
+    """An effect the workflow added to the twin, in the order it was accepted: value ± s.e. in ``unit``, ΔBIC, p, share explained 0–1 (discrepancy README §3, §4)."""
 
     order: int
     effect_id: str
@@ -73,7 +75,7 @@ class Structure(_M):
 
 
 class SignalGap(_M):
-    """Force residual of one trial and axis, before and after (N); held-out = validation + test blocks."""
+    """Force residual RMS of one trial and axis, before and after, N; held-out = validation + test blocks (discrepancy README §3, §4)."""
 
     trial_id: str
     protocol: str
@@ -85,7 +87,7 @@ class SignalGap(_M):
 
 
 class BenchmarkGap(_M):
-    """A benchmark computed from the measured force and from the twin's force on the same path."""
+    """A benchmark computed by the reference's operator from the measured force and from the twin's force on the same path, in ``unit`` (discrepancy README §4)."""
 
     metric: str
     trial_id: str
@@ -96,7 +98,7 @@ class BenchmarkGap(_M):
 
 
 class WorkspaceRegion(_M):
-    """Position residual of the workspace sweep in one region (tertiles of the sweep per world axis), m."""
+    """Position residual RMS of the workspace sweep in one region (tertiles of the sweep per world axis), m (discrepancy README §1, §4)."""
 
     label: str
     rms_before_m: float
@@ -105,7 +107,7 @@ class WorkspaceRegion(_M):
 
 
 class WorkspaceGap(_M):
-    """The workspace sweep against the twin's examiner rule (radial stop), before and after (m, m³)."""
+    """The workspace sweep against the twin's examiner rule (radial stop), before and after, m and m³ (discrepancy README §1, §4)."""
 
     trial_id: str
     rms_before_m: float = Field(description="RMS distance measured − predicted sweep point, before, m.")

@@ -19,7 +19,9 @@ from haptify_tools.discrepancy.model import DiscrepancyFile
 
 def write_overlay(session: SessionFolder, trials: list[MeasuredTrial], twin_force: dict[str, np.ndarray],
                   result: DiscrepancyFile, path: Path) -> Path:
-    """Write the overlay recording to ``path`` (atomically, by the viewer's :func:`write_rrd`)."""
+    """Write the overlay recording (the updated twin's hand force, N, as the ``compare`` role) to ``path`` (atomically, by the
+    viewer's :func:`write_rrd`) (discrepancy README §4).
+    """
     import rerun as rr
 
     from haptify_tools.viewer.blueprints import blueprint_for

@@ -106,7 +106,7 @@ def _table(head: list[str], rows: list[list[object]]) -> str:
 
 
 def write_report(folder: Path, result: DiscrepancyFile, trials: list[MeasuredTrial], sel: Selection) -> dict[str, str]:
-    """Write ``report.html`` and its PNG figures into ``folder``; returns the file map for ``files``."""
+    """Write ``report.html`` and its PNG figures (forces in N, positions in m) into ``folder``; returns the file map for ``files`` (discrepancy README §4)."""
     import matplotlib.pyplot as plt
 
     figs = _figures(trials, sel)

@@ -41,8 +41,9 @@ MAX_DECIMATION = 50
 
 @dataclass
 class Design:
-    """Rows of the stacked residual: per trial the usable row indices and their roles; ``decimation``: the
-    correlation lag D that turns row counts into effective sample counts."""
+    """Rows of the stacked residual: per trial the usable row indices and their contiguous-block roles; ``decimation``: the
+    correlation lag D (rows) that turns row counts into effective sample counts (discrepancy README §3).
+    """
 
     trials: list[MeasuredTrial]
     rows: dict[str, np.ndarray]
@@ -61,14 +62,14 @@ class Design:
 
 
 def block_roles(n: int, repeats: int = FORCE_REPEATS) -> np.ndarray:
-    """Role of each of ``n`` consecutive rows: ``5·repeats`` contiguous blocks, roles :data:`ROLES` repeated."""
+    """Role of each of ``n`` consecutive rows: ``5·repeats`` contiguous blocks, roles :data:`ROLES` repeated (discrepancy README §3)."""
     roles = ROLES * repeats
     b = np.minimum((np.arange(n) * len(roles)) // max(n, 1), len(roles) - 1)
     return np.asarray(roles)[b]
 
 
 def correlation_lag(residual: dict[str, np.ndarray], trials: list[MeasuredTrial]) -> int:
-    """Lag (rows) at which the mean autocorrelation of the residual first falls below 1/e (≥ 1)."""
+    """Lag (rows, ≥ 1) at which the mean autocorrelation of the residual first falls below 1/e (discrepancy README §3)."""
     acfs = []
     for tr in trials:
         r = residual[tr.trial_id][tr.valid]
@@ -86,7 +87,7 @@ def correlation_lag(residual: dict[str, np.ndarray], trials: list[MeasuredTrial]
 
 
 def make_design(trials: list[MeasuredTrial], residual: dict[str, np.ndarray], repeats: int = FORCE_REPEATS) -> Design:
-    """The design of a residual: every usable row, its contiguous block role, and the correlation lag ``D``."""
+    """The design of a residual: every usable row, its contiguous block role, and the correlation lag ``D`` in rows (discrepancy README §3)."""
     d = correlation_lag(residual, trials)
     rows, roles = {}, {}
     for tr in trials:
@@ -100,7 +101,7 @@ def make_design(trials: list[MeasuredTrial], residual: dict[str, np.ndarray], re
 
 @dataclass
 class Score:
-    """A fitted candidate's scores against the current residual."""
+    """A fitted candidate's scores against the current residual: ΔBIC, F and p, validation and test shares (0–1), RSS in the residual's unit squared (discrepancy README §3)."""
 
     delta_bic: float
     f_stat: float
@@ -119,7 +120,7 @@ class Score:
 
 
 def score(design: Design, residual: dict[str, np.ndarray], predicted: dict[str, np.ndarray], k: int = 1) -> Score:
-    """Scores of the model ``residual ≈ predicted`` against ``residual ≈ 0`` (k new parameters)."""
+    """Scores of the model ``residual ≈ predicted`` against ``residual ≈ 0`` (k new parameters), counting n_eff = n / D rows (discrepancy README §3)."""
     def rss(role):
         r = design.stack(residual, role)
         e = r - design.stack(predicted, role)
@@ -139,7 +140,9 @@ def score(design: Design, residual: dict[str, np.ndarray], predicted: dict[str, 
 
 def affine_fit(design: Design, residual: dict, a: dict, b: dict) -> tuple[float, float]:
     """Least-squares ``p`` of ``residual ≈ a + p·b`` on the training rows, and its standard error
-    (inflated by √D for the correlated rows)."""
+    (inflated by √D for the correlated rows); ``p`` is in the effect parameter's unit, ``b`` the residual per unit of it
+    (discrepancy README §2, §3).
+    """
     r = design.stack(residual, "train") - design.stack(a, "train")
     bb = design.stack(b, "train")
     den = float(np.dot(bb, bb))
@@ -152,7 +155,7 @@ def affine_fit(design: Design, residual: dict, a: dict, b: dict) -> tuple[float,
 
 
 def state_features(tr: MeasuredTrial) -> np.ndarray:
-    """Generic state regressors ``(N, m)`` of one trial for the structure check (no physics in them)."""
+    """Generic state regressors ``(N, m)`` of one trial for the structure check (no physics in them): position m, velocity m/s, acceleration m/s², penetration m (discrepancy README §3)."""
     v = np.gradient(tr.position, tr.t, axis=0)
     a = np.gradient(v, tr.t, axis=0)
     p = tr.position - tr.position.mean(axis=0)
@@ -168,8 +171,10 @@ def state_features(tr: MeasuredTrial) -> np.ndarray:
 
 def structure_left(design: Design, residual: dict[str, np.ndarray]) -> dict:
     """Generic regression of the residual on the state (per trial and channel, every usable training row),
-    judged on the held-out (validation + test) rows: share of held-out energy it removes, an F test whose
-    degrees of freedom count decimated rows, and a Ljung–Box whiteness p-value on the decimated held-out residual."""
+    judged on the held-out (validation + test) rows: share (0–1) of held-out energy it removes, an F test whose
+    degrees of freedom count decimated rows, and a Ljung–Box whiteness p-value on the decimated held-out residual
+    (discrepancy README §3).
+    """
     d = design.decimation
     held0 = held1 = 0.0
     q_stats, dof = 0.0, 0

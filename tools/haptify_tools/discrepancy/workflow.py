@@ -94,7 +94,7 @@ def localise(trials: list[dt.MeasuredTrial], before: dict, after: dict) -> list[
 
 
 def signal_gaps(design: st.Design, trials: list[dt.MeasuredTrial], before: dict, after: dict) -> list[SignalGap]:
-    """Per trial and axis: residual RMS over every usable row and over the held-out blocks, before and after."""
+    """Per trial and axis: force residual RMS (N) over every usable row and over the held-out blocks, before and after (discrepancy README §4)."""
     out = []
     for tr in trials:
         v = tr.valid
@@ -136,7 +136,7 @@ def benchmark_values(tr: dt.MeasuredTrial, force: np.ndarray) -> dict[str, tuple
 
 
 def benchmark_gaps(trials: list[dt.MeasuredTrial], before: dict, after: dict) -> list[BenchmarkGap]:
-    """Benchmarks from the measured force and from the twin's force before and after, per trial."""
+    """Benchmarks from the measured force and from the twin's force before and after, per trial, in each metric's unit (discrepancy README §4)."""
     out = []
     for tr in trials:
         m = benchmark_values(tr, tr.force)
@@ -185,7 +185,7 @@ def workspace_gaps(sel: Selection) -> list[WorkspaceGap]:
 
 
 def annotate_twin(twin: TwinFile, sel: Selection) -> TwinFile:
-    """The updated twin with each identified parameter's uncertainty and evidence in the effect's ``sources``."""
+    """The updated twin with each identified parameter's uncertainty and evidence (± s.e., ΔBIC, p) in the effect's ``sources`` (discrepancy README §4)."""
     data = twin_to_dict(twin)
     for f in sel.accepted:
         c = f.candidate
@@ -204,7 +204,7 @@ def annotate_twin(twin: TwinFile, sel: Selection) -> TwinFile:
 
 def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial], sel: Selection,
                  floor: float | None = None) -> DiscrepancyFile:
-    """Assemble :class:`DiscrepancyFile` from a finished selection (``floor``: :func:`.floor.replay_floor`, N)."""
+    """Assemble :class:`DiscrepancyFile` from a finished selection (``floor``: :func:`.floor.replay_floor`, N) (discrepancy README §4)."""
     rounds = []
     for i, r in enumerate(sel.rounds):
         cands = [CandidateFit(effect_id=f.candidate.effect_id, parameter=f.candidate.parameter, value=f.value,
@@ -243,7 +243,7 @@ def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial]
 def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | None = None, *, max_effects: int = 5,
                     overwrite: bool = False, log: Callable[[str], object] | None = None,
                     report: bool = True, workers: int = 1, overlay: bool = True) -> tuple[DiscrepancyFile, Selection]:
-    """Run the workflow; with ``out`` write ``discrepancy.json``, ``twin.json`` and ``report.html`` there.
+    """Run the workflow (discrepancy README §1–4; issue 8); with ``out`` write ``discrepancy.json``, ``twin.json`` and ``report.html`` there.
 
     ``overlay``: also write ``overlay.rrd`` for the viewer (when ``report``). ``workers``: processes fitting candidates in parallel (0: one per CPU, at most 4; results do not
     depend on it). Returns the result and the selection (its simulations, for callers that draw or test).

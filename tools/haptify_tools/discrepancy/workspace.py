@@ -35,7 +35,7 @@ GRID_FACTORS = (0.5, 0.7, 1.0, 1.4, 2.0)     # of the stored box's height above 
 
 @dataclass
 class MeasuredSweep:
-    """The measured workspace points of one trial (W, m) on the mocap clock; ``valid``: usable rows."""
+    """The measured workspace points of one trial (W, m) on the mocap clock; ``valid``: usable rows (discrepancy README §1)."""
 
     trial_id: str
     t: np.ndarray
@@ -60,18 +60,18 @@ def _box_index(twin: TwinFile) -> int | None:
 
 
 def available(twin: TwinFile) -> bool:
-    """The candidate is offered when the twin's collision is off and its file holds a box primitive."""
+    """The candidate ``kinematics.base_collision`` is offered when the twin's collision is off and its file holds a box primitive (discrepancy README §2)."""
     return not twin.on(EFFECT_ID) and _box_index(twin) is not None
 
 
 def box_top(twin: TwinFile) -> tuple[float, float]:
-    """(top, bottom) heights of the collision box in the device frame, m."""
+    """(top, bottom) heights of the collision box in the device frame, m (discrepancy README §2, ``base_top_m``)."""
     box = twin.effects.kinematics_base_collision.primitives[_box_index(twin)]
     return box.center_m[2] + box.half_extents_m[2], box.center_m[2] - box.half_extents_m[2]
 
 
 def apply(twin: TwinFile, top: float) -> TwinFile:
-    """A copy of ``twin`` with the base collision on and its box's top at ``top`` m (bottom unchanged)."""
+    """A copy of ``twin`` with the base collision on and its box's top at ``top`` m (bottom unchanged) (discrepancy README §2)."""
     i = _box_index(twin)
     _, bottom = box_top(twin)
     data = twin_to_dict(twin)
@@ -85,7 +85,8 @@ def apply(twin: TwinFile, top: float) -> TwinFile:
 
 def face_commands(twin: TwinFile, points_W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit joint coordinates on the joint box's faces ``(N, 3)`` that the examiner was heading for at each
-    measured point, and ``ok`` (the point is within the twin's reach)."""
+    measured point, and ``ok`` (the point is within the twin's reach) (discrepancy README §1).
+    """
     kin = true_kinematics(twin)
     q, _, _ = hand_to_joints(twin, points_W)
     lo, hi = joint_limits(kin, q)
@@ -100,12 +101,12 @@ def face_commands(twin: TwinFile, points_W: np.ndarray) -> tuple[np.ndarray, np.
 
 
 def predict(twin: TwinFile, commands: np.ndarray) -> np.ndarray:
-    """Where the twin's hand stops on the way to each face command (W, m; the examiner's radial stop)."""
+    """Where the twin's hand stops on the way to each face command (W, m; the examiner's radial stop) (discrepancy README §1)."""
     return reach_from_twin(twin).radial_stop(commands)
 
 
 def sweep_predictions(twin: TwinFile, sweeps: list[MeasuredSweep], commands: dict) -> dict[str, np.ndarray]:
-    """:func:`predict` for every sweep (trial id → predicted points)."""
+    """:func:`predict` for every sweep (trial id → predicted points, W, m) (discrepancy README §1)."""
     return {sw.trial_id: predict(twin, commands[sw.trial_id][0]) for sw in sweeps}
 
 
