@@ -16,12 +16,12 @@ from hypothesis import strategies as st
 
 from haptify import validation
 from haptify.errors import HaptifyError
+from haptify.kinematics import RANGE_LATTICE_POINTS as LIMIT_LATTICE_POINTS
 from haptify.kinematics import configurations_from_unit
 from haptify.session_format import Kinematics
 from haptify.validation import (
     ALLOWED_VALUES,
     CSV_CHUNK_BYTES,
-    LIMIT_LATTICE_POINTS,
     NORMAL_NORM_TOLERANCE,
     check_csv_grammar,
     kinematics_findings,

@@ -7,6 +7,8 @@ centre), in the device frame unless a function says otherwise.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from haptify.conventions import pose_apply
@@ -80,14 +82,55 @@ def within_limits(kin: Kinematics, q: np.ndarray, tol: float = 1e-12) -> np.ndar
     return np.all((q >= lower - tol) & (q <= upper + tol), axis=1)
 
 
+#: samples per joint of the unit lattice on which joint ranges are judged (spec §8.3 step 1; E115, E311)
+RANGE_LATTICE_POINTS = 5
+
+
+def limit_order_violations(kin: Kinematics) -> list[tuple[int, str, str]]:
+    """Every limit that names a joint that is not an earlier one: ``(joint index, "lower"|"upper", named joint)``
+    (spec §2.3, §8.2)."""
+    names = [j.name for j in kin.joints]
+    return [(i, side, other) for i, j in enumerate(kin.joints) for side in ("lower", "upper")
+            for other in getattr(j, side).coefficients if other not in names[:i]]
+
+
 def check_limit_order(kin: Kinematics) -> None:
     """Raise ValueError unless every limit depends only on earlier joints (spec §8.2)."""
+    for i, side, other in limit_order_violations(kin)[:1]:
+        raise ValueError(f"{side} limit of {kin.joints[i].name} depends on {other}, which is not an earlier joint")
+
+
+def unit_lattice(counts: list[int]) -> np.ndarray:
+    """The unit cube's lattice with ``counts[j]`` evenly spaced samples of joint j in [0, 1], one row a point
+    (spec §8.3 step 1)."""
+    axes = [np.linspace(0.0, 1.0, c) for c in counts]
+    return np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
+
+
+@dataclass(frozen=True)
+class EmptyRange:
+    """The first joint whose coupled range is empty at every sample: its index and the largest
+    ``upper − lower`` (rad, negative) over the samples that reached it."""
+
+    joint: int
+    widest_rad: float
+
+
+def _fill_configurations(kin: Kinematics, s: np.ndarray) -> tuple[np.ndarray, EmptyRange | None]:
+    check_limit_order(kin)
+    s = np.atleast_2d(np.asarray(s, dtype=float))
     names = [j.name for j in kin.joints]
+    q = np.zeros_like(s)
+    empty = None
     for i, j in enumerate(kin.joints):
-        for lim in (j.lower, j.upper):
-            for other in lim.coefficients:
-                if other not in names[:i]:
-                    raise ValueError(f"limit of {j.name} depends on {other}, which is not an earlier joint")
+        alive = ~np.isnan(q[:, 0]) if i else np.ones(len(q), bool)
+        lo = _limit_value(j.lower, q, names)
+        hi = _limit_value(j.upper, q, names)
+        q[:, i] = lo + s[:, i] * (hi - lo)
+        q[hi < lo, :] = np.nan
+        if empty is None and alive.any() and np.isnan(q[alive, 0]).all():
+            empty = EmptyRange(i, float(np.max((hi - lo)[alive])))
+    return q, empty
 
 
 def configurations_from_unit(kin: Kinematics, s: np.ndarray) -> np.ndarray:
@@ -97,13 +140,11 @@ def configurations_from_unit(kin: Kinematics, s: np.ndarray) -> np.ndarray:
     Joint by joint: ``q_j = lower_j(q_<j) + s_j · (upper_j(q_<j) − lower_j(q_<j))``; where the coupled
     range is empty the configuration is infeasible and returned as NaN.
     """
-    check_limit_order(kin)
-    s = np.atleast_2d(np.asarray(s, dtype=float))
-    names = [j.name for j in kin.joints]
-    q = np.zeros_like(s)
-    for i, j in enumerate(kin.joints):
-        lo = _limit_value(j.lower, q, names)
-        hi = _limit_value(j.upper, q, names)
-        q[:, i] = lo + s[:, i] * (hi - lo)
-        q[hi < lo, :] = np.nan
-    return q
+    return _fill_configurations(kin, s)[0]
+
+
+def empty_joint_range(kin: Kinematics, points: int = RANGE_LATTICE_POINTS) -> EmptyRange | None:
+    """The joint at which every configuration of the ``points``-per-joint unit lattice has an empty coupled
+    range (spec §2.3, §8.3 step 1), or None when some configuration is feasible. Limits must name earlier
+    joints only (:func:`limit_order_violations`)."""
+    return _fill_configurations(kin, unit_lattice([points] * len(kin.joints)))[1]

@@ -35,12 +35,12 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from haptify import schemas
 from haptify.conventions import QUATERNION_NORM_TOLERANCE
 from haptify.errors import Finding, HaptifyError, fail
+from haptify.kinematics import empty_joint_range, limit_order_violations
 from haptify.session_format import (
     ALLOWED_VALUES,
     ClockOffset,
     Device,
     Kinematics,
-    LinearLimit,
     Rig,
     SensorRange,
     Session,
@@ -49,6 +49,7 @@ from haptify.session_format import (
     expected_columns,
     kind_table,
     quaternion_groups,
+    values_outside_set,
 )
 from haptify.storage import (
     MANIFEST,
@@ -66,7 +67,6 @@ RATE_TOLERANCE = 0.01                 # |actual mean rate / rate_hz − 1| allow
 INTERVAL_LOW, INTERVAL_HIGH = 0.5, 1.5  # an interval outside [0.5, 1.5] / rate_hz is irregular (W402)
 OCCLUSION_WARNING_SHARE = 0.20        # share of occluded samples above which W405 is raised
 NORMAL_NORM_TOLERANCE = QUATERNION_NORM_TOLERANCE  # |‖n‖ − 1| allowed in a rendering's surface_normal (E307, spec §2.5)
-LIMIT_LATTICE_POINTS = 5              # per-joint lattice on which joint ranges must be non-empty (E115, spec §2.3, §8.3)
 MANIFEST_MAX_BYTES = 16 * 2**20       # session.json larger than this is not read (E113)
 DEVICE_MAX_BYTES = 4 * 2**20          # device.json larger than this is not read (E113)
 STREAM_MAX_BYTES = 8 * 2**30          # spec §3.5: no stream file exceeds 8 GiB (E113)
@@ -344,61 +344,34 @@ def _csv_line_error(raw: bytes, line_no: int, columns: list[str], label: str) ->
 
 # --- the device's kinematic chain (spec §2.3) ------------------------------------------------------
 
-def _limit_at(limit: LinearLimit, prefixes: np.ndarray, names: list[str]) -> np.ndarray:
-    """``constant + Σ c_k q_k`` (rad) at each row of ``prefixes`` (configurations of the joints ``names``)."""
-    value = np.full(prefixes.shape[0], float(limit.constant))
-    for joint, coeff in limit.coefficients.items():
-        value = value + coeff * prefixes[:, names.index(joint)]
-    return value
-
-
 def kinematics_findings(kin: Kinematics, file: str, base: str) -> list[Finding]:
     """The rules of spec §2.3 on a DH chain, as findings located at ``file`` + ``base`` (a JSON pointer).
 
     E116: the joints are named ``q1 … qn`` in chain order, and a limit names only earlier joints.
     E115: every joint's range is non-empty — ``upper ≥ lower`` — at some configuration of the lattice of
-    spec §8.3 step 1 (``LIMIT_LATTICE_POINTS`` per joint, joint by joint within the earlier joints' coupled
-    limits); for constant limits simply ``upper ≥ lower``. This is exactly the condition under which the
-    modeled workspace (spec §8.3) has at least one configuration, so a session that validates never
-    fails ``workspace.modeled_volume`` for its limits.
+    spec §8.3 step 1 (``RANGE_LATTICE_POINTS`` per joint, joint by joint within the earlier joints' coupled
+    limits; :func:`haptify.kinematics.empty_joint_range`); for constant limits simply ``upper ≥ lower``.
+    It is the very lattice the modeled workspace samples, so a session that validates never fails
+    ``workspace.modeled_volume`` for its limits.
     """
-    out: list[Finding] = []
+    out = [Finding("E116", f"joint {i + 1} of the chain is named {joint.name!r}", file=file,
+                   pointer=f"{base}/joints/{i}/name", expected=f"q{i + 1}", found=joint.name)
+           for i, joint in enumerate(kin.joints) if joint.name != f"q{i + 1}"]
+    if out:
+        return out
     names = [j.name for j in kin.joints]
-    for i, joint in enumerate(kin.joints):
-        if joint.name != f"q{i + 1}":
-            out.append(Finding("E116", f"joint {i + 1} of the chain is named {joint.name!r}", file=file,
-                               pointer=f"{base}/joints/{i}/name", expected=f"q{i + 1}", found=joint.name))
+    out = [Finding("E116", f"the {side} limit of {names[i]} depends on {other}, which is not an earlier joint",
+                   file=file, pointer=f"{base}/joints/{i}/{side}/coefficients/{other}", expected=names[:i], found=other)
+           for i, side, other in limit_order_violations(kin)]
     if out:
         return out
-    for i, joint in enumerate(kin.joints):
-        for side in ("lower", "upper"):
-            for other in getattr(joint, side).coefficients:
-                if other not in names[:i]:
-                    out.append(Finding("E116", f"the {side} limit of {joint.name} depends on {other}, which is not an earlier joint",
-                                       file=file, pointer=f"{base}/joints/{i}/{side}/coefficients/{other}",
-                                       expected=names[:i], found=other))
-    if out:
-        return out
-    referenced = [any(joint.name in j.lower.coefficients or joint.name in j.upper.coefficients for j in kin.joints[i + 1:])
-                  for i, joint in enumerate(kin.joints)]
-    unit = np.linspace(0.0, 1.0, LIMIT_LATTICE_POINTS)
-    prefixes = np.zeros((1, 0))  # feasible lattice configurations of the joints before the current one (rad)
-    for i, joint in enumerate(kin.joints):
-        lo, hi = _limit_at(joint.lower, prefixes, names), _limit_at(joint.upper, prefixes, names)
-        feasible = hi >= lo
-        if not feasible.any():
-            gap = float(np.max(hi - lo))
-            out.append(Finding("E115", f"the upper limit of {joint.name} lies below its lower limit (by at least {-gap:.6g} rad) "
-                               f"for every configuration of the earlier joints", file=file, pointer=f"{base}/joints/{i}",
-                               expected="upper ≥ lower for some configuration",
-                               found={"lower": joint.lower.model_dump(), "upper": joint.upper.model_dump()}))
-            return out
-        keep, lo, hi = prefixes[feasible], lo[feasible], hi[feasible]
-        q = lo[:, None] + unit[None, :] * (hi - lo)[:, None]
-        prefixes = np.concatenate([np.repeat(keep, unit.size, axis=0), q.reshape(-1, 1)], axis=1)
-        # a joint no later limit names only has to be feasible: forget its value, keep one row per distinct rest
-        prefixes[:, [k for k in range(i + 1) if not referenced[k]]] = 0.0
-        prefixes = np.unique(prefixes, axis=0)
+    empty = empty_joint_range(kin)
+    if empty is not None:
+        joint = kin.joints[empty.joint]
+        out.append(Finding("E115", f"the upper limit of {joint.name} lies below its lower limit (by at least "
+                           f"{-empty.widest_rad:.6g} rad) for every configuration of the earlier joints", file=file,
+                           pointer=f"{base}/joints/{empty.joint}", expected="upper ≥ lower for some configuration",
+                           found={"lower": joint.lower.model_dump(), "upper": joint.upper.model_dump()}))
     return out
 
 
@@ -867,15 +840,13 @@ class SessionValidator:
                             file=label, column=data_cols[k], time_range=_time_span(t, nan[:, k]), expected="no NaN", found="NaN"))
         # closed value sets (the sync trigger)
         for k, col in enumerate(data_cols):
-            allowed = ALLOWED_VALUES.get((s.kind, col))
-            if allowed is None:
-                continue
-            other = np.isfinite(values[:, k]) & ~np.isin(values[:, k], allowed)
-            if other.any():
+            outside = values_outside_set(s.kind, col, values[:, k])
+            if outside is not None and outside[0].any():
+                other, words = outside
                 seen = np.unique(values[other, k])
-                add(Finding("E214", f"column {col!r} holds {int(other.sum())} values other than {' or '.join(f'{a:g}' for a in allowed)} "
+                add(Finding("E214", f"column {col!r} holds {int(other.sum())} values other than {words} "
                             f"({seen.size} distinct, e.g. {float(seen[0])!r})", file=label, column=col, time_range=_time_span(t, other),
-                            expected=list(allowed), found=[float(v) for v in seen[:5]]))
+                            expected=list(ALLOWED_VALUES[(s.kind, col)]), found=[float(v) for v in seen[:5]]))
         # quaternions
         col_index = {c: k for k, c in enumerate(data_cols)}
         for group in quaternion_groups(s.kind, s.entities):

@@ -18,7 +18,7 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from haptify.conventions import pose_apply
 from haptify.errors import HaptifyError, fail
-from haptify.kinematics import configurations_from_unit, forward_positions, joint_limits
+from haptify.kinematics import RANGE_LATTICE_POINTS, configurations_from_unit, forward_positions, joint_limits, unit_lattice
 from haptify.metric_definitions import param
 from haptify.repetitions import TrialValue, aggregate, no_trials, per_trial, single, unavailable
 from haptify.session_format import Kinematics
@@ -202,11 +202,9 @@ def _levers(kin: Kinematics) -> list[float]:
 
 
 def _joint_ranges(kin: Kinematics) -> np.ndarray:
-    """Largest range (rad) of each joint over a 5-per-joint lattice of the unit cube (coupled limits evaluated)."""
-    n = len(kin.joints)
-    axes = [np.linspace(0.0, 1.0, 5)] * n
-    unit = np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
-    q = configurations_from_unit(kin, unit)
+    """Largest range (rad) of each joint over the unit cube's ``RANGE_LATTICE_POINTS``-per-joint lattice
+    (coupled limits evaluated; spec §8.3 step 1)."""
+    q = configurations_from_unit(kin, unit_lattice([RANGE_LATTICE_POINTS] * len(kin.joints)))
     q = q[~np.isnan(q).any(axis=1)]
     if len(q) == 0:  # every coupled range of the lattice is empty (e.g. an upper limit below the lower one)
         raise fail("E311", "the device's joint limits admit no configuration (every sampled coupled range is empty)",
@@ -220,18 +218,13 @@ def _counts(kin: Kinematics, step: float) -> list[int]:
     return [int(math.ceil(rng * lever / step)) + 1 for rng, lever in zip(_joint_ranges(kin), _levers(kin))]
 
 
-def _lattice(counts: list[int]) -> np.ndarray:
-    axes = [np.linspace(0.0, 1.0, c) for c in counts]
-    return np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
-
-
 def _boundary_lattice(counts: list[int]) -> np.ndarray:
     """Unit-cube samples on the cube's faces: each face a full lattice of the other joints' counts."""
     n = len(counts)
     faces = []
     for axis in range(n):
         others = [c for i, c in enumerate(counts) if i != axis]
-        sub = _lattice(others) if others else np.zeros((1, 0))
+        sub = unit_lattice(others) if others else np.zeros((1, 0))
         for value in (0.0, 1.0):
             face = np.empty((len(sub), n))
             face[:, [i for i in range(n) if i != axis]] = sub
@@ -250,7 +243,7 @@ def modeled_points(kin: Kinematics, *, step: float | None = None, interior_step:
     step = float(wp("model_max_step_m") if step is None else step)
     interior_step = float(wp("model_interior_step_m") if interior_step is None else interior_step)
     faces = _positions(kin, _boundary_lattice(_counts(kin, step)))
-    interior = _positions(kin, _lattice(_counts(kin, interior_step)))
+    interior = _positions(kin, unit_lattice(_counts(kin, interior_step)))
     dist, _ = cKDTree(faces).query(interior, k=1, distance_upper_bound=float(wp("model_interior_clearance_m")))
     return np.concatenate([faces, interior[~np.isfinite(dist)]])
 
