@@ -45,6 +45,7 @@ from haptify.session_format import (
     Session,
     expected_columns,
     kind_table,
+    values_outside_set,
 )
 from haptify.storage import (
     MANIFEST,
@@ -606,14 +607,13 @@ def build_stream_columns(kind: str, smap: StreamMap, n: int, read: SourceReader,
                 code = "E204" if np.isnan(values[i]) else "E210"
                 raise fail(code, f"{kind} column {col!r} (from {ch.source!r}) holds a non-finite value at sample {i}",
                            file=source_file, column=ch.source, expected="finite values", found=str(values[i]))
-        allowed_values = ALLOWED_VALUES.get((kind, col))
-        if allowed_values is not None:
-            other = ~np.isin(values, allowed_values) & np.isfinite(values)
-            if other.any():
-                i = int(np.argmax(other))
-                raise fail("E214", f"{kind} column {col!r} (from {ch.source!r}) holds {int(other.sum())} values other than "
-                           f"{' or '.join(f'{a:g}' for a in allowed_values)}, first at sample {i}; map it with a 'threshold'",
-                           file=source_file, column=ch.source, expected=list(allowed_values), found=float(values[i]))
+        outside = values_outside_set(kind, col, values)
+        if outside is not None and outside[0].any():
+            other, words = outside
+            i = int(np.argmax(other))
+            raise fail("E214", f"{kind} column {col!r} (from {ch.source!r}) holds {int(other.sum())} values other than "
+                       f"{words}, first at sample {i}; map it with a 'threshold'",
+                       file=source_file, column=ch.source, expected=list(ALLOWED_VALUES[(kind, col)]), found=float(values[i]))
         out[col] = values
     return out
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import re
 from typing import Annotated, Literal, Union
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from haptify import schemas
@@ -285,6 +286,16 @@ def kind_table(kind: str) -> dict:
 
 #: Columns whose values come from a closed set (spec §2.6 kind table): the sync trigger is 0 or 1 (E214).
 ALLOWED_VALUES: dict[tuple[str, str], tuple[float, ...]] = {("sync", "trigger"): (0.0, 1.0)}
+
+
+def values_outside_set(kind: str, column: str, values: np.ndarray) -> tuple[np.ndarray, str] | None:
+    """For a column with a closed value set (:data:`ALLOWED_VALUES`, E214): the mask of finite values outside
+    it and the set in words ("0 or 1"); None for any other column. NaN is judged elsewhere (E204)."""
+    allowed = ALLOWED_VALUES.get((kind, column))
+    if allowed is None:
+        return None
+    values = np.asarray(values, dtype=float)
+    return np.isfinite(values) & ~np.isin(values, allowed), " or ".join(f"{a:g}" for a in allowed)
 
 
 def expected_columns(kind: str, entities: list[str] | None = None, present: list[str] | None = None) -> list[tuple[str, str]]:

@@ -36,7 +36,7 @@ REPLAYABLE_OTHER_LABELS = ("figure_eight",)
 
 def heldout_gap(trials: list[dt.MeasuredTrial], sim: dict) -> float:
     """RMS force residual (N, three axes pooled) over the validation and test blocks of every trial (discrepancy README §3, §4)."""
-    parts = [(tr.force - sim[tr.trial_id])[tr.valid & (st.block_roles(len(tr.t)) != "train")] for tr in trials]
+    parts = [(tr.force - sim[tr.trial_id])[st.heldout_rows(tr)] for tr in trials]
     r = np.concatenate(parts) if parts else np.zeros((0, 3))
     return float(np.sqrt(np.mean(r ** 2))) if len(r) else 0.0
 

@@ -68,6 +68,11 @@ def block_roles(n: int, repeats: int = FORCE_REPEATS) -> np.ndarray:
     return np.asarray(roles)[b]
 
 
+def heldout_rows(tr: MeasuredTrial) -> np.ndarray:
+    """The usable rows of a trial that lie in its validation and test blocks (the held-out rows, bool)."""
+    return tr.valid & (block_roles(len(tr.t)) != "train")
+
+
 def correlation_lag(residual: dict[str, np.ndarray], trials: list[MeasuredTrial]) -> int:
     """Lag (rows, ≥ 1) at which the mean autocorrelation of the residual first falls below 1/e (discrepancy README §3)."""
     acfs = []

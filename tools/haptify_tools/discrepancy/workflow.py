@@ -98,7 +98,7 @@ def signal_gaps(design: st.Design, trials: list[dt.MeasuredTrial], before: dict,
     out = []
     for tr in trials:
         v = tr.valid
-        held = v & (st.block_roles(len(tr.t)) != "train")
+        held = st.heldout_rows(tr)
         for k, ch in enumerate(CHANNELS):
             rb, ra = tr.force[:, k] - before[tr.trial_id][:, k], tr.force[:, k] - after[tr.trial_id][:, k]
             rms = lambda x, m: float(np.sqrt(np.mean(x[m] ** 2))) if m.any() else 0.0  # noqa: E731
