@@ -36,6 +36,7 @@ from haptify.conventions import quat_conjugate, quat_multiply, quat_to_matrix
 from haptify.errors import fail
 from haptify.session_format import Kinematics, Rendering
 
+from haptify_tools.twin import drive_loops
 from haptify_tools.twin.examiner import band_noise as _band_noise
 from haptify_tools.twin.kinematics import (
     gimbal_angles, hand_to_joints, in_collision, link_transforms, nominal_kinematics, placement_matrix, rows_times,
@@ -482,45 +483,6 @@ class ActiveResult(HandPathResult):
     cut_off: np.ndarray
 
 
-class _ScalarChain:
-    """Forward kinematics and position Jacobian of a DH chain for ONE configuration, in plain floats.
-
-    The rendering loop is sequential; plain-float arithmetic is several times faster than NumPy on
-    3-vectors. Results are in the device frame (the chain's base pose applied).
-    """
-
-    def __init__(self, kin: Kinematics):
-        self.j = [(jt.a, math.cos(jt.alpha), math.sin(jt.alpha), jt.d, jt.theta_offset) for jt in kin.joints]
-        r = quat_to_matrix(np.asarray(kin.base.quaternion))
-        self.r = r.tolist()
-        self.p = list(kin.base.position)
-
-    def fk_jac(self, q):
-        """Gimbal-centre position ``[x, y, z]`` and Jacobian rows ``jac[i] = ∂p/∂q_i`` (device frame)."""
-        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = self.r
-        px, py, pz = self.p
-        origins = [(px, py, pz)]
-        axes = [(r02, r12, r22)]
-        for (a, ca, sa, d, off), qi in zip(self.j, q):
-            th = qi + off
-            ct, st = math.cos(th), math.sin(th)
-            tx, ty = a * ct, a * st
-            px, py, pz = (px + r00 * tx + r01 * ty + r02 * d, py + r10 * tx + r11 * ty + r12 * d,
-                          pz + r20 * tx + r21 * ty + r22 * d)
-            yx, yy = -st * ca, ct * ca
-            zx, zy = st * sa, -ct * sa
-            r00, r01, r02 = r00 * ct + r01 * st, r00 * yx + r01 * yy + r02 * sa, r00 * zx + r01 * zy + r02 * ca
-            r10, r11, r12 = r10 * ct + r11 * st, r10 * yx + r11 * yy + r12 * sa, r10 * zx + r11 * zy + r12 * ca
-            r20, r21, r22 = r20 * ct + r21 * st, r20 * yx + r21 * yy + r22 * sa, r20 * zx + r21 * zy + r22 * ca
-            origins.append((px, py, pz))
-            axes.append((r02, r12, r22))
-        jac = []
-        for (ox, oy, oz), (zx, zy, zz) in zip(origins[:-1], axes[:-1]):
-            dx, dy, dz = px - ox, py - oy, pz - oz
-            jac.append((zy * dz - zz * dy, zz * dx - zx * dz, zx * dy - zy * dx))
-        return (px, py, pz), jac
-
-
 def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, hand_quaternion_W: np.ndarray,
                     rendering: Rendering | dict) -> ActiveResult:
     """Simulate the powered device rendering a frictionless virtual plane (issue 3; CHAI3D plane example).
@@ -578,7 +540,7 @@ def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, 
         tau_cmd = rows_times(np.einsum("nik,ni->nk", ref.jacobian(nom, enc_q[ticks]), f_tick), c_inv)
         motor = np.clip(tau_cmd, -tau_max, tau_max)
         sat_tick = np.any(np.abs(tau_cmd) > tau_max, axis=1)
-        cut_tick = _cutoff_latch(k_r * depth, cut) if cut.enabled else np.zeros(len(ticks), bool)
+        cut_tick = drive_loops.cutoff_latch(k_r * depth, cut.trip_force_N, cut.rearm_force_N) if cut.enabled else np.zeros(len(ticks), bool)
         motor[cut_tick] = 0.0
         motor, f_cmd_D, saturated, cut_flags = motor[hold_idx], f_tick[hold_idx], sat_tick[hold_idx], cut_tick[hold_idx]
         cable = motor + drive_friction(twin, thd_l, th_l) - j_refl * thdd_l
@@ -611,52 +573,6 @@ def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, 
                         cable_torque=cable, saturated=saturated, cut_off=cut_flags)
 
 
-def _cutoff_latch(f_cmd_mag: np.ndarray, cut) -> np.ndarray:
-    """Latched cut-off flags: on when the commanded force exceeds the trip level, off below the re-arm level."""
-    out = np.zeros(len(f_cmd_mag), bool)
-    on = False
-    trip, rearm = cut.trip_force_N, cut.rearm_force_N
-    for i, f in enumerate(f_cmd_mag.tolist()):
-        if on and f < rearm:
-            on = False
-        elif not on and f > trip:
-            on = True
-        out[i] = on
-    return out
-
-
-class _Command:
-    """One evaluation of the rendering software at motor angles ``θ_m`` (plain floats, drive-axis units)."""
-
-    def __init__(self, chain: _ScalarChain, c_inv, ps_D, n_D, k_r, tau_max):
-        self.chain, self.ci, self.k_r, self.tmax = chain, c_inv.tolist(), k_r, tau_max.tolist()
-        self.n = n_D.tolist()
-        self.s = ps_D.tolist()
-        self.rj = range(len(self.tmax))
-
-    def __call__(self, th_m):
-        """(drive torques after saturation, force magnitude, force vector, encoder q, A = C⁻ᵀJᵀn, saturated?)."""
-        ci, rj = self.ci, self.rj
-        nx, ny, nz = self.n
-        qe = [sum(ci[r][cc] * th_m[cc] for cc in rj) for r in rj]
-        p, jac = self.chain.fk_jac(qe)
-        depth = (self.s[0] - p[0]) * nx + (self.s[1] - p[1]) * ny + (self.s[2] - p[2]) * nz
-        fmag = self.k_r * depth if depth > 0.0 else 0.0
-        jn = [jac[r][0] * nx + jac[r][1] * ny + jac[r][2] * nz for r in rj]          # Jᵀ n per joint
-        a_vec = [sum(ci[r][cc] * jn[r] for r in rj) for cc in rj]                    # C⁻ᵀ Jᵀ n per axis
-        ta = [fmag * a for a in a_vec]
-        sat = False
-        for a_ in rj:
-            lim = self.tmax[a_]
-            if ta[a_] > lim:
-                ta[a_], sat = lim, True
-            elif ta[a_] < -lim:
-                ta[a_], sat = -lim, True
-        if depth <= 0.0:
-            a_vec = [0.0] * len(a_vec)
-        return ta, fmag, (fmag * nx, fmag * ny, fmag * nz), qe, a_vec, sat
-
-
 def _exact_step(j: float, b: float, k: float, h: float) -> tuple[float, ...]:
     """Exact discretisation over ``h`` of ``J·z̈ + b·ż + k·z = 0``: (h, Φ00, Φ01, Φ10, Φ11, Ψ00, Ψ01, Ψ10, Ψ11),
     with Φ = exp(A·h) and Ψ = (1/h)∫₀ʰ exp(A·s) ds (the period average)."""
@@ -672,181 +588,50 @@ def _exact_step(j: float, b: float, k: float, h: float) -> tuple[float, ...]:
     return (h, phi[0, 0], phi[0, 1], phi[1, 0], phi[1, 1], psi[0, 0], psi[0, 1], psi[1, 0], psi[1, 1])
 
 
-def _axis_period(d, dd, u, k, b, g, j, exact, margin, dt, substeps):
-    """Advance one drive axis over a period ``dt`` with a constant input torque ``u`` on the rotor.
-
-    State: cable deflection ``d = θ_motor − θ_link`` and its rate ``ḋ`` (the link-side angle moves
-    linearly within the period). Engaged on one side of the backlash gap (``|d| > g + margin``) the
-    exact solution of ``J·d̈ + b·ḋ + k·(d ∓ g) = u`` is used (``exact`` from :func:`_exact_step`);
-    near or inside the gap, semi-implicit Euler sub-steps. Returns ``(d, ḋ, period-average cable torque)``.
-    """
-    if exact is not None and abs(d) > g + margin:
-        _, p00, p01, p10, p11, s00, s01, s10, s11 = exact
-        side = g if d > 0 else -g
-        off = side + u / k
-        z0 = d - off
-        d_avg = off + s00 * z0 + s01 * dd
-        dd_avg = s10 * z0 + s11 * dd
-        return off + p00 * z0 + p01 * dd, p10 * z0 + p11 * dd, k * (d_avg - side) + b * dd_avg
-    h = dt / substeps
-    acc = 0.0
-    for _ in range(substeps):
-        if d > g:
-            spring = k * (d - g) + b * dd
-        elif d < -g:
-            spring = k * (d + g) + b * dd
-        else:
-            spring = 0.0
-        dd += h * (u - spring) / j
-        d += h * dd
-        acc += spring
-    return d, dd, acc / substeps
-
-
 def _passive_drive(twin: TwinFile, t: np.ndarray, th_l: np.ndarray, thd_l: np.ndarray) -> np.ndarray:
     """Cable torques ``(N, n)`` on the links of an unpowered drive whose rotors hang on elastic, backlashed
     cables (``drive.series_elasticity``, ``drive.backlash``) while the hand moves the links.
 
     The rotors are driven by the link motion through the cables and braked by the drive friction
     (evaluated at the link-side speed, as in the active loop); the zero motor torque makes this the
-    active loop without its rendering part.
+    active loop without its rendering part (:func:`.drive_loops.passive_drive`).
     """
     n_s, n_j = th_l.shape
     se = twin.effects.drive_series_elasticity
     bl = twin.effects.drive_backlash
-    kk, bb = list(se.stiffness_Nm_per_rad), list(se.damping_Nms_per_rad)
-    gap = [0.5 * w for w in bl.width_rad] if bl.enabled else [0.0] * n_j
-    jr = reflected_rotor_inertia(twin).tolist()
-    fr_all = drive_friction(twin, thd_l, th_l)
-    dt_all = np.diff(t, append=t[-1] + (t[-1] - t[-2] if n_s > 1 else 1e-3))
-    dt0 = float(dt_all[0])
-    uniform = bool(np.allclose(dt_all, dt0, rtol=1e-6, atol=1e-12))
-    out = np.zeros((n_s, n_j))
-    substeps = 8
-    w_per = np.diff(th_l, axis=0) / dt_all[:-1, None] if n_s > 1 else np.zeros((0, n_j))
+    k, b = np.asarray(se.stiffness_Nm_per_rad, float), np.asarray(se.damping_Nms_per_rad, float)
+    half_gap = 0.5 * np.asarray(bl.width_rad, float) if bl.enabled else np.zeros(n_j)
+    j_refl = reflected_rotor_inertia(twin)
+    dts = np.diff(t, append=t[-1] + (t[-1] - t[-2] if n_s > 1 else 1e-3))
+    uniform = bool(np.allclose(dts, dts[0], rtol=1e-6, atol=1e-12))
+    w_per = np.diff(th_l, axis=0) / dts[:-1, None] if n_s > 1 else np.zeros((0, n_j))
     w_per = np.concatenate([w_per, w_per[-1:] if len(w_per) else np.zeros((1, n_j))])
     # the link's velocity step at the end of each period, seen in the rotor's relative coordinate
     jumps = np.concatenate([w_per[:-1] - w_per[1:], np.zeros((1, n_j))])
-    for a_ in range(n_j):
-        k, b, g, j = kk[a_], bb[a_], gap[a_], jr[a_]
-        exact = _exact_step(j, b, k, dt0) if uniform else None
-        edge = 1.25 * g                     # engaged beyond this deflection: exact linear step
-        fr = fr_all[:, a_].tolist()
-        jump = jumps[:, a_].tolist()
-        dts = dt_all.tolist()
-        # start at rest relative to the link, the cable carrying the friction (quasi-static)
-        d = fr[0] / k + (g if fr[0] > 0 else -g if fr[0] < 0 else 0.0)
-        dd = 0.0
-        col = [0.0] * n_s
-        if exact is not None:
-            _, p00, p01, p10, p11, s00, s01, s10, s11 = exact
-        kinv = 1.0 / k
-        for i in range(n_s):
-            u = fr[i]
-            if exact is not None and (d > edge or d < -edge):
-                side = g if d > 0 else -g
-                off = side + u * kinv
-                z0 = d - off
-                col[i] = k * (off + s00 * z0 + s01 * dd - side) + b * (s10 * z0 + s11 * dd)
-                d, dd = off + p00 * z0 + p01 * dd, p10 * z0 + p11 * dd
-            else:
-                d, dd, col[i] = _axis_period(d, dd, u, k, b, g, j, None, 0.0, dts[i], substeps)
-            dd += jump[i]
-        out[:, a_] = col
-    return out
+    exact = _exact_steps(j_refl, b, k, float(dts[0]))
+    return drive_loops.passive_drive(np.ascontiguousarray(drive_friction(twin, thd_l, th_l)), jumps, dts, k, b, half_gap,
+                                     j_refl, exact, uniform)
 
 
-def _dead_zone(d: float, g: float) -> float:
-    return d - g if d > g else (d + g if d < -g else 0.0)
+def _exact_steps(j_refl: np.ndarray, b: np.ndarray, k: np.ndarray, h: float) -> np.ndarray:
+    """:func:`_exact_step` per drive axis ``(n, 9)``; zeros for a massless rotor (it has no dynamics to step)."""
+    return np.array([_exact_step(j, bb, kk, h) if j > 0 else (0.0,) * 9 for j, bb, kk in zip(j_refl, b, k)], float)
 
 
 def _render_loop(twin, t, th_l, thd_l, nom, c_inv, ps_D, n_D, k_r, tau_max, cut, j_refl, k, b, half_gap):
-    """The sequential loop with an elastic cable.
-
-    Rotors with inertia: semi-implicit Euler, 4 sub-steps per loop period, command held (zero-order hold).
-    Massless rotors (``inertia`` off): the motor is in quasi-static balance with the cable at every
-    period, ``k·dz(θ_m − θ_l) = τ(θ_m) + friction(θ̇_l)``, solved by Newton's method (the loop settles
-    within one period).
-    """
-    n_s, n_j = th_l.shape
-    command = _Command(_ScalarChain(nom), c_inv, ps_D, n_D, k_r, tau_max)
-    th_l_l, thd_l_l = th_l.tolist(), thd_l.tolist()
-    kk, bb, gap = k.tolist(), b.tolist(), half_gap.tolist()
-    jr = j_refl.tolist()
-    massless = any(v <= 0.0 for v in jr)
-    fr_all = drive_friction(twin, thd_l, th_l).tolist()   # at the link-side speed and angle
+    """The sequential loop with an elastic cable (:func:`.drive_loops.render_loop`): the nominal chain as DH
+    rows, the drive friction at the link-side speed and angle, the exact cable steps over the first period."""
+    dh = np.array([(jt.a, math.cos(jt.alpha), math.sin(jt.alpha), jt.d, jt.theta_offset) for jt in nom.joints], float)
+    base_r = quat_to_matrix(np.asarray(nom.base.quaternion, float))
+    n_s = len(t)
+    dts = np.diff(t, append=t[-1] + (t[-1] - t[-2] if n_s > 1 else 1e-3))
     trip, rearm = (cut.trip_force_N, cut.rearm_force_N) if cut.enabled else (math.inf, -1.0)
-    dt_all = np.diff(t, append=t[-1] + (t[-1] - t[-2] if n_s > 1 else 1e-3)).tolist()
-    th_m = list(th_l_l[0])          # the motors start at rest on the links (cables relaxed)
-    w_m = list(thd_l_l[0])
-    motor = np.zeros((n_s, n_j))
-    cable = np.zeros((n_s, n_j))
-    enc = np.zeros((n_s, n_j))
-    fcmd = np.zeros((n_s, 3))
-    sat = np.zeros(n_s, bool)
-    cutf = np.zeros(n_s, bool)
-    latched = False
-    substeps = 8
-    rj = range(n_j)
-    dt0 = dt_all[0]
-    exact = [_exact_step(jr[a_], bb[a_], kk[a_], dt0) if jr[a_] > 0 else None for a_ in rj]
-    # stay in the sub-stepped branch while within a few µrad of the gap edge (where the linear model switches)
-    backlash_margin = [0.0 if gap[a_] == 0.0 else 0.25 * gap[a_] for a_ in rj]
-    for i in range(n_s):
-        tl, wl = th_l_l[i], thd_l_l[i]
-        if massless:
-            # Newton on r(x) = k·dz(x − θ_l) − τ(x) − friction; Jacobian K + k_r·A·Aᵀ (Sherman–Morrison)
-            fr = fr_all[i]
-            for _ in range(6):
-                ta, fmag, fv, qe, a_vec, s_flag = command(th_m)
-                if latched or fmag > trip:
-                    ta = [0.0] * n_j
-                    a_vec = [0.0] * n_j
-                res = [kk[a_] * _dead_zone(th_m[a_] - tl[a_], gap[a_]) - ta[a_] - fr[a_] for a_ in rj]
-                if s_flag:
-                    a_vec = [0.0] * n_j
-                kinv_r = [res[a_] / kk[a_] for a_ in rj]
-                kinv_a = [a_vec[a_] / kk[a_] for a_ in rj]
-                denom = 1.0 + k_r * sum(a_vec[a_] * kinv_a[a_] for a_ in rj)
-                proj = k_r * sum(a_vec[a_] * kinv_r[a_] for a_ in rj) / denom
-                step = [kinv_r[a_] - kinv_a[a_] * proj for a_ in rj]
-                th_m = [th_m[a_] - step[a_] for a_ in rj]
-                if max(abs(x) for x in step) < 1e-12:
-                    break
-            ta, fmag, fv, qe, a_vec, s_flag = command(th_m)
-        else:
-            ta, fmag, fv, qe, a_vec, s_flag = command(th_m)
-        if latched and fmag < rearm:
-            latched = False
-        elif not latched and fmag > trip:
-            latched = True
-        if latched:
-            ta = [0.0] * n_j
-        if massless:
-            tau_c = [kk[a_] * _dead_zone(th_m[a_] - tl[a_], gap[a_]) for a_ in rj]
-            if latched:    # the motor relaxes onto the link within the period
-                th_m = [tl[a_] + fr_all[i][a_] / kk[a_] for a_ in rj]
-                tau_c = list(fr_all[i])
-        else:
-            # one loop period with the command held; friction acts at the link-side drive speed
-            tl_next = th_l_l[i + 1] if i + 1 < n_s else tl
-            dt = dt_all[i]
-            tau_c = [0.0] * n_j
-            for a_ in rj:
-                w_l = (tl_next[a_] - tl[a_]) / dt if dt > 0 else wl[a_]
-                u = ta[a_] + fr_all[i][a_]
-                d_new, dd_new, tau_c[a_] = _axis_period(
-                    th_m[a_] - tl[a_], w_m[a_] - w_l, u, kk[a_], bb[a_], gap[a_], jr[a_],
-                    exact[a_] if abs(dt - exact[a_][0]) < 1e-12 else None, backlash_margin[a_], dt, substeps)
-                th_m[a_] = tl_next[a_] + d_new
-                w_m[a_] = w_l + dd_new
-        motor[i] = ta
-        cable[i] = tau_c
-        enc[i] = qe
-        fcmd[i] = fv
-        sat[i] = s_flag
-        cutf[i] = latched
-    return motor, cable, enc, fcmd, sat, cutf
+    k, b, half_gap = (np.asarray(x, float) for x in (k, b, half_gap))
+    return drive_loops.render_loop(
+        np.ascontiguousarray(th_l, float), np.ascontiguousarray(thd_l, float),
+        np.ascontiguousarray(drive_friction(twin, thd_l, th_l)), dts, dh, base_r, np.asarray(nom.base.position, float),
+        np.asarray(c_inv, float), np.asarray(ps_D, float), np.asarray(n_D, float), float(k_r),
+        np.asarray(tau_max, float), float(trip), float(rearm), k, b, half_gap, j_refl, _exact_steps(j_refl, b, k, float(dts[0])))
 
 
 # --- vibration ----------------------------------------------------------------------------------
