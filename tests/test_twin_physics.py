@@ -416,3 +416,42 @@ def test_a_twin_without_effects_does_nothing_to_the_hand():
     assert res.base_force_W == pytest.approx(np.tile([0.0, 0.0, -1.5 * G], (len(t), 1)), abs=1e-12)
     res = ph.simulate_passive(disable(tw, "gravity"), t, p, quat)
     assert np.max(np.abs(res.base_force_W)) < 1e-12
+
+
+# --- remembered paths ---------------------------------------------------------------------------
+
+def _variants(base):
+    """The preset with each effect switched the other way, with longer links and with a stronger gravity."""
+    out = {}
+    for effect in EFFECT_IDS:
+        on = base.on(effect)
+        out[f"{effect} {'off' if not on else 'on'}→{'on' if not on else 'off'}"] = set_param(base, f"{effect}.enabled", not on)
+    links = set_param(base, "kinematics.link_length.delta_a_m", [0.004, 0.004, 0.004])
+    out["link length +4 mm"] = set_param(links, "kinematics.link_length.enabled", True)
+    out["gravity 10.5"] = set_param(base, "gravity.g_m_per_s2", 10.5)
+    return out
+
+
+@pytest.mark.parametrize("kind", ["passive", "active"])
+def test_remembered_joint_paths_and_rigid_parts_never_change_a_result(kind):
+    """The in-process memo (TWIN.md: joint path and rigid-body part per path and twin) must be invisible: a twin
+    simulated right after the preset on the same path gives exactly what it gives from scratch."""
+    base = preset("touch")
+    q = centre_q(base)
+    t, p, quat = hold(base, q, n=3000)
+    p = p + 0.02 * np.sin(2 * np.pi * 0.7 * t)[:, None] * np.array([1.0, 0.5, -0.8])     # reversals, some contact
+    surface = p[0] - np.array([0.0, 0.0, 0.01])
+    rend = {"surface_point_m": surface.tolist(), "surface_normal": [0.0, 0.0, 1.0], "stiffness_N_per_m": 750.0}
+
+    def run(tw):
+        r = ph.simulate_passive(tw, t, p, quat) if kind == "passive" else ph.simulate_active(tw, t, p, quat, rend)
+        return np.concatenate([r.force_W, r.torque_W, r.base_force_W, r.base_torque_W], axis=1)
+
+    for name, tw in _variants(base).items():
+        ph._MEMO.clear()
+        fresh = run(tw)
+        ph._MEMO.clear()
+        run(base)
+        assert np.array_equal(run(tw), fresh, equal_nan=True), name
+        if name.startswith(("gravity", "inertia", "friction.", "link length")):    # they act on any moving hand
+            assert not np.array_equal(fresh, run(base), equal_nan=True), name

@@ -216,12 +216,22 @@ def select_effects(twin: TwinFile, trials: list[MeasuredTrial], max_effects: int
     candidate. ``workers`` > 1 fits the candidates of a round in that many processes (0: one per CPU,
     at most 4); the result does not depend on it.
     """
-    n = workers or min(4, os.cpu_count() or 1)
+    n = pool_size(workers)
     if n <= 1:
         return _select(twin, trials, sweeps or [], max_effects, library, log, None)
-    ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
-    with ProcessPoolExecutor(max_workers=n, mp_context=ctx) as pool:
+    with process_pool(n) as pool:
         return _select(twin, trials, sweeps or [], max_effects, library, log, pool)
+
+
+def pool_size(workers: int) -> int:
+    """Worker processes for a ``workers`` setting: itself, or for 0 one per CPU, at most 4."""
+    return workers or min(4, os.cpu_count() or 1)
+
+
+def process_pool(n: int) -> ProcessPoolExecutor:
+    """``n`` worker processes, forked where the platform can (the workers inherit the loaded trials and the compiled drive loops)."""
+    ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
+    return ProcessPoolExecutor(max_workers=n, mp_context=ctx)
 
 
 def _select(twin, trials, sweeps, max_effects, library, log, pool) -> Selection:

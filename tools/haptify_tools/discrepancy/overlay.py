@@ -17,15 +17,10 @@ from haptify_tools.discrepancy.data import MeasuredTrial
 from haptify_tools.discrepancy.model import DiscrepancyFile
 
 
-def write_overlay(session: SessionFolder, trials: list[MeasuredTrial], twin_force: dict[str, np.ndarray],
-                  result: DiscrepancyFile, path: Path) -> Path:
-    """Write the overlay recording (the updated twin's hand force, N, as the ``compare`` role) to ``path`` (atomically, by the
-    viewer's :func:`write_rrd`) (discrepancy README §4).
-    """
-    import rerun as rr
-
-    from haptify_tools.viewer.blueprints import blueprint_for
-    from haptify_tools.viewer.recording import Entry, plan_recording, series_entry, write_rrd
+def overlay_plan(session: SessionFolder, trials: list[MeasuredTrial], twin_force: dict[str, np.ndarray]):
+    """The viewer's recording plan of the compared trials with the updated twin's hand force (N) as the ``compare``
+    role (discrepancy README §4); :func:`write_overlay` adds the note and writes it."""
+    from haptify_tools.viewer.recording import plan_recording, series_entry
 
     plan = plan_recording(session)
     compared = {tr.trial_id for tr in trials}
@@ -41,6 +36,18 @@ def write_overlay(session: SessionFolder, trials: list[MeasuredTrial], twin_forc
         force = np.where(tr.valid[:, None], twin_force[tr.trial_id], np.nan)
         plan.add(series_entry(f"/series/{tp.key}/compare/hand_force/calibrated", "hand_force/calibrated", tr.t, force,
                               ["fx", "fy", "fz"], "compare", "haptify discrepancy"))
+    return plan
+
+
+def write_overlay(plan, result: DiscrepancyFile, path: Path) -> Path:
+    """Write the overlay recording of :func:`overlay_plan` with a markdown note ``/discrepancy`` (effects added, verdict,
+    gap) to ``path`` (atomically, by the viewer's :func:`write_rrd`) (discrepancy README §4).
+    """
+    import rerun as rr
+
+    from haptify_tools.viewer.blueprints import blueprint_for
+    from haptify_tools.viewer.recording import Entry, write_rrd
+
     named = ", ".join(f"{a.effect_id} {a.parameter} = {a.value:.4g} {a.unit}" for a in result.accepted) or "none"
     note = ("# Twin versus measurement\n\nLines marked *(compare)* in the hand-force views are the updated twin's "
             f"force along the measured path (low-passed at the workflow's comparison band).\n\nEffects added: {named}.\n\n"

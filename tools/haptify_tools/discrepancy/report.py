@@ -105,14 +105,20 @@ def _table(head: list[str], rows: list[list[object]]) -> str:
             + "".join("<tr>" + "".join(f"<td>{cell(v)}</td>" for v in r) + "</tr>" for r in rows) + "</tbody></table>")
 
 
-def write_report(folder: Path, result: DiscrepancyFile, trials: list[MeasuredTrial], sel: Selection) -> dict[str, str]:
-    """Write ``report.html`` and its PNG figures (forces in N, positions in m) into ``folder``; returns the file map for ``files`` (discrepancy README §4)."""
+def write_figures(folder: Path, trials: list[MeasuredTrial], sel: Selection) -> list[tuple[str, str]]:
+    """Draw the report's PNG figures (forces in N, positions in m) into ``folder``; returns (file stem, caption) per figure (discrepancy README §4)."""
     import matplotlib.pyplot as plt
 
-    figs = _figures(trials, sel)
-    for name, _, fig in figs:
+    out = []
+    for name, caption, fig in _figures(trials, sel):
         fig.savefig(folder / f"{name}.png", dpi=90, bbox_inches="tight")
         plt.close(fig)
+        out.append((name, caption))
+    return out
+
+
+def write_report(folder: Path, result: DiscrepancyFile, figs: list[tuple[str, str]]) -> dict[str, str]:
+    """Write ``report.html`` into ``folder`` beside the figures :func:`write_figures` drew there; returns the file map for ``files`` (discrepancy README §4)."""
     acc = _table(["#", "effect", "parameter", "value", "s.e.", "unit", "ΔBIC", "p", "share explained", "near ties"],
                  [[a.order, a.effect_id, a.parameter, a.value, a.stderr if a.stderr is not None else "—", a.unit,
                    a.delta_bic, a.p_value, a.share_explained, ", ".join(a.near_ties) or "—"] for a in result.accepted])
@@ -135,7 +141,7 @@ def write_report(folder: Path, result: DiscrepancyFile, trials: list[MeasuredTri
                   for w in result.workspace_gaps)
     s = result.structure
     fig_html = "".join(f"<figure><img src=\"{html.escape(n)}.png\" alt=\"{html.escape(c)}\"><figcaption>{html.escape(c)}"
-                       "</figcaption></figure>" for n, c, _ in figs)
+                       "</figcaption></figure>" for n, c in figs)
     page = f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>Discrepancy — {html.escape(result.session_id)}</title>
 <style>body{{font-family:sans-serif;max-width:1100px;margin:2em auto}}table{{border-collapse:collapse;margin:.5em 0}}
@@ -157,4 +163,4 @@ if s.structured else 'no clear structure left'}.</p>
 </body></html>
 """
     atomic_write_text(folder / "report.html", page)
-    return {"report": "report.html", **{n: f"{n}.png" for n, _, _ in figs}}
+    return {"report": "report.html", **{n: f"{n}.png" for n, _ in figs}}

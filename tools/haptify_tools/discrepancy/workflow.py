@@ -9,7 +9,9 @@ renamed into place (spec §3.6 style), so an interrupted run leaves nothing half
 
 from __future__ import annotations
 
+import shutil
 import tempfile
+from contextlib import ExitStack
 from pathlib import Path
 from typing import Callable
 
@@ -25,7 +27,7 @@ from haptify_tools.discrepancy import data as dt
 from haptify_tools.discrepancy import stats as st
 from haptify_tools.discrepancy import workspace as ws
 from haptify_tools.discrepancy.floor import gap_above_floor, heldout_gap, replay_floor
-from haptify_tools.discrepancy.identify import Selection, select_effects
+from haptify_tools.discrepancy.identify import Selection, pool_size, process_pool, select_effects
 from haptify_tools.discrepancy.library import NOT_OBSERVABLE
 from haptify_tools.discrepancy.model import (
     AcceptedEffect, BenchmarkGap, CandidateFit, DiscrepancyFile, Place, RoundResult, SignalGap, Structure, WorkspaceGap,
@@ -202,9 +204,8 @@ def annotate_twin(twin: TwinFile, sel: Selection) -> TwinFile:
     return twin_from_dict(data)
 
 
-def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial], sel: Selection,
-                 floor: float | None = None) -> DiscrepancyFile:
-    """Assemble :class:`DiscrepancyFile` from a finished selection (``floor``: :func:`.floor.replay_floor`, N) (discrepancy README §4)."""
+def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial], sel: Selection) -> DiscrepancyFile:
+    """Assemble :class:`DiscrepancyFile` from a finished selection, its floor not yet known (:func:`with_floor`) (discrepancy README §4)."""
     rounds = []
     for i, r in enumerate(sel.rounds):
         cands = [CandidateFit(effect_id=f.candidate.effect_id, parameter=f.candidate.parameter, value=f.value,
@@ -230,9 +231,7 @@ def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial]
         structure=Structure(**s), where=localise(trials, sel.initial_sim, sel.final_sim),
         signal_gaps=signal_gaps(design, trials, sel.initial_sim, sel.final_sim),
         benchmark_gaps=bench, workspace_gaps=wgaps,
-        heldout_gap_before_N=before, heldout_gap_after_N=after, floor_N=floor,
-        heldout_gap_above_floor_before_N=None if floor is None else gap_above_floor(before, floor),
-        heldout_gap_above_floor_after_N=None if floor is None else gap_above_floor(after, floor),
+        heldout_gap_before_N=before, heldout_gap_after_N=after,
         not_observable=dict(NOT_OBSERVABLE),
         settings={"pose_cutoff_hz": dt.POSE_CUTOFF_HZ, "free_space_pose_cutoff_hz": dt.POSE_CUTOFF_BY_PROTOCOL_HZ["free_space"],
                   "orientation_cutoff_hz": dt.ORIENTATION_CUTOFF_HZ, "residual_cutoff_hz": dt.RESIDUAL_CUTOFF_HZ,
@@ -240,37 +239,78 @@ def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial]
                   "validation_min": st.VALIDATION_MIN, "structure_share": st.STRUCTURE_SHARE})
 
 
+def with_floor(result: DiscrepancyFile, floor: float | None) -> DiscrepancyFile:
+    """``result`` with its floor (:func:`.floor.replay_floor`, N; None: no trial could be replayed) and the held-out gaps
+    above it (discrepancy README §4, the floor)."""
+    if floor is None:
+        return result
+    return result.model_copy(update={
+        "floor_N": floor, "heldout_gap_above_floor_before_N": gap_above_floor(result.heldout_gap_before_N, floor),
+        "heldout_gap_above_floor_after_N": gap_above_floor(result.heldout_gap_after_N, floor)})
+
+
+def _floor_of(twin: TwinFile, session_path: str, trials: list[dt.MeasuredTrial]) -> float | None:
+    return replay_floor(twin, open_session(session_path), trials)
+
+
 def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | None = None, *, max_effects: int = 5,
                     overwrite: bool = False, log: Callable[[str], object] | None = None,
                     report: bool = True, workers: int = 1, overlay: bool = True) -> tuple[DiscrepancyFile, Selection]:
     """Run the workflow (discrepancy README §1–4; issue 8); with ``out`` write ``discrepancy.json``, ``twin.json`` and ``report.html`` there.
 
-    ``overlay``: also write ``overlay.rrd`` for the viewer (when ``report``). ``workers``: processes fitting candidates in parallel (0: one per CPU, at most 4; results do not
-    depend on it). Returns the result and the selection (its simulations, for callers that draw or test).
+    ``overlay``: also write ``overlay.rrd`` for the viewer (when ``report``). ``workers``: processes fitting candidates
+    in parallel (0: one per CPU, at most 4; results do not depend on it); with more than one, the floor's replay
+    runs in its own process while the figures and the overlay are drawn. Returns the result and the selection
+    (its simulations, for callers that draw or test).
     """
     session = open_session(session_path)
     sweeps = ws.load_sweeps(session)
     trials = dt.load_measured(session, required=not sweeps)
     sel = select_effects(twin, trials, max_effects=max_effects, log=log, workers=workers, sweeps=sweeps)
-    floor = replay_floor(sel.twin, session, trials) if trials else None
-    result = build_result(session.session_id, twin, trials, sel, floor)
-    if out is not None:
-        target = Path(out)
+    target = Path(out) if out is not None else None
+    build = None
+    if target is not None:
         target.parent.mkdir(parents=True, exist_ok=True)
         build = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
         build.chmod(0o755)          # an ordinary folder once renamed into place
-        files = {"twin": "twin.json"}
-        write_twin(annotate_twin(sel.twin, sel), build / "twin.json")
-        if report:
-            from haptify_tools.discrepancy.report import write_report
+    try:
+        with ExitStack() as stack:
+            pending = None
+            if trials and pool_size(workers) > 1:
+                pool = stack.enter_context(process_pool(1))
+                pending = pool.submit(_floor_of, sel.twin, str(session.root), trials)
+            figures = plan = None
+            if build is not None and report:
+                from haptify_tools.discrepancy.report import write_figures
 
-            files.update(write_report(build, result, trials, sel))
-            if overlay:
+                figures = write_figures(build, trials, sel)
+                if overlay:
+                    from haptify_tools.discrepancy.overlay import overlay_plan
+
+                    plan = overlay_plan(session, trials, sel.final_sim)
+            result = build_result(session.session_id, twin, trials, sel)
+            if pending is not None:
+                floor = pending.result()
+            else:
+                floor = replay_floor(sel.twin, session, trials) if trials else None
+        result = with_floor(result, floor)
+        if build is not None:
+            files = {"twin": "twin.json"}
+            write_twin(annotate_twin(sel.twin, sel), build / "twin.json")
+            if figures is not None:
+                from haptify_tools.discrepancy.report import write_report
+
+                files.update(write_report(build, result, figures))
+            if plan is not None:
                 from haptify_tools.discrepancy.overlay import write_overlay
 
-                write_overlay(session, trials, sel.final_sim, result, build / "overlay.rrd")
+                write_overlay(plan, result, build / "overlay.rrd")
                 files["overlay"] = "overlay.rrd"
-        result.files = files
-        atomic_write_json(build / "discrepancy.json", result.model_dump(mode="json"))
-        replace_folder_atomically(build, target, overwrite)
+            result.files = files
+            atomic_write_json(build / "discrepancy.json", result.model_dump(mode="json"))
+            replace_folder_atomically(build, target, overwrite)
+    except BaseException:
+        if build is not None:
+            shutil.rmtree(build, ignore_errors=True)      # nothing half-written is left beside the target
+        raise
     return result, sel

@@ -24,7 +24,10 @@ Frames: W (world) for inputs and outputs, D (device) inside; SI units.
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -42,7 +45,7 @@ from haptify_tools.twin.kinematics import (
     gimbal_angles, hand_to_joints, in_collision, link_transforms, nominal_kinematics, placement_matrix, rows_times,
     true_kinematics, world_to_device,
 )
-from haptify_tools.twin.model import TwinFile
+from haptify_tools.twin.model import TwinFile, twin_to_dict
 
 DEFAULT_LOOP_HZ = 1000.0   # CHAI3D's haptic loop rate when the rendering does not say (paper §V-D)
 
@@ -380,36 +383,57 @@ def _jacobians(frames: list[np.ndarray], n: int) -> tuple[np.ndarray, np.ndarray
     return jv, jw
 
 
-def _hand_wrench_from_drive(twin, kin, t, q, qd, qdd, quat_W, tau_drive_joint, frames, angles):
-    """Shared core: device→hand wrench (D) and device→plate wrench (D, about the device origin)
-    given the torques the drives apply to the joints."""
+@dataclass
+class _RigidPart:
+    """Everything of the hand and plate wrenches that does not depend on the drive torques (device frame D):
+    the gimbal body's wrench ``f_g, m_g``, the gimbal friction ``fric``, the Jacobians, ``rhs0 = τ0 + J_ωᵀ fric``
+    (the joint torques the links need with no drive), the base's force/moment on link 1 ``f1, n1`` and the
+    chain's ends ``o0, tip``."""
+
+    f_g: np.ndarray
+    m_g: np.ndarray
+    fric: np.ndarray
+    jac: np.ndarray
+    rhs0: np.ndarray
+    f1: np.ndarray
+    n1: np.ndarray
+    o0: np.ndarray
+    tip: np.ndarray
+
+
+def _rigid_part(twin, kin, t, q, qd, qdd, quat_W, gimbal, frames=None) -> _RigidPart:
     g_D = _gravity_D(twin)
     inert = twin.on("inertia")
+    frames = frames if frames is not None else link_transforms(kin, q)
     st = _forward_pass(twin, kin, q, qd if inert else np.zeros_like(qd), qdd if inert else np.zeros_like(qdd), g_D, frames)
     tau0, f1, n1 = _backward_pass(twin, st)
     a_tip = st.acc_origin[-1] + g_D          # true acceleration of the gimbal centre
-    f_g, m_g, fric = _gimbal_body_terms(twin, t, frames, angles, quat_W, a_tip, g_D)
+    f_g, m_g, fric = _gimbal_body_terms(twin, t, frames, gimbal, quat_W, a_tip, g_D)
     jac, jw = _jacobians(frames, len(twin.links))
     # Link n receives at the gimbal centre a force f_e and moment m_e = −fric from the gimbal.
     # τ_drive = τ0 − Jᵀ f_e − J_ωᵀ m_e  →  Jᵀ f_e = τ0 + J_ωᵀ fric − τ_drive
-    rhs = tau0 + np.einsum("nik,ni->nk", jw, fric) - tau_drive_joint
-    f_e = np.linalg.solve(np.swapaxes(jac, 1, 2), rhs[..., None])[..., 0]
+    rhs0 = tau0 + np.einsum("nik,ni->nk", jw, fric)
+    return _RigidPart(f_g, m_g, fric, jac, rhs0, f1, n1, frames[0][:, :3, 3].copy(), frames[-1][:, :3, 3].copy())
+
+
+def _hand_wrench_from_drive(twin, rigid: _RigidPart, tau_drive_joint):
+    """Shared core: device→hand wrench (D) and device→plate wrench (D, about the device origin)
+    given the torques the drives apply to the joints."""
+    r = rigid
+    f_e = np.linalg.solve(np.swapaxes(r.jac, 1, 2), (r.rhs0 - tau_drive_joint)[..., None])[..., 0]
     # The gimbal body: f_link_on_gimbal = −f_e; hand force on gimbal = m(a−g) + f_e
-    force_hand = -(f_g + f_e)                       # device → hand
-    torque_hand = -(m_g - fric)                     # device → hand about the gimbal centre
+    force_hand = -(r.f_g + f_e)                     # device → hand
+    torque_hand = -(r.m_g - r.fric)                 # device → hand about the gimbal centre
     # Base: link 1 gets f1,n1 from the base when no external load; with f_e, m_e on link n:
-    o0 = frames[0][:, :3, 3]
-    tip = frames[-1][:, :3, 3]
-    f_base_on_link = f1 - f_e
-    m_base_on_link = n1 - _cross(tip - o0, f_e) + fric
+    f_base_on_link = r.f1 - f_e
+    m_base_on_link = r.n1 - _cross(r.tip - r.o0, f_e) + r.fric
     force_plate = -f_base_on_link                   # arm → base → plate (base static)
-    torque_plate = -m_base_on_link + _cross(o0, force_plate)   # about the device origin
+    torque_plate = -m_base_on_link + _cross(r.o0, force_plate)   # about the device origin
     # base weight
-    m_b = twin.base.mass_kg
-    wb = m_b * g_D
+    wb = twin.base.mass_kg * _gravity_D(twin)
     force_plate = force_plate + wb
     torque_plate = torque_plate + _cross(np.asarray(twin.base.com_m), wb)
-    joint_torque = np.einsum("nik,ni->nk", jac, -force_hand)
+    joint_torque = np.einsum("nik,ni->nk", r.jac, -force_hand)
     return force_hand, torque_hand, force_plate, torque_plate, joint_torque
 
 
@@ -422,11 +446,95 @@ def _to_world(twin: TwinFile, force_D, torque_D, about_origin_D: bool = True):
     return f, m
 
 
-def _joint_path(twin, t: np.ndarray, position_W: np.ndarray, quaternion_W: np.ndarray):
-    """The arm's joint path under a hand path (both trial types): true kinematics, joint angles by IK,
-    reachability (limits and base collision), link frames, gimbal angles, joint velocity and acceleration
-    by finite differences, and the drive coupling matrix ``C`` (θ = C·q)."""
+#: Twin parts the arm's joint path cannot depend on (dynamics, drive, sensors): left out of its memo key.
+_NOT_KINEMATIC = ("gravity", "inertia", "friction.", "drive.", "vibration.")
+#: Effects that act on the drive torques only: left out of the rigid part's memo key.
+_DRIVE_ONLY = ("friction.stribeck", "drive.", "vibration.")
+
+
+def _twin_key(twin: TwinFile, leave_out: tuple[str, ...]) -> str:
+    """The twin as canonical JSON without the effects ``leave_out`` names (prefixes), the drive's gearing and the rig."""
+    data = twin_to_dict(twin)
+    data["effects"] = {k: v for k, v in data["effects"].items() if not k.startswith(leave_out)}
+    for k in ("drive", "rig", "sources", "description", "name"):
+        data.pop(k)
+    return json.dumps(data, sort_keys=True)
+
+
+def _array_key(*arrays: np.ndarray) -> str:
+    h = hashlib.blake2b(digest_size=16)
+    for x in arrays:
+        x = np.ascontiguousarray(x, float)
+        h.update(str(x.shape).encode())
+        h.update(x.data)
+    return h.hexdigest()
+
+
+class _Memo:
+    """A small least-recently-used store of per-path arrays, bounded in bytes (read-only arrays: callers share them).
+
+    The discrepancy workflow re-simulates the same measured paths with twins that differ in one drive or
+    friction parameter: the joint path (inverse kinematics, gimbal angles, finite differences) and the
+    rigid-body part of the wrench are the same for all of them.
+    """
+
+    def __init__(self, max_bytes: int) -> None:
+        self.max_bytes, self.items, self.size = max_bytes, OrderedDict(), 0
+
+    def clear(self) -> None:
+        self.items.clear()
+        self.size = 0
+
+    def get(self, key):
+        value = self.items.get(key)
+        if value is not None:
+            self.items.move_to_end(key)
+        return value
+
+    def put(self, key, value):
+        arrays = [v for v in (value.__dict__.values() if hasattr(value, "__dict__") else value) if isinstance(v, np.ndarray)]
+        for x in arrays:
+            x.flags.writeable = False
+        nbytes = sum(x.nbytes for x in arrays)
+        if nbytes > self.max_bytes:
+            return value
+        self.items[key] = (value, nbytes)
+        self.size += nbytes
+        while self.size > self.max_bytes:
+            _, (_, n) = self.items.popitem(last=False)
+            self.size -= n
+        return value
+
+
+MEMO_BYTES = 1 << 30        # per process
+_MEMO = _Memo(MEMO_BYTES)
+
+
+@dataclass
+class _JointPath:
+    """The arm under a hand path: true kinematics, joint angles (IK), reachability (limits and base collision),
+    gimbal angles, joint velocity and acceleration (finite differences), drive coupling ``C`` (θ = C·q);
+    ``key`` identifies it (kinematic parts of the twin and the path) for :func:`_rigid_part_of`."""
+
+    kin: Kinematics
+    q: np.ndarray
+    ok: np.ndarray
+    gimbal: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    c: np.ndarray
+    key: tuple
+    frames: list | None = None      # the DH frames when just computed (not kept in the memo)
+
+
+def _joint_path(twin, t: np.ndarray, position_W: np.ndarray, quaternion_W: np.ndarray) -> _JointPath:
+    """The arm's joint path under a hand path (both trial types); remembered per kinematic twin and path (:class:`_Memo`)."""
     kin = true_kinematics(twin)
+    key = ("joint path", _twin_key(twin, _NOT_KINEMATIC), _array_key(t, position_W, quaternion_W))
+    hit = _MEMO.get(key)
+    if hit is not None:
+        q, ok, gimbal, qd, qdd = hit[0]
+        return _JointPath(kin, q, ok, gimbal, qd, qdd, _coupling(twin), key)
     q, _, ok = hand_to_joints(twin, position_W, None)
     ok = ok & ~in_collision(twin, world_to_device(twin, position_W))
     q = _unwrap(q)
@@ -434,7 +542,17 @@ def _joint_path(twin, t: np.ndarray, position_W: np.ndarray, quaternion_W: np.nd
     gimbal = gimbal_angles(twin, q, quaternion_W, frames)
     qd = _diff(t, q)
     qdd = _diff(t, qd)
-    return kin, q, ok, frames, gimbal, qd, qdd, _coupling(twin)
+    _MEMO.put(key, (q, ok, gimbal, qd, qdd))
+    return _JointPath(kin, q, ok, gimbal, qd, qdd, _coupling(twin), key, frames)
+
+
+def _rigid_part_of(twin, jp: _JointPath, t: np.ndarray, quaternion_W: np.ndarray) -> _RigidPart:
+    """:func:`_rigid_part` along a joint path, remembered per twin without its drive-only effects (:class:`_Memo`)."""
+    key = ("rigid part", jp.key, _twin_key(twin, _DRIVE_ONLY))
+    hit = _MEMO.get(key)
+    if hit is not None:
+        return hit[0]
+    return _MEMO.put(key, _rigid_part(twin, jp.kin, t, jp.q, jp.qd, jp.qdd, quaternion_W, jp.gimbal, jp.frames))
 
 
 def simulate_passive(twin: TwinFile, t: np.ndarray, position_W: np.ndarray, quaternion_W: np.ndarray) -> PassiveResult:
@@ -446,7 +564,8 @@ def simulate_passive(twin: TwinFile, t: np.ndarray, position_W: np.ndarray, quat
     reflected rotor inertia act on the drive axes ``θ = C·q`` and reach the joints as ``Cᵀ·τ``.
     """
     t, position_W, quaternion_W = _check_path(t, position_W, quaternion_W)
-    kin, q, ok, frames, gimbal, qd, qdd, c = _joint_path(twin, t, position_W, quaternion_W)
+    jp = _joint_path(twin, t, position_W, quaternion_W)
+    q, qd, qdd, c = jp.q, jp.qd, jp.qdd, jp.c
     th_d, th_dd = rows_times(qd, c.T), rows_times(qdd, c.T)
     j_refl = reflected_rotor_inertia(twin)
     if twin.on("drive.series_elasticity") and np.all(j_refl > 0) and len(t) > 2:
@@ -454,11 +573,11 @@ def simulate_passive(twin: TwinFile, t: np.ndarray, position_W: np.ndarray, quat
     else:   # rigid cables (or massless rotors): friction and rotor inertia reach the links directly
         tau_axis = drive_friction(twin, th_d, rows_times(q, c.T)) - j_refl * th_dd
     tau_joint = rows_times(tau_axis, c)
-    fh, th, fp, tp, jt = _hand_wrench_from_drive(twin, kin, t, q, qd, qdd, quaternion_W, tau_joint, frames, gimbal)
+    fh, th, fp, tp, jt = _hand_wrench_from_drive(twin, _rigid_part_of(twin, jp, t, quaternion_W), tau_joint)
     f_w, m_w = _to_world(twin, fh, th, about_origin_D=False)
     bf_w, bm_w = _to_world(twin, fp, tp)
-    return PassiveResult(t=t, q=q, gimbal=gimbal, force_W=f_w, torque_W=m_w, base_force_W=bf_w, base_torque_W=bm_w,
-                         ok=ok, qd=qd, qdd=qdd, joint_torque=jt)
+    return PassiveResult(t=t, q=q, gimbal=jp.gimbal, force_W=f_w, torque_W=m_w, base_force_W=bf_w, base_torque_W=bm_w,
+                         ok=jp.ok, qd=qd, qdd=qdd, joint_torque=jt)
 
 
 # --- active -------------------------------------------------------------------------------------
@@ -511,7 +630,8 @@ def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, 
     t, pos_W, quat_W = _check_path(t, hand_position_W, hand_quaternion_W, uniform=True)
     n_s = len(t)
     nom = nominal_kinematics(twin)
-    kin, q, ok, frames, gimbal, qd, qdd, c = _joint_path(twin, t, pos_W, quat_W)
+    jp = _joint_path(twin, t, pos_W, quat_W)
+    q, qd, qdd, c = jp.q, jp.qd, jp.qdd, jp.c
     c_inv = np.linalg.inv(c)
     th_l, thd_l, thdd_l = rows_times(q, c.T), rows_times(qd, c.T), rows_times(qdd, c.T)
     r_wd, t_wd = placement_matrix(twin)
@@ -563,13 +683,13 @@ def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, 
         p_enc = ref.forward_positions(nom, enc_q)
 
     tau_joint = rows_times(cable, c)
-    fh, th, fp, tp, _ = _hand_wrench_from_drive(twin, kin, t, q, qd, qdd, quat_W, tau_joint, frames, gimbal)
+    fh, th, fp, tp, _ = _hand_wrench_from_drive(twin, _rigid_part_of(twin, jp, t, quat_W), tau_joint)
     f_w, m_w = _to_world(twin, fh, th, about_origin_D=False)
     bf_w, bm_w = _to_world(twin, fp, tp)
     commanded = np.concatenate([rows_times(f_cmd_D, r_wd.T), np.zeros((n_s, 3))], axis=1)
     p_enc_W = rows_times(p_enc, r_wd.T) + t_wd
-    return ActiveResult(t=t, q=q, gimbal=gimbal, force_W=f_w, torque_W=m_w, base_force_W=bf_w, base_torque_W=bm_w,
-                        ok=ok, commanded_W=commanded, encoder_q=enc_q, encoder_position_W=p_enc_W, motor_torque=motor,
+    return ActiveResult(t=t, q=q, gimbal=jp.gimbal, force_W=f_w, torque_W=m_w, base_force_W=bf_w, base_torque_W=bm_w,
+                        ok=jp.ok, commanded_W=commanded, encoder_q=enc_q, encoder_position_W=p_enc_W, motor_torque=motor,
                         cable_torque=cable, saturated=saturated, cut_off=cut_flags)
 
 
