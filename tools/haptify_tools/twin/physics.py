@@ -27,6 +27,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import threading
 from collections import OrderedDict
 from dataclasses import dataclass, field
 
@@ -480,16 +481,19 @@ class _Memo:
 
     def __init__(self, max_bytes: int) -> None:
         self.max_bytes, self.items, self.size = max_bytes, OrderedDict(), 0
+        self.lock = threading.Lock()          # simulations may run in threads of one process
 
     def clear(self) -> None:
-        self.items.clear()
-        self.size = 0
+        with self.lock:
+            self.items.clear()
+            self.size = 0
 
     def get(self, key):
-        value = self.items.get(key)
-        if value is not None:
-            self.items.move_to_end(key)
-        return value
+        with self.lock:
+            value = self.items.get(key)
+            if value is not None:
+                self.items.move_to_end(key)
+            return value
 
     def put(self, key, value):
         arrays = [v for v in (value.__dict__.values() if hasattr(value, "__dict__") else value) if isinstance(v, np.ndarray)]
@@ -498,11 +502,13 @@ class _Memo:
         nbytes = sum(x.nbytes for x in arrays)
         if nbytes > self.max_bytes:
             return value
-        self.items[key] = (value, nbytes)
-        self.size += nbytes
-        while self.size > self.max_bytes:
-            _, (_, n) = self.items.popitem(last=False)
-            self.size -= n
+        with self.lock:
+            if key not in self.items:
+                self.items[key] = (value, nbytes)
+                self.size += nbytes
+            while self.size > self.max_bytes:
+                _, (_, n) = self.items.popitem(last=False)
+                self.size -= n
         return value
 
 
