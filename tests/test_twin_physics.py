@@ -429,6 +429,11 @@ def _variants(base):
     links = set_param(base, "kinematics.link_length.delta_a_m", [0.004, 0.004, 0.004])
     out["link length +4 mm"] = set_param(links, "kinematics.link_length.enabled", True)
     out["gravity 10.5"] = set_param(base, "gravity.g_m_per_s2", 10.5)
+    for key, value in (("friction.coulomb.gimbal_torque_Nm", [0.004, 0.004, 0.004]), ("friction.coulomb.torque_Nm", [0.05] * 3),
+                       ("friction.coulomb.zero_crossing_velocity_rad_per_s", 0.01),
+                       ("friction.viscous.gimbal_damping_Nms_per_rad", [2e-4, 2e-4, 2e-4]),
+                       ("friction.viscous.damping_Nms_per_rad", [2e-3] * 3), ("inertia.rotor_inertia_kg_m2", [3e-6] * 3)):
+        out[f"{key} changed"] = set_param(base, key, value)
     return out
 
 

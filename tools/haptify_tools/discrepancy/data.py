@@ -154,10 +154,41 @@ def simulate_all(twin: TwinFile, trials: list[MeasuredTrial], only_active: bool 
     """:func:`simulate_trial` for every trial (trial id → force, N); with ``only_active`` the passive trials
     are copied from ``base`` (effects that act only while the motors render) (discrepancy README §1, §2).
     """
-    out = {}
-    for tr in trials:
-        if only_active and not tr.active and base is not None:
-            out[tr.trial_id] = base[tr.trial_id]
-        else:
-            out[tr.trial_id] = simulate_trial(twin, tr)
-    return out
+    return simulate_many([twin], trials, only_active, base)[0]
+
+
+#: The trials a worker process simulates, by id (set once per worker by :func:`share_trials`).
+_WORKER_TRIALS: dict[str, MeasuredTrial] = {}
+
+
+def share_trials(trials: list[MeasuredTrial]) -> None:
+    """Worker initializer: keep the measured trials in the worker, so that a job names its trial by id."""
+    _WORKER_TRIALS.clear()
+    _WORKER_TRIALS.update({tr.trial_id: tr for tr in trials})
+
+
+def _simulate_shared(twin: TwinFile, trial_id: str) -> np.ndarray:
+    return simulate_trial(twin, _WORKER_TRIALS[trial_id])
+
+
+def simulate_many(twins: list[TwinFile], trials: list[MeasuredTrial], only_active: bool = False,
+                  base: dict[str, np.ndarray] | None = None, pool=None) -> list[dict[str, np.ndarray]]:
+    """:func:`simulate_all` for several twins; with ``pool`` (workers initialised by :func:`share_trials` with
+    these trials) every (twin, trial) pair is one job, the longest trials first (discrepancy README §1, §2)."""
+    out: list[dict[str, np.ndarray]] = [{} for _ in twins]
+    jobs = []
+    for i in range(len(twins)):
+        for tr in trials:
+            if only_active and not tr.active and base is not None:
+                out[i][tr.trial_id] = base[tr.trial_id]
+            else:
+                jobs.append((i, tr))
+    if pool is None:
+        for i, tr in jobs:
+            out[i][tr.trial_id] = simulate_trial(twins[i], tr)
+    else:
+        futures = {(i, tr.trial_id): pool.submit(_simulate_shared, twins[i], tr.trial_id)
+                   for i, tr in sorted(jobs, key=lambda job: -len(job[1].t))}
+        for (i, trial_id), future in futures.items():
+            out[i][trial_id] = future.result()
+    return [{tr.trial_id: o[tr.trial_id] for tr in trials} for o in out]

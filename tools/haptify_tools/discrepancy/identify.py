@@ -19,7 +19,7 @@ import numpy as np
 
 from haptify_tools.discrepancy import stats as st
 from haptify_tools.discrepancy import workspace as ws
-from haptify_tools.discrepancy.data import MeasuredTrial, simulate_all
+from haptify_tools.discrepancy.data import MeasuredTrial, share_trials, simulate_many
 from haptify_tools.discrepancy.library import LIBRARY, Candidate
 from haptify_tools.twin.model import TwinFile
 
@@ -36,15 +36,20 @@ class Dataset:
     kind: str                       # "force" or "workspace"
     items: list
     commands: dict | None = None    # workspace: trial id → (face commands, ok)
+    pool: ProcessPoolExecutor | None = None     # force: workers sharing the trials (:func:`.data.share_trials`)
 
     @property
     def measured(self) -> dict[str, np.ndarray]:
         return {it.trial_id: (it.force if self.kind == "force" else it.position) for it in self.items}
 
     def simulate(self, twin: TwinFile, only_active: bool = False, base: dict | None = None) -> dict[str, np.ndarray]:
+        return self.simulate_many([twin], only_active, base)[0]
+
+    def simulate_many(self, twins: list[TwinFile], only_active: bool = False, base: dict | None = None) -> list[dict]:
+        """The predictions of several twins (force trials: every (twin, trial) pair in parallel when there is a pool)."""
         if self.kind == "force":
-            return simulate_all(twin, self.items, only_active, base)
-        return ws.sweep_predictions(twin, self.items, self.commands)
+            return simulate_many(twins, self.items, only_active, base, self.pool)
+        return [ws.sweep_predictions(tw, self.items, self.commands) for tw in twins]
 
     @staticmethod
     def sweeps(twin: TwinFile, sweeps: list) -> "Dataset":
@@ -119,23 +124,29 @@ def fit_candidate(cand: Candidate, twin: TwinFile, data: Dataset, design: st.Des
         ceiling = max((tr.commanded_max_N for tr in trials if tr.active), default=0.0)
         probe = ceiling if ceiling > 0 else probe
 
+    def deltas(ps: list[float]) -> list[dict]:
+        """δ(p) for several values, simulated together (values at or above the ceiling: zero)."""
+        todo = [p for p in ps if p < ceiling]
+        sims = iter(data.simulate_many([cand.apply(twin, p) for p in todo], only_active, base))
+        return [_minus(next(sims), base) if p < ceiling else zero for p in ps]
+
     def delta(p: float) -> dict:
-        if p >= ceiling:
-            return zero
-        return _minus(data.simulate(cand.apply(twin, p), only_active, base), base)
+        return deltas([p])[0]
 
     if only_active and not any(tr.active for tr in trials):
         return Fit(cand, probe, float("inf"), zero, st.score(design, residual, zero), 0)
     if cand.kind == "affine":
         p1, p2 = probe, 2.0 * probe
-        d1, d2 = delta(p1), delta(p2)
+        d1, d2 = deltas([p1, p2])
         b = {k: (d2[k] - d1[k]) / (p2 - p1) for k in d1}
         a = {k: d1[k] - p1 * b[k] for k in d1}
         p, se = st.affine_fit(design, residual, a, b)
         p = max(p, cand.lower + 1e-12 * probe)
         sims = 2
         pts = [(p1, d1), (p2, d2)]
-        for _ in range(cand.relinearise):
+        # re-linearising refines a fit that earns something; one that is worse than nothing stays rejected
+        steps = cand.relinearise if st.score(design, residual, {k: a[k] + p * b[k] for k in a}).delta_bic > 0 else 0
+        for _ in range(steps):
             # secant (Gauss–Newton) steps for an effect that is only nearly affine: re-linearise at p̂
             pts.append((p, delta(p)))
             sims += 1
@@ -150,14 +161,16 @@ def fit_candidate(cand: Candidate, twin: TwinFile, data: Dataset, design: st.Des
     # 1-D search on a logarithmic grid, then parabolic refinement in log p
     evals: dict[float, tuple[float, dict]] = {}
 
-    def ev(p: float) -> float:
-        if p not in evals:
-            d = delta(p)
+    def ev_many(ps: list[float]) -> None:
+        new = [p for p in dict.fromkeys(ps) if p not in evals]
+        for p, d in zip(new, deltas(new)):
             evals[p] = (_sse(design, residual, d), d)
+
+    def ev(p: float) -> float:
+        ev_many([p])
         return evals[p][0]
 
-    for f in cand.grid_factors:
-        ev(probe * f)
+    ev_many([probe * f for f in cand.grid_factors])
     step = np.log(cand.grid_factors[-1] / cand.grid_factors[-2])
     for _ in range(EXTENSIONS):
         ps = sorted(evals)
@@ -213,14 +226,15 @@ def select_effects(twin: TwinFile, trials: list[MeasuredTrial], max_effects: int
     """Forward selection (see the module docstring; discrepancy README §2, §3); deterministic for a given twin and session.
 
     ``sweeps``: the measured workspace sweeps (:func:`.workspace.load_sweeps`) for the workspace
-    candidate. ``workers`` > 1 fits the candidates of a round in that many processes (0: one per CPU,
-    at most 4); the result does not depend on it.
+    candidate. ``workers`` > 1 runs the simulations — every (twin, trial) pair a job, the values a candidate
+    needs at once simulated together — in that many processes (0: one per CPU, at most 4); the result does
+    not depend on it.
     """
     n = pool_size(workers)
-    if n <= 1:
-        return _select(twin, trials, sweeps or [], max_effects, library, log, None)
-    with process_pool(n) as pool:
-        return _select(twin, trials, sweeps or [], max_effects, library, log, pool)
+    if n <= 1 or not trials:
+        return _select(twin, Dataset("force", trials), sweeps or [], max_effects, library, log)
+    with process_pool(n, share_trials, (trials,)) as pool:
+        return _select(twin, Dataset("force", trials, pool=pool), sweeps or [], max_effects, library, log)
 
 
 def pool_size(workers: int) -> int:
@@ -228,14 +242,15 @@ def pool_size(workers: int) -> int:
     return workers or min(4, os.cpu_count() or 1)
 
 
-def process_pool(n: int) -> ProcessPoolExecutor:
-    """``n`` worker processes, forked where the platform can (the workers inherit the loaded trials and the compiled drive loops)."""
+def process_pool(n: int, initializer=None, initargs: tuple = ()) -> ProcessPoolExecutor:
+    """``n`` worker processes, forked where the platform can (the workers inherit what is loaded: the compiled
+    drive loops, the trials, the twin's path memo)."""
     ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
-    return ProcessPoolExecutor(max_workers=n, mp_context=ctx)
+    return ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=initializer, initargs=initargs)
 
 
-def _select(twin, trials, sweeps, max_effects, library, log, pool) -> Selection:
-    forces = Dataset("force", trials)
+def _select(twin, forces: Dataset, sweeps, max_effects, library, log) -> Selection:
+    trials = forces.items
     current = twin
     base = forces.simulate(current) if trials else {}
     sweep_data = Dataset.sweeps(current, sweeps) if sweeps else None
@@ -254,13 +269,7 @@ def _select(twin, trials, sweeps, max_effects, library, log, pool) -> Selection:
             break
         jobs = [(c, current, sweep_data, design_w, residual_w, base_w) if c.scope == "workspace"
                 else (c, current, forces, design, residual, base) for c in cands]
-        if pool is None:
-            fits = [fit_candidate(*job) for job in jobs]
-        else:
-            # the slowest fits (searches over the active trials) first keeps every worker busy
-            order = sorted(range(len(cands)), key=lambda i: cands[i].kind != "search")
-            futures = {i: pool.submit(fit_candidate, *jobs[i]) for i in order}
-            fits = [futures[i].result() for i in range(len(cands))]
+        fits = [fit_candidate(*job) for job in jobs]
         fits.sort(key=lambda f: -f.score.delta_bic)
         best = fits[0]
         ok = best.score.accepted()

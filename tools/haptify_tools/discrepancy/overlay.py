@@ -1,6 +1,6 @@
 """``overlay.rrd``: the measured session with the updated twin's hand force overlaid, for ``haptify view``
 (issue 8, step 4). Built on the viewer's own recording plan (:mod:`haptify_tools.viewer.recording`): the
-measured session is planned as usual (only the compared trials are kept) and, for every compared trial, the twin's force (after the update)
+measured session's compared trials are planned as usual and, for every compared trial, the twin's force (after the update)
 is added as the ``compare`` role of ``hand_force/calibrated`` — so the viewer's hand-force views overlay
 measured and simulated; a markdown note ``/discrepancy`` says what the compared lines are.
 """
@@ -22,11 +22,7 @@ def overlay_plan(session: SessionFolder, trials: list[MeasuredTrial], twin_force
     role (discrepancy README §4); :func:`write_overlay` adds the note and writes it."""
     from haptify_tools.viewer.recording import plan_recording, series_entry
 
-    plan = plan_recording(session)
-    compared = {tr.trial_id for tr in trials}
-    dropped = {tp.key for tp in plan.trials if tp.trial.id not in compared}    # keep the recording small
-    plan.entries = [e for e in plan.entries if not any(e.path.startswith((f"/world/{k}/", f"/series/{k}/")) for k in dropped)]
-    plan.trials = [tp for tp in plan.trials if tp.trial.id in compared]
+    plan = plan_recording(session, trial_ids={tr.trial_id for tr in trials})     # only the compared trials
     by_id = {tp.trial.id: tp for tp in plan.trials}
     for tr in trials:
         tp = by_id.get(tr.trial_id)

@@ -447,16 +447,25 @@ def _to_world(twin: TwinFile, force_D, torque_D, about_origin_D: bool = True):
     return f, m
 
 
-#: Twin parts the arm's joint path cannot depend on (dynamics, drive, sensors): left out of its memo key.
-_NOT_KINEMATIC = ("gravity", "inertia", "friction.", "drive.", "vibration.")
-#: Effects that act on the drive torques only: left out of the rigid part's memo key.
-_DRIVE_ONLY = ("friction.stribeck", "drive.", "vibration.")
+#: What the arm's joint path cannot depend on (dynamics, drive): effect-id prefix → its parameters left out of
+#: the memo key (None: the whole effect).
+_NOT_KINEMATIC = {"gravity": None, "inertia": None, "friction.": None, "drive.": None, "vibration.": None}
+#: What acts on the drive torques only, left out of the rigid part's memo key: the drive's effects and the drive
+#: side of friction and inertia (the gimbal's friction and the links' inertia stay in).
+_DRIVE_ONLY = {"friction.stribeck": None, "drive.": None, "vibration.": None, "inertia": ("rotor_inertia_kg_m2",),
+               "friction.coulomb": ("torque_Nm", "ripple_fraction", "ripple_cycles_per_rad"),
+               "friction.viscous": ("damping_Nms_per_rad",)}
 
 
-def _twin_key(twin: TwinFile, leave_out: tuple[str, ...]) -> str:
-    """The twin as canonical JSON without the effects ``leave_out`` names (prefixes), the drive's gearing and the rig."""
+def _twin_key(twin: TwinFile, leave_out: dict[str, tuple[str, ...] | None]) -> str:
+    """The twin as canonical JSON without what ``leave_out`` names, the drive's gearing, the rig and the prose."""
     data = twin_to_dict(twin)
-    data["effects"] = {k: v for k, v in data["effects"].items() if not k.startswith(leave_out)}
+    effects = {}
+    for name, effect in data["effects"].items():
+        drop = next((fields for prefix, fields in leave_out.items() if name.startswith(prefix)), ())
+        if drop is not None:
+            effects[name] = {k: v for k, v in effect.items() if k not in (*drop, "description", "sources")}
+    data["effects"] = effects
     for k in ("drive", "rig", "sources", "description", "name"):
         data.pop(k)
     return json.dumps(data, sort_keys=True)

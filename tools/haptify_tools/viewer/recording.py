@@ -38,6 +38,7 @@ from __future__ import annotations
 import functools
 import os
 import uuid
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -658,15 +659,17 @@ def counterpart(other: SessionFolder, trial: Trial) -> Trial | None:
 
 
 def plan_recording(session: SessionFolder, *, trial_id: str | None = None, results: ResultsFile | None = None,
-                   other: SessionFolder | None = None) -> Plan:
-    """Every entity of the recording of ``session`` (one trial or all), optionally compared with ``other``.
+                   other: SessionFolder | None = None, trial_ids: Collection[str] | None = None) -> Plan:
+    """Every entity of the recording of ``session`` (one trial, the trials ``trial_ids`` in session order, or
+    all), optionally compared with ``other``.
 
     A compared trial is shifted in time by a whole number of nanoseconds so that it starts with the
     measured trial (their first samples coincide); the shift is listed in the session document.
     """
     ctx = ComputeContext(session=CachedStreams(session))
     other_ctx = ComputeContext(session=CachedStreams(other)) if other is not None else None
-    trials = [session.trial(trial_id)] if trial_id else list(session.trials)
+    trials = [session.trial(trial_id)] if trial_id else [t for t in session.trials
+                                                          if trial_ids is None or t.id in trial_ids]
     rec_id = session.session_id + (f"/{trial_id}" if trial_id else "") + (f"+{other.session_id}" if other else "")
     plan = Plan(recording_id=rec_id, has_results=results is not None)
     plan.entries.extend(rig_entries(session))
