@@ -101,15 +101,19 @@ def _benchmark_gap_halves(result, metric):
     ("handle.connector_mass", "mass_kg", 0.02, 0.06, ("local_dynamic",)),
     # the play shows where the drive torque reverses while the motors render: sliding on the surface
     ("drive.backlash", "width_rad", 0.003, 0.008, ("frictionless_surface",)),
+    # the Stribeck excess lives at the reversals: the protocol's full 40 s of free space (16 s: biased 10–30 % low)
+    ("friction.stribeck", "excess_torque_Nm", 0.035, 0.105, ("free_space:40",)),
 ])
 def test_hidden_effect_is_named_first_and_identified(tmp_path, effect, parameter, low, high, protocols):
     """One library effect hidden with a random plausible value; the twin starts from the preset without it
-    (its stored, different value is only the search's starting point). The gap must halve above the floor
+    (its stored, different value is only the search's starting point); ``protocol:seconds`` sets a duration. The gap must halve above the floor
     the true twin itself leaves (a 40 g connector in the local-dynamic trial: 0.16 N before, 0.097 N after,
     and the true twin leaves 0.097 N — the raw gap cannot halve, the part above the floor can)."""
     value = float(np.random.default_rng(7).uniform(low, high))
     truth = set_param(set_param(preset("touch"), f"{effect}.{parameter}", value), f"{effect}.enabled", True)
-    result, sel = run_discrepancy(_session(tmp_path, truth, 7, protocols=protocols), disable(preset("touch"), effect), None,
+    durations = {**FREE, **{p.split(":")[0]: float(p.split(":")[1]) for p in protocols if ":" in p}}
+    protocols = tuple(p.split(":")[0] for p in protocols)
+    result, sel = run_discrepancy(_session(tmp_path, truth, 7, durations, protocols), disable(preset("touch"), effect), None,
                                   max_effects=1)
     assert result.accepted[0].effect_id == effect
     assert _rel(result.accepted[0].value, value) < 0.15
