@@ -126,8 +126,8 @@ def fit_candidate(cand: Candidate, twin: TwinFile, data: Dataset, design: st.Des
 
     def deltas(ps: list[float]) -> list[dict]:
         """δ(p) for several values, simulated together (values at or above the ceiling: zero)."""
-        todo = [p for p in ps if p < ceiling]
-        sims = iter(data.simulate_many([cand.apply(twin, p) for p in todo], only_active, base))
+        below = [p for p in ps if p < ceiling]
+        sims = iter(data.simulate_many([cand.apply(twin, p) for p in below], only_active, base))
         return [_minus(next(sims), base) if p < ceiling else zero for p in ps]
 
     def delta(p: float) -> dict:
