@@ -28,8 +28,8 @@ from haptify_tools.twin.model import disable, preset, set_param
 from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
 
 DURATIONS = {"free_space": 16.0, "figure_eight": 16.0, "stiffness": 12.0, "workspace": 60.0, "rig.handle_calibration": 12.0}
-#: effect → (parameter, low, high, protocols): the hidden value is uniform in [low, high]; ``protocol:seconds``
-#: overrides the protocol's duration in :data:`DURATIONS`
+#: effect → (parameter, low, high, protocols[, durations]): the hidden value is uniform in [low, high]; the optional
+#: durations (s) override those of :data:`DURATIONS` for that effect
 CASES = {
     "gravity": ("g_m_per_s2", 9.0, 10.5, ("free_space",)),
     "friction.coulomb": ("torque_Nm", 0.02, 0.06, ("free_space",)),
@@ -38,7 +38,7 @@ CASES = {
     "handle.connector_mass": ("mass_kg", 0.02, 0.06, ("local_dynamic",)),
     "inertia": ("rotor_inertia_kg_m2", 0.5e-6, 2e-6, ("local_dynamic",)),
     # ½–1½ × the preset's 0.07, on the protocol's full 40 s of free space (on 16 s: 2/10 within 15 %)
-    "friction.stribeck": ("excess_torque_Nm", 0.035, 0.105, ("free_space:40",)),
+    "friction.stribeck": ("excess_torque_Nm", 0.035, 0.105, ("free_space",), {"free_space": 40.0}),
     "kinematics.base_collision": ("base_top_m", 0.075, 0.125, ("workspace",)),
     "drive.torque_saturation": ("max_torque_Nm", 0.12, 0.22, ("stiffness",)),
     "drive.force_cutoff": ("trip_force_N", 1.5, 2.5, ("stiffness",)),
@@ -57,10 +57,9 @@ def truth_of(effect: str, parameter: str, value: float):
 def one(effect: str, seed: int, folder: Path) -> tuple[bool, float, float, float]:
     """(named first?, relative error, held-out gap ratio after/before, the same above the true twin's floor)
     for one seed. The floor is the held-out gap of the twin that generated the session (known here)."""
-    parameter, low, high, protocols = CASES[effect]
+    parameter, low, high, protocols, *longer = CASES[effect]
     value = float(np.random.default_rng(1000 + seed).uniform(low, high))
-    durations = {**DURATIONS, **{p.split(":")[0]: float(p.split(":")[1]) for p in protocols if ":" in p}}
-    protocols = tuple(p.split(":")[0] for p in protocols)
+    durations = {**DURATIONS, **(longer[0] if longer else {})}
     rig = () if protocols == ("workspace",) else ("rig.handle_calibration",)
     opt = SimulationOptions(protocols=(*protocols, *rig), reps=1, seed=seed, durations=durations, rig_trials=False,
                             workers=1)

@@ -258,9 +258,9 @@ def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | 
                     report: bool = True, workers: int = 1, overlay: bool = True) -> tuple[DiscrepancyFile, Selection]:
     """Run the workflow (discrepancy README §1–4; issue 8); with ``out`` write ``discrepancy.json``, ``twin.json`` and ``report.html`` there.
 
-    ``overlay``: also write ``overlay.rrd`` for the viewer (when ``report``). ``workers``: processes fitting candidates
-    in parallel (0: one per CPU, at most 4; results do not depend on it); with more than one, the floor's replay
-    runs in its own process while the figures and the overlay are drawn. Returns the result and the selection
+    ``overlay``: also write ``overlay.rrd`` for the viewer (when ``report``). ``workers``: processes that run the
+    simulations trial by trial (0: one per CPU, at most 4; results do not depend on it, :func:`.identify.select_effects`);
+    with more than one, the floor's replay runs in its own process while the figures and the overlay are drawn. Returns the result and the selection
     (its simulations, for callers that draw or test).
     """
     session = open_session(session_path)

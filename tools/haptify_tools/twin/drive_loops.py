@@ -20,13 +20,13 @@ SUBSTEPS = 8
 
 
 @njit(cache=True)
-def axis_period(d, dd, u, k, b, g, j, exact, use_exact, margin, dt, substeps):
+def axis_period(d, dd, u, k, b, g, j, exact, use_exact, margin, dt):
     """Advance one drive axis over a period ``dt`` (s) with a constant input torque ``u`` (N·m) on the rotor.
 
     State: cable deflection ``d = θ_motor − θ_link`` (rad) and its rate ``ḋ`` (rad/s); the link-side angle
     moves linearly within the period. Engaged on one side of the backlash gap (``|d| > g + margin``) and
     with ``use_exact``, the exact solution of ``J·d̈ + b·ḋ + k·(d ∓ g) = u`` is used (``exact`` from
-    :func:`haptify_tools.twin.physics._exact_step`); near or inside the gap, ``substeps`` semi-implicit
+    :func:`haptify_tools.twin.physics._exact_step`); near or inside the gap, :data:`SUBSTEPS` semi-implicit
     Euler steps. Returns ``(d, ḋ, period-average cable torque)``.
     """
     if use_exact and abs(d) > g + margin:
@@ -36,9 +36,9 @@ def axis_period(d, dd, u, k, b, g, j, exact, use_exact, margin, dt, substeps):
         d_avg = off + exact[5] * z0 + exact[6] * dd
         dd_avg = exact[7] * z0 + exact[8] * dd
         return off + exact[1] * z0 + exact[2] * dd, exact[3] * z0 + exact[4] * dd, k * (d_avg - side) + b * dd_avg
-    h = dt / substeps
+    h = dt / SUBSTEPS
     acc = 0.0
-    for _ in range(substeps):
+    for _ in range(SUBSTEPS):
         if d > g:
             spring = k * (d - g) + b * dd
         elif d < -g:
@@ -48,7 +48,7 @@ def axis_period(d, dd, u, k, b, g, j, exact, use_exact, margin, dt, substeps):
         dd += h * (u - spring) / j
         d += h * dd
         acc += spring
-    return d, dd, acc / substeps
+    return d, dd, acc / SUBSTEPS
 
 
 @njit(cache=True)
@@ -79,8 +79,7 @@ def passive_drive(friction, jumps, dts, stiffness, damping, half_gap, rotor_iner
         d = f0 / k + (g if f0 > 0 else (-g if f0 < 0 else 0.0))
         dd = 0.0
         for i in range(n_s):
-            d, dd, out[i, a] = axis_period(d, dd, friction[i, a], k, b, g, j, exact[a], use_exact, 0.25 * g, dts[i],
-                                           SUBSTEPS)
+            d, dd, out[i, a] = axis_period(d, dd, friction[i, a], k, b, g, j, exact[a], use_exact, 0.25 * g, dts[i])
             dd += jumps[i, a]
     return out
 
@@ -236,7 +235,7 @@ def render_loop(th_l, thd_l, friction, dts, dh, base_r, base_p, c_inv, surface_p
                 use_exact = abs(dt - exact[a, 0]) < 1e-12
                 d_new, dd_new, tau_c[a] = axis_period(th_m[a] - th_l[i, a], w_m[a] - w_l, ta[a] + friction[i, a],
                                                       stiffness[a], damping[a], half_gap[a], rotor_inertia[a], exact[a],
-                                                      use_exact, margin[a], dt, SUBSTEPS)
+                                                      use_exact, margin[a], dt)
                 th_m[a] = th_l[nxt, a] + d_new
                 w_m[a] = w_l + dd_new
         motor[i] = ta

@@ -737,7 +737,7 @@ def _passive_drive(twin: TwinFile, t: np.ndarray, th_l: np.ndarray, thd_l: np.nd
     k, b = np.asarray(se.stiffness_Nm_per_rad, float), np.asarray(se.damping_Nms_per_rad, float)
     half_gap = 0.5 * np.asarray(bl.width_rad, float) if bl.enabled else np.zeros(n_j)
     j_refl = reflected_rotor_inertia(twin)
-    dts = np.diff(t, append=t[-1] + (t[-1] - t[-2] if n_s > 1 else 1e-3))
+    dts = _periods(t)
     uniform = bool(np.allclose(dts, dts[0], rtol=1e-6, atol=1e-12))
     w_per = np.diff(th_l, axis=0) / dts[:-1, None] if n_s > 1 else np.zeros((0, n_j))
     w_per = np.concatenate([w_per, w_per[-1:] if len(w_per) else np.zeros((1, n_j))])
@@ -746,6 +746,11 @@ def _passive_drive(twin: TwinFile, t: np.ndarray, th_l: np.ndarray, thd_l: np.nd
     exact = _exact_steps(j_refl, b, k, float(dts[0]))
     return drive_loops.passive_drive(np.ascontiguousarray(drive_friction(twin, thd_l, th_l)), jumps, dts, k, b, half_gap,
                                      j_refl, exact, uniform)
+
+
+def _periods(t: np.ndarray) -> np.ndarray:
+    """Length (s) of each loop period starting at ``t``; the last repeats the one before (1 ms for a single sample)."""
+    return np.diff(t, append=t[-1] + (t[-1] - t[-2] if len(t) > 1 else 1e-3))
 
 
 def _exact_steps(j_refl: np.ndarray, b: np.ndarray, k: np.ndarray, h: float) -> np.ndarray:
@@ -758,8 +763,7 @@ def _render_loop(twin, t, th_l, thd_l, nom, c_inv, ps_D, n_D, k_r, tau_max, cut,
     rows, the drive friction at the link-side speed and angle, the exact cable steps over the first period."""
     dh = np.array([(jt.a, math.cos(jt.alpha), math.sin(jt.alpha), jt.d, jt.theta_offset) for jt in nom.joints], float)
     base_r = quat_to_matrix(np.asarray(nom.base.quaternion, float))
-    n_s = len(t)
-    dts = np.diff(t, append=t[-1] + (t[-1] - t[-2] if n_s > 1 else 1e-3))
+    dts = _periods(t)
     trip, rearm = (cut.trip_force_N, cut.rearm_force_N) if cut.enabled else (math.inf, -1.0)
     k, b, half_gap = (np.asarray(x, float) for x in (k, b, half_gap))
     return drive_loops.render_loop(
