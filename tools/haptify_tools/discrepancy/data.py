@@ -1,11 +1,10 @@
 """Measured trials on the residual grid and their re-simulation with a twin (issue 8, step 1 "where").
 
 Every trial with a ``handle_wrench`` stream is read once through the reference's calibrated handle
-signals (spec §7.5, default 100 Hz grid). The measured handle pose drives the twin: motion-capture
-gaps are bridged by linear interpolation, the path is low-passed at :data:`POSE_CUTOFF_HZ` (the
-twin's inverse dynamics differentiates it twice), and every trial is simulated on a 1 kHz grid (the
-rendering loop's rate, CHAI3D, at which the twin's drive model is defined) from a cubic spline of the
-same path: the drive's sharp friction reversals make the model converge only to first order in its
+signals (spec §7.5, default 100 Hz grid). The hand path that drives the twin blends motion capture
+with the handle accelerometer (:mod:`.hand_path`), and every trial is simulated on a 1 kHz grid (the
+rendering loop's rate, CHAI3D, at which the twin's drive model is defined) from a cubic spline of that
+path: the drive's sharp friction reversals make the model converge only to first order in its
 step, and a hidden 5·10⁻⁷ kg·m² rotor inertia came out 20 % high with the passive trials at 250 Hz, 1 %
 at 1 kHz. The calibrated force still holds the sensing handle's connector inertia (the paper's
 eqs. 1–3 remove only its weight; spec §6.1), so the twin's prediction of the measured signal is the
@@ -26,15 +25,14 @@ from haptify.signals import handle_signals, lowpass
 from haptify.storage import SessionFolder
 from haptify.surface import contact_of, unit_normal
 
+from haptify_tools.discrepancy.hand_path import FROM_MOCAP, fill_gaps, hand_path
 from haptify_tools.twin.model import TwinFile
 from haptify_tools.twin.physics import simulate_active, simulate_passive
 
-POSE_CUTOFF_HZ = 8.0          # above the local-dynamic protocol's 4 Hz oscillations (paper §V-C)
-#: slower protocols get a lower cut-off: free-space wandering stays under 0.16 m/s (paper §V-B)
-POSE_CUTOFF_BY_PROTOCOL_HZ = {"free_space": 4.0}
-ORIENTATION_CUTOFF_HZ = 1.5   # the hand's orientation wanders slowly (under 16°/s in free space, paper §V-B);
-                              # gimbal friction turns orientation noise into force noise
 RESIDUAL_CUTOFF_HZ = 5.0      # both forces are compared below this frequency
+EDGE_S = 0.5                  # the first and last half second of a trial are not compared: there the path's
+                              # velocity rests on one side's data only (a hand at rest started 4 mm/s fast, its
+                              # friction 0.9 N off) and the low-passes are held at the ends
 SIM_RATE_HZ = 1000.0          # the rendering loop's rate (paper §V-D), active and passive trials alike
 FORCE_PROTOCOLS = ("free_space", "local_dynamic", "other", "frictionless_surface", "stiffness")
 
@@ -45,9 +43,10 @@ class MeasuredTrial:
 
     ``position``/``quaternion``: the smoothed, gap-free hand path that drives the twin; ``force``:
     the measured calibrated hand force, low-passed; ``valid``: rows whose measured force and motion
-    capture are usable; ``contact``: rows in contact with the rendered plane (active trials, from the
+    capture are usable, :data:`EDGE_S` or more from the trial's ends; ``contact``: rows in contact with the rendered plane (active trials, from the
     commanded force, spec §12.2); ``speed``: gimbal-centre speed, m/s;
-    ``commanded_max_N``: largest commanded force magnitude (active trials), N.
+    ``commanded_max_N``: largest commanded force magnitude (active trials), N; ``path_source``: what the
+    position came from (:data:`.hand_path.FROM_BOTH` or :data:`.hand_path.FROM_MOCAP`).
     """
 
     trial_id: str
@@ -62,17 +61,11 @@ class MeasuredTrial:
     contact: np.ndarray
     speed: np.ndarray
     commanded_max_N: float = 0.0
+    path_source: str = FROM_MOCAP
 
     @property
     def active(self) -> bool:
         return self.rendering is not None
-
-
-def _fill(t: np.ndarray, x: np.ndarray, ok: np.ndarray) -> np.ndarray:
-    out = np.array(x, dtype=float)
-    for k in range(out.shape[1]):
-        out[:, k] = np.interp(t, t[ok], out[ok, k])
-    return out
 
 
 def load_measured(session: SessionFolder, ctx: ComputeContext | None = None, required: bool = True) -> list[MeasuredTrial]:
@@ -88,16 +81,13 @@ def load_measured(session: SessionFolder, ctx: ComputeContext | None = None, req
             continue
         hs = handle_signals(ctx, trial.id)
         ok = hs.valid & np.all(np.isfinite(hs.force), axis=1) & np.all(np.isfinite(hs.position), axis=1)
-        if ok.sum() < 20:
+        inner = (hs.t >= hs.t[0] + EDGE_S) & (hs.t <= hs.t[-1] - EDGE_S)
+        if (ok & inner).sum() < 20:
             continue
         rate = hs.rate_hz
-        pos = lowpass(_fill(hs.t, hs.position, ok), rate, POSE_CUTOFF_BY_PROTOCOL_HZ.get(trial.protocol, POSE_CUTOFF_HZ))
-        quat = _fill(hs.t, hs.quaternion, ok)
-        quat = quat * np.where(np.sum(quat * quat[:1], axis=1) < 0, -1.0, 1.0)[:, None]
-        quat = lowpass(quat, rate, ORIENTATION_CUTOFF_HZ)
-        quat /= np.linalg.norm(quat, axis=1)[:, None]
-        force = lowpass(_fill(hs.t, hs.force, ok), rate, RESIDUAL_CUTOFF_HZ)
-        speed = np.linalg.norm(np.gradient(pos, hs.t, axis=0), axis=1)
+        path = hand_path(session, ctx, hs, ok, trial.protocol)
+        force = lowpass(fill_gaps(hs.t, hs.force, ok), rate, RESIDUAL_CUTOFF_HZ)
+        speed = np.linalg.norm(np.gradient(path.position, hs.t, axis=0), axis=1)
         rendering = trial.rendering.model_dump(mode="json") if trial.powered and trial.rendering is not None else None
         contact = np.zeros(len(hs.t), bool)
         cmd_max = 0.0
@@ -107,8 +97,8 @@ def load_measured(session: SessionFolder, ctx: ComputeContext | None = None, req
             cmd_n = cmd[["fx", "fy", "fz"]].to_numpy() @ n
             contact = contact_of(np.interp(hs.t, cmd["t"].to_numpy(), cmd_n))
             cmd_max = float(np.max(np.linalg.norm(cmd[["fx", "fy", "fz"]].to_numpy(), axis=1)))
-        out.append(MeasuredTrial(trial.id, trial.protocol, rendering, hs.t, rate, pos, quat, force, ok, contact, speed,
-                                 cmd_max))
+        out.append(MeasuredTrial(trial.id, trial.protocol, rendering, hs.t, rate, path.position, path.quaternion, force, ok & inner,
+                                 contact, speed, cmd_max, path.source))
     if not out and required:
         raise fail("E302", "the measured session has no trial with a handle_wrench stream to compare with the twin",
                    file="session.json", expected="a free-space, local-dynamic, figure-eight, surface or stiffness trial",

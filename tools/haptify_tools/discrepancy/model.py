@@ -143,6 +143,10 @@ class DiscrepancyFile(_M):
     heldout_gap_above_floor_before_N: float | None = Field(None, description="√max(gap² − floor², 0) before (N).")
     heldout_gap_above_floor_after_N: float | None = Field(None, description="√max(gap² − floor², 0) after (N).")
     not_observable: dict[str, str] = Field(description="Library effect ids the force residual cannot reveal, and why.")
+    hand_path: dict[str, Literal["motion capture + accelerometer", "motion capture"]] = Field(
+        default_factory=dict, description="Per force trial id, what the path driving the twin came from: motion "
+        "capture below the crossover and the handle accelerometer above it, or motion capture alone (no "
+        "handle_accel stream, or the accelerometer reached its range).")
     settings: dict[str, float]
     files: dict[str, str] = Field(default_factory=dict, description="Outputs written beside this file.")
 

@@ -24,6 +24,7 @@ from haptify.storage import atomic_write_json, open_session, replace_folder_atom
 from haptify.surface import planar_stats
 
 from haptify_tools.discrepancy import data as dt
+from haptify_tools.discrepancy import hand_path as hp
 from haptify_tools.discrepancy import stats as st
 from haptify_tools.discrepancy import workspace as ws
 from haptify_tools.discrepancy.floor import gap_above_floor, heldout_gap, replay_floor
@@ -233,8 +234,10 @@ def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial]
         benchmark_gaps=bench, workspace_gaps=wgaps,
         heldout_gap_before_N=before, heldout_gap_after_N=after,
         not_observable=dict(NOT_OBSERVABLE),
-        settings={"pose_cutoff_hz": dt.POSE_CUTOFF_HZ, "free_space_pose_cutoff_hz": dt.POSE_CUTOFF_BY_PROTOCOL_HZ["free_space"],
-                  "orientation_cutoff_hz": dt.ORIENTATION_CUTOFF_HZ, "residual_cutoff_hz": dt.RESIDUAL_CUTOFF_HZ,
+        hand_path={tr.trial_id: tr.path_source for tr in trials},
+        settings={"path_crossover_hz": hp.PATH_CROSSOVER_HZ, "pose_cutoff_hz": hp.POSE_CUTOFF_HZ,
+                  "free_space_pose_cutoff_hz": hp.POSE_CUTOFF_BY_PROTOCOL_HZ["free_space"],
+                  "orientation_cutoff_hz": hp.ORIENTATION_CUTOFF_HZ, "residual_cutoff_hz": dt.RESIDUAL_CUTOFF_HZ,
                   "sim_rate_hz": dt.SIM_RATE_HZ, "bic_min": st.BIC_MIN, "p_max": st.P_MAX,
                   "validation_min": st.VALIDATION_MIN, "structure_share": st.STRUCTURE_SHARE})
 

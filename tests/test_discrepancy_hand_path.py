@@ -1,0 +1,138 @@
+"""The hand path that drives the twin (discrepancy README §1, ``hand_path.py``): motion capture below the
+crossover, the accelerometer above — checked on analytic paths with known noise, and on a simulated
+session against the simulator's true path."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as hst
+
+from haptify.conventions import quat_normalize, quat_to_matrix
+from haptify.compute import ComputeContext
+from haptify.session_format import SensorRange
+from haptify.signals import handle_signals, lowpass
+from haptify.storage import open_session
+from haptify_tools.discrepancy import hand_path as hp
+from haptify_tools.discrepancy.data import load_measured
+from haptify_tools.twin.model import preset
+from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
+
+RATE = 100.0
+T = np.arange(0.0, 20.0, 1 / RATE)
+
+
+def _path(t):
+    """A hand-like path (m): slow wandering plus 3 Hz and 6 Hz motion, its exact acceleration (m/s²)."""
+    comps = [(0.03, 0.2, 0.0), (0.004, 3.0, 0.7), (0.001, 6.0, 1.9)]
+    p = np.zeros((len(t), 3))
+    a = np.zeros((len(t), 3))
+    for k in range(3):
+        for amp, f, ph in comps:
+            w = 2 * np.pi * f
+            p[:, k] += amp * np.sin(w * t + ph + k)
+            a[:, k] -= amp * w * w * np.sin(w * t + ph + k)
+    return p, a
+
+
+def _accel_path(shift=(0.0, 0.0, 0.0)):
+    """The accelerometer's path on the grid from the exact acceleration sampled at 2 kHz (plus a constant ``shift``, m/s²)."""
+    fine = np.arange(0.0, T[-1] + 1e-9, 1 / 2000)
+    _, a = _path(fine)
+    x = hp.double_integral(fine, a + np.asarray(shift))
+    return np.stack([np.interp(T, fine, x[:, k]) for k in range(3)], axis=1)
+
+
+def _interior(x):
+    return x[200:-200]      # 2 s from each end: the zero-phase filters' edges
+
+
+def test_exact_measurements_give_the_path_back():
+    p, _ = _path(T)
+    out = hp.blend(T, RATE, p, _accel_path())
+    assert np.max(np.abs(_interior(out - p))) < 2e-6
+
+
+def test_a_constant_accelerometer_bias_is_taken_out_with_the_drift():
+    p, _ = _path(T)
+    out = hp.blend(T, RATE, p, _accel_path((0.05, -0.03, 0.2)))
+    assert np.max(np.abs(_interior(out - p))) < 2e-6
+
+
+def test_capture_noise_above_the_crossover_is_removed():
+    """White capture noise σ: the blend keeps only its part under the crossover's zero-phase order-4 low-pass
+    (power response 1/(1 + (f/fc)⁸)²), variance σ²·fc/(fs/2)·(π/8)(7/8)/sin(π/8); its velocity error is far
+    below that of motion capture alone low-passed at 8 Hz."""
+    p, _ = _path(T)
+    sigma = 1e-4
+    noisy = p + np.random.default_rng(3).normal(0.0, sigma, p.shape)
+    err = _interior(hp.blend(T, RATE, noisy, _accel_path()) - p)
+    expected = sigma * np.sqrt(hp.PATH_CROSSOVER_HZ / (RATE / 2) * (np.pi / 8) * (7 / 8) / np.sin(np.pi / 8))
+    assert np.sqrt(np.mean(err ** 2)) == pytest.approx(expected, rel=0.15)
+    only_mocap = _interior(lowpass(noisy, RATE, hp.POSE_CUTOFF_HZ) - p)
+    v_err = np.gradient(err, axis=0) * RATE
+    v_mocap = np.gradient(only_mocap, axis=0) * RATE
+    assert np.sqrt(np.mean(v_err ** 2)) < 0.2 * np.sqrt(np.mean(v_mocap ** 2))
+
+
+ACCEL_PATH = _accel_path()
+
+
+@settings(max_examples=25, deadline=None)
+@given(q=hst.lists(hst.floats(-1, 1), min_size=4, max_size=4).filter(lambda v: np.linalg.norm(v) > 0.1),
+       scale=hst.floats(1e-3, 1e3))
+def test_the_blend_turns_with_the_frame_and_scales_with_the_unit(q, scale):
+    p, _ = _path(T)
+    noisy = p + np.random.default_rng(5).normal(0.0, 1e-4, p.shape)
+    x = ACCEL_PATH
+    r = quat_to_matrix(quat_normalize(np.asarray(q, float)))
+    base = hp.blend(T, RATE, noisy, x)
+    np.testing.assert_allclose(hp.blend(T, RATE, noisy @ r.T, x @ r.T), base @ r.T, atol=1e-12)
+    np.testing.assert_allclose(hp.blend(T, RATE, noisy * scale, x * scale), base * scale, rtol=1e-9, atol=1e-15 * scale)
+
+
+@pytest.fixture(scope="module")
+def figure_eight(tmp_path_factory):
+    opt = SimulationOptions(protocols=("figure_eight", "rig.handle_calibration"), reps=1, seed=4,
+                            durations={"figure_eight": 16.0, "rig.handle_calibration": 12.0}, rig_trials=False, workers=1)
+    return simulate_dossier(preset("touch"), tmp_path_factory.mktemp("hand-path") / "s", opt)
+
+
+def _true_path(dossier, trial):
+    z = np.load(dossier.truth_npz)
+    t, p = z[f"{trial.trial_id}/t"], z[f"{trial.trial_id}/position_W"]
+    return np.stack([np.interp(trial.t, t, p[:, k]) for k in range(3)], axis=1)
+
+
+def test_on_a_simulated_session_the_blend_follows_the_true_path(figure_eight):
+    """The simulator's own true path: the blended velocity is ≥ 2× closer to it than motion capture alone."""
+    session = open_session(figure_eight.session)
+    trial = next(tr for tr in load_measured(session) if tr.protocol == "other")
+    assert trial.path_source == hp.FROM_BOTH
+    truth = _true_path(figure_eight, trial)
+    ok = trial.valid
+    v_true = np.gradient(truth, trial.t, axis=0)
+    v_err = (np.gradient(trial.position, trial.t, axis=0) - v_true)[ok]
+    hs = handle_signals(ComputeContext(session=session), trial.trial_id)
+    mocap = lowpass(hp.fill_gaps(hs.t, hs.position, hs.valid), hs.rate_hz, hp.POSE_CUTOFF_HZ)
+    v_mocap = (np.gradient(mocap, trial.t, axis=0) - v_true)[ok]
+    assert np.sqrt(np.mean(v_err ** 2)) < 0.5 * np.sqrt(np.mean(v_mocap ** 2))
+    assert np.sqrt(np.mean((trial.position - truth)[ok] ** 2)) < 1e-4
+
+
+def test_without_an_accelerometer_or_when_it_reached_its_range_the_path_is_motion_capture_alone(figure_eight, monkeypatch):
+    session = open_session(figure_eight.session)
+    accel = session.manifest.rig.handle.accelerometer
+    reading = session.read(next(t.id for t in session.trials if t.protocol == "other"), "handle_accel")
+    peak = float(np.max(np.abs(reading[["ax", "ay", "az"]].to_numpy())))
+    monkeypatch.setattr(accel, "range", SensorRange(accel_m_per_s2=[peak, peak, peak]))
+    trial = next(tr for tr in load_measured(session) if tr.protocol == "other")
+    assert trial.path_source == hp.FROM_MOCAP
+    monkeypatch.setattr(accel, "range", SensorRange(accel_m_per_s2=[1.01 * peak] * 3))
+    assert next(tr for tr in load_measured(session) if tr.protocol == "other").path_source == hp.FROM_BOTH
+    stream = type(session).stream
+    eight = next(t.id for t in session.trials if t.protocol == "other")
+    monkeypatch.setattr(type(session), "stream", lambda self, trial_id, kind:
+                        None if (trial_id, kind) == (eight, "handle_accel") else stream(self, trial_id, kind))
+    assert next(tr for tr in load_measured(session) if tr.protocol == "other").path_source == hp.FROM_MOCAP

@@ -1,0 +1,154 @@
+"""The hand path that drives the twin (issue 8, step 1 "where"; discrepancy README §1, the hand path).
+
+The twin is driven along the measured path, and its friction turns every error of that path's velocity
+into a force error: on simulated Touch sessions the twin that generated the data, driven along the
+motion-capture path low-passed at 8 Hz, still left 0.02 N in a figure eight and 0.13 N in the stiffness
+presses; along the true path it leaves 0.003 N and 0.012 N. Motion capture is accurate where the hand
+moves slowly and noisy where it moves fast (white noise, differentiated); the handle accelerometer is
+the other way round (its small errors of orientation and bias grow when integrated twice). The path is
+therefore their complementary blend around :data:`PATH_CROSSOVER_HZ`:
+
+    p = x + S(p_mocap − x) + LP(p_mocap − x − S(p_mocap − x)),   x = ∬ a_W dt,
+
+with LP the zero-phase Butterworth of spec §7.2 at the crossover: below it ``p`` follows motion capture, above it
+the accelerometer's double integral ``x`` — taken at the sensor's own rate (at the 100 Hz grid the trapezoid
+rule's error, (ωh)²/6 of the amplitude, is 1 % at 4 Hz: 0.3 mm of a local-dynamic stroke) — whose drift
+(the unknown start position and velocity, the bias the calibration left, integrated orientation errors) is
+fitted to motion capture by ``S``, a least-squares cubic spline with a knot every :data:`SLOW_KNOT_S`. The
+low-pass then sees no slow difference and runs with mirrored ends (:func:`smooth`): the spec's low-pass holds
+its ends at the first and last samples, and their capture noise became a jump of the path's acceleration — a
+0.6–0.9 N force spike in the first and last 0.2 s of the simulated figure eight. ``a_W`` is the calibrated
+reading (spec §6.6) turned to W with the orientation smoothed the same way at :data:`ORIENTATION_CUTOFF_HZ` —
+gravity leaks into ``a_W`` through every orientation error, and the raw mocap orientation is noisy (0.3° on the
+simulated rig; a plain low-pass, held at a noisy last sample, turned 1.5° off in the last 0.2 s) — minus the
+accelerometer's lever-arm acceleration about the gimbal centre. A trial without a ``handle_accel`` stream,
+or whose accelerometer reached its range, falls back to motion capture alone, smoothed at
+:data:`POSE_CUTOFF_HZ`. On the same sessions the blend leaves 0.004 N (figure eight), 0.02–0.04 N
+(stiffness), 0.06 N (local dynamic, where the hand also turns the handle at 4 Hz) and 0.007–0.01 N
+(free space, against 0.02 N).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.integrate import cumulative_trapezoid
+from scipy.interpolate import make_lsq_spline
+from scipy.signal import butter, sosfiltfilt
+
+from haptify import calibration as cal_mod
+from haptify.compute import ComputeContext
+from haptify.conventions import quat_normalize, quat_rotate
+from haptify.signals import ACCEL_COLUMNS, HandleSignals, effective_cutoff, interp_columns, lowpass, nominal_rate, sp
+from haptify.storage import SessionFolder
+
+PATH_CROSSOVER_HZ = 1.5       # motion capture below, the accelerometer above (the true twin's floor is lowest
+                              # for 1–1.5 Hz on figure-eight, free-space, stiffness and local-dynamic trials)
+ORIENTATION_CUTOFF_HZ = 1.0   # the hand's orientation wanders slowly (under 16°/s in free space, paper §V-B);
+                              # its noise becomes gimbal-friction noise and, through gravity, acceleration noise
+SLOW_KNOT_S = 1.0             # knot spacing of the splines that carry slow motion past the low-passes' edges
+POSE_CUTOFF_HZ = 8.0          # without an accelerometer: above the local-dynamic 4 Hz oscillations (paper §V-C)
+#: slower protocols get a lower cut-off: free-space wandering stays under 0.16 m/s (paper §V-B)
+POSE_CUTOFF_BY_PROTOCOL_HZ = {"free_space": 4.0}
+FROM_BOTH = "motion capture + accelerometer"
+FROM_MOCAP = "motion capture"
+
+
+@dataclass
+class HandPath:
+    """A trial's hand path on its residual grid: gimbal-centre position (m, W), orientation (wxyz, body →
+    world) and where the position came from (:data:`FROM_BOTH` or :data:`FROM_MOCAP`)."""
+
+    position: np.ndarray
+    quaternion: np.ndarray
+    source: str
+
+
+def fill_gaps(t: np.ndarray, x: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """``x (N, k)`` with the rows where ``ok`` is False linearly interpolated in ``t`` from the usable rows."""
+    out = np.array(x, dtype=float)
+    for k in range(out.shape[1]):
+        out[:, k] = np.interp(t, t[ok], out[ok, k])
+    return out
+
+
+def smooth_orientation(t: np.ndarray, quaternion: np.ndarray, ok: np.ndarray, rate_hz: float) -> np.ndarray:
+    """Unit quaternions ``(N, 4)``: gaps bridged, one hemisphere, ``S(q) + LP(q − S(q))`` with LP at
+    :data:`ORIENTATION_CUTOFF_HZ` (module docstring)."""
+    q = fill_gaps(t, quaternion, ok)
+    q = q * np.where(np.sum(q * q[:1], axis=1) < 0, -1.0, 1.0)[:, None]
+    q = smooth(t, rate_hz, q, ORIENTATION_CUTOFF_HZ)
+    return q / np.linalg.norm(q, axis=1)[:, None]
+
+
+def second_derivative(x: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Central second differences of ``x (N, k)`` in ``t`` (s), one-sided at the ends."""
+    return np.gradient(np.gradient(x, t, axis=0), t, axis=0)
+
+
+def accelerometer_path(session: SessionFolder, ctx: ComputeContext, trial_id: str, t: np.ndarray,
+                       quaternion: np.ndarray) -> np.ndarray | None:
+    """The gimbal centre's path ∬ a_W dt ``(N, 3)`` at times ``t`` (m, W; from rest at the origin) from the handle
+    accelerometer, integrated at the sensor's own rate (module docstring); ``quaternion`` the orientation at
+    ``t``. None without a ``handle_accel`` stream or when a reading reached the sensor's range.
+    """
+    if session.stream(trial_id, "handle_accel") is None:
+        return None
+    stream = session.read(trial_id, "handle_accel")
+    reading = stream[ACCEL_COLUMNS].to_numpy()
+    sensor = session.manifest.rig.handle.accelerometer
+    limit = sensor.range.accel_m_per_s2 if sensor.range is not None else None
+    if limit is not None and np.any(np.abs(reading) >= np.asarray(limit, float)):
+        return None
+    ts = stream["t"].to_numpy()
+    rate = nominal_rate(ts)
+    inside = (ts >= t[0]) & (ts <= t[-1])
+    ts = ts[inside]
+    raw = lowpass(reading, rate, float(sp("accel_cutoff_hz")))[inside]
+    q = quat_normalize(interp_columns(t, quaternion, ts))
+    pose = cal_mod.sensor_pose(session, "accelerometer")
+    lever = quat_rotate(q, np.broadcast_to(np.asarray(pose.position, float), (len(ts), 3)))
+    a_gimbal = cal_mod.compensate_accel(raw, q, cal_mod.handle_calibration(ctx), pose) - second_derivative(lever, ts)
+    return interp_columns(ts, double_integral(ts, a_gimbal), t)
+
+
+def double_integral(t: np.ndarray, acceleration: np.ndarray) -> np.ndarray:
+    """∬ a dt ``(N, 3)`` from zero position and velocity at ``t[0]`` (trapezoid rule), m."""
+    return cumulative_trapezoid(cumulative_trapezoid(acceleration, t, axis=0, initial=0), t, axis=0, initial=0)
+
+
+def slow_part(t: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The least-squares cubic spline of ``x (N, k)`` in ``t`` with a knot every :data:`SLOW_KNOT_S` (module docstring)."""
+    inner = np.arange(t[0] + SLOW_KNOT_S, t[-1] - 0.5 * SLOW_KNOT_S, SLOW_KNOT_S)
+    knots = np.r_[[t[0]] * 4, inner, [t[-1]] * 4]
+    return make_lsq_spline(t, x, knots, k=3)(t)
+
+
+def smooth(t: np.ndarray, rate_hz: float, x: np.ndarray, cutoff_hz: float) -> np.ndarray:
+    """``S(x) + LP(x − S(x))``: the slow part by :func:`slow_part`, the rest low-passed at ``cutoff_hz`` (the zero-phase
+    Butterworth of spec §7.2) with mirrored ends — unlike the spec's low-pass, not held at the first and last samples,
+    whose noise would otherwise become a jump of the path's acceleration at the trial's ends (module docstring)."""
+    slow = slow_part(t, x)
+    sos = butter(int(sp("filter_order")), effective_cutoff(cutoff_hz, rate_hz), fs=rate_hz, output="sos")
+    return slow + sosfiltfilt(sos, x - slow, axis=0, padtype="even", padlen=min(len(x) - 1, int(4 * rate_hz / cutoff_hz)))
+
+
+def blend(t: np.ndarray, rate_hz: float, mocap_position: np.ndarray, accel_path: np.ndarray) -> np.ndarray:
+    """Motion capture below :data:`PATH_CROSSOVER_HZ`, the accelerometer's path ``x`` above (m; both at times ``t``
+    on one grid at ``rate_hz``; module docstring): ``x + smooth(p_mocap − x)``."""
+    return accel_path + smooth(t, rate_hz, mocap_position - accel_path, PATH_CROSSOVER_HZ)
+
+
+def hand_path(session: SessionFolder, ctx: ComputeContext, hs: HandleSignals, ok: np.ndarray, protocol: str) -> HandPath:
+    """The path that drives the twin for one trial, on the handle signals' grid (module docstring).
+
+    ``hs``: the trial's calibrated handle signals (spec §7.5); ``ok``: their usable rows (at least two).
+    """
+    quaternion = smooth_orientation(hs.t, hs.quaternion, ok, hs.rate_hz)
+    mocap = fill_gaps(hs.t, hs.position, ok)
+    accel_path = accelerometer_path(session, ctx, hs.trial_id, hs.t, quaternion)
+    if accel_path is None:
+        cutoff = POSE_CUTOFF_BY_PROTOCOL_HZ.get(protocol, POSE_CUTOFF_HZ)
+        return HandPath(smooth(hs.t, hs.rate_hz, mocap, cutoff), quaternion, FROM_MOCAP)
+    return HandPath(blend(hs.t, hs.rate_hz, mocap, accel_path), quaternion, FROM_BOTH)
