@@ -107,9 +107,9 @@ def _benchmark_gap_halves(result, metric):
 def test_hidden_effect_is_named_first_and_identified(tmp_path, effect, parameter, low, high, protocols, longer):
     """One library effect hidden with a random plausible value; the twin starts from the preset without it
     (its stored, different value is only the search's starting point); ``longer`` overrides trial durations (s).
-    The gap must halve above the floor the true twin itself leaves (a 40 g connector in the local-dynamic
-    trial: 0.16 N before, 0.097 N after, and the true twin leaves 0.097 N — the raw gap cannot halve, the
-    part above the floor can)."""
+    The held-out gap must halve, as it is and above the floor the true twin itself leaves (its own held-out gap:
+    ≈ 0.004 N on the figure eight, 0.06 N in the local-dynamic trial, where a 20 g connector's 0.11 N gap
+    before can come down only to about 0.065 N — 7 seeds in 10 halve there, benchmarks/RESULTS.md)."""
     value = float(np.random.default_rng(7).uniform(low, high))
     truth = set_param(set_param(preset("touch"), f"{effect}.{parameter}", value), f"{effect}.enabled", True)
     result, sel = run_discrepancy(_session(tmp_path, truth, 7, {**FREE, **longer}, protocols), disable(preset("touch"), effect), None,
@@ -118,12 +118,12 @@ def test_hidden_effect_is_named_first_and_identified(tmp_path, effect, parameter
     assert _rel(result.accepted[0].value, value) < 0.15
     trials = sel.rounds[0].design.trials
     floor = heldout_gap(trials, simulate_all(truth, trials))
-    assert result.heldout_gap_after_N < result.heldout_gap_before_N
+    assert result.heldout_gap_after_N <= 0.5 * result.heldout_gap_before_N
     assert gap_above_floor(result.heldout_gap_after_N, floor) <= 0.5 * gap_above_floor(result.heldout_gap_before_N, floor)
     if effect == "drive.torque_saturation":
         _benchmark_gap_halves(result, "stiffness.peak_force")  # the paper's story: saturation is the force plateau
     # the workflow's own floor (a replay the updated twin generates along other examiner paths) estimates the
-    # true one to within the spread of the floor between paths (0.017–0.033 N in free space)
+    # true one to within the spread of the floor between paths (0.007–0.018 N in free space)
     assert 1 / 2.5 < result.floor_N / floor < 2.5
 
 
