@@ -121,18 +121,42 @@ def test_on_a_simulated_session_the_blend_follows_the_true_path(figure_eight):
     assert np.sqrt(np.mean((trial.position - truth)[ok] ** 2)) < 1e-4
 
 
-def test_without_an_accelerometer_or_when_it_reached_its_range_the_path_is_motion_capture_alone(figure_eight, monkeypatch):
+def _eight(session):
+    return next(tr for tr in load_measured(session) if tr.protocol == "other")
+
+
+def test_rows_near_a_reading_at_the_accelerometers_range_are_not_compared(figure_eight, monkeypatch):
+    """The declared range set so that only the trial's largest reading is at it: exactly the rows within
+    CLIP_MARGIN_S of that reading's time leave the comparison; the path still uses the accelerometer."""
     session = open_session(figure_eight.session)
-    accel = session.manifest.rig.handle.accelerometer
-    reading = session.read(next(t.id for t in session.trials if t.protocol == "other"), "handle_accel")
-    peak = float(np.max(np.abs(reading[["ax", "ay", "az"]].to_numpy())))
-    monkeypatch.setattr(accel, "range", SensorRange(accel_m_per_s2=[peak, peak, peak]))
-    trial = next(tr for tr in load_measured(session) if tr.protocol == "other")
-    assert trial.path_source == hp.FROM_MOCAP
-    monkeypatch.setattr(accel, "range", SensorRange(accel_m_per_s2=[1.01 * peak] * 3))
-    assert next(tr for tr in load_measured(session) if tr.protocol == "other").path_source == hp.FROM_BOTH
+    free = _eight(session)
+    eight = free.trial_id
+    reading = session.read(eight, "handle_accel")
+    values = np.abs(reading[["ax", "ay", "az"]].to_numpy())
+    peak_row = int(np.argmax(values.max(axis=1)))
+    peak, t_peak = float(values.max()), float(reading["t"].iloc[peak_row])
+    monkeypatch.setattr(session.manifest.rig.handle.accelerometer, "range",
+                        SensorRange(accel_m_per_s2=[peak / hp.RANGE_FRACTION] * 3))
+    clipped = _eight(session)
+    assert clipped.path_source == hp.FROM_BOTH
+    near = np.abs(clipped.t - t_peak) <= hp.CLIP_MARGIN_S
+    assert near.any()
+    np.testing.assert_array_equal(clipped.valid, free.valid & ~near)
+    monkeypatch.setattr(session.manifest.rig.handle.accelerometer, "range",
+                        SensorRange(accel_m_per_s2=[1.01 * peak / hp.RANGE_FRACTION] * 3))
+    np.testing.assert_array_equal(_eight(session).valid, free.valid)
+
+
+def test_without_an_accelerometer_or_when_it_is_mostly_at_its_range_the_path_is_motion_capture_alone(figure_eight,
+                                                                                                     monkeypatch):
+    session = open_session(figure_eight.session)
+    assert _eight(session).path_source == hp.FROM_BOTH
+    monkeypatch.setattr(session.manifest.rig.handle.accelerometer, "range", SensorRange(accel_m_per_s2=[1.0, 1.0, 1.0]))
+    trial = _eight(session)          # gravity alone is past 1 m/s² on some axis all the time
+    assert trial.path_source == hp.FROM_MOCAP and trial.valid.sum() > 0.8 * len(trial.t)
+    monkeypatch.setattr(session.manifest.rig.handle.accelerometer, "range", None)
     stream = type(session).stream
-    eight = next(t.id for t in session.trials if t.protocol == "other")
+    eight = trial.trial_id
     monkeypatch.setattr(type(session), "stream", lambda self, trial_id, kind:
                         None if (trial_id, kind) == (eight, "handle_accel") else stream(self, trial_id, kind))
-    assert next(tr for tr in load_measured(session) if tr.protocol == "other").path_source == hp.FROM_MOCAP
+    assert _eight(session).path_source == hp.FROM_MOCAP

@@ -43,7 +43,8 @@ class MeasuredTrial:
 
     ``position``/``quaternion``: the smoothed, gap-free hand path that drives the twin; ``force``:
     the measured calibrated hand force, low-passed; ``valid``: rows whose measured force and motion
-    capture are usable, :data:`EDGE_S` or more from the trial's ends; ``contact``: rows in contact with the rendered plane (active trials, from the
+    capture are usable, :data:`EDGE_S` or more from the trial's ends and not near a clipped accelerometer
+    reading (:attr:`.hand_path.HandPath.near_clip`); ``contact``: rows in contact with the rendered plane (active trials, from the
     commanded force, spec §12.2); ``speed``: gimbal-centre speed, m/s;
     ``commanded_max_N``: largest commanded force magnitude (active trials), N; ``path_source``: what the
     position came from (:data:`.hand_path.FROM_BOTH` or :data:`.hand_path.FROM_MOCAP`).
@@ -81,11 +82,13 @@ def load_measured(session: SessionFolder, ctx: ComputeContext | None = None, req
             continue
         hs = handle_signals(ctx, trial.id)
         ok = hs.valid & np.all(np.isfinite(hs.force), axis=1) & np.all(np.isfinite(hs.position), axis=1)
-        inner = (hs.t >= hs.t[0] + EDGE_S) & (hs.t <= hs.t[-1] - EDGE_S)
-        if (ok & inner).sum() < 20:
+        if ok.sum() < 20:
+            continue
+        path = hand_path(session, ctx, hs, ok, trial.protocol)
+        usable = ok & ~path.near_clip & (hs.t >= hs.t[0] + EDGE_S) & (hs.t <= hs.t[-1] - EDGE_S)
+        if usable.sum() < 20:
             continue
         rate = hs.rate_hz
-        path = hand_path(session, ctx, hs, ok, trial.protocol)
         force = lowpass(fill_gaps(hs.t, hs.force, ok), rate, RESIDUAL_CUTOFF_HZ)
         speed = np.linalg.norm(np.gradient(path.position, hs.t, axis=0), axis=1)
         rendering = trial.rendering.model_dump(mode="json") if trial.powered and trial.rendering is not None else None
@@ -97,7 +100,7 @@ def load_measured(session: SessionFolder, ctx: ComputeContext | None = None, req
             cmd_n = cmd[["fx", "fy", "fz"]].to_numpy() @ n
             contact = contact_of(np.interp(hs.t, cmd["t"].to_numpy(), cmd_n))
             cmd_max = float(np.max(np.linalg.norm(cmd[["fx", "fy", "fz"]].to_numpy(), axis=1)))
-        out.append(MeasuredTrial(trial.id, trial.protocol, rendering, hs.t, rate, path.position, path.quaternion, force, ok & inner,
+        out.append(MeasuredTrial(trial.id, trial.protocol, rendering, hs.t, rate, path.position, path.quaternion, force, usable,
                                  contact, speed, cmd_max, path.source))
     if not out and required:
         raise fail("E302", "the measured session has no trial with a handle_wrench stream to compare with the twin",

@@ -21,9 +21,12 @@ its ends at the first and last samples, and their capture noise became a jump of
 reading (spec §6.6) turned to W with the orientation smoothed the same way at :data:`ORIENTATION_CUTOFF_HZ` —
 gravity leaks into ``a_W`` through every orientation error, and the raw mocap orientation is noisy (0.3° on the
 simulated rig; a plain low-pass, held at a noisy last sample, turned 1.5° off in the last 0.2 s) — minus the
-accelerometer's lever-arm acceleration about the gimbal centre. A trial without a ``handle_accel`` stream,
-or whose accelerometer reached its range, falls back to motion capture alone, smoothed at
-:data:`POSE_CUTOFF_HZ`. On the same sessions the blend leaves 0.004 N (figure eight), 0.02–0.04 N
+accelerometer's lever-arm acceleration about the gimbal centre. The accelerometer clips at its range (the
+simulated rig's ±40 m/s² in the fastest local-dynamic strokes): its double integral then misses the clipped
+acceleration, so the rows within :data:`CLIP_MARGIN_S` of a reading at the declared range are not compared
+(``near_clip``; the fastest strokes had 2–14 mm/s of velocity error). A trial without a ``handle_accel`` stream,
+or with more than :data:`MAX_CLIPPED_SHARE` of its rows near clipped readings, falls back to motion capture alone,
+smoothed at :data:`POSE_CUTOFF_HZ`. On the same sessions the blend leaves 0.004 N (figure eight), 0.02–0.04 N
 (stiffness), 0.06 N (local dynamic, where the hand also turns the handle at 4 Hz) and 0.007–0.01 N
 (free space, against 0.02 N).
 """
@@ -48,6 +51,10 @@ PATH_CROSSOVER_HZ = 1.5       # motion capture below, the accelerometer above (t
 ORIENTATION_CUTOFF_HZ = 1.0   # the hand's orientation wanders slowly (under 16°/s in free space, paper §V-B);
                               # its noise becomes gimbal-friction noise and, through gravity, acceleration noise
 SLOW_KNOT_S = 1.0             # knot spacing of the splines that carry slow motion past the low-passes' edges
+RANGE_FRACTION = 0.999        # a reading at 99.9 % of the declared range is at the range (quantised clipping)
+CLIP_MARGIN_S = 0.5           # rows this close to a clipped reading are not compared (the clip's missing
+                              # acceleration stays in the integrated velocity until the blend's low-pass catches up)
+MAX_CLIPPED_SHARE = 0.5       # a trial with more rows near clipped readings falls back to motion capture
 POSE_CUTOFF_HZ = 8.0          # without an accelerometer: above the local-dynamic 4 Hz oscillations (paper §V-C)
 #: slower protocols get a lower cut-off: free-space wandering stays under 0.16 m/s (paper §V-B)
 POSE_CUTOFF_BY_PROTOCOL_HZ = {"free_space": 4.0}
@@ -58,11 +65,13 @@ FROM_MOCAP = "motion capture"
 @dataclass
 class HandPath:
     """A trial's hand path on its residual grid: gimbal-centre position (m, W), orientation (wxyz, body →
-    world) and where the position came from (:data:`FROM_BOTH` or :data:`FROM_MOCAP`)."""
+    world), where the position came from (:data:`FROM_BOTH` or :data:`FROM_MOCAP`) and ``near_clip``, the rows
+    whose position is unreliable because the accelerometer was at its range nearby."""
 
     position: np.ndarray
     quaternion: np.ndarray
     source: str
+    near_clip: np.ndarray
 
 
 def fill_gaps(t: np.ndarray, x: np.ndarray, ok: np.ndarray) -> np.ndarray:
@@ -88,20 +97,23 @@ def second_derivative(x: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def accelerometer_path(session: SessionFolder, ctx: ComputeContext, trial_id: str, t: np.ndarray,
-                       quaternion: np.ndarray) -> np.ndarray | None:
+                       quaternion: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """The gimbal centre's path ∬ a_W dt ``(N, 3)`` at times ``t`` (m, W; from rest at the origin) from the handle
-    accelerometer, integrated at the sensor's own rate (module docstring); ``quaternion`` the orientation at
-    ``t``. None without a ``handle_accel`` stream or when a reading reached the sensor's range.
+    accelerometer, integrated at the sensor's own rate, and the rows within :data:`CLIP_MARGIN_S` of a reading at
+    the sensor's declared range (module docstring); ``quaternion`` the orientation at ``t``. None without a
+    ``handle_accel`` stream.
     """
     if session.stream(trial_id, "handle_accel") is None:
         return None
     stream = session.read(trial_id, "handle_accel")
     reading = stream[ACCEL_COLUMNS].to_numpy()
-    sensor = session.manifest.rig.handle.accelerometer
-    limit = sensor.range.accel_m_per_s2 if sensor.range is not None else None
-    if limit is not None and np.any(np.abs(reading) >= np.asarray(limit, float)):
-        return None
     ts = stream["t"].to_numpy()
+    sensor = session.manifest.rig.handle.accelerometer
+    near_clip = np.zeros(len(t), bool)
+    if sensor.range is not None and sensor.range.accel_m_per_s2 is not None:
+        at_range = np.any(np.abs(reading) >= RANGE_FRACTION * np.asarray(sensor.range.accel_m_per_s2, float), axis=1)
+        for tc in ts[at_range]:
+            near_clip[np.searchsorted(t, tc - CLIP_MARGIN_S):np.searchsorted(t, tc + CLIP_MARGIN_S, side="right")] = True
     rate = nominal_rate(ts)
     inside = (ts >= t[0]) & (ts <= t[-1])
     ts = ts[inside]
@@ -110,7 +122,7 @@ def accelerometer_path(session: SessionFolder, ctx: ComputeContext, trial_id: st
     pose = cal_mod.sensor_pose(session, "accelerometer")
     lever = quat_rotate(q, np.broadcast_to(np.asarray(pose.position, float), (len(ts), 3)))
     a_gimbal = cal_mod.compensate_accel(raw, q, cal_mod.handle_calibration(ctx), pose) - second_derivative(lever, ts)
-    return interp_columns(ts, double_integral(ts, a_gimbal), t)
+    return interp_columns(ts, double_integral(ts, a_gimbal), t), near_clip
 
 
 def double_integral(t: np.ndarray, acceleration: np.ndarray) -> np.ndarray:
@@ -147,8 +159,8 @@ def hand_path(session: SessionFolder, ctx: ComputeContext, hs: HandleSignals, ok
     """
     quaternion = smooth_orientation(hs.t, hs.quaternion, ok, hs.rate_hz)
     mocap = fill_gaps(hs.t, hs.position, ok)
-    accel_path = accelerometer_path(session, ctx, hs.trial_id, hs.t, quaternion)
-    if accel_path is None:
+    accel = accelerometer_path(session, ctx, hs.trial_id, hs.t, quaternion)
+    if accel is None or np.mean(accel[1]) > MAX_CLIPPED_SHARE:
         cutoff = POSE_CUTOFF_BY_PROTOCOL_HZ.get(protocol, POSE_CUTOFF_HZ)
-        return HandPath(smooth(hs.t, hs.rate_hz, mocap, cutoff), quaternion, FROM_MOCAP)
-    return HandPath(blend(hs.t, hs.rate_hz, mocap, accel_path), quaternion, FROM_BOTH)
+        return HandPath(smooth(hs.t, hs.rate_hz, mocap, cutoff), quaternion, FROM_MOCAP, np.zeros(len(hs.t), bool))
+    return HandPath(blend(hs.t, hs.rate_hz, mocap, accel[0]), quaternion, FROM_BOTH, accel[1])
