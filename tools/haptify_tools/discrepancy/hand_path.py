@@ -27,8 +27,8 @@ acceleration, so the rows within :data:`CLIP_MARGIN_S` of a reading at the decla
 (``near_clip``; the fastest strokes had 2–14 mm/s of velocity error). A trial without a ``handle_accel`` stream,
 or with more than :data:`MAX_CLIPPED_SHARE` of its rows near clipped readings, falls back to motion capture alone,
 smoothed at :data:`POSE_CUTOFF_HZ`. On the same sessions the blend leaves 0.004 N (figure eight), 0.02–0.04 N
-(stiffness), 0.06 N (local dynamic, where the hand also turns the handle at 4 Hz) and 0.007–0.01 N
-(free space, against 0.02 N).
+(stiffness), 0.06 N (local dynamic, where the hand also turns the handle at 4 Hz) and 0.008–0.018 N
+(free space, against 0.017–0.022 N).
 """
 
 from __future__ import annotations
@@ -112,8 +112,11 @@ def accelerometer_path(session: SessionFolder, ctx: ComputeContext, trial_id: st
     near_clip = np.zeros(len(t), bool)
     if sensor.range is not None and sensor.range.accel_m_per_s2 is not None:
         at_range = np.any(np.abs(reading) >= RANGE_FRACTION * np.asarray(sensor.range.accel_m_per_s2, float), axis=1)
-        for tc in ts[at_range]:
-            near_clip[np.searchsorted(t, tc - CLIP_MARGIN_S):np.searchsorted(t, tc + CLIP_MARGIN_S, side="right")] = True
+        clips = ts[at_range]
+        if len(clips):
+            k = np.clip(np.searchsorted(clips, t), 1, len(clips))
+            nearest = np.minimum(np.abs(t - clips[k - 1]), np.abs(clips[np.minimum(k, len(clips) - 1)] - t))
+            near_clip = nearest <= CLIP_MARGIN_S
     rate = nominal_rate(ts)
     inside = (ts >= t[0]) & (ts <= t[-1])
     ts = ts[inside]
