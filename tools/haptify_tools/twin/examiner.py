@@ -461,13 +461,16 @@ def free_space_wander(rng: np.random.Generator, reach: Reach | None, duration_s:
     phases = rng.uniform(0.0, 2 * np.pi, (3, components))
     weights = rng.uniform(0.5, 1.0, (3, components))
     weights /= weights.sum(axis=1, keepdims=True)
-    ease = minimum_jerk(np.minimum(1.0, np.minimum(rel, rel[-1] - rel) / 2.0).clip(0.0, 1.0))
     amp = [1.0]
+    ramp = [2.0]                  # s: the wander eases in from the centre and back to it at the ends
 
-    def shape(lam: float, tt: np.ndarray = rel, ee: np.ndarray = ease) -> np.ndarray:
+    def ease_of(tt: np.ndarray) -> np.ndarray:
+        return minimum_jerk(np.minimum(1.0, np.minimum(tt, rel[-1] - tt) / ramp[0]).clip(0.0, 1.0))
+
+    def shape(lam: float, tt: np.ndarray = rel) -> np.ndarray:
         """Wander ``(N, 3)`` at time scale ``lam``; starts and ends at the centre, peaks near ±1 per axis."""
         arg = 2 * np.pi * freqs[None, :, :] * lam * tt[:, None, None] + phases[None, :, :]
-        return ee[:, None] * np.sum(weights[None] * (np.sin(arg) - np.sin(phases)[None]), axis=2) / norm
+        return ease_of(tt)[:, None] * np.sum(weights[None] * (np.sin(arg) - np.sin(phases)[None]), axis=2) / norm
 
     norm = 1.0
     norm = np.maximum(np.max(np.abs(shape(1.0)), axis=0), 1e-6)
@@ -476,23 +479,34 @@ def free_space_wander(rng: np.random.Generator, reach: Reach | None, duration_s:
         half = 0.5 - margin
 
         def path(lam: float, sub: int = 1) -> np.ndarray:
-            return reach.unit_to_W(0.5 + amp[0] * half * shape(lam, rel[::sub], ease[::sub]))
+            return reach.unit_to_W(0.5 + amp[0] * half * shape(lam, rel[::sub]))
     else:
         c = np.asarray(centre_W if centre_W is not None else [0.0, 0.0, 0.3], dtype=float)
 
         def path(lam: float, sub: int = 1) -> np.ndarray:
-            return c[None, :] + amp[0] * extent_m * shape(lam, rel[::sub], ease[::sub])
+            return c[None, :] + amp[0] * extent_m * shape(lam, rel[::sub])
 
     sub = max(1, int(rate_hz // 200))          # speed and clearance checks on a 200 Hz grid
 
     def speeds(lam: float) -> np.ndarray:
         return np.linalg.norm(derivative(path(lam, sub), rate_hz / sub), axis=1)
 
+    def time_scale() -> float:
+        """The time scale whose mean speed is nearest ``mean_speed`` with the peak under ``max_speed``, from a scan of
+        ×¼ … ×4: speed is nearly ∝ the scale, but a faster wander can cross a part of the workspace where the map
+        stretches it, so the peak jumps (none under the limit: the scale with the lowest peak)."""
+        scan = [(lam, speeds(lam)) for lam in np.geomspace(0.25, 4.0, 33)]
+        feasible = [(abs(np.mean(v) - mean_speed), lam) for lam, v in scan if np.max(v) <= max_speed]
+        return min(feasible)[1] if feasible else min((np.max(v), lam) for lam, v in scan)[1]
+
     lam = 1.0
     for _ in range(30):
-        for _ in range(4):             # the time scale that gives the mean speed (speed ∝ lam, nearly)
-            v = speeds(lam)
-            lam *= min(mean_speed / max(np.mean(v), 1e-9), max_speed / max(np.max(v), 1e-9))
+        lam = time_scale()
+        # the ease at the ends does not slow down with the time scale: a return to the centre that is still
+        # too fast gets a longer ease (at most a fifth of the trial at each end)
+        if np.max(speeds(lam)) > max_speed * 1.02 and ramp[0] < 0.2 * rel[-1]:
+            ramp[0] = min(1.5 * ramp[0], 0.2 * rel[-1])
+            continue
         # keep clear of the base: shrink the wander about the centre (the time scale changes the path)
         if reach is None or amp[0] <= 0.1 or np.min(reach.clearance(path(lam, sub))) >= clearance_m:
             break
