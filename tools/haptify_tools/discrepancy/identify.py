@@ -279,7 +279,7 @@ def _select(twin, forces: Dataset, sweeps, max_effects, library, log) -> Selecti
         if log:
             log(f"round {len(rounds)}: best {best.candidate.effect_id} = {best.value:.4g} {best.candidate.unit}, "
                 f"ΔBIC {best.score.delta_bic:.1f}, p {best.score.p_value:.2g}, "
-                f"validation −{100 * best.score.validation_improvement:.0f} % → {'accepted' if ok else 'rejected'}")
+                f"validation residual {-100 * best.score.validation_improvement:+.0f} % → {'accepted' if ok else 'rejected'}")
         if not ok:
             break
         accepted.append(best)
