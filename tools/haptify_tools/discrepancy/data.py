@@ -25,7 +25,7 @@ from haptify.signals import handle_signals, lowpass
 from haptify.storage import SessionFolder
 from haptify.surface import contact_of, unit_normal
 
-from haptify_tools.discrepancy.hand_path import FROM_MOCAP, fill_gaps, hand_path
+from haptify_tools.discrepancy.hand_path import FROM_MOCAP, fill_gaps, hand_path, second_derivative
 from haptify_tools.twin.model import TwinFile
 from haptify_tools.twin.physics import simulate_active, simulate_passive
 
@@ -139,7 +139,7 @@ def connector_force(twin: TwinFile, t: np.ndarray, position: np.ndarray) -> np.n
     c = twin.rig.connector_mass
     if not c.enabled or c.mass_kg == 0:
         return np.zeros_like(position)
-    return c.mass_kg * np.gradient(np.gradient(position, t, axis=0), t, axis=0)
+    return c.mass_kg * second_derivative(position, t)
 
 
 def simulate_all(twin: TwinFile, trials: list[MeasuredTrial], only_active: bool = False,
