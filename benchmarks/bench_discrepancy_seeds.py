@@ -5,10 +5,10 @@ For every covered library effect: ``SEEDS`` sessions (own examiner paths and rig
 hidden with a random plausible value drawn from the seed, the workflow started from the ``touch`` preset
 without it. Prints, per effect, the share of seeds where it was named first, the share within 15 % and
 the share whose held-out gap shrank by half — as it is, and above the floor (the gap the true twin
-itself leaves, :func:`~haptify_tools.discrepancy.workflow.gap_above_floor`: effects smaller than the
-path-reconstruction floor cannot halve the raw gap) — and the worst relative error. ``python
-benchmarks/bench_discrepancy_seeds.py [SEEDS]`` (default 10; the passive effects take seconds per seed,
-the active ones — saturation, cut-off, series elasticity — about 15 s).
+itself leaves, :func:`~haptify_tools.discrepancy.floor.gap_above_floor`: an effect smaller than the
+path's floor cannot halve the raw gap) — and the worst relative error. ``python
+benchmarks/bench_discrepancy_seeds.py [SEEDS [EFFECT,…]]`` (default 10 seeds, every effect: about 8 minutes —
+2–4 s a seed, 10–14 s for the local-dynamic effects).
 """
 
 from __future__ import annotations
@@ -28,8 +28,7 @@ from haptify_tools.twin.model import disable, preset, set_param
 from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
 
 DURATIONS = {"free_space": 16.0, "figure_eight": 16.0, "stiffness": 12.0, "workspace": 60.0, "rig.handle_calibration": 12.0}
-#: effect → (parameter, low, high, protocols[, durations]): the hidden value is uniform in [low, high]; the optional
-#: durations (s) override those of :data:`DURATIONS` for that effect
+#: effect → (parameter, low, high, protocols): the hidden value is uniform in [low, high]
 CASES = {
     "gravity": ("g_m_per_s2", 9.0, 10.5, ("free_space",)),
     "friction.coulomb": ("torque_Nm", 0.02, 0.06, ("free_space",)),
@@ -37,8 +36,8 @@ CASES = {
     "kinematics.link_length": ("delta_a_m", 0.003, 0.01, ("free_space",)),
     "handle.connector_mass": ("mass_kg", 0.02, 0.06, ("local_dynamic",)),
     "inertia": ("rotor_inertia_kg_m2", 0.5e-6, 2e-6, ("local_dynamic",)),
-    # ½–1½ × the preset's 0.07, on the protocol's full 40 s of free space (on 16 s: 2/10 within 15 %)
-    "friction.stribeck": ("excess_torque_Nm", 0.035, 0.105, ("free_space",), {"free_space": 40.0}),
+    # ½–1½ × the preset's 0.07
+    "friction.stribeck": ("excess_torque_Nm", 0.035, 0.105, ("free_space",)),
     "kinematics.base_collision": ("base_top_m", 0.075, 0.125, ("workspace",)),
     "drive.torque_saturation": ("max_torque_Nm", 0.12, 0.22, ("stiffness",)),
     "drive.force_cutoff": ("trip_force_N", 1.5, 2.5, ("stiffness",)),
@@ -57,11 +56,10 @@ def truth_of(effect: str, parameter: str, value: float):
 def one(effect: str, seed: int, folder: Path) -> tuple[bool, float, float, float]:
     """(named first?, relative error, held-out gap ratio after/before, the same above the true twin's floor)
     for one seed. The floor is the held-out gap of the twin that generated the session (known here)."""
-    parameter, low, high, protocols, *longer = CASES[effect]
+    parameter, low, high, protocols = CASES[effect]
     value = float(np.random.default_rng(1000 + seed).uniform(low, high))
-    durations = {**DURATIONS, **(longer[0] if longer else {})}
     rig = () if protocols == ("workspace",) else ("rig.handle_calibration",)
-    opt = SimulationOptions(protocols=(*protocols, *rig), reps=1, seed=seed, durations=durations, rig_trials=False,
+    opt = SimulationOptions(protocols=(*protocols, *rig), reps=1, seed=seed, durations=DURATIONS, rig_trials=False,
                             workers=1)
     truth = truth_of(effect, parameter, value)
     session = simulate_dossier(truth, folder / f"{effect}-{seed}", opt).session
