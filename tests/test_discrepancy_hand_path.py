@@ -12,7 +12,7 @@ from hypothesis import strategies as hst
 from haptify.conventions import quat_normalize, quat_to_matrix
 from haptify.compute import ComputeContext
 from haptify.session_format import SensorRange
-from haptify.signals import handle_signals, lowpass
+from haptify.signals import handle_signals
 from haptify.storage import open_session
 from haptify_tools.discrepancy import hand_path as hp
 from haptify_tools.discrepancy.data import load_measured
@@ -63,14 +63,14 @@ def test_a_constant_accelerometer_bias_is_taken_out_with_the_drift():
 def test_capture_noise_above_the_crossover_is_removed():
     """White capture noise σ: the blend keeps only its part under the crossover's zero-phase order-4 low-pass
     (power response 1/(1 + (f/fc)⁸)²), variance σ²·fc/(fs/2)·(π/8)(7/8)/sin(π/8); its velocity error is far
-    below that of motion capture alone low-passed at 8 Hz."""
+    below that of motion capture alone smoothed at 8 Hz (the fallback)."""
     p, _ = _path(T)
     sigma = 1e-4
     noisy = p + np.random.default_rng(3).normal(0.0, sigma, p.shape)
     err = _interior(hp.blend(T, RATE, noisy, _accel_path()) - p)
     expected = sigma * np.sqrt(hp.PATH_CROSSOVER_HZ / (RATE / 2) * (np.pi / 8) * (7 / 8) / np.sin(np.pi / 8))
     assert np.sqrt(np.mean(err ** 2)) == pytest.approx(expected, rel=0.15)
-    only_mocap = _interior(lowpass(noisy, RATE, hp.POSE_CUTOFF_HZ) - p)
+    only_mocap = _interior(hp.smooth(T, RATE, noisy, hp.POSE_CUTOFF_HZ) - p)      # the fallback without an accelerometer
     v_err = np.gradient(err, axis=0) * RATE
     v_mocap = np.gradient(only_mocap, axis=0) * RATE
     assert np.sqrt(np.mean(v_err ** 2)) < 0.2 * np.sqrt(np.mean(v_mocap ** 2))
@@ -106,7 +106,7 @@ def _true_path(dossier, trial):
 
 
 def test_on_a_simulated_session_the_blend_follows_the_true_path(figure_eight):
-    """The simulator's own true path: the blended velocity is ≥ 2× closer to it than motion capture alone."""
+    """The simulator's own true path: the blended velocity is ≥ 2× closer to it than motion capture alone (the fallback)."""
     session = open_session(figure_eight.session)
     trial = next(tr for tr in load_measured(session) if tr.protocol == "other")
     assert trial.path_source == hp.FROM_BOTH
@@ -115,7 +115,7 @@ def test_on_a_simulated_session_the_blend_follows_the_true_path(figure_eight):
     v_true = np.gradient(truth, trial.t, axis=0)
     v_err = (np.gradient(trial.position, trial.t, axis=0) - v_true)[ok]
     hs = handle_signals(ComputeContext(session=session), trial.trial_id)
-    mocap = lowpass(hp.fill_gaps(hs.t, hs.position, hs.valid), hs.rate_hz, hp.POSE_CUTOFF_HZ)
+    mocap = hp.smooth(hs.t, hs.rate_hz, hp.fill_gaps(hs.t, hs.position, hs.valid), hp.POSE_CUTOFF_HZ)  # the fallback
     v_mocap = (np.gradient(mocap, trial.t, axis=0) - v_true)[ok]
     assert np.sqrt(np.mean(v_err ** 2)) < 0.5 * np.sqrt(np.mean(v_mocap ** 2))
     assert np.sqrt(np.mean((trial.position - truth)[ok] ** 2)) < 1e-4

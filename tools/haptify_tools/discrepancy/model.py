@@ -146,7 +146,7 @@ class DiscrepancyFile(_M):
     hand_path: dict[str, Literal["motion capture + accelerometer", "motion capture"]] = Field(
         default_factory=dict, description="Per force trial id, what the path driving the twin came from: motion "
         "capture below the crossover and the handle accelerometer above it, or motion capture alone (no "
-        "handle_accel stream, or the accelerometer reached its range).")
+        "handle_accel stream, or more than half of the trial's rows near readings at the accelerometer's range).")
     settings: dict[str, float]
     files: dict[str, str] = Field(default_factory=dict, description="Outputs written beside this file.")
 

@@ -491,20 +491,21 @@ def free_space_wander(rng: np.random.Generator, reach: Reach | None, duration_s:
     def speeds(lam: float) -> np.ndarray:
         return np.linalg.norm(derivative(path(lam, sub), rate_hz / sub), axis=1)
 
-    def time_scale() -> float:
+    def time_scale() -> tuple[float, float]:
         """The time scale whose mean speed is nearest ``mean_speed`` with the peak under ``max_speed``, from a scan of
-        ×¼ … ×4: speed is nearly ∝ the scale, but a faster wander can cross a part of the workspace where the map
-        stretches it, so the peak jumps (none under the limit: the scale with the lowest peak)."""
+        ×¼ … ×4, and its peak speed (m/s): speed is nearly ∝ the scale, but a faster wander can cross a part of the
+        workspace where the map stretches it, so the peak jumps (none under the limit: the scale with the lowest peak)."""
         scan = [(lam, speeds(lam)) for lam in np.geomspace(0.25, 4.0, 33)]
-        feasible = [(abs(np.mean(v) - mean_speed), lam) for lam, v in scan if np.max(v) <= max_speed]
-        return min(feasible)[1] if feasible else min((np.max(v), lam) for lam, v in scan)[1]
+        feasible = [(abs(np.mean(v) - mean_speed), lam, np.max(v)) for lam, v in scan if np.max(v) <= max_speed]
+        if feasible:
+            return min(feasible)[1:]
+        return min((np.max(v), lam) for lam, v in scan)[::-1]
 
-    lam = 1.0
     for _ in range(30):
-        lam = time_scale()
+        lam, peak = time_scale()
         # the ease at the ends does not slow down with the time scale: a return to the centre that is still
         # too fast gets a longer ease (at most a fifth of the trial at each end)
-        if np.max(speeds(lam)) > max_speed * 1.02 and ramp[0] < 0.2 * rel[-1]:
+        if peak > max_speed * 1.02 and ramp[0] < 0.2 * rel[-1]:
             ramp[0] = min(1.5 * ramp[0], 0.2 * rel[-1])
             continue
         # keep clear of the base: shrink the wander about the centre (the time scale changes the path)
