@@ -15,12 +15,13 @@ from haptify.session_format import SensorRange
 from haptify.signals import handle_signals
 from haptify.storage import open_session
 from haptify_tools.discrepancy import hand_path as hp
-from haptify_tools.discrepancy.data import load_measured
+from haptify_tools.discrepancy.data import EDGE_S, load_measured
 from haptify_tools.twin.model import preset
 from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
 
 RATE = 100.0
 T = np.arange(0.0, 20.0, 1 / RATE)
+ALL = np.ones(len(T), bool)
 
 
 def _path(t):
@@ -50,13 +51,26 @@ def _interior(x):
 
 def test_exact_measurements_give_the_path_back():
     p, _ = _path(T)
-    out = hp.blend(T, RATE, p, _accel_path())
+    out = hp.blend(T, RATE, p, _accel_path(), ALL)
     assert np.max(np.abs(_interior(out - p))) < 2e-6
 
 
 def test_a_constant_accelerometer_bias_is_taken_out_with_the_drift():
     p, _ = _path(T)
-    out = hp.blend(T, RATE, p, _accel_path((0.05, -0.03, 0.2)))
+    out = hp.blend(T, RATE, p, _accel_path((0.05, -0.03, 0.2)), ALL)
+    assert np.max(np.abs(_interior(out - p))) < 2e-6
+
+
+def test_a_capture_gap_in_fast_motion_is_bridged_by_the_accelerometer():
+    """Motion capture lost for 0.3 s (NaN rows) while the hand moves at 3 Hz: the blend bridges the slow
+    difference capture − accelerometer, not the capture itself, so the path stays exact through the gap and
+    on both sides of it (bridging the capture linearly put it 4 mm off the stroke, spread over ±2.5 s)."""
+    p, _ = _path(T)
+    ok = ALL.copy()
+    ok[1000:1030] = False
+    mocap = np.where(ok[:, None], p, np.nan)
+    out = hp.blend(T, RATE, mocap, _accel_path((0.05, -0.03, 0.2)), ok)
+    assert np.all(np.isfinite(out))
     assert np.max(np.abs(_interior(out - p))) < 2e-6
 
 
@@ -67,7 +81,7 @@ def test_capture_noise_above_the_crossover_is_removed():
     p, _ = _path(T)
     sigma = 1e-4
     noisy = p + np.random.default_rng(3).normal(0.0, sigma, p.shape)
-    err = _interior(hp.blend(T, RATE, noisy, _accel_path()) - p)
+    err = _interior(hp.blend(T, RATE, noisy, _accel_path(), ALL) - p)
     expected = sigma * np.sqrt(hp.PATH_CROSSOVER_HZ / (RATE / 2) * (np.pi / 8) * (7 / 8) / np.sin(np.pi / 8))
     assert np.sqrt(np.mean(err ** 2)) == pytest.approx(expected, rel=0.15)
     only_mocap = _interior(hp.smooth(T, RATE, noisy, hp.POSE_CUTOFF_HZ) - p)      # the fallback without an accelerometer
@@ -87,9 +101,9 @@ def test_the_blend_turns_with_the_frame_and_scales_with_the_unit(q, scale):
     noisy = p + np.random.default_rng(5).normal(0.0, 1e-4, p.shape)
     x = ACCEL_PATH
     r = quat_to_matrix(quat_normalize(np.asarray(q, float)))
-    base = hp.blend(T, RATE, noisy, x)
-    np.testing.assert_allclose(hp.blend(T, RATE, noisy @ r.T, x @ r.T), base @ r.T, atol=1e-12)
-    np.testing.assert_allclose(hp.blend(T, RATE, noisy * scale, x * scale), base * scale, rtol=1e-9, atol=1e-15 * scale)
+    base = hp.blend(T, RATE, noisy, x, ALL)
+    np.testing.assert_allclose(hp.blend(T, RATE, noisy @ r.T, x @ r.T, ALL), base @ r.T, atol=1e-12)
+    np.testing.assert_allclose(hp.blend(T, RATE, noisy * scale, x * scale, ALL), base * scale, rtol=1e-9, atol=1e-15 * scale)
 
 
 @pytest.fixture(scope="module")
@@ -145,6 +159,37 @@ def test_rows_near_a_reading_at_the_accelerometers_range_are_not_compared(figure
     monkeypatch.setattr(session.manifest.rig.handle.accelerometer, "range",
                         SensorRange(accel_m_per_s2=[1.01 * peak / hp.RANGE_FRACTION] * 3))
     np.testing.assert_array_equal(_eight(session).valid, free.valid)
+
+
+def test_rows_near_a_capture_gap_are_not_compared(figure_eight, monkeypatch):
+    """Motion capture lost for 0.3 s: exactly the usable rows farther than GAP_MARGIN_S from every row without it,
+    and EDGE_S from the trial's ends, are compared (no reading is at the accelerometer's range in this trial)."""
+    session = open_session(figure_eight.session)
+    eight = _eight(session).trial_id
+    read = session.read
+
+    def read_with_gap(trial_id, kind):
+        df = read(trial_id, kind)
+        if (trial_id, kind) == (eight, "handle_pose"):
+            df = df.copy()
+            df.loc[(df["t"] >= df["t"].iloc[0] + 8.0) & (df["t"] < df["t"].iloc[0] + 8.3), ["px", "py", "pz", "qw", "qx", "qy", "qz"]] = np.nan
+        return df
+
+    monkeypatch.setattr(session, "read", read_with_gap)
+    trial = _eight(session)
+    hs = handle_signals(ComputeContext(session=session), trial.trial_id)
+    ok = hs.valid & np.all(np.isfinite(hs.force), axis=1)
+    assert 25 <= (~ok).sum() <= 40
+    gap_t = hs.t[~ok]
+    distance = np.min(np.abs(hs.t[:, None] - gap_t[None, :]), axis=1)
+    inner = (hs.t >= hs.t[0] + EDGE_S) & (hs.t <= hs.t[-1] - EDGE_S)
+    np.testing.assert_array_equal(trial.valid, ok & (distance > hp.GAP_MARGIN_S) & inner)
+
+
+def test_near_marks_the_rows_within_the_margin_of_an_event():
+    t = np.arange(0.0, 10.0, 0.5)
+    np.testing.assert_array_equal(hp.near(t, np.array([2.0, 7.2]), 0.5), (np.abs(t - 2.0) <= 0.5) | (np.abs(t - 7.2) <= 0.5))
+    assert not hp.near(t, np.array([]), 0.5).any()
 
 
 def test_without_an_accelerometer_or_when_it_is_mostly_at_its_range_the_path_is_motion_capture_alone(figure_eight,

@@ -44,7 +44,7 @@ class MeasuredTrial:
     ``position``/``quaternion``: the smoothed, gap-free hand path that drives the twin; ``force``:
     the measured calibrated hand force, low-passed; ``valid``: rows whose measured force and motion
     capture are usable, :data:`EDGE_S` or more from the trial's ends and not near a clipped accelerometer
-    reading (:attr:`.hand_path.HandPath.near_clip`); ``contact``: rows in contact with the rendered plane (active trials, from the
+    reading or a capture gap (:attr:`.hand_path.HandPath.unreliable`); ``contact``: rows in contact with the rendered plane (active trials, from the
     commanded force, spec §12.2); ``speed``: gimbal-centre speed, m/s;
     ``commanded_max_N``: largest commanded force magnitude (active trials), N; ``path_source``: what the
     position came from (:data:`.hand_path.FROM_BOTH` or :data:`.hand_path.FROM_MOCAP`).
@@ -85,7 +85,7 @@ def load_measured(session: SessionFolder, ctx: ComputeContext | None = None, req
         if ok.sum() < 20:
             continue
         path = hand_path(session, ctx, hs, ok, trial.protocol)
-        usable = ok & ~path.near_clip & (hs.t >= hs.t[0] + EDGE_S) & (hs.t <= hs.t[-1] - EDGE_S)
+        usable = ok & ~path.unreliable & (hs.t >= hs.t[0] + EDGE_S) & (hs.t <= hs.t[-1] - EDGE_S)
         if usable.sum() < 20:
             continue
         rate = hs.rate_hz

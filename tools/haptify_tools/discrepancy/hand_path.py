@@ -54,6 +54,9 @@ SLOW_KNOT_S = 1.0             # knot spacing of the splines that carry slow moti
 RANGE_FRACTION = 0.999        # a reading at 99.9 % of the declared range is at the range (quantised clipping)
 CLIP_MARGIN_S = 0.5           # rows this close to a clipped reading are not compared (the clip's missing
                               # acceleration stays in the integrated velocity until the blend's low-pass catches up)
+GAP_MARGIN_S = 0.5            # rows this close to a capture gap are not compared (the orientation bridged across
+                              # the gap turns gravity into the accelerometer's path; the blend spreads it ±0.5 s)
+GAP_WEIGHT = 1e-6             # weight of a bridged row in the slow spline (it keeps the fit defined over long gaps)
 MAX_CLIPPED_SHARE = 0.5       # a trial with more rows near clipped readings falls back to motion capture
 POSE_CUTOFF_HZ = 8.0          # without an accelerometer: above the local-dynamic 4 Hz oscillations (paper §V-C)
 #: slower protocols get a lower cut-off: free-space wandering stays under 0.16 m/s (paper §V-B)
@@ -65,13 +68,14 @@ FROM_MOCAP = "motion capture"
 @dataclass
 class HandPath:
     """A trial's hand path on its residual grid: gimbal-centre position (m, W), orientation (wxyz, body →
-    world), where the position came from (:data:`FROM_BOTH` or :data:`FROM_MOCAP`) and ``near_clip``, the rows
-    whose position is unreliable because the accelerometer was at its range nearby."""
+    world), where the position came from (:data:`FROM_BOTH` or :data:`FROM_MOCAP`) and ``unreliable``, the rows
+    whose path is bridged or disturbed nearby: within :data:`CLIP_MARGIN_S` of an accelerometer reading at its
+    range, within :data:`GAP_MARGIN_S` of a row without motion capture."""
 
     position: np.ndarray
     quaternion: np.ndarray
     source: str
-    near_clip: np.ndarray
+    unreliable: np.ndarray
 
 
 def fill_gaps(t: np.ndarray, x: np.ndarray, ok: np.ndarray) -> np.ndarray:
@@ -96,6 +100,15 @@ def second_derivative(x: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.gradient(np.gradient(x, t, axis=0), t, axis=0)
 
 
+def near(t: np.ndarray, events: np.ndarray, margin_s: float) -> np.ndarray:
+    """Rows of ``t`` within ``margin_s`` (s) of any time in the sorted ``events``."""
+    if not len(events):
+        return np.zeros(len(t), bool)
+    k = np.clip(np.searchsorted(events, t), 1, len(events))
+    nearest = np.minimum(np.abs(t - events[k - 1]), np.abs(events[np.minimum(k, len(events) - 1)] - t))
+    return nearest <= margin_s
+
+
 def accelerometer_path(session: SessionFolder, ctx: ComputeContext, trial_id: str, t: np.ndarray,
                        quaternion: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """The gimbal centre's path ∬ a_W dt ``(N, 3)`` at times ``t`` (m, W; from rest at the origin) from the handle
@@ -112,11 +125,7 @@ def accelerometer_path(session: SessionFolder, ctx: ComputeContext, trial_id: st
     near_clip = np.zeros(len(t), bool)
     if sensor.range is not None and sensor.range.accel_m_per_s2 is not None:
         at_range = np.any(np.abs(reading) >= RANGE_FRACTION * np.asarray(sensor.range.accel_m_per_s2, float), axis=1)
-        clips = ts[at_range]
-        if len(clips):
-            k = np.clip(np.searchsorted(clips, t), 1, len(clips))
-            nearest = np.minimum(np.abs(t - clips[k - 1]), np.abs(clips[np.minimum(k, len(clips) - 1)] - t))
-            near_clip = nearest <= CLIP_MARGIN_S
+        near_clip = near(t, ts[at_range], CLIP_MARGIN_S)
     rate = nominal_rate(ts)
     inside = (ts >= t[0]) & (ts <= t[-1])
     ts = ts[inside]
@@ -133,26 +142,33 @@ def double_integral(t: np.ndarray, acceleration: np.ndarray) -> np.ndarray:
     return cumulative_trapezoid(cumulative_trapezoid(acceleration, t, axis=0, initial=0), t, axis=0, initial=0)
 
 
-def slow_part(t: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """The least-squares cubic spline of ``x (N, k)`` in ``t`` with a knot every :data:`SLOW_KNOT_S` (module docstring)."""
+def slow_part(t: np.ndarray, x: np.ndarray, ok: np.ndarray | None = None) -> np.ndarray:
+    """The least-squares cubic spline of ``x (N, k)`` in ``t`` with a knot every :data:`SLOW_KNOT_S` (module docstring);
+    rows where ``ok`` is False (bridged gaps) weigh :data:`GAP_WEIGHT` and steer it only where no usable row is near."""
     inner = np.arange(t[0] + SLOW_KNOT_S, t[-1] - 0.5 * SLOW_KNOT_S, SLOW_KNOT_S)
     knots = np.r_[[t[0]] * 4, inner, [t[-1]] * 4]
-    return make_lsq_spline(t, x, knots, k=3)(t)
+    w = None if ok is None else np.where(ok, 1.0, GAP_WEIGHT)
+    return make_lsq_spline(t, x, knots, k=3, w=w)(t)
 
 
-def smooth(t: np.ndarray, rate_hz: float, x: np.ndarray, cutoff_hz: float) -> np.ndarray:
+def smooth(t: np.ndarray, rate_hz: float, x: np.ndarray, cutoff_hz: float, ok: np.ndarray | None = None) -> np.ndarray:
     """``S(x) + LP(x − S(x))``: the slow part by :func:`slow_part`, the rest low-passed at ``cutoff_hz`` (the zero-phase
     Butterworth of spec §7.2) with mirrored ends — unlike the spec's low-pass, not held at the first and last samples,
-    whose noise would otherwise become a jump of the path's acceleration at the trial's ends (module docstring)."""
-    slow = slow_part(t, x)
+    whose noise would otherwise become a jump of the path's acceleration at the trial's ends (module docstring).
+    With ``ok``, the rows where it is False are gaps: bridged by the slow part alone."""
+    if ok is not None:
+        x = fill_gaps(t, x, ok)
+    slow = slow_part(t, x, ok)
+    rest = x - slow if ok is None else np.where(ok[:, None], x - slow, 0.0)
     sos = butter(int(sp("filter_order")), effective_cutoff(cutoff_hz, rate_hz), fs=rate_hz, output="sos")
-    return slow + sosfiltfilt(sos, x - slow, axis=0, padtype="even", padlen=min(len(x) - 1, int(4 * rate_hz / cutoff_hz)))
+    return slow + sosfiltfilt(sos, rest, axis=0, padtype="even", padlen=min(len(x) - 1, int(4 * rate_hz / cutoff_hz)))
 
 
-def blend(t: np.ndarray, rate_hz: float, mocap_position: np.ndarray, accel_path: np.ndarray) -> np.ndarray:
+def blend(t: np.ndarray, rate_hz: float, mocap_position: np.ndarray, accel_path: np.ndarray, ok: np.ndarray) -> np.ndarray:
     """Motion capture below :data:`PATH_CROSSOVER_HZ`, the accelerometer's path ``x`` above (m; both at times ``t``
-    on one grid at ``rate_hz``; module docstring): ``x + smooth(p_mocap − x)``."""
-    return accel_path + smooth(t, rate_hz, mocap_position - accel_path, PATH_CROSSOVER_HZ)
+    on one grid at ``rate_hz``; module docstring): ``x + smooth(p_mocap − x)``, the difference — not the capture,
+    which moves fast — bridged by its slow part over the rows where ``ok`` is False (motion capture's gaps)."""
+    return accel_path + smooth(t, rate_hz, mocap_position - accel_path, PATH_CROSSOVER_HZ, ok)
 
 
 def hand_path(session: SessionFolder, ctx: ComputeContext, hs: HandleSignals, ok: np.ndarray, protocol: str) -> HandPath:
@@ -161,9 +177,10 @@ def hand_path(session: SessionFolder, ctx: ComputeContext, hs: HandleSignals, ok
     ``hs``: the trial's calibrated handle signals (spec §7.5); ``ok``: their usable rows (at least two).
     """
     quaternion = smooth_orientation(hs.t, hs.quaternion, ok, hs.rate_hz)
-    mocap = fill_gaps(hs.t, hs.position, ok)
     accel = accelerometer_path(session, ctx, hs.trial_id, hs.t, quaternion)
+    near_gap = near(hs.t, hs.t[~ok], GAP_MARGIN_S)
     if accel is None or np.mean(accel[1]) > MAX_CLIPPED_SHARE:
         cutoff = POSE_CUTOFF_BY_PROTOCOL_HZ.get(protocol, POSE_CUTOFF_HZ)
-        return HandPath(smooth(hs.t, hs.rate_hz, mocap, cutoff), quaternion, FROM_MOCAP, np.zeros(len(hs.t), bool))
-    return HandPath(blend(hs.t, hs.rate_hz, mocap, accel[0]), quaternion, FROM_BOTH, accel[1])
+        mocap = fill_gaps(hs.t, hs.position, ok)
+        return HandPath(smooth(hs.t, hs.rate_hz, mocap, cutoff), quaternion, FROM_MOCAP, near_gap)
+    return HandPath(blend(hs.t, hs.rate_hz, hs.position, accel[0], ok), quaternion, FROM_BOTH, accel[1] | near_gap)
