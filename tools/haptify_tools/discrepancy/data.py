@@ -25,6 +25,7 @@ from haptify.signals import handle_signals, lowpass
 from haptify.storage import SessionFolder
 from haptify.surface import contact_of, unit_normal
 
+from haptify_tools.discrepancy.drive_rest import hold_resting_drives
 from haptify_tools.discrepancy.hand_path import FROM_MOCAP, fill_gaps, hand_path, second_derivative
 from haptify_tools.twin.model import TwinFile
 from haptify_tools.twin.physics import simulate_active, simulate_passive
@@ -109,12 +110,13 @@ def load_measured(session: SessionFolder, ctx: ComputeContext | None = None, req
     return out
 
 
-def fine_path(trial: MeasuredTrial) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The trial's smoothed hand path on its simulation grid (cubic spline): ``t`` (s), position (m, W), quaternion (wxyz) (discrepancy README §1)."""
+def fine_path(twin: TwinFile, trial: MeasuredTrial) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The trial's smoothed hand path with ``twin``'s resting drives held (``drive_rest.py``) on its simulation grid
+    (cubic spline): ``t`` (s), position (m, W), quaternion (wxyz) (discrepancy README §1)."""
     dt = 1.0 / SIM_RATE_HZ
     fine = np.arange(trial.t[0], trial.t[-1] + 0.5 * dt, dt)
     fine = fine[fine <= trial.t[-1]]
-    pos = CubicSpline(trial.t, trial.position, axis=0)(fine)
+    pos = CubicSpline(trial.t, hold_resting_drives(twin, trial.t, trial.position), axis=0)(fine)
     quat = CubicSpline(trial.t, trial.quaternion, axis=0)(fine)
     return fine, pos, quat / np.linalg.norm(quat, axis=1)[:, None]
 
@@ -123,7 +125,7 @@ def simulate_trial(twin: TwinFile, trial: MeasuredTrial) -> np.ndarray:
     """The force ``(N, 3)`` the twin applies to the hand along the measured path, on the trial's grid,
     low-passed like the measured force (N, W frame) (discrepancy README §1).
     """
-    fine, pos, quat = fine_path(trial)
+    fine, pos, quat = fine_path(twin, trial)
     if trial.active:
         res = simulate_active(twin, fine, pos, quat, trial.rendering)
     else:
