@@ -24,11 +24,14 @@ simulated rig; a plain low-pass, held at a noisy last sample, turned 1.5° off i
 accelerometer's lever-arm acceleration about the gimbal centre. The accelerometer clips at its range (the
 simulated rig's ±40 m/s² in the fastest local-dynamic strokes): its double integral then misses the clipped
 acceleration, so the rows within :data:`CLIP_MARGIN_S` of a reading at the declared range are not compared
-(``near_clip``; the fastest strokes had 2–14 mm/s of velocity error). A trial without a ``handle_accel`` stream,
+(the fastest strokes had 2–14 mm/s of velocity error). Over a motion-capture gap the blend bridges the slow
+difference ``p_mocap − x`` by its spline, not the capture, which moves fast (a 0.3 s gap in local-dynamic strokes,
+bridged linearly, was 26 mm off); the orientation is bridged linearly, so rows within :data:`GAP_MARGIN_S` of a gap
+are not compared either (``unreliable``). A trial without a ``handle_accel`` stream,
 or with more than :data:`MAX_CLIPPED_SHARE` of its rows near clipped readings, falls back to motion capture alone,
 smoothed at :data:`POSE_CUTOFF_HZ`. On the same sessions the blend leaves 0.004 N (figure eight), 0.02–0.04 N
-(stiffness), 0.06 N (local dynamic, where the hand also turns the handle at 4 Hz) and 0.008–0.018 N
-(free space, against 0.017–0.022 N).
+(stiffness), 0.06 N (local dynamic) and 0.008–0.018 N (free space, against 0.017–0.022 N); holding the drives at
+rest in the replay (:mod:`.drive_rest`) then brings stiffness to 0.0035–0.019 N and local dynamic to 0.007–0.009 N.
 """
 
 from __future__ import annotations

@@ -147,7 +147,10 @@ class DiscrepancyFile(_M):
         default_factory=dict, description="Per force trial id, what the path driving the twin came from: motion "
         "capture below the crossover and the handle accelerometer above it, or motion capture alone (no "
         "handle_accel stream, or more than half of the trial's rows near readings at the accelerometer's range).")
-    settings: dict[str, float]
+    settings: dict[str, float] = Field(description="The workflow's constants, each named with its unit (_hz, _s, _rad; "
+                                       "the statistics' thresholds are plain numbers): the hand path's filters and "
+                                       "margins, the replay's rest detection, the residual's low-pass and simulation "
+                                       "rate, the acceptance thresholds (discrepancy README).")
     files: dict[str, str] = Field(default_factory=dict, description="Outputs written beside this file.")
 
     def gap_summary(self) -> str:

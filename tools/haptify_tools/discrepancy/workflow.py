@@ -24,6 +24,7 @@ from haptify.storage import atomic_write_json, open_session, replace_folder_atom
 from haptify.surface import planar_stats
 
 from haptify_tools.discrepancy import data as dt
+from haptify_tools.discrepancy import drive_rest
 from haptify_tools.discrepancy import hand_path as hp
 from haptify_tools.discrepancy import stats as st
 from haptify_tools.discrepancy import workspace as ws
@@ -237,7 +238,9 @@ def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial]
         hand_path={tr.trial_id: tr.path_source for tr in trials},
         settings={"path_crossover_hz": hp.PATH_CROSSOVER_HZ, "pose_cutoff_hz": hp.POSE_CUTOFF_HZ,
                   "free_space_pose_cutoff_hz": hp.POSE_CUTOFF_BY_PROTOCOL_HZ["free_space"],
-                  "orientation_cutoff_hz": hp.ORIENTATION_CUTOFF_HZ, "residual_cutoff_hz": dt.RESIDUAL_CUTOFF_HZ,
+                  "orientation_cutoff_hz": hp.ORIENTATION_CUTOFF_HZ, "clip_margin_s": hp.CLIP_MARGIN_S,
+                  "gap_margin_s": hp.GAP_MARGIN_S, "rest_window_s": drive_rest.REST_WINDOW_S,
+                  "rest_range_rad": drive_rest.REST_RANGE_RAD, "residual_cutoff_hz": dt.RESIDUAL_CUTOFF_HZ,
                   "sim_rate_hz": dt.SIM_RATE_HZ, "bic_min": st.BIC_MIN, "p_max": st.P_MAX,
                   "validation_min": st.VALIDATION_MIN, "structure_share": st.STRUCTURE_SHARE})
 
