@@ -6,8 +6,9 @@ speed only to 1–3 mrad/s (the blend of motion capture and accelerometer, ``han
 While the hand moves, no drive stays that slow for long; but protocols hold some drives still for seconds — the
 local-dynamic strokes in a vertical plane through the base axis leave the base drive at rest, a stiffness press
 leaves it still too — and along the measured path such a drive jitters around zero, its friction flipping
-between ±τ_c. On simulated Touch sessions that jitter was nearly all of the floor: 0.06 N of the local-dynamic
-trial's held-out gap (0.017–0.034 N with the resting drives held) and 0.035 N of the stiffness trial's (0.010 N).
+between ±τ_c. On simulated Touch sessions that jitter was nearly all of the floor (the true twin's own held-out
+gap): 0.06 N in the local-dynamic trial (0.007–0.009 N with the resting drives held; 0.008 N along the true path)
+and 0.035 N in a stiffness trial (0.010 N).
 
 A drive axis (``θ = C·q``, the twin's coupling) is at rest in every window of :data:`REST_WINDOW_S` in which it
 turns less than :data:`REST_RANGE_RAD`; over each run of such windows it is held at its mean
