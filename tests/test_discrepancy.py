@@ -179,6 +179,20 @@ def test_nothing_is_named_without_a_hidden_effect_in_20_seeds(tmp_path):
     assert sum(s.structure["structured"] for s in named) <= 1
 
 
+def test_a_hidden_sensor_bias_is_reported_not_observable_and_nothing_is_named(tmp_path):
+    """Large constant sensor offsets (2 N, 0.05 N·m, 0.5 m/s², 3× the preset's) in the measured session, a twin
+    without them: the session's handle calibration removes them, so the force residual cannot see them — nothing
+    is named and the output says why."""
+    truth = preset("touch")
+    for name, value in (("handle_force_N", [2.0, -1.5, 2.5]), ("handle_torque_Nm", [0.05, -0.04, 0.03]),
+                        ("accel_m_per_s2", [0.5, -0.4, 0.6])):
+        truth = set_param(truth, f"sensor.bias.{name}", value)
+    result, _ = run_discrepancy(_session(tmp_path, truth, 9), disable(truth, "sensor.bias"), None)
+    assert result.accepted == []
+    assert result.verdict == "no discrepancy"
+    assert "calibration" in result.not_observable["sensor.bias"]
+
+
 def test_an_effect_outside_the_library_is_reported_unexplained_not_misnamed(tmp_path):
     """A link mass error (no effect id models it) with the friction candidates on offer."""
     twin = disable(disable(disable(preset("touch"), "friction.coulomb"), "friction.viscous"), "friction.stribeck")
