@@ -59,7 +59,8 @@ def _arm_path(seed=0):
     rng = np.random.default_rng(seed)
     q = np.zeros((len(T), 3))
     still = (T >= 3.0) & (T < 9.0)
-    q[:, 0] = np.where(still, 0.1, 0.1 + 0.2 * np.sin(0.5 * (T - 3.0)) * (T < 3.0) + 0.2 * np.sin(0.5 * (T - 9.0)) * (T >= 9.0))
+    turning = 0.2 * np.sin(0.5 * (T - np.where(T < 3.0, 3.0, 9.0)))      # slow turns into and out of the rest
+    q[:, 0] = np.where(still, 0.1, 0.1 + turning)
     q[:, 0] += still * rng.normal(0.0, 1e-4, len(T))
     q[:, 1] = 0.8 + 0.15 * np.sin(2 * np.pi * 3.0 * T)
     q[:, 2] = -1.6 + 0.15 * np.cos(2 * np.pi * 3.0 * T)

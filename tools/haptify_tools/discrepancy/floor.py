@@ -1,18 +1,18 @@
 """The gap and its floor (issue 8, step 4 "show"): how far the twin is from the measurement on held-out
 rows, and how far the right twin would still be.
 
-No twin closes the whole gap. The hand path the twin is driven along is rebuilt from motion capture and
-the handle accelerometer (:mod:`.hand_path`) — its velocity is off by a fraction of a mm/s, and the twin's
-friction is not linear in it — and the sensors add noise: on simulated Touch sessions the twin that
-generated the data still leaves ≈ 0.004 N on the figure eight, 0.008–0.018 N in free space, 0.0035–0.019 N
-in stiffness presses and 0.007–0.009 N in the local-dynamic trial (its drives at rest held, :mod:`.drive_rest`). The floor is measured, not assumed:
-the updated twin plays the measured session's protocols through the virtual rig
-(:func:`haptify_tools.twin.simulate.simulate_dossier`, one trial per protocol at the measured duration, a fixed seed), the replay is analysed exactly like the
-measured session, and its held-out gap is the floor. It is the floor under the simulator's own examiner
-and rig, and along the examiner's paths, not the measured ones: the floor depends on the path (how often
-and how slowly the hand reverses), and between simulated sessions of the same twin it varies by a factor of
-two to five (0.008–0.018 N in 16 s of free space, 0.0035–0.019 N in 12 s of stiffness presses). It is reported beside the gap as the method's
-resolution, never used to accept an effect.
+No twin closes the whole gap. The hand path the twin is driven along is rebuilt from motion capture and the handle
+accelerometer (:mod:`.hand_path`) — its velocity is off by a fraction of a mm/s, and the twin's friction is not
+linear in it — and the sensors add noise: on simulated Touch sessions the twin that generated the data still leaves
+≈ 0.004 N on the figure eight, 0.008–0.018 N in free space, 0.0035–0.019 N in stiffness presses and 0.007–0.009 N
+in the local-dynamic trial (its drives at rest held, :mod:`.drive_rest`). The floor is measured, not assumed: the
+updated twin plays the measured session's protocols through the virtual rig
+(:func:`haptify_tools.twin.simulate.simulate_dossier`, one trial per protocol at the measured duration, a fixed
+seed), the replay is analysed exactly like the measured session, and its held-out gap is the floor. It is the floor
+under the simulator's own examiner and rig, and along the examiner's paths, not the measured ones: the floor
+depends on the path (how often and how slowly the hand reverses), and between simulated sessions of the same twin
+it varies by a factor of two to five (0.008–0.018 N in 16 s of free space, 0.0035–0.019 N in 12 s of stiffness
+presses). It is reported beside the gap as the method's resolution, never used to accept an effect.
 """
 
 from __future__ import annotations
