@@ -14,16 +14,15 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from haptify import validation
+from haptify import storage, validation
 from haptify.errors import HaptifyError
 from haptify.kinematics import RANGE_LATTICE_POINTS as LIMIT_LATTICE_POINTS
 from haptify.kinematics import configurations_from_unit
 from haptify.session_format import Kinematics
+from haptify.storage import CSV_CHUNK_BYTES, check_csv_grammar
 from haptify.validation import (
     ALLOWED_VALUES,
-    CSV_CHUNK_BYTES,
     NORMAL_NORM_TOLERANCE,
-    check_csv_grammar,
     kinematics_findings,
     validate_session,
 )
@@ -269,7 +268,7 @@ def _grammar(tmp_path: Path, text: str, columns=("t", "x")):
 @pytest.mark.parametrize("text", ["t,x\n0,1\n1,NaN\n", "t,x\n0,1\n1,2", "t,x\r\n0,1\r\n1,-2.5e-3\r\n", "t,x\n0,1.\n1,1E+5\n",
                                   "t,x\n-0,-1.e-300\n"])
 def test_csv_lines_of_the_grammar_pass(tmp_path: Path, monkeypatch, text: str, chunk: int):
-    monkeypatch.setattr(validation, "CSV_CHUNK_BYTES", chunk)
+    monkeypatch.setattr(storage, "CSV_CHUNK_BYTES", chunk)
     assert _grammar(tmp_path, text) is None
 
 
@@ -280,7 +279,7 @@ def test_csv_lines_of_the_grammar_pass(tmp_path: Path, monkeypatch, text: str, c
     ("t,x\n0,1.2.3\n", 2, "x", "1.2.3"), ("t,x\n0,1\n\n1,2\n", 3, None, "a blank line"), ("t,x\n0,1\n1,2\n\n", 4, None, "a blank line"),
     ("t,x\n0,1,2\n", 2, None, 3), ("t,x\n0,1\r1,2\n", 2, None, 3), ("t,x\r\n0,1\r\n1,2\r\r\n", 3, "x", "2\r")])
 def test_csv_lines_outside_the_grammar_are_e112_naming_line_and_column(tmp_path: Path, monkeypatch, text, line, column, found, chunk):
-    monkeypatch.setattr(validation, "CSV_CHUNK_BYTES", chunk)
+    monkeypatch.setattr(storage, "CSV_CHUNK_BYTES", chunk)
     f = _grammar(tmp_path, text)
     assert (f.code, f.column, f.found) == ("E112", column, found)
     assert f"line {line} " in f.message
@@ -295,7 +294,7 @@ def test_a_lone_carriage_return_line_end_is_e112(tmp_path: Path):
        crlf=st.booleans(), last_eol=st.booleans(), chunk=st.sampled_from([5, 17, CSV_CHUNK_BYTES]))
 def test_every_shortest_round_trip_float_and_nan_passes(tmp_path: Path, monkeypatch, values, crlf, last_eol, chunk):
     """What spec §3.2 tells writers to print (Python's repr, NaN as 'NaN') always satisfies the grammar."""
-    monkeypatch.setattr(validation, "CSV_CHUNK_BYTES", chunk)
+    monkeypatch.setattr(storage, "CSV_CHUNK_BYTES", chunk)
     eol = "\r\n" if crlf else "\n"
     rows = [",".join("NaN" if math.isnan(v) else repr(v) for v in row) for row in values]
     text = "a,b,c" + eol + eol.join(rows) + (eol if last_eol else "")

@@ -12,6 +12,7 @@ import hashlib
 import json
 import math
 import os
+import re
 import shutil
 import tempfile
 import uuid
@@ -106,6 +107,22 @@ class _NonFinite(ValueError):
     pass
 
 
+class _DuplicateKey(ValueError):
+    def __init__(self, key: str) -> None:
+        super().__init__(key)
+        self.key = key
+
+
+def _unique_members(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object's members; a name given twice is an error (spec §3.1), not a silent overwrite."""
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise _DuplicateKey(key)
+        out[key] = value
+    return out
+
+
 def _reject_constant(name: str) -> float:
     raise _NonFinite(f"{name} is not a JSON number")
 
@@ -118,7 +135,8 @@ def _finite_float(text: str) -> float:
 
 
 def parse_json_file(path: Path, code: str, label: str) -> Any:
-    """Parse a JSON file strictly: UTF-8, no NaN/Infinity literals, no numbers that overflow (spec §3.1, §4.3)."""
+    """Parse a JSON file strictly: UTF-8, no NaN/Infinity literals, no numbers that overflow, no member
+    name twice in one object (E117) (spec §3.1, §4.3)."""
     try:
         text = path.read_bytes().decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -127,10 +145,13 @@ def parse_json_file(path: Path, code: str, label: str) -> Any:
     except OSError as exc:
         raise HaptifyError(Finding(code, f"{label} cannot be read: {exc.strerror}", file=label)) from None
     try:
-        return json.loads(text, parse_constant=_reject_constant, parse_float=_finite_float)
+        return json.loads(text, parse_constant=_reject_constant, parse_float=_finite_float, object_pairs_hook=_unique_members)
     except json.JSONDecodeError as exc:
         raise HaptifyError(Finding(code, f"{label} is not well-formed JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})",
                                    file=label, expected="JSON", found=text[max(0, exc.pos - 20): exc.pos + 20])) from None
+    except _DuplicateKey as exc:
+        raise HaptifyError(Finding("E117", f"{label} names the member {_short_text(exc.key)!r} twice in one object", file=label,
+                                   expected="unique member names", found=_short_text(exc.key))) from None
     except _NonFinite as exc:
         raise HaptifyError(Finding(code, f"{label} is not well-formed JSON: {exc}", file=label, expected="a finite JSON number")) from None
     except RecursionError:
@@ -249,21 +270,28 @@ class SessionFolder:
 
 
 def read_table(path: Path, fmt: str, columns: list[str], *, label: str) -> pd.DataFrame:
-    """Read a stream file as float64 columns; unreadable files raise E112, a wrong CSV header E211.
-    Spec §3.2."""
+    """Read a stream file as float64 columns (spec §3.2); see :func:`read_stream_file` for the codes."""
+    return read_stream_file(path, fmt, columns, label=label)[0]
+
+
+def read_stream_file(path: Path, fmt: str, columns: list[str], *, label: str) -> tuple[pd.DataFrame, str]:
+    """Read a stream file once: its table as float64 columns and the sha256 of its bytes (spec §3.2, §3.4).
+
+    The bytes are hashed as they are read, so verifying a checksum costs no second pass. A CSV file is
+    checked against the grammar of §3.2 in bounded memory before it is parsed (a header or a line
+    longer than :func:`csv_line_limit` is E112 at once). Unreadable files raise E112, a wrong CSV
+    header E211, a column that is not float64 E212.
+    """
     try:
         if fmt == "parquet":
-            table = pq.read_table(path)
+            data = path.read_bytes()
+            digest = hashlib.sha256(data).hexdigest()
             # the columns are the data (spec §3.2); pandas' own metadata is neither needed nor trusted
-            frame = table.to_pandas(ignore_metadata=True)
+            frame = pq.read_table(pa.BufferReader(data)).to_pandas(ignore_metadata=True)
+            del data
         else:
-            with open(path, encoding="utf-8") as fh:
-                header = fh.readline().rstrip("\r\n").split(",")
-            if header != columns:
-                raise fail("E211", f"CSV header of {label!r} differs from the declared columns", file=label,
-                           expected=columns, found=header)
-            frame = pd.read_csv(path, dtype="float64", na_values=["NaN"],
-                                keep_default_na=False, engine="c")
+            digest = check_csv_grammar(path, columns, label)
+            frame = pd.read_csv(path, dtype="float64", na_values=["NaN"], keep_default_na=False, engine="c")
     except HaptifyError:
         raise
     except (OSError, pa.ArrowException, ValueError, pd.errors.ParserError, UnicodeDecodeError) as exc:
@@ -272,7 +300,104 @@ def read_table(path: Path, fmt: str, columns: list[str], *, label: str) -> pd.Da
         if frame[name].dtype != np.float64:
             raise fail("E212", f"column {name!r} of {label!r} is {frame[name].dtype}, not float64", file=label,
                        column=str(name), expected="float64", found=str(frame[name].dtype))
-    return frame
+    return frame, digest
+
+
+# --- CSV grammar (spec §3.2) --------------------------------------------------------------------------
+
+CSV_FIELD = re.compile(rb"(?<![^,\n])(?:NaN|-?[0-9]+(?:\.[0-9]*)?(?:[eE][+-]?[0-9]+)?)(?![^,\r\n])")
+CSV_FIELD_TEXT = re.compile(r"NaN|-?[0-9]+(?:\.[0-9]*)?(?:[eE][+-]?[0-9]+)?")
+CSV_CHUNK_BYTES = 8 * 2**20
+CSV_FIELD_MAX_CHARS = 32  # the longest field §3.2 allows: 17 significant digits, sign, point, exponent
+
+
+def csv_line_limit(columns: list[str]) -> int:
+    """The longest line (bytes, line end included) a CSV stream with ``columns`` can hold (spec §3.2):
+    ``n`` fields of at most :data:`CSV_FIELD_MAX_CHARS`, ``n − 1`` commas and CR LF — or the header's
+    names, commas and line end when they are longer."""
+    n = len(columns)
+    names = sum(len(c.encode("utf-8")) for c in columns)
+    return max(names, CSV_FIELD_MAX_CHARS * n) + n + 1
+
+
+def check_csv_grammar(path: Path, columns: list[str], label: str) -> str:
+    r"""Check a CSV stream against the grammar of spec §3.2 and return the sha256 of its bytes.
+
+    The header must list ``columns`` (E211). Every line after it holds exactly ``len(columns)`` fields,
+    each ``NaN`` or a decimal number ``-?[0-9]+(\.[0-9]*)?([eE][+-]?[0-9]+)?`` — no sign '+', quotes,
+    spaces, empty fields, ``inf`` or blank lines — and ends in ``\n`` or ``\r\n`` (the last line's end
+    optional); the first line that does not is E112. The file is scanned in chunks of whole lines (every
+    valid field is replaced by ``x``, so a sound line reads ``x,x,…,x``); a line longer than
+    :func:`csv_line_limit` is E112 as soon as it is seen, so memory stays bounded whatever the content.
+    """
+    sound = b",".join([b"x"] * len(columns))
+    allowed = {sound, sound + b"\r"}
+    limit = csv_line_limit(columns)
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        header = fh.readline(limit + 1)
+        digest.update(header)
+        _check_csv_header(header, columns, label, limit)
+        line_no, rest = 1, b""
+        while True:
+            block = fh.read(CSV_CHUNK_BYTES)
+            digest.update(block)
+            data = rest + block
+            if block:
+                cut = data.rfind(b"\n") + 1
+                data, rest = data[:cut], data[cut:]
+                if len(rest) > limit:
+                    long_line = line_no + data.count(b"\n") + 1
+                    raise fail("E112", f"line {long_line} of {label!r} is longer than the {limit} bytes "
+                               f"a line of {len(columns)} numbers can take", file=label,
+                               expected=f"at most {limit} bytes per line", found=f"more than {len(rest)} bytes")
+            else:
+                rest = b""
+            if data:
+                lines = CSV_FIELD.sub(b"x", data).split(b"\n")
+                if data.endswith(b"\n"):
+                    lines.pop()
+                if not set(lines) <= allowed:
+                    k = next(i for i, line in enumerate(lines) if line not in allowed)
+                    _csv_line_error(data.split(b"\n")[k], line_no + k + 1, columns, label)
+                line_no += len(lines)
+            if not block:
+                return digest.hexdigest()
+
+
+def _check_csv_header(header: bytes, columns: list[str], label: str, limit: int) -> None:
+    r"""The header line names exactly ``columns`` and ends in ``\n`` or ``\r\n`` (E211, E112; spec §3.2)."""
+    if len(header) > limit:
+        raise fail("E211", f"the header line of {label!r} is longer than the {limit} bytes its columns take", file=label,
+                   expected=columns, found=f"more than {limit} bytes")
+    body = header.removesuffix(b"\n").removesuffix(b"\r")
+    if b"\r" in body:
+        raise fail("E112", f"{label!r} ends a line with a lone carriage return", file=label,
+                   expected="lines ending in \\n or \\r\\n", found="\\r")
+    found = body.decode("utf-8", errors="replace").split(",")
+    if found != columns:
+        raise fail("E211", f"CSV header of {label!r} differs from the declared columns", file=label,
+                   expected=columns, found=[_short_text(f) for f in found[:len(columns) + 2]])
+
+
+def _csv_line_error(raw: bytes, line_no: int, columns: list[str], label: str) -> None:
+    """Raise E112 naming the line, the column and the first field of ``raw`` outside the grammar."""
+    text = raw.decode("utf-8", errors="replace").removesuffix("\r")
+    fields = text.split(",")
+    if text == "":
+        raise fail("E112", f"line {line_no} of {label!r} is blank", file=label, expected="one sample per line, no blank lines",
+                   found="a blank line")
+    if len(fields) != len(columns):
+        raise fail("E112", f"line {line_no} of {label!r} has {len(fields)} fields, not {len(columns)}", file=label,
+                   expected=len(columns), found=len(fields))
+    k = next((i for i, f in enumerate(fields) if not CSV_FIELD_TEXT.fullmatch(f)), 0)
+    raise fail("E112", f"line {line_no} of {label!r}: field {_short_text(fields[k])!r} is not a number as spec §3.2 writes it",
+               file=label, column=columns[k], expected="NaN or -?[0-9]+(.[0-9]*)?([eE][+-]?[0-9]+)?", found=_short_text(fields[k]))
+
+
+def _short_text(text: str) -> str:
+    """``text`` cut to 80 characters for a finding's ``found``."""
+    return text if len(text) <= 80 else text[:77] + "..."
 
 
 def open_session(path: str | os.PathLike) -> SessionFolder:

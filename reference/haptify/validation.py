@@ -19,7 +19,6 @@ import datetime
 import json
 import math
 import os
-import re
 import stat
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -28,6 +27,8 @@ from typing import Any, Callable, Iterable, Literal
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
 from jsonschema import Draft202012Validator
 from jsonschema.exceptions import ValidationError as SchemaError
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -56,7 +57,7 @@ from haptify.storage import (
     parse_json_file,
     pointer_of,
     pydantic_findings,
-    read_table,
+    read_stream_file,
     resolve_inside,
     sha256_file,
 )
@@ -284,64 +285,6 @@ def schema_findings(instance: Any, schema_name: str, code: str, label: str) -> l
     return out
 
 
-# --- CSV grammar (spec §3.2) --------------------------------------------------------------------------
-
-CSV_FIELD = re.compile(rb"(?<![^,\n])(?:NaN|-?[0-9]+(?:\.[0-9]*)?(?:[eE][+-]?[0-9]+)?)(?![^,\r\n])")
-CSV_FIELD_TEXT = re.compile(r"NaN|-?[0-9]+(?:\.[0-9]*)?(?:[eE][+-]?[0-9]+)?")
-CSV_CHUNK_BYTES = 8 * 2**20
-
-
-def check_csv_grammar(path: Path, columns: list[str], label: str) -> None:
-    r"""Raise E112 at the first CSV data line that breaks the grammar of spec §3.2.
-
-    Every line after the header holds exactly ``len(columns)`` fields, each ``NaN`` or a decimal number
-    ``-?[0-9]+(\.[0-9]*)?([eE][+-]?[0-9]+)?`` — no sign '+', quotes, spaces, empty fields, ``inf`` or
-    blank lines — and ends in ``\n`` or ``\r\n`` (the last line's end optional). The file is scanned in
-    chunks of whole lines: every valid field is replaced by ``x``, so a sound line reads ``x,x,…,x``.
-    """
-    sound = b",".join([b"x"] * len(columns))
-    allowed = {sound, sound + b"\r"}
-    with open(path, "rb") as fh:
-        header = fh.readline()  # its names were checked when the table was read (E211); here only its line end
-        if b"\r" in header.removesuffix(b"\n").removesuffix(b"\r"):
-            raise fail("E112", f"{label!r} ends a line with a lone carriage return", file=label,
-                       expected="lines ending in \\n or \\r\\n", found="\\r")
-        line_no, rest = 1, b""
-        while True:
-            block = fh.read(CSV_CHUNK_BYTES)
-            data = rest + block
-            if block:
-                cut = data.rfind(b"\n") + 1
-                data, rest = data[:cut], data[cut:]
-            else:
-                rest = b""
-            if data:
-                lines = CSV_FIELD.sub(b"x", data).split(b"\n")
-                if data.endswith(b"\n"):
-                    lines.pop()
-                if not set(lines) <= allowed:
-                    k = next(i for i, line in enumerate(lines) if line not in allowed)
-                    _csv_line_error(data.split(b"\n")[k], line_no + k + 1, columns, label)
-                line_no += len(lines)
-            if not block:
-                return
-
-
-def _csv_line_error(raw: bytes, line_no: int, columns: list[str], label: str) -> None:
-    """Raise E112 naming the line, the column and the first field of ``raw`` outside the grammar."""
-    text = raw.decode("utf-8", errors="replace").removesuffix("\r")
-    fields = text.split(",")
-    if text == "":
-        raise fail("E112", f"line {line_no} of {label!r} is blank", file=label, expected="one sample per line, no blank lines",
-                   found="a blank line")
-    if len(fields) != len(columns):
-        raise fail("E112", f"line {line_no} of {label!r} has {len(fields)} fields, not {len(columns)}", file=label,
-                   expected=len(columns), found=len(fields))
-    k = next((i for i, f in enumerate(fields) if not CSV_FIELD_TEXT.fullmatch(f)), 0)
-    raise fail("E112", f"line {line_no} of {label!r}: field {_short(fields[k])!r} is not a number as spec §3.2 writes it",
-               file=label, column=columns[k], expected="NaN or -?[0-9]+(.[0-9]*)?([eE][+-]?[0-9]+)?", found=_short(fields[k]))
-
-
 # --- the device's kinematic chain (spec §2.3) ------------------------------------------------------
 
 def kinematics_findings(kin: Kinematics, file: str, base: str) -> list[Finding]:
@@ -392,6 +335,26 @@ def _regular_file(path: Path, label: str, missing_code: str, missing_text: str, 
         raise HaptifyError(Finding("E113", f"{label!r} is {st.st_size} bytes, more than the {limit} bytes allowed", file=label,
                                    expected=f"at most {limit} bytes", found=st.st_size))
     return st.st_size
+
+
+def stream_size_limit(columns: int, rows: int, row_groups: int = 1) -> int:
+    """The largest plausible size (bytes) of a stream file with ``columns`` × ``rows`` declared values
+    and ``row_groups`` Parquet row groups (1 for CSV): min(8 GiB, 16 KiB + C · (1 KiB · G + 32 B · R)),
+    spec §4.2 (E113)."""
+    return min(STREAM_MAX_BYTES, STREAM_BYTES_BASE + columns * (STREAM_BYTES_PER_COLUMN * row_groups + STREAM_BYTES_PER_VALUE * rows))
+
+
+def _parquet_row_groups(path: Path, label: str, rows: int) -> int:
+    """The number of row groups a Parquet file's footer declares (E112 unreadable; E113 more row groups
+    than declared rows, since every row group but an empty file's holds a row; spec §4.2)."""
+    try:
+        groups = pq.read_metadata(path).num_row_groups
+    except (OSError, pa.ArrowException, ValueError) as exc:
+        raise HaptifyError(Finding("E112", f"{label!r} cannot be read as parquet: {exc}", file=label)) from None
+    if groups > max(1, rows):
+        raise HaptifyError(Finding("E113", f"{label!r} declares {groups} row groups for {rows} rows", file=label,
+                                   expected=f"at most {max(1, rows)} row groups", found=groups))
+    return max(1, groups)
 
 
 # --- the validator -------------------------------------------------------------------------------
@@ -756,18 +719,23 @@ class SessionValidator:
                         file=MANIFEST, pointer=f"{entry.pointer}/rate_hz", expected=spec["recommended_rate_hz"], found=s.rate_hz))
         # the file: path safety, existence, size, checksum, readability
         path = resolve_inside(self.root, s.file)
-        size_limit = min(STREAM_MAX_BYTES, STREAM_BYTES_BASE + len(declared) * (STREAM_BYTES_PER_COLUMN + STREAM_BYTES_PER_VALUE * s.rows))
-        _regular_file(path, label, "E110", f"stream file {label!r} does not exist", size_limit)
-        digest = sha256_file(path)
-        if digest != s.sha256:
-            add(Finding("E111", f"checksum of {label!r} does not match session.json", file=label, expected=s.sha256, found=digest))
-        table = read_table(path, s.format, declared, label=label)
+        missing = f"stream file {label!r} does not exist"
+        if s.format == "parquet":  # the footer says how many row groups the file may spend metadata on
+            _regular_file(path, label, "E110", missing, stream_size_limit(len(declared), s.rows, max(1, s.rows)))
+            groups = _parquet_row_groups(path, label, s.rows)
+            _regular_file(path, label, "E110", missing, stream_size_limit(len(declared), s.rows, groups))
+        else:
+            _regular_file(path, label, "E110", missing, stream_size_limit(len(declared), s.rows))
+        try:
+            table, digest = read_stream_file(path, s.format, declared, label=label)
+        except HaptifyError:
+            self._check_digest(s, sha256_file(path), add)
+            raise
+        self._check_digest(s, digest, add)
         if list(table.columns) != declared:
             add(Finding("E201", "the file's columns differ from the columns declared in session.json", file=label,
                         expected=declared, found=[str(c) for c in table.columns]))
             return
-        if s.format == "csv":
-            check_csv_grammar(path, declared, label)
         n = len(table)
         if n != s.rows:
             add(Finding("E208", f"{label!r} holds {n} rows, session.json declares {s.rows}", file=label, expected=s.rows, found=n))
@@ -777,6 +745,12 @@ class SessionValidator:
         if not names_ok or len(set(declared)) != len(declared):
             return  # the columns' meaning is unknown (E201/E107 above): data checks would mislead
         self._check_data(entry, table, add)
+
+    @staticmethod
+    def _check_digest(s: Stream, digest: str, add: Callable[[Finding], None]) -> None:
+        """The file's sha256 matches the manifest's (E111, spec §3.4)."""
+        if digest != s.sha256:
+            add(Finding("E111", f"checksum of {s.file!r} does not match session.json", file=s.file, expected=s.sha256, found=digest))
 
     def _known_entities(self, kind: str) -> set[str] | None:
         mocap = self.rig.motion_capture if self.rig is not None else None

@@ -306,6 +306,14 @@ def _csv_edit_line(kind: str, row: int, fn: Callable[[str], str]) -> Callable[[P
     return edit_line
 
 
+def _csv_nul_bytes(folder: Path) -> None:
+    """handle_pose's CSV file replaced by NUL bytes with no line end, as much as its declared rows allow."""
+    rel = stream_of(manifest(folder), "handle_pose")["file"]
+    path = folder / rel
+    path.write_bytes(b"\0" * path.stat().st_size * 4)
+    rehash(folder, "handle_pose")
+
+
 def _oversized(folder: Path) -> None:
     """A CSV handle_pose declared with 20 rows whose file is padded far beyond what 20 rows need."""
     rel = stream_of(manifest(folder), "handle_pose")["file"]
@@ -490,6 +498,12 @@ CASES: list[Case] = [
          _markers_nan(slice(5, 15), ["h2_x", "h2_y", "h2_z"]), extend=lambda w: add_markers_trial(w, ["h1", "h2"])),
     Case("wrong-frame", ["E209"], "handle_wrench is declared in frame 'world' instead of 'handle_ft_sensor'.",
          lambda f: edit(f, lambda m: stream_of(m, "handle_wrench").update(frame="world"))),
+    Case("manifest-duplicate-key", ["E117"], "session.json names the member 'date' twice at its top level.",
+         lambda f: _replace_text(f, MANIFEST, '"date": "2026-11-22",', '"date": "2026-11-22",\n  "date": "2026-11-23",')),
+    Case("device-file-duplicate-key", ["E117"], "device.json names the member 'dof' twice.",
+         lambda f: (_device_file({})(f), _replace_text(f, "device.json", '"dof": 6', '"dof": 6,\n  "dof": 3'))),
+    Case("csv-nul-bytes", ["E211"], "CSV session whose handle_pose file is NUL bytes with no line end (checksum updated).",
+         _csv_nul_bytes, fmt="csv"),
     Case("device-file-missing", ["E106"], "device refers to device.json, which is absent.", _device_file(None)),
     Case("device-file-escape", ["E108"], "device refers to '../device.json', outside the folder.", _device_file(None, "../device.json")),
     Case("device-file-invalid", ["E106"], "device.json gives dof as the string 'six'.", _device_file({"dof": "six"})),
