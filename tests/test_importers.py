@@ -69,7 +69,7 @@ def run_cli(argv: list[str], capsys) -> tuple[int, str, str]:
     parser.add_argument("--quiet", "-q", action="store_true")
     cmd_import.register(parser.add_subparsers(dest="command"))
     original = cli.build_parser
-    cli.build_parser = lambda: parser
+    cli.build_parser = lambda command=None: parser
     try:
         code = cli.main(argv)
     finally:

@@ -63,7 +63,7 @@ def test_plate_capacity_of_the_paper_plate():
 
 
 def _run(path, json_mode: bool = False) -> int:
-    return cmd_rig_check.run(argparse.Namespace(session=path, rig_check_json=json_mode), UI())
+    return cmd_rig_check.run(argparse.Namespace(session=path), UI(json_mode=json_mode))
 
 
 def test_rig_check_passes_a_good_rig(good, capsys):
@@ -92,13 +92,11 @@ def test_rig_check_skips_what_the_session_cannot_show(example_session, capsys):
     assert "SKIP  COP error" in out and "E310" in out
 
 
-def test_rig_check_plugin_parses_its_own_json_flag(good, capsys):
-    """``haptify rig-check SESSION --json`` (the plugin's parser, as the CLI registers it)."""
-    parser = argparse.ArgumentParser()
-    sub = parser.add_subparsers(dest="command")
-    cmd_rig_check.register(sub)
-    args = parser.parse_args(["rig-check", str(good), "--json"])
-    assert args.func(args, UI()) == 0
+def test_rig_check_takes_the_global_json_flag_after_the_command(good, capsys):
+    """``haptify rig-check SESSION --json``: the global flag where users put it (spec §0.5)."""
+    from haptify.cli import main
+
+    assert main(["rig-check", str(good), "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["ok"] is True and len(report["checks"]) == 10
 

@@ -63,17 +63,33 @@ def _json_default(obj: Any) -> Any:
     raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The ``haptify`` parser: ``--version``, ``--json``, ``--quiet`` and the plugin sub-commands (spec §0.5)."""
+GLOBAL_FLAGS = {"--json": "json", "--quiet": "quiet", "-q": "quiet"}  # accepted before or after the sub-command
+
+
+def command_names() -> list[str]:
+    """The sub-commands, from the entry-point metadata alone (nothing is imported)."""
+    return sorted({ep.name for ep in entry_points(group="haptify.commands")})
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``haptify`` parser: ``--version``, ``--json``, ``--quiet`` and the plugin sub-commands (spec §0.5).
+
+    Only ``command``'s plugin is imported and registered; the others are listed by name from the
+    entry-point metadata, so starting the command costs only what the command itself needs.
+    """
     parser = argparse.ArgumentParser(
         prog="haptify",
         description="Haptify: benchmark grounded force-feedback haptic devices from external measurements.",
+        epilog="Run 'haptify COMMAND --help' for a command's options.",
     )
     parser.add_argument("--version", action="store_true", help="print package, spec and schema versions")
-    parser.add_argument("--json", action="store_true", help="machine-readable output on stdout")
-    parser.add_argument("--quiet", "-q", action="store_true", help="print only errors")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    parser.add_argument("--json", action="store_true", help="machine-readable output on stdout (also after COMMAND)")
+    parser.add_argument("--quiet", "-q", action="store_true", help="print only errors (also after COMMAND)")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands")
     for ep in sorted(entry_points(group="haptify.commands"), key=lambda e: e.name):
+        if ep.name != command:
+            sub.add_parser(ep.name, help="", add_help=False)
+            continue
         try:
             register = ep.load()
         except Exception as exc:  # a broken plugin must not take the other commands down
@@ -81,6 +97,26 @@ def build_parser() -> argparse.ArgumentParser:
             continue
         register(sub)
     return parser
+
+
+def split_global_flags(argv: list[str]) -> tuple[list[str], dict[str, bool], str | None]:
+    """``argv`` without the global flags, the flags found (anywhere before ``--``), and the sub-command
+    named (the first argument that is one), spec §0.5."""
+    names = set(command_names())
+    rest: list[str] = []
+    flags = {"json": False, "quiet": False}
+    command = None
+    for k, arg in enumerate(argv):
+        if arg == "--":
+            rest.extend(argv[k:])
+            break
+        if arg in GLOBAL_FLAGS:
+            flags[GLOBAL_FLAGS[arg]] = True
+            continue
+        if command is None and arg in names:
+            command = arg
+        rest.append(arg)
+    return rest, flags, command
 
 
 def _register_broken(sub, name: str, target: str, exc: Exception) -> None:
@@ -105,12 +141,13 @@ def _print_findings(ui: UI, findings: list[Finding]) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``haptify`` console script; returns the process exit code.
     0, 1 or 2 as spec §0.5 defines."""
-    parser = build_parser()
+    argv, flags, command = split_global_flags(sys.argv[1:] if argv is None else list(argv))
+    parser = build_parser(command)
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # argparse already printed usage or --help
         return EXIT_OK if exc.code == 0 else EXIT_CANNOT_RUN
-    ui = UI(json_mode=args.json, quiet=args.quiet)
+    ui = UI(json_mode=flags["json"] or args.json, quiet=flags["quiet"] or args.quiet)
     if args.version:
         versions = {"package": PACKAGE_VERSION, "spec": SPEC_VERSION, "schema": SCHEMA_VERSION}
         if ui.json_mode:
@@ -123,9 +160,9 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_CANNOT_RUN
     try:
         return int(args.func(args, ui))
-    except HaptifyError as err:
+    except HaptifyError as err:  # exit 1 when the input was refused (spec §4.8), else 2
         _print_findings(ui, err.findings)
-        return EXIT_CANNOT_RUN
+        return err.exit_code
     except BrokenPipeError:  # e.g. `haptify … | head`: the reader left; not an error of ours
         sys.stderr.close()
         return EXIT_OK

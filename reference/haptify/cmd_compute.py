@@ -1,34 +1,50 @@
-"""``haptify compute SESSION [-o results.json] [--metrics ID,…]`` (spec §15.4)."""
+"""``haptify compute SESSION [-o results.json] [--metrics ID,…] [--params FILE]`` (spec §15.4).
+
+The session passes the validation gate first (§4.8): a session that does not validate gets no results
+file; with ``-o`` the findings document of §16.4.1 is written there instead and the exit status is 1,
+so the command is itself a conformance ``--cmd`` implementation.
+"""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
+from typing import Any
 
-from haptify.compute import compute_session, family_modules
-from haptify.errors import fail
-from haptify.storage import atomic_write_text, open_session
+from haptify.compute import ComputeContext, compute_session, family_modules
+from haptify.errors import Finding, HaptifyError, fail
+from haptify.gate import CheckedSession, as_result_warnings, open_checked_session
+from haptify.results import ResultsFile
+from haptify.storage import atomic_write_text, parse_json_file
 
 
 def register(sub) -> None:
     """Add the ``compute`` sub-command (spec §15.4)."""
-    p = sub.add_parser("compute", help="compute every metric the session's trials allow")
+    p = sub.add_parser("compute", help="compute every metric the session's trials allow",
+                       description="Validate the session (refused sessions exit 1 with the validator's codes) and compute "
+                                   "every metric its trials allow.")
     p.add_argument("session", type=Path)
-    p.add_argument("-o", "--output", type=Path, help="results file (default SESSION/../<id>.results.json)")
+    p.add_argument("-o", "--output", type=Path,
+                   help="results file (default SESSION/../<id>.results.json); a refused session writes "
+                        "{\"findings\": [...]} here (spec §16.4.1)")
     p.add_argument("--metrics", help="comma-separated metric ids (default: all)")
+    p.add_argument("--params", type=Path, metavar="FILE",
+                   help="case parameters, a JSON object (spec §16.2), e.g. {\"model\": \"<model file in the session>\"}")
     p.set_defaults(func=run)
 
 
 def run(args, ui) -> int:
-    """Compute the session's metrics and write ``results.json`` atomically (spec §15.4, §3.6)."""
-    session = open_session(args.session)
-    wanted = None
-    if args.metrics is not None:
-        wanted = [m.strip() for m in args.metrics.split(",") if m.strip()]
-        if not wanted:
-            raise fail("E903", "--metrics names no metric id", expected="ID[,ID…]", found=args.metrics)
+    """Validate, compute and write ``results.json`` atomically (spec §15.4, §4.8, §3.6)."""
+    try:
+        wanted = _wanted_metrics(args.metrics)
+        parameters = case_parameters(args.params)
+        session = open_checked_session(args.session)
+        results = _compute_checked(session, wanted, parameters, ui)
+    except HaptifyError as err:
+        if args.output is not None:
+            write_findings(args.output, err.findings)
+        raise
     out = args.output or args.session.parent / f"{session.session_id}.results.json"
-    with ui.progress("computing metrics", total=len(family_modules())) as advance:
-        results = compute_session(session, wanted, progress=advance)
     atomic_write_text(out, results.model_dump_json(indent=2) + "\n")
     if ui.json_mode:
         ui.emit_json(results.model_dump(mode="json"))
@@ -42,3 +58,47 @@ def run(args, ui) -> int:
         ui.warn(f"{w.code} warning: {w.message}")
     ui.say(f"wrote {out}")
     return 0
+
+
+def _wanted_metrics(text: str | None) -> list[str] | None:
+    if text is None:
+        return None
+    wanted = [m.strip() for m in text.split(",") if m.strip()]
+    if not wanted:
+        raise fail("E903", "--metrics names no metric id", expected="ID[,ID…]", found=text)
+    return wanted
+
+
+def case_parameters(path: Path | None) -> dict[str, Any]:
+    """The case parameters of spec §16.2 from a JSON file: an object (E903 otherwise)."""
+    if path is None:
+        return {}
+    if not path.is_file():
+        raise fail("E903", f"--params file {str(path)!r} does not exist", file=str(path), expected="a JSON file", found=None)
+    params = parse_json_file(path, "E903", str(path))
+    if not isinstance(params, dict):
+        raise fail("E903", f"--params file {str(path)!r} is not a JSON object", file=str(path),
+                   expected="a JSON object", found=type(params).__name__)
+    return params
+
+
+def _compute_checked(session: CheckedSession, wanted: list[str] | None, parameters: dict[str, Any], ui) -> ResultsFile:
+    """Compute on a gated session, then finish its validation (spec §4.8): the streams no metric read
+    are checked too, so a result exists only for a session that validates whole. A coded failure of the
+    computation is reported as the session's refusal when the session turns out invalid."""
+    ctx = ComputeContext(session=session, parameters=parameters)
+    with ui.progress("computing metrics", total=len(family_modules()) + 1) as advance:
+        try:
+            results = compute_session(session, wanted, progress=advance, ctx=ctx)
+        except HaptifyError:
+            session.finish()
+            raise
+        validation_warnings = session.finish()
+        advance(1)
+    results.warnings = as_result_warnings(validation_warnings) + results.warnings
+    return results
+
+
+def write_findings(path: Path, findings: list[Finding]) -> None:
+    """The findings document of spec §16.4.1, written atomically."""
+    atomic_write_text(path, json.dumps({"findings": [f.to_dict() for f in findings]}, indent=2) + "\n")

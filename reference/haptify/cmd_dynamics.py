@@ -25,7 +25,8 @@ from haptify.local_dynamics import (
     trial_data,
     training_trial,
 )
-from haptify.storage import open_session, write_atomically
+from haptify.gate import require_valid_session
+from haptify.storage import write_atomically
 
 
 def register(sub) -> None:
@@ -62,7 +63,7 @@ def _check_free(paths: list[Path | None], overwrite: bool) -> None:
 def run_fit(args, ui) -> int:
     """Fit and write the parameter file (and .mat); prints the training RMS errors (N and N·m; spec §11.8)."""
     _check_free([args.output, args.mat], args.overwrite)
-    session = open_session(args.session)
+    session, _ = require_valid_session(args.session)
     trial_id = args.trial or training_trial(session).id
     session.trial(trial_id)
     model, _ = fit_trial(session, trial_id)
@@ -85,7 +86,7 @@ def run_predict(args, ui) -> int:
     Units s, N, N·m; spec §11.8."""
     _check_free([args.output], args.overwrite)
     model = load_model(args.model)
-    session = open_session(args.session)
+    session, _ = require_valid_session(args.session)
     trial_id = args.trial or training_trial(session).id
     session.trial(trial_id)
     data = trial_data(session, trial_id, model.sample_rate_hz)

@@ -8,7 +8,7 @@ from pathlib import Path
 from haptify.cmd_compare import load_results
 from haptify.compute import ComputeContext, compute_session, family_modules
 from haptify.errors import fail
-from haptify.storage import open_session
+from haptify.gate import as_result_warnings, require_valid_session
 from haptify.report import write_report
 
 
@@ -29,7 +29,7 @@ def run(args, ui) -> int:
     if args.wav_scale is not None and not (math.isfinite(args.wav_scale) and args.wav_scale > 0):
         # 0 silently meant "the default", a negative scale inverted the audio and NaN wrote NaN samples
         raise fail("E903", "--wav-scale must be a positive amplitude in m/s^2", expected="> 0", found=args.wav_scale)
-    session = open_session(args.session)
+    session, validation_warnings = require_valid_session(args.session)
     ctx = ComputeContext(session=session)
     if args.results:
         results = load_results(args.results)
@@ -39,6 +39,7 @@ def run(args, ui) -> int:
     else:
         with ui.progress("computing metrics", total=len(family_modules())) as advance:
             results = compute_session(session, progress=advance, ctx=ctx)
+        results.warnings = as_result_warnings(validation_warnings) + results.warnings
     out = write_report(ctx, results, args.output, wav_scale=args.wav_scale, overwrite=args.overwrite)
     ui.say(f"wrote {out / 'index.html'}")
     ui.emit_json({"report": str(out / "index.html")})

@@ -10,22 +10,19 @@ from pathlib import Path
 
 from haptify.compute import ComputeContext
 from haptify.rig_checks import check_rig
-from haptify.storage import open_session
+from haptify.gate import require_valid_session
 
 
 def register(sub) -> None:
     """Add the ``rig-check`` sub-command (spec §14.8)."""
     p = sub.add_parser("rig-check", help="check the rig against the paper's requirements (Table I, Appendix)")
     p.add_argument("session", type=Path)
-    p.add_argument("--json", dest="rig_check_json", action="store_true", help="machine-readable output on stdout")
     p.set_defaults(func=run)
 
 
 def run(args, ui) -> int:
     """Print (or emit as JSON) one line per rig check; exit 1 when any check FAILs (spec §14.8)."""
-    if getattr(args, "rig_check_json", False):
-        ui.json_mode = True
-    session = open_session(args.session)
+    session, _ = require_valid_session(args.session)
     checks = check_rig(ComputeContext(session=session))
     failed = [c for c in checks if c.status == "FAIL"]
     if ui.json_mode:

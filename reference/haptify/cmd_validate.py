@@ -8,9 +8,10 @@ the session is valid (warnings allowed), 1 when it is invalid, 2 when validation
 from __future__ import annotations
 
 import argparse
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from haptify.validation import ValidationReport, SessionValidator
+if TYPE_CHECKING:  # the validator (numpy, pandas, Arrow) is imported when the command runs, not for --help
+    from haptify.validation import ValidationReport
 
 
 def register(subparsers: Any) -> None:
@@ -20,15 +21,16 @@ def register(subparsers: Any) -> None:
         "validate", help="check a session folder against the Haptify spec",
         description="Check a session folder (session.json and its stream files) against the Haptify spec and "
                     "report every problem, grouped by trial and file. Exit code: 0 valid (warnings allowed), "
-                    "1 invalid, 2 could not run.")
+                    "1 invalid, 2 could not run. --json (before or after the sub-command) prints the report as JSON "
+                    "(validation-report.schema.json).")
     parser.add_argument("session", metavar="SESSION", help="the session folder")
-    parser.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
-                        help="print the report as JSON (validation-report.schema.json)")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace, ui: Any) -> int:
     """Validate ``args.session``; print the report; return the exit code (spec §4.6)."""
+    from haptify.validation import SessionValidator
+
     validator = SessionValidator(args.session)
     validator.check_manifest()
     with ui.progress(f"validating {validator.stream_count} streams", total=validator.stream_count) as advance:

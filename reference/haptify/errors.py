@@ -82,7 +82,10 @@ class Finding:
 
 
 class HaptifyError(Exception):
-    """A coded failure that stops a command; holds the findings that explain it (spec §0.4)."""
+    """A coded failure that stops a command; holds the findings that explain it (spec §0.4).
+    ``exit_code`` is the command's exit status (§0.5): 2, the command could not run."""
+
+    exit_code = 2
 
     def __init__(self, *findings: Finding) -> None:
         if not findings:

@@ -360,7 +360,7 @@ def _parquet_row_groups(path: Path, label: str, rows: int) -> int:
 # --- the validator -------------------------------------------------------------------------------
 
 @dataclass
-class _StreamEntry:
+class StreamEntry:
     trial: str | None
     pointer: str
     stream: Stream
@@ -400,9 +400,10 @@ class SessionValidator:
         self.root = Path(path)
         self.report = ValidationReport(session=str(path))
         self.raw: Any = None
+        self.manifest: Session | None = None  # the parsed session.json, when it validates whole
         self.rig: Rig | None = None
         self.trials: list[tuple[int, dict, Trial | None]] = []
-        self.entries: list[_StreamEntry] = []
+        self.entries: list[StreamEntry] = []
         self.offsets: dict[str, float] = {}
         self._manifest_ok = False
 
@@ -471,6 +472,7 @@ class SessionValidator:
                 self.add_all(pydantic_findings(exc, "E104", MANIFEST))
                 manifest = None
             if manifest is not None:
+                self.manifest = manifest
                 self.rig = manifest.rig
                 self.trials = [(i, raw["trials"][i], t) for i, t in enumerate(manifest.trials)]
                 self.offsets = self._offsets(manifest.calibration)
@@ -512,7 +514,7 @@ class SessionValidator:
             for j, s in enumerate(raw_streams):
                 stream = s if isinstance(s, Stream) else _try(Stream, s)
                 if stream is not None:
-                    self.entries.append(_StreamEntry(trial_id, f"/trials/{index}/streams/{j}", stream))
+                    self.entries.append(StreamEntry(trial_id, f"/trials/{index}/streams/{j}", stream))
 
     def _check_device(self) -> None:
         dev = self.raw.get("device")
@@ -670,15 +672,27 @@ class SessionValidator:
     def check_streams(self, advance: Callable[[int], Any] | None = None) -> None:
         """Check every stream's file and data, then the time overlap per trial (spec §4.3.5–4.3.6)."""
         for entry in self.entries:
-            found: list[Finding] = []
-            raised = _collect(lambda: self._check_stream(entry, found.append), entry.stream.file)
-            self.add_all(found + raised, entry.trial)
-            self.report.streams_checked += 1
+            self.check_stream(entry)
             if advance is not None:
                 advance(1)
+        self.check_overlap()
+
+    def check_stream(self, entry: StreamEntry) -> pd.DataFrame | None:
+        """Check one stream's file and data (spec §4.3.5) and return its table as read (stream clock),
+        or None when the file could not be read; the findings go into the report."""
+        found: list[Finding] = []
+        kept: list[pd.DataFrame] = []
+        raised = _collect(lambda: self._check_stream(entry, found.append, kept.append), entry.stream.file)
+        self.add_all(found + raised, entry.trial)
+        self.report.streams_checked += 1
+        return kept[0] if kept else None
+
+    def check_overlap(self) -> None:
+        """The last check, once every stream has been checked: time overlap per trial (spec §4.3.6)."""
         self._guard(self._check_overlap, file=MANIFEST)
 
-    def _check_stream(self, entry: _StreamEntry, add: Callable[[Finding], None]) -> None:
+    def _check_stream(self, entry: StreamEntry, add: Callable[[Finding], None],
+                      keep: Callable[[pd.DataFrame], Any] = lambda table: None) -> None:
         s, label = entry.stream, entry.stream.file
         spec = kind_table(s.kind)
         # declared metadata: columns, units, entities, frame, rate
@@ -732,6 +746,7 @@ class SessionValidator:
             self._check_digest(s, sha256_file(path), add)
             raise
         self._check_digest(s, digest, add)
+        keep(table)
         if list(table.columns) != declared:
             add(Finding("E201", "the file's columns differ from the columns declared in session.json", file=label,
                         expected=declared, found=[str(c) for c in table.columns]))
@@ -762,7 +777,7 @@ class SessionValidator:
             return {rb.name for rb in mocap.rigid_bodies}
         return None
 
-    def _check_data(self, entry: _StreamEntry, table: pd.DataFrame, add: Callable[[Finding], None]) -> None:
+    def _check_data(self, entry: StreamEntry, table: pd.DataFrame, add: Callable[[Finding], None]) -> None:
         """Time, rate, NaN policy, infinities, quaternions and sensor ranges of one stream (spec §4.4)."""
         s, label = entry.stream, entry.stream.file
         spec = kind_table(s.kind)
@@ -880,7 +895,7 @@ class SessionValidator:
 
     def _check_overlap(self) -> None:
         """The streams of one trial share a time interval of positive length (spec §4.3.5)."""
-        by_trial: dict[str | None, list[_StreamEntry]] = {}
+        by_trial: dict[str | None, list[StreamEntry]] = {}
         for e in self.entries:
             if e.span is not None:
                 by_trial.setdefault(e.trial, []).append(e)

@@ -20,6 +20,7 @@ import numpy as np
 from haptify.errors import HaptifyError
 from haptify.free_space import magnitude_stats
 from haptify.stiffness import fit_stiffness
+from haptify.gate import require_valid_session
 from haptify.storage import atomic_write_json, open_session, replace_folder_atomically
 from haptify.surface import planar_stats
 
@@ -269,7 +270,7 @@ def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | 
     with more than one, the floor's replay runs in its own process while the figures and the overlay are drawn. Returns the result and the selection
     (its simulations, for callers that draw or test).
     """
-    session = open_session(session_path)
+    session, _ = require_valid_session(session_path)
     sweeps = ws.load_sweeps(session)
     trials = dt.load_measured(session, required=not sweeps)
     sel = select_effects(twin, trials, max_effects=max_effects, log=log, workers=workers, sweeps=sweeps)

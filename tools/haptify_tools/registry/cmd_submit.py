@@ -24,6 +24,7 @@ import urllib.request
 from pathlib import Path
 
 from haptify.errors import Finding, HaptifyError, fail
+from haptify.gate import require_valid_session
 from haptify_tools.registry.bundle import build_bundle, pack, submission_id, unpack
 from haptify_tools.registry.checks import check_bundle, verify_bundle
 
@@ -104,6 +105,7 @@ def _run(args, ui) -> int:
     if not args.dry_run and not (args.registry and token):
         raise fail("E903", "uploading needs --registry and --token (or $" + TOKEN_ENV + ")",
                    expected="--registry URL --token TOKEN", found={"registry": args.registry, "token": bool(token)})
+    require_valid_session(args.session)  # an invalid session is never packed nor sent (spec §4.8)
     work = Path(tempfile.mkdtemp(prefix="haptify-submit-"))
     try:
         bundle, files = build_bundle(args.session, args.results, args.conformance, include_raw=args.include_raw,

@@ -24,7 +24,8 @@ from pathlib import Path
 from typing import IO
 
 from haptify.errors import fail
-from haptify.storage import MANIFEST, SessionFolder, open_session
+from haptify.gate import require_valid_session
+from haptify.storage import MANIFEST, SessionFolder
 from haptify_tools.viewer.recording import build, load_results
 
 LOOPBACK = "127.0.0.1"
@@ -149,11 +150,13 @@ def serve_web(rrd: str | os.PathLike, web_port: int, grpc_port: int | None = Non
 
 
 def open_session_or_dossier(path: str) -> SessionFolder:
-    """Open a session folder, or the ``session/`` inside a folder written by ``haptify simulate``."""
+    """Open a session folder, or the ``session/`` inside a folder written by ``haptify simulate``, through the
+    validation gate (spec §4.8): an invalid session is refused before anything is drawn."""
     root = Path(path)
     if not (root / MANIFEST).is_file() and (root / "session" / MANIFEST).is_file():
         root = root / "session"
-    return open_session(root)
+    session, _ = require_valid_session(root)
+    return session
 
 
 def run(args: argparse.Namespace, ui) -> int:

@@ -1,0 +1,86 @@
+"""The validation gate's cost (spec §4.8) and validate against a plain hash-and-decode script.
+
+Builds (or reuses) a simulated 3-repetition Touch dossier — the demo's — and measures, as process CPU
+time in fresh subprocesses (best of ``REPEATS``):
+
+- ``compute`` without the gate (open the session, compute every metric) and with it (validate each stream
+  as it is read, then the streams no metric read): target overhead ≤ 10 %;
+- ``validate`` against a plain script that only hashes and decodes every stream: target ≤ 1.3×.
+
+``python benchmarks/bench_gate.py [DOSSIER]``: DOSSIER is a ``haptify simulate`` output folder (default:
+simulated into a temporary folder).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import tempfile
+import textwrap
+from pathlib import Path
+
+REPEATS = 3
+
+PLAIN = textwrap.dedent("""
+    import hashlib, json, sys, time
+    from pathlib import Path
+    import pyarrow as pa, pyarrow.parquet as pq
+    root = Path(sys.argv[1]); start = time.process_time()
+    for trial in json.loads((root / "session.json").read_text())["trials"]:
+        for s in trial["streams"]:
+            data = (root / s["file"]).read_bytes()
+            assert hashlib.sha256(data).hexdigest() == s["sha256"]
+            pq.read_table(pa.BufferReader(data)).to_pandas()
+    print(time.process_time() - start)
+""")
+VALIDATE = textwrap.dedent("""
+    import sys, time
+    from haptify.validation import validate_session
+    start = time.process_time(); report = validate_session(sys.argv[1]); assert report.valid
+    print(time.process_time() - start)
+""")
+COMPUTE_UNGATED = textwrap.dedent("""
+    import sys, time
+    from haptify.compute import compute_session
+    from haptify.storage import open_session
+    start = time.process_time(); compute_session(open_session(sys.argv[1]))
+    print(time.process_time() - start)
+""")
+COMPUTE_GATED = textwrap.dedent("""
+    import sys, time
+    from haptify.compute import compute_session
+    from haptify.gate import open_checked_session
+    start = time.process_time(); session = open_checked_session(sys.argv[1]); compute_session(session); session.finish()
+    print(time.process_time() - start)
+""")
+
+
+def cpu_seconds(script: str, session: Path) -> float:
+    """Best process CPU time (s) of ``script`` on ``session`` over :data:`REPEATS` fresh interpreters."""
+    runs = [float(subprocess.run([sys.executable, "-c", script, str(session)], capture_output=True, text=True,
+                                 check=True).stdout.strip()) for _ in range(REPEATS)]
+    return min(runs)
+
+
+def dossier(arg: str | None, tmp: Path) -> Path:
+    if arg:
+        return Path(arg) / "session"
+    out = tmp / "touch"
+    subprocess.run([sys.executable, "-m", "haptify.cli", "simulate", "--preset", "touch", "--protocol", "all", "--reps", "3",
+                    "--seed", "1", "-o", str(out)], check=True, capture_output=True)
+    return out / "session"
+
+
+def main() -> int:
+    with tempfile.TemporaryDirectory() as tmp:
+        session = dossier(sys.argv[1] if len(sys.argv) > 1 else None, Path(tmp))
+        plain, validate = cpu_seconds(PLAIN, session), cpu_seconds(VALIDATE, session)
+        ungated, gated = cpu_seconds(COMPUTE_UNGATED, session), cpu_seconds(COMPUTE_GATED, session)
+    print(f"validate: {validate:.2f} s CPU; plain hash-and-decode: {plain:.2f} s; ratio {validate / plain:.2f} (target ≤ 1.3)")
+    print(f"compute without the gate: {ungated:.2f} s CPU; with it: {gated:.2f} s; "
+          f"overhead {100 * (gated / ungated - 1):+.1f} % (target ≤ 10 %)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
