@@ -167,9 +167,91 @@ def test_a_broken_suite_means_the_run_cannot_start(monkeypatch, capsys):
     # a case file that does not load raised out of main (a traceback, exit 1); it is exit 2 (spec §16.6)
     from haptify_conform import cli
 
-    def broken():
+    def broken(root=None):
         raise ValueError("cases/x.json: not a case file")
 
     monkeypatch.setattr(cli, "load_cases", broken)
     assert cli.main(["--python", "haptify_conform.reference:analyse"]) == 2
     assert "not a case file" in capsys.readouterr().err
+
+
+# --- conformance is not claimed by judging nothing or by skipping what must be answered (spec §16, §16.6) --
+
+def _verdict(cid: str, metric: str, status: str, level: str = "MUST"):
+    from haptify_conform.judge import Verdict
+
+    return Verdict(case_id=cid, metric=metric, status=status, level=level)
+
+
+@pytest.mark.parametrize("verdicts, conforms, must_skipped", [
+    ([("a", "m.x", "passed"), ("b", "m.y", "skipped")], True, []),                       # m.y left out of the claim
+    ([("a", "m.x", "passed"), ("b", "m.x", "skipped")], False, ["b"]),                   # m.x reported, one case skipped
+    ([("a", "m.x", "passed"), ("v", "validate", "skipped")], False, ["v"]),              # a negative case skipped
+    ([("a", "m.x", "passed"), ("b", "m.x", "skipped", "SHOULD")], True, []),             # a SHOULD case may be skipped
+    ([], False, []),                                                                     # nothing judged
+])
+def test_a_run_conforms_only_without_forbidden_skips(verdicts, conforms, must_skipped):
+    report = build_report(header("cmd", {}, "2026-01-01T00:00:00Z"), [_verdict(*v) for v in verdicts])
+    assert (report.summary.conforms, report.summary.must_skipped) == (conforms, must_skipped)
+    assert ("DOES NOT CONFORM" in to_table(report)) == (not conforms)
+
+
+def test_zero_selected_cases_cannot_start(capsys):
+    from haptify_conform.cli import main
+
+    assert main(["--python", "haptify_conform.reference:analyse", "--metric", "no.such.metric"]) == 2
+    assert "no case" in capsys.readouterr().err
+
+
+def test_no_suite_found_cannot_start(tmp_path, monkeypatch, capsys):
+    from haptify_conform.cli import main
+
+    monkeypatch.setenv("HAPTIFY_CONFORMANCE_SUITE", str(tmp_path))
+    assert main(["--python", "haptify_conform.reference:analyse"]) == 2
+    assert "no conformance suite" in capsys.readouterr().err
+    assert main(["--lint"]) == 2
+
+
+@pytest.mark.parametrize("template, says", [
+    ("/nonexistent/haptify-impl {session} {out}", "No such file"),
+    (f"{sys.executable} -c \"import sys; sys.stderr.write('boom: missing module'); sys.exit(127)\" {{session}} {{out}}",
+     "boom: missing module"),
+])
+def test_an_implementation_that_cannot_start_is_exit_2_with_its_stderr(template, says, capsys):
+    from haptify_conform.cli import main
+
+    assert main(["--cmd", template, "--metric", "workspace.spec_box_volume"]) == 2
+    assert says in capsys.readouterr().err
+
+
+def test_a_jsonl_program_that_cannot_start_is_exit_2(capsys):
+    from haptify_conform.cli import main
+
+    assert main(["--jsonl", "/nonexistent/haptify-impl", "--metric", "workspace.spec_box_volume"]) == 2
+    assert "cannot start" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_the_runner_installed_from_a_wheel_needs_and_finds_the_suite(tmp_path):
+    """Built as a regular wheel and installed alone: no cases beside the package, so the suite is named."""
+    import subprocess
+
+    repo = Path(__file__).resolve().parents[1]
+    wheels = tmp_path / "wheels"
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(wheels), str(repo)],
+                   check=True, capture_output=True)
+    target = tmp_path / "site"
+    (wheel,) = wheels.glob("haptify-*.whl")
+    subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(target), str(wheel)],
+                   check=True, capture_output=True)
+    env = {k: v for k, v in __import__("os").environ.items() if k != "HAPTIFY_CONFORMANCE_SUITE"}
+    env["PYTHONPATH"] = str(target)
+
+    def conform(*args):
+        return subprocess.run([sys.executable, "-c", "import sys, haptify_conform.cli as c; print(c.__file__, file=sys.stderr); "
+                               "sys.exit(c.main())", *args], capture_output=True, text=True, env=env, cwd=tmp_path)
+
+    alone = conform("--python", "haptify_conform.reference:analyse")
+    assert str(target) in alone.stderr and alone.returncode == 2 and "no conformance suite" in alone.stderr
+    named = conform("--python", "haptify_conform.reference:analyse", "--suite", str(repo), "--metric", "vibration.rms", "--quiet")
+    assert named.returncode == 0 and "CONFORMS" in named.stdout, named.stdout + named.stderr

@@ -15,6 +15,7 @@ from conform_impls import bad_impls
 from haptify_conform.adapters import JsonlAdapter, PythonAdapter
 from haptify_conform.cases import REPO_ROOT, load_cases, select
 from haptify_conform.lint import lint
+from haptify_conform.report import build_report, header
 from haptify_conform.runner import load_skips, run_cases
 from haptify_tools import build_conformance_fixtures as builder
 
@@ -83,6 +84,9 @@ def test_javascript_implementation_passes_its_cases_over_json_lines():
     assert [(v.case_id, v.message) for v in ran if v.status != "passed"] == []
     assert len(ran) >= 7
     assert adapter.implementation.get("name") == "haptify-js-example"
+    summary = build_report(header("jsonl", adapter.implementation, "2026-01-01T00:00:00Z"), verdicts).summary
+    negative = {c.id for c in cases if c.metric == "validate" and c.level == "MUST"}
+    assert not summary.conforms and negative <= set(summary.must_skipped)  # skipping MUST cases never conforms
 
 
 def test_the_linter_reports_a_fixture_edited_by_hand(tmp_path):

@@ -59,6 +59,13 @@ def classify(document: Any) -> Answer:
     return Answer("error", message="output has neither 'metrics' (results) nor 'findings' (rejection)")
 
 
+class CannotStart(RuntimeError):
+    """The implementation's program cannot be started at all (spec §16.6: exit 2, not a failed case)."""
+
+
+EXIT_NOT_EXECUTABLE, EXIT_NOT_FOUND = 126, 127  # a shell's "cannot execute" and "command not found"
+
+
 class CmdAdapter:
     """``--cmd "PROGRAM {session} {out}"``: one process per case (substituted: {session} {out} {metric} {case} {params}).
     Spec §16.4.1."""
@@ -71,6 +78,7 @@ class CmdAdapter:
         if not any("{session}" in a for a in self.argv) or not any("{out}" in a for a in self.argv):
             raise ValueError("the --cmd template must contain {session} and {out}")
         self.timeout_s = timeout_s
+        self.answered = False  # has the program run once (then a later 126/127 is that case's error)
 
     def run(self, case: Case, session: Path) -> Answer:
         with tempfile.TemporaryDirectory(prefix="haptify-conform-") as tmp:
@@ -90,8 +98,12 @@ class CmdAdapter:
             except subprocess.TimeoutExpired:
                 return Answer("error", message=f"timed out after {self.timeout_s} s", duration_s=self.timeout_s)
             except OSError as exc:
-                return Answer("error", message=f"cannot start {argv[0]!r}: {exc.strerror}")
+                raise CannotStart(f"cannot start {argv[0]!r}: {exc.strerror}") from None
             elapsed = time.perf_counter() - start
+            if not out.exists() and proc.returncode in (EXIT_NOT_EXECUTABLE, EXIT_NOT_FOUND) and not self.answered:
+                raise CannotStart(f"{argv[0]!r} exited {proc.returncode} without output on the first case; "
+                                  f"its stderr:\n{proc.stderr.strip()[-2000:]}")
+            self.answered = True
             if not out.exists():
                 tail = (proc.stderr or proc.stdout).strip().splitlines()[-3:]
                 return Answer("error", message=f"exit {proc.returncode}, wrote no output; {' / '.join(tail)}", duration_s=elapsed)
@@ -188,6 +200,8 @@ class JsonlAdapter:
                 self._start()
             except (RuntimeError, TimeoutError, OSError) as exc:
                 self._kill()
+                if self.starts == 1:  # it never answered: nothing it would be judged on exists (spec §16.6)
+                    raise CannotStart(f"cannot start {self.argv[0]!r}: {getattr(exc, 'strerror', None) or exc}") from None
                 return Answer("error", message=f"cannot start the implementation: {exc}")
         start = time.perf_counter()
         try:

@@ -3,14 +3,40 @@
 from __future__ import annotations
 
 import json
+import os
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-SUITE_ROOT = Path(__file__).resolve().parents[1]  # conformance/
+SUITE_ROOT = Path(__file__).resolve().parents[1]  # conformance/ of a source checkout
 REPO_ROOT = SUITE_ROOT.parent
+SUITE_ENV = "HAPTIFY_CONFORMANCE_SUITE"
+
+
+@dataclass(frozen=True)
+class Suite:
+    """Where a run finds the suite's data (spec §16.1): ``cases_root/cases/*.json`` and ``repo/fixtures/``."""
+
+    cases_root: Path
+    repo: Path
+
+
+def find_suite(option: Path | None = None, environ: dict[str, str] | None = None) -> Suite:
+    """The suite named by ``--suite DIR``, else by ``$HAPTIFY_CONFORMANCE_SUITE``, else the source checkout
+    this package lies in (spec §16.1). DIR is a checkout of the standard (or its suite archive, unpacked):
+    it holds ``conformance/cases/`` and ``fixtures/``. Raises ValueError saying where it looked."""
+    environ = os.environ if environ is None else environ
+    named = option or (Path(environ[SUITE_ENV]) if environ.get(SUITE_ENV) else None)
+    candidates = [named] if named is not None else [REPO_ROOT]
+    for root in candidates:
+        if (root / "conformance" / "cases").is_dir() and (root / "fixtures").is_dir():
+            return Suite(cases_root=root / "conformance", repo=root)
+    where = f"{str(named)!r}" if named is not None else f"the installed package's checkout ({str(REPO_ROOT)!r})"
+    raise ValueError(f"no conformance suite in {where}: expected conformance/cases/ and fixtures/ there; "
+                     f"pass --suite DIR or set {SUITE_ENV} to a checkout of the Haptify standard")
 
 
 class Tolerance(BaseModel):

@@ -1,7 +1,8 @@
 """``haptify-conform``: run an implementation against the Haptify conformance suite (spec chapter 16).
 
-Exit codes: 0 every selected case passed (or was skip-listed by the implementation), 1 a case failed or
-errored, 2 the run could not start (bad arguments, unreadable skip list, a suite that does not lint).
+Exit codes: 0 the implementation conforms (every selected case passed, or was skip-listed where §16 allows a
+skip), 1 it does not, 2 the run could not start (bad arguments, unreadable skip list, no suite found, no case
+selected, an implementation that cannot be started).
 """
 
 from __future__ import annotations
@@ -14,8 +15,8 @@ from pathlib import Path
 
 from haptify.storage import atomic_write_text
 from haptify.versions import SPEC_VERSION
-from haptify_conform.adapters import CmdAdapter, JsonlAdapter, PythonAdapter
-from haptify_conform.cases import load_cases, select
+from haptify_conform.adapters import CannotStart, CmdAdapter, JsonlAdapter, PythonAdapter
+from haptify_conform.cases import SUITE_ENV, find_suite, load_cases, select
 from haptify_conform.lint import lint
 from haptify_conform.report import build_report, header, to_junit, to_table
 from haptify_conform.runner import load_skips, run_cases
@@ -39,6 +40,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json-report", type=Path, help="write the JSON report here")
     p.add_argument("--junit", type=Path, help="write a JUnit XML report here")
     p.add_argument("--quiet", action="store_true", help="print only the summary line")
+    p.add_argument("--suite", type=Path, metavar="DIR",
+                   help=f"a checkout of the standard holding conformance/cases/ and fixtures/ (default: ${SUITE_ENV}, "
+                        "else the checkout this package was installed from)")
     return p
 
 
@@ -59,7 +63,12 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:
         return 0 if exc.code == 0 else 2
     if args.lint:
-        problems = lint()
+        try:
+            suite = find_suite(args.suite)
+        except ValueError as exc:
+            print(f"haptify-conform: {exc}", file=sys.stderr)
+            return 2
+        problems = lint(suite.cases_root, suite.repo)
         for line in problems:
             print(line)
         print(f"suite lint: {len(problems)} problem(s)")
@@ -68,9 +77,12 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_usage(sys.stderr)
         print("haptify-conform: give --cmd, --jsonl or --python", file=sys.stderr)
         return 2
-    try:  # the suite first: a broken case file means the run cannot start (exit 2, spec §16.6)
-        cases = select(load_cases(), level=args.level, metrics=set(args.metric) if args.metric else None,
+    try:  # the suite first: a missing or broken suite means the run cannot start (exit 2, spec §16.6)
+        suite = find_suite(args.suite)
+        cases = select(load_cases(suite.cases_root), level=args.level, metrics=set(args.metric) if args.metric else None,
                        spec_version=SPEC_VERSION)
+        if not cases:
+            raise ValueError(f"no case of {str(suite.cases_root / 'cases')!r} is selected: nothing would be judged")
         adapter = make_adapter(args)
         skips = load_skips(args.skip_file)
     except (ValueError, OSError, ImportError, AttributeError, json.JSONDecodeError) as exc:
@@ -81,7 +93,11 @@ def main(argv: list[str] | None = None) -> int:
         print("\n".join(lines))
         return 0 if ok else 1
     started = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
-    verdicts = run_cases(cases, adapter, skips)
+    try:
+        verdicts = run_cases(cases, adapter, skips, repo=suite.repo)
+    except CannotStart as exc:  # the implementation never ran: no verdict would mean anything (spec §16.6)
+        print(f"haptify-conform: {exc}", file=sys.stderr)
+        return 2
     implementation = getattr(adapter, "implementation", {}) or {"command": args.cmd or args.jsonl or args.python}
     report = build_report(header(adapter.name, implementation, started), verdicts)
     if args.json_report:

@@ -6,7 +6,7 @@ import xml.etree.ElementTree as ET
 from collections import Counter
 from dataclasses import asdict
 
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, Field
 
 from haptify.versions import SPEC_VERSION
 from haptify_conform import PROTOCOL_VERSION, SUITE_VERSION
@@ -42,7 +42,9 @@ class CaseRecord(BaseModel):
 
 
 class Summary(BaseModel):
-    """Case counts of a run; the implementation conforms when none failed or errored (spec §16.6)."""
+    """Case counts of a run and the verdict (spec §16, §16.6): the implementation conforms when no case
+    failed or errored and no MUST case it had to answer was skipped — a negative (``validate``) case, or a
+    case of a metric it reports (one with a passed case)."""
 
     model_config = ConfigDict(extra="forbid")
     total: int
@@ -50,6 +52,7 @@ class Summary(BaseModel):
     failed: int
     error: int
     skipped: int
+    must_skipped: list[str] = Field(default_factory=list, description="MUST cases skipped that a conforming implementation answers.")
     conforms: bool
 
 
@@ -66,9 +69,20 @@ def build_report(header: ReportHeader, verdicts: list[Verdict]) -> ConformReport
     """The JSON report (spec §16.6): header, one record per case, counts; it conforms when none failed or errored."""
     counts = Counter(v.status for v in verdicts)
     records = [CaseRecord(**{k: v for k, v in asdict(verdict).items() if k != "extra"}) for verdict in verdicts]
+    must_skipped = skipped_must_cases(verdicts)
     summary = Summary(total=len(verdicts), passed=counts["passed"], failed=counts["failed"], error=counts["error"],
-                      skipped=counts["skipped"], conforms=counts["failed"] == 0 and counts["error"] == 0)
+                      skipped=counts["skipped"], must_skipped=must_skipped,
+                      conforms=bool(verdicts) and counts["failed"] == 0 and counts["error"] == 0 and not must_skipped)
     return ConformReport(header=header, cases=records, summary=summary)
+
+
+def skipped_must_cases(verdicts: list[Verdict]) -> list[str]:
+    """The skipped MUST cases that forbid conformance (spec §16): every negative case, and the cases of
+    every metric the implementation reports (it passed a case of it). Skipping all cases of a metric
+    leaves that metric out of the claim instead."""
+    reported = {v.metric for v in verdicts if v.status == "passed"}
+    return [v.case_id for v in verdicts
+            if v.status == "skipped" and v.level == "MUST" and (v.metric == "validate" or v.metric in reported)]
 
 
 def _err(value: float | None) -> str:
@@ -83,6 +97,10 @@ def to_table(report: ConformReport) -> str:
         if c.status in ("failed", "error") or (c.status == "skipped" and c.message):
             lines.append(f"         {c.message} (spec §{c.spec_section})")
     s = report.summary
+    if s.must_skipped:
+        lines.append(f"\n{len(s.must_skipped)} MUST case(s) skipped that a conforming implementation answers "
+                     f"(every negative case, every case of a metric it reports): {', '.join(s.must_skipped[:8])}"
+                     + (" …" if len(s.must_skipped) > 8 else ""))
     lines.append(f"\n{s.passed} passed, {s.failed} failed, {s.error} errors, {s.skipped} skipped of {s.total} cases — "
                  + ("CONFORMS" if s.conforms else "DOES NOT CONFORM") + f" to Haptify {report.header.spec_version}")
     return "\n".join(lines) + "\n"
