@@ -33,3 +33,22 @@ def test_console_script_runs_without_traceback():
 def test_compute_with_an_empty_metric_list_is_a_usage_error(example_session, capsys):
     assert main(["--json", "compute", str(example_session), "--metrics", ","]) == 2
     assert json.loads(capsys.readouterr().out)["findings"][0]["code"] == "E903"
+
+
+def test_every_command_a_hint_names_exists():
+    """A hint that sends the user to a command that does not exist is a dead end (spec §0.4)."""
+    import re
+
+    from haptify.cli import command_names
+    from haptify.errors import catalogue
+    from haptify_conform.cli import build_parser as conform_parser
+
+    commands = set(command_names())
+    conform_options = {o for a in conform_parser()._actions for o in a.option_strings}
+    named = []
+    for code, entry in catalogue().items():
+        for word in re.findall(r"\bhaptify ([a-z][a-z-]*)", entry["hint"]):
+            named.append((code, word, word in commands))
+        for option in re.findall(r"\bhaptify-conform (--[a-z-]+)", entry["hint"]):
+            named.append((code, option, option in conform_options))
+    assert named and [n for n in named if not n[2]] == []

@@ -51,3 +51,24 @@ def test_compare_command_writes_file_and_rejects_bad_json(tmp_path, capsys):
     assert main(["--json", "compare", str(bad)]) == 2
     report = json.loads(capsys.readouterr().out)
     assert report["findings"][0]["code"] == "E104" and report["findings"][0]["file"] == str(bad)
+
+
+def test_the_html_table_is_a_complete_utf8_page(tmp_path):
+    from html.parser import HTMLParser
+
+    a = tmp_path / "a.json"
+    a.write_text(_results("Ä", 0.5, 0.0125).model_dump_json())
+    out = tmp_path / "table.html"
+    assert main(["compare", str(a), "--format", "html", "-o", str(out)]) == 0
+    text = out.read_text(encoding="utf-8")
+    tags: list[tuple[str, dict]] = []
+
+    class Tags(HTMLParser):
+        def handle_starttag(self, tag, attrs):
+            tags.append((tag, dict(attrs)))
+
+    Tags().feed(text)
+    names = [t for t, _ in tags]
+    assert text.startswith("<!DOCTYPE html>") and names[:3] == ["html", "head", "meta"]
+    assert tags[2][1] == {"charset": "utf-8"} and "title" in names and names.index("table") > names.index("body")
+    assert "Acme Ä" in text

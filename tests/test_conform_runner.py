@@ -236,9 +236,16 @@ def test_the_runner_installed_from_a_wheel_needs_and_finds_the_suite(tmp_path):
     """Built as a regular wheel and installed alone: no cases beside the package, so the suite is named."""
     import subprocess
 
+    import shutil
+
     repo = Path(__file__).resolve().parents[1]
+    source = tmp_path / "source"  # a copy: building writes build/ beside the sources
+    for part in ("reference", "schemas", "tools", "conformance"):
+        shutil.copytree(repo / part, source / part, ignore=shutil.ignore_patterns("__pycache__", "cases", "examples"))
+    for part in ("pyproject.toml", "README.md"):
+        shutil.copy(repo / part, source / part)
     wheels = tmp_path / "wheels"
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(wheels), str(repo)],
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(wheels), str(source)],
                    check=True, capture_output=True)
     target = tmp_path / "site"
     (wheel,) = wheels.glob("haptify-*.whl")

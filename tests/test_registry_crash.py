@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -164,9 +165,23 @@ def test_submit_and_registry_commands_end_to_end(base, tmp_path, capsys):
         assert "E970" in capsys.readouterr().err
         args = _parse(["submit", str(session), "--results", str(results), "--registry", f"http://127.0.0.1:{free_port()}",
                        "--token", token])
-        with pytest.raises(HaptifyError) as e:  # nobody listens there: the command could not run (exit 2)
+        with pytest.raises(HaptifyError) as e:  # nobody listens there: a wrong URL, not "retry later" (exit 2)
             args.func(args, UI())
-        assert e.value.findings[0].code == "E978"
+        assert e.value.findings[0].code == "E903" and "check the URL" in e.value.findings[0].message
     finally:
         proc.terminate()
         proc.wait()
+
+
+@pytest.mark.parametrize("registry, reason, code", [
+    ("http://regsitry.example.org", socket.gaierror(-2, "Name or service not known"), "E903"),  # a typo in the host
+    ("registry.example.org", OSError("unknown url type"), "E903"),                             # no scheme: no host
+    ("http://127.0.0.1:9", ConnectionRefusedError(111, "Connection refused"), "E903"),          # nothing listens
+    ("http://registry.example.org", TimeoutError("timed out"), "E978"),                          # may pass: retry
+])
+def test_an_unreachable_registry_says_whether_to_check_the_url_or_retry(registry, reason, code):
+    from haptify_tools.registry.cmd_submit import unreachable
+
+    finding = unreachable(registry, registry + "/api/v1/submissions", reason).findings[0]
+    assert finding.code == code
+    assert ("check the URL" in finding.message) == (code == "E903")

@@ -67,3 +67,23 @@ def test_ranks_follow_the_means_whatever_the_input_order(means, rnd):
         assert (a.rank == b.rank) == (a.metric["mean"] == b.metric["mean"])
         assert a.rank <= b.rank
     assert rows[0].rank == 1 and all(r.rank == 1 + sum(x < r.metric["mean"] for x in means) for r in rows)
+
+
+def test_a_vector_metric_with_one_repetition_compares_without_an_sd():
+    """The compare page built a results file whose vector sd held None (one repetition): HTTP 500."""
+    from types import SimpleNamespace
+
+    from haptify.compare import build_table
+    from haptify.results import DeviceSummary, Implementation, MetricResult, ResultsFile
+    from haptify_tools.registry.service import aggregate, defined_sd
+
+    row = SimpleNamespace(per_repetition_json="[]", value_json="[0.1, 0.2, 0.3]", unit="N",
+                          definition_version="1.0.0")
+    agg = aggregate("dynamics.error_vs_distance", [({"lab": "lab-a"}, row)])
+    assert agg["mean"] == [0.1, 0.2, 0.3] and agg["sd"] == [None, None, None]
+    metric = MetricResult(id=agg["metric"], value=agg["mean"], unit=agg["unit"], n=agg["repetitions"],
+                          sd=defined_sd(agg["sd"]), definition_version=agg["definition_version"])
+    assert metric.sd is None and defined_sd([0.5, 0.25]) == [0.5, 0.25] and defined_sd(0.5) == 0.5
+    results = ResultsFile(implementation=Implementation(name="r", version="0"), session_id="s",
+                          device=DeviceSummary(manufacturer="Acme", model="A"), manifest_sha256="0" * 64, metrics=[metric])
+    assert build_table([results]).header == ["Metric", "Acme A"]

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from haptify.compare import build_table, to_csv, to_html, to_markdown
+from haptify.compare import build_table, to_csv, to_html_document, to_markdown
 from haptify.results import ResultsFile
 from haptify.storage import atomic_write_text, read_json_model
 
-RENDERERS = {"md": to_markdown, "csv": to_csv, "html": to_html}
+RENDERERS = {"md": to_markdown, "csv": to_csv, "html": to_html_document}
 
 
 def register(sub) -> None:

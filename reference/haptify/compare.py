@@ -94,8 +94,14 @@ def to_csv(table: Table) -> str:
     return buf.getvalue()
 
 
+def to_html_document(table: Table) -> str:
+    """The comparison table as a complete HTML page, UTF-8 (``--format html``; spec §15.5)."""
+    return ("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
+            "<title>Haptify comparison</title>\n</head>\n<body>\n" + to_html(table) + "\n</body>\n</html>\n")
+
+
 def to_html(table: Table) -> str:
-    """The comparison table as an HTML fragment, every cell escaped (``--format html``; spec §15.5)."""
+    """The comparison table as an HTML fragment, every cell escaped (for pages that embed it; spec §15.5)."""
     head = "".join(f"<th>{html.escape(h)}</th>" for h in table.header)
     body = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>" for r in table.rows)
     notes = "".join(f"<li>{html.escape(n)}</li>" for n in table.notes)

@@ -17,9 +17,11 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import socket
 import sys
 import tempfile
 import urllib.error
+import urllib.parse
 import urllib.request
 from pathlib import Path
 
@@ -65,7 +67,19 @@ def post_bundle(registry: str, token: str, archive: Path, *, dry_run: bool = Fal
         except (ValueError, KeyError, TypeError):
             raise fail("E978", f"the registry answered HTTP {exc.code}: {body[:300]}", file=url) from None
     except (urllib.error.URLError, OSError) as exc:
-        raise fail("E978", f"cannot reach the registry at {registry}: {getattr(exc, 'reason', exc)}", file=url) from None
+        raise unreachable(registry, url, getattr(exc, "reason", exc)) from None
+
+
+def unreachable(registry: str, url: str, reason: object) -> HaptifyError:
+    """Why the registry could not be reached: a URL that names no host, or nothing listening there, is a
+    wrong ``--registry`` (E903: check the URL); anything else may pass (E978: retry later). Spec §17.7."""
+    if isinstance(reason, socket.gaierror) or not urllib.parse.urlsplit(registry).hostname:
+        return fail("E903", f"--registry {registry!r} names no host this machine can resolve ({reason}); check the URL",
+                    file=url, expected="http(s)://HOST[:PORT] of a Haptify registry", found=registry)
+    if isinstance(reason, ConnectionRefusedError):
+        return fail("E903", f"nothing answers at {registry!r} ({reason}); check the URL and port, or start the registry "
+                    "(haptify registry serve)", file=url, expected="the address of a running registry", found=registry)
+    return fail("E978", f"cannot reach the registry at {registry}: {reason}", file=url)
 
 
 def describe(outcome: dict) -> list[str]:

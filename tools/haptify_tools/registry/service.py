@@ -567,7 +567,7 @@ class Registry:
             metrics = []
             for m in agg["metrics"]:
                 metrics.append(MetricResult(id=m["metric"], value=m["mean"], unit=m["unit"], n=m["repetitions"],
-                                            sd=m["sd"], definition_version=m["definition_version"]))
+                                            sd=defined_sd(m["sd"]), definition_version=m["definition_version"]))
             dev = agg["device"]
             out.append(ResultsFile(implementation=Implementation(name="haptify-registry", version=PACKAGE_VERSION),
                                    session_id=slug, device=DeviceSummary(manufacturer=dev["manufacturer"], model=dev["model"]),
@@ -595,6 +595,12 @@ class Registry:
                                 "value": m.value_json, "unit": m.unit, "n": m.n, "sd": m.sd_json,
                                 "received_at": sub.received_at.isoformat()})
             return out
+
+
+def defined_sd(sd: float | list[float | None] | None) -> float | list[float] | None:
+    """An aggregate's sd as a results file carries it (spec §15.2): a vector metric's sd is given for
+    every component or not at all (with one repetition no component has one)."""
+    return None if isinstance(sd, list) and any(v is None for v in sd) else sd
 
 
 def _components(value: Any) -> list[float]:
