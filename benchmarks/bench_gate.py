@@ -19,7 +19,7 @@ import tempfile
 import textwrap
 from pathlib import Path
 
-REPEATS = 3
+REPEATS = 5
 
 PLAIN = textwrap.dedent("""
     import hashlib, json, sys, time

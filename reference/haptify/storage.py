@@ -270,8 +270,16 @@ class SessionFolder:
 
 
 def read_table(path: Path, fmt: str, columns: list[str], *, label: str) -> pd.DataFrame:
-    """Read a stream file as float64 columns (spec §3.2); see :func:`read_stream_file` for the codes."""
-    return read_stream_file(path, fmt, columns, label=label)[0]
+    """Read a stream file as float64 columns without hashing it (spec §3.2); the codes are those of
+    :func:`read_stream_file`."""
+    if fmt != "parquet":
+        return read_stream_file(path, fmt, columns, label=label)[0]
+    try:
+        frame = pq.read_table(path).to_pandas(ignore_metadata=True)
+    except (OSError, pa.ArrowException, ValueError) as exc:
+        raise fail("E112", f"{label!r} cannot be read as {fmt}: {exc}", file=label) from None
+    _require_float64(frame, label)
+    return frame
 
 
 def read_stream_file(path: Path, fmt: str, columns: list[str], *, label: str) -> tuple[pd.DataFrame, str]:
@@ -296,11 +304,16 @@ def read_stream_file(path: Path, fmt: str, columns: list[str], *, label: str) ->
         raise
     except (OSError, pa.ArrowException, ValueError, pd.errors.ParserError, UnicodeDecodeError) as exc:
         raise fail("E112", f"{label!r} cannot be read as {fmt}: {exc}", file=label) from None
-    for name in frame.columns:
-        if frame[name].dtype != np.float64:
-            raise fail("E212", f"column {name!r} of {label!r} is {frame[name].dtype}, not float64", file=label,
-                       column=str(name), expected="float64", found=str(frame[name].dtype))
+    _require_float64(frame, label)
     return frame, digest
+
+
+def _require_float64(frame: pd.DataFrame, label: str) -> None:
+    """Every column of a stream table is float64 (E212, spec §3.2)."""
+    for name, dtype in frame.dtypes.items():
+        if dtype != np.float64:
+            raise fail("E212", f"column {name!r} of {label!r} is {dtype}, not float64", file=label,
+                       column=str(name), expected="float64", found=str(dtype))
 
 
 # --- CSV grammar (spec §3.2) --------------------------------------------------------------------------

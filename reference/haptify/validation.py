@@ -781,8 +781,10 @@ class SessionValidator:
         """Time, rate, NaN policy, infinities, quaternions and sensor ranges of one stream (spec §4.4)."""
         s, label = entry.stream, entry.stream.file
         spec = kind_table(s.kind)
-        t = table["t"].to_numpy()
-        data_cols = [c for c in table.columns if c != "t"]
+        columns = [str(c) for c in table.columns]
+        full = table.to_numpy(dtype=np.float64, copy=False)  # one block: no per-column frame is built
+        t = full[:, columns.index("t")]
+        data_cols = [c for c in columns if c != "t"]
         # time
         finite_t = np.isfinite(t)
         time_ok = True
@@ -815,18 +817,10 @@ class SessionValidator:
                             f"(largest {dt.max():.6g} s, smallest {dt.min():.6g} s)", file=label, column="t",
                             time_range=(float(t[idx[0]]), float(t[idx[-1] + 1])), expected=nominal, found=int(idx.size)))
         # values: infinities, NaN policy
-        values = table[data_cols].to_numpy(dtype=np.float64, copy=False) if data_cols else np.empty((len(t), 0))
-        nan = np.isnan(values)
-        inf = np.isinf(values)
-        for k in np.flatnonzero(inf.any(axis=0)):
-            add(Finding("E210", f"column {data_cols[k]!r} holds {int(inf[:, k].sum())} infinite values", file=label,
-                        column=data_cols[k], time_range=_time_span(t, inf[:, k]), expected="finite values", found="inf"))
-        if s.kind in MOCAP_KINDS:
-            self._check_occlusion(s, t, data_cols, nan, add)
-        else:
-            for k in np.flatnonzero(nan.any(axis=0)):
-                add(Finding("E204", f"column {data_cols[k]!r} holds {int(nan[:, k].sum())} NaN values; {s.kind} allows none",
-                            file=label, column=data_cols[k], time_range=_time_span(t, nan[:, k]), expected="no NaN", found="NaN"))
+        t_index = columns.index("t")
+        values = full[:, 1:] if t_index == 0 else np.delete(full, t_index, axis=1)
+        if not np.isfinite(values).all():  # the column-by-column account only when something is not finite
+            self._check_non_finite(s, t, data_cols, values, add)
         # closed value sets (the sync trigger)
         for k, col in enumerate(data_cols):
             outside = values_outside_set(s.kind, col, values[:, k])
@@ -864,6 +858,21 @@ class SessionValidator:
                     peak = float(np.nanmax(np.abs(values[over, k])))
                     add(Finding("W401", f"column {col!r} exceeds the declared ±{limit:g} range at {int(over.sum())} samples (peak {peak:.6g})",
                                 file=label, column=col, time_range=_time_span(t, over), expected=f"|value| ≤ {limit:g}", found=peak))
+
+    def _check_non_finite(self, s: Stream, t: np.ndarray, data_cols: list[str], values: np.ndarray,
+                          add: Callable[[Finding], None]) -> None:
+        """Infinities (E210) anywhere; NaN outside motion capture (E204), occlusion within it (spec §2.7, §4.4)."""
+        nan = np.isnan(values)
+        inf = np.isinf(values)
+        for k in np.flatnonzero(inf.any(axis=0)):
+            add(Finding("E210", f"column {data_cols[k]!r} holds {int(inf[:, k].sum())} infinite values", file=s.file,
+                        column=data_cols[k], time_range=_time_span(t, inf[:, k]), expected="finite values", found="inf"))
+        if s.kind in MOCAP_KINDS:
+            self._check_occlusion(s, t, data_cols, nan, add)
+            return
+        for k in np.flatnonzero(nan.any(axis=0)):
+            add(Finding("E204", f"column {data_cols[k]!r} holds {int(nan[:, k].sum())} NaN values; {s.kind} allows none",
+                        file=s.file, column=data_cols[k], time_range=_time_span(t, nan[:, k]), expected="no NaN", found="NaN"))
 
     def _check_occlusion(self, s: Stream, t: np.ndarray, cols: list[str], nan: np.ndarray, add: Callable[[Finding], None]) -> None:
         """Mocap NaN policy (spec §2.7): whole entities NaN together; warn above the occlusion share."""
