@@ -154,7 +154,7 @@ def test_the_reference_command_passes_every_case_through_cmd(tmp_path):
                           "--quiet", "--json-report", str(report)], capture_output=True, text=True, env=env, timeout=1500)
     summary = json.loads(report.read_text())["summary"]
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
-    assert summary["failed"] == summary["errors"] == summary["skipped"] == 0 and summary["passed"] >= 179, summary
+    assert summary["failed"] == summary["error"] == summary["skipped"] == 0 and summary["passed"] >= 179, summary
 
 
 # --- start-up: the parser imports only what the command needs -------------------------------------------

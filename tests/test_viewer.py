@@ -76,8 +76,8 @@ def rich_writer(session_id: str = "viewer-0001", force_scale: float = 1.0):
          "gravity_m_per_s2": 9.81},
         {"kind": "plate_bias", "id": "pb", "bias": [0.0] * 24}]
     mc = w.manifest["rig"]["motion_capture"]
-    mc["rigid_bodies"].append({"name": "link2", "markers": ["l2a", "l2b"]})
-    mc["markers"] += ["l2a", "l2b"]
+    mc["rigid_bodies"] += [{"name": "link1", "markers": ["l1a", "l1b"]}, {"name": "link2", "markers": ["l2a", "l2b"]}]
+    mc["markers"] += ["l1a", "l1b", "l2a", "l2b"]
     # workspace: a spiral sweep over a sphere of radius SPHERE_R centred at SPHERE_C, 100 Hz
     n = 600
     t = np.arange(n) / 100.0
@@ -112,7 +112,8 @@ def rich_writer(session_id: str = "viewer-0001", force_scale: float = 1.0):
         markers[f"{name}_x"] = off + 0 * t100
         markers[f"{name}_y"] = 0 * t100
         markers[f"{name}_z"] = pz.copy()
-    markers["h2_x"][OCCLUDED] = np.nan
+    for axis in "xyz":  # an occluded marker loses all three coordinates together (spec §2.7)
+        markers[f"h2_{axis}"][OCCLUDED] = np.nan
     w.add_stream("stiffness-1", "markers", markers, rate_hz=100, entities=["h1", "h2", "h3", "l2a", "l2b"])
     links = {"t": t100}
     for link in ("link1", "link2"):
