@@ -1,8 +1,9 @@
 """The validation gate (spec §4.8): no command computes, draws or sends anything from a session that
 does not validate.
 
-:func:`open_checked_session` runs the manifest checks of §4.3.1–4.3.4 and returns a
-:class:`CheckedSession`. Each stream is checked (§4.3.5) the first time it is read — the file is read
+:func:`open_checked_session` runs the manifest checks of §4.3.1–4.3.4 and, for every stream, the checks of
+its declaration and file that read nothing of the file (§4.2, §4.3.5), and returns a
+:class:`CheckedSession`. Each stream's contents are checked (§4.3.5) the first time it is read — the file is read
 once, hashed as it is read and decoded, so the checksum costs no second pass — and :meth:`CheckedSession.finish`
 checks the streams no one read and the overlap of §4.3.6. The first error refuses the session with
 :class:`SessionRefused`, which carries the complete validation report (the same findings and codes as
@@ -86,13 +87,16 @@ def refusal(path: str | os.PathLike, found_so_far: list[Finding]) -> SessionRefu
 
 
 def open_checked_session(path: str | os.PathLike) -> CheckedSession:
-    """Open a session through the gate (spec §4.8): the manifest checks now, each stream when read.
+    """Open a session through the gate (spec §4.8): the manifest and every stream's declaration and file
+    (present, inside the folder, within its size bound) now, each stream's contents when read.
 
     Raises :class:`SessionRefused` (exit 1) when the manifest does not validate, and a coded error with
     exit status 2 when the folder cannot be validated at all (E101, E999; spec §4.1).
     """
     validator = SessionValidator(path)
     validator.check_manifest()
+    for entry in validator.entries:  # what the manifest declares of each stream, and that its file is there
+        validator.check_declaration(entry)
     if validator.report.errors:
         if any(f.code in ("E101", "E999") for f in validator.report.errors):  # could not run (spec §4.1)
             raise HaptifyError(*validator.report.errors)

@@ -361,10 +361,15 @@ def _parquet_row_groups(path: Path, label: str, rows: int) -> int:
 
 @dataclass
 class StreamEntry:
+    """One stream of the manifest as the validator checks it: where it is declared, and what its checks found."""
+
     trial: str | None
     pointer: str
     stream: Stream
-    span: tuple[float, float] | None = None
+    span: tuple[float, float] | None = None  # first and last time on the session clock, when its time is sound
+    declared: bool = False  # its declaration has been checked
+    names_ok: bool = False  # its declared columns are its kind's, each once
+    path: Path | None = None  # its file, once found inside the folder within its size bound
 
 
 def _time_span(t: np.ndarray, mask: np.ndarray) -> tuple[float, float] | None:
@@ -677,13 +682,25 @@ class SessionValidator:
                 advance(1)
         self.check_overlap()
 
-    def check_stream(self, entry: StreamEntry) -> pd.DataFrame | None:
-        """Check one stream's file and data (spec §4.3.5) and return its table as read (stream clock),
-        or None when the file could not be read; the findings go into the report."""
+    def check_declaration(self, entry: StreamEntry) -> None:
+        """Check what session.json declares of one stream and that its file is there, inside the folder and
+        within its size bound — nothing of the file is read but a Parquet footer (spec §4.2, §4.3.5)."""
+        if entry.declared:
+            return
+        entry.declared = True
         found: list[Finding] = []
-        kept: list[pd.DataFrame] = []
-        raised = _collect(lambda: self._check_stream(entry, found.append, kept.append), entry.stream.file)
+        raised = _collect(lambda: self._check_declaration(entry, found.append), entry.stream.file)
         self.add_all(found + raised, entry.trial)
+
+    def check_stream(self, entry: StreamEntry) -> pd.DataFrame | None:
+        """Check one stream's declaration, file and data (spec §4.3.5) and return its table as read (stream
+        clock), or None when the file could not be read; the findings go into the report."""
+        self.check_declaration(entry)
+        kept: list[pd.DataFrame] = []
+        if entry.path is not None:
+            found: list[Finding] = []
+            raised = _collect(lambda: self._check_contents(entry, entry.path, found.append, kept.append), entry.stream.file)
+            self.add_all(found + raised, entry.trial)
         self.report.streams_checked += 1
         return kept[0] if kept else None
 
@@ -691,8 +708,7 @@ class SessionValidator:
         """The last check, once every stream has been checked: time overlap per trial (spec §4.3.6)."""
         self._guard(self._check_overlap, file=MANIFEST)
 
-    def _check_stream(self, entry: StreamEntry, add: Callable[[Finding], None],
-                      keep: Callable[[pd.DataFrame], Any] = lambda table: None) -> None:
+    def _check_declaration(self, entry: StreamEntry, add: Callable[[Finding], None]) -> None:
         s, label = entry.stream, entry.stream.file
         spec = kind_table(s.kind)
         # declared metadata: columns, units, entities, frame, rate
@@ -716,8 +732,8 @@ class SessionValidator:
             add(Finding("E215", f"{s.kind} stream declares entities, which only markers and link_poses have", file=MANIFEST,
                         pointer=f"{entry.pointer}/entities", expected="no 'entities' member", found=s.entities))
         expected = expected_columns(s.kind, s.entities, declared)
-        names_ok = [n for n, _ in expected] == declared
-        if not names_ok:
+        entry.names_ok = [n for n, _ in expected] == declared and len(set(declared)) == len(declared)
+        if [n for n, _ in expected] != declared:
             add(Finding("E201", f"{s.kind} stream declares columns that differ from its kind's", file=MANIFEST,
                         pointer=f"{entry.pointer}/columns", expected=[n for n, _ in expected], found=declared))
         else:
@@ -731,7 +747,7 @@ class SessionValidator:
         if s.rate_hz < spec["recommended_rate_hz"]:
             add(Finding("W406", f"{s.kind} stream at {s.rate_hz:g} Hz is below the recommended {spec['recommended_rate_hz']} Hz",
                         file=MANIFEST, pointer=f"{entry.pointer}/rate_hz", expected=spec["recommended_rate_hz"], found=s.rate_hz))
-        # the file: path safety, existence, size, checksum, readability
+        # the file: path safety, existence, size
         path = resolve_inside(self.root, s.file)
         missing = f"stream file {label!r} does not exist"
         if s.format == "parquet":  # the footer says how many row groups the file may spend metadata on
@@ -740,6 +756,13 @@ class SessionValidator:
             _regular_file(path, label, "E110", missing, stream_size_limit(len(declared), s.rows, groups))
         else:
             _regular_file(path, label, "E110", missing, stream_size_limit(len(declared), s.rows))
+        entry.path = path
+
+    def _check_contents(self, entry: StreamEntry, path: Path, add: Callable[[Finding], None],
+                        keep: Callable[[pd.DataFrame], Any]) -> None:
+        """Checksum, readability, columns, rows and data of a stream file whose declaration was checked."""
+        s, label = entry.stream, entry.stream.file
+        declared = [c.name for c in s.columns]
         try:
             table, digest = read_stream_file(path, s.format, declared, label=label)
         except HaptifyError:
@@ -757,7 +780,7 @@ class SessionValidator:
         if n < 2:
             add(Finding("E205", f"{s.kind} stream holds {n} sample{'s' if n != 1 else ''}", file=label, expected="at least 2 samples", found=n))
             return
-        if not names_ok or len(set(declared)) != len(declared):
+        if not entry.names_ok:
             return  # the columns' meaning is unknown (E201/E107 above): data checks would mislead
         self._check_data(entry, table, add)
 
