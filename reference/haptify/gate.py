@@ -42,11 +42,6 @@ class CheckedSession(SessionFolder):
         self._validator = validator
         self._unchecked: dict[str, StreamEntry] = {e.stream.file: e for e in validator.entries}
 
-    @property
-    def stream_count(self) -> int:
-        """How many streams the manifest declares."""
-        return len(self._validator.entries)
-
     def read_stream(self, stream: Stream, *, verify: bool = False, session_clock: bool = True) -> pd.DataFrame:
         """The stream's table (spec §3.2); its first read is also its validation (§4.3.5), and an
         invalid stream refuses the whole session."""
