@@ -21,7 +21,8 @@ import numpy as np
 from scipy.signal import sosfilt
 from scipy.spatial import ConvexHull
 
-from haptify import calibration, free_space, local_dynamics, signals, storage, vibration, workspace
+from haptify import (calibration, free_space, local_dynamics, repetitions, rig_checks, signals, stiffness, storage,
+                     surface, vibration, workspace)
 from haptify_conform import reference
 
 # --- the mistakes --------------------------------------------------------------------------------
@@ -83,7 +84,16 @@ def _no_hemisphere(u, hemi):
     return np.array(u, dtype=float, copy=True)
 
 
+def _median_aggregate(family_name, metric_id, values, **kw):
+    """The median of the per-repetition values where the spec (§15.3) reports their mean."""
+    result = _REAL["aggregate"](family_name, metric_id, values, **kw)
+    if getattr(result, "per_repetition", None):
+        result.value = float(np.median(result.per_repetition))
+    return result
+
+
 _REAL: dict[str, Callable] = {
+    "aggregate": repetitions.aggregate,
     "power_spectrum": vibration.power_spectrum, "volume_solid": workspace.volume_solid,
     "compensate_wrench": calibration.compensate_wrench, "_speed_summary": free_space._speed_summary,
     "read": storage.SessionFolder.read, "bridge_gaps": signals.bridge_gaps,
@@ -135,6 +145,11 @@ def hemisphere_ignored(session: str, metric: str, parameters: dict) -> dict:
     return _run([(local_dynamics, "hemisphere_align", _no_hemisphere)], session, metric, parameters)
 
 
+def median_of_repetitions(session: str, metric: str, parameters: dict) -> dict:
+    families = (free_space, rig_checks, stiffness, surface, vibration, workspace)
+    return _run([(m, "aggregate", _median_aggregate) for m in families], session, metric, parameters)
+
+
 # function name → the metric whose cases must catch its mistake
 BREAKS: dict[str, str] = {
     "single_pass_filter": "vibration.rms",
@@ -146,4 +161,5 @@ BREAKS: dict[str, str] = {
     "mm_for_m": "free_space.speed_mean",
     "gaps_interpolated": "free_space.speed_mean",
     "hemisphere_ignored": "dynamics.error_vs_distance",
+    "median_of_repetitions": "vibration.rms",
 }

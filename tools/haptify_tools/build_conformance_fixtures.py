@@ -650,7 +650,45 @@ def vibration_fixtures() -> list[Fixture]:
                  "Hz", 0.0, 2e-3, "analytic", f"power-weighted mean frequency of {fmt_tones(all_base)}", desc),
         ]
         out.append(fx)
+    out.append(repetitions_fixture(note_filter))
     return out
+
+
+REPETITION_TONES = [(120.0, 0.05), (150.0, 0.06), (400.0, 0.20)]  # one tone per free-space repetition: the third is the outlier
+
+
+def repetitions_fixture(note_filter: str) -> Fixture:
+    """Three free-space repetitions, one tone each, the third far larger and higher: the reported value is
+    the mean of the per-repetition values (spec §15.3), which the median or the first repetition misses by
+    far more than the tolerance."""
+    name, rate, secs = "vib-three-reps-csv", 1500.0, 4.0
+
+    def build(path: Path) -> None:
+        w = manifest(f"conf-{name}", example_rig())
+        for k, (f, amp) in enumerate(REPETITION_TONES):
+            def tone(t: np.ndarray, f=f, amp=amp) -> np.ndarray:
+                a = np.zeros((len(t), 3))
+                a[:, k] = amp * np.sin(2 * np.pi * f * t)
+                return a
+            handle_trial(w, f"free_space-{k + 1}", "free_space", duration_s=secs - 1 / rate, position=circle(0.03, 0.5),
+                         quaternion=spin(0.05), force_w=lambda t: np.tile([0.1, 0.0, -0.2], (len(t), 1)),
+                         rates=(250.0, rate, 100.0), fmt="csv", repetition=k + 1, accel_extra=tone)
+        w.write(path)
+
+    fx = Fixture(name, build)
+    rms = [tones_rms([tone]) for tone in REPETITION_TONES]
+    centroids = [tones_centroid([tone]) for tone in REPETITION_TONES]
+    tones = "; ".join(f"repetition {k + 1}: {a} m/s² at {f:g} Hz on {'xyz'[k]}" for k, (f, a) in enumerate(REPETITION_TONES))
+    desc = "Tricky: three repetitions, one outlying; the value is their mean (spec §15.3), not their median."
+    fx.cases += [
+        case("vibration.rms.three-reps", "vibration.rms", "15.3", name, float(np.mean(rms)), "m/s^2", 0.0, 2e-3, "analytic",
+             f"mean over repetitions of √((A·g(f))²/2) — {tones}; {note_filter}. The median "
+             f"({np.median(rms):.4g}) and the first repetition ({rms[0]:.4g}) lie ≥ 40 % away", desc),
+        case("vibration.spectral_centroid.three-reps", "vibration.spectral_centroid", "15.3", name, float(np.mean(centroids)),
+             "Hz", 0.0, 2e-3, "analytic", f"mean over repetitions of each repetition's single tone frequency — {tones}. "
+             f"The median ({np.median(centroids):.4g} Hz) lies 33 % away", desc),
+    ]
+    return fx
 
 
 # --- frictionless surface (spec chapter 12) ----------------------------------------------------------
