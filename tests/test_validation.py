@@ -83,6 +83,31 @@ def test_committed_fixtures_are_current(tmp_path: Path, monkeypatch):
     assert not stale, f"stale fixtures {stale[:5]}: run python -m haptify_tools.build_invalid_fixtures"
 
 
+
+@pytest.mark.parametrize("fmt", ["parquet", "csv"])
+@pytest.mark.parametrize("nudge, agree", [(4, True), (10 ** 8, False)])
+def test_rebuilt_trees_agree_up_to_the_cpus_rounding(tmp_path: Path, fmt: str, nudge: int, agree: bool):
+    """A rebuild whose numbers differ from the committed tree by a few units in the last place (numpy's
+    vectorised sin and exp round differently on different CPUs) is the same fixture; a real change is not."""
+    import numpy as np
+    from haptify.storage import read_table, sha256_file, write_table
+
+    committed = example_writer(duration_s=0.2, fmt=fmt).write(tmp_path / "committed")
+    rebuilt = example_writer(duration_s=0.2, fmt=fmt).write(tmp_path / "rebuilt")
+    manifest = json.loads((rebuilt / "session.json").read_text(encoding="utf-8"))
+    stream = next(s for s in manifest["trials"][0]["streams"] if s["kind"] == "handle_wrench")
+    path = rebuilt / stream["file"]
+    frame = read_table(path, fmt, [c["name"] for c in stream["columns"]], label=stream["file"])
+    x = frame["fx"].to_numpy().copy()
+    x[50] = x[50] + nudge * np.spacing(np.abs(x).max())
+    frame["fx"] = x
+    write_table(path, frame, fmt)
+    stream["sha256"] = sha256_file(path)
+    (rebuilt / "session.json").write_text(json.dumps(manifest), encoding="utf-8")
+    assert fx.trees_agree(rebuilt, committed) is agree
+    assert fx.trees_agree(committed, committed)
+
+
 # --- thresholds of spec §4.4, by construction ------------------------------------------------------
 
 def _session(tmp_path: Path, name: str = "s", **kw) -> Path:

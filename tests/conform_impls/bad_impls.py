@@ -84,6 +84,16 @@ def _no_hemisphere(u, hemi):
     return np.array(u, dtype=float, copy=True)
 
 
+def _summed_axes(x: np.ndarray) -> np.ndarray:
+    """The three axes added sample by sample where the spec (§10.3) combines them with DFT321."""
+    return np.asarray(x, dtype=float).sum(axis=1)
+
+
+def _vector_magnitude(x: np.ndarray) -> np.ndarray:
+    """The per-sample vector magnitude √(x² + y² + z²) where the spec (§10.3) combines the axes with DFT321."""
+    return np.linalg.norm(np.asarray(x, dtype=float), axis=1)
+
+
 def _median_aggregate(family_name, metric_id, values, **kw):
     """The median of the per-repetition values where the spec (§15.3) reports their mean."""
     result = _REAL["aggregate"](family_name, metric_id, values, **kw)
@@ -145,6 +155,14 @@ def hemisphere_ignored(session: str, metric: str, parameters: dict) -> dict:
     return _run([(local_dynamics, "hemisphere_align", _no_hemisphere)], session, metric, parameters)
 
 
+def axes_summed(session: str, metric: str, parameters: dict) -> dict:
+    return _run([(vibration, "dft321", _summed_axes)], session, metric, parameters)
+
+
+def vector_magnitude(session: str, metric: str, parameters: dict) -> dict:
+    return _run([(vibration, "dft321", _vector_magnitude)], session, metric, parameters)
+
+
 def median_of_repetitions(session: str, metric: str, parameters: dict) -> dict:
     families = (free_space, rig_checks, stiffness, surface, vibration, workspace)
     return _run([(m, "aggregate", _median_aggregate) for m in families], session, metric, parameters)
@@ -162,4 +180,6 @@ BREAKS: dict[str, str] = {
     "gaps_interpolated": "free_space.speed_mean",
     "hemisphere_ignored": "dynamics.error_vs_distance",
     "median_of_repetitions": "vibration.rms",
+    "axes_summed": "vibration.rms",
+    "vector_magnitude": "vibration.spectral_centroid",
 }

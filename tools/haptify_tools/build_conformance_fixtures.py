@@ -35,7 +35,7 @@ from haptify.conventions import quat_from_axis_angle, quat_multiply, quat_rotate
 from haptify.metric_definitions import param
 from haptify.storage import SessionWriter
 from haptify.versions import SPEC_VERSION
-from haptify_tools.build_invalid_fixtures import logical_snapshot
+from haptify_tools.build_invalid_fixtures import logical_snapshot, trees_agree, values_agree
 from haptify_tools import rig_builders as rb
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
 
@@ -605,6 +605,9 @@ def vibration_fixtures() -> list[Fixture]:
          "Tricky: two tones on one axis; a magnitude-weighted centroid differs from the power-weighted one."),
         ("vib-near-cutoff-csv", "csv", 1500.0, 4.0, {0: [(12.0, 0.2)], 1: [(400.0, 0.02)]}, {0: [(15.0, 0.1)]}, "rotated",
          "Edge: a tone just above the 10 Hz cut-off, an unusual 1.5 kHz rate, CSV (a single-pass filter shows here)."),
+        ("vib-antiphase-csv", "csv", 1500.0, 4.0, {0: [(200.0, 0.05)], 1: [(200.0, -0.05)]}, {1: [(90.0, 0.03)], 2: [(90.0, 0.03)]},
+         "example", "Tricky: one tone in antiphase on two axes; DFT321 keeps both axes' power (the sum of the axes cancels "
+         "it, the per-sample vector magnitude doubles its frequency)."),
     ]
     note_filter = ("zero-phase Butterworth high-pass gain 1/(1+(10/f)^8) per tone (spec §10.2); every tone falls on a DFT "
                    "bin of the trimmed signal")
@@ -1222,7 +1225,7 @@ def main(argv: list[str] | None = None) -> int:
             for name, fx in flat.items():
                 fresh = Path(tmp) / name
                 build_fixture(fx, fresh)
-                if not (root / name).is_dir() or logical_snapshot(fresh) != logical_snapshot(root / name):
+                if not (root / name).is_dir() or not trees_agree(fresh, root / name):
                     stale.append(f"fixture {FIXTURE_DIR}/{name}")
         extra = sorted(p.name for p in root.iterdir() if p.is_dir() and p.name not in flat) if root.is_dir() else []
         stale += [f"fixture {FIXTURE_DIR}/{n} is not built by this script" for n in extra]
@@ -1231,7 +1234,7 @@ def main(argv: list[str] | None = None) -> int:
             stale.append(f"{FIXTURE_DIR}/{DIGESTS}")
         for fname, text in docs.items():
             path = args.cases / fname
-            if not path.is_file() or path.read_text(encoding="utf-8") != text:
+            if not path.is_file() or not values_agree(json.loads(path.read_text(encoding="utf-8")), json.loads(text)):
                 stale.append(f"case file {fname}")
         for line in stale:
             print(f"stale: {line}")
