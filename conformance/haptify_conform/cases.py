@@ -73,6 +73,8 @@ class Case(BaseModel):
     metric: str = Field(description="A metric id from schemas/<v>/metrics, or 'validate'.")
     spec_section: str
     level: Literal["MUST", "SHOULD"]
+    requirements: list[str] = Field(default_factory=list, description="Ids of the requirements the case tests "
+                                    "(schemas/<v>/requirements.json, or R<section>-<code> for a validation code; spec §16.7).")
     fixture: str = Field(description="Session folder, relative to the repository's fixtures/ folder.")
     parameters: dict[str, Any] = Field(default_factory=dict)
     expected: Expected

@@ -17,6 +17,7 @@ from haptify.storage import atomic_write_text
 from haptify.versions import SPEC_VERSION
 from haptify_conform.adapters import CannotStart, CmdAdapter, JsonlAdapter, PythonAdapter
 from haptify_conform.cases import SUITE_ENV, find_suite, load_cases, select
+from haptify_conform.coverage import coverage_table, suite_coverage
 from haptify_conform.lint import lint
 from haptify_conform.report import build_report, header, to_junit, to_table
 from haptify_conform.runner import load_skips, run_cases
@@ -69,6 +70,11 @@ def main(argv: list[str] | None = None) -> int:
             print(f"haptify-conform: {exc}", file=sys.stderr)
             return 2
         problems = lint(suite.cases_root, suite.repo)
+        if not args.quiet:
+            try:
+                print(coverage_table(suite_coverage(suite.cases_root)))
+            except ValueError:  # an invalid case file: the problems below say which
+                pass
         for line in problems:
             print(line)
         print(f"suite lint: {len(problems)} problem(s)")

@@ -1,4 +1,5 @@
-"""The suite linter (spec §16.7): cases validate, ids are unique, every metric has cases, fixtures exist."""
+"""The suite linter (spec §16.7): cases validate, ids are unique, every metric has cases, fixtures exist,
+every requirement is tested and every value MUST is distinguished (:mod:`haptify_conform.coverage`)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from pydantic import ValidationError
 
 from haptify.metric_definitions import all_families
 from haptify_conform.cases import REPO_ROOT, SUITE_ROOT, CaseFile, case_files
+from haptify_conform.coverage import requirement_problems
 
 MIN_CASES_PER_METRIC = 3
 
@@ -40,6 +42,7 @@ def lint(root: Path = SUITE_ROOT, repo: Path = REPO_ROOT) -> list[str]:
             problems.append(f"case {c.id}: a validate case needs expected codes or valid: true")
         if not (repo / "fixtures" / c.fixture / "session.json").exists() and not (repo / "fixtures" / c.fixture).is_dir():
             problems.append(f"case {c.id}: fixture {c.fixture} does not exist")
+    problems += requirement_problems(cases, root)
     problems += _stale_fixtures(repo / "fixtures" / "conformance", {c.fixture for c in cases})
     invalid_dir = repo / "fixtures" / "invalid"
     if invalid_dir.is_dir():

@@ -37,6 +37,7 @@ from haptify.storage import SessionWriter
 from haptify.versions import SPEC_VERSION
 from haptify_tools.build_invalid_fixtures import logical_snapshot, trees_agree, values_agree
 from haptify_tools import rig_builders as rb
+from haptify_conform.requirements import requirements_for_case
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
 
 REPO = Path(__file__).resolve().parents[2]
@@ -1168,6 +1169,17 @@ def all_fixtures() -> dict[str, list[Fixture]]:
     return {fam: fn() for fam, fn in FAMILIES.items()}
 
 
+def with_requirements(c: dict) -> dict:
+    """The case with the ids of the requirements it tests after its level (spec §16.7)."""
+    ids = requirements_for_case(c["metric"], c["expected"].get("codes"))
+    out = {}
+    for key, value in c.items():
+        out[key] = value
+        if key == "level":
+            out["requirements"] = ids
+    return out
+
+
 def case_documents(fixtures: dict[str, list[Fixture]], fixtures_root: Path) -> dict[str, str]:
     """File name → text of every case file."""
     docs = {}
@@ -1177,6 +1189,7 @@ def case_documents(fixtures: dict[str, list[Fixture]], fixtures_root: Path) -> d
                              "rejected (or warned about) with its codes; every fixture of fixtures/valid must be accepted.",
                              "cases": validate_cases(fixtures_root)}
     for doc in docs.values():
+        doc["cases"] = [with_requirements(c) for c in doc["cases"]]
         for c in doc["cases"]:
             if c.get("tolerance") is None:
                 c.pop("tolerance", None)

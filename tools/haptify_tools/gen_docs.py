@@ -2,7 +2,9 @@
 
 A spec chapter marks a generated block with ``<!-- BEGIN GENERATED: <what> [arg] -->`` …
 ``<!-- END GENERATED -->``. ``<what>`` is ``params <family>`` (a metric family's parameters and
-metrics), ``stream-kinds``, ``protocols``, ``codes`` or ``import-units``. ``--check`` exits 1 when a chapter's tables
+metrics), ``stream-kinds``, ``protocols``, ``codes``, ``import-units``, ``requirements <chapter>`` (a chapter's
+requirement ids) or ``coverage`` (requirement → cases and distinguishing mutants, from the case files and
+``conformance/mutants/results.json``). ``--check`` exits 1 when a chapter's tables
 differ from the data, so prose tables cannot drift from the definition files.
 """
 
@@ -14,11 +16,13 @@ from pathlib import Path
 
 from haptify import schemas
 from haptify.metric_definitions import family
+from haptify_conform.coverage import coverage_table, suite_coverage
+from haptify_conform.requirements import all_requirements
 from haptify_tools.generated_files import generator_main
 
 REPO = Path(__file__).resolve().parents[2]
 SPEC_DIR = REPO / "spec"
-BLOCK = re.compile(r"(<!-- BEGIN GENERATED: (?P<what>[a-z-]+)(?: (?P<arg>[a-z_]+))? -->\n)(?P<body>.*?)(<!-- END GENERATED -->)", re.S)
+BLOCK = re.compile(r"(<!-- BEGIN GENERATED: (?P<what>[a-z-]+)(?: (?P<arg>[a-z_0-9]+))? -->\n)(?P<body>.*?)(<!-- END GENERATED -->)", re.S)
 
 
 def _cell(value: object) -> str:
@@ -79,11 +83,23 @@ def import_units_table() -> str:
     return _table(["dimension", "spellings", "mul", "div", "note"], rows)
 
 
+def requirements_table(chapter: str) -> str:
+    rows = [[f"`{r.id}`", r.level, f"§{r.section}", r.statement] for r in all_requirements()
+            if r.section.split(".")[0] == chapter]
+    return _table(["id", "level", "spec", "requirement"], rows)
+
+
+def coverage_appendix() -> str:
+    return coverage_table(suite_coverage(REPO / "conformance"))
+
+
 def render_block(what: str, arg: str | None) -> str:
     if what == "params" and arg:
         return params_table(arg)
+    if what == "requirements" and arg:
+        return requirements_table(arg)
     return {"stream-kinds": stream_kinds_table, "protocols": protocols_table, "codes": codes_table,
-            "import-units": import_units_table}[what]()
+            "import-units": import_units_table, "coverage": coverage_appendix}[what]()
 
 
 def regenerate(text: str) -> str:
