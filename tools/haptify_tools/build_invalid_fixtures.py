@@ -522,6 +522,9 @@ CASES: list[Case] = [
              {"kind": "plate_bias", "id": "bias-1", "source_trial": "plate-bias-9", "bias": [0.0] * 24}))),
     Case("plate-corner-duplicate-id", ["E107"], "The force plate's third corner sensor has id 'c1' (c1 twice, c3 missing).",
          lambda f: edit(f, lambda m: m["rig"]["force_plate"]["corners"][2].update(id="c1"))),
+    Case("rendering-without-stiffness", ["E104"], "An active stiffness trial's rendering lacks the required "
+         "stiffness_N_per_m (spec §2.5: plane point, normal and stiffness are required).",
+         lambda f: edit(f, lambda m: trial_of(m, "stiffness-1")["rendering"].pop("stiffness_N_per_m")), extend=add_active_trial),
     Case("surface-normal-not-unit", ["E307"], "An active stiffness trial's rendering surface_normal is [0, 0.1, 1] (norm 1.005).",
          extend=lambda w: add_active_trial(w, rendering={**RENDERING, "surface_normal": [0.0, 0.1, 1.0]})),
     Case("sync-not-binary", ["E214"], "A sync stream holds the raw trigger voltage (0 V and 5 V), not 0 and 1.",
@@ -543,6 +546,10 @@ CASES: list[Case] = [
 
 VALID: list[Case] = [
     Case("parquet-basic", [], "The analytic free-space example session (Parquet)."),
+    Case("rendering-minimal", [], "An active stiffness trial whose rendering has only its required members (plane point, "
+         "normal, stiffness): friction, software and loop rate are optional (spec §2.5).",
+         extend=lambda w: add_active_trial(w, rendering={k: RENDERING[k] for k in ("surface_point_m", "surface_normal",
+                                                                                   "stiffness_N_per_m")})),
     Case("csv-multi-trial", [], "CSV session: a free-space trial, an active stiffness trial with rendering, and a workspace "
          "trial with markers and link poses.", fmt="csv",
          extend=lambda w: (add_active_trial(w, fmt="csv"), add_markers_trial(w, ["h1", "h2", "h3"], fmt="csv"),
