@@ -57,12 +57,23 @@ class Expected(BaseModel):
     valid: bool | None = Field(None, description="For 'validate' cases on valid sessions: must be accepted.")
 
 
+class BudgetTerm(BaseModel):
+    """One source of allowed difference from the expected value: abs in the metric's unit, rel dimensionless (spec §16.2)."""
+
+    model_config = ConfigDict(extra="forbid")
+    source: str
+    abs: float = Field(0.0, ge=0)
+    rel: float = Field(0.0, ge=0)
+
+
 class Provenance(BaseModel):
-    """How a case's expected value is known: analytic, generated from a known model, paper or spec, with a note (spec §16.2, §16.8.1)."""
+    """How a case's expected value is known: analytic, generated from a known model, paper or spec, with a note
+    and, for a metric case, the budget its tolerance is the sum of (spec §16.2, §16.7, §16.8.1)."""
 
     model_config = ConfigDict(extra="forbid")
     kind: Literal["analytic", "generated", "paper", "spec"]
     note: str
+    budget: list[BudgetTerm] | None = Field(None, description="Sources of allowed difference; the tolerance must not exceed their sum.")
 
 
 class Case(BaseModel):

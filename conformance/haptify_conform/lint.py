@@ -38,6 +38,8 @@ def lint(root: Path = SUITE_ROOT, repo: Path = REPO_ROOT) -> list[str]:
             problems.append(f"case {c.id}: unknown metric {c.metric!r}")
         if c.metric != "validate" and (c.tolerance is None or c.expected.value is None or c.expected.unit is None):
             problems.append(f"case {c.id}: a metric case needs expected value, unit and tolerance")
+        elif c.metric != "validate":
+            problems += _budget_problems(c)
         if c.metric == "validate" and c.expected.codes is None and c.expected.valid is not True:
             problems.append(f"case {c.id}: a validate case needs expected codes or valid: true")
         if not (repo / "fixtures" / c.fixture / "session.json").exists() and not (repo / "fixtures" / c.fixture).is_dir():
@@ -52,6 +54,22 @@ def lint(root: Path = SUITE_ROOT, repo: Path = REPO_ROOT) -> list[str]:
             if name not in covered:
                 problems.append(f"invalid fixture {name} has no negative case")
     return problems
+
+
+#: Rounding slack between a tolerance and the sum of its budget.
+BUDGET_SLACK = 1.0 + 1e-9
+
+
+def _budget_problems(c) -> list[str]:
+    """A metric case states the budget of its tolerance, and its tolerance is not looser than the budget (spec §16.7)."""
+    if not c.provenance.budget:
+        return [f"case {c.id}: no tolerance budget in its provenance (where does ±{c.tolerance.abs} + {c.tolerance.rel}·|x| come from?)"]
+    need_abs = sum(t.abs for t in c.provenance.budget)
+    need_rel = sum(t.rel for t in c.provenance.budget)
+    if c.tolerance.abs > need_abs * BUDGET_SLACK or c.tolerance.rel > need_rel * BUDGET_SLACK:
+        return [f"case {c.id}: tolerance (abs {c.tolerance.abs:g}, rel {c.tolerance.rel:g}) is looser than its budget "
+                f"(abs {need_abs:g}, rel {need_rel:g})"]
+    return []
 
 
 def _stale_fixtures(root: Path, used: set[str]) -> list[str]:
