@@ -49,33 +49,36 @@ class Coverage:
         return best is not None and best[2] >= DISTINGUISHING_RATIO
 
 
-def load_mutant_results(cases_root: Path) -> tuple[list[dict], str | None]:
-    """The mutants of ``results.json`` and a problem line when the file is missing or stale (else None)."""
+def load_mutant_results(cases_root: Path) -> tuple[dict[str, dict], str | None]:
+    """The mutants of ``results.json`` (name → record) and a problem line when the file is missing or stale."""
     path = cases_root / MUTANT_RESULTS
+    where = f"{cases_root.name}/{MUTANT_RESULTS.as_posix()}"
     if not path.is_file():
-        return [], f"{MUTANT_RESULTS} is missing: run make mutants"
+        return {}, f"{where} is missing: run make mutants"
     data = json.loads(path.read_text(encoding="utf-8"))
     if data.get("cases_digest") != cases_digest(cases_root):
-        return data.get("mutants", []), f"{MUTANT_RESULTS} was made from other case files: run make mutants"
-    return data.get("mutants", []), None
+        return data.get("mutants", {}), f"{where} was made from other case files: run make mutants"
+    return data.get("mutants", {}), None
 
 
-def coverage(cases: list[Case], mutants: list[dict]) -> list[Coverage]:
-    """Every requirement with the cases listing it and the mutant failures on those cases."""
+def coverage(cases: list[Case], mutants: dict[str, dict]) -> list[Coverage]:
+    """Every requirement with the cases listing it and its mutants' failures on those cases. A failure
+    without a comparable value (the metric missing or unavailable, the session rejected) counts as infinitely
+    far: the mistake cannot pass unnoticed."""
     rows = {r.id: Coverage(r) for r in all_requirements()}
     for c in cases:
         for rid in c.requirements:
             if rid in rows:
                 rows[rid].cases.append(c.id)
-    for m in mutants:
+    for name, m in mutants.items():
         row = rows.get(m.get("requirement", ""))
         if row is None:
             continue
         listed = set(row.cases)
-        for failure in m.get("failures", []):
+        for failure in m.get("failing_cases", []):
             if failure["case"] in listed:
-                ratio = math.inf if failure.get("ratio") is None else float(failure["ratio"])
-                row.evidence.append((m["name"], failure["case"], ratio))
+                ratio = failure.get("ratio")
+                row.evidence.append((name, failure["case"], math.inf if ratio in (None, "inf") else float(ratio)))
     return list(rows.values())
 
 
