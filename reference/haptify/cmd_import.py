@@ -142,6 +142,8 @@ def run(args, ui) -> int:
     for s in result.streams:
         ui.say(f"  {s['kind']:16s} {s['rows']:8d} rows at {s['rate_hz']:g} Hz, {s['columns']} columns")
     ui.say(f"  {result.world_frame}")
+    for w in result.warnings:
+        ui.warn(str(w))
     for f in report.findings:
         ui.warn(str(f))
     ui.say("the session validates" + (f" ({len(report.warnings)} warnings)" if report.warnings else "")
