@@ -1246,6 +1246,7 @@ def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, devic
         t = (rec.point_first_frame + np.arange(rec.frames)) / rec.point_rate + m.time_offset_s
         if chosen:
             pos = point_unit.to_si(rec.points[:, chosen, :])
+            pos[~np.isfinite(pos).all(axis=2)] = np.nan  # a marker is seen or occluded as a whole (§2.7)
             if world is not None:
                 pos = world.apply(pos)
             marker_data = {"t": t}
