@@ -32,7 +32,9 @@ def register(sub) -> None:
         q = kinds.add_parser(fmt, help=f"import {text}")
         q.add_argument("file", type=Path, help="the source file")
         q.add_argument("-o", "--output", type=Path, help="the session folder to create")
-        q.add_argument("--map", type=Path, required=(fmt == "csv"), help="import map (JSON; import-map.schema.json)")
+        q.add_argument("--map", type=Path, help="import map (JSON; import-map.schema.json)" + (" — required" if fmt == "csv" else ""))
+        q.add_argument("--suggest-map", action="store_true",
+                       help="print a map guessed from the file's labels, bodies, platforms or columns (placeholders for the facts it cannot hold) and what it could not place; write nothing")
         q.add_argument("--overwrite", action="store_true", help="replace an existing session folder")
         q.add_argument("--append", action="store_true",
                        help="add the file as one more trial of the existing session SESSION (its facts need not be repeated)")
@@ -137,6 +139,27 @@ def _load(args, fmt: str, facts: dict | None):
         raise fail("E903", "; ".join(f"{f.pointer}: {f.message}" for f in err.findings), found="invalid option") from None
 
 
+def _suggest(fmt: str, args, ui) -> int:
+    """``--suggest-map`` (spec §5.11): the guessed map on stdout, what it could not place on stderr."""
+    import json
+
+    from haptify.suggest_map import suggest_csv_map, suggest_recording_map
+
+    if fmt == "csv":
+        if not args.file.is_file():
+            raise fail("E501", f"{str(args.file)!r} does not exist or is not a file", file=str(args.file))
+        m, unplaced = suggest_csv_map(args.file)
+    else:
+        m, unplaced = suggest_recording_map(_read(fmt, args.file))
+    if ui.json_mode:
+        ui.emit_json({"map": m, "unplaced": unplaced})
+        return 0
+    print(json.dumps(m, indent=2, ensure_ascii=False))
+    for note in unplaced:
+        ui.warn(f"not placed: {note}")
+    return 0
+
+
 def _importer(fmt: str):
     if fmt in ("c3d", "csv"):
         return import_c3d if fmt == "c3d" else import_csv
@@ -148,6 +171,11 @@ def _importer(fmt: str):
 def run(args, ui) -> int:
     """Import (or ``--list``) one source file; exit 0 valid, 1 imported but invalid (spec §5.8)."""
     fmt = _format_of(args)
+    if args.suggest_map:
+        return _suggest(fmt, args, ui)
+    if fmt == "csv" and args.map is None:
+        raise fail("E903", "haptify import csv needs --map MAP.json (--suggest-map prints one to start from)",
+                   expected="--map MAP.json", found=None)
     if fmt != "csv" and args.list:
         summary = _read(fmt, args.file).summary()
         if ui.json_mode:
