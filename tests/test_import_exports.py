@@ -126,11 +126,17 @@ def test_qualisys_3d_tsv_markers_and_zero_gaps(tmp_path):
     np.testing.assert_array_equal(mk["t"].to_numpy(), np.arange(frames) / RATE)
 
 
-def test_qualisys_bad_files(tmp_path):
-    (tmp_path / "a.tsv").write_text("NO_OF_FRAMES\t2\nMARKER_NAMES\ta\n1\t2\t3\n")
+def unreadable(fmt: str, path: Path, text: str) -> str:
+    """The E501 message for a file of ``text`` read as ``fmt``."""
+    path.write_text(text)
     with pytest.raises(HaptifyError) as err:
-        read_export("tsv", tmp_path / "a.tsv")
-    assert err.value.code == "E501" and "FREQUENCY" in str(err.value)
+        read_export(fmt, path)
+    assert err.value.code == "E501"
+    return str(err.value)
+
+
+def test_qualisys_bad_files(tmp_path):
+    assert "FREQUENCY" in unreadable("tsv", tmp_path / "a.tsv", "NO_OF_FRAMES\t2\nMARKER_NAMES\ta\n1\t2\t3\n")
     write_qtm_6d(tmp_path / "b.tsv", frames=5)
     text = (tmp_path / "b.tsv").read_text().splitlines()
     text[12] = text[12].replace("0.800000", "abc", 1)
@@ -246,10 +252,7 @@ def test_nexus_csv_segments_session_validates_and_computes(tmp_path, capsys):
 
 
 def test_nexus_bad_file_and_unknown_body(tmp_path):
-    (tmp_path / "x.csv").write_text("Something else\n1\n")
-    with pytest.raises(HaptifyError) as err:
-        read_export("nexus", tmp_path / "x.csv")
-    assert err.value.code == "E501" and "Trajectories" in str(err.value)
+    assert "Trajectories" in unreadable("nexus", tmp_path / "x.csv", "Something else\n1\n")
     write_nexus(tmp_path / "t.csv", frames=10)
     with pytest.raises(HaptifyError) as err:
         import_export("nexus", tmp_path / "t.csv", tmp_path / "s", None, overrides=workspace_map("nexus"))
