@@ -13,7 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from haptify.errors import HaptifyError, fail
-from haptify.importers import Destination, import_c3d, import_csv, load_map, read_c3d
+from haptify.importers import MOCAP_SOURCES, Destination, import_c3d, import_csv, load_map, read_c3d
 from haptify.validation import validate_session
 
 # option name -> the map field it fills (for the error that lists what is missing without a map)
@@ -28,16 +28,17 @@ def register(sub) -> None:
     p = sub.add_parser("import", help="import a C3D file or a CSV log as a session",
                        description=__doc__.splitlines()[0])
     kinds = p.add_subparsers(dest="import_kind", metavar="FORMAT", required=True)
-    for fmt, text in (("c3d", "a C3D motion-capture file (Vicon, Qualisys, …)"),
-                      ("csv", "a column-mapped CSV log (ATI F/T log, CHAI3D log, …)")):
+    for fmt, text in FORMATS.items():
         q = kinds.add_parser(fmt, help=f"import {text}")
-        q.add_argument("file", type=Path, help=f"the {fmt.upper()} file")
+        q.add_argument("file", type=Path, help="the source file")
         q.add_argument("-o", "--output", type=Path, help="the session folder to create")
-        q.add_argument("--map", type=Path, required=(fmt == "csv"), help="import map (JSON; import-map.schema.json)")
+        q.add_argument("--map", type=Path, help="import map (JSON; import-map.schema.json)" + (" — required" if fmt == "csv" else ""))
+        q.add_argument("--suggest-map", action="store_true",
+                       help="print a map guessed from the file's labels, bodies, platforms or columns (placeholders for the facts it cannot hold) and what it could not place; write nothing")
         q.add_argument("--overwrite", action="store_true", help="replace an existing session folder")
         q.add_argument("--append", action="store_true",
                        help="add the file as one more trial of the existing session SESSION (its facts need not be repeated)")
-        g = q.add_argument_group("session facts (override the map; required for a C3D without --map)")
+        g = q.add_argument_group("session facts (override the map; required for a motion-capture file without --map)")
         g.add_argument("--device", type=Path, help="device description (device.json), copied into the session")
         g.add_argument("--lab", help="pseudonymous lab id")
         g.add_argument("--examiner", help="pseudonymous examiner id")
@@ -47,10 +48,39 @@ def register(sub) -> None:
         g.add_argument("--session-id", help="session id (default: the file's name)")
         g.add_argument("--trial-id", help="trial id (default: the file's name)")
         g.add_argument("--repetition", type=int, help="repetition number of the trial")
-        if fmt == "c3d":
+        if fmt != "csv":
             g.add_argument("--plate", help="force platform that defines W: a number, or 'none' (default: 1 when present)")
-            q.add_argument("--list", action="store_true", help="describe the file (labels, units, rates, platforms) and exit")
+            q.add_argument("--list", action="store_true", help="describe the file (labels, bodies, units, rates, platforms) and exit")
         q.set_defaults(func=run)
+
+
+FORMATS = {"c3d": "a C3D motion-capture file (Vicon, Qualisys, OptiTrack, markerless, …)",
+           "tsv": "a Qualisys Track Manager TSV export (3-D markers and 6DOF bodies)",
+           "motive": "an OptiTrack Motive CSV export (markers and rigid bodies)",
+           "nexus": "a Vicon Nexus CSV export (trajectories, model outputs, segments, devices)",
+           "auto": "a motion-capture file of any of the formats above, recognised from its content",
+           "csv": "a column-mapped CSV log (ATI F/T log, CHAI3D log, …)"}
+
+
+def _format_of(args) -> str:
+    """The source format: the sub-command's, or for ``auto`` the one the file's content shows (§5.8)."""
+    if args.import_kind != "auto":
+        return args.import_kind
+    from haptify.mocap_exports import detect_format
+
+    fmt = detect_format(args.file)
+    if fmt is None:
+        raise fail("E501", f"{str(args.file)!r} is none of the motion-capture formats {list(MOCAP_SOURCES)}",
+                   file=str(args.file), expected=list(MOCAP_SOURCES), found=None)
+    return fmt
+
+
+def _read(fmt: str, path: Path):
+    if fmt == "c3d":
+        return read_c3d(path)
+    from haptify.mocap_exports import read_export
+
+    return read_export(fmt, path)
 
 
 def _placement(text: str) -> dict:
@@ -109,11 +139,45 @@ def _load(args, fmt: str, facts: dict | None):
         raise fail("E903", "; ".join(f"{f.pointer}: {f.message}" for f in err.findings), found="invalid option") from None
 
 
+def _suggest(fmt: str, args, ui) -> int:
+    """``--suggest-map`` (spec §5.11): the guessed map on stdout, what it could not place on stderr."""
+    import json
+
+    from haptify.suggest_map import suggest_csv_map, suggest_recording_map
+
+    if fmt == "csv":
+        if not args.file.is_file():
+            raise fail("E501", f"{str(args.file)!r} does not exist or is not a file", file=str(args.file))
+        m, unplaced = suggest_csv_map(args.file)
+    else:
+        m, unplaced = suggest_recording_map(_read(fmt, args.file))
+    if ui.json_mode:
+        ui.emit_json({"map": m, "unplaced": unplaced})
+        return 0
+    print(json.dumps(m, indent=2, ensure_ascii=False))
+    for note in unplaced:
+        ui.warn(f"not placed: {note}")
+    return 0
+
+
+def _importer(fmt: str):
+    if fmt in ("c3d", "csv"):
+        return import_c3d if fmt == "c3d" else import_csv
+    from haptify.mocap_exports import import_export
+
+    return lambda path, dest, loaded: import_export(fmt, path, dest, loaded)
+
+
 def run(args, ui) -> int:
     """Import (or ``--list``) one source file; exit 0 valid, 1 imported but invalid (spec §5.8)."""
-    fmt = args.import_kind
-    if fmt == "c3d" and args.list:
-        summary = read_c3d(args.file).summary()
+    fmt = _format_of(args)
+    if args.suggest_map:
+        return _suggest(fmt, args, ui)
+    if fmt == "csv" and args.map is None:
+        raise fail("E903", "haptify import csv needs --map MAP.json (--suggest-map prints one to start from)",
+                   expected="--map MAP.json", found=None)
+    if fmt != "csv" and args.list:
+        summary = _read(fmt, args.file).summary()
         if ui.json_mode:
             ui.emit_json(summary)
         else:
@@ -121,18 +185,23 @@ def run(args, ui) -> int:
             ui.say(f"{summary['file']} ({summary['manufacturer'] or 'unknown system'})")
             ui.say(f"markers: {mk['count']} at {mk['rate_hz']:g} Hz, {mk['frames']} frames, units {mk['units']}")
             ui.say("  " + ", ".join(mk["labels"]))
+            if summary["bodies"]["count"]:
+                ui.say(f"6-DoF bodies: {summary['bodies']['count']}")
+                ui.say("  " + ", ".join(summary["bodies"]["labels"]))
             ui.say(f"analog: {an['count']} channels at {an['rate_hz']:g} Hz, {an['samples']} samples")
             ui.say("  " + ", ".join(f"{c['label']} [{c['unit']}]" for c in an["channels"]))
             for p in summary["force_platforms"]:
-                ui.say(f"force platform {p['number']}: type {p['type']}")
+                ui.say(f"force platform {p['number']}: type {p['type']}, channels " + (", ".join(p["channels"]) or "none")
+                       + (" (calibration matrix)" if p["calibrated"] else ""))
+            for w in summary["warnings"]:
+                ui.warn(f"{w['code']} warning: {w['message']}")
         return 0
     if args.output is None:
         raise fail("E903", f"haptify import {fmt} needs -o SESSION", expected="-o SESSION", found=None)
     dest = Destination.of(args.output, overwrite=args.overwrite, append=args.append)
     loaded = _load(args, fmt, dest.session_facts())
-    importer = import_c3d if fmt == "c3d" else import_csv
     with ui.progress(f"importing {args.file.name}", total=None):
-        result = importer(args.file, dest, loaded)
+        result = _importer(fmt)(args.file, dest, loaded)
         report = validate_session(result.session)
     if ui.json_mode:
         ui.emit_json({**result.to_dict(), "validation": {"valid": report.valid,
@@ -142,6 +211,8 @@ def run(args, ui) -> int:
     for s in result.streams:
         ui.say(f"  {s['kind']:16s} {s['rows']:8d} rows at {s['rate_hz']:g} Hz, {s['columns']} columns")
     ui.say(f"  {result.world_frame}")
+    for w in result.warnings:
+        ui.warn(str(w))
     for f in report.findings:
         ui.warn(str(f))
     ui.say("the session validates" + (f" ({len(report.warnings)} warnings)" if report.warnings else "")

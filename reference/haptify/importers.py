@@ -31,7 +31,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from haptify import schemas
 from haptify.conventions import matrix_to_quat, quat_to_matrix
-from haptify.errors import HaptifyError, fail
+from haptify.errors import Finding, HaptifyError, fail
 from haptify.session_format import (
     ALLOWED_VALUES,
     PROTOCOLS,
@@ -165,6 +165,16 @@ class MarkerMap(_Strict):
     format: Literal["parquet", "csv"] = "parquet"
 
 
+class BodyMap(_Strict):
+    """Which 6-DoF bodies (C3D ROTATION group, Qualisys 6DOF, Motive rigid bodies) become pose streams
+    (spec §5.5): the handle's pose and the device links' poses."""
+
+    handle: str | None = Field(None, description="The body label whose pose becomes handle_pose (its origin must be the gimbal centre).")
+    links: dict[Id, str] = Field(default_factory=dict, description="Link name → body label; each becomes one entity of link_poses (the link must be a rigid body of markers.rigid_bodies).")
+    max_residual: float | None = Field(None, gt=0, description="A sample whose residual (in the file's point units) exceeds this is occluded; default: only the file's own invalid samples are.")
+    format: Literal["parquet", "csv"] = "parquet"
+
+
 class DeviceFile(_Strict):
     """The device given as a device.json file beside the map instead of inline (spec §5.2)."""
 
@@ -210,15 +220,20 @@ class CsvOptions(_Strict):
     comment: str | None = Field(None, min_length=1, max_length=1, description="Lines starting with this character are ignored.")
 
 
-class ImportMap(_Strict):
-    """An import map (spec §5.2): how one C3D or CSV file becomes one trial of a session."""
+MOCAP_SOURCES = ("c3d", "tsv", "motive", "nexus")  # motion-capture files: markers, bodies, platforms (§5.5, §5.10)
+SOURCES = (*MOCAP_SOURCES, "csv")
 
-    source: Literal["c3d", "csv"] = Field(description="The importer this map is for.")
+
+class ImportMap(_Strict):
+    """An import map (spec §5.2): how one source file becomes one trial of a session."""
+
+    source: Literal[SOURCES] = Field(description="The importer this map is for.")  # type: ignore[valid-type]
     session: SessionFields
     trial: TrialFields
     time_offset_s: float = Field(0.0, description="Added to every imported time, s (puts the source on the session clock).")
     streams: dict[Literal[FIXED_KINDS], StreamMap] = Field(default_factory=dict)  # type: ignore[valid-type]
-    markers: MarkerMap | None = Field(None, description="C3D only; default: every point label.")
+    markers: MarkerMap | None = Field(None, description="Motion-capture sources only; default: every point label.")
+    bodies: BodyMap | None = Field(None, description="Motion-capture sources only: 6-DoF bodies that become handle_pose and link_poses; default none.")
     force_plate: Union[Annotated[int, Field(ge=1)], Literal["auto", "none"]] = Field("auto", description="C3D only: the FORCE_PLATFORM number (1-based) that becomes the rig's plate and defines W; 'auto' = 1 when the file has platforms.")
     lab_to_world: Pose | None = Field(None, description="C3D only, without a force plate: the C3D lab frame in W (default: W is the lab frame).")
     time: CsvTime | None = Field(None, description="CSV only, required: the time column and its unit.")
@@ -288,7 +303,7 @@ def load_map(path: str | Path | None, source: str, overrides: dict | None = None
     if m.source != source:
         raise fail("E502", f"the map is for the {m.source} importer, not {source}", file=label, pointer="/source",
                    expected=source, found=m.source)
-    wrong = {"c3d": ("time", "csv"), "csv": ("markers", "lab_to_world")}[source]
+    wrong = ("markers", "bodies", "lab_to_world") if source == "csv" else ("time", "csv")
     for key in wrong:
         if getattr(m, key) is not None:
             raise fail("E502", f"{key!r} does not apply to {source} imports", file=label, pointer=f"/{key}",
@@ -324,19 +339,25 @@ def sanitize_id(text: str, fallback: str) -> str:
 
 @dataclass
 class C3DPlatform:
-    """One FORCE_PLATFORM entry: number (1-based), type, corners (4 × 3, POINT units, lab), origin (3).
-    Spec §5.6."""
+    """One FORCE_PLATFORM entry: number (1-based), type, corners (4 × 3, POINT units, lab), origin (3),
+    its analog channels (0-based indices into the analog labels) and calibration matrix (row = output,
+    or None). Spec §5.6."""
 
     number: int
     type: int | None
     corners: np.ndarray | None
     origin: np.ndarray | None
+    channels: list[int] = field(default_factory=list)
+    cal_matrix: np.ndarray | None = None
 
 
 @dataclass
-class C3DContent:
-    """What the importer uses from a C3D file, as ezc3d reads it (analog values already scaled).
-    Spec §5.5."""
+class Recording:
+    """What the importer uses from a motion-capture file (C3D, Qualisys TSV, Motive CSV, Nexus CSV),
+    as the file's reader exposes it (analog values already scaled). Spec §5.5, §5.10.
+
+    Points and 6-DoF bodies share the point clock: sample ``k`` is at ``(point_first_frame + k) /
+    point_rate``. ``warnings`` are the coded disagreements found while reading (W501)."""
 
     path: Path
     manufacturer: str
@@ -351,19 +372,37 @@ class C3DContent:
     analog_first_sample: int
     analogs: np.ndarray  # (n_channels, n_samples)
     platforms: list[C3DPlatform] = field(default_factory=list)
+    body_labels: list[str] = field(default_factory=list)
+    body_positions: np.ndarray | None = None  # (n_frames, n_bodies, 3), POINT units, NaN where invalid
+    body_rotations: np.ndarray | None = None  # (n_frames, n_bodies, 3, 3), body → lab, NaN where invalid
+    body_residuals: np.ndarray | None = None  # (n_frames, n_bodies), POINT units, when the file has them
+    format: str = "c3d"
+    warnings: list[Finding] = field(default_factory=list)
+
+    @property
+    def frames(self) -> int:
+        """Point (and body) frames: the length of the point clock."""
+        if self.body_positions is not None and not self.point_labels:
+            return int(self.body_positions.shape[0])
+        return int(self.points.shape[0])
 
     def summary(self) -> dict:
-        """A JSON-able description of the file (what ``haptify import c3d --list`` prints)."""
+        """A JSON-able description of the file (what ``haptify import FORMAT --list`` prints)."""
         return {
-            "file": self.path.name, "manufacturer": self.manufacturer,
-            "markers": {"count": len(self.point_labels), "rate_hz": self.point_rate, "frames": int(self.points.shape[0]),
+            "file": self.path.name, "format": self.format, "manufacturer": self.manufacturer,
+            "markers": {"count": len(self.point_labels), "rate_hz": self.point_rate, "frames": self.frames,
                         "units": self.point_units, "labels": list(self.point_labels)},
+            "bodies": {"count": len(self.body_labels), "labels": list(self.body_labels),
+                       "residuals": self.body_residuals is not None},
             "analog": {"count": len(self.analog_labels), "rate_hz": self.analog_rate,
                        "samples": int(self.analogs.shape[1]),
                        "channels": [{"label": l, "unit": u} for l, u in zip(self.analog_labels, self.analog_units)]},
             "force_platforms": [{"number": p.number, "type": p.type,
                                  "corners": None if p.corners is None else p.corners.tolist(),
-                                 "origin": None if p.origin is None else p.origin.tolist()} for p in self.platforms],
+                                 "origin": None if p.origin is None else p.origin.tolist(),
+                                 "channels": [self.analog_labels[i] for i in p.channels if i < len(self.analog_labels)],
+                                 "calibrated": p.cal_matrix is not None} for p in self.platforms],
+            "warnings": [f.to_dict() for f in self.warnings],
         }
 
 
@@ -379,36 +418,137 @@ def _strings(values: Any, n: int) -> list[str]:
     return (vals + [""] * n)[:n]
 
 
+def _number(params: Any, group: str, name: str) -> float | None:
+    """A numeric parameter's first value, or None when absent or empty."""
+    arr = np.asarray(_param(params, group, name, []), dtype=np.float64).ravel()
+    return float(arr[0]) if arr.size else None
+
+
 C3D_BLOCK = 512  # bytes per C3D block
+C3D_LONG_FILE_LAST_FRAME = 0xFFFF  # header word 5 of a file longer than 65535 frames (the count is elsewhere)
+RATE_AGREEMENT = 1e-6  # relative: a header rate and a parameter rate closer than this agree
 
 
-def _check_complete(path: Path, bytes_per_value: int) -> None:
-    """E501 when the file is shorter than its header's frame count implies (ezc3d reads a truncated
-    file silently and shortens its frame count). Header words (16-bit, 1-based): 2 points, 3 analog
-    values per frame, 4–5 first and last frame, 9 first data block; byte order from the processor
-    type in the parameter section (86 = MIPS, big-endian)."""
-    size = path.stat().st_size
+@dataclass(frozen=True)
+class C3DHeader:
+    """The header words the importer compares with the data (spec §5.5): point count, analog values
+    per frame, first and last frame (as stored), frame rate. Byte order from the processor type."""
+
+    points: int
+    analog_values: int
+    first_frame: int
+    last_frame: int
+    rate: float
+
+    @property
+    def frames(self) -> int:
+        """Frames the header declares: last − first + 1 (both 1-based, or both 0-based as some writers
+        store them); none when both words are 0 or the last precedes the first."""
+        return self.last_frame - self.first_frame + 1 if self.last_frame >= max(self.first_frame, 1) else 0
+
+
+def read_c3d_header(path: Path) -> C3DHeader:
+    """The header of a C3D file (16-bit words 2–5, float word 11–12). E501 when too short."""
     with open(path, "rb") as fh:
         head = fh.read(C3D_BLOCK)
-        if len(head) < 18:
+        if len(head) < 24 or head[0] == 0:
             raise fail("E501", f"{str(path)!r} is too short for a C3D header", file=str(path),
                        expected=f"≥ {C3D_BLOCK} bytes", found=len(head))
         fh.seek((head[0] - 1) * C3D_BLOCK + 3)
         processor = fh.read(1)
     order = ">" if processor == bytes([86]) else "<"
     words = struct.unpack(f"{order}9H", head[:18])
-    n_points, analog_per_frame, first, last, data_block = words[1], words[2], words[3], words[4], words[8]
-    frames = last - first + 1
-    frame_bytes = (4 * n_points + analog_per_frame) * bytes_per_value
-    data_start = (data_block - 1) * C3D_BLOCK
-    if frames > 0 and frame_bytes > 0 and size < data_start + frames * frame_bytes:
-        held = max(0, (size - data_start) // frame_bytes)
-        raise fail("E501", f"{str(path)!r} is truncated: its header declares {frames} frames, the file holds {held}",
-                   file=str(path), expected=frames, found=held)
+    rate = struct.unpack(f"{order}f", head[20:24])[0] if processor != bytes([85]) else float("nan")
+    return C3DHeader(words[1], words[2], words[3], words[4], float(rate))
 
 
-def read_c3d(path: str | Path) -> C3DContent:
-    """Read a C3D file with ezc3d (spec §5.5); E501 when it is missing, not a C3D or truncated."""
+def _disagreement(path: Path, what: str, header: Any, other: Any, followed: str, pointer: str) -> Finding:
+    return Finding("W501", f"{path.name}: {what}; {followed}", file=str(path), pointer=pointer,
+                   expected=header, found=other)
+
+
+def c3d_disagreements(path: Path, header: C3DHeader, params: Any, frames_read: int, analog_per_frame: int,
+                      point_rate: float, analog_rate: float, header_analog_rate: float) -> list[Finding]:
+    """W501 findings: where the header, the POINT/ANALOG parameters and the data as read disagree
+    (spec §5.5). The data as read, and the rates chosen by §5.5's rule, are what is imported."""
+    out = []
+    long_file = header.last_frame == C3D_LONG_FILE_LAST_FRAME and frames_read >= header.frames
+    if header.frames != frames_read and not long_file:
+        out.append(_disagreement(path, f"the header declares {header.frames} frames, the data hold {frames_read}",
+                                 header.frames, frames_read, f"the {frames_read} frames read are imported", "/header/last_frame"))
+    frames_param = _number(params, "POINT", "FRAMES")
+    if frames_param is not None and frames_param >= 0 and int(frames_param) != frames_read and not long_file:
+        out.append(_disagreement(path, f"POINT:FRAMES is {int(frames_param)}, the data hold {frames_read} frames",
+                                 int(frames_param), frames_read, f"the {frames_read} frames read are imported", "/POINT/FRAMES"))
+    used = _number(params, "POINT", "USED")
+    if used is not None and int(used) != header.points:
+        out.append(_disagreement(path, f"POINT:USED is {int(used)}, the header holds {header.points} points",
+                                 header.points, int(used), "the header's points are read", "/POINT/USED"))
+    rate_param = _number(params, "POINT", "RATE")
+    if rate_param is not None and header.rate > 0 and rate_param > 0 and \
+            abs(rate_param - header.rate) > RATE_AGREEMENT * header.rate:
+        out.append(_disagreement(path, f"POINT:RATE is {rate_param:g} Hz, the header says {header.rate:g} Hz",
+                                 header.rate, rate_param, f"{point_rate:g} Hz is used", "/POINT/RATE"))
+    an_param = _number(params, "ANALOG", "RATE")
+    if analog_per_frame and an_param is not None and header_analog_rate > 0 and an_param > 0 and \
+            abs(an_param - header_analog_rate) > RATE_AGREEMENT * header_analog_rate:
+        out.append(_disagreement(path, f"ANALOG:RATE is {an_param:g} Hz, the header implies {header_analog_rate:g} Hz",
+                                 header_analog_rate, an_param, f"{analog_rate:g} Hz is used", "/ANALOG/RATE"))
+    return out
+
+
+def _platforms(params: Any, n_analogs: int, path: Path) -> tuple[list[C3DPlatform], list[Finding]]:
+    """The FORCE_PLATFORM entries (spec §5.6): corners, origin, type, channels, calibration matrix."""
+    used = np.asarray(_param(params, "FORCE_PLATFORM", "USED", []), dtype=np.int64).ravel()
+    n_plates = int(used[0]) if used.size else 0
+    corners = np.asarray(_param(params, "FORCE_PLATFORM", "CORNERS", []), dtype=np.float64)
+    origins = np.asarray(_param(params, "FORCE_PLATFORM", "ORIGIN", []), dtype=np.float64)
+    types = np.asarray(_param(params, "FORCE_PLATFORM", "TYPE", []), dtype=np.int64).ravel()
+    channel = np.asarray(_param(params, "FORCE_PLATFORM", "CHANNEL", []), dtype=np.int64)
+    cal = np.asarray(_param(params, "FORCE_PLATFORM", "CAL_MATRIX", []), dtype=np.float64)
+    corners = corners.reshape(3, 4, -1) if corners.size and corners.size % 12 == 0 else corners
+    origins = origins.reshape(3, -1) if origins.size and origins.size % 3 == 0 else origins
+    channel = channel.reshape(channel.shape[0], -1) if channel.ndim >= 1 and channel.size else channel
+    out, notes = [], []
+    for i in range(n_plates):
+        cor = corners[:, :, i].T.copy() if corners.ndim == 3 and corners.shape[2] > i else None
+        org = origins[:, i].copy() if origins.ndim == 2 and origins.shape[1] > i else None
+        chans = [int(c) - 1 for c in channel[:, i]] if channel.ndim == 2 and channel.shape[1] > i else []
+        chans = [c for c in chans if c >= 0]
+        if any(c >= n_analogs for c in chans):
+            notes.append(Finding("W501", f"{path.name}: FORCE_PLATFORM:CHANNEL of platform {i + 1} names analog "
+                                 f"channels beyond the {n_analogs} the file holds; its channels are not used",
+                                 file=str(path), pointer="/FORCE_PLATFORM/CHANNEL", expected=f"≤ {n_analogs}",
+                                 found=[c + 1 for c in chans]))
+            chans = []
+        matrix = None
+        if cal.ndim == 3 and cal.shape[2] > i and cal.shape[0] == cal.shape[1] and cal[:, :, i].any():
+            matrix = cal[:, :, i].T.copy()  # stored column by column
+        out.append(C3DPlatform(i + 1, int(types[i]) if types.size > i else None, cor, org, chans, matrix))
+    return out, notes
+
+
+def _rotations(c: Any, params: Any, n_frames: int, path: Path) -> tuple[list[str], np.ndarray | None, np.ndarray | None, list[Finding]]:
+    """The ROTATION group's 6-DoF bodies (spec §5.5): labels, positions (POINT units) and rotation
+    matrices (body → lab) per point frame; NaN where the writer marked a sample invalid."""
+    rot = np.asarray(c["data"].get("rotations", np.zeros((4, 4, 0, 0))), dtype=np.float64)
+    if rot.ndim != 4 or rot.shape[2] == 0 or rot.shape[3] == 0:
+        return [], None, None, []
+    notes = []
+    ratio = max(1, int(_number(params, "ROTATION", "RATIO") or 1))
+    if ratio > 1:  # several rotation samples per point frame: the point clock keeps the first of each
+        notes.append(Finding("W501", f"{path.name}: ROTATION:RATIO is {ratio}; one rotation sample per point frame "
+                             "(the first) is imported", file=str(path), pointer="/ROTATION/RATIO", expected=1, found=ratio))
+        rot = rot[:, :, :, ::ratio]
+    labels = _strings(_param(params, "ROTATION", "LABELS"), rot.shape[2])
+    m = rot.transpose(3, 2, 0, 1)  # (frames, bodies, 4, 4)
+    return labels, m[:, :, :3, 3].copy(), m[:, :, :3, :3].copy(), notes
+
+
+def read_c3d(path: str | Path) -> Recording:
+    """Read a C3D file with ezc3d (spec §5.5). E501 only when it is missing, not a C3D, or ezc3d cannot
+    read it; every disagreement between the header, the parameters and the data is a W501 finding in
+    ``warnings``, and the data as ezc3d reads them are what the recording holds."""
     import ezc3d
 
     p = Path(path)
@@ -420,13 +560,12 @@ def read_c3d(path: str | Path) -> C3DContent:
     if len(head) < 2 or head[1] != 0x50:
         raise fail("E501", f"{label!r} is not a C3D file (its second byte is not 0x50)", file=label,
                    expected="0x50", found=head[1:2].hex() or "end of file")
+    header = read_c3d_header(p)
     try:
         c = ezc3d.c3d(str(p), extract_forceplat_data=False)
-    except (OSError, RuntimeError, ValueError) as exc:
+    except (OSError, RuntimeError, ValueError, IndexError) as exc:
         raise fail("E501", f"{label!r} cannot be read as C3D: {exc}", file=label) from None
-    params, header, data = c["parameters"], c["header"], c["data"]
-    scale = float(np.asarray(_param(params, "POINT", "SCALE", [-1.0]), dtype=np.float64).ravel()[0])
-    _check_complete(p, 4 if scale < 0 else 2)
+    params, head_info, data = c["parameters"], c["header"], c["data"]
     pts = np.asarray(data["points"], dtype=np.float64)  # (4, n_markers, n_frames)
     n_markers, n_frames = pts.shape[1], pts.shape[2]
     xyz = pts[:3].transpose(2, 1, 0).copy()  # (n_frames, n_markers, 3)
@@ -436,36 +575,47 @@ def read_c3d(path: str | Path) -> C3DContent:
     an = np.asarray(data["analogs"], dtype=np.float64)
     analogs = an[0] if an.ndim == 3 and an.shape[0] == 1 else an.reshape(an.shape[-2], -1)
     n_ch = analogs.shape[0]
+    per_frame = analogs.shape[1] // n_frames if n_frames else 0
+    # rates (spec §5.5): the header's as ezc3d reads it; a writer that leaves it 0 (analog-only files)
+    # has the parameter's
+    point_rate = float(head_info["points"]["frame_rate"]) or (_number(params, "POINT", "RATE") or 0.0)
+    header_analog_rate = float(head_info["analogs"]["frame_rate"])
+    analog_rate = header_analog_rate or (_number(params, "ANALOG", "RATE") or 0.0)
+    warnings = c3d_disagreements(p, header, params, n_frames, per_frame, point_rate, analog_rate, header_analog_rate)
+    if n_ch and analog_rate <= 0:
+        raise fail("E501", f"{label!r} holds {n_ch} analog channels but states no analog rate", file=label,
+                   pointer="/ANALOG/RATE", expected="a rate > 0", found=analog_rate)
     company = _strings(_param(params, "MANUFACTURER", "COMPANY"), 1)[0]
     software = _strings(_param(params, "MANUFACTURER", "SOFTWARE"), 1)[0]
     if software.startswith(company):
         company = ""
     units = _strings(_param(params, "POINT", "UNITS"), 1)[0] or None
-    platforms = []
-    used = np.asarray(_param(params, "FORCE_PLATFORM", "USED", []), dtype=np.int64).ravel()
-    n_plates = int(used[0]) if used.size else 0
-    corners = np.asarray(_param(params, "FORCE_PLATFORM", "CORNERS", []), dtype=np.float64)
-    origins = np.asarray(_param(params, "FORCE_PLATFORM", "ORIGIN", []), dtype=np.float64)
-    types = np.asarray(_param(params, "FORCE_PLATFORM", "TYPE", []), dtype=np.int64).ravel()
-    for i in range(n_plates):
-        cor = corners[:, :, i].T.copy() if corners.ndim == 3 and corners.shape[:2] == (3, 4) and corners.shape[2] > i else None
-        org = origins[:, i].copy() if origins.ndim == 2 and origins.shape[0] == 3 and origins.shape[1] > i else None
-        platforms.append(C3DPlatform(i + 1, int(types[i]) if types.size > i else None, cor, org))
-    return C3DContent(
+    platforms, notes = _platforms(params, n_ch, p)
+    body_labels, body_pos, body_rot, rot_notes = _rotations(c, params, n_frames, p)
+    if body_labels and point_rate <= 0:
+        raise fail("E501", f"{label!r} holds 6-DoF bodies but states no frame rate", file=label,
+                   pointer="/POINT/RATE", expected="a rate > 0", found=point_rate)
+    if n_markers and point_rate <= 0:
+        raise fail("E501", f"{label!r} holds {n_markers} points but states no point rate", file=label,
+                   pointer="/POINT/RATE", expected="a rate > 0", found=point_rate)
+    return Recording(
         path=p, manufacturer=" ".join(s for s in (company, software) if s),
         point_labels=_strings(_param(params, "POINT", "LABELS"), n_markers), point_units=units,
-        point_rate=float(header["points"]["frame_rate"]), point_first_frame=int(header["points"]["first_frame"]),
+        point_rate=point_rate, point_first_frame=int(head_info["points"]["first_frame"]),
         points=xyz,
         analog_labels=_strings(_param(params, "ANALOG", "LABELS"), n_ch),
         analog_units=_strings(_param(params, "ANALOG", "UNITS"), n_ch),
-        analog_rate=float(header["analogs"]["frame_rate"]), analog_first_sample=int(header["analogs"]["first_frame"]),
-        analogs=analogs, platforms=platforms,
+        analog_rate=analog_rate, analog_first_sample=int(head_info["points"]["first_frame"]) * max(per_frame, 1),
+        analogs=analogs, platforms=platforms, body_labels=body_labels, body_positions=body_pos,
+        body_rotations=body_rot, warnings=warnings + notes + rot_notes,
     )
 
 
 # --- geometry: the world frame from a force platform (spec §5.6) ----------------------------------
 
-PLATE_RECTANGLE_TOLERANCE_M = 0.001  # corners must form a flat rectangle to within 1 mm (§5.6)
+PLATE_RECTANGLE_TOLERANCE_M = 0.001  # corners within 1 mm of a flat rectangle: silent (§5.6)
+PLATE_SHAPE_LIMIT = 0.1  # a deviation beyond 10 % of the shorter side is no rectangle at all (E505)
+PLATE_MIN_SIDE_M = 0.01  # a side shorter than 10 mm: coincident corners (E505)
 
 
 @dataclass
@@ -481,22 +631,37 @@ class WorldFrame:
         return (p - self.centre) @ self.rotation.T
 
 
-def plate_frame(corners_m: np.ndarray, *, file: str, number: int) -> tuple[WorldFrame, np.ndarray, list[float]]:
+def _meaningless(number: int, why: str, file: str, found: Any) -> HaptifyError:
+    return fail("E505", f"force platform {number}: {why}", file=file, pointer="/FORCE_PLATFORM/CORNERS",
+                expected="four corners of a plate, in C3D order", found=found)
+
+
+def plate_frame(corners_m: np.ndarray, *, file: str, number: int) -> tuple[WorldFrame, np.ndarray, list[float], float]:
     """W from a C3D platform's corners (metres, lab frame), spec §5.6.
 
     C3D numbers corners by the plate's own quadrants (+x+y, −x+y, −x−y, +x−y) and its z axis points
     into the plate. W's origin is the centre of the four corners, x the plate's x, z up (−plate z),
-    y = z × x. Returns W, the plate axes in W (3 × 3, columns x, y, z) and the size [x, y] in m.
+    y = z × x. Returns W, the plate axes in W (3 × 3, columns x, y, z), the size [x, y] in m and the
+    largest deviation of a corner from the flat rectangle of that size (m). E505 when the corners
+    cannot define a plate: not finite, coincident (two corners within 10 mm), collinear, crossed (a
+    corner outside its quadrant), or further from a rectangle than 10 % of the shorter side.
     """
-    c = corners_m
+    c = np.asarray(corners_m, dtype=np.float64)
+    if not np.isfinite(c).all():
+        raise _meaningless(number, "a corner coordinate is not finite", file, c.tolist())
+    gaps = [float(np.linalg.norm(c[i] - c[j])) for i in range(4) for j in range(i + 1, 4)]
+    if min(gaps) < PLATE_MIN_SIDE_M:
+        raise _meaningless(number, f"its corners coincide (two are {min(gaps) * 1000:.3g} mm apart)", file, c.tolist())
+    crossed = "its corners are not in C3D order (the outline crosses itself)"
     x = (c[0] + c[3]) / 2 - (c[1] + c[2]) / 2
     y_raw = (c[0] + c[1]) / 2 - (c[2] + c[3]) / 2
     size = [float(np.linalg.norm(x)), float(np.linalg.norm(y_raw))]
-    if min(size) <= PLATE_RECTANGLE_TOLERANCE_M:
-        raise fail("E501", f"force platform {number} has degenerate corners", file=file,
-                   pointer="/FORCE_PLATFORM/CORNERS", expected="four corners of a rectangle", found=c.tolist())
+    if min(size) < PLATE_MIN_SIDE_M:
+        raise _meaningless(number, crossed, file, c.tolist())
     x /= size[0]
     z_plate = np.cross(x, y_raw)
+    if np.linalg.norm(z_plate) < PLATE_MIN_SIDE_M * size[1]:
+        raise _meaningless(number, "its corners are collinear", file, c.tolist())
     z_plate /= np.linalg.norm(z_plate)
     y_plate = np.cross(z_plate, x)
     zw = -z_plate
@@ -504,16 +669,18 @@ def plate_frame(corners_m: np.ndarray, *, file: str, number: int) -> tuple[World
     rotation = np.stack([x, yw, zw])
     centre = c.mean(axis=0)
     local = (c - centre) @ rotation.T
-    ideal = np.array([[1, -1], [-1, -1], [-1, 1], [1, 1]]) * np.array(size) / 2
+    quadrants = np.array([[1, -1], [-1, -1], [-1, 1], [1, 1]])
+    if (np.sign(local[:, :2]) != quadrants).any():
+        raise _meaningless(number, crossed, file, c.tolist())
+    ideal = quadrants * np.array(size) / 2
     deviation = float(max(np.abs(local[:, :2] - ideal).max(), np.abs(local[:, 2]).max()))
-    if deviation > PLATE_RECTANGLE_TOLERANCE_M:
-        raise fail("E501", f"the corners of force platform {number} are not a flat rectangle "
-                   f"(deviation {deviation * 1000:.3g} mm)", file=file, pointer="/FORCE_PLATFORM/CORNERS",
-                   expected=f"≤ {PLATE_RECTANGLE_TOLERANCE_M * 1000:g} mm", found=f"{deviation * 1000:.3g} mm")
+    if deviation > PLATE_SHAPE_LIMIT * min(size):
+        raise _meaningless(number, f"its corners are {deviation * 1000:.3g} mm from a flat rectangle, more than "
+                           f"{PLATE_SHAPE_LIMIT:.0%} of its shorter side", file, c.tolist())
     axes_in_w = rotation @ np.stack([x, y_plate, z_plate], axis=1)
     desc = (f"W: centre of C3D force platform {number}'s corners, x along the platform's x axis, "
             f"z up (opposite to the platform's z)")
-    return WorldFrame(rotation, centre, desc), axes_in_w, size
+    return WorldFrame(rotation, centre, desc), axes_in_w, size, deviation
 
 
 # Haptify names corner sensors by their quadrant of W (spec §5.6); C3D numbers them in the platform's
@@ -521,23 +688,34 @@ def plate_frame(corners_m: np.ndarray, *, file: str, number: int) -> tuple[World
 CORNER_QUADRANTS = {"c1": (1.0, 1.0), "c2": (-1.0, 1.0), "c3": (-1.0, -1.0), "c4": (1.0, -1.0)}
 
 
-def plate_description(platform: C3DPlatform, to_m: Unit, *, file: str) -> tuple[WorldFrame, dict]:
+def plate_description(platform: C3DPlatform, to_m: Unit, *, file: str) -> tuple[WorldFrame, dict, list[Finding]]:
     """W and the rig's ``force_plate`` from a C3D platform (spec §5.6): one corner sensor at each C3D
     corner, named by its quadrant of W (``CORNER_QUADRANTS``), lowered to the depth |ORIGIN z| of the
-    platform's sensing origin and oriented as the platform's frame."""
+    platform's sensing origin and oriented as the platform's frame. A W502 finding gives the corners'
+    deviation from a flat rectangle when it exceeds 1 mm."""
     if platform.corners is None:
         raise fail("E503", f"force platform {platform.number} has no FORCE_PLATFORM:CORNERS", file=file,
                    pointer="/FORCE_PLATFORM/CORNERS", expected="corners", found=None)
     corners = to_m.to_si(platform.corners)
-    world, axes, size = plate_frame(corners, file=file, number=platform.number)
-    depth = float(abs(to_m.to_si(platform.origin)[2])) if platform.origin is not None else 0.0
+    world, axes, size, deviation = plate_frame(corners, file=file, number=platform.number)
+    warnings = []
+    if deviation > PLATE_RECTANGLE_TOLERANCE_M:
+        warnings.append(Finding("W502", f"the corners of force platform {platform.number} are {deviation * 1000:.3g} mm "
+                                "from a flat rectangle; W and the plate size come from the best-fitting rectangle",
+                                file=file, pointer="/FORCE_PLATFORM/CORNERS",
+                                expected=f"≤ {PLATE_RECTANGLE_TOLERANCE_M * 1000:g} mm", found=f"{deviation * 1000:.3g} mm"))
+    origin = to_m.to_si(platform.origin) if platform.origin is not None else np.zeros(3)
+    if not np.isfinite(origin).all():
+        raise fail("E505", f"force platform {platform.number}: its origin is not finite", file=file,
+                   pointer="/FORCE_PLATFORM/ORIGIN", expected="a finite origin", found=origin.tolist())
+    depth = float(abs(origin[2]))
     q = [float(v) for v in matrix_to_quat(axes)]
     in_w = world.apply(corners)
     sensors = []
     for cid, (sx, sy) in CORNER_QUADRANTS.items():
         corner = next(c for c in in_w if np.sign(c[0]) == sx and np.sign(c[1]) == sy)
         sensors.append({"id": cid, "pose": {"position": [float(corner[0]), float(corner[1]), -depth], "quaternion": q}})
-    return world, {"size_m": size, "corners": sensors}
+    return world, {"size_m": size, "corners": sensors}, warnings
 
 
 def pose_frame(pose: Pose) -> WorldFrame:
@@ -688,10 +866,12 @@ class ImportResult:
     streams: list[dict]
     world_frame: str
     source: dict
+    warnings: list[Finding] = field(default_factory=list)
 
     def to_dict(self) -> dict:
         return {"ok": True, "session": str(self.session), "session_id": self.session_id, "trial_id": self.trial_id,
-                "streams": self.streams, "world_frame": self.world_frame, "source": self.source}
+                "streams": self.streams, "world_frame": self.world_frame, "source": self.source,
+                "warnings": [w.to_dict() for w in self.warnings]}
 
 
 @dataclass
@@ -872,7 +1052,7 @@ def _stream_summary(stream: dict) -> dict:
 
 # --- C3D import (spec §5.5) -----------------------------------------------------------------------
 
-def _select_markers(c3d: C3DContent, mm: MarkerMap, label: str) -> tuple[list[int], list[str]]:
+def _select_markers(c3d: Recording, mm: MarkerMap, label: str) -> tuple[list[int], list[str]]:
     """Indices of the imported point labels and their entity ids (spec §5.4)."""
     labels = c3d.point_labels
     where = {"file": label}
@@ -904,7 +1084,7 @@ def _select_markers(c3d: C3DContent, mm: MarkerMap, label: str) -> tuple[list[in
     return chosen, ids
 
 
-def _analog_reader(c3d: C3DContent, label: str) -> SourceReader:
+def _analog_reader(c3d: Recording, label: str) -> SourceReader:
     def read(name: str) -> tuple[np.ndarray, str | None]:
         hits = [i for i, lab in enumerate(c3d.analog_labels) if lab == name]
         if len(hits) != 1:
@@ -926,72 +1106,156 @@ def _prepare(out: str | Path | Destination, mapping: str | Path | LoadedMap | No
     return dest, loaded, model, device, extra
 
 
+ROTATION_TOLERANCE = 1e-3  # |RᵀR − I| and |det R − 1| allowed in a stored rotation (float32 storage)
+
+
+def body_poses(rec: Recording, index: int, world: WorldFrame | None, to_m: Unit, max_residual: float | None,
+               *, label: str) -> tuple[np.ndarray, np.ndarray]:
+    """One 6-DoF body as pose columns (spec §5.5): positions (n × 3, m, in W) and unit quaternions
+    (n × 4, body → W, w ≥ 0). A sample the file marks invalid, or whose residual exceeds
+    ``max_residual``, is occluded: all seven values NaN. E501 when a valid sample is not a rotation."""
+    pos = to_m.to_si(rec.body_positions[:, index, :])
+    rot = rec.body_rotations[:, index, :, :]
+    valid = np.isfinite(pos).all(axis=1) & np.isfinite(rot).all(axis=(1, 2))
+    if rec.body_residuals is not None:
+        res = rec.body_residuals[:, index]
+        valid &= ~(res < 0)
+        if max_residual is not None:
+            valid &= ~(res > max_residual)
+    r = np.where(valid[:, None, None], rot, np.eye(3))
+    err = np.abs(np.einsum("nji,njk->nik", r, r) - np.eye(3)).max(axis=(1, 2))
+    err = np.maximum(err, np.abs(np.linalg.det(r) - 1.0))
+    if (err > ROTATION_TOLERANCE).any():
+        k = int(np.argmax(err > ROTATION_TOLERANCE))
+        raise fail("E501", f"6-DoF body {rec.body_labels[index]!r} of {rec.path.name} holds no rotation at frame {k}",
+                   file=str(rec.path), column=rec.body_labels[index], expected="an orthonormal matrix, det 1",
+                   found=np.round(r[k], 6).tolist())
+    if world is not None:
+        pos = world.apply(pos)
+        r = world.rotation @ r
+    quat = matrix_to_quat(r)
+    pos = np.where(valid[:, None], pos, np.nan)
+    quat = np.where(valid[:, None], quat, np.nan)
+    return pos, quat
+
+
+def _body_index(rec: Recording, body: str, pointer: str, label: str) -> int:
+    hits = [i for i, b in enumerate(rec.body_labels) if b == body]
+    if len(hits) != 1:
+        why = "no" if not hits else f"{len(hits)} bodies labelled"
+        raise fail("E503", f"{rec.path.name} has {why} 6-DoF body {body!r}", file=label, pointer=pointer,
+                   expected=rec.body_labels, found=body)
+    return hits[0]
+
+
+def _pose_streams(rec: Recording, m: ImportMap, world: WorldFrame | None, to_m: Unit | None, t: np.ndarray,
+                  rigid_bodies: list[RigidBody], label: str) -> dict[str, tuple[dict[str, np.ndarray], list[str] | None]]:
+    """handle_pose and link_poses from the map's ``bodies`` (spec §5.5): kind → (columns, entities)."""
+    bm = m.bodies
+    if bm is None or (bm.handle is None and not bm.links):
+        return {}
+    out: dict[str, tuple[dict[str, np.ndarray], list[str] | None]] = {}
+    names = {b.name for b in rigid_bodies}
+    if bm.handle is not None:
+        pos, quat = body_poses(rec, _body_index(rec, bm.handle, "/bodies/handle", label), world, to_m,
+                               bm.max_residual, label=label)
+        cols = {c: pos[:, k] for k, c in enumerate(("px", "py", "pz"))}
+        cols.update({c: quat[:, k] for k, c in enumerate(("qw", "qx", "qy", "qz"))})
+        out["handle_pose"] = ({"t": t, **cols}, None)
+    if bm.links:
+        cols = {"t": t}
+        for link, body in bm.links.items():
+            if link not in names:
+                raise fail("E502", f"link {link!r} of bodies.links is not a rigid body of markers.rigid_bodies", file=label,
+                           pointer=f"/bodies/links/{link}", expected=sorted(names), found=link)
+            pos, quat = body_poses(rec, _body_index(rec, body, f"/bodies/links/{link}", label), world, to_m,
+                                   bm.max_residual, label=label)
+            cols.update({f"{link}_{c}": pos[:, k] for k, c in enumerate(("px", "py", "pz"))})
+            cols.update({f"{link}_{c}": quat[:, k] for k, c in enumerate(("qw", "qx", "qy", "qz"))})
+        out["link_poses"] = (cols, list(bm.links))
+    return out
+
+
 def import_c3d(path: str | Path, out: str | Path | Destination, mapping: str | Path | LoadedMap | None = None, *,
                overrides: dict | None = None, overwrite: bool = False, append: bool = False) -> ImportResult:
     """Import a C3D file as one trial of a new session at ``out`` (spec §5.5), or append it as one
-    more trial to the session at ``out`` (``append``, §5.9).
-
-    Markers become a ``markers`` stream (POINT:UNITS → m, residual < 0 → NaN), in W (§5.6); analog
-    channels become the streams the map names (§5.3); a chosen force platform becomes the rig's plate.
-    ``mapping`` is a map file, an already loaded map, or None (then ``overrides`` must hold every
-    required session and trial field). Nothing is written when any check fails.
-    """
+    more trial to the session at ``out`` (``append``, §5.9). See :func:`import_recording`."""
     dest, loaded, _, device, extra = _prepare(out, mapping, "c3d", overrides, overwrite, append)
+    return import_recording(read_c3d(path), dest, loaded, device, extra)
+
+
+def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, device: dict,
+                     extra: dict[str, str]) -> ImportResult:
+    """One motion-capture recording (C3D, Qualisys TSV, Motive or Nexus CSV) as one trial (spec §5.5, §5.10).
+
+    Markers become a ``markers`` stream (point units → m, invalid → NaN), the map's 6-DoF bodies
+    ``handle_pose`` and ``link_poses``, all in W (§5.6); analog channels become the streams the map
+    names (§5.3); a chosen force platform becomes the rig's plate. The reader's warnings (W501) and
+    the plate's (W502) are returned and written into the trial's notes. Nothing is written when any
+    check fails.
+    """
     m, label = loaded.map, loaded.label
-    c3d = read_c3d(path)
-    src = str(c3d.path)
+    src = str(rec.path)
     mm = m.markers or MarkerMap()
+    warnings = list(rec.warnings)
 
     # world frame
     plate_number = None
     if isinstance(m.force_plate, int):
-        if m.force_plate > len(c3d.platforms):
-            raise fail("E503", f"{c3d.path.name} has no force platform {m.force_plate}", file=label, pointer="/force_plate",
-                       expected=[p.number for p in c3d.platforms], found=m.force_plate)
+        if m.force_plate > len(rec.platforms):
+            raise fail("E503", f"{rec.path.name} has no force platform {m.force_plate}", file=label, pointer="/force_plate",
+                       expected=[p.number for p in rec.platforms], found=m.force_plate)
         plate_number = m.force_plate
-    elif m.force_plate == "auto" and c3d.platforms and m.lab_to_world is None:
+    elif m.force_plate == "auto" and rec.platforms and m.lab_to_world is None:
         plate_number = 1
     if plate_number is not None and m.lab_to_world is not None:
         raise fail("E502", "give either a force platform or lab_to_world: the platform defines W", file=label,
                    pointer="/lab_to_world", expected="one of them", found="both")
     rig = m.session.rig.model_dump(mode="json", exclude_none=True)
     point_unit = None
-    chosen, entities = _select_markers(c3d, mm, label)
-    if chosen or plate_number is not None:
-        point_unit = unit_conversion(c3d.point_units, "m", file=src, pointer="/POINT/UNITS")
+    chosen, entities = _select_markers(rec, mm, label)
+    wants_bodies = m.bodies is not None and (m.bodies.handle is not None or bool(m.bodies.links))
+    if chosen or wants_bodies or plate_number is not None:
+        point_unit = unit_conversion(rec.point_units, "m", file=src, pointer="/POINT/UNITS")
     world: WorldFrame | None = None
     if plate_number is not None:
         if "force_plate" in rig:
             raise fail("E502", "the map's rig has a force_plate and the C3D platform would replace it; set force_plate to 'none' or remove one",
                        file=label, pointer="/session/rig/force_plate", expected="one plate description", found="two")
-        world, rig["force_plate"] = plate_description(c3d.platforms[plate_number - 1], point_unit, file=src)
+        world, rig["force_plate"], plate_warnings = plate_description(rec.platforms[plate_number - 1], point_unit, file=src)
+        warnings += plate_warnings
     elif m.lab_to_world is not None:
         world = pose_frame(m.lab_to_world)
-    frame_note = world.description if world else "W: the C3D lab frame as recorded (no force platform, no lab_to_world)"
+    frame_note = world.description if world else f"W: the {rec.format.upper()} lab frame as recorded (no force platform, no lab_to_world)"
 
-    # markers
-    marker_data = None
-    if chosen:
-        if c3d.points.shape[0] < 2:
-            raise fail("E205", f"{c3d.path.name} holds {c3d.points.shape[0]} frame(s); a stream needs two", file=src,
-                       expected="≥ 2 frames", found=c3d.points.shape[0])
+    # markers and 6-DoF bodies, on the point clock
+    mocap_streams: dict[str, tuple[dict[str, np.ndarray], list[str] | None]] = {}
+    if chosen or wants_bodies:
+        if rec.frames < 2:
+            raise fail("E205", f"{rec.path.name} holds {rec.frames} frame(s); a stream needs two", file=src,
+                       expected="≥ 2 frames", found=rec.frames)
         if "motion_capture" in rig:
-            raise fail("E502", "the importer writes rig.motion_capture from the C3D; give rigid bodies and the system under 'markers'",
+            raise fail("E502", "the importer writes rig.motion_capture from the source; give rigid bodies and the system under 'markers'",
                        file=label, pointer="/session/rig/motion_capture", expected=None, found="motion_capture")
-        for j, body in enumerate(mm.rigid_bodies):
-            unknown = [e for e in body.markers if e not in entities]
-            if unknown:
-                raise fail("E503", f"rigid body {body.name!r} names markers that are not imported: {unknown}", file=label,
-                           pointer=f"/markers/rigid_bodies/{j}/markers", expected=entities, found=unknown)
-        pos = point_unit.to_si(c3d.points[:, chosen, :])
-        if world is not None:
-            pos = world.apply(pos)
-        t = (c3d.point_first_frame + np.arange(pos.shape[0])) / c3d.point_rate + m.time_offset_s
-        marker_data = {"t": t}
-        for j, ent in enumerate(entities):
-            for k, axis in enumerate("xyz"):
-                marker_data[f"{ent}_{axis}"] = pos[:, j, k]
-        rig["motion_capture"] = {"system": mm.system or c3d.manufacturer or None, "rate_hz": c3d.point_rate,
+        if chosen:
+            for j, body in enumerate(mm.rigid_bodies):
+                unknown = [e for e in body.markers if e not in entities]
+                if unknown:
+                    raise fail("E503", f"rigid body {body.name!r} names markers that are not imported: {unknown}", file=label,
+                               pointer=f"/markers/rigid_bodies/{j}/markers", expected=entities, found=unknown)
+        t = (rec.point_first_frame + np.arange(rec.frames)) / rec.point_rate + m.time_offset_s
+        if chosen:
+            pos = point_unit.to_si(rec.points[:, chosen, :])
+            pos[~np.isfinite(pos).all(axis=2)] = np.nan  # a marker is seen or occluded as a whole (§2.7)
+            if world is not None:
+                pos = world.apply(pos)
+            marker_data = {"t": t}
+            for j, ent in enumerate(entities):
+                for k, axis in enumerate("xyz"):
+                    marker_data[f"{ent}_{axis}"] = pos[:, j, k]
+            mocap_streams["markers"] = (marker_data, entities)
+        mocap_streams.update(_pose_streams(rec, m, world, point_unit, t, mm.rigid_bodies, label))
+        rig["motion_capture"] = {"system": mm.system or rec.manufacturer or None, "rate_hz": rec.point_rate,
                                  "rigid_bodies": [b.model_dump() for b in mm.rigid_bodies], "markers": entities}
         if rig["motion_capture"]["system"] is None:
             del rig["motion_capture"]["system"]
@@ -999,39 +1263,41 @@ def import_c3d(path: str | Path, out: str | Path | Destination, mapping: str | P
     # analog streams
     analog_streams: dict[str, dict[str, np.ndarray]] = {}
     if m.streams:
-        n = c3d.analogs.shape[1]
+        n = rec.analogs.shape[1]
         if n < 2:
-            raise fail("E205", f"{c3d.path.name} holds {n} analog sample(s); a stream needs two", file=src,
+            raise fail("E205", f"{rec.path.name} holds {n} analog sample(s); a stream needs two", file=src,
                        expected="≥ 2 analog samples", found=n)
-        t_an = (c3d.analog_first_sample + np.arange(n)) / c3d.analog_rate + m.time_offset_s
+        t_an = (rec.analog_first_sample + np.arange(n)) / rec.analog_rate + m.time_offset_s
         for kind, smap in m.streams.items():
-            if smap.rate_hz is not None and smap.rate_hz != c3d.analog_rate:
-                raise fail("E502", f"{kind} rate_hz {smap.rate_hz} differs from the file's ANALOG:RATE {c3d.analog_rate}",
-                           file=label, pointer=f"/streams/{kind}/rate_hz", expected=c3d.analog_rate, found=smap.rate_hz)
-        mapped = _mapped_streams(m, n, _analog_reader(c3d, label), label=label, source_file=src, unit_required=False)
+            if smap.rate_hz is not None and smap.rate_hz != rec.analog_rate:
+                raise fail("E502", f"{kind} rate_hz {smap.rate_hz} differs from the file's analog rate {rec.analog_rate}",
+                           file=label, pointer=f"/streams/{kind}/rate_hz", expected=rec.analog_rate, found=smap.rate_hz)
+        mapped = _mapped_streams(m, n, _analog_reader(rec, label), label=label, source_file=src, unit_required=False)
         analog_streams = {kind: {"t": t_an, **cols} for kind, cols in mapped.items()}
 
-    kinds = (["markers"] if marker_data else []) + list(analog_streams)
+    kinds = list(mocap_streams) + list(analog_streams)
     if not kinds:
-        raise fail("E502", f"nothing to import from {c3d.path.name}: no markers selected and no streams mapped", file=label,
-                   pointer="/streams", expected="markers or mapped analog streams", found=None)
+        raise fail("E502", f"nothing to import from {rec.path.name}: no markers selected, no bodies and no streams mapped",
+                   file=label, pointer="/streams", expected="markers, bodies or mapped analog streams", found=None)
     _check_trial_streams(m, kinds, label)
-    world_rule = ("plate" if plate_number is not None else "pose" if world is not None else "lab") if chosen else None
+    world_rule = ("plate" if plate_number is not None else "pose" if world is not None else "lab") if mocap_streams else None
     rig = dest.rig(rig, world_rule, label)
-    recorder = f"haptify {PACKAGE_VERSION} import c3d" + (f" ({c3d.manufacturer})" if c3d.manufacturer else "")
-    writer, stem = dest.writer(m, c3d.path, rig, device, extra, recorder)
-    provenance = f"Imported from {c3d.path.name} by haptify {PACKAGE_VERSION}. {frame_note}."
-    trial_id = _add_trial(writer, m, stem, c3d.path, provenance)
+    recorder = f"haptify {PACKAGE_VERSION} import {rec.format}" + (f" ({rec.manufacturer})" if rec.manufacturer else "")
+    writer, stem = dest.writer(m, rec.path, rig, device, extra, recorder)
+    provenance = f"Imported from {rec.path.name} by haptify {PACKAGE_VERSION}. {frame_note}."
+    if warnings:
+        provenance += " Import warnings: " + " ".join(f"{w.code} {w.message}." for w in warnings)
+    trial_id = _add_trial(writer, m, stem, rec.path, provenance)
     written = []
-    if marker_data:
-        written.append(writer.add_stream(trial_id, "markers", marker_data, rate_hz=c3d.point_rate, fmt=mm.format,
-                                         entities=entities))
+    for kind, (cols, ents) in mocap_streams.items():
+        fmt = mm.format if kind == "markers" else m.bodies.format  # type: ignore[union-attr]
+        written.append(writer.add_stream(trial_id, kind, cols, rate_hz=rec.point_rate, fmt=fmt, entities=ents))
     for kind, cols in analog_streams.items():
         smap = m.streams[kind]
-        written.append(writer.add_stream(trial_id, kind, cols, rate_hz=c3d.analog_rate, fmt=smap.format, frame=smap.frame))
+        written.append(writer.add_stream(trial_id, kind, cols, rate_hz=rec.analog_rate, fmt=smap.format, frame=smap.frame))
     dest.write(writer, trial_id)
     return ImportResult(dest.out, writer.manifest["session_id"], trial_id, [_stream_summary(s) for s in written],
-                        frame_note, c3d.summary())
+                        frame_note, rec.summary(), warnings)
 
 
 # --- CSV import (spec §5.7) -----------------------------------------------------------------------

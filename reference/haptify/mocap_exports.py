@@ -1,0 +1,360 @@
+"""Readers of the common motion-capture text exports (spec §5.10): Qualisys TSV, OptiTrack Motive CSV
+and Vicon Nexus CSV, each into a :class:`~haptify.importers.Recording`, so that they import through the
+same map rules as a C3D file (markers, 6-DoF bodies, analog channels; W of §5.6).
+
+Occlusion follows each format: an empty cell or ``NaN``, and in a Qualisys 3-D export a marker at
+exactly (0, 0, 0) (how QTM writes a gap). E501 names the file and the line when the file is not of
+its format.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from haptify.conventions import quat_to_matrix
+from haptify.errors import Finding, fail
+from haptify.importers import UNITS, Destination, ImportResult, LoadedMap, Recording, _prepare, import_recording
+
+FORMATS = ("tsv", "motive", "nexus")
+
+
+def _text(path: Path) -> str:
+    label = str(path)
+    if not path.is_file():
+        raise fail("E501", f"{label!r} does not exist or is not a file", file=label)
+    try:
+        return path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise fail("E501", f"{label!r} cannot be read as UTF-8 text: {exc}", file=label) from None
+
+
+def _table(lines: list[str], sep: str, path: Path, first_line: int, width: int | None = None) -> np.ndarray:
+    """The numeric block of ``lines`` (empty cells → NaN); E501 naming the line of a non-number."""
+    if not lines:
+        return np.zeros((0, width or 0))
+    try:
+        frame = pd.read_csv(io.StringIO("\n".join(lines)), sep=sep, header=None, dtype=np.float64,
+                            na_values=["", "NaN", "nan"], keep_default_na=False, skipinitialspace=True,
+                            names=range(width) if width else None, engine="c")
+    except ValueError as exc:
+        for i, line in enumerate(lines):
+            for cell in line.split(sep):
+                cell = cell.strip()
+                if cell and cell.lower() != "nan":
+                    try:
+                        float(cell)
+                    except ValueError:
+                        raise fail("E501", f"{path.name} line {first_line + i}: {cell!r} is not a number", file=str(path),
+                                   expected="a number", found=cell) from None
+        raise fail("E501", f"{path.name} cannot be read: {exc}", file=str(path)) from None
+    return frame.to_numpy(dtype=np.float64)
+
+
+def detect_format(path: Path) -> str | None:
+    """The export a file is, from its first line: ``tsv`` (QTM: ``NO_OF_FRAMES``), ``motive``
+    (``Format Version``), ``nexus`` (a section name such as ``Trajectories`` or ``Devices``), ``c3d``
+    (second byte 0x50), else None (spec §5.8)."""
+    try:
+        head = path.read_bytes()[:512]
+    except OSError:
+        return None
+    if len(head) >= 2 and head[1] == 0x50:
+        return "c3d"
+    first = head.decode("utf-8", "replace").lstrip("\ufeff").splitlines()[0] if head else ""
+    if first.startswith("NO_OF_FRAMES"):
+        return "tsv"
+    if first.startswith("Format Version"):
+        return "motive"
+    if first.strip().strip(",") in NEXUS_SECTIONS:
+        return "nexus"
+    return None
+
+
+def _empty(path: Path, fmt: str, manufacturer: str) -> dict:
+    return {"path": path, "manufacturer": manufacturer, "format": fmt, "point_labels": [], "point_units": "mm",
+            "point_rate": 0.0, "point_first_frame": 0, "points": np.zeros((0, 0, 3)), "analog_labels": [],
+            "analog_units": [], "analog_rate": 0.0, "analog_first_sample": 0, "analogs": np.zeros((0, 0))}
+
+
+# --- Qualisys TSV (QTM "Export to TSV": 3D and 6D files) -----------------------------------------
+
+def qtm_rotation(cells: np.ndarray) -> np.ndarray:
+    """QTM's Rot[0]…Rot[8] (column by column: r11, r21, r31, r12, …) as (…, 3, 3) matrices."""
+    return np.swapaxes(cells.reshape(*cells.shape[:-1], 3, 3), -1, -2)
+
+
+def read_qualisys_tsv(path: str | Path) -> Recording:
+    """A QTM TSV export (spec §5.10): header lines ``KEY<TAB>value…`` up to the data; ``MARKER_NAMES``
+    give markers (X, Y, Z in mm), ``BODY_NAMES`` 6-DoF bodies (X, Y, Z, Roll, Pitch, Yaw, Residual,
+    Rot[0]–Rot[8]). ``FREQUENCY`` is the rate; a ``Frame``/``Time`` column pair, when present, is
+    skipped, and the first frame number sets the clock."""
+    p = Path(path)
+    lines = _text(p).splitlines()
+    meta: dict[str, list[str]] = {}
+    i = 0
+    while i < len(lines) and lines[i] and not _is_number(lines[i].split("\t")[0]) and lines[i].split("\t")[0] != "Frame":
+        cells = lines[i].split("\t")
+        meta[cells[0].strip()] = [c.strip() for c in cells[1:]]
+        i += 1
+    has_columns = i < len(lines) and lines[i].split("\t")[0] == "Frame"
+    header = lines[i].split("\t") if has_columns else []
+    data_start = i + 1 if has_columns else i
+    if "FREQUENCY" not in meta:
+        raise fail("E501", f"{p.name} is not a QTM TSV export: no FREQUENCY line", file=str(p), expected="FREQUENCY",
+                   found=sorted(meta))
+    rate = float(meta["FREQUENCY"][0])
+    markers = [m for m in meta.get("MARKER_NAMES", []) if m]
+    bodies = [b for b in meta.get("BODY_NAMES", []) if b]
+    per_body = 16
+    width = (2 if has_columns else 0) + 3 * len(markers) + per_body * len(bodies)
+    data = _table([ln for ln in lines[data_start:] if ln.strip()], "\t", p, data_start + 1, width)
+    lead = 2 if has_columns else 0
+    first_frame = int(data[0, 0]) - 1 if has_columns and len(data) and math.isfinite(data[0, 0]) else 0
+    rec = _empty(p, "tsv", "Qualisys Track Manager")
+    rec.update(point_rate=rate, point_first_frame=first_frame, point_labels=markers)
+    pts = data[:, lead:lead + 3 * len(markers)].reshape(len(data), len(markers), 3)
+    gap = (pts == 0.0).all(axis=2) | ~np.isfinite(pts).all(axis=2)
+    pts[gap] = np.nan
+    rec["points"] = pts
+    if bodies:
+        b = data[:, lead + 3 * len(markers):].reshape(len(data), len(bodies), per_body)
+        rec.update(body_labels=bodies, body_positions=b[:, :, 0:3].copy(), body_residuals=b[:, :, 6].copy(),
+                   body_rotations=qtm_rotation(b[:, :, 7:16]))
+    expected = int(meta["NO_OF_FRAMES"][0]) if meta.get("NO_OF_FRAMES") else len(data)
+    out = Recording(**rec)
+    if expected != len(data):
+        out.warnings.append(Finding("W501", f"{p.name}: NO_OF_FRAMES is {expected}, the file holds {len(data)} frames; "
+                                    f"the {len(data)} frames read are imported", file=str(p), pointer="/NO_OF_FRAMES",
+                                    expected=expected, found=len(data)))
+    return out
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
+
+
+# --- OptiTrack Motive CSV ------------------------------------------------------------------------
+
+MOTIVE_UNITS = {"Millimeters": "mm", "Centimeters": "cm", "Meters": "m"}
+
+
+def read_motive_csv(path: str | Path) -> Recording:
+    """A Motive CSV export (spec §5.10): a metadata line (``Format Version``, ``Export Frame Rate``,
+    ``Rotation Type``, ``Length Units``), a blank line, then the Type, Name, ID, quantity and axis
+    lines. ``Marker`` columns (Position X, Y, Z) become markers; ``Rigid Body`` columns (Rotation X, Y,
+    Z, W quaternion, Position X, Y, Z, Mean Marker Error) 6-DoF bodies, their mean marker error the
+    residual. Only quaternion exports are read (an Euler export's axis order is not in the file)."""
+    p = Path(path)
+    lines = _text(p).splitlines()
+    first = [c.strip() for c in lines[0].split(",")] if lines else []
+    meta = dict(zip(first[0::2], first[1::2]))
+    if "Format Version" not in meta:
+        raise fail("E501", f"{p.name} is not a Motive CSV export: no 'Format Version'", file=str(p))
+    if meta.get("Rotation Type", "Quaternion") != "Quaternion":
+        raise fail("E501", f"{p.name} holds rotations as {meta['Rotation Type']}: export with Rotation Type Quaternion",
+                   file=str(p), pointer="/Rotation Type", expected="Quaternion", found=meta["Rotation Type"])
+    units = MOTIVE_UNITS.get(meta.get("Length Units", "Meters"))
+    if units is None:
+        raise fail("E504", f"{p.name}: Length Units {meta['Length Units']!r} is not known", file=str(p),
+                   expected=sorted(MOTIVE_UNITS), found=meta["Length Units"])
+    rate = float(meta.get("Export Frame Rate") or meta.get("Capture Frame Rate") or 0)
+    k = 1
+    while k < len(lines) and not lines[k].strip():
+        k += 1
+    rows = [[c.strip() for c in lines[k + j].split(",")] for j in range(5)] if len(lines) >= k + 5 else []
+    if len(rows) < 5 or rows[4][:1] != ["Frame"]:
+        raise fail("E501", f"{p.name}: the Type, Name, ID, quantity and axis lines are missing", file=str(p),
+                   expected="Frame, Time, …", found=rows[-1][:2] if rows else None)
+    types, names, _, quantity, axes = rows
+    width = len(axes)
+    data = _table([ln for ln in lines[k + 5:] if ln.strip()], ",", p, k + 6, width)
+    col = {(types[j], names[j], quantity[j], axes[j]): j for j in range(2, width)}
+    markers = list(dict.fromkeys(names[j] for j in range(2, width) if types[j] == "Marker" and quantity[j] == "Position"))
+    bodies = list(dict.fromkeys(names[j] for j in range(2, width) if types[j] == "Rigid Body"))
+    rec = _empty(p, "motive", f"OptiTrack Motive (format {meta['Format Version']})")
+    n = len(data)
+    pts = np.full((n, len(markers), 3), np.nan)
+    for i, name in enumerate(markers):
+        for a, axis in enumerate("XYZ"):
+            pts[:, i, a] = data[:, col[("Marker", name, "Position", axis)]]
+    rec.update(point_rate=rate, point_units=units, point_labels=markers, points=pts,
+               point_first_frame=int(data[0, 0]) if n and math.isfinite(data[0, 0]) else 0)
+    if bodies:
+        pos = np.full((n, len(bodies), 3), np.nan)
+        quat = np.full((n, len(bodies), 4), np.nan)
+        res = np.full((n, len(bodies)), np.nan)
+        for i, name in enumerate(bodies):
+            try:
+                for a, axis in enumerate("XYZ"):
+                    pos[:, i, a] = data[:, col[("Rigid Body", name, "Position", axis)]]
+                for a, axis in enumerate("WXYZ"):
+                    quat[:, i, a] = data[:, col[("Rigid Body", name, "Rotation", axis)]]
+            except KeyError as exc:
+                raise fail("E501", f"{p.name}: rigid body {name!r} lacks column {exc.args[0][2:]}", file=str(p),
+                           expected="Rotation X, Y, Z, W and Position X, Y, Z", found=None) from None
+            err = col.get(("Rigid Body", name, "Mean Marker Error", ""))
+            if err is not None:
+                res[:, i] = data[:, err]
+        valid = np.isfinite(quat).all(axis=2)
+        rot = np.full((n, len(bodies), 3, 3), np.nan)
+        rot[valid] = quat_to_matrix(quat[valid])
+        norm_err = np.abs(np.linalg.norm(np.where(valid[..., None], quat, [1.0, 0.0, 0.0, 0.0]), axis=2) - 1.0)
+        if (norm_err > 1e-3).any():
+            f, b = np.argwhere(norm_err > 1e-3)[0]
+            raise fail("E501", f"{p.name}: rigid body {bodies[b]!r} holds no unit quaternion at frame {f}",
+                       file=str(p), expected="|q| = 1", found=float(np.linalg.norm(quat[f, b])))
+        rec.update(body_labels=bodies, body_positions=pos, body_rotations=rot,
+                   body_residuals=None if np.isnan(res).all() else np.where(np.isnan(res) & valid, 0.0, res))
+    return Recording(**rec)
+
+
+# --- Vicon Nexus CSV -----------------------------------------------------------------------------
+
+NEXUS_SECTIONS = ("Devices", "Joints", "Model Outputs", "Segments", "Trajectories")
+
+
+def _nexus_sections(lines: list[str], path: Path) -> dict[str, tuple[float, list[str], list[str], list[str], int, list[str]]]:
+    """Each section: rate, label line, column line, unit line, first data line number, data lines."""
+    out = {}
+    i = 0
+    while i < len(lines):
+        name = lines[i].strip().strip(",")
+        if name not in NEXUS_SECTIONS:
+            i += 1
+            continue
+        if i + 4 >= len(lines):
+            raise fail("E501", f"{path.name}: section {name!r} ends before its data", file=str(path))
+        rate = float(lines[i + 1].split(",")[0])
+        labels, columns, units = ([c.strip() for c in lines[i + k].split(",")] for k in (2, 3, 4))
+        j = i + 5
+        while j < len(lines) and lines[j].strip() and lines[j].strip().strip(",") not in NEXUS_SECTIONS:
+            j += 1
+        out[name] = (rate, labels, columns, units, i + 6, lines[i + 5:j])
+        i = j
+    if not out:
+        raise fail("E501", f"{path.name} is not a Nexus CSV export: no section ({', '.join(NEXUS_SECTIONS)})",
+                   file=str(path))
+    return out
+
+
+def _groups(labels: list[str], columns: list[str]) -> list[tuple[str, dict[str, int]]]:
+    """(label, {column name: index}) for each labelled group of columns after Frame and Sub Frame."""
+    groups: list[tuple[str, dict[str, int]]] = []
+    for j in range(2, len(columns)):
+        if j < len(labels) and labels[j]:
+            groups.append((labels[j], {}))
+        if groups and columns[j]:
+            groups[-1][1][columns[j]] = j
+    return groups
+
+
+def rotation_vector_matrix(v: np.ndarray) -> np.ndarray:
+    """Rotation matrices (…, 3, 3) of rotation vectors (…, 3) in rad (Rodrigues)."""
+    angle = np.linalg.norm(v, axis=-1)
+    axis = v / np.where(angle > 0, angle, 1.0)[..., None]
+    x, y, z = np.moveaxis(axis, -1, 0)
+    c, s = np.cos(angle), np.sin(angle)
+    C = 1 - c
+    return np.stack([np.stack([c + x * x * C, x * y * C - z * s, x * z * C + y * s], -1),
+                     np.stack([y * x * C + z * s, c + y * y * C, y * z * C - x * s], -1),
+                     np.stack([z * x * C - y * s, z * y * C + x * s, c + z * z * C], -1)], -2)
+
+
+def read_nexus_csv(path: str | Path) -> Recording:
+    """A Vicon Nexus CSV export (spec §5.10): sections (name, rate, label, column and unit lines,
+    data). ``Trajectories`` and the ``Model Outputs`` in a length unit become markers; ``Segments``
+    (RX, RY, RZ a rotation vector in the unit line's angle unit; TX, TY, TZ) 6-DoF bodies; ``Devices``
+    analog channels labelled ``<device> - <column>`` at the device rate. The first Frame number sets
+    the clock (Nexus counts from 1)."""
+    p = Path(path)
+    sections = _nexus_sections(_text(p).splitlines(), p)
+    rec = _empty(p, "nexus", "Vicon Nexus")
+    point_labels, point_cols, point_rate, unit = [], [], 0.0, None
+    frames = None
+    for name in ("Trajectories", "Model Outputs"):
+        if name not in sections:
+            continue
+        rate, labels, columns, units, first, body = sections[name]
+        data = _table(body, ",", p, first, len(columns))
+        for label, cols in _groups(labels, columns):
+            if not all(a in cols for a in "XYZ") or UNITS.get(units[cols["X"]], None) is None \
+                    or UNITS[units[cols["X"]]].dimension != "length":
+                continue
+            if unit is not None and units[cols["X"]] != unit:
+                raise fail("E504", f"{p.name}: {label!r} is in {units[cols['X']]}, other points in {unit}", file=str(p),
+                           expected=unit, found=units[cols["X"]])
+            unit = units[cols["X"]]
+            point_labels.append(label)
+            point_cols.append(data[:, [cols[a] for a in "XYZ"]])
+        point_rate, frames = rate, data[:, 0]
+    if point_labels:
+        rec.update(point_labels=point_labels, points=np.stack(point_cols, axis=1), point_units=unit)
+    if "Segments" in sections:
+        rate, labels, columns, units, first, body = sections["Segments"]
+        data = _table(body, ",", p, first, len(columns))
+        names, pos, rot = [], [], []
+        for label, cols in _groups(labels, columns):
+            if not all(c in cols for c in ("RX", "RY", "RZ", "TX", "TY", "TZ")):
+                continue
+            angle = UNITS.get(units[cols["RX"]])
+            if angle is None or angle.dimension != "angle":
+                raise fail("E504", f"{p.name}: segment {label!r} rotation unit {units[cols['RX']]!r} is not an angle",
+                           file=str(p), expected=["deg", "rad"], found=units[cols["RX"]])
+            if unit is not None and units[cols["TX"]] != unit:
+                raise fail("E504", f"{p.name}: segment {label!r} is in {units[cols['TX']]}, points in {unit}", file=str(p),
+                           expected=unit, found=units[cols["TX"]])
+            unit = units[cols["TX"]]
+            names.append(label)
+            pos.append(data[:, [cols[c] for c in ("TX", "TY", "TZ")]])
+            rot.append(rotation_vector_matrix(angle.to_si(data[:, [cols[c] for c in ("RX", "RY", "RZ")]])))
+        if names:
+            n_frames = len(data)
+            if point_labels and n_frames != rec["points"].shape[0]:
+                raise fail("E501", f"{p.name}: Segments hold {n_frames} frames, Trajectories {rec['points'].shape[0]}",
+                           file=str(p), expected=rec["points"].shape[0], found=n_frames)
+            rec.update(body_labels=names, body_positions=np.stack(pos, axis=1), body_rotations=np.stack(rot, axis=1),
+                       point_units=unit)
+            point_rate, frames = rate, data[:, 0]
+            if not point_labels:
+                rec["points"] = np.zeros((n_frames, 0, 3))
+    if frames is not None and len(frames):
+        rec.update(point_rate=point_rate, point_first_frame=int(frames[0]) - 1)
+    if "Devices" in sections:
+        rate, labels, columns, units, first, body = sections["Devices"]
+        data = _table(body, ",", p, first, len(columns))
+        an_labels, an_units, values = [], [], []
+        for label, cols in _groups(labels, columns):
+            for column, j in cols.items():
+                an_labels.append(f"{label} - {column}")
+                an_units.append(units[j] if j < len(units) else "")
+                values.append(data[:, j])
+        per_frame = int(round(rate / point_rate)) if point_rate else 1
+        first_sample = (int(data[0, 0]) - 1) * per_frame + int(data[0, 1]) if len(data) else 0
+        rec.update(analog_labels=an_labels, analog_units=an_units, analog_rate=rate, analog_first_sample=first_sample,
+                   analogs=np.array(values) if values else np.zeros((0, len(data))))
+    return Recording(**rec)
+
+
+READERS = {"tsv": read_qualisys_tsv, "motive": read_motive_csv, "nexus": read_nexus_csv}
+
+
+def read_export(fmt: str, path: str | Path) -> Recording:
+    """The recording in a ``tsv``, ``motive`` or ``nexus`` export (spec §5.10)."""
+    return READERS[fmt](path)
+
+
+def import_export(fmt: str, path: str | Path, out: str | Path | Destination, mapping: str | Path | LoadedMap | None = None,
+                  *, overrides: dict | None = None, overwrite: bool = False, append: bool = False) -> ImportResult:
+    """Import a Qualisys TSV, Motive CSV or Nexus CSV export as one trial (spec §5.10), through the
+    map rules of a C3D file (:func:`~haptify.importers.import_recording`)."""
+    dest, loaded, _, device, extra = _prepare(out, mapping, fmt, overrides, overwrite, append)
+    return import_recording(read_export(fmt, path), dest, loaded, device, extra)

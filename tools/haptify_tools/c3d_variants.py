@@ -1,0 +1,172 @@
+"""C3D files as other systems write them, built with ezc3d's own writer (spec §5.5–5.6; tests, benchmarks).
+
+Every variant the importer must read is made here from known values, never edited by hand: markers
+in any unit and at any rate, analog-only files (no point, point rate 0), 6-DoF bodies in the ROTATION
+group with or without markers, force platforms of types 1–4 (calibration matrices, Kistler's
+eight-channel type 3), and the header/data disagreements some writers leave (:func:`patch_header`
+rewrites the header words after ezc3d has written a consistent file, as those writers do).
+
+ezc3d's Python ``write`` needs at least one point; :func:`write_c3d` therefore uses its SWIG layer,
+which writes any combination (the same C++ writer).
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+C3D_BLOCK = 512
+
+
+@dataclass
+class Platform:
+    """One FORCE_PLATFORM entry as a vendor writes it: corners (4 × 3, POINT units, lab frame, C3D
+    order +x+y, −x+y, −x−y, +x−y of the platform), origin (3), its analog channels (1-based), and a
+    calibration matrix (n × n, row = output) for types 3 and 4."""
+
+    type: int
+    corners: np.ndarray
+    origin: np.ndarray
+    channels: list[int]
+    cal_matrix: np.ndarray | None = None
+
+
+@dataclass
+class C3DSpec:
+    """Everything one synthetic C3D file holds; arrays as the importer reads them back (float32-exact)."""
+
+    point_rate: float = 100.0
+    point_units: str = "mm"
+    labels: list[str] = field(default_factory=list)
+    points: np.ndarray | None = None  # (n_frames, n_markers, 3)
+    residuals: np.ndarray | None = None  # (n_frames, n_markers); negative = invalid
+    analog_rate: float = 0.0
+    analog_labels: list[str] = field(default_factory=list)
+    analog_units: list[str] = field(default_factory=list)
+    analogs: np.ndarray | None = None  # (n_channels, n_samples), already scaled
+    rotation_labels: list[str] = field(default_factory=list)
+    rotations: np.ndarray | None = None  # (n_frames, n_bodies, 4, 4) homogeneous, NaN = invalid
+    platforms: list[Platform] = field(default_factory=list)
+    first_frame: int = 0  # 0-based
+    company: str = ""
+    software: str = ""
+    frames: int = 0  # frames when there is no point and no rotation (analog-only: samples / ratio)
+
+
+def _param(c, group: str, name: str, values, kind: str = "float", dims: list[int] | None = None) -> None:
+    from ezc3d import ezc3d as E
+
+    p = E.Parameter(name)
+    if kind == "str":
+        p.set(E.VecString([str(v) for v in values]), dims or [len(values)])
+    elif kind == "int":
+        p.set(E.VecInt([int(v) for v in np.ravel(values, order="F")]), dims or [int(np.size(values))])
+    else:
+        p.set(E.VecDouble([float(v) for v in np.ravel(values, order="F")]), dims or [int(np.size(values))])
+    if not c.parameters().isGroup(group):
+        c.parameters().group(E.Group(group))
+    c.parameter(group, p)
+
+
+def float32(values: np.ndarray) -> np.ndarray:
+    """Values as a C3D file stores them (IEEE float32), back in float64: what a reader gets."""
+    return np.asarray(values, dtype=np.float64).astype(np.float32).astype(np.float64)
+
+
+def write_c3d(path: Path, spec: C3DSpec) -> Path:
+    """Write ``spec`` as a C3D file with ezc3d (float data, Intel byte order)."""
+    from ezc3d import ezc3d as E
+
+    c = E.c3d()
+    n_frames = (spec.points.shape[0] if spec.points is not None else
+                spec.rotations.shape[0] if spec.rotations is not None else spec.frames)
+    for label in spec.labels:
+        c.point(label)
+    for label in spec.analog_labels:
+        c.analog(label)
+    _param(c, "POINT", "RATE", [spec.point_rate])
+    _param(c, "POINT", "UNITS", [spec.point_units], "str")
+    _param(c, "ANALOG", "RATE", [spec.analog_rate or spec.point_rate or 1.0])
+    if spec.analog_labels:
+        _param(c, "ANALOG", "UNITS", spec.analog_units or [""] * len(spec.analog_labels), "str")
+    if spec.company or spec.software:
+        _param(c, "MANUFACTURER", "COMPANY", [spec.company], "str")
+        _param(c, "MANUFACTURER", "SOFTWARE", [spec.software], "str")
+    if spec.rotation_labels:
+        _param(c, "ROTATION", "USED", [len(spec.rotation_labels)], "int")
+        _param(c, "ROTATION", "LABELS", spec.rotation_labels, "str")
+        _param(c, "ROTATION", "RATE", [spec.point_rate])
+        _param(c, "ROTATION", "RATIO", [1], "int")
+    if spec.platforms:
+        n = len(spec.platforms)
+        width = max(len(p.channels) for p in spec.platforms)
+        _param(c, "FORCE_PLATFORM", "USED", [n], "int")
+        _param(c, "FORCE_PLATFORM", "TYPE", [p.type for p in spec.platforms], "int")
+        _param(c, "FORCE_PLATFORM", "CORNERS", np.stack([p.corners.T for p in spec.platforms], axis=2), dims=[3, 4, n])
+        _param(c, "FORCE_PLATFORM", "ORIGIN", np.stack([p.origin for p in spec.platforms], axis=1), dims=[3, n])
+        chan = np.zeros((width, n), dtype=int)
+        for i, p in enumerate(spec.platforms):
+            chan[: len(p.channels), i] = p.channels
+        _param(c, "FORCE_PLATFORM", "CHANNEL", chan, "int", dims=[width, n])
+        cals = [p.cal_matrix for p in spec.platforms if p.cal_matrix is not None]
+        if cals:
+            size = max(m.shape[0] for m in cals)
+            cal = np.zeros((size, size, n))
+            for i, p in enumerate(spec.platforms):
+                if p.cal_matrix is not None:
+                    k = p.cal_matrix.shape[0]
+                    cal[:k, :k, i] = p.cal_matrix.T  # C3D stores the matrix column by column
+            _param(c, "FORCE_PLATFORM", "CAL_MATRIX", cal, dims=[size, size, n])
+    n_markers = len(spec.labels)
+    points = np.zeros((4, n_markers, n_frames))
+    residuals = np.zeros((1, n_markers, n_frames))
+    if n_markers:
+        points[:3] = spec.points.transpose(2, 1, 0)
+        points[3] = 1.0
+        if spec.residuals is not None:
+            residuals[0] = spec.residuals.T
+    n_ch = len(spec.analog_labels)
+    analogs = np.zeros((1, n_ch, 0 if spec.analogs is None else spec.analogs.shape[1]))
+    if n_ch:
+        analogs[0] = spec.analogs
+    rotations = None if spec.rotations is None else spec.rotations.transpose(2, 3, 1, 0)
+    if spec.first_frame:  # ezc3d keeps TRIAL:ACTUAL_START_FIELD/END_FIELD in step with the header
+        _param(c, "TRIAL", "ACTUAL_START_FIELD", [spec.first_frame + 1, 0], "int")
+        _param(c, "TRIAL", "ACTUAL_END_FIELD", [spec.first_frame + n_frames, 0], "int")
+        c.header().firstFrame(spec.first_frame)
+    c.import_numpy_data(points, residuals, np.zeros((7, n_markers, n_frames), dtype=bool), analogs, rotations)
+    c.write(str(path), E.WriteOptions(True, False))
+    return path
+
+
+def header_words(path: Path) -> tuple[int, ...]:
+    """The first nine 16-bit header words (Intel order)."""
+    return struct.unpack("<9H", path.read_bytes()[:18])
+
+
+def patch_header(path: Path, *, first_frame: int | None = None, last_frame: int | None = None,
+                 rate: float | None = None) -> Path:
+    """Rewrite header words 4–5 (first and last frame, as stored) and the header frame rate of a file
+    ezc3d wrote: the disagreements other writers leave between the header and the data."""
+    data = bytearray(path.read_bytes())
+    if first_frame is not None:
+        data[6:8] = struct.pack("<H", first_frame)
+    if last_frame is not None:
+        data[8:10] = struct.pack("<H", last_frame)
+    if rate is not None:
+        data[20:24] = struct.pack("<f", rate)
+    path.write_bytes(bytes(data))
+    return path
+
+
+def rectangle_corners(centre, size_x: float, size_y: float, x_axis=(1.0, 0.0, 0.0), z_down=(0.0, 0.0, -1.0)) -> np.ndarray:
+    """The four C3D corners (+x+y, −x+y, −x−y, +x−y of the platform) of a size_x × size_y plate whose
+    x axis and (downward) z axis are given in the lab frame."""
+    x = np.asarray(x_axis, float) / np.linalg.norm(x_axis)
+    z = np.asarray(z_down, float) / np.linalg.norm(z_down)
+    y = np.cross(z, x)
+    c = np.asarray(centre, float)
+    return np.array([c + sx * size_x / 2 * x + sy * size_y / 2 * y for sx, sy in ((1, 1), (-1, 1), (-1, -1), (1, -1))])
