@@ -4,7 +4,9 @@ loading strokes."""
 
 from __future__ import annotations
 
+import json
 import math
+from dataclasses import replace
 
 import matplotlib
 import numpy as np
@@ -19,9 +21,10 @@ from haptify.compute import ComputeContext
 from haptify.conventions import quat_from_axis_angle, quat_to_matrix
 from haptify.errors import HaptifyError
 from haptify.results import MetricResult, Unavailable
-from haptify.stiffness import FitRule, compute, end_of_rise, find_presses, fit_stiffness, report_figures, runs
+from haptify.stiffness import FitRule, compute, end_of_rise, find_presses, fit_stiffness, grid_rate, report_figures, runs
 from haptify.storage import open_session
-from haptify.surface import contact_of, unit_normal
+from haptify.surface import contact_of, contact_signals, unit_normal
+from haptify_conform.cases import REPO_ROOT
 from metric_sessions import add_handle_trial, spin, writer
 
 K_TRUE, F_SAT, K_CMD = 360.0, 2.7, 750.0
@@ -325,3 +328,58 @@ def test_a_fast_press_in_a_session_raises_w415(tmp_path):
     assert [x.code for x in ctx.warnings] == ["W415"]
     assert res["stiffness.measured"].diagnostics["presses"] == [2]
     assert res["stiffness.measured"].value == pytest.approx(K_TRUE, rel=0.02)
+
+
+# --- the conformance fixtures pin the window (issue 16: a plausible wrong reading moves ≥ 5× the tolerance) ---
+
+def previous_rule(t, d, f, contact, valid):
+    """The rule before this fit (spec 1.0 as first written): peak = the largest force of the whole contact run,
+    fit samples = the run's samples up to that peak with 0.2·peak ≤ f ≤ 0.8·peak, at least 5 of them."""
+    xs, ys, peaks = [], [], []
+    for a, b in runs(contact):
+        if (a > 0 and not valid[a - 1]) or t[b - 1] - t[a] < 0.2 - 1e-12 or d[a:b].max() < 0.002:
+            continue
+        k = a + int(np.argmax(f[a:b]))
+        i = np.arange(a, k + 1)
+        i = i[(f[i] >= 0.2 * f[k]) & (f[i] <= 0.8 * f[k])]
+        if len(i) >= 5:
+            xs.append(d[i]), ys.append(f[i]), peaks.append(f[k])
+    return float(np.polyfit(np.concatenate(xs), np.concatenate(ys), 1)[0]), float(np.mean(peaks))
+
+
+def whole_loading_stroke(t, d, f, contact, valid):
+    """Every loading sample from the first contact sample to the deepest one, contact transient included."""
+    xs, ys = [], []
+    for p in find_presses(t, d, f, contact, valid):
+        xs.append(d[p.start:p.deepest + 1]), ys.append(f[p.start:p.deepest + 1])
+    return float(np.polyfit(np.concatenate(xs), np.concatenate(ys), 1)[0])
+
+
+def case_of(cid):
+    """A stiffness conformance case by id."""
+    cases = json.loads((REPO_ROOT / "conformance" / "cases" / "stiffness.json").read_text())["cases"]
+    return next(c for c in cases if c["id"] == cid)
+
+
+@pytest.mark.parametrize("fixture", ["kick-dip", "falling-release"])
+def test_the_window_fixtures_move_five_tolerances_under_each_plausible_wrong_reading(fixture):
+    """stiff-kick-dip and stiff-falling-release (spec §16): the previous rule, the whole loading stroke, the contact
+    transient kept and the peak over the whole contact run each miss the expected value by ≥ 5 tolerances."""
+    measured, peak = case_of(f"stiffness.measured.{fixture}"), case_of(f"stiffness.peak_force.{fixture}")
+    ctx = ComputeContext(session=open_session(REPO_ROOT / "fixtures" / "conformance" / f"stiff-{fixture}"))
+    cs = contact_signals(ctx, "stiffness-1")
+    args = (cs.t, cs.penetration, cs.normal_force, cs.contact)
+    right = fit_stiffness(*args, valid=cs.valid)
+    assert right.stiffness == pytest.approx(measured["expected"]["value"], rel=measured["tolerance"]["rel"])
+
+    def off(value, c):
+        return abs(value / c["expected"]["value"] - 1) / c["tolerance"]["rel"]
+
+    old_k, old_peak = previous_rule(*args, cs.valid)
+    assert off(old_k, measured) >= 5
+    assert off(whole_loading_stroke(*args, cs.valid), measured) >= 5
+    if fixture == "kick-dip":    # the contact transient kept: the rise from the first contact sample
+        kept = fit_stiffness(*args, valid=cs.valid, rule=replace(FitRule.at_rate(grid_rate(cs.t)), settle=0))
+        assert off(kept.stiffness, measured) >= 5
+    else:                        # the peak over the whole contact run lies on the release stroke
+        assert off(old_peak, peak) >= 5
