@@ -108,7 +108,7 @@ def test_linear_spring_with_saturation_is_recovered_exactly():
                                                   & (f <= f[s] + 0.9 * (F_SAT - f[s]) + 1e-12)))
         assert p.fit[0] == s and p.rise_end <= p.deepest
         assert f[p.rise_end] == pytest.approx(F_SAT)
-        assert len(p.fit) >= 8 and p.overshoot == pytest.approx(0.0, abs=1e-12)
+        assert len(p.fit) >= 6 and p.overshoot == pytest.approx(0.0, abs=1e-12)
 
 
 def test_a_force_that_saturates_then_falls_with_depth_is_fitted_on_its_loading_stroke():
@@ -173,13 +173,13 @@ def test_contact_overshoot_is_the_kick_above_the_line_and_enters_no_value():
 
 
 def test_a_press_too_fast_for_the_grid_is_left_out():
-    """Four presses at the protocol's pace and one in 0.25 s: the fast one reaches its plateau less than 8 grid
+    """Four presses at the protocol's pace and one in 0.25 s: the fast one reaches its plateau less than 6 grid
     samples after its contact transient, is left out (W415 at trial level) and the others give the spring."""
     durations = (PRESS_S, PRESS_S, 0.25, PRESS_S, PRESS_S)
     t, d, f, contact = arrays(durations=durations)
     fit = fit_stiffness(t, d, f, contact)
     assert len(fit.presses) == 4 and len(fit.thin) == 1
-    assert 0 < len(fit.thin[0].fit) < 8
+    assert 0 < len(fit.thin[0].fit) < 6
     assert fit.stiffness == pytest.approx(K_TRUE, rel=1e-9)
     t1, d1, f1, c1 = arrays(durations=(0.25, 0.25))
     with pytest.raises(HaptifyError) as err:
