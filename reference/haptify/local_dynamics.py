@@ -25,6 +25,7 @@ from typing import Annotated, Any, Literal, Sequence, Union
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
+from scipy.linalg import cho_factor, cho_solve
 from scipy.signal import lfilter
 
 from haptify.conventions import quat_mean
@@ -421,6 +422,9 @@ class _Structure:
             n += 0 if bp is None else len(bp)
         self.n_shared = n
         self.shared_input = np.array([i for i, bp in enumerate(self.in_bp) if bp is not None for _ in bp], dtype=int)
+        # The signal each Jacobian column before the output map filters, among [Φ | w | z_j] (_output_jacobian).
+        self.jacobian_source = np.concatenate([np.arange(n), [n + i + (0 if k < self.nb else self.nu)
+                                                              for i in range(self.nu) for k in range(self.nb + self.nf)]])
         self.b_idx = np.zeros((self.ny, self.nu, self.nb), dtype=int)
         self.f_idx = np.zeros((self.ny, self.nu, self.nf), dtype=int)
         self.c_idx = []
@@ -452,6 +456,15 @@ class _Record:
     y: np.ndarray
     basis: np.ndarray
     segments: list
+    _signals: np.ndarray | None = None
+
+    def jacobian_inputs(self, st: _Structure) -> np.ndarray:
+        """A reused (N, shared + 2 nu) buffer: the input basis Φ, then room for w and z_j, the signals the
+        linear block's Jacobian columns filter (see :func:`_output_jacobian`)."""
+        if self._signals is None:
+            self._signals = np.empty((len(self.u), st.n_shared + 2 * st.nu))
+            self._signals[:, : st.n_shared] = self.basis
+        return self._signals
 
     @classmethod
     def of(cls, st: _Structure, u: np.ndarray, y: np.ndarray) -> "_Record":
@@ -505,56 +518,76 @@ def _simulate(st: _Structure, theta: np.ndarray, rec: _Record) -> np.ndarray:
     return y
 
 
-def _set_lagged(dst: np.ndarray, src: np.ndarray, d: int, gain: np.ndarray) -> None:
-    """dst[t] = gain[t] · src[t − d] for t ≥ d and 0 before (a delay of ``d`` samples along the first axis)."""
-    n = len(src)
-    d = min(d, n)
-    dst[:d] = 0.0
-    np.multiply(src[: n - d], gain[d:, None], out=dst[d:])
+def _pwl_parts(breakpoints: np.ndarray, values: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`pwl_eval`, :func:`pwl_slope` and :func:`pwl_basis` of one map at ``x`` from one segment search."""
+    k, s = _segments(breakpoints, x)
+    lo, hi = values[k], values[k + 1]
+    basis = np.zeros((len(k), len(breakpoints)))
+    rows = np.arange(len(k))
+    basis[rows, k] = 1.0 - s
+    basis[rows, k + 1] = s
+    return lo + s * (hi - lo), (hi - lo) / (breakpoints[k + 1] - breakpoints[k]), basis
 
 
-def _output_jacobian(st: _Structure, theta: np.ndarray, rec: _Record, j: int, w: np.ndarray | None = None,
-                     weight: float = 1.0, out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def _linear_responses(st: _Structure, theta: np.ndarray, rec: _Record) -> tuple[np.ndarray, np.ndarray]:
+    """w (N, nu), the inputs through their maps, and z (N, ny · nu, output-major) = q^-nk B_ji/F_ji w_i for
+    every transfer function (one filter-bank call)."""
+    from haptify.filter_bank import lfilter_columns
+
+    w = _inputs_mapped(st, theta, rec)
+    num, den = _polynomials(st, theta)
+    return w, lfilter_columns(num, den, np.tile(w, (1, st.ny)))
+
+
+def _jacobian_filters(st: _Structure, theta: np.ndarray, j: int) -> tuple[np.ndarray, np.ndarray]:
+    """Numerator and denominator of every column of output j's Jacobian before the output map (spec §11.4.3):
+    ∂z_ji/∂v_ik = q^-nk B_ji/F_ji φ_ik, ∂z_ji/∂b_k = q^-(nk+k-1)/F_ji w_i, ∂z_ji/∂f_l = −q^-l/F_ji z_ji."""
+    nu, nb, nf, nk = st.nu, st.nb, st.nf, st.nk
+    num, den = _polynomials(st, theta, j)
+    width = max(nk + nb, nf + 1)
+    lin_num = np.zeros((nu, nb + nf, width))
+    for k in range(nb):
+        lin_num[:, k, nk + k] = 1.0
+    for l in range(1, nf + 1):
+        lin_num[:, nb + l - 1, l] = -1.0
+    shared_num = np.zeros((st.n_shared, width))
+    shared_num[:, : nk + nb] = num[st.shared_input]
+    numerators = np.vstack([shared_num, lin_num.reshape(nu * (nb + nf), width)])
+    denominators = np.vstack([den[st.shared_input], np.repeat(den, nb + nf, axis=0)])
+    return numerators, denominators
+
+
+def _output_jacobian(st: _Structure, theta: np.ndarray, rec: _Record, j: int, weight: float = 1.0,
+                     out: np.ndarray | None = None, responses: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
     """ŷ_j and ``weight`` times its analytic Jacobian (spec §11.4.3): one row per sample, one column per
     parameter in the order ``[shared input-map values, output j's own B, F and output-map values]``.
 
-    ``w`` is :func:`_inputs_mapped` (computed when not given); ``out``, if given, is an (N, ≥ columns)
-    buffer the Jacobian is written into. Output j's filtering is three filter-bank calls: w_i/F_ji and
-    z_ji/F_ji for every input i, then q^-nk B_ji/F_ji φ_ik for every input and breakpoint, written
-    straight into the Jacobian already multiplied by the output map's slope.
+    ``responses`` is :func:`_linear_responses` (computed when not given); ``out``, if given, is an
+    (N, ≥ columns) buffer the Jacobian is written into. Every column but the output map's is one
+    filter-bank call (:func:`_jacobian_filters` applied to φ, w and z), written straight into the Jacobian
+    already multiplied by the output map's slope and the weight.
     """
     from haptify.filter_bank import lfilter_columns
 
-    n, nu, nb, nf, nk, ns = len(rec.u), st.nu, st.nb, st.nf, st.nk, st.n_shared
+    n, nu, nb, nf, ns = len(rec.u), st.nu, st.nb, st.nf, st.n_shared
     n_lin = nu * (nb + nf)
     cols = ns + n_lin + (0 if st.c_idx[j] is None else len(st.c_idx[j]))
     jac = np.empty((n, cols)) if out is None else out[:n, :cols]
-    if w is None:
-        w = _inputs_mapped(st, theta, rec)
-    num, den = _polynomials(st, theta, j)
-    ones = np.ones((nu, 1))
-    s = lfilter_columns(ones, den, w)                             # w_i filtered by 1/F_ji
-    z = np.zeros((n, nu))
-    for k in range(nb):
-        d = min(nk + k, n)
-        z[d:] += num[:, nk + k] * s[: n - d]
+    w, z = _linear_responses(st, theta, rec) if responses is None else responses
+    z = z[:, j * nu: (j + 1) * nu]
     x = z @ np.ones(nu)
     bp = st.out_bp[j]
     if bp is None:
         gain, yhat = np.full(n, weight), x
     else:
-        c = theta[st.c_idx[j]]
-        gain, yhat = weight * pwl_slope(bp, c, x), pwl_eval(bp, c, x)
-        np.multiply(pwl_basis(bp, x), weight, out=jac[:, ns + n_lin:])
-    lin = jac[:, ns: ns + n_lin].reshape(n, nu, nb + nf)
-    for k in range(nb):                                           # ∂z/∂b_k = q^-(nk+k-1) w/F
-        _set_lagged(lin[:, :, k], s, nk + k, gain)
-    if nf:                                                        # ∂z/∂f_l = −q^-l z/F
-        zf = lfilter_columns(ones, den, z)
-        for l in range(1, nf + 1):
-            _set_lagged(lin[:, :, nb + l - 1], zf, l, -gain)
-    if ns:                                                        # ∂z/∂v_ik = q^-nk B/F φ_ik
-        lfilter_columns(num[st.shared_input], den[st.shared_input], rec.basis, out=jac[:, :ns], gain=gain)
+        yhat, slope, basis = _pwl_parts(bp, theta[st.c_idx[j]], x)
+        gain = weight * slope
+        np.multiply(basis, weight, out=jac[:, ns + n_lin:])
+    signals = rec.jacobian_inputs(st)                             # [φ | w | z_j]
+    signals[:, ns: ns + nu] = w
+    signals[:, ns + nu:] = z
+    numerators, denominators = _jacobian_filters(st, theta, j)
+    lfilter_columns(numerators, denominators, signals, out=jac[:, : ns + n_lin], gain=gain, source=st.jacobian_source)
     return yhat, jac
 
 
@@ -700,7 +733,9 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
             scale[st.c_idx[j]] = 1.0 / sd_y[j]
 
     records = [_Record.of(st, a, b) for a, b in zip(us, ys)]
-    work = np.empty((max(len(a) for a in us), st.n_shared + max(st.own(j).stop - st.own(j).start for j in range(ny))))
+    starts = np.cumsum([0] + [len(a) for a in us])              # the records' rows in one stacked Jacobian
+    work = np.empty((n, st.n_shared + max(st.own(j).stop - st.own(j).start for j in range(ny))))
+    residual = np.empty(n)
     wy = 1.0 / (sd_y * math.sqrt(n))                          # residual weights (spec §11.4.2)
     d2 = opts.ridge * scale ** 2
 
@@ -723,15 +758,17 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
     for iterations in range(1, opts.max_iterations + 1):
         hess = np.diag(d2)
         grad = d2 * (theta - theta0)                           # half the gradient of the cost
-        for rec in records:
-            w = _inputs_mapped(st, theta, rec)
-            for j in range(ny):
-                yhat, jac = _output_jacobian(st, theta, rec, j, w=w, weight=wy[j], out=work)
-                _add_normal_equations(hess, grad, ns, own[j], jac.T @ jac, ((rec.y[:, j] - yhat) * wy[j]) @ jac)
+        responses = [_linear_responses(st, theta, rec) for rec in records]
+        for j in range(ny):
+            for rec, resp, a, b in zip(records, responses, starts[:-1], starts[1:]):
+                yhat, _ = _output_jacobian(st, theta, rec, j, weight=wy[j], out=work[a:b], responses=resp)
+                residual[a:b] = (rec.y[:, j] - yhat) * wy[j]
+            jac = work[:, : ns + own[j].stop - own[j].start]
+            _add_normal_equations(hess, grad, ns, own[j], jac.T @ jac, residual @ jac)
         accepted = False
         while mu <= mu_max:
             try:
-                step = np.linalg.solve(hess + mu * np.diag(np.diag(hess)), -grad)
+                step = -cho_solve(cho_factor(hess + mu * np.diag(np.diag(hess))), grad)
             except np.linalg.LinAlgError:
                 mu *= up
                 continue
