@@ -769,7 +769,7 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
         while mu <= mu_max:
             try:
                 step = -cho_solve(cho_factor(hess + mu * np.diag(np.diag(hess))), grad)
-            except np.linalg.LinAlgError:
+            except (np.linalg.LinAlgError, ValueError):           # not positive definite, or not finite
                 mu *= up
                 continue
             trial = theta + step
