@@ -155,8 +155,7 @@ def dossier_versus_peer(arg: str | None) -> None:
     from bench_gate import dossier
 
     with tempfile.TemporaryDirectory() as tmp:
-        default = REPO / "demo-out" / "touch"
-        session = dossier(arg or (str(default) if (default / "session").is_dir() else None), Path(tmp))
+        session = dossier(arg, Path(tmp))
         records = Path(tmp) / "records.npz"
         trial, seconds = export_records(session, records)
         have_peer = PEER_PYTHON.is_file()
