@@ -77,3 +77,18 @@ def test_source_feeds_one_signal_to_several_filters():
         assert np.array_equal(y[:, m], lfilter(b[m], a[m], x[:, src]))
     with pytest.raises(ValueError, match="source must pick"):
         lfilter_columns(b, a, x, source=[0, 1, 2])
+
+
+def test_stacked_records_restart_from_rest_at_their_starts():
+    rng = np.random.default_rng(8)
+    lengths = [50, 1, 80, 2]
+    x = rng.standard_normal((sum(lengths), 3))
+    b = rng.standard_normal((3, 3))
+    a = np.tile([1.0, -1.2, 0.5], (3, 1))
+    starts = np.cumsum([0] + lengths[:-1])
+    y = lfilter_columns(b, a, x, starts=starts)
+    for s, n in zip(starts, lengths):
+        for m in range(3):
+            assert np.array_equal(y[s:s + n, m], lfilter(b[m], a[m], x[s:s + n, m]))
+    with pytest.raises(ValueError, match="starts must be rows"):
+        lfilter_columns(b, a, x, starts=[len(x)])

@@ -23,16 +23,18 @@ def _kernel():
     if _KERNEL is None:
         from numba import njit
 
-        @njit("void(f8[:, ::1], f8[:, ::1], f8[:, ::1], i8[::1], f8[::1], f8[:, :])", cache=True, nogil=True)
-        def run(b, a, x, source, gain, out):
+        @njit("void(f8[:, ::1], f8[:, ::1], f8[:, ::1], i8[::1], f8[::1], u1[::1], f8[:, :])", cache=True, nogil=True)
+        def run(b, a, x, source, gain, rest, out):
             # b, a: (order + 1, M) coefficients; x: (N, S) signals; source: (M,) the signal of each column;
-            # gain: (N,); out: (N, M)
+            # gain: (N,); rest: (N,) 1 where every filter restarts from rest; out: (N, M)
             order = b.shape[0] - 1
             n, m = x.shape[0], b.shape[1]
             z = np.zeros((order + 1, m))          # z[order] stays 0: the last delay has no successor
             xs = np.empty(m)
             y = np.empty(m)
             for t in range(n):
+                if rest[t]:
+                    z[:] = 0.0
                 xt = x[t]
                 for r in range(m):
                     xs[r] = xt[source[r]]
@@ -51,9 +53,12 @@ def _kernel():
 
 
 def lfilter_columns(b: np.ndarray, a: np.ndarray, x: np.ndarray, out: np.ndarray | None = None,
-                    gain: np.ndarray | None = None, source: np.ndarray | None = None) -> np.ndarray:
+                    gain: np.ndarray | None = None, source: np.ndarray | None = None,
+                    starts: np.ndarray | None = None) -> np.ndarray:
     """Column m of the result is ``x[:, source[m]]`` (default ``x[:, m]``) filtered by ``b[m] / a[m]`` from
     zero initial conditions, each output sample t then multiplied by ``gain[t]`` when a gain (N,) is given.
+    ``starts`` lists rows where every filter restarts from rest (records stacked one after the other, each
+    simulated from zero initial conditions as spec §11.3 requires); row 0 always starts.
 
     ``b`` (M, nb) and ``a`` (M, na) hold one numerator and one denominator per column, each denominator
     with a leading 1 (F(q) = 1 + f_1 q^-1 + …, as every transfer function of spec §11.2); the shorter of
@@ -87,6 +92,12 @@ def lfilter_columns(b: np.ndarray, a: np.ndarray, x: np.ndarray, out: np.ndarray
     gain = np.ones(len(x)) if gain is None else np.ascontiguousarray(gain, dtype=float)
     if gain.shape != (len(x),):
         raise ValueError(f"gain must hold one factor per sample ({len(x)}); got shape {gain.shape}")
+    rest = np.zeros(len(x), dtype=np.uint8)
+    if starts is not None and len(x):
+        starts = np.asarray(starts, dtype=np.int64)
+        if len(starts) and (starts.min() < 0 or starts.max() >= len(x)):
+            raise ValueError(f"starts must be rows of x (0 … {len(x) - 1})")
+        rest[starts] = 1
     if out.size:
-        _kernel()(coef_b, coef_a, x, src.astype(np.int64), gain, out)
+        _kernel()(coef_b, coef_a, x, src.astype(np.int64), gain, rest, out)
     return out

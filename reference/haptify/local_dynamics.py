@@ -449,13 +449,15 @@ class _Structure:
 
 @dataclass
 class _Record:
-    """One training record (spec §11.4: records are simulated separately from rest) and what the fit
-    precomputes for it: the input basis Φ (N, shared parameters) and each mapped input's segments."""
+    """The training records stacked (spec §11.4: each is simulated from rest; ``starts`` holds their first
+    rows) and what the fit precomputes for them: the input basis Φ (N, shared parameters) and each mapped
+    input's segments."""
 
     u: np.ndarray
     y: np.ndarray
     basis: np.ndarray
     segments: list
+    starts: np.ndarray
     _signals: np.ndarray | None = None
 
     def jacobian_inputs(self, st: _Structure) -> np.ndarray:
@@ -467,14 +469,14 @@ class _Record:
         return self._signals
 
     @classmethod
-    def of(cls, st: _Structure, u: np.ndarray, y: np.ndarray) -> "_Record":
+    def of(cls, st: _Structure, u: np.ndarray, y: np.ndarray, starts: Sequence[int] = (0,)) -> "_Record":
         basis = np.empty((len(u), st.n_shared))
         segments = []
         for i, bp in enumerate(st.in_bp):
             segments.append(None if bp is None else _segments(bp, u[:, i]))
             if bp is not None:
                 basis[:, st.v_idx[i]] = pwl_basis(bp, u[:, i])
-        return cls(u=u, y=y, basis=basis, segments=segments)
+        return cls(u=u, y=y, basis=basis, segments=segments, starts=np.asarray(starts, dtype=np.int64))
 
 
 def _inputs_mapped(st: _Structure, theta: np.ndarray, rec: _Record) -> np.ndarray:
@@ -509,7 +511,7 @@ def _simulate(st: _Structure, theta: np.ndarray, rec: _Record) -> np.ndarray:
     n = len(rec.u)
     w = _inputs_mapped(st, theta, rec)
     num, den = _polynomials(st, theta)
-    z = lfilter_columns(num, den, np.tile(w, (1, st.ny)))
+    z = lfilter_columns(num, den, np.tile(w, (1, st.ny)), starts=rec.starts)
     x = z @ np.kron(np.eye(st.ny), np.ones((st.nu, 1)))           # Σ_i z_ji for every output j
     y = np.empty((n, st.ny))
     for j in range(st.ny):
@@ -536,7 +538,7 @@ def _linear_responses(st: _Structure, theta: np.ndarray, rec: _Record) -> tuple[
 
     w = _inputs_mapped(st, theta, rec)
     num, den = _polynomials(st, theta)
-    return w, lfilter_columns(num, den, np.tile(w, (1, st.ny)))
+    return w, lfilter_columns(num, den, np.tile(w, (1, st.ny)), starts=rec.starts)
 
 
 def _jacobian_filters(st: _Structure, theta: np.ndarray, j: int) -> tuple[np.ndarray, np.ndarray]:
@@ -587,7 +589,8 @@ def _output_jacobian(st: _Structure, theta: np.ndarray, rec: _Record, j: int, we
     signals[:, ns: ns + nu] = w
     signals[:, ns + nu:] = z
     numerators, denominators = _jacobian_filters(st, theta, j)
-    lfilter_columns(numerators, denominators, signals, out=jac[:, : ns + n_lin], gain=gain, source=st.jacobian_source)
+    lfilter_columns(numerators, denominators, signals, out=jac[:, : ns + n_lin], gain=gain, source=st.jacobian_source,
+                    starts=rec.starts)
     return yhat, jac
 
 
@@ -732,19 +735,15 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
             theta0[st.c_idx[j]] = mu_y[j] + sd_y[j] * out_bp[j]
             scale[st.c_idx[j]] = 1.0 / sd_y[j]
 
-    records = [_Record.of(st, a, b) for a, b in zip(us, ys)]
-    starts = np.cumsum([0] + [len(a) for a in us])              # the records' rows in one stacked Jacobian
+    rec = _Record.of(st, u_all, y_all, starts=np.cumsum([0] + [len(a) for a in us[:-1]]))
     work = np.empty((n, st.n_shared + max(st.own(j).stop - st.own(j).start for j in range(ny))))
-    residual = np.empty(n)
     wy = 1.0 / (sd_y * math.sqrt(n))                          # residual weights (spec §11.4.2)
     d2 = opts.ridge * scale ** 2
 
     def cost(theta: np.ndarray) -> float:
         total = float(np.sum(d2 * (theta - theta0) ** 2))
-        for rec in records:
-            e = (rec.y - _simulate(st, theta, rec)) * wy
-            total += float(np.sum(e * e))
-        return total
+        e = (rec.y - _simulate(st, theta, rec)) * wy
+        return total + float(np.sum(e * e))
 
     # -- §11.4.3 Levenberg–Marquardt ------------------------------------------------------------------
     mu, up, down, mu_max = opts.lm_damping
@@ -758,13 +757,10 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
     for iterations in range(1, opts.max_iterations + 1):
         hess = np.diag(d2)
         grad = d2 * (theta - theta0)                           # half the gradient of the cost
-        responses = [_linear_responses(st, theta, rec) for rec in records]
+        responses = _linear_responses(st, theta, rec)
         for j in range(ny):
-            for rec, resp, a, b in zip(records, responses, starts[:-1], starts[1:]):
-                yhat, _ = _output_jacobian(st, theta, rec, j, weight=wy[j], out=work[a:b], responses=resp)
-                residual[a:b] = (rec.y[:, j] - yhat) * wy[j]
-            jac = work[:, : ns + own[j].stop - own[j].start]
-            _add_normal_equations(hess, grad, ns, own[j], jac.T @ jac, residual @ jac)
+            yhat, jac = _output_jacobian(st, theta, rec, j, weight=wy[j], out=work, responses=responses)
+            _add_normal_equations(hess, grad, ns, own[j], jac.T @ jac, ((rec.y[:, j] - yhat) * wy[j]) @ jac)
         accepted = False
         while mu <= mu_max:
             try:
