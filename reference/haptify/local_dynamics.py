@@ -503,15 +503,11 @@ def _polynomials(st: _Structure, theta: np.ndarray, j: int | None = None) -> tup
     return num, den
 
 
-def _simulate(st: _Structure, theta: np.ndarray, rec: _Record) -> np.ndarray:
+def _simulate(st: _Structure, theta: np.ndarray, rec: _Record, responses: tuple | None = None) -> np.ndarray:
     """ŷ (N, ny) of the model under fit (same algorithm as :func:`predict`), the ny · nu transfer
-    functions in one filter-bank call."""
-    from haptify.filter_bank import lfilter_columns
-
+    functions in one filter-bank call (:func:`_linear_responses`, unless ``responses`` holds them)."""
     n = len(rec.u)
-    w = _inputs_mapped(st, theta, rec)
-    num, den = _polynomials(st, theta)
-    z = lfilter_columns(num, den, np.tile(w, (1, st.ny)), starts=rec.starts)
+    _, z = _linear_responses(st, theta, rec) if responses is None else responses
     x = z @ np.kron(np.eye(st.ny), np.ones((st.nu, 1)))           # Σ_i z_ji for every output j
     y = np.empty((n, st.ny))
     for j in range(st.ny):
@@ -740,15 +736,16 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
     wy = 1.0 / (sd_y * math.sqrt(n))                          # residual weights (spec §11.4.2)
     d2 = opts.ridge * scale ** 2
 
-    def cost(theta: np.ndarray) -> float:
-        total = float(np.sum(d2 * (theta - theta0) ** 2))
-        e = (rec.y - _simulate(st, theta, rec)) * wy
-        return total + float(np.sum(e * e))
+    def cost(theta: np.ndarray) -> tuple[float, tuple]:
+        """The cost of spec §11.4.2 and the linear responses it simulated (the next Jacobian's, if accepted)."""
+        responses = _linear_responses(st, theta, rec)
+        e = (rec.y - _simulate(st, theta, rec, responses)) * wy
+        return float(np.sum(d2 * (theta - theta0) ** 2)) + float(np.sum(e * e)), responses
 
     # -- §11.4.3 Levenberg–Marquardt ------------------------------------------------------------------
     mu, up, down, mu_max = opts.lm_damping
     theta = theta0.copy()
-    current = cost(theta)
+    current, responses = cost(theta)
     history = [current]
     ns = st.n_shared
     own = [st.own(j) for j in range(ny)]
@@ -757,7 +754,6 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
     for iterations in range(1, opts.max_iterations + 1):
         hess = np.diag(d2)
         grad = d2 * (theta - theta0)                           # half the gradient of the cost
-        responses = _linear_responses(st, theta, rec)
         for j in range(ny):
             yhat, jac = _output_jacobian(st, theta, rec, j, weight=wy[j], out=work, responses=responses)
             _add_normal_equations(hess, grad, ns, own[j], jac.T @ jac, ((rec.y[:, j] - yhat) * wy[j]) @ jac)
@@ -772,7 +768,7 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
             if _max_pole_modulus(st, trial) >= opts.stability_radius:
                 mu *= up
                 continue
-            new = cost(trial)
+            new, trial_responses = cost(trial)
             if np.isfinite(new) and new < current:
                 accepted = True
                 break
@@ -782,7 +778,7 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
             iterations -= 1
             break
         gain = (current - new) / current if current > 0 else 0.0
-        theta, current = trial, new
+        theta, current, responses = trial, new, trial_responses
         history.append(current)
         mu = max(mu * down, 1e-12)
         if gain < opts.tolerance:
