@@ -25,8 +25,19 @@ demo: $(STAMP)
 test: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) -m pytest -q -n 2 tests
 
-bench: $(STAMP)
+# Benchmark-time peers live in their own environment: sysidentpy (the local dynamic model's peer, issue 21)
+# pins numpy <= 2.3.5, older than the project's.
+PEERS      := .venv-peers
+PEER_STAMP := $(PEERS)/.installed-stamp
+
+$(PEER_STAMP): benchmarks/peers/requirements.txt
+	$(PYTHON) -m venv $(PEERS)
+	$(PEERS)/bin/python -m pip install --quiet -r benchmarks/peers/requirements.txt
+	touch $(PEER_STAMP)
+
+# Writes benchmarks/RESULTS-table.md (the figures, their peers and ratios; see benchmarks/run.py).
+bench: $(STAMP) $(PEER_STAMP)
 	$(PY) benchmarks/run.py
 
 clean:
-	rm -rf $(VENV) $(OUT) build *.egg-info
+	rm -rf $(VENV) $(PEERS) $(OUT) build *.egg-info

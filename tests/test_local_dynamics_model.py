@@ -286,3 +286,48 @@ def test_unit_gain_model_is_linear_and_time_invariant(b, p, nk, shift, gain):
     assert np.allclose(predict(model, u1 + gain * u2), y1 + gain * y2, atol=1e-9)
     delayed = np.vstack([np.zeros((shift, 2)), u1])[:60]
     assert np.allclose(predict(model, delayed)[shift:], y1[: 60 - shift], atol=1e-9)
+
+
+# ---------------------------------------------------------------------------------------------
+# the batched simulation and Jacobian of the fit (spec §11.4.3; issue 21)
+# ---------------------------------------------------------------------------------------------
+
+def _random_structure(rng: np.random.Generator, nk: int):
+    from haptify import local_dynamics as ld
+
+    u = smooth_inputs(rng, 400, 3)
+    in_bp = [np.sort(rng.uniform(-1.0, 1.0, 5)), None, np.linspace(-0.8, 0.8, 4)]   # a unit-gain input among maps
+    out_bp = [np.linspace(-1.5, 1.5, 6), None]
+    st_ = ld._Structure(nu=3, ny=2, nb=2, nf=2, nk=nk, in_bp=in_bp, out_bp=out_bp)
+    theta = rng.normal(0.0, 0.5, st_.size)
+    for j in range(2):
+        for i in range(3):
+            theta[st_.f_idx[j, i]] = np.poly(rng.uniform(-0.8, 0.8, 2))[1:]   # stable real poles
+        if out_bp[j] is not None:
+            theta[st_.c_idx[j]] = np.sort(rng.normal(0.0, 1.0, 6))
+    return ld, st_, theta, ld._Record.of(st_, u, np.zeros((len(u), 2)))
+
+
+@pytest.mark.parametrize("nk", [0, 2])
+def test_batched_simulation_is_the_prediction_of_the_same_parameters(nk):
+    ld, st_, theta, rec = _random_structure(np.random.default_rng(10 + nk), nk)
+    model = ld._assemble(st_, theta, 100.0, None, [Channel(name=f"u{i}", unit="1") for i in range(3)],
+                         [Channel(name=f"y{j}", unit="1") for j in range(2)])
+    np.testing.assert_allclose(ld._simulate(st_, theta, rec), predict(model, rec.u), rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("nk", [0, 1])
+def test_analytic_jacobian_matches_central_differences(nk):
+    ld, st_, theta, rec = _random_structure(np.random.default_rng(20 + nk), nk)
+    h = 1e-6
+    for j in range(2):
+        yhat, jac = ld._output_jacobian(st_, theta, rec, j, weight=0.5)
+        np.testing.assert_allclose(yhat, ld._simulate(st_, theta, rec)[:, j], rtol=1e-12, atol=1e-12)
+        own = st_.own(j)
+        columns = list(range(st_.n_shared)) + list(range(own.start, own.stop))
+        assert jac.shape == (len(rec.u), len(columns))
+        for col, p in enumerate(columns):
+            step = np.zeros(st_.size)
+            step[p] = h
+            numeric = (ld._simulate(st_, theta + step, rec)[:, j] - ld._simulate(st_, theta - step, rec)[:, j]) / (2 * h)
+            np.testing.assert_allclose(jac[:, col], 0.5 * numeric, rtol=0, atol=2e-6 * max(1.0, np.abs(numeric).max()))

@@ -25,6 +25,7 @@ from typing import Annotated, Any, Literal, Sequence, Union
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
+from scipy.linalg import cho_factor, cho_solve
 from scipy.signal import lfilter
 
 from haptify.conventions import quat_mean
@@ -420,6 +421,10 @@ class _Structure:
             self.v_idx.append(None if bp is None else np.arange(n, n + len(bp)))
             n += 0 if bp is None else len(bp)
         self.n_shared = n
+        self.shared_input = np.array([i for i, bp in enumerate(self.in_bp) if bp is not None for _ in bp], dtype=int)
+        # The signal each Jacobian column before the output map filters, among [Φ | w | z_j] (_output_jacobian).
+        self.jacobian_source = np.concatenate([np.arange(n), [n + i + (0 if k < self.nb else self.nu)
+                                                              for i in range(self.nu) for k in range(self.nb + self.nf)]])
         self.b_idx = np.zeros((self.ny, self.nu, self.nb), dtype=int)
         self.f_idx = np.zeros((self.ny, self.nu, self.nf), dtype=int)
         self.c_idx = []
@@ -434,77 +439,167 @@ class _Structure:
             n += 0 if bp is None else len(bp)
         self.size = n
 
-    def own(self, j: int) -> np.ndarray:
-        """θ indices that only output j depends on (its B, F and output map), in Jacobian order."""
-        parts = [np.concatenate([self.b_idx[j, i], self.f_idx[j, i]]) for i in range(self.nu)]
-        if self.c_idx[j] is not None:
-            parts.append(self.c_idx[j])
-        return np.concatenate(parts)
-
-    def shared(self) -> np.ndarray:
-        return np.arange(self.n_shared)
+    def own(self, j: int) -> slice:
+        """θ indices that only output j depends on (its B, F and output map), in Jacobian order: one
+        contiguous range of θ."""
+        start = int(self.b_idx[j, 0, 0])
+        stop = start + self.nu * (self.nb + self.nf) + (0 if self.c_idx[j] is None else len(self.c_idx[j]))
+        return slice(start, stop)
 
 
-def _inputs_mapped(st: _Structure, theta: np.ndarray, u: np.ndarray, basis_t: list) -> np.ndarray:
-    return np.column_stack([u[:, i] if basis_t[i] is None else theta[st.v_idx[i]] @ basis_t[i] for i in range(st.nu)])
+@dataclass
+class _Record:
+    """The training records stacked (spec §11.4: each is simulated from rest; ``starts`` holds their first
+    rows) and what the fit precomputes for them: the input basis Φ (N, shared parameters) and each mapped
+    input's segments."""
+
+    u: np.ndarray
+    y: np.ndarray
+    basis: np.ndarray
+    segments: list
+    starts: np.ndarray
+    _signals: np.ndarray | None = None
+
+    def jacobian_inputs(self, st: _Structure) -> np.ndarray:
+        """A reused (N, shared + 2 nu) buffer: the input basis Φ, then room for w and z_j, the signals the
+        linear block's Jacobian columns filter (see :func:`_output_jacobian`)."""
+        if self._signals is None:
+            self._signals = np.empty((len(self.u), st.n_shared + 2 * st.nu))
+            self._signals[:, : st.n_shared] = self.basis
+        return self._signals
+
+    @classmethod
+    def of(cls, st: _Structure, u: np.ndarray, y: np.ndarray, starts: Sequence[int] = (0,)) -> "_Record":
+        basis = np.empty((len(u), st.n_shared))
+        segments = []
+        for i, bp in enumerate(st.in_bp):
+            segments.append(None if bp is None else _segments(bp, u[:, i]))
+            if bp is not None:
+                basis[:, st.v_idx[i]] = pwl_basis(bp, u[:, i])
+        return cls(u=u, y=y, basis=basis, segments=segments, starts=np.asarray(starts, dtype=np.int64))
 
 
-def _simulate(st: _Structure, theta: np.ndarray, u: np.ndarray, basis_t: list) -> np.ndarray:
-    """ŷ (N, ny) of the model under fit (same algorithm as :func:`predict`)."""
-    w = _inputs_mapped(st, theta, u, basis_t)
-    zeros = np.zeros(st.nk)
-    y = np.empty((len(u), st.ny))
+def _inputs_mapped(st: _Structure, theta: np.ndarray, rec: _Record) -> np.ndarray:
+    """w (N, nu): each input through its map (as :func:`pwl_eval`, on the record's precomputed segments)."""
+    w = np.array(rec.u, dtype=float, copy=True)
+    for i, seg in enumerate(rec.segments):
+        if seg is not None:
+            k, s = seg
+            v = theta[st.v_idx[i]]
+            w[:, i] = v[k] + s * (v[k + 1] - v[k])
+    return w
+
+
+def _polynomials(st: _Structure, theta: np.ndarray, j: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Numerators q^-nk B (rows of nk + nb coefficients) and denominators F (rows of 1 + nf) of the
+    transfer functions of output ``j`` (nu rows) or of all outputs (ny · nu rows, output-major)."""
+    b_idx = st.b_idx if j is None else st.b_idx[j:j + 1]
+    f_idx = st.f_idx if j is None else st.f_idx[j:j + 1]
+    rows = b_idx.shape[0] * st.nu
+    num = np.zeros((rows, st.nk + st.nb))
+    num[:, st.nk:] = theta[b_idx].reshape(rows, st.nb)
+    den = np.ones((rows, 1 + st.nf))
+    den[:, 1:] = theta[f_idx].reshape(rows, st.nf)
+    return num, den
+
+
+def _simulate(st: _Structure, theta: np.ndarray, rec: _Record, responses: tuple | None = None) -> np.ndarray:
+    """ŷ (N, ny) of the model under fit (same algorithm as :func:`predict`), the ny · nu transfer
+    functions in one filter-bank call (:func:`_linear_responses`, unless ``responses`` holds them)."""
+    n = len(rec.u)
+    _, z = _linear_responses(st, theta, rec) if responses is None else responses
+    x = z @ np.kron(np.eye(st.ny), np.ones((st.nu, 1)))           # Σ_i z_ji for every output j
+    y = np.empty((n, st.ny))
     for j in range(st.ny):
-        x = np.zeros(len(u))
-        for i in range(st.nu):
-            x += lfilter(np.concatenate([zeros, theta[st.b_idx[j, i]]]),
-                         np.concatenate([[1.0], theta[st.f_idx[j, i]]]), w[:, i])
         bp = st.out_bp[j]
-        y[:, j] = x if bp is None else pwl_eval(bp, theta[st.c_idx[j]], x)
+        y[:, j] = x[:, j] if bp is None else pwl_eval(bp, theta[st.c_idx[j]], x[:, j])
     return y
 
 
-def _add_lagged(dst: np.ndarray, src: np.ndarray, d: int, gain: float = 1.0) -> None:
-    """dst[..., t] += gain · src[..., t − d] for t ≥ d (a delay along the last axis)."""
-    n = src.shape[-1]
-    if d < n:
-        dst[..., d:] += gain * src[..., : n - d]
+def _pwl_parts(breakpoints: np.ndarray, values: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`pwl_eval`, :func:`pwl_slope` and :func:`pwl_basis` of one map at ``x`` from one segment search."""
+    k, s = _segments(breakpoints, x)
+    lo, hi = values[k], values[k + 1]
+    basis = np.zeros((len(k), len(breakpoints)))
+    rows = np.arange(len(k))
+    basis[rows, k] = 1.0 - s
+    basis[rows, k + 1] = s
+    return lo + s * (hi - lo), (hi - lo) / (breakpoints[k + 1] - breakpoints[k]), basis
 
 
-def _output_jacobian(st: _Structure, theta: np.ndarray, u: np.ndarray, basis_t: list, j: int) -> tuple[np.ndarray, np.ndarray]:
-    """ŷ_j and its analytic Jacobian (spec §11.4.3), transposed: one row per parameter in the order
-    ``[shared input-map values, output j's own B, F and output-map values]``, one column per sample."""
-    n = len(u)
-    own_rows = st.nu * (st.nb + st.nf) + (0 if st.c_idx[j] is None else len(st.c_idx[j]))
-    jac_t = np.zeros((st.n_shared + own_rows, n))
-    x = np.zeros(n)
-    r = st.n_shared
-    w = _inputs_mapped(st, theta, u, basis_t)
-    lead = np.zeros(st.nk)
-    for i in range(st.nu):
-        a = np.concatenate([[1.0], theta[st.f_idx[j, i]]])
-        b = theta[st.b_idx[j, i]]
-        s = lfilter([1.0], a, w[:, i])                       # w_i filtered by 1/F_ji
-        for k in range(st.nb):                               # ∂z/∂b_k = q^-(nk+k-1) w/F
-            _add_lagged(jac_t[r + k], s, st.nk + k)
-        z = b @ jac_t[r: r + st.nb]
-        x += z
-        r += st.nb
-        if st.nf:                                            # ∂z/∂f_l = −q^-l z/F
-            zf = lfilter([1.0], a, z)
-            for l in range(1, st.nf + 1):
-                _add_lagged(jac_t[r + l - 1], zf, l, -1.0)
-            r += st.nf
-        if basis_t[i] is not None:                           # ∂z/∂v_ik = q^-nk B/F φ_ik
-            rows = slice(st.v_idx[i][0], st.v_idx[i][-1] + 1)
-            jac_t[rows] = lfilter(np.concatenate([lead, b]), a, basis_t[i], axis=-1)
+def _linear_responses(st: _Structure, theta: np.ndarray, rec: _Record) -> tuple[np.ndarray, np.ndarray]:
+    """w (N, nu), the inputs through their maps, and z (N, ny · nu, output-major) = q^-nk B_ji/F_ji w_i for
+    every transfer function (one filter-bank call)."""
+    from haptify.filter_bank import lfilter_columns
+
+    w = _inputs_mapped(st, theta, rec)
+    num, den = _polynomials(st, theta)
+    return w, lfilter_columns(num, den, np.tile(w, (1, st.ny)), starts=rec.starts)
+
+
+def _jacobian_filters(st: _Structure, theta: np.ndarray, j: int) -> tuple[np.ndarray, np.ndarray]:
+    """Numerator and denominator of every column of output j's Jacobian before the output map (spec §11.4.3):
+    ∂z_ji/∂v_ik = q^-nk B_ji/F_ji φ_ik, ∂z_ji/∂b_k = q^-(nk+k-1)/F_ji w_i, ∂z_ji/∂f_l = −q^-l/F_ji z_ji."""
+    nu, nb, nf, nk = st.nu, st.nb, st.nf, st.nk
+    num, den = _polynomials(st, theta, j)
+    width = max(nk + nb, nf + 1)
+    lin_num = np.zeros((nu, nb + nf, width))
+    for k in range(nb):
+        lin_num[:, k, nk + k] = 1.0
+    for l in range(1, nf + 1):
+        lin_num[:, nb + l - 1, l] = -1.0
+    shared_num = np.zeros((st.n_shared, width))
+    shared_num[:, : nk + nb] = num[st.shared_input]
+    numerators = np.vstack([shared_num, lin_num.reshape(nu * (nb + nf), width)])
+    denominators = np.vstack([den[st.shared_input], np.repeat(den, nb + nf, axis=0)])
+    return numerators, denominators
+
+
+def _output_jacobian(st: _Structure, theta: np.ndarray, rec: _Record, j: int, weight: float = 1.0,
+                     out: np.ndarray | None = None, responses: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """ŷ_j and ``weight`` times its analytic Jacobian (spec §11.4.3): one row per sample, one column per
+    parameter in the order ``[shared input-map values, output j's own B, F and output-map values]``.
+
+    ``responses`` is :func:`_linear_responses` (computed when not given); ``out``, if given, is an
+    (N, ≥ columns) buffer the Jacobian is written into. Every column but the output map's is one
+    filter-bank call (:func:`_jacobian_filters` applied to φ, w and z), written straight into the Jacobian
+    already multiplied by the output map's slope and the weight.
+    """
+    from haptify.filter_bank import lfilter_columns
+
+    n, nu, nb, nf, ns = len(rec.u), st.nu, st.nb, st.nf, st.n_shared
+    n_lin = nu * (nb + nf)
+    cols = ns + n_lin + (0 if st.c_idx[j] is None else len(st.c_idx[j]))
+    jac = np.empty((n, cols)) if out is None else out[:n, :cols]
+    w, z = _linear_responses(st, theta, rec) if responses is None else responses
+    z = z[:, j * nu: (j + 1) * nu]
+    x = z @ np.ones(nu)
     bp = st.out_bp[j]
     if bp is None:
-        return x, jac_t
-    c = theta[st.c_idx[j]]
-    jac_t[:r] *= pwl_slope(bp, c, x)
-    jac_t[r:] = pwl_basis(bp, x).T
-    return pwl_eval(bp, c, x), jac_t
+        gain, yhat = np.full(n, weight), x
+    else:
+        yhat, slope, basis = _pwl_parts(bp, theta[st.c_idx[j]], x)
+        gain = weight * slope
+        np.multiply(basis, weight, out=jac[:, ns + n_lin:])
+    signals = rec.jacobian_inputs(st)                             # [φ | w | z_j]
+    signals[:, ns: ns + nu] = w
+    signals[:, ns + nu:] = z
+    numerators, denominators = _jacobian_filters(st, theta, j)
+    lfilter_columns(numerators, denominators, signals, out=jac[:, : ns + n_lin], gain=gain, source=st.jacobian_source,
+                    starts=rec.starts)
+    return yhat, jac
+
+
+def _add_normal_equations(hess: np.ndarray, grad: np.ndarray, ns: int, own: slice, gram: np.ndarray,
+                          jac_e: np.ndarray) -> None:
+    """Add one output's JᵀJ and −Jᵀe (rows ``[shared, own]`` of :func:`_output_jacobian`) to the normal
+    equations of spec §11.4.3: the shared parameters are θ[:ns], the output's own a contiguous range."""
+    hess[:ns, :ns] += gram[:ns, :ns]
+    hess[:ns, own] += gram[:ns, ns:]
+    hess[own, :ns] += gram[ns:, :ns]
+    hess[own, own] += gram[ns:, ns:]
+    grad[:ns] -= jac_e[:ns]
+    grad[own] -= jac_e[ns:]
 
 
 def _max_pole_modulus(st: _Structure, theta: np.ndarray) -> float:
@@ -636,48 +731,44 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
             theta0[st.c_idx[j]] = mu_y[j] + sd_y[j] * out_bp[j]
             scale[st.c_idx[j]] = 1.0 / sd_y[j]
 
-    bases = [[None if bp is None else np.ascontiguousarray(pwl_basis(bp, a[:, i]).T) for i, bp in enumerate(in_bp)]
-             for a in us]
+    rec = _Record.of(st, u_all, y_all, starts=np.cumsum([0] + [len(a) for a in us[:-1]]))
+    work = np.empty((n, st.n_shared + max(st.own(j).stop - st.own(j).start for j in range(ny))))
     wy = 1.0 / (sd_y * math.sqrt(n))                          # residual weights (spec §11.4.2)
     d2 = opts.ridge * scale ** 2
 
-    def cost(theta: np.ndarray) -> float:
-        total = float(np.sum(d2 * (theta - theta0) ** 2))
-        for a, b, basis in zip(us, ys, bases):
-            e = (b - _simulate(st, theta, a, basis)) * wy
-            total += float(np.sum(e * e))
-        return total
+    def cost(theta: np.ndarray) -> tuple[float, tuple]:
+        """The cost of spec §11.4.2 and the linear responses it simulated (the next Jacobian's, if accepted)."""
+        responses = _linear_responses(st, theta, rec)
+        e = (rec.y - _simulate(st, theta, rec, responses)) * wy
+        return float(np.sum(d2 * (theta - theta0) ** 2)) + float(np.sum(e * e)), responses
 
     # -- §11.4.3 Levenberg–Marquardt ------------------------------------------------------------------
     mu, up, down, mu_max = opts.lm_damping
     theta = theta0.copy()
-    current = cost(theta)
+    current, responses = cost(theta)
     history = [current]
-    shared = st.shared()
-    own = [np.concatenate([shared, st.own(j)]) for j in range(ny)]
+    ns = st.n_shared
+    own = [st.own(j) for j in range(ny)]
     stop = "max_iterations"
     iterations = 0
     for iterations in range(1, opts.max_iterations + 1):
         hess = np.diag(d2)
         grad = d2 * (theta - theta0)                           # half the gradient of the cost
-        for a, b, basis in zip(us, ys, bases):
-            for j in range(ny):
-                yhat, jac_t = _output_jacobian(st, theta, a, basis, j)
-                jac_t *= wy[j]
-                hess[np.ix_(own[j], own[j])] += jac_t @ jac_t.T
-                grad[own[j]] -= jac_t @ ((b[:, j] - yhat) * wy[j])
+        for j in range(ny):
+            yhat, jac = _output_jacobian(st, theta, rec, j, weight=wy[j], out=work, responses=responses)
+            _add_normal_equations(hess, grad, ns, own[j], jac.T @ jac, ((rec.y[:, j] - yhat) * wy[j]) @ jac)
         accepted = False
         while mu <= mu_max:
             try:
-                step = np.linalg.solve(hess + mu * np.diag(np.diag(hess)), -grad)
-            except np.linalg.LinAlgError:
+                step = -cho_solve(cho_factor(hess + mu * np.diag(np.diag(hess))), grad)
+            except (np.linalg.LinAlgError, ValueError):           # not positive definite, or not finite
                 mu *= up
                 continue
             trial = theta + step
             if _max_pole_modulus(st, trial) >= opts.stability_radius:
                 mu *= up
                 continue
-            new = cost(trial)
+            new, trial_responses = cost(trial)
             if np.isfinite(new) and new < current:
                 accepted = True
                 break
@@ -687,7 +778,7 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
             iterations -= 1
             break
         gain = (current - new) / current if current > 0 else 0.0
-        theta, current = trial, new
+        theta, current, responses = trial, new, trial_responses
         history.append(current)
         mu = max(mu * down, 1e-12)
         if gain < opts.tolerance:

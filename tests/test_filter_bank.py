@@ -1,0 +1,94 @@
+"""The filter bank of the Hammerstein–Wiener fit (haptify.filter_bank; spec §11.3, §11.4.3; issue 21)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.signal import lfilter
+
+from haptify.filter_bank import lfilter_columns
+
+
+def test_first_order_impulse_response_is_the_geometric_sequence():
+    # 1 / (1 − p q^-1) driven by a unit impulse: p^t, known in closed form.
+    poles = np.array([0.5, -0.9, 0.0])
+    x = np.zeros((30, 3))
+    x[0] = 1.0
+    y = lfilter_columns(np.ones((3, 1)), np.column_stack([np.ones(3), -poles]), x)
+    t = np.arange(30)[:, None]
+    np.testing.assert_allclose(y, poles[None, :] ** t, rtol=0, atol=1e-15)
+
+
+def test_fir_with_delay_shifts_and_scales():
+    # B(q) = 0·1 + 0·q^-1 + 2 q^-2 with F = 1: y(t) = 2 x(t − 2), zeros before.
+    x = np.arange(1.0, 11.0)[:, None]
+    y = lfilter_columns([[0.0, 0.0, 2.0]], [[1.0]], x)
+    np.testing.assert_array_equal(y[:, 0], np.r_[0.0, 0.0, 2.0 * x[:-2, 0]])
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), order_b=st.integers(1, 4), order_a=st.integers(0, 3),
+       columns=st.integers(1, 9), n=st.integers(1, 300))
+def test_every_column_is_scipy_lfilter_bitwise_when_recursive(seed, order_b, order_a, columns, n):
+    rng = np.random.default_rng(seed)
+    b = rng.standard_normal((columns, order_b))
+    poles = rng.uniform(-0.95, 0.95, (columns, order_a))
+    a = np.array([np.poly(p) for p in poles]).reshape(columns, order_a + 1)
+    x = rng.standard_normal((n, columns))
+    y = lfilter_columns(b, a, x)
+    for m in range(columns):
+        expected = lfilter(b[m], a[m], x[:, m])
+        if order_a:
+            assert np.array_equal(y[:, m], expected)
+        else:  # scipy computes a pure FIR filter by convolution: another order of the sums
+            np.testing.assert_allclose(y[:, m], expected, rtol=1e-13, atol=1e-14)
+
+
+def test_gain_scales_each_output_sample_and_out_may_be_a_strided_view():
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal((200, 4))
+    b, a = rng.standard_normal((4, 2)), np.tile([1.0, -1.6, 0.64], (4, 1))
+    gain = rng.uniform(0.5, 2.0, 200)
+    big = np.full((200, 9), np.nan)
+    lfilter_columns(b, a, x, out=big[:, 2:6], gain=gain)
+    expected = np.column_stack([lfilter(b[m], a[m], x[:, m]) * gain for m in range(4)])
+    np.testing.assert_array_equal(big[:, 2:6], expected)
+    assert np.isnan(big[:, :2]).all() and np.isnan(big[:, 6:]).all()
+
+
+@pytest.mark.parametrize("b, a, x, message", [
+    (np.ones((2, 1)), np.ones((3, 1)), np.ones((5, 2)), "one numerator and one denominator per column"),
+    (np.ones((2, 1)), np.array([[2.0, 0.1], [1.0, 0.1]]), np.ones((5, 2)), "start with 1"),
+])
+def test_inconsistent_filters_are_refused(b, a, x, message):
+    with pytest.raises(ValueError, match=message):
+        lfilter_columns(b, a, x)
+
+
+def test_source_feeds_one_signal_to_several_filters():
+    rng = np.random.default_rng(5)
+    x = rng.standard_normal((120, 2))
+    b = rng.standard_normal((3, 2))
+    a = np.tile([1.0, -0.5], (3, 1))
+    y = lfilter_columns(b, a, x, source=[1, 0, 1])
+    for m, src in enumerate([1, 0, 1]):
+        assert np.array_equal(y[:, m], lfilter(b[m], a[m], x[:, src]))
+    with pytest.raises(ValueError, match="source must pick"):
+        lfilter_columns(b, a, x, source=[0, 1, 2])
+
+
+def test_stacked_records_restart_from_rest_at_their_starts():
+    rng = np.random.default_rng(8)
+    lengths = [50, 1, 80, 2]
+    x = rng.standard_normal((sum(lengths), 3))
+    b = rng.standard_normal((3, 3))
+    a = np.tile([1.0, -1.2, 0.5], (3, 1))
+    starts = np.cumsum([0] + lengths[:-1])
+    y = lfilter_columns(b, a, x, starts=starts)
+    for s, n in zip(starts, lengths):
+        for m in range(3):
+            assert np.array_equal(y[s:s + n, m], lfilter(b[m], a[m], x[s:s + n, m]))
+    with pytest.raises(ValueError, match="starts must be rows"):
+        lfilter_columns(b, a, x, starts=[len(x)])
