@@ -19,7 +19,7 @@ along the drum: ``felt`` differs from ``spring`` by the weight only), ``friction
 the case whose fitted stiffness came out at −7 N/m before the peak was taken on the loading stroke).
 
 ``python benchmarks/bench_stiffness_spread.py [SEEDS [VARIANT,…]]`` (default 10 seeds, every variant:
-about 40 s on 2 cores).
+40–80 s on the shared 2 cores).
 """
 
 from __future__ import annotations

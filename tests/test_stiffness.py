@@ -85,10 +85,10 @@ def test_end_of_rise_is_the_first_sample_not_exceeded_within_the_hold():
     assert end_of_rise(f, 0) == 0
 
 
-@pytest.mark.parametrize("rate, settle, hold", [(100.0, 5, 10), (150.0, 8, 15), (30.0, 2, 3), (1000.0, 50, 100)])
+@pytest.mark.parametrize("rate, settle, hold", [(100.0, 4, 10), (150.0, 6, 15), (30.0, 1, 3), (62.5, 2, 6), (1000.0, 40, 100)])
 def test_windows_round_to_whole_grid_samples(rate, settle, hold):
-    """contact_settle_s = 0.05 s and rise_hold_s = 0.1 s in grid samples, rounded half to even (spec §13.2):
-    7.5 → 8 at 150 Hz, 1.5 → 2 and 3.0 → 3 at 30 Hz."""
+    """contact_settle_s = 0.04 s and rise_hold_s = 0.1 s in grid samples, rounded half to even (spec §13.2):
+    6.0 → 6 at 150 Hz, 1.2 → 1 and 3.0 → 3 at 30 Hz, 2.5 → 2 (to even) at 62.5 Hz."""
     rule = FitRule.at_rate(rate)
     assert (rule.settle, rule.hold) == (settle, hold)
 
@@ -102,13 +102,13 @@ def test_linear_spring_with_saturation_is_recovered_exactly():
     assert fit.peak_force == pytest.approx(F_SAT, rel=1e-12)
     assert fit.r2 == pytest.approx(1.0)
     for p in fit.presses:
-        # the fit: the samples after the 5-sample contact transient up to 90 % of the rise that follows
-        s = p.start + 5
+        # the fit: the samples after the 4-sample contact transient up to 90 % of the rise that follows
+        s = p.start + 4
         assert list(p.fit) == list(np.flatnonzero((np.arange(len(f)) >= s) & (np.arange(len(f)) <= p.rise_end)
                                                   & (f <= f[s] + 0.9 * (F_SAT - f[s]) + 1e-12)))
         assert p.fit[0] == s and p.rise_end <= p.deepest
         assert f[p.rise_end] == pytest.approx(F_SAT)
-        assert len(p.fit) >= 6 and p.overshoot == pytest.approx(0.0, abs=1e-12)
+        assert len(p.fit) >= 5 and p.overshoot == pytest.approx(0.0, abs=1e-12)
 
 
 def test_a_force_that_saturates_then_falls_with_depth_is_fitted_on_its_loading_stroke():
@@ -173,13 +173,13 @@ def test_contact_overshoot_is_the_kick_above_the_line_and_enters_no_value():
 
 
 def test_a_press_too_fast_for_the_grid_is_left_out():
-    """Four presses at the protocol's pace and one in 0.25 s: the fast one reaches its plateau less than 6 grid
+    """Four presses at the protocol's pace and one in 0.25 s: the fast one reaches its plateau less than 5 grid
     samples after its contact transient, is left out (W415 at trial level) and the others give the spring."""
     durations = (PRESS_S, PRESS_S, 0.25, PRESS_S, PRESS_S)
     t, d, f, contact = arrays(durations=durations)
     fit = fit_stiffness(t, d, f, contact)
     assert len(fit.presses) == 4 and len(fit.thin) == 1
-    assert 0 < len(fit.thin[0].fit) < 6
+    assert 0 < len(fit.thin[0].fit) < 5
     assert fit.stiffness == pytest.approx(K_TRUE, rel=1e-9)
     t1, d1, f1, c1 = arrays(durations=(0.25, 0.25))
     with pytest.raises(HaptifyError) as err:

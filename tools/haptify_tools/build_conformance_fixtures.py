@@ -788,7 +788,7 @@ def contact_kick(t: np.ndarray, amplitude: float, length_s: float, press_s: floa
     return np.where(on, amplitude * np.sin(np.pi * np.clip(tau, 0, length_s) / length_s) ** 2, 0.0)
 
 
-FIT_RULE = ("after the contact transient (the first 5 grid samples of a press), from the force there up to 90 % of "
+FIT_RULE = ("after the contact transient (the first 4 grid samples of a press), from the force there up to 90 % of "
             "the rise to where the force stops rising (spec §13.2)")
 
 
@@ -863,13 +863,13 @@ def stiffness_fixtures() -> list[Fixture]:
     return out
 
 
-KICK_N, KICK_S = 1.5, 0.02   # the contact kick of stiff-kick-dip: 1.5 N for 20 ms
+KICK_N, KICK_S = 3.0, 0.01   # the contact kick of stiff-kick-dip: 3 N for 10 ms
 SLOW_S = 2.4                 # stiff-kick-dip's presses last 2.4 s: the plane is crossed at 0.02 m/s
 
 
 def kick_dip_law(t: np.ndarray) -> np.ndarray:
     """stiff-kick-dip's normal force (N): 400 N/m up to 1.6 N at 4 mm, a sag to 1.0 N and back to 1.6 N at 11 mm,
-    then 400 N/m to 2.0 N at the 12 mm bottom; a 1.5 N, 20 ms kick at every contact."""
+    then 400 N/m to 2.0 N at the 12 mm bottom; a 3 N, 10 ms kick at every contact."""
     d = press_depth(t, SLOW_S)
     sag = 1.6 - 0.6 * np.sin(np.pi * np.clip((d - 0.004) / 0.007, 0.0, 1.0))
     spring = np.where(d <= 0, 0.0, np.where(d <= 0.004, 400.0 * d, np.where(d <= 0.011, sag, 1.6 + 400.0 * (d - 0.011))))
@@ -890,7 +890,7 @@ def kick_dip_fixture() -> Fixture:
         {"surface_point_m": pp.tolist(), "surface_normal": up.tolist(), "stiffness_N_per_m": K_CMD},
         (1000.0, 500.0, 100.0), "parquet"))
     how = ("five slow presses (2.4 s, crossing the plane at 0.02 m/s) 12 mm deep; force 400 N/m × penetration up to 1.6 N at 4 mm, a sag to 1.0 N and back to 1.6 N at "
-           "11 mm, then 400 N/m more to 2.0 N at the bottom; a 1.5 N, 20 ms sin² kick at each contact. The fit samples, "
+           "11 mm, then 400 N/m more to 2.0 N at the bottom; a 3 N, 10 ms sin² kick at each contact. The fit samples, "
            + FIT_RULE + ", lie on the first 400 N/m part: the rise ends at the first top (the force stays below 1.6 N for "
            "0.39 s after it), and the kick has decayed through the 20 Hz low-pass before the first settled sample")
     desc = "Edge: a kick at contact and a plateau that sags and climbs again (the fit window of §13.2)."

@@ -12,6 +12,7 @@ from __future__ import annotations
 import shutil
 import tempfile
 from contextlib import ExitStack
+from dataclasses import replace
 from pathlib import Path
 from typing import Callable
 
@@ -19,7 +20,7 @@ import numpy as np
 
 from haptify.errors import HaptifyError
 from haptify.free_space import magnitude_stats
-from haptify.stiffness import fit_stiffness
+from haptify.stiffness import FitRule, fit_stiffness
 from haptify.gate import require_valid_session
 from haptify.storage import atomic_write_json, open_session, replace_folder_atomically
 from haptify.surface import planar_stats
@@ -120,7 +121,12 @@ def _penetration(tr: dt.MeasuredTrial) -> tuple[np.ndarray, np.ndarray]:
 
 def benchmark_values(tr: dt.MeasuredTrial, force: np.ndarray) -> dict[str, tuple[float, str]]:
     """The reference's benchmark operators applied to ``force`` on the trial's grid: free-space mean force
-    (spec §9.2), planar force on the surface (§12.3), rendered stiffness and peak force (§13.3)."""
+    (spec §9.2), planar force on the surface (§12.3), rendered stiffness and peak force (§13.3).
+
+    The stiffness fit keeps the contact transient (§13.2's first samples of a press): the presses are the
+    measured trial's contact runs, which begin where the measured device's encoders cross the plane, and a
+    twin with a stiffer drive is already well up its rise there — setting its first samples aside would leave
+    it too few (a twin without drive compliance would have no stiffness at all)."""
     v = tr.valid
     out: dict[str, tuple[float, str]] = {}
     try:
@@ -132,7 +138,8 @@ def benchmark_values(tr: dt.MeasuredTrial, force: np.ndarray) -> dict[str, tuple
             if tr.protocol == "frictionless_surface" and c.sum() >= 2:
                 out["surface.planar_force_mean"] = (planar_stats(force[c], n)["mean"], "N")
             if tr.protocol == "stiffness":
-                fit = fit_stiffness(tr.t[v], pen[v], force[v] @ n, tr.contact[v], tr.trial_id)
+                rule = replace(FitRule.at_rate(tr.rate_hz), settle=0)
+                fit = fit_stiffness(tr.t[v], pen[v], force[v] @ n, tr.contact[v], tr.trial_id, rule=rule)
                 out["stiffness.measured"] = (fit.stiffness, "N/m")
                 out["stiffness.peak_force"] = (float(np.max((force @ n)[c])) if c.any() else 0.0, "N")
     except HaptifyError:
