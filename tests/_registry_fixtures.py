@@ -12,6 +12,7 @@ import shutil
 import socket
 import statistics
 import subprocess
+import sys
 import tarfile
 import tempfile
 import time
@@ -170,6 +171,27 @@ def wait_http(url: str, timeout: float = 20.0, alive: subprocess.Popen | None = 
             if time.monotonic() > deadline:
                 raise
             time.sleep(0.05)
+
+
+SERVE = "import argparse, sys; from haptify.cli import UI; from haptify_tools.registry import cmd_registry; " \
+        "p = argparse.ArgumentParser(); cmd_registry.register(p.add_subparsers()); a = p.parse_args(sys.argv[1:]); " \
+        "sys.exit(a.func(a, UI(quiet=True)))"
+
+
+def start(data: Path) -> tuple[subprocess.Popen, int]:
+    """``haptify registry serve --data DATA --port PORT`` in a subprocess on a fresh port, once it answers.
+
+    Every start takes a new port: a port given back by a killed server may be taken by a parallel test's
+    server (another xdist worker) before the restart binds it."""
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-c", SERVE, "registry", "serve", "--data", str(data), "--port", str(port)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        wait_http(f"http://127.0.0.1:{port}/api/v1/health", alive=proc)
+    except Exception:
+        proc.kill()
+        raise
+    return proc, port
 
 
 @pytest.fixture(scope="session")

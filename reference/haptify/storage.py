@@ -276,6 +276,8 @@ def read_table(path: Path, fmt: str, columns: list[str], *, label: str) -> pd.Da
         return read_stream_file(path, fmt, columns, label=label)[0]
     try:
         frame = pq.read_table(path).to_pandas(ignore_metadata=True)
+    except MemoryError:  # Arrow's allocation failure is the reader's, not the file's (never E112)
+        raise
     except (OSError, pa.ArrowException, ValueError) as exc:
         raise fail("E112", f"{label!r} cannot be read as {fmt}: {exc}", file=label) from None
     _require_float64(frame, label)
@@ -300,7 +302,7 @@ def read_stream_file(path: Path, fmt: str, columns: list[str], *, label: str) ->
         else:
             digest = check_csv_grammar(path, columns, label)
             frame = pd.read_csv(path, dtype="float64", na_values=["NaN"], keep_default_na=False, engine="c")
-    except HaptifyError:
+    except (HaptifyError, MemoryError):  # out of memory is the reader's failure, not the file's (never E112)
         raise
     except (OSError, pa.ArrowException, ValueError, pd.errors.ParserError, UnicodeDecodeError) as exc:
         raise fail("E112", f"{label!r} cannot be read as {fmt}: {exc}", file=label) from None

@@ -12,6 +12,8 @@ from ``codes.json``, the field (``file`` and ``pointer``), ``expected`` and ``fo
 from __future__ import annotations
 
 import importlib
+import logging
+from dataclasses import replace
 from contextlib import asynccontextmanager
 from typing import Any
 
@@ -29,6 +31,7 @@ from haptify_tools.registry.api_read import reads
 from haptify_tools.registry.service import Registry, Settings
 
 API = "/api/v1"
+log = logging.getLogger("haptify.registry")
 
 STATUS = {"E960": 413, "E970": 401, "E971": 403, "E972": 429, "E973": 404, "E974": 409, "E975": 400, "E977": 403,
           "E978": 503, "E999": 500}
@@ -50,6 +53,13 @@ def refusal(err: HaptifyError) -> JSONResponse:
                         status_code=http_status(err), headers=headers)
 
 
+def log_refusal(request: Request, err: HaptifyError) -> None:
+    """Every refusal is logged on the server with its codes, method, path and client (spec §17.5.1)."""
+    client = request.client.host if request.client else "-"
+    log.warning("refused %s %s from %s: %s", request.method, request.url.path, client,
+                "; ".join(f"{f.code} {f.message}" for f in err.findings[:5]))
+
+
 class WithdrawBody(BaseModel):
     """The body of ``POST /api/v1/submissions/{id}/withdraw``: a non-empty ``reason`` (spec §17.5)."""
     model_config = ConfigDict(extra="forbid")
@@ -62,6 +72,45 @@ class TokenBody(BaseModel):
     lab: str
     scope: str = "submit"
     rate_per_minute: int | None = Field(None, ge=1, le=100_000)
+
+
+CSP_PAGES = ("default-src 'none'; img-src 'self' data:; media-src 'self'; style-src 'self' 'unsafe-inline'; "
+             "font-src 'self'; connect-src 'self'; form-action 'self'; base-uri 'none'; frame-ancestors 'none'")
+# Swagger UI and ReDoc (/docs, /redoc) are FastAPI's pages: their script and style come from its CDN.
+CSP_API_DOCS = ("default-src 'none'; script-src 'unsafe-inline' https://cdn.jsdelivr.net; "
+                "style-src 'unsafe-inline' https://cdn.jsdelivr.net https://fonts.googleapis.com; font-src https://fonts.gstatic.com; "
+                "img-src 'self' data: https://fastapi.tiangolo.com https://cdn.redoc.ly; connect-src 'self'; worker-src blob:; "
+                "base-uri 'none'; form-action 'none'; frame-ancestors 'none'")
+API_DOCS_PATHS = ("/docs", "/docs/oauth2-redirect", "/redoc")
+
+
+def security_headers(path: str) -> list[tuple[bytes, bytes]]:
+    """The headers every response carries (spec §17.4.1): a Content-Security-Policy without scripts on the
+    registry's own pages and ``frame-ancestors 'none'`` everywhere, ``X-Content-Type-Options: nosniff``,
+    ``X-Frame-Options: DENY`` and ``Referrer-Policy: no-referrer``."""
+    csp = CSP_API_DOCS if path in API_DOCS_PATHS else CSP_PAGES
+    return [(b"content-security-policy", csp.encode()), (b"x-content-type-options", b"nosniff"),
+            (b"x-frame-options", b"DENY"), (b"referrer-policy", b"no-referrer")]
+
+
+class SecurityHeaders:
+    """ASGI middleware adding :func:`security_headers` to every HTTP response (pages, API, files, errors)."""
+
+    def __init__(self, app) -> None:
+        self.app = app
+
+    async def __call__(self, scope, receive, send) -> None:
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        extra = security_headers(scope.get("path", ""))
+
+        async def send_with_headers(message) -> None:
+            if message["type"] == "http.response.start":
+                names = {k.lower() for k, _ in message.get("headers", [])}
+                message = {**message, "headers": [*message.get("headers", []), *(h for h in extra if h[0] not in names)]}
+            await send(message)
+
+        await self.app(scope, receive, send_with_headers)
 
 
 def create_app(settings: Settings | None = None, *, registry: Registry | None = None) -> FastAPI:
@@ -78,9 +127,11 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
                   description="Labs submit verified device results; everyone compares devices (Haptify spec chapter 17).")
     app.state.registry = reg
     app.state.swept = swept
+    app.add_middleware(SecurityHeaders)
 
     @app.exception_handler(HaptifyError)
-    async def _coded(_request: Request, err: HaptifyError) -> JSONResponse:
+    async def _coded(request: Request, err: HaptifyError) -> JSONResponse:
+        log_refusal(request, err)
         return refusal(err)
 
     @app.exception_handler(RequestValidationError)
@@ -185,7 +236,7 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
             raise HaptifyError(Finding("E975", "no device given", file="query", pointer="/devices", expected="slug,slug,…", found=devices))
         table = compare.build_table(reg.comparison(slugs, verified_only=verified_only), with_paper=paper)
         if format == "csv":
-            return PlainTextResponse(compare.to_csv(table), media_type="text/csv")
+            return PlainTextResponse(compare.to_csv(neutralised(table)), media_type="text/csv")
         if format == "md":
             return PlainTextResponse(compare.to_markdown(table), media_type="text/markdown")
         if format == "html":
@@ -214,8 +265,30 @@ def to_csv(rows: list[dict]) -> str:
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=EXPORT_COLUMNS, lineterminator="\n")
     writer.writeheader()
-    writer.writerows(rows)
+    writer.writerows({k: csv_cell(v) for k, v in row.items()} for row in rows)
     return buf.getvalue()
+
+
+FORMULA_LEAD = ("=", "+", "-", "@", "\t", "\r")
+
+
+def csv_cell(value: Any) -> Any:
+    """A CSV cell that no spreadsheet runs as a formula (spec §17.4.1): text starting with ``=``, ``+``,
+    ``-``, ``@``, a tab or a carriage return gets a leading ``'``, unless the whole text is a number
+    (``-1.5`` stays a number). Non-text values pass unchanged."""
+    if not isinstance(value, str) or not value.startswith(FORMULA_LEAD):
+        return value
+    try:
+        float(value)
+        return value
+    except ValueError:
+        return "'" + value
+
+
+def neutralised(table: compare.Table) -> compare.Table:
+    """The comparison table with every header and body cell passed through :func:`csv_cell`."""
+    return replace(table, header=[csv_cell(h) for h in table.header],
+                   rows=[[csv_cell(c) for c in row] for row in table.rows])
 
 
 def _short(value: Any) -> Any:

@@ -26,6 +26,7 @@ from sqlalchemy import (
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
+SQLITE_FILE = "registry.sqlite3"
 SQLITE_BUSY_TIMEOUT_MS = 30_000  # a writer waits this long for another writer before E978
 
 
@@ -145,7 +146,7 @@ class ConformanceReport(Base):
 
 def default_db_url(data_dir: Path) -> str:
     """The embedded default: SQLite in ``registry.sqlite3`` inside the data folder (spec §17.7)."""
-    return f"sqlite:///{Path(data_dir).resolve() / 'registry.sqlite3'}"
+    return f"sqlite:///{Path(data_dir).resolve() / SQLITE_FILE}"
 
 
 def make_engine(url: str) -> Engine:

@@ -44,8 +44,9 @@ from haptify.results import DeviceSummary, Implementation, MetricResult, Results
 from haptify.versions import PACKAGE_VERSION
 from haptify_conform.report import ConformReport
 from haptify_tools.registry import db
-from haptify_tools.registry.bundle import SESSION_DIR, Limits, read_manifest, submission_id, unpack
+from haptify_tools.registry.bundle import DIR_MODE, FILE_MODE, SESSION_DIR, Limits, bundle_digest, submission_id, unpack, unpack_bundle
 from haptify_tools.registry.checks import Checked, check_bundle, check_conformance, verify_bundle
+from haptify_tools.registry.worker import run_contained
 
 log = logging.getLogger("haptify.registry")
 
@@ -141,18 +142,22 @@ class Registry:
     def __init__(self, settings: Settings, *, lock: bool = True) -> None:
         self.settings = settings
         self.data = Path(settings.data_dir)
-        self.data.mkdir(parents=True, exist_ok=True)
+        self.data.mkdir(mode=DIR_MODE, parents=True, exist_ok=True)
+        os.chmod(self.data, DIR_MODE)  # records and archives are the service user's only (spec §17.7)
         self.tmp = self.data / "tmp"
         self.bundles = self.data / "bundles"
         self._lock_fh = None
         if lock:
-            self._lock_fh = open(self.data / "registry.lock", "a+")
+            self._lock_fh = os.fdopen(os.open(self.data / "registry.lock", os.O_RDWR | os.O_CREAT, FILE_MODE), "a+")
             try:
                 fcntl.flock(self._lock_fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError:
                 self._lock_fh.close()
                 raise fail("E978", f"another registry process serves the data folder {str(self.data)!r}",
                            file=str(self.data), expected="one process per data folder", found="locked") from None
+        if settings.db_url is None:  # SQLite creates its -wal and -shm files with the database file's mode
+            os.close(os.open(self.data / db.SQLITE_FILE, os.O_RDWR | os.O_CREAT, FILE_MODE))
+            os.chmod(self.data / db.SQLITE_FILE, FILE_MODE)
         self.engine = db.make_engine(settings.url)
         self.writer = db.writer(self.engine)
         db.migrate(self.engine)
@@ -175,8 +180,8 @@ class Registry:
             for entry in self.tmp.iterdir():
                 shutil.rmtree(entry) if entry.is_dir() and not entry.is_symlink() else entry.unlink()
                 removed_tmp += 1
-        self.tmp.mkdir(parents=True, exist_ok=True)
-        self.bundles.mkdir(parents=True, exist_ok=True)
+        self.tmp.mkdir(mode=DIR_MODE, parents=True, exist_ok=True)
+        self.bundles.mkdir(mode=DIR_MODE, parents=True, exist_ok=True)
         with DBSession(self.engine) as s:
             referenced = set(s.scalars(select(db.Submission.archive_path)))
         removed_orphans = 0
@@ -239,11 +244,11 @@ class Registry:
         """Stream an upload to ``tmp/`` (E960 as soon as it passes the archive limit) and fsync it.
 
         Memory stays bounded by one chunk; the file is removed when anything goes wrong."""
-        self.tmp.mkdir(parents=True, exist_ok=True)
+        self.tmp.mkdir(mode=DIR_MODE, parents=True, exist_ok=True)
         path = self.tmp / f"upload-{uuid.uuid4().hex}.tar.gz"
         limit, total = self.settings.limits.max_archive_bytes, 0
         try:
-            with open(path, "wb") as fh:
+            with os.fdopen(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, FILE_MODE), "wb") as fh:
                 async for chunk in chunks:
                     total += len(chunk)
                     if total > limit:
@@ -264,21 +269,23 @@ class Registry:
             return self._digest_locks.setdefault(digest, threading.Lock())
 
     def submit(self, upload: Path, caller: Caller, *, dry_run: bool = False) -> Outcome:
-        """Check and store one uploaded bundle (spec §17.3–§17.5); the upload file is consumed."""
+        """Check and store one uploaded bundle (spec §17.3–§17.5); the upload file is consumed.
+
+        Unpacking, the document checks and the re-computation each run in a worker process under the
+        worker limits (:func:`~haptify_tools.registry.worker.run_contained`, spec §17.4.1); this process
+        only reads and writes the records."""
         work = self.tmp / f"unpack-{uuid.uuid4().hex}"
+        limits = self.settings.limits
         try:
-            unpacked = unpack(upload, work, self.settings.limits)
-            bundle = read_manifest(unpacked, self.settings.limits)
+            unpacked, bundle = run_contained(unpack_bundle, upload, work, limits, limits=limits)
             if bundle.lab.id != caller.lab_id:
                 raise fail("E977", "the bundle is from another lab than the token", file="bundle.json", pointer="/lab/id",
                            expected=caller.lab_id, found=bundle.lab.id)
-            from haptify_tools.registry.bundle import bundle_digest
-
             digest = bundle_digest(bundle)
             existing = self._existing(digest)
             if existing is not None:
                 return existing
-            checked = check_bundle(unpacked, self.settings.limits)
+            checked = run_contained(check_bundle, unpacked, limits, limits=limits)
             report = checked.conformance or self._report_on_file(checked)
             if report is None:
                 impl = checked.results.implementation
@@ -288,7 +295,7 @@ class Registry:
             if checked.conformance is None:
                 check_conformance(report, checked.results, checked.bundle.spec_version, file="(report on file)")
             self._check_supersede(checked, caller)
-            checked.verification = verify_bundle(checked, unpacked, self.settings.verify_raw)
+            checked.verification = run_contained(verify_bundle, checked, unpacked, self.settings.verify_raw, limits=limits)
             sid = submission_id(digest)
             if dry_run:
                 return Outcome(sid, digest, "would-accept", checked.verification.to_dict(), bundle.supersedes)
@@ -356,7 +363,7 @@ class Registry:
         sid = submission_id(digest)
         rel = f"bundles/{digest[:2]}/{digest}.tar.gz"
         final = self.data / rel
-        final.parent.mkdir(parents=True, exist_ok=True)
+        final.parent.mkdir(mode=DIR_MODE, parents=True, exist_ok=True)
         os.replace(upload, final)
         _fsync_dir(final.parent)
         results = checked.results
@@ -501,8 +508,8 @@ class Registry:
         target = self.data / "cache" / archive.name[: -len(".tar.gz")]
         if not target.is_dir():
             work = self.tmp / f"cache-{uuid.uuid4().hex}"
-            unpack(archive, work, self.settings.limits)
-            target.parent.mkdir(parents=True, exist_ok=True)
+            run_contained(unpack, archive, work, self.settings.limits, limits=self.settings.limits)
+            target.parent.mkdir(mode=DIR_MODE, parents=True, exist_ok=True)
             try:
                 os.replace(work, target)
             except OSError:  # another request unpacked it first
