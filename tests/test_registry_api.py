@@ -203,7 +203,7 @@ def test_supersede_and_withdraw_keep_every_record(registry, base, tmp_path):
     assert r.status_code == 409 and codes(r) == ["E974"]
     states = {s["id"]: s["state"] for s in client.get(f"{API}/submissions").json()}
     assert states == {first: "superseded", second: "withdrawn"}
-    assert client.get(f"{API}/devices/3d-systems-touch").json()["metrics"] == []  # nothing current
+    assert client.get(f"{API}/devices/3d-systems-touch?verification=all").json()["metrics"] == []  # nothing current
 
 
 def test_records_are_append_only_in_the_database(registry, base, tmp_path):
@@ -229,13 +229,13 @@ def test_aggregation_over_labs_and_repetitions_and_comparison(registry, base, tm
         assert resp.status_code == 201, resp.text
     devices = {d["slug"]: d["submissions"] for d in client.get(f"{API}/devices").json()}
     assert devices == {"3d-systems-touch": 2, "3d-systems-touch-x": 1}
-    agg = {m["metric"]: m for m in client.get(f"{API}/devices/3d-systems-touch").json()["metrics"]}
+    agg = {m["metric"]: m for m in client.get(f"{API}/devices/3d-systems-touch?verification=all").json()["metrics"]}
     rms = agg["vibration.rms"]
     assert rms["mean"] == pytest.approx(3.0) and rms["sd"] == pytest.approx(statistics.stdev([1, 2, 3, 4, 5]))
     assert (rms["min"], rms["max"], rms["repetitions"], rms["submissions"], rms["labs"]) == (1.0, 5.0, 5, 2, 2)
     assert rms["lab_means"] == {"lab-a": pytest.approx(2.0), "lab-b": pytest.approx(4.5)}
     assert rms["between_lab_sd"] == pytest.approx(statistics.stdev([2.0, 4.5]))
-    table = client.get(f"{API}/compare", params={"devices": "3d-systems-touch,3d-systems-touch-x"}).json()
+    table = client.get(f"{API}/compare", params={"devices": "3d-systems-touch,3d-systems-touch-x", "verification": "all"}).json()
     assert table["header"] == ["Metric", "3D Systems Touch", "3D Systems Touch X"]
     row = next(r for r in table["rows"] if r[0].startswith("Free-space vibration RMS"))
     assert row[1].startswith("3 ± 1.6") and row[2].startswith("0.6 ± 0.14")

@@ -164,15 +164,18 @@ def test_index_lists_devices_and_leaderboards(registry):
 
 
 def test_leaderboard_order_and_values(registry):
-    r = registry.client.get("/leaderboard/vibration.rms")
+    # every submission of PLAN is without raw streams (unverified), so they rank only with verification=all
+    default = registry.client.get("/leaderboard/vibration.rms").text
+    assert 'id="leaderboard"' not in default and default.count('data-verification="unverified"') == len(PLAN)
+    r = registry.client.get("/leaderboard/vibration.rms?verification=all")
     assert r.status_code == 200
     # lower vibration is better: Touch X (0.041) < Falcon (0.0535) < Touch (mean of 5 repetitions 0.0698)
     assert devices_in_order(r.text, "leaderboard") == ["3d-systems-touch-x", "novint-falcon", "3d-systems-touch"]
     assert _fmt(fmean(all_reps("Touch", 3))) in r.text and _fmt(stdev(all_reps("Touch", 3))) in r.text
     # a larger workspace is better: Touch > Touch X > Falcon
-    vol = registry.client.get("/leaderboard/workspace.measured_volume").text
+    vol = registry.client.get("/leaderboard/workspace.measured_volume?verification=all").text
     assert devices_in_order(vol, "leaderboard") == ["3d-systems-touch", "3d-systems-touch-x", "novint-falcon"]
-    api = registry.client.get("/api/v1/leaderboard/vibration.rms").json()
+    api = registry.client.get("/api/v1/leaderboard/vibration.rms?verification=all").json()
     assert [(row["rank"], row["device"]) for row in api["rows"]] == [(1, "3d-systems-touch-x"), (2, "novint-falcon"),
                                                                      (3, "3d-systems-touch")]
     assert api["rows"][2]["mean"] == pytest.approx(fmean(all_reps("Touch", 3)))
@@ -181,7 +184,7 @@ def test_leaderboard_order_and_values(registry):
 
 
 def test_device_page_shows_spread_over_labs_and_repetitions(registry):
-    html = registry.client.get("/devices/3d-systems-touch").text
+    html = registry.client.get("/devices/3d-systems-touch?verification=all").text
     row = re.search(r'<tr data-metric="vibration.rms">(.*?)</tr>', html, re.S).group(1)
     reps = all_reps("Touch", 3)
     lab_a, lab_b = fmean(PLAN[0][3]), fmean(PLAN[1][3])
@@ -196,22 +199,23 @@ def test_device_page_shows_spread_over_labs_and_repetitions(registry):
 
 def test_withdrawn_submission_leaves_the_aggregates(fresh_registry):
     registry = fresh_registry
-    before = registry.client.get("/devices/3d-systems-touch").text  # the pages' read cache now holds this state
+    before = registry.client.get("/devices/3d-systems-touch?verification=all").text  # the read cache now holds this state
     assert "lab-b" in re.search(r'<tr data-metric="vibration.rms">(.*?)</tr>', before, re.S).group(1)
     sid = registry.ids[1]  # lab-b's Touch
     r = registry.client.post(f"/api/v1/submissions/{sid}/withdraw", json={"reason": "wrong calibration file"},
                              headers={"Authorization": f"Bearer {registry.tokens['lab-b']}"})
     assert r.status_code == 200, r.text
-    html = registry.client.get("/devices/3d-systems-touch").text
+    html = registry.client.get("/devices/3d-systems-touch?verification=all").text
     row = re.search(r'<tr data-metric="vibration.rms">(.*?)</tr>', html, re.S).group(1)
     assert _fmt(fmean(PLAN[0][3])) in row and "lab-b" not in row
     assert "withdrawn: wrong calibration file" in html  # the record stays, with its reason
-    board = registry.client.get("/api/v1/leaderboard/vibration.rms").json()["rows"]
+    board = registry.client.get("/api/v1/leaderboard/vibration.rms?verification=all").json()["rows"]
     assert next(r for r in board if r["device"] == "3d-systems-touch")["mean"] == pytest.approx(fmean(PLAN[0][3]))
 
 
 def test_compare_page_is_table_iii_for_the_chosen_devices(registry):
-    r = registry.client.get("/compare", params=[("device", "3d-systems-touch"), ("device", "3d-systems-touch-x"), ("paper", "true")])
+    r = registry.client.get("/compare", params=[("device", "3d-systems-touch"), ("device", "3d-systems-touch-x"), ("paper", "true"),
+                                                ("verification", "all")])
     assert r.status_code == 200
     table = re.search(r'<div id="comparison">(.*?)</div>', r.text, re.S).group(1)
     header = re.findall(r"<th>(.*?)</th>", table)
@@ -239,7 +243,7 @@ def test_empty_registry_pages(tmp_path):
     with TestClient(app) as client:
         assert "No results have been submitted yet" in client.get("/").text
         assert client.get("/leaderboard", follow_redirects=False).status_code == 303
-        assert "No device has a current value" in client.get("/leaderboard/vibration.rms").text
+        assert "No device has a verified current value" in client.get("/leaderboard/vibration.rms").text
         assert "Choose one or more devices" in client.get("/compare").text
         assert client.get("/static/registry.css").status_code == 200
 
@@ -302,21 +306,31 @@ def test_pages_in_a_real_headless_browser(tmp_path, bundles):
                 page.goto(f"{url}/")
                 page.get_by_role("link", name="Free-space vibration RMS").click()
                 page.wait_for_url(f"{url}/leaderboard/vibration.rms")
+                # nothing here is verified (no raw streams): nothing ranks, all is listed apart and marked
+                assert page.locator("#leaderboard").count() == 0
+                marks = page.locator("#not-ranked-table tbody td.mark").all_inner_texts()
+                assert len(marks) == len(PLAN) and set(marks) == {"unverified"}
+                mark = page.locator("#not-ranked-table tbody td.mark").first.evaluate(
+                    "el => getComputedStyle(el, '::before').content")
+                assert mark == '"? "'  # the stylesheet marks the state
+                page.get_by_role("link", name="include results that are not verified").click()
+                page.wait_for_url(f"{url}/leaderboard/vibration.rms?verification=all")
                 ranked = page.locator("#leaderboard tbody tr td:nth-child(2)").all_inner_texts()
                 assert ranked == ["3D Systems Touch X", "Novint Falcon", "3D Systems Touch"]
                 assert page.locator("#leaderboard tbody tr td.rank").all_inner_texts() == ["1", "2", "3"]
                 page.select_option("select[name=metric]", "workspace.measured_volume")  # the metric picker (no script)
                 page.get_by_role("button", name="Show").click()
-                page.wait_for_url(f"{url}/leaderboard/workspace.measured_volume")
+                page.wait_for_url(f"{url}/leaderboard/workspace.measured_volume?verification=all")
                 ranked = page.locator("#leaderboard tbody tr td:nth-child(2)").all_inner_texts()
                 assert ranked == ["3D Systems Touch", "3D Systems Touch X", "Novint Falcon"]  # larger is better
                 page.get_by_role("link", name="3D Systems Touch X").click()
-                page.wait_for_url(f"{url}/devices/3d-systems-touch-x")
+                page.wait_for_url(f"{url}/devices/3d-systems-touch-x?verification=all")
                 cells = page.locator('#device-metrics tr[data-metric="vibration.rms"] td').all_inner_texts()
                 assert cells[1] == _fmt(fmean(all_reps("Touch X", 3))) and cells[2] == "m/s^2"
                 page.goto(f"{url}/")
                 page.check('input[value="3d-systems-touch"]')
                 page.check('input[value="3d-systems-touch-x"]')
+                page.check('#devices input[name="verification"]')
                 page.get_by_role("button", name="Compare the chosen devices").click()
                 page.wait_for_selector("#comparison table")
                 header = page.locator("#comparison thead th").all_inner_texts()

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import importlib
 import logging
-from dataclasses import replace
 from contextlib import asynccontextmanager
+from dataclasses import replace
 from typing import Any
 
 from fastapi import FastAPI, Header, Query, Request
@@ -27,10 +27,12 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from haptify import compare
 from haptify.errors import Finding, HaptifyError
 from haptify.versions import PACKAGE_VERSION, SPEC_VERSION
-from haptify_tools.registry.api_read import reads
+from haptify_tools.registry.api_read import not_counted_notes, reads
 from haptify_tools.registry.service import Registry, Settings
 
 API = "/api/v1"
+VERIFICATION_FILTER = "^(all|verified|disagrees|unverified)$"  # lists: one verification state, or all (spec §17.3.1)
+RANKED_FILTER = "^(verified|all)$"  # aggregates and rankings: verified results only (default), or all
 log = logging.getLogger("haptify.registry")
 
 STATUS = {"E960": 413, "E970": 401, "E971": 403, "E972": 429, "E973": 404, "E974": 409, "E975": 400, "E977": 403,
@@ -178,9 +180,11 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
     @app.get(f"{API}/submissions", tags=["submissions"])
     def list_submissions(lab: str | None = None, device: str | None = None,
                          state: str = Query("all", pattern="^(all|current|superseded|withdrawn)$"),
+                         verification: str = Query("all", pattern=VERIFICATION_FILTER),
                          limit: int = Query(100, ge=1, le=1000), offset: int = Query(0, ge=0)) -> list[dict]:
-        """Submissions, newest first; ``state`` current, superseded, withdrawn or all."""
-        return reg.submissions(lab=lab, device=device, state=state, limit=limit, offset=offset)
+        """Submissions, newest first; ``state`` current, superseded, withdrawn or all; ``verification``
+        verified, disagrees, unverified or all (spec §17.3.1)."""
+        return reg.submissions(lab=lab, device=device, state=state, verification=verification, limit=limit, offset=offset)
 
     @app.get(f"{API}/submissions/{{sid}}", tags=["submissions"])
     def get_submission(sid: str, request: Request) -> dict:
@@ -217,36 +221,43 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
         return reads(request).devices()
 
     @app.get(f"{API}/devices/{{slug}}", tags=["devices"])
-    def device(slug: str, request: Request, verified_only: bool = False) -> dict:
-        """A device's aggregated results: per metric mean and spread over labs and repetitions (spec §17.5).
+    def device(slug: str, request: Request, verification: str = Query("verified", pattern=RANKED_FILTER)) -> dict:
+        """A device's aggregated results: per metric mean and spread over labs and repetitions (spec §17.5),
+        of its verified current submissions (``verification=all``: of all of them); the others are listed
+        in ``not_counted`` with their state.
 
         Records are append-only, so answers are cached until a submission or withdrawal is added."""
-        cache = reads(request)
-        if not verified_only:
-            return cache.device_results(slug)
-        return cache.get(("device-verified", slug), lambda: reg.device_results(slug, verified_only=True))
+        return reads(request).device_results(slug, verification)
 
     @app.get(f"{API}/compare", tags=["devices"])
-    def compare_devices(devices: str = Query(..., description="comma-separated device slugs"),
+    def compare_devices(request: Request, devices: str = Query(..., description="comma-separated device slugs"),
                         format: str = Query("json", pattern="^(json|csv|md|html)$"), paper: bool = False,
-                        verified_only: bool = False) -> Any:
-        """The paper's Table III for any number of devices (``haptify.compare``; spec §15.5)."""
+                        verification: str = Query("verified", pattern=RANKED_FILTER)) -> Any:
+        """The paper's Table III for any number of devices (``haptify.compare``; spec §15.5), from their
+        verified current submissions (``verification=all``: from all); a note counts those left out."""
         slugs = [s for s in devices.split(",") if s]
         if not slugs:
             raise HaptifyError(Finding("E975", "no device given", file="query", pointer="/devices", expected="slug,slug,…", found=devices))
-        table = compare.build_table(reg.comparison(slugs, verified_only=verified_only), with_paper=paper)
+        cache = reads(request)
+        table = compare.build_table(cache.comparison(tuple(slugs), verification), with_paper=paper)
+        apart = {slug: cache.device_results(slug, verification)["not_counted"] for slug in slugs}
+        table.notes.extend(not_counted_notes(apart))
         if format == "csv":
             return PlainTextResponse(compare.to_csv(neutralised(table)), media_type="text/csv")
         if format == "md":
             return PlainTextResponse(compare.to_markdown(table), media_type="text/markdown")
         if format == "html":
             return Response(compare.to_html(table), media_type="text/html")
-        return {"devices": slugs, "header": table.header, "rows": table.rows, "notes": table.notes}
+        return {"devices": slugs, "verification": verification, "header": table.header, "rows": table.rows,
+                "notes": table.notes, "not_counted": apart}
 
     @app.get(f"{API}/export.csv", tags=["devices"], response_class=PlainTextResponse)
-    def export_csv(device: str | None = None, state: str = Query("current", pattern="^(all|current|superseded|withdrawn)$")) -> Response:
-        """Every metric of every submission (filtered), one row each, as CSV."""
-        return PlainTextResponse(to_csv(reg.export_rows(device=device, state=state)), media_type="text/csv")
+    def export_csv(device: str | None = None, state: str = Query("current", pattern="^(all|current|superseded|withdrawn)$"),
+                   verification: str = Query("all", pattern=VERIFICATION_FILTER)) -> Response:
+        """Every metric of every submission (filtered by state and verification state), one row each, as
+        CSV; the ``verification`` column carries each submission's state (spec §17.3.1)."""
+        return PlainTextResponse(to_csv(reg.export_rows(device=device, state=state, verification=verification)),
+                                 media_type="text/csv")
 
     _add_web(app)
     return app

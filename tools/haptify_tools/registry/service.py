@@ -54,6 +54,8 @@ SCOPES = ("submit", "admin")
 TOKEN_PREFIX = "hpt_"
 DEFAULT_RATE_PER_MINUTE = 120
 STATES = ("current", "superseded", "withdrawn")
+VERIFICATIONS = ("verified", "disagrees", "unverified")  # spec §17.3.1
+RANKED = ("verified", "all")  # which results aggregates and rankings count: verified only (default) or all
 
 
 @dataclass
@@ -466,8 +468,8 @@ class Registry:
         return withdrawn, superseded_by
 
     def submissions(self, *, lab: str | None = None, device: str | None = None, state: str | None = None,
-                    limit: int = 100, offset: int = 0) -> list[dict]:
-        """Submission summaries, newest first, filtered by lab, device slug and state."""
+                    verification: str | None = None, limit: int = 100, offset: int = 0) -> list[dict]:
+        """Submission summaries, newest first, filtered by lab, device slug, state and verification state."""
         with DBSession(self.engine) as s:
             q = select(db.Submission).options(selectinload(db.Submission.device)).order_by(
                 db.Submission.received_at.desc(), db.Submission.id)
@@ -475,6 +477,8 @@ class Registry:
                 q = q.where(db.Submission.lab_id == lab)
             if device:
                 q = q.join(db.Device).where(db.Device.slug == device)
+            if verification not in (None, "all"):
+                q = q.where(db.Submission.verification == verification)
             withdrawn, superseded_by = self._context(s)
             rows = [self._summary(r, withdrawn, superseded_by) for r in s.scalars(q)]
         rows = [r for r in rows if state in (None, "all") or r["state"] == state]
@@ -540,37 +544,50 @@ class Registry:
             raise fail("E973", f"no device {slug!r}", expected="a device slug from /api/v1/devices", found=slug)
         return d
 
-    def current_metric_rows(self, slug: str, *, verified_only: bool = False) -> tuple[dict, list[tuple[dict, db.MetricValue]]]:
-        """The device and ``(submission summary, metric row)`` of its current submissions."""
+    def current_metric_rows(self, slug: str, *, verification: str = "verified"
+                            ) -> tuple[dict, list[tuple[dict, db.MetricValue]], list[tuple[dict, db.Submission]]]:
+        """The device, ``(submission summary, metric row)`` of its current submissions that count under
+        ``verification`` (``verified``: only verified ones; ``all``: every one), and ``(summary, row)`` of
+        its current submissions that do not count (spec §17.3.1)."""
+        if verification not in RANKED:
+            raise fail("E975", f"unknown verification filter {verification!r}", pointer="/verification",
+                       expected=list(RANKED), found=verification)
         with DBSession(self.engine) as s:
             d = self._device_row(s, slug)
             device = {"slug": d.slug, "manufacturer": d.manufacturer, "model": d.model}
             withdrawn, superseded_by = self._context(s)
             subs = s.scalars(select(db.Submission).options(selectinload(db.Submission.metrics), selectinload(db.Submission.device))
                              .where(db.Submission.device_id == d.id).order_by(db.Submission.received_at)).all()
-            out = []
+            counted, apart = [], []
             for sub in subs:
                 summary = self._summary(sub, withdrawn, superseded_by)
-                if summary["state"] != "current" or (verified_only and sub.verification != "verified"):
+                if summary["state"] != "current":
                     continue
-                out += [(summary, m) for m in sub.metrics]
-            return device, out
+                if verification == "verified" and sub.verification != "verified":
+                    apart.append((summary, sub))
+                    continue
+                counted += [(summary, m) for m in sub.metrics]
+            return device, counted, apart
 
-    def device_results(self, slug: str, *, verified_only: bool = False) -> dict:
-        """Per metric of a device: mean and spread over labs and repetitions of its current submissions (spec §17.5)."""
-        device, rows = self.current_metric_rows(slug, verified_only=verified_only)
+    def device_results(self, slug: str, *, verification: str = "verified") -> dict:
+        """Per metric of a device: mean and spread over labs and repetitions of its current submissions that
+        count under ``verification`` (spec §17.5); the current submissions that do not count are listed
+        apart in ``not_counted``, one entry per metric, with their state (and for a disagreeing one both
+        the submitted and the recomputed value, spec §17.3.1)."""
+        device, rows, apart = self.current_metric_rows(slug, verification=verification)
         by_metric: dict[str, list[tuple[dict, db.MetricValue]]] = {}
         for summary, m in rows:
             by_metric.setdefault(m.metric_id, []).append((summary, m))
         metrics = [aggregate(metric, items) for metric, items in sorted(by_metric.items())]
         n_subs = len({summary["id"] for summary, _ in rows})
-        return {"device": device, "submissions": n_subs, "verified_only": verified_only, "metrics": metrics}
+        return {"device": device, "submissions": n_subs, "verification": verification, "metrics": metrics,
+                "not_counted": [entry for summary, sub in apart for entry in not_counted(summary, sub)]}
 
-    def comparison(self, slugs: list[str], *, verified_only: bool = False) -> list[ResultsFile]:
+    def comparison(self, slugs: list[str], *, verification: str = "verified") -> list[ResultsFile]:
         """One synthetic results file per device, holding its aggregated means (for ``haptify.compare``)."""
         out = []
         for slug in slugs:
-            agg = self.device_results(slug, verified_only=verified_only)
+            agg = self.device_results(slug, verification=verification)
             metrics = []
             for m in agg["metrics"]:
                 metrics.append(MetricResult(id=m["metric"], value=m["mean"], unit=m["unit"], n=m["repetitions"],
@@ -581,8 +598,8 @@ class Registry:
                                    manifest_sha256="0" * 64, metrics=metrics))
         return out
 
-    def export_rows(self, *, device: str | None = None, state: str = "current") -> list[dict]:
-        """One row per submission × metric (the CSV export)."""
+    def export_rows(self, *, device: str | None = None, state: str = "current", verification: str = "all") -> list[dict]:
+        """One row per submission × metric (the CSV export), filtered by state and verification state."""
         with DBSession(self.engine) as s:
             q = select(db.Submission).options(selectinload(db.Submission.metrics), selectinload(db.Submission.device)).order_by(
                 db.Submission.received_at, db.Submission.id)
@@ -592,7 +609,7 @@ class Registry:
             out = []
             for sub in s.scalars(q):
                 summary = self._summary(sub, withdrawn, superseded_by)
-                if state != "all" and summary["state"] != state:
+                if state != "all" and summary["state"] != state or verification not in ("all", sub.verification):
                     continue
                 for m in sub.metrics:
                     out.append({"submission": sub.id, "state": summary["state"], "verification": sub.verification,
@@ -602,6 +619,22 @@ class Registry:
                                 "value": m.value_json, "unit": m.unit, "n": m.n, "sd": m.sd_json,
                                 "received_at": sub.received_at.isoformat()})
             return out
+
+
+def not_counted(summary: dict, sub: db.Submission) -> list[dict]:
+    """The metrics of a submission that does not count (not verified), one entry each: submission, lab,
+    state, metric, submitted value and unit, and — from its verification record — the recomputed value,
+    the tolerance and why it does not agree (spec §17.3.1)."""
+    checks = {c["metric"]: c for c in json.loads(sub.verification_json).get("checks", [])}
+    out = []
+    for m in sub.metrics:
+        check = checks.get(m.metric_id, {})
+        out.append({"submission": sub.id, "lab": sub.lab_id, "verification": sub.verification, "metric": m.metric_id,
+                    "submitted": json.loads(m.value_json), "unit": m.unit, "recomputed": check.get("recomputed"),
+                    "check": check.get("status"), "tolerance": check.get("tolerance"),
+                    "why": check.get("message") or json.loads(sub.verification_json).get("note", ""),
+                    "implementation": summary["implementation"]})
+    return out
 
 
 def defined_sd(sd: float | list[float | None] | None) -> float | list[float] | None:
