@@ -12,7 +12,6 @@ from __future__ import annotations
 import copy
 import json
 import re
-import shutil
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,7 +20,7 @@ from statistics import fmean, stdev
 import pytest
 from fastapi.testclient import TestClient
 
-from _registry_fixtures import base, bundle_for, example_session, passing_report, postgres_or_skip  # noqa: F401 (base: fixture)
+from _registry_fixtures import base, browser, bundle_for, example_session, passing_report, postgres_or_skip, skip_or_fail  # noqa: F401 (base: fixture)
 from haptify.compare import _fmt
 from haptify.metric_definitions import family
 from haptify.results import Implementation, MetricResult, ResultsFile
@@ -29,10 +28,6 @@ from haptify.versions import PACKAGE_VERSION
 from haptify.storage import sha256_file
 from haptify_tools.registry.app import create_app
 from haptify_tools.registry.service import Settings
-
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
 
 # (lab, manufacturer, model, vibration.rms repetitions in m/s², workspace.measured_volume repetitions in m³)
 PLAN = [
@@ -288,63 +283,60 @@ def test_results_only_submission_has_no_report(registry):
 # --- a real browser against a live server --------------------------------------------------------
 
 def test_pages_in_a_real_headless_browser(tmp_path, bundles):
-    if not CHROMIUM.exists():
-        pytest.skip(f"browser test skipped: no system Chromium at {CHROMIUM} (install the 'chromium' package)")
-    sync_api = pytest.importorskip("playwright.sync_api", reason="browser test skipped: the playwright package is not installed")
     from haptify_tools.registry.live import serve_in_thread
 
     pop = populate(tmp_path / "registry", bundles)
-    profile = tmp_path / "chromium-profile"
     shot = tmp_path / "compare.png"
     try:
-        with serve_in_thread(pop.app) as url, sync_api.sync_playwright() as pw:
-            ctx = pw.chromium.launch_persistent_context(str(profile), executable_path=str(CHROMIUM), headless=True,
-                                                        args=CHROMIUM_FLAGS, timeout=30_000)
-            try:
-                page = ctx.new_page()
-                page.set_default_timeout(15_000)
-                page.goto(f"{url}/")
-                page.get_by_role("link", name="Free-space vibration RMS").click()
-                page.wait_for_url(f"{url}/leaderboard/vibration.rms")
-                # nothing here is verified (no raw streams): nothing ranks, all is listed apart and marked
-                assert page.locator("#leaderboard").count() == 0
-                marks = page.locator("#not-ranked-table tbody td.mark").all_inner_texts()
-                assert len(marks) == len(PLAN) and set(marks) == {"unverified"}
-                mark = page.locator("#not-ranked-table tbody td.mark").first.evaluate(
-                    "el => getComputedStyle(el, '::before').content")
-                assert mark == '"? "'  # the stylesheet marks the state
-                page.get_by_role("link", name="include results that are not verified").click()
-                page.wait_for_url(f"{url}/leaderboard/vibration.rms?verification=all")
-                ranked = page.locator("#leaderboard tbody tr td:nth-child(2)").all_inner_texts()
-                assert ranked == ["3D Systems Touch X", "Novint Falcon", "3D Systems Touch"]
-                assert page.locator("#leaderboard tbody tr td.rank").all_inner_texts() == ["1", "2", "3"]
-                page.select_option("select[name=metric]", "workspace.measured_volume")  # the metric picker (no script)
-                page.get_by_role("button", name="Show").click()
-                page.wait_for_url(f"{url}/leaderboard/workspace.measured_volume?verification=all")
-                ranked = page.locator("#leaderboard tbody tr td:nth-child(2)").all_inner_texts()
-                assert ranked == ["3D Systems Touch", "3D Systems Touch X", "Novint Falcon"]  # larger is better
-                page.get_by_role("link", name="3D Systems Touch X").click()
-                page.wait_for_url(f"{url}/devices/3d-systems-touch-x?verification=all")
-                cells = page.locator('#device-metrics tr[data-metric="vibration.rms"] td').all_inner_texts()
-                assert cells[1] == _fmt(fmean(all_reps("Touch X", 3))) and cells[2] == "m/s^2"
-                page.goto(f"{url}/")
-                page.check('input[value="3d-systems-touch"]')
-                page.check('input[value="3d-systems-touch-x"]')
-                page.check('#devices input[name="verification"]')
-                page.get_by_role("button", name="Compare the chosen devices").click()
-                page.wait_for_selector("#comparison table")
-                header = page.locator("#comparison thead th").all_inner_texts()
-                assert header == ["Metric", "3D Systems Touch", "3D Systems Touch X"]
-                row = page.locator("#comparison tbody tr", has_text="Free-space vibration RMS").locator("td").all_inner_texts()
-                assert row[1].startswith(_fmt(fmean(all_reps("Touch", 3)))) and row[2].startswith(_fmt(fmean(all_reps("Touch X", 3))))
-                page.screenshot(path=str(shot), full_page=True)
-            finally:
-                ctx.close()
+        with serve_in_thread(pop.app) as url, browser(tmp_path / "chromium-profile") as page:
+            page.goto(f"{url}/")
+            page.get_by_role("link", name="Free-space vibration RMS").click()
+            page.wait_for_url(f"{url}/leaderboard/vibration.rms")
+            # nothing here is verified (no raw streams): nothing ranks, all is listed apart and marked
+            assert page.locator("#leaderboard").count() == 0
+            marks = page.locator("#not-ranked-table tbody td.mark").all_inner_texts()
+            assert len(marks) == len(PLAN) and set(marks) == {"unverified"}
+            mark = page.locator("#not-ranked-table tbody td.mark").first.evaluate(
+                "el => getComputedStyle(el, '::before').content")
+            assert mark == '"? "'  # the stylesheet marks the state
+            page.get_by_role("link", name="include results that are not verified").click()
+            page.wait_for_url(f"{url}/leaderboard/vibration.rms?verification=all")
+            ranked = page.locator("#leaderboard tbody tr td:nth-child(2)").all_inner_texts()
+            assert ranked == ["3D Systems Touch X", "Novint Falcon", "3D Systems Touch"]
+            assert page.locator("#leaderboard tbody tr td.rank").all_inner_texts() == ["1", "2", "3"]
+            page.select_option("select[name=metric]", "workspace.measured_volume")  # the metric picker (no script)
+            page.get_by_role("button", name="Show").click()
+            page.wait_for_url(f"{url}/leaderboard/workspace.measured_volume?verification=all")
+            ranked = page.locator("#leaderboard tbody tr td:nth-child(2)").all_inner_texts()
+            assert ranked == ["3D Systems Touch", "3D Systems Touch X", "Novint Falcon"]  # larger is better
+            page.get_by_role("link", name="3D Systems Touch X").click()
+            page.wait_for_url(f"{url}/devices/3d-systems-touch-x?verification=all")
+            cells = page.locator('#device-metrics tr[data-metric="vibration.rms"] td').all_inner_texts()
+            assert cells[1] == _fmt(fmean(all_reps("Touch X", 3))) and cells[2] == "m/s^2"
+            page.goto(f"{url}/")
+            page.check('input[value="3d-systems-touch"]')
+            page.check('input[value="3d-systems-touch-x"]')
+            page.check('#devices input[name="verification"]')
+            page.get_by_role("button", name="Compare the chosen devices").click()
+            page.wait_for_selector("#comparison table")
+            header = page.locator("#comparison thead th").all_inner_texts()
+            assert header == ["Metric", "3D Systems Touch", "3D Systems Touch X"]
+            row = page.locator("#comparison tbody tr", has_text="Free-space vibration RMS").locator("td").all_inner_texts()
+            assert row[1].startswith(_fmt(fmean(all_reps("Touch", 3)))) and row[2].startswith(_fmt(fmean(all_reps("Touch X", 3))))
+            page.screenshot(path=str(shot), full_page=True)
     finally:
         pop.client.close()
         pop.app.state.registry.close()
-        shutil.rmtree(profile, ignore_errors=True)
     assert shot.stat().st_size > 10_000 and shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_skip_or_fail_fails_under_ci(monkeypatch):
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(pytest.fail.Exception, match="CI=true"):
+        skip_or_fail("no browser")
+    monkeypatch.setenv("CI", "false")
+    with pytest.raises(pytest.skip.Exception, match="no browser"):
+        skip_or_fail("no browser")
 
 
 def test_live_server_binds_loopback_only(tmp_path):

@@ -12,7 +12,7 @@ import re
 import pytest
 from fastapi.testclient import TestClient
 
-from _registry_fixtures import base, bundle_for, variant  # noqa: F401  (base: fixture)
+from _registry_fixtures import base, browser, bundle_for, variant  # noqa: F401  (base: fixture)
 from haptify_tools.registry.app import create_app
 from haptify_tools.registry.service import Settings
 
@@ -39,6 +39,7 @@ def three(base, tmp_path_factory):  # noqa: F811 (base is a fixture)
         assert resp.status_code == 201, resp.text
         ids[name] = resp.json()["id"]
         rms[name] = next(m["value"] for m in json.loads(r.read_text())["metrics"] if m["id"] == "vibration.rms")
+    client.app_ = app
     yield client, ids, rms
     client.close()
     app.state.registry.close()
@@ -125,3 +126,31 @@ def test_the_pages_mark_the_states_and_filter(three):
     assert 'id="not-counted"' in device and 'data-verification="disagrees"' in device
     compare = client.get("/compare", params=[("device", "3d-systems-touch"), ("device", "3d-systems-falcon")]).text
     assert "not verified and not counted" in compare
+
+
+def test_the_three_states_in_a_real_browser(three, tmp_path):
+    """Leaderboard, device page, comparison and a verified submission's report page, in headless Chromium."""
+    from haptify_tools.registry.live import serve_in_thread
+
+    client, ids, rms = three
+    with serve_in_thread(client.app_) as url, browser(tmp_path / "profile") as page:
+        page.goto(f"{url}/leaderboard/vibration.rms")
+        assert page.locator("#leaderboard tbody tr td:nth-child(2)").all_inner_texts() == ["3D Systems Touch"]
+        rows = page.locator("#not-ranked-table tbody tr")
+        states = {r.get_attribute("data-submission"): r.locator("td.mark").inner_text() for r in rows.all()}
+        assert states == {ids["falcon"]: "disagrees", ids["omega"]: "unverified"}
+        falcon = page.locator(f'#not-ranked-table tr[data-submission="{ids["falcon"]}"]')
+        assert float(falcon.locator("td.submitted").inner_text()) == pytest.approx(rms["falcon"], rel=1e-4)
+        assert float(falcon.locator("td.recomputed").inner_text()) == pytest.approx(rms["falcon"] / SCALE, rel=1e-4)
+        assert falcon.locator("td.mark").evaluate("el => getComputedStyle(el, '::before').content") == '"✗ "'
+        page.get_by_role("link", name="include results that are not verified").click()
+        page.wait_for_url(f"{url}/leaderboard/vibration.rms?verification=all")
+        assert page.locator("#leaderboard tbody tr").count() == 3 and page.locator("#not-ranked-table").count() == 0
+        page.goto(f"{url}/devices/3d-systems-falcon")
+        assert page.locator("#device-metrics").count() == 0
+        assert page.locator('#not-counted-table tr[data-verification="disagrees"]').count() >= 1
+        page.goto(f"{url}/compare?device=3d-systems-touch&device=3d-systems-falcon")
+        assert "not verified and not counted" in page.locator("#comparison").inner_text()
+        page.goto(f"{url}/submissions/{ids['touch']}/report/index.html")
+        assert "Haptify report" in page.content() and page.locator("img").count() >= 1
+        assert page.locator("img").first.evaluate("el => el.naturalWidth") > 0  # the figure loads under the CSP
