@@ -42,6 +42,15 @@ def registry(request, tmp_path):
         yield client, app, tokens
 
 
+@pytest.fixture(params=["sqlite", "postgresql"])
+def backend_url(request):
+    """A function giving a fresh database URL in a folder: a SQLite file, or a new PostgreSQL database."""
+    if request.param == "sqlite":
+        return lambda folder: f"sqlite:///{folder / 'r.sqlite3'}"
+    server = request.getfixturevalue("pg_server")
+    return lambda folder: server.new_database(f"m{abs(hash(request.node.nodeid)) % 10**9}")
+
+
 def auth(token: str) -> dict:
     return {"Authorization": f"Bearer {token}", "Content-Type": "application/gzip"}
 
@@ -275,6 +284,27 @@ def test_two_labs_submitting_at_once(registry, base, tmp_path):
     assert sorted(s["id"] for s in listed) == sorted(set(ids))
     files = [p for p in (Path(app.state.registry.data) / "bundles").rglob("*.tar.gz")]
     assert len(files) == 12
+
+
+def test_migrations_go_down_and_up_again(tmp_path, backend_url):
+    """Every migration reverts (down to r0001, then to nothing) and re-applies, on SQLite and PostgreSQL."""
+    from sqlalchemy import inspect
+
+    from haptify_tools.registry import db
+
+    engine = db.make_engine(backend_url(tmp_path))
+    try:
+        db.migrate(engine)
+        tables = lambda: set(inspect(engine).get_table_names()) - {"alembic_version"}  # noqa: E731
+        assert {"challenges", "challenge_results", "submissions"} <= tables()
+        db.migrate(engine, "r0001", down=True)
+        assert "challenges" not in tables() and "submissions" in tables()
+        db.migrate(engine, "base", down=True)
+        assert tables() == set()
+        db.migrate(engine)
+        assert {"challenges", "challenge_results", "submissions"} <= tables()
+    finally:
+        engine.dispose()
 
 
 def test_migrations_build_exactly_the_orm_models(registry):

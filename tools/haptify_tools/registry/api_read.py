@@ -6,9 +6,9 @@ export. This router adds the leaderboard of one metric (devices ranked by their 
 
 :class:`ReadCache` keeps the answers of the core's read queries (``Registry.devices``,
 ``device_results``, ``submissions``, ``comparison``) for the pages. Records are append-only (no row of
-``submissions`` or ``withdrawals`` is ever updated or deleted, spec §17.5), so the pair (number of
-submissions, number of withdrawals) changes with every change a reader can see: one count query per
-request tells whether the cached answers still hold.
+``submissions``, ``withdrawals`` or ``challenge_results`` is ever updated or deleted, spec §17.5), so
+the counts of those tables change with every change a reader can see: one count query per request
+tells whether the cached answers still hold.
 """
 
 from __future__ import annotations
@@ -37,15 +37,17 @@ class ReadCache:
 
     def __init__(self, reg: Registry) -> None:
         self.reg = reg
-        self._version: tuple[int, int] | None = None
+        self._version: tuple[int, int, int] | None = None
         self._store: dict[Any, Any] = {}
         self._lock = threading.Lock()
 
-    def version(self) -> tuple[int, int]:
-        """(submissions, withdrawals) now: both tables only grow, so any change changes this pair."""
+    def version(self) -> tuple[int, int, int]:
+        """(submissions, withdrawals, answered challenges) now: the tables only grow, so any change a reader
+        can see (a new record, a withdrawal, an implementation proven by a challenge) changes this triple."""
         with self.reg.engine.connect() as conn:
             return tuple(conn.execute(select(select(func.count()).select_from(db.Submission).scalar_subquery(),
-                                             select(func.count()).select_from(db.Withdrawal).scalar_subquery())).one())
+                                             select(func.count()).select_from(db.Withdrawal).scalar_subquery(),
+                                             select(func.count()).select_from(db.ChallengeResult).scalar_subquery())).one())
 
     def get(self, key: Any, compute: Callable[[], Any]) -> Any:
         """The cached answer for ``key``, or ``compute()`` (run outside the lock; errors are not cached)."""

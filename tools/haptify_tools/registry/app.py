@@ -14,7 +14,7 @@ from __future__ import annotations
 import importlib
 import logging
 from contextlib import asynccontextmanager
-from dataclasses import replace
+from dataclasses import asdict, replace
 from typing import Any
 
 from fastapi import FastAPI, Header, Query, Request
@@ -27,6 +27,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from haptify import compare
 from haptify.errors import Finding, HaptifyError
 from haptify.versions import PACKAGE_VERSION, SPEC_VERSION
+from haptify_tools.registry import challenge
 from haptify_tools.registry.api_read import not_counted_notes, reads
 from haptify_tools.registry.service import Registry, Settings
 
@@ -36,7 +37,7 @@ RANKED_FILTER = "^(verified|all)$"  # aggregates and rankings: verified results 
 log = logging.getLogger("haptify.registry")
 
 STATUS = {"E960": 413, "E970": 401, "E971": 403, "E972": 429, "E973": 404, "E974": 409, "E975": 400, "E977": 403,
-          "E978": 503, "E999": 500}
+          "E978": 503, "E979": 410, "E999": 500}
 
 
 def http_status(err: HaptifyError) -> int:
@@ -207,6 +208,38 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
         """Create a lab token (admin only). The token is shown once; the registry keeps only its sha256."""
         reg.authenticate(authorization, "admin")
         return {"lab": body.lab, "scope": body.scope, "token": reg.create_token(body.lab, body.scope, body.rate_per_minute)}
+
+    @app.get(f"{API}/limits", tags=["service"])
+    def limits() -> dict:
+        """What this registry accepts (spec §17.4, §17.4.1): a client checks its bundle against these before sending."""
+        return {**asdict(reg.settings.limits), "challenge_ttl_s": reg.settings.challenge_ttl_s}
+
+    @app.post(f"{API}/challenges", tags=["conformance"], status_code=201)
+    def create_challenge(authorization: str | None = Header(None)) -> dict:
+        """Issue a conformance challenge to the token's lab (spec §17.8): fresh known-answer sessions from a
+        secret seed; the answers stay on the registry. Answer it before ``expires_at``."""
+        return challenge.issue(reg, reg.authenticate(authorization, "submit"))
+
+    @app.get(f"{API}/challenges/{{cid}}", tags=["conformance"])
+    def get_challenge(cid: str) -> dict:
+        """A challenge: its cases (no answers) while open; once answered, the verdict and every case's figures."""
+        return challenge.record(reg, cid)
+
+    @app.get(f"{API}/challenges/{{cid}}/sessions.tar.gz", tags=["conformance"], response_class=FileResponse)
+    def get_challenge_sessions(cid: str) -> FileResponse:
+        """The challenge's session folders (while it is open)."""
+        return FileResponse(challenge.sessions_archive(reg, cid), media_type="application/gzip", filename=f"challenge-{cid}.tar.gz")
+
+    @app.post(f"{API}/challenges/{{cid}}/answers", tags=["conformance"])
+    def answer_challenge(cid: str, body: challenge.Answers, authorization: str | None = Header(None)) -> dict:
+        """Answer a challenge once: the registry judges every case against its secret answers and records
+        that the implementation and version passed or failed (spec §17.8)."""
+        return challenge.answer(reg, cid, reg.authenticate(authorization, "submit"), body)
+
+    @app.get(f"{API}/implementations", tags=["conformance"])
+    def implementations() -> list[dict]:
+        """Implementations and versions with answered challenges: passed, failed, latest passed challenge."""
+        return challenge.implementations(reg)
 
     @app.get(f"{API}/labs", tags=["labs"])
     def labs() -> list[dict]:

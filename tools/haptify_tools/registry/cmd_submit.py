@@ -70,6 +70,29 @@ def post_bundle(registry: str, token: str, archive: Path, *, dry_run: bool = Fal
         raise unreachable(registry, url, getattr(exc, "reason", exc)) from None
 
 
+def registry_limits(registry: str) -> dict | None:
+    """``GET REGISTRY/api/v1/limits`` (spec §17.4): what the registry accepts; None when it does not say."""
+    url = registry.rstrip("/") + "/api/v1/limits"
+    try:
+        with urllib.request.urlopen(url, timeout=TIMEOUT_S) as response:
+            return json.loads(response.read().decode("utf-8"))
+    except urllib.error.HTTPError:
+        return None  # an older registry: it still enforces its limits on the upload
+    except (urllib.error.URLError, OSError) as exc:
+        raise unreachable(registry, url, getattr(exc, "reason", exc)) from None
+
+
+def check_size(archive: Path, limits: dict | None, registry: str) -> None:
+    """E960 before anything is sent when the archive is larger than the registry's ``max_archive_bytes``."""
+    if limits is None or "max_archive_bytes" not in limits:
+        return
+    size, limit = archive.stat().st_size, int(limits["max_archive_bytes"])
+    if size > limit:
+        raise fail("E960", f"the bundle is {size / 2**20:.1f} MiB; the registry at {registry} accepts at most "
+                           f"{limit / 2**20:.1f} MiB, so it was not sent", file=str(archive),
+                   expected=f"≤ {limit} bytes", found=f"{size} bytes")
+
+
 def unreachable(registry: str, url: str, reason: object) -> HaptifyError:
     """Why the registry could not be reached: a URL that names no host, or nothing listening there, is a
     wrong ``--registry`` (E903: check the URL); anything else may pass (E978: retry later). Spec §17.7."""
@@ -139,9 +162,11 @@ def _run(args, ui) -> int:
                 lines.append("no conformance report included: the registry accepts it only with a passing report "
                              "of this implementation on file")
             if args.registry and token:
+                check_size(archive, registry_limits(args.registry), args.registry)
                 outcome = {**post_bundle(args.registry, token, archive, dry_run=True), "checked": "locally and by the registry"}
                 lines += ["the registry says:"] + describe(outcome)
         else:
+            check_size(archive, registry_limits(args.registry), args.registry)
             outcome = post_bundle(args.registry, token, archive)
             lines = describe(outcome)
         if ui.json_mode:

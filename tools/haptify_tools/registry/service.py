@@ -67,6 +67,7 @@ class Settings:
     limits: Limits = field(default_factory=Limits)
     verify_raw: bool = True  # re-compute metrics when raw streams are included
     default_rate_per_minute: int = DEFAULT_RATE_PER_MINUTE
+    challenge_ttl_s: float = 3600.0  # a challenge must be answered within this time (spec §17.8)
 
     @property
     def url(self) -> str:
@@ -127,6 +128,16 @@ class Outcome:
     def to_dict(self) -> dict:
         return {"id": self.id, "digest": self.digest, "status": self.status, "supersedes": self.supersedes,
                 "verification": self.verification, "url": f"/api/v1/submissions/{self.id}"}
+
+
+@dataclass
+class ReadContext:
+    """What a submission's summary needs beyond its row: withdrawals, supersessions and, per implementation
+    name and version, the id of its latest passed conformance challenge (spec §17.5, §17.8)."""
+
+    withdrawn: dict[str, db.Withdrawal]
+    superseded_by: dict[str, str]
+    proven: dict[tuple[str, str], str]
 
 
 def _fsync_dir(path: Path) -> None:
@@ -447,25 +458,33 @@ class Registry:
             return "superseded"
         return "current"
 
-    def _summary(self, row: db.Submission, withdrawn: dict[str, db.Withdrawal], superseded_by: dict[str, str]) -> dict:
-        w = withdrawn.get(row.id)
-        state = "withdrawn" if w else "superseded" if row.id in superseded_by else "current"
+    def _summary(self, row: db.Submission, ctx: ReadContext) -> dict:
+        w = ctx.withdrawn.get(row.id)
+        state = "withdrawn" if w else "superseded" if row.id in ctx.superseded_by else "current"
+        challenge = ctx.proven.get((row.implementation_name, row.implementation_version))
         return {
             "id": row.id, "digest": row.digest, "state": state, "lab": row.lab_id,
             "device": {"slug": row.device.slug, "manufacturer": row.device.manufacturer, "model": row.device.model},
             "serial": row.serial, "spec_version": row.spec_version,
             "implementation": {"name": row.implementation_name, "version": row.implementation_version},
+            "conformance": {"status": "proven" if challenge else "self-asserted", "challenge": challenge},
             "session_id": row.session_id, "verification": row.verification, "has_raw": row.has_raw,
             "received_at": row.received_at.isoformat(), "supersedes": row.supersedes_id,
-            "superseded_by": superseded_by.get(row.id),
+            "superseded_by": ctx.superseded_by.get(row.id),
             "withdrawal": {"reason": w.reason, "at": w.at.isoformat()} if w else None,
         }
 
-    def _context(self, s: DBSession) -> tuple[dict[str, db.Withdrawal], dict[str, str]]:
+    def _context(self, s: DBSession) -> ReadContext:
         withdrawn = {w.submission_id: w for w in s.scalars(select(db.Withdrawal))}
         superseded_by = {old: new for new, old in s.execute(
             select(db.Submission.id, db.Submission.supersedes_id).where(db.Submission.supersedes_id.is_not(None)))}
-        return withdrawn, superseded_by
+        proven: dict[tuple[str, str], str] = {}
+        for name, version, cid in s.execute(
+                select(db.ChallengeResult.implementation_name, db.ChallengeResult.implementation_version,
+                       db.ChallengeResult.challenge_id).where(db.ChallengeResult.passed.is_(True))
+                .order_by(db.ChallengeResult.answered_at)):
+            proven[(name, version)] = cid  # the latest passed challenge of each implementation and version
+        return ReadContext(withdrawn, superseded_by, proven)
 
     def submissions(self, *, lab: str | None = None, device: str | None = None, state: str | None = None,
                     verification: str | None = None, limit: int = 100, offset: int = 0) -> list[dict]:
@@ -479,8 +498,8 @@ class Registry:
                 q = q.join(db.Device).where(db.Device.slug == device)
             if verification not in (None, "all"):
                 q = q.where(db.Submission.verification == verification)
-            withdrawn, superseded_by = self._context(s)
-            rows = [self._summary(r, withdrawn, superseded_by) for r in s.scalars(q)]
+            ctx = self._context(s)
+            rows = [self._summary(r, ctx) for r in s.scalars(q)]
         rows = [r for r in rows if state in (None, "all") or r["state"] == state]
         return rows[offset: offset + limit]
 
@@ -490,8 +509,8 @@ class Registry:
             row = s.get(db.Submission, sid)
             if row is None:
                 raise fail("E973", f"no submission {sid!r}", expected="an existing submission id", found=sid)
-            withdrawn, superseded_by = self._context(s)
-            out = self._summary(row, withdrawn, superseded_by)
+            ctx = self._context(s)
+            out = self._summary(row, ctx)
             out.update(archive_sha256=row.archive_sha256, archive_size=row.archive_size,
                        verification_details=json.loads(row.verification_json), results=json.loads(row.results_json),
                        bundle=json.loads(row.bundle_json))
@@ -555,12 +574,12 @@ class Registry:
         with DBSession(self.engine) as s:
             d = self._device_row(s, slug)
             device = {"slug": d.slug, "manufacturer": d.manufacturer, "model": d.model}
-            withdrawn, superseded_by = self._context(s)
+            ctx = self._context(s)
             subs = s.scalars(select(db.Submission).options(selectinload(db.Submission.metrics), selectinload(db.Submission.device))
                              .where(db.Submission.device_id == d.id).order_by(db.Submission.received_at)).all()
             counted, apart = [], []
             for sub in subs:
-                summary = self._summary(sub, withdrawn, superseded_by)
+                summary = self._summary(sub, ctx)
                 if summary["state"] != "current":
                     continue
                 if verification == "verified" and sub.verification != "verified":
@@ -605,10 +624,10 @@ class Registry:
                 db.Submission.received_at, db.Submission.id)
             if device:
                 q = q.join(db.Device).where(db.Device.slug == device)
-            withdrawn, superseded_by = self._context(s)
+            ctx = self._context(s)
             out = []
             for sub in s.scalars(q):
-                summary = self._summary(sub, withdrawn, superseded_by)
+                summary = self._summary(sub, ctx)
                 if state != "all" and summary["state"] != state or verification not in ("all", sub.verification):
                     continue
                 for m in sub.metrics:

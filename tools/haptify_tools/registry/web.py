@@ -277,6 +277,19 @@ def page_recording(sid: str, request: Request) -> Response:
     return FileResponse(path, media_type="application/octet-stream", filename=f"{sid}.rrd")
 
 
+@router.get("/challenges/{cid}", name="page_challenge", response_class=HTMLResponse)
+def page_challenge(cid: str, request: Request) -> HTMLResponse:
+    """A conformance challenge (spec §17.8): its cases while open; once answered, the implementation, the
+    verdict and each case's expected and found value."""
+    from haptify_tools.registry import challenge
+
+    try:
+        record = challenge.record(api_read.reads(request).reg, cid)
+    except HaptifyError as err:
+        return _error_page(request, err)
+    return _render(request, "challenge.html", c=record)
+
+
 def register(app: FastAPI) -> None:
     """Add the web pages, the read-side JSON endpoints and the stylesheet to the registry app."""
     app.include_router(api_read.router)
