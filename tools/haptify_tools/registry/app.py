@@ -30,6 +30,7 @@ from haptify.versions import PACKAGE_VERSION, SPEC_VERSION
 from haptify_tools.registry import challenge
 from haptify_tools.registry.api_read import not_counted_notes, reads
 from haptify_tools.registry.service import Registry, Settings
+from haptify_tools.registry.uploads import Uploads
 
 API = "/api/v1"
 VERIFICATION_FILTER = "^(all|verified|disagrees|unverified)$"  # lists: one verification state, or all (spec §17.3.1)
@@ -174,6 +175,37 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
                                        expected=f"≤ {limit} bytes", found=f"{declared} bytes"))
         upload = await reg.receive(request.stream())
         outcome = await run_in_threadpool(reg.submit, upload, caller, dry_run=dry_run)
+        if outcome.status != "accepted":
+            response.status_code = 200
+        return outcome.to_dict()
+
+    uploads = Uploads(reg.tmp, reg.settings.limits.max_archive_bytes)
+
+    @app.post(f"{API}/uploads", tags=["submissions"], status_code=201)
+    def open_upload(upload_length: str | None = Header(None), authorization: str | None = Header(None)) -> dict:
+        """Open a resumable upload of ``Upload-Length`` bytes (spec §17.5.2); send it with PATCH in chunks."""
+        caller = reg.authenticate(authorization, "submit")
+        return uploads.open(caller.token_id, upload_length).state()
+
+    @app.patch(f"{API}/uploads/{{uid}}", tags=["submissions"])
+    async def append_upload(uid: str, request: Request, upload_offset: str | None = Header(None),
+                            authorization: str | None = Header(None)) -> dict:
+        """Append the body at ``Upload-Offset`` (the bytes received so far); a body cut short keeps what arrived."""
+        caller = await run_in_threadpool(reg.authenticate, authorization, "submit")
+        return (await uploads.append(uid, caller.token_id, upload_offset, request.stream())).state()
+
+    @app.get(f"{API}/uploads/{{uid}}", tags=["submissions"])
+    def upload_state(uid: str, authorization: str | None = Header(None)) -> dict:
+        """How far an upload got: resume with PATCH at ``offset``."""
+        caller = reg.authenticate(authorization, "submit", rate_limit=False)
+        return uploads.get(uid, caller.token_id).state()
+
+    @app.post(f"{API}/uploads/{{uid}}/submit", tags=["submissions"], status_code=201)
+    def submit_upload(uid: str, response: Response, dry_run: bool = Query(False, description="check only; store nothing"),
+                      authorization: str | None = Header(None)) -> dict:
+        """Submit a complete upload: the same checks and answers as ``POST /submissions`` (spec §17.3)."""
+        caller = reg.authenticate(authorization, "submit")
+        outcome = reg.submit(uploads.take(uid, caller.token_id), caller, dry_run=dry_run)
         if outcome.status != "accepted":
             response.status_code = 200
         return outcome.to_dict()
