@@ -12,6 +12,7 @@ import time
 
 import pytest
 from fastapi.testclient import TestClient
+from sqlalchemy import text
 
 from _registry_fixtures import base, browser, bundle_for  # noqa: F401  (base: fixture)
 from haptify_conform import cli
@@ -87,6 +88,11 @@ def test_answers_are_judged_once_and_a_replay_is_refused(registry, tmp_path):
     judged_b = client.post(f"{API}/challenges/{b['id']}/answers", json=renamed, headers=auth(tokens["lab-a"])).json()
     assert judged_b["state"] == "failed"  # the old values relabelled: new sessions, new answers
     assert client.get(f"{API}/challenges/{a['id']}/sessions.tar.gz").json()["findings"][0]["code"] == "E979"
+    for statement in ("UPDATE challenge_results SET passed = true", "DELETE FROM challenge_results",
+                      "UPDATE challenges SET expires_at = created_at", "DELETE FROM challenges"):
+        with pytest.raises(Exception, match="append-only"):  # a verdict cannot be rewritten
+            with app.state.registry.engine.begin() as conn:
+                conn.execute(text(statement))
 
 
 def test_a_challenge_expires(tmp_path):

@@ -9,6 +9,8 @@ Revises: r0001
 import sqlalchemy as sa
 from alembic import op
 
+from haptify_tools.registry.migrations.append_only import add_triggers, drop_triggers
+
 revision = "r0002"
 down_revision = "r0001"
 branch_labels = None
@@ -35,24 +37,10 @@ def upgrade() -> None:
                     sa.Column("passed", sa.Boolean, nullable=False),
                     sa.Column("verdicts_json", sa.Text, nullable=False),
                     sa.Column("answered_at", tz, nullable=False))
-    dialect = op.get_bind().dialect.name
-    for table in APPEND_ONLY:
-        if dialect == "postgresql":
-            op.execute(f"CREATE TRIGGER {table}_append_only BEFORE UPDATE OR DELETE ON {table} "
-                       "FOR EACH ROW EXECUTE FUNCTION registry_append_only()")
-        elif dialect == "sqlite":
-            for action in ("UPDATE", "DELETE"):
-                op.execute(f"CREATE TRIGGER {table}_no_{action.lower()} BEFORE {action} ON {table} "
-                           f"BEGIN SELECT RAISE(ABORT, 'registry records are append-only ({table})'); END")
+    add_triggers(APPEND_ONLY)
 
 
 def downgrade() -> None:
-    dialect = op.get_bind().dialect.name
-    for table in APPEND_ONLY:
-        if dialect == "postgresql":
-            op.execute(f"DROP TRIGGER IF EXISTS {table}_append_only ON {table}")
-        elif dialect == "sqlite":
-            for action in ("update", "delete"):
-                op.execute(f"DROP TRIGGER IF EXISTS {table}_no_{action}")
+    drop_triggers(APPEND_ONLY)
     op.drop_table("challenge_results")
     op.drop_table("challenges")
