@@ -279,3 +279,18 @@ def test_the_database_and_the_archives_are_the_service_users_only(base, tmp_path
         for d in [data, data / "bundles", stored.parent, data / "tmp"]:
             assert stat.S_IMODE(d.stat().st_mode) == 0o700, d
 
+
+
+def test_every_refusal_is_logged_with_its_code(tmp_path, caplog):
+    import logging
+
+    app = create_app(Settings(data_dir=tmp_path / "data"))
+    with TestClient(app) as client, caplog.at_level(logging.WARNING, logger="haptify.registry"):
+        client.post("/api/v1/submissions", content=b"x", headers={"Content-Type": "application/gzip"})  # no token
+        client.get("/api/v1/submissions/nothere")
+        client.get("/devices/nothere")  # a page
+    app.state.registry.close()
+    lines = [r.getMessage() for r in caplog.records]
+    assert any("POST /api/v1/submissions" in m and "E970" in m for m in lines)
+    assert any("GET /api/v1/submissions/nothere" in m and "E973" in m for m in lines)
+    assert any("GET /devices/nothere" in m and "E973" in m for m in lines)

@@ -20,6 +20,7 @@ and the stylesheet; ``create_app`` calls it.
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 import threading
@@ -39,6 +40,7 @@ from haptify.versions import SPEC_VERSION
 from haptify_tools.registry import api_read
 from haptify_tools.registry.leaderboard import leaderboard, rule_text
 
+log = logging.getLogger("haptify.registry")
 _HERE = resources.files("haptify_tools.registry")
 templates = Jinja2Templates(directory=str(_HERE / "templates"))
 templates.env.globals["spec_version"] = SPEC_VERSION
@@ -69,6 +71,8 @@ def _error_page(request: Request, err: HaptifyError) -> HTMLResponse:
     """A refusal as a page: its code and message, HTTP status by code."""
     f = err.findings[0]
     status = STATUS_OF_CODE.get(f.code, 500)
+    log.warning("refused %s %s from %s: %s %s", request.method, request.url.path,
+                request.client.host if request.client else "-", f.code, f.message)
     title = {404: "Not found", 400: "Bad request"}.get(status, "Error")
     return _render(request, "error.html", status_code=status, code=f.code, title=title, message=f.message)
 
