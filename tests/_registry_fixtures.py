@@ -194,13 +194,14 @@ SERVE = "import argparse, sys; from haptify.cli import UI; from haptify_tools.re
         "sys.exit(a.func(a, UI(quiet=True)))"
 
 
-def start(data: Path) -> tuple[subprocess.Popen, int]:
-    """``haptify registry serve --data DATA --port PORT`` in a subprocess on a fresh port, once it answers.
+def start(data: Path, db_url: str | None = None) -> tuple[subprocess.Popen, int]:
+    """``haptify registry serve --data DATA [--db URL] --port PORT`` in a subprocess on a fresh port, once it answers.
 
     Every start takes a new port: a port given back by a killed server may be taken by a parallel test's
     server (another xdist worker) before the restart binds it."""
     port = free_port()
-    proc = subprocess.Popen([sys.executable, "-c", SERVE, "registry", "serve", "--data", str(data), "--port", str(port)],
+    db = ["--db", db_url] if db_url else []
+    proc = subprocess.Popen([sys.executable, "-c", SERVE, "registry", "serve", "--data", str(data), *db, "--port", str(port)],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
         wait_http(f"http://127.0.0.1:{port}/api/v1/health", alive=proc)

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from _registry_fixtures import SERVE, base, bundle_for, free_port, start, variant, wait_http  # noqa: F401  (base: fixture)
+from _registry_fixtures import SERVE, base, bundle_for, free_port, postgres_or_skip, start, variant, wait_http  # noqa: F401  (base: fixture)
 from haptify.cli import UI
 from haptify.errors import HaptifyError
 from haptify_tools.registry import cmd_registry, cmd_submit
@@ -33,17 +33,32 @@ def _parse(argv: list[str]):
     return parser.parse_args(argv)
 
 
-def test_killed_mid_submission_loses_nothing_accepted_and_leaves_nothing_half(base, tmp_path):
+@pytest.fixture(scope="module")
+def pg_server():
+    server = postgres_or_skip()
+    yield server
+    server.stop()
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def db_url(request):
+    """None (SQLite in the data folder) or a fresh database on a throwaway PostgreSQL server."""
+    if request.param == "sqlite":
+        return None
+    return request.getfixturevalue("pg_server").new_database(f"k{abs(hash(request.node.nodeid)) % 10**9}")
+
+
+def test_killed_mid_submission_loses_nothing_accepted_and_leaves_nothing_half(base, tmp_path, db_url):
     report = base[3]
     data = tmp_path / "data"
-    registry = Registry(Settings(data_dir=data), lock=False)
+    registry = Registry(Settings(data_dir=data, db_url=db_url), lock=False)
     token = registry.create_token("lab-a")
     registry.close()
     archives = []
     for i in range(12):
         s, r = variant(base, tmp_path, f"k{i}", rms=[1.0 + i, 2.0])
         archives.append(bundle_for(s, r, report, tmp_path / f"k{i}.tar.gz")[0])
-    proc, port = start(data)
+    proc, port = start(data, db_url)
     acknowledged: list[str] = []
     lock = threading.Lock()
 
@@ -67,7 +82,7 @@ def test_killed_mid_submission_loses_nothing_accepted_and_leaves_nothing_half(ba
     for t in threads:
         t.join()
     assert 4 <= len(acknowledged) < 12, "the kill should land while submissions are in flight"
-    proc, port = start(data)  # restart: migrations, then the sweep
+    proc, port = start(data, db_url)  # restart: migrations, then the sweep
     try:
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/v1/health") as r:
             health = json.loads(r.read())

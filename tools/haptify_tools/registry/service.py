@@ -308,7 +308,10 @@ class Registry:
             if checked.conformance is None:
                 check_conformance(report, checked.results, checked.bundle.spec_version, file="(report on file)")
             self._check_supersede(checked, caller)
-            checked.verification = run_contained(verify_bundle, checked, unpacked, self.settings.verify_raw, limits=limits)
+            if checked.bundle.includes_raw and self.settings.verify_raw:  # re-computation reads the streams
+                checked.verification = run_contained(verify_bundle, checked, unpacked, True, limits=limits)
+            else:  # nothing of the bundle is read: no worker needed
+                checked.verification = verify_bundle(checked, unpacked, self.settings.verify_raw)
             sid = submission_id(digest)
             if dry_run:
                 return Outcome(sid, digest, "would-accept", checked.verification.to_dict(), bundle.supersedes)
