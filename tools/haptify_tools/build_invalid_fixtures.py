@@ -267,16 +267,6 @@ def _int_column(folder: Path) -> None:
     rehash(folder, "handle_wrench")
 
 
-def _float32_column(folder: Path, name: str) -> None:
-    """Store one column of handle_wrench as Parquet FLOAT (32-bit) and rehash."""
-    s = stream_of(manifest(folder), "handle_wrench")
-    path = folder / s["file"]
-    table = pq.read_table(path)
-    narrow = pa.array(table.column(name).to_numpy().astype(np.float32))
-    pq.write_table(table.set_column(table.schema.get_field_index(name), name, narrow), path, compression="zstd")
-    rehash(folder, "handle_wrench")
-
-
 def _drop_file_column(folder: Path) -> None:
     m = manifest(folder)
     s = stream_of(m, "handle_wrench")
@@ -429,8 +419,6 @@ CASES: list[Case] = [
     Case("csv-blank-line", ["E112"], "CSV session whose handle_wrench has a blank line after row 10.",
          _csv_edit_line("handle_wrench", 10, lambda line: line + "\n"), fmt="csv"),
     Case("column-not-float", ["E212"], "handle_wrench column fx is stored as 64-bit integers.", _int_column),
-    Case("time-float32", ["E212"], "handle_wrench's t is stored as 32-bit floats (only sensor columns may be compact, "
-         "spec §3.2.1).", lambda f: _float32_column(f, "t")),
     Case("time-not-increasing", ["E203"], "Two handle_wrench samples are swapped, so t decreases once.",
          lambda f: rewrite_data(f, "handle_wrench", _swap_times)),
     Case("time-nan", ["E203"], "handle_accel's t is NaN at row 10.",
@@ -558,8 +546,6 @@ CASES: list[Case] = [
 
 VALID: list[Case] = [
     Case("parquet-basic", [], "The analytic free-space example session (Parquet)."),
-    Case("parquet-compact", [], "The analytic example session with compact streams: every sensor column Parquet FLOAT "
-         "with BYTE_STREAM_SPLIT, t DOUBLE (spec §3.2.1).", extend=lambda w: setattr(w, "compact", True)),
     Case("rendering-minimal", [], "An active stiffness trial whose rendering has only its required members (plane point, "
          "normal, stiffness): friction, software and loop rate are optional (spec §2.5).",
          extend=lambda w: add_active_trial(w, rendering={k: RENDERING[k] for k in ("surface_point_m", "surface_normal",
