@@ -171,6 +171,14 @@ def postgres_or_skip() -> PostgresServer:
     return server
 
 
+@pytest.fixture(scope="module")
+def pg_server():
+    """A throwaway PostgreSQL server for the tests of one module (skipped without one; a failure under CI)."""
+    server = postgres_or_skip()
+    yield server
+    server.stop()
+
+
 def wait_http(url: str, timeout: float = 20.0, alive: subprocess.Popen | None = None) -> None:
     """Poll ``url`` until it answers 200; with ``alive``, fail at once (with its stderr) if that server process exits."""
     import urllib.request

@@ -13,19 +13,12 @@ import pytest
 from fastapi.testclient import TestClient
 from sqlalchemy import text
 
-from _registry_fixtures import base, bundle_for, passing_report, postgres_or_skip, variant  # noqa: F401  (base: fixture)
+from _registry_fixtures import base, bundle_for, passing_report, pg_server, variant  # noqa: F401  (base: fixture)
 from haptify_conform.cases import load_cases, select
 from haptify_tools.registry.app import create_app
 from haptify_tools.registry.service import Settings
 
 API = "/api/v1"
-
-
-@pytest.fixture(scope="module")
-def pg_server():
-    server = postgres_or_skip()
-    yield server
-    server.stop()
 
 
 @pytest.fixture(params=["sqlite", "postgresql"])

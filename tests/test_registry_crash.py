@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from _registry_fixtures import SERVE, base, bundle_for, free_port, postgres_or_skip, start, variant, wait_http  # noqa: F401  (base: fixture)
+from _registry_fixtures import SERVE, base, bundle_for, free_port, pg_server, start, variant, wait_http  # noqa: F401  (base: fixture)
 from haptify.cli import UI
 from haptify.errors import HaptifyError
 from haptify_tools.registry import cmd_registry, cmd_submit
@@ -31,13 +31,6 @@ def _parse(argv: list[str]):
     cmd_submit.register(sub)
     cmd_registry.register(sub)
     return parser.parse_args(argv)
-
-
-@pytest.fixture(scope="module")
-def pg_server():
-    server = postgres_or_skip()
-    yield server
-    server.stop()
 
 
 @pytest.fixture(params=["sqlite", "postgresql"])

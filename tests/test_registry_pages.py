@@ -20,7 +20,7 @@ from statistics import fmean, stdev
 import pytest
 from fastapi.testclient import TestClient
 
-from _registry_fixtures import base, browser, bundle_for, example_session, passing_report, postgres_or_skip, skip_or_fail  # noqa: F401 (base: fixture)
+from _registry_fixtures import base, browser, bundle_for, example_session, passing_report, pg_server, skip_or_fail  # noqa: F401 (base: fixture)
 from haptify.compare import _fmt
 from haptify.metric_definitions import family
 from haptify.results import Implementation, MetricResult, ResultsFile
@@ -100,13 +100,6 @@ def populate(data_dir: Path, bundles: list[tuple[str, Path]], db_url: str | None
         assert r.status_code == 201, r.text
         ids.append(r.json()["id"])
     return Populated(client, app, tokens, ids)
-
-
-@pytest.fixture(scope="module")
-def pg_server():
-    server = postgres_or_skip()
-    yield server
-    server.stop()
 
 
 @pytest.fixture(params=["sqlite", "postgresql"], scope="module")
