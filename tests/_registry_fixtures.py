@@ -3,6 +3,7 @@ archives, a registry app on SQLite or a throwaway PostgreSQL server."""
 
 from __future__ import annotations
 
+import contextlib
 import gzip
 import hashlib
 import io
@@ -12,6 +13,7 @@ import shutil
 import socket
 import statistics
 import subprocess
+import sys
 import tarfile
 import tempfile
 import time
@@ -29,7 +31,22 @@ from haptify_tools.registry.bundle import build_bundle, pack
 
 FAST_METRICS = ["free_space.speed_mean", "free_space.angular_speed_mean", "vibration.rms", "vibration.spectral_centroid",
                 "workspace.spec_box_volume"]
-PG_BIN = Path("/usr/local/bin")
+def _pg_bin() -> Path:
+    """The folder of PostgreSQL's initdb and pg_ctl: /usr/local/bin, else Debian's /usr/lib/postgresql/<newest>/bin."""
+    candidates = [Path("/usr/local/bin")] + sorted(Path("/usr/lib/postgresql").glob("*/bin"),
+                                                   key=lambda p: int(p.parent.name) if p.parent.name.isdigit() else 0, reverse=True)
+    return next((c for c in candidates if (c / "initdb").exists()), candidates[0])
+
+
+PG_BIN = _pg_bin()
+
+
+def skip_or_fail(reason: str) -> None:
+    """Skip the test with ``reason``; under CI (``CI=true``, as ``.ci/run`` sets) a skip is a failure, so the
+    PostgreSQL and browser tests cannot silently not run there."""
+    if os.environ.get("CI", "").lower() == "true":
+        pytest.fail(f"{reason} — CI=true: this test must run (.ci/run installs what it needs)")
+    pytest.skip(reason)
 
 
 def example_session(root: Path, lab: str = "lab-example", session_id: str = "example-0001",
@@ -139,19 +156,27 @@ class PostgresServer:
 
 
 def postgres_or_skip() -> PostgresServer:
-    """Start a PostgreSQL server, or skip the test with the reason."""
+    """Start a PostgreSQL server, or skip the test with the reason (fail under CI)."""
     if not (PG_BIN / "initdb").exists():
-        pytest.skip(f"PostgreSQL not available: no initdb in {PG_BIN}")
+        skip_or_fail(f"PostgreSQL not available: no initdb in {PG_BIN}")
     if os.geteuid() == 0 and shutil.which("runuser") is None:
-        pytest.skip("PostgreSQL cannot start: running as root without runuser")
+        skip_or_fail("PostgreSQL cannot start: running as root without runuser")
     server = PostgresServer()
     try:
         server.start()
     except (subprocess.SubprocessError, OSError, KeyError, LookupError) as exc:
         server.stop()
         detail = getattr(exc, "stderr", b"") or b""
-        pytest.skip(f"PostgreSQL could not be started: {exc} {detail.decode(errors='replace')[:300]}")
+        skip_or_fail(f"PostgreSQL could not be started: {exc} {detail.decode(errors='replace')[:300]}")
     return server
+
+
+@pytest.fixture(scope="module")
+def pg_server():
+    """A throwaway PostgreSQL server for the tests of one module (skipped without one; a failure under CI)."""
+    server = postgres_or_skip()
+    yield server
+    server.stop()
 
 
 def wait_http(url: str, timeout: float = 20.0, alive: subprocess.Popen | None = None) -> None:
@@ -170,6 +195,55 @@ def wait_http(url: str, timeout: float = 20.0, alive: subprocess.Popen | None = 
             if time.monotonic() > deadline:
                 raise
             time.sleep(0.05)
+
+
+SERVE = "import argparse, sys; from haptify.cli import UI; from haptify_tools.registry import cmd_registry; " \
+        "p = argparse.ArgumentParser(); cmd_registry.register(p.add_subparsers()); a = p.parse_args(sys.argv[1:]); " \
+        "sys.exit(a.func(a, UI(quiet=True)))"
+
+
+def start(data: Path, db_url: str | None = None) -> tuple[subprocess.Popen, int]:
+    """``haptify registry serve --data DATA [--db URL] --port PORT`` in a subprocess on a fresh port, once it answers.
+
+    Every start takes a new port: a port given back by a killed server may be taken by a parallel test's
+    server (another xdist worker) before the restart binds it."""
+    port = free_port()
+    db = ["--db", db_url] if db_url else []
+    proc = subprocess.Popen([sys.executable, "-c", SERVE, "registry", "serve", "--data", str(data), *db, "--port", str(port)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        wait_http(f"http://127.0.0.1:{port}/api/v1/health", alive=proc)
+    except Exception:
+        proc.kill()
+        raise
+    return proc, port
+
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+
+
+@contextlib.contextmanager
+def browser(profile: Path):
+    """A page of the system's headless Chromium driven by Playwright (which downloads nothing: it runs
+    ``/usr/bin/chromium``). Skipped without Chromium or Playwright — a failure under CI (:func:`skip_or_fail`)."""
+    if not CHROMIUM.exists():
+        skip_or_fail(f"browser test skipped: no system Chromium at {CHROMIUM} (install the 'chromium' package)")
+    try:
+        from playwright import sync_api
+    except ImportError:
+        skip_or_fail("browser test skipped: the playwright package is not installed")
+    with sync_api.sync_playwright() as pw:
+        ctx = pw.chromium.launch_persistent_context(str(profile), executable_path=str(CHROMIUM), headless=True,
+                                                    args=CHROMIUM_FLAGS, timeout=30_000)
+        try:
+            page = ctx.new_page()
+            page.set_default_timeout(15_000)
+            yield page
+        finally:
+            ctx.close()
+            shutil.rmtree(profile, ignore_errors=True)
 
 
 @pytest.fixture(scope="session")

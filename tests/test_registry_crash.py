@@ -17,32 +17,11 @@ from pathlib import Path
 
 import pytest
 
-from _registry_fixtures import base, bundle_for, free_port, variant, wait_http  # noqa: F401  (base: fixture)
+from _registry_fixtures import SERVE, base, bundle_for, free_port, pg_server, start, variant, wait_http  # noqa: F401  (base: fixture)
 from haptify.cli import UI
 from haptify.errors import HaptifyError
 from haptify_tools.registry import cmd_registry, cmd_submit
 from haptify_tools.registry.service import Registry, Settings
-
-SERVE = "import argparse, sys; from haptify.cli import UI; from haptify_tools.registry import cmd_registry; " \
-        "p = argparse.ArgumentParser(); cmd_registry.register(p.add_subparsers()); a = p.parse_args(sys.argv[1:]); " \
-        "sys.exit(a.func(a, UI(quiet=True)))"
-
-
-def start(data: Path) -> tuple[subprocess.Popen, int]:
-    """``haptify registry serve --data DATA --port PORT`` in a subprocess on a fresh port, once it answers.
-
-    Every start takes a new port: a port given back by a killed server may be taken by a parallel test's
-    server (another xdist worker) before the restart binds it."""
-    port = free_port()
-    proc = subprocess.Popen([sys.executable, "-c", SERVE, "registry", "serve", "--data", str(data), "--port", str(port)],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    try:
-        wait_http(f"http://127.0.0.1:{port}/api/v1/health", alive=proc)
-    except Exception:
-        proc.kill()
-        raise
-    return proc, port
-
 
 def _parse(argv: list[str]):
     import argparse
@@ -54,17 +33,25 @@ def _parse(argv: list[str]):
     return parser.parse_args(argv)
 
 
-def test_killed_mid_submission_loses_nothing_accepted_and_leaves_nothing_half(base, tmp_path):
+@pytest.fixture(params=["sqlite", "postgresql"])
+def db_url(request):
+    """None (SQLite in the data folder) or a fresh database on a throwaway PostgreSQL server."""
+    if request.param == "sqlite":
+        return None
+    return request.getfixturevalue("pg_server").new_database(f"k{abs(hash(request.node.nodeid)) % 10**9}")
+
+
+def test_killed_mid_submission_loses_nothing_accepted_and_leaves_nothing_half(base, tmp_path, db_url):
     report = base[3]
     data = tmp_path / "data"
-    registry = Registry(Settings(data_dir=data), lock=False)
+    registry = Registry(Settings(data_dir=data, db_url=db_url), lock=False)
     token = registry.create_token("lab-a")
     registry.close()
     archives = []
     for i in range(12):
         s, r = variant(base, tmp_path, f"k{i}", rms=[1.0 + i, 2.0])
         archives.append(bundle_for(s, r, report, tmp_path / f"k{i}.tar.gz")[0])
-    proc, port = start(data)
+    proc, port = start(data, db_url)
     acknowledged: list[str] = []
     lock = threading.Lock()
 
@@ -88,7 +75,7 @@ def test_killed_mid_submission_loses_nothing_accepted_and_leaves_nothing_half(ba
     for t in threads:
         t.join()
     assert 4 <= len(acknowledged) < 12, "the kill should land while submissions are in flight"
-    proc, port = start(data)  # restart: migrations, then the sweep
+    proc, port = start(data, db_url)  # restart: migrations, then the sweep
     try:
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/v1/health") as r:
             health = json.loads(r.read())

@@ -12,7 +12,6 @@ from __future__ import annotations
 import copy
 import json
 import re
-import shutil
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,7 +20,7 @@ from statistics import fmean, stdev
 import pytest
 from fastapi.testclient import TestClient
 
-from _registry_fixtures import base, bundle_for, example_session, passing_report, postgres_or_skip  # noqa: F401 (base: fixture)
+from _registry_fixtures import base, browser, bundle_for, example_session, passing_report, pg_server, skip_or_fail  # noqa: F401 (base: fixture)
 from haptify.compare import _fmt
 from haptify.metric_definitions import family
 from haptify.results import Implementation, MetricResult, ResultsFile
@@ -29,10 +28,6 @@ from haptify.versions import PACKAGE_VERSION
 from haptify.storage import sha256_file
 from haptify_tools.registry.app import create_app
 from haptify_tools.registry.service import Settings
-
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
 
 # (lab, manufacturer, model, vibration.rms repetitions in m/s², workspace.measured_volume repetitions in m³)
 PLAN = [
@@ -107,13 +102,6 @@ def populate(data_dir: Path, bundles: list[tuple[str, Path]], db_url: str | None
     return Populated(client, app, tokens, ids)
 
 
-@pytest.fixture(scope="module")
-def pg_server():
-    server = postgres_or_skip()
-    yield server
-    server.stop()
-
-
 @pytest.fixture(params=["sqlite", "postgresql"], scope="module")
 def backend(request):
     """A function returning a fresh database URL: None (SQLite in the data folder) or a new PostgreSQL database."""
@@ -164,15 +152,18 @@ def test_index_lists_devices_and_leaderboards(registry):
 
 
 def test_leaderboard_order_and_values(registry):
-    r = registry.client.get("/leaderboard/vibration.rms")
+    # every submission of PLAN is without raw streams (unverified), so they rank only with verification=all
+    default = registry.client.get("/leaderboard/vibration.rms").text
+    assert 'id="leaderboard"' not in default and default.count('data-verification="unverified"') == len(PLAN)
+    r = registry.client.get("/leaderboard/vibration.rms?verification=all")
     assert r.status_code == 200
     # lower vibration is better: Touch X (0.041) < Falcon (0.0535) < Touch (mean of 5 repetitions 0.0698)
     assert devices_in_order(r.text, "leaderboard") == ["3d-systems-touch-x", "novint-falcon", "3d-systems-touch"]
     assert _fmt(fmean(all_reps("Touch", 3))) in r.text and _fmt(stdev(all_reps("Touch", 3))) in r.text
     # a larger workspace is better: Touch > Touch X > Falcon
-    vol = registry.client.get("/leaderboard/workspace.measured_volume").text
+    vol = registry.client.get("/leaderboard/workspace.measured_volume?verification=all").text
     assert devices_in_order(vol, "leaderboard") == ["3d-systems-touch", "3d-systems-touch-x", "novint-falcon"]
-    api = registry.client.get("/api/v1/leaderboard/vibration.rms").json()
+    api = registry.client.get("/api/v1/leaderboard/vibration.rms?verification=all").json()
     assert [(row["rank"], row["device"]) for row in api["rows"]] == [(1, "3d-systems-touch-x"), (2, "novint-falcon"),
                                                                      (3, "3d-systems-touch")]
     assert api["rows"][2]["mean"] == pytest.approx(fmean(all_reps("Touch", 3)))
@@ -181,7 +172,7 @@ def test_leaderboard_order_and_values(registry):
 
 
 def test_device_page_shows_spread_over_labs_and_repetitions(registry):
-    html = registry.client.get("/devices/3d-systems-touch").text
+    html = registry.client.get("/devices/3d-systems-touch?verification=all").text
     row = re.search(r'<tr data-metric="vibration.rms">(.*?)</tr>', html, re.S).group(1)
     reps = all_reps("Touch", 3)
     lab_a, lab_b = fmean(PLAN[0][3]), fmean(PLAN[1][3])
@@ -196,22 +187,23 @@ def test_device_page_shows_spread_over_labs_and_repetitions(registry):
 
 def test_withdrawn_submission_leaves_the_aggregates(fresh_registry):
     registry = fresh_registry
-    before = registry.client.get("/devices/3d-systems-touch").text  # the pages' read cache now holds this state
+    before = registry.client.get("/devices/3d-systems-touch?verification=all").text  # the read cache now holds this state
     assert "lab-b" in re.search(r'<tr data-metric="vibration.rms">(.*?)</tr>', before, re.S).group(1)
     sid = registry.ids[1]  # lab-b's Touch
     r = registry.client.post(f"/api/v1/submissions/{sid}/withdraw", json={"reason": "wrong calibration file"},
                              headers={"Authorization": f"Bearer {registry.tokens['lab-b']}"})
     assert r.status_code == 200, r.text
-    html = registry.client.get("/devices/3d-systems-touch").text
+    html = registry.client.get("/devices/3d-systems-touch?verification=all").text
     row = re.search(r'<tr data-metric="vibration.rms">(.*?)</tr>', html, re.S).group(1)
     assert _fmt(fmean(PLAN[0][3])) in row and "lab-b" not in row
     assert "withdrawn: wrong calibration file" in html  # the record stays, with its reason
-    board = registry.client.get("/api/v1/leaderboard/vibration.rms").json()["rows"]
+    board = registry.client.get("/api/v1/leaderboard/vibration.rms?verification=all").json()["rows"]
     assert next(r for r in board if r["device"] == "3d-systems-touch")["mean"] == pytest.approx(fmean(PLAN[0][3]))
 
 
 def test_compare_page_is_table_iii_for_the_chosen_devices(registry):
-    r = registry.client.get("/compare", params=[("device", "3d-systems-touch"), ("device", "3d-systems-touch-x"), ("paper", "true")])
+    r = registry.client.get("/compare", params=[("device", "3d-systems-touch"), ("device", "3d-systems-touch-x"), ("paper", "true"),
+                                                ("verification", "all")])
     assert r.status_code == 200
     table = re.search(r'<div id="comparison">(.*?)</div>', r.text, re.S).group(1)
     header = re.findall(r"<th>(.*?)</th>", table)
@@ -239,7 +231,7 @@ def test_empty_registry_pages(tmp_path):
     with TestClient(app) as client:
         assert "No results have been submitted yet" in client.get("/").text
         assert client.get("/leaderboard", follow_redirects=False).status_code == 303
-        assert "No device has a current value" in client.get("/leaderboard/vibration.rms").text
+        assert "No device has a verified current value" in client.get("/leaderboard/vibration.rms").text
         assert "Choose one or more devices" in client.get("/compare").text
         assert client.get("/static/registry.css").status_code == 200
 
@@ -284,53 +276,60 @@ def test_results_only_submission_has_no_report(registry):
 # --- a real browser against a live server --------------------------------------------------------
 
 def test_pages_in_a_real_headless_browser(tmp_path, bundles):
-    if not CHROMIUM.exists():
-        pytest.skip(f"browser test skipped: no system Chromium at {CHROMIUM} (install the 'chromium' package)")
-    sync_api = pytest.importorskip("playwright.sync_api", reason="browser test skipped: the playwright package is not installed")
     from haptify_tools.registry.live import serve_in_thread
 
     pop = populate(tmp_path / "registry", bundles)
-    profile = tmp_path / "chromium-profile"
     shot = tmp_path / "compare.png"
     try:
-        with serve_in_thread(pop.app) as url, sync_api.sync_playwright() as pw:
-            ctx = pw.chromium.launch_persistent_context(str(profile), executable_path=str(CHROMIUM), headless=True,
-                                                        args=CHROMIUM_FLAGS, timeout=30_000)
-            try:
-                page = ctx.new_page()
-                page.set_default_timeout(15_000)
-                page.goto(f"{url}/")
-                page.get_by_role("link", name="Free-space vibration RMS").click()
-                page.wait_for_url(f"{url}/leaderboard/vibration.rms")
-                ranked = page.locator("#leaderboard tbody tr td:nth-child(2)").all_inner_texts()
-                assert ranked == ["3D Systems Touch X", "Novint Falcon", "3D Systems Touch"]
-                assert page.locator("#leaderboard tbody tr td.rank").all_inner_texts() == ["1", "2", "3"]
-                page.select_option("select[name=metric]", "workspace.measured_volume")  # the metric picker (no script)
-                page.get_by_role("button", name="Show").click()
-                page.wait_for_url(f"{url}/leaderboard/workspace.measured_volume")
-                ranked = page.locator("#leaderboard tbody tr td:nth-child(2)").all_inner_texts()
-                assert ranked == ["3D Systems Touch", "3D Systems Touch X", "Novint Falcon"]  # larger is better
-                page.get_by_role("link", name="3D Systems Touch X").click()
-                page.wait_for_url(f"{url}/devices/3d-systems-touch-x")
-                cells = page.locator('#device-metrics tr[data-metric="vibration.rms"] td').all_inner_texts()
-                assert cells[1] == _fmt(fmean(all_reps("Touch X", 3))) and cells[2] == "m/s^2"
-                page.goto(f"{url}/")
-                page.check('input[value="3d-systems-touch"]')
-                page.check('input[value="3d-systems-touch-x"]')
-                page.get_by_role("button", name="Compare the chosen devices").click()
-                page.wait_for_selector("#comparison table")
-                header = page.locator("#comparison thead th").all_inner_texts()
-                assert header == ["Metric", "3D Systems Touch", "3D Systems Touch X"]
-                row = page.locator("#comparison tbody tr", has_text="Free-space vibration RMS").locator("td").all_inner_texts()
-                assert row[1].startswith(_fmt(fmean(all_reps("Touch", 3)))) and row[2].startswith(_fmt(fmean(all_reps("Touch X", 3))))
-                page.screenshot(path=str(shot), full_page=True)
-            finally:
-                ctx.close()
+        with serve_in_thread(pop.app) as url, browser(tmp_path / "chromium-profile") as page:
+            page.goto(f"{url}/")
+            page.get_by_role("link", name="Free-space vibration RMS").click()
+            page.wait_for_url(f"{url}/leaderboard/vibration.rms")
+            # nothing here is verified (no raw streams): nothing ranks, all is listed apart and marked
+            assert page.locator("#leaderboard").count() == 0
+            marks = page.locator("#not-ranked-table tbody td.mark").all_inner_texts()
+            assert len(marks) == len(PLAN) and set(marks) == {"unverified"}
+            mark = page.locator("#not-ranked-table tbody td.mark").first.evaluate(
+                "el => getComputedStyle(el, '::before').content")
+            assert mark == '"? "'  # the stylesheet marks the state
+            page.get_by_role("link", name="include results that are not verified").click()
+            page.wait_for_url(f"{url}/leaderboard/vibration.rms?verification=all")
+            ranked = page.locator("#leaderboard tbody tr td:nth-child(2)").all_inner_texts()
+            assert ranked == ["3D Systems Touch X", "Novint Falcon", "3D Systems Touch"]
+            assert page.locator("#leaderboard tbody tr td.rank").all_inner_texts() == ["1", "2", "3"]
+            page.select_option("select[name=metric]", "workspace.measured_volume")  # the metric picker (no script)
+            page.get_by_role("button", name="Show").click()
+            page.wait_for_url(f"{url}/leaderboard/workspace.measured_volume?verification=all")
+            ranked = page.locator("#leaderboard tbody tr td:nth-child(2)").all_inner_texts()
+            assert ranked == ["3D Systems Touch", "3D Systems Touch X", "Novint Falcon"]  # larger is better
+            page.get_by_role("link", name="3D Systems Touch X").click()
+            page.wait_for_url(f"{url}/devices/3d-systems-touch-x?verification=all")
+            cells = page.locator('#device-metrics tr[data-metric="vibration.rms"] td').all_inner_texts()
+            assert cells[1] == _fmt(fmean(all_reps("Touch X", 3))) and cells[2] == "m/s^2"
+            page.goto(f"{url}/")
+            page.check('input[value="3d-systems-touch"]')
+            page.check('input[value="3d-systems-touch-x"]')
+            page.check('#devices input[name="verification"]')
+            page.get_by_role("button", name="Compare the chosen devices").click()
+            page.wait_for_selector("#comparison table")
+            header = page.locator("#comparison thead th").all_inner_texts()
+            assert header == ["Metric", "3D Systems Touch", "3D Systems Touch X"]
+            row = page.locator("#comparison tbody tr", has_text="Free-space vibration RMS").locator("td").all_inner_texts()
+            assert row[1].startswith(_fmt(fmean(all_reps("Touch", 3)))) and row[2].startswith(_fmt(fmean(all_reps("Touch X", 3))))
+            page.screenshot(path=str(shot), full_page=True)
     finally:
         pop.client.close()
         pop.app.state.registry.close()
-        shutil.rmtree(profile, ignore_errors=True)
     assert shot.stat().st_size > 10_000 and shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_skip_or_fail_fails_under_ci(monkeypatch):
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(pytest.fail.Exception, match="CI=true"):
+        skip_or_fail("no browser")
+    monkeypatch.setenv("CI", "false")
+    with pytest.raises(pytest.skip.Exception, match="no browser"):
+        skip_or_fail("no browser")
 
 
 def test_live_server_binds_loopback_only(tmp_path):

@@ -104,7 +104,7 @@ def test_deterministic_for_a_seed_and_independent_of_the_other_trials(tmp_path):
 
 def _args(**kw):
     base = dict(preset=None, twin=None, disable=[], set_params=[], protocol="all", reps=1, seed=0, out=None, overwrite=False,
-                no_rig_trials=True, clock_offsets=False, duration=[], workers=1, format="parquet")
+                no_rig_trials=True, clock_offsets=False, duration=[], workers=1, format="parquet", compact=False)
     base.update(kw)
     return argparse.Namespace(**base)
 
@@ -118,9 +118,14 @@ def test_cli_twin_export_and_simulate(tmp_path):
     assert not twin.on("drive.backlash") and twin.effects.friction_coulomb.torque_Nm == [0.01] * 3
     out = tmp_path / "run"
     code = cmd_simulate.run_simulate(_args(twin=str(twin_file), protocol="stiffness", out=str(out), clock_offsets=True,
-                                           duration=["stiffness=6"]), UI(quiet=True))
+                                           duration=["stiffness=6"], compact=True), UI(quiet=True))
     assert code == 0
     s = open_session(out / "session")
+    import pyarrow.parquet as pq  # --compact: sensor columns FLOAT, t DOUBLE (spec §3.2.1)
+
+    schema = pq.ParquetFile(out / "session" / s.trials[0].streams[0].file).schema
+    types = {schema.column(i).name: schema.column(i).physical_type for i in range(len(schema))}
+    assert types.pop("t") == "DOUBLE" and set(types.values()) == {"FLOAT"}
     assert [t.id for t in s.trials] == ["stiffness-1"]
     offsets = [c for c in s.manifest.calibration if c.kind == "clock_offset"]
     assert offsets and all(abs(c.offset_s) <= 0.02 for c in offsets)

@@ -41,6 +41,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json-report", type=Path, help="write the JSON report here")
     p.add_argument("--junit", type=Path, help="write a JUnit XML report here")
     p.add_argument("--quiet", action="store_true", help="print only the summary line")
+    p.add_argument("--challenge", metavar="URL",
+                   help="instead of the suite, answer a fresh challenge of the results registry at URL (spec §17.8)")
+    p.add_argument("--token", help="the registry API token for --challenge (default: $HAPTIFY_TOKEN)")
     p.add_argument("--suite", type=Path, metavar="DIR",
                    help=f"a checkout of the standard holding conformance/cases/ and fixtures/ (default: ${SUITE_ENV}, "
                         "else the checkout this package was installed from)")
@@ -83,6 +86,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_usage(sys.stderr)
         print("haptify-conform: give --cmd, --jsonl or --python", file=sys.stderr)
         return 2
+    if args.challenge:
+        return run_challenge_command(args)
     try:  # the suite first: a missing or broken suite means the run cannot start (exit 2, spec §16.6)
         suite = find_suite(args.suite)
         cases = select(load_cases(suite.cases_root), level=args.level, metrics=set(args.metric) if args.metric else None,
@@ -113,6 +118,27 @@ def main(argv: list[str] | None = None) -> int:
     text = to_table(report)
     print(text.splitlines()[-1] if args.quiet else text, end="\n" if args.quiet else "")
     return 0 if report.summary.conforms else 1
+
+
+def run_challenge_command(args) -> int:
+    """``--challenge URL``: answer a registry's challenge with the implementation; 0 passed, 1 failed, 2 not run."""
+    import os
+
+    from haptify_conform.challenge import ChallengeError, run_challenge, summary
+
+    token = args.token or os.environ.get("HAPTIFY_TOKEN")
+    if not token:
+        print("haptify-conform: --challenge needs --token (or $HAPTIFY_TOKEN)", file=sys.stderr)
+        return 2
+    try:
+        record = run_challenge(args.challenge, token, make_adapter(args))
+    except (ChallengeError, CannotStart, ValueError, OSError, ImportError, AttributeError) as exc:
+        print(f"haptify-conform: {exc}", file=sys.stderr)
+        return 2
+    if args.json_report:
+        atomic_write_text(args.json_report, json.dumps(record, indent=2) + "\n")
+    print(summary(record).splitlines()[-1] if args.quiet else summary(record))
+    return 0 if record["result"]["passed"] else 1
 
 
 if __name__ == "__main__":

@@ -276,10 +276,11 @@ def read_table(path: Path, fmt: str, columns: list[str], *, label: str) -> pd.Da
         return read_stream_file(path, fmt, columns, label=label)[0]
     try:
         frame = pq.read_table(path).to_pandas(ignore_metadata=True)
+    except MemoryError:  # Arrow's allocation failure is the reader's, not the file's (never E112)
+        raise
     except (OSError, pa.ArrowException, ValueError) as exc:
         raise fail("E112", f"{label!r} cannot be read as {fmt}: {exc}", file=label) from None
-    _require_float64(frame, label)
-    return frame
+    return as_float64(frame, label)
 
 
 def read_stream_file(path: Path, fmt: str, columns: list[str], *, label: str) -> tuple[pd.DataFrame, str]:
@@ -288,7 +289,8 @@ def read_stream_file(path: Path, fmt: str, columns: list[str], *, label: str) ->
     The bytes are hashed as they are read, so verifying a checksum costs no second pass. A CSV file is
     checked against the grammar of §3.2 in bounded memory before it is parsed (a header or a line
     longer than :func:`csv_line_limit` is E112 at once). Unreadable files raise E112, a wrong CSV
-    header E211, a column that is not float64 E212.
+    header E211, a column that is neither float64 nor (except ``t``) float32 E212; float32 columns are
+    widened to float64 exactly.
     """
     try:
         if fmt == "parquet":
@@ -300,20 +302,24 @@ def read_stream_file(path: Path, fmt: str, columns: list[str], *, label: str) ->
         else:
             digest = check_csv_grammar(path, columns, label)
             frame = pd.read_csv(path, dtype="float64", na_values=["NaN"], keep_default_na=False, engine="c")
-    except HaptifyError:
+    except (HaptifyError, MemoryError):  # out of memory is the reader's failure, not the file's (never E112)
         raise
     except (OSError, pa.ArrowException, ValueError, pd.errors.ParserError, UnicodeDecodeError) as exc:
         raise fail("E112", f"{label!r} cannot be read as {fmt}: {exc}", file=label) from None
-    _require_float64(frame, label)
-    return frame, digest
+    return as_float64(frame, label), digest
 
 
-def _require_float64(frame: pd.DataFrame, label: str) -> None:
-    """Every column of a stream table is float64 (E212, spec §3.2)."""
+def as_float64(frame: pd.DataFrame, label: str) -> pd.DataFrame:
+    """The stream table as float64 columns (spec §3.2): ``t`` must be float64; any other column may also
+    be a compact float32 column, widened exactly. Any other type is E212."""
     for name, dtype in frame.dtypes.items():
-        if dtype != np.float64:
-            raise fail("E212", f"column {name!r} of {label!r} is {dtype}, not float64", file=label,
-                       column=str(name), expected="float64", found=str(dtype))
+        if dtype == np.float64 or (dtype == np.float32 and name != "t"):
+            continue
+        expected = "float64" if name == "t" else "float64 or float32"
+        raise fail("E212", f"column {name!r} of {label!r} is {dtype}, not {expected}", file=label,
+                   column=str(name), expected=expected, found=str(dtype))
+    narrow = [name for name, dtype in frame.dtypes.items() if dtype == np.float32]
+    return frame.astype({name: np.float64 for name in narrow}) if narrow else frame
 
 
 # --- CSV grammar (spec §3.2) --------------------------------------------------------------------------
@@ -434,14 +440,20 @@ def open_session(path: str | os.PathLike) -> SessionFolder:
 
 # --- writing -----------------------------------------------------------------------------------
 
-def write_table(path: Path, frame: pd.DataFrame, fmt: str) -> None:
+def write_table(path: Path, frame: pd.DataFrame, fmt: str, *, compact: bool = False) -> None:
     """Write a float64 table as Parquet (zstd) or CSV (shortest round-trip decimal, NaN as 'NaN'), spec §3.2.
 
     Parquet columns are PLAIN-encoded: dictionary encoding never pays off for measured floats and makes
-    files larger and reading ~2x slower (benchmarks/bench_io.py).
+    files larger and reading ~2x slower (benchmarks/bench_io.py). ``compact`` (Parquet only, spec §3.2.1)
+    stores every column but ``t`` as float32 with the BYTE_STREAM_SPLIT encoding, which zstd compresses
+    far better than interleaved bytes: a simulated three-repetition dossier takes 46 % of its float64 size.
     """
     if fmt == "parquet":
-        pq.write_table(pa.Table.from_pandas(frame, preserve_index=False), path, compression="zstd", use_dictionary=False)
+        table = pa.Table.from_pandas(frame, preserve_index=False)
+        narrow = [c for c in table.column_names if c != "t"] if compact else []
+        if narrow:
+            table = table.cast(pa.schema([pa.field(c, pa.float32() if c in narrow else pa.float64()) for c in table.column_names]))
+        pq.write_table(table, path, compression="zstd", use_dictionary=False, use_byte_stream_split=narrow or False)
     else:
         frame.to_csv(path, index=False, na_rep="NaN", float_format=None, lineterminator="\n")
 
@@ -513,6 +525,7 @@ class SessionWriter:
 
     manifest: dict
     extra_files: dict[str, str] = field(default_factory=dict)
+    compact: bool = False  # Parquet streams: float32 + BYTE_STREAM_SPLIT for every column but t (spec §3.2.1)
     _trials: list[dict] = field(default_factory=list)
     _streams: list[_PendingStream] = field(default_factory=list)
 
@@ -567,7 +580,7 @@ class SessionWriter:
             for pending in self._streams:
                 path = resolve_inside(build, pending.stream["file"])
                 path.parent.mkdir(parents=True, exist_ok=True)
-                write_table(path, pending.frame, pending.stream["format"])
+                write_table(path, pending.frame, pending.stream["format"], compact=self.compact)
                 pending.stream["sha256"] = sha256_file(path)
             for rel, text in self.extra_files.items():
                 atomic_write_text(resolve_inside(build, rel), text)

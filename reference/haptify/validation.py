@@ -349,6 +349,8 @@ def _parquet_row_groups(path: Path, label: str, rows: int) -> int:
     than declared rows, since every row group but an empty file's holds a row; spec §4.2)."""
     try:
         groups = pq.read_metadata(path).num_row_groups
+    except MemoryError:
+        raise
     except (OSError, pa.ArrowException, ValueError) as exc:
         raise HaptifyError(Finding("E112", f"{label!r} cannot be read as parquet: {exc}", file=label)) from None
     if groups > max(1, rows):

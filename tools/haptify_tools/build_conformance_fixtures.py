@@ -582,6 +582,38 @@ def tones_centroid(tones: list[tuple[float, float]]) -> float:
     return sum(pi * f for pi, (f, _) in zip(p, tones)) / sum(p)
 
 
+Tones = dict[int, list[tuple[float, float]]]  # axis → [(frequency Hz, amplitude m/s²)]
+
+
+def write_vibration_session(path: Path, session_id: str, fmt: str, rate: float, secs: float, fs_tones: Tones,
+                            base_tones: Tones, rig_kind: str) -> None:
+    """A free-space trial whose handle acceleration carries ``fs_tones`` and a baseline trial carrying
+    ``base_tones`` (spec §10), both at ``rate`` Hz for ``secs`` s, on the example or the rotated rig; the
+    known answers are :func:`tones_rms` and :func:`tones_centroid` of the tones (every tone an integer
+    frequency, so it falls on a DFT bin of the trimmed signal)."""
+    rig = example_rig() if rig_kind == "example" else rotated_rig_full()
+
+    def extra(tones: Tones) -> Fn:
+        def fn(t: np.ndarray) -> np.ndarray:
+            a = np.zeros((len(t), 3))
+            for axis, ts in tones.items():
+                for f, amp in ts:
+                    a[:, axis] += amp * np.sin(2 * np.pi * f * t)
+            return a
+        return fn
+
+    w = manifest(session_id, rig)
+    handle_trial(w, "free_space-1", "free_space", duration_s=secs - 1 / rate, position=circle(0.03, 0.5), quaternion=spin(0.05),
+                 force_w=lambda t: np.tile([0.1, 0.0, -0.2], (len(t), 1)), rates=(250.0, rate, 100.0), fmt=fmt,
+                 accel_extra=extra(fs_tones))
+    tb = clock(secs, rate)[:-1]
+    a_base = rb.HandleTruth().accel_bias + np.array([0.0, 0.0, 9.81]) + extra(base_tones)(tb)
+    w.add_trial("baseline-1", "rig.baseline_vibration", powered=False)
+    w.add_stream("baseline-1", "handle_accel", {"t": tb, "ax": a_base[:, 0], "ay": a_base[:, 1], "az": a_base[:, 2]},
+                 rate_hz=rate, fmt=fmt)
+    w.write(path)
+
+
 def vibration_fixtures() -> list[Fixture]:
     out: list[Fixture] = []
     variants = [
@@ -601,27 +633,7 @@ def vibration_fixtures() -> list[Fixture]:
     for name, fmt, rate, secs, fs_tones, base_tones, rig_kind, desc in variants:
         def build(path: Path, fmt=fmt, rate=rate, secs=secs, fs_tones=fs_tones, base_tones=base_tones, rig_kind=rig_kind,
                   name=name) -> None:
-            rig = example_rig() if rig_kind == "example" else rotated_rig_full()
-
-            def extra(tones):
-                def fn(t: np.ndarray) -> np.ndarray:
-                    a = np.zeros((len(t), 3))
-                    for axis, ts in tones.items():
-                        for f, amp in ts:
-                            a[:, axis] += amp * np.sin(2 * np.pi * f * t)
-                    return a
-                return fn
-
-            w = manifest(f"conf-{name}", rig)
-            handle_trial(w, "free_space-1", "free_space", duration_s=secs - 1 / rate, position=circle(0.03, 0.5), quaternion=spin(0.05),
-                         force_w=lambda t: np.tile([0.1, 0.0, -0.2], (len(t), 1)), rates=(250.0, rate, 100.0), fmt=fmt,
-                         accel_extra=extra(fs_tones))
-            tb = clock(secs, rate)[:-1]
-            a_base = rb.HandleTruth().accel_bias + np.array([0.0, 0.0, 9.81]) + extra(base_tones)(tb)
-            w.add_trial("baseline-1", "rig.baseline_vibration", powered=False)
-            w.add_stream("baseline-1", "handle_accel", {"t": tb, "ax": a_base[:, 0], "ay": a_base[:, 1], "az": a_base[:, 2]},
-                         rate_hz=rate, fmt=fmt)
-            w.write(path)
+            write_vibration_session(path, f"conf-{name}", fmt, rate, secs, fs_tones, base_tones, rig_kind)
 
         fx = Fixture(name, build)
         all_fs = [tone for ts in fs_tones.values() for tone in ts]

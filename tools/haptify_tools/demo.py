@@ -42,7 +42,7 @@ def main(argv: list[str] | None = None) -> int:
         folder = out / preset
         step(f"simulate the {preset} dossier (device twin + virtual rig)",
              ["simulate", "--preset", preset, "--protocol", "all", "--reps", "3", "--seed", str(seed),
-              "-o", str(folder), "--overwrite"])
+              "--compact", "-o", str(folder), "--overwrite"])
         step(f"validate the {preset} session", ["validate", str(folder / "session")])
         result = out / f"{preset}.results.json"
         step(f"compute every benchmark of the {preset}", ["compute", str(folder / "session"), "-o", str(result)])

@@ -6,9 +6,9 @@ export. This router adds the leaderboard of one metric (devices ranked by their 
 
 :class:`ReadCache` keeps the answers of the core's read queries (``Registry.devices``,
 ``device_results``, ``submissions``, ``comparison``) for the pages. Records are append-only (no row of
-``submissions`` or ``withdrawals`` is ever updated or deleted, spec §17.5), so the pair (number of
-submissions, number of withdrawals) changes with every change a reader can see: one count query per
-request tells whether the cached answers still hold.
+``submissions``, ``withdrawals`` or ``challenge_results`` is ever updated or deleted, spec §17.5), so
+the counts of those tables change with every change a reader can see: one count query per request
+tells whether the cached answers still hold.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from collections.abc import Callable
 from functools import lru_cache
 from typing import Any
 
-from fastapi import APIRouter, Request
+from fastapi import APIRouter, Query, Request
 from sqlalchemy import func, select
 
 from haptify.metric_definitions import MetricDefinition, family
@@ -37,15 +37,17 @@ class ReadCache:
 
     def __init__(self, reg: Registry) -> None:
         self.reg = reg
-        self._version: tuple[int, int] | None = None
+        self._version: tuple[int, int, int] | None = None
         self._store: dict[Any, Any] = {}
         self._lock = threading.Lock()
 
-    def version(self) -> tuple[int, int]:
-        """(submissions, withdrawals) now: both tables only grow, so any change changes this pair."""
+    def version(self) -> tuple[int, int, int]:
+        """(submissions, withdrawals, answered challenges) now: the tables only grow, so any change a reader
+        can see (a new record, a withdrawal, an implementation proven by a challenge) changes this triple."""
         with self.reg.engine.connect() as conn:
             return tuple(conn.execute(select(select(func.count()).select_from(db.Submission).scalar_subquery(),
-                                             select(func.count()).select_from(db.Withdrawal).scalar_subquery())).one())
+                                             select(func.count()).select_from(db.Withdrawal).scalar_subquery(),
+                                             select(func.count()).select_from(db.ChallengeResult).scalar_subquery())).one())
 
     def get(self, key: Any, compute: Callable[[], Any]) -> Any:
         """The cached answer for ``key``, or ``compute()`` (run outside the lock; errors are not cached)."""
@@ -64,19 +66,20 @@ class ReadCache:
     def devices(self) -> list[dict]:
         return self.get("devices", self.reg.devices)
 
-    def device_results(self, slug: str) -> dict:
-        return self.get(("device", slug), lambda: self.reg.device_results(slug))
+    def device_results(self, slug: str, verification: str = "verified") -> dict:
+        return self.get(("device", slug, verification), lambda: self.reg.device_results(slug, verification=verification))
 
-    def all_device_results(self) -> list[dict]:
+    def all_device_results(self, verification: str = "verified") -> list[dict]:
         """:meth:`Registry.device_results` of every device (those without current results have no metrics)."""
-        return self.get("all-devices", lambda: [self.device_results(d["slug"]) for d in self.devices()])
+        return self.get(("all-devices", verification),
+                        lambda: [self.device_results(d["slug"], verification) for d in self.devices()])
 
     def submissions(self) -> list[dict]:
         """Every submission summary (all states), newest first."""
         return self.get("submissions", lambda: self.reg.submissions(state="all", limit=MAX_LISTED))
 
-    def comparison(self, slugs: tuple[str, ...]) -> list:
-        return self.get(("compare", slugs), lambda: self.reg.comparison(list(slugs)))
+    def comparison(self, slugs: tuple[str, ...], verification: str = "verified") -> list:
+        return self.get(("compare", slugs, verification), lambda: self.reg.comparison(list(slugs), verification=verification))
 
 
 @lru_cache(maxsize=1)
@@ -99,19 +102,41 @@ def reads(request: Request) -> ReadCache:
 
 
 def leaderboard_menu(results: list[dict]) -> list[dict]:
-    """Every scalar metric some device has, in definition order: id, title, unit and number of devices."""
+    """Every scalar metric some device has (counted or listed apart), in definition order: id, title and
+    number of devices."""
     defs = metric_definitions()
     counts: dict[str, int] = {}
     for d in results:
-        for m in d["metrics"]:
-            if not isinstance(m["mean"], list):
-                counts[m["metric"]] = counts.get(m["metric"], 0) + 1
+        have = {m["metric"] for m in d["metrics"] if not isinstance(m["mean"], list)}
+        have |= {e["metric"] for e in d.get("not_counted", []) if not isinstance(e["submitted"], list)}
+        for metric in have:
+            counts[metric] = counts.get(metric, 0) + 1
     order = {mid: i for i, mid in enumerate(defs)}
     ids = sorted(counts, key=lambda m: (order.get(m, len(order)), m))
     return [{"id": m, "title": defs[m].title if m in defs else m, "devices": counts[m]} for m in ids]
 
 
 router = APIRouter(prefix=API, tags=["devices"])
+
+
+def not_counted_notes(apart: dict[str, list[dict]]) -> list[str]:
+    """One note per device whose current results were left out of a verified-only comparison."""
+    out = []
+    for slug, entries in apart.items():
+        subs = {e["submission"]: e["verification"] for e in entries}
+        if subs:
+            states = ", ".join(f"{n} {state}" for state in ("disagrees", "unverified")
+                               if (n := sum(v == state for v in subs.values())))
+            out.append(f"{slug}: {len(subs)} current submission(s) not verified and not counted ({states}); "
+                       f"verification=all includes them")
+    return out
+
+
+def not_ranked(metric_id: str, results: list[dict]) -> list[dict]:
+    """The current results of ``metric_id`` left out of a ranking (not verified), with their device and
+    state; a disagreeing one carries both the submitted and the recomputed value (spec §17.3.1)."""
+    return [{**e, "device": d["device"]["slug"], "label": f"{d['device']['manufacturer']} {d['device']['model']}"}
+            for d in results for e in d.get("not_counted", []) if e["metric"] == metric_id]
 
 
 @router.get("/leaderboards", name="api_leaderboards", summary="Metrics that have a leaderboard")
@@ -121,7 +146,11 @@ def api_leaderboards(request: Request) -> list[dict]:
 
 
 @router.get("/leaderboard/{metric_id}", name="api_leaderboard", summary="Devices ranked by one metric")
-def api_leaderboard(metric_id: str, request: Request) -> dict:
-    """Devices with current results for ``metric_id``, best first, with each device's mean and spread."""
-    rows = leaderboard(metric_id, reads(request).all_device_results())
-    return {"metric": metric_id, "rule": rule_text(metric_id), "rows": [r.as_dict() for r in rows]}
+def api_leaderboard(metric_id: str, request: Request, verification: str = Query("verified", pattern="^(verified|all)$")) -> dict:
+    """Devices with current results for ``metric_id``, best first, with each device's mean and spread:
+    from verified submissions only (``verification=all``: from all); the results left out are listed in
+    ``not_ranked`` with their state."""
+    results = reads(request).all_device_results(verification)
+    rows = leaderboard(metric_id, results)
+    return {"metric": metric_id, "rule": rule_text(metric_id), "verification": verification,
+            "rows": [r.as_dict() for r in rows], "not_ranked": not_ranked(metric_id, results)}

@@ -12,7 +12,9 @@ from ``codes.json``, the field (``file`` and ``pointer``), ``expected`` and ``fo
 from __future__ import annotations
 
 import importlib
+import logging
 from contextlib import asynccontextmanager
+from dataclasses import asdict, replace
 from typing import Any
 
 from fastapi import FastAPI, Header, Query, Request
@@ -25,13 +27,18 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from haptify import compare
 from haptify.errors import Finding, HaptifyError
 from haptify.versions import PACKAGE_VERSION, SPEC_VERSION
-from haptify_tools.registry.api_read import reads
+from haptify_tools.registry import challenge
+from haptify_tools.registry.api_read import not_counted_notes, reads
 from haptify_tools.registry.service import Registry, Settings
+from haptify_tools.registry.uploads import Uploads
 
 API = "/api/v1"
+VERIFICATION_FILTER = "^(all|verified|disagrees|unverified)$"  # lists: one verification state, or all (spec §17.3.1)
+RANKED_FILTER = "^(verified|all)$"  # aggregates and rankings: verified results only (default), or all
+log = logging.getLogger("haptify.registry")
 
 STATUS = {"E960": 413, "E970": 401, "E971": 403, "E972": 429, "E973": 404, "E974": 409, "E975": 400, "E977": 403,
-          "E978": 503, "E999": 500}
+          "E978": 503, "E979": 410, "E999": 500}
 
 
 def http_status(err: HaptifyError) -> int:
@@ -50,6 +57,13 @@ def refusal(err: HaptifyError) -> JSONResponse:
                         status_code=http_status(err), headers=headers)
 
 
+def log_refusal(request: Request, err: HaptifyError) -> None:
+    """Every refusal is logged on the server with its codes, method, path and client (spec §17.5.1)."""
+    client = request.client.host if request.client else "-"
+    log.warning("refused %s %s from %s: %s", request.method, request.url.path, client,
+                "; ".join(f"{f.code} {f.message}" for f in err.findings[:5]))
+
+
 class WithdrawBody(BaseModel):
     """The body of ``POST /api/v1/submissions/{id}/withdraw``: a non-empty ``reason`` (spec §17.5)."""
     model_config = ConfigDict(extra="forbid")
@@ -62,6 +76,45 @@ class TokenBody(BaseModel):
     lab: str
     scope: str = "submit"
     rate_per_minute: int | None = Field(None, ge=1, le=100_000)
+
+
+CSP_PAGES = ("default-src 'none'; img-src 'self' data:; media-src 'self'; style-src 'self' 'unsafe-inline'; "
+             "font-src 'self'; connect-src 'self'; form-action 'self'; base-uri 'none'; frame-ancestors 'none'")
+# Swagger UI and ReDoc (/docs, /redoc) are FastAPI's pages: their script and style come from its CDN.
+CSP_API_DOCS = ("default-src 'none'; script-src 'unsafe-inline' https://cdn.jsdelivr.net; "
+                "style-src 'unsafe-inline' https://cdn.jsdelivr.net https://fonts.googleapis.com; font-src https://fonts.gstatic.com; "
+                "img-src 'self' data: https://fastapi.tiangolo.com https://cdn.redoc.ly; connect-src 'self'; worker-src blob:; "
+                "base-uri 'none'; form-action 'none'; frame-ancestors 'none'")
+API_DOCS_PATHS = ("/docs", "/docs/oauth2-redirect", "/redoc")
+
+
+def security_headers(path: str) -> list[tuple[bytes, bytes]]:
+    """The headers every response carries (spec §17.4.1): a Content-Security-Policy without scripts on the
+    registry's own pages and ``frame-ancestors 'none'`` everywhere, ``X-Content-Type-Options: nosniff``,
+    ``X-Frame-Options: DENY`` and ``Referrer-Policy: no-referrer``."""
+    csp = CSP_API_DOCS if path in API_DOCS_PATHS else CSP_PAGES
+    return [(b"content-security-policy", csp.encode()), (b"x-content-type-options", b"nosniff"),
+            (b"x-frame-options", b"DENY"), (b"referrer-policy", b"no-referrer")]
+
+
+class SecurityHeaders:
+    """ASGI middleware adding :func:`security_headers` to every HTTP response (pages, API, files, errors)."""
+
+    def __init__(self, app) -> None:
+        self.app = app
+
+    async def __call__(self, scope, receive, send) -> None:
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        extra = security_headers(scope.get("path", ""))
+
+        async def send_with_headers(message) -> None:
+            if message["type"] == "http.response.start":
+                names = {k.lower() for k, _ in message.get("headers", [])}
+                message = {**message, "headers": [*message.get("headers", []), *(h for h in extra if h[0] not in names)]}
+            await send(message)
+
+        await self.app(scope, receive, send_with_headers)
 
 
 def create_app(settings: Settings | None = None, *, registry: Registry | None = None) -> FastAPI:
@@ -78,9 +131,11 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
                   description="Labs submit verified device results; everyone compares devices (Haptify spec chapter 17).")
     app.state.registry = reg
     app.state.swept = swept
+    app.add_middleware(SecurityHeaders)
 
     @app.exception_handler(HaptifyError)
-    async def _coded(_request: Request, err: HaptifyError) -> JSONResponse:
+    async def _coded(request: Request, err: HaptifyError) -> JSONResponse:
+        log_refusal(request, err)
         return refusal(err)
 
     @app.exception_handler(RequestValidationError)
@@ -124,12 +179,45 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
             response.status_code = 200
         return outcome.to_dict()
 
+    uploads = Uploads(reg.tmp, reg.settings.limits.max_archive_bytes)
+
+    @app.post(f"{API}/uploads", tags=["submissions"], status_code=201)
+    def open_upload(upload_length: str | None = Header(None), authorization: str | None = Header(None)) -> dict:
+        """Open a resumable upload of ``Upload-Length`` bytes (spec §17.5.2); send it with PATCH in chunks."""
+        caller = reg.authenticate(authorization, "submit")
+        return uploads.open(caller.token_id, upload_length).state()
+
+    @app.patch(f"{API}/uploads/{{uid}}", tags=["submissions"])
+    async def append_upload(uid: str, request: Request, upload_offset: str | None = Header(None),
+                            authorization: str | None = Header(None)) -> dict:
+        """Append the body at ``Upload-Offset`` (the bytes received so far); a body cut short keeps what arrived."""
+        caller = await run_in_threadpool(reg.authenticate, authorization, "submit")
+        return (await uploads.append(uid, caller.token_id, upload_offset, request.stream())).state()
+
+    @app.get(f"{API}/uploads/{{uid}}", tags=["submissions"])
+    def upload_state(uid: str, authorization: str | None = Header(None)) -> dict:
+        """How far an upload got: resume with PATCH at ``offset``."""
+        caller = reg.authenticate(authorization, "submit", rate_limit=False)
+        return uploads.get(uid, caller.token_id).state()
+
+    @app.post(f"{API}/uploads/{{uid}}/submit", tags=["submissions"], status_code=201)
+    def submit_upload(uid: str, response: Response, dry_run: bool = Query(False, description="check only; store nothing"),
+                      authorization: str | None = Header(None)) -> dict:
+        """Submit a complete upload: the same checks and answers as ``POST /submissions`` (spec §17.3)."""
+        caller = reg.authenticate(authorization, "submit")
+        outcome = reg.submit(uploads.take(uid, caller.token_id), caller, dry_run=dry_run)
+        if outcome.status != "accepted":
+            response.status_code = 200
+        return outcome.to_dict()
+
     @app.get(f"{API}/submissions", tags=["submissions"])
     def list_submissions(lab: str | None = None, device: str | None = None,
                          state: str = Query("all", pattern="^(all|current|superseded|withdrawn)$"),
+                         verification: str = Query("all", pattern=VERIFICATION_FILTER),
                          limit: int = Query(100, ge=1, le=1000), offset: int = Query(0, ge=0)) -> list[dict]:
-        """Submissions, newest first; ``state`` current, superseded, withdrawn or all."""
-        return reg.submissions(lab=lab, device=device, state=state, limit=limit, offset=offset)
+        """Submissions, newest first; ``state`` current, superseded, withdrawn or all; ``verification``
+        verified, disagrees, unverified or all (spec §17.3.1)."""
+        return reg.submissions(lab=lab, device=device, state=state, verification=verification, limit=limit, offset=offset)
 
     @app.get(f"{API}/submissions/{{sid}}", tags=["submissions"])
     def get_submission(sid: str, request: Request) -> dict:
@@ -153,6 +241,38 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
         reg.authenticate(authorization, "admin")
         return {"lab": body.lab, "scope": body.scope, "token": reg.create_token(body.lab, body.scope, body.rate_per_minute)}
 
+    @app.get(f"{API}/limits", tags=["service"])
+    def limits() -> dict:
+        """What this registry accepts (spec §17.4, §17.4.1): a client checks its bundle against these before sending."""
+        return {**asdict(reg.settings.limits), "challenge_ttl_s": reg.settings.challenge_ttl_s}
+
+    @app.post(f"{API}/challenges", tags=["conformance"], status_code=201)
+    def create_challenge(authorization: str | None = Header(None)) -> dict:
+        """Issue a conformance challenge to the token's lab (spec §17.8): fresh known-answer sessions from a
+        secret seed; the answers stay on the registry. Answer it before ``expires_at``."""
+        return challenge.issue(reg, reg.authenticate(authorization, "submit"))
+
+    @app.get(f"{API}/challenges/{{cid}}", tags=["conformance"])
+    def get_challenge(cid: str) -> dict:
+        """A challenge: its cases (no answers) while open; once answered, the verdict and every case's figures."""
+        return challenge.record(reg, cid)
+
+    @app.get(f"{API}/challenges/{{cid}}/sessions.tar.gz", tags=["conformance"], response_class=FileResponse)
+    def get_challenge_sessions(cid: str) -> FileResponse:
+        """The challenge's session folders (while it is open)."""
+        return FileResponse(challenge.sessions_archive(reg, cid), media_type="application/gzip", filename=f"challenge-{cid}.tar.gz")
+
+    @app.post(f"{API}/challenges/{{cid}}/answers", tags=["conformance"])
+    def answer_challenge(cid: str, body: challenge.Answers, authorization: str | None = Header(None)) -> dict:
+        """Answer a challenge once: the registry judges every case against its secret answers and records
+        that the implementation and version passed or failed (spec §17.8)."""
+        return challenge.answer(reg, cid, reg.authenticate(authorization, "submit"), body)
+
+    @app.get(f"{API}/implementations", tags=["conformance"])
+    def implementations() -> list[dict]:
+        """Implementations and versions with answered challenges: passed, failed, latest passed challenge."""
+        return challenge.implementations(reg)
+
     @app.get(f"{API}/labs", tags=["labs"])
     def labs() -> list[dict]:
         return reg.labs()
@@ -166,36 +286,43 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
         return reads(request).devices()
 
     @app.get(f"{API}/devices/{{slug}}", tags=["devices"])
-    def device(slug: str, request: Request, verified_only: bool = False) -> dict:
-        """A device's aggregated results: per metric mean and spread over labs and repetitions (spec §17.5).
+    def device(slug: str, request: Request, verification: str = Query("verified", pattern=RANKED_FILTER)) -> dict:
+        """A device's aggregated results: per metric mean and spread over labs and repetitions (spec §17.5),
+        of its verified current submissions (``verification=all``: of all of them); the others are listed
+        in ``not_counted`` with their state.
 
         Records are append-only, so answers are cached until a submission or withdrawal is added."""
-        cache = reads(request)
-        if not verified_only:
-            return cache.device_results(slug)
-        return cache.get(("device-verified", slug), lambda: reg.device_results(slug, verified_only=True))
+        return reads(request).device_results(slug, verification)
 
     @app.get(f"{API}/compare", tags=["devices"])
-    def compare_devices(devices: str = Query(..., description="comma-separated device slugs"),
+    def compare_devices(request: Request, devices: str = Query(..., description="comma-separated device slugs"),
                         format: str = Query("json", pattern="^(json|csv|md|html)$"), paper: bool = False,
-                        verified_only: bool = False) -> Any:
-        """The paper's Table III for any number of devices (``haptify.compare``; spec §15.5)."""
+                        verification: str = Query("verified", pattern=RANKED_FILTER)) -> Any:
+        """The paper's Table III for any number of devices (``haptify.compare``; spec §15.5), from their
+        verified current submissions (``verification=all``: from all); a note counts those left out."""
         slugs = [s for s in devices.split(",") if s]
         if not slugs:
             raise HaptifyError(Finding("E975", "no device given", file="query", pointer="/devices", expected="slug,slug,…", found=devices))
-        table = compare.build_table(reg.comparison(slugs, verified_only=verified_only), with_paper=paper)
+        cache = reads(request)
+        table = compare.build_table(cache.comparison(tuple(slugs), verification), with_paper=paper)
+        apart = {slug: cache.device_results(slug, verification)["not_counted"] for slug in slugs}
+        table.notes.extend(not_counted_notes(apart))
         if format == "csv":
-            return PlainTextResponse(compare.to_csv(table), media_type="text/csv")
+            return PlainTextResponse(compare.to_csv(neutralised(table)), media_type="text/csv")
         if format == "md":
             return PlainTextResponse(compare.to_markdown(table), media_type="text/markdown")
         if format == "html":
             return Response(compare.to_html(table), media_type="text/html")
-        return {"devices": slugs, "header": table.header, "rows": table.rows, "notes": table.notes}
+        return {"devices": slugs, "verification": verification, "header": table.header, "rows": table.rows,
+                "notes": table.notes, "not_counted": apart}
 
     @app.get(f"{API}/export.csv", tags=["devices"], response_class=PlainTextResponse)
-    def export_csv(device: str | None = None, state: str = Query("current", pattern="^(all|current|superseded|withdrawn)$")) -> Response:
-        """Every metric of every submission (filtered), one row each, as CSV."""
-        return PlainTextResponse(to_csv(reg.export_rows(device=device, state=state)), media_type="text/csv")
+    def export_csv(device: str | None = None, state: str = Query("current", pattern="^(all|current|superseded|withdrawn)$"),
+                   verification: str = Query("all", pattern=VERIFICATION_FILTER)) -> Response:
+        """Every metric of every submission (filtered by state and verification state), one row each, as
+        CSV; the ``verification`` column carries each submission's state (spec §17.3.1)."""
+        return PlainTextResponse(to_csv(reg.export_rows(device=device, state=state, verification=verification)),
+                                 media_type="text/csv")
 
     _add_web(app)
     return app
@@ -214,8 +341,30 @@ def to_csv(rows: list[dict]) -> str:
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=EXPORT_COLUMNS, lineterminator="\n")
     writer.writeheader()
-    writer.writerows(rows)
+    writer.writerows({k: csv_cell(v) for k, v in row.items()} for row in rows)
     return buf.getvalue()
+
+
+FORMULA_LEAD = ("=", "+", "-", "@", "\t", "\r")
+
+
+def csv_cell(value: Any) -> Any:
+    """A CSV cell that no spreadsheet runs as a formula (spec §17.4.1): text starting with ``=``, ``+``,
+    ``-``, ``@``, a tab or a carriage return gets a leading ``'``, unless the whole text is a number
+    (``-1.5`` stays a number). Non-text values pass unchanged."""
+    if not isinstance(value, str) or not value.startswith(FORMULA_LEAD):
+        return value
+    try:
+        float(value)
+        return value
+    except ValueError:
+        return "'" + value
+
+
+def neutralised(table: compare.Table) -> compare.Table:
+    """The comparison table with every header and body cell passed through :func:`csv_cell`."""
+    return replace(table, header=[csv_cell(h) for h in table.header],
+                   rows=[[csv_cell(c) for c in row] for row in table.rows])
 
 
 def _short(value: Any) -> Any:

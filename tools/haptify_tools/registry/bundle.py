@@ -16,9 +16,10 @@ commits to every byte of content, and it does not depend on how the archive was 
 deterministic as well (sorted members, zero times and owners, fixed modes, gzip without name or time),
 so packing the same content twice gives byte-identical archives on the same zlib.
 
-Unpacking never trusts the archive: sizes are counted on the bytes actually decompressed, every member
-must be a regular file (or a directory entry) at a safe relative path, and each file is written with
-``O_EXCL | O_NOFOLLOW`` into a fresh folder (spec §17.4).
+Unpacking never trusts the archive: sizes are counted on the bytes actually decompressed and on the
+bytes actually written, every member must be a regular, non-sparse file (or a directory entry) at a
+safe relative path, and each file is written with ``O_EXCL | O_NOFOLLOW``, mode 0600, into a fresh
+folder (spec §17.4).
 """
 
 from __future__ import annotations
@@ -48,6 +49,8 @@ RESULTS_JSON = "results.json"
 CONFORMANCE_JSON = "conformance.json"
 SESSION_DIR = "session"
 CHUNK = 1 << 16
+FILE_MODE = 0o600  # what the registry writes is readable by its service user only (spec §17.7)
+DIR_MODE = 0o700
 
 Role = Literal["results", "conformance", "session-manifest", "session-file", "stream"]
 
@@ -211,12 +214,16 @@ def pack(bundle: Bundle, files: list[tuple[str, Path]], target: str | os.PathLik
 class Limits:
     """The registry's size limits (spec §17.4); every one is a setting of the service."""
 
-    max_archive_bytes: int = 256 << 20  # the upload as sent
-    max_unpacked_bytes: int = 1 << 30  # sum of the bytes the archive decompresses to
+    # Sized from the demo dossier (3 repetitions of every protocol, spec §17.4): 257 MiB as a float64 bundle,
+    # about 120 MiB compact (§3.2.1); 1 GiB leaves four times that, and a bundle unpacks to about its size.
+    max_archive_bytes: int = 1 << 30  # the upload as sent
+    max_unpacked_bytes: int = 2 << 30  # sum of the bytes the archive decompresses to
     max_ratio: float = 100.0  # decompressed / compressed, judged once more than ratio_floor_bytes came out
     ratio_floor_bytes: int = 1 << 20
     max_members: int = 10_000
     max_json_bytes: int = 32 << 20  # each JSON document of the bundle
+    worker_memory_bytes: int = 4 << 30  # address space of the process that unpacks and re-computes (RLIMIT_AS)
+    worker_seconds: float = 900.0  # wall-clock time of that process, per step
 
 
 class _CountingReader(io.RawIOBase):
@@ -279,8 +286,9 @@ def _unsafe(name: str, why: str, found: str | None = None) -> HaptifyError:
 def unpack(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits = Limits()) -> Unpacked:
     """Unpack a bundle archive into the new folder ``root`` under ``limits`` (spec §17.4).
 
-    Refuses (E960–E963) oversize archives, decompression bombs, links, devices, absolute or climbing
-    paths and duplicate names; the bytes of each file are hashed as they are written.
+    Refuses (E960–E963) oversize archives, decompression bombs, links, devices, sparse members, absolute
+    or climbing paths and duplicate names; the bytes of each file are counted and hashed as they are
+    written, and writing stops at ``max_unpacked_bytes``.
     """
     archive = Path(archive)
     size = archive.stat().st_size
@@ -288,7 +296,7 @@ def unpack(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits =
         raise fail("E960", "the bundle archive is larger than the registry accepts", file="<upload>",
                    expected=f"≤ {limits.max_archive_bytes} bytes", found=f"{size} bytes")
     root = Path(root)
-    root.mkdir(parents=True, exist_ok=False)
+    root.mkdir(mode=DIR_MODE, parents=True, exist_ok=False)
     out = Unpacked(root=root, archive_sha256=sha256_file(archive), archive_size=size)
     seen_folded: set[str] = set()
     with open(archive, "rb") as raw:
@@ -299,7 +307,7 @@ def unpack(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits =
             except tarfile.TarError as exc:
                 raise fail("E961", f"the upload is not a tar archive: {exc}", file="<upload>", expected="gzip-compressed tar") from None
             try:
-                count = 0
+                count = written = 0
                 for member in tar:
                     count += 1
                     if count > limits.max_members:
@@ -315,6 +323,8 @@ def unpack(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits =
                         raise _unsafe(name, f"is a {'symbolic' if member.issym() else 'hard'} link to {member.linkname!r}", "link")
                     if not member.isreg():
                         raise _unsafe(name, "is not a regular file (device, FIFO or other special member)", "special file")
+                    if member.issparse():  # its holes would be written as zeros the compressed stream never held
+                        raise _unsafe(name, "is a sparse member (its declared size is not in the archive)", "sparse file")
                     folded = name.casefold()
                     if folded in seen_folded:
                         raise _unsafe(name, "appears twice (names must be unique, also ignoring case)", "duplicate")
@@ -326,12 +336,19 @@ def unpack(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits =
                     _make_parents(root, name)
                     source = tar.extractfile(member)
                     digest = hashlib.sha256()
-                    fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), 0o644)
+                    fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), FILE_MODE)
+                    size = 0
                     with os.fdopen(fd, "wb") as fh:
                         for chunk in iter(lambda: source.read(CHUNK), b""):
+                            size += len(chunk)
+                            written += len(chunk)
+                            if written > limits.max_unpacked_bytes:
+                                raise fail("E960", "the archive unpacks to more bytes than the registry accepts", file=name,
+                                           expected=f"≤ {limits.max_unpacked_bytes} bytes written",
+                                           found=f"> {limits.max_unpacked_bytes} bytes written")
                             digest.update(chunk)
                             fh.write(chunk)
-                    out.members[name] = (member.size, digest.hexdigest())
+                    out.members[name] = (size, digest.hexdigest())
             except tarfile.TarError as exc:
                 raise fail("E961", f"the tar archive is damaged: {exc}", file="<upload>", expected="a complete tar archive") from None
             except (EOFError, zlib.error) as exc:
@@ -346,7 +363,13 @@ def _make_parents(root: Path, name: str) -> None:
         current = current / part
         if current.is_symlink() or (current.exists() and not current.is_dir()):
             raise _unsafe(name, f"needs {part!r} to be a folder, but it is a file")
-        current.mkdir(exist_ok=True)
+        current.mkdir(mode=DIR_MODE, exist_ok=True)
+
+
+def unpack_bundle(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits = Limits()) -> tuple[Unpacked, Bundle]:
+    """Steps 2 and 3 of spec §17.3: :func:`unpack` under ``limits``, then :func:`read_manifest`."""
+    unpacked = unpack(archive, root, limits)
+    return unpacked, read_manifest(unpacked, limits)
 
 
 def read_manifest(unpacked: Unpacked, limits: Limits = Limits()) -> Bundle:

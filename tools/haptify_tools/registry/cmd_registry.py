@@ -3,8 +3,10 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
+from haptify_tools.registry.bundle import Limits
 from haptify_tools.registry.service import DEFAULT_RATE_PER_MINUTE, SCOPES, Registry, Settings
 
 DEFAULT_DATA = Path("haptify-registry")
@@ -24,6 +26,14 @@ def register(sub) -> None:
     serve.add_argument("--host", default="127.0.0.1")
     serve.add_argument("--port", type=int, default=8080)
     serve.add_argument("--no-verify", action="store_true", help="do not re-compute metrics of bundles with raw streams")
+    limits = Limits()
+    serve.add_argument("--max-archive-mib", type=int, default=limits.max_archive_bytes >> 20, help="largest upload accepted (MiB)")
+    serve.add_argument("--max-unpacked-mib", type=int, default=limits.max_unpacked_bytes >> 20,
+                       help="most bytes a bundle may unpack to (MiB)")
+    serve.add_argument("--worker-memory-mib", type=int, default=limits.worker_memory_bytes >> 20,
+                       help="address space of the worker that unpacks and re-computes a bundle (MiB)")
+    serve.add_argument("--worker-seconds", type=float, default=limits.worker_seconds,
+                       help="time the worker may take for each step of checking a bundle (s)")
     serve.set_defaults(func=run_serve)
     token = rsub.add_parser("token", help="API tokens")
     tsub = token.add_subparsers(dest="token_command", metavar="ACTION", required=True)
@@ -36,7 +46,11 @@ def register(sub) -> None:
 
 
 def _settings(args) -> Settings:
-    return Settings(data_dir=args.data, db_url=args.db, verify_raw=not getattr(args, "no_verify", False))
+    limits = Limits()
+    if hasattr(args, "worker_seconds"):
+        limits = replace(limits, max_archive_bytes=args.max_archive_mib << 20, max_unpacked_bytes=args.max_unpacked_mib << 20,
+                         worker_memory_bytes=args.worker_memory_mib << 20, worker_seconds=args.worker_seconds)
+    return Settings(data_dir=args.data, db_url=args.db, verify_raw=not getattr(args, "no_verify", False), limits=limits)
 
 
 def run_serve(args, ui) -> int:

@@ -20,6 +20,7 @@ import shutil
 import socket
 import sys
 import tempfile
+import time
 import urllib.error
 import urllib.parse
 import urllib.request
@@ -32,6 +33,8 @@ from haptify_tools.registry.checks import check_bundle, verify_bundle
 
 TOKEN_ENV = "HAPTIFY_REGISTRY_TOKEN"
 TIMEOUT_S = 300
+CHUNK_BYTES = 8 << 20  # archives larger than this go as a resumable upload, in chunks of this size
+RESUME_ATTEMPTS = 5
 
 
 def register(sub) -> None:
@@ -46,15 +49,17 @@ def register(sub) -> None:
     p.add_argument("--token", help=f"API token (default: ${TOKEN_ENV})")
     p.add_argument("--dry-run", action="store_true", help="check locally (and at the registry, if given); store nothing")
     p.add_argument("--keep", type=Path, help="also write the bundle archive to this file")
+    p.add_argument("--chunk-mib", type=float, default=CHUNK_BYTES / 2**20,
+                   help="archives larger than this many MiB are sent as a resumable upload in chunks of this size")
     p.set_defaults(func=run)
 
 
-def post_bundle(registry: str, token: str, archive: Path, *, dry_run: bool = False) -> dict:
-    """POST the archive to ``REGISTRY/api/v1/submissions``; the registry's refusal becomes a HaptifyError.
-    Spec §17.5.1."""
-    url = registry.rstrip("/") + "/api/v1/submissions" + ("?dry_run=true" if dry_run else "")
-    request = urllib.request.Request(url, data=archive.read_bytes(), method="POST",
-                                     headers={"Content-Type": "application/gzip", "Authorization": f"Bearer {token}"})
+def request_json(method: str, url: str, token: str, data: bytes | None = None, headers: dict | None = None,
+                 *, registry: str) -> dict:
+    """One request to the registry; its JSON answer. A refusal becomes a HaptifyError with the registry's
+    findings; an unreachable registry E903/E978 (:func:`unreachable`). Spec §17.5.1."""
+    request = urllib.request.Request(url, data=data, method=method,
+                                     headers={"Authorization": f"Bearer {token}", **(headers or {})})
     try:
         with urllib.request.urlopen(request, timeout=TIMEOUT_S) as response:
             return json.loads(response.read().decode("utf-8"))
@@ -68,6 +73,70 @@ def post_bundle(registry: str, token: str, archive: Path, *, dry_run: bool = Fal
             raise fail("E978", f"the registry answered HTTP {exc.code}: {body[:300]}", file=url) from None
     except (urllib.error.URLError, OSError) as exc:
         raise unreachable(registry, url, getattr(exc, "reason", exc)) from None
+
+
+def post_bundle(registry: str, token: str, archive: Path, *, dry_run: bool = False) -> dict:
+    """POST the archive to ``REGISTRY/api/v1/submissions`` in one request (spec §17.5.1)."""
+    url = registry.rstrip("/") + "/api/v1/submissions" + ("?dry_run=true" if dry_run else "")
+    return request_json("POST", url, token, archive.read_bytes(), {"Content-Type": "application/gzip"}, registry=registry)
+
+
+def upload_resumable(registry: str, token: str, archive: Path, *, chunk_bytes: int = CHUNK_BYTES, dry_run: bool = False,
+                     attempts: int = RESUME_ATTEMPTS) -> dict:
+    """Send the archive in chunks of ``chunk_bytes`` (spec §17.5.2) and submit it. When a chunk's connection
+    drops, ask the registry how far it got and continue from there (at most ``attempts`` times in a row,
+    waiting 0.2, 0.4, … s), so a broken connection costs at most one chunk; memory holds one chunk."""
+    base = registry.rstrip("/") + "/api/v1/uploads"
+    size = archive.stat().st_size
+    state = request_json("POST", base, token, b"", {"Upload-Length": str(size)}, registry=registry)
+    uid, offset, failures = state["id"], 0, 0
+    with open(archive, "rb") as fh:
+        while offset < size:
+            fh.seek(offset)
+            chunk = fh.read(chunk_bytes)
+            try:
+                offset = request_json("PATCH", f"{base}/{uid}", token, chunk, {"Upload-Offset": str(offset),
+                                      "Content-Type": "application/offset+octet-stream"}, registry=registry)["offset"]
+                failures = 0
+            except HaptifyError as err:
+                if err.findings[0].code != "E978" or failures >= attempts:
+                    raise
+                failures += 1
+                time.sleep(0.1 * 2 ** failures)
+                offset = request_json("GET", f"{base}/{uid}", token, registry=registry)["offset"]
+    return request_json("POST", f"{base}/{uid}/submit" + ("?dry_run=true" if dry_run else ""), token, b"", registry=registry)
+
+
+def send(registry: str, token: str, archive: Path, *, dry_run: bool = False, chunk_bytes: int = CHUNK_BYTES) -> dict:
+    """Check the archive against the registry's limits (E960 before sending), then send it: in one request
+    when it fits one chunk, else as a resumable upload."""
+    check_size(archive, registry_limits(registry), registry)
+    if archive.stat().st_size <= chunk_bytes:
+        return post_bundle(registry, token, archive, dry_run=dry_run)
+    return upload_resumable(registry, token, archive, chunk_bytes=chunk_bytes, dry_run=dry_run)
+
+
+def registry_limits(registry: str) -> dict | None:
+    """``GET REGISTRY/api/v1/limits`` (spec §17.4): what the registry accepts; None when it does not say."""
+    url = registry.rstrip("/") + "/api/v1/limits"
+    try:
+        with urllib.request.urlopen(url, timeout=TIMEOUT_S) as response:
+            return json.loads(response.read().decode("utf-8"))
+    except urllib.error.HTTPError:
+        return None  # an older registry: it still enforces its limits on the upload
+    except (urllib.error.URLError, OSError) as exc:
+        raise unreachable(registry, url, getattr(exc, "reason", exc)) from None
+
+
+def check_size(archive: Path, limits: dict | None, registry: str) -> None:
+    """E960 before anything is sent when the archive is larger than the registry's ``max_archive_bytes``."""
+    if limits is None or "max_archive_bytes" not in limits:
+        return
+    size, limit = archive.stat().st_size, int(limits["max_archive_bytes"])
+    if size > limit:
+        raise fail("E960", f"the bundle is {size / 2**20:.1f} MiB; the registry at {registry} accepts at most "
+                           f"{limit / 2**20:.1f} MiB, so it was not sent", file=str(archive),
+                   expected=f"≤ {limit} bytes", found=f"{size} bytes")
 
 
 def unreachable(registry: str, url: str, reason: object) -> HaptifyError:
@@ -139,10 +208,11 @@ def _run(args, ui) -> int:
                 lines.append("no conformance report included: the registry accepts it only with a passing report "
                              "of this implementation on file")
             if args.registry and token:
-                outcome = {**post_bundle(args.registry, token, archive, dry_run=True), "checked": "locally and by the registry"}
+                outcome = {**send(args.registry, token, archive, dry_run=True, chunk_bytes=max(1, int(args.chunk_mib * 2**20))),
+                           "checked": "locally and by the registry"}
                 lines += ["the registry says:"] + describe(outcome)
         else:
-            outcome = post_bundle(args.registry, token, archive)
+            outcome = send(args.registry, token, archive, chunk_bytes=max(1, int(args.chunk_mib * 2**20)))
             lines = describe(outcome)
         if ui.json_mode:
             ui.emit_json(outcome)

@@ -26,6 +26,7 @@ from sqlalchemy import (
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
+SQLITE_FILE = "registry.sqlite3"
 SQLITE_BUSY_TIMEOUT_MS = 30_000  # a writer waits this long for another writer before E978
 
 
@@ -143,9 +144,36 @@ class ConformanceReport(Base):
     received_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
 
+class Challenge(Base):
+    """A conformance challenge the registry issued (spec §17.8): its secret seed and cases with their
+    expected values stay here; the implementation receives only the sessions and the case ids."""
+
+    __tablename__ = "challenges"
+    id: Mapped[str] = mapped_column(String(32), primary_key=True)
+    lab_id: Mapped[str] = mapped_column(ForeignKey("labs.id"), index=True)
+    token_id: Mapped[int] = mapped_column(ForeignKey("tokens.id"))
+    spec_version: Mapped[str] = mapped_column(String(16))
+    seed: Mapped[str] = mapped_column(String(64))
+    cases_json: Mapped[str] = mapped_column(Text)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    expires_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+
+
+class ChallengeResult(Base):
+    """The judged answer to a challenge: at most one per challenge (the primary key refuses a replay)."""
+
+    __tablename__ = "challenge_results"
+    challenge_id: Mapped[str] = mapped_column(ForeignKey("challenges.id"), primary_key=True)
+    implementation_name: Mapped[str] = mapped_column(String(200), index=True)
+    implementation_version: Mapped[str] = mapped_column(String(100))
+    passed: Mapped[bool] = mapped_column(Boolean)
+    verdicts_json: Mapped[str] = mapped_column(Text)
+    answered_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
 def default_db_url(data_dir: Path) -> str:
     """The embedded default: SQLite in ``registry.sqlite3`` inside the data folder (spec §17.7)."""
-    return f"sqlite:///{Path(data_dir).resolve() / 'registry.sqlite3'}"
+    return f"sqlite:///{Path(data_dir).resolve() / SQLITE_FILE}"
 
 
 def make_engine(url: str) -> Engine:
@@ -185,8 +213,9 @@ def writer(engine: Engine) -> Engine:
     return engine.execution_options(sqlite_immediate=True) if engine.dialect.name == "sqlite" else engine
 
 
-def migrate(engine: Engine) -> None:
-    """Apply every Alembic migration (``migrations/versions``) up to head; idempotent (spec §17.7)."""
+def migrate(engine: Engine, target: str = "head", *, down: bool = False) -> None:
+    """Apply the Alembic migrations (``migrations/versions``) up to ``target`` (head: all; idempotent), or
+    with ``down`` revert them down to ``target`` (``base``: none left); spec §17.7."""
     from alembic import command
     from alembic.config import Config
 
@@ -194,4 +223,4 @@ def migrate(engine: Engine) -> None:
     cfg.set_main_option("script_location", str(Path(__file__).parent / "migrations"))
     with writer(engine).begin() as conn:
         cfg.attributes["connection"] = conn
-        command.upgrade(cfg, "head")
+        (command.downgrade if down else command.upgrade)(cfg, target)

@@ -44,8 +44,9 @@ from haptify.results import DeviceSummary, Implementation, MetricResult, Results
 from haptify.versions import PACKAGE_VERSION
 from haptify_conform.report import ConformReport
 from haptify_tools.registry import db
-from haptify_tools.registry.bundle import SESSION_DIR, Limits, read_manifest, submission_id, unpack
+from haptify_tools.registry.bundle import DIR_MODE, FILE_MODE, SESSION_DIR, Limits, bundle_digest, submission_id, unpack, unpack_bundle
 from haptify_tools.registry.checks import Checked, check_bundle, check_conformance, verify_bundle
+from haptify_tools.registry.worker import run_contained
 
 log = logging.getLogger("haptify.registry")
 
@@ -53,6 +54,8 @@ SCOPES = ("submit", "admin")
 TOKEN_PREFIX = "hpt_"
 DEFAULT_RATE_PER_MINUTE = 120
 STATES = ("current", "superseded", "withdrawn")
+VERIFICATIONS = ("verified", "disagrees", "unverified")  # spec §17.3.1
+RANKED = ("verified", "all")  # which results aggregates and rankings count: verified only (default) or all
 
 
 @dataclass
@@ -64,6 +67,7 @@ class Settings:
     limits: Limits = field(default_factory=Limits)
     verify_raw: bool = True  # re-compute metrics when raw streams are included
     default_rate_per_minute: int = DEFAULT_RATE_PER_MINUTE
+    challenge_ttl_s: float = 3600.0  # a challenge must be answered within this time (spec §17.8)
 
     @property
     def url(self) -> str:
@@ -126,6 +130,16 @@ class Outcome:
                 "verification": self.verification, "url": f"/api/v1/submissions/{self.id}"}
 
 
+@dataclass
+class ReadContext:
+    """What a submission's summary needs beyond its row: withdrawals, supersessions and, per implementation
+    name and version, the id of its latest passed conformance challenge (spec §17.5, §17.8)."""
+
+    withdrawn: dict[str, db.Withdrawal]
+    superseded_by: dict[str, str]
+    proven: dict[tuple[str, str], str]
+
+
 def _fsync_dir(path: Path) -> None:
     fd = os.open(path, os.O_RDONLY)
     try:
@@ -141,18 +155,22 @@ class Registry:
     def __init__(self, settings: Settings, *, lock: bool = True) -> None:
         self.settings = settings
         self.data = Path(settings.data_dir)
-        self.data.mkdir(parents=True, exist_ok=True)
+        self.data.mkdir(mode=DIR_MODE, parents=True, exist_ok=True)
+        os.chmod(self.data, DIR_MODE)  # records and archives are the service user's only (spec §17.7)
         self.tmp = self.data / "tmp"
         self.bundles = self.data / "bundles"
         self._lock_fh = None
         if lock:
-            self._lock_fh = open(self.data / "registry.lock", "a+")
+            self._lock_fh = os.fdopen(os.open(self.data / "registry.lock", os.O_RDWR | os.O_CREAT, FILE_MODE), "a+")
             try:
                 fcntl.flock(self._lock_fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError:
                 self._lock_fh.close()
                 raise fail("E978", f"another registry process serves the data folder {str(self.data)!r}",
                            file=str(self.data), expected="one process per data folder", found="locked") from None
+        if settings.db_url is None:  # SQLite creates its -wal and -shm files with the database file's mode
+            os.close(os.open(self.data / db.SQLITE_FILE, os.O_RDWR | os.O_CREAT, FILE_MODE))
+            os.chmod(self.data / db.SQLITE_FILE, FILE_MODE)
         self.engine = db.make_engine(settings.url)
         self.writer = db.writer(self.engine)
         db.migrate(self.engine)
@@ -175,8 +193,8 @@ class Registry:
             for entry in self.tmp.iterdir():
                 shutil.rmtree(entry) if entry.is_dir() and not entry.is_symlink() else entry.unlink()
                 removed_tmp += 1
-        self.tmp.mkdir(parents=True, exist_ok=True)
-        self.bundles.mkdir(parents=True, exist_ok=True)
+        self.tmp.mkdir(mode=DIR_MODE, parents=True, exist_ok=True)
+        self.bundles.mkdir(mode=DIR_MODE, parents=True, exist_ok=True)
         with DBSession(self.engine) as s:
             referenced = set(s.scalars(select(db.Submission.archive_path)))
         removed_orphans = 0
@@ -239,11 +257,11 @@ class Registry:
         """Stream an upload to ``tmp/`` (E960 as soon as it passes the archive limit) and fsync it.
 
         Memory stays bounded by one chunk; the file is removed when anything goes wrong."""
-        self.tmp.mkdir(parents=True, exist_ok=True)
+        self.tmp.mkdir(mode=DIR_MODE, parents=True, exist_ok=True)
         path = self.tmp / f"upload-{uuid.uuid4().hex}.tar.gz"
         limit, total = self.settings.limits.max_archive_bytes, 0
         try:
-            with open(path, "wb") as fh:
+            with os.fdopen(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, FILE_MODE), "wb") as fh:
                 async for chunk in chunks:
                     total += len(chunk)
                     if total > limit:
@@ -264,21 +282,23 @@ class Registry:
             return self._digest_locks.setdefault(digest, threading.Lock())
 
     def submit(self, upload: Path, caller: Caller, *, dry_run: bool = False) -> Outcome:
-        """Check and store one uploaded bundle (spec §17.3–§17.5); the upload file is consumed."""
+        """Check and store one uploaded bundle (spec §17.3–§17.5); the upload file is consumed.
+
+        Unpacking, the document checks and the re-computation each run in a worker process under the
+        worker limits (:func:`~haptify_tools.registry.worker.run_contained`, spec §17.4.1); this process
+        only reads and writes the records."""
         work = self.tmp / f"unpack-{uuid.uuid4().hex}"
+        limits = self.settings.limits
         try:
-            unpacked = unpack(upload, work, self.settings.limits)
-            bundle = read_manifest(unpacked, self.settings.limits)
+            unpacked, bundle = run_contained(unpack_bundle, upload, work, limits, limits=limits)
             if bundle.lab.id != caller.lab_id:
                 raise fail("E977", "the bundle is from another lab than the token", file="bundle.json", pointer="/lab/id",
                            expected=caller.lab_id, found=bundle.lab.id)
-            from haptify_tools.registry.bundle import bundle_digest
-
             digest = bundle_digest(bundle)
             existing = self._existing(digest)
             if existing is not None:
                 return existing
-            checked = check_bundle(unpacked, self.settings.limits)
+            checked = run_contained(check_bundle, unpacked, limits, limits=limits)
             report = checked.conformance or self._report_on_file(checked)
             if report is None:
                 impl = checked.results.implementation
@@ -288,7 +308,10 @@ class Registry:
             if checked.conformance is None:
                 check_conformance(report, checked.results, checked.bundle.spec_version, file="(report on file)")
             self._check_supersede(checked, caller)
-            checked.verification = verify_bundle(checked, unpacked, self.settings.verify_raw)
+            if checked.bundle.includes_raw and self.settings.verify_raw:  # re-computation reads the streams
+                checked.verification = run_contained(verify_bundle, checked, unpacked, True, limits=limits)
+            else:  # nothing of the bundle is read: no worker needed
+                checked.verification = verify_bundle(checked, unpacked, self.settings.verify_raw)
             sid = submission_id(digest)
             if dry_run:
                 return Outcome(sid, digest, "would-accept", checked.verification.to_dict(), bundle.supersedes)
@@ -356,7 +379,7 @@ class Registry:
         sid = submission_id(digest)
         rel = f"bundles/{digest[:2]}/{digest}.tar.gz"
         final = self.data / rel
-        final.parent.mkdir(parents=True, exist_ok=True)
+        final.parent.mkdir(mode=DIR_MODE, parents=True, exist_ok=True)
         os.replace(upload, final)
         _fsync_dir(final.parent)
         results = checked.results
@@ -438,29 +461,37 @@ class Registry:
             return "superseded"
         return "current"
 
-    def _summary(self, row: db.Submission, withdrawn: dict[str, db.Withdrawal], superseded_by: dict[str, str]) -> dict:
-        w = withdrawn.get(row.id)
-        state = "withdrawn" if w else "superseded" if row.id in superseded_by else "current"
+    def _summary(self, row: db.Submission, ctx: ReadContext) -> dict:
+        w = ctx.withdrawn.get(row.id)
+        state = "withdrawn" if w else "superseded" if row.id in ctx.superseded_by else "current"
+        challenge = ctx.proven.get((row.implementation_name, row.implementation_version))
         return {
             "id": row.id, "digest": row.digest, "state": state, "lab": row.lab_id,
             "device": {"slug": row.device.slug, "manufacturer": row.device.manufacturer, "model": row.device.model},
             "serial": row.serial, "spec_version": row.spec_version,
             "implementation": {"name": row.implementation_name, "version": row.implementation_version},
+            "conformance": {"status": "proven" if challenge else "self-asserted", "challenge": challenge},
             "session_id": row.session_id, "verification": row.verification, "has_raw": row.has_raw,
             "received_at": row.received_at.isoformat(), "supersedes": row.supersedes_id,
-            "superseded_by": superseded_by.get(row.id),
+            "superseded_by": ctx.superseded_by.get(row.id),
             "withdrawal": {"reason": w.reason, "at": w.at.isoformat()} if w else None,
         }
 
-    def _context(self, s: DBSession) -> tuple[dict[str, db.Withdrawal], dict[str, str]]:
+    def _context(self, s: DBSession) -> ReadContext:
         withdrawn = {w.submission_id: w for w in s.scalars(select(db.Withdrawal))}
         superseded_by = {old: new for new, old in s.execute(
             select(db.Submission.id, db.Submission.supersedes_id).where(db.Submission.supersedes_id.is_not(None)))}
-        return withdrawn, superseded_by
+        proven: dict[tuple[str, str], str] = {}
+        for name, version, cid in s.execute(
+                select(db.ChallengeResult.implementation_name, db.ChallengeResult.implementation_version,
+                       db.ChallengeResult.challenge_id).where(db.ChallengeResult.passed.is_(True))
+                .order_by(db.ChallengeResult.answered_at)):
+            proven[(name, version)] = cid  # the latest passed challenge of each implementation and version
+        return ReadContext(withdrawn, superseded_by, proven)
 
     def submissions(self, *, lab: str | None = None, device: str | None = None, state: str | None = None,
-                    limit: int = 100, offset: int = 0) -> list[dict]:
-        """Submission summaries, newest first, filtered by lab, device slug and state."""
+                    verification: str | None = None, limit: int = 100, offset: int = 0) -> list[dict]:
+        """Submission summaries, newest first, filtered by lab, device slug, state and verification state."""
         with DBSession(self.engine) as s:
             q = select(db.Submission).options(selectinload(db.Submission.device)).order_by(
                 db.Submission.received_at.desc(), db.Submission.id)
@@ -468,8 +499,10 @@ class Registry:
                 q = q.where(db.Submission.lab_id == lab)
             if device:
                 q = q.join(db.Device).where(db.Device.slug == device)
-            withdrawn, superseded_by = self._context(s)
-            rows = [self._summary(r, withdrawn, superseded_by) for r in s.scalars(q)]
+            if verification not in (None, "all"):
+                q = q.where(db.Submission.verification == verification)
+            ctx = self._context(s)
+            rows = [self._summary(r, ctx) for r in s.scalars(q)]
         rows = [r for r in rows if state in (None, "all") or r["state"] == state]
         return rows[offset: offset + limit]
 
@@ -479,8 +512,8 @@ class Registry:
             row = s.get(db.Submission, sid)
             if row is None:
                 raise fail("E973", f"no submission {sid!r}", expected="an existing submission id", found=sid)
-            withdrawn, superseded_by = self._context(s)
-            out = self._summary(row, withdrawn, superseded_by)
+            ctx = self._context(s)
+            out = self._summary(row, ctx)
             out.update(archive_sha256=row.archive_sha256, archive_size=row.archive_size,
                        verification_details=json.loads(row.verification_json), results=json.loads(row.results_json),
                        bundle=json.loads(row.bundle_json))
@@ -501,8 +534,8 @@ class Registry:
         target = self.data / "cache" / archive.name[: -len(".tar.gz")]
         if not target.is_dir():
             work = self.tmp / f"cache-{uuid.uuid4().hex}"
-            unpack(archive, work, self.settings.limits)
-            target.parent.mkdir(parents=True, exist_ok=True)
+            run_contained(unpack, archive, work, self.settings.limits, limits=self.settings.limits)
+            target.parent.mkdir(mode=DIR_MODE, parents=True, exist_ok=True)
             try:
                 os.replace(work, target)
             except OSError:  # another request unpacked it first
@@ -533,37 +566,50 @@ class Registry:
             raise fail("E973", f"no device {slug!r}", expected="a device slug from /api/v1/devices", found=slug)
         return d
 
-    def current_metric_rows(self, slug: str, *, verified_only: bool = False) -> tuple[dict, list[tuple[dict, db.MetricValue]]]:
-        """The device and ``(submission summary, metric row)`` of its current submissions."""
+    def current_metric_rows(self, slug: str, *, verification: str = "verified"
+                            ) -> tuple[dict, list[tuple[dict, db.MetricValue]], list[tuple[dict, db.Submission]]]:
+        """The device, ``(submission summary, metric row)`` of its current submissions that count under
+        ``verification`` (``verified``: only verified ones; ``all``: every one), and ``(summary, row)`` of
+        its current submissions that do not count (spec §17.3.1)."""
+        if verification not in RANKED:
+            raise fail("E975", f"unknown verification filter {verification!r}", pointer="/verification",
+                       expected=list(RANKED), found=verification)
         with DBSession(self.engine) as s:
             d = self._device_row(s, slug)
             device = {"slug": d.slug, "manufacturer": d.manufacturer, "model": d.model}
-            withdrawn, superseded_by = self._context(s)
+            ctx = self._context(s)
             subs = s.scalars(select(db.Submission).options(selectinload(db.Submission.metrics), selectinload(db.Submission.device))
                              .where(db.Submission.device_id == d.id).order_by(db.Submission.received_at)).all()
-            out = []
+            counted, apart = [], []
             for sub in subs:
-                summary = self._summary(sub, withdrawn, superseded_by)
-                if summary["state"] != "current" or (verified_only and sub.verification != "verified"):
+                summary = self._summary(sub, ctx)
+                if summary["state"] != "current":
                     continue
-                out += [(summary, m) for m in sub.metrics]
-            return device, out
+                if verification == "verified" and sub.verification != "verified":
+                    apart.append((summary, sub))
+                    continue
+                counted += [(summary, m) for m in sub.metrics]
+            return device, counted, apart
 
-    def device_results(self, slug: str, *, verified_only: bool = False) -> dict:
-        """Per metric of a device: mean and spread over labs and repetitions of its current submissions (spec §17.5)."""
-        device, rows = self.current_metric_rows(slug, verified_only=verified_only)
+    def device_results(self, slug: str, *, verification: str = "verified") -> dict:
+        """Per metric of a device: mean and spread over labs and repetitions of its current submissions that
+        count under ``verification`` (spec §17.5); the current submissions that do not count are listed
+        apart in ``not_counted``, one entry per metric, with their state (and for a disagreeing one both
+        the submitted and the recomputed value, spec §17.3.1)."""
+        device, rows, apart = self.current_metric_rows(slug, verification=verification)
         by_metric: dict[str, list[tuple[dict, db.MetricValue]]] = {}
         for summary, m in rows:
             by_metric.setdefault(m.metric_id, []).append((summary, m))
         metrics = [aggregate(metric, items) for metric, items in sorted(by_metric.items())]
         n_subs = len({summary["id"] for summary, _ in rows})
-        return {"device": device, "submissions": n_subs, "verified_only": verified_only, "metrics": metrics}
+        return {"device": device, "submissions": n_subs, "verification": verification, "metrics": metrics,
+                "not_counted": [entry for summary, sub in apart for entry in not_counted(summary, sub)]}
 
-    def comparison(self, slugs: list[str], *, verified_only: bool = False) -> list[ResultsFile]:
+    def comparison(self, slugs: list[str], *, verification: str = "verified") -> list[ResultsFile]:
         """One synthetic results file per device, holding its aggregated means (for ``haptify.compare``)."""
         out = []
         for slug in slugs:
-            agg = self.device_results(slug, verified_only=verified_only)
+            agg = self.device_results(slug, verification=verification)
             metrics = []
             for m in agg["metrics"]:
                 metrics.append(MetricResult(id=m["metric"], value=m["mean"], unit=m["unit"], n=m["repetitions"],
@@ -574,18 +620,18 @@ class Registry:
                                    manifest_sha256="0" * 64, metrics=metrics))
         return out
 
-    def export_rows(self, *, device: str | None = None, state: str = "current") -> list[dict]:
-        """One row per submission × metric (the CSV export)."""
+    def export_rows(self, *, device: str | None = None, state: str = "current", verification: str = "all") -> list[dict]:
+        """One row per submission × metric (the CSV export), filtered by state and verification state."""
         with DBSession(self.engine) as s:
             q = select(db.Submission).options(selectinload(db.Submission.metrics), selectinload(db.Submission.device)).order_by(
                 db.Submission.received_at, db.Submission.id)
             if device:
                 q = q.join(db.Device).where(db.Device.slug == device)
-            withdrawn, superseded_by = self._context(s)
+            ctx = self._context(s)
             out = []
             for sub in s.scalars(q):
-                summary = self._summary(sub, withdrawn, superseded_by)
-                if state != "all" and summary["state"] != state:
+                summary = self._summary(sub, ctx)
+                if state != "all" and summary["state"] != state or verification not in ("all", sub.verification):
                     continue
                 for m in sub.metrics:
                     out.append({"submission": sub.id, "state": summary["state"], "verification": sub.verification,
@@ -595,6 +641,22 @@ class Registry:
                                 "value": m.value_json, "unit": m.unit, "n": m.n, "sd": m.sd_json,
                                 "received_at": sub.received_at.isoformat()})
             return out
+
+
+def not_counted(summary: dict, sub: db.Submission) -> list[dict]:
+    """The metrics of a submission that does not count (not verified), one entry each: submission, lab,
+    state, metric, submitted value and unit, and — from its verification record — the recomputed value,
+    the tolerance and why it does not agree (spec §17.3.1)."""
+    checks = {c["metric"]: c for c in json.loads(sub.verification_json).get("checks", [])}
+    out = []
+    for m in sub.metrics:
+        check = checks.get(m.metric_id, {})
+        out.append({"submission": sub.id, "lab": sub.lab_id, "verification": sub.verification, "metric": m.metric_id,
+                    "submitted": json.loads(m.value_json), "unit": m.unit, "recomputed": check.get("recomputed"),
+                    "check": check.get("status"), "tolerance": check.get("tolerance"),
+                    "why": check.get("message") or json.loads(sub.verification_json).get("note", ""),
+                    "implementation": summary["implementation"]})
+    return out
 
 
 def defined_sd(sd: float | list[float | None] | None) -> float | list[float] | None:

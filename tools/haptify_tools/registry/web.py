@@ -20,6 +20,7 @@ and the stylesheet; ``create_app`` calls it.
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 import threading
@@ -39,6 +40,7 @@ from haptify.versions import SPEC_VERSION
 from haptify_tools.registry import api_read
 from haptify_tools.registry.leaderboard import leaderboard, rule_text
 
+log = logging.getLogger("haptify.registry")
 _HERE = resources.files("haptify_tools.registry")
 templates = Jinja2Templates(directory=str(_HERE / "templates"))
 templates.env.globals["spec_version"] = SPEC_VERSION
@@ -69,6 +71,8 @@ def _error_page(request: Request, err: HaptifyError) -> HTMLResponse:
     """A refusal as a page: its code and message, HTTP status by code."""
     f = err.findings[0]
     status = STATUS_OF_CODE.get(f.code, 500)
+    log.warning("refused %s %s from %s: %s %s", request.method, request.url.path,
+                request.client.host if request.client else "-", f.code, f.message)
     title = {404: "Not found", 400: "Bad request"}.get(status, "Error")
     return _render(request, "error.html", status_code=status, code=f.code, title=title, message=f.message)
 
@@ -95,20 +99,30 @@ def page_index(request: Request) -> HTMLResponse:
 
 
 @router.get("/leaderboard", name="page_leaderboard_redirect")
-def page_leaderboard_redirect(request: Request, metric: str | None = None) -> Response:
-    """``/leaderboard?metric=ID`` (the metric picker) → ``/leaderboard/ID``; without a metric, the first one."""
+def page_leaderboard_redirect(request: Request, metric: str | None = None, verification: str = "verified") -> Response:
+    """``/leaderboard?metric=ID`` (the metric picker) → ``/leaderboard/ID`` (keeping ``verification=all``);
+    without a metric, the first one."""
     if metric is None:
         menu = api_read.leaderboard_menu(api_read.reads(request).all_device_results())
         if not menu:
             return RedirectResponse(request.url_for("page_index"), status_code=303)
         metric = menu[0]["id"]
-    return RedirectResponse(request.url_for("page_leaderboard", metric_id=metric), status_code=303)
+    target = str(request.url_for("page_leaderboard", metric_id=metric))
+    return RedirectResponse(target + ("?verification=all" if _ranked(verification) == "all" else ""), status_code=303)
+
+
+def _ranked(verification: str) -> str:
+    """The aggregation filter of a page's query (``verified``, the default, or ``all``)."""
+    return "all" if verification == "all" else "verified"
 
 
 @router.get("/leaderboard/{metric_id}", name="page_leaderboard", response_class=HTMLResponse)
-def page_leaderboard(metric_id: str, request: Request) -> HTMLResponse:
-    """One metric's leaderboard: devices best first, each with its mean and spread (spec §17.5); E973 unknown metric."""
-    results = api_read.reads(request).all_device_results()
+def page_leaderboard(metric_id: str, request: Request, verification: str = "verified") -> HTMLResponse:
+    """One metric's leaderboard: devices best first, each with its mean and spread (spec §17.5), from
+    verified results unless ``verification=all``; the results left out are listed apart, marked with
+    their state (spec §17.3.1). E973 unknown metric."""
+    verification = _ranked(verification)
+    results = api_read.reads(request).all_device_results(verification)
     defs = api_read.metric_definitions()
     if metric_id not in defs:
         return _error_page(request, fail("E973", f"there is no metric {metric_id!r}", pointer="/metric",
@@ -117,16 +131,20 @@ def page_leaderboard(metric_id: str, request: Request) -> HTMLResponse:
     definition = defs[metric_id]
     return _render(request, "leaderboard.html", metric_id=metric_id, title=definition.title, description=definition.description,
                    unit=rows[0].metric["unit"] if rows else definition.unit, rule=rule_text(metric_id), rows=rows,
-                   metrics=api_read.leaderboard_menu(results))
+                   metrics=api_read.leaderboard_menu(results), verification=verification,
+                   not_ranked=api_read.not_ranked(metric_id, results))
 
 
 @router.get("/devices/{slug}", name="page_device", response_class=HTMLResponse)
-def page_device(slug: str, request: Request) -> HTMLResponse:
-    """A device: its metrics with spread over labs and repetitions, every submission (current, superseded,
-    withdrawn), the report figures and viewer recordings of submissions with raw streams (spec §17.5)."""
+def page_device(slug: str, request: Request, verification: str = "verified") -> HTMLResponse:
+    """A device: its metrics with spread over labs and repetitions (of verified submissions unless
+    ``verification=all``; the others listed apart with their state), every submission (current,
+    superseded, withdrawn), the report figures and viewer recordings of submissions with raw streams
+    (spec §17.5, §17.3.1)."""
     reads = api_read.reads(request)
+    verification = _ranked(verification)
     try:
-        agg = reads.device_results(slug)
+        agg = reads.device_results(slug, verification)
     except HaptifyError as err:
         return _error_page(request, err)
     defs = api_read.metric_definitions()
@@ -135,6 +153,7 @@ def page_device(slug: str, request: Request) -> HTMLResponse:
     submissions = [s for s in reads.submissions() if s["device"]["slug"] == slug]
     current = [s for s in submissions if s["state"] == "current"]
     return _render(request, "device.html", device=agg["device"], label=_label(agg["device"]), metrics=metrics,
+                   verification=verification, not_counted=agg["not_counted"],
                    titles={k: v.title for k, v in defs.items()}, submissions=submissions,
                    labs=sorted({s["lab"] for s in current}), current=current,
                    raw=[s for s in current if s["has_raw"]],
@@ -142,9 +161,12 @@ def page_device(slug: str, request: Request) -> HTMLResponse:
 
 
 @router.get("/compare", name="page_compare", response_class=HTMLResponse)
-def page_compare(request: Request, device: list[str] = Query(default=[]), paper: bool = False) -> HTMLResponse:
-    """Table III (spec §15.5) for the chosen devices (``?device=a&device=b``, optionally ``&paper=true``)."""
+def page_compare(request: Request, device: list[str] = Query(default=[]), paper: bool = False,
+                 verification: str = "verified") -> HTMLResponse:
+    """Table III (spec §15.5) for the chosen devices (``?device=a&device=b``, optionally ``&paper=true``),
+    from verified results unless ``verification=all``; a note counts the results left out."""
     reads = api_read.reads(request)
+    verification = _ranked(verification)
     chosen = list(dict.fromkeys(device))
     table_html = csv_url = json_url = None
     if len(chosen) > MAX_COMPARED:
@@ -152,15 +174,16 @@ def page_compare(request: Request, device: list[str] = Query(default=[]), paper:
                                          expected=f"≤ {MAX_COMPARED}", found=len(chosen)))
     if chosen:
         try:
-            table = build_table(reads.comparison(tuple(chosen)), with_paper=paper)
+            table = build_table(reads.comparison(tuple(chosen), verification), with_paper=paper)
+            table.notes.extend(api_read.not_counted_notes({s: reads.device_results(s, verification)["not_counted"] for s in chosen}))
         except HaptifyError as err:
             return _error_page(request, err)
         table_html = to_html(table)
-        query = urlencode({"devices": ",".join(chosen), "paper": "true" if paper else "false"})
+        query = urlencode({"devices": ",".join(chosen), "paper": "true" if paper else "false", "verification": verification})
         csv_url = f"{api_read.API}/compare?{query}&format=csv"
         json_url = f"{api_read.API}/compare?{query}"
     devices = [{"slug": d["slug"], "label": _label(d)} for d in reads.devices()]
-    return _render(request, "compare.html", devices=devices, chosen_slugs=set(chosen), with_paper=paper,
+    return _render(request, "compare.html", devices=devices, chosen_slugs=set(chosen), with_paper=paper, verification=verification,
                    table_html=table_html, csv_url=csv_url, json_url=json_url)
 
 
@@ -256,6 +279,19 @@ def page_recording(sid: str, request: Request) -> Response:
     except HaptifyError as err:
         return _error_page(request, err)
     return FileResponse(path, media_type="application/octet-stream", filename=f"{sid}.rrd")
+
+
+@router.get("/challenges/{cid}", name="page_challenge", response_class=HTMLResponse)
+def page_challenge(cid: str, request: Request) -> HTMLResponse:
+    """A conformance challenge (spec §17.8): its cases while open; once answered, the implementation, the
+    verdict and each case's expected and found value."""
+    from haptify_tools.registry import challenge
+
+    try:
+        record = challenge.record(api_read.reads(request).reg, cid)
+    except HaptifyError as err:
+        return _error_page(request, err)
+    return _render(request, "challenge.html", c=record)
 
 
 def register(app: FastAPI) -> None:

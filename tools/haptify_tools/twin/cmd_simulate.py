@@ -79,6 +79,8 @@ def register_simulate(subparsers) -> None:
     p.add_argument("--duration", action="append", default=[], metavar="NAME=SECONDS", help="override a trial duration")
     p.add_argument("--workers", type=int, default=0, help="parallel processes (default: one per CPU, at most 4)")
     p.add_argument("--format", choices=("parquet", "csv"), default="parquet", help="stream file format")
+    p.add_argument("--compact", action="store_true",
+                   help="Parquet: store the sensor columns as float32 (every simulated sensor is far coarser; spec §3.2.1)")
     p.set_defaults(func=run_simulate)
 
 
@@ -89,7 +91,8 @@ def run_simulate(args: argparse.Namespace, ui) -> int:
     twin = twin_from_args(args)
     options = SimulationOptions(protocols=parse_protocols(args.protocol), reps=args.reps, seed=args.seed,
                                 rig_trials=not args.no_rig_trials, durations=_durations(args.duration),
-                                rig=RigConfig(clock_offsets=args.clock_offsets), workers=args.workers, fmt=args.format)
+                                rig=RigConfig(clock_offsets=args.clock_offsets), workers=args.workers, fmt=args.format,
+                                compact=args.compact)
     total = len(plan(options))
     with ui.progress(f"simulating {twin.name}", total) as advance:
         result = simulate_dossier(twin, Path(args.out), options, overwrite=args.overwrite, advance=advance)

@@ -72,6 +72,7 @@ class SimulationOptions:
     rig: rg.RigConfig = field(default_factory=rg.RigConfig)
     rate_hz: float = ex.DEFAULT_RATE_HZ
     fmt: str = "parquet"
+    compact: bool = False     # Parquet: float32 sensor columns, BYTE_STREAM_SPLIT (spec §3.2.1)
     session_id: str | None = None
     workers: int = 0          # processes simulating trials in parallel; 0 = one per CPU (at most 4)
 
@@ -462,7 +463,7 @@ def simulate_dossier(twin: TwinFile, out_dir: str | os.PathLike, options: Simula
     if out.exists() and not overwrite:
         raise fail("E901", f"{str(out)!r} already exists", file=str(out))
     sim = DossierSimulator(twin, opt)
-    writer = SessionWriter(manifest=sim.manifest())
+    writer = SessionWriter(manifest=sim.manifest(), compact=opt.compact)
     trials_truth, arrays, clock_records = [], {}, []
     recorded = 0.0
     planned = plan(opt)

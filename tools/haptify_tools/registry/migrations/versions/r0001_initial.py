@@ -9,6 +9,8 @@ Revises:
 import sqlalchemy as sa
 from alembic import op
 
+from haptify_tools.registry.migrations.append_only import add_triggers, drop_triggers
+
 revision = "r0001"
 down_revision = None
 branch_labels = None
@@ -85,25 +87,12 @@ def upgrade() -> None:
     if dialect == "postgresql":
         op.execute("CREATE FUNCTION registry_append_only() RETURNS trigger AS $$ BEGIN "
                    "RAISE EXCEPTION 'registry records are append-only (%)', TG_TABLE_NAME; END $$ LANGUAGE plpgsql")
-        for table in APPEND_ONLY:
-            op.execute(f"CREATE TRIGGER {table}_append_only BEFORE UPDATE OR DELETE ON {table} "
-                       "FOR EACH ROW EXECUTE FUNCTION registry_append_only()")
-    elif dialect == "sqlite":
-        for table in APPEND_ONLY:
-            for action in ("UPDATE", "DELETE"):
-                op.execute(f"CREATE TRIGGER {table}_no_{action.lower()} BEFORE {action} ON {table} "
-                           f"BEGIN SELECT RAISE(ABORT, 'registry records are append-only ({table})'); END")
+    add_triggers(APPEND_ONLY)
 
 
 def downgrade() -> None:
-    dialect = op.get_bind().dialect.name
-    for table in APPEND_ONLY:
-        if dialect == "postgresql":
-            op.execute(f"DROP TRIGGER IF EXISTS {table}_append_only ON {table}")
-        elif dialect == "sqlite":
-            for action in ("update", "delete"):
-                op.execute(f"DROP TRIGGER IF EXISTS {table}_no_{action}")
-    if dialect == "postgresql":
+    drop_triggers(APPEND_ONLY)
+    if op.get_bind().dialect.name == "postgresql":
         op.execute("DROP FUNCTION IF EXISTS registry_append_only()")
     for table in ("conformance_reports", "withdrawals", "metric_values", "submissions", "devices", "tokens", "labs"):
         op.drop_table(table)

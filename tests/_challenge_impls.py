@@ -1,0 +1,15 @@
+"""Implementations for the challenge tests (spec §17.8), in the ``--python module:function`` form."""
+
+from __future__ import annotations
+
+from haptify_conform.reference import analyse
+
+
+def off_by_one_percent(session: str, metric: str = "", parameters: dict | None = None) -> dict:
+    """The reference with vibration.rms 1 % high, under its own name: a wrong implementation."""
+    doc = analyse(session, metric, parameters)
+    doc["implementation"] = {"name": "off-by-one-percent", "version": "0.1"}
+    for m in doc.get("metrics", []):
+        if m["id"] == "vibration.rms":
+            m["value"] *= 1.01
+    return doc
