@@ -118,14 +118,25 @@ def handle_trial(w: SessionWriter, tid: str, protocol: str, *, duration_s: float
                  force_w: Fn, truth: rb.HandleTruth = QUIET, rates=(500.0, 500.0, 100.0), fmt: str = "parquet",
                  repetition: int = 1, powered: bool = False, rendering: dict | None = None, commanded_w: Fn | None = None,
                  occluded: Callable[[np.ndarray], np.ndarray] | None = None, accel_extra: Fn | None = None,
-                 plate_force_w: Fn | None = None, plate_bias: np.ndarray | None = None, rng=None) -> None:
+                 plate_force_w: Fn | None = None, plate_bias: np.ndarray | None = None, rng=None, start_s: float = 0.0,
+                 clock_offsets: dict[str, float] | None = None) -> None:
     """A trial whose raw streams realise the truth: ``force_w`` (N, on the hand, W; zero torque about the
-    gimbal centre), the pose, and ``accel_extra`` (m/s², added in the accelerometer frame: vibrations)."""
+    gimbal centre), the pose, and ``accel_extra`` (m/s², added in the accelerometer frame: vibrations).
+
+    Every stream starts at ``start_s`` on the session clock; a stream kind named in ``clock_offsets`` is stored
+    with ``t − offset`` and gets a ``clock_offset`` record of ``offset`` (spec §2.8) that puts it back."""
     rig = w.manifest["rig"]
     rng = rng or np.random.default_rng(SEED)
     ft_rate, acc_rate, mocap_rate = rates
     w.add_trial(tid, protocol, powered=powered, repetition=repetition, rendering=rendering)
-    t_ft, t_acc, t_m = clock(duration_s, ft_rate), clock(duration_s, acc_rate), clock(duration_s, mocap_rate)
+    t_ft, t_acc, t_m = (start_s + clock(duration_s, r) for r in rates)
+
+    def add(kind: str, data: dict, rate: float) -> None:
+        offset = (clock_offsets or {}).get(kind)
+        stream = w.add_stream(tid, kind, {**data, "t": data["t"] - offset} if offset else data, rate_hz=rate, fmt=fmt)
+        if offset:
+            w.manifest["calibration"].append({"kind": "clock_offset", "id": f"offset-{tid}-{kind}".replace("_", "-"),
+                                              "stream_file": stream["file"], "offset_s": offset})
     f_w = force_w(t_ft)
     wrench, accel = rb.raw_handle(truth, rig, t_ft, quaternion(t_ft), t_acc, quaternion(t_acc), rng,
                                   hand_force_w=f_w, hand_torque_g_w=np.zeros_like(f_w))
@@ -133,23 +144,22 @@ def handle_trial(w: SessionWriter, tid: str, protocol: str, *, duration_s: float
         extra = accel_extra(t_acc)
         for k, c in enumerate(("ax", "ay", "az")):
             accel[c] = accel[c] + extra[:, k]
-    w.add_stream(tid, "handle_wrench", wrench, rate_hz=ft_rate, fmt=fmt)
-    w.add_stream(tid, "handle_accel", accel, rate_hz=acc_rate, fmt=fmt)
+    add("handle_wrench", wrench, ft_rate)
+    add("handle_accel", accel, acc_rate)
     p, q = position(t_m), quaternion(t_m)
     if occluded is not None:
         gone = occluded(t_m)
         p, q = p.copy(), q.copy()
         p[gone], q[gone] = np.nan, np.nan
-    w.add_stream(tid, "handle_pose", {"t": t_m, "px": p[:, 0], "py": p[:, 1], "pz": p[:, 2],
-                                      "qw": q[:, 0], "qx": q[:, 1], "qy": q[:, 2], "qz": q[:, 3]}, rate_hz=mocap_rate, fmt=fmt)
+    add("handle_pose", {"t": t_m, "px": p[:, 0], "py": p[:, 1], "pz": p[:, 2], "qw": q[:, 0], "qx": q[:, 1], "qy": q[:, 2],
+                        "qz": q[:, 3]}, mocap_rate)
     if commanded_w is not None:
         c = commanded_w(t_ft)
-        w.add_stream(tid, "commanded_wrench", {"t": t_ft, "fx": c[:, 0], "fy": c[:, 1], "fz": c[:, 2], "tx": 0 * t_ft,
-                                               "ty": 0 * t_ft, "tz": 0 * t_ft}, rate_hz=ft_rate, fmt=fmt)
+        add("commanded_wrench", {"t": t_ft, "fx": c[:, 0], "fy": c[:, 1], "fz": c[:, 2], "tx": 0 * t_ft, "ty": 0 * t_ft,
+                                 "tz": 0 * t_ft}, ft_rate)
     if plate_force_w is not None:
         pf = plate_force_w(t_ft)
-        raw = rb.corner_readings(rig, pf, np.zeros_like(pf), plate_bias)
-        w.add_stream(tid, "plate_wrench", rb.plate_stream(t_ft, raw), rate_hz=ft_rate, fmt=fmt)
+        add("plate_wrench", rb.plate_stream(t_ft, rb.corner_readings(rig, pf, np.zeros_like(pf), plate_bias)), ft_rate)
 
 
 def active_session(name: str, rig_kind: str, tid: str, protocol: str, duration_s: float, spin_rate: float, position: Fn,
@@ -931,6 +941,16 @@ def hw_model(variant: str) -> dict:
         out_maps[0] = {"type": "piecewise_linear", "breakpoints": [-1.0, 0.0, 0.5, 1.5], "values": [-0.5, 0.1, 0.2, 1.4]}
         linear[1][7] = {"b": [2.0, 1.0], "f": [-0.5, 0.0], "nk": 1}
         linear[3][6] = {"b": [0.01, 0.0], "f": [-0.9, 0.0], "nk": 0}
+    elif variant == "c":  # every input kind reaches an output: orientation, position, velocity, acceleration
+        in_maps[5] = {"type": "piecewise_linear", "breakpoints": [-0.03, 0.0, 0.03], "values": [-0.2, 0.0, 0.5]}
+        in_maps[12] = {"type": "piecewise_linear", "breakpoints": [-1.0, 0.0, 1.0], "values": [-0.5, 0.0, 0.2]}
+        linear[0][1] = {"b": [0.8, 0.0], "f": [-0.3, 0.0], "nk": 0}
+        linear[0][10] = {"b": [0.05, 0.02], "f": [0.0, 0.0], "nk": 0}
+        linear[1][5] = {"b": [1.0, -0.4], "f": [-0.5, 0.0], "nk": 0}
+        linear[1][11] = {"b": [0.04, 0.0], "f": [0.0, 0.0], "nk": 0}
+        linear[2][12] = {"b": [0.3, 0.0], "f": [-0.2, 0.0], "nk": 0}
+        linear[2][8] = {"b": [5.0, 0.0], "f": [0.0, 0.0], "nk": 1}
+        linear[5][2] = {"b": [0.01, 0.0], "f": [-0.4, 0.0], "nk": 0}
     else:
         in_maps[7] = {"type": "piecewise_linear", "breakpoints": [-0.05, 0.0, 0.05], "values": [0.2, 0.0, 0.3]}
         linear[2][7] = {"b": [0.5, 0.5], "f": [-0.2, 0.0], "nk": 0}
@@ -993,14 +1013,45 @@ class LineMotion:
         return np.column_stack([np.tile(self.q, (n, 1)), self.position(t), np.tile(self.v, (n, 1)), np.zeros((n, 3))])
 
 
+@dataclass
+class Prediction:
+    """A prediction fixture (spec §16.8.2): a training and a test trial on straight lines at constant velocity, and
+    given parameter files. The test trial's motion is the training one moved by ``shift`` (m), turned by ``turn``
+    = (axis, angle in rad) about a world axis, and its force offset by ``df0`` (N)."""
+
+    name: str
+    fmt: str
+    rig_kind: str
+    train: LineMotion
+    shift: np.ndarray
+    df0: np.ndarray
+    desc: str
+    models: tuple[str, ...] = ("a", "b")
+    turn: tuple[tuple[float, float, float], float] = ((0.0, 0.0, 1.0), 0.0)
+    rates: tuple[float, float, float] = (100.0, 100.0, 100.0)
+    start_s: float = 0.0
+    clock_offsets: dict[str, float] = field(default_factory=dict)
+    how: str = ""
+
+    @property
+    def test(self) -> LineMotion:
+        axis, angle = self.turn
+        q = quat_multiply(quat_from_axis_angle(np.asarray(axis, float), np.array(angle)), self.train.q) if angle else self.train.q
+        return LineMotion(self.train.p0 + self.shift, self.train.v, q, self.train.f0 + self.df0, self.train.f1)
+
+
 def dynamics_fixtures() -> list[Fixture]:
     out: list[Fixture] = []
     T = 25.0
     seg = int(round(param("dynamics", "segment_s") * 100))
     R_p = param("dynamics", "R_p")
+    R_theta = math.radians(param("dynamics", "R_theta"))
 
-    def expectations(model: dict, train: LineMotion, test: LineMotion) -> dict:
-        tg = grid(T)
+    def expectations(model: dict, pr: Prediction) -> dict:
+        """Spec §11.3 on both trials' inputs on the grid of §7.3 (from the streams' common start), §11.6 for the line:
+        every test window's nearest training window is its twin, |Δp|/R_p + turn/R_θ away."""
+        tg = pr.start_s + grid(T)
+        train, test = pr.train, pr.test
         y_hat = hw_predict(model, train.inputs(tg))
         meas = np.column_stack([train.force(tg), np.zeros((len(tg), 3))])
         err = meas - y_hat
@@ -1013,60 +1064,75 @@ def dynamics_fixtures() -> list[Fixture]:
             return [float(np.mean(np.sqrt(np.mean(e[s * seg:(s + 1) * seg, :3] ** 2, axis=0)))) for s in range(nseg)]
 
         tr, te = seg_errors(err), seg_errors(err_test)
-        d_test = float(np.linalg.norm(test.p0 - train.p0) / R_p)
+        d_test = float(np.linalg.norm(pr.shift) / R_p + pr.turn[1] / R_theta)
         x = np.array([0.0] * len(tr) + [d_test] * len(te))
         yv = np.array(tr + te)
         slope, intercept = np.polyfit(x, yv, 1)
         return {"force": rm[:3], "torque": rm[3:], "line": [float(slope), float(intercept)], "distance": d_test}
 
     q_tilt = quat_from_axis_angle(np.array([0.2, 1.0, 0.1]), np.array(0.6))
+    turned_start, turn = 0.0037, 0.75
     variants = [
-        ("dyn-predict", "parquet", "example", LineMotion(np.array([-0.04, 0.01, 0.15]), np.array([0.003, 0.0, 0.0]),
-                                                         np.array([1.0, 0.0, 0.0, 0.0]), np.array([0.2, -0.1, 0.3]),
-                                                         np.array([0.01, 0.004, 0.0])),
-         np.array([0.0, 0.0, R_p]), np.array([0.5, 0.2, -0.1]), "Typical: a given model, a test trial one R_p away."),
-        ("dyn-predict-hemisphere-csv", "csv", "rotated",
-         LineMotion(np.array([0.05, -0.02, 0.12]), np.array([-0.002, 0.001, 0.0005]), -q_tilt, np.array([-0.3, 0.2, 0.1]),
-                    np.array([0.0, -0.01, 0.006])),
-         0.5 * R_p * np.array([1.0, 2.0, 0.0]) / math.sqrt(5.0), np.array([0.1, 0.0, 0.2]),
-         "Tricky: the motion-capture quaternion is stored as −q (hemisphere rule), rotated sensor frames, CSV."),
+        Prediction("dyn-predict", "parquet", "example", LineMotion(np.array([-0.04, 0.01, 0.15]), np.array([0.003, 0.0, 0.0]),
+                                                                   np.array([1.0, 0.0, 0.0, 0.0]), np.array([0.2, -0.1, 0.3]),
+                                                                   np.array([0.01, 0.004, 0.0])),
+                   np.array([0.0, 0.0, R_p]), np.array([0.5, 0.2, -0.1]), "Typical: a given model, a test trial one R_p away."),
+        Prediction("dyn-predict-hemisphere-csv", "csv", "rotated",
+                   LineMotion(np.array([0.05, -0.02, 0.12]), np.array([-0.002, 0.001, 0.0005]), -q_tilt, np.array([-0.3, 0.2, 0.1]),
+                              np.array([0.0, -0.01, 0.006])),
+                   0.5 * R_p * np.array([1.0, 2.0, 0.0]) / math.sqrt(5.0), np.array([0.1, 0.0, 0.2]),
+                   "Tricky: the motion-capture quaternion is stored as −q (hemisphere rule), rotated sensor frames, CSV."),
+        Prediction("dyn-predict-clock-csv", "csv", "rotated",
+                   LineMotion(np.array([0.02, 0.035, 0.13]), np.array([0.002, -0.0015, 0.001]), q_tilt, np.array([0.1, 0.3, -0.2]),
+                              np.array([0.008, 0.0, -0.005])),
+                   0.5 * R_p * np.array([0.6, 0.8, 0.0]), np.array([-0.2, 0.1, 0.05]),
+                   "Tricky: streams at 250, 400 and 120 Hz starting 3.7 ms into the session clock, motion capture and "
+                   "accelerometer shifted by clock-offset records, a test trial turned by 43°, a model that reads "
+                   "orientation, position beyond its map, velocity and the gravity-free acceleration.",
+                   models=("c",), turn=((0.3, -0.4, 0.87), turn), rates=(250.0, 400.0, 120.0), start_s=turned_start,
+                   clock_offsets={"handle_pose": 0.0213, "handle_accel": -0.0171},
+                   how=(f"; the streams start at t = {turned_start} s (the grid of §7.3 starts there, not at a multiple of "
+                        "10 ms), handle_pose is stored 21.3 ms early and handle_accel 17.1 ms late with clock_offset records "
+                        "+0.0213 s and −0.0171 s (§2.8: added to t), and at 250/400/120 Hz the 100 Hz grid falls between "
+                        "samples (linear interpolation is exact on lines); the calibrated acceleration is zero (gravity, "
+                        "bias and the rotated accelerometer frame removed, §6.6) and model-c maps it")),
     ]
-    for name, fmt, rig_kind, train, shift, df0, desc in variants:
-        test = LineMotion(train.p0 + shift, train.v, train.q, train.f0 + df0, train.f1)
-
-        def build(path: Path, name=name, fmt=fmt, rig_kind=rig_kind, train=train, test=test) -> None:
-            rig = example_rig() if rig_kind == "example" else rb.rotated_rig()
-            w = manifest(f"conf-{name}", rig, truth=rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0))
-            for tid, rep, m in (("local_dynamic-1", 1, train), ("local_dynamic-2", 2, test)):
+    for pr in variants:
+        def build(path: Path, pr=pr) -> None:
+            rig = example_rig() if pr.rig_kind == "example" else rb.rotated_rig()
+            w = manifest(f"conf-{pr.name}", rig, truth=rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0))
+            for tid, rep, m in (("local_dynamic-1", 1, pr.train), ("local_dynamic-2", 2, pr.test)):
                 handle_trial(w, tid, "local_dynamic", duration_s=T, position=m.position, quaternion=fixed(m.q), force_w=m.force,
                              truth=rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0),
-                             rates=(100.0, 100.0, 100.0), fmt=fmt, repetition=rep)
+                             rates=pr.rates, fmt=pr.fmt, repetition=rep, start_s=pr.start_s, clock_offsets=pr.clock_offsets)
             w.write(path)
-            for variant in ("a", "b"):
+            for variant in pr.models:
                 (path / f"model-{variant}.json").write_text(json.dumps(hw_model(variant), indent=1) + "\n", encoding="utf-8")
 
-        fx = Fixture(name, build)
-        short = name.removeprefix("dyn-")
+        fx = Fixture(pr.name, build)
+        short, desc = pr.name.removeprefix("dyn-"), pr.desc
         how = ("the handle moves on a straight line at constant velocity with a fixed orientation and the hand force is "
                "linear in time, so the §7.2 filters (chord removed) pass every signal unchanged and the model inputs on "
                "the 100 Hz grid are known exactly; the value is spec §11.3 applied to them (lfilter from rest, maps with "
-               "linear extension) against the measured force")
-        for variant in ("a", "b"):
-            e = expectations(hw_model(variant), train, test)
+               "linear extension) against the measured force" + pr.how)
+        for variant in pr.models:
+            e = expectations(hw_model(variant), pr)
             params = {"model": f"model-{variant}.json"}
             sfx = f"{short}.model-{variant}"
+            away = (f"{np.linalg.norm(pr.shift) / R_p:g}·R_p away" + (f" and turned by {pr.turn[1]} rad = "
+                                                                      f"{pr.turn[1] / R_theta:.4g}·R_θ" if pr.turn[1] else ""))
             fx.cases += [
-                case(f"dynamics.force_rmse.{sfx}", "dynamics.force_rmse", "11.3", name, e["force"], "N", 1e-7, 1e-7, "spec",
+                case(f"dynamics.force_rmse.{sfx}", "dynamics.force_rmse", "11.3", pr.name, e["force"], "N", 1e-7, 1e-7, "spec",
                      how + f"; model file model-{variant}.json given in parameters.model", desc, parameters=params),
-                case(f"dynamics.force_rmse_mean.{sfx}", "dynamics.force_rmse_mean", "11.7", name, float(np.mean(e["force"])),
+                case(f"dynamics.force_rmse_mean.{sfx}", "dynamics.force_rmse_mean", "11.7", pr.name, float(np.mean(e["force"])),
                      "N", 1e-7, 1e-7, "spec", how, desc, parameters=params),
-                case(f"dynamics.torque_rmse.{sfx}", "dynamics.torque_rmse", "11.3", name, e["torque"], "N*m", 1e-8, 1e-7,
+                case(f"dynamics.torque_rmse.{sfx}", "dynamics.torque_rmse", "11.3", pr.name, e["torque"], "N*m", 1e-8, 1e-7,
                      "spec", how + "; the measured torque about the gimbal centre is zero", desc, parameters=params),
-                case(f"dynamics.torque_rmse_mean.{sfx}", "dynamics.torque_rmse_mean", "11.7", name,
+                case(f"dynamics.torque_rmse_mean.{sfx}", "dynamics.torque_rmse_mean", "11.7", pr.name,
                      float(np.mean(e["torque"])), "N*m", 1e-8, 1e-7, "spec", how, desc, parameters=params),
-                case(f"dynamics.error_vs_distance.{sfx}", "dynamics.error_vs_distance", "11.6", name, e["line"], "N", 1e-6,
-                     1e-6, "spec", how + f"; the test trial repeats the motion {e['distance']:g}·R_p away (every window's "
-                     f"nearest training window is its twin: distance {e['distance']:g}), training segments at distance 0; "
+                case(f"dynamics.error_vs_distance.{sfx}", "dynamics.error_vs_distance", "11.6", pr.name, e["line"], "N", 1e-6,
+                     1e-6, "spec", how + f"; the test trial repeats the motion {away}, perpendicular to its velocity (every window's nearest training "
+                     f"window is its twin: distance {e['distance']:g}), training segments at distance 0; "
                      "the least-squares line through (distance, mean per-axis RMS error) of the 5 s segments",
                      desc, parameters=params),
             ]
