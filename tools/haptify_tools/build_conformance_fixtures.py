@@ -180,6 +180,13 @@ def grid(duration_s: float, rate: float = 100.0) -> np.ndarray:
     return clock(duration_s, rate)
 
 
+def lowpass_pair_gain(f: float, fs: float, fc: float) -> float:
+    """Amplitude gain at f of the forward-backward Butterworth low-pass of spec §7.2: |H|² = 1 / (1 + Ω^(2N))."""
+    fc = min(fc, param("signals", "max_cutoff_fraction") * fs / 2.0)
+    omega = math.tan(math.pi * f / fs) / math.tan(math.pi * fc / fs)
+    return 1.0 / (1.0 + omega ** (2 * int(param("signals", "filter_order"))))
+
+
 def lowpass_noise_ratio(fc: float, fs: float, order: int) -> float:
     """Variance gain of white noise through the zero-phase Butterworth low-pass of spec §7.2:
     (2/fs)·∫₀^{fs/2} |H(f)|⁴ df with |H|² = 1 / (1 + Ω^(2N)), Ω = tan(πf/fs) / tan(πfc/fs) (midpoint rule)."""
@@ -585,7 +592,88 @@ def free_space_fixtures() -> list[Fixture]:
              "has no occlusion", "Edge: a purely vertical oscillation."),
     ]
     out.append(fx)
+    out.append(jitter_fixture(truth))
     return out
+
+
+def envelope(t: np.ndarray, start: float, stop: float, ramp: float = 0.5) -> np.ndarray:
+    """0 before ``start`` and after ``stop``, 1 between the two sin² ramps of ``ramp`` s: switches a vibration on
+    away from a trial's ends (its spectrum stays within ~2/ramp Hz of the vibration's frequency)."""
+    up = np.clip((t - start) / ramp, 0.0, 1.0)
+    down = np.clip((stop - t) / ramp, 0.0, 1.0)
+    return np.sin(0.5 * np.pi * up) ** 2 * np.sin(0.5 * np.pi * down) ** 2
+
+
+JITTER = {"position_m": 3e-4, "position_hz": 30.0, "angle_rad": math.radians(0.1), "angle_hz": 30.0,
+          "force_N": 0.5, "force_hz": 180.0, "plate_N": 2.0, "plate_hz": 130.0}
+
+
+def jitter_fixture(truth: rb.HandleTruth) -> Fixture:
+    """Free space with vibrations every low-pass of §7.2 removes: 30 Hz marker jitter in position and about the
+    vertical, a 180 Hz force on the hand, a 130 Hz plate force. The spec's values are those of the smooth motion and
+    forces; a velocity or angular velocity differentiated without the low-pass, a force resampled before filtering
+    (180 Hz aliases to 20 Hz on the 100 Hz grid) or an unfiltered plate force are far off."""
+    name, T, j = "fs-jitter", 12.0, JITTER
+    F0, P0 = np.array([0.4, -0.2, 0.3]), np.array([0.3, 0.0, -16.0])
+
+    def on(t: np.ndarray) -> np.ndarray:
+        return envelope(t, 1.0, T - 1.0)
+
+    def position(t: np.ndarray) -> np.ndarray:
+        return circle(0.05, 1.0)(t) + np.outer(j["position_m"] * on(t) * np.sin(2 * np.pi * j["position_hz"] * t), Z)
+
+    def quaternion(t: np.ndarray) -> np.ndarray:
+        wobble = quat_from_axis_angle(np.tile(Z, (len(t), 1)), j["angle_rad"] * on(t) * np.sin(2 * np.pi * j["angle_hz"] * t))
+        return quat_multiply(wobble, spin(0.07)(t))
+
+    def force(t: np.ndarray) -> np.ndarray:
+        return F0 + np.outer(j["force_N"] * on(t) * np.sin(2 * np.pi * j["force_hz"] * t), [1.0, 0.0, 0.0])
+
+    def plate(t: np.ndarray) -> np.ndarray:
+        return P0 + np.outer(j["plate_N"] * on(t) * np.cos(2 * np.pi * j["plate_hz"] * t), Z)
+
+    def build(path: Path) -> None:
+        rig = example_rig()
+        bias = rb.plate_bias_vector(rig)
+        w = manifest(f"conf-{name}", rig, truth=truth, plate_bias=bias)
+        handle_trial(w, "free_space-1", "free_space", duration_s=T, position=position, quaternion=quaternion, force_w=force,
+                     truth=truth, rates=(1000.0, 500.0, 100.0), plate_force_w=plate, plate_bias=bias)
+        w.write(path)
+
+    fx = Fixture(name, build)
+    fc = param("signals", "mocap_cutoff_hz")
+    gains = {k: lowpass_pair_gain(f, rate, cut) for k, f, rate, cut in (
+        ("mocap", j["position_hz"], 100.0, fc), ("force", j["force_hz"], 1000.0, param("signals", "wrench_cutoff_hz")),
+        ("plate", j["plate_hz"], 1000.0, param("signals", "wrench_cutoff_hz")))}
+    jit = (f"marker jitter {j['position_m'] * 1000:g} mm along z and {math.degrees(j['angle_rad']):g}° about the vertical "
+           f"at {j['position_hz']:g} Hz (switched on by sin² ramps 1 s from the ends), which the §7.4 low-pass at {fc:g} Hz "
+           f"passes with gain {gains['mocap']:.1e}")
+    f0 = float(np.linalg.norm(F0))
+    felt_note = (f"constant force {tuple(F0)} N on the hand plus {j['force_N']} N at {j['force_hz']:g} Hz along x (ramped on "
+                 f"1 s from the ends); the 20 Hz low-pass at the F/T's 1 kHz leaves {gains['force']:.1e} of it (§7.5: filter at "
+                 "the native rate, then interpolate; resampled first, 180 Hz aliases to 20 Hz on the 100 Hz grid)")
+    desc = "Tricky: vibrations above every cut-off of §7.2 (marker jitter, a motor hum in the force, a ringing plate)."
+    fx.cases += [
+        case("free_space.speed_mean.jitter", "free_space.speed_mean", "7.4", name, 0.05, "m/s", 0.0, 1e-3, "analytic",
+             f"circle r = 0.05 m at 1 rad/s (speed r·ω) with {jit}; velocity is the derivative of the LOW-PASSED position. "
+             "Tolerance 0.1 %: the circle passes the low-pass unchanged to 1e-5, the jitter adds its square (1e-11)", desc),
+        case("free_space.angular_speed_mean.jitter", "free_space.angular_speed_mean", "7.4", name, 0.07, "rad/s", 0.0, 1e-3,
+             "analytic", f"constant rotation at 0.07 rad/s with {jit}; the angular velocity is low-passed (§7.4 step 4). "
+             "Tolerance 0.1 %: a rotation about the vertical turns the spin axis without changing |ω| to first order", desc),
+        case("free_space.force_mean.jitter", "free_space.force_mean", "9.2", name, f0, "N", 0.0, 2e-3, "analytic",
+             f"|F| of the {felt_note}; the jitter about the vertical leaves the connector's weight in the sensor frame "
+             "unchanged. Tolerance 0.2 % as for the other constant forces", desc),
+        case("free_space.force_max.jitter", "free_space.force_max", "9.2", name, f0, "N", 0.0, 2e-3, "analytic",
+             f"max |F| of the {felt_note}", desc),
+        case("free_space.force_sd.jitter", "free_space.force_sd", "9.2", name, 0.0, "N", 2e-3, 0.0, "analytic",
+             f"SD of |F| of the {felt_note}: 0 (tolerance: the rounding of the calibration under rotation, as for the "
+             "other constant force)", desc),
+        case("free_space.plate_force_mean.jitter", "free_space.plate_force_mean", "9.3", name, 0.3, "N", 0.0, 5e-3, "analytic",
+             f"plate force {tuple(P0)} N plus {j['plate_N']} N at {j['plate_hz']:g} Hz vertical (ramped on 1 s from the ends), "
+             f"low-passed at 20 Hz (gain {gains['plate']:.1e}) before resampling (§9.3); removing the mean vertical leaves "
+             "|(0.3, 0, 0)|. Tolerance 0.5 % as for the other plate cases", desc),
+    ]
+    return fx
 
 
 # --- vibration (spec chapter 10) --------------------------------------------------------------------
