@@ -398,6 +398,48 @@ def workspace_fixtures() -> list[Fixture]:
     ]
     out.append(fx)
 
+    # A sweep that missed a cap of the workspace: its 4 cm hole is narrower than 2r, so the closing bridges it.
+    RC, CC, rim = 0.07, (0.0, -0.02, 0.15), 0.02
+
+    def capless(path: Path) -> None:
+        pts = sphere_cloud(7000, RC, CC, np.random.default_rng(SEED + 6))
+        pts = pts[pts[:, 2] - CC[2] <= math.sqrt(RC ** 2 - rim ** 2)]
+        w = manifest("conf-ws-capless", example_rig(), device=tiny)
+        pose_cloud(w, "workspace-1", pts, "csv")
+        w.write(path)
+
+    fx = Fixture("ws-sphere-capless-csv", capless)
+    h_sphere, h_ball = RC - math.sqrt(RC ** 2 - rim ** 2), cr - math.sqrt(cr ** 2 - rim ** 2)
+    dented = 4 / 3 * math.pi * RC ** 3 - math.pi * h_sphere ** 2 * (3 * RC - h_sphere) / 3 - math.pi * h_ball ** 2 * (3 * cr - h_ball) / 3
+    fx.cases += [
+        case("workspace.measured_volume.capless", "workspace.measured_volume", "8.4", fx.name, dented, "m^3", 0.0, 0.015,
+             "analytic", f"sphere R = {RC} m sampled on its surface except a polar cap whose rim has radius {rim} m: the hole "
+             f"(4 cm across) is narrower than 2r = {2 * cr:g} m, so the closing by a ball of radius r bridges it (§8.4 steps 2–4) "
+             "and the solid is the sphere minus its cap above the rim and minus the part of an r-ball resting on the rim "
+             "that dips below it (πh²(3R − h)/3 each: 0.5 % of the sphere in all); the dent has no boundary samples, so "
+             "it is resolved on the coarse lattice only (≤ 0.2 %); " + bias, "Tricky: a sweep that missed a cap."),
+    ]
+    out.append(fx)
+
+    # A thin slab, four voxels thick: near the operator's resolution limit of about 2 h (spec §8.8).
+    slab, q_slab = (0.12, 0.12, 0.01), quat_from_axis_angle(np.array([0.3, -0.5, 0.8]), np.array(0.7))
+
+    def thin(path: Path) -> None:
+        w = manifest("conf-ws-slab", example_rig(), device=tiny)
+        pose_cloud(w, "workspace-1", box_cloud(20_000, slab, np.random.default_rng(SEED + 7), q_slab, (0.02, 0.01, 0.15)),
+                   "parquet")
+        w.write(path)
+
+    fx = Fixture("ws-thin-slab", thin)
+    fx.cases += [
+        case("workspace.measured_volume.thin-slab", "workspace.measured_volume", "8.4", fx.name, math.prod(slab), "m^3", 0.0,
+             0.02, "analytic", f"a box of edges {slab} m turned 0.7 rad about (0.3, −0.5, 0.8), 20 000 samples on its faces; "
+             f"1 cm is four voxels of h = {pitch} m, twice the operator's resolution limit of about 2 h (spec §8.8): both "
+             "faces' samples lie within every band voxel's search radius, so the sub-voxel ramps place both faces; "
+             "tolerance 2 %, the bias allowed for a non-convex or thin solid", "Edge: a thin workspace."),
+    ]
+    out.append(fx)
+
     # The model swept through its whole boundary, device placed turned and moved (rotated frames).
     mid = scaled_device(0.45)
     placement = placement_of((0.04, -0.03, 0.01), yaw=2.2, tilt=0.15)
