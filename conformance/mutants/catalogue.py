@@ -31,8 +31,8 @@ from scipy import ndimage
 from scipy.signal import butter, cheby1, sosfilt, sosfiltfilt
 from scipy.spatial import ConvexHull
 
-from haptify import (calibration, force_plate, free_space, local_dynamics, repetitions, signals, stiffness, storage,
-                     surface, vibration, workspace)
+from haptify import (calibration, force_plate, free_space, local_dynamics, repetitions, rig_checks, signals, stiffness,
+                     storage, surface, vibration, workspace)
 from haptify.caching import session_of
 from haptify.conventions import STANDARD_GRAVITY, quat_conjugate, quat_rotate
 from haptify_conform import reference
@@ -114,7 +114,7 @@ def _params(**values: Any) -> Make:
 
 
 def _post(fn: Callable) -> Make:
-    """The real function, its result passed through ``fn(result, *args)``."""
+    """The real function, its result passed through ``fn(result, *args)`` (positional arguments only)."""
     def make(real: Callable) -> Callable:
         def wrapped(*args: Any, **kw: Any) -> Any:
             return fn(real(*args, **kw), *args)
@@ -202,6 +202,17 @@ def _combine_then_trim(real: Callable) -> Callable:
         whole = vibration.dft321(vibration.highpass(accel, signals.nominal_rate(np.asarray(t, dtype=float))))
         trim = (len(t) - len(out.t)) // 2
         return dataclasses.replace(out, signal=whole[trim:trim + len(out.t)])
+    return combine
+
+
+def _trim_start_only(real: Callable) -> Callable:
+    """edge_trim_s cut from the start only (the filter's start-up), the end kept."""
+    def combine(t: np.ndarray, accel: np.ndarray, trial_id: str = "") -> Any:
+        out = real(t, accel, trial_id)
+        trim = (len(t) - len(out.t)) // 2
+        kept = slice(trim, len(t))
+        filtered = vibration.highpass(accel, signals.nominal_rate(np.asarray(t, dtype=float)))
+        return dataclasses.replace(out, t=np.asarray(t, dtype=float)[kept], signal=vibration.dft321(filtered[kept]))
     return combine
 
 
@@ -344,6 +355,29 @@ def _raw_derivative(which: str) -> Make:
     return make
 
 
+def _population_sd(stats: dict, values: np.ndarray, *_: Any) -> dict:
+    """The standard deviation with ddof = 0 (numpy's default) where the spec says ddof = 1."""
+    n = len(values)
+    return {**stats, "sd": stats["sd"] * math.sqrt((n - 1) / n)}
+
+
+def _first_record(real: Callable) -> Callable:
+    """The FIRST handle_gravity record in manifest order applies (the last one is the spec's)."""
+    def handle_calibration(ctx_or_session: Any) -> Any:
+        session = session_of(ctx_or_session)
+        records = [c for c in session.manifest.calibration if c.kind == "handle_gravity"]
+        return calibration.HandleCalibration.from_record(records[0]) if records else real(ctx_or_session)
+    return handle_calibration
+
+
+def _gap_limit_strict(real: Callable) -> Callable:
+    """Gaps bridged only when t_j − t_i ≤ max_gap_s (the sample interval Δ of §7.4 left out)."""
+    def bridge_gaps(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray, max_gap_s: float | None = None) -> Any:
+        limit = float(signals.sp("max_gap_s") if max_gap_s is None else max_gap_s)
+        return real(t, position, quaternion, max_gap_s=limit - float(np.median(np.diff(np.asarray(t, dtype=float)))))
+    return bridge_gaps
+
+
 # --- surface contact (spec chapter 12) ------------------------------------------------------------------
 
 def _contact_unguarded(cs: Any, *_: Any) -> Any:
@@ -385,6 +419,15 @@ def _cop_kistler_sign(result: tuple, *_: Any) -> tuple:
     cop = np.array(cop, copy=True)
     cop[:, 1] *= -1.0
     return cop, valid
+
+
+def _signed_sync(result: Any, family_name: str, metric_id: str, values: Any, **kw: Any) -> Any:
+    """rig.sync_offset as the largest SIGNED delay of each trial (a recorder that is early does not count); the rig
+    family's aggregate is patched, the signed delays are in the record's diagnostics."""
+    if metric_id != "rig.sync_offset":
+        return result
+    per_trial = [max(d.values()) for d in result.diagnostics["delays_s"].values()]
+    return result.model_copy(update={"value": float(np.mean(per_trial)), "per_repetition": per_trial})
 
 
 def _fit_raw_samples(real: Callable) -> Callable:
@@ -493,6 +536,13 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant("last_repetition_only", "15.3", "a metric's value is the arithmetic mean of its per-repetition values",
            "the last repetition's value (as §6.4 takes the most recent calibration)", _aggregate_by(lambda v: v[-1]),
            ("vibration.rms", "vibration.spectral_centroid"), cheap=True),
+    Mutant("quadratic_mean_of_repetitions", "15.3", "a metric's value is the arithmetic mean of its per-repetition values",
+           "the root mean square of the per-repetition values (pooling their energy)",
+           _aggregate_by(lambda v: math.sqrt(float(np.mean(np.square(v))))), ("vibration.rms",), cheap=True),
+    Mutant("sd_ddof_0", "9.2", "force_sd and planar_force_sd are sample standard deviations (ddof = 1)",
+           "numpy's default ddof = 0", (Patch(free_space, "magnitude_stats", _post(_population_sd)),
+                                        Patch(surface, "planar_stats", _post(_population_sd))),
+           ("free_space.force_sd",), cheap=True),
     # vibration: axis combination
     Mutant("axes_summed", "10.3", "the three axes are combined by DFT321", "the axes added sample by sample",
            (Patch(vibration, "dft321", _replace(_summed_axes)),), ("vibration.rms",), cheap=True),
@@ -519,6 +569,8 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant("edge_trim_off", "10.2", "edge_trim_s = 0.5 s is cut from each end after filtering",
            "the whole filtered signal is analysed", (Patch(vibration, "vp", _params(edge_trim_s=0.0)),),
            ("vibration.rms", "vibration.spectral_centroid"), cheap=True),
+    Mutant("edge_trim_start_only", "10.2", "edge_trim_s is cut from EACH end", "only from the start (the filter's start-up)",
+           (Patch(vibration, "combine", _trim_start_only),), ("vibration.rms",), cheap=True),
     Mutant("dft321_before_trim", "10.2", "the filtered axes are trimmed, then combined by DFT321",
            "DFT321 over the whole filtered signal, trimmed afterwards", (Patch(vibration, "combine", _combine_then_trim),),
            ("vibration.rms", "vibration.spectral_centroid"), cheap=True),
@@ -597,6 +649,8 @@ MUTANTS: tuple[Mutant, ...] = (
            "only the bias is removed", (Patch(calibration, "compensate_wrench",
                                                _with_calibration(connector_mass_kg=lambda c: 0.0)),),
            ("free_space.force_mean",), cheap=True),
+    Mutant("calibration_first_record", "6.4", "the LAST handle_gravity record in manifest order applies",
+           "the first one", (Patch(calibration, "handle_calibration", _first_record),), ("free_space.force_mean",)),
     Mutant("connector_weight_at_9_8", "6.4", "the connector weight removed is m·g0 (g0 = 9.80665 m/s²)",
            "m·9.8", (Patch(calibration, "compensate_wrench",
                            _with_calibration(connector_mass_kg=lambda c: c.connector_mass_kg * 9.8 / STANDARD_GRAVITY)),),
@@ -605,6 +659,8 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant("gaps_interpolated", "7.4", "occlusion gaps longer than max_gap_s are never interpolated across",
            "every gap is bridged", (Patch(signals, "bridge_gaps", lambda real: lambda t, p, q, max_gap_s=None:
                                           real(t, p, q, max_gap_s=math.inf)),), ("free_space.speed_mean",), cheap=True),
+    Mutant("gap_limit_without_sample_interval", "7.4", "a gap is bridged when t_j − t_i ≤ max_gap_s + Δ",
+           "when t_j − t_i ≤ max_gap_s", (Patch(signals, "bridge_gaps", _gap_limit_strict),), ("free_space.force_max",)),
     Mutant("speed_from_raw_positions", "7.4", "velocity is the derivative of the low-passed position",
            "of the raw positions", (Patch(signals, "process_mocap", _raw_derivative("velocity")),), ("free_space.speed_mean",)),
     Mutant("angular_velocity_unfiltered", "7.4", "the angular velocity is low-passed at mocap_cutoff_hz",
@@ -619,6 +675,9 @@ MUTANTS: tuple[Mutant, ...] = (
            "it is resampled unfiltered", (Patch(free_space, "lowpass_resample",
                                                 _replace(lambda t, x, grid, fc: signals.interp_columns(t, x, grid))),),
            ("free_space.plate_force_mean",)),
+    Mutant("plate_bias_ignored", "14.2", "the plate bias (record or rig.plate_bias trial) is subtracted from every corner",
+           "the bias is left in (the vertical de-meaning of §9.3 taken to remove it)",
+           (Patch(force_plate, "plate_bias", _replace(lambda ctx: (np.zeros(24), "none"))),), ("free_space.plate_force_mean",)),
     Mutant("plate_corner_frames_ignored", "14.1", "each corner reading is rotated from its sensor frame into W",
            "the corner frames are taken for W", (Patch(force_plate, "corner_geometry", _post(
                lambda r, *_: (r[0], np.broadcast_to(np.eye(3), r[1].shape).copy())), everywhere=True),),
@@ -653,6 +712,8 @@ MUTANTS: tuple[Mutant, ...] = (
     # rig
     Mutant("cop_kistler_sign", "14.3", "Y = +M_x / F_z in the z-up plate frame", "Y = −M_x / F_z as the paper prints it",
            (Patch(force_plate, "center_of_pressure", _post(_cop_kistler_sign)),), ("rig.cop_error",)),
+    Mutant("sync_offset_signed_max", "14.6", "rig.sync_offset is the largest |delay| of the two recorders",
+           "the largest signed delay", (Patch(rig_checks, "aggregate", _post(_signed_sync)),), ("rig.sync_offset",)),
     Mutant("calibration_fit_on_raw_samples", "6.2", "the calibration fits use the low-passed samples resampled to 100 Hz",
            "the raw samples at their native rates", (Patch(calibration, "fit_trial", _fit_raw_samples),),
            ("rig.handle_calibration_rms",)),

@@ -84,8 +84,11 @@ def rotated_rig_full() -> dict:
 
 
 def manifest(sid: str, rig: dict, *, device: dict | None = None, placement: dict | None = None,
-             truth: rb.HandleTruth = QUIET, plate_bias: np.ndarray | None = None) -> SessionWriter:
-    cal: list = [truth.record("hg-1")]
+             truth: rb.HandleTruth = QUIET, plate_bias: np.ndarray | None = None,
+             superseded: rb.HandleTruth | None = None) -> SessionWriter:
+    """A session writer whose handle_gravity record holds ``truth`` — after a ``superseded`` record, when given,
+    which §6.4 (the last record applies) sets aside."""
+    cal: list = ([superseded.record("hg-0")] if superseded else []) + [truth.record("hg-1")]
     if plate_bias is not None:
         cal.append({"kind": "plate_bias", "id": "plate-bias-1", "bias": [float(v) for v in plate_bias]})
     return SessionWriter(manifest={"session_id": sid, "date": "2026-11-22", "lab": {"id": "lab-conformance"},
@@ -645,7 +648,86 @@ def free_space_fixtures() -> list[Fixture]:
     ]
     out.append(fx)
     out.append(jitter_fixture(truth))
+    out.append(glimpse_fixture(truth))
+    out.append(pushes_fixture(truth))
     return out
+
+
+def glimpse_fixture(truth: rb.HandleTruth) -> Fixture:
+    """Motion capture sees the handle for 0.3 s only (31 rows of the 100 Hz grid): the force statistics rest on few
+    samples, where the sample SD (ddof = 1, §9.2) and the population SD differ by 1.6 %."""
+    name, T = "fs-glimpse-csv", 6.0
+
+    def force(t: np.ndarray) -> np.ndarray:
+        return np.column_stack([0.3 + 0.4 * t, -0.2 + 0 * t, 0.1 + 0 * t])
+
+    def seen(t: np.ndarray) -> np.ndarray:
+        k = np.round(t * 100).astype(int)
+        return (k >= 200) & (k <= 230)
+
+    def build(path: Path) -> None:
+        w = manifest(f"conf-{name}", example_rig(), truth=truth)
+        handle_trial(w, "free_space-1", "free_space", duration_s=T, position=circle(0.05, 1.0), quaternion=spin(0.07),
+                     force_w=force, truth=truth, fmt="csv", occluded=lambda t: ~seen(t))
+        w.write(path)
+
+    fx = Fixture(name, build)
+    tg = grid(T)
+    mag = np.linalg.norm(force(tg[seen(tg)]), axis=1)
+    how = (f"|(0.3 + 0.4t, −0.2, 0.1)| N over the {len(mag)} grid rows t = 2.00 … 2.30 s, the only time motion capture "
+           "sees the handle (§7.5: the force counts only where the orientation is known); a force linear in time passes "
+           "the §7.2 low-pass exactly (chord removed), so the values are exact: tolerance 1e-4")
+    desc = "Edge: a trial whose motion capture is usable for 0.3 s only (sample statistics of 31 values)."
+    fx.cases += [
+        case("free_space.force_sd.glimpse", "free_space.force_sd", "9.2", name, mag.std(ddof=1), "N", 0.0, 1e-4, "analytic",
+             "sample SD (ddof = 1) of " + how + f"; ddof = 0 gives {mag.std():.6g} N (1.6 % less)", desc),
+        case("free_space.force_mean.glimpse", "free_space.force_mean", "9.2", name, mag.mean(), "N", 0.0, 1e-4, "analytic",
+             "mean of " + how, desc),
+        case("free_space.force_min.glimpse", "free_space.force_min", "9.2", name, mag.min(), "N", 0.0, 1e-4, "analytic",
+             "minimum (at t = 2.00 s) of " + how, desc),
+        case("free_space.force_max.glimpse", "free_space.force_max", "9.2", name, mag.max(), "N", 0.0, 1e-4, "analytic",
+             "maximum (at t = 2.30 s) of " + how, desc),
+    ]
+    return fx
+
+
+def pushes_fixture(truth: rb.HandleTruth) -> Fixture:
+    """The examiner's hand hides the markers while it pushes: four gaps of seven frames at 150 Hz (t_j − t_i = 53 ms,
+    bridged by §7.4 since max_gap_s + Δ = 56.7 ms), each centred on a force pulse. Leaving such a gap open drops the
+    rows around each pulse's peak."""
+    name, T, rate, centres, width = "fs-occluded-pushes", 10.0, 150.0, (2.0, 4.0, 6.0, 8.0), 0.6
+    F0, push = np.array([0.3, 0.1, 0.2]), np.array([0.6, 0.0, 0.0])
+
+    def pulses(t: np.ndarray) -> np.ndarray:
+        return sum(np.where(np.abs(t - c) <= width / 2, np.sin(np.pi * (t - c + width / 2) / width) ** 2, 0.0) for c in centres)
+
+    def force(t: np.ndarray) -> np.ndarray:
+        return F0 + np.outer(pulses(t), push)
+
+    def hidden(t: np.ndarray) -> np.ndarray:
+        k = np.round(t * rate).astype(int)
+        return np.any([np.abs(k - round(c * rate)) <= 3 for c in centres], axis=0)
+
+    def build(path: Path) -> None:
+        w = manifest(f"conf-{name}", example_rig(), truth=truth)
+        handle_trial(w, "free_space-1", "free_space", duration_s=T, position=circle(0.05, 1.0), quaternion=spin(0.07),
+                     force_w=force, truth=truth, rates=(1000.0, 500.0, rate), occluded=hidden)
+        w.write(path)
+
+    fx = Fixture(name, build)
+    mag = np.linalg.norm(force(grid(T)), axis=1)
+    how = (f"|(0.3, 0.1, 0.2) + p(t)·(0.6, 0, 0)| N with p four sin² pulses {width} s wide centred on t = {centres} s; "
+           f"motion capture at {rate:g} Hz misses 7 frames around each centre (t_j − t_i = 8/150 s = 53.3 ms ≤ max_gap_s + Δ "
+           "= 56.7 ms: bridged, §7.4), so every grid row counts; the pulses pass the §7.2 low-pass (flat to order 8) to "
+           "better than 1e-5: tolerance 1e-3")
+    desc = "Tricky: short occlusions exactly where the force peaks (bridged by §7.4's rule, Δ included)."
+    fx.cases += [
+        case("free_space.force_max.occluded-pushes", "free_space.force_max", "7.4", name, mag.max(), "N", 0.0, 1e-3,
+             "analytic", "maximum (at each pulse's peak, inside a gap) of " + how, desc),
+        case("free_space.force_mean.occluded-pushes", "free_space.force_mean", "7.4", name, mag.mean(), "N", 0.0, 1e-3,
+             "analytic", "mean over the grid of " + how, desc),
+    ]
+    return fx
 
 
 def envelope(t: np.ndarray, start: float, stop: float, ramp: float = 0.5) -> np.ndarray:
@@ -656,6 +738,7 @@ def envelope(t: np.ndarray, start: float, stop: float, ramp: float = 0.5) -> np.
     return np.sin(0.5 * np.pi * up) ** 2 * np.sin(0.5 * np.pi * down) ** 2
 
 
+SUPERSEDED = rb.HandleTruth(mass=0.09, force_bias=np.array([0.1, 0.2, -0.3]), force_noise=0.0, torque_noise=0.0, accel_noise=0.0)
 JITTER = {"position_m": 3e-4, "position_hz": 30.0, "angle_rad": math.radians(0.1), "angle_hz": 30.0,
           "force_N": 0.5, "force_hz": 180.0, "plate_N": 2.0, "plate_hz": 130.0}
 
@@ -687,7 +770,7 @@ def jitter_fixture(truth: rb.HandleTruth) -> Fixture:
     def build(path: Path) -> None:
         rig = example_rig()
         bias = rb.plate_bias_vector(rig)
-        w = manifest(f"conf-{name}", rig, truth=truth, plate_bias=bias)
+        w = manifest(f"conf-{name}", rig, truth=truth, plate_bias=bias, superseded=SUPERSEDED)
         handle_trial(w, "free_space-1", "free_space", duration_s=T, position=position, quaternion=quaternion, force_w=force,
                      truth=truth, rates=(1000.0, 500.0, 100.0), plate_force_w=plate, plate_bias=bias)
         w.write(path)
@@ -714,7 +797,8 @@ def jitter_fixture(truth: rb.HandleTruth) -> Fixture:
              "Tolerance 0.1 %: a rotation about the vertical turns the spin axis without changing |ω| to first order", desc),
         case("free_space.force_mean.jitter", "free_space.force_mean", "9.2", name, f0, "N", 0.0, 2e-3, "analytic",
              f"|F| of the {felt_note}; the jitter about the vertical leaves the connector's weight in the sensor frame "
-             "unchanged. Tolerance 0.2 % as for the other constant forces", desc),
+             f"unchanged; an earlier handle_gravity record (a {SUPERSEDED.mass * 1000:g} g connector) precedes the one that "
+             "applies (§6.4: the last). Tolerance 0.2 % as for the other constant forces", desc),
         case("free_space.force_max.jitter", "free_space.force_max", "9.2", name, f0, "N", 0.0, 2e-3, "analytic",
              f"max |F| of the {felt_note}", desc),
         case("free_space.force_sd.jitter", "free_space.force_sd", "9.2", name, 0.0, "N", 2e-3, 0.0, "analytic",
@@ -1143,7 +1227,27 @@ def rig_fixtures() -> list[Fixture]:
         ]
         out.append(fx)
     out.append(impact_fixture())
+    out.append(early_accel_fixture())
     return out
+
+
+def early_accel_fixture() -> Fixture:
+    """A calibration trial whose accelerometer is EARLY by 4 ms and motion capture late by 1.5 ms: the largest |delay|
+    is the negative one."""
+    name, acc_d, moc_d = "rig-early-accel", -0.004, 0.0015
+
+    def build(path: Path) -> None:
+        w = rb.writer(rig=rb.rotated_rig(), sid=f"conf-{name}")
+        rb.add_calibration_trial(w, rb.HandleTruth(), np.random.default_rng(SEED + 13), duration_s=12.0, accel_delay_s=acc_d,
+                                 mocap_delay_s=moc_d)
+        w.write(path)
+
+    fx = Fixture(name, build)
+    fx.cases.append(case("rig.sync_offset.early-accel", "rig.sync_offset", "14.6", name, max(abs(acc_d), abs(moc_d)), "s",
+                         3e-4, 0.0, "analytic", f"accelerometer time stamps early by {-acc_d} s (delay {acc_d} s), motion "
+                         f"capture late by {moc_d} s against the F/T recorder; the value is the larger |delay|, that of the "
+                         "early recorder; tolerance = a third of the 1 ms grid step", "Edge: the largest delay is negative."))
+    return fx
 
 
 def impact_peaks(t: np.ndarray, force: np.ndarray, rate: float) -> list[float]:
