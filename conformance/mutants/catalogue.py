@@ -42,7 +42,8 @@ Make = Callable[[Any], Any]  # the real object → its replacement
 
 @dataclass(frozen=True)
 class Patch:
-    """Replace ``owner.name`` by ``make(real)`` while a mutant is applied.
+    """Replace ``owner.name`` (or the item ``owner[name]`` of a dict such as a dispatch table) by ``make(real)``
+    while a mutant is applied.
 
     With ``everywhere`` the replacement also goes into every ``haptify`` module that bound the same object
     by name (``from haptify.signals import lowpass_resample``), so the whole reference sees one mistake.
@@ -53,13 +54,24 @@ class Patch:
     make: Make
     everywhere: bool = False
 
+    def real(self) -> Any:
+        """The object replaced (looked up before anything is patched)."""
+        return self.owner[self.name] if isinstance(self.owner, dict) else getattr(self.owner, self.name)
+
     def targets(self) -> list[Any]:
         """The objects whose attribute ``name`` is replaced (looked up before anything is patched)."""
         if not self.everywhere:
             return [self.owner]
-        real = getattr(self.owner, self.name)
+        real = self.real()
         loaded = [m for n, m in sorted(sys.modules.items()) if n == "haptify" or n.startswith("haptify.")]
         return [self.owner] + [m for m in loaded if m is not self.owner and getattr(m, self.name, None) is real]
+
+    def patchers(self) -> list[Any]:
+        """The ``unittest.mock`` patchers that apply it."""
+        new = self.make(self.real())
+        if isinstance(self.owner, dict):
+            return [mock.patch.dict(self.owner, {self.name: new})]
+        return [mock.patch.object(target, self.name, new) for target in self.targets()]
 
 
 @dataclass(frozen=True)
@@ -84,11 +96,8 @@ class Mutant:
     def applied(self) -> Iterator[None]:
         """The reference with this mistake, for the duration of the ``with`` block."""
         with ExitStack() as stack:
-            for p in self.patches:
-                targets = p.targets()
-                new = p.make(getattr(p.owner, p.name))
-                for target in targets:
-                    stack.enter_context(mock.patch.object(target, p.name, new))
+            for patcher in [q for p in self.patches for q in p.patchers()]:
+                stack.enter_context(patcher)
             yield
 
     def analyse(self, session: str, metric: str = "", parameters: dict | None = None) -> dict:
@@ -430,6 +439,17 @@ def _signed_sync(result: Any, family_name: str, metric_id: str, values: Any, **k
     return result.model_copy(update={"value": float(np.mean(per_trial)), "per_repetition": per_trial})
 
 
+def _cop_rms(step: tuple) -> tuple:
+    """rig.cop_error as the root mean square of the placements' errors instead of their mean."""
+    per_trial, summarise = step
+
+    def rms_summary(ctx: Any, metric_id: str, got: dict) -> Any:
+        result = summarise(ctx, metric_id, got)
+        errors = np.array([p.error for placements in got.values() for p in placements])
+        return result.model_copy(update={"value": float(np.sqrt(np.mean(errors ** 2)))})
+    return per_trial, rms_summary
+
+
 def _fit_raw_samples(real: Callable) -> Callable:
     """The calibration spheres and torque fit on the raw samples at their native rates (no Fig. 3 low-pass and
     resampling)."""
@@ -589,6 +609,10 @@ MUTANTS: tuple[Mutant, ...] = (
            "sosfiltfilt without padding, started from the first sample", (Patch(signals, "lowpass", _lowpass_ends_untreated,
                                                                                  everywhere=True),),
            ("dynamics.force_rmse",)),
+    Mutant("sensor_streams_unfiltered", "7.5", "raw F/T and accelerometer streams are low-passed before resampling",
+           "they are interpolated onto the grid as recorded", (Patch(signals, "lowpass_resample", _replace(
+               lambda t_src, x_src, t_dst, cutoff_hz: signals.interp_columns(t_src, x_src, t_dst)), everywhere=True),),
+           ("free_space.force_max",)),
     Mutant("lowpass_after_resampling", "7.5", "raw streams are low-passed at their native rate, then interpolated",
            "interpolated onto the grid first, then low-passed at the grid rate",
            (Patch(signals, "lowpass_resample", _resample_then_lowpass, everywhere=True),), ("free_space.force_max",)),
@@ -710,6 +734,8 @@ MUTANTS: tuple[Mutant, ...] = (
            "3 cm taken for the ball's diameter (radius 1.5 cm)", (Patch(workspace, "wp", _params(closing_radius_m=0.015)),),
            ("workspace.measured_volume",)),
     # rig
+    Mutant("cop_error_rms", "14.5", "rig.cop_error is the MEAN distance over all placements",
+           "their root mean square", (Patch(rig_checks.METRIC_STEPS, "rig.cop_error", _cop_rms),), ("rig.cop_error",)),
     Mutant("cop_kistler_sign", "14.3", "Y = +M_x / F_z in the z-up plate frame", "Y = −M_x / F_z as the paper prints it",
            (Patch(force_plate, "center_of_pressure", _post(_cop_kistler_sign)),), ("rig.cop_error",)),
     Mutant("sync_offset_signed_max", "14.6", "rig.sync_offset is the largest |delay| of the two recorders",
@@ -726,6 +752,10 @@ MUTANTS: tuple[Mutant, ...] = (
            "only to the next power of two", (Patch(force_plate, "param", _params(zero_pad_factor=1)),),
            ("rig.plate_natural_frequency",)),
     # local dynamics
+    Mutant("training_trial_first_listed", "11.7", "the training trial is the local_dynamic trial with the LOWEST repetition",
+           "the first local_dynamic trial in manifest order", (Patch(local_dynamics, "training_trial", _replace(
+               lambda session: next(t for t in session.trials if t.protocol == "local_dynamic"))),),
+           ("dynamics.force_rmse",)),
     Mutant("hemisphere_ignored", "11.3", "quaternions are flipped to the hemisphere of the file's reference",
            "the hemisphere rule is left out", (Patch(local_dynamics, "hemisphere_align", _replace(lambda u, hemi: np.array(u, dtype=float))),),
            ("dynamics.error_vs_distance",)),

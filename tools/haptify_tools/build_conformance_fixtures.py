@@ -1228,7 +1228,32 @@ def rig_fixtures() -> list[Fixture]:
         out.append(fx)
     out.append(impact_fixture())
     out.append(early_accel_fixture())
+    out.append(cop_spread_fixture())
     return out
+
+
+def cop_spread_fixture() -> Fixture:
+    """A COP trial whose marker offsets differ from placement to placement (0, 5 and 25 mm): their mean, 10 mm, is
+    the metric; their root mean square (14.7 mm) or median (5 mm) is not."""
+    name, offsets = "rig-cop-spread", np.array([[0.0, 0.0], [0.005, 0.0], [0.0, -0.025]])
+
+    def build(path: Path) -> None:
+        rng = np.random.default_rng(SEED + 14)
+        rig = example_rig()
+        rig["motion_capture"]["markers"] = sorted(set(rig["motion_capture"]["markers"]) | {"w1"})
+        w = rb.writer(rig=rig, sid=f"conf-{name}")
+        rb.add_plate_bias_trial(w, rng)
+        rb.add_cop_trial(w, rng, np.array([[0.05, -0.05], [-0.15, 0.1], [0.2, 0.2]]), offsets)
+        w.write(path)
+
+    fx = Fixture(name, build)
+    errors = np.linalg.norm(offsets, axis=1)
+    fx.cases.append(case("rig.cop_error.spread", "rig.cop_error", "14.5", name, float(errors.mean()), "m", 5e-4, 0.0, "analytic",
+                         f"three placements of a 1 kg weight whose marker is offset from the load point by {errors.tolist()} m: "
+                         "the mean distance over the placements; corner readings split the load statically (spec §14.1); "
+                         "noise 5 mN per channel; tolerance 0.5 mm as for the other COP cases",
+                         "Tricky: placements of different errors (mean, not RMS or median)."))
+    return fx
 
 
 def early_accel_fixture() -> Fixture:
@@ -1409,6 +1434,7 @@ class Prediction:
     start_s: float = 0.0
     clock_offsets: dict[str, float] = field(default_factory=dict)
     how: str = ""
+    test_listed_first: bool = False
 
     @property
     def test(self) -> LineMotion:
@@ -1467,18 +1493,20 @@ def dynamics_fixtures() -> list[Fixture]:
                    "accelerometer shifted by clock-offset records, a test trial turned by 43°, a model that reads "
                    "orientation, position beyond its map, velocity and the gravity-free acceleration.",
                    models=("c",), turn=((0.3, -0.4, 0.87), turn), rates=(250.0, 400.0, 120.0), start_s=turned_start,
-                   clock_offsets={"handle_pose": 0.0213, "handle_accel": -0.0171},
+                   clock_offsets={"handle_pose": 0.0213, "handle_accel": -0.0171}, test_listed_first=True,
                    how=(f"; the streams start at t = {turned_start} s (the grid of §7.3 starts there, not at a multiple of "
                         "10 ms), handle_pose is stored 21.3 ms early and handle_accel 17.1 ms late with clock_offset records "
                         "+0.0213 s and −0.0171 s (§2.8: added to t), and at 250/400/120 Hz the 100 Hz grid falls between "
                         "samples (linear interpolation is exact on lines); the calibrated acceleration is zero (gravity, "
-                        "bias and the rotated accelerometer frame removed, §6.6) and model-c maps it")),
+                        "bias and the rotated accelerometer frame removed, §6.6) and model-c maps it; the test trial "
+                        "(repetition 2) is listed first in the manifest, the training trial is repetition 1 (§11.7)")),
     ]
     for pr in variants:
         def build(path: Path, pr=pr) -> None:
             rig = example_rig() if pr.rig_kind == "example" else rb.rotated_rig()
             w = manifest(f"conf-{pr.name}", rig, truth=rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0))
-            for tid, rep, m in (("local_dynamic-1", 1, pr.train), ("local_dynamic-2", 2, pr.test)):
+            trials = (("local_dynamic-1", 1, pr.train), ("local_dynamic-2", 2, pr.test))
+            for tid, rep, m in (trials[::-1] if pr.test_listed_first else trials):
                 handle_trial(w, tid, "local_dynamic", duration_s=T, position=m.position, quaternion=fixed(m.q), force_w=m.force,
                              truth=rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0),
                              rates=pr.rates, fmt=pr.fmt, repetition=rep, start_s=pr.start_s, clock_offsets=pr.clock_offsets)
