@@ -3,7 +3,9 @@
 Every case file runs in-process (the reference's ``analyse`` with the mutant's patches applied for the whole
 run, one compute context per session as the JSON-lines reference keeps them) in ``--workers`` processes. A
 control run of the unpatched reference comes first: it must pass every case, or no verdict on a mutant means
-anything (exit 2). A mutant is **caught** when at least one case fails. Per mutant the failing cases are
+anything (exit 2). The validation of a fixture (spec chapter 4: more than half of a run's time) is done once per
+worker process and reused by every mutant that patches nothing in ``haptify.validation``: the fixtures do not
+change between mutants, and no other mutant can change a validation report. A mutant is **caught** when at least one case fails. Per mutant the failing cases are
 listed with their deviation in tolerances, ``max_i |value_i − expected_i| / (abs + rel·|expected_i|)``
 (none when the value is missing, of the wrong shape or unit, or the session was rejected).
 
@@ -22,9 +24,12 @@ import multiprocessing
 import os
 import sys
 import time
+from contextlib import ExitStack
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
+from unittest import mock
 
+from haptify import validation
 from haptify.storage import atomic_write_text
 from haptify_conform import reference
 from haptify_conform.adapters import PythonAdapter
@@ -55,17 +60,33 @@ def deviation_ratio(case: Case, verdict: Verdict) -> float | None:
     return max(ratios)
 
 
+_VALIDATED: dict[str, Any] = {}  # fixture folder → its validation report, per worker process
+
+
+def _validate_once(real: Callable) -> Callable:
+    def validate_session(path: Path, *args: Any, **kw: Any) -> Any:
+        key = str(Path(path).resolve())
+        if args or kw:
+            return real(path, *args, **kw)
+        if key not in _VALIDATED:
+            _VALIDATED[key] = real(path)
+        return _VALIDATED[key]
+    return validate_session
+
+
 def run_one(name: str) -> dict[str, Any]:
     """Run every case against the mutant ``name`` (or the unpatched reference for :data:`CONTROL`)."""
     cases = {c.id: c for c in load_cases()}
     start = time.perf_counter()
     reference._contexts.clear()
     adapter = PythonAdapter("haptify_conform.reference:analyse")
-    if name == CONTROL:
+    with ExitStack() as stack:
+        mutant = BY_NAME.get(name)
+        if mutant is None or not any(getattr(p.owner, "__name__", "") == "haptify.validation" for p in mutant.patches):
+            stack.enter_context(mock.patch.object(reference, "validate_session", _validate_once(validation.validate_session)))
+        if mutant is not None:
+            stack.enter_context(mutant.applied())
         verdicts = run_cases(list(cases.values()), adapter)
-    else:
-        with BY_NAME[name].applied():
-            verdicts = run_cases(list(cases.values()), adapter)
     reference._contexts.clear()
     failing = []
     for v in verdicts:
