@@ -623,7 +623,7 @@ MUTANTS: tuple[Mutant, ...] = (
            "the grid is anchored at multiples of 1/rate on the session clock",
            (Patch(signals, "uniform_grid", _grid_on_clock_multiples, everywhere=True),), ("dynamics.force_rmse",)),
     Mutant("clock_offset_opposite_sign", "2.8", "a clock_offset record's offset_s is ADDED to the stream's t",
-           "subtracted", (Patch(storage.SessionFolder, "clock_offset", lambda real: lambda self, s: -real(self, s)),),
+           "subtracted from the stream's t", (Patch(storage.SessionFolder, "clock_offset", lambda real: lambda self, s: -real(self, s)),),
            ("dynamics.force_rmse",)),
     Mutant("clock_offset_ignored", "2.8", "clock_offset records put streams on the session clock",
            "the records are ignored", (Patch(storage.SessionFolder, "clock_offset", _replace(lambda self, s: 0.0)),),
@@ -676,7 +676,7 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant("calibration_first_record", "6.4", "the LAST handle_gravity record in manifest order applies",
            "the first one", (Patch(calibration, "handle_calibration", _first_record),), ("free_space.force_mean",)),
     Mutant("connector_weight_at_9_8", "6.4", "the connector weight removed is m·g0 (g0 = 9.80665 m/s²)",
-           "m·9.8", (Patch(calibration, "compensate_wrench",
+           "m·9.8 (the rounded g of textbooks)", (Patch(calibration, "compensate_wrench",
                            _with_calibration(connector_mass_kg=lambda c: c.connector_mass_kg * 9.8 / STANDARD_GRAVITY)),),
            ("dynamics.force_rmse",)),
     # motion capture
