@@ -67,6 +67,9 @@ def test_the_mutant_set_is_well_formed_and_its_recorded_result_current():
         assert all((p.name in p.owner) if isinstance(p.owner, dict) else hasattr(p.owner, p.name) for p in m.patches), m.name
     recorded = json.loads(RESULTS.read_text(encoding="utf-8"))
     assert set(recorded["mutants"]) == {m.name for m in mutants}, "run `make mutants` after changing the catalogue"
+    for m in mutants:  # a caught mutant fails a case of a metric it names
+        failing = {f["metric"] for f in recorded["mutants"][m.name]["failing_cases"]}
+        assert not failing or failing & set(m.metrics), (m.name, m.metrics, sorted(failing))
     assert recorded["total"] == len(mutants) and recorded["caught"] == len(mutants) - len(recorded["escaped"])
     assert [n for n in recorded["escaped"] if not catalogue.BY_NAME[n].owner] == []
 
