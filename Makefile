@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 OUT    ?= demo-out
 
-.PHONY: demo test bench install clean
+.PHONY: demo test bench mutants install clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -38,6 +38,11 @@ $(PEER_STAMP): benchmarks/peers/requirements.txt
 # Writes benchmarks/RESULTS-table.md (the figures, their peers and ratios; see benchmarks/run.py).
 bench: $(STAMP) $(PEER_STAMP)
 	$(PY) benchmarks/run.py
+
+# The whole conformance suite against every mutant of conformance/mutants/catalogue.py (spec §16.8.3):
+# prints caught/total, writes conformance/mutants/results.json, exits 1 when a mutant escapes.
+mutants: $(STAMP)
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) -m haptify_mutants.run --workers 2
 
 clean:
 	rm -rf $(VENV) $(PEERS) $(OUT) build *.egg-info

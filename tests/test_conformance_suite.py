@@ -1,6 +1,7 @@
-"""The conformance suite's content (spec chapter 16, issue 6): the reference passes every case, every
-known-bad implementation fails a case of the metric it breaks, the suite lints clean, the committed
-fixtures and case files are what the builder makes, and a JavaScript implementation passes its cases."""
+"""The conformance suite's content (spec chapter 16, issues 6 and 16): the reference passes every case, every
+cheap mutant of ``haptify_mutants.catalogue`` fails a case of a metric it breaks, the mutant set is well formed
+and its recorded result current, the suite lints clean, the committed fixtures and case files are what the
+builder makes, and a JavaScript implementation passes its cases."""
 
 from __future__ import annotations
 
@@ -11,12 +12,13 @@ import sys
 
 import pytest
 
-from conform_impls import bad_impls
 from haptify_conform.adapters import JsonlAdapter, PythonAdapter
 from haptify_conform.cases import REPO_ROOT, load_cases, select
 from haptify_conform.lint import lint
 from haptify_conform.report import build_report, header
 from haptify_conform.runner import load_skips, run_cases
+from haptify_mutants import catalogue
+from haptify_mutants.run import RESULTS
 from haptify_tools import build_conformance_fixtures as builder
 
 JS_DIR = REPO_ROOT / "conformance" / "examples" / "js"
@@ -34,15 +36,42 @@ def test_the_reference_passes_every_case_over_json_lines(tmp_path):
     assert data["summary"]["total"] == len(load_cases()) and data["summary"]["conforms"]
 
 
-@pytest.mark.parametrize("name", sorted(bad_impls.BREAKS))
-def test_each_known_bad_implementation_fails_a_case_of_the_metric_it_breaks(name):
-    metric = bad_impls.BREAKS[name]
-    cases = select(load_cases(), metrics={metric})
+@pytest.mark.parametrize("name", [m.name for m in catalogue.cheap_mutants()])
+def test_each_cheap_mutant_fails_a_case_of_a_metric_it_breaks(name):
+    mutant = catalogue.BY_NAME[name]
+    cases = select(load_cases(), metrics=set(mutant.metrics))
     assert len(cases) >= 3
-    verdicts = run_cases(cases, PythonAdapter(f"conform_impls.bad_impls:{name}"))
-    failed = [v for v in verdicts if v.status == "failed" and v.metric == metric]
-    assert failed, f"{name}: no case of {metric} caught it: {[(v.case_id, v.status) for v in verdicts]}"
+    verdicts = run_cases(cases, PythonAdapter(f"haptify_mutants.catalogue:{name}"))
+    failed = [v for v in verdicts if v.status == "failed"]
+    assert failed, f"{name}: no case of {mutant.metrics} caught it: {[(v.case_id, v.status) for v in verdicts]}"
     assert all(v.spec_section for v in failed)
+
+
+def test_the_mutant_set_is_well_formed_and_its_recorded_result_current():
+    """At least 40 mutants with unique names, spec sections that exist, known metrics and patch targets that
+    exist; conformance/mutants/results.json (written by `make mutants`) covers exactly this set and every
+    mutant it records as escaped concerns a spec part whose fixtures another work package owns (``owner``)."""
+    import re
+
+    from haptify.metric_definitions import all_families
+
+    mutants = catalogue.MUTANTS
+    assert len(mutants) >= 40 and len({m.name for m in mutants}) == len(mutants)
+    headings = set(re.findall(r"^#+ (\d+(?:\.\d+)*)\.? ", "\n".join(p.read_text() for p in (REPO_ROOT / "spec").glob("*.md")),
+                              flags=re.M))
+    known = {m.id for f in all_families() for m in f.metrics}
+    for m in mutants:
+        assert m.section in headings, (m.name, m.section)
+        assert m.metrics and set(m.metrics) <= known, (m.name, m.metrics)
+        assert len(m.rule) > 10 and len(m.wrong) > 10 and m.patches, m.name
+        assert all((p.name in p.owner) if isinstance(p.owner, dict) else hasattr(p.owner, p.name) for p in m.patches), m.name
+    recorded = json.loads(RESULTS.read_text(encoding="utf-8"))
+    assert set(recorded["mutants"]) == {m.name for m in mutants}, "run `make mutants` after changing the catalogue"
+    for m in mutants:  # a caught mutant fails a case of a metric it names
+        failing = {f["metric"] for f in recorded["mutants"][m.name]["failing_cases"]}
+        assert not failing or failing & set(m.metrics), (m.name, m.metrics, sorted(failing))
+    assert recorded["total"] == len(mutants) and recorded["caught"] == len(mutants) - len(recorded["escaped"])
+    assert [n for n in recorded["escaped"] if not catalogue.BY_NAME[n].owner] == []
 
 
 def test_the_suite_lints_clean_and_covers_every_metric_three_times():

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
-from scipy.signal import lfilter
+from scipy.signal import butter, lfilter, sosfiltfilt
 
 from haptify.conventions import quat_from_axis_angle, quat_multiply, quat_rotate
 from haptify.metric_definitions import param
@@ -88,8 +88,11 @@ def rotated_rig_full() -> dict:
 
 
 def manifest(sid: str, rig: dict, *, device: dict | None = None, placement: dict | None = None,
-             truth: rb.HandleTruth = QUIET, plate_bias: np.ndarray | None = None) -> SessionWriter:
-    cal: list = [truth.record("hg-1")]
+             truth: rb.HandleTruth = QUIET, plate_bias: np.ndarray | None = None,
+             superseded: rb.HandleTruth | None = None) -> SessionWriter:
+    """A session writer whose handle_gravity record holds ``truth`` — after a ``superseded`` record, when given,
+    which §6.4 (the last record applies) sets aside."""
+    cal: list = ([superseded.record("hg-0")] if superseded else []) + [truth.record("hg-1")]
     if plate_bias is not None:
         cal.append({"kind": "plate_bias", "id": "plate-bias-1", "bias": [float(v) for v in plate_bias]})
     return SessionWriter(manifest={"session_id": sid, "date": "2026-11-22", "lab": {"id": "lab-conformance"},
@@ -122,14 +125,25 @@ def handle_trial(w: SessionWriter, tid: str, protocol: str, *, duration_s: float
                  force_w: Fn, truth: rb.HandleTruth = QUIET, rates=(500.0, 500.0, 100.0), fmt: str = "parquet",
                  repetition: int = 1, powered: bool = False, rendering: dict | None = None, commanded_w: Fn | None = None,
                  occluded: Callable[[np.ndarray], np.ndarray] | None = None, accel_extra: Fn | None = None,
-                 plate_force_w: Fn | None = None, plate_bias: np.ndarray | None = None, rng=None) -> None:
+                 plate_force_w: Fn | None = None, plate_bias: np.ndarray | None = None, rng=None, start_s: float = 0.0,
+                 clock_offsets: dict[str, float] | None = None) -> None:
     """A trial whose raw streams realise the truth: ``force_w`` (N, on the hand, W; zero torque about the
-    gimbal centre), the pose, and ``accel_extra`` (m/s², added in the accelerometer frame: vibrations)."""
+    gimbal centre), the pose, and ``accel_extra`` (m/s², added in the accelerometer frame: vibrations).
+
+    Every stream starts at ``start_s`` on the session clock; a stream kind named in ``clock_offsets`` is stored
+    with ``t − offset`` and gets a ``clock_offset`` record of ``offset`` (spec §2.8) that puts it back."""
     rig = w.manifest["rig"]
     rng = rng or np.random.default_rng(SEED)
     ft_rate, acc_rate, mocap_rate = rates
     w.add_trial(tid, protocol, powered=powered, repetition=repetition, rendering=rendering)
-    t_ft, t_acc, t_m = clock(duration_s, ft_rate), clock(duration_s, acc_rate), clock(duration_s, mocap_rate)
+    t_ft, t_acc, t_m = (start_s + clock(duration_s, r) for r in rates)
+
+    def add(kind: str, data: dict, rate: float) -> None:
+        offset = (clock_offsets or {}).get(kind)
+        stream = w.add_stream(tid, kind, {**data, "t": data["t"] - offset} if offset else data, rate_hz=rate, fmt=fmt)
+        if offset:
+            w.manifest["calibration"].append({"kind": "clock_offset", "id": f"offset-{tid}-{kind}".replace("_", "-"),
+                                              "stream_file": stream["file"], "offset_s": offset})
     f_w = force_w(t_ft)
     wrench, accel = rb.raw_handle(truth, rig, t_ft, quaternion(t_ft), t_acc, quaternion(t_acc), rng,
                                   hand_force_w=f_w, hand_torque_g_w=np.zeros_like(f_w))
@@ -137,23 +151,22 @@ def handle_trial(w: SessionWriter, tid: str, protocol: str, *, duration_s: float
         extra = accel_extra(t_acc)
         for k, c in enumerate(("ax", "ay", "az")):
             accel[c] = accel[c] + extra[:, k]
-    w.add_stream(tid, "handle_wrench", wrench, rate_hz=ft_rate, fmt=fmt)
-    w.add_stream(tid, "handle_accel", accel, rate_hz=acc_rate, fmt=fmt)
+    add("handle_wrench", wrench, ft_rate)
+    add("handle_accel", accel, acc_rate)
     p, q = position(t_m), quaternion(t_m)
     if occluded is not None:
         gone = occluded(t_m)
         p, q = p.copy(), q.copy()
         p[gone], q[gone] = np.nan, np.nan
-    w.add_stream(tid, "handle_pose", {"t": t_m, "px": p[:, 0], "py": p[:, 1], "pz": p[:, 2],
-                                      "qw": q[:, 0], "qx": q[:, 1], "qy": q[:, 2], "qz": q[:, 3]}, rate_hz=mocap_rate, fmt=fmt)
+    add("handle_pose", {"t": t_m, "px": p[:, 0], "py": p[:, 1], "pz": p[:, 2], "qw": q[:, 0], "qx": q[:, 1], "qy": q[:, 2],
+                        "qz": q[:, 3]}, mocap_rate)
     if commanded_w is not None:
         c = commanded_w(t_ft)
-        w.add_stream(tid, "commanded_wrench", {"t": t_ft, "fx": c[:, 0], "fy": c[:, 1], "fz": c[:, 2], "tx": 0 * t_ft,
-                                               "ty": 0 * t_ft, "tz": 0 * t_ft}, rate_hz=ft_rate, fmt=fmt)
+        add("commanded_wrench", {"t": t_ft, "fx": c[:, 0], "fy": c[:, 1], "fz": c[:, 2], "tx": 0 * t_ft, "ty": 0 * t_ft,
+                                 "tz": 0 * t_ft}, ft_rate)
     if plate_force_w is not None:
         pf = plate_force_w(t_ft)
-        raw = rb.corner_readings(rig, pf, np.zeros_like(pf), plate_bias)
-        w.add_stream(tid, "plate_wrench", rb.plate_stream(t_ft, raw), rate_hz=ft_rate, fmt=fmt)
+        add("plate_wrench", rb.plate_stream(t_ft, rb.corner_readings(rig, pf, np.zeros_like(pf), plate_bias)), ft_rate)
 
 
 def active_session(name: str, rig_kind: str, tid: str, protocol: str, duration_s: float, spin_rate: float, position: Fn,
@@ -172,6 +185,23 @@ def active_session(name: str, rig_kind: str, tid: str, protocol: str, duration_s
 def grid(duration_s: float, rate: float = 100.0) -> np.ndarray:
     """The common grid of spec §7.3 for streams that all start at 0 and end at ``duration_s``."""
     return clock(duration_s, rate)
+
+
+def lowpass_pair_gain(f: float, fs: float, fc: float) -> float:
+    """Amplitude gain at f of the forward-backward Butterworth low-pass of spec §7.2: |H|² = 1 / (1 + Ω^(2N))."""
+    fc = min(fc, param("signals", "max_cutoff_fraction") * fs / 2.0)
+    omega = math.tan(math.pi * f / fs) / math.tan(math.pi * fc / fs)
+    return 1.0 / (1.0 + omega ** (2 * int(param("signals", "filter_order"))))
+
+
+def pair_step(t: np.ndarray, fs: float, fc: float | None = None) -> np.ndarray:
+    """Response at times ``t`` (s) of the zero-phase Butterworth low-pass of spec §7.2 (order ``filter_order``, cut-off
+    ``fc``, default ``wrench_cutoff_hz``, at rate ``fs``) to a unit step whose first sample of 1 is at t = 0: it rises
+    0 → 1 symmetrically about the step, ringing on both sides. scipy's butter + sosfiltfilt, as §7.2 names them."""
+    fc = float(param("signals", "wrench_cutoff_hz") if fc is None else fc)
+    k = np.arange(-4 * int(fs), 4 * int(fs) + 1)
+    y = sosfiltfilt(butter(int(param("signals", "filter_order")), fc, fs=fs, output="sos"), (k >= 0).astype(float))
+    return np.interp(np.asarray(t, float) * fs, k, y)
 
 
 def lowpass_noise_ratio(fc: float, fs: float, order: int) -> float:
@@ -371,6 +401,46 @@ def workspace_fixtures() -> list[Fixture]:
     ]
     out.append(fx)
 
+    # A sweep that missed a cap of the workspace: its 4 cm hole is narrower than 2r, so the closing bridges it.
+    RC, CC, rim = 0.07, (0.0, -0.02, 0.15), 0.02
+
+    def capless(path: Path) -> None:
+        pts = sphere_cloud(7000, RC, CC, np.random.default_rng(SEED + 6))
+        pts = pts[pts[:, 2] - CC[2] <= math.sqrt(RC ** 2 - rim ** 2)]
+        w = manifest("conf-ws-capless", example_rig(), device=tiny)
+        pose_cloud(w, "workspace-1", pts, "csv")
+        w.write(path)
+
+    fx = Fixture("ws-sphere-capless-csv", capless)
+    h_sphere, h_ball = RC - math.sqrt(RC ** 2 - rim ** 2), cr - math.sqrt(cr ** 2 - rim ** 2)
+    dented = 4 / 3 * math.pi * RC ** 3 - math.pi * h_sphere ** 2 * (3 * RC - h_sphere) / 3 - math.pi * h_ball ** 2 * (3 * cr - h_ball) / 3
+    fx.cases += [
+        case("workspace.measured_volume.capless", "workspace.measured_volume", "8.4", fx.name, dented, "m^3", "analytic", f"sphere R = {RC} m sampled on its surface except a polar cap whose rim has radius {rim} m: the hole "
+             f"(4 cm across) is narrower than 2r = {2 * cr:g} m, so the closing by a ball of radius r bridges it (§8.4 steps 2–4) "
+             "and the solid is the sphere minus its cap above the rim and minus the part of an r-ball resting on the rim "
+             "that dips below it (πh²(3R − h)/3 each: 0.5 % of the sphere in all); the dent has no boundary samples, so "
+             "it is resolved on the coarse lattice only (≤ 0.2 %); " + bias, "Tricky: a sweep that missed a cap."),
+    ]
+    out.append(fx)
+
+    # A thin slab, four voxels thick: near the operator's resolution limit of about 2 h (spec §8.8).
+    slab, q_slab = (0.12, 0.12, 0.01), quat_from_axis_angle(np.array([0.3, -0.5, 0.8]), np.array(0.7))
+
+    def thin(path: Path) -> None:
+        w = manifest("conf-ws-slab", example_rig(), device=tiny)
+        pose_cloud(w, "workspace-1", box_cloud(20_000, slab, np.random.default_rng(SEED + 7), q_slab, (0.02, 0.01, 0.15)),
+                   "parquet")
+        w.write(path)
+
+    fx = Fixture("ws-thin-slab", thin)
+    fx.cases += [
+        case("workspace.measured_volume.thin-slab", "workspace.measured_volume", "8.4", fx.name, math.prod(slab), "m^3", "analytic", f"a box of edges {slab} m turned 0.7 rad about (0.3, −0.5, 0.8), 20 000 samples on its faces; "
+             f"1 cm is four voxels of h = {pitch} m, twice the operator's resolution limit of about 2 h (spec §8.8): both "
+             "faces' samples lie within every band voxel's search radius, so the sub-voxel ramps place both faces; "
+             "tolerance 2 %, the bias allowed for a non-convex or thin solid", "Edge: a thin workspace."),
+    ]
+    out.append(fx)
+
     # The model swept through its whole boundary, device placed turned and moved (rotated frames).
     mid = scaled_device(0.45)
     placement = placement_of((0.04, -0.03, 0.01), yaw=2.2, tilt=0.15)
@@ -562,7 +632,166 @@ def free_space_fixtures() -> list[Fixture]:
              "has no occlusion", "Edge: a purely vertical oscillation."),
     ]
     out.append(fx)
+    out.append(jitter_fixture(truth))
+    out.append(glimpse_fixture(truth))
+    out.append(pushes_fixture(truth))
     return out
+
+
+def glimpse_fixture(truth: rb.HandleTruth) -> Fixture:
+    """Motion capture sees the handle for 0.3 s only (31 rows of the 100 Hz grid): the force statistics rest on few
+    samples, where the sample SD (ddof = 1, §9.2) and the population SD differ by 1.6 %."""
+    name, T = "fs-glimpse-csv", 6.0
+
+    def force(t: np.ndarray) -> np.ndarray:
+        return np.column_stack([0.3 + 0.4 * t, -0.2 + 0 * t, 0.1 + 0 * t])
+
+    def seen(t: np.ndarray) -> np.ndarray:
+        k = np.round(t * 100).astype(int)
+        return (k >= 200) & (k <= 230)
+
+    def build(path: Path) -> None:
+        w = manifest(f"conf-{name}", example_rig(), truth=truth)
+        handle_trial(w, "free_space-1", "free_space", duration_s=T, position=circle(0.05, 1.0), quaternion=spin(0.07),
+                     force_w=force, truth=truth, fmt="csv", occluded=lambda t: ~seen(t))
+        w.write(path)
+
+    fx = Fixture(name, build)
+    tg = grid(T)
+    mag = np.linalg.norm(force(tg[seen(tg)]), axis=1)
+    how = (f"|(0.3 + 0.4t, −0.2, 0.1)| N over the {len(mag)} grid rows t = 2.00 … 2.30 s, the only time motion capture "
+           "sees the handle (§7.5: the force counts only where the orientation is known); a force linear in time passes "
+           "the §7.2 low-pass exactly (chord removed), so the values are exact: tolerance 1e-4")
+    desc = "Edge: a trial whose motion capture is usable for 0.3 s only (sample statistics of 31 values)."
+    fx.cases += [
+        case("free_space.force_sd.glimpse", "free_space.force_sd", "9.2", name, mag.std(ddof=1), "N", "analytic",
+             "sample SD (ddof = 1) of " + how + f"; ddof = 0 gives {mag.std():.6g} N (1.6 % less)", desc),
+        case("free_space.force_mean.glimpse", "free_space.force_mean", "9.2", name, mag.mean(), "N", "analytic",
+             "mean of " + how, desc),
+        case("free_space.force_min.glimpse", "free_space.force_min", "9.2", name, mag.min(), "N", "analytic",
+             "minimum (at t = 2.00 s) of " + how, desc),
+        case("free_space.force_max.glimpse", "free_space.force_max", "9.2", name, mag.max(), "N", "analytic",
+             "maximum (at t = 2.30 s) of " + how, desc),
+    ]
+    return fx
+
+
+def pushes_fixture(truth: rb.HandleTruth) -> Fixture:
+    """The examiner's hand hides the markers while it pushes: four gaps of seven frames at 150 Hz (t_j − t_i = 53 ms,
+    bridged by §7.4 since max_gap_s + Δ = 56.7 ms), each centred on a force pulse. Leaving such a gap open drops the
+    rows around each pulse's peak."""
+    name, T, rate, centres, width = "fs-occluded-pushes", 10.0, 150.0, (2.0, 4.0, 6.0, 8.0), 0.6
+    F0, push = np.array([0.3, 0.1, 0.2]), np.array([0.6, 0.0, 0.0])
+
+    def pulses(t: np.ndarray) -> np.ndarray:
+        return sum(np.where(np.abs(t - c) <= width / 2, np.sin(np.pi * (t - c + width / 2) / width) ** 2, 0.0) for c in centres)
+
+    def force(t: np.ndarray) -> np.ndarray:
+        return F0 + np.outer(pulses(t), push)
+
+    def hidden(t: np.ndarray) -> np.ndarray:
+        k = np.round(t * rate).astype(int)
+        return np.any([np.abs(k - round(c * rate)) <= 3 for c in centres], axis=0)
+
+    def build(path: Path) -> None:
+        w = manifest(f"conf-{name}", example_rig(), truth=truth)
+        handle_trial(w, "free_space-1", "free_space", duration_s=T, position=circle(0.05, 1.0), quaternion=spin(0.07),
+                     force_w=force, truth=truth, rates=(1000.0, 500.0, rate), occluded=hidden)
+        w.write(path)
+
+    fx = Fixture(name, build)
+    mag = np.linalg.norm(force(grid(T)), axis=1)
+    how = (f"|(0.3, 0.1, 0.2) + p(t)·(0.6, 0, 0)| N with p four sin² pulses {width} s wide centred on t = {centres} s; "
+           f"motion capture at {rate:g} Hz misses 7 frames around each centre (t_j − t_i = 8/150 s = 53.3 ms ≤ max_gap_s + Δ "
+           "= 56.7 ms: bridged, §7.4), so every grid row counts; the pulses pass the §7.2 low-pass (flat to order 8) to "
+           "better than 1e-5: tolerance 1e-3")
+    desc = "Tricky: short occlusions exactly where the force peaks (bridged by §7.4's rule, Δ included)."
+    fx.cases += [
+        case("free_space.force_max.occluded-pushes", "free_space.force_max", "7.4", name, mag.max(), "N", "analytic", "maximum (at each pulse's peak, inside a gap) of " + how, desc),
+        case("free_space.force_mean.occluded-pushes", "free_space.force_mean", "7.4", name, mag.mean(), "N", "analytic", "mean over the grid of " + how, desc),
+    ]
+    return fx
+
+
+def envelope(t: np.ndarray, start: float, stop: float, ramp: float = 0.5) -> np.ndarray:
+    """0 before ``start`` and after ``stop``, 1 between the two sin² ramps of ``ramp`` s: switches a vibration on
+    away from a trial's ends (its spectrum stays within ~2/ramp Hz of the vibration's frequency)."""
+    up = np.clip((t - start) / ramp, 0.0, 1.0)
+    down = np.clip((stop - t) / ramp, 0.0, 1.0)
+    return np.sin(0.5 * np.pi * up) ** 2 * np.sin(0.5 * np.pi * down) ** 2
+
+
+SUPERSEDED = rb.HandleTruth(mass=0.09, force_bias=np.array([0.1, 0.2, -0.3]), force_noise=0.0, torque_noise=0.0, accel_noise=0.0)
+JITTER = {"position_m": 3e-4, "position_hz": 30.0, "angle_rad": math.radians(0.1), "angle_hz": 30.0,
+          "force_N": 0.5, "force_hz": 180.0, "plate_N": 2.0, "plate_hz": 130.0}
+
+
+def jitter_fixture(truth: rb.HandleTruth) -> Fixture:
+    """Free space with vibrations every low-pass of §7.2 removes: 30 Hz marker jitter in position and about the
+    vertical, a 180 Hz force on the hand, a 130 Hz plate force. The spec's values are those of the smooth motion and
+    forces; a velocity or angular velocity differentiated without the low-pass, a force resampled before filtering
+    (180 Hz aliases to 20 Hz on the 100 Hz grid) or an unfiltered plate force are far off."""
+    name, T, j = "fs-jitter", 12.0, JITTER
+    F0, P0 = np.array([0.4, -0.2, 0.3]), np.array([0.3, 0.0, -16.0])
+
+    def on(t: np.ndarray) -> np.ndarray:
+        return envelope(t, 1.0, T - 1.0)
+
+    def position(t: np.ndarray) -> np.ndarray:
+        return circle(0.05, 1.0)(t) + np.outer(j["position_m"] * on(t) * np.sin(2 * np.pi * j["position_hz"] * t), Z)
+
+    def quaternion(t: np.ndarray) -> np.ndarray:
+        wobble = quat_from_axis_angle(np.tile(Z, (len(t), 1)), j["angle_rad"] * on(t) * np.sin(2 * np.pi * j["angle_hz"] * t))
+        return quat_multiply(wobble, spin(0.07)(t))
+
+    def force(t: np.ndarray) -> np.ndarray:
+        return F0 + np.outer(j["force_N"] * on(t) * np.sin(2 * np.pi * j["force_hz"] * t), [1.0, 0.0, 0.0])
+
+    def plate(t: np.ndarray) -> np.ndarray:
+        return P0 + np.outer(j["plate_N"] * on(t) * np.cos(2 * np.pi * j["plate_hz"] * t), Z)
+
+    def build(path: Path) -> None:
+        rig = example_rig()
+        bias = rb.plate_bias_vector(rig)
+        w = manifest(f"conf-{name}", rig, truth=truth, plate_bias=bias, superseded=SUPERSEDED)
+        handle_trial(w, "free_space-1", "free_space", duration_s=T, position=position, quaternion=quaternion, force_w=force,
+                     truth=truth, rates=(1000.0, 500.0, 100.0), plate_force_w=plate, plate_bias=bias)
+        w.write(path)
+
+    fx = Fixture(name, build)
+    fc = param("signals", "mocap_cutoff_hz")
+    gains = {k: lowpass_pair_gain(f, rate, cut) for k, f, rate, cut in (
+        ("mocap", j["position_hz"], 100.0, fc), ("force", j["force_hz"], 1000.0, param("signals", "wrench_cutoff_hz")),
+        ("plate", j["plate_hz"], 1000.0, param("signals", "wrench_cutoff_hz")))}
+    jit = (f"marker jitter {j['position_m'] * 1000:g} mm along z and {math.degrees(j['angle_rad']):g}° about the vertical "
+           f"at {j['position_hz']:g} Hz (switched on by sin² ramps 1 s from the ends), which the §7.4 low-pass at {fc:g} Hz "
+           f"passes with gain {gains['mocap']:.1e}")
+    f0 = float(np.linalg.norm(F0))
+    felt_note = (f"constant force {tuple(F0)} N on the hand plus {j['force_N']} N at {j['force_hz']:g} Hz along x (ramped on "
+                 f"1 s from the ends); the 20 Hz low-pass at the F/T's 1 kHz leaves {gains['force']:.1e} of it (§7.5: filter at "
+                 "the native rate, then interpolate; resampled first, 180 Hz aliases to 20 Hz on the 100 Hz grid)")
+    desc = "Tricky: vibrations above every cut-off of §7.2 (marker jitter, a motor hum in the force, a ringing plate)."
+    fx.cases += [
+        case("free_space.speed_mean.jitter", "free_space.speed_mean", "7.4", name, 0.05, "m/s", "analytic",
+             f"circle r = 0.05 m at 1 rad/s (speed r·ω) with {jit}; velocity is the derivative of the LOW-PASSED position. "
+             "Tolerance 0.1 %: the circle passes the low-pass unchanged to 1e-5, the jitter adds its square (1e-11)", desc),
+        case("free_space.angular_speed_mean.jitter", "free_space.angular_speed_mean", "7.4", name, 0.07, "rad/s", "analytic", f"constant rotation at 0.07 rad/s with {jit}; the angular velocity is low-passed (§7.4 step 4). "
+             "Tolerance 0.1 %: a rotation about the vertical turns the spin axis without changing |ω| to first order", desc),
+        case("free_space.force_mean.jitter", "free_space.force_mean", "9.2", name, f0, "N", "analytic",
+             f"|F| of the {felt_note}; the jitter about the vertical leaves the connector's weight in the sensor frame "
+             f"unchanged; an earlier handle_gravity record (a {SUPERSEDED.mass * 1000:g} g connector) precedes the one that "
+             "applies (§6.4: the last). Tolerance 0.2 % as for the other constant forces", desc),
+        case("free_space.force_max.jitter", "free_space.force_max", "9.2", name, f0, "N", "analytic",
+             f"max |F| of the {felt_note}", desc),
+        case("free_space.force_sd.jitter", "free_space.force_sd", "9.2", name, 0.0, "N", "analytic",
+             f"SD of |F| of the {felt_note}: 0 (tolerance: the rounding of the calibration under rotation, as for the "
+             "other constant force)", desc),
+        case("free_space.plate_force_mean.jitter", "free_space.plate_force_mean", "9.3", name, 0.3, "N", "analytic",
+             f"plate force {tuple(P0)} N plus {j['plate_N']} N at {j['plate_hz']:g} Hz vertical (ramped on 1 s from the ends), "
+             f"low-passed at 20 Hz (gain {gains['plate']:.1e}) before resampling (§9.3); removing the mean vertical leaves "
+             "|(0.3, 0, 0)|. Tolerance 0.5 % as for the other plate cases", desc),
+    ]
+    return fx
 
 
 # --- vibration (spec chapter 10) --------------------------------------------------------------------
@@ -652,6 +881,7 @@ def vibration_fixtures() -> list[Fixture]:
         ]
         out.append(fx)
     out.append(repetitions_fixture(note_filter))
+    out.append(bursts_fixture())
     return out
 
 
@@ -692,6 +922,73 @@ def repetitions_fixture(note_filter: str) -> Fixture:
     return fx
 
 
+def burst(t: np.ndarray, f: float, amp: float, start: float, stop: float) -> np.ndarray:
+    """A tone of ``f`` Hz under a sin² (Hann) envelope from ``start`` to ``stop`` s, zero elsewhere: its spectrum stays
+    within a few Hz of f, so the 10 Hz high-pass passes it with the gain at f and spreads none of it in time."""
+    inside = (t >= start) & (t <= stop)
+    return np.where(inside, amp * np.sin(np.pi * (t - start) / (stop - start)) ** 2 * np.sin(2 * np.pi * f * t), 0.0)
+
+
+def one_sided_power(a: np.ndarray) -> np.ndarray:
+    """P_k = w_k |A_k|² of spec §10.5 (rectangular window, DFT length N)."""
+    p = np.abs(np.fft.rfft(a)) ** 2
+    w = np.full(len(p), 2.0)
+    w[0] = 1.0
+    if len(a) % 2 == 0:
+        w[-1] = 1.0
+    return w * p
+
+
+BURSTS = {"tone": (100.0, 0.05), "inner": (400.0, 0.08, 0.55, 0.85), "start": (250.0, 0.3, 0.05, 0.45),
+          "end": (250.0, 0.3, 1.75, 2.15)}
+
+
+def bursts_fixture() -> Fixture:
+    """One free-space trial at 1.5 kHz, 2.2 s: a steady 100 Hz tone on x, a 400 Hz burst on y early in the analysed
+    window, and 250 Hz bursts inside the two trimmed edges (the start one on z, the end one on y). The analysed signal
+    (§10.2: 0.5 s cut from each end) is known exactly; a Hann window before the periodogram weighs the early burst
+    down (centroid), analysing the edges adds the edge bursts, and DFT321 before trimming mixes the two edge bursts
+    (same band, different axes) into the middle."""
+    name, rate, secs = "vib-bursts-csv", 1500.0, 2.2
+    (f_tone, a_tone), inner, first, last = BURSTS["tone"], BURSTS["inner"], BURSTS["start"], BURSTS["end"]
+
+    def extra(t: np.ndarray) -> np.ndarray:
+        return np.column_stack([a_tone * np.sin(2 * np.pi * f_tone * t), burst(t, *inner) + burst(t, *last), burst(t, *first)])
+
+    def build(path: Path) -> None:
+        w = manifest(f"conf-{name}", example_rig())
+        handle_trial(w, "free_space-1", "free_space", duration_s=secs - 1 / rate, position=circle(0.03, 0.5),
+                     quaternion=fixed(quat_from_axis_angle(np.array([1.0, 0.0, 0.0]), np.array(0.4))),
+                     force_w=lambda t: np.tile([0.1, 0.0, -0.2], (len(t), 1)), rates=(250.0, rate, 100.0), fmt="csv",
+                     accel_extra=extra)
+        w.write(path)
+
+    fx = Fixture(name, build)
+    t = clock(secs - 1 / rate, rate)
+    trim = int(round(param("vibration", "edge_trim_s") * rate))
+    window = t[trim:len(t) - trim]
+    x = hp_gain(f_tone) * a_tone * np.sin(2 * np.pi * f_tone * window)
+    y = hp_gain(inner[0]) * burst(window, *inner)
+    power = one_sided_power(x) + one_sided_power(y)  # DFT321 keeps |X|² + |Y|² per bin (§10.3)
+    freqs = np.fft.rfftfreq(len(window), 1 / rate)
+    how = (f"{a_tone} m/s² at {f_tone:g} Hz on x (on a DFT bin), a {inner[1]} m/s² {inner[0]:g} Hz sin²-burst on y over "
+           f"[{inner[2]}, {inner[3]}] s, {first[1]} m/s² {first[0]:g} Hz sin²-bursts over [{first[2]}, {first[3]}] s on z and "
+           f"[{last[2]}, {last[3]}] s on y; after the high-pass (gain 1/(1+(10/f)^8)) and the {trim}-sample trims "
+           f"(§10.2) the analysed {len(window)} samples hold the tone and the inner burst only, exactly")
+    why_tol = ("tolerance 1e-4: the analysed signal is known to ~1e-6 of its amplitude (the high-pass's start-up "
+               "transient, from poles near 10 Hz, has decayed to e^−12 by the end of the trim; the bursts' sin² envelopes "
+               "keep their spectra within a few Hz of their tones, where the gain is exact)")
+    desc = ("Tricky: a burst early in the analysed window (a Hann window weighs it down) and bursts inside the trimmed "
+            "edges (analysing them, or combining the axes before trimming, lets them in).")
+    fx.cases += [
+        case("vibration.rms.bursts", "vibration.rms", "10.2", name, float(np.sqrt(np.mean(x ** 2 + y ** 2))), "m/s^2", "analytic", f"RMS over the analysed samples of {how} (DFT321 keeps the energy, §10.3); {why_tol}", desc),
+        case("vibration.spectral_centroid.bursts", "vibration.spectral_centroid", "10.5", name,
+             float(np.sum(freqs * power) / np.sum(power)), "Hz", "analytic",
+             f"Σ f_k P_k / Σ P_k of the one-sided rectangular periodograms of {how}; {why_tol}", desc),
+    ]
+    return fx
+
+
 # --- frictionless surface (spec chapter 12) ----------------------------------------------------------
 
 def tangent_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -703,32 +1000,38 @@ def tangent_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def surface_fixtures() -> list[Fixture]:
     out: list[Fixture] = []
     guard = param("surface", "contact_guard_s")
+    # name, format, rig, normal, plane point, contact intervals (s), duration, planar force in contact, rates, description,
+    # measured normal force outside contact (N: the device's own weight pushing the hand up)
     variants = [
-        ("surf-typical", "parquet", "example", [0.0, 0.0, 1.0], (0.0, 0.05, 0.10), (1.0, 9.0), 10.0,
-         lambda t: 0.53 + 0.1 * np.sin(2 * np.pi * 0.5 * t), (1000.0, 500.0, 100.0), "Typical: a horizontal surface."),
-        ("surf-tilted-rotated-csv", "csv", "rotated", [0.0, 0.2, 1.0], (0.0, 0.05, 0.12), (1.5, 8.5), 10.0,
+        ("surf-typical", "parquet", "example", [0.0, 0.0, 1.0], (0.0, 0.05, 0.10), ((1.0, 9.0),), 10.0,
+         lambda t: 0.53 + 0.1 * np.sin(2 * np.pi * 0.5 * t), (1000.0, 500.0, 100.0), "Typical: a horizontal surface.", 0.0),
+        ("surf-tilted-rotated-csv", "csv", "rotated", [0.0, 0.2, 1.0], (0.0, 0.05, 0.12), ((1.5, 8.5),), 10.0,
          lambda t: 0.4 + 0.15 * np.cos(2 * np.pi * 0.25 * t), (400.0, 250.0, 150.0),
-         "Tricky: a tilted surface normal, rotated sensor frames, CSV, unusual rates."),
-        ("surf-constant", "parquet", "example", [0.3, 0.0, 1.0], (0.01, 0.0, 0.10), (0.8, 5.2), 6.0, lambda t: 0.25 + 0 * t,
-         (1000.0, 500.0, 100.0), "Edge: a constant planar force (SD 0), short trial."),
+         "Tricky: a tilted surface normal, rotated sensor frames, CSV, unusual rates.", 0.0),
+        ("surf-constant", "parquet", "example", [0.3, 0.0, 1.0], (0.01, 0.0, 0.10), ((0.8, 5.2),), 6.0, lambda t: 0.25 + 0 * t,
+         (1000.0, 500.0, 100.0), "Edge: a constant planar force (SD 0), short trial.", 0.0),
+        ("surf-preload", "parquet", "example", [0.0, 0.0, 1.0], (0.0, 0.02, 0.11), ((0.8, 1.8), (2.4, 3.4), (4.0, 5.0), (5.6, 6.6)),
+         7.4, lambda t: 0.3 + 0 * t, (1000.0, 500.0, 100.0),
+         "Tricky: four short contacts, and outside them the device's uncompensated weight pushes the hand up 0.5 N along "
+         "the normal (a measured-force contact rule counts those samples; the guard matters at eight transitions).", 0.5),
     ]
-    for name, fmt, rig_kind, normal_raw, point, (t_on, t_off), secs, planar, rates, desc in variants:
+    for name, fmt, rig_kind, normal_raw, point, contacts, secs, planar, rates, desc, preload in variants:
         outside = None if name == "surf-constant" else 2.0  # the planar force outside contact (a step at contact)
         n = np.asarray(normal_raw, float) / np.linalg.norm(normal_raw)
         u, v = tangent_basis(n)
         pp = np.asarray(point, float)
 
-        def contact(t, t_on=t_on, t_off=t_off):
-            return (t >= t_on) & (t <= t_off)
+        def contact(t, contacts=contacts):
+            return np.any([(t >= on) & (t <= off) for on, off in contacts], axis=0)
 
         def position(t, u=u, v=v, n=n, pp=pp, contact=contact):
             depth = np.where(contact(t), 0.002, -0.01)
             return pp + 0.03 * (np.cos(2 * t)[:, None] * u + np.sin(2 * t)[:, None] * v) - depth[:, None] * n
 
-        def force(t, u=u, v=v, n=n, contact=contact, planar=planar, outside=outside):
+        def force(t, u=u, v=v, n=n, contact=contact, planar=planar, outside=outside, preload=preload):
             d = np.sin(2 * t)[:, None] * u - np.cos(2 * t)[:, None] * v
             mag = np.where(contact(t), planar(t), outside if outside is not None else planar(t))
-            return mag[:, None] * d + np.where(contact(t), 1.5, 0.0)[:, None] * n
+            return mag[:, None] * d + np.where(contact(t), 1.5, preload)[:, None] * n
 
         def commanded(t, n=n, contact=contact):
             return np.where(contact(t), 1.5, 0.0)[:, None] * n
@@ -738,12 +1041,22 @@ def surface_fixtures() -> list[Fixture]:
         fx = Fixture(name, active_session(name, rig_kind, "surface-1", "frictionless_surface", secs, 0.05, position, force,
                                           commanded, rendering, rates, fmt))
         tg = grid(secs)
-        used = (tg >= t_on + guard - 1e-9) & (tg <= t_off - guard + 1e-9)
+        used = np.any([(tg >= on + guard - 1e-9) & (tg <= off - guard + 1e-9) for on, off in contacts], axis=0)
         truth = planar(tg[used])
+        if preload:  # the low-passed steps of the planar force still ring a little beyond the guard: superpose them
+            fs, step = rates[0], planar(tg[used]) - outside
+            truth = outside + step * sum(pair_step(tg[used] - on, fs) - pair_step(tg[used] - off - 1 / fs, fs) for on, off in contacts)
         short = name.removeprefix("surf-")
+        spans = " and ".join(f"from {on} s to {off} s" for on, off in contacts)
         how = (f"planar force of the stated magnitude against the motion plus 1.5 N along the normal {normal_raw}, in contact "
-               f"from {t_on} s to {t_off} s (commanded normal force 1.5 N), statistics over the 100 Hz grid rows inside the "
+               f"{spans} (commanded normal force 1.5 N), statistics over the 100 Hz grid rows inside the "
                f"contact minus the {guard} s guard at both ends (spec §12.2)")
+        if preload:
+            how += (f"; outside contact the hand feels {outside} N planar and {preload} N along the normal while the "
+                    "commanded force is zero: contact is the COMMANDED force's (§12.2), so those rows never count. The "
+                    "planar force steps at each transition; the values superpose the zero-phase low-pass's step response "
+                    "(§7.2, 20 Hz at 1 kHz), whose ringing beyond the 50 ms guard moves them by up to 0.3 %; the hand "
+                    "direction turns 0.1 rad within the filter's span, a second-order effect")
         fx.cases += [
             case(f"surface.planar_force_mean.{short}", "surface.planar_force_mean", "12.2", name, truth.mean(), "N", "analytic", how, desc),
             case(f"surface.planar_force_sd.{short}", "surface.planar_force_sd", "12.2", name,
@@ -1017,7 +1330,100 @@ def rig_fixtures() -> list[Fixture]:
                   "independent samples"), desc),
         ]
         out.append(fx)
+    out.append(impact_fixture())
+    out.append(early_accel_fixture())
+    out.append(cop_spread_fixture())
     return out
+
+
+def cop_spread_fixture() -> Fixture:
+    """A COP trial whose marker offsets differ from placement to placement (0, 5 and 25 mm): their mean, 10 mm, is
+    the metric; their root mean square (14.7 mm) or median (5 mm) is not."""
+    name, offsets = "rig-cop-spread", np.array([[0.0, 0.0], [0.005, 0.0], [0.0, -0.025]])
+
+    def build(path: Path) -> None:
+        rng = np.random.default_rng(SEED + 14)
+        rig = example_rig()
+        rig["motion_capture"]["markers"] = sorted(set(rig["motion_capture"]["markers"]) | {"w1"})
+        w = rb.writer(rig=rig, sid=f"conf-{name}")
+        rb.add_plate_bias_trial(w, rng)
+        rb.add_cop_trial(w, rng, np.array([[0.05, -0.05], [-0.15, 0.1], [0.2, 0.2]]), offsets)
+        w.write(path)
+
+    fx = Fixture(name, build)
+    errors = np.linalg.norm(offsets, axis=1)
+    fx.cases.append(case("rig.cop_error.spread", "rig.cop_error", "14.5", name, float(errors.mean()), "m", "analytic",
+                         f"three placements of a 1 kg weight whose marker is offset from the load point by {errors.tolist()} m: "
+                         "the mean distance over the placements; corner readings split the load statically (spec §14.1); "
+                         "noise 5 mN per channel; tolerance 0.5 mm as for the other COP cases",
+                         "Tricky: placements of different errors (mean, not RMS or median)."))
+    return fx
+
+
+def early_accel_fixture() -> Fixture:
+    """A calibration trial whose accelerometer is EARLY by 4 ms and motion capture late by 1.5 ms: the largest |delay|
+    is the negative one."""
+    name, acc_d, moc_d = "rig-early-accel", -0.004, 0.0015
+
+    def build(path: Path) -> None:
+        w = rb.writer(rig=rb.rotated_rig(), sid=f"conf-{name}")
+        rb.add_calibration_trial(w, rb.HandleTruth(), np.random.default_rng(SEED + 13), duration_s=12.0, accel_delay_s=acc_d,
+                                 mocap_delay_s=moc_d)
+        w.write(path)
+
+    fx = Fixture(name, build)
+    fx.cases.append(case("rig.sync_offset.early-accel", "rig.sync_offset", "14.6", name, max(abs(acc_d), abs(moc_d)), "s",
+                         "analytic", f"accelerometer time stamps early by {-acc_d} s (delay {acc_d} s), motion "
+                         f"capture late by {moc_d} s against the F/T recorder; the value is the larger |delay|, that of the "
+                         "early recorder; tolerance = a third of the 1 ms grid step", "Edge: the largest delay is negative."))
+    return fx
+
+
+def impact_peaks(t: np.ndarray, force: np.ndarray, rate: float) -> list[float]:
+    """Spec §14.4 steps 2–4 written out for a known total plate force ``force (N, 3)``: the window around the largest
+    deviation from the median, per axis the mean removed, zero-padding to a power of two, the largest |FFT| in the band
+    and the vertex of the parabola through the log-magnitudes around it (clipped to half a bin)."""
+    centre = t[np.argmax(np.linalg.norm(force - np.median(force, axis=0), axis=1))]
+    inside = (t >= centre - param("rig", "impact_pre_s")) & (t <= centre + param("rig", "impact_window_s"))
+    nfft = 1 << int(math.ceil(math.log2(inside.sum() * param("rig", "zero_pad_factor"))))
+    freqs = np.arange(nfft // 2 + 1) * rate / nfft
+    band = (freqs >= param("rig", "impact_band_low_hz")) & (freqs <= param("rig", "impact_band_high_fraction") * rate / 2)
+    peaks = []
+    for axis in range(3):
+        x = force[inside, axis]
+        mag = np.abs(np.fft.rfft(x - x.mean(), nfft))
+        k = int(np.flatnonzero(band)[np.argmax(mag[band])])
+        lo, mid, hi = np.log(mag[k - 1:k + 2])
+        shift = 0.5 * (lo - hi) / (lo - 2 * mid + hi) if lo - 2 * mid + hi < 0 else 0.0
+        peaks.append(float(freqs[k] + min(max(shift, -0.5), 0.5) * rate / nfft))
+    return peaks
+
+
+def impact_fixture() -> Fixture:
+    """Noise-free ball drops: the value is the §14.4 procedure applied to the exactly known ringing, so its discrete
+    choices (no taper, zero-padding, the parabola) are pinned to 1e-4 Hz; broad peaks (ζ = 6 %) make them matter."""
+    name, zeta, modes = "rig-impact-clean", 0.06, [(187.0, 214.0, 143.0), (191.0, 209.0, 151.0)]
+
+    def build(path: Path) -> None:
+        w = rb.writer(rig=rotated_rig_full(), sid=f"conf-{name}")
+        for rep, m in enumerate(modes, start=1):
+            rb.add_impact_trial(w, np.random.default_rng(SEED), modes=m, zeta=zeta, trial_id=f"impact-{rep}", repetition=rep,
+                                noise=0.0)
+        w.write(path)
+
+    fx = Fixture(name, build)
+    t = np.arange(3000) / 1000.0
+    per_trial = [impact_peaks(t, np.column_stack([rb.damped(t, f, zeta, 1.0, a) for f, a in zip(m, (4.0, 3.0, 20.0))]), 1000.0)
+                 for m in modes]
+    analytic = [[round(damped_peak(f, zeta), 3) for f in m] for m in modes]
+    fx.cases.append(case(
+        "rig.plate_natural_frequency.clean", "rig.plate_natural_frequency", "14.4", name, np.mean(per_trial, axis=0), "Hz",
+        "spec", f"two noise-free impact trials ringing as e^(−ζωt) sin(ω_d t), ζ = {zeta}, f_n = {modes} Hz (x, y, z), "
+        "split over four corner sensors yawed 0/90/180/270°; the value is the per-axis mean of §14.4's procedure applied to "
+        "the known ringing (0.5 s window, no taper, zero-padding to 8× the length, parabola on the log-magnitudes), "
+        f"close to the continuous peaks f_n √(1 − 2ζ²) = {analytic} Hz; tolerance 1e-4 Hz: the inputs are exact, only "
+        "rounding differs", "Tricky: broad, noise-free peaks, where a taper or a shorter FFT moves the estimate."))
+    return fx
 
 
 # --- local dynamics (spec chapter 11) --------------------------------------------------------------------
@@ -1041,6 +1447,16 @@ def hw_model(variant: str) -> dict:
         out_maps[0] = {"type": "piecewise_linear", "breakpoints": [-1.0, 0.0, 0.5, 1.5], "values": [-0.5, 0.1, 0.2, 1.4]}
         linear[1][7] = {"b": [2.0, 1.0], "f": [-0.5, 0.0], "nk": 1}
         linear[3][6] = {"b": [0.01, 0.0], "f": [-0.9, 0.0], "nk": 0}
+    elif variant == "c":  # every input kind reaches an output: orientation, position, velocity, acceleration
+        in_maps[5] = {"type": "piecewise_linear", "breakpoints": [-0.03, 0.0, 0.03], "values": [-0.2, 0.0, 0.5]}
+        in_maps[12] = {"type": "piecewise_linear", "breakpoints": [-1.0, 0.0, 1.0], "values": [-0.5, 0.0, 0.2]}
+        linear[0][1] = {"b": [0.8, 0.0], "f": [-0.3, 0.0], "nk": 0}
+        linear[0][10] = {"b": [0.05, 0.02], "f": [0.0, 0.0], "nk": 0}
+        linear[1][5] = {"b": [1.0, -0.4], "f": [-0.5, 0.0], "nk": 0}
+        linear[1][11] = {"b": [0.04, 0.0], "f": [0.0, 0.0], "nk": 0}
+        linear[2][12] = {"b": [0.3, 0.0], "f": [-0.2, 0.0], "nk": 0}
+        linear[2][8] = {"b": [5.0, 0.0], "f": [0.0, 0.0], "nk": 1}
+        linear[5][2] = {"b": [0.01, 0.0], "f": [-0.4, 0.0], "nk": 0}
     else:
         in_maps[7] = {"type": "piecewise_linear", "breakpoints": [-0.05, 0.0, 0.05], "values": [0.2, 0.0, 0.3]}
         linear[2][7] = {"b": [0.5, 0.5], "f": [-0.2, 0.0], "nk": 0}
@@ -1103,14 +1519,46 @@ class LineMotion:
         return np.column_stack([np.tile(self.q, (n, 1)), self.position(t), np.tile(self.v, (n, 1)), np.zeros((n, 3))])
 
 
+@dataclass
+class Prediction:
+    """A prediction fixture (spec §16.8.2): a training and a test trial on straight lines at constant velocity, and
+    given parameter files. The test trial's motion is the training one moved by ``shift`` (m), turned by ``turn``
+    = (axis, angle in rad) about a world axis, and its force offset by ``df0`` (N)."""
+
+    name: str
+    fmt: str
+    rig_kind: str
+    train: LineMotion
+    shift: np.ndarray
+    df0: np.ndarray
+    desc: str
+    models: tuple[str, ...] = ("a", "b")
+    turn: tuple[tuple[float, float, float], float] = ((0.0, 0.0, 1.0), 0.0)
+    rates: tuple[float, float, float] = (100.0, 100.0, 100.0)
+    start_s: float = 0.0
+    clock_offsets: dict[str, float] = field(default_factory=dict)
+    how: str = ""
+    test_listed_first: bool = False
+
+    @property
+    def test(self) -> LineMotion:
+        axis, angle = self.turn
+        q = quat_multiply(quat_from_axis_angle(np.asarray(axis, float), np.array(angle)), self.train.q) if angle else self.train.q
+        return LineMotion(self.train.p0 + self.shift, self.train.v, q, self.train.f0 + self.df0, self.train.f1)
+
+
 def dynamics_fixtures() -> list[Fixture]:
     out: list[Fixture] = []
     T = 25.0
     seg = int(round(param("dynamics", "segment_s") * 100))
     R_p = param("dynamics", "R_p")
+    R_theta = math.radians(param("dynamics", "R_theta"))
 
-    def expectations(model: dict, train: LineMotion, test: LineMotion) -> dict:
-        tg = grid(T)
+    def expectations(model: dict, pr: Prediction) -> dict:
+        """Spec §11.3 on both trials' inputs on the grid of §7.3 (from the streams' common start), §11.6 for the line:
+        every test window's nearest training window is its twin, |Δp|/R_p + turn/R_θ away."""
+        tg = pr.start_s + grid(T)
+        train, test = pr.train, pr.test
         y_hat = hw_predict(model, train.inputs(tg))
         meas = np.column_stack([train.force(tg), np.zeros((len(tg), 3))])
         err = meas - y_hat
@@ -1123,58 +1571,75 @@ def dynamics_fixtures() -> list[Fixture]:
             return [float(np.mean(np.sqrt(np.mean(e[s * seg:(s + 1) * seg, :3] ** 2, axis=0)))) for s in range(nseg)]
 
         tr, te = seg_errors(err), seg_errors(err_test)
-        d_test = float(np.linalg.norm(test.p0 - train.p0) / R_p)
+        d_test = float(np.linalg.norm(pr.shift) / R_p + pr.turn[1] / R_theta)
         x = np.array([0.0] * len(tr) + [d_test] * len(te))
         yv = np.array(tr + te)
         slope, intercept = np.polyfit(x, yv, 1)
         return {"force": rm[:3], "torque": rm[3:], "line": [float(slope), float(intercept)], "distance": d_test}
 
     q_tilt = quat_from_axis_angle(np.array([0.2, 1.0, 0.1]), np.array(0.6))
+    turned_start, turn = 0.0037, 0.75
     variants = [
-        ("dyn-predict", "parquet", "example", LineMotion(np.array([-0.04, 0.01, 0.15]), np.array([0.003, 0.0, 0.0]),
-                                                         np.array([1.0, 0.0, 0.0, 0.0]), np.array([0.2, -0.1, 0.3]),
-                                                         np.array([0.01, 0.004, 0.0])),
-         np.array([0.0, 0.0, R_p]), np.array([0.5, 0.2, -0.1]), "Typical: a given model, a test trial one R_p away."),
-        ("dyn-predict-hemisphere-csv", "csv", "rotated",
-         LineMotion(np.array([0.05, -0.02, 0.12]), np.array([-0.002, 0.001, 0.0005]), -q_tilt, np.array([-0.3, 0.2, 0.1]),
-                    np.array([0.0, -0.01, 0.006])),
-         0.5 * R_p * np.array([1.0, 2.0, 0.0]) / math.sqrt(5.0), np.array([0.1, 0.0, 0.2]),
-         "Tricky: the motion-capture quaternion is stored as −q (hemisphere rule), rotated sensor frames, CSV."),
+        Prediction("dyn-predict", "parquet", "example", LineMotion(np.array([-0.04, 0.01, 0.15]), np.array([0.003, 0.0, 0.0]),
+                                                                   np.array([1.0, 0.0, 0.0, 0.0]), np.array([0.2, -0.1, 0.3]),
+                                                                   np.array([0.01, 0.004, 0.0])),
+                   np.array([0.0, 0.0, R_p]), np.array([0.5, 0.2, -0.1]), "Typical: a given model, a test trial one R_p away."),
+        Prediction("dyn-predict-hemisphere-csv", "csv", "rotated",
+                   LineMotion(np.array([0.05, -0.02, 0.12]), np.array([-0.002, 0.001, 0.0005]), -q_tilt, np.array([-0.3, 0.2, 0.1]),
+                              np.array([0.0, -0.01, 0.006])),
+                   0.5 * R_p * np.array([1.0, 2.0, 0.0]) / math.sqrt(5.0), np.array([0.1, 0.0, 0.2]),
+                   "Tricky: the motion-capture quaternion is stored as −q (hemisphere rule), rotated sensor frames, CSV."),
+        Prediction("dyn-predict-clock-csv", "csv", "rotated",
+                   LineMotion(np.array([0.02, 0.035, 0.13]), np.array([0.002, -0.0015, 0.001]), q_tilt, np.array([0.1, 0.3, -0.2]),
+                              np.array([0.008, 0.0, -0.005])),
+                   0.5 * R_p * np.array([0.6, 0.8, 0.0]), np.array([-0.2, 0.1, 0.05]),
+                   "Tricky: streams at 250, 400 and 120 Hz starting 3.7 ms into the session clock, motion capture and "
+                   "accelerometer shifted by clock-offset records, a test trial turned by 43°, a model that reads "
+                   "orientation, position beyond its map, velocity and the gravity-free acceleration.",
+                   models=("c",), turn=((0.3, -0.4, 0.87), turn), rates=(250.0, 400.0, 120.0), start_s=turned_start,
+                   clock_offsets={"handle_pose": 0.0213, "handle_accel": -0.0171}, test_listed_first=True,
+                   how=(f"; the streams start at t = {turned_start} s (the grid of §7.3 starts there, not at a multiple of "
+                        "10 ms), handle_pose is stored 21.3 ms early and handle_accel 17.1 ms late with clock_offset records "
+                        "+0.0213 s and −0.0171 s (§2.8: added to t), and at 250/400/120 Hz the 100 Hz grid falls between "
+                        "samples (linear interpolation is exact on lines); the calibrated acceleration is zero (gravity, "
+                        "bias and the rotated accelerometer frame removed, §6.6) and model-c maps it; the test trial "
+                        "(repetition 2) is listed first in the manifest, the training trial is repetition 1 (§11.7)")),
     ]
-    for name, fmt, rig_kind, train, shift, df0, desc in variants:
-        test = LineMotion(train.p0 + shift, train.v, train.q, train.f0 + df0, train.f1)
-
-        def build(path: Path, name=name, fmt=fmt, rig_kind=rig_kind, train=train, test=test) -> None:
-            rig = example_rig() if rig_kind == "example" else rb.rotated_rig()
-            w = manifest(f"conf-{name}", rig, truth=rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0))
-            for tid, rep, m in (("local_dynamic-1", 1, train), ("local_dynamic-2", 2, test)):
+    for pr in variants:
+        def build(path: Path, pr=pr) -> None:
+            rig = example_rig() if pr.rig_kind == "example" else rb.rotated_rig()
+            w = manifest(f"conf-{pr.name}", rig, truth=rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0))
+            trials = (("local_dynamic-1", 1, pr.train), ("local_dynamic-2", 2, pr.test))
+            for tid, rep, m in (trials[::-1] if pr.test_listed_first else trials):
                 handle_trial(w, tid, "local_dynamic", duration_s=T, position=m.position, quaternion=fixed(m.q), force_w=m.force,
                              truth=rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0),
-                             rates=(100.0, 100.0, 100.0), fmt=fmt, repetition=rep)
+                             rates=pr.rates, fmt=pr.fmt, repetition=rep, start_s=pr.start_s, clock_offsets=pr.clock_offsets)
             w.write(path)
-            for variant in ("a", "b"):
+            for variant in pr.models:
                 (path / f"model-{variant}.json").write_text(json.dumps(hw_model(variant), indent=1) + "\n", encoding="utf-8")
 
-        fx = Fixture(name, build)
-        short = name.removeprefix("dyn-")
+        fx = Fixture(pr.name, build)
+        short, desc = pr.name.removeprefix("dyn-"), pr.desc
         how = ("the handle moves on a straight line at constant velocity with a fixed orientation and the hand force is "
                "linear in time, so the §7.2 filters (chord removed) pass every signal unchanged and the model inputs on "
                "the 100 Hz grid are known exactly; the value is spec §11.3 applied to them (lfilter from rest, maps with "
-               "linear extension) against the measured force")
-        for variant in ("a", "b"):
-            e = expectations(hw_model(variant), train, test)
+               "linear extension) against the measured force" + pr.how)
+        for variant in pr.models:
+            e = expectations(hw_model(variant), pr)
             params = {"model": f"model-{variant}.json"}
             sfx = f"{short}.model-{variant}"
+            away = (f"{np.linalg.norm(pr.shift) / R_p:g}·R_p away" + (f" and turned by {pr.turn[1]} rad = "
+                                                                      f"{pr.turn[1] / R_theta:.4g}·R_θ" if pr.turn[1] else ""))
             fx.cases += [
-                case(f"dynamics.force_rmse.{sfx}", "dynamics.force_rmse", "11.3", name, e["force"], "N", "spec",
+                case(f"dynamics.force_rmse.{sfx}", "dynamics.force_rmse", "11.3", pr.name, e["force"], "N", "spec",
                      how + f"; model file model-{variant}.json given in parameters.model", desc, parameters=params),
-                case(f"dynamics.force_rmse_mean.{sfx}", "dynamics.force_rmse_mean", "11.7", name, float(np.mean(e["force"])),
+                case(f"dynamics.force_rmse_mean.{sfx}", "dynamics.force_rmse_mean", "11.7", pr.name, float(np.mean(e["force"])),
                      "N", "spec", how, desc, parameters=params),
-                case(f"dynamics.torque_rmse.{sfx}", "dynamics.torque_rmse", "11.3", name, e["torque"], "N*m", "spec", how + "; the measured torque about the gimbal centre is zero", desc, parameters=params),
-                case(f"dynamics.torque_rmse_mean.{sfx}", "dynamics.torque_rmse_mean", "11.7", name,
+                case(f"dynamics.torque_rmse.{sfx}", "dynamics.torque_rmse", "11.3", pr.name, e["torque"], "N*m", "spec", how + "; the measured torque about the gimbal centre is zero", desc, parameters=params),
+                case(f"dynamics.torque_rmse_mean.{sfx}", "dynamics.torque_rmse_mean", "11.7", pr.name,
                      float(np.mean(e["torque"])), "N*m", "spec", how, desc, parameters=params),
-                case(f"dynamics.error_vs_distance.{sfx}", "dynamics.error_vs_distance", "11.6", name, e["line"], "N", "spec", how + f"; the test trial repeats the motion {e['distance']:g}·R_p away (every window's "
-                     f"nearest training window is its twin: distance {e['distance']:g}), training segments at distance 0; "
+                case(f"dynamics.error_vs_distance.{sfx}", "dynamics.error_vs_distance", "11.6", pr.name, e["line"], "N", "spec", how + f"; the test trial repeats the motion {away}, perpendicular to its velocity (every window's nearest training "
+                     f"window is its twin: distance {e['distance']:g}), training segments at distance 0; "
                      "the least-squares line through (distance, mean per-axis RMS error) of the 5 s segments",
                      desc, parameters=params),
             ]

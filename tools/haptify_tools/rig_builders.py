@@ -192,13 +192,14 @@ def damped(t: np.ndarray, f_hz: float, zeta: float, t0: float, amp: float) -> np
 
 
 def add_impact_trial(w: SessionWriter, rng: np.random.Generator, modes=(205.0, 206.0, 182.0), zeta: float = 0.03,
-                     trial_id: str = "impact-1", repetition: int = 1) -> None:
-    """A ball dropped at the plate centre: each axis rings at its mode frequency (plus the plate bias and noise)."""
+                     trial_id: str = "impact-1", repetition: int = 1, noise: float = 0.01) -> None:
+    """A ball dropped at the plate centre: each axis rings at its mode frequency (plus the plate bias and white noise
+    of ``noise`` N per channel)."""
     rig = w.manifest["rig"]
     t = np.arange(3000) / 1000.0
     force = np.column_stack([damped(t, modes[0], zeta, 1.0, 4.0), damped(t, modes[1], zeta, 1.0, 3.0),
                              damped(t, modes[2], zeta, 1.0, 20.0)])
-    raw = corner_readings(rig, force, np.zeros_like(force), plate_bias_vector(rig)) + rng.normal(0, 0.01, (len(t), 24))
+    raw = corner_readings(rig, force, np.zeros_like(force), plate_bias_vector(rig)) + rng.normal(0, noise, (len(t), 24))
     w.add_trial(trial_id, "rig.plate_impact", powered=False, repetition=repetition)
     w.add_stream(trial_id, "plate_wrench", plate_stream(t, raw), rate_hz=1000)
 
