@@ -49,12 +49,14 @@ def test_each_cheap_mutant_fails_a_case_of_a_metric_it_breaks(name):
 
 def test_the_mutant_set_is_well_formed_and_its_recorded_result_current():
     """At least 40 mutants with unique names, spec sections that exist, known metrics and patch targets that
-    exist; conformance/mutants/results.json (written by `make mutants`) covers exactly this set and every
-    mutant it records as escaped concerns a spec part whose fixtures another work package owns (``owner``)."""
+    exist, each naming a requirement of its chapter; conformance/mutants/results.json (written by `make
+    mutants`) covers exactly this set and records every mutant caught."""
     import re
 
     from haptify.metric_definitions import all_families
+    from haptify_conform.requirements import by_id
 
+    requirement_ids = set(by_id())
     mutants = catalogue.MUTANTS
     assert len(mutants) >= 40 and len({m.name for m in mutants}) == len(mutants)
     headings = set(re.findall(r"^#+ (\d+(?:\.\d+)*)\.? ", "\n".join(p.read_text() for p in (REPO_ROOT / "spec").glob("*.md")),
@@ -63,6 +65,7 @@ def test_the_mutant_set_is_well_formed_and_its_recorded_result_current():
     for m in mutants:
         assert m.section in headings, (m.name, m.section)
         assert m.metrics and set(m.metrics) <= known, (m.name, m.metrics)
+        assert m.requirement in requirement_ids and by_id()[m.requirement].section.startswith(m.section.split(".")[0]), m.name
         assert len(m.rule) > 10 and len(m.wrong) > 10 and m.patches, m.name
         assert all((p.name in p.owner) if isinstance(p.owner, dict) else hasattr(p.owner, p.name) for p in m.patches), m.name
     recorded = json.loads(RESULTS.read_text(encoding="utf-8"))
@@ -71,7 +74,7 @@ def test_the_mutant_set_is_well_formed_and_its_recorded_result_current():
         failing = {f["metric"] for f in recorded["mutants"][m.name]["failing_cases"]}
         assert not failing or failing & set(m.metrics), (m.name, m.metrics, sorted(failing))
     assert recorded["total"] == len(mutants) and recorded["caught"] == len(mutants) - len(recorded["escaped"])
-    assert [n for n in recorded["escaped"] if not catalogue.BY_NAME[n].owner] == []
+    assert recorded["escaped"] == []
 
 
 def test_the_suite_lints_clean_and_covers_every_metric_three_times():

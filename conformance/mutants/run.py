@@ -33,7 +33,8 @@ from haptify import validation
 from haptify.storage import atomic_write_text
 from haptify_conform import reference
 from haptify_conform.adapters import PythonAdapter
-from haptify_conform.cases import REPO_ROOT, Case, load_cases
+from haptify_conform.cases import REPO_ROOT, SUITE_ROOT, Case, load_cases
+from haptify_conform.coverage import cases_digest
 from haptify_conform.judge import Verdict
 from haptify_conform.runner import run_cases
 from haptify_mutants.catalogue import BY_NAME, MUTANTS
@@ -101,8 +102,8 @@ def run_one(name: str) -> dict[str, Any]:
 
 def _record(name: str, outcome: dict[str, Any]) -> dict[str, Any]:
     m = BY_NAME[name]
-    return {"section": m.section, "rule": m.rule, "wrong": m.wrong, "expected_metrics": list(m.metrics),
-            "owner": m.owner or None, "caught": bool(outcome["failing"]),
+    return {"section": m.section, "requirement": m.requirement, "rule": m.rule, "wrong": m.wrong,
+            "expected_metrics": list(m.metrics), "caught": bool(outcome["failing"]),
             "failing_cases": outcome["failing"], "seconds": outcome["seconds"]}
 
 
@@ -150,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.only:
         doc = {"$comment": "written by `make mutants` (python -m haptify_mutants.run); read by the suite's lint",
                "date": time.strftime("%Y-%m-%d", time.gmtime()), "workers": args.workers, "cpu_count": os.cpu_count(),
-               "wall_s": round(wall, 1), "cases": control["cases"], "caught": caught, "total": len(records),
+               "wall_s": round(wall, 1), "cases_digest": cases_digest(SUITE_ROOT), "cases": control["cases"], "caught": caught, "total": len(records),
                "escaped": escaped, "mutants": records}
         atomic_write_text(args.out, json.dumps(doc, indent=1, ensure_ascii=False) + "\n")
     return 1 if escaped else 0
