@@ -508,6 +508,23 @@ def workspace_fixtures() -> list[Fixture]:
              "Tricky: coverage of an interior solid."),
     ]
     out.append(fx)
+
+    # A solid outside the model: coverage (the overlap, §8.5) is 0 while the volume ratio is not.
+    def ball_outside(path: Path) -> None:
+        w = manifest("conf-ws-ball-outside", example_rig(), device=mid)
+        pose_cloud(w, "workspace-1", sphere_cloud(8000, 0.03, (0.0, 0.0, 0.45), np.random.default_rng(SEED + 6)), "parquet")
+        w.write(path)
+
+    fx = Fixture("ws-ball-outside-model", ball_outside)
+    v_out = 4 / 3 * math.pi * 0.03 ** 3
+    fx.cases += [
+        case("workspace.volume_ratio.ball-outside", "workspace.volume_ratio", "8.5", fx.name, v_out / pappus_volume(mid), "1",
+             "analytic", "a ball R = 3 cm (4/3πR³) divided by the model's Pappus volume", "Tricky: a solid the model does not contain."),
+        case("workspace.coverage.ball-outside", "workspace.coverage", "8.5", fx.name, 0.0, "1", "analytic",
+             "the ball (centre (0, 0, 45) cm, R = 3 cm) lies far outside the reachable set (under 15 cm from the base): no "
+             "overlap; the volume ratio would be 0.093", "Tricky: coverage of a solid outside the model."),
+    ]
+    out.append(fx)
     return out
 
 
@@ -1085,12 +1102,15 @@ def press_phase(t: np.ndarray, press_s: float = PRESS_S) -> tuple[np.ndarray, np
     return tau, (t >= GAP_S) & (tau < press_s) & (t < GAP_S + PRESSES * (press_s + GAP_S))
 
 
-def press_depth(t: np.ndarray, press_s: float = PRESS_S) -> np.ndarray:
-    """Penetration (m): from hovering HOVER above the plane, PRESSES presses −HOVER + (DEPTH + HOVER)·sin²(π τ / press_s),
-    τ the time since the press began, separated by GAP_S. Smooth throughout (at the default 1.2 s the hand crosses
-    the plane at about 0.04 m/s, the protocol's pace), so the motion-capture low-pass of §7.4 has no step to ring at."""
+def press_depth(t: np.ndarray, press_s: float = PRESS_S, scales: tuple[float, ...] = (1.0,) * PRESSES) -> np.ndarray:
+    """Penetration (m): from hovering HOVER above the plane, PRESSES presses −HOVER + (s_k·DEPTH + HOVER)·sin²(π τ / press_s),
+    τ the time since press k began, s_k = ``scales[k]``, separated by GAP_S. Smooth throughout (at the default 1.2 s the
+    hand crosses the plane at about 0.04 m/s, the protocol's pace), so the motion-capture low-pass of §7.4 has no step to
+    ring at."""
     tau, inside = press_phase(t, press_s)
-    return np.where(inside, -HOVER + (DEPTH + HOVER) * np.sin(np.pi * tau / press_s) ** 2, -HOVER)
+    k = np.clip(np.floor((t - GAP_S) / (press_s + GAP_S)).astype(int), 0, PRESSES - 1)
+    deepest = DEPTH * np.asarray(scales, dtype=float)[k]
+    return np.where(inside, -HOVER + (deepest + HOVER) * np.sin(np.pi * tau / press_s) ** 2, -HOVER)
 
 
 def press_time(depth: float, press_s: float = PRESS_S) -> float:
@@ -1182,6 +1202,27 @@ def stiffness_fixtures() -> list[Fixture]:
         case("stiffness.measured.linear", "stiffness.measured", "13.3", fx.name, 300.0, "N/m", "analytic",
              "a purely linear 300 N/m spring pressed five times 12 mm deep: the least-squares slope of force against "
              "penetration over the fit samples is the spring constant (the rise ends at the deepest sample)", "Edge: no saturation."),
+    ]
+    out.append(fx)
+    # Presses of unequal depth: the peak force is the MEAN of the presses' peaks (§13.4), not the largest.
+    scales = (0.7, 0.85, 1.0, 1.15, 1.3)
+    uneven = lambda t: press_depth(t, scales=scales)  # noqa: E731
+    fx = Fixture("stiff-linear-uneven", active_session(
+        "stiff-linear-uneven", "example", "stiffness-1", "stiffness", duration(), 0.03,
+        lambda t: np.array([0.0, 0.01, 0.1]) - uneven(t)[:, None] * up,
+        lambda t: np.clip(300.0 * uneven(t), 0.0, None)[:, None] * up,
+        lambda t: (K_CMD * np.maximum(uneven(t), 0.0))[:, None] * up,
+        {"surface_point_m": [0.0, 0.01, 0.1], "surface_normal": [0.0, 0.0, 1.0], "stiffness_N_per_m": K_CMD},
+        (500.0, 500.0, 100.0), "parquet"))
+    peaks = [300.0 * DEPTH * sc for sc in scales]
+    fx.cases += [
+        case("stiffness.peak_force.linear-uneven", "stiffness.peak_force", "13.4", fx.name, float(np.mean(peaks)), "N",
+             "analytic", f"a purely linear 300 N/m spring pressed {', '.join(f'{1000 * DEPTH * sc:g}' for sc in scales)} mm "
+             f"deep: the press peaks are {', '.join(f'{pk:.3g}' for pk in peaks)} N and the value is their mean (the largest "
+             f"is {max(peaks) / np.mean(peaks) - 1:.0%} higher)", "Tricky: presses of unequal depth."),
+        case("stiffness.measured.linear-uneven", "stiffness.measured", "13.3", fx.name, 300.0, "N/m", "analytic",
+             "a purely linear 300 N/m spring: every press's fit samples lie on one line whatever its depth",
+             "Tricky: presses of unequal depth."),
     ]
     out.append(fx)
     out += [kick_dip_fixture(), falling_release_fixture()]
