@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import re
 import signal
 import stat
 import threading
@@ -39,6 +40,8 @@ from haptify.storage import sha256_file
 from haptify_tools import build_invalid_fixtures as fx
 from haptify_tools.example_session import example_writer
 from haptify_tools.registry.app import EXPORT_COLUMNS, FORMULA_LEAD, create_app, csv_cell, neutralised
+
+NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")  # a signed number is data, not a formula
 from haptify_tools.registry.bundle import Limits, unpack
 from haptify_tools.registry.service import Settings
 from haptify_tools.registry.worker import run_contained
@@ -233,7 +236,7 @@ def test_export_and_compare_csv_carry_no_formula(base, tmp_path):
         table = list(csv.reader(io.StringIO(client.get(f"/api/v1/compare?devices={slug}&format=csv").text)))
     cells = [c for row in export + table for c in row]
     assert export[1][EXPORT_COLUMNS.index("model")] == "'" + evil and len(table) > 1
-    assert not [c for c in cells if c.startswith(FORMULA_LEAD) and not _is_number(c)]
+    assert not [c for c in cells if c.startswith(FORMULA_LEAD) and not NUMBER.fullmatch(c)]
 
 
 def test_a_comparison_table_is_neutralised_cell_by_cell():
@@ -241,12 +244,6 @@ def test_a_comparison_table_is_neutralised_cell_by_cell():
     assert neutralised(table) == Table(["Metric", "'@SUM(A1)"], [["'+cmd|' /C calc'!A0", "-1.5", "'-1.5 ± 0.2"]], [])
 
 
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-        return True
-    except ValueError:
-        return False
 
 
 # --- headers and file modes -------------------------------------------------------------------------

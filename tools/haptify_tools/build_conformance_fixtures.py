@@ -493,13 +493,16 @@ def workspace_fixtures() -> list[Fixture]:
     ]
     out.append(fx)
 
-    # Ratio below and above 1 by construction: a ball inside the model of known volume.
-    def ball(path: Path) -> None:
-        w = manifest("conf-ws-ball", example_rig(), device=mid)
-        pose_cloud(w, "workspace-1", sphere_cloud(6000, 0.02, (0.07, 0.0, 0.02), np.random.default_rng(SEED + 5)), "parquet")
-        w.write(path)
+    def ball_session(sid: str, n: int, radius: float, centre: tuple, seed: int) -> Callable[[Path], None]:
+        """A workspace trial whose cloud samples the surface of one ball, with the mid-size model."""
+        def build(path: Path) -> None:
+            w = manifest(sid, example_rig(), device=mid)
+            pose_cloud(w, "workspace-1", sphere_cloud(n, radius, centre, np.random.default_rng(seed)), "parquet")
+            w.write(path)
+        return build
 
-    fx = Fixture("ws-ball-in-model", ball)
+    # Ratio below and above 1 by construction: a ball inside the model of known volume.
+    fx = Fixture("ws-ball-in-model", ball_session("conf-ws-ball", 6000, 0.02, (0.07, 0.0, 0.02), SEED + 5))
     v_ball = 4 / 3 * math.pi * 0.02 ** 3
     fx.cases += [
         case("workspace.volume_ratio.ball", "workspace.volume_ratio", "8.5", fx.name, v_ball / pappus_volume(mid), "1", "analytic", "a ball R = 2 cm (4/3πR³) divided by the model's Pappus volume; tolerance = both operators' biases",
@@ -510,12 +513,7 @@ def workspace_fixtures() -> list[Fixture]:
     out.append(fx)
 
     # A solid outside the model: coverage (the overlap, §8.5) is 0 while the volume ratio is not.
-    def ball_outside(path: Path) -> None:
-        w = manifest("conf-ws-ball-outside", example_rig(), device=mid)
-        pose_cloud(w, "workspace-1", sphere_cloud(8000, 0.03, (0.0, 0.0, 0.45), np.random.default_rng(SEED + 6)), "parquet")
-        w.write(path)
-
-    fx = Fixture("ws-ball-outside-model", ball_outside)
+    fx = Fixture("ws-ball-outside-model", ball_session("conf-ws-ball-outside", 8000, 0.03, (0.0, 0.0, 0.45), SEED + 6))
     v_out = 4 / 3 * math.pi * 0.03 ** 3
     fx.cases += [
         case("workspace.volume_ratio.ball-outside", "workspace.volume_ratio", "8.5", fx.name, v_out / pappus_volume(mid), "1",
@@ -1186,15 +1184,21 @@ def stiffness_fixtures() -> list[Fixture]:
         if after is None:
             fx.cases.append(case(f"stiffness.peak_force.{short}", "stiffness.peak_force", "13.4", name, peak, "N", "analytic", how + "; every press reaches the saturation plateau", desc))
         out.append(fx)
-    # A third peak-force case: a press that never saturates, so its peak is k·depth.
     up = np.array([0.0, 0.0, 1.0])
-    fx = Fixture("stiff-linear", active_session(
-        "stiff-linear", "example", "stiffness-1", "stiffness", duration(), 0.03,
-        lambda t: np.array([0.0, 0.01, 0.1]) - press_depth(t)[:, None] * up,
-        lambda t: np.clip(300.0 * press_depth(t), 0.0, None)[:, None] * up,
-        lambda t: (K_CMD * np.maximum(press_depth(t), 0.0))[:, None] * up,
-        {"surface_point_m": [0.0, 0.01, 0.1], "surface_normal": [0.0, 0.0, 1.0], "stiffness_N_per_m": K_CMD},
-        (500.0, 500.0, 100.0), "parquet"))
+
+    def linear_presses(name: str, scales: tuple[float, ...]) -> Fixture:
+        """A purely linear 300 N/m spring pressed PRESSES times, press k ``scales[k]``·DEPTH deep."""
+        depth = lambda t: press_depth(t, scales=scales)  # noqa: E731
+        return Fixture(name, active_session(
+            name, "example", "stiffness-1", "stiffness", duration(), 0.03,
+            lambda t: np.array([0.0, 0.01, 0.1]) - depth(t)[:, None] * up,
+            lambda t: np.clip(300.0 * depth(t), 0.0, None)[:, None] * up,
+            lambda t: (K_CMD * np.maximum(depth(t), 0.0))[:, None] * up,
+            {"surface_point_m": [0.0, 0.01, 0.1], "surface_normal": [0.0, 0.0, 1.0], "stiffness_N_per_m": K_CMD},
+            (500.0, 500.0, 100.0), "parquet"))
+
+    # A third peak-force case: a press that never saturates, so its peak is k·depth.
+    fx = linear_presses("stiff-linear", (1.0,) * PRESSES)
     fx.cases += [
         case("stiffness.peak_force.linear", "stiffness.peak_force", "13.4", fx.name, 300.0 * DEPTH, "N", "analytic",
              "a purely linear 300 N/m spring pressed 12 mm deep: the peak is 3.6 N (the sin² press is smooth at its bottom, "
@@ -1206,14 +1210,7 @@ def stiffness_fixtures() -> list[Fixture]:
     out.append(fx)
     # Presses of unequal depth: the peak force is the MEAN of the presses' peaks (§13.4), not the largest.
     scales = (0.7, 0.85, 1.0, 1.15, 1.3)
-    uneven = lambda t: press_depth(t, scales=scales)  # noqa: E731
-    fx = Fixture("stiff-linear-uneven", active_session(
-        "stiff-linear-uneven", "example", "stiffness-1", "stiffness", duration(), 0.03,
-        lambda t: np.array([0.0, 0.01, 0.1]) - uneven(t)[:, None] * up,
-        lambda t: np.clip(300.0 * uneven(t), 0.0, None)[:, None] * up,
-        lambda t: (K_CMD * np.maximum(uneven(t), 0.0))[:, None] * up,
-        {"surface_point_m": [0.0, 0.01, 0.1], "surface_normal": [0.0, 0.0, 1.0], "stiffness_N_per_m": K_CMD},
-        (500.0, 500.0, 100.0), "parquet"))
+    fx = linear_presses("stiff-linear-uneven", scales)
     peaks = [300.0 * DEPTH * sc for sc in scales]
     fx.cases += [
         case("stiffness.peak_force.linear-uneven", "stiffness.peak_force", "13.4", fx.name, float(np.mean(peaks)), "N",
