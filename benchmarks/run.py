@@ -31,18 +31,18 @@ def local_dependencies(script: Path) -> list[Path]:
     """The files of this folder a script depends on: itself, the modules of this folder it imports (and
     theirs), and ``peers/`` when it runs a peer from there. Sorted, each once."""
     seen: dict[Path, None] = {}
-    todo = [script]
-    while todo:
-        path = todo.pop()
+    unread = [script]
+    while unread:
+        path = unread.pop()
         if path in seen:
             continue
         seen[path] = None
         text = path.read_text(encoding="utf-8")
         for name in re.findall(r"^\s*(?:from|import)\s+(\w+)", text, re.M):
             if (HERE / f"{name}.py").is_file():
-                todo.append(HERE / f"{name}.py")
+                unread.append(HERE / f"{name}.py")
         if '"peers"' in text:
-            todo.extend(sorted(p for p in (HERE / "peers").iterdir() if p.is_file()))
+            unread.extend(sorted(p for p in (HERE / "peers").iterdir() if p.is_file()))
     return sorted(seen)
 
 

@@ -67,7 +67,9 @@ def all_requirements() -> tuple[Requirement, ...]:
     return tuple(value + verdict)
 
 
+@lru_cache(maxsize=1)
 def by_id() -> dict[str, Requirement]:
+    """Every requirement by its id."""
     return {r.id: r for r in all_requirements()}
 
 
