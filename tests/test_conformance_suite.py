@@ -144,3 +144,15 @@ def test_a_case_model_outside_the_session_or_missing_is_e702(model):
     doc = analyse(str(REPO_ROOT / "fixtures" / "conformance" / "dyn-predict"), "dynamics.force_rmse", {"model": model})
     assert [(u["id"], u["code"]) for u in doc["unavailable"]] == [("dynamics.force_rmse", "E702")]
     assert doc["metrics"] == []
+
+
+def test_the_spec_table_of_case_files_states_their_case_counts():
+    """Spec §16.8.1 lists every case file with its number of cases: the table is prose, its counts must
+    follow the files."""
+    import re
+
+    table = (REPO_ROOT / "spec" / "16-conformance.md").read_text(encoding="utf-8")
+    stated = {m.group(1): int(m.group(2)) for m in re.finditer(r"^\| `(\w+\.json)` \| (\d+) \|", table, re.M)}
+    actual = {p.name: len(json.loads(p.read_text(encoding="utf-8"))["cases"])
+              for p in sorted((REPO_ROOT / "conformance" / "cases").glob("*.json"))}
+    assert stated == actual
