@@ -33,7 +33,7 @@ from haptify_tools.registry.service import Registry, Settings
 from haptify_tools.registry.uploads import Uploads
 
 API = "/api/v1"
-VERIFICATION_FILTER = "^(all|verified|disagrees|unverified)$"  # lists: one verification state, or all (spec §17.3.1)
+VERIFICATION_FILTER = "^(all|verified|disagreeing|unverified)$"  # lists: one verification state, or all (spec §17.3.1)
 RANKED_FILTER = "^(verified|all)$"  # aggregates and rankings: verified results only (default), or all
 log = logging.getLogger("haptify.registry")
 
@@ -216,7 +216,7 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
                          verification: str = Query("all", pattern=VERIFICATION_FILTER),
                          limit: int = Query(100, ge=1, le=1000), offset: int = Query(0, ge=0)) -> list[dict]:
         """Submissions, newest first; ``state`` current, superseded, withdrawn or all; ``verification``
-        verified, disagrees, unverified or all (spec §17.3.1)."""
+        verified, disagreeing, unverified or all (spec §17.3.1)."""
         return reg.submissions(lab=lab, device=device, state=state, verification=verification, limit=limit, offset=offset)
 
     @app.get(f"{API}/submissions/{{sid}}", tags=["submissions"])

@@ -54,7 +54,7 @@ SCOPES = ("submit", "admin")
 TOKEN_PREFIX = "hpt_"
 DEFAULT_RATE_PER_MINUTE = 120
 STATES = ("current", "superseded", "withdrawn")
-VERIFICATIONS = ("verified", "disagrees", "unverified")  # spec §17.3.1
+VERIFICATIONS = ("verified", "disagreeing", "unverified")  # spec §17.3.1
 RANKED = ("verified", "all")  # which results aggregates and rankings count: verified only (default) or all
 
 
