@@ -258,6 +258,38 @@ def test_every_response_carries_the_security_headers(base, tmp_path):
             assert "frame-ancestors 'none'" in csp and "default-src 'none'" in csp, path
             assert h["x-content-type-options"] == "nosniff" and h["referrer-policy"] == "no-referrer", path
         assert "script-src" not in client.get("/").headers["content-security-policy"]  # the pages run no script
+    app.state.registry.close()
+
+
+def assert_secured(response) -> None:
+    h = response.headers
+    assert "frame-ancestors 'none'" in h["content-security-policy"] and "default-src 'none'" in h["content-security-policy"]
+    assert h["x-content-type-options"] == "nosniff" and h["referrer-policy"] == "no-referrer"
+
+
+def test_error_responses_and_a_forced_500_carry_the_security_headers(tmp_path, monkeypatch, caplog):
+    """4xx of every kind (coded refusal, unknown route, wrong method, invalid query) and the 500 of an
+    unhandled exception carry the headers; the 500 is the coded E999 body and is logged with its code."""
+    import logging
+
+    app = create_app(Settings(data_dir=tmp_path / "data"))
+
+    def broken() -> list:
+        raise RuntimeError("forced failure")
+
+    monkeypatch.setattr(app.state.registry, "labs", broken)
+    with TestClient(app, raise_server_exceptions=False) as client, caplog.at_level(logging.WARNING, logger="haptify.registry"):
+        for method, path, status in [("POST", "/api/v1/submissions", 401), ("GET", "/no/such/page", 404),
+                                     ("DELETE", "/api/v1/health", 405), ("GET", "/api/v1/submissions?limit=0", 400),
+                                     ("GET", "/api/v1/submissions/nothere", 404)]:
+            r = client.request(method, path)
+            assert r.status_code == status, (path, r.status_code)
+            assert_secured(r)
+        crashed = client.get("/api/v1/labs")
+        assert crashed.status_code == 500 and crashed.json()["findings"][0]["code"] == "E999"
+        assert_secured(crashed)
+    app.state.registry.close()
+    assert any("GET /api/v1/labs" in r.getMessage() and "E999" in r.getMessage() and r.exc_info for r in caplog.records)
 
 
 def test_the_database_and_the_archives_are_the_service_users_only(base, tmp_path):

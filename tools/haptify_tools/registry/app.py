@@ -98,7 +98,10 @@ def security_headers(path: str) -> list[tuple[bytes, bytes]]:
 
 
 class SecurityHeaders:
-    """ASGI middleware adding :func:`security_headers` to every HTTP response (pages, API, files, errors)."""
+    """ASGI middleware adding :func:`security_headers` to every HTTP response (pages, API, files, errors).
+
+    :func:`create_app` puts it outside Starlette's ``ServerErrorMiddleware``, so the 500 of an unhandled
+    exception carries the headers too (a middleware added with ``add_middleware`` sits inside it)."""
 
     def __init__(self, app) -> None:
         self.app = app
@@ -131,7 +134,8 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
                   description="Labs submit verified device results; everyone compares devices (Haptify spec chapter 17).")
     app.state.registry = reg
     app.state.swept = swept
-    app.add_middleware(SecurityHeaders)
+    build_stack = app.build_middleware_stack
+    app.build_middleware_stack = lambda: SecurityHeaders(build_stack())  # outermost: 500s get the headers too
 
     @app.exception_handler(HaptifyError)
     async def _coded(request: Request, err: HaptifyError) -> JSONResponse:
@@ -152,7 +156,9 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
                             status_code=exc.status_code)
 
     @app.exception_handler(Exception)
-    async def _internal(_request: Request, exc: Exception) -> JSONResponse:
+    async def _internal(request: Request, exc: Exception) -> JSONResponse:
+        log.error("error %s %s from %s: E999 %s: %s", request.method, request.url.path,
+                  request.client.host if request.client else "-", type(exc).__name__, exc, exc_info=exc)
         return JSONResponse({"status": "error", "findings": [Finding("E999", f"{type(exc).__name__}: {exc}").to_dict()]},
                             status_code=500)
 
