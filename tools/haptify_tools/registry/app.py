@@ -185,7 +185,8 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
             response.status_code = 200
         return outcome.to_dict()
 
-    uploads = Uploads(reg.tmp, reg.settings.limits.max_archive_bytes)
+    uploads = Uploads(reg.data / "uploads", reg.tmp, reg.settings.limits.max_archive_bytes, reg.settings.upload_ttl_s)
+    app.state.swept.update(uploads_resumed=uploads.resumed, uploads_expired=uploads.expired)
 
     @app.post(f"{API}/uploads", tags=["submissions"], status_code=201)
     def open_upload(upload_length: str | None = Header(None), authorization: str | None = Header(None)) -> dict:
@@ -250,7 +251,8 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
     @app.get(f"{API}/limits", tags=["service"])
     def limits() -> dict:
         """What this registry accepts (spec §17.4, §17.4.1): a client checks its bundle against these before sending."""
-        return {**asdict(reg.settings.limits), "challenge_ttl_s": reg.settings.challenge_ttl_s}
+        return {**asdict(reg.settings.limits), "challenge_ttl_s": reg.settings.challenge_ttl_s,
+                "upload_ttl_s": reg.settings.upload_ttl_s}
 
     @app.post(f"{API}/challenges", tags=["conformance"], status_code=201)
     def create_challenge(authorization: str | None = Header(None)) -> dict:

@@ -68,6 +68,7 @@ class Settings:
     verify_raw: bool = True  # re-compute metrics when raw streams are included
     default_rate_per_minute: int = DEFAULT_RATE_PER_MINUTE
     challenge_ttl_s: float = 3600.0  # a challenge must be answered within this time (spec §17.8)
+    upload_ttl_s: float = 24 * 3600.0  # a resumable upload without a chunk for this long expires (spec §17.5.2)
 
     @property
     def url(self) -> str:
