@@ -143,17 +143,20 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
         return refusal(err)
 
     @app.exception_handler(RequestValidationError)
-    async def _invalid(_request: Request, exc: RequestValidationError) -> JSONResponse:
+    async def _invalid(request: Request, exc: RequestValidationError) -> JSONResponse:
         findings = [Finding("E975", e.get("msg", "invalid"), file=str(e.get("loc", ["request"])[0]),
                             pointer="/" + "/".join(str(p) for p in e.get("loc", [])[1:]),
                             expected=e.get("type"), found=_short(e.get("input"))) for e in exc.errors()]
-        return refusal(HaptifyError(*findings))
+        err = HaptifyError(*(findings or [Finding("E975", "invalid request")]))
+        log_refusal(request, err)
+        return refusal(err)
 
     @app.exception_handler(StarletteHTTPException)
-    async def _http(_request: Request, exc: StarletteHTTPException) -> JSONResponse:
-        code = "E973" if exc.status_code == 404 else "E975"
-        return JSONResponse({"status": "refused", "findings": [Finding(code, str(exc.detail)).to_dict()]},
-                            status_code=exc.status_code)
+    async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        err = HaptifyError(Finding("E973" if exc.status_code == 404 else "E975", str(exc.detail)))
+        log_refusal(request, err)
+        return JSONResponse({"status": "refused", "findings": [f.to_dict() for f in err.findings]},
+                            status_code=exc.status_code, headers=getattr(exc, "headers", None))
 
     @app.exception_handler(Exception)
     async def _internal(request: Request, exc: Exception) -> JSONResponse:
