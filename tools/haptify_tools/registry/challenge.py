@@ -53,7 +53,6 @@ Truth = tuple[str, Any, str, dict]  # metric, expected value (number or list), u
 RATES_HZ = (1000.0, 1500.0, 2000.0)  # accelerometer rates of a vibration session
 SECONDS = (4.0, 6.0)
 LOWEST_HZ = 20  # well above the 10 Hz high-pass cut-off (§10.2): the filter's gain is then analytic to < 1e-4
-NOT_CHALLENGED = ("dynamics: the fit of a model (§11.4); workspace.volume_ratio and workspace.coverage (§8.5)")
 
 
 @dataclass(frozen=True)
