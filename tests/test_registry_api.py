@@ -81,22 +81,28 @@ def test_raw_bundle_is_verified_and_a_replay_is_idempotent(base, tmp_path):
             sorted(p.relative_to(session).as_posix() for p in session.rglob("*.parquet"))
 
 
-def test_a_disagreeing_metric_is_named(base, tmp_path):
+def disagreeing_bundle(base, tmp_path) -> Path:
+    """A bundle with raw streams whose vibration.rms is 1 % off the reference's (far beyond the loosest
+    vibration.rms case tolerance): the registry re-computes it and finds it disagreeing."""
     root, session, results, report, impl = base
     data = json.loads(results.read_text())
     rms = next(m for m in data["metrics"] if m["id"] == "vibration.rms")
-    rms["value"] *= 1.01  # 1 % off; far beyond the loosest vibration.rms case tolerance
+    rms["value"] *= 1.01
     rms["per_repetition"] = [v * 1.01 for v in rms["per_repetition"]]
     bad = tmp_path / "results.json"
     bad.write_text(json.dumps(data))
+    return bundle_for(session, bad, report, tmp_path / "b.tar.gz", include_raw=True)[0]
+
+
+def test_a_disagreeing_metric_is_named(base, tmp_path):
+    archive = disagreeing_bundle(base, tmp_path)
     app = create_app(Settings(data_dir=tmp_path / "data"))
     token = app.state.registry.create_token("lab-a")
-    archive, _ = bundle_for(session, bad, report, tmp_path / "b.tar.gz", include_raw=True)
     with TestClient(app) as client:
         r = post(client, archive, token)
         assert r.status_code == 201
         v = r.json()["verification"]
-        assert v["status"] == "disagrees"
+        assert v["status"] == "disagreeing"
         wrong = [c for c in v["checks"] if c["status"] != "agrees"]
         assert [c["metric"] for c in wrong] == ["vibration.rms"]
         cases = [c for c in select(load_cases(), spec_version="1.0") if c.metric == "vibration.rms" and c.tolerance]
@@ -299,6 +305,37 @@ def test_migrations_go_down_and_up_again(tmp_path, backend_url):
         assert {"challenges", "challenge_results", "submissions"} <= tables()
     finally:
         engine.dispose()
+
+
+def test_the_disagreeing_state_is_converted_by_its_migration_both_ways(base, tmp_path, backend_url):
+    """r0003 renames the stored state disagrees → disagreeing (column and verification record) and back."""
+    from haptify_tools.registry import db
+
+    app = create_app(Settings(data_dir=tmp_path / "data", db_url=backend_url(tmp_path)))
+    reg = app.state.registry
+    token = reg.create_token("lab-a")
+
+    def stored(sid: str) -> tuple[str, str]:
+        with reg.engine.connect() as conn:
+            state, record = conn.execute(text("SELECT verification, verification_json FROM submissions WHERE id = :i"),
+                                         {"i": sid}).one()
+        return state, json.loads(record)["status"]
+
+    try:
+        with TestClient(app) as client:
+            sid = post(client, disagreeing_bundle(base, tmp_path), token).json()["id"]
+            assert stored(sid) == ("disagreeing", "disagreeing")
+            db.migrate(reg.engine, "r0002", down=True)
+            assert stored(sid) == ("disagrees", "disagrees")
+            db.migrate(reg.engine)
+            assert stored(sid) == ("disagreeing", "disagreeing")
+            got = client.get(f"{API}/submissions/{sid}").json()
+            assert got["verification"] == got["verification_details"]["status"] == "disagreeing"
+            with pytest.raises(Exception, match="append-only"):  # the triggers are back
+                with reg.engine.begin() as conn:
+                    conn.execute(text("UPDATE submissions SET verification = 'verified'"))
+    finally:
+        reg.close()
 
 
 def test_migrations_build_exactly_the_orm_models(registry):

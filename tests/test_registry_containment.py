@@ -108,13 +108,16 @@ def test_a_worker_over_its_limits_fails_alone_with_E976(fn, args, found):
     # streams) fails, and the validator reports the stream as too large to check (E112, spec §4.6).
     (Limits(worker_memory_bytes=1 << 20), ["E966", "E112"], "MemoryError"),
 ])
-def test_a_bundle_the_worker_cannot_check_within_its_limits_fails_alone(base, tmp_path, limits, codes, says):
+def test_a_bundle_the_worker_cannot_check_within_its_limits_fails_alone(base, tmp_path, limits, codes, says, caplog):
+    import logging
+
     root, session, results, report, impl = base
     archive, _ = bundle_for(session, results, report, tmp_path / "raw.tar.gz", include_raw=True)
     app = create_app(Settings(data_dir=tmp_path / "data", limits=limits))
     token = app.state.registry.create_token("lab-a")
-    with TestClient(app) as client:
+    with TestClient(app) as client, caplog.at_level(logging.WARNING, logger="haptify.registry"):
         r = post(client, archive.read_bytes(), token)
+        assert any("POST /api/v1/submissions" in m.getMessage() and codes[0] in m.getMessage() for m in caplog.records)
         found = [f["code"] for f in r.json()["findings"]]
         assert r.status_code == 422 and found[:len(codes)] == codes and says in json.dumps(r.json()), r.json()
         assert client.get("/api/v1/health").status_code == 200
@@ -258,6 +261,38 @@ def test_every_response_carries_the_security_headers(base, tmp_path):
             assert "frame-ancestors 'none'" in csp and "default-src 'none'" in csp, path
             assert h["x-content-type-options"] == "nosniff" and h["referrer-policy"] == "no-referrer", path
         assert "script-src" not in client.get("/").headers["content-security-policy"]  # the pages run no script
+    app.state.registry.close()
+
+
+def assert_secured(response) -> None:
+    h = response.headers
+    assert "frame-ancestors 'none'" in h["content-security-policy"] and "default-src 'none'" in h["content-security-policy"]
+    assert h["x-content-type-options"] == "nosniff" and h["referrer-policy"] == "no-referrer"
+
+
+def test_error_responses_and_a_forced_500_carry_the_security_headers(tmp_path, monkeypatch, caplog):
+    """4xx of every kind (coded refusal, unknown route, wrong method, invalid query) and the 500 of an
+    unhandled exception carry the headers; the 500 is the coded E999 body and is logged with its code."""
+    import logging
+
+    app = create_app(Settings(data_dir=tmp_path / "data"))
+
+    def broken() -> list:
+        raise RuntimeError("forced failure")
+
+    monkeypatch.setattr(app.state.registry, "labs", broken)
+    with TestClient(app, raise_server_exceptions=False) as client, caplog.at_level(logging.WARNING, logger="haptify.registry"):
+        for method, path, status in [("POST", "/api/v1/submissions", 401), ("GET", "/no/such/page", 404),
+                                     ("DELETE", "/api/v1/health", 405), ("GET", "/api/v1/submissions?limit=0", 400),
+                                     ("GET", "/api/v1/submissions/nothere", 404)]:
+            r = client.request(method, path)
+            assert r.status_code == status, (path, r.status_code)
+            assert_secured(r)
+        crashed = client.get("/api/v1/labs")
+        assert crashed.status_code == 500 and crashed.json()["findings"][0]["code"] == "E999"
+        assert_secured(crashed)
+    app.state.registry.close()
+    assert any("GET /api/v1/labs" in r.getMessage() and "E999" in r.getMessage() and r.exc_info for r in caplog.records)
 
 
 def test_the_database_and_the_archives_are_the_service_users_only(base, tmp_path):
@@ -279,15 +314,33 @@ def test_the_database_and_the_archives_are_the_service_users_only(base, tmp_path
 
 
 def test_every_refusal_is_logged_with_its_code(tmp_path, caplog):
+    """Each kind of refusal — a coded one, the framework's (validation, unknown route, wrong method), a size
+    refusal before reading, an upload's, a challenge's, a page's and a hostile bundle refused by the worker —
+    leaves one WARNING line with its method, path and code."""
     import logging
 
     app = create_app(Settings(data_dir=tmp_path / "data"))
+    token = app.state.registry.create_token("lab-a")
+    h = {"Authorization": f"Bearer {token}", "Content-Type": "application/gzip"}
+    limit = app.state.registry.settings.limits.max_archive_bytes
+    expected = [
+        (("POST", "/api/v1/submissions", {"content": b"x", "headers": {"Content-Type": "application/gzip"}}), "E970"),
+        (("GET", "/api/v1/submissions/nothere", {}), "E973"),
+        (("GET", "/devices/nothere", {}), "E973"),
+        (("GET", "/api/v1/submissions?limit=0", {}), "E975"),
+        (("GET", "/no/such/route/at/all", {}), "E973"),
+        (("DELETE", "/api/v1/health", {}), "E975"),
+        (("POST", "/api/v1/submissions", {"content": b"x", "headers": {**h, "Content-Length": str(limit + 1)}}), "E960"),
+        (("GET", "/api/v1/uploads/0123456789abcdef01234567", {"headers": h}), "E973"),
+        (("POST", "/api/v1/uploads", {"headers": {**h, "Upload-Length": str(limit + 1)}}), "E960"),
+        (("GET", "/api/v1/challenges/nothere", {}), "E973"),
+        (("POST", "/api/v1/submissions", {"content": sparse_archive(), "headers": h}), "E962"),  # refused in the worker
+    ]
     with TestClient(app) as client, caplog.at_level(logging.WARNING, logger="haptify.registry"):
-        client.post("/api/v1/submissions", content=b"x", headers={"Content-Type": "application/gzip"})  # no token
-        client.get("/api/v1/submissions/nothere")
-        client.get("/devices/nothere")  # a page
+        for (method, path, kwargs), code in expected:
+            caplog.clear()
+            response = client.request(method, path, **kwargs)
+            assert response.status_code >= 400, path
+            lines = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+            assert any(f"{method} {path.split('?')[0]}" in m and code in m for m in lines), (method, path, code, lines)
     app.state.registry.close()
-    lines = [r.getMessage() for r in caplog.records]
-    assert any("POST /api/v1/submissions" in m and "E970" in m for m in lines)
-    assert any("GET /api/v1/submissions/nothere" in m and "E973" in m for m in lines)
-    assert any("GET /devices/nothere" in m and "E973" in m for m in lines)

@@ -96,6 +96,72 @@ def test_an_upload_cut_short_keeps_what_arrived_and_resumes(base, tmp_path):
         app.state.registry.close()
 
 
+def test_an_upload_survives_a_restart_of_the_registry(base, tmp_path):
+    """Start an upload, stop the registry, start a new app on the same data folder: the upload is there at
+    its offset, continues, completes and is verified; a torn chunk (bytes past the recorded offset) is cut."""
+    root, session, results, report, impl = base
+    archive, digest = bundle_for(session, results, report, tmp_path / "raw.tar.gz", include_raw=True)
+    data = archive.read_bytes()
+    settings = Settings(data_dir=tmp_path / "data")
+    first = create_app(settings)
+    token = first.state.registry.create_token("lab-a")
+    h = {"Authorization": f"Bearer {token}"}
+    try:
+        with TestClient(first) as client:
+            up = client.post("/api/v1/uploads", headers={**h, "Upload-Length": str(len(data))}).json()
+            assert client.patch(f"/api/v1/uploads/{up['id']}", content=data[:12_345],
+                                headers={**h, "Upload-Offset": "0"}).json()["offset"] == 12_345
+    finally:
+        first.state.registry.close()
+    part = tmp_path / "data" / "uploads" / f"{up['id']}.part"
+    with open(part, "ab") as fh:  # a chunk the crash tore: written, never acknowledged
+        fh.write(b"\x00" * 999)
+    second = create_app(settings)
+    try:
+        assert second.state.swept["uploads_resumed"] == 1
+        with TestClient(second) as client:
+            got = client.get(f"/api/v1/uploads/{up['id']}", headers=h).json()
+            assert got["offset"] == 12_345 and not got["complete"] and part.stat().st_size == 12_345
+            rest = client.patch(f"/api/v1/uploads/{up['id']}", content=data[12_345:], headers={**h, "Upload-Offset": "12345"})
+            assert rest.json()["complete"]
+            done = client.post(f"/api/v1/uploads/{up['id']}/submit", headers=h)
+            assert done.status_code == 201 and done.json()["digest"] == digest
+            assert done.json()["verification"]["status"] == "verified"
+            assert client.get(f"/api/v1/submissions/{done.json()['id']}/bundle").content == data
+        assert sorted(p.name for p in (tmp_path / "data" / "uploads").iterdir()) == []
+    finally:
+        second.state.registry.close()
+
+
+def test_stale_uploads_expire_and_are_deleted(tmp_path):
+    """An upload without a chunk for upload_ttl_s is gone: at start-up, and in a running registry."""
+    settings = Settings(data_dir=tmp_path / "data", upload_ttl_s=0.5)
+    folder = tmp_path / "data" / "uploads"
+    app = create_app(settings)
+    token = app.state.registry.create_token("lab-a")
+    h = {"Authorization": f"Bearer {token}"}
+    try:
+        with TestClient(app) as client:
+            assert client.get("/api/v1/limits").json()["upload_ttl_s"] == 0.5
+            a = client.post("/api/v1/uploads", headers={**h, "Upload-Length": "100"}).json()
+            assert client.patch(f"/api/v1/uploads/{a['id']}", content=b"x" * 10, headers={**h, "Upload-Offset": "0"}).status_code == 200
+            time.sleep(0.8)
+            assert client.get(f"/api/v1/uploads/{a['id']}", headers=h).json()["findings"][0]["code"] == "E973"
+            assert not list(folder.iterdir())
+            b = client.post("/api/v1/uploads", headers={**h, "Upload-Length": "100"}).json()
+            assert client.get("/api/v1/uploads/..%2Fregistry", headers=h).status_code == 404  # ids name no other file
+    finally:
+        app.state.registry.close()
+    assert sorted(p.name for p in folder.iterdir()) == [f"{b['id']}.json", f"{b['id']}.part"]
+    time.sleep(0.8)
+    again = create_app(settings)
+    try:
+        assert again.state.swept["uploads_expired"] == 1 and again.state.swept["uploads_resumed"] == 0
+        assert not list(folder.iterdir())
+    finally:
+        again.state.registry.close()
+
+
 def test_haptify_submit_resumes_after_a_dropped_chunk(base, tmp_path, capsys, monkeypatch):
     from haptify_tools.registry import cmd_submit
 

@@ -1,4 +1,4 @@
-"""Verification states, visible (spec §17.3.1): each submission is verified, disagrees (both values shown) or
+"""Verification states, visible (spec §17.3.1): each submission is verified, disagreeing (both values shown) or
 unverified; aggregates, leaderboards and comparisons count only verified results unless asked for all;
 the others are listed apart and marked; the API, the export and the pages carry the state and filter by it."""
 
@@ -48,8 +48,8 @@ def three(base, tmp_path_factory):  # noqa: F811 (base is a fixture)
 def test_each_submission_has_its_state(three):
     client, ids, rms = three
     states = {name: client.get(f"{API}/submissions/{sid}").json()["verification"] for name, sid in ids.items()}
-    assert states == {"touch": "verified", "falcon": "disagrees", "omega": "unverified"}
-    for state, name in (("verified", "touch"), ("disagrees", "falcon"), ("unverified", "omega")):
+    assert states == {"touch": "verified", "falcon": "disagreeing", "omega": "unverified"}
+    for state, name in (("verified", "touch"), ("disagreeing", "falcon"), ("unverified", "omega")):
         listed = client.get(f"{API}/submissions", params={"verification": state}).json()
         assert [s["id"] for s in listed] == [ids[name]]
     assert len(client.get(f"{API}/submissions").json()) == 3
@@ -64,7 +64,7 @@ def test_the_leaderboard_ranks_only_verified_results_and_lists_the_others_apart(
     apart = {e["device"]: e for e in board["not_ranked"]}
     assert set(apart) == {"3d-systems-falcon", "3d-systems-omega"}
     falcon, omega = apart["3d-systems-falcon"], apart["3d-systems-omega"]
-    assert falcon["verification"] == "disagrees" and falcon["submitted"] == pytest.approx(rms["falcon"])
+    assert falcon["verification"] == "disagreeing" and falcon["submitted"] == pytest.approx(rms["falcon"])
     assert falcon["recomputed"] == pytest.approx(rms["falcon"] / SCALE, rel=1e-9)  # both values shown
     assert omega["verification"] == "unverified" and omega["recomputed"] is None and "no raw streams" in omega["why"]
     everything = client.get(f"{API}/leaderboard/vibration.rms", params={"verification": "all"}).json()
@@ -90,8 +90,8 @@ def test_the_comparison_counts_only_verified_results_and_says_what_it_left_out(t
     table = client.get(f"{API}/compare", params=q).json()
     row = next(r for r in table["rows"] if r[0].startswith("Free-space vibration RMS"))
     assert row[1] != "—" and row[2] == "—"
-    assert any(n.startswith("3d-systems-falcon: 1 current submission(s) not verified") and "1 disagrees" in n for n in table["notes"])
-    assert [e["verification"] for e in table["not_counted"]["3d-systems-falcon"]][0] == "disagrees"
+    assert any(n.startswith("3d-systems-falcon: 1 current submission(s) not verified") and "1 disagreeing" in n for n in table["notes"])
+    assert [e["verification"] for e in table["not_counted"]["3d-systems-falcon"]][0] == "disagreeing"
     row_all = next(r for r in client.get(f"{API}/compare", params={**q, "verification": "all"}).json()["rows"]
                    if r[0].startswith("Free-space vibration RMS"))
     assert row_all[2] != "—"
@@ -101,8 +101,8 @@ def test_the_export_carries_the_state_and_filters_by_it(three):
     client, ids, rms = three
     rows = list(csv.DictReader(io.StringIO(client.get(f"{API}/export.csv").text)))
     assert {r["submission"]: r["verification"] for r in rows} == {
-        ids["touch"]: "verified", ids["falcon"]: "disagrees", ids["omega"]: "unverified"}
-    only = list(csv.DictReader(io.StringIO(client.get(f"{API}/export.csv", params={"verification": "disagrees"}).text)))
+        ids["touch"]: "verified", ids["falcon"]: "disagreeing", ids["omega"]: "unverified"}
+    only = list(csv.DictReader(io.StringIO(client.get(f"{API}/export.csv", params={"verification": "disagreeing"}).text)))
     assert only and {r["submission"] for r in only} == {ids["falcon"]}
 
 
@@ -113,7 +113,7 @@ def test_the_pages_mark_the_states_and_filter(three):
     assert re.findall(r'<tr data-device="([^"]+)"', ranked) == ["3d-systems-touch"]
     apart = re.search(r'<table[^>]*id="not-ranked-table".*?</table>', html, re.S).group(0)
     marks = dict(re.findall(r'data-submission="(\w+)" data-verification="(\w+)"', apart))
-    assert marks == {ids["falcon"]: "disagrees", ids["omega"]: "unverified"}
+    assert marks == {ids["falcon"]: "disagreeing", ids["omega"]: "unverified"}
     falcon_row = re.search(rf'data-submission="{ids["falcon"]}".*?</tr>', apart, re.S).group(0)
     submitted = re.search(r'class="num submitted">([^<]+)<', falcon_row).group(1)
     recomputed = re.search(r'class="num recomputed">([^<]+)<', falcon_row).group(1)
@@ -123,7 +123,7 @@ def test_the_pages_mark_the_states_and_filter(three):
     every = client.get("/leaderboard/vibration.rms?verification=all").text
     assert 'id="not-ranked"' not in every and len(re.findall(r'<tr data-device=', every)) == 3
     device = client.get("/devices/3d-systems-falcon").text
-    assert 'id="not-counted"' in device and 'data-verification="disagrees"' in device
+    assert 'id="not-counted"' in device and 'data-verification="disagreeing"' in device
     compare = client.get("/compare", params=[("device", "3d-systems-touch"), ("device", "3d-systems-falcon")]).text
     assert "not verified and not counted" in compare
 
@@ -138,7 +138,7 @@ def test_the_three_states_in_a_real_browser(three, tmp_path):
         assert page.locator("#leaderboard tbody tr td:nth-child(2)").all_inner_texts() == ["3D Systems Touch"]
         rows = page.locator("#not-ranked-table tbody tr")
         states = {r.get_attribute("data-submission"): r.locator("td.mark").inner_text() for r in rows.all()}
-        assert states == {ids["falcon"]: "disagrees", ids["omega"]: "unverified"}
+        assert states == {ids["falcon"]: "disagreeing", ids["omega"]: "unverified"}
         falcon = page.locator(f'#not-ranked-table tr[data-submission="{ids["falcon"]}"]')
         assert float(falcon.locator("td.submitted").inner_text()) == pytest.approx(rms["falcon"], rel=1e-4)
         assert float(falcon.locator("td.recomputed").inner_text()) == pytest.approx(rms["falcon"] / SCALE, rel=1e-4)
@@ -148,7 +148,7 @@ def test_the_three_states_in_a_real_browser(three, tmp_path):
         assert page.locator("#leaderboard tbody tr").count() == 3 and page.locator("#not-ranked-table").count() == 0
         page.goto(f"{url}/devices/3d-systems-falcon")
         assert page.locator("#device-metrics").count() == 0
-        assert page.locator('#not-counted-table tr[data-verification="disagrees"]').count() >= 1
+        assert page.locator('#not-counted-table tr[data-verification="disagreeing"]').count() >= 1
         page.goto(f"{url}/compare?device=3d-systems-touch&device=3d-systems-falcon")
         assert "not verified and not counted" in page.locator("#comparison").inner_text()
         page.goto(f"{url}/submissions/{ids['touch']}/report/index.html")

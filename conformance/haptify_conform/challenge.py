@@ -97,10 +97,15 @@ def run_challenge(registry: str, token: str, adapter) -> dict:
     return _call(f"{base}/challenges/{issued['id']}/answers", token, body)
 
 
+def _g(value: Any) -> str:
+    """A number, or each number of a vector, to 6 significant digits."""
+    return f"[{', '.join(_g(v) for v in value)}]" if isinstance(value, list) else f"{value:.6g}"
+
+
 def summary(record: dict) -> str:
     """One line per case and a verdict line, for people."""
     result = record["result"]
-    lines = [f"{'PASS' if c['status'] == 'passed' else 'FAIL'}  {c['case']}  expected {c['expected']:.6g}  found "
+    lines = [f"{'PASS' if c['status'] == 'passed' else 'FAIL'}  {c['case']}  expected {_g(c['expected'])}  found "
              f"{c['actual'] if c['actual'] is not None else '—'}{'  ' + c['message'] if c['message'] else ''}"
              for c in result["cases"]]
     impl = result["implementation"]

@@ -1012,9 +1012,62 @@ def tangent_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u, np.cross(n, u)
 
 
-def surface_fixtures() -> list[Fixture]:
-    out: list[Fixture] = []
+def surface_fixture(name: str, fmt: str, rig_kind: str, normal_raw, point, contacts, secs: float, planar: Fn, rates,
+                    desc: str, preload: float, outside: float | None = 2.0) -> Fixture:
+    """A frictionless-surface fixture (spec §12.2): a hand circling on the rendered plane (normal ``normal_raw``
+    through ``point``) in contact during ``contacts`` (s), feeling ``planar(t)`` N against its motion and 1.5 N
+    along the normal; outside contact ``outside`` N planar (None: ``planar``) and ``preload`` N along the normal.
+    Its cases are the planar force's mean and SD over the guarded contact rows."""
     guard = param("surface", "contact_guard_s")
+    n = np.asarray(normal_raw, float) / np.linalg.norm(normal_raw)
+    u, v = tangent_basis(n)
+    pp = np.asarray(point, float)
+
+    def contact(t, contacts=contacts):
+        return np.any([(t >= on) & (t <= off) for on, off in contacts], axis=0)
+
+    def position(t, u=u, v=v, n=n, pp=pp, contact=contact):
+        depth = np.where(contact(t), 0.002, -0.01)
+        return pp + 0.03 * (np.cos(2 * t)[:, None] * u + np.sin(2 * t)[:, None] * v) - depth[:, None] * n
+
+    def force(t, u=u, v=v, n=n, contact=contact, planar=planar, outside=outside, preload=preload):
+        d = np.sin(2 * t)[:, None] * u - np.cos(2 * t)[:, None] * v
+        mag = np.where(contact(t), planar(t), outside if outside is not None else planar(t))
+        return mag[:, None] * d + np.where(contact(t), 1.5, preload)[:, None] * n
+
+    def commanded(t, n=n, contact=contact):
+        return np.where(contact(t), 1.5, 0.0)[:, None] * n
+
+    rendering = {"surface_point_m": list(point), "surface_normal": [float(c) for c in n], "stiffness_N_per_m": 750.0}
+
+    fx = Fixture(name, active_session(name, rig_kind, "surface-1", "frictionless_surface", secs, 0.05, position, force,
+                                      commanded, rendering, rates, fmt))
+    tg = grid(secs)
+    used = np.any([(tg >= on + guard - 1e-9) & (tg <= off - guard + 1e-9) for on, off in contacts], axis=0)
+    truth = planar(tg[used])
+    if preload:  # the low-passed steps of the planar force still ring a little beyond the guard: superpose them
+        fs, step = rates[0], planar(tg[used]) - outside
+        truth = outside + step * sum(pair_step(tg[used] - on, fs) - pair_step(tg[used] - off - 1 / fs, fs) for on, off in contacts)
+    short = name.removeprefix("surf-")
+    spans = " and ".join(f"from {on} s to {off} s" for on, off in contacts)
+    how = (f"planar force of the stated magnitude against the motion plus 1.5 N along the normal {normal_raw}, in contact "
+           f"{spans} (commanded normal force 1.5 N), statistics over the 100 Hz grid rows inside the "
+           f"contact minus the {guard} s guard at both ends (spec §12.2)")
+    if preload:
+        how += (f"; outside contact the hand feels {outside} N planar and {preload} N along the normal while the "
+                "commanded force is zero: contact is the COMMANDED force's (§12.2), so those rows never count. The "
+                "planar force steps at each transition; the values superpose the zero-phase low-pass's step response "
+                "(§7.2, 20 Hz at 1 kHz), whose ringing beyond the 50 ms guard moves them by up to 0.3 %; the hand "
+                "direction turns 0.1 rad within the filter's span, a second-order effect")
+    fx.cases += [
+        case(f"surface.planar_force_mean.{short}", "surface.planar_force_mean", "12.2", name, truth.mean(), "N", "analytic", how, desc),
+        case(f"surface.planar_force_sd.{short}", "surface.planar_force_sd", "12.2", name,
+             truth.std(ddof=1) if len(truth) > 1 else 0.0, "N", "analytic", how, desc),
+    ]
+    return fx
+
+
+def surface_fixtures() -> list[Fixture]:
     # name, format, rig, normal, plane point, contact intervals (s), duration, planar force in contact, rates, description,
     # measured normal force outside contact (N: the device's own weight pushing the hand up)
     variants = [
@@ -1030,55 +1083,7 @@ def surface_fixtures() -> list[Fixture]:
          "Tricky: four short contacts, and outside them the device's uncompensated weight pushes the hand up 0.5 N along "
          "the normal (a measured-force contact rule counts those samples; the guard matters at eight transitions).", 0.5),
     ]
-    for name, fmt, rig_kind, normal_raw, point, contacts, secs, planar, rates, desc, preload in variants:
-        outside = None if name == "surf-constant" else 2.0  # the planar force outside contact (a step at contact)
-        n = np.asarray(normal_raw, float) / np.linalg.norm(normal_raw)
-        u, v = tangent_basis(n)
-        pp = np.asarray(point, float)
-
-        def contact(t, contacts=contacts):
-            return np.any([(t >= on) & (t <= off) for on, off in contacts], axis=0)
-
-        def position(t, u=u, v=v, n=n, pp=pp, contact=contact):
-            depth = np.where(contact(t), 0.002, -0.01)
-            return pp + 0.03 * (np.cos(2 * t)[:, None] * u + np.sin(2 * t)[:, None] * v) - depth[:, None] * n
-
-        def force(t, u=u, v=v, n=n, contact=contact, planar=planar, outside=outside, preload=preload):
-            d = np.sin(2 * t)[:, None] * u - np.cos(2 * t)[:, None] * v
-            mag = np.where(contact(t), planar(t), outside if outside is not None else planar(t))
-            return mag[:, None] * d + np.where(contact(t), 1.5, preload)[:, None] * n
-
-        def commanded(t, n=n, contact=contact):
-            return np.where(contact(t), 1.5, 0.0)[:, None] * n
-
-        rendering = {"surface_point_m": list(point), "surface_normal": [float(c) for c in n], "stiffness_N_per_m": 750.0}
-
-        fx = Fixture(name, active_session(name, rig_kind, "surface-1", "frictionless_surface", secs, 0.05, position, force,
-                                          commanded, rendering, rates, fmt))
-        tg = grid(secs)
-        used = np.any([(tg >= on + guard - 1e-9) & (tg <= off - guard + 1e-9) for on, off in contacts], axis=0)
-        truth = planar(tg[used])
-        if preload:  # the low-passed steps of the planar force still ring a little beyond the guard: superpose them
-            fs, step = rates[0], planar(tg[used]) - outside
-            truth = outside + step * sum(pair_step(tg[used] - on, fs) - pair_step(tg[used] - off - 1 / fs, fs) for on, off in contacts)
-        short = name.removeprefix("surf-")
-        spans = " and ".join(f"from {on} s to {off} s" for on, off in contacts)
-        how = (f"planar force of the stated magnitude against the motion plus 1.5 N along the normal {normal_raw}, in contact "
-               f"{spans} (commanded normal force 1.5 N), statistics over the 100 Hz grid rows inside the "
-               f"contact minus the {guard} s guard at both ends (spec §12.2)")
-        if preload:
-            how += (f"; outside contact the hand feels {outside} N planar and {preload} N along the normal while the "
-                    "commanded force is zero: contact is the COMMANDED force's (§12.2), so those rows never count. The "
-                    "planar force steps at each transition; the values superpose the zero-phase low-pass's step response "
-                    "(§7.2, 20 Hz at 1 kHz), whose ringing beyond the 50 ms guard moves them by up to 0.3 %; the hand "
-                    "direction turns 0.1 rad within the filter's span, a second-order effect")
-        fx.cases += [
-            case(f"surface.planar_force_mean.{short}", "surface.planar_force_mean", "12.2", name, truth.mean(), "N", "analytic", how, desc),
-            case(f"surface.planar_force_sd.{short}", "surface.planar_force_sd", "12.2", name,
-                 truth.std(ddof=1) if len(truth) > 1 else 0.0, "N", "analytic", how, desc),
-        ]
-        out.append(fx)
-    return out
+    return [surface_fixture(*v, outside=None if v[0] == "surf-constant" else 2.0) for v in variants]
 
 
 # --- stiffness (spec chapter 13) -------------------------------------------------------------------------
@@ -1135,8 +1140,53 @@ FIT_RULE = ("after the contact transient (the first 4 grid samples of a press), 
             "the rise to where the force stops rising (spec §13.2)")
 
 
+def spring_fixture(name: str, fmt: str, rig_kind: str, normal_raw, point, k: float, peak: float, after: float | None,
+                   rates, desc: str) -> Fixture:
+    """A stiffness fixture (spec §13.2–§13.4): five presses into a rendered K_CMD N/m plane (normal ``normal_raw``
+    through ``point``) of a device whose force is ``k`` N/m × penetration, saturating at ``peak`` N (``after`` None)
+    or giving way to ``after`` N once it reaches ``peak``. Cases: the measured stiffness, the accuracy and, when
+    it saturates, the peak force."""
+    n = np.asarray(normal_raw, float) / np.linalg.norm(normal_raw)
+    pp = np.asarray(point, float)
+
+    def law(t, k=k, peak=peak, after=after):
+        d = press_depth(t)
+        if after is None:
+            return np.clip(k * d, 0.0, peak)
+        # gives way: once k·d reaches the peak the force drops to `after` for the rest of that press
+        tau, _ = press_phase(t)
+        return np.where(d <= 0, 0.0, np.where(tau < press_time(peak / k), k * d, after))
+
+    def position(t, n=n, pp=pp):
+        return pp - press_depth(t)[:, None] * n
+
+    def force(t, n=n, law=law):
+        side = np.array([0.1, 0.0, 0.0]) - (np.array([0.1, 0.0, 0.0]) @ n) * n  # a small planar force
+        return law(t)[:, None] * n + side
+
+    def commanded(t, n=n):
+        return (K_CMD * np.maximum(press_depth(t), 0.0))[:, None] * n
+
+    rendering = {"surface_point_m": list(point), "surface_normal": [float(c) for c in n], "stiffness_N_per_m": K_CMD}
+
+    fx = Fixture(name, active_session(name, rig_kind, "stiffness-1", "stiffness", duration(), 0.03, position, force,
+                                      commanded, rendering, rates, fmt))
+    short = name.removeprefix("stiff-")
+    how = (f"five presses from {HOVER * 1000:g} mm above to {DEPTH * 1000:g} mm into a rendered {K_CMD:g} N/m surface (normal "
+           f"{normal_raw}); the device's force is {k:g} N/m × penetration "
+           + (f"saturating at {peak} N" if after is None else f"up to {peak} N, then {after} N until the press ends")
+           + "; the fit samples, " + FIT_RULE + ", lie on the linear part")
+    fx.cases += [
+        case(f"stiffness.measured.{short}", "stiffness.measured", "13.3", name, k, "N/m", "analytic", how, desc),
+        case(f"stiffness.accuracy.{short}", "stiffness.accuracy", "13.4", name, 100 * k / K_CMD, "%", "analytic",
+             how + f"; accuracy = 100·{k:g}/{K_CMD:g}", desc),
+    ]
+    if after is None:
+        fx.cases.append(case(f"stiffness.peak_force.{short}", "stiffness.peak_force", "13.4", name, peak, "N", "analytic", how + "; every press reaches the saturation plateau", desc))
+    return fx
+
+
 def stiffness_fixtures() -> list[Fixture]:
-    out: list[Fixture] = []
     variants = [
         ("stiff-saturating", "parquet", "example", [0.0, -0.15, 1.0], (0.01, 0.04, 0.11), 360.0, 2.7, None,
          (1000.0, 500.0, 100.0), "Typical: a linear spring that saturates (the Touch, paper §VI-F)."),
@@ -1145,45 +1195,7 @@ def stiffness_fixtures() -> list[Fixture]:
         ("stiff-giving-way", "parquet", "example", [0.0, 0.0, 1.0], (0.0, 0.0, 0.10), 600.0, 5.7, 1.0, (1000.0, 500.0, 100.0),
          "Edge: a spring that gives way after its peak (the Touch X, paper §VI-F)."),
     ]
-    for name, fmt, rig_kind, normal_raw, point, k, peak, after, rates, desc in variants:
-        n = np.asarray(normal_raw, float) / np.linalg.norm(normal_raw)
-        pp = np.asarray(point, float)
-
-        def law(t, k=k, peak=peak, after=after):
-            d = press_depth(t)
-            if after is None:
-                return np.clip(k * d, 0.0, peak)
-            # gives way: once k·d reaches the peak the force drops to `after` for the rest of that press
-            tau, _ = press_phase(t)
-            return np.where(d <= 0, 0.0, np.where(tau < press_time(peak / k), k * d, after))
-
-        def position(t, n=n, pp=pp):
-            return pp - press_depth(t)[:, None] * n
-
-        def force(t, n=n, law=law):
-            side = np.array([0.1, 0.0, 0.0]) - (np.array([0.1, 0.0, 0.0]) @ n) * n  # a small planar force
-            return law(t)[:, None] * n + side
-
-        def commanded(t, n=n):
-            return (K_CMD * np.maximum(press_depth(t), 0.0))[:, None] * n
-
-        rendering = {"surface_point_m": list(point), "surface_normal": [float(c) for c in n], "stiffness_N_per_m": K_CMD}
-
-        fx = Fixture(name, active_session(name, rig_kind, "stiffness-1", "stiffness", duration(), 0.03, position, force,
-                                          commanded, rendering, rates, fmt))
-        short = name.removeprefix("stiff-")
-        how = (f"five presses from {HOVER * 1000:g} mm above to {DEPTH * 1000:g} mm into a rendered {K_CMD:g} N/m surface (normal "
-               f"{normal_raw}); the device's force is {k:g} N/m × penetration "
-               + (f"saturating at {peak} N" if after is None else f"up to {peak} N, then {after} N until the press ends")
-               + "; the fit samples, " + FIT_RULE + ", lie on the linear part")
-        fx.cases += [
-            case(f"stiffness.measured.{short}", "stiffness.measured", "13.3", name, k, "N/m", "analytic", how, desc),
-            case(f"stiffness.accuracy.{short}", "stiffness.accuracy", "13.4", name, 100 * k / K_CMD, "%", "analytic",
-                 how + f"; accuracy = 100·{k:g}/{K_CMD:g}", desc),
-        ]
-        if after is None:
-            fx.cases.append(case(f"stiffness.peak_force.{short}", "stiffness.peak_force", "13.4", name, peak, "N", "analytic", how + "; every press reaches the saturation plateau", desc))
-        out.append(fx)
+    out: list[Fixture] = [spring_fixture(*v) for v in variants]
     up = np.array([0.0, 0.0, 1.0])
 
     def linear_presses(name: str, scales: tuple[float, ...]) -> Fixture:
@@ -1312,6 +1324,17 @@ def damped_peak(f_n: float, zeta: float) -> float:
     return f_n * math.sqrt(1 - 2 * zeta ** 2)
 
 
+def calibration_rms(truth: rb.HandleTruth) -> list[float]:
+    """The known rig.handle_calibration_rms (spec §14.7) of a calibration trial of ``truth``'s white sensor noise
+    (F/T at 1 kHz, accelerometer at 2 kHz) after the 20 Hz zero-phase low-pass: per channel σ·√(variance gain);
+    the torque residual τ − (b + c × F) adds the force noise through c × n_F, E|c × n|² = 2|c|²σ_F² (per axis
+    ⅔|c|²σ_F²)."""
+    ft_var = lowpass_noise_ratio(param("signals", "wrench_cutoff_hz"), 1000.0, param("signals", "filter_order"))
+    acc_var = lowpass_noise_ratio(param("signals", "accel_cutoff_hz"), 2000.0, param("signals", "filter_order"))
+    torque_sigma = math.sqrt(truth.torque_noise ** 2 + 2 / 3 * float(truth.com @ truth.com) * truth.force_noise ** 2)
+    return [truth.force_noise * math.sqrt(ft_var), truth.accel_noise * math.sqrt(acc_var), torque_sigma * math.sqrt(ft_var)]
+
+
 def rig_fixtures() -> list[Fixture]:
     out: list[Fixture] = []
     variants = [
@@ -1341,12 +1364,7 @@ def rig_fixtures() -> list[Fixture]:
         fx = Fixture(name, build)
         short = name.removeprefix("rig-")
         peaks = [damped_peak(f, zeta) for f in modes]
-        ft_var = lowpass_noise_ratio(param("signals", "wrench_cutoff_hz"), 1000.0, param("signals", "filter_order"))
-        acc_var = lowpass_noise_ratio(param("signals", "accel_cutoff_hz"), 2000.0, param("signals", "filter_order"))
-        # torque residual τ − (b + c × F): the force noise enters through c × n_F, E|c × n|² = 2|c|²σ_F² (per axis ⅔|c|²σ_F²)
-        torque_sigma = math.sqrt(truth.torque_noise ** 2 + 2 / 3 * float(truth.com @ truth.com) * truth.force_noise ** 2)
-        expected_rms = [truth.force_noise * math.sqrt(ft_var), truth.accel_noise * math.sqrt(acc_var),
-                        torque_sigma * math.sqrt(ft_var)]
+        expected_rms = calibration_rms(truth)
         quiet = truth.force_noise == 0.0
         fx.cases += [
             case(f"rig.plate_natural_frequency.{short}", "rig.plate_natural_frequency", "14.4", name, peaks, "Hz", "analytic", f"a ball drop rings each axis as e^(−ζωt) sin(ω_d t) with f_n = {modes} Hz, ζ = {zeta}: the "
@@ -1557,6 +1575,9 @@ class LineMotion:
         return np.column_stack([np.tile(self.q, (n, 1)), self.position(t), np.tile(self.v, (n, 1)), np.zeros((n, 3))])
 
 
+PREDICT_S = 25.0  # s, each trial of a prediction fixture
+
+
 @dataclass
 class Prediction:
     """A prediction fixture (spec §16.8.2): a training and a test trial on straight lines at constant velocity, and
@@ -1585,35 +1606,79 @@ class Prediction:
         return LineMotion(self.train.p0 + self.shift, self.train.v, q, self.train.f0 + self.df0, self.train.f1)
 
 
-def dynamics_fixtures() -> list[Fixture]:
-    out: list[Fixture] = []
-    T = 25.0
+def prediction_expectations(model: dict, pr: Prediction) -> dict:
+    """The known answers of a prediction fixture for the parameter file ``model``: spec §11.3 on both trials' inputs
+    on the grid of §7.3 (from the streams' common start), §11.6 for the line: every test window's nearest training
+    window is its twin, |Δp|/R_p + turn/R_θ away."""
     seg = int(round(param("dynamics", "segment_s") * 100))
+    tg = pr.start_s + grid(PREDICT_S)
+    train, test = pr.train, pr.test
+    y_hat = hw_predict(model, train.inputs(tg))
+    meas = np.column_stack([train.force(tg), np.zeros((len(tg), 3))])
+    err = meas - y_hat
+    rm = np.sqrt(np.mean(err ** 2, axis=0))
+    y_test = hw_predict(model, test.inputs(tg))
+    err_test = np.column_stack([test.force(tg), np.zeros((len(tg), 3))]) - y_test
+
+    def seg_errors(e):
+        nseg = len(tg) // seg
+        return [float(np.mean(np.sqrt(np.mean(e[s * seg:(s + 1) * seg, :3] ** 2, axis=0)))) for s in range(nseg)]
+
+    tr, te = seg_errors(err), seg_errors(err_test)
+    d_test = float(np.linalg.norm(pr.shift) / param("dynamics", "R_p") + pr.turn[1] / math.radians(param("dynamics", "R_theta")))
+    x = np.array([0.0] * len(tr) + [d_test] * len(te))
+    yv = np.array(tr + te)
+    slope, intercept = np.polyfit(x, yv, 1)
+    return {"force": rm[:3], "torque": rm[3:], "line": [float(slope), float(intercept)], "distance": d_test}
+
+
+def prediction_fixture(pr: Prediction) -> Fixture:
+    """A prediction fixture (spec §16.8.2) with, per given parameter file, the cases of §11.3, §11.6 and §11.7."""
     R_p = param("dynamics", "R_p")
     R_theta = math.radians(param("dynamics", "R_theta"))
 
-    def expectations(model: dict, pr: Prediction) -> dict:
-        """Spec §11.3 on both trials' inputs on the grid of §7.3 (from the streams' common start), §11.6 for the line:
-        every test window's nearest training window is its twin, |Δp|/R_p + turn/R_θ away."""
-        tg = pr.start_s + grid(T)
-        train, test = pr.train, pr.test
-        y_hat = hw_predict(model, train.inputs(tg))
-        meas = np.column_stack([train.force(tg), np.zeros((len(tg), 3))])
-        err = meas - y_hat
-        rm = np.sqrt(np.mean(err ** 2, axis=0))
-        y_test = hw_predict(model, test.inputs(tg))
-        err_test = np.column_stack([test.force(tg), np.zeros((len(tg), 3))]) - y_test
+    def build(path: Path) -> None:
+        rig = example_rig() if pr.rig_kind == "example" else rb.rotated_rig()
+        w = manifest(f"conf-{pr.name}", rig, truth=rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0))
+        trials = (("local_dynamic-1", 1, pr.train), ("local_dynamic-2", 2, pr.test))
+        for tid, rep, m in (trials[::-1] if pr.test_listed_first else trials):
+            handle_trial(w, tid, "local_dynamic", duration_s=PREDICT_S, position=m.position, quaternion=fixed(m.q), force_w=m.force,
+                         truth=rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0),
+                         rates=pr.rates, fmt=pr.fmt, repetition=rep, start_s=pr.start_s, clock_offsets=pr.clock_offsets)
+        w.write(path)
+        for variant in pr.models:
+            (path / f"model-{variant}.json").write_text(json.dumps(hw_model(variant), indent=1) + "\n", encoding="utf-8")
 
-        def seg_errors(e):
-            nseg = len(tg) // seg
-            return [float(np.mean(np.sqrt(np.mean(e[s * seg:(s + 1) * seg, :3] ** 2, axis=0)))) for s in range(nseg)]
+    fx = Fixture(pr.name, build)
+    short, desc = pr.name.removeprefix("dyn-"), pr.desc
+    how = ("the handle moves on a straight line at constant velocity with a fixed orientation and the hand force is "
+           "linear in time, so the §7.2 filters (chord removed) pass every signal unchanged and the model inputs on "
+           "the 100 Hz grid are known exactly; the value is spec §11.3 applied to them (lfilter from rest, maps with "
+           "linear extension) against the measured force" + pr.how)
+    for variant in pr.models:
+        e = prediction_expectations(hw_model(variant), pr)
+        params = {"model": f"model-{variant}.json"}
+        sfx = f"{short}.model-{variant}"
+        away = (f"{np.linalg.norm(pr.shift) / R_p:g}·R_p away" + (f" and turned by {pr.turn[1]} rad = "
+                                                                  f"{pr.turn[1] / R_theta:.4g}·R_θ" if pr.turn[1] else ""))
+        fx.cases += [
+            case(f"dynamics.force_rmse.{sfx}", "dynamics.force_rmse", "11.3", pr.name, e["force"], "N", "spec",
+                 how + f"; model file model-{variant}.json given in parameters.model", desc, parameters=params),
+            case(f"dynamics.force_rmse_mean.{sfx}", "dynamics.force_rmse_mean", "11.7", pr.name, float(np.mean(e["force"])),
+                 "N", "spec", how, desc, parameters=params),
+            case(f"dynamics.torque_rmse.{sfx}", "dynamics.torque_rmse", "11.3", pr.name, e["torque"], "N*m", "spec", how + "; the measured torque about the gimbal centre is zero", desc, parameters=params),
+            case(f"dynamics.torque_rmse_mean.{sfx}", "dynamics.torque_rmse_mean", "11.7", pr.name,
+                 float(np.mean(e["torque"])), "N*m", "spec", how, desc, parameters=params),
+            case(f"dynamics.error_vs_distance.{sfx}", "dynamics.error_vs_distance", "11.6", pr.name, e["line"], "N", "spec", how + f"; the test trial repeats the motion {away}, perpendicular to its velocity (every window's nearest training "
+                 f"window is its twin: distance {e['distance']:g}), training segments at distance 0; "
+                 "the least-squares line through (distance, mean per-axis RMS error) of the 5 s segments",
+                 desc, parameters=params),
+        ]
+    return fx
 
-        tr, te = seg_errors(err), seg_errors(err_test)
-        d_test = float(np.linalg.norm(pr.shift) / R_p + pr.turn[1] / R_theta)
-        x = np.array([0.0] * len(tr) + [d_test] * len(te))
-        yv = np.array(tr + te)
-        slope, intercept = np.polyfit(x, yv, 1)
-        return {"force": rm[:3], "torque": rm[3:], "line": [float(slope), float(intercept)], "distance": d_test}
+
+def dynamics_fixtures() -> list[Fixture]:
+    R_p = param("dynamics", "R_p")
 
     q_tilt = quat_from_axis_angle(np.array([0.2, 1.0, 0.1]), np.array(0.6))
     turned_start, turn = 0.0037, 0.75
@@ -1643,45 +1708,7 @@ def dynamics_fixtures() -> list[Fixture]:
                         "bias and the rotated accelerometer frame removed, §6.6) and model-c maps it; the test trial "
                         "(repetition 2) is listed first in the manifest, the training trial is repetition 1 (§11.7)")),
     ]
-    for pr in variants:
-        def build(path: Path, pr=pr) -> None:
-            rig = example_rig() if pr.rig_kind == "example" else rb.rotated_rig()
-            w = manifest(f"conf-{pr.name}", rig, truth=rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0))
-            trials = (("local_dynamic-1", 1, pr.train), ("local_dynamic-2", 2, pr.test))
-            for tid, rep, m in (trials[::-1] if pr.test_listed_first else trials):
-                handle_trial(w, tid, "local_dynamic", duration_s=T, position=m.position, quaternion=fixed(m.q), force_w=m.force,
-                             truth=rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0),
-                             rates=pr.rates, fmt=pr.fmt, repetition=rep, start_s=pr.start_s, clock_offsets=pr.clock_offsets)
-            w.write(path)
-            for variant in pr.models:
-                (path / f"model-{variant}.json").write_text(json.dumps(hw_model(variant), indent=1) + "\n", encoding="utf-8")
-
-        fx = Fixture(pr.name, build)
-        short, desc = pr.name.removeprefix("dyn-"), pr.desc
-        how = ("the handle moves on a straight line at constant velocity with a fixed orientation and the hand force is "
-               "linear in time, so the §7.2 filters (chord removed) pass every signal unchanged and the model inputs on "
-               "the 100 Hz grid are known exactly; the value is spec §11.3 applied to them (lfilter from rest, maps with "
-               "linear extension) against the measured force" + pr.how)
-        for variant in pr.models:
-            e = expectations(hw_model(variant), pr)
-            params = {"model": f"model-{variant}.json"}
-            sfx = f"{short}.model-{variant}"
-            away = (f"{np.linalg.norm(pr.shift) / R_p:g}·R_p away" + (f" and turned by {pr.turn[1]} rad = "
-                                                                      f"{pr.turn[1] / R_theta:.4g}·R_θ" if pr.turn[1] else ""))
-            fx.cases += [
-                case(f"dynamics.force_rmse.{sfx}", "dynamics.force_rmse", "11.3", pr.name, e["force"], "N", "spec",
-                     how + f"; model file model-{variant}.json given in parameters.model", desc, parameters=params),
-                case(f"dynamics.force_rmse_mean.{sfx}", "dynamics.force_rmse_mean", "11.7", pr.name, float(np.mean(e["force"])),
-                     "N", "spec", how, desc, parameters=params),
-                case(f"dynamics.torque_rmse.{sfx}", "dynamics.torque_rmse", "11.3", pr.name, e["torque"], "N*m", "spec", how + "; the measured torque about the gimbal centre is zero", desc, parameters=params),
-                case(f"dynamics.torque_rmse_mean.{sfx}", "dynamics.torque_rmse_mean", "11.7", pr.name,
-                     float(np.mean(e["torque"])), "N*m", "spec", how, desc, parameters=params),
-                case(f"dynamics.error_vs_distance.{sfx}", "dynamics.error_vs_distance", "11.6", pr.name, e["line"], "N", "spec", how + f"; the test trial repeats the motion {away}, perpendicular to its velocity (every window's nearest training "
-                     f"window is its twin: distance {e['distance']:g}), training segments at distance 0; "
-                     "the least-squares line through (distance, mean per-axis RMS error) of the 5 s segments",
-                     desc, parameters=params),
-            ]
-        out.append(fx)
+    out: list[Fixture] = [prediction_fixture(pr) for pr in variants]
 
     # Fitting quality (spec §11.4.5): data from a known linear law inside the model class, known noise.
     mass, damping, sigma = 0.15, 0.8, 0.01

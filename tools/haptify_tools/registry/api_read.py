@@ -125,7 +125,7 @@ def not_counted_notes(apart: dict[str, list[dict]]) -> list[str]:
     for slug, entries in apart.items():
         subs = {e["submission"]: e["verification"] for e in entries}
         if subs:
-            states = ", ".join(f"{n} {state}" for state in ("disagrees", "unverified")
+            states = ", ".join(f"{n} {state}" for state in ("disagreeing", "unverified")
                                if (n := sum(v == state for v in subs.values())))
             out.append(f"{slug}: {len(subs)} current submission(s) not verified and not counted ({states}); "
                        f"verification=all includes them")

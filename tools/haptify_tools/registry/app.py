@@ -33,7 +33,7 @@ from haptify_tools.registry.service import Registry, Settings
 from haptify_tools.registry.uploads import Uploads
 
 API = "/api/v1"
-VERIFICATION_FILTER = "^(all|verified|disagrees|unverified)$"  # lists: one verification state, or all (spec §17.3.1)
+VERIFICATION_FILTER = "^(all|verified|disagreeing|unverified)$"  # lists: one verification state, or all (spec §17.3.1)
 RANKED_FILTER = "^(verified|all)$"  # aggregates and rankings: verified results only (default), or all
 log = logging.getLogger("haptify.registry")
 
@@ -98,7 +98,10 @@ def security_headers(path: str) -> list[tuple[bytes, bytes]]:
 
 
 class SecurityHeaders:
-    """ASGI middleware adding :func:`security_headers` to every HTTP response (pages, API, files, errors)."""
+    """ASGI middleware adding :func:`security_headers` to every HTTP response (pages, API, files, errors).
+
+    :func:`create_app` puts it outside Starlette's ``ServerErrorMiddleware``, so the 500 of an unhandled
+    exception carries the headers too (a middleware added with ``add_middleware`` sits inside it)."""
 
     def __init__(self, app) -> None:
         self.app = app
@@ -131,7 +134,8 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
                   description="Labs submit verified device results; everyone compares devices (Haptify spec chapter 17).")
     app.state.registry = reg
     app.state.swept = swept
-    app.add_middleware(SecurityHeaders)
+    build_stack = app.build_middleware_stack
+    app.build_middleware_stack = lambda: SecurityHeaders(build_stack())  # outermost: 500s get the headers too
 
     @app.exception_handler(HaptifyError)
     async def _coded(request: Request, err: HaptifyError) -> JSONResponse:
@@ -139,20 +143,25 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
         return refusal(err)
 
     @app.exception_handler(RequestValidationError)
-    async def _invalid(_request: Request, exc: RequestValidationError) -> JSONResponse:
+    async def _invalid(request: Request, exc: RequestValidationError) -> JSONResponse:
         findings = [Finding("E975", e.get("msg", "invalid"), file=str(e.get("loc", ["request"])[0]),
                             pointer="/" + "/".join(str(p) for p in e.get("loc", [])[1:]),
                             expected=e.get("type"), found=_short(e.get("input"))) for e in exc.errors()]
-        return refusal(HaptifyError(*findings))
+        err = HaptifyError(*(findings or [Finding("E975", "invalid request")]))
+        log_refusal(request, err)
+        return refusal(err)
 
     @app.exception_handler(StarletteHTTPException)
-    async def _http(_request: Request, exc: StarletteHTTPException) -> JSONResponse:
-        code = "E973" if exc.status_code == 404 else "E975"
-        return JSONResponse({"status": "refused", "findings": [Finding(code, str(exc.detail)).to_dict()]},
-                            status_code=exc.status_code)
+    async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        err = HaptifyError(Finding("E973" if exc.status_code == 404 else "E975", str(exc.detail)))
+        log_refusal(request, err)
+        return JSONResponse({"status": "refused", "findings": [f.to_dict() for f in err.findings]},
+                            status_code=exc.status_code, headers=getattr(exc, "headers", None))
 
     @app.exception_handler(Exception)
-    async def _internal(_request: Request, exc: Exception) -> JSONResponse:
+    async def _internal(request: Request, exc: Exception) -> JSONResponse:
+        log.error("error %s %s from %s: E999 %s: %s", request.method, request.url.path,
+                  request.client.host if request.client else "-", type(exc).__name__, exc, exc_info=exc)
         return JSONResponse({"status": "error", "findings": [Finding("E999", f"{type(exc).__name__}: {exc}").to_dict()]},
                             status_code=500)
 
@@ -179,7 +188,8 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
             response.status_code = 200
         return outcome.to_dict()
 
-    uploads = Uploads(reg.tmp, reg.settings.limits.max_archive_bytes)
+    uploads = Uploads(reg.data / "uploads", reg.tmp, reg.settings.limits.max_archive_bytes, reg.settings.upload_ttl_s)
+    app.state.swept.update(uploads_resumed=uploads.resumed, uploads_expired=uploads.expired)
 
     @app.post(f"{API}/uploads", tags=["submissions"], status_code=201)
     def open_upload(upload_length: str | None = Header(None), authorization: str | None = Header(None)) -> dict:
@@ -216,7 +226,7 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
                          verification: str = Query("all", pattern=VERIFICATION_FILTER),
                          limit: int = Query(100, ge=1, le=1000), offset: int = Query(0, ge=0)) -> list[dict]:
         """Submissions, newest first; ``state`` current, superseded, withdrawn or all; ``verification``
-        verified, disagrees, unverified or all (spec §17.3.1)."""
+        verified, disagreeing, unverified or all (spec §17.3.1)."""
         return reg.submissions(lab=lab, device=device, state=state, verification=verification, limit=limit, offset=offset)
 
     @app.get(f"{API}/submissions/{{sid}}", tags=["submissions"])
@@ -244,7 +254,8 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
     @app.get(f"{API}/limits", tags=["service"])
     def limits() -> dict:
         """What this registry accepts (spec §17.4, §17.4.1): a client checks its bundle against these before sending."""
-        return {**asdict(reg.settings.limits), "challenge_ttl_s": reg.settings.challenge_ttl_s}
+        return {**asdict(reg.settings.limits), "challenge_ttl_s": reg.settings.challenge_ttl_s,
+                "upload_ttl_s": reg.settings.upload_ttl_s}
 
     @app.post(f"{API}/challenges", tags=["conformance"], status_code=201)
     def create_challenge(authorization: str | None = Header(None)) -> dict:

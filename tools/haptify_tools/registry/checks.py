@@ -45,7 +45,7 @@ class MetricCheck:
     """The re-computation of one submitted metric (spec §17.3)."""
 
     metric: str
-    status: str  # agrees | disagrees | unverifiable
+    status: str  # agrees | disagrees | unverifiable (one metric's check; the submission's state is disagreeing)
     submitted: Any
     recomputed: Any = None
     tolerance: dict | None = None
@@ -55,7 +55,8 @@ class MetricCheck:
 
 @dataclass
 class Verification:
-    """``verified`` (every metric agrees), ``disagrees`` (at least one does not) or ``unverified`` (no raw streams).
+    """``verified`` (every metric agrees), ``disagreeing`` (at least one disagrees) or ``unverified`` (no raw
+    streams, or only metrics the suite cannot check).
     Spec §17.3.1."""
 
     status: str
@@ -285,8 +286,8 @@ def verify(session_root: Path, results: ResultsFile, spec_version: str = SPEC_VE
             checks.append(MetricCheck(m.id, "disagrees", m.value, ref.value, tol,
                                       f"submitted {m.value!r}, the reference computes {ref.value!r}; "
                                       f"allowed |difference| ≤ {tol['abs']:g} + {tol['rel']:g}·|reference|", "W969"))
-    status = "verified" if all(c.status == "agrees" for c in checks) else "disagrees"
-    if status == "disagrees" and not any(c.status == "disagrees" for c in checks):
+    status = "verified" if all(c.status == "agrees" for c in checks) else "disagreeing"
+    if status == "disagreeing" and not any(c.status == "disagrees" for c in checks):
         status = "unverified"
     bad = [c.metric for c in checks if c.status != "agrees"]
     return Verification(status, checks, "" if not bad else f"not agreeing: {', '.join(bad)}")

@@ -34,6 +34,8 @@ def register(sub) -> None:
                        help="address space of the worker that unpacks and re-computes a bundle (MiB)")
     serve.add_argument("--worker-seconds", type=float, default=limits.worker_seconds,
                        help="time the worker may take for each step of checking a bundle (s)")
+    serve.add_argument("--upload-ttl-hours", type=float, default=Settings.upload_ttl_s / 3600,
+                       help="a resumable upload without a chunk for this long expires and is deleted (h)")
     serve.set_defaults(func=run_serve)
     token = rsub.add_parser("token", help="API tokens")
     tsub = token.add_subparsers(dest="token_command", metavar="ACTION", required=True)
@@ -50,7 +52,8 @@ def _settings(args) -> Settings:
     if hasattr(args, "worker_seconds"):
         limits = replace(limits, max_archive_bytes=args.max_archive_mib << 20, max_unpacked_bytes=args.max_unpacked_mib << 20,
                          worker_memory_bytes=args.worker_memory_mib << 20, worker_seconds=args.worker_seconds)
-    return Settings(data_dir=args.data, db_url=args.db, verify_raw=not getattr(args, "no_verify", False), limits=limits)
+    ttl = {"upload_ttl_s": args.upload_ttl_hours * 3600} if hasattr(args, "upload_ttl_hours") else {}
+    return Settings(data_dir=args.data, db_url=args.db, verify_raw=not getattr(args, "no_verify", False), limits=limits, **ttl)
 
 
 def run_serve(args, ui) -> int:

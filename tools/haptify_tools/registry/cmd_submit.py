@@ -218,6 +218,6 @@ def _run(args, ui) -> int:
             ui.emit_json(outcome)
         for line in lines:
             ui.say(line)
-        return 0 if outcome["verification"]["status"] != "disagrees" else 1
+        return 0 if outcome["verification"]["status"] != "disagreeing" else 1
     finally:
         shutil.rmtree(work, ignore_errors=True)

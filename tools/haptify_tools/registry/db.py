@@ -90,7 +90,7 @@ class Submission(Base):
     session_id: Mapped[str] = mapped_column(String(200))
     manifest_sha256: Mapped[str] = mapped_column(String(64))
     supersedes_id: Mapped[str | None] = mapped_column(ForeignKey("submissions.id"), unique=True)
-    verification: Mapped[str] = mapped_column(String(16))  # verified | disagrees | unverified
+    verification: Mapped[str] = mapped_column(String(16))  # verified | disagreeing | unverified
     verification_json: Mapped[str] = mapped_column(Text)
     bundle_json: Mapped[str] = mapped_column(Text)
     results_json: Mapped[str] = mapped_column(Text)

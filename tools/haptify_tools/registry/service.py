@@ -54,7 +54,7 @@ SCOPES = ("submit", "admin")
 TOKEN_PREFIX = "hpt_"
 DEFAULT_RATE_PER_MINUTE = 120
 STATES = ("current", "superseded", "withdrawn")
-VERIFICATIONS = ("verified", "disagrees", "unverified")  # spec §17.3.1
+VERIFICATIONS = ("verified", "disagreeing", "unverified")  # spec §17.3.1
 RANKED = ("verified", "all")  # which results aggregates and rankings count: verified only (default) or all
 
 
@@ -68,6 +68,7 @@ class Settings:
     verify_raw: bool = True  # re-compute metrics when raw streams are included
     default_rate_per_minute: int = DEFAULT_RATE_PER_MINUTE
     challenge_ttl_s: float = 3600.0  # a challenge must be answered within this time (spec §17.8)
+    upload_ttl_s: float = 24 * 3600.0  # a resumable upload without a chunk for this long expires (spec §17.5.2)
 
     @property
     def url(self) -> str:
@@ -133,11 +134,12 @@ class Outcome:
 @dataclass
 class ReadContext:
     """What a submission's summary needs beyond its row: withdrawals, supersessions and, per implementation
-    name and version, the id of its latest passed conformance challenge (spec §17.5, §17.8)."""
+    name and version, its latest passed conformance challenge and the metric families that challenge
+    covered (spec §17.5, §17.8)."""
 
     withdrawn: dict[str, db.Withdrawal]
     superseded_by: dict[str, str]
-    proven: dict[tuple[str, str], str]
+    proven: dict[tuple[str, str], tuple[str, list[str]]]
 
 
 def _fsync_dir(path: Path) -> None:
@@ -464,13 +466,14 @@ class Registry:
     def _summary(self, row: db.Submission, ctx: ReadContext) -> dict:
         w = ctx.withdrawn.get(row.id)
         state = "withdrawn" if w else "superseded" if row.id in ctx.superseded_by else "current"
-        challenge = ctx.proven.get((row.implementation_name, row.implementation_version))
+        challenge, families = ctx.proven.get((row.implementation_name, row.implementation_version), (None, []))
         return {
             "id": row.id, "digest": row.digest, "state": state, "lab": row.lab_id,
             "device": {"slug": row.device.slug, "manufacturer": row.device.manufacturer, "model": row.device.model},
             "serial": row.serial, "spec_version": row.spec_version,
             "implementation": {"name": row.implementation_name, "version": row.implementation_version},
-            "conformance": {"status": "proven" if challenge else "self-asserted", "challenge": challenge},
+            "conformance": {"status": "proven" if challenge else "self-asserted", "challenge": challenge,
+                            "families": families},
             "session_id": row.session_id, "verification": row.verification, "has_raw": row.has_raw,
             "received_at": row.received_at.isoformat(), "supersedes": row.supersedes_id,
             "superseded_by": ctx.superseded_by.get(row.id),
@@ -481,12 +484,15 @@ class Registry:
         withdrawn = {w.submission_id: w for w in s.scalars(select(db.Withdrawal))}
         superseded_by = {old: new for new, old in s.execute(
             select(db.Submission.id, db.Submission.supersedes_id).where(db.Submission.supersedes_id.is_not(None)))}
-        proven: dict[tuple[str, str], str] = {}
-        for name, version, cid in s.execute(
+        from haptify_tools.registry.challenge import cases_from_json, families_of
+
+        proven: dict[tuple[str, str], tuple[str, list[str]]] = {}
+        for name, version, cid, cases in s.execute(
                 select(db.ChallengeResult.implementation_name, db.ChallengeResult.implementation_version,
-                       db.ChallengeResult.challenge_id).where(db.ChallengeResult.passed.is_(True))
-                .order_by(db.ChallengeResult.answered_at)):
-            proven[(name, version)] = cid  # the latest passed challenge of each implementation and version
+                       db.ChallengeResult.challenge_id, db.Challenge.cases_json)
+                .join(db.Challenge, db.Challenge.id == db.ChallengeResult.challenge_id)
+                .where(db.ChallengeResult.passed.is_(True)).order_by(db.ChallengeResult.answered_at)):
+            proven[(name, version)] = (cid, families_of(cases_from_json(cases)))  # the latest passed challenge
         return ReadContext(withdrawn, superseded_by, proven)
 
     def submissions(self, *, lab: str | None = None, device: str | None = None, state: str | None = None,

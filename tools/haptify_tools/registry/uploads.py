@@ -1,5 +1,5 @@
 """Resumable chunked uploads (spec §17.5.2): a large bundle is sent in chunks that are appended to a file in
-``DATA/tmp/``, so a dropped connection loses only the chunk in flight — the client asks how far the
+``DATA/uploads/``, so a dropped connection loses only the chunk in flight — the client asks how far the
 registry got and continues from there — and the archive is never held in memory.
 
 1. ``POST /api/v1/uploads`` with ``Upload-Length: N`` opens an upload of N bytes (E960 when N is over
@@ -9,17 +9,24 @@ registry got and continues from there — and the archive is never held in memor
 3. ``GET /api/v1/uploads/{id}`` says the offset reached;
 4. ``POST /api/v1/uploads/{id}/submit`` submits the complete archive exactly as ``POST /submissions``.
 
-Uploads belong to the token that opened them, live in this process (the start-up sweep deletes their
-files with the rest of ``tmp/``) and are dropped after ``UPLOAD_TTL_S`` without a chunk.
+Uploads belong to the token that opened them and live on disk, so they survive a restart of the
+registry: ``<id>.part`` holds the bytes, ``<id>.json`` the owner, the declared length, the offset up to
+which the part file is fsynced and the time of the last chunk (written atomically after each chunk's
+fsync). A new process on the same data folder resumes every upload at its recorded offset (a part file
+longer than that — a chunk torn by a crash — is cut back). An upload without a chunk for ``ttl_s``
+(``Settings.upload_ttl_s``, default 24 h) expires: it is deleted at start-up and whenever an upload is
+opened or looked up.
 """
 
 from __future__ import annotations
 
+import json
 import os
+import re
 import secrets
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import AsyncIterator
 
@@ -27,19 +34,21 @@ from starlette.concurrency import run_in_threadpool
 from starlette.requests import ClientDisconnect
 
 from haptify.errors import fail
+from haptify.storage import atomic_write_text
 from haptify_tools.registry.bundle import DIR_MODE, FILE_MODE
 
 UPLOAD_TTL_S = 24 * 3600.0
+UPLOAD_ID = re.compile(r"^[0-9a-f]{24}$")  # secrets.token_hex(12): nothing else names a file here
 
 
 @dataclass
 class Upload:
-    """One upload in progress: its owner (token id), declared length, bytes received and file."""
+    """One upload in progress: its owner (token id), declared length, bytes received (fsynced) and the
+    wall-clock time of its last chunk (s since the epoch)."""
 
     id: str
     token_id: int
     length: int
-    path: Path
     offset: int = 0
     touched: float = 0.0
     busy: bool = False
@@ -50,19 +59,63 @@ class Upload:
 
 
 class Uploads:
-    """The uploads in progress of one registry (thread-safe)."""
+    """The uploads in progress of one registry, kept in ``folder`` (thread-safe; one process per data folder)."""
 
-    def __init__(self, tmp: Path, max_bytes: int) -> None:
-        self.tmp, self.max_bytes = tmp, max_bytes
+    def __init__(self, folder: Path, tmp: Path, max_bytes: int, ttl_s: float = UPLOAD_TTL_S) -> None:
+        self.folder, self.tmp, self.max_bytes, self.ttl_s = folder, tmp, max_bytes, ttl_s
         self._lock = threading.Lock()
         self._open: dict[str, Upload] = {}
+        self.folder.mkdir(mode=DIR_MODE, parents=True, exist_ok=True)
+        self.resumed, self.expired = self._load()
+
+    # --- files -------------------------------------------------------------------------------------
+    def _part(self, uid: str) -> Path:
+        return self.folder / f"{uid}.part"
+
+    def _record(self, uid: str) -> Path:
+        return self.folder / f"{uid}.json"
+
+    def _save(self, upload: Upload) -> None:
+        """The upload's record, written atomically (mode 0600) after its bytes are fsynced."""
+        record = {k: v for k, v in asdict(upload).items() if k != "busy"}
+        atomic_write_text(self._record(upload.id), json.dumps(record) + "\n")
+        os.chmod(self._record(upload.id), FILE_MODE)
+
+    def _delete(self, uid: str) -> None:
+        self._part(uid).unlink(missing_ok=True)
+        self._record(uid).unlink(missing_ok=True)
+
+    def _load(self) -> tuple[int, int]:
+        """Take over the uploads a previous process left: each record with its part file, cut back to the
+        recorded offset. Expired uploads, and halves (a part without a record or the reverse), are deleted.
+        Returns (resumed, deleted)."""
+        resumed = deleted = 0
+        now = time.time()
+        names = {p.name.rsplit(".", 1)[0] for p in self.folder.iterdir() if p.suffix in (".part", ".json")}
+        for uid in sorted(names):
+            try:
+                rec = json.loads(self._record(uid).read_text(encoding="utf-8"))
+                upload = Upload(uid, int(rec["token_id"]), int(rec["length"]), int(rec["offset"]), float(rec["touched"]))
+                size = self._part(uid).stat().st_size
+            except (OSError, ValueError, KeyError, TypeError):
+                upload, size = None, -1
+            if upload is None or not UPLOAD_ID.match(uid) or size < upload.offset or now - upload.touched > self.ttl_s:
+                self._delete(uid)
+                deleted += 1
+                continue
+            if size > upload.offset:  # a chunk torn by the crash: its unacknowledged bytes are dropped
+                os.truncate(self._part(uid), upload.offset)
+            self._open[uid] = upload
+            resumed += 1
+        return resumed, deleted
 
     def _expire(self) -> None:
-        now = time.monotonic()
-        for u in [u for u in self._open.values() if not u.busy and now - u.touched > UPLOAD_TTL_S]:
+        now = time.time()
+        for u in [u for u in self._open.values() if not u.busy and now - u.touched > self.ttl_s]:
             self._open.pop(u.id)
-            u.path.unlink(missing_ok=True)
+            self._delete(u.id)
 
+    # --- the protocol ------------------------------------------------------------------------------
     def open(self, token_id: int, length: str | None) -> Upload:
         """Start an upload of ``length`` bytes (the ``Upload-Length`` header)."""
         if length is None or not length.isdigit() or int(length) == 0:
@@ -71,21 +124,23 @@ class Uploads:
         if int(length) > self.max_bytes:
             raise fail("E960", "the bundle archive is larger than the registry accepts", file="Upload-Length",
                        expected=f"≤ {self.max_bytes} bytes", found=f"{length} bytes")
-        self.tmp.mkdir(mode=DIR_MODE, parents=True, exist_ok=True)
         uid = secrets.token_hex(12)
-        path = self.tmp / f"upload-{uid}.part"
-        os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, FILE_MODE))
+        os.close(os.open(self._part(uid), os.O_WRONLY | os.O_CREAT | os.O_EXCL, FILE_MODE))
+        upload = Upload(uid, token_id, int(length), touched=time.time())
+        self._save(upload)
         with self._lock:
             self._expire()
-            upload = self._open[uid] = Upload(uid, token_id, int(length), path, touched=time.monotonic())
+            self._open[uid] = upload
         return upload
 
     def get(self, uid: str, token_id: int | None = None) -> Upload:
         """The upload ``uid`` (E973 unknown or expired; E971 another token's)."""
         with self._lock:
-            upload = self._open.get(uid)
+            self._expire()
+            upload = self._open.get(uid) if UPLOAD_ID.match(uid) else None
         if upload is None:
-            raise fail("E973", f"no upload {uid!r} in progress", expected="an id from POST /api/v1/uploads", found=uid)
+            raise fail("E973", f"no upload {uid[:40]!r} in progress", expected="an id from POST /api/v1/uploads",
+                       found=uid[:40])
         if token_id is not None and upload.token_id != token_id:
             raise fail("E971", "an upload is continued by the token that opened it", file="Authorization")
         return upload
@@ -102,35 +157,40 @@ class Uploads:
                 raise fail("E975", f"the chunk does not start where the upload stands ({upload.offset} bytes received)",
                            file="Upload-Offset", expected=upload.offset, found=offset)
             upload.busy = True
+        received = upload.offset
         try:
-            with open(upload.path, "r+b") as fh:
-                fh.seek(upload.offset)
+            with open(self._part(uid), "r+b") as fh:
+                fh.seek(received)
                 try:
                     async for chunk in chunks:
-                        if upload.offset + len(chunk) > upload.length:
+                        if received + len(chunk) > upload.length:
                             raise fail("E960", "the chunk goes past the declared length of the upload", file="<upload>",
                                        expected=f"≤ {upload.length} bytes", found=f"> {upload.length} bytes")
                         fh.write(chunk)
-                        upload.offset += len(chunk)
+                        received += len(chunk)
                 except ClientDisconnect:  # keep what arrived: the client resumes from upload.offset
                     pass
                 finally:
                     fh.flush()
                     await run_in_threadpool(os.fsync, fh.fileno())
+                    upload.offset, upload.touched = received, time.time()
+                    await run_in_threadpool(self._save, upload)
         finally:
-            upload.busy, upload.touched = False, time.monotonic()
+            upload.busy = False
         return upload
 
     def take(self, uid: str, token_id: int) -> Path:
-        """The complete archive of an upload, handed over to a submission (the upload ends here)."""
+        """The complete archive of an upload, moved to ``tmp/`` for a submission (the upload ends here)."""
         upload = self.get(uid, token_id)
         with self._lock:
             if upload.busy or upload.offset != upload.length:
                 raise fail("E975", "the upload is not complete", file="<upload>", expected=f"{upload.length} bytes",
                            found=f"{upload.offset} bytes")
             self._open.pop(uid)
-        final = upload.path.with_suffix(".tar.gz")
-        os.replace(upload.path, final)
+        self.tmp.mkdir(mode=DIR_MODE, parents=True, exist_ok=True)
+        final = self.tmp / f"upload-{uid}.tar.gz"
+        os.replace(self._part(uid), final)
+        self._record(uid).unlink(missing_ok=True)
         return final
 
 
