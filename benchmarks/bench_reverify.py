@@ -1,4 +1,4 @@
-"""Registry-wide re-verification at scale (issue 24, spec §17.10): a synthetic registry of ≥ 500 small
+"""Registry-wide re-verification at scale (issue 24, spec §17.9): a synthetic registry of ≥ 500 small
 submissions with raw streams, re-verified serially, on a Dask LocalCluster of 2 worker processes, and on a
 scheduler plus 2 workers started as separate commands (``python -m dask scheduler`` / ``python -m dask worker
 tcp://…``, as on a cluster of machines); every run's records must equal the serial run's.

@@ -1,5 +1,5 @@
 """``haptify batch compute SESSION… -o OUT [--metrics ID,…] [--params FILE] [--workers N | --scheduler ADDRESS]``:
-many sessions computed at once on a Dask cluster (issue 24; spec §15.4, §17.10).
+many sessions computed at once on a Dask cluster (issue 24; spec §15.4, §17.9).
 
 Each session is one task doing exactly what ``haptify compute SESSION -o OUT/<name>/results.json`` does
 (:func:`haptify.cmd_compute.compute_folder`): the session passes the gate, its metrics are computed, the

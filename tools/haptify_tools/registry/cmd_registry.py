@@ -1,6 +1,6 @@
 """``haptify registry serve [--db URL] [--data DIR] [--host 127.0.0.1] [--port 8080]``,
 ``haptify registry token create --lab LAB [--scope submit|admin] [--rate N]`` (spec §17.6, §17.7) and
-``haptify registry reverify [--since-version V] [--resume RUN] [--workers N | --scheduler ADDRESS]`` (spec §17.10)."""
+``haptify registry reverify [--since-version V] [--resume RUN] [--workers N | --scheduler ADDRESS]`` (spec §17.9)."""
 
 from __future__ import annotations
 
@@ -51,7 +51,7 @@ def register(sub) -> None:
                                                  "reference, on a Dask cluster; record the new values beside the old")
     _store_options(reverify)
     reverify.add_argument("--storage", metavar="LOCATION",
-                          help="the data folder as the workers see it (default: --data; spec §17.10)")
+                          help="the data folder as the workers see it (default: --data; spec §17.9)")
     reverify.add_argument("--since-version", metavar="V",
                           help="only submissions no reference of version V or later has re-verified yet")
     reverify.add_argument("--resume", metavar="RUN", help="finish the run RUN (skips the submissions it has recorded)")
@@ -97,7 +97,7 @@ def run_token_create(args, ui) -> int:
 
 
 def run_reverify_command(args, ui) -> int:
-    """Start (or ``--resume``) a re-verification run and print its summary (spec §17.10). Exit 1 when a
+    """Start (or ``--resume``) a re-verification run and print its summary (spec §17.9). Exit 1 when a
     submission could not be re-verified for a reason that is not its own (resume the run to retry it)."""
     from haptify_tools.registry.reverify import load_run, run_reverify, start_run
     from haptify_tools.registry.storage import open_store

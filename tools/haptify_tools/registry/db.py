@@ -172,7 +172,7 @@ class ChallengeResult(Base):
 
 
 class ReverifyRun(Base):
-    """One registry-wide re-verification (spec §17.10): which reference re-computed, which submissions it
+    """One registry-wide re-verification (spec §17.9): which reference re-computed, which submissions it
     planned (their ids, fixed when the run starts, so that a resumed run does the same work), on what."""
 
     __tablename__ = "reverify_runs"
@@ -187,7 +187,7 @@ class ReverifyRun(Base):
 
 class ReverifyRecord(Base):
     """The re-computation of one submission in one run, beside the submission's own record (never over it):
-    at most one per (submission, reference version, run) — the primary key refuses a second (spec §17.10)."""
+    at most one per (submission, reference version, run) — the primary key refuses a second (spec §17.9)."""
 
     __tablename__ = "reverify_records"
     submission_id: Mapped[str] = mapped_column(ForeignKey("submissions.id"), primary_key=True)

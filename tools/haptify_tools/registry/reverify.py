@@ -1,4 +1,4 @@
-"""Registry-wide re-verification (spec §17.10; issue 24): re-compute every stored submission that has raw
+"""Registry-wide re-verification (spec §17.9; issue 24): re-compute every stored submission that has raw
 streams with the installed reference, on a Dask cluster, and record the new values beside the old ones.
 
 The work is split so that nothing but the driver touches the database:
@@ -91,7 +91,7 @@ class Baseline:
 
 
 def judge(out: dict, baseline: Baseline, spec_version: str) -> tuple[str, list[dict]]:
-    """The record's status and per-metric checks for a task's ``out`` (spec §17.10).
+    """The record's status and per-metric checks for a task's ``out`` (spec §17.9).
 
     A metric is ``changed`` when ``|previous − recomputed| > abs + rel·|recomputed|`` for a component, with
     the loosest tolerance of its conformance cases (the rule of §17.3.1; exact for a metric without cases),
@@ -146,7 +146,7 @@ def version_key(version: str) -> tuple[int, ...]:
 
 def plan(s: DBSession, since_version: str | None = None) -> list[str]:
     """The ids of the submissions a new run re-verifies: every one with raw streams; with ``since_version``
-    only those no reference of that version or later has re-verified yet (spec §17.10)."""
+    only those no reference of that version or later has re-verified yet (spec §17.9)."""
     ids = sorted(s.scalars(select(db.Submission.id).where(db.Submission.has_raw.is_(True))))
     if since_version is None:
         return ids
@@ -158,7 +158,7 @@ def plan(s: DBSession, since_version: str | None = None) -> list[str]:
 
 @dataclass
 class Summary:
-    """What a run found (spec §17.10): submissions by status, metrics by status, verification states that
+    """What a run found (spec §17.9): submissions by status, metrics by status, verification states that
     changed, the submissions whose values moved, and what this invocation did."""
 
     run_id: str

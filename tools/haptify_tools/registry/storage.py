@@ -1,4 +1,4 @@
-"""Where re-verification workers read the registry's bundle archives from (spec §17.10).
+"""Where re-verification workers read the registry's bundle archives from (spec §17.9).
 
 A store turns an archive's key — the ``archive_path`` of its record, ``bundles/<d₀d₁>/<digest>.tar.gz`` —
 into a local file the worker can unpack. The registry writes archives to its data folder (spec §17.7), so
@@ -21,7 +21,7 @@ from haptify.storage import resolve_inside
 
 
 class BundleStore(Protocol):
-    """What a worker needs from the registry's storage: one archive as a local file (spec §17.10)."""
+    """What a worker needs from the registry's storage: one archive as a local file (spec §17.9)."""
 
     location: str
 
@@ -32,7 +32,7 @@ class BundleStore(Protocol):
 
 @dataclass(frozen=True)
 class LocalFolderStore:
-    """The registry's data folder, read in place (spec §17.7, §17.10); ``location`` as the workers see it."""
+    """The registry's data folder, read in place (spec §17.7, §17.9); ``location`` as the workers see it."""
 
     location: str
 
@@ -45,7 +45,7 @@ class LocalFolderStore:
 
 
 def open_store(location: str) -> BundleStore:
-    """The store at ``location``: a folder path or a ``file://`` URL (spec §17.10). Other schemes (an object
+    """The store at ``location``: a folder path or a ``file://`` URL (spec §17.9). Other schemes (an object
     store) are E903: none is implemented yet."""
     if location.startswith("file://"):
         location = location[len("file://"):]

@@ -1,4 +1,4 @@
-"""Registry-wide re-verification (spec §17.10): the runs and, per run and submission, the re-computed
+"""Registry-wide re-verification (spec §17.9): the runs and, per run and submission, the re-computed
 values beside the submission's own record. Both append-only, like the records of r0001.
 
 Revision ID: r0003
