@@ -226,6 +226,15 @@ def test_bad_locations_and_runs_are_coded_errors(registry):
     with pytest.raises(HaptifyError) as err, dask_client("tcp://127.0.0.1:9"):
         pass
     assert err.value.findings[0].code == "E980"
+    _plant(reg, ids["s0"], {}, version="0.0.9")  # a run another reference version started
+    with pytest.raises(HaptifyError) as err:
+        run_reverify(reg.engine, store, "planted")
+    assert err.value.findings[0].code == "E981"
+    args = argparse.Namespace(data=reg.data, db=None, storage=None, since_version="0.1.0", resume="planted", workers=0,
+                              scheduler=None)
+    with pytest.raises(HaptifyError) as err:
+        cmd_registry.run_reverify_command(args, UI(quiet=True))
+    assert err.value.findings[0].code == "E903"
 
 
 def test_an_archive_the_store_cannot_give_is_not_recorded_and_a_resume_retries_it(registry):
