@@ -110,12 +110,12 @@ def run_reverify_command(args, ui) -> int:
     registry = Registry(settings, lock=False)
     try:
         executor = describe(args.scheduler, args.workers)
-        run = load_run(registry.engine, args.resume or start_run(registry.engine, executor, args.since_version))
-        run_id = run.id
-        ui.say(f"re-verification run {run_id} ({executor})")
-        with dask_client(args.scheduler, args.workers) as client, \
-                ui.progress("re-verifying", total=len(json.loads(run.planned_json))) as advance:
-            summary = run_reverify(registry.engine, store, run_id, client, limits=settings.limits, progress=advance)
+        with dask_client(args.scheduler, args.workers) as client:  # E980 before a run is recorded
+            run = load_run(registry.engine, args.resume or start_run(registry.engine, executor, args.since_version))
+            run_id = run.id
+            ui.say(f"re-verification run {run_id} ({executor})")
+            with ui.progress("re-verifying", total=len(json.loads(run.planned_json))) as advance:
+                summary = run_reverify(registry.engine, store, run_id, client, limits=settings.limits, progress=advance)
     finally:
         registry.close()
     ui.emit_json(summary.to_dict())
