@@ -38,13 +38,12 @@ def run(args, ui) -> int:
     try:
         wanted = _wanted_metrics(args.metrics)
         parameters = case_parameters(args.params)
-        session = open_checked_session(args.session)
-        results = _compute_checked(session, wanted, parameters, ui)
+        results = compute_folder(args.session, wanted, parameters, ui)
     except HaptifyError as err:
         if args.output is not None:
             write_findings(args.output, err.findings)
         raise
-    out = args.output or args.session.parent / f"{session.session_id}.results.json"
+    out = args.output or args.session.parent / f"{results.session_id}.results.json"
     atomic_write_text(out, results.model_dump_json(indent=2) + "\n")
     if ui.json_mode:
         ui.emit_json(results.model_dump(mode="json"))
@@ -80,6 +79,14 @@ def case_parameters(path: Path | None) -> dict[str, Any]:
         raise fail("E903", f"--params file {str(path)!r} is not a JSON object", file=str(path),
                    expected="a JSON object", found=type(params).__name__)
     return params
+
+
+def compute_folder(path: Path, wanted: list[str] | None = None, parameters: dict[str, Any] | None = None, ui=None) -> ResultsFile:
+    """What ``haptify compute`` computes for the session folder ``path``: the session through the gate, every
+    (or every ``wanted``) metric, then the rest of its validation (spec §15.4, §4.8); ``ui`` shows progress."""
+    from haptify.cli import UI
+
+    return _compute_checked(open_checked_session(path), wanted, parameters or {}, ui or UI(quiet=True))
 
 
 def _compute_checked(session: CheckedSession, wanted: list[str] | None, parameters: dict[str, Any], ui) -> ResultsFile:

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from haptify.errors import fail
 
+from haptify_tools.cluster import dask_client
 from haptify_tools.discrepancy.workflow import run_discrepancy
 from haptify_tools.twin.model import load_twin
 
@@ -30,6 +31,8 @@ def register(subparsers) -> None:
     p.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
     p.add_argument("--no-overlay", action="store_true", help="do not write OUT/overlay.rrd (the viewer recording)")
     p.add_argument("--workers", type=int, default=0, help="processes fitting candidates in parallel (default: one per CPU, at most 4)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run the candidates' simulations on an existing Dask cluster instead, e.g. tcp://host:8786")
     p.set_defaults(func=run)
 
 
@@ -41,9 +44,9 @@ def run(args: argparse.Namespace, ui) -> int:
     if out.exists() and not args.overwrite:
         raise fail("E901", f"{str(out)!r} already exists", file=str(out))
     twin = load_twin(args.twin)
-    result, _ = run_discrepancy(args.session, twin, out, max_effects=args.max_effects, overwrite=args.overwrite,
-                                log=ui.say, workers=args.workers,
-                                overlay=not args.no_overlay)
+    with dask_client(getattr(args, "scheduler", None), 0) as client:
+        result, _ = run_discrepancy(args.session, twin, out, max_effects=args.max_effects, overwrite=args.overwrite,
+                                    log=ui.say, workers=args.workers, overlay=not args.no_overlay, client=client)
     named = ", ".join(f"{a.effect_id} {a.parameter}={a.value:.4g} {a.unit}" for a in result.accepted) or "none"
     ui.say(f"{result.verdict}: effects named: {named}; {result.gap_summary()}; wrote {out}")
     ui.emit_json({"ok": True, "out": str(out), "verdict": result.verdict,

@@ -222,14 +222,19 @@ def _curvature_error(evals: dict[float, tuple[float, dict]], p: float, n: int) -
 
 def select_effects(twin: TwinFile, trials: list[MeasuredTrial], max_effects: int = 5,
                    library: tuple[Candidate, ...] = LIBRARY, log: Callable[[str], object] | None = None,
-                   workers: int = 1, sweeps: list | None = None) -> Selection:
+                   workers: int = 1, sweeps: list | None = None, client=None) -> Selection:
     """Forward selection (see the module docstring; discrepancy README §2, §3); deterministic for a given twin and session.
 
     ``sweeps``: the measured workspace sweeps (:func:`.workspace.load_sweeps`) for the workspace
     candidate. ``workers`` > 1 runs the simulations — every (twin, trial) pair a job, the values a candidate
-    needs at once simulated together — in that many processes (0: one per CPU, at most 4); the result does
-    not depend on it.
+    needs at once simulated together — in that many processes (0: one per CPU, at most 4); with a Dask
+    ``client`` (``--scheduler``) on its cluster instead (:class:`.cluster_pool.ClusterPool`). The result depends on neither.
     """
+    if client is not None and trials:
+        from haptify_tools.discrepancy.cluster_pool import ClusterPool
+
+        with ClusterPool(client, trials) as pool:
+            return _select(twin, Dataset("force", trials, pool=pool), sweeps or [], max_effects, library, log)
     n = pool_size(workers)
     if n <= 1 or not trials:
         return _select(twin, Dataset("force", trials), sweeps or [], max_effects, library, log)

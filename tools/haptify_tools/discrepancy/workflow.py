@@ -269,18 +269,19 @@ def _floor_of(twin: TwinFile, session_path: str, trials: list[dt.MeasuredTrial])
 
 def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | None = None, *, max_effects: int = 5,
                     overwrite: bool = False, log: Callable[[str], object] | None = None,
-                    report: bool = True, workers: int = 1, overlay: bool = True) -> tuple[DiscrepancyFile, Selection]:
+                    report: bool = True, workers: int = 1, overlay: bool = True, client=None) -> tuple[DiscrepancyFile, Selection]:
     """Run the workflow (discrepancy README §1–4; issue 8); with ``out`` write ``discrepancy.json``, ``twin.json`` and ``report.html`` there.
 
     ``overlay``: also write ``overlay.rrd`` for the viewer (when ``report``). ``workers``: processes that run the
     simulations trial by trial (0: one per CPU, at most 4; results do not depend on it, :func:`.identify.select_effects`);
-    with more than one, the floor's replay runs in its own process while the figures and the overlay are drawn. Returns the result and the selection
+    with more than one, the floor's replay runs in its own process while the figures and the overlay are drawn. With a Dask
+    ``client`` the simulations and the floor's replay run on its cluster instead (issue 24). Returns the result and the selection
     (its simulations, for callers that draw or test).
     """
     session, _ = require_valid_session(session_path)
     sweeps = ws.load_sweeps(session)
     trials = dt.load_measured(session, required=not sweeps)
-    sel = select_effects(twin, trials, max_effects=max_effects, log=log, workers=workers, sweeps=sweeps)
+    sel = select_effects(twin, trials, max_effects=max_effects, log=log, workers=workers, sweeps=sweeps, client=client)
     target = Path(out) if out is not None else None
     build = None
     if target is not None:
@@ -290,7 +291,9 @@ def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | 
     try:
         with ExitStack() as stack:
             pending = None
-            if trials and pool_size(workers) > 1:
+            if trials and client is not None:
+                pending = client.submit(_floor_of, sel.twin, str(session.root), trials, pure=False)
+            elif trials and pool_size(workers) > 1:
                 pool = stack.enter_context(process_pool(1))
                 pending = pool.submit(_floor_of, sel.twin, str(session.root), trials)
             figures = plan = None

@@ -1,11 +1,15 @@
-"""``haptify registry serve [--db URL] [--data DIR] [--host 127.0.0.1] [--port 8080]`` and
-``haptify registry token create --lab LAB [--scope submit|admin] [--rate N]`` (spec §17.6, §17.7)."""
+"""``haptify registry serve [--db URL] [--data DIR] [--host 127.0.0.1] [--port 8080]``,
+``haptify registry token create --lab LAB [--scope submit|admin] [--rate N]`` (spec §17.6, §17.7) and
+``haptify registry reverify [--since-version V] [--resume RUN] [--workers N | --scheduler ADDRESS]`` (spec §17.9)."""
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 from pathlib import Path
 
+from haptify.errors import fail
+from haptify_tools.cluster import add_executor_options, dask_client, describe
 from haptify_tools.registry.bundle import Limits
 from haptify_tools.registry.service import DEFAULT_RATE_PER_MINUTE, SCOPES, Registry, Settings
 
@@ -45,6 +49,16 @@ def register(sub) -> None:
     create.add_argument("--scope", choices=SCOPES, default="submit")
     create.add_argument("--rate", type=int, default=DEFAULT_RATE_PER_MINUTE, help="requests per minute allowed")
     create.set_defaults(func=run_token_create)
+    reverify = rsub.add_parser("reverify", help="re-compute every stored submission with raw streams with the installed "
+                                                 "reference, on a Dask cluster; record the new values beside the old")
+    _store_options(reverify)
+    reverify.add_argument("--storage", metavar="LOCATION",
+                          help="the data folder as the workers see it (default: --data; spec §17.9)")
+    reverify.add_argument("--since-version", metavar="V",
+                          help="only submissions no reference of version V or later has re-verified yet")
+    reverify.add_argument("--resume", metavar="RUN", help="finish the run RUN (skips the submissions it has recorded)")
+    add_executor_options(reverify)
+    reverify.set_defaults(func=run_reverify_command)
 
 
 def _settings(args) -> Settings:
@@ -83,3 +97,50 @@ def run_token_create(args, ui) -> int:
         print(token)
         ui.warn(f"token for lab {args.lab} (scope {args.scope}); it is shown once and stored only as its sha256")
     return 0
+
+
+def run_reverify_command(args, ui) -> int:
+    """Start (or ``--resume``) a re-verification run and print its summary (spec §17.9). Exit 1 when a
+    submission could not be re-verified for a reason that is not its own (resume the run to retry it)."""
+    from haptify_tools.registry.reverify import load_run, run_reverify, start_run
+    from haptify_tools.registry.storage import open_store
+
+    if args.resume and args.since_version:
+        raise fail("E903", "--since-version chooses the submissions of a new run; a resumed run keeps its own",
+                   expected="--resume RUN or --since-version V", found="both")
+    settings = _settings(args)
+    store = open_store(args.storage or str(settings.data_dir))
+    registry = Registry(settings, lock=False)
+    try:
+        executor = describe(args.scheduler, args.workers)
+        with dask_client(args.scheduler, args.workers) as client:  # E980 before a run is recorded
+            run = load_run(registry.engine, args.resume or start_run(registry.engine, executor, args.since_version))
+            run_id = run.id
+            ui.say(f"re-verification run {run_id} ({executor})")
+            with ui.progress("re-verifying", total=len(json.loads(run.planned_json))) as advance:
+                summary = run_reverify(registry.engine, store, run_id, client, limits=settings.limits, progress=advance)
+    finally:
+        registry.close()
+    ui.emit_json(summary.to_dict())
+    for line in summary_lines(summary):
+        ui.say(line)
+    for sid, why in sorted(summary.errors.items()):
+        ui.warn(f"{sid}: not re-verified ({why}); `haptify registry reverify --resume {run_id}` retries it")
+    return 0 if summary.complete else 1
+
+
+def summary_lines(summary) -> list[str]:
+    """The human summary of a run: totals, then one line per metric, verification changes and the moved."""
+    s = summary.submissions
+    lines = [f"run {summary.run_id} (reference {summary.reference_version}): {summary.recorded}/{summary.planned} recorded "
+             f"({summary.computed_now} now, {summary.skipped} before) in {summary.seconds:.1f} s; "
+             f"changed {s['changed']}, unchanged {s['unchanged']}, failed {s['failed']}"]
+    for metric, counts in summary.metrics.items():
+        lines.append(f"  {metric:36s} " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+    for transition, n in summary.transitions.items():
+        lines.append(f"  verification {transition}: {n}")
+    for sid, metrics in summary.changed.items():
+        lines.append(f"  W982 {sid}: moved beyond tolerance: {', '.join(metrics)}")
+    for sid, codes in summary.failed.items():
+        lines.append(f"  {sid}: the reference refuses it now ({', '.join(codes)})")
+    return lines

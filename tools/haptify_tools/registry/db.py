@@ -171,6 +171,38 @@ class ChallengeResult(Base):
     answered_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
 
+class ReverifyRun(Base):
+    """One registry-wide re-verification (spec §17.9): which reference re-computed, which submissions it
+    planned (their ids, fixed when the run starts, so that a resumed run does the same work), on what."""
+
+    __tablename__ = "reverify_runs"
+    id: Mapped[str] = mapped_column(String(32), primary_key=True)
+    reference_version: Mapped[str] = mapped_column(String(50), index=True)
+    spec_version: Mapped[str] = mapped_column(String(16))
+    since_version: Mapped[str | None] = mapped_column(String(50))
+    executor: Mapped[str] = mapped_column(String(300))  # "serial", "local N workers" or the scheduler's address
+    planned_json: Mapped[str] = mapped_column(Text)  # the submission ids, sorted
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class ReverifyRecord(Base):
+    """The re-computation of one submission in one run, beside the submission's own record (never over it):
+    at most one per (submission, reference version, run) — the primary key refuses a second (spec §17.9)."""
+
+    __tablename__ = "reverify_records"
+    submission_id: Mapped[str] = mapped_column(ForeignKey("submissions.id"), primary_key=True)
+    reference_version: Mapped[str] = mapped_column(String(50), primary_key=True)
+    run_id: Mapped[str] = mapped_column(ForeignKey("reverify_runs.id"), primary_key=True, index=True)
+    status: Mapped[str] = mapped_column(String(16), index=True)  # changed | unchanged | failed
+    verification: Mapped[str | None] = mapped_column(String(16))  # the state against the submitted values now
+    previous_verification: Mapped[str] = mapped_column(String(16))
+    checks_json: Mapped[str] = mapped_column(Text)  # per metric: previous, recomputed, tolerance, status
+    findings_json: Mapped[str] = mapped_column(Text)  # why the re-computation was refused (status failed)
+    worker: Mapped[str] = mapped_column(String(300))
+    seconds: Mapped[float] = mapped_column(Float)
+    recorded_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
 def default_db_url(data_dir: Path) -> str:
     """The embedded default: SQLite in ``registry.sqlite3`` inside the data folder (spec §17.7)."""
     return f"sqlite:///{Path(data_dir).resolve() / SQLITE_FILE}"

@@ -29,3 +29,17 @@ def drop_triggers(tables: tuple[str, ...]) -> None:
         elif dialect == "sqlite":
             for action in ("update", "delete"):
                 op.execute(f"DROP TRIGGER IF EXISTS {table}_no_{action}")
+
+
+def create_tables(tables: dict[str, list]) -> None:
+    """Create each table (name → its columns and constraints) in order, then make them append-only."""
+    for name, columns in tables.items():
+        op.create_table(name, *columns)
+    add_triggers(tuple(tables))
+
+
+def drop_tables(tables: tuple[str, ...]) -> None:
+    """Undo :func:`create_tables`: the triggers, then the tables in reverse order."""
+    drop_triggers(tables)
+    for name in reversed(tables):
+        op.drop_table(name)
