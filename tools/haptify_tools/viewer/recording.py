@@ -205,6 +205,9 @@ class RrdWriter:
         self.chunk_rows = chunk_rows
 
     def write(self, e: Entry) -> None:
+        bad = {k: len(v) for k, v in e.fields.items() if len(v) != e.rows}
+        if bad:  # a programming error, raised before anything of the entry is sent
+            raise ValueError(f"{e.path}: {e.rows} timestamps but field lengths {bad}")
         if e.static:
             self.rec.log(e.path, *e.static, static=True, strict=True)
         for start in range(0, e.rows, self.chunk_rows):
