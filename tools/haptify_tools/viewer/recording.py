@@ -274,6 +274,12 @@ def raw_pose_at(t_pose: np.ndarray, p: np.ndarray, q: np.ndarray, t: np.ndarray)
     return signals.resample_track(track, t)
 
 
+def columns_of(frame: pd.DataFrame, names: list[str]) -> np.ndarray:
+    """The columns ``names`` of a stream table as one float64 array (rows × names), built column by column
+    (selecting a list of columns through pandas builds an index each time and costs more than the copy)."""
+    return np.column_stack([frame[name].to_numpy(dtype=np.float64) for name in names]) if names else np.empty((len(frame), 0))
+
+
 def finite_rows(*arrays: np.ndarray) -> np.ndarray:
     """Boolean mask of rows where every given array is finite."""
     mask = np.ones(len(arrays[0]), dtype=bool)
@@ -408,8 +414,8 @@ class TrialPlanner:
         p = q = t_pose = None
         if pose is not None:
             t_pose = pose["t"].to_numpy()
-            p = pose[["px", "py", "pz"]].to_numpy()
-            q = pose[["qw", "qx", "qy", "qz"]].to_numpy()
+            p = columns_of(pose, ["px", "py", "pz"])
+            q = columns_of(pose, ["qw", "qx", "qy", "qz"])
             self.handle(t_pose, p, q)
         self.wrench(t_pose, p, q)
         self.accel()
@@ -506,9 +512,9 @@ class TrialPlanner:
         if w is None:
             return
         t = w["t"].to_numpy()
-        f = w[["fx", "fy", "fz"]].to_numpy()
+        f = columns_of(w, ["fx", "fy", "fz"])
         self.add_series("handle/force_raw", t, f, ["fx", "fy", "fz"], "handle_wrench")
-        self.add_series("handle/torque_raw", t, w[["tx", "ty", "tz"]].to_numpy(), ["tx", "ty", "tz"], "handle_wrench")
+        self.add_series("handle/torque_raw", t, columns_of(w, ["tx", "ty", "tz"]), ["tx", "ty", "tz"], "handle_wrench")
         hs = self.handle_signals()
         if hs is not None and hs.force is not None:
             self.add_series("hand_force/calibrated", hs.t, hs.force, ["fx", "fy", "fz"], "handle_signals", derived=True)
@@ -540,7 +546,7 @@ class TrialPlanner:
     def accel(self) -> None:
         a = self.read("handle_accel")
         if a is not None:
-            self.add_series("accel/raw", a["t"].to_numpy(), a[["ax", "ay", "az"]].to_numpy(), ["ax", "ay", "az"], "handle_accel")
+            self.add_series("accel/raw", a["t"].to_numpy(), columns_of(a, ["ax", "ay", "az"]), ["ax", "ay", "az"], "handle_accel")
             hs = self.handle_signals()
             if hs is not None and hs.acceleration is not None:
                 self.add_series("accel/world", hs.t, hs.acceleration, ["ax", "ay", "az"], "handle_signals", derived=True)
@@ -562,8 +568,8 @@ class TrialPlanner:
         t = w["t"].to_numpy()
         names_f = [f"c{i}_f{a}" for i in range(1, 5) for a in "xyz"]
         names_t = [f"c{i}_t{a}" for i in range(1, 5) for a in "xyz"]
-        self.add_series("plate/corner_force_raw", t, w[names_f].to_numpy(), names_f, "plate_wrench")
-        self.add_series("plate/corner_torque_raw", t, w[names_t].to_numpy(), names_t, "plate_wrench")
+        self.add_series("plate/corner_force_raw", t, columns_of(w, names_f), names_f, "plate_wrench")
+        self.add_series("plate/corner_torque_raw", t, columns_of(w, names_t), names_t, "plate_wrench")
         if not self.derive:
             return
         from haptify import force_plate
@@ -589,18 +595,18 @@ class TrialPlanner:
         if c is None:
             return
         t = c["t"].to_numpy()
-        self.add_series("commanded/force", t, c[["fx", "fy", "fz"]].to_numpy(), ["fx", "fy", "fz"], "commanded_wrench")
-        self.add_series("commanded/torque", t, c[["tx", "ty", "tz"]].to_numpy(), ["tx", "ty", "tz"], "commanded_wrench")
+        self.add_series("commanded/force", t, columns_of(c, ["fx", "fy", "fz"]), ["fx", "fy", "fz"], "commanded_wrench")
+        self.add_series("commanded/torque", t, columns_of(c, ["tx", "ty", "tz"]), ["tx", "ty", "tz"], "commanded_wrench")
 
     def device_and_sync(self) -> None:
         """The device's own joint angles (diagnostic, spec §2.6) and the sync trigger, as they are."""
         q = self.read("device_joint_angles")
         if q is not None:
             names = [c for c in q.columns if c != "t"]
-            self.add_series("device/joint_angles", q["t"].to_numpy(), q[names].to_numpy(), names, "device_joint_angles")
+            self.add_series("device/joint_angles", q["t"].to_numpy(), columns_of(q, names), names, "device_joint_angles")
         s = self.read("sync")
         if s is not None:
-            self.add_series("sync/trigger", s["t"].to_numpy(), s[["trigger"]].to_numpy(), ["trigger"], "sync")
+            self.add_series("sync/trigger", s["t"].to_numpy(), columns_of(s, ["trigger"]), ["trigger"], "sync")
 
     def read_entities(self, kind: str) -> tuple[list[str], pd.DataFrame, np.ndarray] | None:
         """Entity names, table and time column of a per-entity stream (markers, link_poses), or None."""
@@ -627,7 +633,7 @@ class TrialPlanner:
         for i, (link, names) in enumerate(groups.items()):
             color = LINK_PALETTE[i % len(LINK_PALETTE)]
             for m in names:
-                xyz = frame[[f"{m}_x", f"{m}_y", f"{m}_z"]].to_numpy()
+                xyz = columns_of(frame, [f"{m}_x", f"{m}_y", f"{m}_z"])
                 ok = finite_rows(xyz)
                 self.plan.add(Entry(
                     f"{self.world}/markers/{rr.escape_entity_path_part(link)}/{rr.escape_entity_path_part(m)}",
@@ -641,8 +647,8 @@ class TrialPlanner:
             return
         entities, frame, t = found
         for link in entities:
-            p = frame[[f"{link}_p{a}" for a in "xyz"]].to_numpy()
-            q = frame[[f"{link}_q{a}" for a in "wxyz"]].to_numpy()
+            p = columns_of(frame, [f"{link}_p{a}" for a in "xyz"])
+            q = columns_of(frame, [f"{link}_q{a}" for a in "wxyz"])
             ok = finite_rows(p, q)
             self.plan.add(Entry(f"{self.world}/links/{rr.escape_entity_path_part(link)}",
                                 static=[rr.TransformAxes3D(LINK_AXIS_M)], times_ns=time_ns(t[ok]),
