@@ -51,20 +51,22 @@ import uuid
 from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
 import rerun as rr
 from pydantic import ValidationError
 
-from haptify.compute import ComputeContext
 from haptify.conventions import quat_multiply, quat_rotate
 from haptify.errors import HaptifyError, fail
-from haptify.results import ResultsFile
 from haptify.session_format import Kinematics, Stream, Trial
 from haptify.storage import SessionFolder, pydantic_findings
 from haptify_tools.viewer.voxel_mesh import boundary_mesh
+
+if TYPE_CHECKING:  # imported where used: a raw-only recording needs neither (start-up, issue 21)
+    from haptify.compute import ComputeContext
+    from haptify.results import ResultsFile
 
 APP_ID = "haptify"
 TIMELINE = "time"
@@ -244,13 +246,14 @@ class CachedStreams(SessionFolder):
 
 def time_ns(t: np.ndarray) -> np.ndarray:
     """Session-clock seconds → exact integer nanoseconds (int64), ``round(t · 10⁹)`` (spec §1.4)."""
-    return np.round(np.asarray(t, dtype=np.float64) * 1e9).astype(np.int64)
+    ns = np.asarray(t, dtype=np.float64) * 1e9
+    return np.rint(ns, out=ns).astype(np.int64)
 
 
 def time_column(ns: np.ndarray) -> rr.TimeColumn:
     """The ``time`` timeline column from integer nanoseconds (no float truncation).
     The session clock of spec §1.4."""
-    return rr.TimeColumn(TIMELINE, duration=np.asarray(ns, dtype=np.int64).astype("timedelta64[ns]"))
+    return rr.TimeColumn(TIMELINE, duration=np.ascontiguousarray(ns, dtype=np.int64).view("timedelta64[ns]"))
 
 
 def xyzw(q_wxyz: np.ndarray) -> np.ndarray:
@@ -382,9 +385,10 @@ def series_entry(path: str, key: str, t: np.ndarray, values: np.ndarray, names: 
 class TrialPlanner:
     """Turns one trial of one session (one role) into entries (issue 7, spec chapter 2 streams)."""
 
-    def __init__(self, ctx: ComputeContext, trial: Trial, role: str, key: str, plan: Plan) -> None:
-        self.ctx = ctx  # shares calibration, handle and plate signals between the reference functions
-        self.session = ctx.session
+    def __init__(self, session: CachedStreams, ctx: ComputeContext | None, trial: Trial, role: str, key: str,
+                 plan: Plan) -> None:
+        self.ctx = ctx  # shares calibration, handle and plate signals between the reference functions (None: derived off)
+        self.session = session
         self.trial = trial
         self.role = role
         self.plan = plan
@@ -733,6 +737,8 @@ def rig_entries(session: SessionFolder) -> list[Entry]:
 
 def load_results(path: str | os.PathLike) -> ResultsFile:
     """Read and validate ``results.json`` (spec §15.1); E903 when missing, E104 when invalid."""
+    from haptify.results import ResultsFile
+
     path = Path(path)
     if not path.is_file():
         raise fail("E903", f"results file {str(path)!r} does not exist", file=str(path))
@@ -834,8 +840,16 @@ def plan_recording(session: SessionFolder, *, trial_id: str | None = None, resul
     """
     if derived not in DERIVED_MODES:
         raise fail("E903", f"unknown derived-signal mode {derived!r}", expected=list(DERIVED_MODES), found=derived)
-    ctx = ComputeContext(session=CachedStreams(session))
-    other_ctx = ComputeContext(session=CachedStreams(other)) if other is not None else None
+    def context(folder: SessionFolder) -> tuple[CachedStreams, ComputeContext | None]:
+        cached = CachedStreams(folder)
+        if derived == "off":
+            return cached, None
+        from haptify.compute import ComputeContext
+
+        return cached, ComputeContext(session=cached)
+
+    streams, ctx = context(session)
+    other_streams, other_ctx = context(other) if other is not None else (None, None)
     trials = [session.trial(trial_id)] if trial_id else [t for t in session.trials
                                                           if trial_ids is None or t.id in trial_ids]
     plan = Plan(recording_id=recording_id(session, trial_id, other), has_results=results is not None, derived=derived, writer=writer)
@@ -847,15 +861,17 @@ def plan_recording(session: SessionFolder, *, trial_id: str | None = None, resul
         match = counterpart(other, trial) if other is not None else None
         shift = 0
         if match is not None:  # read before the measured trial's tables are dropped
-            shift = trial_start_ns(ctx.session, trial) - trial_start_ns(other_ctx.session, match)
-        TrialPlanner(ctx, trial, "measured", key, plan).run()
-        ctx.forget_trial(trial.id)  # each trial is visited once: its derived signals can go
+            shift = trial_start_ns(streams, trial) - trial_start_ns(other_streams, match)
+        TrialPlanner(streams, ctx, trial, "measured", key, plan).run()
+        if ctx is not None:
+            ctx.forget_trial(trial.id)  # each trial is visited once: its derived signals can go
         if match is not None:
             tp.counterpart["compare"] = match.id
             plan.shift_ns = shift
-            TrialPlanner(other_ctx, match, "compare", key, plan).run()
+            TrialPlanner(other_streams, other_ctx, match, "compare", key, plan).run()
             plan.shift_ns = 0
-            other_ctx.forget_trial(match.id)
+            if other_ctx is not None:
+                other_ctx.forget_trial(match.id)
             if shift:
                 plan.notes.append(f"{match.id} (compare) shifted by {shift / 1e9:+.9g} s to start with {trial.id} (measured)")
         plan.trials.append(tp)
