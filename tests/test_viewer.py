@@ -517,7 +517,7 @@ def test_workspace_meshes_enclose_the_solids(recorded, sessions):
 @given(arrays(np.bool_, st.tuples(st.integers(1, 5), st.integers(1, 5), st.integers(1, 5))),
        st.tuples(st.integers(-50, 50), st.integers(-50, 50), st.integers(-50, 50)))
 def test_voxel_boundary_mesh_is_closed_and_outward(grid, origin):
-    from haptify_tools.viewer.voxel_mesh import boundary_mesh
+    from haptify_tools.viewer.voxel_mesh import SurfaceMesh, boundary_mesh
 
     pitch = 0.004
     mesh = boundary_mesh(grid, origin, pitch)
@@ -533,6 +533,11 @@ def test_voxel_boundary_mesh_is_closed_and_outward(grid, origin):
             e = (tuple(keys[tri[a]]), tuple(keys[tri[b]]))
             edges[e] = edges.get(e, 0) + 1
     assert all(edges.get((b, a), 0) == n for (a, b), n in edges.items())
+    # the compact form: each lattice corner once, the same closed surface
+    vertices, triangles = mesh.shared(pitch)
+    assert len(np.unique(np.round(vertices / pitch), axis=0)) == len(vertices)
+    assert len(triangles) == len(mesh.triangles)
+    assert SurfaceMesh(vertices, triangles, vertices).enclosed_volume() == pytest.approx(grid.sum() * pitch ** 3, rel=1e-9, abs=1e-15)
 
 
 # --- the command -------------------------------------------------------------------------------------
@@ -811,6 +816,20 @@ def test_compact_derived_signals(recorded, sessions, tmp_path):
             np.testing.assert_array_equal(env[2 * b + 1], chunk.max(axis=0))
     arrows_t, _ = temporal(out, "/world/free_space-1/measured/plate_force", "Arrows3D:origins")
     np.testing.assert_array_equal(arrows_t, all_ns[::10])
+    from haptify_tools.viewer.voxel_mesh import SurfaceMesh
+
+    for name in ("measured", "modeled"):  # the workspace meshes: shared corners, no normals, the same volume
+        meshes = []
+        for path in (whole, out):
+            [ch] = list(RrdReader(path).stream().filter(content=f"/world/workspace-1/measured/workspace/{name}", is_static=True))
+            rb = ch.to_record_batch()
+            v = np.array(rb.column("Mesh3D:vertex_positions").to_pylist()[0], dtype=float)
+            tri = np.array(rb.column("Mesh3D:triangle_indices").to_pylist()[0], dtype=np.int64)
+            meshes.append((v, tri, "Mesh3D:vertex_normals" in rb.schema.names))
+        (v_full, t_full, normals_full), (v_compact, t_compact, normals_compact) = meshes
+        assert normals_full and not normals_compact and len(v_compact) < len(v_full) / 2
+        assert SurfaceMesh(v_compact, t_compact, v_compact).enclosed_volume() == \
+            pytest.approx(SurfaceMesh(v_full, t_full, v_full).enclosed_volume(), rel=1e-5)
     assert out.stat().st_size < whole.stat().st_size
 
 

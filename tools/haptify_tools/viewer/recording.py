@@ -479,7 +479,7 @@ class TrialPlanner:
 
     def add_solid(self, what: str, path: str, solid: Any, color: tuple[int, int, int]) -> None:
         """A voxel solid as a mesh, or a W410 note when nothing is inside (the sweep did not close)."""
-        entry = solid_entry(path, solid, color)
+        entry = solid_entry(path, solid, color, compact=self.plan.derived == "compact")
         if entry is None:
             self.plan.notes.append(f"{self.trial.id} ({self.role}): {what} not shown — W410 the points enclose no volume")
         else:
@@ -702,14 +702,19 @@ def modeled_solid(kinematics_json: str, position: tuple, quaternion: tuple) -> A
     return workspace.modeled_solid(kin, position, quaternion)
 
 
-def solid_entry(path: str, solid: Any, color: tuple[int, int, int]) -> Entry | None:
+def solid_entry(path: str, solid: Any, color: tuple[int, int, int], compact: bool = False) -> Entry | None:
     """A voxel solid's boundary (voxels with fraction ≥ 0.5) as a translucent static mesh; None when empty.
-    The fractions of spec §8.4 step 5."""
+    The fractions of spec §8.4 step 5. ``compact``: each lattice corner once, no normals (``SurfaceMesh.shared``)."""
     mesh = boundary_mesh(solid.fraction >= 0.5, solid.origin, solid.pitch)
     if not len(mesh.triangles):
         return None
-    return Entry(path, static=[rr.Mesh3D(vertex_positions=mesh.vertices, triangle_indices=mesh.triangles,
-                                         vertex_normals=mesh.normals, albedo_factor=(*color, MESH_ALPHA))], derived=True)
+    if compact:
+        vertices, triangles = mesh.shared(solid.pitch)
+        drawn = rr.Mesh3D(vertex_positions=vertices, triangle_indices=triangles, albedo_factor=(*color, MESH_ALPHA))
+    else:
+        drawn = rr.Mesh3D(vertex_positions=mesh.vertices, triangle_indices=mesh.triangles, vertex_normals=mesh.normals,
+                          albedo_factor=(*color, MESH_ALPHA))
+    return Entry(path, static=[drawn], derived=True)
 
 
 # --- session level ---------------------------------------------------------------------------------
