@@ -181,6 +181,11 @@ def temporal(path: Path, entity: str, component: str) -> tuple[np.ndarray, list]
     return t[order], [values[i] for i in order]
 
 
+def static_labels(path: Path, entity: str) -> list[str]:
+    [ch] = list(RrdReader(path).stream().filter(content=entity, is_static=True, components="Points3D:labels"))
+    return ch.to_record_batch().column("Points3D:labels").to_pylist()[0]
+
+
 def static_text(path: Path, entity: str) -> str:
     [ch] = list(RrdReader(path).stream().filter(content=entity, is_static=True, components="TextDocument:text"))
     return ch.to_record_batch().column("TextDocument:text").to_pylist()[0][0]
@@ -216,8 +221,8 @@ def test_expected_entity_paths(recorded):
         "/series/free_space-1/measured/hand_force/calibrated", "/series/free_space-1/measured/hand_torque/calibrated",
         "/series/free_space-1/measured/accel/world", "/series/free_space-1/measured/plate/force",
         "/series/free_space-1/measured/plate/cop",
-        "/world/stiffness-1/measured/virtual_surface", "/world/stiffness-1/measured/markers/handle/h3",
-        "/world/stiffness-1/measured/markers/link2/l2a", "/world/stiffness-1/measured/links/link1",
+        "/world/stiffness-1/measured/virtual_surface", "/world/stiffness-1/measured/markers/handle",
+        "/world/stiffness-1/measured/markers/link2", "/world/stiffness-1/measured/links/link1",
         "/world/stiffness-1/measured/links/link2",
         "/series/free_space-1/measured/handle/force_raw", "/series/free_space-1/measured/handle/torque_raw",
         "/series/free_space-1/measured/accel/raw",
@@ -274,13 +279,17 @@ def test_three_d_entities_skip_unknown_poses(recorded):
     t_ns, _ = temporal(out, "/world/stiffness-1/measured/handle", "Transform3D:translation")
     all_ns = time_ns(np.arange(100) / 100.0)
     np.testing.assert_array_equal(t_ns, np.delete(all_ns, np.arange(100)[OCCLUDED]))
-    t_ns, pts = temporal(out, "/world/stiffness-1/measured/markers/handle/h1", "Points3D:positions")
+    # the handle's markers h1, h2, h3 in one labelled cloud: every frame (h1, h3 are always seen), h2 NaN when occluded
+    assert static_labels(out, "/world/stiffness-1/measured/markers/handle") == ["h1", "h2", "h3"]
+    t_ns, pts = temporal(out, "/world/stiffness-1/measured/markers/handle", "Points3D:positions")
     np.testing.assert_array_equal(t_ns, all_ns)
-    t_ns, pts = temporal(out, "/world/stiffness-1/measured/markers/handle/h2", "Points3D:positions")  # occluded
-    np.testing.assert_array_equal(t_ns, np.delete(all_ns, np.arange(100)[OCCLUDED]))
-    assert all(len(p) == 1 for p in pts) and pts[0][0][0] == pytest.approx(0.02)
-    t_ns, _ = temporal(out, "/world/stiffness-1/measured/markers/link2/l2b", "Points3D:positions")
-    assert len(t_ns) == 100
+    pts = np.array(pts, dtype=float)
+    assert pts.shape == (100, 3, 3) and pts[0, 1, 0] == pytest.approx(0.02)
+    h2_seen = np.isfinite(pts[:, 1]).all(axis=1)
+    np.testing.assert_array_equal(h2_seen, ~np.isin(np.arange(100), np.arange(100)[OCCLUDED]))
+    assert np.isfinite(pts[:, [0, 2]]).all()
+    t_ns, pts = temporal(out, "/world/stiffness-1/measured/markers/link2", "Points3D:positions")
+    assert len(t_ns) == 100 and all(len(p) == 2 for p in pts)
 
 
 def test_session_and_results_documents(recorded):
@@ -738,15 +747,16 @@ def test_raw_only_recording_holds_every_raw_value_exactly(raw_only, sessions):
                 np.testing.assert_array_equal(got_t, t_ns[ok])
                 np.testing.assert_array_equal(got_q, q[ok][:, [1, 2, 3, 0]].astype(np.float32))
                 covered += ["qw", "qx", "qy", "qz"]
-            elif stream.kind == "markers":
-                for m in stream.entities:
-                    [entity] = [p for p in paths if p.startswith(f"/world/{trial.id}/measured/markers/") and p.endswith(f"/{m}")]
-                    xyz = frame[[f"{m}_{a}" for a in "xyz"]].to_numpy()
-                    ok = np.all(np.isfinite(xyz), axis=1)
-                    got_t, got = column_values(raw_only, entity, "Points3D:positions")
+            elif stream.kind == "markers":  # one labelled cloud per link; frames where any of its markers is known
+                for entity in sorted(p for p in paths if p.startswith(f"/world/{trial.id}/measured/markers/")):
+                    labels = static_labels(raw_only, entity)
+                    xyz = np.stack([frame[[f"{m}_{a}" for a in "xyz"]].to_numpy() for m in labels], axis=1)
+                    ok = np.isfinite(xyz).all(axis=2).any(axis=1)
+                    got_t, rows = temporal(raw_only, entity, "Points3D:positions")
                     np.testing.assert_array_equal(got_t, t_ns[ok])
+                    got = np.array(rows, dtype=np.float32).reshape(xyz[ok].shape)
                     np.testing.assert_array_equal(got, xyz[ok].astype(np.float32))  # rerun stores positions as float32
-                    covered += [f"{m}_{a}" for a in "xyz"]
+                    covered += [f"{m}_{a}" for m in labels for a in "xyz"]
             elif stream.kind == "link_poses":
                 for link in stream.entities:
                     p = frame[[f"{link}_p{a}" for a in "xyz"]].to_numpy()

@@ -31,7 +31,7 @@ Entity paths (``<trial>`` is the escaped trial id, ``<role>`` is ``measured`` or
     /world/<trial>/<role>/hand_force/calibrated  hand force (haptify.signals), arrow at the handle
     /world/<trial>/<role>/hand_force/raw      without calibration: raw F/T force rotated to W
     /world/<trial>/<role>/plate_force         plate force (haptify.force_plate), arrow ending at the COP
-    /world/<trial>/<role>/markers/<link>/<m>  motion-capture marker m, one colour per link
+    /world/<trial>/<role>/markers/<link>      the motion-capture markers of a link, labelled, one colour per link
     /world/<trial>/<role>/links/<link>        link frames from link_poses
     /world/<trial>/<role>/force_field         free space: mean force per bin (haptify.free_space)
     /world/<trial>/<role>/workspace/points    workspace: the measured point cloud
@@ -149,8 +149,14 @@ class Entry:
         return 0 if self.times_ns is None else int(len(self.times_ns))
 
     def columns(self, start: int = 0, stop: int | None = None) -> Any:
-        """The component columns of rows ``start:stop``."""
-        return self.archetype.columns(**{k: v[start:stop] for k, v in self.fields.items()})
+        """The component columns of rows ``start:stop``; positions of shape (rows, points, 3) make rows of
+        several points each."""
+        fields = {k: v[start:stop] for k, v in self.fields.items()}
+        points = fields.get("positions")
+        if points is not None and points.ndim == 3:
+            fields["positions"] = points.reshape(-1, 3)
+            return self.archetype.columns(**fields).partition(np.full(len(points), points.shape[1]))
+        return self.archetype.columns(**fields)
 
 
 @dataclass
@@ -621,7 +627,8 @@ class TrialPlanner:
         return list(stream.entities or []), frame, frame["t"].to_numpy()
 
     def markers(self) -> None:
-        """Each marker as its own entity under the rigid body (link) it belongs to, a colour per link."""
+        """The markers of each rigid body (link) as one labelled point cloud, a colour per link: one row per
+        frame where any of them is known, an occluded marker's position NaN (not drawn) in that row."""
         found = self.read_entities("markers")
         if found is None:
             return
@@ -635,14 +642,12 @@ class TrialPlanner:
         for m in entities:
             groups.setdefault(owner.get(m, "unassigned"), []).append(m)
         for i, (link, names) in enumerate(groups.items()):
-            color = LINK_PALETTE[i % len(LINK_PALETTE)]
-            for m in names:
-                xyz = columns_of(frame, [f"{m}_x", f"{m}_y", f"{m}_z"])
-                ok = finite_rows(xyz)
-                self.plan.add(Entry(
-                    f"{self.world}/markers/{rr.escape_entity_path_part(link)}/{rr.escape_entity_path_part(m)}",
-                    static=[rr.Points3D.from_fields(colors=color, radii=0.002, labels=[m])],
-                    times_ns=time_ns(t[ok]), archetype=rr.Points3D, fields={"positions": xyz[ok]}, stream="markers"))
+            xyz = columns_of(frame, [f"{m}_{a}" for m in names for a in "xyz"]).reshape(len(t), len(names), 3)
+            ok = np.isfinite(xyz).all(axis=2).any(axis=1)
+            self.plan.add(Entry(
+                f"{self.world}/markers/{rr.escape_entity_path_part(link)}",
+                static=[rr.Points3D.from_fields(colors=LINK_PALETTE[i % len(LINK_PALETTE)], radii=0.002, labels=names)],
+                times_ns=time_ns(t[ok]), archetype=rr.Points3D, fields={"positions": xyz[ok]}, stream="markers"))
 
     def links(self) -> None:
         """Each link's frame from link_poses, with axes."""
