@@ -874,3 +874,15 @@ def test_unknown_derived_mode_and_chunk_size_are_usage_errors(sessions, tmp_path
             build(main, tmp_path / "x.rrd", **kw)
         assert err.value.findings[0].code == "E903"
     assert not any(tmp_path.iterdir())
+
+
+def test_forget_trial_drops_only_that_trials_memos(sessions):
+    from haptify.compute import ComputeContext
+
+    main, _, _ = sessions
+    ctx = ComputeContext(session=main)
+    for key in (("handle_calibration",), ("handle_signals", "stiffness-1", 100.0), ("plate_signals", "free_space-1"),
+                ("vibration", "stiffness-1")):
+        ctx.cached(key, lambda: object())
+    ctx.forget_trial("stiffness-1")
+    assert set(ctx._cache) == {("handle_calibration",), ("plate_signals", "free_space-1")}
