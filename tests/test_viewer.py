@@ -17,6 +17,7 @@ import subprocess
 import sys
 import time
 import urllib.request
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -37,6 +38,9 @@ from haptify_tools.viewer import blueprints, cmd_view
 from haptify_tools.viewer.recording import (
     HAND_FORCE_M_PER_N,
     PLATE_FORCE_M_PER_N,
+    build,
+    decimation_factor,
+    envelope,
     load_results,
     nan_split,
     plane_rectangle,
@@ -150,7 +154,7 @@ def results_for(session_id: str) -> ResultsFile:
 def recorded(sessions):
     main, other, root = sessions
     results = results_for(main.session_id)
-    plan = plan_recording(main, results=results, other=other)
+    plan = plan_recording(main, results=results, other=other, derived="full")  # kept whole: the meshes are inspected
     out = write_rrd(plan, root / "all.rrd", blueprints.blueprint_for(plan))
     return plan, out
 
@@ -175,6 +179,11 @@ def temporal(path: Path, entity: str, component: str) -> tuple[np.ndarray, list]
     t = np.concatenate(times) if times else np.empty(0, np.int64)
     order = np.argsort(t, kind="stable")
     return t[order], [values[i] for i in order]
+
+
+def static_labels(path: Path, entity: str) -> list[str]:
+    [ch] = list(RrdReader(path).stream().filter(content=entity, is_static=True, components="Points3D:labels"))
+    return ch.to_record_batch().column("Points3D:labels").to_pylist()[0]
 
 
 def static_text(path: Path, entity: str) -> str:
@@ -212,8 +221,8 @@ def test_expected_entity_paths(recorded):
         "/series/free_space-1/measured/hand_force/calibrated", "/series/free_space-1/measured/hand_torque/calibrated",
         "/series/free_space-1/measured/accel/world", "/series/free_space-1/measured/plate/force",
         "/series/free_space-1/measured/plate/cop",
-        "/world/stiffness-1/measured/virtual_surface", "/world/stiffness-1/measured/markers/handle/h3",
-        "/world/stiffness-1/measured/markers/link2/l2a", "/world/stiffness-1/measured/links/link1",
+        "/world/stiffness-1/measured/virtual_surface", "/world/stiffness-1/measured/markers/handle",
+        "/world/stiffness-1/measured/markers/link2", "/world/stiffness-1/measured/links/link1",
         "/world/stiffness-1/measured/links/link2",
         "/series/free_space-1/measured/handle/force_raw", "/series/free_space-1/measured/handle/torque_raw",
         "/series/free_space-1/measured/accel/raw",
@@ -236,8 +245,6 @@ def test_each_series_has_one_row_per_sample_at_exact_ns(recorded, sessions):
         role, trial_id = e.path.split("/")[3], e.path.split("/")[2]
         session = main if role == "measured" else other
         frame = session.read(trial_id, e.stream)
-        if e.stream == "plate_wrench" and e.series in ("plate/force", "plate/cop"):
-            assert e.rows == len(frame)
         declared = session.stream(trial_id, e.stream).rows
         t_ns, rows = temporal(out, e.path, "Scalars:scalars")
         assert len(t_ns) == declared == len(frame), e.path
@@ -272,13 +279,17 @@ def test_three_d_entities_skip_unknown_poses(recorded):
     t_ns, _ = temporal(out, "/world/stiffness-1/measured/handle", "Transform3D:translation")
     all_ns = time_ns(np.arange(100) / 100.0)
     np.testing.assert_array_equal(t_ns, np.delete(all_ns, np.arange(100)[OCCLUDED]))
-    t_ns, pts = temporal(out, "/world/stiffness-1/measured/markers/handle/h1", "Points3D:positions")
+    # the handle's markers h1, h2, h3 in one labelled cloud: every frame (h1, h3 are always seen), h2 NaN when occluded
+    assert static_labels(out, "/world/stiffness-1/measured/markers/handle") == ["h1", "h2", "h3"]
+    t_ns, pts = temporal(out, "/world/stiffness-1/measured/markers/handle", "Points3D:positions")
     np.testing.assert_array_equal(t_ns, all_ns)
-    t_ns, pts = temporal(out, "/world/stiffness-1/measured/markers/handle/h2", "Points3D:positions")  # occluded
-    np.testing.assert_array_equal(t_ns, np.delete(all_ns, np.arange(100)[OCCLUDED]))
-    assert all(len(p) == 1 for p in pts) and pts[0][0][0] == pytest.approx(0.02)
-    t_ns, _ = temporal(out, "/world/stiffness-1/measured/markers/link2/l2b", "Points3D:positions")
-    assert len(t_ns) == 100
+    pts = np.array(pts, dtype=float)
+    assert pts.shape == (100, 3, 3) and pts[0, 1, 0] == pytest.approx(0.02)
+    h2_seen = np.isfinite(pts[:, 1]).all(axis=1)
+    np.testing.assert_array_equal(h2_seen, ~np.isin(np.arange(100), np.arange(100)[OCCLUDED]))
+    assert np.isfinite(pts[:, [0, 2]]).all()
+    t_ns, pts = temporal(out, "/world/stiffness-1/measured/markers/link2", "Points3D:positions")
+    assert len(t_ns) == 100 and all(len(p) == 2 for p in pts)
 
 
 def test_session_and_results_documents(recorded):
@@ -329,13 +340,14 @@ def test_write_is_atomic_with_ordinary_permissions(tmp_path):
     from haptify_tools.viewer.recording import Entry, Plan
 
     good = Plan("atomic-ok")
-    good.add(Entry("/a", times_ns=np.array([0, 1, 2]), columns=rr.Scalars.columns(scalars=np.ones(3))))
+    good.add(Entry("/a", times_ns=np.array([0, 1, 2]), archetype=rr.Scalars, fields={"scalars": np.ones(3)}))
     out = write_rrd(good, tmp_path / "ok.rrd", None)
     umask = os.umask(0)
     os.umask(umask)
     assert out.stat().st_mode & 0o777 == 0o666 & ~umask
-    bad = Plan("atomic-bad")  # 3 timestamps for 5 values: strict mode raises half-way
-    bad.add(Entry("/a", times_ns=np.array([0, 1, 2]), columns=rr.Scalars.columns(scalars=np.ones(5))))
+    bad = Plan("atomic-bad")  # 3 timestamps for 5 values: the writer raises half-way
+    bad.add(Entry("/a", times_ns=np.array([0, 1, 2]), archetype=rr.Scalars, fields={"scalars": np.ones(3)}))
+    bad.add(Entry("/b", times_ns=np.array([0, 1, 2]), archetype=rr.Scalars, fields={"scalars": np.ones(5)}))
     with pytest.raises(ValueError):
         write_rrd(bad, tmp_path / "bad.rrd", None)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ok.rrd"]  # no partial file, no temp file
@@ -465,7 +477,7 @@ def test_missing_calibration_is_reported_not_hidden(sessions, tmp_path):
     w = rich_writer("viewer-nocal")
     w.manifest["calibration"] = []
     session = open_session(w.write(tmp_path / "nocal"))
-    plan = plan_recording(session)
+    plan = plan_recording(session, derived="full")
     assert "/series/stiffness-1/measured/hand_force/raw_world" in plan.paths()
     assert "/world/stiffness-1/measured/hand_force/raw" in plan.paths()
     assert not any("calibrated" in p for p in plan.paths())
@@ -514,7 +526,7 @@ def test_workspace_meshes_enclose_the_solids(recorded, sessions):
 @given(arrays(np.bool_, st.tuples(st.integers(1, 5), st.integers(1, 5), st.integers(1, 5))),
        st.tuples(st.integers(-50, 50), st.integers(-50, 50), st.integers(-50, 50)))
 def test_voxel_boundary_mesh_is_closed_and_outward(grid, origin):
-    from haptify_tools.viewer.voxel_mesh import boundary_mesh
+    from haptify_tools.viewer.voxel_mesh import SurfaceMesh, boundary_mesh
 
     pitch = 0.004
     mesh = boundary_mesh(grid, origin, pitch)
@@ -530,6 +542,11 @@ def test_voxel_boundary_mesh_is_closed_and_outward(grid, origin):
             e = (tuple(keys[tri[a]]), tuple(keys[tri[b]]))
             edges[e] = edges.get(e, 0) + 1
     assert all(edges.get((b, a), 0) == n for (a, b), n in edges.items())
+    # the compact form: each lattice corner once, the same closed surface
+    vertices, triangles = mesh.shared(pitch)
+    assert len(np.unique(np.round(vertices / pitch), axis=0)) == len(vertices)
+    assert len(triangles) == len(mesh.triangles)
+    assert SurfaceMesh(vertices, triangles, vertices).enclosed_volume() == pytest.approx(grid.sum() * pitch ** 3, rel=1e-9, abs=1e-15)
 
 
 # --- the command -------------------------------------------------------------------------------------
@@ -670,3 +687,202 @@ def test_web_viewer_screenshot(recorded, tmp_path):
         viewer.stop()
     assert shot.is_file() and shot.stat().st_size > 0, "Chromium wrote no screenshot"
     assert colours > 1500, f"the viewer did not draw the recording within 120 s ({colours} colours: loading screen)"
+
+
+# --- streaming, chunks and derived modes (issue 21) -------------------------------------------------
+
+# Raw stream kind → the time series that show its columns exactly (None: every column of the stream).
+RAW_SERIES = {
+    "handle_pose": [("handle/position", ["px", "py", "pz"])],
+    "handle_wrench": [("handle/force_raw", ["fx", "fy", "fz"]), ("handle/torque_raw", ["tx", "ty", "tz"])],
+    "commanded_wrench": [("commanded/force", ["fx", "fy", "fz"]), ("commanded/torque", ["tx", "ty", "tz"])],
+    "handle_accel": [("accel/raw", ["ax", "ay", "az"])],
+    "plate_wrench": [("plate/corner_force_raw", [f"c{i}_f{a}" for i in range(1, 5) for a in "xyz"]),
+                     ("plate/corner_torque_raw", [f"c{i}_t{a}" for i in range(1, 5) for a in "xyz"])],
+    "device_joint_angles": [("device/joint_angles", None)],
+    "sync": [("sync/trigger", ["trigger"])],
+}
+DERIVED_PARTS = ("calibrated", "raw_world", "dft321", "accel/world", "plate/force", "plate/cop", "plate_force",
+                 "contact/", "force_field", "workspace/measured", "workspace/modeled", "hand_force/raw")
+
+
+def column_values(path: Path, entity: str, component: str) -> tuple[np.ndarray, np.ndarray]:
+    t_ns, rows = temporal(path, entity, component)
+    return t_ns, np.array(rows, dtype=np.float64).reshape(len(t_ns), -1)
+
+
+@pytest.fixture(scope="module")
+def raw_only(sessions):
+    """The default recording (derived signals off) written by `haptify view --save` through the gate."""
+    main, _, root = sessions
+    out = root / "raw.rrd"
+    args = view_args(str(main.root), "--save", str(out))
+    assert args.derived == "off"
+    assert args.func(args, UI()) == 0
+    return out
+
+
+def test_raw_only_recording_holds_every_raw_value_exactly(raw_only, sessions):
+    """Every column of every stream of every trial is in the recording, value for value (float64, NaN
+    kept in series) at its exact nanosecond; nothing derived is recorded."""
+    main, _, _ = sessions
+    paths = set(RrdReader(raw_only).store().schema().entity_paths())
+    for trial in main.trials:
+        for stream in trial.streams:
+            frame = main.read_stream(stream)
+            cols = [c for c in frame.columns if c != "t"]
+            t_ns = time_ns(frame["t"].to_numpy())
+            covered: list[str] = []
+            if stream.kind in RAW_SERIES:
+                for key, names in RAW_SERIES[stream.kind]:
+                    names = names or cols
+                    got_t, got = column_values(raw_only, f"/series/{trial.id}/measured/{key}", "Scalars:scalars")
+                    np.testing.assert_array_equal(got_t, t_ns, err_msg=f"{trial.id} {key}")
+                    np.testing.assert_array_equal(got, frame[names].to_numpy(), err_msg=f"{trial.id} {key}")
+                    covered += names
+            if stream.kind == "handle_pose":  # the orientation is the handle's transform (float32, rows of known pose)
+                q = frame[["qw", "qx", "qy", "qz"]].to_numpy()
+                ok = np.all(np.isfinite(frame[["px", "py", "pz", "qw", "qx", "qy", "qz"]].to_numpy()), axis=1)
+                got_t, got_q = column_values(raw_only, f"/world/{trial.id}/measured/handle", "Transform3D:quaternion")
+                np.testing.assert_array_equal(got_t, t_ns[ok])
+                np.testing.assert_array_equal(got_q, q[ok][:, [1, 2, 3, 0]].astype(np.float32))
+                covered += ["qw", "qx", "qy", "qz"]
+            elif stream.kind == "markers":  # one labelled cloud per link; frames where any of its markers is known
+                for entity in sorted(p for p in paths if p.startswith(f"/world/{trial.id}/measured/markers/")):
+                    labels = static_labels(raw_only, entity)
+                    xyz = np.stack([frame[[f"{m}_{a}" for a in "xyz"]].to_numpy() for m in labels], axis=1)
+                    ok = np.isfinite(xyz).all(axis=2).any(axis=1)
+                    got_t, rows = temporal(raw_only, entity, "Points3D:positions")
+                    np.testing.assert_array_equal(got_t, t_ns[ok])
+                    got = np.array(rows, dtype=np.float32).reshape(xyz[ok].shape)
+                    np.testing.assert_array_equal(got, xyz[ok].astype(np.float32))  # rerun stores positions as float32
+                    covered += [f"{m}_{a}" for m in labels for a in "xyz"]
+            elif stream.kind == "link_poses":
+                for link in stream.entities:
+                    p = frame[[f"{link}_p{a}" for a in "xyz"]].to_numpy()
+                    q = frame[[f"{link}_q{a}" for a in "wxyz"]].to_numpy()
+                    got_t, got_p = column_values(raw_only, f"/world/{trial.id}/measured/links/{link}", "Transform3D:translation")
+                    _, got_q = column_values(raw_only, f"/world/{trial.id}/measured/links/{link}", "Transform3D:quaternion")
+                    np.testing.assert_array_equal(got_t, t_ns)
+                    np.testing.assert_array_equal(got_p, p.astype(np.float32))
+                    np.testing.assert_array_equal(got_q, q[:, [1, 2, 3, 0]].astype(np.float32))
+                    covered += [f"{link}_p{a}" for a in "xyz"] + [f"{link}_q{a}" for a in "wxyz"]
+            assert sorted(covered) == sorted(cols), (trial.id, stream.kind)
+    derived = sorted(p for p in paths if any(part in p for part in DERIVED_PARTS))
+    assert not derived, derived
+    assert "/world/stiffness-1/measured/handle" in paths and "/series/stiffness-1/measured/penetration" in paths
+    assert RrdReader(raw_only).blueprints()  # the blueprint, sent after the data, is in the file
+
+
+def test_streamed_in_small_chunks_equals_the_recording_kept_whole(recorded, sessions, tmp_path):
+    """build() streaming entity by entity in chunks of 7 rows writes the same entities, times and values as
+    write_rrd() of the plan kept in memory (one send per entity)."""
+    plan, whole = recorded
+    main, other, _ = sessions
+    out = tmp_path / "chunked.rrd"
+    streamed = build(main, out, results=results_for(main.session_id), other=other, derived="full", chunk_rows=7)
+    assert [(e.path, e.rows, e.series, e.stream) for e in streamed.entries] == \
+        [(e.path, e.rows, e.series, e.stream) for e in plan.entries]
+    assert max(ch.num_rows for ch in RrdReader(out).stream().filter(is_static=False)) <= 7
+    a, b = temporal_batches(whole), temporal_batches(out)
+    assert sorted(a) == sorted(b)
+    for entity, batches in a.items():
+        components = {n for rb in batches for n in rb.schema.names if ":" in n}
+        for component in components:
+            ta, va = temporal(whole, entity, component)
+            tb, vb = temporal(out, entity, component)
+            np.testing.assert_array_equal(ta, tb, err_msg=entity)
+            assert va == vb or np.array_equal(np.array(va, dtype=float), np.array(vb, dtype=float), equal_nan=True), entity
+    assert static_text(out, "/results") == static_text(whole, "/results")
+
+
+def test_compact_derived_signals(recorded, sessions, tmp_path):
+    """compact: raw series unchanged; derived series as float32, at most 100 Hz — the 1 kHz plate force as a
+    min/max envelope of 10-sample bins, the 2 kHz DFT321 of 20-sample bins — and 1 kHz arrows every 10th."""
+    _, whole = recorded
+    main, _, _ = sessions
+    out = tmp_path / "compact.rrd"
+    build(main, out, derived="compact")
+    for entity in ("/series/stiffness-1/measured/handle/force_raw", "/series/free_space-1/measured/plate/corner_force_raw"):
+        np.testing.assert_array_equal(column_values(out, entity, "Scalars:scalars")[1],
+                                      column_values(whole, entity, "Scalars:scalars")[1])
+    n = int(FREE_SPACE_S * 1000)
+    t_ns, f = column_values(out, "/series/free_space-1/measured/plate/force", "Scalars:scalars")
+    all_ns = time_ns(np.arange(n) / 1000.0)
+    np.testing.assert_array_equal(t_ns, np.sort(np.concatenate([all_ns[0::10], all_ns[5::10]])))
+    np.testing.assert_array_equal(f, np.tile([0.0, 0.0, -18.5], (n // 5, 1)))
+    for entity, k in (("/series/free_space-1/measured/accel/dft321", 20), ("/series/stiffness-1/measured/hand_force/calibrated", 1)):
+        full_t, full = column_values(whole, entity, "Scalars:scalars")
+        t_ns, env = column_values(out, entity, "Scalars:scalars")
+        if k == 1:  # already at 100 Hz: only float32
+            np.testing.assert_array_equal(t_ns, full_t)
+            np.testing.assert_array_equal(env, full.astype(np.float32).astype(np.float64))
+            continue
+        bins = -(-len(full) // k)
+        assert len(t_ns) == 2 * bins
+        for b in range(bins):
+            chunk = full[b * k:(b + 1) * k].astype(np.float32)
+            np.testing.assert_array_equal(env[2 * b], chunk.min(axis=0))
+            np.testing.assert_array_equal(env[2 * b + 1], chunk.max(axis=0))
+    arrows_t, _ = temporal(out, "/world/free_space-1/measured/plate_force", "Arrows3D:origins")
+    np.testing.assert_array_equal(arrows_t, all_ns[::10])
+    from haptify_tools.viewer.voxel_mesh import SurfaceMesh
+
+    for name in ("measured", "modeled"):  # the workspace meshes: shared corners, no normals, the same volume
+        meshes = []
+        for path in (whole, out):
+            [ch] = list(RrdReader(path).stream().filter(content=f"/world/workspace-1/measured/workspace/{name}", is_static=True))
+            rb = ch.to_record_batch()
+            v = np.array(rb.column("Mesh3D:vertex_positions").to_pylist()[0], dtype=float)
+            tri = np.array(rb.column("Mesh3D:triangle_indices").to_pylist()[0], dtype=np.int64)
+            meshes.append((v, tri, "Mesh3D:vertex_normals" in rb.schema.names))
+        (v_full, t_full, normals_full), (v_compact, t_compact, normals_compact) = meshes
+        assert normals_full and not normals_compact and len(v_compact) < len(v_full) / 2
+        assert SurfaceMesh(v_compact, t_compact, v_compact).enclosed_volume() == \
+            pytest.approx(SurfaceMesh(v_full, t_full, v_full).enclosed_volume(), rel=1e-5)
+    assert out.stat().st_size < whole.stat().st_size
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 120), st.integers(1, 4), st.integers(1, 15), st.data())
+def test_envelope_holds_each_bins_extremes(n, c, k, data):
+    values = data.draw(arrays(np.float64, (n, c), elements=st.floats(-1e6, 1e6) | st.just(np.nan)))
+    t = np.cumsum(data.draw(arrays(np.int64, n, elements=st.integers(1, 10**7))))
+    t_env, env = envelope(t, values, k)
+    bins = -(-n // k)
+    assert env.shape == (2 * bins, c) and len(t_env) == 2 * bins
+    assert np.all(np.diff(t_env) >= 0)
+    for b in range(bins):
+        chunk = values[b * k:(b + 1) * k]
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            np.testing.assert_array_equal(env[2 * b], np.nanmin(chunk, axis=0))
+            np.testing.assert_array_equal(env[2 * b + 1], np.nanmax(chunk, axis=0))
+        assert t_env[2 * b] == t[b * k] and t[b * k] <= t_env[2 * b + 1] <= t[min((b + 1) * k, n) - 1]
+
+
+def test_decimation_factor_brings_the_rate_to_at_most_100_hz():
+    for rate, k in ((100.0, 1), (50.0, 1), (1000.0, 10), (2000.0, 20), (150.0, 2), (1001.0, 11)):
+        assert decimation_factor(time_ns(np.arange(50) / rate)) == k, rate
+    assert decimation_factor(np.array([5], dtype=np.int64)) == 1
+
+
+def test_unknown_derived_mode_and_chunk_size_are_usage_errors(sessions, tmp_path):
+    main, _, _ = sessions
+    for kw in ({"derived": "most"}, {"chunk_rows": 0}):
+        with pytest.raises(HaptifyError) as err:
+            build(main, tmp_path / "x.rrd", **kw)
+        assert err.value.findings[0].code == "E903"
+    assert not any(tmp_path.iterdir())
+
+
+def test_forget_trial_drops_only_that_trials_memos(sessions):
+    from haptify.compute import ComputeContext
+
+    main, _, _ = sessions
+    ctx = ComputeContext(session=main)
+    for key in (("handle_calibration",), ("handle_signals", "stiffness-1", 100.0), ("plate_signals", "free_space-1"),
+                ("vibration", "stiffness-1")):
+        ctx.cached(key, lambda: object())
+    ctx.forget_trial("stiffness-1")
+    assert set(ctx._cache) == {("handle_calibration",), ("plate_signals", "free_space-1")}

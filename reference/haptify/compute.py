@@ -36,6 +36,12 @@ class ComputeContext:
             self._cache[key] = build()
         return self._cache[key]
 
+    def forget_trial(self, trial_id: str) -> None:
+        """Drop what was memoised for one trial (the keys that name it, e.g. ``("handle_signals", id, rate)``),
+        keeping session-wide entries such as the calibration; for work that visits each trial once."""
+        for key in [k for k in self._cache if isinstance(k, tuple) and trial_id in k[1:]]:
+            del self._cache[key]
+
     def wants(self, metric_id: str) -> bool:
         return self.wanted is None or metric_id in self.wanted
 

@@ -14,15 +14,17 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import pandas as pd
 
 from haptify.errors import Finding, HaptifyError
-from haptify.results import ResultWarning
 from haptify.session_format import Stream
 from haptify.storage import SessionFolder
 from haptify.validation import ReportItem, SessionValidator, StreamEntry, validate_session
+
+if TYPE_CHECKING:
+    from haptify.results import ResultWarning
 
 EXIT_REFUSED = 1
 
@@ -111,4 +113,6 @@ def require_valid_session(path: str | os.PathLike,
 
 def as_result_warnings(items: list[ReportItem]) -> list[ResultWarning]:
     """Validation warnings as a results file carries them, each with its trial (spec §4.8, §15.1)."""
+    from haptify.results import ResultWarning  # imported here: commands that write no results file skip its models
+
     return [ResultWarning(code=i.finding.code, message=i.finding.message, trial=i.trial) for i in items]

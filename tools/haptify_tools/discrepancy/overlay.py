@@ -22,7 +22,7 @@ def overlay_plan(session: SessionFolder, trials: list[MeasuredTrial], twin_force
     role (discrepancy README §4); :func:`write_overlay` adds the note and writes it."""
     from haptify_tools.viewer.recording import plan_recording, series_entry
 
-    plan = plan_recording(session, trial_ids={tr.trial_id for tr in trials})     # only the compared trials
+    plan = plan_recording(session, trial_ids={tr.trial_id for tr in trials}, derived="full")  # the compared trials, with the calibrated force
     by_id = {tp.trial.id: tp for tp in plan.trials}
     for tr in trials:
         tp = by_id.get(tr.trial_id)

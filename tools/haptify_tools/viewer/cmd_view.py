@@ -24,9 +24,9 @@ from pathlib import Path
 from typing import IO
 
 from haptify.errors import fail
-from haptify.gate import require_valid_session
-from haptify.storage import MANIFEST, SessionFolder
-from haptify_tools.viewer.recording import build, load_results
+from haptify.gate import CheckedSession, open_checked_session
+from haptify.storage import MANIFEST
+from haptify_tools.viewer.recording import DEFAULT_DERIVED, DERIVED_MODES, build, load_results
 
 LOOPBACK = "127.0.0.1"
 DEFAULT_WEB_PORT = 9090  # rerun's own default web-viewer port
@@ -45,6 +45,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--compare", metavar="OTHER", help="a second session (e.g. simulated, or a 'haptify simulate' output "
                                                        "folder) overlaid on the first")
     p.add_argument("--save", metavar="OUT.rrd", help="write the recording to this .rrd file (no display needed)")
+    p.add_argument("--derived", choices=DERIVED_MODES, default=DEFAULT_DERIVED,
+                   help="derived signals (calibrated hand force, plate force/COP, DFT321, contact, force arrows, workspace "
+                        "meshes): off = raw streams only (default), compact = float32 at most 100 Hz, full = every sample")
     p.add_argument("--web", action="store_true", help=f"serve rerun's web viewer on {LOOPBACK} only")
     p.add_argument("--port", type=int, metavar="N", help=f"HTTP port of the web viewer (with --web; default {DEFAULT_WEB_PORT})")
     p.set_defaults(func=run)
@@ -149,14 +152,15 @@ def serve_web(rrd: str | os.PathLike, web_port: int, grpc_port: int | None = Non
     return WebViewer(proc, web_url(web_port, grpc_port), web_port, log)
 
 
-def open_session_or_dossier(path: str) -> SessionFolder:
+def open_session_or_dossier(path: str) -> CheckedSession:
     """Open a session folder, or the ``session/`` inside a folder written by ``haptify simulate``, through the
-    validation gate (spec §4.8): an invalid session is refused before anything is drawn."""
+    validation gate (spec §4.8): each stream is validated as the recording reads it (one read), and
+    :meth:`CheckedSession.finish` runs before the recording is renamed into place, so an invalid session
+    is refused before anything is drawn or saved."""
     root = Path(path)
     if not (root / MANIFEST).is_file() and (root / "session" / MANIFEST).is_file():
         root = root / "session"
-    session, _ = require_valid_session(root)
-    return session
+    return open_checked_session(root)
 
 
 def run(args: argparse.Namespace, ui) -> int:
@@ -177,7 +181,8 @@ def run(args: argparse.Namespace, ui) -> int:
     with tempfile.TemporaryDirectory(prefix="haptify-view-") as tmp:
         out = Path(args.save) if args.save else Path(tmp) / f"{session.session_id}.rrd"
         try:
-            plan = build(session, out, trial_id=args.trial, results=results, other=other)
+            plan = build(session, out, trial_id=args.trial, results=results, other=other, derived=args.derived,
+                         before_commit=lambda: [s.finish() for s in (session, other) if s is not None])
         except OSError as exc:
             raise fail("E902", f"cannot write {str(out)!r}: {exc.strerror or exc}", file=str(out)) from None
         summary = {"ok": True, "rrd": str(out) if args.save else None, "trials": [tp.trial.id for tp in plan.trials],

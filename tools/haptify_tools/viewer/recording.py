@@ -1,10 +1,19 @@
 """A Haptify session as a rerun recording (.rrd): scene graph, time series, blueprints (issue 7).
 
-The recording is built in two steps. :func:`plan_recording` reads the session (and optionally a
-results file and a second session to compare with) and turns every stream into :class:`Entry`
-objects — an entity path, its static archetypes and its time-indexed component columns. The
-blueprint is derived from the plan (:mod:`haptify_tools.viewer.blueprints`) and
-:func:`write_rrd` sends everything with bulk ``send_columns`` to an .rrd file.
+:func:`build` streams the recording straight to the .rrd (issue 21): the file sink is set before
+anything is logged, each trial's streams are read one at a time (each read is also the stream's
+validation when the session came through the gate, spec §4.8), turned into :class:`Entry` objects —
+an entity path, its static archetypes and its time-indexed fields — and each entry is sent with bulk
+``send_columns`` in chunks of at most ``CHUNK_ROWS`` rows and dropped; only its metadata (path,
+series, stream, rows) stays in the :class:`Plan`. The blueprint is derived from that metadata
+(:mod:`haptify_tools.viewer.blueprints`) and sent last. :func:`plan_recording` + :func:`write_rrd`
+keep every entry in memory first, for callers that add entries of their own (the discrepancy overlay).
+
+What is derived from the raw streams by the reference's processing (calibrated hand signals, plate
+force and COP, DFT321, contact signals, force arrows, workspace meshes, the force field) is recorded
+according to ``derived`` (:data:`DERIVED_MODES`): ``off`` (the default: raw streams only, exact),
+``compact`` (float32, at most ``COMPACT_RATE_HZ`` — time series above it as a min/max envelope, 3-D
+arrows point-sampled) or ``full`` (every derived sample, float64).
 
 Every sample is placed on one timeline, ``time`` (a duration on the session clock, spec §1.4), at
 its exact integer-nanosecond timestamp ``round(t · 10⁹)``. Time series hold one row per stream
@@ -22,7 +31,7 @@ Entity paths (``<trial>`` is the escaped trial id, ``<role>`` is ``measured`` or
     /world/<trial>/<role>/hand_force/calibrated  hand force (haptify.signals), arrow at the handle
     /world/<trial>/<role>/hand_force/raw      without calibration: raw F/T force rotated to W
     /world/<trial>/<role>/plate_force         plate force (haptify.force_plate), arrow ending at the COP
-    /world/<trial>/<role>/markers/<link>/<m>  motion-capture marker m, one colour per link
+    /world/<trial>/<role>/markers/<link>      the motion-capture markers of a link, labelled, one colour per link
     /world/<trial>/<role>/links/<link>        link frames from link_poses
     /world/<trial>/<role>/force_field         free space: mean force per bin (haptify.free_space)
     /world/<trial>/<role>/workspace/points    workspace: the measured point cloud
@@ -36,30 +45,36 @@ Entity paths (``<trial>`` is the escaped trial id, ``<role>`` is ``measured`` or
 from __future__ import annotations
 
 import functools
+import math
 import os
 import uuid
-from collections.abc import Collection
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
 import rerun as rr
 from pydantic import ValidationError
 
-from haptify import force_plate, free_space, signals, surface, vibration, workspace
-from haptify.compute import ComputeContext
 from haptify.conventions import quat_multiply, quat_rotate
 from haptify.errors import HaptifyError, fail
-from haptify.results import ResultsFile
 from haptify.session_format import Kinematics, Stream, Trial
 from haptify.storage import SessionFolder, pydantic_findings
 from haptify_tools.viewer.voxel_mesh import boundary_mesh
 
+if TYPE_CHECKING:  # imported where used: a raw-only recording needs neither (start-up, issue 21)
+    from haptify.compute import ComputeContext
+    from haptify.results import ResultsFile
+
 APP_ID = "haptify"
 TIMELINE = "time"
 ROLES = ("measured", "compare")
+DERIVED_MODES = ("off", "compact", "full")  # how derived signals are recorded (module docstring)
+DEFAULT_DERIVED = "off"
+CHUNK_ROWS = 100_000  # rows per send_columns call: bounds the SDK's per-call buffers on long streams
+COMPACT_RATE_HZ = 100.0  # compact derived signals: at most this rate (the default signal grid of spec §7.3)
 
 # Display constants (visual only; no metric depends on them).
 HAND_FORCE_M_PER_N = 0.02  # arrow length per newton of hand force
@@ -111,18 +126,37 @@ SERIES = {
 
 @dataclass
 class Entry:
-    """One entity of the recording: static archetypes and/or time-indexed component columns."""
+    """One entity of the recording: static archetypes and/or time-indexed fields of one archetype.
+
+    ``archetype.columns(**fields)`` builds the component columns, one row per entry of ``times_ns``
+    (so any row range can be sent on its own). Once written, only the metadata stays (``rows``).
+    """
 
     path: str
     static: list[Any] = field(default_factory=list)
     times_ns: np.ndarray | None = None  # int64 ns on the session clock
-    columns: Any = None  # a rerun ComponentColumnList, one row per entry of times_ns
+    archetype: Any = None  # rr.Scalars, rr.Transform3D, rr.Points3D or rr.Arrows3D
+    fields: dict[str, np.ndarray] = field(default_factory=dict)  # that archetype's fields, first axis = rows
     series: str | None = None  # for time series: the relative series key (a key of SERIES)
     stream: str | None = None  # the stream kind whose samples are the rows, or the derivation ("handle_signals", "vibration")
+    derived: bool = False  # computed by the reference's processing from the raw streams (recorded per ``derived`` mode)
+    written_rows: int | None = None  # set when the entry was written and its data dropped
 
     @property
     def rows(self) -> int:
+        if self.written_rows is not None:
+            return self.written_rows
         return 0 if self.times_ns is None else int(len(self.times_ns))
+
+    def columns(self, start: int = 0, stop: int | None = None) -> Any:
+        """The component columns of rows ``start:stop``; positions of shape (rows, points, 3) make rows of
+        several points each."""
+        fields = {k: v[start:stop] for k, v in self.fields.items()}
+        points = fields.get("positions")
+        if points is not None and points.ndim == 3:
+            fields["positions"] = points.reshape(-1, 3)
+            return self.archetype.columns(**fields).partition(np.full(len(points), points.shape[1]))
+        return self.archetype.columns(**fields)
 
 
 @dataclass
@@ -136,50 +170,96 @@ class TrialPlan:
 
 @dataclass
 class Plan:
-    """Everything the recording will hold, before any of it is written."""
+    """What the recording holds: the entries (only their metadata once written), trials, notes.
+
+    With a ``writer`` (:func:`build`), :meth:`add` writes each entry at once; without one
+    (:func:`plan_recording`), entries are kept whole until :func:`write_rrd`.
+    """
 
     recording_id: str
     entries: list[Entry] = field(default_factory=list)
     trials: list[TrialPlan] = field(default_factory=list)
     has_results: bool = False
     notes: list[str] = field(default_factory=list)  # what could not be shown, and why (coded)
+    derived: str = DEFAULT_DERIVED  # a member of DERIVED_MODES
+    writer: RrdWriter | None = None
+    shift_ns: int = 0  # added to the times of the entries added now (a compared trial's alignment)
 
     def paths(self) -> set[str]:
         return {e.path for e in self.entries}
 
     def add(self, entry: Entry) -> None:
+        if entry.derived and self.derived == "off":
+            return
+        if self.shift_ns and entry.times_ns is not None:
+            entry.times_ns = entry.times_ns + self.shift_ns
+        if entry.derived and self.derived == "compact":
+            entry = compact(entry)
+        if self.writer is not None:
+            self.writer.write(entry)
+            entry = Entry(entry.path, series=entry.series, stream=entry.stream, derived=entry.derived,
+                          written_rows=entry.rows)
         self.entries.append(entry)
 
 
-class CachedStreams(SessionFolder):
-    """A session whose stream tables are read once per recording (spec §3.2 reading, unchanged).
+class RrdWriter:
+    """Sends entries to a recording stream whose file sink is already set: static archetypes once,
+    temporal rows with ``send_columns`` in chunks of at most ``chunk_rows`` rows (strict mode)."""
 
-    The planner and the reference functions it calls (``haptify.signals``, ``haptify.force_plate``)
-    read the same streams; each caller gets a shallow copy, so replacing a column never leaks.
+    def __init__(self, rec: rr.RecordingStream, chunk_rows: int = CHUNK_ROWS) -> None:
+        if chunk_rows < 1:
+            raise fail("E903", f"chunk_rows must be at least 1, not {chunk_rows}", expected=">= 1", found=chunk_rows)
+        self.rec = rec
+        self.chunk_rows = chunk_rows
+
+    def write(self, e: Entry) -> None:
+        bad = {k: len(v) for k, v in e.fields.items() if len(v) != e.rows}
+        if bad:  # a programming error, raised before anything of the entry is sent
+            raise ValueError(f"{e.path}: {e.rows} timestamps but field lengths {bad}")
+        if e.static:
+            self.rec.log(e.path, *e.static, static=True, strict=True)
+        for start in range(0, e.rows, self.chunk_rows):
+            stop = min(start + self.chunk_rows, e.rows)
+            self.rec.send_columns(e.path, [time_column(e.times_ns[start:stop])], e.columns(start, stop), strict=True)
+
+
+class CachedStreams(SessionFolder):
+    """A session whose stream tables are read once per trial (spec §3.2 reading, unchanged).
+
+    Reads go through the wrapped session (so a checked session validates each stream on its first
+    read, spec §4.8). The planner and the reference functions it calls (``haptify.signals``,
+    ``haptify.force_plate``) read the same streams; each caller gets a shallow copy, so replacing a
+    column never leaks. :meth:`forget` drops the tables once a trial is written, so at most one
+    trial's tables are in memory.
     """
 
     def __init__(self, session: SessionFolder) -> None:
         super().__init__(session.root, session.manifest, session.raw)
+        self._inner = session
         self._tables: dict[tuple, pd.DataFrame] = {}
 
     def read_stream(self, stream: Stream, *, verify: bool = False, session_clock: bool = True) -> pd.DataFrame:
         key = (stream.file, verify, session_clock)
         if key not in self._tables:
-            self._tables[key] = super().read_stream(stream, verify=verify, session_clock=session_clock)
+            self._tables[key] = self._inner.read_stream(stream, verify=verify, session_clock=session_clock)
         return self._tables[key].copy(deep=False)
+
+    def forget(self) -> None:
+        self._tables.clear()
 
 
 # --- small numeric helpers -----------------------------------------------------------------------
 
 def time_ns(t: np.ndarray) -> np.ndarray:
     """Session-clock seconds → exact integer nanoseconds (int64), ``round(t · 10⁹)`` (spec §1.4)."""
-    return np.round(np.asarray(t, dtype=np.float64) * 1e9).astype(np.int64)
+    ns = np.asarray(t, dtype=np.float64) * 1e9
+    return np.rint(ns, out=ns).astype(np.int64)
 
 
 def time_column(ns: np.ndarray) -> rr.TimeColumn:
     """The ``time`` timeline column from integer nanoseconds (no float truncation).
     The session clock of spec §1.4."""
-    return rr.TimeColumn(TIMELINE, duration=np.asarray(ns, dtype=np.int64).astype("timedelta64[ns]"))
+    return rr.TimeColumn(TIMELINE, duration=np.ascontiguousarray(ns, dtype=np.int64).view("timedelta64[ns]"))
 
 
 def xyzw(q_wxyz: np.ndarray) -> np.ndarray:
@@ -188,17 +268,25 @@ def xyzw(q_wxyz: np.ndarray) -> np.ndarray:
     return np.concatenate([q[..., 1:], q[..., :1]], axis=-1)
 
 
-def raw_pose_at(t_pose: np.ndarray, p: np.ndarray, q: np.ndarray, t: np.ndarray) -> signals.PoseOnGrid:
+def raw_pose_at(t_pose: np.ndarray, p: np.ndarray, q: np.ndarray, t: np.ndarray) -> Any:
     """The unfiltered pose stream at times ``t`` (s): linear in position, slerp in orientation (spec §7.4).
 
     Every finite sample counts as one segment, so a time is valid only between two finite samples;
-    nothing is bridged or filtered (the viewer's "raw" quantities stay raw).
+    nothing is bridged or filtered (the viewer's "raw" quantities stay raw). A ``signals.PoseOnGrid``.
     """
+    from haptify import signals
+
     ok = finite_rows(p, q)
     nan3 = np.full((len(t_pose), 3), np.nan)
     track = signals.MocapTrack(t=np.asarray(t_pose, dtype=np.float64), position=p, quaternion=q, velocity=nan3,
                                angular_velocity=nan3, segment=np.where(ok, 0, -1))
     return signals.resample_track(track, t)
+
+
+def columns_of(frame: pd.DataFrame, names: list[str]) -> np.ndarray:
+    """The columns ``names`` of a stream table as one float64 array (rows × names), built column by column
+    (selecting a list of columns through pandas builds an index each time and costs more than the copy)."""
+    return np.column_stack([frame[name].to_numpy(dtype=np.float64) for name in names]) if names else np.empty((len(frame), 0))
 
 
 def finite_rows(*arrays: np.ndarray) -> np.ndarray:
@@ -214,6 +302,47 @@ def nan_split(points: np.ndarray) -> list[np.ndarray]:
     ok = finite_rows(points)
     edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
     return [points[a:b] for a, b in zip(edges[::2], edges[1::2]) if b - a >= 2]
+
+
+def decimation_factor(times_ns: np.ndarray, max_rate_hz: float = COMPACT_RATE_HZ) -> int:
+    """The whole number of samples per bin that brings a series' median rate to at most ``max_rate_hz`` (≥ 1)."""
+    if len(times_ns) < 2:
+        return 1
+    dt = float(np.median(np.diff(times_ns)))
+    if dt <= 0:
+        return 1
+    return max(1, math.ceil(1e9 / dt / max_rate_hz - 1e-6))
+
+
+def envelope(times_ns: np.ndarray, values: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Min/max envelope of ``values (n, c)`` over bins of ``k`` consecutive rows: per bin two rows, each
+    column's minimum at the bin's first time and its maximum at the time of its middle row (NaN only when
+    the whole bin is NaN). A line through them covers every sample's value range at bin resolution."""
+    n = len(times_ns)
+    starts = np.arange(0, n, k)
+    values = np.asarray(values).reshape(n, -1)
+    with np.errstate(invalid="ignore"):
+        lo = np.fmin.reduceat(values, starts, axis=0)
+        hi = np.fmax.reduceat(values, starts, axis=0)
+    ends = np.append(starts[1:], n)
+    mid = starts + (ends - starts) // 2
+    t = np.column_stack([times_ns[starts], times_ns[mid]]).reshape(-1)
+    return t, np.stack([lo, hi], axis=1).reshape(-1, values.shape[1])
+
+
+def compact(entry: Entry) -> Entry:
+    """A derived entry as the ``compact`` mode records it: fields as float32 and at most ``COMPACT_RATE_HZ``
+    — a time series as its :func:`envelope`, other archetypes (arrows) point-sampled every k-th row."""
+    fields = {name: np.asarray(v, dtype=np.float32) for name, v in entry.fields.items()}
+    times = entry.times_ns
+    k = 1 if times is None else decimation_factor(times)
+    if k > 1 and entry.archetype is rr.Scalars:
+        times, fields["scalars"] = envelope(times, fields["scalars"], k)
+    elif k > 1:
+        times = times[::k]
+        fields = {name: v[::k] for name, v in fields.items()}
+    return Entry(entry.path, static=entry.static, times_ns=times, archetype=entry.archetype, fields=fields,
+                 series=entry.series, stream=entry.stream, derived=True)
 
 
 def plane_rectangle(point: np.ndarray, normal: np.ndarray, around: np.ndarray | None) -> np.ndarray:
@@ -243,7 +372,8 @@ def plane_rectangle(point: np.ndarray, normal: np.ndarray, around: np.ndarray | 
 
 # --- entries ---------------------------------------------------------------------------------------
 
-def series_entry(path: str, key: str, t: np.ndarray, values: np.ndarray, names: list[str], role: str, stream: str) -> Entry:
+def series_entry(path: str, key: str, t: np.ndarray, values: np.ndarray, names: list[str], role: str, stream: str,
+                 derived: bool = False) -> Entry:
     """A time series: one row of ``len(names)`` scalars per sample, at the samples' exact times.
     ``t`` in s on the session clock, spec §1.4.
 
@@ -254,16 +384,17 @@ def series_entry(path: str, key: str, t: np.ndarray, values: np.ndarray, names: 
     suffix = f" [{SERIES[key][1]}]" + ("" if role == "measured" else f" ({role})")
     lines = rr.SeriesLines(names=[f"{n}{suffix}" for n in names],
                            colors=[palette[i % len(palette)] for i in range(len(names))])
-    return Entry(path, static=[lines], times_ns=time_ns(t), columns=rr.Scalars.columns(scalars=values),
-                 series=key, stream=stream)
+    return Entry(path, static=[lines], times_ns=time_ns(t), archetype=rr.Scalars, fields={"scalars": values},
+                 series=key, stream=stream, derived=derived)
 
 
 class TrialPlanner:
     """Turns one trial of one session (one role) into entries (issue 7, spec chapter 2 streams)."""
 
-    def __init__(self, ctx: ComputeContext, trial: Trial, role: str, key: str, plan: Plan) -> None:
-        self.ctx = ctx  # shares calibration, handle and plate signals between the reference functions
-        self.session = ctx.session
+    def __init__(self, session: CachedStreams, ctx: ComputeContext | None, trial: Trial, role: str, key: str,
+                 plan: Plan) -> None:
+        self.ctx = ctx  # shares calibration, handle and plate signals between the reference functions (None: derived off)
+        self.session = session
         self.trial = trial
         self.role = role
         self.plan = plan
@@ -271,7 +402,7 @@ class TrialPlanner:
         self.series = f"/series/{key}/{role}"
         self.kinds = {s.kind for s in trial.streams}
         self.rig = self.session.manifest.rig
-        self._signals: signals.HandleSignals | None = None
+        self._signals: Any = None  # signals.HandleSignals
         self._signals_tried = False
 
     def read(self, kind: str) -> pd.DataFrame | None:
@@ -279,16 +410,22 @@ class TrialPlanner:
             return None
         return self.session.read(self.trial.id, kind)
 
-    def add_series(self, key: str, t: np.ndarray, values: np.ndarray, names: list[str], stream: str) -> None:
-        self.plan.add(series_entry(f"{self.series}/{key}", key, t, values, names, self.role, stream))
+    @property
+    def derive(self) -> bool:
+        """Whether derived signals are computed at all (``derived`` is not ``off``)."""
+        return self.plan.derived != "off"
+
+    def add_series(self, key: str, t: np.ndarray, values: np.ndarray, names: list[str], stream: str,
+                   derived: bool = False) -> None:
+        self.plan.add(series_entry(f"{self.series}/{key}", key, t, values, names, self.role, stream, derived))
 
     def run(self) -> None:
         pose = self.read("handle_pose")
         p = q = t_pose = None
         if pose is not None:
             t_pose = pose["t"].to_numpy()
-            p = pose[["px", "py", "pz"]].to_numpy()
-            q = pose[["qw", "qx", "qy", "qz"]].to_numpy()
+            p = columns_of(pose, ["px", "py", "pz"])
+            q = columns_of(pose, ["qw", "qx", "qy", "qz"])
             self.handle(t_pose, p, q)
         self.wrench(t_pose, p, q)
         self.accel()
@@ -299,6 +436,7 @@ class TrialPlanner:
         self.links()
         if p is not None and self.trial.protocol == "workspace":
             self.workspace(p[finite_rows(p)])
+        self.session.forget()
         if self.trial.rendering is not None:
             self.surface(t_pose, p)
 
@@ -306,6 +444,10 @@ class TrialPlanner:
         """The measured cloud, and the measured and modeled workspaces as meshes (spec §8.2–8.4)."""
         self.plan.add(Entry(f"{self.world}/workspace/points",
                             static=[rr.Points3D(points, radii=0.0015, colors=ROLE_COLORS[self.role])]))
+        if not self.derive:
+            return
+        from haptify import workspace
+
         try:
             solid = workspace.volume_solid(points)
         except HaptifyError as err:
@@ -328,9 +470,8 @@ class TrialPlanner:
         """Handle pose with axes, the gimbal-centre path and the position time series."""
         ok = finite_rows(p, q)
         self.plan.add(Entry(f"{self.world}/handle", static=[rr.TransformAxes3D(HANDLE_AXIS_M)],
-                            times_ns=time_ns(t[ok]),
-                            columns=rr.Transform3D.columns(translation=p[ok], quaternion=xyzw(q[ok])),
-                            stream="handle_pose"))
+                            times_ns=time_ns(t[ok]), archetype=rr.Transform3D,
+                            fields={"translation": p[ok], "quaternion": xyzw(q[ok])}, stream="handle_pose"))
         strips = nan_split(p)
         if strips:
             self.plan.add(Entry(f"{self.world}/trajectory",
@@ -342,17 +483,20 @@ class TrialPlanner:
         f = err.findings[0]
         self.plan.notes.append(f"{self.trial.id} ({self.role}): {what} not shown — {f.code} {f.message}")
 
-    def add_solid(self, what: str, path: str, solid: workspace.VoxelSolid, color: tuple[int, int, int]) -> None:
+    def add_solid(self, what: str, path: str, solid: Any, color: tuple[int, int, int]) -> None:
         """A voxel solid as a mesh, or a W410 note when nothing is inside (the sweep did not close)."""
-        entry = solid_entry(path, solid, color)
+        entry = solid_entry(path, solid, color, compact=self.plan.derived == "compact")
         if entry is None:
             self.plan.notes.append(f"{self.trial.id} ({self.role}): {what} not shown — W410 the points enclose no volume")
         else:
             self.plan.add(entry)
 
-    def handle_signals(self) -> signals.HandleSignals | None:
-        """The calibrated handle signals (spec §7.5), once per trial; None (with a note) when unavailable."""
-        if not self._signals_tried:
+    def handle_signals(self) -> Any:
+        """The calibrated handle signals (spec §7.5, ``signals.HandleSignals``), once per trial; None (with a
+        note) when unavailable, and None without computing anything when derived signals are off."""
+        if not self._signals_tried and self.derive:
+            from haptify import signals
+
             self._signals_tried = True
             if "handle_pose" in self.kinds and self.kinds & {"handle_wrench", "handle_accel"}:
                 try:
@@ -365,8 +509,8 @@ class TrialPlanner:
         ok = finite_rows(origins, force)
         self.plan.add(Entry(path, times_ns=time_ns(t[ok]),
                             static=[rr.Arrows3D.from_fields(colors=FORCE_COLORS[self.role], radii=0.001)],
-                            columns=rr.Arrows3D.columns(origins=origins[ok], vectors=force[ok] * HAND_FORCE_M_PER_N),
-                            stream=stream))
+                            archetype=rr.Arrows3D, fields={"origins": origins[ok], "vectors": force[ok] * HAND_FORCE_M_PER_N},
+                            stream=stream, derived=True))
 
     def wrench(self, t_pose: np.ndarray | None, p: np.ndarray | None, q: np.ndarray | None) -> None:
         """Raw F/T series (sensor frame), and the hand force in W as series, arrow and free-space field.
@@ -378,20 +522,20 @@ class TrialPlanner:
         if w is None:
             return
         t = w["t"].to_numpy()
-        f = w[["fx", "fy", "fz"]].to_numpy()
+        f = columns_of(w, ["fx", "fy", "fz"])
         self.add_series("handle/force_raw", t, f, ["fx", "fy", "fz"], "handle_wrench")
-        self.add_series("handle/torque_raw", t, w[["tx", "ty", "tz"]].to_numpy(), ["tx", "ty", "tz"], "handle_wrench")
+        self.add_series("handle/torque_raw", t, columns_of(w, ["tx", "ty", "tz"]), ["tx", "ty", "tz"], "handle_wrench")
         hs = self.handle_signals()
         if hs is not None and hs.force is not None:
-            self.add_series("hand_force/calibrated", hs.t, hs.force, ["fx", "fy", "fz"], "handle_signals")
-            self.add_series("hand_torque/calibrated", hs.t, hs.torque, ["tx", "ty", "tz"], "handle_signals")
+            self.add_series("hand_force/calibrated", hs.t, hs.force, ["fx", "fy", "fz"], "handle_signals", derived=True)
+            self.add_series("hand_torque/calibrated", hs.t, hs.torque, ["tx", "ty", "tz"], "handle_signals", derived=True)
             shown = (hs.t, hs.position, hs.force, "handle_signals", "calibrated")
-        elif t_pose is not None and self.rig.handle is not None:
+        elif self.derive and t_pose is not None and self.rig.handle is not None:
             pose = raw_pose_at(t_pose, p, q, t)
             q_sensor = np.asarray(self.rig.handle.ft_sensor.pose.quaternion, dtype=np.float64)
             with np.errstate(invalid="ignore"):
                 f_w = quat_rotate(quat_multiply(pose.quaternion, q_sensor), f)
-            self.add_series("hand_force/raw_world", t, f_w, ["fx", "fy", "fz"], "handle_wrench")
+            self.add_series("hand_force/raw_world", t, f_w, ["fx", "fy", "fz"], "handle_wrench", derived=True)
             shown = (t, pose.position, f_w, "handle_wrench", "raw")
         else:
             shown = None
@@ -401,25 +545,31 @@ class TrialPlanner:
         self.force_arrows(f"{self.world}/hand_force/{label}", t_a, origins, force, stream)
         ok = finite_rows(origins, force)
         if self.trial.protocol == "free_space" and ok.any():
+            from haptify import free_space
+
             field_ = free_space.force_field(origins[ok], force[ok])  # the spec's binning (§9.5)
             if len(field_.centres):
                 self.plan.add(Entry(f"{self.world}/force_field",
                                     static=[rr.Arrows3D(origins=field_.centres, vectors=field_.mean_force * HAND_FORCE_M_PER_N,
-                                                        colors=FORCE_COLORS[self.role], radii=0.0006)]))
+                                                        colors=FORCE_COLORS[self.role], radii=0.0006)], derived=True))
 
     def accel(self) -> None:
         a = self.read("handle_accel")
         if a is not None:
-            self.add_series("accel/raw", a["t"].to_numpy(), a[["ax", "ay", "az"]].to_numpy(), ["ax", "ay", "az"], "handle_accel")
+            self.add_series("accel/raw", a["t"].to_numpy(), columns_of(a, ["ax", "ay", "az"]), ["ax", "ay", "az"], "handle_accel")
             hs = self.handle_signals()
             if hs is not None and hs.acceleration is not None:
-                self.add_series("accel/world", hs.t, hs.acceleration, ["ax", "ay", "az"], "handle_signals")
+                self.add_series("accel/world", hs.t, hs.acceleration, ["ax", "ay", "az"], "handle_signals", derived=True)
+            if not self.derive:
+                return
+            from haptify import vibration
+
             try:
                 vib = vibration.trial_vibration(self.ctx, self.trial.id)
             except HaptifyError as err:
                 self.note("DFT321 vibration signal", err)
             else:
-                self.add_series("accel/dft321", vib.t, vib.signal, ["dft321"], "vibration")
+                self.add_series("accel/dft321", vib.t, vib.signal, ["dft321"], "vibration", derived=True)
 
     def plate(self) -> None:
         w = self.read("plate_wrench")
@@ -428,40 +578,45 @@ class TrialPlanner:
         t = w["t"].to_numpy()
         names_f = [f"c{i}_f{a}" for i in range(1, 5) for a in "xyz"]
         names_t = [f"c{i}_t{a}" for i in range(1, 5) for a in "xyz"]
-        self.add_series("plate/corner_force_raw", t, w[names_f].to_numpy(), names_f, "plate_wrench")
-        self.add_series("plate/corner_torque_raw", t, w[names_t].to_numpy(), names_t, "plate_wrench")
+        self.add_series("plate/corner_force_raw", t, columns_of(w, names_f), names_f, "plate_wrench")
+        self.add_series("plate/corner_torque_raw", t, columns_of(w, names_t), names_t, "plate_wrench")
+        if not self.derive:
+            return
+        from haptify import force_plate
+
         try:
             ps = force_plate.plate_signals(self.ctx, self.trial.id)
         except HaptifyError as err:
             self.note("plate total force and COP", err)
             return
-        self.add_series("plate/force", ps.t, ps.force, ["Fx", "Fy", "Fz"], "plate_wrench")
-        self.add_series("plate/cop", ps.t, ps.cop, ["x", "y"], "plate_wrench")
+        self.add_series("plate/force", ps.t, ps.force, ["Fx", "Fy", "Fz"], "plate_signals", derived=True)
+        self.add_series("plate/cop", ps.t, ps.cop, ["x", "y"], "plate_signals", derived=True)
         # The force on the plate drawn as an arrow whose head is at the COP (on the top surface, z = 0).
         ok = ps.cop_valid & finite_rows(ps.force)
         head = np.column_stack([ps.cop[ok], np.zeros(int(ok.sum()))])
         vec = ps.force[ok] * PLATE_FORCE_M_PER_N
         self.plan.add(Entry(f"{self.world}/plate_force", times_ns=time_ns(ps.t[ok]),
                             static=[rr.Arrows3D.from_fields(colors=PLATE_FORCE_COLOR, radii=0.002)],
-                            columns=rr.Arrows3D.columns(origins=head - vec, vectors=vec), stream="plate_wrench"))
+                            archetype=rr.Arrows3D, fields={"origins": head - vec, "vectors": vec}, stream="plate_signals",
+                            derived=True))
 
     def commanded(self) -> None:
         c = self.read("commanded_wrench")
         if c is None:
             return
         t = c["t"].to_numpy()
-        self.add_series("commanded/force", t, c[["fx", "fy", "fz"]].to_numpy(), ["fx", "fy", "fz"], "commanded_wrench")
-        self.add_series("commanded/torque", t, c[["tx", "ty", "tz"]].to_numpy(), ["tx", "ty", "tz"], "commanded_wrench")
+        self.add_series("commanded/force", t, columns_of(c, ["fx", "fy", "fz"]), ["fx", "fy", "fz"], "commanded_wrench")
+        self.add_series("commanded/torque", t, columns_of(c, ["tx", "ty", "tz"]), ["tx", "ty", "tz"], "commanded_wrench")
 
     def device_and_sync(self) -> None:
         """The device's own joint angles (diagnostic, spec §2.6) and the sync trigger, as they are."""
         q = self.read("device_joint_angles")
         if q is not None:
             names = [c for c in q.columns if c != "t"]
-            self.add_series("device/joint_angles", q["t"].to_numpy(), q[names].to_numpy(), names, "device_joint_angles")
+            self.add_series("device/joint_angles", q["t"].to_numpy(), columns_of(q, names), names, "device_joint_angles")
         s = self.read("sync")
         if s is not None:
-            self.add_series("sync/trigger", s["t"].to_numpy(), s[["trigger"]].to_numpy(), ["trigger"], "sync")
+            self.add_series("sync/trigger", s["t"].to_numpy(), columns_of(s, ["trigger"]), ["trigger"], "sync")
 
     def read_entities(self, kind: str) -> tuple[list[str], pd.DataFrame, np.ndarray] | None:
         """Entity names, table and time column of a per-entity stream (markers, link_poses), or None."""
@@ -472,7 +627,8 @@ class TrialPlanner:
         return list(stream.entities or []), frame, frame["t"].to_numpy()
 
     def markers(self) -> None:
-        """Each marker as its own entity under the rigid body (link) it belongs to, a colour per link."""
+        """The markers of each rigid body (link) as one labelled point cloud, a colour per link: one row per
+        frame where any of them is known, an occluded marker's position NaN (not drawn) in that row."""
         found = self.read_entities("markers")
         if found is None:
             return
@@ -486,14 +642,12 @@ class TrialPlanner:
         for m in entities:
             groups.setdefault(owner.get(m, "unassigned"), []).append(m)
         for i, (link, names) in enumerate(groups.items()):
-            color = LINK_PALETTE[i % len(LINK_PALETTE)]
-            for m in names:
-                xyz = frame[[f"{m}_x", f"{m}_y", f"{m}_z"]].to_numpy()
-                ok = finite_rows(xyz)
-                self.plan.add(Entry(
-                    f"{self.world}/markers/{rr.escape_entity_path_part(link)}/{rr.escape_entity_path_part(m)}",
-                    static=[rr.Points3D.from_fields(colors=color, radii=0.002, labels=[m])],
-                    times_ns=time_ns(t[ok]), columns=rr.Points3D.columns(positions=xyz[ok]), stream="markers"))
+            xyz = columns_of(frame, [f"{m}_{a}" for m in names for a in "xyz"]).reshape(len(t), len(names), 3)
+            ok = np.isfinite(xyz).all(axis=2).any(axis=1)
+            self.plan.add(Entry(
+                f"{self.world}/markers/{rr.escape_entity_path_part(link)}",
+                static=[rr.Points3D.from_fields(colors=LINK_PALETTE[i % len(LINK_PALETTE)], radii=0.002, labels=names)],
+                times_ns=time_ns(t[ok]), archetype=rr.Points3D, fields={"positions": xyz[ok]}, stream="markers"))
 
     def links(self) -> None:
         """Each link's frame from link_poses, with axes."""
@@ -502,19 +656,25 @@ class TrialPlanner:
             return
         entities, frame, t = found
         for link in entities:
-            p = frame[[f"{link}_p{a}" for a in "xyz"]].to_numpy()
-            q = frame[[f"{link}_q{a}" for a in "wxyz"]].to_numpy()
+            p = columns_of(frame, [f"{link}_p{a}" for a in "xyz"])
+            q = columns_of(frame, [f"{link}_q{a}" for a in "wxyz"])
             ok = finite_rows(p, q)
             self.plan.add(Entry(f"{self.world}/links/{rr.escape_entity_path_part(link)}",
                                 static=[rr.TransformAxes3D(LINK_AXIS_M)], times_ns=time_ns(t[ok]),
-                                columns=rr.Transform3D.columns(translation=p[ok], quaternion=xyzw(q[ok])),
+                                archetype=rr.Transform3D, fields={"translation": p[ok], "quaternion": xyzw(q[ok])},
                                 stream="link_poses"))
 
     def surface(self, t_pose: np.ndarray | None, p: np.ndarray | None) -> None:
         """The rendered plane as a translucent rectangle, and the handle's penetration series."""
         r = self.trial.rendering
         point = np.asarray(r.surface_point_m, dtype=np.float64)
-        normal = surface.unit_normal(r.surface_normal, self.trial.id)
+        normal = np.asarray(r.surface_normal, dtype=np.float64)
+        norm = float(np.linalg.norm(normal))
+        if not (np.isfinite(norm) and norm > 0.0):
+            from haptify.surface import unit_normal
+
+            unit_normal(normal, self.trial.id)  # the reference's coded error (E303)
+        normal = normal / norm
         around = p[finite_rows(p)] if p is not None else None
         corners = plane_rectangle(point, normal, around)
         self.plan.add(Entry(f"{self.world}/virtual_surface", static=[rr.Mesh3D(
@@ -523,34 +683,43 @@ class TrialPlanner:
         if p is not None:
             depth = (point - p) @ normal
             self.add_series("penetration", t_pose, depth, ["depth"], "handle_pose")
-        if "commanded_wrench" in self.kinds and "handle_wrench" in self.kinds and "handle_pose" in self.kinds:
+        if self.derive and {"commanded_wrench", "handle_wrench", "handle_pose"} <= self.kinds:
+            from haptify import surface
+
             try:
                 cs = surface.contact_signals(self.ctx, self.trial.id)
             except HaptifyError as err:
                 self.note("contact signals (normal force, contact)", err)
                 return
             self.add_series("contact/normal_force", cs.t, np.column_stack([cs.commanded_normal, cs.normal_force]),
-                            ["commanded Fn", "felt Fn"], "handle_signals")
-            self.add_series("contact/penetration", cs.t, cs.penetration, ["depth"], "handle_signals")
+                            ["commanded Fn", "felt Fn"], "handle_signals", derived=True)
+            self.add_series("contact/penetration", cs.t, cs.penetration, ["depth"], "handle_signals", derived=True)
             self.add_series("contact/state", cs.t, np.column_stack([cs.contact, cs.used]).astype(np.float64),
-                            ["contact", "used"], "handle_signals")
+                            ["contact", "used"], "handle_signals", derived=True)
 
 
 @functools.lru_cache(maxsize=4)
-def modeled_solid(kinematics_json: str, position: tuple, quaternion: tuple) -> workspace.VoxelSolid:
-    """``haptify.workspace.modeled_solid`` (spec §8.3), computed once per device model and placement."""
+def modeled_solid(kinematics_json: str, position: tuple, quaternion: tuple) -> Any:
+    """``haptify.workspace.modeled_solid`` (spec §8.3, a ``VoxelSolid``), computed once per device model and placement."""
+    from haptify import workspace
+
     kin = Kinematics.model_validate_json(kinematics_json)
     return workspace.modeled_solid(kin, position, quaternion)
 
 
-def solid_entry(path: str, solid: workspace.VoxelSolid, color: tuple[int, int, int]) -> Entry | None:
+def solid_entry(path: str, solid: Any, color: tuple[int, int, int], compact: bool = False) -> Entry | None:
     """A voxel solid's boundary (voxels with fraction ≥ 0.5) as a translucent static mesh; None when empty.
-    The fractions of spec §8.4 step 5."""
+    The fractions of spec §8.4 step 5. ``compact``: each lattice corner once, no normals (``SurfaceMesh.shared``)."""
     mesh = boundary_mesh(solid.fraction >= 0.5, solid.origin, solid.pitch)
     if not len(mesh.triangles):
         return None
-    return Entry(path, static=[rr.Mesh3D(vertex_positions=mesh.vertices, triangle_indices=mesh.triangles,
-                                         vertex_normals=mesh.normals, albedo_factor=(*color, MESH_ALPHA))])
+    if compact:
+        vertices, triangles = mesh.shared(solid.pitch)
+        drawn = rr.Mesh3D(vertex_positions=vertices, triangle_indices=triangles, albedo_factor=(*color, MESH_ALPHA))
+    else:
+        drawn = rr.Mesh3D(vertex_positions=mesh.vertices, triangle_indices=mesh.triangles, vertex_normals=mesh.normals,
+                          albedo_factor=(*color, MESH_ALPHA))
+    return Entry(path, static=[drawn], derived=True)
 
 
 # --- session level ---------------------------------------------------------------------------------
@@ -578,6 +747,8 @@ def rig_entries(session: SessionFolder) -> list[Entry]:
 
 def load_results(path: str | os.PathLike) -> ResultsFile:
     """Read and validate ``results.json`` (spec §15.1); E903 when missing, E104 when invalid."""
+    from haptify.results import ResultsFile
+
     path = Path(path)
     if not path.is_file():
         raise fail("E903", f"results file {str(path)!r} does not exist", file=str(path))
@@ -619,7 +790,7 @@ def results_markdown(results: ResultsFile, session_id: str) -> str:
 
 
 def session_markdown(session: SessionFolder, trials: list[TrialPlan], other: SessionFolder | None,
-                     notes: list[str] = ()) -> str:
+                     notes: list[str] = (), derived: str = "full") -> str:
     """A summary of the session (and the compared one) and how to read the 3-D view."""
     m = session.manifest
     dev = session.device()
@@ -635,11 +806,20 @@ def session_markdown(session: SessionFolder, trials: list[TrialPlan], other: Ses
         kinds = ", ".join(f"{s.kind} ({s.rows} @ {s.rate_hz:g} Hz)" for s in t.streams)
         lines.append(f"| {_cell(t.id)} | {t.protocol} | {'yes' if t.powered else 'no'} | {_cell(kinds)} | "
                      f"{_cell(tp.counterpart.get('compare', '—' if other is not None else ''))} |")
-    lines += ["", "World frame W: origin at the centre of the plate's top surface, z up, right-handed (spec §1.2).",
-              f"Arrows: hand force {HAND_FORCE_M_PER_N * 100:g} cm per N; plate force {PLATE_FORCE_M_PER_N * 100:g} cm per N.",
-              f"Free-space force field: mean hand force per {free_space.fp('force_field_bin_m') * 100:g} cm bin "
-              f"holding at least {free_space.fp('force_field_min_samples')} samples (spec §9.5).",
-              "The plate arrow is the force the load exerts on the plate, drawn with its head at the COP."]
+    lines += ["", "World frame W: origin at the centre of the plate's top surface, z up, right-handed (spec §1.2)."]
+    if derived == "off":
+        lines.append("Derived signals (calibrated hand force, plate force and COP, DFT321, contact signals, force arrows, "
+                     "workspace meshes) are not recorded: `haptify view --derived compact` or `--derived full` adds them.")
+    else:
+        from haptify.metric_definitions import param
+
+        lines += [f"Arrows: hand force {HAND_FORCE_M_PER_N * 100:g} cm per N; plate force {PLATE_FORCE_M_PER_N * 100:g} cm per N.",
+                  f"Free-space force field: mean hand force per {param('free_space', 'force_field_bin_m') * 100:g} cm bin "
+                  f"holding at least {param('free_space', 'force_field_min_samples')} samples (spec §9.5).",
+                  "The plate arrow is the force the load exerts on the plate, drawn with its head at the COP."]
+        if derived == "compact":
+            lines.append(f"Derived signals are compact: float32, at most {COMPACT_RATE_HZ:g} Hz (faster time series as a "
+                         "min/max envelope, faster arrows point-sampled); `--derived full` records every sample.")
     if notes:
         lines += ["", "## Not shown", ""] + [f"- {_cell(n)}" for n in notes]
     return "\n".join(lines) + "\n"
@@ -659,38 +839,53 @@ def counterpart(other: SessionFolder, trial: Trial) -> Trial | None:
 
 
 def plan_recording(session: SessionFolder, *, trial_id: str | None = None, results: ResultsFile | None = None,
-                   other: SessionFolder | None = None, trial_ids: Collection[str] | None = None) -> Plan:
+                   other: SessionFolder | None = None, trial_ids: Collection[str] | None = None,
+                   derived: str = DEFAULT_DERIVED, writer: RrdWriter | None = None) -> Plan:
     """Every entity of the recording of ``session`` (one trial, the trials ``trial_ids`` in session order, or
-    all), optionally compared with ``other``.
+    all), optionally compared with ``other``; written entry by entry through ``writer`` when given, else
+    kept whole in the plan (for :func:`write_rrd`).
 
     A compared trial is shifted in time by a whole number of nanoseconds so that it starts with the
     measured trial (their first samples coincide); the shift is listed in the session document.
     """
-    ctx = ComputeContext(session=CachedStreams(session))
-    other_ctx = ComputeContext(session=CachedStreams(other)) if other is not None else None
+    if derived not in DERIVED_MODES:
+        raise fail("E903", f"unknown derived-signal mode {derived!r}", expected=list(DERIVED_MODES), found=derived)
+    def context(folder: SessionFolder) -> tuple[CachedStreams, ComputeContext | None]:
+        cached = CachedStreams(folder)
+        if derived == "off":
+            return cached, None
+        from haptify.compute import ComputeContext
+
+        return cached, ComputeContext(session=cached)
+
+    streams, ctx = context(session)
+    other_streams, other_ctx = context(other) if other is not None else (None, None)
     trials = [session.trial(trial_id)] if trial_id else [t for t in session.trials
                                                           if trial_ids is None or t.id in trial_ids]
-    rec_id = session.session_id + (f"/{trial_id}" if trial_id else "") + (f"+{other.session_id}" if other else "")
-    plan = Plan(recording_id=rec_id, has_results=results is not None)
-    plan.entries.extend(rig_entries(session))
+    plan = Plan(recording_id=recording_id(session, trial_id, other), has_results=results is not None, derived=derived, writer=writer)
+    for entry in rig_entries(session):
+        plan.add(entry)
     for trial in trials:
         key = rr.escape_entity_path_part(trial.id)
         tp = TrialPlan(trial, key, {"measured": trial.id})
-        TrialPlanner(ctx, trial, "measured", key, plan).run()
-        if other is not None:
-            match = counterpart(other, trial)
-            if match is not None:
-                tp.counterpart["compare"] = match.id
-                first = len(plan.entries)
-                TrialPlanner(other_ctx, match, "compare", key, plan).run()
-                shift = trial_start_ns(ctx.session, trial) - trial_start_ns(other_ctx.session, match)
-                if shift:
-                    for e in plan.entries[first:]:
-                        if e.times_ns is not None:
-                            e.times_ns = e.times_ns + shift
-                    plan.notes.append(f"{match.id} (compare) shifted by {shift / 1e9:+.9g} s to start with {trial.id} (measured)")
+        match = counterpart(other, trial) if other is not None else None
+        shift = 0
+        if match is not None:  # read before the measured trial's tables are dropped
+            shift = trial_start_ns(streams, trial) - trial_start_ns(other_streams, match)
+        TrialPlanner(streams, ctx, trial, "measured", key, plan).run()
+        if ctx is not None:
+            ctx.forget_trial(trial.id)  # each trial is visited once: its derived signals can go
+        if match is not None:
+            tp.counterpart["compare"] = match.id
+            plan.shift_ns = shift
+            TrialPlanner(other_streams, other_ctx, match, "compare", key, plan).run()
+            plan.shift_ns = 0
+            if other_ctx is not None:
+                other_ctx.forget_trial(match.id)
+            if shift:
+                plan.notes.append(f"{match.id} (compare) shifted by {shift / 1e9:+.9g} s to start with {trial.id} (measured)")
         plan.trials.append(tp)
-    plan.add(Entry("/session", static=[rr.TextDocument(session_markdown(session, plan.trials, other, plan.notes),
+    plan.add(Entry("/session", static=[rr.TextDocument(session_markdown(session, plan.trials, other, plan.notes, derived),
                                                        media_type=rr.MediaType.MARKDOWN)]))
     if results is not None:
         plan.add(Entry("/results", static=[rr.TextDocument(results_markdown(results, session.session_id),
@@ -698,22 +893,26 @@ def plan_recording(session: SessionFolder, *, trial_id: str | None = None, resul
     return plan
 
 
-def write_rrd(plan: Plan, path: str | os.PathLike, blueprint: Any) -> Path:
-    """Write the plan to an .rrd file atomically (temp file + rename, spec §3.6) with its blueprint."""
+def open_rrd(recording_id: str, tmp: Path) -> rr.RecordingStream:
+    """A recording stream whose file sink (``tmp``) is set before anything is logged."""
+    rec = rr.RecordingStream(APP_ID, recording_id=recording_id, send_properties=False)
+    rec.save(tmp)
+    rec.send_recording_name(recording_id)
+    return rec
+
+
+def atomic_rrd(path: str | os.PathLike, recording_id: str, fill: Callable[[rr.RecordingStream], Any]) -> Path:
+    """Write an .rrd atomically (temp file + rename, spec §3.6): ``fill(rec)`` logs into a stream whose
+    file sink is the temp file, in strict mode; the file is closed (footer written) and renamed only when
+    ``fill`` returned."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.parent / f".{path.name}.{uuid.uuid4().hex[:12]}.tmp"  # created by rerun, with the usual permissions
     previous = rr.strict_mode()
     rr.set_strict_mode(True)
     try:
-        rec = rr.RecordingStream(APP_ID, recording_id=plan.recording_id, send_properties=False)
-        rec.save(tmp, default_blueprint=blueprint)
-        rec.send_recording_name(plan.recording_id)
-        for e in plan.entries:
-            if e.static:
-                rec.log(e.path, *e.static, static=True, strict=True)
-            if e.times_ns is not None and e.rows:
-                rec.send_columns(e.path, [time_column(e.times_ns)], e.columns, strict=True)
+        rec = open_rrd(recording_id, tmp)
+        fill(rec)
         rec.disconnect()
         os.replace(tmp, path)
     except BaseException:
@@ -724,11 +923,41 @@ def write_rrd(plan: Plan, path: str | os.PathLike, blueprint: Any) -> Path:
     return path
 
 
+def write_rrd(plan: Plan, path: str | os.PathLike, blueprint: Any, *, chunk_rows: int = CHUNK_ROWS) -> Path:
+    """Write a plan kept in memory (:func:`plan_recording` without a writer) to an .rrd file atomically,
+    with its blueprint."""
+
+    def fill(rec: rr.RecordingStream) -> None:
+        writer = RrdWriter(rec, chunk_rows)
+        for e in plan.entries:
+            writer.write(e)
+        if blueprint is not None:
+            rec.send_blueprint(blueprint, make_active=True, make_default=True)
+
+    return atomic_rrd(path, plan.recording_id, fill)
+
+
+def recording_id(session: SessionFolder, trial_id: str | None, other: SessionFolder | None) -> str:
+    return session.session_id + (f"/{trial_id}" if trial_id else "") + (f"+{other.session_id}" if other else "")
+
+
 def build(session: SessionFolder, out: str | os.PathLike, *, trial_id: str | None = None,
-          results: ResultsFile | None = None, other: SessionFolder | None = None) -> Plan:
-    """Plan, derive the blueprint and write ``out``; returns the plan (for summaries and tests)."""
+          results: ResultsFile | None = None, other: SessionFolder | None = None, derived: str = DEFAULT_DERIVED,
+          chunk_rows: int = CHUNK_ROWS, before_commit: Callable[[], Any] | None = None) -> Plan:
+    """Stream the recording of ``session`` to ``out`` entry by entry, then its blueprint; returns the plan's
+    metadata (for summaries and tests). ``before_commit`` runs after everything was logged and before the
+    file is renamed into place (the gate's final checks, spec §4.8): when it raises, nothing is written."""
     from haptify_tools.viewer.blueprints import blueprint_for
 
-    plan = plan_recording(session, trial_id=trial_id, results=results, other=other)
-    write_rrd(plan, out, blueprint_for(plan))
-    return plan
+    done: list[Plan] = []
+
+    def fill(rec: rr.RecordingStream) -> None:
+        plan = plan_recording(session, trial_id=trial_id, results=results, other=other, derived=derived,
+                              writer=RrdWriter(rec, chunk_rows))
+        rec.send_blueprint(blueprint_for(plan), make_active=True, make_default=True)
+        if before_commit is not None:
+            before_commit()
+        done.append(plan)
+
+    atomic_rrd(out, recording_id(session, trial_id, other), fill)
+    return done[0]

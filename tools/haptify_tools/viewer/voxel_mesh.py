@@ -30,6 +30,13 @@ class SurfaceMesh:
         v = self.vertices[self.triangles]
         return float(np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum() / 6.0)
 
+    def shared(self, pitch: float) -> tuple[np.ndarray, np.ndarray]:
+        """The same surface with each lattice corner stored once (vertices (m, W), triangles): about a quarter
+        of the vertices, without normals (faces meeting at a corner no longer share one) — the compact form."""
+        keys = np.round(self.vertices / pitch).astype(np.int64)
+        unique, inverse = np.unique(keys, axis=0, return_inverse=True)
+        return unique * pitch, inverse.reshape(-1)[self.triangles].astype(np.uint32)
+
 
 def boundary_mesh(inside: np.ndarray, origin: tuple[int, int, int], pitch: float) -> SurfaceMesh:
     """The exposed faces of the boolean voxel grid ``inside`` as a triangle mesh.
