@@ -21,6 +21,7 @@ from haptify_tools.discrepancy import stats as st
 from haptify_tools.discrepancy import workspace as ws
 from haptify_tools.discrepancy.data import MeasuredTrial, share_trials, simulate_many
 from haptify_tools.discrepancy.library import LIBRARY, Candidate
+from haptify_tools.discrepancy.shape import characterise
 from haptify_tools.twin.model import TwinFile
 
 REFINEMENTS = 2          # parabolic steps in log p after the grid
@@ -98,6 +99,7 @@ class Selection:
     sweeps: Dataset | None = None
     initial_sweep: dict[str, np.ndarray] | None = None
     final_sweep: dict[str, np.ndarray] | None = None
+    shape: dict | None = None       # the residual left, characterised (:func:`.shape.characterise`)
 
 
 def _minus(a: dict, b: dict) -> dict:
@@ -293,4 +295,7 @@ def _select(twin, forces: Dataset, sweeps, max_effects, library, log) -> Selecti
                 base_w = sweep_data.simulate(current)
     structure = (st.structure_left(rounds[-1].design, rounds[-1].residual) if trials else
                  {"heldout_share": 0.0, "f_p_value": 1.0, "ljung_box_p_value": 1.0, "structured": False})
-    return Selection(rounds, accepted, current, initial, base, structure, sweep_data, initial_w, base_w)
+    shape = characterise(rounds[-1].design, rounds[-1].residual, current) if trials else None
+    if shape is not None:       # structure that the generic regression misses (a periodic force) is structure too
+        structure["structured"] = bool(structure["structured"] or shape["structured"])
+    return Selection(rounds, accepted, current, initial, base, structure, sweep_data, initial_w, base_w, shape)
