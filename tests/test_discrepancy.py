@@ -67,6 +67,7 @@ def test_hidden_coulomb_friction_is_named_identified_and_the_gap_shrinks(tmp_pat
         result, _ = run_discrepancy(session, start, None)
     assert result.accepted and result.accepted[0].effect_id == "friction.coulomb"
     assert _rel(result.accepted[0].value, torque) < 0.15
+    assert result.accepted[0].per_drive is None     # equal on every drive: the shared value is kept (README §2)
     assert result.accepted[0].stderr is not None and result.accepted[0].stderr < 0.15 * torque
     assert result.heldout_gap_after_N <= 0.5 * result.heldout_gap_before_N
     assert result.verdict == "explained"

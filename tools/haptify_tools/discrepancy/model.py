@@ -25,7 +25,20 @@ class Place(_M):
     samples: int
 
 
-class CandidateFit(_M):
+class _Estimate(_M):
+    """A parameter's 95 % interval, and the per-drive values of an effect whose parameter holds one value per drive
+    (discrepancy README §2, per drive; §3, uncertainty)."""
+
+    ci95: list[float] | None = Field(None, description="95 % block-bootstrap interval of value [low, high] in unit (null "
+                                     "when not estimable: a per-drive fit, or a search whose minimum is at the grid's end).")
+    per_drive: list[float] | None = Field(None, description="The values per drive axis when identified per drive "
+                                          "(value is then their mean); null: one value shared by every drive.")
+    per_drive_stderr: list[float | None] | None = None
+    per_drive_delta_bic: float | None = Field(None, description="ΔBIC of the per-drive values over the shared one (on "
+                                              "the shared fit's residual, n − 1 extra parameters); null when not tried.")
+
+
+class CandidateFit(_Estimate):
     """A library effect fitted to one round's residual: value ± s.e. in ``unit``, ΔBIC, F-test p, validation and test shares, 0–1 (discrepancy README §2, §3)."""
 
     effect_id: str
@@ -50,7 +63,7 @@ class RoundResult(_M):
     near_ties: list[str] = Field(default_factory=list, description="Other accepted candidates within 10 % of the best ΔBIC (ambiguous).")
 
 
-class AcceptedEffect(_M):
+class AcceptedEffect(_Estimate):
     """An effect the workflow added to the twin, in the order it was accepted: value ± s.e. in ``unit``, ΔBIC, p, share explained 0–1 (discrepancy README §3, §4)."""
 
     order: int

@@ -222,11 +222,21 @@ def annotate_twin(twin: TwinFile, sel: Selection) -> TwinFile:
             key = f"primitives.{box['name']}.top"
         else:
             key = c.parameter
-        se = f"{f.stderr:.3g}" if np.isfinite(f.stderr) else "n/a"
+        if f.values is not None:
+            shown = "per drive " + ", ".join(f"{v:.6g} ± {e:.3g}" for v, e in zip(f.values, f.stderrs))
+        else:
+            shown = f"{f.value:.6g} ± " + (f"{f.stderr:.3g}" if np.isfinite(f.stderr) else "n/a")
         holder[c.effect_id].setdefault("sources", {})[key] = (
-            f"identified by haptify discrepancy: {f.value:.6g} ± {se} {c.unit} (1 s.e.), "
+            f"identified by haptify discrepancy: {shown} {c.unit} (1 s.e.), "
             f"ΔBIC {f.score.delta_bic:.1f}, p {f.score.p_value:.2g}")
     return twin_from_dict(data)
+
+
+def _per_drive(f) -> dict:
+    """The interval and per-drive fields of a fit's record (discrepancy README §2, per drive; §3, uncertainty)."""
+    ci = None if f.values is not None or f.interval is None or not np.all(np.isfinite(f.interval)) else list(f.interval)
+    return {"ci95": ci, "per_drive": f.values, "per_drive_stderr": [_finite(e) for e in f.stderrs] if f.stderrs else None,
+            "per_drive_delta_bic": f.per_drive_score.delta_bic if f.per_drive_score is not None else None}
 
 
 def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial], sel: Selection) -> DiscrepancyFile:
@@ -237,12 +247,12 @@ def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial]
                               stderr=_finite(f.stderr), unit=f.candidate.unit, delta_bic=f.score.delta_bic,
                               p_value=f.score.p_value, validation_improvement=f.score.validation_improvement,
                               test_share=f.score.test_share, simulations=f.simulations,
-                              accepted=bool(r.accepted and f is r.chosen)) for f in r.fits]
+                              accepted=bool(r.accepted and f is r.chosen), **_per_drive(f)) for f in r.fits]
         rounds.append(RoundResult(number=i + 1, decimation=r.design.decimation, candidates=cands, near_ties=r.near_ties))
     accepted = [AcceptedEffect(order=i + 1, effect_id=f.candidate.effect_id, parameter=f.candidate.parameter, value=f.value,
                                stderr=_finite(f.stderr), unit=f.candidate.unit, delta_bic=f.score.delta_bic,
                                p_value=f.score.p_value, share_explained=f.score.test_share,
-                               near_ties=sel.rounds[i].near_ties) for i, f in enumerate(sel.accepted)]
+                               near_ties=sel.rounds[i].near_ties, **_per_drive(f)) for i, f in enumerate(sel.accepted)]
     s = sel.structure
     design = sel.rounds[0].design
     wgaps = workspace_gaps(sel)
