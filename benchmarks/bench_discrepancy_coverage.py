@@ -19,8 +19,10 @@ import numpy as np
 
 from haptify.storage import open_session
 from haptify_tools.discrepancy.data import load_measured
+from haptify_tools.discrepancy.floor import replay_floors
 from haptify_tools.discrepancy.identify import select_effects
 from haptify_tools.discrepancy.library import candidate
+from haptify_tools.discrepancy.workflow import replay_parameters
 from haptify_tools.twin.model import disable, preset, set_param
 from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
 
@@ -41,7 +43,10 @@ def one(effect: str, seed: int, folder: Path) -> tuple[float, float, tuple[float
     trials = load_measured(open_session(simulate_dossier(truth, folder / f"{effect}-{seed}", opt).session))
     sel = select_effects(disable(preset("touch"), effect), trials, max_effects=1, library=(candidate(effect),))
     fit = sel.rounds[0].fits[0]
-    return value, fit.value, fit.interval or (-np.inf, np.inf)
+    if not sel.accepted:
+        return value, fit.value, (-np.inf, np.inf)
+    floor = replay_floors(sel.twin, {protocol: seconds}, params=replay_parameters(sel))
+    return value, fit.value, floor.uncertainty(0)[1]
 
 
 def main() -> int:

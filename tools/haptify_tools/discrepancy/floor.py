@@ -31,7 +31,8 @@ from haptify.storage import SessionFolder, open_session
 
 from haptify_tools.discrepancy import data as dt
 from haptify_tools.discrepancy import stats as st
-from haptify_tools.twin.model import TwinFile
+from haptify_tools.discrepancy.library import Candidate
+from haptify_tools.twin.model import TwinFile, set_param
 from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
 
 REPLAY_SEED = 0          # the replays are deterministic (seeds 0, 1, …), like the rest of the workflow
@@ -77,16 +78,52 @@ def replay_durations(session: SessionFolder, trials: list[dt.MeasuredTrial]) -> 
     return durations
 
 
-def replay_floor(twin: TwinFile, durations: dict[str, float], seed: int = REPLAY_SEED) -> float | None:
-    """The held-out gap (N) of ``twin`` against one replay (``seed``) of the protocols in ``durations`` (simulator protocol →
-    s) that ``twin`` itself generated (module docstring; discrepancy README §4, the floor); None when there is none."""
+@dataclass(frozen=True)
+class Parameter:
+    """One identified value the replays estimate again: the library candidate, the drive (None: the value shared by
+    every drive) and the value (discrepancy README §3, uncertainty)."""
+
+    candidate: Candidate
+    drive: int | None
+    value: float
+
+    def set(self, twin: TwinFile, value: float) -> TwinFile:
+        if self.drive is None:
+            return self.candidate.apply(twin, value)
+        return set_param(twin, f"{self.candidate.effect_id}.{self.candidate.parameter}[{self.drive}]", value)
+
+
+def reestimate(twin: TwinFile, params: tuple[Parameter, ...], trials: list[dt.MeasuredTrial], sim: dict) -> list[float]:
+    """The values ``params`` would be identified at on ``trials`` (simulated ``sim`` by ``twin``, which holds them): one
+    Gauss–Newton step from the twin's values, the residual's slope in each parameter by central differences at ±2 %
+    (two simulations a parameter), all parameters fitted together on the training rows (discrepancy README §3)."""
+    residual = {tr.trial_id: tr.force - sim[tr.trial_id] for tr in trials}
+    design = st.make_design(trials, residual)
+    steps = [st.SLOPE_STEP * abs(q.value) for q in params]
+    twins = [q.set(twin, q.value + f * h) for q, h in zip(params, steps) for f in (-1, 1)]
+    sims = iter(dt.simulate_many(twins, trials))
+    slopes = []
+    for h in steps:
+        lo, hi = next(sims), next(sims)
+        slopes.append({k: (hi[k] - lo[k]) / (2 * h) for k in residual})
+    zero = {k: np.zeros_like(v) for k, v in residual.items()}
+    step, _ = st.affine_fit_many(design, residual, zero, slopes)
+    return [q.value + float(d) for q, d in zip(params, step)]
+
+
+def replay_floor(twin: TwinFile, durations: dict[str, float], seed: int = REPLAY_SEED,
+                 params: tuple[Parameter, ...] = ()) -> tuple[float, list[float]] | None:
+    """One replay (``seed``) of the protocols in ``durations`` (simulator protocol → s) that ``twin`` itself generated:
+    the held-out gap (N) ``twin`` leaves on it (module docstring; discrepancy README §4, the floor) and the values of
+    ``params`` identified again on it (:func:`reestimate`); None when there is nothing to replay."""
     if not durations:
         return None
     options = SimulationOptions(protocols=(*durations, "rig.handle_calibration"), reps=1, seed=seed,
                                 durations=durations, rig_trials=False, workers=1)
     with tempfile.TemporaryDirectory(prefix="haptify-floor-") as tmp:
         replay = dt.load_measured(open_session(simulate_dossier(twin, Path(tmp) / "replay", options).session))
-        return heldout_gap(replay, dt.simulate_all(twin, replay))
+        sim = dt.simulate_all(twin, replay)
+        return heldout_gap(replay, sim), (reestimate(twin, params, replay, sim) if params else [])
 
 
 @dataclass(frozen=True)
@@ -96,6 +133,9 @@ class Floor:
     gap of one more session of the same twin — the floor the gap is compared with (discrepancy README §3, §4)."""
 
     replays_N: tuple[float, ...]
+    #: per replay, the identified values estimated again on it (:func:`reestimate`), in the order of ``params``
+    estimates: tuple[tuple[float, ...], ...] = ()
+    params: tuple[Parameter, ...] = ()
 
     @property
     def log_centre_scale(self) -> tuple[float, float]:
@@ -129,8 +169,22 @@ class Floor:
         return float(sps.t.sf((np.log(gap) - m) / (s * np.sqrt(1 + 1 / k)), k - 1))
 
 
-def replay_floors(twin: TwinFile, durations: dict[str, float], replays: int = FLOOR_REPLAYS) -> Floor | None:
+    def uncertainty(self, j: int) -> tuple[float, tuple[float, float]]:
+        """The ``j``-th parameter's standard error and 95 % interval from the replays (a parametric bootstrap: the replays
+        are sessions of the updated twin, so each re-estimate's error is one draw of the identification's error, path
+        reconstruction included): ``s = √(mean (p*ₖ − p̂)²)`` over the K replays (bias included) and
+        ``p̂ ± t₀.₉₇₅,K · s`` (discrepancy README §3, uncertainty)."""
+        v = self.params[j].value
+        err = np.array([e[j] for e in self.estimates]) - v
+        s = float(np.sqrt(np.mean(err ** 2)))
+        half = float(sps.t.ppf(0.975, len(err))) * s
+        return s, (v - half, v + half)
+
+
+def replay_floors(twin: TwinFile, durations: dict[str, float], replays: int = FLOOR_REPLAYS,
+                  params: tuple[Parameter, ...] = ()) -> Floor | None:
     """:func:`replay_floor` for seeds ``0 … replays − 1`` (discrepancy README §4, the floor); None when nothing can be replayed."""
     if not durations:
         return None
-    return Floor(tuple(replay_floor(twin, durations, seed) for seed in range(replays)))
+    runs = [replay_floor(twin, durations, seed, params) for seed in range(replays)]
+    return Floor(tuple(g for g, _ in runs), tuple(tuple(e) for _, e in runs), params)

@@ -27,7 +27,6 @@ from haptify_tools.twin.model import TwinFile
 
 EXTENSIONS = 2           # grid extensions when the best grid point is at an end
 XATOL_LOG = 2e-4         # the continuous refinement stops within 0.02 % of the optimum (Brent, in log p)
-SLOPE_STEP = 0.02        # ±2 % around the optimum: the central difference that linearises δ(p) for the uncertainty
 
 
 @dataclass
@@ -206,7 +205,7 @@ def fit_candidate(cand: Candidate, twin: TwinFile, data: Dataset, design: st.Des
     pred = evals[p][1]
     se, interval = float("inf"), None
     if ps[0] < p < ps[-1]:       # bracketed: the uncertainty from the model linearised at p̂ (central difference)
-        lo, hi = p * (1 - SLOPE_STEP), p * (1 + SLOPE_STEP)
+        lo, hi = p * (1 - st.SLOPE_STEP), p * (1 + st.SLOPE_STEP)
         ev_many([lo, hi])
         slope = {k: (evals[hi][1][k] - evals[lo][1][k]) / (hi - lo) for k in pred}
         se, interval = st.bootstrap_linear(design, residual, pred, slope, p)

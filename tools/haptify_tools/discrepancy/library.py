@@ -2,13 +2,14 @@
 
 Every candidate is the twin's own component (:mod:`haptify_tools.twin.model`), switched on with ONE
 identified parameter — the same value on every drive axis — while its other parameters keep the values
-stored in the twin file (a disabled component still carries them). Its prediction of the residual is
+stored in the twin file (a disabled component still carries them); affine effects marked ``per_drive`` may be
+identified with one value per drive (:func:`.identify.fit_per_drive`). Its prediction of the residual is
 always obtained by simulation along the measured path, ``δ(p) = sim(twin + effect(p)) − sim(twin)``:
 
 - ``affine`` candidates (weights, inertia, friction levels, link length): δ is affine in the parameter,
   ``δ(p) = a + p·b``, so two simulations give the regressor and least squares gives ``p``;
 - ``search`` candidates (series-elastic stiffness, torque limit, cut-off trip force, backlash width, the
-  base-collision box's top height): a logarithmic grid of simulations and two parabolic refinements in
+  base-collision box's top height): a logarithmic grid of simulations, then a bounded Brent refinement in
   ``log p`` (a 1-D search). The base collision is fitted to the workspace sweep (:mod:`.workspace`),
   every other candidate to the hand-force residual.
 

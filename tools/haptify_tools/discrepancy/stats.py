@@ -37,6 +37,7 @@ P_MAX = 1e-3                # nested F test
 VALIDATION_MIN = 0.10       # the held-out validation residual energy must fall by at least 10 %
 STRUCTURE_SHARE = 0.25      # generic regression removing ≥ 25 % of held-out energy → structure left
 MAX_DECIMATION = 50
+SLOPE_STEP = 0.02           # ±2 % around an identified value: the central difference that linearises δ(p) there
 BOOTSTRAP_REPLICATES = 400  # block-bootstrap replicates of a parameter's uncertainty
 BOOTSTRAP_SEED = 0          # deterministic, like the rest of the workflow
 SUBBLOCK_MIN_ROWS = 50      # bootstrap units: runs of training rows of at least this many rows and 2 correlation lags

@@ -31,7 +31,7 @@ from haptify_tools.discrepancy import hand_path as hp
 from haptify_tools.discrepancy import stats as st
 from haptify_tools.discrepancy import workspace as ws
 from haptify_tools.discrepancy.floor import (
-    GAP_ALPHA, Floor, gap_above_floor, heldout_gap, replay_durations, replay_floors,
+    FLOOR_REPLAYS, GAP_ALPHA, Floor, Parameter, gap_above_floor, heldout_gap, replay_durations, replay_floors,
 )
 from haptify_tools.discrepancy.identify import Selection, pool_size, process_pool, select_effects
 from haptify_tools.discrepancy.library import NOT_OBSERVABLE
@@ -211,24 +211,24 @@ def workspace_gaps(sel: Selection) -> list[WorkspaceGap]:
     return out
 
 
-def annotate_twin(twin: TwinFile, sel: Selection) -> TwinFile:
-    """The updated twin with each identified parameter's uncertainty and evidence (± s.e., ΔBIC, p) in the effect's ``sources`` (discrepancy README §4)."""
+def annotate_twin(twin: TwinFile, result: DiscrepancyFile) -> TwinFile:
+    """The updated twin with each identified parameter's uncertainty and evidence (± s.e., 95 % interval, ΔBIC, p) in
+    the effect's ``sources`` (discrepancy README §4)."""
     data = twin_to_dict(twin)
-    for f in sel.accepted:
-        c = f.candidate
-        holder = data["rig"] if c.effect_id == "handle.connector_mass" else data["effects"]
-        if c.effect_id == ws.EFFECT_ID:
-            box = next(p for p in holder[c.effect_id]["primitives"] if p["shape"] == "box")
+    for a in result.accepted:
+        holder = data["rig"] if a.effect_id == "handle.connector_mass" else data["effects"]
+        if a.effect_id == ws.EFFECT_ID:
+            box = next(p for p in holder[a.effect_id]["primitives"] if p["shape"] == "box")
             key = f"primitives.{box['name']}.top"
         else:
-            key = c.parameter
-        if f.values is not None:
-            shown = "per drive " + ", ".join(f"{v:.6g} ± {e:.3g}" for v, e in zip(f.values, f.stderrs))
+            key = a.parameter
+        se = lambda e: f"{e:.3g}" if e is not None else "n/a"  # noqa: E731
+        if a.per_drive is not None:
+            shown = "per drive " + ", ".join(f"{v:.6g} ± {se(e)}" for v, e in zip(a.per_drive, a.per_drive_stderr or []))
         else:
-            shown = f"{f.value:.6g} ± " + (f"{f.stderr:.3g}" if np.isfinite(f.stderr) else "n/a")
-        holder[c.effect_id].setdefault("sources", {})[key] = (
-            f"identified by haptify discrepancy: {shown} {c.unit} (1 s.e.), "
-            f"ΔBIC {f.score.delta_bic:.1f}, p {f.score.p_value:.2g}")
+            shown = f"{a.value:.6g} ± {se(a.stderr)}" + (f" (95 % {a.ci95[0]:.6g} … {a.ci95[1]:.6g})" if a.ci95 else "")
+        holder[a.effect_id].setdefault("sources", {})[key] = (
+            f"identified by haptify discrepancy: {shown} {a.unit} (1 s.e.), ΔBIC {a.delta_bic:.1f}, p {a.p_value:.2g}")
     return twin_from_dict(data)
 
 
@@ -304,6 +304,37 @@ def residual_shape(shape: dict | None) -> ResidualShape | None:
         follows=best.state if best is not None else None, description=text, structured=shape["structured"])
 
 
+def replay_parameters(sel: Selection) -> tuple[Parameter, ...]:
+    """The accepted force effects' identified values, one per drive when identified per drive, for the replays to
+    estimate again (discrepancy README §3, uncertainty); the workspace effect is fitted to the sweep, not replayed."""
+    out: list[Parameter] = []
+    for f in sel.accepted:
+        if f.candidate.scope == "workspace":
+            continue
+        if f.values is not None:
+            out += [Parameter(f.candidate, i, v) for i, v in enumerate(f.values)]
+        else:
+            out.append(Parameter(f.candidate, None, f.value))
+    return tuple(out)
+
+
+def _replay_uncertainty(accepted: list[AcceptedEffect], floor: Floor) -> list[AcceptedEffect]:
+    """``accepted`` with the replays' standard errors and 95 % intervals (:meth:`.floor.Floor.uncertainty`)."""
+    out = []
+    for a in accepted:
+        idx = [j for j, q in enumerate(floor.params) if q.candidate.effect_id == a.effect_id]
+        if not idx or not floor.estimates:
+            out.append(a)
+            continue
+        unc = [floor.uncertainty(j) for j in idx]
+        if a.per_drive is not None:
+            out.append(a.model_copy(update={"per_drive_stderr": [se for se, _ in unc]}))
+        else:
+            se, (lo, hi) = unc[0]
+            out.append(a.model_copy(update={"stderr": se, "ci95": [lo, hi]}))
+    return out
+
+
 def with_floor(result: DiscrepancyFile, floor: Floor | None) -> DiscrepancyFile:
     """``result`` with its floor (:func:`.floor.replay_floors`; None: no trial could be replayed), the held-out gaps above it,
     the gap test and the verdict it decides (discrepancy README §3, §4)."""
@@ -313,6 +344,7 @@ def with_floor(result: DiscrepancyFile, floor: Floor | None) -> DiscrepancyFile:
     p = floor.p_value(result.heldout_gap_after_N)
     significant = p < GAP_ALPHA
     return result.model_copy(update={
+        "accepted": _replay_uncertainty(result.accepted, floor),
         "floor_N": bound, "floor_replays_N": list(floor.replays_N), "floor_median_N": floor.median_N,
         "gap_p_value": p, "gap_significant": significant,
         "verdict": verdict_of(bool(result.accepted), result.structure.structured, significant),
@@ -327,7 +359,7 @@ def assess(twin: TwinFile, trials: list[dt.MeasuredTrial], durations: dict[str, 
     (from replays of ``durations``, :func:`.floor.replay_durations`) and verdict (discrepancy README §2–4)."""
     sel = select_effects(twin, trials, max_effects=max_effects, log=log, workers=workers, sweeps=sweeps)
     result = build_result(session_id, twin, trials, sel)
-    return with_floor(result, replay_floors(sel.twin, durations) if trials else None), sel
+    return with_floor(result, replay_floors(sel.twin, durations, params=replay_parameters(sel)) if trials else None), sel
 
 
 def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | None = None, *, max_effects: int = 5,
@@ -356,7 +388,7 @@ def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | 
             pending = None
             if trials and pool_size(workers) > 1:
                 pool = stack.enter_context(process_pool(1))
-                pending = pool.submit(replay_floors, sel.twin, durations)
+                pending = pool.submit(replay_floors, sel.twin, durations, FLOOR_REPLAYS, replay_parameters(sel))
             figures = plan = None
             if build is not None and report:
                 from haptify_tools.discrepancy.report import write_figures
@@ -370,11 +402,11 @@ def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | 
             if pending is not None:
                 floor = pending.result()
             else:
-                floor = replay_floors(sel.twin, durations) if trials else None
+                floor = replay_floors(sel.twin, durations, params=replay_parameters(sel)) if trials else None
         result = with_floor(result, floor)
         if build is not None:
             files = {"twin": "twin.json"}
-            write_twin(annotate_twin(sel.twin, sel), build / "twin.json")
+            write_twin(annotate_twin(sel.twin, result), build / "twin.json")
             if figures is not None:
                 from haptify_tools.discrepancy.report import write_report
 
