@@ -33,8 +33,8 @@ CASES = {
 }
 
 
-def one(effect: str, seed: int, folder: Path) -> tuple[float, float, tuple[float, float]]:
-    """(truth, estimate, 95 % interval) for one case."""
+def one(effect: str, seed: int, folder: Path) -> tuple[float, float, float, float]:
+    """(truth, estimate, 95 % interval low, high) for one case, printed as a line."""
     parameter, low, high, protocol, seconds = CASES[effect]
     value = float(np.random.default_rng(2000 + seed).uniform(low, high))
     truth = set_param(set_param(preset("touch"), f"{effect}.{parameter}", value), f"{effect}.enabled", True)
@@ -42,34 +42,33 @@ def one(effect: str, seed: int, folder: Path) -> tuple[float, float, tuple[float
                             durations={protocol: seconds, "rig.handle_calibration": 12.0}, rig_trials=False, workers=1)
     trials = load_measured(open_session(simulate_dossier(truth, folder / f"{effect}-{seed}", opt).session))
     sel = select_effects(disable(preset("touch"), effect), trials, max_effects=1, library=(candidate(effect),))
-    fit = sel.rounds[0].fits[0]
-    if not sel.accepted:
-        return value, fit.value, (-np.inf, np.inf)
-    floor = replay_floors(sel.twin, {protocol: seconds}, params=replay_parameters(sel))
-    return value, fit.value, floor.uncertainty(0)[1]
+    est = sel.rounds[0].fits[0].value
+    lo, hi = -np.inf, np.inf
+    if sel.accepted:
+        lo, hi = replay_floors(sel.twin, {protocol: seconds}, params=replay_parameters(sel)).uncertainty(0)[1]
+    print(f"{effect:24s} seed {seed:2d}: truth {value:.5g} estimate {est:.5g} 95 % [{lo:.5g}, {hi:.5g}] "
+          f"{'covered' if lo <= value <= hi else 'MISSED '} error {100 * (est / value - 1):+.2f} %", flush=True)
+    return value, est, lo, hi
 
 
-def main() -> int:
-    n = int(sys.argv[1]) if len(sys.argv) > 1 else 30
-    effects = sys.argv[2].split(",") if len(sys.argv) > 2 else list(CASES)
+def summary(effect: str, rows: np.ndarray, seconds: float) -> str:
+    """Coverage, median and worst relative error, median interval width of ``rows`` (truth, estimate, low, high)."""
+    covered = np.mean((rows[:, 2] <= rows[:, 0]) & (rows[:, 0] <= rows[:, 3]))
+    err = np.abs(rows[:, 1] / rows[:, 0] - 1)
+    width = np.median((rows[:, 3] - rows[:, 2]) / rows[:, 0])
+    return (f"{effect}: coverage {100 * covered:.0f} % of {len(rows)}, median relative error {100 * np.median(err):.2f} %, "
+            f"worst {100 * err.max():.2f} %, median interval width {100 * width:.2f} % of the value, {seconds:.1f} s a case")
+
+
+def main(argv: list[str]) -> int:
+    n = int(argv[0]) if argv else 30
     with tempfile.TemporaryDirectory(prefix="bench-discrepancy-coverage-") as tmp:
-        for effect in effects:
+        for effect in (argv[1].split(",") if len(argv) > 1 else CASES):
             t0 = time.perf_counter()
-            rows = []
-            for seed in range(n):
-                truth, est, (lo, hi) = one(effect, seed, Path(tmp))
-                rows.append((truth, est, lo, hi))
-                print(f"{effect:24s} seed {seed:2d}: truth {truth:.5g} estimate {est:.5g} 95 % [{lo:.5g}, {hi:.5g}] "
-                      f"{'covered' if lo <= truth <= hi else 'MISSED '} error {100 * (est / truth - 1):+.2f} %", flush=True)
-            r = np.array(rows)
-            covered = np.mean((r[:, 2] <= r[:, 0]) & (r[:, 0] <= r[:, 3]))
-            err = np.abs(r[:, 1] / r[:, 0] - 1)
-            width = np.median((r[:, 3] - r[:, 2]) / r[:, 0])
-            print(f"{effect}: coverage {100 * covered:.0f} % of {n}, median relative error {100 * np.median(err):.2f} %, "
-                  f"worst {100 * err.max():.2f} %, median interval width {100 * width:.2f} % of the value, "
-                  f"{(time.perf_counter() - t0) / n:.1f} s a case", flush=True)
+            rows = np.array([one(effect, seed, Path(tmp)) for seed in range(n)])
+            print(summary(effect, rows, (time.perf_counter() - t0) / n), flush=True)
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(main(sys.argv[1:]))
