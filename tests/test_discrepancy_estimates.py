@@ -48,3 +48,20 @@ def test_an_off_grid_series_elasticity_is_found_within_one_percent_and_its_inter
     assert abs(first.value / 13.7 - 1) < 0.01
     assert first.ci95[0] <= 13.7 <= first.ci95[1]
     assert first.ci95[1] - first.ci95[0] < 0.1 * 13.7          # honest, and still informative
+
+
+def test_the_replays_interval_is_the_t_interval_of_their_root_mean_square_error():
+    """Known errors ±0.1, ±0.2, 0, 0 around p̂ = 10 over six replays: s = √(0.1/6), half width t₀.₉₇₅,₆ · s; a replay
+    that cannot determine the value (NaN) leaves no interval."""
+    from scipy import stats
+
+    from haptify_tools.discrepancy.floor import Floor, Parameter
+    from haptify_tools.discrepancy.library import candidate
+
+    q = Parameter(candidate("friction.coulomb"), None, 10.0)
+    floor = Floor((0.01,) * 6, tuple((v,) for v in (10.1, 9.9, 10.2, 9.8, 10.0, 10.0)), (q,))
+    s, (lo, hi) = floor.uncertainty(0)
+    assert np.isclose(s, np.sqrt(0.1 / 6))
+    assert np.isclose(hi - 10.0, stats.t.ppf(0.975, 6) * s) and np.isclose(10.0 - lo, hi - 10.0)
+    broken = Floor((0.01,) * 6, tuple((v,) for v in (10.1, float("nan"), 10.2, 9.8, 10.0, 10.0)), (q,))
+    assert broken.uncertainty(0) == (float("inf"), (-float("inf"), float("inf")))

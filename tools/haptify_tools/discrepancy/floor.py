@@ -96,7 +96,8 @@ class Parameter:
 def reestimate(twin: TwinFile, params: tuple[Parameter, ...], trials: list[dt.MeasuredTrial], sim: dict) -> list[float]:
     """The values ``params`` would be identified at on ``trials`` (simulated ``sim`` by ``twin``, which holds them): one
     Gauss–Newton step from the twin's values, the residual's slope in each parameter by central differences at ±2 %
-    (two simulations a parameter), all parameters fitted together on the training rows (discrepancy README §3)."""
+    (two simulations a parameter), all parameters fitted together on the training rows (discrepancy README §3); NaN
+    for a value the replay's rows do not determine."""
     residual = {tr.trial_id: tr.force - sim[tr.trial_id] for tr in trials}
     design = st.make_design(trials, residual)
     steps = [st.SLOPE_STEP * abs(q.value) for q in params]
@@ -107,8 +108,8 @@ def reestimate(twin: TwinFile, params: tuple[Parameter, ...], trials: list[dt.Me
         lo, hi = next(sims), next(sims)
         slopes.append({k: (hi[k] - lo[k]) / (2 * h) for k in residual})
     zero = {k: np.zeros_like(v) for k, v in residual.items()}
-    step, _ = st.affine_fit_many(design, residual, zero, slopes)
-    return [q.value + float(d) for q, d in zip(params, step)]
+    step, se = st.affine_fit_many(design, residual, zero, slopes)
+    return [q.value + float(d) if np.isfinite(e) else float("nan") for q, d, e in zip(params, step, se)]
 
 
 def replay_floor(twin: TwinFile, durations: dict[str, float], seed: int = REPLAY_SEED,
@@ -176,6 +177,8 @@ class Floor:
         ``p̂ ± t₀.₉₇₅,K · s`` (discrepancy README §3, uncertainty)."""
         v = self.params[j].value
         err = np.array([e[j] for e in self.estimates]) - v
+        if not np.all(np.isfinite(err)):        # a replay that cannot determine the value: no honest interval
+            return float("inf"), (-float("inf"), float("inf"))
         s = float(np.sqrt(np.mean(err ** 2)))
         half = float(sps.t.ppf(0.975, len(err))) * s
         return s, (v - half, v + half)

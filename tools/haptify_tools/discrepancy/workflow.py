@@ -328,10 +328,10 @@ def _replay_uncertainty(accepted: list[AcceptedEffect], floor: Floor) -> list[Ac
             continue
         unc = [floor.uncertainty(j) for j in idx]
         if a.per_drive is not None:
-            out.append(a.model_copy(update={"per_drive_stderr": [se for se, _ in unc]}))
+            out.append(a.model_copy(update={"per_drive_stderr": [_finite(se) for se, _ in unc]}))
         else:
             se, (lo, hi) = unc[0]
-            out.append(a.model_copy(update={"stderr": se, "ci95": [lo, hi]}))
+            out.append(a.model_copy(update={"stderr": _finite(se), "ci95": [lo, hi] if np.isfinite(se) else None}))
     return out
 
 
