@@ -236,7 +236,8 @@ def fit_per_drive(shared: Fit, twin: TwinFile, data: Dataset, design: st.Design,
     if not nested.accepted():
         return replace(shared, simulations=shared.simulations + len(twins), per_drive_score=nested)
     return Fit(cand, float(np.mean(p)), float(np.sqrt(np.sum(se ** 2)) / n_d), pred, st.score(design, residual, pred, k=n_d),
-               shared.simulations + len(twins), [float(x) for x in p], [float(x) for x in se], nested)
+               shared.simulations + len(twins), values=[float(x) for x in p], stderrs=[float(x) for x in se],
+               per_drive_score=nested)
 
 
 def select_effects(twin: TwinFile, trials: list[MeasuredTrial], max_effects: int = 5,
