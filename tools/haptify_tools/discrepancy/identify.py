@@ -317,6 +317,4 @@ def _select(twin, forces: Dataset, sweeps, max_effects, library, log) -> Selecti
     structure = (st.structure_left(rounds[-1].design, rounds[-1].residual) if trials else
                  {"heldout_share": 0.0, "f_p_value": 1.0, "ljung_box_p_value": 1.0, "structured": False})
     shape = characterise(rounds[-1].design, rounds[-1].residual, current) if trials else None
-    if shape is not None:       # structure that the generic regression misses (a periodic force) is structure too
-        structure["structured"] = bool(structure["structured"] or shape["structured"])
     return Selection(rounds, accepted, current, initial, base, structure, sweep_data, initial_w, base_w, shape)

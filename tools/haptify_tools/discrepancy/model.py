@@ -150,7 +150,8 @@ class ResidualShape(_M):
     states: list[StateShape] = Field(description="Every state's best shape, the best first.")
     follows: str | None = Field(description="The state the residual follows best (null without rows to judge).")
     description: str
-    structured: bool = Field(description="The best shape's held-out R² ≥ 0.25, or the constant removes ≥ 25 %.")
+    structured: bool = Field(description="The best shape's held-out R² ≥ 0.25, or the constant removes ≥ 25 % (it counts "
+                             "in the verdict when the gap is above the floor's median).")
 
 
 class WorkspaceRegion(_M):
