@@ -12,19 +12,21 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
+from scipy.optimize import minimize_scalar
 
 from haptify_tools.discrepancy import stats as st
 from haptify_tools.discrepancy import workspace as ws
 from haptify_tools.discrepancy.data import MeasuredTrial, share_trials, simulate_many
 from haptify_tools.discrepancy.library import LIBRARY, Candidate
+from haptify_tools.discrepancy.shape import characterise
 from haptify_tools.twin.model import TwinFile
 
-REFINEMENTS = 2          # parabolic steps in log p after the grid
 EXTENSIONS = 2           # grid extensions when the best grid point is at an end
+XATOL_LOG = 2e-4         # the continuous refinement stops within 0.02 % of the optimum (Brent, in log p)
 
 
 @dataclass
@@ -70,6 +72,16 @@ class Fit:
     predicted: dict[str, np.ndarray]
     score: st.Score
     simulations: int
+    interval: tuple[float, float] | None = None     # 95 % block-bootstrap interval (:func:`.stats.bootstrap_linear`)
+    values: list[float] | None = None       # per drive (:func:`fit_per_drive`); ``value`` is then their mean
+    stderrs: list[float] | None = None
+    #: per drive against shared: the nested scores of the per-drive values on the shared fit's residual
+    per_drive_score: st.Score | None = None
+
+    @property
+    def applied(self) -> float | list[float]:
+        """What the twin's parameter is set to: the per-drive values, or the one shared value."""
+        return self.values if self.values is not None else self.value
 
 
 @dataclass
@@ -98,6 +110,7 @@ class Selection:
     sweeps: Dataset | None = None
     initial_sweep: dict[str, np.ndarray] | None = None
     final_sweep: dict[str, np.ndarray] | None = None
+    shape: dict | None = None       # the residual left, characterised (:func:`.shape.characterise`)
 
 
 def _minus(a: dict, b: dict) -> dict:
@@ -157,8 +170,9 @@ def fit_candidate(cand: Candidate, twin: TwinFile, data: Dataset, design: st.Des
             a = {k: da[k] - pa * b[k] for k in da}
             p, se = st.affine_fit(design, residual, a, b)
         pred = {k: a[k] + p * b[k] for k in a}
-        return Fit(cand, p, se, pred, st.score(design, residual, pred), sims)
-    # 1-D search on a logarithmic grid, then parabolic refinement in log p
+        se, interval = st.bootstrap_linear(design, residual, pred, b, p)
+        return Fit(cand, p, se, pred, st.score(design, residual, pred), sims, interval=interval)
+    # 1-D search on a logarithmic grid, then a bounded Brent refinement in log p
     evals: dict[float, tuple[float, dict]] = {}
 
     def ev_many(ps: list[float]) -> None:
@@ -181,43 +195,49 @@ def fit_candidate(cand: Candidate, twin: TwinFile, data: Dataset, design: st.Des
             ev(ps[-1] * np.exp(step))
         else:
             break
-    for _ in range(REFINEMENTS):
-        ps = sorted(evals)
-        i = min(range(len(ps)), key=lambda j: evals[ps[j]][0])
-        if i == 0 or i == len(ps) - 1:
-            break
-        x = np.log([ps[i - 1], ps[i], ps[i + 1]])
-        y = [evals[ps[j]][0] for j in (i - 1, i, i + 1)]
-        den = (x[1] - x[0]) * (y[1] - y[2]) - (x[1] - x[2]) * (y[1] - y[0])
-        if den == 0:
-            break
-        xv = x[1] - 0.5 * ((x[1] - x[0]) ** 2 * (y[1] - y[2]) - (x[1] - x[2]) ** 2 * (y[1] - y[0])) / den
-        pv = float(np.exp(np.clip(xv, x[0], x[2])))
-        if any(abs(pv / q - 1.0) < 1e-3 for q in ps):
-            break
-        ev(pv)
+    ps = sorted(evals)
+    i = min(range(len(ps)), key=lambda j: evals[ps[j]][0])
+    if 0 < i < len(ps) - 1:
+        # continuous refinement to the optimum inside the bracket (not a grid point): bounded Brent in log p
+        minimize_scalar(lambda x: ev(float(np.exp(x))), bounds=(np.log(ps[i - 1]), np.log(ps[i + 1])), method="bounded",
+                        options={"xatol": XATOL_LOG})
     p = min(evals, key=lambda x: evals[x][0])
     pred = evals[p][1]
-    n_rows = len(design.stack(residual, "train"))
-    se = _curvature_error(evals, p, n_rows) * np.sqrt(design.decimation)
-    return Fit(cand, p, se, pred, st.score(design, residual, pred), len(evals))
+    se, interval = float("inf"), None
+    if ps[0] < p < ps[-1]:       # bracketed: the uncertainty from the model linearised at p̂ (central difference)
+        lo, hi = p * (1 - st.SLOPE_STEP), p * (1 + st.SLOPE_STEP)
+        ev_many([lo, hi])
+        slope = {k: (evals[hi][1][k] - evals[lo][1][k]) / (hi - lo) for k in pred}
+        se, interval = st.bootstrap_linear(design, residual, pred, slope, p)
+    return Fit(cand, p, se, pred, st.score(design, residual, pred), len(evals), interval=interval)
 
 
-def _curvature_error(evals: dict[float, tuple[float, dict]], p: float, n: int) -> float:
-    """Standard error of a searched parameter from the curvature of the training SSE at its minimum:
-    ``SSE(p) ≈ SSE_min + c·(p − p̂)²`` through the best point and its two neighbours gives
-    ``c = Σ(∂δ/∂p)²`` (Gauss–Newton), so ``s.e. = √(SSE_min/(n − 1) / c)`` over ``n`` rows (the caller
-    inflates it by √D for correlated rows); ∞ when the minimum is not bracketed."""
-    ps = sorted(evals)
-    i = ps.index(p)
-    if i == 0 or i == len(ps) - 1:
-        return float("inf")
-    x = np.array(ps[i - 1:i + 2])
-    y = np.array([evals[q][0] for q in x])
-    c = np.polyfit(x, y, 2)[0]
-    if c <= 0:
-        return float("inf")
-    return float(np.sqrt(evals[p][0] / max(n - 1, 1) / c))
+def fit_per_drive(shared: Fit, twin: TwinFile, data: Dataset, design: st.Design, residual: dict, base: dict) -> Fit:
+    """The per-drive version of an affine fit (discrepancy README §2, per drive): ``δ(p₁…p_n) = a + Σ p_j·b_j``, ``b_j``
+    from the twin with drive ``j`` alone at twice the probe (n + 1 simulations), least squares for the values. Kept —
+    the returned fit has ``values`` — only when it earns its n − 1 extra parameters by the acceptance rule itself
+    (ΔBIC, F test, validation) on the shared fit's residual; otherwise ``shared`` is returned with that score attached.
+    """
+    cand = shared.candidate
+    n_d = len(getattr(twin.effect(cand.effect_id), cand.parameter))
+    if not cand.per_drive or cand.kind != "affine" or n_d < 2:
+        return shared
+    p1 = cand.probe(twin)
+    p2 = 2.0 * p1
+    twins = [cand.apply(twin, [p1] * n_d)] + [cand.apply(twin, [p2 if j == i else p1 for j in range(n_d)]) for i in range(n_d)]
+    sims = data.simulate_many(twins, cand.scope == "active", base)
+    d1 = _minus(sims[0], base)
+    bs = [{k: (sims[1 + i][k] - sims[0][k]) / (p2 - p1) for k in d1} for i in range(n_d)]
+    a = {k: d1[k] - p1 * sum(b[k] for b in bs) for k in d1}
+    p, se = st.affine_fit_many(design, residual, a, bs)
+    p = np.maximum(p, cand.lower + 1e-12 * p1)
+    pred = {k: a[k] + sum(pj * b[k] for pj, b in zip(p, bs)) for k in a}
+    nested = st.score(design, _minus(residual, shared.predicted), _minus(pred, shared.predicted), k=n_d - 1)
+    if not nested.accepted():
+        return replace(shared, simulations=shared.simulations + len(twins), per_drive_score=nested)
+    return Fit(cand, float(np.mean(p)), float(np.sqrt(np.sum(se ** 2)) / n_d), pred, st.score(design, residual, pred, k=n_d),
+               shared.simulations + len(twins), values=[float(x) for x in p], stderrs=[float(x) for x in se],
+               per_drive_score=nested)
 
 
 def select_effects(twin: TwinFile, trials: list[MeasuredTrial], max_effects: int = 5,
@@ -276,19 +296,22 @@ def _select(twin, forces: Dataset, sweeps, max_effects, library, log) -> Selecti
                 else (c, current, forces, design, residual, base) for c in cands]
         fits = [fit_candidate(*job) for job in jobs]
         fits.sort(key=lambda f: -f.score.delta_bic)
+        if fits[0].candidate.per_drive:      # the best effect, per drive when the data support it
+            fits[0] = fit_per_drive(fits[0], current, forces, design, residual, base)
         best = fits[0]
         ok = best.score.accepted()
         ties = [f.candidate.effect_id for f in fits[1:] if f.score.accepted()
                 and f.score.delta_bic >= 0.9 * best.score.delta_bic]
         rounds.append(Round(residual, design, fits, best, ok, ties, workspace_residual=residual_w))
         if log:
-            log(f"round {len(rounds)}: best {best.candidate.effect_id} = {best.value:.4g} {best.candidate.unit}, "
+            shown = ("[" + ", ".join(f"{v:.4g}" for v in best.values) + "]") if best.values else f"{best.value:.4g}"
+            log(f"round {len(rounds)}: best {best.candidate.effect_id} = {shown} {best.candidate.unit}, "
                 f"ΔBIC {best.score.delta_bic:.1f}, p {best.score.p_value:.2g}, "
                 f"validation residual {-100 * best.score.validation_improvement:+.0f} % → {'accepted' if ok else 'rejected'}")
         if not ok:
             break
         accepted.append(best)
-        current = best.candidate.apply(current, best.value)
+        current = best.candidate.apply(current, best.applied)
         if best.candidate.scope == "workspace":
             base_w = sweep_data.simulate(current)
         else:
@@ -298,4 +321,5 @@ def _select(twin, forces: Dataset, sweeps, max_effects, library, log) -> Selecti
                 base_w = sweep_data.simulate(current)
     structure = (st.structure_left(rounds[-1].design, rounds[-1].residual) if trials else
                  {"heldout_share": 0.0, "f_p_value": 1.0, "ljung_box_p_value": 1.0, "structured": False})
-    return Selection(rounds, accepted, current, initial, base, structure, sweep_data, initial_w, base_w)
+    shape = characterise(rounds[-1].design, rounds[-1].residual, current) if trials else None
+    return Selection(rounds, accepted, current, initial, base, structure, sweep_data, initial_w, base_w, shape)

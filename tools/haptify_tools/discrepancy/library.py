@@ -2,13 +2,14 @@
 
 Every candidate is the twin's own component (:mod:`haptify_tools.twin.model`), switched on with ONE
 identified parameter — the same value on every drive axis — while its other parameters keep the values
-stored in the twin file (a disabled component still carries them). Its prediction of the residual is
+stored in the twin file (a disabled component still carries them); affine effects marked ``per_drive`` may be
+identified with one value per drive (:func:`.identify.fit_per_drive`). Its prediction of the residual is
 always obtained by simulation along the measured path, ``δ(p) = sim(twin + effect(p)) − sim(twin)``:
 
 - ``affine`` candidates (weights, inertia, friction levels, link length): δ is affine in the parameter,
   ``δ(p) = a + p·b``, so two simulations give the regressor and least squares gives ``p``;
 - ``search`` candidates (series-elastic stiffness, torque limit, cut-off trip force, backlash width, the
-  base-collision box's top height): a logarithmic grid of simulations and two parabolic refinements in
+  base-collision box's top height): a logarithmic grid of simulations, then a bounded Brent refinement in
   ``log p`` (a 1-D search). The base collision is fitted to the workspace sweep (:mod:`.workspace`),
   every other candidate to the hand-force residual.
 
@@ -51,16 +52,20 @@ class Candidate:
     commanded_scale: bool = False
     #: secant re-linearisations of an affine fit (for effects that are affine only to first order)
     relinearise: int = 0
+    #: the parameter holds one value per drive and may be identified per drive (an affine fit, discrepancy README §2)
+    per_drive: bool = False
 
-    def apply(self, twin: TwinFile, value: float) -> TwinFile:
-        """A copy of ``twin`` with this effect on and its parameter set to ``value`` (every axis)."""
+    def apply(self, twin: TwinFile, value: float | list[float]) -> TwinFile:
+        """A copy of ``twin`` with this effect on and its parameter set to ``value`` (one number: every axis; a list:
+        one value per drive)."""
         if self.effect_id == ws.EFFECT_ID:
             return ws.apply(twin, value)
         t = twin
         if self.effect_id == "drive.force_cutoff":      # keep the re-arm level below the new trip level
             rearm = min(t.effects.drive_force_cutoff.rearm_force_N, 0.5 * float(value))
             t = set_param(t, "drive.force_cutoff.rearm_force_N", rearm)
-        t = set_param(t, f"{self.effect_id}.{self.parameter}", float(value))
+        v = [float(x) for x in value] if isinstance(value, (list, tuple, np.ndarray)) else float(value)
+        t = set_param(t, f"{self.effect_id}.{self.parameter}", v)
         return set_param(t, f"{self.effect_id}.enabled", True)
 
     def available(self, twin: TwinFile) -> bool:
@@ -113,11 +118,14 @@ class _BoxTop:
 #: The library, in the order of the simulator's effect ids (issue 8).
 LIBRARY: tuple[Candidate, ...] = (
     Candidate("gravity", "g_m_per_s2", "m/s²", "affine", "all", _mean_of("gravity", "g_m_per_s2", 9.80665)),
-    Candidate("inertia", "rotor_inertia_kg_m2", "kg·m²", "affine", "all", _mean_of("inertia", "rotor_inertia_kg_m2", 1e-6)),
-    Candidate("friction.coulomb", "torque_Nm", "N·m", "affine", "all", _mean_of("friction.coulomb", "torque_Nm", 0.03)),
+    Candidate("inertia", "rotor_inertia_kg_m2", "kg·m²", "affine", "all", _mean_of("inertia", "rotor_inertia_kg_m2", 1e-6),
+              per_drive=True),
+    Candidate("friction.coulomb", "torque_Nm", "N·m", "affine", "all", _mean_of("friction.coulomb", "torque_Nm", 0.03),
+              per_drive=True),
     Candidate("friction.viscous", "damping_Nms_per_rad", "N·m·s/rad", "affine", "all",
-              _mean_of("friction.viscous", "damping_Nms_per_rad", 0.01)),
-    Candidate("friction.stribeck", "excess_torque_Nm", "N·m", "affine", "all", _mean_of("friction.stribeck", "excess_torque_Nm", 0.01)),
+              _mean_of("friction.viscous", "damping_Nms_per_rad", 0.01), per_drive=True),
+    Candidate("friction.stribeck", "excess_torque_Nm", "N·m", "affine", "all", _mean_of("friction.stribeck", "excess_torque_Nm", 0.01),
+              per_drive=True),
     Candidate("drive.series_elasticity", "stiffness_Nm_per_rad", "N·m/rad", "search", "active",
               _mean_of("drive.series_elasticity", "stiffness_Nm_per_rad", 10.0)),
     Candidate("drive.torque_saturation", "max_torque_Nm", "N·m", "search", "active",

@@ -25,7 +25,20 @@ class Place(_M):
     samples: int
 
 
-class CandidateFit(_M):
+class _Estimate(_M):
+    """A parameter's 95 % interval, and the per-drive values of an effect whose parameter holds one value per drive
+    (discrepancy README §2, per drive; §3, uncertainty)."""
+
+    ci95: list[float] | None = Field(None, description="95 % block-bootstrap interval of value [low, high] in unit (null "
+                                     "when not estimable: a per-drive fit, or a search whose minimum is at the grid's end).")
+    per_drive: list[float] | None = Field(None, description="The values per drive axis when identified per drive "
+                                          "(value is then their mean); null: one value shared by every drive.")
+    per_drive_stderr: list[float | None] | None = None
+    per_drive_delta_bic: float | None = Field(None, description="ΔBIC of the per-drive values over the shared one (on "
+                                              "the shared fit's residual, n − 1 extra parameters); null when not tried.")
+
+
+class CandidateFit(_Estimate):
     """A library effect fitted to one round's residual: value ± s.e. in ``unit``, ΔBIC, F-test p, validation and test shares, 0–1 (discrepancy README §2, §3)."""
 
     effect_id: str
@@ -50,7 +63,7 @@ class RoundResult(_M):
     near_ties: list[str] = Field(default_factory=list, description="Other accepted candidates within 10 % of the best ΔBIC (ambiguous).")
 
 
-class AcceptedEffect(_M):
+class AcceptedEffect(_Estimate):
     """An effect the workflow added to the twin, in the order it was accepted: value ± s.e. in ``unit``, ΔBIC, p, share explained 0–1 (discrepancy README §3, §4)."""
 
     order: int
@@ -97,6 +110,50 @@ class BenchmarkGap(_M):
     twin_after: float
 
 
+class BenchmarkNotComputed(_M):
+    """A benchmark the reference's operator could not compute on one trial's force, with the operator's code (discrepancy README §4)."""
+
+    metrics: list[str] = Field(description="The benchmarks of the trial's protocol left out (one operator computes them together).")
+    trial_id: str
+    force: Literal["measured", "twin before", "twin after"]
+    code: str = Field(description="The operator's error code (schemas/1.0/codes.json).")
+    message: str
+
+
+class ResidualCell(_M):
+    """Where the residual left lives: one protocol × force axis, its held-out RMS about each trial's mean (N) and share of that energy."""
+
+    protocol: str
+    channel: Literal["fx", "fy", "fz"]
+    heldout_rms_N: float
+    share: float
+
+
+class StateShape(_M):
+    """The residual against one state (discrepancy README §3, characterising the residual)."""
+
+    state: str = Field(description="x, y, z (hand position, W, m), vx…vz, speed (m/s), ax…az (m/s²), q1…q3 (the twin's arm "
+                       "angles, rad) or time (s).")
+    kind: Literal["binned", "periodic"]
+    heldout_r2: float = Field(description="1 − SSE/SSE of a constant per trial and axis, on the held-out rows (all axes).")
+    description: str
+    period: float | None = Field(None, description="Periodic shapes: the period, in the state's unit (m or rad).")
+    amplitude_N: float | None = Field(None, description="Periodic shapes: the force amplitude, N (all axes).")
+    amplitude_per_axis_N: list[float] = Field(default_factory=list)
+
+
+class ResidualShape(_M):
+    """What the residual left looks like: where it lives and which state it follows best (discrepancy README §3)."""
+
+    where: list[ResidualCell]
+    offset_share: float = Field(description="Share of the held-out residual energy a constant per trial and axis removes.")
+    states: list[StateShape] = Field(description="Every state's best shape, the best first.")
+    follows: str | None = Field(description="The state the residual follows best (null without rows to judge).")
+    description: str
+    structured: bool = Field(description="The best shape's held-out R² ≥ 0.25, or the constant removes ≥ 25 % (it counts "
+                             "in the verdict when the gap is above the floor's median).")
+
+
 class WorkspaceRegion(_M):
     """Position residual RMS of the workspace sweep in one region (tertiles of the sweep per world axis), m (discrepancy README §1, §4)."""
 
@@ -126,8 +183,10 @@ class DiscrepancyFile(_M):
     session_id: str
     twin_name: str
     verdict: Literal["explained", "unexplained residual", "no discrepancy"] = Field(
-        description="explained: effects accepted and no structure left; unexplained residual: structure left that "
-                    "no library effect explains; no discrepancy: nothing accepted and no structure left.")
+        description="explained: effects accepted, no structure left and the held-out gap not significantly above the "
+                    "floor; unexplained residual: structure left, or a held-out gap significantly above the floor, that "
+                    "no library effect explains (see `residual`); no discrepancy: nothing accepted, no structure left "
+                    "and the gap not significantly above the floor.")
     accepted: list[AcceptedEffect]
     rounds: list[RoundResult]
     structure: Structure
@@ -137,11 +196,21 @@ class DiscrepancyFile(_M):
     workspace_gaps: list[WorkspaceGap] = Field(default_factory=list)
     heldout_gap_before_N: float = Field(description="RMS force residual on the held-out blocks, all trials, before.")
     heldout_gap_after_N: float
-    floor_N: float | None = Field(None, description="Held-out gap of the updated twin against a replay of the session's "
-                                  "force protocols that it generated itself through the virtual rig (the method's "
-                                  "resolution: path reconstruction and sensor noise); null when no trial can be replayed.")
+    floor_N: float | None = Field(None, description="The floor: the one-sided 95 % upper prediction bound of the held-out "
+                                  "gap the updated twin leaves against replays of the session's force protocols that it "
+                                  "generated itself through the virtual rig (the method's resolution: path reconstruction "
+                                  "and sensor noise), from floor_replays_N; null when no trial can be replayed.")
     heldout_gap_above_floor_before_N: float | None = Field(None, description="√max(gap² − floor², 0) before (N).")
     heldout_gap_above_floor_after_N: float | None = Field(None, description="√max(gap² − floor², 0) after (N).")
+    floor_replays_N: list[float] = Field(default_factory=list, description="The held-out gap of each replay the floor "
+                                         "is made from (seeds 0, 1, …), N.")
+    floor_median_N: float | None = None
+    gap_p_value: float | None = Field(None, description="One-sided p-value of 'the held-out gap after is one more draw "
+                                      "of the floor' (Student-t predictive test on the replays' log gaps).")
+    gap_significant: bool | None = Field(None, description="gap_p_value < 0.05, i.e. the gap after is above floor_N.")
+    residual: ResidualShape | None = Field(None, description="The residual left, characterised (always computed; it "
+                                           "is what an 'unexplained residual' verdict reports instead of an effect).")
+    benchmarks_not_computed: list[BenchmarkNotComputed] = Field(default_factory=list)
     not_observable: dict[str, str] = Field(description="Library effect ids the force residual cannot reveal, and why.")
     hand_path: dict[str, Literal["motion capture + accelerometer", "motion capture"]] = Field(
         default_factory=dict, description="Per force trial id, what the path driving the twin came from: motion "

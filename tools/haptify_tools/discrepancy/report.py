@@ -117,6 +117,24 @@ def write_figures(folder: Path, trials: list[MeasuredTrial], sel: Selection) -> 
     return out
 
 
+def _residual_html(result: DiscrepancyFile) -> str:
+    """The gap test and the residual's description (discrepancy README §3)."""
+    out = ""
+    if result.gap_p_value is not None:
+        out += (f"<p>Held-out gap after {result.heldout_gap_after_N:.4g} N against the floor's 95 % bound "
+                f"{result.floor_N:.4g} N (replays: {', '.join(f'{g:.3g}' for g in result.floor_replays_N)} N): p = "
+                f"{result.gap_p_value:.2g} → {'significantly above the floor' if result.gap_significant else 'within the floor'}.</p>")
+    r = result.residual
+    if r is not None:
+        out += f"<p>The residual left: {html.escape(r.description)}.</p>" + _table(
+            ["state", "shape", "held-out R²"], [[x.state, x.kind, x.heldout_r2] for x in r.states[:6]]) + _table(
+            ["protocol", "axis", "held-out RMS (N)", "share"], [[c.protocol, c.channel, c.heldout_rms_N, c.share] for c in r.where])
+    if result.benchmarks_not_computed:
+        out += "<p>Benchmarks not computed: " + "; ".join(
+            html.escape(f"{', '.join(b.metrics)} on {b.trial_id} ({b.force}): {b.code}") for b in result.benchmarks_not_computed) + "</p>"
+    return out
+
+
 def write_report(folder: Path, result: DiscrepancyFile, figs: list[tuple[str, str]]) -> dict[str, str]:
     """Write ``report.html`` into ``folder`` beside the figures :func:`write_figures` drew there; returns the file map for ``files`` (discrepancy README §4)."""
     acc = _table(["#", "effect", "parameter", "value", "s.e.", "unit", "ΔBIC", "p", "share explained", "near ties"],
@@ -153,6 +171,7 @@ verdict: <b>{html.escape(result.verdict)}</b> · {html.escape(result.gap_summary
 <h2>Residual left</h2><p>A generic state regression removes {100 * s.heldout_share:.1f} % of the held-out residual
 (F test p = {s.f_p_value:.2g}; Ljung–Box p = {s.ljung_box_p_value:.2g}) → {'structure left that no library effect explains'
 if s.structured else 'no clear structure left'}.</p>
+{_residual_html(result)}
 <h2>Where the twin and the measurement disagree</h2>{where}
 {f'<h2>Workspace</h2>{wsp}' if wsp else ''}
 <h2>Benchmarks</h2>{bench}

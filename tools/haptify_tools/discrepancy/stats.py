@@ -37,6 +37,10 @@ P_MAX = 1e-3                # nested F test
 VALIDATION_MIN = 0.10       # the held-out validation residual energy must fall by at least 10 %
 STRUCTURE_SHARE = 0.25      # generic regression removing ≥ 25 % of held-out energy → structure left
 MAX_DECIMATION = 50
+SLOPE_STEP = 0.02           # ±2 % around an identified value: the central difference that linearises δ(p) there
+BOOTSTRAP_REPLICATES = 400  # block-bootstrap replicates of a parameter's uncertainty
+BOOTSTRAP_SEED = 0          # deterministic, like the rest of the workflow
+SUBBLOCK_MIN_ROWS = 50      # bootstrap units: runs of training rows of at least this many rows and 2 correlation lags
 
 
 @dataclass
@@ -148,15 +152,64 @@ def affine_fit(design: Design, residual: dict, a: dict, b: dict) -> tuple[float,
     (inflated by √D for the correlated rows); ``p`` is in the effect parameter's unit, ``b`` the residual per unit of it
     (discrepancy README §2, §3).
     """
+    p, se = affine_fit_many(design, residual, a, [b])
+    return float(p[0]), float(se[0])
+
+
+def affine_fit_many(design: Design, residual: dict, a: dict, bs: list[dict]) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares ``p`` (one value per regressor) of ``residual ≈ a + Σ p_j·b_j`` on the training rows, and the
+    standard errors (``σ²·(BᵀB)⁻¹`` inflated by √D for the correlated rows; ∞ for a regressor the rows do not
+    determine) — the per-drive values of an effect (discrepancy README §2, per drive)."""
     r = design.stack(residual, "train") - design.stack(a, "train")
-    bb = design.stack(b, "train")
-    den = float(np.dot(bb, bb))
-    if den <= 0:
-        return 0.0, float("inf")
-    p = float(np.dot(bb, r)) / den
-    e = r - p * bb
-    sigma2 = float(np.dot(e, e)) / max(len(e) - 1, 1)
-    return p, float(np.sqrt(design.decimation * sigma2 / den))
+    bb = np.column_stack([design.stack(b, "train") for b in bs])
+    gram = bb.T @ bb
+    k = len(bs)
+    if len(r) <= k or np.linalg.matrix_rank(gram) < k:
+        return np.zeros(k), np.full(k, np.inf)
+    p = np.linalg.solve(gram, bb.T @ r)
+    e = r - bb @ p
+    sigma2 = float(np.dot(e, e)) / max(len(e) - k, 1)
+    return p, np.sqrt(design.decimation * sigma2 * np.diag(np.linalg.inv(gram)))
+
+
+def training_units(design: Design) -> list[tuple[str, np.ndarray]]:
+    """The bootstrap's resampling units: every trial's training rows cut into runs of ``max(SUBBLOCK_MIN_ROWS, 2·D)``
+    consecutive design rows (trial id, positions in the trial's design rows) (discrepancy README §3, uncertainty)."""
+    size = max(SUBBLOCK_MIN_ROWS, 2 * design.decimation)
+    units = []
+    for tr in design.trials:
+        pos = np.flatnonzero(design.roles[tr.trial_id] == "train")
+        if len(pos) == 0:
+            continue
+        cuts = np.flatnonzero(np.diff(pos) > 1) + 1          # training blocks are separated by held-out ones
+        for run in np.split(pos, cuts):
+            n = max(len(run) // size, 1)
+            units += [(tr.trial_id, part) for part in np.array_split(run, n)]
+    return units
+
+
+def bootstrap_linear(design: Design, residual: dict, at: dict, slope: dict, value: float,
+                     replicates: int = BOOTSTRAP_REPLICATES) -> tuple[float, tuple[float, float]]:
+    """Block-bootstrap uncertainty of a parameter identified at ``value`` (discrepancy README §3, uncertainty): the
+    model linearised there, ``residual ≈ at + (p − value)·slope`` (``at`` = δ(value), ``slope`` = ∂δ/∂p), is refitted by
+    least squares on resampled training units (:func:`training_units`, drawn with replacement); returns the replicates'
+    standard deviation and the 95 % interval ``value ± t₀.₉₇₅,U−1 · sd · √(U/(U − 1))`` (U units: few units make the
+    plain bootstrap too narrow). ∞ and (−∞, ∞) when the rows do not determine the parameter."""
+    units = training_units(design)
+    if len(units) < 2:
+        return float("inf"), (-float("inf"), float("inf"))
+    rg = np.array([float(np.dot(np.ravel(slope[t][design.rows[t][u]]),
+                                np.ravel(residual[t][design.rows[t][u]] - at[t][design.rows[t][u]]))) for t, u in units])
+    gg = np.array([float(np.sum(slope[t][design.rows[t][u]] ** 2)) for t, u in units])
+    w = np.random.default_rng(BOOTSTRAP_SEED).multinomial(len(units), np.full(len(units), 1 / len(units)), size=replicates)
+    den = w @ gg
+    if np.any(den <= 0):
+        return float("inf"), (-float("inf"), float("inf"))
+    reps = value + (w @ rg) / den
+    u = len(units)
+    sd = float(np.std(reps, ddof=1))
+    half = float(sps.t.ppf(0.975, u - 1)) * sd * np.sqrt(u / (u - 1))
+    return sd, (value - half, value + half)
 
 
 def state_features(tr: MeasuredTrial) -> np.ndarray:

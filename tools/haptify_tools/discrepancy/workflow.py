@@ -30,12 +30,14 @@ from haptify_tools.discrepancy import drive_rest
 from haptify_tools.discrepancy import hand_path as hp
 from haptify_tools.discrepancy import stats as st
 from haptify_tools.discrepancy import workspace as ws
-from haptify_tools.discrepancy.floor import gap_above_floor, heldout_gap, replay_floor
+from haptify_tools.discrepancy.floor import (
+    FLOOR_REPLAYS, GAP_ALPHA, Floor, Parameter, gap_above_floor, heldout_gap, replay_durations, replay_floors,
+)
 from haptify_tools.discrepancy.identify import Selection, pool_size, process_pool, select_effects
 from haptify_tools.discrepancy.library import NOT_OBSERVABLE
 from haptify_tools.discrepancy.model import (
-    AcceptedEffect, BenchmarkGap, CandidateFit, DiscrepancyFile, Place, RoundResult, SignalGap, Structure, WorkspaceGap,
-    WorkspaceRegion,
+    AcceptedEffect, BenchmarkGap, BenchmarkNotComputed, CandidateFit, DiscrepancyFile, Place, ResidualCell, ResidualShape,
+    RoundResult, SignalGap, StateShape, Structure, WorkspaceGap, WorkspaceRegion,
 )
 from haptify_tools.twin.model import TwinFile, twin_from_dict, twin_to_dict, write_twin
 
@@ -119,14 +121,21 @@ def _penetration(tr: dt.MeasuredTrial) -> tuple[np.ndarray, np.ndarray]:
     return (np.asarray(tr.rendering["surface_point_m"], float) - tr.position) @ n, n
 
 
-def benchmark_values(tr: dt.MeasuredTrial, force: np.ndarray) -> dict[str, tuple[float, str]]:
+#: the benchmarks :func:`benchmark_values` computes per protocol (listed when its operator fails)
+BENCHMARKS_OF = {"free_space": ("free_space.force_mean",), "local_dynamic": ("force_mean",), "other": ("force_mean",),
+                 "frictionless_surface": ("surface.planar_force_mean",),
+                 "stiffness": ("stiffness.measured", "stiffness.peak_force")}
+
+
+def benchmark_values(tr: dt.MeasuredTrial, force: np.ndarray, errors: list | None = None) -> dict[str, tuple[float, str]]:
     """The reference's benchmark operators applied to ``force`` on the trial's grid: free-space mean force
     (spec §9.2), planar force on the surface (§12.3), rendered stiffness and peak force (§13.3).
 
     The stiffness fit keeps the contact transient (§13.2's first samples of a press): the presses are the
     measured trial's contact runs, which begin where the measured device's encoders cross the plane, and a
     twin with a stiffer drive is already well up its rise there — setting its first samples aside would leave
-    it too few (a twin without drive compliance would have no stiffness at all)."""
+    it too few (a twin without drive compliance would have no stiffness at all). An operator's coded error
+    (:class:`~haptify.errors.HaptifyError`) is appended to ``errors`` as ``(metrics, code, message)``."""
     v = tr.valid
     out: dict[str, tuple[float, str]] = {}
     try:
@@ -142,23 +151,29 @@ def benchmark_values(tr: dt.MeasuredTrial, force: np.ndarray) -> dict[str, tuple
                 fit = fit_stiffness(tr.t[v], pen[v], force[v] @ n, tr.contact[v], tr.trial_id, rule=rule)
                 out["stiffness.measured"] = (fit.stiffness, "N/m")
                 out["stiffness.peak_force"] = (float(np.max((force @ n)[c])) if c.any() else 0.0, "N")
-    except HaptifyError:
-        pass
+    except HaptifyError as e:
+        if errors is not None:
+            errors.append((list(BENCHMARKS_OF.get(tr.protocol, ())), e.code, str(e)))
     return out
 
 
-def benchmark_gaps(trials: list[dt.MeasuredTrial], before: dict, after: dict) -> list[BenchmarkGap]:
-    """Benchmarks from the measured force and from the twin's force before and after, per trial, in each metric's unit (discrepancy README §4)."""
-    out = []
+def benchmark_gaps(trials: list[dt.MeasuredTrial], before: dict, after: dict) -> tuple[list[BenchmarkGap], list[BenchmarkNotComputed]]:
+    """Benchmarks from the measured force and from the twin's force before and after, per trial, in each metric's unit,
+    and those an operator could not compute, with its code (discrepancy README §4)."""
+    out, missing = [], []
     for tr in trials:
-        m = benchmark_values(tr, tr.force)
-        b = benchmark_values(tr, before[tr.trial_id])
-        a = benchmark_values(tr, after[tr.trial_id])
+        values = {}
+        for source, force in (("measured", tr.force), ("twin before", before[tr.trial_id]), ("twin after", after[tr.trial_id])):
+            errors: list = []
+            values[source] = benchmark_values(tr, force, errors)
+            missing += [BenchmarkNotComputed(metrics=m, trial_id=tr.trial_id, force=source, code=c, message=msg)
+                        for m, c, msg in errors]
+        m, b, a = values["measured"], values["twin before"], values["twin after"]
         for key in m:
             if key in b and key in a:
                 out.append(BenchmarkGap(metric=key, trial_id=tr.trial_id, unit=m[key][1], measured=m[key][0],
                                         twin_before=b[key][0], twin_after=a[key][0]))
-    return out
+    return out, missing
 
 
 def _tertile_labels(points: np.ndarray) -> list[str]:
@@ -196,22 +211,32 @@ def workspace_gaps(sel: Selection) -> list[WorkspaceGap]:
     return out
 
 
-def annotate_twin(twin: TwinFile, sel: Selection) -> TwinFile:
-    """The updated twin with each identified parameter's uncertainty and evidence (± s.e., ΔBIC, p) in the effect's ``sources`` (discrepancy README §4)."""
+def annotate_twin(twin: TwinFile, result: DiscrepancyFile) -> TwinFile:
+    """The updated twin with each identified parameter's uncertainty and evidence (± s.e., 95 % interval, ΔBIC, p) in
+    the effect's ``sources`` (discrepancy README §4)."""
     data = twin_to_dict(twin)
-    for f in sel.accepted:
-        c = f.candidate
-        holder = data["rig"] if c.effect_id == "handle.connector_mass" else data["effects"]
-        if c.effect_id == ws.EFFECT_ID:
-            box = next(p for p in holder[c.effect_id]["primitives"] if p["shape"] == "box")
+    for a in result.accepted:
+        holder = data["rig"] if a.effect_id == "handle.connector_mass" else data["effects"]
+        if a.effect_id == ws.EFFECT_ID:
+            box = next(p for p in holder[a.effect_id]["primitives"] if p["shape"] == "box")
             key = f"primitives.{box['name']}.top"
         else:
-            key = c.parameter
-        se = f"{f.stderr:.3g}" if np.isfinite(f.stderr) else "n/a"
-        holder[c.effect_id].setdefault("sources", {})[key] = (
-            f"identified by haptify discrepancy: {f.value:.6g} ± {se} {c.unit} (1 s.e.), "
-            f"ΔBIC {f.score.delta_bic:.1f}, p {f.score.p_value:.2g}")
+            key = a.parameter
+        se = lambda e: f"{e:.3g}" if e is not None else "n/a"  # noqa: E731
+        if a.per_drive is not None:
+            shown = "per drive " + ", ".join(f"{v:.6g} ± {se(e)}" for v, e in zip(a.per_drive, a.per_drive_stderr or []))
+        else:
+            shown = f"{a.value:.6g} ± {se(a.stderr)}" + (f" (95 % {a.ci95[0]:.6g} … {a.ci95[1]:.6g})" if a.ci95 else "")
+        holder[a.effect_id].setdefault("sources", {})[key] = (
+            f"identified by haptify discrepancy: {shown} {a.unit} (1 s.e.), ΔBIC {a.delta_bic:.1f}, p {a.p_value:.2g}")
     return twin_from_dict(data)
+
+
+def _per_drive(f) -> dict:
+    """The interval and per-drive fields of a fit's record (discrepancy README §2, per drive; §3, uncertainty)."""
+    ci = None if f.values is not None or f.interval is None or not np.all(np.isfinite(f.interval)) else list(f.interval)
+    return {"ci95": ci, "per_drive": f.values, "per_drive_stderr": [_finite(e) for e in f.stderrs] if f.stderrs else None,
+            "per_drive_delta_bic": f.per_drive_score.delta_bic if f.per_drive_score is not None else None}
 
 
 def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial], sel: Selection) -> DiscrepancyFile:
@@ -222,22 +247,24 @@ def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial]
                               stderr=_finite(f.stderr), unit=f.candidate.unit, delta_bic=f.score.delta_bic,
                               p_value=f.score.p_value, validation_improvement=f.score.validation_improvement,
                               test_share=f.score.test_share, simulations=f.simulations,
-                              accepted=bool(r.accepted and f is r.chosen)) for f in r.fits]
+                              accepted=bool(r.accepted and f is r.chosen), **_per_drive(f)) for f in r.fits]
         rounds.append(RoundResult(number=i + 1, decimation=r.design.decimation, candidates=cands, near_ties=r.near_ties))
     accepted = [AcceptedEffect(order=i + 1, effect_id=f.candidate.effect_id, parameter=f.candidate.parameter, value=f.value,
                                stderr=_finite(f.stderr), unit=f.candidate.unit, delta_bic=f.score.delta_bic,
                                p_value=f.score.p_value, share_explained=f.score.test_share,
-                               near_ties=sel.rounds[i].near_ties) for i, f in enumerate(sel.accepted)]
+                               near_ties=sel.rounds[i].near_ties, **_per_drive(f)) for i, f in enumerate(sel.accepted)]
     s = sel.structure
-    verdict = "unexplained residual" if s["structured"] else ("explained" if accepted else "no discrepancy")
     design = sel.rounds[0].design
     wgaps = workspace_gaps(sel)
     before, after = heldout_gap(trials, sel.initial_sim), heldout_gap(trials, sel.final_sim)
-    bench = benchmark_gaps(trials, sel.initial_sim, sel.final_sim) + [
+    bench, missing = benchmark_gaps(trials, sel.initial_sim, sel.final_sim)
+    bench += [
         BenchmarkGap(metric="workspace.measured_volume", trial_id=w.trial_id, unit="m^3", measured=w.measured_volume_m3,
                      twin_before=w.twin_before_volume_m3, twin_after=w.twin_after_volume_m3) for w in wgaps]
     return DiscrepancyFile(
-        session_id=session_id, twin_name=twin.name, verdict=verdict, accepted=accepted, rounds=rounds,
+        session_id=session_id, twin_name=twin.name, verdict=verdict_of(bool(accepted), s["structured"], False,
+                                                                       bool(sel.shape and sel.shape["structured"])),
+        accepted=accepted, rounds=rounds, residual=residual_shape(sel.shape), benchmarks_not_computed=missing,
         structure=Structure(**s), where=localise(trials, sel.initial_sim, sel.final_sim),
         signal_gaps=signal_gaps(design, trials, sel.initial_sim, sel.final_sim),
         benchmark_gaps=bench, workspace_gaps=wgaps,
@@ -253,18 +280,89 @@ def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial]
                   "validation_min": st.VALIDATION_MIN, "structure_share": st.STRUCTURE_SHARE})
 
 
-def with_floor(result: DiscrepancyFile, floor: float | None) -> DiscrepancyFile:
-    """``result`` with its floor (:func:`.floor.replay_floor`, N; None: no trial could be replayed) and the held-out gaps
-    above it (discrepancy README §4, the floor)."""
+def verdict_of(accepted: bool, structured: bool, gap_significant: bool, shaped: bool = False) -> str:
+    """The verdict (discrepancy README §3): never "no discrepancy" (nor "explained") while structure is left (the generic
+    regression's, or ``shaped``: the residual's characterisation found a shape and the gap is above the floor's median)
+    or the held-out gap is significantly above the floor — then "unexplained residual", whatever was accepted."""
+    if structured or gap_significant or shaped:
+        return "unexplained residual"
+    return "explained" if accepted else "no discrepancy"
+
+
+def residual_shape(shape: dict | None) -> ResidualShape | None:
+    """The model of :func:`.shape.characterise`'s result (discrepancy README §3)."""
+    if shape is None:
+        return None
+    best = shape["best"]
+    offset = shape["offset_share"] >= st.STRUCTURE_SHARE
+    text = best.description if best is not None else "no rows to judge"
+    if offset:
+        text = f"a constant offset per trial ({100 * shape['offset_share']:.0f} % of the held-out energy); beyond it, {text}"
+    return ResidualShape(
+        where=[ResidualCell(protocol=p, channel=c, heldout_rms_N=r, share=e) for p, c, r, e in shape["where"]],
+        offset_share=shape["offset_share"],
+        states=[StateShape(state=f.state, kind=f.kind, heldout_r2=f.heldout_r2, description=f.description, period=f.period,
+                           amplitude_N=f.amplitude_N, amplitude_per_axis_N=f.amplitude_per_axis_N) for f in shape["fits"]],
+        follows=best.state if best is not None else None, description=text, structured=shape["structured"])
+
+
+def replay_parameters(sel: Selection) -> tuple[Parameter, ...]:
+    """The accepted force effects' identified values, one per drive when identified per drive, for the replays to
+    estimate again (discrepancy README §3, uncertainty); the workspace effect is fitted to the sweep, not replayed."""
+    out: list[Parameter] = []
+    for f in sel.accepted:
+        if f.candidate.scope == "workspace":
+            continue
+        if f.values is not None:
+            out += [Parameter(f.candidate, i, v) for i, v in enumerate(f.values)]
+        else:
+            out.append(Parameter(f.candidate, None, f.value))
+    return tuple(out)
+
+
+def _replay_uncertainty(accepted: list[AcceptedEffect], floor: Floor) -> list[AcceptedEffect]:
+    """``accepted`` with the replays' standard errors and 95 % intervals (:meth:`.floor.Floor.uncertainty`)."""
+    out = []
+    for a in accepted:
+        idx = [j for j, q in enumerate(floor.params) if q.candidate.effect_id == a.effect_id]
+        if not idx or not floor.estimates:
+            out.append(a)
+            continue
+        unc = [floor.uncertainty(j) for j in idx]
+        if a.per_drive is not None:
+            out.append(a.model_copy(update={"per_drive_stderr": [_finite(se) for se, _ in unc]}))
+        else:
+            se, (lo, hi) = unc[0]
+            out.append(a.model_copy(update={"stderr": _finite(se), "ci95": [lo, hi] if np.isfinite(se) else None}))
+    return out
+
+
+def with_floor(result: DiscrepancyFile, floor: Floor | None) -> DiscrepancyFile:
+    """``result`` with its floor (:func:`.floor.replay_floors`; None: no trial could be replayed), the held-out gaps above it,
+    the gap test and the verdict it decides (discrepancy README §3, §4)."""
     if floor is None:
         return result
+    bound = floor.bound_N
+    p = floor.p_value(result.heldout_gap_after_N)
+    significant = p < GAP_ALPHA
     return result.model_copy(update={
-        "floor_N": floor, "heldout_gap_above_floor_before_N": gap_above_floor(result.heldout_gap_before_N, floor),
-        "heldout_gap_above_floor_after_N": gap_above_floor(result.heldout_gap_after_N, floor)})
+        "accepted": _replay_uncertainty(result.accepted, floor),
+        "floor_N": bound, "floor_replays_N": list(floor.replays_N), "floor_median_N": floor.median_N,
+        "gap_p_value": p, "gap_significant": significant,
+        "verdict": verdict_of(bool(result.accepted), result.structure.structured, significant,
+                              bool(result.residual and result.residual.structured) and p < 0.5),
+        "heldout_gap_above_floor_before_N": gap_above_floor(result.heldout_gap_before_N, bound),
+        "heldout_gap_above_floor_after_N": gap_above_floor(result.heldout_gap_after_N, bound)})
 
 
-def _floor_of(twin: TwinFile, session_path: str, trials: list[dt.MeasuredTrial]) -> float | None:
-    return replay_floor(twin, open_session(session_path), trials)
+def assess(twin: TwinFile, trials: list[dt.MeasuredTrial], durations: dict[str, float], session_id: str = "",
+           max_effects: int = 5, workers: int = 1, log: Callable[[str], object] | None = None,
+           sweeps: list | None = None) -> tuple[DiscrepancyFile, Selection]:
+    """What :func:`run_discrepancy` decides, for force trials already loaded, without outputs: selection, result, floor
+    (from replays of ``durations``, :func:`.floor.replay_durations`) and verdict (discrepancy README §2–4)."""
+    sel = select_effects(twin, trials, max_effects=max_effects, log=log, workers=workers, sweeps=sweeps)
+    result = build_result(session_id, twin, trials, sel)
+    return with_floor(result, replay_floors(sel.twin, durations, params=replay_parameters(sel)) if trials else None), sel
 
 
 def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | None = None, *, max_effects: int = 5,
@@ -282,6 +380,7 @@ def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | 
     sweeps = ws.load_sweeps(session)
     trials = dt.load_measured(session, required=not sweeps)
     sel = select_effects(twin, trials, max_effects=max_effects, log=log, workers=workers, sweeps=sweeps, client=client)
+    durations = replay_durations(session, trials)
     target = Path(out) if out is not None else None
     build = None
     if target is not None:
@@ -292,10 +391,10 @@ def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | 
         with ExitStack() as stack:
             pending = None
             if trials and client is not None:
-                pending = client.submit(_floor_of, sel.twin, str(session.root), trials, pure=False)
+                pending = client.submit(replay_floors, sel.twin, durations, FLOOR_REPLAYS, replay_parameters(sel), pure=False)
             elif trials and pool_size(workers) > 1:
                 pool = stack.enter_context(process_pool(1))
-                pending = pool.submit(_floor_of, sel.twin, str(session.root), trials)
+                pending = pool.submit(replay_floors, sel.twin, durations, FLOOR_REPLAYS, replay_parameters(sel))
             figures = plan = None
             if build is not None and report:
                 from haptify_tools.discrepancy.report import write_figures
@@ -309,11 +408,11 @@ def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | 
             if pending is not None:
                 floor = pending.result()
             else:
-                floor = replay_floor(sel.twin, session, trials) if trials else None
+                floor = replay_floors(sel.twin, durations, params=replay_parameters(sel)) if trials else None
         result = with_floor(result, floor)
         if build is not None:
             files = {"twin": "twin.json"}
-            write_twin(annotate_twin(sel.twin, sel), build / "twin.json")
+            write_twin(annotate_twin(sel.twin, result), build / "twin.json")
             if figures is not None:
                 from haptify_tools.discrepancy.report import write_report
 
