@@ -32,6 +32,16 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from haptify import schemas
 from haptify.conventions import matrix_to_quat, quat_to_matrix
 from haptify.errors import Finding, HaptifyError, fail
+from haptify.force_plate import CORNERS, PLATE_COLUMNS
+from haptify.platform_wrench import (
+    CHANNEL_DIMENSIONS,
+    PLATFORM_CHANNELS,
+    calibrated,
+    equivalent_corners,
+    origin_by_rule,
+    wrench_at_origin,
+    wrench_at_surface,
+)
 from haptify.session_format import (
     ALLOWED_VALUES,
     PROTOCOLS,
@@ -175,6 +185,17 @@ class BodyMap(_Strict):
     format: Literal["parquet", "csv"] = "parquet"
 
 
+class PlatformWrenchMap(_Strict):
+    """The chosen C3D force platform's channels as the trial's ``plate_wrench`` (spec §5.6.1): the units
+    of the platform's outputs (after its calibration matrix), each defaulting to its channel's
+    ANALOG:UNITS."""
+
+    force_unit: str | None = Field(None, description="Unit of the force outputs (Fx, Fy, Fz; type 3: all eight).")
+    torque_unit: str | None = Field(None, description="Unit of the moment outputs (types 2 and 4: Mx, My, Mz; type 1: Tz).")
+    length_unit: str | None = Field(None, description="Type 1 only: unit of the centre of pressure Px, Py.")
+    format: Literal["parquet", "csv"] = "parquet"
+
+
 class DeviceFile(_Strict):
     """The device given as a device.json file beside the map instead of inline (spec §5.2)."""
 
@@ -235,6 +256,7 @@ class ImportMap(_Strict):
     markers: MarkerMap | None = Field(None, description="Motion-capture sources only; default: every point label.")
     bodies: BodyMap | None = Field(None, description="Motion-capture sources only: 6-DoF bodies that become handle_pose and link_poses; default none.")
     force_plate: Union[Annotated[int, Field(ge=1)], Literal["auto", "none"]] = Field("auto", description="C3D only: the FORCE_PLATFORM number (1-based) that becomes the rig's plate and defines W; 'auto' = 1 when the file has platforms.")
+    platform_wrench: PlatformWrenchMap | None = Field(None, description="C3D only: the force platform that defines W also gives the trial's plate_wrench, from its channels (types 1–4); default: its channels are not imported.")
     lab_to_world: Pose | None = Field(None, description="C3D only, without a force plate: the C3D lab frame in W (default: W is the lab frame).")
     time: CsvTime | None = Field(None, description="CSV only, required: the time column and its unit.")
     csv: CsvOptions | None = Field(None, description="CSV only: parsing options.")
@@ -303,7 +325,7 @@ def load_map(path: str | Path | None, source: str, overrides: dict | None = None
     if m.source != source:
         raise fail("E502", f"the map is for the {m.source} importer, not {source}", file=label, pointer="/source",
                    expected=source, found=m.source)
-    wrong = ("markers", "bodies", "lab_to_world") if source == "csv" else ("time", "csv")
+    wrong = ("markers", "bodies", "lab_to_world", "platform_wrench") if source == "csv" else ("time", "csv")
     for key in wrong:
         if getattr(m, key) is not None:
             raise fail("E502", f"{key!r} does not apply to {source} imports", file=label, pointer=f"/{key}",
@@ -523,7 +545,7 @@ def _platforms(params: Any, n_analogs: int, path: Path) -> tuple[list[C3DPlatfor
             chans = []
         matrix = None
         if cal.ndim == 3 and cal.shape[2] > i and cal.shape[0] == cal.shape[1] and cal[:, :, i].any():
-            matrix = cal[:, :, i].T.copy()  # stored column by column
+            matrix = cal[:, :, i].copy()  # CAL_MATRIX(output, channel, plate), as ezc3d applies it
         out.append(C3DPlatform(i + 1, int(types[i]) if types.size > i else None, cor, org, chans, matrix))
     return out, notes
 
@@ -724,6 +746,61 @@ def pose_frame(pose: Pose) -> WorldFrame:
     rotation = quat_to_matrix(np.asarray(pose.quaternion, dtype=np.float64))
     centre = -rotation.T @ np.asarray(pose.position, dtype=np.float64)
     return WorldFrame(rotation, centre, "W: the C3D lab frame placed in W by the map's lab_to_world pose")
+
+
+# --- the platform's wrench (spec §5.6.1) ------------------------------------------------------------
+
+_SI_OF_DIMENSION = {"force": "N", "torque": "N*m", "length": "m"}
+
+
+def platform_plate_wrench(rec: Recording, platform: C3DPlatform, pm: PlatformWrenchMap, plate: dict, to_m: Unit, *,
+                          label: str) -> tuple[dict[str, np.ndarray], list[Finding]]:
+    """The ``plate_wrench`` columns (``t`` excluded) of the platform that defines W (spec §5.6.1): its
+    outputs (types 1–4, calibration matrix applied) in SI, the wrench moved to the top surface's
+    centre (W's origin) and rotated into W, shared among the rig's four corner sensors
+    (:func:`~haptify.platform_wrench.equivalent_corners`). Returns the columns and W503 findings.
+
+    E506 when the platform's type is not 1–4, its channels are missing or its calibration matrix or
+    origin is unusable; E504 for a unit that is not a force, torque or length as the output needs.
+    """
+    src, number = str(rec.path), platform.number
+    kind = platform.type
+    if kind not in PLATFORM_CHANNELS:
+        raise fail("E506", f"force platform {number} is of type {kind}; its wrench is imported for types "
+                   f"{sorted(PLATFORM_CHANNELS)}", file=src, pointer="/FORCE_PLATFORM/TYPE",
+                   expected=sorted(PLATFORM_CHANNELS), found=kind)
+    need = PLATFORM_CHANNELS[kind]
+    if len(platform.channels) < need:
+        raise fail("E506", f"force platform {number} (type {kind}) names {len(platform.channels)} of the {need} analog "
+                   "channels its type records in FORCE_PLATFORM:CHANNEL", file=src, pointer="/FORCE_PLATFORM/CHANNEL",
+                   expected=need, found=[c + 1 for c in platform.channels])
+    if platform.origin is None:
+        raise fail("E506", f"force platform {number} has no FORCE_PLATFORM:ORIGIN", file=src,
+                   pointer="/FORCE_PLATFORM/ORIGIN", expected="3 numbers", found=None)
+    chans = platform.channels[:need]
+    out = calibrated(kind, rec.analogs[chans], platform.cal_matrix, number=number, file=src)
+    given = {"force": pm.force_unit, "torque": pm.torque_unit, "length": pm.length_unit}
+    si = np.empty_like(out)
+    for row, (ch, dim) in enumerate(zip(chans, CHANNEL_DIMENSIONS[kind])):
+        unit = given[dim] if given[dim] is not None else (rec.analog_units[ch] or None)
+        si[row] = unit_conversion(unit, _SI_OF_DIMENSION[dim], file=label if given[dim] else src,
+                                  pointer=f"/platform_wrench/{dim}_unit" if given[dim] else "/ANALOG/UNITS",
+                                  column=rec.analog_labels[ch]).to_si(out[row])
+    bad = ~np.isfinite(si)
+    if bad.any():
+        row, i = (int(v[0]) for v in np.nonzero(bad))
+        raise fail("E204", f"force platform {number}: channel {rec.analog_labels[chans[row]]!r} is not finite at "
+                   f"sample {i}", file=src, column=rec.analog_labels[chans[row]], expected="finite values",
+                   found=str(si[row, i]))
+    geometry, notes = origin_by_rule(kind, to_m.to_si(platform.origin), number=number, file=src)
+    force, moment_o = wrench_at_origin(kind, si, geometry)
+    moment_c = wrench_at_surface(force, moment_o, geometry)
+    sensors = {c["id"]: c["pose"] for c in plate["corners"]}
+    positions = np.array([sensors[c]["position"] for c in CORNERS], dtype=np.float64)
+    rotations = quat_to_matrix(np.array([sensors[c]["quaternion"] for c in CORNERS], dtype=np.float64))
+    axes = rotations[0]  # every corner sensor is oriented as the platform (§5.6): platform → W
+    readings = equivalent_corners(force @ axes.T, moment_c @ axes.T, positions, rotations)
+    return {col: readings[:, j] for j, col in enumerate(PLATE_COLUMNS)}, notes
 
 
 # --- building streams from channels (spec §5.3) ---------------------------------------------------
@@ -1260,9 +1337,16 @@ def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, devic
         if rig["motion_capture"]["system"] is None:
             del rig["motion_capture"]["system"]
 
-    # analog streams
+    # analog streams, and the platform's wrench (§5.6.1)
     analog_streams: dict[str, dict[str, np.ndarray]] = {}
-    if m.streams:
+    if m.platform_wrench is not None:
+        if plate_number is None:
+            raise fail("E502", "platform_wrench needs the force platform that defines W (force_plate)", file=label,
+                       pointer="/platform_wrench", expected="a force platform", found=m.force_plate)
+        if "plate_wrench" in m.streams:
+            raise fail("E502", "plate_wrench is both mapped from channels and taken from the platform; keep one",
+                       file=label, pointer="/streams/plate_wrench", expected="one source", found="two")
+    if m.streams or m.platform_wrench is not None:
         n = rec.analogs.shape[1]
         if n < 2:
             raise fail("E205", f"{rec.path.name} holds {n} analog sample(s); a stream needs two", file=src,
@@ -1273,6 +1357,10 @@ def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, devic
                 raise fail("E502", f"{kind} rate_hz {smap.rate_hz} differs from the file's analog rate {rec.analog_rate}",
                            file=label, pointer=f"/streams/{kind}/rate_hz", expected=rec.analog_rate, found=smap.rate_hz)
         mapped = _mapped_streams(m, n, _analog_reader(rec, label), label=label, source_file=src, unit_required=False)
+        if m.platform_wrench is not None:
+            mapped["plate_wrench"], origin_notes = platform_plate_wrench(
+                rec, rec.platforms[plate_number - 1], m.platform_wrench, rig["force_plate"], point_unit, label=label)
+            warnings += origin_notes
         analog_streams = {kind: {"t": t_an, **cols} for kind, cols in mapped.items()}
 
     kinds = list(mocap_streams) + list(analog_streams)
@@ -1293,8 +1381,9 @@ def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, devic
         fmt = mm.format if kind == "markers" else m.bodies.format  # type: ignore[union-attr]
         written.append(writer.add_stream(trial_id, kind, cols, rate_hz=rec.point_rate, fmt=fmt, entities=ents))
     for kind, cols in analog_streams.items():
-        smap = m.streams[kind]
-        written.append(writer.add_stream(trial_id, kind, cols, rate_hz=rec.analog_rate, fmt=smap.format, frame=smap.frame))
+        smap = m.streams.get(kind)
+        fmt, frame = (smap.format, smap.frame) if smap is not None else (m.platform_wrench.format, None)  # type: ignore[union-attr]
+        written.append(writer.add_stream(trial_id, kind, cols, rate_hz=rec.analog_rate, fmt=fmt, frame=frame))
     dest.write(writer, trial_id)
     return ImportResult(dest.out, writer.manifest["session_id"], trial_id, [_stream_summary(s) for s in written],
                         frame_note, rec.summary(), warnings)

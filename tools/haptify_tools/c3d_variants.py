@@ -118,7 +118,7 @@ def write_c3d(path: Path, spec: C3DSpec) -> Path:
             for i, p in enumerate(spec.platforms):
                 if p.cal_matrix is not None:
                     k = p.cal_matrix.shape[0]
-                    cal[:k, :k, i] = p.cal_matrix.T  # C3D stores the matrix column by column
+                    cal[:k, :k, i] = p.cal_matrix  # first index = output row, as ezc3d applies it
             _param(c, "FORCE_PLATFORM", "CAL_MATRIX", cal, dims=[size, size, n])
     n_markers = len(spec.labels)
     points = np.zeros((4, n_markers, n_frames))
@@ -170,3 +170,56 @@ def rectangle_corners(centre, size_x: float, size_y: float, x_axis=(1.0, 0.0, 0.
     y = np.cross(z, x)
     c = np.asarray(centre, float)
     return np.array([c + sx * size_x / 2 * x + sy * size_y / 2 * y for sx, sy in ((1, 1), (-1, 1), (-1, -1), (1, -1))])
+
+
+# --- force platforms carrying a known load (spec §5.6.1) -------------------------------------------
+
+PLATFORM_UNITS = {1: ["N", "N", "N", "mm", "mm", "Nmm"], 2: ["N", "N", "N", "Nmm", "Nmm", "Nmm"],
+                  3: ["N"] * 8, 4: ["N", "N", "N", "Nmm", "Nmm", "Nmm"]}
+
+
+def unimodular(seed: int, n: int = 6) -> np.ndarray:
+    """An integer n × n calibration matrix with an integer inverse (determinant 1: unit lower times unit
+    upper triangular), so that channels = CAL⁻¹ · outputs are integers a C3D file stores exactly."""
+    rng = np.random.default_rng(seed)
+    lower = np.tril(rng.integers(-2, 3, (n, n)), -1) + np.eye(n, dtype=int)
+    upper = np.triu(rng.integers(-2, 3, (n, n)), 1) + np.eye(n, dtype=int)
+    return (lower @ upper).astype(np.float64)
+
+
+def known_load_channels(kind: int, force, point, free_moment: np.ndarray, origin, cal: np.ndarray | None = None,
+                        split: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """The channels ``(n_channels, N)`` a platform of ``kind`` records for a load, all in the platform
+    frame (x, y in the top surface, z down; N, mm, N·mm): ``force (N, 3)`` acting at ``point (N, 2)``
+    of the top surface (measured from its centre) with the free moment ``free_moment (N,)`` about the
+    vertical there. ``origin`` is FORCE_PLATFORM:ORIGIN as the standard writes it (the sensing origin →
+    the surface centre; type 3: ``(a, b, az0)``). Type 3's two statically free shares — how the vertical
+    load twists among the four sensors, how Fy divides between the sensor pairs — are ``split`` (default
+    zero); type 4 records ``CAL⁻¹ · [F, M]``. Raises ValueError when a channel value would not be stored
+    exactly as float32 (choose integers, and for type 3 offsets that are powers of two)."""
+    f = np.asarray(force, np.float64)
+    p = np.asarray(point, np.float64)
+    o = np.asarray(origin, np.float64)
+    n = len(f)
+    tz = np.asarray(free_moment, np.float64)
+    surface = np.zeros(3) if kind == 3 else o  # the point from the sensing origin: O → C, then C → P
+    r = np.column_stack([p, np.zeros(n)]) + (np.array([0.0, 0.0, o[2]]) if kind == 3 else surface)
+    moment = np.cross(r, f)
+    moment[:, 2] += tz
+    if kind == 1:
+        ch = np.vstack([f.T, p[:, 0] + o[0], p[:, 1] + o[1], tz])
+    elif kind in (2, 4):
+        ch = np.vstack([f.T, moment.T])
+        if kind == 4:
+            ch = np.rint(np.linalg.inv(cal)) @ ch
+    else:
+        a, b = o[0], o[1]
+        twist, shift = (np.zeros(n), np.zeros(n)) if split is None else map(np.asarray, split)
+        s, u, v = f[:, 2], moment[:, 0] / b, moment[:, 1] / a
+        fz = [(s + u - v + twist) / 4, (s + u + v - twist) / 4, (s - u + v + twist) / 4, (s - u - v - twist) / 4]
+        fy14, fy23 = f[:, 1] / 2 + shift, f[:, 1] / 2 - shift
+        dx = (moment[:, 2] - a * (fy14 - fy23)) / b
+        ch = np.vstack([(f[:, 0] - dx) / 2, (f[:, 0] + dx) / 2, fy14, fy23, *fz])
+    if not np.array_equal(float32(ch), ch):
+        raise ValueError("a channel value is not exactly a float32; choose integer loads")
+    return ch
