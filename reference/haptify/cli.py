@@ -142,6 +142,10 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``haptify`` console script; returns the process exit code.
     0, 1 or 2 as spec §0.5 defines."""
     argv, flags, command = split_global_flags(sys.argv[1:] if argv is None else list(argv))
+    if command == "import":  # the format word is optional (spec §5.8)
+        from haptify.cmd_import import implicit_format
+
+        argv = implicit_format(argv)
     parser = build_parser(command)
     try:
         args = parser.parse_args(argv)
