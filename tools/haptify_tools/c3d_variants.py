@@ -223,3 +223,72 @@ def known_load_channels(kind: int, force, point, free_moment: np.ndarray, origin
     if not np.array_equal(float32(ch), ch):
         raise ValueError("a channel value is not exactly a float32; choose integer loads")
     return ch
+
+
+# --- large files (benchmarks/bench_import.py, the streamed import's tests) --------------------------
+
+PARAM_TYPES = {-1: "S1", 1: "i1", 2: "<i2", 4: "<f4"}  # C3D parameter element types (Intel byte order)
+
+
+def parameter_records(data: bytes) -> dict[tuple[str, str], tuple[int, str, tuple[int, ...]]]:
+    """Every parameter of an Intel C3D file's parameter section: ``(GROUP, NAME)`` → (byte offset of its
+    data, numpy dtype, dimensions). The section is a chain of records (name length, group id, name,
+    offset to the next record; for a parameter: type, dimensions, data)."""
+    start = (data[0] - 1) * C3D_BLOCK + 4
+    groups: dict[int, str] = {}
+    params: dict[int, list[tuple[str, int, str, tuple[int, ...]]]] = {}
+    pos = start
+    while True:
+        n_chars, gid = struct.unpack_from("<bb", data, pos)
+        if n_chars == 0:
+            break
+        name = data[pos + 2: pos + 2 + abs(n_chars)].decode("ascii").upper()
+        here = pos + 2 + abs(n_chars)
+        (step,) = struct.unpack_from("<h", data, here)
+        if gid < 0:
+            groups[-gid] = name
+        else:
+            kind, ndim = struct.unpack_from("<bB", data, here + 2)
+            dims = tuple(data[here + 4: here + 4 + ndim])
+            params.setdefault(gid, []).append((name, here + 4 + ndim, PARAM_TYPES[kind], dims))
+        if step == 0:
+            break
+        pos = here + step
+    return {(groups[g], name): (off, dtype, dims) for g, rows in params.items() for name, off, dtype, dims in rows}
+
+
+def patch_parameter(path: Path, group: str, name: str, values) -> Path:
+    """Overwrite the values of an existing parameter in place (same count, its own element type): the
+    scale factors and offsets other writers set (ezc3d writes 1 and 0)."""
+    data = bytearray(path.read_bytes())
+    offset, dtype, dims = parameter_records(bytes(data))[(group, name)]
+    vals = np.asarray(values, dtype=dtype).ravel()
+    count = int(np.prod(dims)) if dims else 1
+    if vals.size != count:
+        raise ValueError(f"{group}:{name} holds {count} values, not {vals.size}")
+    data[offset: offset + vals.nbytes] = vals.tobytes()
+    path.write_bytes(bytes(data))
+    return path
+
+
+def to_integer(src: Path, dst: Path, point_scale: float) -> Path:
+    """The same recording in the INTEGER format (int16 words; points stored as value / point_scale, the
+    fourth word as int16, analog words as they were): POINT:SCALE and the header's scale factor become
+    ``point_scale`` > 0. Every stored value must be an integer in that encoding (ValueError otherwise)."""
+    data = bytearray(src.read_bytes())
+    recs = parameter_records(bytes(data))
+    (start,) = np.frombuffer(bytes(data), "<i2", 1, recs[("POINT", "DATA_START")][0])
+    points = struct.unpack_from("<H", data, 2)[0]
+    body = np.frombuffer(bytes(data[(start - 1) * C3D_BLOCK:]), "<f4").astype(np.float64)
+    analog_values = struct.unpack_from("<H", data, 4)[0]
+    frame = 4 * points + analog_values
+    words = body[: len(body) // frame * frame].reshape(-1, frame).copy()
+    xyz = words[:, : 4 * points].reshape(len(words), points, 4)
+    xyz[:, :, :3] /= point_scale
+    if not np.array_equal(np.rint(words), words) or np.abs(words).max(initial=0) > 32767:
+        raise ValueError("a value is not an int16 in the INTEGER encoding")
+    out = data[: (start - 1) * C3D_BLOCK] + words.astype("<i2").tobytes()
+    out += bytes(-len(out) % C3D_BLOCK)
+    struct.pack_into("<f", out, 12, point_scale)
+    dst.write_bytes(bytes(out))
+    return patch_parameter(dst, "POINT", "SCALE", [point_scale])
