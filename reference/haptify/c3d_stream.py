@@ -19,6 +19,7 @@ than the file holds.
 from __future__ import annotations
 
 import shutil
+import struct
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -60,6 +61,36 @@ class C3DLayout:
         return self.frame_words * (4 if self.real else 2)
 
 
+PARAM_TYPES = {-1: "S1", 1: "i1", 2: "<i2", 4: "<f4"}  # C3D parameter element types (Intel byte order)
+
+
+def parameter_records(data: bytes) -> dict[tuple[str, str], tuple[int, str, tuple[int, ...]]]:
+    """Every parameter of an Intel C3D file's parameter section: ``(GROUP, NAME)`` → (byte offset of its
+    data, numpy dtype, dimensions). The section is a chain of records (name length, group id, name,
+    offset to the next record; for a parameter: type, dimensions, data)."""
+    start = (data[0] - 1) * C3D_BLOCK + 4
+    groups: dict[int, str] = {}
+    params: dict[int, list[tuple[str, int, str, tuple[int, ...]]]] = {}
+    pos = start
+    while True:
+        n_chars, gid = struct.unpack_from("<bb", data, pos)
+        if n_chars == 0:
+            break
+        name = data[pos + 2: pos + 2 + abs(n_chars)].decode("ascii").upper()
+        here = pos + 2 + abs(n_chars)
+        (step,) = struct.unpack_from("<h", data, here)
+        if gid < 0:
+            groups[-gid] = name
+        else:
+            kind, ndim = struct.unpack_from("<bB", data, here + 2)
+            dims = tuple(data[here + 4: here + 4 + ndim])
+            params.setdefault(gid, []).append((name, here + 4 + ndim, PARAM_TYPES[kind], dims))
+        if step == 0:
+            break
+        pos = here + step
+    return {(groups[g], name): (off, dtype, dims) for g, rows in params.items() for name, off, dtype, dims in rows}
+
+
 def read_head(path: Path) -> tuple[Any, int]:
     """ezc3d's reading of the header and parameters alone (a copy of the blocks before the data), and
     the first data block (1-based). Raises what ezc3d raises for an unreadable file."""
@@ -73,6 +104,12 @@ def read_head(path: Path) -> tuple[Any, int]:
         with open(path, "rb") as src, open(copy, "wb") as dst:
             shutil.copyfileobj(_limited(src, (data_start - 1) * C3D_BLOCK), dst)
         c = ezc3d.c3d(str(copy), extract_forceplat_data=False)
+        with open(path, "rb") as fh:  # ezc3d sets POINT:FRAMES to the frames it read (none): the file's own
+            section = fh.read((data_start - 1) * C3D_BLOCK)
+        where = parameter_records(section).get(("POINT", "FRAMES"))
+        if where is not None and "POINT" in c["parameters"] and "FRAMES" in c["parameters"]["POINT"]:
+            offset, dtype, dims = where
+            c["parameters"]["POINT"]["FRAMES"]["value"] = np.frombuffer(section, dtype, max(1, int(np.prod(dims))), offset)
     return c, data_start
 
 

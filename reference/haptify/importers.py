@@ -21,9 +21,9 @@ import re
 import shutil
 import struct
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Annotated, Any, Callable, Literal, Union
+from typing import Annotated, Any, Callable, Iterator, Literal, Union
 
 import numpy as np
 import pandas as pd
@@ -31,6 +31,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from haptify import schemas
 from haptify.conventions import matrix_to_quat, quat_to_matrix
+from haptify.c3d_stream import STREAM_ABOVE_BYTES, C3DLayout, c3d_layout, chunk_frames_for, iter_frames, read_head
 from haptify.errors import Finding, HaptifyError, fail
 from haptify.force_plate import CORNERS, PLATE_COLUMNS
 from haptify.platform_wrench import (
@@ -400,6 +401,7 @@ class Recording:
     body_residuals: np.ndarray | None = None  # (n_frames, n_bodies), POINT units, when the file has them
     format: str = "c3d"
     warnings: list[Finding] = field(default_factory=list)
+    layout: C3DLayout | None = None  # set when the frames are read in chunks (§5.5.1); points/analogs are then placeholders
 
     @property
     def frames(self) -> int:
@@ -567,10 +569,14 @@ def _rotations(c: Any, params: Any, n_frames: int, path: Path) -> tuple[list[str
     return labels, m[:, :, :3, 3].copy(), m[:, :, :3, :3].copy(), notes
 
 
-def read_c3d(path: str | Path) -> Recording:
+def read_c3d(path: str | Path, *, stream: bool | None = None) -> Recording:
     """Read a C3D file with ezc3d (spec §5.5). E501 only when it is missing, not a C3D, or ezc3d cannot
     read it; every disagreement between the header, the parameters and the data is a W501 finding in
-    ``warnings``, and the data as ezc3d reads them are what the recording holds."""
+    ``warnings``, and the data as ezc3d reads them are what the recording holds.
+
+    A file larger than ``STREAM_ABOVE_BYTES`` (or any file with ``stream=True``; never with ``False``)
+    is opened for streaming (§5.5.1) when its encoding allows: the recording then holds only its
+    header facts, ``layout`` says where its frames are, and :func:`recording_chunks` reads them."""
     import ezc3d
 
     p = Path(path)
@@ -583,19 +589,30 @@ def read_c3d(path: str | Path) -> Recording:
         raise fail("E501", f"{label!r} is not a C3D file (its second byte is not 0x50)", file=label,
                    expected="0x50", found=head[1:2].hex() or "end of file")
     header = read_c3d_header(p)
+    layout = None
     try:
-        c = ezc3d.c3d(str(p), extract_forceplat_data=False)
+        if stream or (stream is None and p.stat().st_size > STREAM_ABOVE_BYTES):
+            c, data_start = read_head(p)
+            layout = c3d_layout(p, c, data_start, header.analog_values, header.frames,
+                                header.last_frame == C3D_LONG_FILE_LAST_FRAME)
+        if layout is None:
+            c = ezc3d.c3d(str(p), extract_forceplat_data=False)
     except (OSError, RuntimeError, ValueError, IndexError) as exc:
         raise fail("E501", f"{label!r} cannot be read as C3D: {exc}", file=label) from None
     params, head_info, data = c["parameters"], c["header"], c["data"]
-    pts = np.asarray(data["points"], dtype=np.float64)  # (4, n_markers, n_frames)
-    n_markers, n_frames = pts.shape[1], pts.shape[2]
-    xyz = pts[:3].transpose(2, 1, 0).copy()  # (n_frames, n_markers, 3)
-    residuals = np.asarray(data["meta_points"]["residuals"], dtype=np.float64)[0].T if n_markers else np.zeros((n_frames, 0))
-    invalid = (residuals < 0) | ~np.isfinite(xyz).all(axis=2)
-    xyz[invalid] = np.nan
-    an = np.asarray(data["analogs"], dtype=np.float64)
-    analogs = an[0] if an.ndim == 3 and an.shape[0] == 1 else an.reshape(an.shape[-2], -1)
+    if layout is not None:  # the frames stay in the file; broadcast placeholders give the shapes (§5.5.1)
+        xyz = np.broadcast_to(np.float64(np.nan), (layout.frames, layout.points, 3))
+        analogs = np.broadcast_to(np.float64(0.0), (layout.channels, layout.frames * layout.per_frame))
+        n_markers, n_frames = layout.points, layout.frames
+    else:
+        pts = np.asarray(data["points"], dtype=np.float64)  # (4, n_markers, n_frames)
+        n_markers, n_frames = pts.shape[1], pts.shape[2]
+        xyz = pts[:3].transpose(2, 1, 0).copy()  # (n_frames, n_markers, 3)
+        residuals = np.asarray(data["meta_points"]["residuals"], dtype=np.float64)[0].T if n_markers else np.zeros((n_frames, 0))
+        invalid = (residuals < 0) | ~np.isfinite(xyz).all(axis=2)
+        xyz[invalid] = np.nan
+        an = np.asarray(data["analogs"], dtype=np.float64)
+        analogs = an[0] if an.ndim == 3 and an.shape[0] == 1 else an.reshape(an.shape[-2], -1)
     n_ch = analogs.shape[0]
     per_frame = analogs.shape[1] // n_frames if n_frames else 0
     # rates (spec §5.5): the header's as ezc3d reads it; a writer that leaves it 0 (analog-only files)
@@ -629,8 +646,20 @@ def read_c3d(path: str | Path) -> Recording:
         analog_units=_strings(_param(params, "ANALOG", "UNITS"), n_ch),
         analog_rate=analog_rate, analog_first_sample=int(head_info["points"]["first_frame"]) * max(per_frame, 1),
         analogs=analogs, platforms=platforms, body_labels=body_labels, body_positions=body_pos,
-        body_rotations=body_rot, warnings=warnings + notes + rot_notes,
+        body_rotations=body_rot, warnings=warnings + notes + rot_notes, layout=layout,
     )
+
+
+def recording_chunks(rec: Recording, chunk_frames: int | None = None) -> Iterator[tuple[int, Recording]]:
+    """A recording's frames in chunks (spec §5.5.1): ``(first frame, the recording restricted to the
+    chunk)``, its clocks advanced to the chunk's first frame. A recording read whole is one chunk."""
+    if rec.layout is None:
+        yield 0, rec
+        return
+    per_frame = rec.layout.per_frame
+    for start, points, analogs in iter_frames(rec.layout, chunk_frames or chunk_frames_for(rec.layout)):
+        yield start, replace(rec, points=points, analogs=analogs, point_first_frame=rec.point_first_frame + start,
+                             analog_first_sample=rec.analog_first_sample + start * per_frame, layout=None)
 
 
 # --- geometry: the world frame from a force platform (spec §5.6) ----------------------------------
@@ -1254,15 +1283,20 @@ def _pose_streams(rec: Recording, m: ImportMap, world: WorldFrame | None, to_m: 
 
 
 def import_c3d(path: str | Path, out: str | Path | Destination, mapping: str | Path | LoadedMap | None = None, *,
-               overrides: dict | None = None, overwrite: bool = False, append: bool = False) -> ImportResult:
+               overrides: dict | None = None, overwrite: bool = False, append: bool = False,
+               stream: bool | None = None, chunk_frames: int | None = None,
+               progress: Callable[[int, int], None] | None = None) -> ImportResult:
     """Import a C3D file as one trial of a new session at ``out`` (spec §5.5), or append it as one
-    more trial to the session at ``out`` (``append``, §5.9). See :func:`import_recording`."""
+    more trial to the session at ``out`` (``append``, §5.9). See :func:`import_recording`; ``stream``
+    as :func:`read_c3d`."""
     dest, loaded, _, device, extra = _prepare(out, mapping, "c3d", overrides, overwrite, append)
-    return import_recording(read_c3d(path), dest, loaded, device, extra)
+    return import_recording(read_c3d(path, stream=stream), dest, loaded, device, extra, chunk_frames=chunk_frames,
+                            progress=progress)
 
 
 def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, device: dict,
-                     extra: dict[str, str]) -> ImportResult:
+                     extra: dict[str, str], *, chunk_frames: int | None = None,
+                     progress: Callable[[int, int], None] | None = None) -> ImportResult:
     """One motion-capture recording (C3D, Qualisys TSV, Motive or Nexus CSV) as one trial (spec §5.5, §5.10).
 
     Markers become a ``markers`` stream (point units → m, invalid → NaN), the map's 6-DoF bodies
@@ -1270,6 +1304,9 @@ def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, devic
     names (§5.3); a chosen force platform becomes the rig's plate. The reader's warnings (W501) and
     the plate's (W502) are returned and written into the trial's notes. Nothing is written when any
     check fails.
+
+    A recording opened for streaming (``rec.layout``, §5.5.1) is read ``chunk_frames`` frames at a time
+    and its streams are written row group by row group; ``progress(frames done, frames)`` follows it.
     """
     m, label = loaded.map, loaded.label
     src = str(rec.path)
@@ -1320,25 +1357,13 @@ def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, devic
                 if unknown:
                     raise fail("E503", f"rigid body {body.name!r} names markers that are not imported: {unknown}", file=label,
                                pointer=f"/markers/rigid_bodies/{j}/markers", expected=entities, found=unknown)
-        t = (rec.point_first_frame + np.arange(rec.frames)) / rec.point_rate + m.time_offset_s
-        if chosen:
-            pos = point_unit.to_si(rec.points[:, chosen, :])
-            pos[~np.isfinite(pos).all(axis=2)] = np.nan  # a marker is seen or occluded as a whole (§2.7)
-            if world is not None:
-                pos = world.apply(pos)
-            marker_data = {"t": t}
-            for j, ent in enumerate(entities):
-                for k, axis in enumerate("xyz"):
-                    marker_data[f"{ent}_{axis}"] = pos[:, j, k]
-            mocap_streams["markers"] = (marker_data, entities)
-        mocap_streams.update(_pose_streams(rec, m, world, point_unit, t, mm.rigid_bodies, label))
         rig["motion_capture"] = {"system": mm.system or rec.manufacturer or None, "rate_hz": rec.point_rate,
                                  "rigid_bodies": [b.model_dump() for b in mm.rigid_bodies], "markers": entities}
         if rig["motion_capture"]["system"] is None:
             del rig["motion_capture"]["system"]
 
     # analog streams, and the platform's wrench (§5.6.1)
-    analog_streams: dict[str, dict[str, np.ndarray]] = {}
+    analog_wanted = bool(m.streams) or m.platform_wrench is not None
     if m.platform_wrench is not None:
         if plate_number is None:
             raise fail("E502", "platform_wrench needs the force platform that defines W (force_plate)", file=label,
@@ -1346,22 +1371,48 @@ def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, devic
         if "plate_wrench" in m.streams:
             raise fail("E502", "plate_wrench is both mapped from channels and taken from the platform; keep one",
                        file=label, pointer="/streams/plate_wrench", expected="one source", found="two")
-    if m.streams or m.platform_wrench is not None:
+    if analog_wanted:
         n = rec.analogs.shape[1]
         if n < 2:
             raise fail("E205", f"{rec.path.name} holds {n} analog sample(s); a stream needs two", file=src,
                        expected="≥ 2 analog samples", found=n)
-        t_an = (rec.analog_first_sample + np.arange(n)) / rec.analog_rate + m.time_offset_s
         for kind, smap in m.streams.items():
             if smap.rate_hz is not None and smap.rate_hz != rec.analog_rate:
                 raise fail("E502", f"{kind} rate_hz {smap.rate_hz} differs from the file's analog rate {rec.analog_rate}",
                            file=label, pointer=f"/streams/{kind}/rate_hz", expected=rec.analog_rate, found=smap.rate_hz)
-        mapped = _mapped_streams(m, n, _analog_reader(rec, label), label=label, source_file=src, unit_required=False)
-        if m.platform_wrench is not None:
-            mapped["plate_wrench"], origin_notes = platform_plate_wrench(
-                rec, rec.platforms[plate_number - 1], m.platform_wrench, rig["force_plate"], point_unit, label=label)
-            warnings += origin_notes
-        analog_streams = {kind: {"t": t_an, **cols} for kind, cols in mapped.items()}
+
+    def streams_of(part: Recording) -> tuple[dict, dict[str, dict[str, np.ndarray]], list[Finding]]:
+        """The trial's streams from the frames of ``part`` (the whole recording, or one chunk of it)."""
+        mocap: dict[str, tuple[dict[str, np.ndarray], list[str] | None]] = {}
+        analog: dict[str, dict[str, np.ndarray]] = {}
+        notes: list[Finding] = []
+        if chosen or wants_bodies:
+            t = (part.point_first_frame + np.arange(part.frames)) / rec.point_rate + m.time_offset_s
+            if chosen:
+                pos = point_unit.to_si(part.points[:, chosen, :])
+                pos[~np.isfinite(pos).all(axis=2)] = np.nan  # a marker is seen or occluded as a whole (§2.7)
+                if world is not None:
+                    pos = world.apply(pos)
+                marker_data = {"t": t}
+                for j, ent in enumerate(entities):
+                    for k, axis in enumerate("xyz"):
+                        marker_data[f"{ent}_{axis}"] = pos[:, j, k]
+                mocap["markers"] = (marker_data, entities)
+            mocap.update(_pose_streams(part, m, world, point_unit, t, mm.rigid_bodies, label))
+        if analog_wanted:
+            n = part.analogs.shape[1]
+            t_an = (part.analog_first_sample + np.arange(n)) / rec.analog_rate + m.time_offset_s
+            mapped = _mapped_streams(m, n, _analog_reader(part, label), label=label, source_file=src, unit_required=False)
+            if m.platform_wrench is not None:
+                mapped["plate_wrench"], notes = platform_plate_wrench(
+                    part, part.platforms[plate_number - 1], m.platform_wrench, rig["force_plate"], point_unit, label=label)
+            analog = {kind: {"t": t_an, **cols} for kind, cols in mapped.items()}
+        return mocap, analog, notes
+
+    pieces = recording_chunks(rec, chunk_frames)
+    first = next(pieces)[1] if rec.frames or rec.analogs.shape[1] else rec
+    mocap_streams, analog_streams, origin_notes = streams_of(first)
+    warnings += origin_notes
 
     kinds = list(mocap_streams) + list(analog_streams)
     if not kinds:
@@ -1377,13 +1428,34 @@ def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, devic
         provenance += " Import warnings: " + " ".join(f"{w.code} {w.message}." for w in warnings)
     trial_id = _add_trial(writer, m, stem, rec.path, provenance)
     written = []
+    streamed = rec.layout is not None
+
+    def add(kind: str, cols: dict[str, np.ndarray], **kw: Any) -> None:
+        if streamed:
+            written.append(writer.add_chunked_stream(trial_id, kind, list(cols), **kw))
+        else:
+            written.append(writer.add_stream(trial_id, kind, cols, **kw))
+
     for kind, (cols, ents) in mocap_streams.items():
         fmt = mm.format if kind == "markers" else m.bodies.format  # type: ignore[union-attr]
-        written.append(writer.add_stream(trial_id, kind, cols, rate_hz=rec.point_rate, fmt=fmt, entities=ents))
+        add(kind, cols, rate_hz=rec.point_rate, fmt=fmt, entities=ents)
     for kind, cols in analog_streams.items():
         smap = m.streams.get(kind)
         fmt, frame = (smap.format, smap.frame) if smap is not None else (m.platform_wrench.format, None)  # type: ignore[union-attr]
-        written.append(writer.add_stream(trial_id, kind, cols, rate_hz=rec.analog_rate, fmt=fmt, frame=frame))
+        add(kind, cols, rate_hz=rec.analog_rate, fmt=fmt, frame=frame)
+    if streamed:
+        def chunks() -> Iterator[dict[str, dict[str, np.ndarray]]]:
+            done = first.frames
+            yield {**{k: c for k, (c, _) in mocap_streams.items()}, **analog_streams}
+            if progress:
+                progress(done, rec.frames)
+            for _, part in pieces:
+                mocap, analog, _ = streams_of(part)
+                yield {**{k: c for k, (c, _) in mocap.items()}, **analog}
+                done += part.frames
+                if progress:
+                    progress(done, rec.frames)
+        writer.chunks = chunks
     dest.write(writer, trial_id)
     return ImportResult(dest.out, writer.manifest["session_id"], trial_id, [_stream_summary(s) for s in written],
                         frame_note, rec.summary(), warnings)

@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from haptify.c3d_stream import parameter_records
+
 C3D_BLOCK = 512
 
 
@@ -226,36 +228,6 @@ def known_load_channels(kind: int, force, point, free_moment: np.ndarray, origin
 
 
 # --- large files (benchmarks/bench_import.py, the streamed import's tests) --------------------------
-
-PARAM_TYPES = {-1: "S1", 1: "i1", 2: "<i2", 4: "<f4"}  # C3D parameter element types (Intel byte order)
-
-
-def parameter_records(data: bytes) -> dict[tuple[str, str], tuple[int, str, tuple[int, ...]]]:
-    """Every parameter of an Intel C3D file's parameter section: ``(GROUP, NAME)`` → (byte offset of its
-    data, numpy dtype, dimensions). The section is a chain of records (name length, group id, name,
-    offset to the next record; for a parameter: type, dimensions, data)."""
-    start = (data[0] - 1) * C3D_BLOCK + 4
-    groups: dict[int, str] = {}
-    params: dict[int, list[tuple[str, int, str, tuple[int, ...]]]] = {}
-    pos = start
-    while True:
-        n_chars, gid = struct.unpack_from("<bb", data, pos)
-        if n_chars == 0:
-            break
-        name = data[pos + 2: pos + 2 + abs(n_chars)].decode("ascii").upper()
-        here = pos + 2 + abs(n_chars)
-        (step,) = struct.unpack_from("<h", data, here)
-        if gid < 0:
-            groups[-gid] = name
-        else:
-            kind, ndim = struct.unpack_from("<bB", data, here + 2)
-            dims = tuple(data[here + 4: here + 4 + ndim])
-            params.setdefault(gid, []).append((name, here + 4 + ndim, PARAM_TYPES[kind], dims))
-        if step == 0:
-            break
-        pos = here + step
-    return {(groups[g], name): (off, dtype, dims) for g, rows in params.items() for name, off, dtype, dims in rows}
-
 
 def patch_parameter(path: Path, group: str, name: str, values) -> Path:
     """Overwrite the values of an existing parameter in place (same count, its own element type): the
