@@ -11,9 +11,9 @@ frame, sample by sample, each channel scaled as ``(raw − |OFFSET|) · SCALE ·
 subtracts the offset's magnitude). Files in DEC or
 MIPS byte order, and files with a ROTATION group (a separate data section), are read whole by ezc3d.
 
-The frames read are the ones ezc3d reads: those the header declares (or, for a file longer than 65535
-frames, whose header and POINT:FRAMES hold the long-file mark, every complete frame), and never more
-than the file holds.
+The frames read are the ones ezc3d reads: those ``POINT:FRAMES`` declares (the header's count when the
+parameter is missing; every complete frame when it holds the long-file mark 65535, as for a file longer
+than 65535 frames), and never more than the file holds.
 """
 
 from __future__ import annotations
@@ -132,10 +132,22 @@ def _values(params: Any, group: str, name: str, n: int, default: float) -> np.nd
     return np.concatenate([v, np.full(max(0, n - v.size), default)])[:n] if n else np.zeros(0)
 
 
-def c3d_layout(path: Path, c: Any, data_start: int, analog_values: int, declared_frames: int,
-               long_file: bool) -> C3DLayout | None:
+def declared_frames(params: Any, header_frames: int, header_long: bool) -> int | None:
+    """The frames a file declares, as ezc3d counts them: ``POINT:FRAMES`` (16 bits, unsigned) when
+    present, else the header's count; None for the long-file mark 65535 (every complete frame)."""
+    try:
+        value = float(np.asarray(params["POINT"]["FRAMES"]["value"], dtype=np.float64).ravel()[0])
+    except (KeyError, TypeError, IndexError, ValueError):
+        return None if header_long else header_frames
+    frames = int(value) % 0x10000 if value < 0 else int(value)
+    return None if frames == LONG_FILE_MARK else frames
+
+
+def c3d_layout(path: Path, c: Any, data_start: int, analog_values: int, header_frames: int,
+               header_long: bool) -> C3DLayout | None:
     """The data layout of a C3D file from ezc3d's header and parameters and the header's analog values
-    per frame (word 3); None when the file is not read here (DEC or MIPS byte order, a ROTATION group)."""
+    per frame (word 3) and frame count; None when the file is not read here (DEC or MIPS byte order, a
+    ROTATION group)."""
     params, head = c["parameters"], c["header"]
     with open(path, "rb") as fh:
         first = fh.read(1)[0]
@@ -155,7 +167,8 @@ def c3d_layout(path: Path, c: Any, data_start: int, analog_values: int, declared
                        per_frame, 0, abs(scale), _values(params, "ANALOG", "SCALE", channels, 1.0),
                        np.abs(_values(params, "ANALOG", "OFFSET", channels, 0.0)), gen, unsigned)
     held = max(0, (path.stat().st_size - layout.data_offset) // layout.frame_bytes) if layout.frame_bytes else 0
-    frames = held if long_file or declared_frames <= 0 else min(declared_frames, held)
+    declared = declared_frames(params, header_frames, header_long)
+    frames = held if declared is None else min(declared, held)
     return C3DLayout(**{**layout.__dict__, "frames": int(frames)})
 
 
