@@ -19,6 +19,7 @@ from haptify_tools.c3d_variants import (
     C3DSpec,
     Platform,
     float32,
+    grow_c3d,
     known_load_channels,
     patch_header,
     patch_parameter,
@@ -71,6 +72,9 @@ def variants(tmp: Path) -> dict[str, Path]:
     out["long"] = write_c3d(tmp / "long.c3d", C3DSpec(labels=["m"], points=float32(np.arange(3.0 * n).reshape(n, 1, 3) % 977),
                                                       analog_rate=200.0, analog_labels=["v"], analog_units=["V"],
                                                       analogs=float32(np.arange(2.0 * n).reshape(1, -1) % 101)))
+    out["grown"] = grow_c3d(tmp / "grown.c3d", recording(n=5), 301, lambda at, n: (
+        np.arange(at, at + n)[:, None, None] * np.array([[[1.0, 2.0, 3.0]]]) + np.zeros((1, 3, 1)),
+        float32(np.sin(np.arange(8 * 3 * n).reshape(8, 3 * n) + at))))
     out.update({f"lab-{p.stem}": p for d in REAL if d.is_dir() for p in sorted(d.glob("*.c3d"))})
     return out
 
@@ -81,7 +85,7 @@ def test_the_chunked_reader_reads_what_ezc3d_reads(tmp_path):
         streamed = read_c3d(path, stream=True)
         assert streamed.layout is not None, name
         assert streamed.summary() == whole.summary(), name  # labels, rates, frames, platforms, W501 warnings
-        for chunk in (1, 7, 10**6):
+        for chunk in (1, 7, 10**6) if whole.frames < 1000 else (9999, 10**6):
             parts = [part for _, part in recording_chunks(streamed, chunk)]
             np.testing.assert_array_equal(np.concatenate([p.points for p in parts]), whole.points, err_msg=name)
             np.testing.assert_array_equal(np.concatenate([p.analogs for p in parts], axis=1), whole.analogs, err_msg=name)

@@ -44,15 +44,16 @@ class UI:
 
     @contextmanager
     def progress(self, description: str, total: float | None) -> Iterator[Any]:
-        """A progress bar on stderr for work that can take more than ~2 s; yields ``advance(n=1)``."""
+        """A progress bar on stderr for work that can take more than ~2 s; yields ``advance(n=1, total=None)``
+        (``total`` sets the bar's length once the work knows it)."""
         if self.quiet or self.json_mode or not sys.stderr.isatty():
-            yield lambda n=1: None
+            yield lambda n=1, total=None: None
             return
         from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
         with Progress(TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(), transient=True) as bar:
             task = bar.add_task(description, total=total)
-            yield lambda n=1: bar.advance(task, n)
+            yield lambda n=1, total=None: bar.update(task, advance=n, **({} if total is None else {"total": total}))
 
 
 def _json_default(obj: Any) -> Any:

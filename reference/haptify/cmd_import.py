@@ -174,9 +174,18 @@ def _suggest(fmt: str, args, ui) -> int:
     return 0
 
 
-def _importer(fmt: str):
-    if fmt in ("c3d", "csv"):
-        return import_c3d if fmt == "c3d" else import_csv
+def _importer(fmt: str, advance):
+    """The import function of ``fmt``, reporting a streamed C3D file's frames to ``advance`` (§5.5.1)."""
+    if fmt == "c3d":
+        seen = [0]
+
+        def progress(done: int, total: int) -> None:
+            advance(done - seen[0], total=total)
+            seen[0] = done
+
+        return lambda path, dest, loaded: import_c3d(path, dest, loaded, progress=progress)
+    if fmt == "csv":
+        return import_csv
     from haptify.mocap_exports import import_export
 
     return lambda path, dest, loaded: import_export(fmt, path, dest, loaded)
@@ -214,8 +223,8 @@ def run(args, ui) -> int:
         raise fail("E903", f"haptify import {fmt} needs -o SESSION", expected="-o SESSION", found=None)
     dest = Destination.of(args.output, overwrite=args.overwrite, append=args.append)
     loaded = _load(args, fmt, dest.session_facts())
-    with ui.progress(f"importing {args.file.name}", total=None):
-        result = _importer(fmt)(args.file, dest, loaded)
+    with ui.progress(f"importing {args.file.name}", total=None) as advance:
+        result = _importer(fmt, advance)(args.file, dest, loaded)
         report = validate_session(result.session)
     if ui.json_mode:
         ui.emit_json({**result.to_dict(), "validation": {"valid": report.valid,

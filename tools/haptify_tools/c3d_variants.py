@@ -264,3 +264,30 @@ def to_integer(src: Path, dst: Path, point_scale: float) -> Path:
     struct.pack_into("<f", out, 12, point_scale)
     dst.write_bytes(bytes(out))
     return patch_parameter(dst, "POINT", "SCALE", [point_scale])
+
+
+def grow_c3d(path: Path, template: C3DSpec, frames: int, fill, chunk: int = 20_000) -> Path:
+    """A C3D file of ``frames`` frames without holding them: ezc3d writes ``template``'s header and
+    parameters (its own frames are dropped), the frame counts are set as ezc3d sets them (header last
+    frame and POINT:FRAMES; the long-file mark 65535 / −1 past 65535 frames), and the frames are
+    appended ``chunk`` at a time from ``fill(first, count)`` → (points ``(count, markers, 3)``, analog
+    samples ``(channels, count · per frame)``), REAL words, every point valid."""
+    write_c3d(path, template)
+    data = path.read_bytes()
+    (start,) = np.frombuffer(data, "<i2", 1, parameter_records(data)[("POINT", "DATA_START")][0])
+    head = bytearray(data[: (start - 1) * C3D_BLOCK])
+    first = struct.unpack_from("<H", head, 6)[0]
+    struct.pack_into("<H", head, 8, min(first + frames - 1, 0xFFFF))
+    path.write_bytes(bytes(head))
+    patch_parameter(path, "POINT", "FRAMES", [frames if frames <= 32767 else frames - 65536 if frames <= 65535 else -1])
+    markers = len(template.labels)
+    with open(path, "ab") as fh:
+        for at in range(0, frames, chunk):
+            n = min(chunk, frames - at)
+            points, analogs = fill(at, n)
+            quad = np.ones((n, markers, 4), np.float32)
+            quad[:, :, :3] = points
+            samples = np.asarray(analogs, np.float32).T.reshape(n, -1)  # sample by sample, channels inside
+            fh.write(np.hstack([quad.reshape(n, -1), samples]).astype("<f4").tobytes())
+        fh.write(bytes(-fh.tell() % C3D_BLOCK))
+    return path
