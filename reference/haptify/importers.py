@@ -828,8 +828,8 @@ def platform_plate_wrench(rec: Recording, platform: C3DPlatform, pm: PlatformWre
     positions = np.array([sensors[c]["position"] for c in CORNERS], dtype=np.float64)
     rotations = quat_to_matrix(np.array([sensors[c]["quaternion"] for c in CORNERS], dtype=np.float64))
     axes = rotations[0]  # every corner sensor is oriented as the platform (§5.6): platform → W
-    readings = equivalent_corners(force @ axes.T, moment_c @ axes.T, positions, rotations)
-    return {col: readings[:, j] for j, col in enumerate(PLATE_COLUMNS)}, notes
+    readings = equivalent_corners(axes @ force, axes @ moment_c, positions, rotations)
+    return dict(zip(PLATE_COLUMNS, readings)), notes
 
 
 # --- building streams from channels (spec §5.3) ---------------------------------------------------
