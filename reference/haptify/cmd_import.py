@@ -175,20 +175,20 @@ def _suggest(fmt: str, args, ui) -> int:
 
 
 def _importer(fmt: str, advance):
-    """The import function of ``fmt``, reporting a streamed C3D file's frames to ``advance`` (§5.5.1)."""
-    if fmt == "c3d":
-        seen = [0]
-
-        def progress(done: int, total: int) -> None:
-            advance(done - seen[0], total=total)
-            seen[0] = done
-
-        return lambda path, dest, loaded: import_c3d(path, dest, loaded, progress=progress)
+    """The import function of ``fmt``, reporting a streamed file's frames to ``advance`` (§5.5.1)."""
     if fmt == "csv":
         return import_csv
+    seen = [0]
+
+    def progress(done: int, total: int) -> None:
+        advance(done - seen[0], total=total)
+        seen[0] = done
+
+    if fmt == "c3d":
+        return lambda path, dest, loaded: import_c3d(path, dest, loaded, progress=progress)
     from haptify.mocap_exports import import_export
 
-    return lambda path, dest, loaded: import_export(fmt, path, dest, loaded)
+    return lambda path, dest, loaded: import_export(fmt, path, dest, loaded, progress=progress)
 
 
 def run(args, ui) -> int:

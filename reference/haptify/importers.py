@@ -401,7 +401,13 @@ class Recording:
     body_residuals: np.ndarray | None = None  # (n_frames, n_bodies), POINT units, when the file has them
     format: str = "c3d"
     warnings: list[Finding] = field(default_factory=list)
-    layout: C3DLayout | None = None  # set when the frames are read in chunks (§5.5.1); points/analogs are then placeholders
+    layout: C3DLayout | None = None  # a C3D file read in chunks (§5.5.1); points/analogs are then placeholders
+    chunked: Callable[[int | None], Iterator[tuple[int, "Recording"]]] | None = None  # a text export read in chunks
+
+    @property
+    def streamed(self) -> bool:
+        """Whether the frames stay in the file and are read chunk by chunk (§5.5.1)."""
+        return self.layout is not None or self.chunked is not None
 
     @property
     def frames(self) -> int:
@@ -653,6 +659,9 @@ def read_c3d(path: str | Path, *, stream: bool | None = None) -> Recording:
 def recording_chunks(rec: Recording, chunk_frames: int | None = None) -> Iterator[tuple[int, Recording]]:
     """A recording's frames in chunks (spec §5.5.1): ``(first frame, the recording restricted to the
     chunk)``, its clocks advanced to the chunk's first frame. A recording read whole is one chunk."""
+    if rec.chunked is not None:
+        yield from rec.chunked(chunk_frames)
+        return
     if rec.layout is None:
         yield 0, rec
         return
@@ -1305,7 +1314,7 @@ def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, devic
     the plate's (W502) are returned and written into the trial's notes. Nothing is written when any
     check fails.
 
-    A recording opened for streaming (``rec.layout``, §5.5.1) is read ``chunk_frames`` frames at a time
+    A recording opened for streaming (``rec.streamed``, §5.5.1) is read ``chunk_frames`` frames at a time
     and its streams are written row group by row group; ``progress(frames done, frames)`` follows it.
     """
     m, label = loaded.map, loaded.label
@@ -1428,7 +1437,7 @@ def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, devic
         provenance += " Import warnings: " + " ".join(f"{w.code} {w.message}." for w in warnings)
     trial_id = _add_trial(writer, m, stem, rec.path, provenance)
     written = []
-    streamed = rec.layout is not None
+    streamed = rec.streamed
 
     def add(kind: str, cols: dict[str, np.ndarray], **kw: Any) -> None:
         if streamed:
