@@ -226,7 +226,7 @@ def test_platform_wrench_needs_the_platform_and_one_source(tmp_path):
 def test_the_platform_reads_as_ezc3d_computes_it(tmp_path, kind):
     """ezc3d's own force-platform computation (``extract_forceplat_data``: force and centre of pressure
     in the lab frame) on the same file agrees with the imported wrench: same channels, same calibration
-    matrix orientation, same sign of the force."""
+    matrix orientation, opposite force (ezc3d reports the ground reaction, §14.1 the load's action)."""
     import ezc3d
 
     force, point, tz = load(seed=kind + 20)
@@ -237,7 +237,28 @@ def test_the_platform_reads_as_ezc3d_computes_it(tmp_path, kind):
     run_import(tmp_path, path)
     got_f, got_m, _ = imported_wrench(tmp_path / "s")
     theirs = ezc3d.c3d(str(path), extract_forceplat_data=True)["data"]["platform"][0]
-    # the level plate: W is the lab frame moved to the plate centre (300, −200, 0) mm
-    np.testing.assert_allclose(got_f, theirs["force"].T, rtol=1e-9, atol=1e-9)
+    # the level plate: W is the lab frame moved to the plate centre (300, −200, 0) mm; ezc3d gives the
+    # platform's reaction on the load (the ground reaction force), the import the load's action on the plate
+    np.testing.assert_allclose(got_f, -theirs["force"].T, rtol=1e-9, atol=1e-9)
     cop, _ = center_of_pressure(got_f, got_m, min_force_N=1.0)
     np.testing.assert_allclose(cop * 1000.0 + [300.0, -200.0], theirs["center_of_pressure"][:2].T, rtol=0, atol=1e-6)
+
+
+REAL = next((d / "shared" / "data" / "c3d" / "Qualisys.c3d" for d in Path(__file__).resolve().parents[1:4]
+             if (d / "shared" / "data" / "c3d" / "Qualisys.c3d").is_file()), None)
+
+
+@pytest.mark.skipif(REAL is None, reason="the real Qualisys recording (../shared/data/c3d) is absent")
+def test_a_real_amti_platform_is_pressed_down_with_its_cop_on_the_plate(tmp_path):
+    """QTM's export of an AMTI platform (type 2, ORIGIN written from the surface to the origin, +34 mm):
+    read by the sign rule (W503), the subject's load pushes the plate down (F_z < 0 in W, §14.1; the
+    unloaded plate's noise stays within 2 % of the peak) and the centre of pressure lies on the plate
+    wherever the load is more than 20 N."""
+    result = run_import(tmp_path, REAL, trial={"powered": False})
+    assert [w.code for w in result.warnings] == ["W503"]
+    force, moment, s = imported_wrench(tmp_path / "s")
+    loaded = force[:, 2] < -20.0
+    assert loaded.mean() > 0.2 and force[:, 2].max() < 0.02 * -force[:, 2].min()  # up only by unloaded noise
+    cop, _ = center_of_pressure(force[loaded], moment[loaded], min_force_N=20.0)
+    half = np.array(s.manifest.rig.force_plate.size_m) / 2
+    assert (np.abs(cop) <= half).all()

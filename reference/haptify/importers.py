@@ -795,7 +795,7 @@ def platform_plate_wrench(rec: Recording, platform: C3DPlatform, pm: PlatformWre
                           label: str) -> tuple[dict[str, np.ndarray], list[Finding]]:
     """The ``plate_wrench`` columns (``t`` excluded) of the platform that defines W (spec §5.6.1): its
     outputs (types 1–4, calibration matrix applied) in SI, the wrench moved to the top surface's
-    centre (W's origin) and rotated into W, shared among the rig's four corner sensors
+    centre (W's origin), rotated into W and reversed (the channels hold the reaction), shared among the rig's four corner sensors
     (:func:`~haptify.platform_wrench.equivalent_corners`). Returns the columns and W503 findings.
 
     E506 when the platform's type is not 1–4, its channels are missing or its calibration matrix or
@@ -837,7 +837,8 @@ def platform_plate_wrench(rec: Recording, platform: C3DPlatform, pm: PlatformWre
     positions = np.array([sensors[c]["position"] for c in CORNERS], dtype=np.float64)
     rotations = quat_to_matrix(np.array([sensors[c]["quaternion"] for c in CORNERS], dtype=np.float64))
     axes = rotations[0]  # every corner sensor is oriented as the platform (§5.6): platform → W
-    readings = equivalent_corners(axes @ force, axes @ moment_c, positions, rotations)
+    # the channels are the platform's reaction on the load; §14.1's wrench is the load's on the plate
+    readings = equivalent_corners(-(axes @ force), -(axes @ moment_c), positions, rotations)
     return dict(zip(PLATE_COLUMNS, readings)), notes
 
 

@@ -1,9 +1,10 @@
 """A C3D force platform's channels as the plate's wrench (spec §5.6.1; §14.1 defines what it becomes).
 
-A C3D platform records one wrench on the plate in one of the standard channel layouts
-(``FORCE_PLATFORM:TYPE``): the force and moment **the load exerts on the platform**, in the
-platform's own frame (x, y in the top surface, z down into the plate), about the platform's
-sensing origin O:
+A C3D platform records one wrench in one of the standard channel layouts (``FORCE_PLATFORM:TYPE``):
+the force and moment **the platform exerts on the load** (the ground reaction, as ezc3d and
+biomechanics software read the channels: a subject standing on it gives a negative Fz), in the
+platform's own frame (x, y in the top surface, z down into the plate), about the platform's sensing
+origin O:
 
 - type 1: ``Fx Fy Fz Px Py Tz`` — force, centre of pressure (in the top surface, measured from O along
   x and y) and the free moment about the vertical through it;
@@ -19,7 +20,8 @@ platform frame, so its z is ≤ 0 (the surface lies above O and z points down); 
 that store the opposite sign are read by the rule of :func:`origin_by_rule` with a W503 warning.
 
 The wrench about C is ``M_C = M_O − ORIGIN × F``; W (§5.6) has its origin at C, so rotating F and
-M_C by the plate axes gives §14.1's total wrench in W directly. Haptify's ``plate_wrench`` stream holds
+M_C by the plate axes and reversing them (action and reaction) gives §14.1's total wrench — the load's
+on the plate — in W. Haptify's ``plate_wrench`` stream holds
 four corner sensors' readings (§2.6), which a platform does not provide: :func:`equivalent_corners`
 writes the readings whose §14.1 sum is exactly the platform's wrench (each corner carries a quarter of
 it), so every consumer of the plate (COP, natural frequency, rig checks) reads the platform unchanged.

@@ -194,16 +194,17 @@ def known_load_channels(kind: int, force, point, free_moment: np.ndarray, origin
     """The channels ``(n_channels, N)`` a platform of ``kind`` records for a load, all in the platform
     frame (x, y in the top surface, z down; N, mm, N·mm): ``force (N, 3)`` acting at ``point (N, 2)``
     of the top surface (measured from its centre) with the free moment ``free_moment (N,)`` about the
-    vertical there. ``origin`` is FORCE_PLATFORM:ORIGIN as the standard writes it (the sensing origin →
+    vertical there. The channels hold the platform's reaction — the negated force and moments, as
+    platforms write them (a load pressing down, +z, reads a negative Fz). ``origin`` is FORCE_PLATFORM:ORIGIN as the standard writes it (the sensing origin →
     the surface centre; type 3: ``(a, b, az0)``). Type 3's two statically free shares — how the vertical
     load twists among the four sensors, how Fy divides between the sensor pairs — are ``split`` (default
     zero); type 4 records ``CAL⁻¹ · [F, M]``. Raises ValueError when a channel value would not be stored
     exactly as float32 (choose integers, and for type 3 offsets that are powers of two)."""
-    f = np.asarray(force, np.float64)
+    f = -np.asarray(force, np.float64)  # the reaction
     p = np.asarray(point, np.float64)
     o = np.asarray(origin, np.float64)
     n = len(f)
-    tz = np.asarray(free_moment, np.float64)
+    tz = -np.asarray(free_moment, np.float64)
     surface = np.zeros(3) if kind == 3 else o  # the point from the sensing origin: O → C, then C → P
     r = np.column_stack([p, np.zeros(n)]) + (np.array([0.0, 0.0, o[2]]) if kind == 3 else surface)
     moment = np.cross(r, f)
