@@ -18,7 +18,7 @@ import tempfile
 import uuid
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
-from typing import Any, Callable, Iterable, Mapping
+from typing import Any, Callable, Iterable, Iterator, Mapping
 
 import numpy as np
 import pandas as pd
@@ -286,27 +286,84 @@ def read_table(path: Path, fmt: str, columns: list[str], *, label: str) -> pd.Da
 def read_stream_file(path: Path, fmt: str, columns: list[str], *, label: str) -> tuple[pd.DataFrame, str]:
     """Read a stream file once: its table as float64 columns and the sha256 of its bytes (spec §3.2, §3.4).
 
-    The bytes are hashed as they are read, so verifying a checksum costs no second pass. A CSV file is
-    checked against the grammar of §3.2 in bounded memory before it is parsed (a header or a line
-    longer than :func:`csv_line_limit` is E112 at once). Unreadable files raise E112, a wrong CSV
-    header E211, a column that is neither float64 nor (except ``t``) float32 E212; float32 columns are
-    widened to float64 exactly.
+    The whole-table case of :func:`read_stream_chunks` (one chunk): the bytes are hashed as they are
+    read, so verifying a checksum costs no second pass. The codes are those of :func:`read_stream_chunks`.
+    """
+    digest, chunks = read_stream_chunks(path, fmt, columns, label=label)
+    return next(chunks), digest
+
+
+def read_stream_chunks(path: Path, fmt: str, columns: list[str], *, label: str,
+                       chunk_rows: int | None = None) -> tuple[str, Iterator[pd.DataFrame]]:
+    """The sha256 of a stream file's bytes and its table as consecutive float64 chunks of at most
+    ``chunk_rows`` rows — at least one chunk, the first possibly empty (spec §3.2, §3.4).
+
+    ``chunk_rows=None`` reads the whole table as one chunk; a Parquet file is then read once, hashed as it
+    is read. Otherwise the file is hashed in a first pass of :data:`HASH_CHUNK` blocks and decoded batch by
+    batch (Parquet, ``ParquetFile.iter_batches``) or ``chunk_rows`` lines at a time (CSV,
+    ``pandas.read_csv(chunksize=…)``), so memory holds one chunk whatever the file's size. A CSV file is
+    checked against the grammar of §3.2 in bounded memory before it is parsed (a header or a line longer
+    than :func:`csv_line_limit` is E112 at once). Unreadable files raise E112 (also from the iterator, when
+    a later part of the file is damaged), a wrong CSV header E211, a column whose stored type is neither
+    float64 nor (except ``t``) float32 E212 — judged on the file's schema, before any row is read, so the
+    verdict never depends on the chunking; float32 columns are widened to float64 exactly.
     """
     try:
         if fmt == "parquet":
-            data = path.read_bytes()
-            digest = hashlib.sha256(data).hexdigest()
+            if chunk_rows is None:
+                data = path.read_bytes()
+                digest = hashlib.sha256(data).hexdigest()
+                source: Any = pa.BufferReader(data)
+                del data
+            else:
+                digest, source = sha256_file(path), path
+            parquet = pq.ParquetFile(source)
             # the columns are the data (spec §3.2); pandas' own metadata is neither needed nor trusted
-            frame = pq.read_table(pa.BufferReader(data)).to_pandas(ignore_metadata=True)
-            del data
-        else:
-            digest = check_csv_grammar(path, columns, label)
-            frame = pd.read_csv(path, dtype="float64", na_values=["NaN"], keep_default_na=False, engine="c")
+            as_float64(parquet.schema_arrow.empty_table().to_pandas(ignore_metadata=True), label)
+            return digest, _checked_chunks(_parquet_chunks(parquet, chunk_rows), fmt, label)
+        digest = check_csv_grammar(path, columns, label)
     except (HaptifyError, MemoryError):  # out of memory is the reader's failure, not the file's (never E112)
         raise
-    except (OSError, pa.ArrowException, ValueError, pd.errors.ParserError, UnicodeDecodeError) as exc:
+    except _READ_ERRORS as exc:
         raise fail("E112", f"{label!r} cannot be read as {fmt}: {exc}", file=label) from None
-    return as_float64(frame, label), digest
+    return digest, _checked_chunks(_csv_chunks(path, chunk_rows), fmt, label)
+
+
+_READ_ERRORS = (OSError, pa.ArrowException, ValueError, pd.errors.ParserError, UnicodeDecodeError)
+
+
+def _parquet_chunks(parquet: pq.ParquetFile, chunk_rows: int | None) -> Iterator[pd.DataFrame]:
+    """A Parquet file's table whole, or batch by batch; an empty file yields its empty table."""
+    if chunk_rows is None:
+        yield parquet.read().to_pandas(ignore_metadata=True)
+        return
+    empty = True
+    for batch in parquet.iter_batches(batch_size=chunk_rows, use_pandas_metadata=False):
+        empty = False
+        yield pa.Table.from_batches([batch]).to_pandas(ignore_metadata=True)
+    if empty:
+        yield parquet.schema_arrow.empty_table().to_pandas(ignore_metadata=True)
+
+
+def _csv_chunks(path: Path, chunk_rows: int | None) -> Iterator[pd.DataFrame]:
+    """A CSV stream's table whole, or ``chunk_rows`` lines at a time (a header-only file: one empty chunk)."""
+    options: dict[str, Any] = {"dtype": "float64", "na_values": ["NaN"], "keep_default_na": False, "engine": "c"}
+    if chunk_rows is None:
+        yield pd.read_csv(path, **options)
+    else:
+        with pd.read_csv(path, chunksize=chunk_rows, **options) as reader:
+            yield from reader
+
+
+def _checked_chunks(chunks: Iterator[pd.DataFrame], fmt: str, label: str) -> Iterator[pd.DataFrame]:
+    """``chunks`` as float64 frames (:func:`as_float64`); a read failure on the way is E112."""
+    try:
+        for chunk in chunks:
+            yield as_float64(chunk, label)
+    except (HaptifyError, MemoryError):
+        raise
+    except _READ_ERRORS as exc:
+        raise fail("E112", f"{label!r} cannot be read as {fmt}: {exc}", file=label) from None
 
 
 def as_float64(frame: pd.DataFrame, label: str) -> pd.DataFrame:
