@@ -9,6 +9,11 @@ Large C3D files (spec §5.5.1, issue 19): a C3D of ``--big-mb`` MB (default 1200
 a trigger) of the large file and of a ``--small-mb`` slice, the whole-file import of the slice, and
 ezc3d's own read of the slice (``ezc3d.c3d``, under an address-space limit: it holds every frame as C++
 objects). Issue 19's target: a 2 GB file must not need 2 GB of RAM.
+
+Then the commands a user runs on the large file (spec §4.4, §5.5.1): ``haptify import c3d`` (the streamed
+import and the validation of the session it wrote) and ``haptify validate`` on that session — each stream
+read in chunks — against the same validation with every stream read whole (as before chunking; the gate
+still reads whole the streams it computes from).
 """
 
 from __future__ import annotations
@@ -84,6 +89,11 @@ CHILD = {
     "ezc3d": "import ezc3d; c = ezc3d.c3d({path!r}); n = c['data']['points'].shape[2]",
     "import": ("from haptify.importers import import_c3d; "
                "import_c3d({path!r}, {out!r}, {map!r}, overwrite=True, stream={stream})"),
+    "haptify import": ("from haptify import cli; "
+                       "assert cli.main(['--quiet', 'import', 'c3d', {path!r}, '--map', {map!r}, '-o', {out!r}, '--overwrite']) == 0"),
+    "haptify validate": "from haptify import cli; assert cli.main(['--quiet', 'validate', {out!r}]) == 0",
+    "validate whole": ("from haptify.validation import SessionValidator; v = SessionValidator({out!r}); v.check_manifest(); "
+                       "[v.check_stream(e, keep=True) for e in v.entries]; assert v.report.valid"),
 }
 
 
@@ -120,6 +130,10 @@ def big_files(tmp: Path, big_mb: float, small_mb: float) -> None:
     small.unlink()
     big = big_c3d(tmp / "big.c3d", big_mb)
     runs["streamed import (large)"] = measure("import", big, tmp)
+    runs["haptify import, with validation (large)"] = measure("haptify import", big, tmp)
+    runs["haptify validate, streams in chunks (large)"] = measure("haptify validate", big, tmp)
+    runs["validation, streams read whole (large)"] = measure("validate whole", big, tmp)
+    session_mb = sum(f.stat().st_size for f in (tmp / "session").rglob("*") if f.is_file()) / 1e6
     big.unlink()
     for name, r in runs.items():
         speed = r["mb"] / r["s"]
@@ -133,6 +147,17 @@ def big_files(tmp: Path, big_mb: float, small_mb: float) -> None:
            f"{large['rss_mb']:.0f} MB at {large['mb'] / large['s']:.1f} MB/s",
            f"ezc3d.c3d {ez['rss_mb']:.0f} MB for {ez['mb']:.0f} MB", large["rss_mb"] / large["mb"],
            large["rss_mb"] < large["mb"])
+    cli_import, cli_validate = runs["haptify import, with validation (large)"], runs["haptify validate, streams in chunks (large)"]
+    whole = runs["validation, streams read whole (large)"]
+    print(f"the imported session: {session_mb:.0f} MB of Parquet; validating it: {cli_validate['s']:.1f} s in chunks, "
+          f"{whole['s']:.1f} s with every stream read whole")
+    report(f"haptify import (with validation) peak RSS, {large['mb']:.0f} MB C3D", "below the file's size (issue 19)",
+           f"{cli_import['rss_mb']:.0f} MB in {cli_import['s']:.1f} s", f"import alone {large['rss_mb']:.0f} MB",
+           cli_import["rss_mb"] / large["mb"], cli_import["rss_mb"] < large["mb"])
+    report(f"haptify validate peak RSS, session of a {large['mb']:.0f} MB C3D", "below the file's size (issue 19)",
+           f"{cli_validate['rss_mb']:.0f} MB in {cli_validate['s']:.1f} s",
+           f"streams read whole {whole['rss_mb']:.0f} MB in {whole['s']:.1f} s", cli_validate["rss_mb"] / large["mb"],
+           cli_validate["rss_mb"] < large["mb"])
 
 
 def main() -> None:
