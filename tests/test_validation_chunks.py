@@ -215,3 +215,19 @@ def test_the_default_chunk_is_about_32_mib_of_float64_rows():
     assert v.chunk_rows_for(7) == validation.STREAM_CHUNK_BYTES // 56
     assert v.chunk_rows_for(7) * 7 * 8 <= 32 * 2**20
     assert SessionValidator(".", chunk_rows=5).chunk_rows_for(7) == 5
+
+
+def test_an_integer_column_with_a_null_is_e212_judged_on_the_schema(tmp_path: Path):
+    """spec §3.2: a column that is not float is E212 — also when a null would make a reader widen it to float64."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    folder = example_writer(duration_s=0.2).write(tmp_path / "s")
+    s = fx.stream_of(fx.manifest(folder), "handle_wrench")
+    table = pq.read_table(folder / s["file"])
+    fx_int = pa.array([None, *range(1, table.num_rows)], type=pa.int64())
+    pq.write_table(table.set_column(table.column_names.index("fx"), "fx", fx_int), folder / s["file"])
+    fx.edit(folder, lambda m: fx.stream_of(m, "handle_wrench").__setitem__("sha256", storage.sha256_file(folder / s["file"])))
+    for rows in (None, 7):
+        report = validate_session(folder, chunk_rows=rows)
+        assert [(f.code, f.column, f.found) for f in report.findings] == [("E212", "fx", "int64")], rows
