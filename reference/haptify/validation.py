@@ -988,17 +988,19 @@ class SessionValidator:
         if keep is not None:
             keep(first)
         columns = [str(c) for c in first.columns]
-        judged = list(first.columns) == declared and entry.names_ok  # else the columns' meaning is unknown (E201/E107)
+        same = list(first.columns) == declared
         times = _TimeScan(s.rate_hz)
-        values = self._value_scan(s, columns[1:]) if judged else None
-        for chunk in itertools.chain([first], chunks):  # every chunk is read: a damaged later part is E112
+        values = self._value_scan(s, columns[1:]) if same and entry.names_ok else None  # else the columns' meaning is unknown
+        chunks = itertools.chain([first], chunks)
+        del first  # hold no chunk but the current one
+        for chunk in chunks:  # every chunk is read: a damaged later part is E112
             if values is None:
                 times.rows += len(chunk)
                 continue
             block = chunk.to_numpy(dtype=np.float64, copy=False)  # one block: no per-column frame; t first (names_ok)
             times.feed(block[:, 0])
             values.feed(block[:, 0], block[:, 1:])
-        if list(first.columns) != declared:
+        if not same:
             add(Finding("E201", "the file's columns differ from the columns declared in session.json", file=label,
                         expected=declared, found=columns))
             return
