@@ -317,7 +317,8 @@ def read_stream_chunks(path: Path, fmt: str, columns: list[str], *, label: str,
                 del data
             else:
                 digest, source = sha256_file(path), path
-            parquet = pq.ParquetFile(source)
+            # pre-buffering would fetch every row group's bytes at once: memory would grow with the file
+            parquet = pq.ParquetFile(source, pre_buffer=chunk_rows is None)
             # the columns are the data (spec §3.2); pandas' own metadata is neither needed nor trusted
             as_float64(parquet.schema_arrow.empty_table().to_pandas(ignore_metadata=True), label)
             return digest, _checked_chunks(_parquet_chunks(parquet, chunk_rows), fmt, label)
