@@ -40,7 +40,8 @@ def fmt_row(values) -> list[str]:
 def run_pipeline(tmp_path: Path, capsys, fmt: str, path: Path, m: dict, cli_format: str | None = None) -> Path:
     """import (CLI) → validate → compute; returns the session; checks the workspace by construction."""
     (tmp_path / "m.json").write_text(json.dumps(m))
-    code = main(["--json", "import", cli_format or fmt, str(path), "-o", str(tmp_path / "s"), "--map", str(tmp_path / "m.json")])
+    word = [fmt] if cli_format is None else [cli_format] if cli_format else []  # "": no format word at all
+    code = main(["--json", "import", *word, str(path), "-o", str(tmp_path / "s"), "--map", str(tmp_path / "m.json")])
     out = capsys.readouterr().out
     assert code == 0, out
     assert json.loads(out)["validation"]["valid"]
@@ -240,7 +241,7 @@ def test_nexus_csv_segments_session_validates_and_computes(tmp_path, capsys):
     m = workspace_map("nexus", bodies={"handle": "Rig:Handle"},
                       streams={"sync": {"columns": {"trigger": {"source": "Trigger - Voltage - Pin", "threshold": 2.5}}}})
     m["trial"]["protocol"] = "workspace"
-    session = run_pipeline(tmp_path, capsys, "nexus", tmp_path / "trial.csv", m, cli_format="auto")
+    session = run_pipeline(tmp_path, capsys, "nexus", tmp_path / "trial.csv", m, cli_format="")
     assert_handle(session, 1e-3, np.round(pos, 6))
     s = open_session(session)
     sync = s.read("ws", "sync")
@@ -264,3 +265,16 @@ def test_auto_refuses_an_unknown_format(tmp_path, capsys):
     (tmp_path / "x.txt").write_text("hello\n")
     assert main(["import", "auto", str(tmp_path / "x.txt"), "--list"]) == 2
     assert "E501" in capsys.readouterr().err
+    assert main(["--json", "import", str(tmp_path / "x.txt"), "--list"]) == 2  # no format word: the same
+    assert "E501" in capsys.readouterr().out
+
+
+def test_without_a_format_word_each_format_is_recognised(tmp_path, capsys):
+    from haptify_tools.c3d_variants import C3DSpec, write_c3d
+
+    write_qtm_6d(tmp_path / "a.tsv")
+    write_nexus(tmp_path / "b.csv", frames=10)
+    write_c3d(tmp_path / "c.c3d", C3DSpec(labels=["m"], points=np.ones((5, 1, 3))))
+    for name, fmt in (("a.tsv", "tsv"), ("b.csv", "nexus"), ("c.c3d", "c3d")):
+        assert main(["import", str(tmp_path / name), "--list", "--json"]) == 0
+        assert json.loads(capsys.readouterr().out)["format"] == fmt

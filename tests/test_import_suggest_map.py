@@ -85,3 +85,21 @@ def test_an_unedited_suggestion_is_refused_naming_the_placeholders(tmp_path, cap
                  "--map", str(tmp_path / "m.json")])
     err = capsys.readouterr().err
     assert code == 2 and "E502" in err and "/session/date" in err and not (tmp_path / "s").exists()
+
+
+def test_a_platform_whose_channel_units_are_stated_is_suggested_as_plate_wrench(tmp_path, capsys):
+    from haptify_tools.c3d_variants import PLATFORM_UNITS
+
+    spec = C3DSpec(point_rate=0.0, frames=5, analog_rate=1000.0, analog_labels=[f"F{i}" for i in range(6)],
+                   analog_units=PLATFORM_UNITS[2], analogs=float32(np.ones((6, 50))),
+                   platforms=[Platform(2, rectangle_corners([0, 0, 0], 600.0, 400.0), np.array([0, 0, -40.0]),
+                                       list(range(1, 7)))])
+    path = write_c3d(tmp_path / "p.c3d", spec)
+    m, unplaced = suggest(["c3d", str(path)], capsys)
+    assert m["force_plate"] == 1 and m["platform_wrench"] == {}
+    assert any("become plate_wrench" in u for u in unplaced)
+    m["session"] = FILLED
+    m["trial"]["powered"] = False
+    (tmp_path / "m.json").write_text(json.dumps(m))
+    result = import_c3d(path, tmp_path / "s", tmp_path / "m.json")
+    assert [s["kind"] for s in result.streams] == ["plate_wrench"]

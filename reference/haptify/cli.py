@@ -44,15 +44,16 @@ class UI:
 
     @contextmanager
     def progress(self, description: str, total: float | None) -> Iterator[Any]:
-        """A progress bar on stderr for work that can take more than ~2 s; yields ``advance(n=1)``."""
+        """A progress bar on stderr for work that can take more than ~2 s; yields ``advance(n=1, total=None)``
+        (``total`` sets the bar's length once the work knows it)."""
         if self.quiet or self.json_mode or not sys.stderr.isatty():
-            yield lambda n=1: None
+            yield lambda n=1, total=None: None
             return
         from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
         with Progress(TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(), transient=True) as bar:
             task = bar.add_task(description, total=total)
-            yield lambda n=1: bar.advance(task, n)
+            yield lambda n=1, total=None: bar.update(task, advance=n, **({} if total is None else {"total": total}))
 
 
 def _json_default(obj: Any) -> Any:
@@ -142,6 +143,10 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``haptify`` console script; returns the process exit code.
     0, 1 or 2 as spec §0.5 defines."""
     argv, flags, command = split_global_flags(sys.argv[1:] if argv is None else list(argv))
+    if command == "import":  # the format word is optional (spec §5.8)
+        from haptify.cmd_import import implicit_format
+
+        argv = implicit_format(argv)
     parser = build_parser(command)
     try:
         args = parser.parse_args(argv)

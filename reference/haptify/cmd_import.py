@@ -1,4 +1,6 @@
-"""``haptify import c3d|csv FILE -o SESSION [--map MAP.json]`` (spec §5.8).
+"""``haptify import [c3d|tsv|motive|nexus|csv] FILE -o SESSION [--map MAP.json]`` (spec §5.8).
+
+Without a format word (or with ``auto``) a motion-capture file's format is recognised from its content.
 
 With ``--map`` the map supplies every fact the source does not hold; the options below override the
 map's fields (one map, many files). Without a map (C3D only) the options must supply them: ``--device``,
@@ -58,8 +60,20 @@ FORMATS = {"c3d": "a C3D motion-capture file (Vicon, Qualisys, OptiTrack, marker
            "tsv": "a Qualisys Track Manager TSV export (3-D markers and 6DOF bodies)",
            "motive": "an OptiTrack Motive CSV export (markers and rigid bodies)",
            "nexus": "a Vicon Nexus CSV export (trajectories, model outputs, segments, devices)",
-           "auto": "a motion-capture file of any of the formats above, recognised from its content",
+           "auto": "a motion-capture file of any of the formats above, recognised from its content (the default: `haptify import FILE`)",
            "csv": "a column-mapped CSV log (ATI F/T log, CHAI3D log, …)"}
+
+
+def implicit_format(argv: list[str]) -> list[str]:
+    """``haptify import FILE …`` without a format word means ``haptify import auto FILE …`` (spec §5.8):
+    the word after ``import`` is a format when it names one, an option when it starts with ``-``, and
+    otherwise the file, recognised by its content."""
+    if "import" not in argv:
+        return argv
+    k = argv.index("import") + 1
+    if k < len(argv) and argv[k] not in FORMATS and not argv[k].startswith("-"):
+        return [*argv[:k], "auto", *argv[k:]]
+    return argv
 
 
 def _format_of(args) -> str:
@@ -160,12 +174,21 @@ def _suggest(fmt: str, args, ui) -> int:
     return 0
 
 
-def _importer(fmt: str):
-    if fmt in ("c3d", "csv"):
-        return import_c3d if fmt == "c3d" else import_csv
+def _importer(fmt: str, advance):
+    """The import function of ``fmt``, reporting a streamed file's frames to ``advance`` (§5.5.1)."""
+    if fmt == "csv":
+        return import_csv
+    seen = [0]
+
+    def progress(done: int, total: int) -> None:
+        advance(done - seen[0], total=total)
+        seen[0] = done
+
+    if fmt == "c3d":
+        return lambda path, dest, loaded: import_c3d(path, dest, loaded, progress=progress)
     from haptify.mocap_exports import import_export
 
-    return lambda path, dest, loaded: import_export(fmt, path, dest, loaded)
+    return lambda path, dest, loaded: import_export(fmt, path, dest, loaded, progress=progress)
 
 
 def run(args, ui) -> int:
@@ -200,8 +223,8 @@ def run(args, ui) -> int:
         raise fail("E903", f"haptify import {fmt} needs -o SESSION", expected="-o SESSION", found=None)
     dest = Destination.of(args.output, overwrite=args.overwrite, append=args.append)
     loaded = _load(args, fmt, dest.session_facts())
-    with ui.progress(f"importing {args.file.name}", total=None):
-        result = _importer(fmt)(args.file, dest, loaded)
+    with ui.progress(f"importing {args.file.name}", total=None) as advance:
+        result = _importer(fmt, advance)(args.file, dest, loaded)
         report = validate_session(result.session)
     if ui.json_mode:
         ui.emit_json({**result.to_dict(), "validation": {"valid": report.valid,

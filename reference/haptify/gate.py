@@ -50,7 +50,7 @@ class CheckedSession(SessionFolder):
         entry = self._unchecked.pop(stream.file, None)
         if entry is None:
             return super().read_stream(stream, verify=verify, session_clock=session_clock)
-        table = self._validator.check_stream(entry)
+        table = self._validator.check_stream(entry, keep=True)
         self._refuse_on_errors()
         assert table is not None  # a stream whose file could not be read has an error finding
         if session_clock:

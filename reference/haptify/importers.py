@@ -21,9 +21,9 @@ import re
 import shutil
 import struct
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Annotated, Any, Callable, Literal, Union
+from typing import Annotated, Any, Callable, Iterator, Literal, Union
 
 import numpy as np
 import pandas as pd
@@ -31,7 +31,18 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from haptify import schemas
 from haptify.conventions import matrix_to_quat, quat_to_matrix
+from haptify.c3d_stream import STREAM_ABOVE_BYTES, C3DLayout, c3d_layout, chunk_frames_for, iter_frames, read_head
 from haptify.errors import Finding, HaptifyError, fail
+from haptify.force_plate import CORNERS, PLATE_COLUMNS
+from haptify.platform_wrench import (
+    CHANNEL_DIMENSIONS,
+    PLATFORM_CHANNELS,
+    calibrated,
+    equivalent_corners,
+    origin_by_rule,
+    wrench_at_origin,
+    wrench_at_surface,
+)
 from haptify.session_format import (
     ALLOWED_VALUES,
     PROTOCOLS,
@@ -175,6 +186,17 @@ class BodyMap(_Strict):
     format: Literal["parquet", "csv"] = "parquet"
 
 
+class PlatformWrenchMap(_Strict):
+    """The chosen C3D force platform's channels as the trial's ``plate_wrench`` (spec §5.6.1): the units
+    of the platform's outputs (after its calibration matrix), each defaulting to its channel's
+    ANALOG:UNITS."""
+
+    force_unit: str | None = Field(None, description="Unit of the force outputs (Fx, Fy, Fz; type 3: all eight).")
+    torque_unit: str | None = Field(None, description="Unit of the moment outputs (types 2 and 4: Mx, My, Mz; type 1: Tz).")
+    length_unit: str | None = Field(None, description="Type 1 only: unit of the centre of pressure Px, Py.")
+    format: Literal["parquet", "csv"] = "parquet"
+
+
 class DeviceFile(_Strict):
     """The device given as a device.json file beside the map instead of inline (spec §5.2)."""
 
@@ -235,6 +257,7 @@ class ImportMap(_Strict):
     markers: MarkerMap | None = Field(None, description="Motion-capture sources only; default: every point label.")
     bodies: BodyMap | None = Field(None, description="Motion-capture sources only: 6-DoF bodies that become handle_pose and link_poses; default none.")
     force_plate: Union[Annotated[int, Field(ge=1)], Literal["auto", "none"]] = Field("auto", description="C3D only: the FORCE_PLATFORM number (1-based) that becomes the rig's plate and defines W; 'auto' = 1 when the file has platforms.")
+    platform_wrench: PlatformWrenchMap | None = Field(None, description="C3D only: the force platform that defines W also gives the trial's plate_wrench, from its channels (types 1–4); default: its channels are not imported.")
     lab_to_world: Pose | None = Field(None, description="C3D only, without a force plate: the C3D lab frame in W (default: W is the lab frame).")
     time: CsvTime | None = Field(None, description="CSV only, required: the time column and its unit.")
     csv: CsvOptions | None = Field(None, description="CSV only: parsing options.")
@@ -303,7 +326,7 @@ def load_map(path: str | Path | None, source: str, overrides: dict | None = None
     if m.source != source:
         raise fail("E502", f"the map is for the {m.source} importer, not {source}", file=label, pointer="/source",
                    expected=source, found=m.source)
-    wrong = ("markers", "bodies", "lab_to_world") if source == "csv" else ("time", "csv")
+    wrong = ("markers", "bodies", "lab_to_world", "platform_wrench") if source == "csv" else ("time", "csv")
     for key in wrong:
         if getattr(m, key) is not None:
             raise fail("E502", f"{key!r} does not apply to {source} imports", file=label, pointer=f"/{key}",
@@ -378,6 +401,13 @@ class Recording:
     body_residuals: np.ndarray | None = None  # (n_frames, n_bodies), POINT units, when the file has them
     format: str = "c3d"
     warnings: list[Finding] = field(default_factory=list)
+    layout: C3DLayout | None = None  # a C3D file read in chunks (§5.5.1); points/analogs are then placeholders
+    chunked: Callable[[int | None], Iterator[tuple[int, "Recording"]]] | None = None  # a text export read in chunks
+
+    @property
+    def streamed(self) -> bool:
+        """Whether the frames stay in the file and are read chunk by chunk (§5.5.1)."""
+        return self.layout is not None or self.chunked is not None
 
     @property
     def frames(self) -> int:
@@ -523,7 +553,7 @@ def _platforms(params: Any, n_analogs: int, path: Path) -> tuple[list[C3DPlatfor
             chans = []
         matrix = None
         if cal.ndim == 3 and cal.shape[2] > i and cal.shape[0] == cal.shape[1] and cal[:, :, i].any():
-            matrix = cal[:, :, i].T.copy()  # stored column by column
+            matrix = cal[:, :, i].copy()  # CAL_MATRIX(output, channel, plate), as ezc3d applies it
         out.append(C3DPlatform(i + 1, int(types[i]) if types.size > i else None, cor, org, chans, matrix))
     return out, notes
 
@@ -545,10 +575,14 @@ def _rotations(c: Any, params: Any, n_frames: int, path: Path) -> tuple[list[str
     return labels, m[:, :, :3, 3].copy(), m[:, :, :3, :3].copy(), notes
 
 
-def read_c3d(path: str | Path) -> Recording:
+def read_c3d(path: str | Path, *, stream: bool | None = None) -> Recording:
     """Read a C3D file with ezc3d (spec §5.5). E501 only when it is missing, not a C3D, or ezc3d cannot
     read it; every disagreement between the header, the parameters and the data is a W501 finding in
-    ``warnings``, and the data as ezc3d reads them are what the recording holds."""
+    ``warnings``, and the data as ezc3d reads them are what the recording holds.
+
+    A file larger than ``STREAM_ABOVE_BYTES`` (or any file with ``stream=True``; never with ``False``)
+    is opened for streaming (§5.5.1) when its encoding allows: the recording then holds only its
+    header facts, ``layout`` says where its frames are, and :func:`recording_chunks` reads them."""
     import ezc3d
 
     p = Path(path)
@@ -561,19 +595,30 @@ def read_c3d(path: str | Path) -> Recording:
         raise fail("E501", f"{label!r} is not a C3D file (its second byte is not 0x50)", file=label,
                    expected="0x50", found=head[1:2].hex() or "end of file")
     header = read_c3d_header(p)
+    layout = None
     try:
-        c = ezc3d.c3d(str(p), extract_forceplat_data=False)
+        if stream or (stream is None and p.stat().st_size > STREAM_ABOVE_BYTES):
+            c, data_start = read_head(p)
+            layout = c3d_layout(p, c, data_start, header.analog_values, header.frames,
+                                header.last_frame == C3D_LONG_FILE_LAST_FRAME)
+        if layout is None:
+            c = ezc3d.c3d(str(p), extract_forceplat_data=False)
     except (OSError, RuntimeError, ValueError, IndexError) as exc:
         raise fail("E501", f"{label!r} cannot be read as C3D: {exc}", file=label) from None
     params, head_info, data = c["parameters"], c["header"], c["data"]
-    pts = np.asarray(data["points"], dtype=np.float64)  # (4, n_markers, n_frames)
-    n_markers, n_frames = pts.shape[1], pts.shape[2]
-    xyz = pts[:3].transpose(2, 1, 0).copy()  # (n_frames, n_markers, 3)
-    residuals = np.asarray(data["meta_points"]["residuals"], dtype=np.float64)[0].T if n_markers else np.zeros((n_frames, 0))
-    invalid = (residuals < 0) | ~np.isfinite(xyz).all(axis=2)
-    xyz[invalid] = np.nan
-    an = np.asarray(data["analogs"], dtype=np.float64)
-    analogs = an[0] if an.ndim == 3 and an.shape[0] == 1 else an.reshape(an.shape[-2], -1)
+    if layout is not None:  # the frames stay in the file; broadcast placeholders give the shapes (§5.5.1)
+        xyz = np.broadcast_to(np.float64(np.nan), (layout.frames, layout.points, 3))
+        analogs = np.broadcast_to(np.float64(0.0), (layout.channels, layout.frames * layout.per_frame))
+        n_markers, n_frames = layout.points, layout.frames
+    else:
+        pts = np.asarray(data["points"], dtype=np.float64)  # (4, n_markers, n_frames)
+        n_markers, n_frames = pts.shape[1], pts.shape[2]
+        xyz = pts[:3].transpose(2, 1, 0).copy()  # (n_frames, n_markers, 3)
+        residuals = np.asarray(data["meta_points"]["residuals"], dtype=np.float64)[0].T if n_markers else np.zeros((n_frames, 0))
+        invalid = (residuals < 0) | ~np.isfinite(xyz).all(axis=2)
+        xyz[invalid] = np.nan
+        an = np.asarray(data["analogs"], dtype=np.float64)
+        analogs = an[0] if an.ndim == 3 and an.shape[0] == 1 else an.reshape(an.shape[-2], -1)
     n_ch = analogs.shape[0]
     per_frame = analogs.shape[1] // n_frames if n_frames else 0
     # rates (spec §5.5): the header's as ezc3d reads it; a writer that leaves it 0 (analog-only files)
@@ -607,8 +652,23 @@ def read_c3d(path: str | Path) -> Recording:
         analog_units=_strings(_param(params, "ANALOG", "UNITS"), n_ch),
         analog_rate=analog_rate, analog_first_sample=int(head_info["points"]["first_frame"]) * max(per_frame, 1),
         analogs=analogs, platforms=platforms, body_labels=body_labels, body_positions=body_pos,
-        body_rotations=body_rot, warnings=warnings + notes + rot_notes,
+        body_rotations=body_rot, warnings=warnings + notes + rot_notes, layout=layout,
     )
+
+
+def recording_chunks(rec: Recording, chunk_frames: int | None = None) -> Iterator[tuple[int, Recording]]:
+    """A recording's frames in chunks (spec §5.5.1): ``(first frame, the recording restricted to the
+    chunk)``, its clocks advanced to the chunk's first frame. A recording read whole is one chunk."""
+    if rec.chunked is not None:
+        yield from rec.chunked(chunk_frames)
+        return
+    if rec.layout is None:
+        yield 0, rec
+        return
+    per_frame = rec.layout.per_frame
+    for start, points, analogs in iter_frames(rec.layout, chunk_frames or chunk_frames_for(rec.layout)):
+        yield start, replace(rec, points=points, analogs=analogs, point_first_frame=rec.point_first_frame + start,
+                             analog_first_sample=rec.analog_first_sample + start * per_frame, layout=None)
 
 
 # --- geometry: the world frame from a force platform (spec §5.6) ----------------------------------
@@ -724,6 +784,62 @@ def pose_frame(pose: Pose) -> WorldFrame:
     rotation = quat_to_matrix(np.asarray(pose.quaternion, dtype=np.float64))
     centre = -rotation.T @ np.asarray(pose.position, dtype=np.float64)
     return WorldFrame(rotation, centre, "W: the C3D lab frame placed in W by the map's lab_to_world pose")
+
+
+# --- the platform's wrench (spec §5.6.1) ------------------------------------------------------------
+
+_SI_OF_DIMENSION = {"force": "N", "torque": "N*m", "length": "m"}
+
+
+def platform_plate_wrench(rec: Recording, platform: C3DPlatform, pm: PlatformWrenchMap, plate: dict, to_m: Unit, *,
+                          label: str) -> tuple[dict[str, np.ndarray], list[Finding]]:
+    """The ``plate_wrench`` columns (``t`` excluded) of the platform that defines W (spec §5.6.1): its
+    outputs (types 1–4, calibration matrix applied) in SI, the wrench moved to the top surface's
+    centre (W's origin), rotated into W and reversed (the channels hold the reaction), shared among the rig's four corner sensors
+    (:func:`~haptify.platform_wrench.equivalent_corners`). Returns the columns and W503 findings.
+
+    E506 when the platform's type is not 1–4, its channels are missing or its calibration matrix or
+    origin is unusable; E504 for a unit that is not a force, torque or length as the output needs.
+    """
+    src, number = str(rec.path), platform.number
+    kind = platform.type
+    if kind not in PLATFORM_CHANNELS:
+        raise fail("E506", f"force platform {number} is of type {kind}; its wrench is imported for types "
+                   f"{sorted(PLATFORM_CHANNELS)}", file=src, pointer="/FORCE_PLATFORM/TYPE",
+                   expected=sorted(PLATFORM_CHANNELS), found=kind)
+    need = PLATFORM_CHANNELS[kind]
+    if len(platform.channels) < need:
+        raise fail("E506", f"force platform {number} (type {kind}) names {len(platform.channels)} of the {need} analog "
+                   "channels its type records in FORCE_PLATFORM:CHANNEL", file=src, pointer="/FORCE_PLATFORM/CHANNEL",
+                   expected=need, found=[c + 1 for c in platform.channels])
+    if platform.origin is None:
+        raise fail("E506", f"force platform {number} has no FORCE_PLATFORM:ORIGIN", file=src,
+                   pointer="/FORCE_PLATFORM/ORIGIN", expected="3 numbers", found=None)
+    chans = platform.channels[:need]
+    out = calibrated(kind, rec.analogs[chans], platform.cal_matrix, number=number, file=src)
+    given = {"force": pm.force_unit, "torque": pm.torque_unit, "length": pm.length_unit}
+    si = np.empty_like(out)
+    for row, (ch, dim) in enumerate(zip(chans, CHANNEL_DIMENSIONS[kind])):
+        unit = given[dim] if given[dim] is not None else (rec.analog_units[ch] or None)
+        si[row] = unit_conversion(unit, _SI_OF_DIMENSION[dim], file=label if given[dim] else src,
+                                  pointer=f"/platform_wrench/{dim}_unit" if given[dim] else "/ANALOG/UNITS",
+                                  column=rec.analog_labels[ch]).to_si(out[row])
+    bad = ~np.isfinite(si)
+    if bad.any():
+        row, i = (int(v[0]) for v in np.nonzero(bad))
+        raise fail("E204", f"force platform {number}: channel {rec.analog_labels[chans[row]]!r} is not finite at "
+                   f"sample {i}", file=src, column=rec.analog_labels[chans[row]], expected="finite values",
+                   found=str(si[row, i]))
+    geometry, notes = origin_by_rule(kind, to_m.to_si(platform.origin), number=number, file=src)
+    force, moment_o = wrench_at_origin(kind, si, geometry)
+    moment_c = wrench_at_surface(force, moment_o, geometry)
+    sensors = {c["id"]: c["pose"] for c in plate["corners"]}
+    positions = np.array([sensors[c]["position"] for c in CORNERS], dtype=np.float64)
+    rotations = quat_to_matrix(np.array([sensors[c]["quaternion"] for c in CORNERS], dtype=np.float64))
+    axes = rotations[0]  # every corner sensor is oriented as the platform (§5.6): platform → W
+    # the channels are the platform's reaction on the load; §14.1's wrench is the load's on the plate
+    readings = equivalent_corners(-(axes @ force), -(axes @ moment_c), positions, rotations)
+    return dict(zip(PLATE_COLUMNS, readings)), notes
 
 
 # --- building streams from channels (spec §5.3) ---------------------------------------------------
@@ -1177,15 +1293,20 @@ def _pose_streams(rec: Recording, m: ImportMap, world: WorldFrame | None, to_m: 
 
 
 def import_c3d(path: str | Path, out: str | Path | Destination, mapping: str | Path | LoadedMap | None = None, *,
-               overrides: dict | None = None, overwrite: bool = False, append: bool = False) -> ImportResult:
+               overrides: dict | None = None, overwrite: bool = False, append: bool = False,
+               stream: bool | None = None, chunk_frames: int | None = None,
+               progress: Callable[[int, int], None] | None = None) -> ImportResult:
     """Import a C3D file as one trial of a new session at ``out`` (spec §5.5), or append it as one
-    more trial to the session at ``out`` (``append``, §5.9). See :func:`import_recording`."""
+    more trial to the session at ``out`` (``append``, §5.9). See :func:`import_recording`; ``stream``
+    as :func:`read_c3d`."""
     dest, loaded, _, device, extra = _prepare(out, mapping, "c3d", overrides, overwrite, append)
-    return import_recording(read_c3d(path), dest, loaded, device, extra)
+    return import_recording(read_c3d(path, stream=stream), dest, loaded, device, extra, chunk_frames=chunk_frames,
+                            progress=progress)
 
 
 def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, device: dict,
-                     extra: dict[str, str]) -> ImportResult:
+                     extra: dict[str, str], *, chunk_frames: int | None = None,
+                     progress: Callable[[int, int], None] | None = None) -> ImportResult:
     """One motion-capture recording (C3D, Qualisys TSV, Motive or Nexus CSV) as one trial (spec §5.5, §5.10).
 
     Markers become a ``markers`` stream (point units → m, invalid → NaN), the map's 6-DoF bodies
@@ -1193,6 +1314,9 @@ def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, devic
     names (§5.3); a chosen force platform becomes the rig's plate. The reader's warnings (W501) and
     the plate's (W502) are returned and written into the trial's notes. Nothing is written when any
     check fails.
+
+    A recording opened for streaming (``rec.streamed``, §5.5.1) is read ``chunk_frames`` frames at a time
+    and its streams are written row group by row group; ``progress(frames done, frames)`` follows it.
     """
     m, label = loaded.map, loaded.label
     src = str(rec.path)
@@ -1243,37 +1367,62 @@ def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, devic
                 if unknown:
                     raise fail("E503", f"rigid body {body.name!r} names markers that are not imported: {unknown}", file=label,
                                pointer=f"/markers/rigid_bodies/{j}/markers", expected=entities, found=unknown)
-        t = (rec.point_first_frame + np.arange(rec.frames)) / rec.point_rate + m.time_offset_s
-        if chosen:
-            pos = point_unit.to_si(rec.points[:, chosen, :])
-            pos[~np.isfinite(pos).all(axis=2)] = np.nan  # a marker is seen or occluded as a whole (§2.7)
-            if world is not None:
-                pos = world.apply(pos)
-            marker_data = {"t": t}
-            for j, ent in enumerate(entities):
-                for k, axis in enumerate("xyz"):
-                    marker_data[f"{ent}_{axis}"] = pos[:, j, k]
-            mocap_streams["markers"] = (marker_data, entities)
-        mocap_streams.update(_pose_streams(rec, m, world, point_unit, t, mm.rigid_bodies, label))
         rig["motion_capture"] = {"system": mm.system or rec.manufacturer or None, "rate_hz": rec.point_rate,
                                  "rigid_bodies": [b.model_dump() for b in mm.rigid_bodies], "markers": entities}
         if rig["motion_capture"]["system"] is None:
             del rig["motion_capture"]["system"]
 
-    # analog streams
-    analog_streams: dict[str, dict[str, np.ndarray]] = {}
-    if m.streams:
+    # analog streams, and the platform's wrench (§5.6.1)
+    analog_wanted = bool(m.streams) or m.platform_wrench is not None
+    if m.platform_wrench is not None:
+        if plate_number is None:
+            raise fail("E502", "platform_wrench needs the force platform that defines W (force_plate)", file=label,
+                       pointer="/platform_wrench", expected="a force platform", found=m.force_plate)
+        if "plate_wrench" in m.streams:
+            raise fail("E502", "plate_wrench is both mapped from channels and taken from the platform; keep one",
+                       file=label, pointer="/streams/plate_wrench", expected="one source", found="two")
+    if analog_wanted:
         n = rec.analogs.shape[1]
         if n < 2:
             raise fail("E205", f"{rec.path.name} holds {n} analog sample(s); a stream needs two", file=src,
                        expected="≥ 2 analog samples", found=n)
-        t_an = (rec.analog_first_sample + np.arange(n)) / rec.analog_rate + m.time_offset_s
         for kind, smap in m.streams.items():
             if smap.rate_hz is not None and smap.rate_hz != rec.analog_rate:
                 raise fail("E502", f"{kind} rate_hz {smap.rate_hz} differs from the file's analog rate {rec.analog_rate}",
                            file=label, pointer=f"/streams/{kind}/rate_hz", expected=rec.analog_rate, found=smap.rate_hz)
-        mapped = _mapped_streams(m, n, _analog_reader(rec, label), label=label, source_file=src, unit_required=False)
-        analog_streams = {kind: {"t": t_an, **cols} for kind, cols in mapped.items()}
+
+    def streams_of(part: Recording) -> tuple[dict, dict[str, dict[str, np.ndarray]], list[Finding]]:
+        """The trial's streams from the frames of ``part`` (the whole recording, or one chunk of it)."""
+        mocap: dict[str, tuple[dict[str, np.ndarray], list[str] | None]] = {}
+        analog: dict[str, dict[str, np.ndarray]] = {}
+        notes: list[Finding] = []
+        if chosen or wants_bodies:
+            t = (part.point_first_frame + np.arange(part.frames)) / rec.point_rate + m.time_offset_s
+            if chosen:
+                pos = point_unit.to_si(part.points[:, chosen, :])
+                pos[~np.isfinite(pos).all(axis=2)] = np.nan  # a marker is seen or occluded as a whole (§2.7)
+                if world is not None:
+                    pos = world.apply(pos)
+                marker_data = {"t": t}
+                for j, ent in enumerate(entities):
+                    for k, axis in enumerate("xyz"):
+                        marker_data[f"{ent}_{axis}"] = pos[:, j, k]
+                mocap["markers"] = (marker_data, entities)
+            mocap.update(_pose_streams(part, m, world, point_unit, t, mm.rigid_bodies, label))
+        if analog_wanted:
+            n = part.analogs.shape[1]
+            t_an = (part.analog_first_sample + np.arange(n)) / rec.analog_rate + m.time_offset_s
+            mapped = _mapped_streams(m, n, _analog_reader(part, label), label=label, source_file=src, unit_required=False)
+            if m.platform_wrench is not None:
+                mapped["plate_wrench"], notes = platform_plate_wrench(
+                    part, part.platforms[plate_number - 1], m.platform_wrench, rig["force_plate"], point_unit, label=label)
+            analog = {kind: {"t": t_an, **cols} for kind, cols in mapped.items()}
+        return mocap, analog, notes
+
+    pieces = recording_chunks(rec, chunk_frames)
+    first = next(pieces)[1] if rec.frames or rec.analogs.shape[1] else rec
+    mocap_streams, analog_streams, origin_notes = streams_of(first)
+    warnings += origin_notes
 
     kinds = list(mocap_streams) + list(analog_streams)
     if not kinds:
@@ -1289,12 +1438,34 @@ def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, devic
         provenance += " Import warnings: " + " ".join(f"{w.code} {w.message}." for w in warnings)
     trial_id = _add_trial(writer, m, stem, rec.path, provenance)
     written = []
+    streamed = rec.streamed
+
+    def add(kind: str, cols: dict[str, np.ndarray], **kw: Any) -> None:
+        if streamed:
+            written.append(writer.add_chunked_stream(trial_id, kind, list(cols), **kw))
+        else:
+            written.append(writer.add_stream(trial_id, kind, cols, **kw))
+
     for kind, (cols, ents) in mocap_streams.items():
         fmt = mm.format if kind == "markers" else m.bodies.format  # type: ignore[union-attr]
-        written.append(writer.add_stream(trial_id, kind, cols, rate_hz=rec.point_rate, fmt=fmt, entities=ents))
+        add(kind, cols, rate_hz=rec.point_rate, fmt=fmt, entities=ents)
     for kind, cols in analog_streams.items():
-        smap = m.streams[kind]
-        written.append(writer.add_stream(trial_id, kind, cols, rate_hz=rec.analog_rate, fmt=smap.format, frame=smap.frame))
+        smap = m.streams.get(kind)
+        fmt, frame = (smap.format, smap.frame) if smap is not None else (m.platform_wrench.format, None)  # type: ignore[union-attr]
+        add(kind, cols, rate_hz=rec.analog_rate, fmt=fmt, frame=frame)
+    if streamed:
+        def chunks() -> Iterator[dict[str, dict[str, np.ndarray]]]:
+            done = first.frames
+            yield {**{k: c for k, (c, _) in mocap_streams.items()}, **analog_streams}
+            if progress:
+                progress(done, rec.frames)
+            for _, part in pieces:
+                mocap, analog, _ = streams_of(part)
+                yield {**{k: c for k, (c, _) in mocap.items()}, **analog}
+                done += part.frames
+                if progress:
+                    progress(done, rec.frames)
+        writer.chunks = chunks
     dest.write(writer, trial_id)
     return ImportResult(dest.out, writer.manifest["session_id"], trial_id, [_stream_summary(s) for s in written],
                         frame_note, rec.summary(), warnings)

@@ -11,13 +11,16 @@ from __future__ import annotations
 
 import io
 import math
+from dataclasses import replace
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 import pandas as pd
 
 from haptify.conventions import quat_to_matrix
 from haptify.errors import Finding, fail
+from haptify.c3d_stream import STREAM_ABOVE_BYTES
 from haptify.importers import UNITS, Destination, ImportResult, LoadedMap, Recording, _prepare, import_recording
 
 FORMATS = ("tsv", "motive", "nexus")
@@ -88,13 +91,9 @@ def qtm_rotation(cells: np.ndarray) -> np.ndarray:
     return np.swapaxes(cells.reshape(*cells.shape[:-1], 3, 3), -1, -2)
 
 
-def read_qualisys_tsv(path: str | Path) -> Recording:
-    """A QTM TSV export (spec §5.10): header lines ``KEY<TAB>value…`` up to the data; ``MARKER_NAMES``
-    give markers (X, Y, Z in mm), ``BODY_NAMES`` 6-DoF bodies (X, Y, Z, Roll, Pitch, Yaw, Residual,
-    Rot[0]–Rot[8]). ``FREQUENCY`` is the rate; a ``Frame``/``Time`` column pair, when present, is
-    skipped, and the first frame number sets the clock."""
-    p = Path(path)
-    lines = _text(p).splitlines()
+def _qtm_head(lines: list[str], p: Path) -> dict:
+    """A QTM TSV's header (spec §5.10): the ``KEY<TAB>value…`` lines, the optional ``Frame`` column
+    line, the line where the data start, the markers, bodies and the width of a data row."""
     meta: dict[str, list[str]] = {}
     i = 0
     while i < len(lines) and lines[i] and not _is_number(lines[i].split("\t")[0]) and lines[i].split("\t")[0] != "Frame":
@@ -102,36 +101,118 @@ def read_qualisys_tsv(path: str | Path) -> Recording:
         meta[cells[0].strip()] = [c.strip() for c in cells[1:]]
         i += 1
     has_columns = i < len(lines) and lines[i].split("\t")[0] == "Frame"
-    header = lines[i].split("\t") if has_columns else []
-    data_start = i + 1 if has_columns else i
     if "FREQUENCY" not in meta:
         raise fail("E501", f"{p.name} is not a QTM TSV export: no FREQUENCY line", file=str(p), expected="FREQUENCY",
                    found=sorted(meta))
-    rate = float(meta["FREQUENCY"][0])
     markers = [m for m in meta.get("MARKER_NAMES", []) if m]
     bodies = [b for b in meta.get("BODY_NAMES", []) if b]
-    per_body = 16
-    width = (2 if has_columns else 0) + 3 * len(markers) + per_body * len(bodies)
-    data = _table([ln for ln in lines[data_start:] if ln.strip()], "\t", p, data_start + 1, width)
     lead = 2 if has_columns else 0
-    first_frame = int(data[0, 0]) - 1 if has_columns and len(data) and math.isfinite(data[0, 0]) else 0
+    return {"meta": meta, "has_columns": has_columns, "data_start": i + 1 if has_columns else i, "markers": markers,
+            "bodies": bodies, "lead": lead, "width": lead + 3 * len(markers) + QTM_PER_BODY * len(bodies),
+            "rate": float(meta["FREQUENCY"][0])}
+
+
+QTM_PER_BODY = 16  # X, Y, Z, Roll, Pitch, Yaw, Residual, Rot[0]…Rot[8]
+
+
+def _qtm_part(p: Path, head: dict, data: np.ndarray, first_frame: int) -> Recording:
+    """The recording held by rows ``data`` of a QTM TSV (the whole file, or one chunk of it)."""
+    markers, bodies, lead = head["markers"], head["bodies"], head["lead"]
     rec = _empty(p, "tsv", "Qualisys Track Manager")
-    rec.update(point_rate=rate, point_first_frame=first_frame, point_labels=markers)
+    rec.update(point_rate=head["rate"], point_first_frame=first_frame, point_labels=markers)
     pts = data[:, lead:lead + 3 * len(markers)].reshape(len(data), len(markers), 3)
     gap = (pts == 0.0).all(axis=2) | ~np.isfinite(pts).all(axis=2)
     pts[gap] = np.nan
     rec["points"] = pts
     if bodies:
-        b = data[:, lead + 3 * len(markers):].reshape(len(data), len(bodies), per_body)
+        b = data[:, lead + 3 * len(markers):].reshape(len(data), len(bodies), QTM_PER_BODY)
         rec.update(body_labels=bodies, body_positions=b[:, :, 0:3].copy(), body_residuals=b[:, :, 6].copy(),
                    body_rotations=qtm_rotation(b[:, :, 7:16]))
-    expected = int(meta["NO_OF_FRAMES"][0]) if meta.get("NO_OF_FRAMES") else len(data)
-    out = Recording(**rec)
-    if expected != len(data):
-        out.warnings.append(Finding("W501", f"{p.name}: NO_OF_FRAMES is {expected}, the file holds {len(data)} frames; "
-                                    f"the {len(data)} frames read are imported", file=str(p), pointer="/NO_OF_FRAMES",
-                                    expected=expected, found=len(data)))
-    return out
+    return Recording(**rec)
+
+
+def read_qualisys_tsv(path: str | Path, *, stream: bool | None = None) -> Recording:
+    """A QTM TSV export (spec §5.10): header lines ``KEY<TAB>value…`` up to the data; ``MARKER_NAMES``
+    give markers (X, Y, Z in mm), ``BODY_NAMES`` 6-DoF bodies (X, Y, Z, Roll, Pitch, Yaw, Residual,
+    Rot[0]–Rot[8]). ``FREQUENCY`` is the rate; a ``Frame``/``Time`` column pair, when present, is
+    skipped, and the first frame number sets the clock. A large file (or any with ``stream=True``)
+    is read in chunks (§5.5.1)."""
+    p = Path(path)
+    if _stream_wanted(p, stream):
+        head = _qtm_head(_head_lines(p), p)
+        rec, rows = _streamed(p, "\t", head, _qtm_part, lambda first: int(first[0]) - 1 if head["has_columns"] and math.isfinite(first[0]) else 0)
+    else:
+        lines = _text(p).splitlines()
+        head = _qtm_head(lines, p)
+        data = _table([ln for ln in lines[head["data_start"]:] if ln.strip()], "\t", p, head["data_start"] + 1, head["width"])
+        first = int(data[0, 0]) - 1 if head["has_columns"] and len(data) and math.isfinite(data[0, 0]) else 0
+        rec, rows = _qtm_part(p, head, data, first), len(data)
+    meta = head["meta"]
+    expected = int(meta["NO_OF_FRAMES"][0]) if meta.get("NO_OF_FRAMES") else rows
+    if expected != rows:
+        rec.warnings.append(Finding("W501", f"{p.name}: NO_OF_FRAMES is {expected}, the file holds {rows} frames; "
+                                    f"the {rows} frames read are imported", file=str(p), pointer="/NO_OF_FRAMES",
+                                    expected=expected, found=rows))
+    return rec
+
+
+# --- streaming a text export (spec §5.5.1) ---------------------------------------------------------
+
+HEAD_LINES = 64  # a text export's header is within its first lines
+STREAM_CHUNK_ROWS = 50_000
+
+
+def _stream_wanted(p: Path, stream: bool | None) -> bool:
+    return bool(stream) or (stream is None and p.is_file() and p.stat().st_size > STREAM_ABOVE_BYTES)
+
+
+def _head_lines(p: Path) -> list[str]:
+    """The first ``HEAD_LINES`` lines of a text file (E501 when it is unreadable)."""
+    try:
+        with open(p, encoding="utf-8-sig") as fh:
+            return [line.rstrip("\r\n") for line, _ in zip(fh, range(HEAD_LINES))]
+    except (OSError, UnicodeDecodeError) as exc:
+        raise fail("E501", f"{str(p)!r} cannot be read as UTF-8 text: {exc}", file=str(p)) from None
+
+
+def _data_chunks(p: Path, sep: str, head: dict, rows: int) -> Iterator[np.ndarray]:
+    """The numeric rows after the header, ``rows`` at a time, parsed as :func:`_table` parses them."""
+    try:
+        reader = pd.read_csv(p, sep=sep, header=None, skiprows=head["data_start"], chunksize=rows, dtype=np.float64,
+                             na_values=["", "NaN", "nan"], keep_default_na=False, skipinitialspace=True,
+                             names=range(head["width"]), engine="c", encoding="utf-8-sig", skip_blank_lines=True)
+        for frame in reader:
+            yield frame.to_numpy(dtype=np.float64)
+    except ValueError as exc:
+        raise fail("E501", f"{p.name} cannot be read after line {head['data_start']}: {exc}", file=str(p)) from None
+
+
+def _streamed(p: Path, sep: str, head: dict, part, first_frame_of) -> tuple[Recording, int]:
+    """A text export opened for streaming: the recording with placeholder frames (their count from one
+    pass over the lines) and its chunk reader; also the row count."""
+    rows, first = 0, None
+    with open(p, "rb") as fh:
+        for k, line in enumerate(fh):
+            if k >= head["data_start"] and line.strip():
+                rows += 1
+                if first is None:
+                    first = line
+    first_frame = first_frame_of(_table([first.decode("utf-8")], sep, p, head["data_start"] + 1, head["width"])[0]) \
+        if first is not None else 0
+    shape = part(p, head, np.zeros((0, head["width"])), first_frame)
+    placeholders = {"points": np.broadcast_to(np.float64(np.nan), (rows, *shape.points.shape[1:]))}
+    for name in ("body_positions", "body_rotations", "body_residuals"):
+        value = getattr(shape, name)
+        if value is not None:
+            placeholders[name] = np.broadcast_to(np.float64(np.nan), (rows, *value.shape[1:]))
+
+    def chunked(chunk: int | None) -> Iterator[tuple[int, Recording]]:
+        start = 0
+        for data in _data_chunks(p, sep, head, chunk or STREAM_CHUNK_ROWS):
+            yield start, part(p, head, data, first_frame + start)
+            start += len(data)
+
+    return replace(shape, chunked=chunked, **placeholders), rows
 
 
 def _is_number(text: str) -> bool:
@@ -147,14 +228,9 @@ def _is_number(text: str) -> bool:
 MOTIVE_UNITS = {"Millimeters": "mm", "Centimeters": "cm", "Meters": "m"}
 
 
-def read_motive_csv(path: str | Path) -> Recording:
-    """A Motive CSV export (spec §5.10): a metadata line (``Format Version``, ``Export Frame Rate``,
-    ``Rotation Type``, ``Length Units``), a blank line, then the Type, Name, ID, quantity and axis
-    lines. ``Marker`` columns (Position X, Y, Z) become markers; ``Rigid Body`` columns (Rotation X, Y,
-    Z, W quaternion, Position X, Y, Z, Mean Marker Error) 6-DoF bodies, their mean marker error the
-    residual. Only quaternion exports are read (an Euler export's axis order is not in the file)."""
-    p = Path(path)
-    lines = _text(p).splitlines()
+def _motive_head(lines: list[str], p: Path) -> dict:
+    """A Motive CSV's header (spec §5.10): the metadata line, the Type, Name, ID, quantity and axis
+    lines, the markers and bodies they name, and where the data start."""
     first = [c.strip() for c in lines[0].split(",")] if lines else []
     meta = dict(zip(first[0::2], first[1::2]))
     if "Format Version" not in meta:
@@ -166,7 +242,6 @@ def read_motive_csv(path: str | Path) -> Recording:
     if units is None:
         raise fail("E504", f"{p.name}: Length Units {meta['Length Units']!r} is not known", file=str(p),
                    expected=sorted(MOTIVE_UNITS), found=meta["Length Units"])
-    rate = float(meta.get("Export Frame Rate") or meta.get("Capture Frame Rate") or 0)
     k = 1
     while k < len(lines) and not lines[k].strip():
         k += 1
@@ -176,18 +251,24 @@ def read_motive_csv(path: str | Path) -> Recording:
                    expected="Frame, Time, …", found=rows[-1][:2] if rows else None)
     types, names, _, quantity, axes = rows
     width = len(axes)
-    data = _table([ln for ln in lines[k + 5:] if ln.strip()], ",", p, k + 6, width)
-    col = {(types[j], names[j], quantity[j], axes[j]): j for j in range(2, width)}
-    markers = list(dict.fromkeys(names[j] for j in range(2, width) if types[j] == "Marker" and quantity[j] == "Position"))
-    bodies = list(dict.fromkeys(names[j] for j in range(2, width) if types[j] == "Rigid Body"))
-    rec = _empty(p, "motive", f"OptiTrack Motive (format {meta['Format Version']})")
+    return {"meta": meta, "units": units, "rate": float(meta.get("Export Frame Rate") or meta.get("Capture Frame Rate") or 0),
+            "data_start": k + 5, "width": width,
+            "col": {(types[j], names[j], quantity[j], axes[j]): j for j in range(2, width)},
+            "markers": list(dict.fromkeys(names[j] for j in range(2, width) if types[j] == "Marker" and quantity[j] == "Position")),
+            "bodies": list(dict.fromkeys(names[j] for j in range(2, width) if types[j] == "Rigid Body"))}
+
+
+def _motive_part(p: Path, head: dict, data: np.ndarray, first_frame: int) -> Recording:
+    """The recording held by rows ``data`` of a Motive CSV (the whole file, or one chunk of it)."""
+    col, markers, bodies = head["col"], head["markers"], head["bodies"]
+    rec = _empty(p, "motive", f"OptiTrack Motive (format {head['meta']['Format Version']})")
     n = len(data)
     pts = np.full((n, len(markers), 3), np.nan)
     for i, name in enumerate(markers):
         for a, axis in enumerate("XYZ"):
             pts[:, i, a] = data[:, col[("Marker", name, "Position", axis)]]
-    rec.update(point_rate=rate, point_units=units, point_labels=markers, points=pts,
-               point_first_frame=int(data[0, 0]) if n and math.isfinite(data[0, 0]) else 0)
+    rec.update(point_rate=head["rate"], point_units=head["units"], point_labels=markers, points=pts,
+               point_first_frame=first_frame)
     if bodies:
         pos = np.full((n, len(bodies), 3), np.nan)
         quat = np.full((n, len(bodies), 4), np.nan)
@@ -210,11 +291,29 @@ def read_motive_csv(path: str | Path) -> Recording:
         norm_err = np.abs(np.linalg.norm(np.where(valid[..., None], quat, [1.0, 0.0, 0.0, 0.0]), axis=2) - 1.0)
         if (norm_err > 1e-3).any():
             f, b = np.argwhere(norm_err > 1e-3)[0]
-            raise fail("E501", f"{p.name}: rigid body {bodies[b]!r} holds no unit quaternion at frame {f}",
+            raise fail("E501", f"{p.name}: rigid body {bodies[b]!r} holds no unit quaternion at frame {first_frame + f}",
                        file=str(p), expected="|q| = 1", found=float(np.linalg.norm(quat[f, b])))
+        has_residuals = any(("Rigid Body", name, "Mean Marker Error", "") in col for name in bodies)
         rec.update(body_labels=bodies, body_positions=pos, body_rotations=rot,
-                   body_residuals=None if np.isnan(res).all() else np.where(np.isnan(res) & valid, 0.0, res))
+                   body_residuals=np.where(np.isnan(res) & valid, 0.0, res) if has_residuals else None)
     return Recording(**rec)
+
+
+def read_motive_csv(path: str | Path, *, stream: bool | None = None) -> Recording:
+    """A Motive CSV export (spec §5.10): a metadata line (``Format Version``, ``Export Frame Rate``,
+    ``Rotation Type``, ``Length Units``), a blank line, then the Type, Name, ID, quantity and axis
+    lines. ``Marker`` columns (Position X, Y, Z) become markers; ``Rigid Body`` columns (Rotation X, Y,
+    Z, W quaternion, Position X, Y, Z, Mean Marker Error) 6-DoF bodies, their mean marker error the
+    residual. Only quaternion exports are read (an Euler export's axis order is not in the file). A
+    large file (or any with ``stream=True``) is read in chunks (§5.5.1)."""
+    p = Path(path)
+    if _stream_wanted(p, stream):
+        head = _motive_head(_head_lines(p), p)
+        return _streamed(p, ",", head, _motive_part, lambda first: int(first[0]) if math.isfinite(first[0]) else 0)[0]
+    lines = _text(p).splitlines()
+    head = _motive_head(lines, p)
+    data = _table([ln for ln in lines[head["data_start"]:] if ln.strip()], ",", p, head["data_start"] + 1, head["width"])
+    return _motive_part(p, head, data, int(data[0, 0]) if len(data) and math.isfinite(data[0, 0]) else 0)
 
 
 # --- Vicon Nexus CSV -----------------------------------------------------------------------------
@@ -347,14 +446,18 @@ def read_nexus_csv(path: str | Path) -> Recording:
 READERS = {"tsv": read_qualisys_tsv, "motive": read_motive_csv, "nexus": read_nexus_csv}
 
 
-def read_export(fmt: str, path: str | Path) -> Recording:
-    """The recording in a ``tsv``, ``motive`` or ``nexus`` export (spec §5.10)."""
-    return READERS[fmt](path)
+def read_export(fmt: str, path: str | Path, *, stream: bool | None = None) -> Recording:
+    """The recording in a ``tsv``, ``motive`` or ``nexus`` export (spec §5.10); Qualisys and Motive files
+    stream when large (or with ``stream=True``, §5.5.1); Nexus files are read whole."""
+    return READERS[fmt](path) if fmt == "nexus" else READERS[fmt](path, stream=stream)
 
 
 def import_export(fmt: str, path: str | Path, out: str | Path | Destination, mapping: str | Path | LoadedMap | None = None,
-                  *, overrides: dict | None = None, overwrite: bool = False, append: bool = False) -> ImportResult:
+                  *, overrides: dict | None = None, overwrite: bool = False, append: bool = False,
+                  stream: bool | None = None, chunk_frames: int | None = None, progress=None) -> ImportResult:
     """Import a Qualisys TSV, Motive CSV or Nexus CSV export as one trial (spec §5.10), through the
-    map rules of a C3D file (:func:`~haptify.importers.import_recording`)."""
+    map rules of a C3D file (:func:`~haptify.importers.import_recording`); ``stream``, ``chunk_frames``
+    and ``progress`` as for a C3D file (§5.5.1)."""
     dest, loaded, _, device, extra = _prepare(out, mapping, fmt, overrides, overwrite, append)
-    return import_recording(read_export(fmt, path), dest, loaded, device, extra)
+    return import_recording(read_export(fmt, path, stream=stream), dest, loaded, device, extra,
+                            chunk_frames=chunk_frames, progress=progress)

@@ -18,7 +18,7 @@ import tempfile
 import uuid
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
-from typing import Any, Callable, Iterable, Mapping
+from typing import Any, Callable, Iterable, Iterator, Mapping
 
 import numpy as np
 import pandas as pd
@@ -286,27 +286,85 @@ def read_table(path: Path, fmt: str, columns: list[str], *, label: str) -> pd.Da
 def read_stream_file(path: Path, fmt: str, columns: list[str], *, label: str) -> tuple[pd.DataFrame, str]:
     """Read a stream file once: its table as float64 columns and the sha256 of its bytes (spec §3.2, §3.4).
 
-    The bytes are hashed as they are read, so verifying a checksum costs no second pass. A CSV file is
-    checked against the grammar of §3.2 in bounded memory before it is parsed (a header or a line
-    longer than :func:`csv_line_limit` is E112 at once). Unreadable files raise E112, a wrong CSV
-    header E211, a column that is neither float64 nor (except ``t``) float32 E212; float32 columns are
-    widened to float64 exactly.
+    The whole-table case of :func:`read_stream_chunks` (one chunk): the bytes are hashed as they are
+    read, so verifying a checksum costs no second pass. The codes are those of :func:`read_stream_chunks`.
+    """
+    digest, chunks = read_stream_chunks(path, fmt, columns, label=label)
+    return next(chunks), digest
+
+
+def read_stream_chunks(path: Path, fmt: str, columns: list[str], *, label: str,
+                       chunk_rows: int | None = None) -> tuple[str, Iterator[pd.DataFrame]]:
+    """The sha256 of a stream file's bytes and its table as consecutive float64 chunks of at most
+    ``chunk_rows`` rows — at least one chunk, the first possibly empty (spec §3.2, §3.4).
+
+    ``chunk_rows=None`` reads the whole table as one chunk; a Parquet file is then read once, hashed as it
+    is read. Otherwise the file is hashed in a first pass of :data:`HASH_CHUNK` blocks and decoded batch by
+    batch (Parquet, ``ParquetFile.iter_batches``) or ``chunk_rows`` lines at a time (CSV,
+    ``pandas.read_csv(chunksize=…)``), so memory holds one chunk whatever the file's size. A CSV file is
+    checked against the grammar of §3.2 in bounded memory before it is parsed (a header or a line longer
+    than :func:`csv_line_limit` is E112 at once). Unreadable files raise E112 (also from the iterator, when
+    a later part of the file is damaged), a wrong CSV header E211, a column whose stored type is neither
+    float64 nor (except ``t``) float32 E212 — judged on the file's schema, before any row is read, so the
+    verdict never depends on the chunking; float32 columns are widened to float64 exactly.
     """
     try:
         if fmt == "parquet":
-            data = path.read_bytes()
-            digest = hashlib.sha256(data).hexdigest()
+            if chunk_rows is None:
+                data = path.read_bytes()
+                digest = hashlib.sha256(data).hexdigest()
+                source: Any = pa.BufferReader(data)
+                del data
+            else:
+                digest, source = sha256_file(path), path
+            # pre-buffering would fetch every row group's bytes at once: memory would grow with the file
+            parquet = pq.ParquetFile(source, pre_buffer=chunk_rows is None)
             # the columns are the data (spec §3.2); pandas' own metadata is neither needed nor trusted
-            frame = pq.read_table(pa.BufferReader(data)).to_pandas(ignore_metadata=True)
-            del data
-        else:
-            digest = check_csv_grammar(path, columns, label)
-            frame = pd.read_csv(path, dtype="float64", na_values=["NaN"], keep_default_na=False, engine="c")
+            as_float64(parquet.schema_arrow.empty_table().to_pandas(ignore_metadata=True), label)
+            return digest, _checked_chunks(_parquet_chunks(parquet, chunk_rows), fmt, label)
+        digest = check_csv_grammar(path, columns, label)
     except (HaptifyError, MemoryError):  # out of memory is the reader's failure, not the file's (never E112)
         raise
-    except (OSError, pa.ArrowException, ValueError, pd.errors.ParserError, UnicodeDecodeError) as exc:
+    except _READ_ERRORS as exc:
         raise fail("E112", f"{label!r} cannot be read as {fmt}: {exc}", file=label) from None
-    return as_float64(frame, label), digest
+    return digest, _checked_chunks(_csv_chunks(path, chunk_rows), fmt, label)
+
+
+_READ_ERRORS = (OSError, pa.ArrowException, ValueError, pd.errors.ParserError, UnicodeDecodeError)
+
+
+def _parquet_chunks(parquet: pq.ParquetFile, chunk_rows: int | None) -> Iterator[pd.DataFrame]:
+    """A Parquet file's table whole, or batch by batch; an empty file yields its empty table."""
+    if chunk_rows is None:
+        yield parquet.read().to_pandas(ignore_metadata=True)
+        return
+    empty = True
+    for batch in parquet.iter_batches(batch_size=chunk_rows, use_pandas_metadata=False):
+        empty = False
+        yield pa.Table.from_batches([batch]).to_pandas(ignore_metadata=True)
+    if empty:
+        yield parquet.schema_arrow.empty_table().to_pandas(ignore_metadata=True)
+
+
+def _csv_chunks(path: Path, chunk_rows: int | None) -> Iterator[pd.DataFrame]:
+    """A CSV stream's table whole, or ``chunk_rows`` lines at a time (a header-only file: one empty chunk)."""
+    options: dict[str, Any] = {"dtype": "float64", "na_values": ["NaN"], "keep_default_na": False, "engine": "c"}
+    if chunk_rows is None:
+        yield pd.read_csv(path, **options)
+    else:
+        with pd.read_csv(path, chunksize=chunk_rows, **options) as reader:
+            yield from reader
+
+
+def _checked_chunks(chunks: Iterator[pd.DataFrame], fmt: str, label: str) -> Iterator[pd.DataFrame]:
+    """``chunks`` as float64 frames (:func:`as_float64`); a read failure on the way is E112."""
+    try:
+        for chunk in chunks:
+            yield as_float64(chunk, label)
+    except (HaptifyError, MemoryError):
+        raise
+    except _READ_ERRORS as exc:
+        raise fail("E112", f"{label!r} cannot be read as {fmt}: {exc}", file=label) from None
 
 
 def as_float64(frame: pd.DataFrame, label: str) -> pd.DataFrame:
@@ -449,13 +507,49 @@ def write_table(path: Path, frame: pd.DataFrame, fmt: str, *, compact: bool = Fa
     far better than interleaved bytes: a simulated three-repetition dossier takes 46 % of its float64 size.
     """
     if fmt == "parquet":
-        table = pa.Table.from_pandas(frame, preserve_index=False)
-        narrow = [c for c in table.column_names if c != "t"] if compact else []
-        if narrow:
-            table = table.cast(pa.schema([pa.field(c, pa.float32() if c in narrow else pa.float64()) for c in table.column_names]))
-        pq.write_table(table, path, compression="zstd", use_dictionary=False, use_byte_stream_split=narrow or False)
+        table, narrow = _arrow_table(frame, compact)
+        pq.write_table(table, path, **_PARQUET_OPTIONS, use_byte_stream_split=narrow or False)
     else:
         frame.to_csv(path, index=False, na_rep="NaN", float_format=None, lineterminator="\n")
+
+
+_PARQUET_OPTIONS = {"compression": "zstd", "use_dictionary": False}
+
+
+def _arrow_table(frame: pd.DataFrame, compact: bool) -> tuple[pa.Table, list[str]]:
+    """The Arrow table :func:`write_table` writes, and its narrowed (float32) columns."""
+    table = pa.Table.from_pandas(frame, preserve_index=False)
+    narrow = [c for c in table.column_names if c != "t"] if compact else []
+    if narrow:
+        table = table.cast(pa.schema([pa.field(c, pa.float32() if c in narrow else pa.float64()) for c in table.column_names]))
+    return table, narrow
+
+
+class TableSink:
+    """A stream file written in pieces (spec §3.2, §5.5.1): each :meth:`write` appends rows — one Parquet
+    row group, or CSV lines after the header the first piece writes — with the encoding of
+    :func:`write_table`; :meth:`close` finishes the file and returns its row count."""
+
+    def __init__(self, path: Path, fmt: str, compact: bool = False) -> None:
+        self.path, self.fmt, self.compact, self.rows = Path(path), fmt, compact, 0
+        self._parquet: pq.ParquetWriter | None = None
+
+    def write(self, frame: pd.DataFrame) -> None:
+        if self.fmt == "parquet":
+            table, narrow = _arrow_table(frame, self.compact)
+            if self._parquet is None:
+                self._parquet = pq.ParquetWriter(self.path, table.schema, **_PARQUET_OPTIONS,
+                                                 use_byte_stream_split=narrow or False)
+            self._parquet.write_table(table)
+        else:
+            frame.to_csv(self.path, mode="a" if self.rows else "w", header=not self.rows, index=False, na_rep="NaN",
+                         float_format=None, lineterminator="\n")
+        self.rows += len(frame)
+
+    def close(self) -> int:
+        if self._parquet is not None:
+            self._parquet.close()
+        return self.rows
 
 
 def write_atomically(path: Path, writer: Callable[[str], Any]) -> None:
@@ -528,6 +622,7 @@ class SessionWriter:
     compact: bool = False  # Parquet streams: float32 + BYTE_STREAM_SPLIT for every column but t (spec §3.2.1)
     _trials: list[dict] = field(default_factory=list)
     _streams: list[_PendingStream] = field(default_factory=list)
+    chunks: Callable[[], Iterable[Mapping[str, Mapping[str, Any]]]] | None = None  # rows of the chunked streams
 
     def add_trial(self, trial_id: str, protocol: str, *, powered: bool, repetition: int = 1, label: str | None = None,
                   rendering: Mapping | None = None, notes: str | None = None) -> dict:
@@ -566,6 +661,38 @@ class SessionWriter:
         self._streams.append(_PendingStream(trial_id, stream, table))
         return stream
 
+    def add_chunked_stream(self, trial_id: str, kind: str, columns: list[str], *, rate_hz: float,
+                           frame: str | None = None, fmt: str = "parquet", entities: list[str] | None = None) -> dict:
+        """Add a stream whose rows come from :attr:`chunks` at :meth:`write` time (spec §5.5.1): each item
+        of ``chunks()`` maps stream kinds to their columns for the next rows (``t`` first)."""
+        cols = expected_columns(kind, entities, columns)
+        missing = [c for c, _ in cols if c not in columns]
+        if missing:
+            raise fail("E201", f"{kind} stream of trial {trial_id!r} lacks columns {missing}", column=missing[0],
+                       expected=[c for c, _ in cols], found=columns)
+        stream = self.add_stream(trial_id, kind, {c: np.zeros(0) for c, _ in cols}, rate_hz=rate_hz, frame=frame,
+                                 fmt=fmt, entities=entities)
+        self._streams[-1].frame = None  # type: ignore[assignment]
+        return stream
+
+    def _write_chunks(self, build: Path) -> None:
+        """Write every chunked stream from one pass over :attr:`chunks` (spec §5.5.1)."""
+        pending = {p.stream["kind"]: p for p in self._streams if p.frame is None}
+        if not pending:
+            return
+        sinks = {}
+        for kind, p in pending.items():
+            path = resolve_inside(build, p.stream["file"])
+            path.parent.mkdir(parents=True, exist_ok=True)
+            sinks[kind] = TableSink(path, p.stream["format"], self.compact)
+        order = {kind: [c["name"] for c in p.stream["columns"]] for kind, p in pending.items()}
+        for piece in self.chunks():  # type: ignore[misc]
+            for kind, data in piece.items():
+                sinks[kind].write(pd.DataFrame({c: np.asarray(data[c], dtype=np.float64) for c in order[kind]}))
+        for kind, p in pending.items():
+            p.stream["rows"] = sinks[kind].close()
+            p.stream["sha256"] = sha256_file(sinks[kind].path)
+
     def build_manifest(self) -> dict:
         return {**self.manifest, "spec_version": SPEC_VERSION, "trials": self._trials}
 
@@ -577,7 +704,8 @@ class SessionWriter:
         target.parent.mkdir(parents=True, exist_ok=True)
         build = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
         try:
-            for pending in self._streams:
+            self._write_chunks(build)
+            for pending in (p for p in self._streams if p.frame is not None):
                 path = resolve_inside(build, pending.stream["file"])
                 path.parent.mkdir(parents=True, exist_ok=True)
                 write_table(path, pending.frame, pending.stream["format"], compact=self.compact)

@@ -13,6 +13,7 @@ import re
 from pathlib import Path
 
 from haptify.importers import UNITS, Recording, sanitize_id
+from haptify.platform_wrench import CHANNEL_DIMENSIONS, PLATFORM_CHANNELS
 
 PLACEHOLDER_SESSION = {
     "date": "<YYYY-MM-DD, or --date per file>", "lab": {"id": "<lab id>"}, "examiner": {"id": "<examiner id>"},
@@ -73,6 +74,17 @@ def _complete(streams: dict[str, dict], unplaced: list[str]) -> dict[str, dict]:
     return out
 
 
+def _wrench_units_known(rec: Recording, platform) -> bool:
+    """Whether a platform's channels state the units its type's outputs need (§5.6.1), so that
+    ``platform_wrench: {}`` imports it as written."""
+    dims = CHANNEL_DIMENSIONS.get(platform.type)
+    chans = platform.channels[:PLATFORM_CHANNELS.get(platform.type, 0)]
+    if dims is None or len(chans) < len(dims) or (platform.type == 4 and platform.cal_matrix is None):
+        return False
+    units = [UNITS.get(rec.analog_units[i].strip()) for i in chans]
+    return all(u is not None and u.dimension == d for u, d in zip(units, dims))
+
+
 def suggest_recording_map(rec: Recording) -> tuple[dict, list[str]]:
     """A map for a motion-capture recording (C3D, TSV, Motive, Nexus) and the notes on what it could not place."""
     unplaced: list[str] = []
@@ -100,8 +112,14 @@ def suggest_recording_map(rec: Recording) -> tuple[dict, list[str]]:
         for p in rec.platforms:
             names = [rec.analog_labels[i] for i in p.channels if i < len(rec.analog_labels)]
             platform_channels.update(names)
-            unplaced.append(f"force platform {p.number} (type {p.type}): its channels {names} are its total wrench; "
-                            "plate_wrench holds four corner sensors (§5.5)" + (" — platform 1 defines W" if p.number == 1 else ""))
+            if p.number == 1 and _wrench_units_known(rec, p):
+                m["platform_wrench"] = {}
+                unplaced.append(f"force platform 1 (type {p.type}) defines W and its channels {names} become "
+                                "plate_wrench (§5.6.1): check their units")
+            else:
+                unplaced.append(f"force platform {p.number} (type {p.type}): channels {names} not imported — "
+                                + ("platform 1 defines W; give platform_wrench with its output units to import its wrench"
+                                   if p.number == 1 else "the rig holds one plate (§5.5)"))
     elif rec.point_labels or rec.body_labels:
         m["lab_to_world"] = {"position": [0.0, 0.0, 0.0], "quaternion": [1.0, 0.0, 0.0, 0.0]}
         unplaced.append("lab_to_world: the file has no force platform; the identity keeps W = the lab frame — give "

@@ -16,6 +16,7 @@ time overlap of the streams of each trial.
 from __future__ import annotations
 
 import datetime
+import itertools
 import json
 import math
 import os
@@ -57,7 +58,7 @@ from haptify.storage import (
     parse_json_file,
     pointer_of,
     pydantic_findings,
-    read_stream_file,
+    read_stream_chunks,
     resolve_inside,
     sha256_file,
 )
@@ -74,6 +75,7 @@ STREAM_MAX_BYTES = 8 * 2**30          # spec §3.5: no stream file exceeds 8 GiB
 STREAM_BYTES_BASE = 16 * 2**10        # plausibility bound of a stream file's size from its declared
 STREAM_BYTES_PER_COLUMN = 2**10       # rows and columns: base + per column + per value (E113), so a
 STREAM_BYTES_PER_VALUE = 32           # tiny declared stream never makes the validator read gigabytes
+STREAM_CHUNK_BYTES = 32 * 2**20       # a stream is validated in chunks of about this many float64 bytes
 
 MOCAP_KINDS = frozenset(k for k, v in schemas.load("stream-kinds.json")["kinds"].items() if v.get("nan_allowed"))
 EXIT_VALID, EXIT_INVALID, EXIT_CANNOT_RUN = 0, 1, 2
@@ -374,16 +376,215 @@ class StreamEntry:
     path: Path | None = None  # its file, once found inside the folder within its size bound
 
 
-def _time_span(t: np.ndarray, mask: np.ndarray) -> tuple[float, float] | None:
-    """First and last time (s) of the samples selected by ``mask`` (finite times only)."""
-    idx = np.flatnonzero(mask)
-    if idx.size == 0:
-        return None
-    times = t[idx]
-    times = times[np.isfinite(times)]
-    if times.size == 0:
-        return None
-    return (float(times[0]), float(times[-1]))
+@dataclass
+class _Tally:
+    """The samples a mask selects, over consecutive chunks of a stream: how many, and the first and last
+    finite time among them (a finding's ``time_range``)."""
+
+    count: int = 0
+    first: float | None = None
+    last: float | None = None
+
+    def add(self, t: np.ndarray, mask: np.ndarray) -> None:
+        idx = np.flatnonzero(mask)
+        if idx.size == 0:
+            return
+        self.count += int(idx.size)
+        times = t[idx]
+        times = times[np.isfinite(times)]
+        if times.size:
+            if self.first is None:
+                self.first = float(times[0])
+            self.last = float(times[-1])
+
+    @property
+    def span(self) -> tuple[float, float] | None:
+        return None if self.first is None else (self.first, self.last)  # type: ignore[return-value]
+
+
+@dataclass
+class _TimeScan:
+    """The time column of a stream, chunk by chunk (spec §4.4: finite, strictly increasing, mean rate,
+    regular intervals). The interval across a chunk border is judged with the previous chunk's last time,
+    so the findings are those of the whole column."""
+
+    rate_hz: float
+    rows: int = 0
+    first: float = math.nan          # t of the first and of the last sample
+    last: float = math.nan
+    non_finite: int = 0
+    last_finite: float | None = None
+    gap: list[float | None] | None = None  # finite times before and after the first non-finite one
+    gap_open: bool = False           # no finite time seen yet after the first non-finite one
+    reversals: int = 0
+    first_reversal: tuple[int, float, float] | None = None  # row k, t[k], t[k+1]
+    odd: int = 0                     # intervals outside [INTERVAL_LOW, INTERVAL_HIGH] / rate_hz
+    odd_span: list[float] = field(default_factory=list)   # start of the first, end of the last
+    dt_max: float = -math.inf
+    dt_min: float = math.inf
+
+    def feed(self, t: np.ndarray) -> None:
+        tt = t if self.rows == 0 else np.concatenate(([self.last], t))
+        base = self.rows - (tt.size - t.size)  # row of tt[0]
+        if self.rows == 0 and t.size:
+            self.first = float(t[0])
+        finite = np.isfinite(t)
+        if self.gap_open and finite.any():
+            self.gap[1], self.gap_open = float(t[finite][0]), False  # type: ignore[index]
+        if not finite.all():
+            bad = np.flatnonzero(~finite)
+            self.non_finite += int(bad.size)
+            if self.gap is None:
+                k = int(bad[0])
+                before, after = t[:k][finite[:k]], t[k + 1:][finite[k + 1:]]
+                self.gap = [float(before[-1]) if before.size else self.last_finite, float(after[0]) if after.size else None]
+                self.gap_open = not after.size
+        if finite.any():
+            self.last_finite = float(t[finite][-1])
+        if t.size:
+            self.rows += int(t.size)
+            self.last = float(t[-1])
+        dt = np.diff(tt)
+        bad_dt = ~(dt > 0) & np.isfinite(dt)
+        if bad_dt.any():
+            j = int(np.flatnonzero(bad_dt)[0])
+            self.reversals += int(bad_dt.sum())
+            if self.first_reversal is None:
+                self.first_reversal = (base + j, float(tt[j]), float(tt[j + 1]))
+        nominal = 1.0 / self.rate_hz
+        odd = np.flatnonzero((dt < INTERVAL_LOW * nominal) | (dt > INTERVAL_HIGH * nominal))
+        if odd.size:
+            self.odd += int(odd.size)
+            self.odd_span = [self.odd_span[0] if self.odd_span else float(tt[odd[0]]), float(tt[odd[-1] + 1])]
+        if dt.size:
+            self.dt_max, self.dt_min = max(self.dt_max, float(dt.max())), min(self.dt_min, float(dt.min()))
+
+    def findings(self, label: str, add: Callable[[Finding], None]) -> bool:
+        """Add the time findings (E203, E206, W402); True when the time column is sound (finite, increasing)."""
+        if self.non_finite:
+            add(Finding("E203", f"time column holds {self.non_finite} non-finite values", file=label, column="t",
+                        time_range=self._gap_span(), expected="finite seconds", found="NaN or infinity"))
+        if self.reversals:
+            k, a, b = self.first_reversal  # type: ignore[misc]
+            add(Finding("E203", f"time does not strictly increase at {self.reversals} intervals (first at row {k + 1})", file=label,
+                        column="t", time_range=(min(a, b), max(a, b)), expected="t[i+1] > t[i]", found=f"t[{k}]={a!r}, t[{k + 1}]={b!r}"))
+        if self.non_finite or self.reversals:
+            return False
+        actual = (self.rows - 1) / (self.last - self.first)
+        if abs(actual / self.rate_hz - 1.0) > RATE_TOLERANCE:
+            add(Finding("E206", f"actual mean rate {actual:.6g} Hz differs from the declared {self.rate_hz:g} Hz by more than "
+                        f"{RATE_TOLERANCE:.0%}", file=label, column="t", time_range=(self.first, self.last),
+                        expected=self.rate_hz, found=round(actual, 6)))
+        if self.odd:
+            nominal = 1.0 / self.rate_hz
+            add(Finding("W402", f"{self.odd} sample intervals lie outside [{INTERVAL_LOW}, {INTERVAL_HIGH}] × {nominal:.6g} s "
+                        f"(largest {self.dt_max:.6g} s, smallest {self.dt_min:.6g} s)", file=label, column="t",
+                        time_range=tuple(self.odd_span), expected=nominal, found=self.odd))
+        return True
+
+    def _gap_span(self) -> tuple[float, float] | None:
+        """The finite times around the first non-finite one (either alone when the other does not exist)."""
+        before, after = self.gap  # type: ignore[misc]
+        if before is None and after is None:
+            return None
+        return (before if before is not None else after, after if after is not None else before)  # type: ignore[return-value]
+
+
+class _ValueScan:
+    """The value columns of a stream, chunk by chunk (spec §2.7, §4.4): infinities (E210), the NaN policy
+    (E204, occlusion W405), closed value sets (E214), quaternion norms (E207) and sensor ranges (W401).
+    Each check keeps counts, first/last times and extremes only, so the findings are those of the whole
+    table whatever the chunking — and memory holds one chunk."""
+
+    def __init__(self, s: Stream, cols: list[str], rng: SensorRange | None) -> None:
+        self.stream, self.cols = s, cols
+        self.inf = [_Tally() for _ in cols]
+        self.nan = [_Tally() for _ in cols]
+        spec = kind_table(s.kind)
+        self.mocap = s.kind in MOCAP_KINDS
+        if "entity_columns" in spec:
+            width = len(spec["entity_columns"])
+            groups = [(ent, list(range(k * width, (k + 1) * width))) for k, ent in enumerate(s.entities or [])]
+        else:
+            groups = [(s.kind, list(range(len(cols))))]
+        self.groups = [(name, idx, _Tally(), _Tally()) for name, idx in groups if idx and idx[-1] < len(cols)]  # partial, occluded
+        self.sets = [(k, _Tally(), []) for k, c in enumerate(cols) if values_outside_set(s.kind, c, np.empty(0)) is not None]
+        index = {c: k for k, c in enumerate(cols)}
+        self.quats = [(list(g), [index[c] for c in g], _Tally(), [None]) for g in quaternion_groups(s.kind, s.entities)
+                      if all(c in index for c in g)]
+        limits = [(k, _range_limit(c, rng)) for k, c in enumerate(cols)] if rng is not None else []
+        self.ranges = [(k, limit, _Tally(), [0.0]) for k, limit in limits if limit is not None]
+
+    def feed(self, t: np.ndarray, values: np.ndarray) -> None:
+        if not np.isfinite(values).all():  # the column-by-column account only when something is not finite
+            nan, inf = np.isnan(values), np.isinf(values)
+            for k in np.flatnonzero(inf.any(axis=0)):
+                self.inf[k].add(t, inf[:, k])
+            for k in np.flatnonzero(nan.any(axis=0)):
+                self.nan[k].add(t, nan[:, k])
+            for _, idx, partial, occluded in self.groups:
+                g = nan[:, idx]
+                some, every = g.any(axis=1), g.all(axis=1)
+                partial.add(t, some & ~every)
+                occluded.add(t, every)
+        for k, tally, seen in self.sets:
+            other, _ = values_outside_set(self.stream.kind, self.cols[k], values[:, k])  # type: ignore[misc]
+            if other.any():
+                tally.add(t, other)
+                seen[:] = [np.union1d(seen[0], values[other, k]) if seen else np.unique(values[other, k])]
+        for _, idx, tally, worst in self.quats:
+            q = values[:, idx]
+            norm = np.sqrt(np.einsum("ij,ij->i", q, q))
+            off = np.isfinite(q).all(axis=1) & (np.abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE)
+            if off.any():
+                tally.add(t, off)
+                local = float(norm[off][np.argmax(np.abs(norm[off] - 1.0))])
+                if worst[0] is None or abs(local - 1.0) > abs(worst[0] - 1.0):  # ties keep the first, as argmax
+                    worst[0] = local
+        for k, limit, tally, peak in self.ranges:
+            with np.errstate(invalid="ignore"):
+                over = np.isfinite(values[:, k]) & (np.abs(values[:, k]) > limit)
+            if over.any():
+                tally.add(t, over)
+                peak[0] = max(peak[0], float(np.max(np.abs(values[over, k]))))
+
+    def findings(self, rows: int, add: Callable[[Finding], None]) -> None:
+        """Add the value findings in the order of spec §4.4: E210, E204/W405, E214, E207, W401."""
+        s, cols, label = self.stream, self.cols, self.stream.file
+        for k, tally in enumerate(self.inf):
+            if tally.count:
+                add(Finding("E210", f"column {cols[k]!r} holds {tally.count} infinite values", file=label,
+                            column=cols[k], time_range=tally.span, expected="finite values", found="inf"))
+        if self.mocap:  # mocap NaN policy (spec §2.7): whole entities NaN together; warn above the occlusion share
+            for name, idx, partial, occluded in self.groups:
+                if partial.count:
+                    add(Finding("E204", f"{name}: {partial.count} samples have some but not all of {[cols[i] for i in idx]} NaN",
+                                file=label, column=cols[idx[0]], time_range=partial.span,
+                                expected="all columns of an occluded entity NaN together", found="partial NaN"))
+                share = occluded.count / rows
+                if share > OCCLUSION_WARNING_SHARE:
+                    add(Finding("W405", f"{name} is occluded in {share:.0%} of the samples", file=label, column=cols[idx[0]],
+                                time_range=occluded.span, expected=f"at most {OCCLUSION_WARNING_SHARE:.0%}", found=round(share, 4)))
+        else:
+            for k, tally in enumerate(self.nan):
+                if tally.count:
+                    add(Finding("E204", f"column {cols[k]!r} holds {tally.count} NaN values; {s.kind} allows none",
+                                file=label, column=cols[k], time_range=tally.span, expected="no NaN", found="NaN"))
+        for k, tally, seen in self.sets:
+            if tally.count:
+                col = cols[k]
+                add(Finding("E214", f"column {col!r} holds {tally.count} values other than {values_outside_set(s.kind, col, np.empty(0))[1]} "  # type: ignore[index]
+                            f"({seen[0].size} distinct, e.g. {float(seen[0][0])!r})", file=label, column=col, time_range=tally.span,
+                            expected=list(ALLOWED_VALUES[(s.kind, col)]), found=[float(v) for v in seen[0][:5]]))
+        for group, _, tally, worst in self.quats:
+            if tally.count:
+                add(Finding("E207", f"{tally.count} quaternions ({', '.join(group)}) are not unit; worst norm {worst[0]:.6g}",
+                            file=label, column=group[0], time_range=tally.span,
+                            expected=f"norm 1 ± {QUATERNION_NORM_TOLERANCE}", found=worst[0]))
+        for k, limit, tally, peak in self.ranges:
+            if tally.count:
+                add(Finding("W401", f"column {cols[k]!r} exceeds the declared ±{limit:g} range at {tally.count} samples (peak {peak[0]:.6g})",
+                            file=label, column=cols[k], time_range=tally.span, expected=f"|value| ≤ {limit:g}", found=peak[0]))
 
 
 def _range_limit(column: str, rng: SensorRange) -> float | None:
@@ -400,11 +601,13 @@ class SessionValidator:
     """Validate one session folder in two phases: :meth:`check_manifest`, then :meth:`check_streams`.
 
     The split lets a caller show progress over the streams (their number is known after the first
-    phase); :func:`validate_session` runs both.
+    phase); :func:`validate_session` runs both. ``chunk_rows`` forces the rows per chunk in which stream
+    files are read (:meth:`chunk_rows_for`); the findings do not depend on it.
     """
 
-    def __init__(self, path: str | os.PathLike) -> None:
+    def __init__(self, path: str | os.PathLike, chunk_rows: int | None = None) -> None:
         self.root = Path(path)
+        self.chunk_rows = chunk_rows
         self.report = ValidationReport(session=str(path))
         self.raw: Any = None
         self.manifest: Session | None = None  # the parsed session.json, when it validates whole
@@ -694,14 +897,17 @@ class SessionValidator:
         raised = _collect(lambda: self._check_declaration(entry, found.append), entry.stream.file)
         self.add_all(found + raised, entry.trial)
 
-    def check_stream(self, entry: StreamEntry) -> pd.DataFrame | None:
-        """Check one stream's declaration, file and data (spec §4.3.5) and return its table as read (stream
-        clock), or None when the file could not be read; the findings go into the report."""
+    def check_stream(self, entry: StreamEntry, *, keep: bool = False) -> pd.DataFrame | None:
+        """Check one stream's declaration, file and data (spec §4.3.5); the findings go into the report.
+
+        With ``keep`` the file is read whole and its table as read (stream clock) is returned, or None when
+        the file could not be read; without, it is read in chunks, in bounded memory, and None is returned."""
         self.check_declaration(entry)
         kept: list[pd.DataFrame] = []
         if entry.path is not None:
             found: list[Finding] = []
-            raised = _collect(lambda: self._check_contents(entry, entry.path, found.append, kept.append), entry.stream.file)
+            raised = _collect(lambda: self._check_contents(entry, entry.path, found.append, kept.append if keep else None),
+                              entry.stream.file)
             self.add_all(found + raised, entry.trial)
         self.report.streams_checked += 1
         return kept[0] if kept else None
@@ -761,30 +967,60 @@ class SessionValidator:
         entry.path = path
 
     def _check_contents(self, entry: StreamEntry, path: Path, add: Callable[[Finding], None],
-                        keep: Callable[[pd.DataFrame], Any]) -> None:
-        """Checksum, readability, columns, rows and data of a stream file whose declaration was checked."""
+                        keep: Callable[[pd.DataFrame], Any] | None) -> None:
+        """Checksum, readability, columns, rows and data of a stream file whose declaration was checked.
+
+        The file is read chunk by chunk (:func:`~haptify.storage.read_stream_chunks`, :meth:`chunk_rows_for`)
+        and every check of spec §4.4 carries its state across chunk borders, so memory holds one chunk and
+        the findings are those of the whole table. With ``keep`` (the gate, which computes from the table)
+        the table is read whole — the one-chunk case — and handed to ``keep``.
+        """
         s, label = entry.stream, entry.stream.file
         declared = [c.name for c in s.columns]
         try:
-            table, digest = read_stream_file(path, s.format, declared, label=label)
+            digest, chunks = read_stream_chunks(path, s.format, declared, label=label,
+                                                chunk_rows=None if keep is not None else self.chunk_rows_for(len(declared)))
         except HaptifyError:
             self._check_digest(s, sha256_file(path), add)
             raise
         self._check_digest(s, digest, add)
-        keep(table)
-        if list(table.columns) != declared:
+        first = next(chunks)
+        if keep is not None:
+            keep(first)
+        columns = [str(c) for c in first.columns]
+        same = list(first.columns) == declared
+        times = _TimeScan(s.rate_hz)
+        values = self._value_scan(s, columns[1:]) if same and entry.names_ok else None  # else the columns' meaning is unknown
+        chunks = itertools.chain([first], chunks)
+        del first  # hold no chunk but the current one
+        for chunk in chunks:  # every chunk is read: a damaged later part is E112
+            if values is None:
+                times.rows += len(chunk)
+                continue
+            block = chunk.to_numpy(dtype=np.float64, copy=False)  # one block: no per-column frame; t first (names_ok)
+            times.feed(block[:, 0])
+            values.feed(block[:, 0], block[:, 1:])
+        if not same:
             add(Finding("E201", "the file's columns differ from the columns declared in session.json", file=label,
-                        expected=declared, found=[str(c) for c in table.columns]))
+                        expected=declared, found=columns))
             return
-        n = len(table)
+        n = times.rows
         if n != s.rows:
             add(Finding("E208", f"{label!r} holds {n} rows, session.json declares {s.rows}", file=label, expected=s.rows, found=n))
         if n < 2:
             add(Finding("E205", f"{s.kind} stream holds {n} sample{'s' if n != 1 else ''}", file=label, expected="at least 2 samples", found=n))
             return
-        if not entry.names_ok:
+        if values is None:
             return  # the columns' meaning is unknown (E201/E107 above): data checks would mislead
-        self._check_data(entry, table, add)
+        if times.findings(label, add):
+            offset = self.offsets.get(s.file, 0.0)
+            entry.span = (times.first + offset, times.last + offset)
+        values.findings(n, add)
+
+    def chunk_rows_for(self, columns: int) -> int:
+        """Rows per chunk when a stream of ``columns`` columns is validated: :attr:`chunk_rows` when set (the
+        tests force tiny chunks), else as many float64 rows as fit in :data:`STREAM_CHUNK_BYTES`."""
+        return self.chunk_rows or max(2, STREAM_CHUNK_BYTES // (8 * max(1, columns)))
 
     @staticmethod
     def _check_digest(s: Stream, digest: str, add: Callable[[Finding], None]) -> None:
@@ -802,124 +1038,10 @@ class SessionValidator:
             return {rb.name for rb in mocap.rigid_bodies}
         return None
 
-    def _check_data(self, entry: StreamEntry, table: pd.DataFrame, add: Callable[[Finding], None]) -> None:
-        """Time, rate, NaN policy, infinities, quaternions and sensor ranges of one stream (spec §4.4)."""
-        s, label = entry.stream, entry.stream.file
-        spec = kind_table(s.kind)
-        columns = [str(c) for c in table.columns]
-        full = table.to_numpy(dtype=np.float64, copy=False)  # one block: no per-column frame is built
-        t = full[:, columns.index("t")]
-        data_cols = [c for c in columns if c != "t"]
-        # time
-        finite_t = np.isfinite(t)
-        time_ok = True
-        if not finite_t.all():
-            time_ok = False
-            add(Finding("E203", f"time column holds {int((~finite_t).sum())} non-finite values", file=label, column="t",
-                        time_range=_time_span(t, ~finite_t) or _neighbour_span(t, ~finite_t), expected="finite seconds", found="NaN or infinity"))
-        dt = np.diff(t)
-        bad = ~(dt > 0) & np.isfinite(dt)
-        if bad.any():
-            time_ok = False
-            k = int(np.flatnonzero(bad)[0])
-            add(Finding("E203", f"time does not strictly increase at {int(bad.sum())} intervals (first at row {k + 1})", file=label,
-                        column="t", time_range=(float(min(t[k], t[k + 1])), float(max(t[k], t[k + 1]))),
-                        expected="t[i+1] > t[i]", found=f"t[{k}]={float(t[k])!r}, t[{k + 1}]={float(t[k + 1])!r}"))
-        if time_ok:
-            offset = self.offsets.get(s.file, 0.0)
-            entry.span = (float(t[0]) + offset, float(t[-1]) + offset)
-            duration = float(t[-1] - t[0])
-            actual = (len(t) - 1) / duration
-            if abs(actual / s.rate_hz - 1.0) > RATE_TOLERANCE:
-                add(Finding("E206", f"actual mean rate {actual:.6g} Hz differs from the declared {s.rate_hz:g} Hz by more than "
-                            f"{RATE_TOLERANCE:.0%}", file=label, column="t", time_range=(float(t[0]), float(t[-1])),
-                            expected=s.rate_hz, found=round(actual, 6)))
-            nominal = 1.0 / s.rate_hz
-            odd = (dt < INTERVAL_LOW * nominal) | (dt > INTERVAL_HIGH * nominal)
-            if odd.any():
-                idx = np.flatnonzero(odd)
-                add(Finding("W402", f"{idx.size} sample intervals lie outside [{INTERVAL_LOW}, {INTERVAL_HIGH}] × {nominal:.6g} s "
-                            f"(largest {dt.max():.6g} s, smallest {dt.min():.6g} s)", file=label, column="t",
-                            time_range=(float(t[idx[0]]), float(t[idx[-1] + 1])), expected=nominal, found=int(idx.size)))
-        # values: infinities, NaN policy
-        t_index = columns.index("t")
-        values = full[:, 1:] if t_index == 0 else np.delete(full, t_index, axis=1)
-        if not np.isfinite(values).all():  # the column-by-column account only when something is not finite
-            self._check_non_finite(s, t, data_cols, values, add)
-        # closed value sets (the sync trigger)
-        for k, col in enumerate(data_cols):
-            outside = values_outside_set(s.kind, col, values[:, k])
-            if outside is not None and outside[0].any():
-                other, words = outside
-                seen = np.unique(values[other, k])
-                add(Finding("E214", f"column {col!r} holds {int(other.sum())} values other than {words} "
-                            f"({seen.size} distinct, e.g. {float(seen[0])!r})", file=label, column=col, time_range=_time_span(t, other),
-                            expected=list(ALLOWED_VALUES[(s.kind, col)]), found=[float(v) for v in seen[:5]]))
-        # quaternions
-        col_index = {c: k for k, c in enumerate(data_cols)}
-        for group in quaternion_groups(s.kind, s.entities):
-            if not all(c in col_index for c in group):
-                continue
-            q = values[:, [col_index[c] for c in group]]
-            ok = np.isfinite(q).all(axis=1)
-            norm = np.sqrt(np.einsum("ij,ij->i", q, q))
-            off = ok & (np.abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE)
-            if off.any():
-                worst = float(norm[off][np.argmax(np.abs(norm[off] - 1.0))])
-                add(Finding("E207", f"{int(off.sum())} quaternions ({', '.join(group)}) are not unit; worst norm {worst:.6g}",
-                            file=label, column=group[0], time_range=_time_span(t, off),
-                            expected=f"norm 1 ± {QUATERNION_NORM_TOLERANCE}", found=worst))
-        # sensor ranges
-        rng_spec = spec.get("range")
-        rng = self._rig_range(rng_spec["rig_field"]) if rng_spec else None
-        if rng is not None:
-            for k, col in enumerate(data_cols):
-                limit = _range_limit(col, rng)
-                if limit is None:
-                    continue
-                with np.errstate(invalid="ignore"):
-                    over = np.isfinite(values[:, k]) & (np.abs(values[:, k]) > limit)
-                if over.any():
-                    peak = float(np.nanmax(np.abs(values[over, k])))
-                    add(Finding("W401", f"column {col!r} exceeds the declared ±{limit:g} range at {int(over.sum())} samples (peak {peak:.6g})",
-                                file=label, column=col, time_range=_time_span(t, over), expected=f"|value| ≤ {limit:g}", found=peak))
-
-    def _check_non_finite(self, s: Stream, t: np.ndarray, data_cols: list[str], values: np.ndarray,
-                          add: Callable[[Finding], None]) -> None:
-        """Infinities (E210) anywhere; NaN outside motion capture (E204), occlusion within it (spec §2.7, §4.4)."""
-        nan = np.isnan(values)
-        inf = np.isinf(values)
-        for k in np.flatnonzero(inf.any(axis=0)):
-            add(Finding("E210", f"column {data_cols[k]!r} holds {int(inf[:, k].sum())} infinite values", file=s.file,
-                        column=data_cols[k], time_range=_time_span(t, inf[:, k]), expected="finite values", found="inf"))
-        if s.kind in MOCAP_KINDS:
-            self._check_occlusion(s, t, data_cols, nan, add)
-            return
-        for k in np.flatnonzero(nan.any(axis=0)):
-            add(Finding("E204", f"column {data_cols[k]!r} holds {int(nan[:, k].sum())} NaN values; {s.kind} allows none",
-                        file=s.file, column=data_cols[k], time_range=_time_span(t, nan[:, k]), expected="no NaN", found="NaN"))
-
-    def _check_occlusion(self, s: Stream, t: np.ndarray, cols: list[str], nan: np.ndarray, add: Callable[[Finding], None]) -> None:
-        """Mocap NaN policy (spec §2.7): whole entities NaN together; warn above the occlusion share."""
-        spec = kind_table(s.kind)
-        if "entity_columns" in spec:
-            width = len(spec["entity_columns"])
-            groups = [(ent, list(range(k * width, (k + 1) * width))) for k, ent in enumerate(s.entities or [])]
-        else:
-            groups = [(s.kind, list(range(len(cols))))]
-        for name, idx in groups:
-            if not idx or idx[-1] >= len(cols):
-                continue
-            g = nan[:, idx]
-            partial = g.any(axis=1) & ~g.all(axis=1)
-            if partial.any():
-                add(Finding("E204", f"{name}: {int(partial.sum())} samples have some but not all of {[cols[i] for i in idx]} NaN",
-                            file=s.file, column=cols[idx[0]], time_range=_time_span(t, partial),
-                            expected="all columns of an occluded entity NaN together", found="partial NaN"))
-            share = float(g.all(axis=1).mean())
-            if share > OCCLUSION_WARNING_SHARE:
-                add(Finding("W405", f"{name} is occluded in {share:.0%} of the samples", file=s.file, column=cols[idx[0]],
-                            time_range=_time_span(t, g.all(axis=1)), expected=f"at most {OCCLUSION_WARNING_SHARE:.0%}", found=round(share, 4)))
+    def _value_scan(self, s: Stream, cols: list[str]) -> _ValueScan:
+        """The value checks of one stream (spec §4.4), with the rig's sensor range of its kind."""
+        rng_spec = kind_table(s.kind).get("range")
+        return _ValueScan(s, cols, self._rig_range(rng_spec["rig_field"]) if rng_spec else None)
 
     def _rig_range(self, dotted: str) -> SensorRange | None:
         node: Any = self.rig
@@ -963,18 +1085,6 @@ def _collect(step: Callable[[], None], file: str | None) -> list[Finding]:
     return []
 
 
-def _neighbour_span(t: np.ndarray, mask: np.ndarray) -> tuple[float, float] | None:
-    """Times of the finite samples around the first masked one (for NaN times)."""
-    k = int(np.flatnonzero(mask)[0])
-    before = t[:k][np.isfinite(t[:k])]
-    after = t[k + 1:][np.isfinite(t[k + 1:])]
-    if before.size == 0 and after.size == 0:
-        return None
-    lo = float(before[-1]) if before.size else float(after[0])
-    hi = float(after[0]) if after.size else float(before[-1])
-    return (lo, hi)
-
-
 def _json_members(node: Any, pointer: str = "") -> Iterable[tuple[str, Any, Any]]:
     """Every ``(pointer, key, value)`` inside a JSON tree, depth first (object keys and array indices)."""
     items = node.items() if isinstance(node, dict) else enumerate(node) if isinstance(node, list) else ()
@@ -1011,13 +1121,15 @@ def _str_or_none(node: Any, key: str) -> str | None:
     return value if isinstance(value, str) else None
 
 
-def validate_session(path: str | os.PathLike, advance: Callable[[int], Any] | None = None) -> ValidationReport:
+def validate_session(path: str | os.PathLike, advance: Callable[[int], Any] | None = None,
+                     chunk_rows: int | None = None) -> ValidationReport:
     """Validate a session folder and return every finding (spec chapter 4); never raises for bad input.
 
-    ``advance(n)`` is called after each stream (for a progress bar). The report's ``exit_code`` is
-    0 when valid (warnings allowed), 1 when invalid, 2 when validation could not run.
+    ``advance(n)`` is called after each stream (for a progress bar). Stream files are read in chunks
+    (``chunk_rows`` rows each when given), so memory does not grow with a stream's length. The report's
+    ``exit_code`` is 0 when valid (warnings allowed), 1 when invalid, 2 when validation could not run.
     """
-    v = SessionValidator(path)
+    v = SessionValidator(path, chunk_rows)
     try:
         v.check_manifest()
         v.check_streams(advance)

@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from haptify.c3d_stream import parameter_records
+
 C3D_BLOCK = 512
 
 
@@ -118,7 +120,7 @@ def write_c3d(path: Path, spec: C3DSpec) -> Path:
             for i, p in enumerate(spec.platforms):
                 if p.cal_matrix is not None:
                     k = p.cal_matrix.shape[0]
-                    cal[:k, :k, i] = p.cal_matrix.T  # C3D stores the matrix column by column
+                    cal[:k, :k, i] = p.cal_matrix  # first index = output row, as ezc3d applies it
             _param(c, "FORCE_PLATFORM", "CAL_MATRIX", cal, dims=[size, size, n])
     n_markers = len(spec.labels)
     points = np.zeros((4, n_markers, n_frames))
@@ -170,3 +172,123 @@ def rectangle_corners(centre, size_x: float, size_y: float, x_axis=(1.0, 0.0, 0.
     y = np.cross(z, x)
     c = np.asarray(centre, float)
     return np.array([c + sx * size_x / 2 * x + sy * size_y / 2 * y for sx, sy in ((1, 1), (-1, 1), (-1, -1), (1, -1))])
+
+
+# --- force platforms carrying a known load (spec §5.6.1) -------------------------------------------
+
+PLATFORM_UNITS = {1: ["N", "N", "N", "mm", "mm", "Nmm"], 2: ["N", "N", "N", "Nmm", "Nmm", "Nmm"],
+                  3: ["N"] * 8, 4: ["N", "N", "N", "Nmm", "Nmm", "Nmm"]}
+
+
+def unimodular(seed: int, n: int = 6) -> np.ndarray:
+    """An integer n × n calibration matrix with an integer inverse (determinant 1: unit lower times unit
+    upper triangular), so that channels = CAL⁻¹ · outputs are integers a C3D file stores exactly."""
+    rng = np.random.default_rng(seed)
+    lower = np.tril(rng.integers(-2, 3, (n, n)), -1) + np.eye(n, dtype=int)
+    upper = np.triu(rng.integers(-2, 3, (n, n)), 1) + np.eye(n, dtype=int)
+    return (lower @ upper).astype(np.float64)
+
+
+def known_load_channels(kind: int, force, point, free_moment: np.ndarray, origin, cal: np.ndarray | None = None,
+                        split: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """The channels ``(n_channels, N)`` a platform of ``kind`` records for a load, all in the platform
+    frame (x, y in the top surface, z down; N, mm, N·mm): ``force (N, 3)`` acting at ``point (N, 2)``
+    of the top surface (measured from its centre) with the free moment ``free_moment (N,)`` about the
+    vertical there. The channels hold the platform's reaction — the negated force and moments, as
+    platforms write them (a load pressing down, +z, reads a negative Fz). ``origin`` is FORCE_PLATFORM:ORIGIN as the standard writes it (the sensing origin →
+    the surface centre; type 3: ``(a, b, az0)``). Type 3's two statically free shares — how the vertical
+    load twists among the four sensors, how Fy divides between the sensor pairs — are ``split`` (default
+    zero); type 4 records ``CAL⁻¹ · [F, M]``. Raises ValueError when a channel value would not be stored
+    exactly as float32 (choose integers, and for type 3 offsets that are powers of two)."""
+    f = -np.asarray(force, np.float64)  # the reaction
+    p = np.asarray(point, np.float64)
+    o = np.asarray(origin, np.float64)
+    n = len(f)
+    tz = -np.asarray(free_moment, np.float64)
+    surface = np.zeros(3) if kind == 3 else o  # the point from the sensing origin: O → C, then C → P
+    r = np.column_stack([p, np.zeros(n)]) + (np.array([0.0, 0.0, o[2]]) if kind == 3 else surface)
+    moment = np.cross(r, f)
+    moment[:, 2] += tz
+    if kind == 1:
+        ch = np.vstack([f.T, p[:, 0] + o[0], p[:, 1] + o[1], tz])
+    elif kind in (2, 4):
+        ch = np.vstack([f.T, moment.T])
+        if kind == 4:
+            ch = np.rint(np.linalg.inv(cal)) @ ch
+    else:
+        a, b = o[0], o[1]
+        twist, shift = (np.zeros(n), np.zeros(n)) if split is None else map(np.asarray, split)
+        s, u, v = f[:, 2], moment[:, 0] / b, moment[:, 1] / a
+        fz = [(s + u - v + twist) / 4, (s + u + v - twist) / 4, (s - u + v + twist) / 4, (s - u - v - twist) / 4]
+        fy14, fy23 = f[:, 1] / 2 + shift, f[:, 1] / 2 - shift
+        dx = (moment[:, 2] - a * (fy14 - fy23)) / b
+        ch = np.vstack([(f[:, 0] - dx) / 2, (f[:, 0] + dx) / 2, fy14, fy23, *fz])
+    if not np.array_equal(float32(ch), ch):
+        raise ValueError("a channel value is not exactly a float32; choose integer loads")
+    return ch
+
+
+# --- large files (benchmarks/bench_import.py, the streamed import's tests) --------------------------
+
+def patch_parameter(path: Path, group: str, name: str, values) -> Path:
+    """Overwrite the values of an existing parameter in place (same count, its own element type): the
+    scale factors and offsets other writers set (ezc3d writes 1 and 0)."""
+    data = bytearray(path.read_bytes())
+    offset, dtype, dims = parameter_records(bytes(data))[(group, name)]
+    vals = np.asarray(values, dtype=dtype).ravel()
+    count = int(np.prod(dims)) if dims else 1
+    if vals.size != count:
+        raise ValueError(f"{group}:{name} holds {count} values, not {vals.size}")
+    data[offset: offset + vals.nbytes] = vals.tobytes()
+    path.write_bytes(bytes(data))
+    return path
+
+
+def to_integer(src: Path, dst: Path, point_scale: float) -> Path:
+    """The same recording in the INTEGER format (int16 words; points stored as value / point_scale, the
+    fourth word as int16, analog words as they were): POINT:SCALE and the header's scale factor become
+    ``point_scale`` > 0. Every stored value must be an integer in that encoding (ValueError otherwise)."""
+    data = bytearray(src.read_bytes())
+    recs = parameter_records(bytes(data))
+    (start,) = np.frombuffer(bytes(data), "<i2", 1, recs[("POINT", "DATA_START")][0])
+    points = struct.unpack_from("<H", data, 2)[0]
+    body = np.frombuffer(bytes(data[(start - 1) * C3D_BLOCK:]), "<f4").astype(np.float64)
+    analog_values = struct.unpack_from("<H", data, 4)[0]
+    frame = 4 * points + analog_values
+    words = body[: len(body) // frame * frame].reshape(-1, frame).copy()
+    xyz = words[:, : 4 * points].reshape(len(words), points, 4)
+    xyz[:, :, :3] /= point_scale
+    if not np.array_equal(np.rint(words), words) or np.abs(words).max(initial=0) > 32767:
+        raise ValueError("a value is not an int16 in the INTEGER encoding")
+    out = data[: (start - 1) * C3D_BLOCK] + words.astype("<i2").tobytes()
+    out += bytes(-len(out) % C3D_BLOCK)
+    struct.pack_into("<f", out, 12, point_scale)
+    dst.write_bytes(bytes(out))
+    return patch_parameter(dst, "POINT", "SCALE", [point_scale])
+
+
+def grow_c3d(path: Path, template: C3DSpec, frames: int, fill, chunk: int = 20_000) -> Path:
+    """A C3D file of ``frames`` frames without holding them: ezc3d writes ``template``'s header and
+    parameters (its own frames are dropped), the frame counts are set as ezc3d sets them (header last
+    frame and POINT:FRAMES; the long-file mark 65535 / −1 past 65535 frames), and the frames are
+    appended ``chunk`` at a time from ``fill(first, count)`` → (points ``(count, markers, 3)``, analog
+    samples ``(channels, count · per frame)``), REAL words, every point valid."""
+    write_c3d(path, template)
+    data = path.read_bytes()
+    (start,) = np.frombuffer(data, "<i2", 1, parameter_records(data)[("POINT", "DATA_START")][0])
+    head = bytearray(data[: (start - 1) * C3D_BLOCK])
+    first = struct.unpack_from("<H", head, 6)[0]
+    struct.pack_into("<H", head, 8, min(first + frames - 1, 0xFFFF))
+    path.write_bytes(bytes(head))
+    patch_parameter(path, "POINT", "FRAMES", [frames if frames <= 32767 else frames - 65536 if frames <= 65535 else -1])
+    markers = len(template.labels)
+    with open(path, "ab") as fh:
+        for at in range(0, frames, chunk):
+            n = min(chunk, frames - at)
+            points, analogs = fill(at, n)
+            quad = np.ones((n, markers, 4), np.float32)
+            quad[:, :, :3] = points
+            samples = np.asarray(analogs, np.float32).T.reshape(n, -1)  # sample by sample, channels inside
+            fh.write(np.hstack([quad.reshape(n, -1), samples]).astype("<f4").tobytes())
+        fh.write(bytes(-fh.tell() % C3D_BLOCK))
+    return path
