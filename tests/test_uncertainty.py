@@ -1,0 +1,186 @@
+"""Measurement uncertainty (spec chapter 19): GUM arithmetic against textbook values, the Monte Carlo
+propagation through the free-space family against the analytic sensitivity of a known force, and the
+method table against the metric definitions."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from haptify import uncertainty as unc
+from haptify.compute import ComputeContext, compute_session
+from haptify.metric_definitions import all_families
+from haptify.results import BudgetTerm, ResultsFile
+from haptify.storage import open_session
+
+
+# --- the definition file (§19.1) -------------------------------------------------------------------
+
+def test_every_metric_has_exactly_one_method():
+    ids = {m.id for f in all_families() for m in f.metrics}
+    assert set(unc.definitions().metrics) == ids
+
+
+def test_methods_name_known_sources_and_reasons():
+    d = unc.definitions()
+    for mid, m in d.metrics.items():
+        if m.method == "type_a_mc":
+            assert m.sources and all(d.sources[s].type == "B" for s in m.sources), mid
+        else:
+            assert not m.sources and m.reason, mid
+    for sid, s in d.sources.items():
+        assert (s.type == "A") == (s.figure is None), sid
+
+
+# --- GUM arithmetic (§19.2, §19.4) -----------------------------------------------------------------
+
+def test_type_a_of_four_values():
+    u, dof = unc.type_a([1.0, 2.0, 3.0, 4.0])
+    assert dof == 3
+    assert u == pytest.approx(math.sqrt(5.0 / 3.0) / 2.0, rel=1e-12)  # s² = 5/3, n = 4
+
+
+def test_type_a_per_component():
+    u, dof = unc.type_a([[0.0, 10.0], [2.0, 10.0]])
+    assert dof == 1
+    np.testing.assert_allclose(u, [1.0, 0.0])  # s = √2, /√2
+
+
+def test_type_a_needs_two():
+    with pytest.raises(ValueError):
+        unc.type_a([1.0])
+
+
+def test_coverage_factors_of_gum_table_g2():
+    assert unc.coverage_factor(2, 0.95) == pytest.approx(4.30, abs=0.005)
+    assert unc.coverage_factor(10, 0.95) == pytest.approx(2.23, abs=0.005)
+    assert unc.coverage_factor(math.inf, 0.95) == pytest.approx(1.960, abs=0.0005)
+
+
+@settings(max_examples=50, deadline=None)
+@given(u=st.floats(1e-6, 1e6), nu=st.floats(1.0, 1e4))
+def test_welch_satterthwaite_two_equal_terms_double_the_dof(u, nu):
+    assert float(unc.welch_satterthwaite([u, u], [nu, nu])) == pytest.approx(2 * nu, rel=1e-9)
+    assert float(unc.welch_satterthwaite([u], [nu])) == pytest.approx(nu, rel=1e-9)
+    assert math.isinf(float(unc.welch_satterthwaite([u, u], [math.inf, math.inf])))
+
+
+def test_combine_gum_example():
+    """u_A = 3 (ν = 4) and u_B = 4 (ν = ∞): u = 5, ν_eff = 5⁴ / (3⁴/4) = 30.86, k = t_0.975(30.86)."""
+    terms = [BudgetTerm(source="repeatability", type="A", distribution="t", u_input=3.0, unit="N", sensitivity=1.0, contribution=3.0, dof=4),
+             BudgetTerm(source="b", type="B", distribution="normal", u_input=4.0, unit="N", sensitivity=1.0, contribution=4.0)]
+    u, big_u, k, nu = unc.combine(terms, 0.95)
+    assert u == pytest.approx(5.0)
+    assert nu == pytest.approx(625 / (81 / 4))
+    assert k == pytest.approx(2.039, abs=0.002)
+    assert big_u == pytest.approx(5.0 * k)
+
+
+def test_delay_of_a_ramp_and_a_sine():
+    t = np.arange(0.0, 2.0, 0.001)
+    x = np.column_stack([3.0 * t, np.sin(2 * np.pi * t)])
+    valid = np.ones(len(t), bool)
+    out = unc.delayed(t, x, valid, 0.01)
+    inner = slice(20, -20)
+    np.testing.assert_allclose(out[inner, 0], 3.0 * (t[inner] - 0.01), atol=1e-12)
+    np.testing.assert_allclose(out[inner, 1], np.sin(2 * np.pi * (t[inner] - 0.01)), atol=1e-5)
+
+
+def test_draws_have_the_declared_distributions():
+    inputs = [unc.Input("handle_force_calibration", 0.1, 0.1), unc.Input("sync_offset", 0.003, 0.003 / math.sqrt(3))]
+    x = unc.draw_inputs(inputs, 20000, np.random.default_rng(1))
+    assert x.shape == (20000, 4)
+    np.testing.assert_allclose(x[:, :3].std(axis=0), 0.1, rtol=0.03)
+    assert np.abs(x[:, 3]).max() <= 0.003 and x[:, 3].std() == pytest.approx(0.003 / math.sqrt(3), rel=0.03)
+
+
+# --- Monte Carlo through the free-space family (§19.3) --------------------------------------------
+
+@pytest.fixture(scope="module")
+def two_rep_free_space(tmp_path_factory):
+    """Two repetitions of the fs-typical free-space trial: F = (0.5, −0.4, 0.3 + 0.2 sin 0.5t) N on the hand,
+    noise-free; the second repetition's force is 1.1 × the first's (a known Type A spread)."""
+    from haptify_tools import build_conformance_fixtures as bcf
+
+    truth = bcf.rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0, mass=0.06)
+    rig = bcf.example_rig()
+    bias = bcf.rb.plate_bias_vector(rig)
+    w = bcf.manifest("unc-fs-two", rig, truth=truth, plate_bias=bias)
+    for rep, gain in ((1, 1.0), (2, 1.1)):
+        bcf.handle_trial(w, f"free_space-{rep}", "free_space", duration_s=12.0, position=bcf.circle(0.05, 1.0), quaternion=bcf.spin(0.07),
+                         force_w=lambda t, g=gain, t0=20.0 * (rep - 1): g * bcf.felt(t - t0), truth=truth, plate_force_w=bcf.plate_truth, plate_bias=bias,
+                         repetition=rep, start_s=20.0 * (rep - 1))
+    path = tmp_path_factory.mktemp("unc") / "session"
+    w.write(path)
+    return path
+
+
+def mean_direction(gain: float = 1.0) -> np.ndarray:
+    """Mean unit vector of the fs-typical force over its 100 Hz grid (∂ mean|F+δ| / ∂δ at δ = 0)."""
+    from haptify_tools import build_conformance_fixtures as bcf
+
+    f = gain * bcf.felt(np.arange(0.0, 12.0, 0.01))
+    return (f / np.linalg.norm(f, axis=1, keepdims=True)).mean(axis=0)
+
+
+def test_mc_sensitivity_of_mean_force_is_the_mean_direction(two_rep_free_space):
+    ctx = ComputeContext(session=open_session(two_rep_free_space))
+    compute_session(ctx.session, ctx=ctx)
+    inputs = [unc.Input("handle_force_calibration", 0.02, 0.02)]
+    x = unc.draw_inputs(inputs, 400, np.random.default_rng(7))
+    y = unc.draw_values(ctx, ["free_space.force_mean"], inputs, x)["free_space.force_mean"]
+    (term,) = unc.mc_terms(inputs, x, y)
+    s = np.linalg.norm(mean_direction())  # both repetitions point the same way
+    assert term.sensitivity == pytest.approx(s, rel=0.01)
+    # the sample sd of |s|·δ over 400 draws: within 3σ of its expectation (σ_rel = 1/√(2·399))
+    assert term.contribution == pytest.approx(s * 0.02, rel=3 / math.sqrt(2 * 399))
+    assert term.dof == 399
+
+
+def test_attach_without_rig_figures_is_type_a_only(two_rep_free_space):
+    ctx = ComputeContext(session=open_session(two_rep_free_space))
+    res = compute_session(ctx.session, ["free_space.force_mean", "free_space.speed_mean"], ctx=ctx, uncertainty=True)
+    rec = res.get("free_space.force_mean")
+    # the two repetitions are x and 1.1 x: s/√2 = 0.1 x / 2 with x the first repetition's value
+    x1 = rec.per_repetition[0]
+    assert rec.per_repetition[1] == pytest.approx(1.1 * x1, rel=1e-4)
+    assert rec.uncertainty.u == pytest.approx(0.05 * x1, rel=1e-3)
+    assert rec.uncertainty.k == pytest.approx(12.706, abs=0.001)  # t_0.975(1)
+    assert rec.uncertainty.dof_eff == pytest.approx(1.0)
+    assert rec.uncertainty.sources_missing == ["handle_force_calibration"]
+    assert [t.source for t in rec.uncertainty.budget] == ["repeatability"]
+    assert res.get("free_space.speed_mean").uncertainty.method == "type_a"
+    assert res.get("workspace.modeled_volume") is None
+
+
+def test_attach_with_a_rig_figure_combines_a_and_b(two_rep_free_space, monkeypatch):
+    """With a handle-calibration figure of 0.05 N: u² = u_A² + u_B², ν_eff by Welch–Satterthwaite."""
+    ctx = ComputeContext(session=open_session(two_rep_free_space))
+    res = compute_session(ctx.session, ["free_space.force_mean"], ctx=ctx)
+    monkeypatch.setattr(unc, "rig_figure", lambda c, r, mid: type("Fig", (), {"value": [0.05, 0.1, 0.01]})())
+    unc.attach(ctx, res, draws=200)
+    rec = res.get("free_space.force_mean")
+    a, b = rec.uncertainty.budget
+    assert (a.source, b.source) == ("repeatability", "handle_force_calibration")
+    assert b.u_input == 0.05
+    assert b.contribution == pytest.approx(0.05 * np.linalg.norm(mean_direction()), rel=3 / math.sqrt(2 * 199))
+    assert rec.uncertainty.u == pytest.approx(math.hypot(a.contribution, b.contribution), rel=1e-12)
+    nu = rec.uncertainty.u ** 4 / (a.contribution ** 4 / 1 + b.contribution ** 4 / 199)
+    assert rec.uncertainty.dof_eff == pytest.approx(nu, rel=1e-9)
+    assert rec.uncertainty.mc_draws == 200 and not rec.uncertainty.sources_missing
+
+
+def test_results_round_trip_through_the_schema(two_rep_free_space):
+    import jsonschema
+
+    from haptify import schemas
+
+    ctx = ComputeContext(session=open_session(two_rep_free_space))
+    res = compute_session(ctx.session, ["free_space.force_mean"], ctx=ctx, uncertainty=True)
+    doc = res.model_dump(mode="json", exclude_none=True)
+    jsonschema.validate(doc, schemas.schema("results"))
+    assert ResultsFile.model_validate(doc).get("free_space.force_mean").uncertainty is not None
