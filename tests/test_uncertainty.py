@@ -5,6 +5,7 @@ method table against the metric definitions."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -101,22 +102,10 @@ def test_draws_have_the_declared_distributions():
 # --- Monte Carlo through the free-space family (§19.3) --------------------------------------------
 
 @pytest.fixture(scope="module")
-def two_rep_free_space(tmp_path_factory):
-    """Two repetitions of the fs-typical free-space trial: F = (0.5, −0.4, 0.3 + 0.2 sin 0.5t) N on the hand,
-    noise-free; the second repetition's force is 1.1 × the first's (a known Type A spread)."""
-    from haptify_tools import build_conformance_fixtures as bcf
-
-    truth = bcf.rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0, mass=0.06)
-    rig = bcf.example_rig()
-    bias = bcf.rb.plate_bias_vector(rig)
-    w = bcf.manifest("unc-fs-two", rig, truth=truth, plate_bias=bias)
-    for rep, gain in ((1, 1.0), (2, 1.1)):
-        bcf.handle_trial(w, f"free_space-{rep}", "free_space", duration_s=12.0, position=bcf.circle(0.05, 1.0), quaternion=bcf.spin(0.07),
-                         force_w=lambda t, g=gain, t0=20.0 * (rep - 1): g * bcf.felt(t - t0), truth=truth, plate_force_w=bcf.plate_truth, plate_bias=bias,
-                         repetition=rep, start_s=20.0 * (rep - 1))
-    path = tmp_path_factory.mktemp("unc") / "session"
-    w.write(path)
-    return path
+def two_rep_free_space():
+    """The fixture ``unc-fs-two-reps``: two free-space repetitions, F = (0.5, −0.4, 0.3 + 0.2 sin 0.5t) N on the
+    hand and 1.1 × it, noise-free, no rig trial (its conformance cases: spec §19.2, §19.4)."""
+    return Path(__file__).resolve().parents[1] / "fixtures" / "conformance" / "unc-fs-two-reps"
 
 
 def mean_direction(gain: float = 1.0) -> np.ndarray:
@@ -184,3 +173,18 @@ def test_results_round_trip_through_the_schema(two_rep_free_space):
     doc = res.model_dump(mode="json", exclude_none=True)
     jsonschema.validate(doc, schemas.schema("results"))
     assert ResultsFile.model_validate(doc).get("free_space.force_mean").uncertainty is not None
+
+
+# --- conformance: judging u, U and k (spec §16.3, §19.6) --------------------------------------------
+
+def test_the_judge_reads_the_uncertainty_record():
+    from haptify_conform.cases import load_cases
+    from haptify_conform.judge import judge_metric
+
+    case = next(c for c in load_cases() if c.id == "free_space.force_mean.uncertainty-k.two-reps")
+    record = {"id": case.metric, "value": 0.7, "unit": "N"}
+    assert "no uncertainty k" in judge_metric(case, {"metrics": [record]}).message
+    record["uncertainty"] = {"u": 0.036, "U": 0.457, "k": 12.7062047}
+    assert judge_metric(case, {"metrics": [record]}).status == "passed"
+    record["uncertainty"]["k"] = 1.96
+    assert judge_metric(case, {"metrics": [record]}).status == "failed"
