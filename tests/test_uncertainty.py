@@ -175,7 +175,7 @@ def test_results_round_trip_through_the_schema(two_rep_free_space):
     assert ResultsFile.model_validate(doc).get("free_space.force_mean").uncertainty is not None
 
 
-# --- conformance: judging u, U and k (spec §16.3, §19.6) --------------------------------------------
+# --- conformance: judging u, U and k (spec §16.3, §19.7) --------------------------------------------
 
 def test_the_judge_reads_the_uncertainty_record():
     from haptify_conform.cases import load_cases
@@ -188,3 +188,51 @@ def test_the_judge_reads_the_uncertainty_record():
     assert judge_metric(case, {"metrics": [record]}).status == "passed"
     record["uncertainty"]["k"] = 1.96
     assert judge_metric(case, {"metrics": [record]}).status == "failed"
+
+
+# --- comparing (spec §19.6) ------------------------------------------------------------------------
+
+def _record(value: float, u: float, dof: float | None):
+    from haptify.results import MetricResult, MetricUncertainty
+
+    k = unc.coverage_factor(math.inf if dof is None else dof, 0.95)
+    return MetricResult(id="free_space.force_mean", value=value, unit="N", n=3, definition_version="1.0.0",
+                        uncertainty=MetricUncertainty(method="type_a", u=u, U=k * u, k=k, coverage_probability=0.95,
+                                                      dof_eff=dof, budget=[]))
+
+
+def test_difference_test_welch():
+    """u₁ = 0.3, u₂ = 0.4 with 4 and 9 dof: u_d = 0.5, ν = 0.0625 / (0.0081/4 + 0.0256/9) = 12.82, k = t_0.975(12.82)."""
+    d = unc.compared(_record(10.0, 0.3, 4), _record(11.0, 0.4, 9))
+    assert d.u == pytest.approx(0.5)
+    assert d.dof == pytest.approx(0.0625 / (0.0081 / 4 + 0.0256 / 9))
+    assert d.k == pytest.approx(2.165, abs=0.002)
+    assert not d.significant  # |−1| < 2.165 × 0.5 = 1.08
+    assert unc.compared(_record(10.0, 0.3, 4), _record(11.2, 0.4, 9)).significant
+    assert unc.compared(_record(10.0, 0.3, 4), None) is None
+
+
+@settings(max_examples=40, deadline=None)
+@given(x=st.floats(-1e3, 1e3), u=st.floats(1e-3, 10.0), nu=st.floats(1.0, 100.0))
+def test_a_value_never_differs_from_itself_and_the_test_is_symmetric(x, u, nu):
+    a, b = _record(x, u, nu), _record(x + 3 * u, u, nu)
+    assert not unc.compared(a, a).significant
+    assert unc.compared(a, b).significant == unc.compared(b, a).significant
+
+
+def test_compare_shows_u_and_marks_significant_pairs():
+    from haptify.compare import SIGNIFICANCE, build_table
+    from haptify.results import DeviceSummary, Implementation
+
+    def results(label: str, value: float, u: float) -> ResultsFile:
+        return ResultsFile(implementation=Implementation(name="t", version="1"), session_id=label,
+                           device=DeviceSummary(manufacturer="M", model=label), manifest_sha256="0" * 64,
+                           metrics=[_record(value, u, None)])
+
+    table = build_table([results("A", 1.0, 0.01), results("B", 1.5, 0.01), results("C", 1.01, 0.01)])
+    row = next(r for r in table.rows if r[0].startswith("Mean free-space force"))
+    assert table.header[4] == SIGNIFICANCE
+    assert row[1] == "1 ± 0.02 (U)"  # U = 1.96 × 0.01
+    assert row[4] == "1–2, 2–3"  # |1 − 1.01| = 0.01 < 1.96·√2·0.01
+    assert any("Welch" in n for n in table.notes)
+    assert SIGNIFICANCE not in build_table([results("A", 1.0, 0.01)]).header

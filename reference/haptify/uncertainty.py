@@ -345,3 +345,40 @@ def attach(ctx: Any, results: ResultsFile, *, draws: int | None = None, seed: in
             method=method.method, u=u, U=big_u, k=k, coverage_probability=p, dof_eff=nu, budget=terms,
             mc_draws=m if r.id in samples else None, sources_missing=sorted(s for s in method.sources if s in missing))
     return results
+
+
+# --- comparing two results (spec §19.6) -------------------------------------------------------------
+
+@dataclass
+class Difference:
+    """The difference of two measured values and its test (spec §19.6): d = x₁ − x₂, u_d = √(u₁² + u₂²), ν by
+    Welch–Satterthwaite, k = t_{(1+p)/2}(ν); significant when |d| > k·u_d."""
+
+    d: float
+    u: float
+    dof: float | None
+    k: float
+
+    @property
+    def expanded(self) -> float:
+        return self.k * self.u
+
+    @property
+    def significant(self) -> bool:
+        return abs(self.d) > self.expanded
+
+
+def difference(a: MetricUncertainty, x_a: float, b: MetricUncertainty, x_b: float, p: float | None = None) -> Difference:
+    """The test of spec §19.6 for two scalar values with their uncertainty records (p defaults to the
+    definition file's coverage probability); each record's ν_eff is its u's degrees of freedom (absent: ∞)."""
+    p = float(up("coverage_probability")) if p is None else p
+    dofs = [math.inf if r.dof_eff is None else r.dof_eff for r in (a, b)]
+    nu = float(welch_satterthwaite([a.u, b.u], dofs))
+    return Difference(d=x_a - x_b, u=math.hypot(a.u, b.u), dof=None if math.isinf(nu) else nu, k=coverage_factor(nu, p))
+
+
+def compared(ra: MetricResult | None, rb: MetricResult | None) -> Difference | None:
+    """:func:`difference` of two scalar metric records when both carry an uncertainty, else None (spec §19.6)."""
+    if ra is None or rb is None or ra.uncertainty is None or rb.uncertainty is None or isinstance(ra.value, list) or isinstance(rb.value, list):
+        return None
+    return difference(ra.uncertainty, float(ra.value), rb.uncertainty, float(rb.value))
