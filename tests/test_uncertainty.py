@@ -236,3 +236,12 @@ def test_compare_shows_u_and_marks_significant_pairs():
     assert row[4] == "1–2, 2–3"  # |1 − 1.01| = 0.01 < 1.96·√2·0.01
     assert any("Welch" in n for n in table.notes)
     assert SIGNIFICANCE not in build_table([results("A", 1.0, 0.01)]).header
+
+
+def test_ties_group_indistinguishable_devices():
+    """u = 0.01, ν = ∞: two values tie when they differ by less than 1.96·√2·0.01 = 0.0277."""
+    recs = [_record(1.00, 0.01, None), _record(1.50, 0.01, None), _record(1.02, 0.01, None), _record(1.04, 0.01, None),
+            _record(1.51, 0.01, None)]
+    assert unc.tie_groups(recs) == [[0, 2], [3], [1, 4]]  # 1.04 − 1.00 = 0.04 > 0.0277: a new group
+    plain = recs[0].model_copy(update={"uncertainty": None})
+    assert unc.tie_groups([plain, recs[2]]) == [[0], [1]]

@@ -382,3 +382,19 @@ def compared(ra: MetricResult | None, rb: MetricResult | None) -> Difference | N
     if ra is None or rb is None or ra.uncertainty is None or rb.uncertainty is None or isinstance(ra.value, list) or isinstance(rb.value, list):
         return None
     return difference(ra.uncertainty, float(ra.value), rb.uncertainty, float(rb.value))
+
+
+def tie_groups(records: Sequence[MetricResult]) -> list[list[int]]:
+    """Indices of ``records`` grouped into ties for a ranking (spec §19.6): sorted by value, a device joins
+    the current group while it does not differ significantly from the group's first device; a record
+    without an uncertainty can never be shown indistinguishable and is a group of its own."""
+    order = sorted(range(len(records)), key=lambda i: float(records[i].value))
+    groups: list[list[int]] = []
+    for i in order:
+        if groups:
+            diff = compared(records[groups[-1][0]], records[i])
+            if diff is not None and not diff.significant:
+                groups[-1].append(i)
+                continue
+        groups.append([i])
+    return groups
