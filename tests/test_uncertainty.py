@@ -245,3 +245,16 @@ def test_ties_group_indistinguishable_devices():
     assert unc.tie_groups(recs) == [[0, 2], [3], [1, 4]]  # 1.04 − 1.00 = 0.04 > 0.0277: a new group
     plain = recs[0].model_copy(update={"uncertainty": None})
     assert unc.tie_groups([plain, recs[2]]) == [[0], [1]]
+
+
+def test_compute_command_writes_the_records_only_when_asked(two_rep_free_space, tmp_path):
+    import json
+
+    from haptify.cli import main
+
+    out = tmp_path / "r.json"
+    assert main(["compute", str(two_rep_free_space), "--metrics", "free_space.force_mean", "-o", str(out)]) == 0
+    assert json.loads(out.read_text())["metrics"][0].get("uncertainty") is None
+    assert main(["compute", str(two_rep_free_space), "--metrics", "free_space.force_mean", "--uncertainty", "-o", str(out)]) == 0
+    rec = json.loads(out.read_text())["metrics"][0]["uncertainty"]
+    assert rec["k"] == pytest.approx(12.706, abs=0.001) and rec["U"] == pytest.approx(rec["k"] * rec["u"])
