@@ -8,7 +8,8 @@ protocol on a perfect rig — the reference's own per-trial computation on the t
 (truth.npz: the hand's pose and the force on it), evaluated at the samples the measurement used — and
 its expectation over the examiner's repetitions, the mean over every trial of every session (its own
 standard error is printed). A session covers a metric when |value − truth| ≤ U. Target: 95 % ± 3 % for
-every metric.
+every metric that reports an uncertainty (a metric whose method is ``none`` is shown, from rows of runs
+before it became so, but not reported as a figure).
 
 Rows are appended to ``--out`` (JSON lines) as sessions finish, so an interrupted run keeps what it did;
 ``--summarise`` only reads that file.
@@ -33,6 +34,7 @@ from haptify.compute import ComputeContext, compute_session
 from haptify.free_space import FORCE_IDS, SPEED_IDS, hand_force_samples, speeds
 from haptify.signals import handle_signals, lowpass_resample, mocap_track, process_mocap, resample_track, sp
 from haptify.storage import open_session
+from haptify.uncertainty import method_of
 
 METRICS = FORCE_IDS + SPEED_IDS
 TARGET, BAND = 0.95, 0.03
@@ -88,11 +90,16 @@ def summarise(rows: list[dict]) -> None:
         per_trial = np.array([tv[mid] for r in rows for tv in r["truth_per_trial"].values()])
         truth, se = per_trial.mean(), per_trial.std(ddof=1) / math.sqrt(len(per_trial))
         got = [r["metrics"][mid] for r in rows if mid in r["metrics"]]
+        if not got:
+            continue
         inside = [abs(g["value"] - truth) <= g["U"] for g in got]
         z = np.mean([(g["value"] - truth) / g["u"] for g in got])
         cov = float(np.mean(inside))
-        print(f"| `{mid}` | {truth:.5g} ± {se:.2g} | {len(got)} | {sum(inside)} | **{cov:.1%}** | "
-              f"{np.mean([g['k'] for g in got]):.3g} | {z:+.3f} |")
+        dropped = method_of(mid).method == "none"  # rows measured before the method became none (spec §19.1)
+        print(f"| `{mid}`{' (method now none)' if dropped else ''} | {truth:.5g} ± {se:.2g} | {len(got)} | {sum(inside)} | "
+              f"**{cov:.1%}** | {np.mean([g['k'] for g in got]):.3g} | {z:+.3f} |")
+        if dropped:
+            continue
         report(f"coverage of U (k≈t, p = 95 %) for {mid}, {len(got)} twin sessions", f"{TARGET:.0%} ± {BAND:.0%}",
                f"{cov:.1%}", "", cov, abs(cov - TARGET) <= BAND)
 
