@@ -84,7 +84,7 @@ def _one(job: tuple) -> dict:
 
 def summarise(rows: list[dict]) -> None:
     print(f"{len(rows)} sessions")
-    print("| metric | truth (mean over trials ± its SE) | sessions | inside U | coverage | mean k | mean (value − truth)/u |")
+    print("| metric | truth (mean over trials ± its SE) | sessions | inside U | coverage | mean k | mean (value − truth) / mean u |")
     print("|---|---|---|---|---|---|---|")
     for mid in METRICS:
         per_trial = np.array([tv[mid] for r in rows for tv in r["truth_per_trial"].values()])
@@ -93,11 +93,11 @@ def summarise(rows: list[dict]) -> None:
         if not got:
             continue
         inside = [abs(g["value"] - truth) <= g["U"] for g in got]
-        z = np.mean([(g["value"] - truth) / g["u"] for g in got])
+        bias = np.mean([g["value"] - truth for g in got]) / np.mean([g["u"] for g in got])
         cov = float(np.mean(inside))
         dropped = method_of(mid).method == "none"  # rows measured before the method became none (spec §19.1)
         print(f"| `{mid}`{' (method now none)' if dropped else ''} | {truth:.5g} ± {se:.2g} | {len(got)} | {sum(inside)} | "
-              f"**{cov:.1%}** | {np.mean([g['k'] for g in got]):.3g} | {z:+.3f} |")
+              f"**{cov:.1%}** | {np.mean([g['k'] for g in got]):.3g} | {bias:+.3f} |")
         if dropped:
             continue
         report(f"coverage of U (k≈t, p = 95 %) for {mid}, {len(got)} twin sessions", f"{TARGET:.0%} ± {BAND:.0%}",
