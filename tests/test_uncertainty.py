@@ -258,3 +258,21 @@ def test_compute_command_writes_the_records_only_when_asked(two_rep_free_space, 
     assert main(["compute", str(two_rep_free_space), "--metrics", "free_space.force_mean", "--uncertainty", "-o", str(out)]) == 0
     rec = json.loads(out.read_text())["metrics"][0]["uncertainty"]
     assert rec["k"] == pytest.approx(12.706, abs=0.001) and rec["U"] == pytest.approx(rec["k"] * rec["u"])
+
+
+def test_type_a_records_of_a_vector_and_of_placements():
+    """rig.plate_natural_frequency from two impacts (per axis s/√2) and rig.cop_error whose n counts 10 placements
+    (sd/√10, 9 dof); no Type B source is involved, so no session is read."""
+    from haptify.results import Implementation, MetricResult
+
+    freq = MetricResult(id="rig.plate_natural_frequency", value=[2.0, 2.0, 4.0], unit="Hz", per_repetition=[[1, 2, 3], [3, 2, 5]],
+                        n=2, sd=[math.sqrt(2), 0.0, math.sqrt(2)], definition_version="1.0.0")
+    cop = MetricResult(id="rig.cop_error", value=0.004, unit="m", per_repetition=[0.0035, 0.0045], n=10, sd=0.002,
+                       definition_version="1.0.0")
+    res = unc.attach(None, ResultsFile(implementation=Implementation(name="t", version="1"), session_id="s",
+                                       manifest_sha256="0" * 64, metrics=[freq, cop]))
+    f, c = res.metrics[0].uncertainty, res.metrics[1].uncertainty
+    np.testing.assert_allclose(f.u, [1.0, 0.0, 1.0])
+    assert f.k == pytest.approx(12.706, abs=0.001) and f.U == pytest.approx([12.7062, 0.0, 12.7062], abs=1e-3)
+    assert c.u == pytest.approx(0.002 / math.sqrt(10)) and c.dof_eff == pytest.approx(9)
+    assert c.k == pytest.approx(2.262, abs=0.001)  # t_0.975(9)
