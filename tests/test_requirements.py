@@ -19,6 +19,7 @@ from haptify_conform.requirements import all_requirements, by_id, requirements_f
 from haptify_tools.tolerance_budgets import BUDGETS, budget_for
 
 METRICS = {m.id for f in all_families() for m in f.metrics}
+QUANTITIES = {f"{m}:{q}" for m in METRICS for q in ("u", "U", "k")}  # a chapter-19 case's metric and quantity
 
 
 def test_requirement_ids_are_unique_well_formed_and_decide_known_metrics():
@@ -29,8 +30,8 @@ def test_requirement_ids_are_unique_well_formed_and_decide_known_metrics():
         assert r.id.startswith(f"R{r.section}-"), r.id
         if r.kind == "value":
             assert r.level == "MUST" and len(r.statement) > 30
-            for pattern in r.metrics:  # every pattern names at least one metric
-                assert any(fnmatchcase(m, pattern) for m in METRICS), (r.id, pattern)
+            for pattern in r.metrics:  # every pattern names at least one metric (or uncertainty quantity, §19.7)
+                assert any(fnmatchcase(m, pattern) for m in METRICS | QUANTITIES), (r.id, pattern)
 
 
 def test_verdict_requirements_are_the_validation_codes_but_the_exempt():
@@ -44,6 +45,12 @@ def test_a_metric_case_lists_the_value_requirements_that_decide_its_metric():
     ids = requirements_for_case("vibration.rms")
     assert "R10.3-1" in ids and "R15.3-1" in ids and "R13.3-1" not in ids
     assert all(by_id()[i].decides("vibration.rms") for i in ids)
+
+
+def test_a_case_on_an_uncertainty_adds_the_chapter_19_requirements():
+    assert requirements_for_case("free_space.force_mean", quantity="u")[-1:] == ["R19.2-1"]
+    assert requirements_for_case("free_space.force_mean", quantity="k")[-2:] == ["R19.2-1", "R19.4-1"]
+    assert set(requirements_for_case("free_space.force_mean")) == set(requirements_for_case("free_space.force_mean", quantity="u")) - {"R19.2-1"}
 
 
 def _case(**over) -> Case:

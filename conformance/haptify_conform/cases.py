@@ -82,6 +82,9 @@ class Case(BaseModel):
     model_config = ConfigDict(extra="forbid")
     id: str = Field(pattern=r"^[a-z0-9][a-z0-9._-]*$", description="Permanent; never reused for another case.")
     metric: str = Field(description="A metric id from schemas/<v>/metrics, or 'validate'.")
+    quantity: Literal["value", "u", "U", "k"] = Field(
+        "value", description="What of the metric record is judged: its value, or u, U or k of its uncertainty record "
+                             "(spec §19.4; the case's parameters then ask for it: {\"uncertainty\": true}).")
     spec_section: str
     level: Literal["MUST", "SHOULD"]
     requirements: list[str] = Field(default_factory=list, description="Ids of the requirements the case tests "

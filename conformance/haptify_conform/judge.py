@@ -52,25 +52,39 @@ def judge_metric(case: Case, results: dict) -> Verdict:
             msg += f" (reported unavailable: {why.get('code')} {why.get('reason')})"
         return Verdict(status="failed", message=msg, **base)
     record = records[0]
-    if record.get("unit") != case.expected.unit:
-        return Verdict(status="failed", message=f"unit mismatch: expected {case.expected.unit!r}, found {record.get('unit')!r}",
-                       actual=record.get("value"), **base)
-    actual = _components(record.get("value"))
+    if case.quantity != "value":
+        return _judge_number(case, _uncertainty_of(record, case.quantity), base, unit=None)
+    return _judge_number(case, record.get("value"), base, unit=record.get("unit"))
+
+
+def _uncertainty_of(record: dict, quantity: str) -> Any:
+    """``u``, ``U`` or ``k`` of a metric record's uncertainty (spec §19.4); None when it has none."""
+    unc = record.get("uncertainty")
+    return unc.get(quantity) if isinstance(unc, dict) else None
+
+
+def _judge_number(case: Case, found: Any, base: dict, unit: str | None) -> Verdict:
+    """``found`` against the case's expected value and tolerance; ``unit`` (the record's) must match the
+    case's unless None (an uncertainty's unit is its metric's, a coverage factor's is 1). Spec §16.3."""
+    what = "value" if case.quantity == "value" else f"uncertainty {case.quantity}"
+    if case.quantity != "value" and found is None:
+        return Verdict(status="failed", message=f"the record of {case.metric} has no uncertainty {case.quantity} (spec §19.4)", **base)
+    if unit is not None and unit != case.expected.unit:
+        return Verdict(status="failed", message=f"unit mismatch: expected {case.expected.unit!r}, found {unit!r}", actual=found, **base)
+    actual = _components(found)
     expected = _components(case.expected.value)
     if actual is None or expected is None or len(actual) != len(expected):
-        return Verdict(status="failed", message=f"value has the wrong shape: expected {case.expected.value!r}, found "
-                       f"{record.get('value')!r}", actual=record.get("value"), **base)
+        return Verdict(status="failed", message=f"{what} has the wrong shape: expected {case.expected.value!r}, found {found!r}",
+                       actual=found, **base)
     if any(math.isnan(a) or math.isinf(a) for a in actual):
-        return Verdict(status="failed", message="value is NaN or infinite", actual=record.get("value"), **base)
+        return Verdict(status="failed", message=f"{what} is NaN or infinite", actual=found, **base)
     tol = case.tolerance
     abs_err = [abs(a - e) for a, e in zip(actual, expected)]
     rel_err = [d / abs(e) if e else (0.0 if d == 0 else math.inf) for d, e in zip(abs_err, expected)]
     ok = all(d <= tol.abs + tol.rel * abs(e) for d, e in zip(abs_err, expected))
-    verdict = Verdict(status="passed" if ok else "failed", actual=record.get("value"),
-                      max_abs_error=max(abs_err), max_rel_error=max(rel_err), **base)
+    verdict = Verdict(status="passed" if ok else "failed", actual=found, max_abs_error=max(abs_err), max_rel_error=max(rel_err), **base)
     if not ok:
-        verdict.message = (f"expected {case.expected.value} ± ({tol.abs} + {tol.rel}·|expected|) {case.expected.unit}, "
-                           f"found {record.get('value')}")
+        verdict.message = f"expected {what} {case.expected.value} ± ({tol.abs} + {tol.rel}·|expected|) {case.expected.unit}, found {found}"
     return verdict
 
 

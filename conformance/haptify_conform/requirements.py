@@ -73,10 +73,15 @@ def by_id() -> dict[str, Requirement]:
     return {r.id: r for r in all_requirements()}
 
 
-def requirements_for_case(metric: str, codes: list[str] | None = None) -> list[str]:
+def requirements_for_case(metric: str, codes: list[str] | None = None, quantity: str = "value") -> list[str]:
     """The ids a case of ``metric`` tests: for ``validate`` cases the verdicts of its expected ``codes``,
-    otherwise every value requirement that decides the metric."""
+    otherwise every value requirement that decides the metric — and, for a case on ``u``, ``U`` or ``k`` of
+    its uncertainty (spec §19.4), those whose patterns name ``<metric>:<quantity>`` (e.g. ``*:k``)."""
     if metric == "validate":
         wanted = set(codes or ())
         return [r.id for r in all_requirements() if r.code in wanted]
-    return [r.id for r in all_requirements() if r.kind == "value" and r.decides(metric)]
+    decides = [r for r in all_requirements() if r.kind == "value" and r.decides(metric)]
+    if quantity != "value":
+        decides += [r for r in all_requirements() if r.kind == "value" and r.decides(f"{metric}:{quantity}")]
+    seen = dict.fromkeys(r.id for r in decides)
+    return [r.id for r in all_requirements() if r.id in seen]

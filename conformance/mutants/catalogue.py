@@ -32,7 +32,7 @@ from scipy.signal import butter, cheby1, sosfilt, sosfiltfilt
 from scipy.spatial import ConvexHull
 
 from haptify import (calibration, force_plate, free_space, local_dynamics, repetitions, rig_checks, signals, stiffness,
-                     storage, surface, vibration, workspace)
+                     storage, surface, uncertainty, vibration, workspace)
 from haptify.caching import session_of
 from haptify.conventions import STANDARD_GRAVITY, quat_conjugate, quat_rotate
 from haptify_conform import reference
@@ -549,6 +549,21 @@ def _through_origin(fit: Any, *_: Any) -> Any:
     return dataclasses.replace(fit, stiffness=float(x @ y / (x @ x)), intercept=0.0)
 
 
+# --- uncertainty (spec chapter 19) ---------------------------------------------------------------------------
+
+def _sd_as_type_a(real: Callable) -> Callable:
+    """Type A = the sample standard deviation itself, not that of the mean."""
+    def type_a(per_repetition: Any) -> Any:
+        u, dof = real(per_repetition)
+        return u * math.sqrt(len(per_repetition)), dof
+    return type_a
+
+
+def _normal_coverage(real: Callable) -> Callable:
+    """k from the normal distribution whatever the degrees of freedom."""
+    return lambda dof, p: real(math.inf, p)
+
+
 # --- the set -----------------------------------------------------------------------------------------------------
 
 
@@ -821,6 +836,13 @@ MUTANTS: tuple[Mutant, ...] = (
            ("dynamics.force_rmse", "dynamics.force_rmse_mean")),
     Mutant("stiffness_through_origin", "13.3", "R13.3-1", "the line f = k·d + c has an intercept", "f = k·d through the origin",
            (Patch(stiffness, "fit_stiffness", _post(_through_origin)),), ("stiffness.measured",)),
+    # uncertainty
+    Mutant("type_a_without_root_n", "19.2", "R19.2-1", "Type A of a mean of n repetitions is s/√n",
+           "the repetitions' standard deviation s (the spread of one repetition)", (Patch(uncertainty, "type_a", _sd_as_type_a),),
+           ("free_space.force_mean",), cheap=True),
+    Mutant("coverage_factor_normal", "19.4", "R19.4-1", "k is Student's t at the effective degrees of freedom",
+           "k = 1.96 from the normal distribution (the large-sample value)", (Patch(uncertainty, "coverage_factor", _normal_coverage),),
+           ("free_space.force_mean",), cheap=True),
 )
 
 BY_NAME: dict[str, Mutant] = {m.name: m for m in MUTANTS}

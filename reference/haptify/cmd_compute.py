@@ -1,4 +1,4 @@
-"""``haptify compute SESSION [-o results.json] [--metrics ID,…] [--params FILE]`` (spec §15.4).
+"""``haptify compute SESSION [-o results.json] [--metrics ID,…] [--params FILE] [--uncertainty]`` (spec §15.4, §19.5).
 
 The session passes the validation gate first (§4.8): a session that does not validate gets no results
 file; with ``-o`` the findings document of §16.4.1 is written there instead and the exit status is 1,
@@ -30,6 +30,8 @@ def register(sub) -> None:
     p.add_argument("--metrics", help="comma-separated metric ids (default: all)")
     p.add_argument("--params", type=Path, metavar="FILE",
                    help="case parameters, a JSON object (spec §16.2), e.g. {\"model\": \"<model file in the session>\"}")
+    p.add_argument("--uncertainty", action="store_true",
+                   help="add each metric's measurement uncertainty: u, U = k·u at 95 %%, the budget (spec chapter 19)")
     p.set_defaults(func=run)
 
 
@@ -38,7 +40,7 @@ def run(args, ui) -> int:
     try:
         wanted = _wanted_metrics(args.metrics)
         parameters = case_parameters(args.params)
-        results = compute_folder(args.session, wanted, parameters, ui)
+        results = compute_folder(args.session, wanted, parameters, ui, uncertainty=args.uncertainty)
     except HaptifyError as err:
         if args.output is not None:
             write_findings(args.output, err.findings)
@@ -50,13 +52,18 @@ def run(args, ui) -> int:
         return 0
     for m in results.metrics:
         value = m.value if isinstance(m.value, list) else f"{m.value:.6g}"
-        ui.say(f"{m.id:36s} {value} {m.unit}  (n={m.n})")
+        spread = f" ± {_fmt(m.uncertainty.U)} (k={m.uncertainty.k:.3g})" if m.uncertainty else ""
+        ui.say(f"{m.id:36s} {value}{spread} {m.unit}  (n={m.n})")
     for u in results.unavailable:
         ui.say(f"{u.id:36s} not computed: {u.code} {u.reason}")
     for w in results.warnings:
         ui.warn(f"{w.code} warning: {w.message}")
     ui.say(f"wrote {out}")
     return 0
+
+
+def _fmt(v: Any) -> str:
+    return f"[{', '.join(f'{x:.3g}' for x in v)}]" if isinstance(v, list) else f"{v:.3g}"
 
 
 def _wanted_metrics(text: str | None) -> list[str] | None:
@@ -81,22 +88,25 @@ def case_parameters(path: Path | None) -> dict[str, Any]:
     return params
 
 
-def compute_folder(path: Path, wanted: list[str] | None = None, parameters: dict[str, Any] | None = None, ui=None) -> ResultsFile:
+def compute_folder(path: Path, wanted: list[str] | None = None, parameters: dict[str, Any] | None = None, ui=None,
+                   uncertainty: bool = False) -> ResultsFile:
     """What ``haptify compute`` computes for the session folder ``path``: the session through the gate, every
-    (or every ``wanted``) metric, then the rest of its validation (spec §15.4, §4.8); ``ui`` shows progress."""
+    (or every ``wanted``) metric (with its uncertainty, chapter 19, when asked), then the rest of its validation
+    (spec §15.4, §4.8); ``ui`` shows progress."""
     from haptify.cli import UI
 
-    return _compute_checked(open_checked_session(path), wanted, parameters or {}, ui or UI(quiet=True))
+    return _compute_checked(open_checked_session(path), wanted, parameters or {}, ui or UI(quiet=True), uncertainty)
 
 
-def _compute_checked(session: CheckedSession, wanted: list[str] | None, parameters: dict[str, Any], ui) -> ResultsFile:
+def _compute_checked(session: CheckedSession, wanted: list[str] | None, parameters: dict[str, Any], ui,
+                     uncertainty: bool = False) -> ResultsFile:
     """Compute on a gated session, then finish its validation (spec §4.8): the streams no metric read
     are checked too, so a result exists only for a session that validates whole. A coded failure of the
     computation is reported as the session's refusal when the session turns out invalid."""
     ctx = ComputeContext(session=session, parameters=parameters)
     with ui.progress("computing metrics", total=len(family_modules()) + 1) as advance:
         try:
-            results = compute_session(session, wanted, progress=advance, ctx=ctx)
+            results = compute_session(session, wanted, progress=advance, ctx=ctx, uncertainty=uncertainty)
         except HaptifyError:
             session.finish()
             raise

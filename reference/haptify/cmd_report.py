@@ -21,6 +21,8 @@ def register(sub) -> None:
     p.add_argument("--wav-scale", type=float, help="divide vibration audio by this (m/s^2), as the paper did, "
                                                     "to compare devices; default: this session's largest amplitude")
     p.add_argument("--overwrite", action="store_true")
+    p.add_argument("--uncertainty", action="store_true", help="compute each metric's uncertainty too (spec chapter 19; "
+                   "results given with --results keep theirs)")
     p.set_defaults(func=run)
 
 
@@ -38,7 +40,7 @@ def run(args, ui) -> int:
                        expected=session.session_id, found=results.session_id)
     else:
         with ui.progress("computing metrics", total=len(family_modules())) as advance:
-            results = compute_session(session, progress=advance, ctx=ctx)
+            results = compute_session(session, progress=advance, ctx=ctx, uncertainty=args.uncertainty)
         results.warnings = as_result_warnings(validation_warnings) + results.warnings
     out = write_report(ctx, results, args.output, wav_scale=args.wav_scale, overwrite=args.overwrite)
     ui.say(f"wrote {out / 'index.html'}")

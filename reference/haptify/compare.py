@@ -13,7 +13,8 @@ import io
 from dataclasses import dataclass
 
 from haptify import schemas
-from haptify.results import ResultsFile
+from haptify.results import MetricResult, ResultsFile
+from haptify.uncertainty import compared
 
 
 @dataclass
@@ -31,14 +32,45 @@ def _num(value: float, significant: int) -> str:
     return f"{value:.0f}" if abs(value) >= 10 ** significant else f"{value:.{significant}g}"
 
 
-def _fmt(value: float | None, sd: float | None = None) -> str:
-    """A table cell: the value to 5 significant digits (the paper's precision), ± sd to 2."""
+def _fmt(value: float | None, sd: float | None = None, expanded: float | None = None) -> str:
+    """A table cell: the value to 5 significant digits (the paper's precision), ± U to 2 marked "(U)" when
+    it has an uncertainty (spec §19.6), else ± sd to 2."""
     if value is None:
         return "—"
     text = _num(value, 5)
-    if sd is not None:
+    if expanded is not None:
+        text += f" ± {_num(expanded, 2)} (U)"
+    elif sd is not None:
         text += f" ± {_num(sd, 2)}"
     return text
+
+
+def _cell(m: MetricResult | None, factor: float) -> str:
+    """A device's cell of a row: "—" for a missing or per-axis metric (spec §15.5, §19.6)."""
+    if m is None or isinstance(m.value, list):
+        return "—"
+    expanded = m.uncertainty.U * factor if m.uncertainty is not None and not isinstance(m.uncertainty.U, list) else None
+    return _fmt(m.value * factor, m.sd * factor if isinstance(m.sd, float) else None, expanded)
+
+
+SIGNIFICANCE = "significant differences"
+SIGNIFICANCE_NOTE = ("± … (U): expanded uncertainty at 95 % (spec §19.4); ± without (U): the repetitions' sd. "
+                     "Significant differences: device columns i–j with |x_i − x_j| > k·√(u_i² + u_j²), k Student's t at the "
+                     "Welch–Satterthwaite degrees of freedom (spec §19.6).")
+
+
+def significance(records: list[MetricResult | None]) -> str:
+    """The pairs of device columns (from 1) whose values differ significantly (spec §19.6): "1–2, 2–3",
+    "none", or "—" when fewer than two values carry an uncertainty."""
+    pairs, tested = [], 0
+    for i in range(len(records)):
+        for j in range(i + 1, len(records)):
+            diff = compared(records[i], records[j])
+            if diff is not None:
+                tested += 1
+                if diff.significant:
+                    pairs.append(f"{i + 1}–{j + 1}")
+    return ", ".join(pairs) if pairs else ("none" if tested else "—")
 
 
 def column_label(results: ResultsFile, taken: set[str]) -> str:
@@ -56,24 +88,25 @@ def build_table(results: list[ResultsFile], with_paper: bool = False) -> Table:
         label = column_label(r, taken)
         taken.add(label)
         header.append(label)
+    significance_column = sum(any(m.uncertainty is not None for m in r.metrics) for r in results) >= 2
+    if significance_column:
+        header.append(SIGNIFICANCE)
     if with_paper:
         header += [f"paper: {d}" for d in paper["devices"]]
     rows, notes = [], []
     for row in paper["rows"]:
         factor = row["display_factor"]
-        cells = [f"{row['label']} ({row['display_unit']})"]
-        for r in results:
-            m = r.get(row["metric"])
-            if m is None or isinstance(m.value, list):
-                cells.append("—")
-            else:
-                sd = m.sd * factor if isinstance(m.sd, float) else None
-                cells.append(_fmt(m.value * factor, sd))
+        records = [r.get(row["metric"]) for r in results]
+        cells = [f"{row['label']} ({row['display_unit']})"] + [_cell(m, factor) for m in records]
+        if significance_column:
+            cells.append(significance(records))
         if with_paper:
             cells += [_fmt(row["values"][d] * factor) for d in paper["devices"]]
             if "note" in row:
                 notes.append(f"{row['label']}: {row['note']}")
         rows.append(cells)
+    if any(m.uncertainty is not None for r in results for m in r.metrics):
+        notes.append(SIGNIFICANCE_NOTE)
     return Table(header, rows, notes)
 
 

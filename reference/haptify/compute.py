@@ -57,10 +57,13 @@ def family_modules() -> list[tuple[str, str]]:
 
 
 def compute_session(session: SessionFolder, metrics: Iterable[str] | None = None,
-                    progress: Callable[[int], None] | None = None, ctx: ComputeContext | None = None) -> ResultsFile:
+                    progress: Callable[[int], None] | None = None, ctx: ComputeContext | None = None,
+                    uncertainty: bool = False) -> ResultsFile:
     """Compute every metric (or those in ``metrics``) that the session's trials allow (spec §15.4).
 
-    Pass ``ctx`` to share its cache with later work on the same session (the report's figures).
+    Pass ``ctx`` to share its cache with later work on the same session (the report's figures). With
+    ``uncertainty`` (or the case parameter ``{"uncertainty": true}``, §16.2), every metric whose method
+    applies gets its uncertainty record (spec chapter 19), propagated through the context's cached intermediates.
     """
     wanted = set(metrics) if metrics else None
     known = {m.id for f in all_families() for m in f.metrics}
@@ -86,4 +89,9 @@ def compute_session(session: SessionFolder, metrics: Iterable[str] | None = None
         if progress:
             progress(1)
     out.warnings = ctx.warnings
+    if uncertainty or ctx.parameters.get("uncertainty") is True:
+        from haptify.uncertainty import attach
+
+        attach(ctx, out)
+        ctx.wanted = wanted
     return out

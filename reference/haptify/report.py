@@ -64,7 +64,9 @@ def to_wav_samples(signal: np.ndarray, rate_hz: float, scale: float) -> np.ndarr
 def _html_page(session_id: str, results: ResultsFile, figures: list[ReportFigure], audio: list[tuple[str, str]]) -> str:
     rows = "".join(
         f"<tr><td><code>{html.escape(m.id)}</code></td><td>{html.escape(_value(m.value))}</td>"
-        f"<td>{html.escape(m.unit)}</td><td>{m.n}</td><td>{html.escape(_value(m.sd) if m.sd is not None else '—')}</td></tr>"
+        f"<td>{html.escape(m.unit)}</td><td>{m.n}</td><td>{html.escape(_value(m.sd) if m.sd is not None else '—')}</td>"
+        f"<td>{html.escape(_value(m.uncertainty.U) if m.uncertainty else '—')}</td>"
+        f"<td>{html.escape(f'{m.uncertainty.k:.3g}' if m.uncertainty else '—')}</td></tr>"
         for m in results.metrics)
     missing = "".join(f"<li><code>{html.escape(u.id)}</code>: {html.escape(u.code)} {html.escape(u.reason)}</li>"
                       for u in results.unavailable)
@@ -80,7 +82,7 @@ td,th{{border:1px solid #ccc;padding:3px 8px}}figure{{margin:1.5em 0}}img{{max-w
 <body><h1>Haptify report</h1><p>Session <code>{html.escape(session_id)}</code> · {html.escape(device)} ·
 {html.escape(results.implementation.name)} {html.escape(results.implementation.version)} · spec {html.escape(results.spec_version)}</p>
 <h2>Benchmarks (the paper's Table III)</h2>{to_html(build_table([results], with_paper=True))}
-<h2>Every metric</h2><table><thead><tr><th>metric</th><th>value</th><th>unit</th><th>n</th><th>sd</th></tr></thead>
+<h2>Every metric</h2><table><thead><tr><th>metric</th><th>value</th><th>unit</th><th>n</th><th>sd</th><th>U (95 %, spec §19.4)</th><th>k</th></tr></thead>
 <tbody>{rows}</tbody></table>
 {f'<h2>Not computed</h2><ul>{missing}</ul>' if missing else ''}
 {f'<h2>Warnings</h2><ul>{warnings}</ul>' if warnings else ''}

@@ -9,7 +9,7 @@ from this model.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
@@ -17,6 +17,45 @@ from haptify.versions import SPEC_VERSION
 
 Number = float
 Value = float | list[float]
+
+
+class BudgetTerm(BaseModel):
+    """One line of an uncertainty budget (spec §19.4): a source, its type, the standard uncertainty of the
+    input quantity, the sensitivity of the metric to it and its contribution to the metric's u."""
+
+    model_config = ConfigDict(extra="forbid")
+    source: str = Field(description="A source id of uncertainty.json (e.g. repeatability, handle_force_calibration).")
+    type: Literal["A", "B"] = Field(description="GUM evaluation type: A from the repetitions, B from other knowledge.")
+    distribution: Literal["t", "normal", "rectangular"]
+    u_input: Value = Field(description="Standard uncertainty of the input quantity, in 'unit'.")
+    unit: str = Field(description="Unit of u_input.")
+    sensitivity: Value = Field(description="|∂metric/∂input| (metric unit per input unit); 1 for repeatability.")
+    contribution: Value = Field(description="Contribution to the metric's standard uncertainty, in the metric's unit.")
+    dof: float | None = Field(None, gt=0, description="Degrees of freedom of the contribution; absent: infinite.")
+
+
+class MetricUncertainty(BaseModel):
+    """A metric's measurement uncertainty (spec §19.4): u, U = k·u at the coverage probability, the
+    effective degrees of freedom (Welch–Satterthwaite) and the budget."""
+
+    model_config = ConfigDict(extra="forbid")
+    method: Literal["type_a", "type_a_mc"] = Field(description="type_a: repetitions only; type_a_mc: plus Monte Carlo Type B (§19.3).")
+    u: Value = Field(description="Combined standard uncertainty, in the metric's unit (per component for a vector).")
+    U: Value = Field(description="Expanded uncertainty k·u.")
+    k: float = Field(gt=0, description="Coverage factor: Student's t at dof_eff for the coverage probability.")
+    coverage_probability: float = Field(gt=0, lt=1)
+    dof_eff: float | None = Field(None, gt=0, description="Effective degrees of freedom (GUM G.4); absent: infinite.")
+    budget: list[BudgetTerm]
+    mc_draws: int | None = Field(None, ge=2, description="Monte Carlo draws behind the Type B terms.")
+    sources_missing: list[str] = Field(default_factory=list, description="Type B sources of the method this session's rig figures could not give (left out of u).")
+
+    @field_validator("u", "U")
+    @classmethod
+    def _finite(cls, v: Any) -> Any:
+        for x in (v if isinstance(v, list) else [v]):
+            if not math.isfinite(x) or x < 0:
+                raise ValueError("uncertainties are finite and non-negative")
+        return v
 
 
 class MetricResult(BaseModel):
@@ -33,6 +72,7 @@ class MetricResult(BaseModel):
     diagnostics: dict[str, Any] = Field(default_factory=dict)
     definition_version: str
     warnings: list[str] = Field(default_factory=list, description="Codes of findings about this metric.")
+    uncertainty: MetricUncertainty | None = Field(None, description="Measurement uncertainty (spec chapter 19), with `haptify compute --uncertainty`.")
 
     @field_validator("value", "per_repetition", "sd")
     @classmethod

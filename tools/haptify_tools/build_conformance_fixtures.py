@@ -62,11 +62,13 @@ class Fixture:
 
 
 def case(cid: str, metric: str, section: str, fixture: str, value: Any, unit: str, kind: str, note: str, description: str,
-         parameters: dict | None = None, level: str = "MUST") -> dict:
-    """A metric case (spec §16.2) whose tolerance is the sum of its budget (:mod:`haptify_tools.tolerance_budgets`)."""
+         parameters: dict | None = None, level: str = "MUST", quantity: str = "value") -> dict:
+    """A metric case (spec §16.2) whose tolerance is the sum of its budget (:mod:`haptify_tools.tolerance_budgets`);
+    ``quantity`` u, U or k judges the metric's uncertainty record instead of its value (§19.4)."""
     value = [float(v) for v in value] if isinstance(value, (list, tuple, np.ndarray)) else float(value)
     budget = budget_record(cid)
-    return {"id": cid, "metric": metric, "spec_section": section, "level": level, "fixture": f"{FIXTURE_DIR}/{fixture}",
+    head = {"id": cid, "metric": metric} | ({"quantity": quantity} if quantity != "value" else {})
+    return {**head, "spec_section": section, "level": level, "fixture": f"{FIXTURE_DIR}/{fixture}",
             "parameters": parameters or {}, "expected": {"value": value, "unit": unit},
             "tolerance": {"abs": math.fsum(t["abs"] for t in budget), "rel": math.fsum(t["rel"] for t in budget)},
             "provenance": {"kind": kind, "note": note, "budget": budget},
@@ -856,6 +858,48 @@ def write_vibration_session(path: Path, session_id: str, fmt: str, rate: float, 
     w.add_stream("baseline-1", "handle_accel", {"t": tb, "ax": a_base[:, 0], "ay": a_base[:, 1], "az": a_base[:, 2]},
                  rate_hz=rate, fmt=fmt)
     w.write(path)
+
+
+def free_space_repetitions(w: SessionWriter, gains: tuple[float, ...], truth: rb.HandleTruth, duration_s: float) -> None:
+    """Free-space trials 1, 2, … whose hand force is ``gain ×`` the fs-typical force :func:`felt` of the
+    trial's own clock (each trial starts 20 s after the previous one), on the fs-typical circle and spin."""
+    for rep, gain in enumerate(gains, start=1):
+        t0 = 20.0 * (rep - 1)
+        handle_trial(w, f"free_space-{rep}", "free_space", duration_s=duration_s, position=circle(0.05, 1.0), quaternion=spin(0.07),
+                     force_w=lambda t, g=gain, t0=t0: g * felt(t - t0), truth=truth, repetition=rep, start_s=t0)
+
+
+def uncertainty_fixtures() -> list[Fixture]:
+    """Type A uncertainty with a known answer (spec §19.2, §19.4): two free-space repetitions whose forces are
+    the fs-typical force and 1.1 × it, so their mean magnitudes are x₁ and 1.1·x₁ (x₁ analytic)."""
+    from scipy import stats
+
+    truth = rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0, mass=0.06)
+    T = 12.0
+    x1 = float(np.linalg.norm(felt(grid(T)), axis=1).mean())
+    u = 0.05 * x1  # s = 0.1·x₁/√2, u = s/√2
+    k = float(stats.t.ppf(0.975, 1))
+
+    def two_reps(path: Path) -> None:
+        w = manifest("conf-unc-fs-two-reps", example_rig(), truth=truth)
+        free_space_repetitions(w, (1.0, 1.1), truth, T)
+        w.write(path)
+
+    fx = Fixture("unc-fs-two-reps", two_reps)
+    why = (f"x₁ = {x1:.6f} N, the fs-typical mean |F| (analytic), and x₂ = 1.1·x₁; no rig trial, so no Type B source "
+           "is available (sources_missing) and u is Type A only")
+    params = {"uncertainty": True}
+    m = "free_space.force_mean"
+    fx.cases += [
+        case(f"{m}.uncertainty-u.two-reps", m, "19.2", fx.name, u, "N", "analytic", f"u = s/√2 = |x₂ − x₁|/2 = 0.05·x₁; {why}",
+             "Type A of two repetitions.", parameters=params, quantity="u"),
+        case(f"{m}.uncertainty-k.two-reps", m, "19.4", fx.name, k, "1", "analytic",
+             "k = t_0.975(ν_eff) with ν_eff = n − 1 = 1 (one Type A term): 12.706", "Coverage factor of two repetitions.",
+             parameters=params, quantity="k"),
+        case(f"{m}.uncertainty-expanded.two-reps", m, "19.4", fx.name, k * u, "N", "analytic", f"U = k·u = 12.706 × 0.05·x₁; {why}",
+             "Expanded uncertainty of two repetitions.", parameters=params, quantity="U"),
+    ]
+    return [fx]
 
 
 def vibration_fixtures() -> list[Fixture]:
@@ -1786,6 +1830,7 @@ def validate_cases(fixtures_root: Path) -> list[dict]:
 FAMILIES: dict[str, Callable[[], list[Fixture]]] = {
     "workspace": workspace_fixtures, "free_space": free_space_fixtures, "vibration": vibration_fixtures,
     "surface": surface_fixtures, "stiffness": stiffness_fixtures, "rig": rig_fixtures, "dynamics": dynamics_fixtures,
+    "uncertainty": uncertainty_fixtures,
 }
 FAMILY_TEXT = {
     "workspace": "Workspace volumes (spec chapter 8): analytic shapes sampled on their boundary and the DH model's Pappus volume.",
@@ -1795,6 +1840,7 @@ FAMILY_TEXT = {
     "stiffness": "Stiffness (spec chapter 13): linear springs with saturation and giving way, pressed five times.",
     "rig": "Rig checks (spec chapter 14): damped plate modes, offset COP markers, known recorder delays and sensor noise.",
     "dynamics": "Local dynamics (spec chapter 11): H-W prediction from a given parameter file, and fitting quality on a known law.",
+    "uncertainty": "Measurement uncertainty (spec chapter 19): Type A, coverage factor and expanded uncertainty of repetitions with known values.",
 }
 
 
@@ -1804,7 +1850,7 @@ def all_fixtures() -> dict[str, list[Fixture]]:
 
 def with_requirements(c: dict) -> dict:
     """The case with the ids of the requirements it tests after its level (spec §16.7)."""
-    ids = requirements_for_case(c["metric"], c["expected"].get("codes"))
+    ids = requirements_for_case(c["metric"], c["expected"].get("codes"), c.get("quantity", "value"))
     out = {}
     for key, value in c.items():
         out[key] = value

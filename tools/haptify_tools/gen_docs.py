@@ -2,7 +2,8 @@
 
 A spec chapter marks a generated block with ``<!-- BEGIN GENERATED: <what> [arg] -->`` …
 ``<!-- END GENERATED -->``. ``<what>`` is ``params <family>`` (a metric family's parameters and
-metrics), ``stream-kinds``, ``protocols``, ``codes``, ``import-units``, ``requirements <chapter>`` (a chapter's
+metrics), ``stream-kinds``, ``protocols``, ``codes``, ``import-units``, ``uncertainty`` (the method per metric and the sources of
+``uncertainty.json``), ``requirements <chapter>`` (a chapter's
 requirement ids) or ``coverage`` (requirement → cases and distinguishing mutants, from the case files and
 ``conformance/mutants/results.json``). ``--check`` exits 1 when a chapter's tables
 differ from the data, so prose tables cannot drift from the definition files.
@@ -83,6 +84,22 @@ def import_units_table() -> str:
     return _table(["dimension", "spellings", "mul", "div", "note"], rows)
 
 
+def uncertainty_table() -> str:
+    from haptify.uncertainty import definitions
+
+    d = definitions()
+    out = f"Definition file `uncertainty.json`, version {d.version}.\n\n"
+    out += _table(["parameter", "value", "unit", "meaning"],
+                  [[f"`{k}`", f"`{p.value}`", p.unit or "—", p.description] for k, p in d.parameters.items()])
+    out += "\n" + _table(["source", "type", "distribution", "figure (component)", "perturbs", "meaning"],
+                         [[f"`{k}`", s.type, s.distribution, "—" if s.figure is None else f"`{s.figure}`" + ("" if s.component is None else f" ({s.component})"),
+                           f"`{s.perturbs}`" if s.perturbs else "—", s.description] for k, s in d.sources.items()])
+    out += "\n" + _table(["metric id", "method", "Type B sources", "why not (more)"],
+                         [[f"`{k}`", m.method, ", ".join(f"`{s}`" for s in m.sources) or "—", m.reason or "—"]
+                          for k, m in d.metrics.items()])
+    return out
+
+
 def requirements_table(chapter: str) -> str:
     rows = [[f"`{r.id}`", r.level, f"§{r.section}", r.statement] for r in all_requirements()
             if r.section.split(".")[0] == chapter]
@@ -99,7 +116,7 @@ def render_block(what: str, arg: str | None) -> str:
     if what == "requirements" and arg:
         return requirements_table(arg)
     return {"stream-kinds": stream_kinds_table, "protocols": protocols_table, "codes": codes_table,
-            "import-units": import_units_table, "coverage": coverage_appendix}[what]()
+            "import-units": import_units_table, "coverage": coverage_appendix, "uncertainty": uncertainty_table}[what]()
 
 
 def regenerate(text: str) -> str:

@@ -23,6 +23,7 @@ MODELS: dict[str, str] = {
     "rig": "haptify.session_format:Rig",
     "metric-definition": "haptify.metric_definitions:MetricFamily",
     "results": "haptify.results:ResultsFile",
+    "uncertainty-definitions": "haptify.uncertainty:UncertaintyDefinitions",
     "import-map": "haptify.importers:ImportMap",
     "hw-model": "haptify.local_dynamics:HWModelFile",
     "validation-report": "haptify.validation:ValidationReportModel",

@@ -32,7 +32,13 @@ STIFFNESS_FIT = Term("penetration (10 Hz) and force (20 Hz) low-passed different
                      "presses)", rel=1.5e-2)
 PEAK_FILTER = Term("the 20 Hz low-pass rounds a press's peak and its plateau (≤ 0.7 % on these presses)", rel=1e-2)
 
+REPS_U = Term("each repetition's mean |F| within the low-pass end effects (5e-4 of x): |Δu| ≤ (|Δx₁| + |Δx₂|)/2 = "
+              "1.05 % of u = 0.05·x₁", rel=1.05e-2)
+
 BUDGETS: list[tuple[str, tuple[Term, ...]]] = [
+    ("*.uncertainty-u.two-reps", (REPS_U,)),
+    ("*.uncertainty-expanded.two-reps", (REPS_U, Term("Student's t quantile to 6 digits", rel=1e-6))),
+    ("*.uncertainty-k.*", (Term("Student's t quantile to 6 digits", rel=1e-6),)),
     ("workspace.spec_box_volume.*", (Term("float64 product of three edges", abs=1e-12, rel=1e-9),)),
     ("workspace.measured_volume.capless", (OPERATOR_BIAS, Term("the dent without boundary samples is resolved on the coarse "
                                                                "lattice only (≤ 0.2 %)", rel=2e-3))),

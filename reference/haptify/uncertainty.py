@@ -1,0 +1,400 @@
+"""Measurement uncertainty of the metrics: GUM budgets (spec chapter 19).
+
+Which method applies to which metric, the Type B sources and the Monte Carlo parameters live in
+``schemas/<v>/uncertainty.json``. Type A comes from the repetitions (s/√n, n − 1 degrees of freedom;
+GUM 4.2). Type B is propagated by Monte Carlo (GUM Supplement 1) through the reference's own family
+computations: each draw perturbs the cached calibrated hand force of every trial (a force offset and a
+delay, common to the session) and recomputes the families that read it, sharing every other cached
+intermediate (the pose, the plate, the calibration) with the plain computation. The two combine by
+root sum of squares; the coverage factor is Student's t at the Welch–Satterthwaite effective degrees
+of freedom (GUM G.4, G.6.4).
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+from dataclasses import dataclass, field, replace
+from functools import lru_cache
+from typing import Any, Literal, Sequence
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+from scipy import stats
+
+from haptify import schemas
+from haptify.metric_definitions import Parameter, all_families
+from haptify.results import BudgetTerm, MetricResult, MetricUncertainty, ResultsFile, Unavailable
+
+
+# --- the definition file (spec §19.1) ------------------------------------------------------------
+
+class Source(BaseModel):
+    """One source of uncertainty (spec §19.2–19.3): Type A (the repetitions) or a Type B input whose
+    standard uncertainty comes from a rig figure of the same session."""
+
+    model_config = ConfigDict(extra="forbid")
+    type: Literal["A", "B"]
+    distribution: Literal["t", "normal", "rectangular"]
+    figure: str | None = Field(description="The rig metric whose value gives the input's standard uncertainty (normal) or half-width (rectangular).")
+    component: int | None = Field(description="Which component of a vector figure; null for a scalar.")
+    unit: str
+    perturbs: Literal["handle_force_offset", "handle_force_delay"] | None = Field(
+        description="What one Monte Carlo draw changes in the cached calibrated hand force (§19.3).")
+    description: str
+
+
+class MetricMethod(BaseModel):
+    """How one metric's uncertainty is evaluated (spec §19.1): ``type_a``, ``type_a_mc`` (Type A and the
+    Monte Carlo Type B of ``sources``) or ``none`` (with the reason)."""
+
+    model_config = ConfigDict(extra="forbid")
+    method: Literal["type_a", "type_a_mc", "none"]
+    sources: list[str] = Field(default_factory=list, description="Type B sources, for type_a_mc.")
+    reason: str | None = Field(None, description="Why Type B is not propagated (type_a) or nothing applies (none).")
+
+
+class UncertaintyDefinitions(BaseModel):
+    """``schemas/<v>/uncertainty.json`` (spec §19.1)."""
+
+    model_config = ConfigDict(extra="forbid")
+    version: str = Field(pattern=r"^\d+\.\d+\.\d+$")
+    spec_section: str
+    parameters: dict[str, Parameter]
+    sources: dict[str, Source]
+    metrics: dict[str, MetricMethod]
+
+
+@lru_cache(maxsize=None)
+def definitions() -> UncertaintyDefinitions:
+    """The parsed ``uncertainty.json`` (spec §19.1)."""
+    return UncertaintyDefinitions.model_validate(schemas.load("uncertainty.json"))
+
+
+def up(key: str) -> Any:
+    """A parameter of ``uncertainty.json`` (spec §19.1)."""
+    return definitions().parameters[key].value
+
+
+def method_of(metric_id: str) -> MetricMethod:
+    """The method of ``metric_id`` (KeyError for an id without one; a test checks every metric has one)."""
+    return definitions().metrics[metric_id]
+
+
+# --- GUM arithmetic (spec §19.2, §19.4) ----------------------------------------------------------
+
+def type_a(per_repetition: Sequence[Any]) -> tuple[np.ndarray, int]:
+    """Standard uncertainty of the mean s/√n (ddof = 1) per component and its degrees of freedom n − 1
+    (GUM 4.2.3; spec §19.2). ValueError below two repetitions."""
+    x = np.asarray(per_repetition, dtype=float)
+    if len(x) < 2:
+        raise ValueError("Type A needs at least two repetitions")
+    return x.std(axis=0, ddof=1) / math.sqrt(len(x)), len(x) - 1
+
+
+def welch_satterthwaite(contributions: Sequence[Any], dofs: Sequence[float]) -> np.ndarray:
+    """Effective degrees of freedom ν = u⁴ / Σ uᵢ⁴/νᵢ of the root-sum-square of ``contributions``
+    (GUM G.4.1, eq. G.2b; spec §19.4); an infinite νᵢ adds nothing to the denominator."""
+    c = np.asarray(contributions, dtype=float)
+    nu = np.asarray(dofs, dtype=float).reshape((-1,) + (1,) * (c.ndim - 1))
+    u4 = np.sum(c ** 2, axis=0) ** 2
+    den = np.sum(np.where(np.isinf(nu), 0.0, c ** 4 / np.where(np.isinf(nu), 1.0, nu)), axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(den > 0, u4 / np.where(den > 0, den, 1.0), np.inf)
+
+
+def coverage_factor(dof: float, p: float) -> float:
+    """Student's t quantile t_{(1+p)/2}(ν) (GUM G.3.4, Table G.2; spec §19.4); the normal quantile for ν = ∞."""
+    return float(stats.norm.ppf(0.5 + p / 2) if math.isinf(dof) else stats.t.ppf(0.5 + p / 2, dof))
+
+
+def combine(terms: list[BudgetTerm], p: float) -> tuple[Any, Any, float, float | None]:
+    """(u, U, k, ν_eff) from a budget (spec §19.4): root sum of squares of the contributions, ν_eff by
+    :func:`welch_satterthwaite` over the least-degrees component, k = t_{(1+p)/2}(ν_eff). ν_eff is None
+    when infinite (JSON has no infinity)."""
+    c = np.array([t.contribution for t in terms], dtype=float)
+    nus = [math.inf if t.dof is None else t.dof for t in terms]
+    u = np.sqrt(np.sum(c ** 2, axis=0))
+    nu = float(np.min(welch_satterthwaite(c, nus)))
+    k = coverage_factor(nu, p)
+    as_value = (lambda a: [float(x) for x in a]) if u.ndim else float
+    return as_value(u), as_value(k * u), k, None if math.isinf(nu) else nu
+
+
+# --- Type B inputs from the session's rig figures (spec §19.3) -------------------------------------
+
+@dataclass
+class Input:
+    """One Type B input of this session: its source id, the figure's value and the standard uncertainty."""
+
+    source: str
+    figure_value: float
+    u: float
+
+    @property
+    def spec(self) -> Source:
+        return definitions().sources[self.source]
+
+    @property
+    def dimension(self) -> int:
+        """Scalar inputs drawn per draw: three force components for an offset, one delay."""
+        return 3 if self.spec.perturbs == "handle_force_offset" else 1
+
+
+def rig_figure(ctx: Any, results: ResultsFile, metric_id: str) -> MetricResult | None:
+    """The rig metric ``metric_id`` from ``results``, or computed on ``ctx`` when it was not asked for;
+    None when the session cannot give it (spec §19.3)."""
+    got = results.get(metric_id)
+    if got is not None:
+        return got
+    from haptify.rig_checks import _safe_metric
+
+    res = _safe_metric(ctx, metric_id)
+    return res if isinstance(res, MetricResult) else None
+
+
+def session_inputs(ctx: Any, results: ResultsFile, source_ids: Sequence[str]) -> tuple[list[Input], list[str]]:
+    """The Type B inputs of ``source_ids`` this session's rig figures give, and the ids it cannot give
+    (spec §19.3). Normal: u = the figure; rectangular: half-width a = |figure|, u = a/√3 (GUM 4.3.7)."""
+    found, missing = [], []
+    for sid in source_ids:
+        spec = definitions().sources[sid]
+        fig = rig_figure(ctx, results, spec.figure)
+        if fig is None:
+            missing.append(sid)
+            continue
+        value = fig.value[spec.component] if spec.component is not None else fig.value
+        value = abs(float(value))
+        found.append(Input(sid, value, value if spec.distribution == "normal" else value / math.sqrt(3.0)))
+    return found, missing
+
+
+def draw_inputs(inputs: Sequence[Input], m: int, rng: np.random.Generator) -> np.ndarray:
+    """The (m, Σ dimension) matrix of input draws (spec §19.3): normal N(0, u²) per component, or uniform
+    in ±a (a = √3·u)."""
+    cols = []
+    for inp in inputs:
+        shape = (m, inp.dimension)
+        if inp.spec.distribution == "normal":
+            cols.append(rng.normal(0.0, inp.u, shape))
+        else:
+            a = inp.u * math.sqrt(3.0)
+            cols.append(rng.uniform(-a, a, shape))
+    return np.concatenate(cols, axis=1) if cols else np.zeros((m, 0))
+
+
+# --- perturbing the cached intermediates (spec §19.3) -----------------------------------------------
+
+# Cache entries (by their key's first element) that do not depend on the calibrated hand force: a draw
+# shares them with the plain computation. Everything else a family caches is recomputed per draw.
+SHARED_KEYS = frozenset({"handle_calibration", "handle_calibration_fit", "plate_bias", "plate_signals", "mocap_track",
+                         "handle_accel_native", "vibration", "free_space_plate", "workspace_model", "workspace_solid",
+                         "dynamics_model", "dynamics_given_model"})
+
+
+def delayed(t: np.ndarray, x: np.ndarray, valid: np.ndarray, delay_s: float) -> np.ndarray:
+    """``x`` delayed by ``delay_s`` on its grid ``t``: x(t − delay) at the valid rows, linear interpolation
+    between valid rows, held at the ends (spec §19.3)."""
+    out = x.copy()
+    tv = t[valid]
+    for c in range(x.shape[1]):
+        out[valid, c] = np.interp(tv - delay_s, tv, x[valid, c])
+    return out
+
+
+def perturb_force(hs: Any, offset_n: np.ndarray, delay_s: float) -> Any:
+    """A copy of :class:`haptify.signals.HandleSignals` whose hand force is delayed by ``delay_s`` and
+    offset by ``offset_n (3,)`` (spec §19.3); nothing else changes."""
+    if hs.force is None:
+        return hs
+    force = delayed(hs.t, hs.force, hs.valid, delay_s) if delay_s else hs.force.copy()
+    force[hs.valid] += offset_n
+    return replace(hs, force=force)
+
+
+class PerturbedContext:
+    """A ComputeContext view for one Monte Carlo draw (spec §19.3): cached handle signals come from the
+    base context with the draw's force offset and delay applied; :data:`SHARED_KEYS` come from the base;
+    everything else is computed afresh on this view. Warnings raised in a draw are dropped."""
+
+    def __init__(self, base: Any, wanted: set[str], offset_n: np.ndarray, delay_s: float):
+        self.base, self.session, self.wanted, self.parameters = base, base.session, wanted, base.parameters
+        self.offset_n, self.delay_s = offset_n, delay_s
+        self.warnings: list = []
+        self._cache: dict[Any, Any] = {}
+
+    def cached(self, key: Any, build: Any) -> Any:
+        if key[0] in SHARED_KEYS:
+            return self.base.cached(key, build)
+        if key[0] == "handle_signals":
+            if key not in self._cache:
+                self._cache[key] = perturb_force(self.base.cached(key, build), self.offset_n, self.delay_s)
+            return self._cache[key]
+        if key not in self._cache:
+            self._cache[key] = build()
+        return self._cache[key]
+
+    def wants(self, metric_id: str) -> bool:
+        return metric_id in self.wanted
+
+    def warn(self, *args: Any, **kwargs: Any) -> None:
+        return None
+
+
+def _family_module(metric_id: str) -> str:
+    return next(f.module for f in all_families() for m in f.metrics if m.id == metric_id)
+
+
+def draw_values(ctx: Any, metric_ids: Sequence[str], inputs: Sequence[Input], x: np.ndarray) -> dict[str, np.ndarray]:
+    """The aggregated value of each metric under each draw (row of ``x``): NaN where a draw left the
+    metric unavailable (spec §19.3). Families are run through their own ``compute``."""
+    modules = sorted({_family_module(m) for m in metric_ids})
+    out = {m: np.full(len(x), np.nan) for m in metric_ids}
+    for j, row in enumerate(x):
+        offset, delay, col = np.zeros(3), 0.0, 0
+        for inp in inputs:
+            if inp.spec.perturbs == "handle_force_offset":
+                offset = offset + row[col:col + 3]
+            else:
+                delay += float(row[col])
+            col += inp.dimension
+        view = PerturbedContext(ctx, set(metric_ids), offset, delay)
+        for name in modules:
+            for item in importlib.import_module(name).compute(view):
+                if isinstance(item, MetricResult) and item.id in out:
+                    out[item.id][j] = float(item.value)
+    return out
+
+
+def mc_terms(inputs: Sequence[Input], x: np.ndarray, y: np.ndarray) -> list[BudgetTerm]:
+    """Type B budget terms from one metric's Monte Carlo sample (spec §19.3).
+
+    The sample's standard deviation (M − 1 degrees of freedom, draws that left the metric unavailable
+    dropped) is the Type B standard uncertainty; it is split among the sources by a least-squares linear
+    fit of ``y`` on the draws: a source's sensitivity is the norm of its slopes (metric unit per input
+    unit), its share |slope|·u, and the shares are scaled to add in quadrature to the sample's value
+    (equal shares when the fit finds no linear part).
+    """
+    ok = np.isfinite(y)
+    x, y = x[ok], y[ok]
+    m = len(y)
+    if m < 2:
+        return []
+    u_mc = float(y.std(ddof=1))
+    fit = np.column_stack([np.ones(m), x - x.mean(axis=0)])
+    slope = np.linalg.lstsq(fit, y, rcond=None)[0][1:] if m > x.shape[1] + 1 else np.zeros(x.shape[1])
+    spread = x.std(axis=0, ddof=1)
+    bounds = np.cumsum([0] + [inp.dimension for inp in inputs])
+    shares = [float(np.sqrt(np.sum((slope[a:b] * spread[a:b]) ** 2))) for a, b in zip(bounds[:-1], bounds[1:])]
+    if not any(shares):  # no linear part (e.g. a symmetric dependence): equal shares
+        shares = [1.0] * len(shares)
+    scale = u_mc / math.sqrt(sum(v ** 2 for v in shares))
+    return [BudgetTerm(source=inp.source, type="B", distribution=inp.spec.distribution, u_input=inp.u, unit=inp.spec.unit,
+                       sensitivity=float(np.linalg.norm(slope[a:b])), contribution=share * scale, dof=m - 1)
+            for inp, share, a, b in zip(inputs, shares, bounds[:-1], bounds[1:])]
+
+
+def repeatability_term(result: MetricResult) -> BudgetTerm:
+    """The Type A term of a metric record with an ``sd`` (spec §19.2): s/√n of its per-repetition values,
+    or for a metric whose n counts other samples (rig.cop_error: placements), sd/√n with n − 1 degrees."""
+    if result.n != len(result.per_repetition):
+        u = np.asarray(result.sd, dtype=float) / math.sqrt(result.n)
+        dof = result.n - 1
+    else:
+        u, dof = type_a(result.per_repetition)
+    contrib = [float(v) for v in u] if np.ndim(u) else float(u)
+    return BudgetTerm(source="repeatability", type="A", distribution="t", u_input=contrib, unit=result.unit,
+                      sensitivity=1.0, contribution=contrib, dof=float(dof))
+
+
+def attach(ctx: Any, results: ResultsFile, *, draws: int | None = None, seed: int | None = None) -> ResultsFile:
+    """Give every metric of ``results`` its uncertainty record where its method applies (spec §19.4).
+
+    A metric with fewer than two repetitions gets none (Type A cannot be evaluated, §19.2). The Type B
+    inputs are drawn once for the session; the metrics with the same sources share one Monte Carlo run
+    (their families recomputed once per draw). A metric that a draw leaves unavailable uses the others.
+    """
+    p = float(up("coverage_probability"))
+    m = int(up("mc_draws") if draws is None else draws)
+    eligible = [r for r in results.metrics if method_of(r.id).method != "none" and r.sd is not None]
+    mc = [r for r in eligible if method_of(r.id).method == "type_a_mc"]
+    inputs, missing = session_inputs(ctx, results, sorted({s for r in mc for s in method_of(r.id).sources}))
+    x = draw_inputs(inputs, m, np.random.default_rng(int(up("mc_seed") if seed is None else seed)))
+    columns, col = {}, 0
+    for inp in inputs:
+        columns[inp.source] = np.arange(col, col + inp.dimension)
+        col += inp.dimension
+    groups: dict[tuple[str, ...], list[MetricResult]] = {}
+    for r in mc:
+        groups.setdefault(tuple(s for s in method_of(r.id).sources if s in columns), []).append(r)
+    samples: dict[str, tuple[list[Input], np.ndarray, np.ndarray]] = {}
+    for group, members in groups.items():
+        if not group:
+            continue
+        mine = [i for i in inputs if i.source in group]
+        xg = x[:, np.concatenate([columns[s.source] for s in mine])]
+        ys = draw_values(ctx, [r.id for r in members], mine, xg)
+        samples.update({r.id: (mine, xg, ys[r.id]) for r in members})
+    for r in eligible:
+        method = method_of(r.id)
+        terms = [repeatability_term(r)]
+        if r.id in samples:
+            terms += mc_terms(*samples[r.id])
+        u, big_u, k, nu = combine(terms, p)
+        r.uncertainty = MetricUncertainty(
+            method=method.method, u=u, U=big_u, k=k, coverage_probability=p, dof_eff=nu, budget=terms,
+            mc_draws=m if r.id in samples else None, sources_missing=sorted(s for s in method.sources if s in missing))
+    return results
+
+
+# --- comparing two results (spec §19.6) -------------------------------------------------------------
+
+@dataclass
+class Difference:
+    """The difference of two measured values and its test (spec §19.6): d = x₁ − x₂, u_d = √(u₁² + u₂²), ν by
+    Welch–Satterthwaite, k = t_{(1+p)/2}(ν); significant when |d| > k·u_d."""
+
+    d: float
+    u: float
+    dof: float | None
+    k: float
+
+    @property
+    def expanded(self) -> float:
+        return self.k * self.u
+
+    @property
+    def significant(self) -> bool:
+        return abs(self.d) > self.expanded
+
+
+def difference(a: MetricUncertainty, x_a: float, b: MetricUncertainty, x_b: float, p: float | None = None) -> Difference:
+    """The test of spec §19.6 for two scalar values with their uncertainty records (p defaults to the
+    definition file's coverage probability); each record's ν_eff is its u's degrees of freedom (absent: ∞)."""
+    p = float(up("coverage_probability")) if p is None else p
+    dofs = [math.inf if r.dof_eff is None else r.dof_eff for r in (a, b)]
+    nu = float(welch_satterthwaite([a.u, b.u], dofs))
+    return Difference(d=x_a - x_b, u=math.hypot(a.u, b.u), dof=None if math.isinf(nu) else nu, k=coverage_factor(nu, p))
+
+
+def compared(ra: MetricResult | None, rb: MetricResult | None) -> Difference | None:
+    """:func:`difference` of two scalar metric records when both carry an uncertainty, else None (spec §19.6)."""
+    if ra is None or rb is None or ra.uncertainty is None or rb.uncertainty is None or isinstance(ra.value, list) or isinstance(rb.value, list):
+        return None
+    return difference(ra.uncertainty, float(ra.value), rb.uncertainty, float(rb.value))
+
+
+def tie_groups(records: Sequence[MetricResult]) -> list[list[int]]:
+    """Indices of ``records`` grouped into ties for a ranking (spec §19.6): sorted by value, a device joins
+    the current group while it does not differ significantly from the group's first device; a record
+    without an uncertainty can never be shown indistinguishable and is a group of its own."""
+    order = sorted(range(len(records)), key=lambda i: float(records[i].value))
+    groups: list[list[int]] = []
+    for i in order:
+        if groups:
+            diff = compared(records[groups[-1][0]], records[i])
+            if diff is not None and not diff.significant:
+                groups[-1].append(i)
+                continue
+        groups.append([i])
+    return groups

@@ -1,0 +1,104 @@
+"""Inter-laboratory statistics of one metric of one device model: ISO 5725-2 (issue 23, item 5).
+
+Pure functions on numbers, no database: each lab contributes its repetitions of the metric (a cell, in
+ISO 5725-2's words). From the cells: the repeatability standard deviation s_r (pooled within-lab), the
+between-lab s_L and the reproducibility s_R = √(s_L² + s_r²) (ISO 5725-2 §7.4, unbalanced cells allowed),
+and Mandel's consistency statistics h (between labs) and k (within labs) with their critical values at
+5 % (stragglers) and 1 % (outliers) (ISO 5725-2 §7.3.1). The registry's pages and API are not wired to it yet.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+from scipy import stats
+
+from haptify.errors import fail
+
+
+@dataclass
+class LabCell:
+    """One lab's repetitions of the metric (same device model, same unit)."""
+
+    lab: str
+    values: list[float]
+
+    @property
+    def n(self) -> int:
+        return len(self.values)
+
+    @property
+    def mean(self) -> float:
+        return float(np.mean(self.values))
+
+    @property
+    def sd(self) -> float:
+        return float(np.std(self.values, ddof=1))
+
+
+@dataclass
+class Precision:
+    """ISO 5725-2 precision of one metric: grand mean, s_r, s_L, s_R, and per lab Mandel's h and k with their
+    flags ('' consistent, 'straggler' beyond the 5 % critical value, 'outlier' beyond 1 %)."""
+
+    labs: list[str]
+    grand_mean: float
+    s_r: float
+    s_L: float
+    s_R: float
+    h: list[float]
+    k: list[float]
+    h_critical: dict[str, float]
+    k_critical: dict[str, float]
+    h_flags: list[str] = field(default_factory=list)
+    k_flags: list[str] = field(default_factory=list)
+
+
+def mandel_h_critical(p: int, alpha: float) -> float:
+    """Two-sided critical value of Mandel's h for p labs: (p − 1)·t / √(p·(p − 2 + t²)), t = t_{1−α/2}(p − 2)
+    (ISO 5725-2 §7.3.1)."""
+    t = stats.t.ppf(1 - alpha / 2, p - 2)
+    return float((p - 1) * t / math.sqrt(p * (p - 2 + t * t)))
+
+
+def mandel_k_critical(p: int, n: int, alpha: float) -> float:
+    """Critical value of Mandel's k for p labs of n repetitions: √(p / (1 + (p − 1)/F)), F the upper α quantile
+    of F(n − 1, (p − 1)(n − 1)) (ISO 5725-2 §7.3.1)."""
+    f = stats.f.ppf(1 - alpha, n - 1, (p - 1) * (n - 1))
+    return float(math.sqrt(p / (1 + (p - 1) / f)))
+
+
+def _flag(value: float, critical: dict[str, float]) -> str:
+    if abs(value) > critical["1%"]:
+        return "outlier"
+    return "straggler" if abs(value) > critical["5%"] else ""
+
+
+def precision(cells: Sequence[LabCell]) -> Precision:
+    """s_r, s_L, s_R and Mandel's h, k of ``cells`` (ISO 5725-2 §7.3–7.4). E903 with fewer than three labs or a
+    lab with fewer than two repetitions (h needs p ≥ 3; s_r needs repetitions)."""
+    if len(cells) < 3 or any(c.n < 2 for c in cells):
+        raise fail("E903", "ISO 5725-2 statistics need at least three labs with at least two repetitions each",
+                   expected="≥ 3 labs × ≥ 2 repetitions", found=[c.n for c in cells])
+    p = len(cells)
+    n = np.array([c.n for c in cells], float)
+    means = np.array([c.mean for c in cells])
+    sds = np.array([c.sd for c in cells])
+    s_r2 = float(np.sum((n - 1) * sds ** 2) / np.sum(n - 1))
+    grand = float(np.sum(n * means) / np.sum(n))
+    s_d2 = float(np.sum(n * (means - grand) ** 2) / (p - 1))
+    n_bar = float((n.sum() - np.sum(n ** 2) / n.sum()) / (p - 1))
+    s_l2 = max(0.0, (s_d2 - s_r2) / n_bar)
+    spread = float(np.std(means, ddof=1))
+    h = (means - means.mean()) / spread if spread > 0 else np.zeros(p)
+    k = sds / math.sqrt(float(np.mean(sds ** 2))) if np.any(sds > 0) else np.ones(p)
+    n_typ = int(round(float(np.median(n))))
+    h_crit = {"5%": mandel_h_critical(p, 0.05), "1%": mandel_h_critical(p, 0.01)}
+    k_crit = {"5%": mandel_k_critical(p, n_typ, 0.05), "1%": mandel_k_critical(p, n_typ, 0.01)}
+    return Precision(labs=[c.lab for c in cells], grand_mean=grand, s_r=math.sqrt(s_r2), s_L=math.sqrt(s_l2),
+                     s_R=math.sqrt(s_l2 + s_r2), h=[float(x) for x in h], k=[float(x) for x in k],
+                     h_critical=h_crit, k_critical=k_crit, h_flags=[_flag(x, h_crit) for x in h],
+                     k_flags=[_flag(x, k_crit) for x in k])
