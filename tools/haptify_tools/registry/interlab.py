@@ -18,6 +18,7 @@ import numpy as np
 from scipy import stats
 
 from haptify.errors import fail
+from haptify.uncertainty import coverage_factor, welch_satterthwaite
 
 
 @dataclass
@@ -142,3 +143,21 @@ def table(per_lab: dict[str, list[float]]) -> dict | None:
     return {"labs": labs, "grand_mean": got.grand_mean, "s_r": got.s_r, "s_L": got.s_L, "s_R": got.s_R,
             "h_critical": got.h_critical, "k_critical": got.k_critical,
             "outlying": [x["lab"] for x in labs if x["h_flag"] or x["k_flag"]], "labs_left_out": left_out, "note": ""}
+
+
+def pooled_uncertainty(records: Sequence[tuple[int, dict | None]]) -> dict | None:
+    """The uncertainty of a device's registry mean (spec §17.5.3) from its submissions' ``(repetitions,
+    uncertainty record)``: the mean weights submission i by wᵢ = nᵢ/N, so u = √Σ(wᵢuᵢ)² with ν by
+    Welch–Satterthwaite (GUM G.4) and U = t_{(1+p)/2}(ν)·u. None when any submission lacks a record (such a
+    mean is never tied, spec §19.6). The submissions are taken as independent."""
+    if not records or any(r is None or isinstance(r.get("u"), list) for _, r in records):
+        return None
+    total = sum(n for n, _ in records)
+    contributions = [n / total * float(r["u"]) for n, r in records]
+    dofs = [math.inf if r.get("dof_eff") is None else float(r["dof_eff"]) for _, r in records]
+    nu = float(welch_satterthwaite(contributions, dofs))
+    p = min(float(r["coverage_probability"]) for _, r in records)
+    u = math.sqrt(sum(c * c for c in contributions))
+    k = coverage_factor(nu, p)
+    return {"u": u, "U": k * u, "k": k, "coverage_probability": p, "dof_eff": None if math.isinf(nu) else nu,
+            "submissions": len(records)}
