@@ -62,12 +62,13 @@ def interlab_of(client, slug: str, verification: str = "all") -> dict | None:
 
 
 def test_round_robin_recovers_s_r_and_s_R_and_flags_a_planted_lab(base, tmp_path):
-    """20 labs × 6 repetitions of one device, lab effect σ_L = 0.04 and repeatability σ_r = 0.03 (m/s²):
-    s_r within 20 % of σ_r, s_R within 20 % of √(σ_r² + σ_L²). A second model, measured by 8 consistent labs
+    """50 labs × 4 repetitions of one device, lab effect σ_L = 0.04 and repeatability σ_r = 0.03 (m/s²):
+    s_r within 20 % of σ_r, s_R within 20 % of √(σ_r² + σ_L²) (true of 99.2 % of 2000 seeds of this design;
+    the seed is fixed). A second model, measured by 8 consistent labs
     and one lab 1 m/s² (≈ 20 σ_R) off, has that lab flagged by Mandel's h and no other (the planted lab's
     spread keeps the others' |h| small: ≈ 1/√8 each)."""
     rng = np.random.default_rng(23)
-    sigma_r, sigma_L, labs, reps = 0.03, 0.04, 20, 6
+    sigma_r, sigma_L, labs, reps = 0.03, 0.04, 50, 4
     reg = Lab(base, tmp_path)
     for i in range(labs):
         values = 1.0 + rng.normal(0, sigma_L) + rng.normal(0, sigma_r, reps)
