@@ -148,3 +148,18 @@ def test_target_metric_ties_on_the_distance_to_the_target():
                for s, x in (("lo", 97.0), ("hi", 103.0), ("far", 110.0))]
     assert [(r.device["slug"], r.tie_group) for r in leaderboard("stiffness.accuracy", devices)] == [
         ("hi", 1), ("lo", 1), ("far", 2)]
+
+
+def test_pooled_uncertainty_of_a_mean_by_hand():
+    """Two submissions of 2 and 6 repetitions, u = 0.04 and 0.02 with ν = 4 and 10: weights ¼ and ¾, so
+    contributions 0.01 and 0.015, u = √(0.01² + 0.015²), ν = u⁴ / (0.01⁴/4 + 0.015⁴/10) (GUM G.2b); one
+    submission without a record makes the mean's uncertainty absent."""
+    from haptify_tools.registry.interlab import pooled_uncertainty
+
+    rec = lambda u, dof: {"u": u, "dof_eff": dof, "coverage_probability": P}  # noqa: E731
+    got = pooled_uncertainty([(2, rec(0.04, 4.0)), (6, rec(0.02, 10.0))])
+    u = math.hypot(0.01, 0.015)
+    nu = u ** 4 / (0.01 ** 4 / 4 + 0.015 ** 4 / 10)
+    assert got["u"] == pytest.approx(u) and got["dof_eff"] == pytest.approx(nu)
+    assert got["k"] == pytest.approx(stats.t.ppf(0.975, nu)) and got["U"] == pytest.approx(got["k"] * u)
+    assert pooled_uncertainty([(2, rec(0.04, 4.0)), (6, None)]) is None
