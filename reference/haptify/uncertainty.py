@@ -16,7 +16,7 @@ import importlib
 import math
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
-from typing import Any, Literal, Sequence
+from typing import Any, Callable, Literal, Sequence
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -371,10 +371,16 @@ class Difference:
 def difference(a: MetricUncertainty, x_a: float, b: MetricUncertainty, x_b: float, p: float | None = None) -> Difference:
     """The test of spec §19.6 for two scalar values with their uncertainty records (p defaults to the
     definition file's coverage probability); each record's ν_eff is its u's degrees of freedom (absent: ∞)."""
+    return welch_difference(x_a, a.u, a.dof_eff, x_b, b.u, b.dof_eff, p)
+
+
+def welch_difference(x_a: float, u_a: float, dof_a: float | None, x_b: float, u_b: float, dof_b: float | None,
+                     p: float | None = None) -> Difference:
+    """The test of spec §19.6 on two values with their standard uncertainties and degrees of freedom (None: ∞)."""
     p = float(up("coverage_probability")) if p is None else p
-    dofs = [math.inf if r.dof_eff is None else r.dof_eff for r in (a, b)]
-    nu = float(welch_satterthwaite([a.u, b.u], dofs))
-    return Difference(d=x_a - x_b, u=math.hypot(a.u, b.u), dof=None if math.isinf(nu) else nu, k=coverage_factor(nu, p))
+    dofs = [math.inf if d is None else d for d in (dof_a, dof_b)]
+    nu = float(welch_satterthwaite([u_a, u_b], dofs))
+    return Difference(d=x_a - x_b, u=math.hypot(u_a, u_b), dof=None if math.isinf(nu) else nu, k=coverage_factor(nu, p))
 
 
 def compared(ra: MetricResult | None, rb: MetricResult | None) -> Difference | None:
@@ -385,16 +391,24 @@ def compared(ra: MetricResult | None, rb: MetricResult | None) -> Difference | N
 
 
 def tie_groups(records: Sequence[MetricResult]) -> list[list[int]]:
-    """Indices of ``records`` grouped into ties for a ranking (spec §19.6): sorted by value, a device joins
-    the current group while it does not differ significantly from the group's first device; a record
-    without an uncertainty can never be shown indistinguishable and is a group of its own."""
+    """Indices of ``records`` grouped into ties for a ranking by ascending value (spec §19.6, :func:`ties`); a
+    record without an uncertainty can never be shown indistinguishable and is a group of its own."""
     order = sorted(range(len(records)), key=lambda i: float(records[i].value))
+
+    def same(i: int, j: int) -> bool:
+        diff = compared(records[i], records[j])
+        return diff is not None and not diff.significant
+
+    return ties(order, same)
+
+
+def ties(order: Sequence[int], same: Callable[[int, int], bool]) -> list[list[int]]:
+    """Ranking ``order`` (indices, best first) cut into ties (spec §19.6): an index joins the current group
+    while ``same(first of the group, index)`` (not significantly different), else it starts a new group."""
     groups: list[list[int]] = []
     for i in order:
-        if groups:
-            diff = compared(records[groups[-1][0]], records[i])
-            if diff is not None and not diff.significant:
-                groups[-1].append(i)
-                continue
-        groups.append([i])
+        if groups and same(groups[-1][0], i):
+            groups[-1].append(i)
+        else:
+            groups.append([i])
     return groups

@@ -43,7 +43,7 @@ from haptify.errors import Finding, HaptifyError, fail
 from haptify.results import DeviceSummary, Implementation, MetricResult, ResultsFile
 from haptify.versions import PACKAGE_VERSION
 from haptify_conform.report import ConformReport
-from haptify_tools.registry import db
+from haptify_tools.registry import db, interlab
 from haptify_tools.registry.bundle import DIR_MODE, FILE_MODE, SESSION_DIR, Limits, bundle_digest, submission_id, unpack, unpack_bundle
 from haptify_tools.registry.checks import Checked, check_bundle, check_conformance, verify_bundle
 from haptify_tools.registry.worker import run_contained
@@ -576,7 +576,8 @@ class Registry:
                             ) -> tuple[dict, list[tuple[dict, db.MetricValue]], list[tuple[dict, db.Submission]]]:
         """The device, ``(submission summary, metric row)`` of its current submissions that count under
         ``verification`` (``verified``: only verified ones; ``all``: every one), and ``(summary, row)`` of
-        its current submissions that do not count (spec §17.3.1)."""
+        its current submissions that do not count (spec §17.3.1). A counted summary carries ``uncertainties``: its
+        results file's uncertainty record by metric id (None when absent, spec §19.4)."""
         if verification not in RANKED:
             raise fail("E975", f"unknown verification filter {verification!r}", pointer="/verification",
                        expected=list(RANKED), found=verification)
@@ -594,6 +595,8 @@ class Registry:
                 if verification == "verified" and sub.verification != "verified":
                     apart.append((summary, sub))
                     continue
+                records = {m["id"]: m.get("uncertainty") for m in json.loads(sub.results_json)["metrics"]}
+                summary = {**summary, "uncertainties": records}
                 counted += [(summary, m) for m in sub.metrics]
             return device, counted, apart
 
@@ -681,7 +684,9 @@ def aggregate(metric: str, items: list[tuple[dict, db.MetricValue]]) -> dict:
     Repetitions: every per-repetition value of every current submission (the submitted value when a
     submission lists none); ``mean``, ``sd`` (ddof = 1), ``min``, ``max`` over them. Labs: each lab's
     mean of its repetitions; ``between_lab_sd`` is the sd of those means (ddof = 1, with ≥ 2 labs).
-    Vector metrics are aggregated per component.
+    Vector metrics are aggregated per component. A scalar metric also has ``uncertainty``, the pooled
+    uncertainty of the mean from the submissions' records (None when one lacks it), and ``interlab``, the
+    ISO 5725-2 table of its labs (None with fewer than two labs of ≥ 2 repetitions; spec §17.5.3).
     """
     reps: list[list[float]] = []
     per_lab: dict[str, list[list[float]]] = {}
@@ -708,7 +713,17 @@ def aggregate(metric: str, items: list[tuple[dict, db.MetricValue]]) -> dict:
             "min": unwrap(stat(min, reps)), "max": unwrap(stat(max, reps)),
             "repetitions": len(reps), "submissions": len(items), "labs": len(per_lab),
             "lab_means": {lab: unwrap(mean) for lab, mean in zip(per_lab, lab_means)},
-            "between_lab_sd": unwrap(stat(sd, lab_means))}
+            "between_lab_sd": unwrap(stat(sd, lab_means)), **scalar_precision(metric, items, per_lab, width)}
+
+
+def scalar_precision(metric: str, items: list[tuple[dict, db.MetricValue]], per_lab: dict[str, list[list[float]]],
+                     width: int) -> dict:
+    """``uncertainty`` and ``interlab`` of a scalar metric's aggregate (spec §17.5.3); both None for a vector."""
+    if width != 1:
+        return {"uncertainty": None, "interlab": None}
+    records = [(m.n, summary.get("uncertainties", {}).get(metric)) for summary, m in items]
+    return {"uncertainty": interlab.pooled_uncertainty(records),
+            "interlab": interlab.table({lab: [r[0] for r in rows] for lab, rows in per_lab.items()})}
 
 
 def findings_of(err: HaptifyError) -> list[dict]:
