@@ -262,8 +262,7 @@ def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial]
         BenchmarkGap(metric="workspace.measured_volume", trial_id=w.trial_id, unit="m^3", measured=w.measured_volume_m3,
                      twin_before=w.twin_before_volume_m3, twin_after=w.twin_after_volume_m3) for w in wgaps]
     return DiscrepancyFile(
-        session_id=session_id, twin_name=twin.name, verdict=verdict_of(bool(accepted), s["structured"], False,
-                                                                       bool(sel.shape and sel.shape["structured"])),
+        session_id=session_id, twin_name=twin.name, verdict=verdict_of(bool(accepted), s["structured"], False),
         accepted=accepted, rounds=rounds, residual=residual_shape(sel.shape), benchmarks_not_computed=missing,
         structure=Structure(**s), where=localise(trials, sel.initial_sim, sel.final_sim),
         signal_gaps=signal_gaps(design, trials, sel.initial_sim, sel.final_sim),
@@ -280,11 +279,11 @@ def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial]
                   "validation_min": st.VALIDATION_MIN, "structure_share": st.STRUCTURE_SHARE})
 
 
-def verdict_of(accepted: bool, structured: bool, gap_significant: bool, shaped: bool = False) -> str:
-    """The verdict (discrepancy README §3): never "no discrepancy" (nor "explained") while structure is left (the generic
-    regression's, or ``shaped``: the residual's characterisation found a shape and the gap is above the floor's median)
-    or the held-out gap is significantly above the floor — then "unexplained residual", whatever was accepted."""
-    if structured or gap_significant or shaped:
+def verdict_of(accepted: bool, structured: bool, gap_significant: bool) -> str:
+    """The verdict (discrepancy README §3): never "no discrepancy" (nor "explained") while the generic regression finds
+    structure left or the held-out gap is significantly above the floor — then "unexplained residual", whatever was
+    accepted. The residual's shape describes what is left; it does not decide the verdict."""
+    if structured or gap_significant:
         return "unexplained residual"
     return "explained" if accepted else "no discrepancy"
 
@@ -349,8 +348,7 @@ def with_floor(result: DiscrepancyFile, floor: Floor | None) -> DiscrepancyFile:
         "accepted": _replay_uncertainty(result.accepted, floor),
         "floor_N": bound, "floor_replays_N": list(floor.replays_N), "floor_median_N": floor.median_N,
         "gap_p_value": p, "gap_significant": significant,
-        "verdict": verdict_of(bool(result.accepted), result.structure.structured, significant,
-                              bool(result.residual and result.residual.structured) and p < 0.5),
+        "verdict": verdict_of(bool(result.accepted), result.structure.structured, significant),
         "heldout_gap_above_floor_before_N": gap_above_floor(result.heldout_gap_before_N, bound),
         "heldout_gap_above_floor_after_N": gap_above_floor(result.heldout_gap_after_N, bound)})
 
