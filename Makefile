@@ -23,7 +23,7 @@ demo: $(STAMP)
 
 # One BLAS thread per test worker: two workers on two cores must not oversubscribe them.
 test: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) -m pytest -q -n 2 tests
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) -m pytest -q -n 2 --dist worksteal tests
 
 # Benchmark-time peers live in their own environment: sysidentpy (the local dynamic model's peer, issue 21)
 # pins numpy <= 2.3.5, older than the project's.

@@ -111,6 +111,7 @@ def _commands(s: str, out: Path, inputs: dict[str, Path]) -> list[list[str]]:
     ]
 
 
+@pytest.mark.slow
 @settings(max_examples=EXAMPLES, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(fmt=st.sampled_from(["parquet", "csv"]), data=st.data())

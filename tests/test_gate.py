@@ -143,7 +143,7 @@ def test_params_must_be_a_json_object(tmp_path, capsys):
 
 # --- the reference through its own suite ----------------------------------------------------------------
 
-@pytest.mark.slow
+@pytest.mark.slow(longest=True)
 def test_the_reference_command_passes_every_case_through_cmd(tmp_path):
     """The exact line of spec §16.4.1 and the README's tour."""
     bindir = Path(sys.executable).parent
