@@ -401,7 +401,7 @@ class Recording:
     body_residuals: np.ndarray | None = None  # (n_frames, n_bodies), POINT units, when the file has them
     format: str = "c3d"
     warnings: list[Finding] = field(default_factory=list)
-    layout: C3DLayout | None = None  # a C3D file read in chunks (§5.5.1); points/analogs are then placeholders
+    layout: C3DLayout | None = None  # a C3D file read in chunks (§5.5.1); points/analogs are then shape-only NaN views
     chunked: Callable[[int | None], Iterator[tuple[int, "Recording"]]] | None = None  # a text export read in chunks
 
     @property
@@ -606,7 +606,7 @@ def read_c3d(path: str | Path, *, stream: bool | None = None) -> Recording:
     except (OSError, RuntimeError, ValueError, IndexError) as exc:
         raise fail("E501", f"{label!r} cannot be read as C3D: {exc}", file=label) from None
     params, head_info, data = c["parameters"], c["header"], c["data"]
-    if layout is not None:  # the frames stay in the file; broadcast placeholders give the shapes (§5.5.1)
+    if layout is not None:  # the frames stay in the file; broadcast NaN views carry only the shapes (§5.5.1)
         xyz = np.broadcast_to(np.float64(np.nan), (layout.frames, layout.points, 3))
         analogs = np.broadcast_to(np.float64(0.0), (layout.channels, layout.frames * layout.per_frame))
         n_markers, n_frames = layout.points, layout.frames

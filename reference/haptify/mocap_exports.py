@@ -188,7 +188,7 @@ def _data_chunks(p: Path, sep: str, head: dict, rows: int) -> Iterator[np.ndarra
 
 
 def _streamed(p: Path, sep: str, head: dict, part, first_frame_of) -> tuple[Recording, int]:
-    """A text export opened for streaming: the recording with placeholder frames (their count from one
+    """A text export opened for streaming: the recording with shape-only frames (NaN views) (their count from one
     pass over the lines) and its chunk reader; also the row count."""
     rows, first = 0, None
     with open(p, "rb") as fh:
@@ -200,11 +200,11 @@ def _streamed(p: Path, sep: str, head: dict, part, first_frame_of) -> tuple[Reco
     first_frame = first_frame_of(_table([first.decode("utf-8")], sep, p, head["data_start"] + 1, head["width"])[0]) \
         if first is not None else 0
     shape = part(p, head, np.zeros((0, head["width"])), first_frame)
-    placeholders = {"points": np.broadcast_to(np.float64(np.nan), (rows, *shape.points.shape[1:]))}
+    shape_only = {"points": np.broadcast_to(np.float64(np.nan), (rows, *shape.points.shape[1:]))}
     for name in ("body_positions", "body_rotations", "body_residuals"):
         value = getattr(shape, name)
         if value is not None:
-            placeholders[name] = np.broadcast_to(np.float64(np.nan), (rows, *value.shape[1:]))
+            shape_only[name] = np.broadcast_to(np.float64(np.nan), (rows, *value.shape[1:]))
 
     def chunked(chunk: int | None) -> Iterator[tuple[int, Recording]]:
         start = 0
@@ -212,7 +212,7 @@ def _streamed(p: Path, sep: str, head: dict, part, first_frame_of) -> tuple[Reco
             yield start, part(p, head, data, first_frame + start)
             start += len(data)
 
-    return replace(shape, chunked=chunked, **placeholders), rows
+    return replace(shape, chunked=chunked, **shape_only), rows
 
 
 def _is_number(text: str) -> bool:

@@ -246,11 +246,11 @@ def run_reverify(engine, store: BundleStore, run_id: str, client=None, *, limits
     planned = json.loads(run.planned_json)
     with DBSession(engine) as s:
         recorded = set(s.scalars(select(db.ReverifyRecord.submission_id).where(db.ReverifyRecord.run_id == run_id)))
-        todo = [sid for sid in planned if sid not in recorded]
-        rows = {r.id: r for r in s.scalars(select(db.Submission).where(db.Submission.id.in_(todo)))}
+        remaining = [sid for sid in planned if sid not in recorded]
+        rows = {r.id: r for r in s.scalars(select(db.Submission).where(db.Submission.id.in_(remaining)))}
         jobs = [(f"reverify-{run_id}-{sid}", (store, Job(sid, rows[sid].archive_path, rows[sid].results_json,
-                                                         rows[sid].spec_version), limits)) for sid in todo]
-        base = baselines(s, todo, run_id)
+                                                         rows[sid].spec_version), limits)) for sid in remaining]
+        base = baselines(s, remaining, run_id)
     computed = refused = 0
     errors: dict[str, str] = {}
     if progress and recorded:
