@@ -118,8 +118,8 @@ def main() -> None:
         done = {r["seed"] for r in rows}
         clock = time.perf_counter()
         with tempfile.TemporaryDirectory() as tmp, multiprocessing.get_context("fork").Pool(args.workers) as pool:
-            remaining = [(seed, args.reps, args.duration, Path(tmp)) for seed in range(args.sessions) if seed not in done]
-            for row in pool.imap_unordered(_one, remaining):
+            todo = [(seed, args.reps, args.duration, Path(tmp)) for seed in range(args.sessions) if seed not in done]
+            for row in pool.imap_unordered(_one, todo):
                 with args.out.open("a") as fh:
                     fh.write(json.dumps(row) + "\n")
                 rows.append(row)
