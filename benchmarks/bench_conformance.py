@@ -21,7 +21,7 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="bench-conformance-") as tmp:
         report = Path(tmp) / "report.json"
         start = time.perf_counter()
-        proc = subprocess.run([sys.executable, "-m", "haptify_conform.cli", "--jsonl", f"{sys.executable} -m haptify_conform.reference",
+        proc = subprocess.run([sys.executable, "-m", "haptify_conform.cli", "--jsonl", f"{sys.executable} -m haptify.conform_adapter",
                                "--json-report", str(report), "--quiet"], capture_output=True, text=True)
         wall = time.perf_counter() - start
         usage = resource.getrusage(resource.RUSAGE_CHILDREN)

@@ -3,7 +3,7 @@ session per metric family from a fresh secret seed, packing them, recording the 
 answering every case, and the registry judging and recording the answer.
 
 ``challenge.issue`` / ``challenge.answer`` are called directly (no HTTP) on a fresh SQLite registry; the
-reference runs in this process (``haptify_conform.reference.analyse``, its per-session context cache as in
+reference runs in this process (``haptify.conform_adapter.analyse``, its per-session context cache as in
 ``--python`` mode). Three challenges (three seeds): each phase's median and max. No target: the figure says
 how long a lab's ``haptify-conform --challenge`` takes and keeps the challenge within test budgets.
 """
@@ -17,7 +17,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from haptify_conform.reference import IMPLEMENTATION, analyse
+from haptify.conform_adapter import IMPLEMENTATION, analyse
 from haptify_tools.registry import challenge
 from haptify_tools.registry.service import Caller, Registry, Settings
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from haptify_conform.reference import analyse
+from haptify.conform_adapter import analyse
 
 
 def off_by_one_percent(session: str, metric: str = "", parameters: dict | None = None) -> dict:

@@ -118,7 +118,7 @@ def test_reports_validate_and_parse(tmp_path):
 def test_reference_passes_the_protocol_self_test(how):
     from haptify_conform.cli import main
 
-    server = f"{sys.executable} -m haptify_conform.reference"
+    server = f"{sys.executable} -m haptify.conform_adapter"
     args = ["--jsonl", server] if how == "jsonl" else ["--cmd", server + " {session} {out}"]
     assert main(args + ["--self-test"]) == 0
 
@@ -171,7 +171,7 @@ def test_a_broken_suite_means_the_run_cannot_start(monkeypatch, capsys):
         raise ValueError("cases/x.json: not a case file")
 
     monkeypatch.setattr(cli, "load_cases", broken)
-    assert cli.main(["--python", "haptify_conform.reference:analyse"]) == 2
+    assert cli.main(["--python", "haptify.conform_adapter:analyse"]) == 2
     assert "not a case file" in capsys.readouterr().err
 
 
@@ -199,7 +199,7 @@ def test_a_run_conforms_only_without_forbidden_skips(verdicts, conforms, must_sk
 def test_zero_selected_cases_cannot_start(capsys):
     from haptify_conform.cli import main
 
-    assert main(["--python", "haptify_conform.reference:analyse", "--metric", "no.such.metric"]) == 2
+    assert main(["--python", "haptify.conform_adapter:analyse", "--metric", "no.such.metric"]) == 2
     assert "no case" in capsys.readouterr().err
 
 
@@ -207,7 +207,7 @@ def test_no_suite_found_cannot_start(tmp_path, monkeypatch, capsys):
     from haptify_conform.cli import main
 
     monkeypatch.setenv("HAPTIFY_CONFORMANCE_SUITE", str(tmp_path))
-    assert main(["--python", "haptify_conform.reference:analyse"]) == 2
+    assert main(["--python", "haptify.conform_adapter:analyse"]) == 2
     assert "no conformance suite" in capsys.readouterr().err
     assert main(["--lint"]) == 2
 
@@ -258,7 +258,7 @@ def test_the_runner_installed_from_a_wheel_needs_and_finds_the_suite(tmp_path):
         return subprocess.run([sys.executable, "-c", "import sys, haptify_conform.cli as c; print(c.__file__, file=sys.stderr); "
                                "sys.exit(c.main())", *args], capture_output=True, text=True, env=env, cwd=tmp_path)
 
-    alone = conform("--python", "haptify_conform.reference:analyse")
+    alone = conform("--python", "haptify.conform_adapter:analyse")
     assert str(target) in alone.stderr and alone.returncode == 2 and "no conformance suite" in alone.stderr
-    named = conform("--python", "haptify_conform.reference:analyse", "--suite", str(repo), "--metric", "vibration.rms", "--quiet")
+    named = conform("--python", "haptify.conform_adapter:analyse", "--suite", str(repo), "--metric", "vibration.rms", "--quiet")
     assert named.returncode == 0 and "CONFORMS" in named.stdout, named.stdout + named.stderr

@@ -27,7 +27,7 @@ JS_DIR = REPO_ROOT / "conformance" / "examples" / "js"
 def test_the_reference_passes_every_case_over_json_lines(tmp_path):
     """One run of the whole suite through the JSON-lines protocol (also the speed check's workload)."""
     report = tmp_path / "report.json"
-    proc = subprocess.run([sys.executable, "-m", "haptify_conform.cli", "--jsonl", f"{sys.executable} -m haptify_conform.reference",
+    proc = subprocess.run([sys.executable, "-m", "haptify_conform.cli", "--jsonl", f"{sys.executable} -m haptify.conform_adapter",
                            "--json-report", str(report), "--quiet"], capture_output=True, text=True, timeout=600)
     data = json.loads(report.read_text())
     bad = [(c["case_id"], c["status"], c["message"]) for c in data["cases"] if c["status"] != "passed"]
@@ -139,7 +139,7 @@ def test_the_linter_reports_a_fixture_edited_by_hand(tmp_path):
 
 @pytest.mark.parametrize("model", ["../ws-sphere/session.json", "/etc/passwd", "missing.json"])
 def test_a_case_model_outside_the_session_or_missing_is_e702(model):
-    from haptify_conform.reference import analyse
+    from haptify.conform_adapter import analyse
 
     doc = analyse(str(REPO_ROOT / "fixtures" / "conformance" / "dyn-predict"), "dynamics.force_rmse", {"model": model})
     assert [(u["id"], u["code"]) for u in doc["unavailable"]] == [("dynamics.force_rmse", "E702")]

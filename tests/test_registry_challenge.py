@@ -17,7 +17,7 @@ from sqlalchemy import text
 
 from _registry_fixtures import base, browser, bundle_for  # noqa: F401  (base: fixture)
 from haptify_conform import cli
-from haptify_conform.reference import analyse
+from haptify.conform_adapter import analyse
 from haptify_tools.registry.app import create_app
 from haptify_tools.registry.challenge import FAMILIES, generate, judge_answer
 from haptify_tools.registry.live import serve_in_thread
@@ -155,7 +155,7 @@ def test_the_reference_passes_and_a_wrong_implementation_fails_through_haptify_c
             assert stiff["state"] == "failed" and {c["metric"] for c in stiff["result"]["cases"] if c["status"] == "failed"} == {
                 "stiffness.measured", "stiffness.accuracy"}
             assert client.get(f"{API}/submissions/{sub['id']}").json()["conformance"]["status"] == "self-asserted"
-            assert run_cli(url, token, "--python", "haptify_conform.reference:analyse", report=tmp_path / "r.json") == 0
+            assert run_cli(url, token, "--python", "haptify.conform_adapter:analyse", report=tmp_path / "r.json") == 0
             passed = json.loads((tmp_path / "r.json").read_text())
             assert passed["state"] == "passed" and passed["result"]["implementation"] == impl
             assert client.get(f"{API}/submissions/{sub['id']}").json()["conformance"] == {
@@ -180,7 +180,7 @@ def test_the_reference_passes_and_a_wrong_implementation_fails_through_haptify_c
                 assert bad and set(bad) == {"vibration.rms"}
             out = capsys.readouterr().out
             assert "FAILED" in out and "PASSED" in out
-            assert run_cli(url, "hpt_unknown", "--python", "haptify_conform.reference:analyse") == 2
+            assert run_cli(url, "hpt_unknown", "--python", "haptify.conform_adapter:analyse") == 2
             assert "E970" in capsys.readouterr().err
     finally:
         app.state.registry.close()

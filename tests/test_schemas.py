@@ -46,6 +46,25 @@ def test_every_metric_definition_validates_and_ids_are_unique():
     assert len(ids) == len(set(ids))
 
 
+def test_the_definition_files_name_no_code_and_every_family_with_metrics_has_its_module():
+    """Spec §15.4: the standard's data says nothing of Python; the computing module of a family is the
+    entry point of its id (group haptify.metric_families), and no entry point names an undefined family."""
+    import importlib
+    from importlib.metadata import entry_points
+
+    from haptify.compute import FAMILY_ENTRY_POINTS, family_module
+
+    families = {name.removesuffix(".json"): schemas.load(f"metrics/{name}") for name in schemas.list_dir("metrics")}
+    assert all("module" not in data for data in families.values())
+    named = {ep.name: ep.value for ep in entry_points(group=FAMILY_ENTRY_POINTS)}
+    assert set(named) <= set(families)
+    for family, data in families.items():
+        if data["metrics"]:
+            assert family in named, f"family {family!r} defines metrics but no module computes it"
+            assert callable(importlib.import_module(named[family]).compute)
+            assert {family_module(m["id"]) for m in data["metrics"]} == {named[family]}
+
+
 def test_code_catalogue_is_unique_and_complete():
     codes = schemas.load("codes.json")["codes"]
     assert len({c["code"] for c in codes}) == len(codes)

@@ -35,13 +35,13 @@ from haptify.results import Implementation, MetricResult, ResultsFile, Unavailab
 from haptify.storage import open_session
 from haptify_tools.example_session import TOUCH_DEVICE, example_writer
 from haptify_tools.viewer import blueprints, cmd_view
+from haptify.results import load_results
 from haptify_tools.viewer.recording import (
     HAND_FORCE_M_PER_N,
     PLATE_FORCE_M_PER_N,
     build,
     decimation_factor,
     envelope,
-    load_results,
     nan_split,
     plane_rectangle,
     plan_recording,

@@ -13,13 +13,12 @@ import sys
 import time
 from pathlib import Path
 
-from haptify.storage import atomic_write_text
-from haptify.versions import SPEC_VERSION
+from haptify_schemas import SPEC_VERSION
 from haptify_conform.adapters import CannotStart, CmdAdapter, JsonlAdapter, PythonAdapter
 from haptify_conform.cases import SUITE_ENV, find_suite, load_cases, select
 from haptify_conform.coverage import coverage_table, suite_coverage
 from haptify_conform.lint import lint
-from haptify_conform.report import build_report, header, to_junit, to_table
+from haptify_conform.report import build_report, header, to_junit, to_table, write_report
 from haptify_conform.runner import load_skips, run_cases
 from haptify_conform.selftest import self_test
 
@@ -112,9 +111,9 @@ def main(argv: list[str] | None = None) -> int:
     implementation = getattr(adapter, "implementation", {}) or {"command": args.cmd or args.jsonl or args.python}
     report = build_report(header(adapter.name, implementation, started), verdicts)
     if args.json_report:
-        atomic_write_text(args.json_report, report.model_dump_json(indent=2) + "\n")
+        write_report(args.json_report, report.model_dump_json(indent=2) + "\n")
     if args.junit:
-        atomic_write_text(args.junit, to_junit(report))
+        write_report(args.junit, to_junit(report))
     text = to_table(report)
     print(text.splitlines()[-1] if args.quiet else text, end="\n" if args.quiet else "")
     return 0 if report.summary.conforms else 1
@@ -136,7 +135,7 @@ def run_challenge_command(args) -> int:
         print(f"haptify-conform: {exc}", file=sys.stderr)
         return 2
     if args.json_report:
-        atomic_write_text(args.json_report, json.dumps(record, indent=2) + "\n")
+        write_report(args.json_report, json.dumps(record, indent=2) + "\n")
     print(summary(record).splitlines()[-1] if args.quiet else summary(record))
     return 0 if record["result"]["passed"] else 1
 

@@ -9,11 +9,17 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
-from haptify.metric_definitions import all_families
+import haptify_schemas
 from haptify_conform.cases import REPO_ROOT, SUITE_ROOT, CaseFile, case_files
 from haptify_conform.coverage import requirement_problems
+from haptify_conform.fixture_digest import DIGESTS, snapshot_digest
 
 MIN_CASES_PER_METRIC = 3
+
+
+def defined_metric_ids() -> set[str]:
+    """Every metric id the standard's metric definitions name (``schemas/<version>/metrics/``; spec §0.3)."""
+    return {m["id"] for name in haptify_schemas.list_dir("metrics") for m in haptify_schemas.load(f"metrics/{name}")["metrics"]}
 
 
 def lint(root: Path = SUITE_ROOT, repo: Path = REPO_ROOT) -> list[str]:
@@ -28,7 +34,7 @@ def lint(root: Path = SUITE_ROOT, repo: Path = REPO_ROOT) -> list[str]:
             problems.append(f"{path.name}: invalid case file: {exc}")
     ids = Counter(c.id for c in cases)
     problems += [f"case id {i!r} is used {n} times" for i, n in ids.items() if n > 1]
-    metric_ids = {m.id for f in all_families() for m in f.metrics}
+    metric_ids = defined_metric_ids()
     per_metric = Counter(c.metric for c in cases)
     for m in sorted(metric_ids):
         if per_metric[m] < MIN_CASES_PER_METRIC:
@@ -77,8 +83,6 @@ def _stale_fixtures(root: Path, used: set[str]) -> list[str]:
     fixture edited by hand, or rebuilt without its record, is reported (spec §16.7)."""
     if not root.is_dir():
         return []
-    from haptify_tools.build_conformance_fixtures import DIGESTS, snapshot_digest
-
     path = root / DIGESTS
     if not path.is_file():
         return [f"fixtures/{root.name}/{DIGESTS} is missing: run python -m haptify_tools.build_conformance_fixtures"]

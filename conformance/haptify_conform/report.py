@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import os
+import tempfile
 import xml.etree.ElementTree as ET
 from collections import Counter
 from dataclasses import asdict
+from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from haptify.versions import SPEC_VERSION
+from haptify_schemas import SPEC_VERSION
 from haptify_conform import PROTOCOL_VERSION, SUITE_VERSION
 from haptify_conform.judge import Verdict
 
@@ -127,3 +130,17 @@ def header(adapter: str, implementation: dict, started: str) -> ReportHeader:
     """The report header: suite, spec and protocol versions, adapter, implementation, start time (spec §16.6)."""
     return ReportHeader(suite_version=SUITE_VERSION, spec_version=SPEC_VERSION, protocol_version=PROTOCOL_VERSION,
                         adapter=adapter, implementation=implementation, started=started)
+
+
+def write_report(path: Path, text: str) -> None:
+    """Write a report file whole or not at all (spec §16.6): a temporary file beside it, synced, renamed over it."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.NamedTemporaryFile("w", encoding="utf-8", dir=path.parent, prefix=f".{path.name}.", delete=False) as fh:
+        try:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        except BaseException:
+            os.unlink(fh.name)
+            raise
+    os.replace(fh.name, path)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from fnmatch import fnmatchcase
 from functools import lru_cache
 
-from haptify import schemas
+import haptify_schemas as schemas
 
 #: Chapters whose codes are validation verdicts (conventions, session format, storage, validation).
 VERDICT_CHAPTERS = ("1", "2", "3", "4")

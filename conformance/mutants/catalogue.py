@@ -35,7 +35,7 @@ from haptify import (calibration, force_plate, free_space, local_dynamics, repet
                      storage, surface, uncertainty, vibration, workspace)
 from haptify.caching import session_of
 from haptify.conventions import STANDARD_GRAVITY, quat_conjugate, quat_rotate
-from haptify_conform import reference
+from haptify import conform_adapter as reference
 
 Make = Callable[[Any], Any]  # the real object → its replacement
 

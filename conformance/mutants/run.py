@@ -31,7 +31,7 @@ from unittest import mock
 
 from haptify import validation
 from haptify.storage import atomic_write_text
-from haptify_conform import reference
+from haptify import conform_adapter as reference
 from haptify_conform.adapters import PythonAdapter
 from haptify_conform.cases import REPO_ROOT, SUITE_ROOT, Case, load_cases
 from haptify_conform.coverage import cases_digest
@@ -80,7 +80,7 @@ def run_one(name: str) -> dict[str, Any]:
     cases = {c.id: c for c in load_cases()}
     start = time.perf_counter()
     reference._contexts.clear()
-    adapter = PythonAdapter("haptify_conform.reference:analyse")
+    adapter = PythonAdapter("haptify.conform_adapter:analyse")
     with ExitStack() as stack:
         mutant = BY_NAME.get(name)
         if mutant is None or not any(getattr(p.owner, "__name__", "") == "haptify.validation" for p in mutant.patches):

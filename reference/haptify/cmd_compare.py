@@ -5,8 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from haptify.compare import build_table, to_csv, to_html_document, to_markdown
-from haptify.results import ResultsFile
-from haptify.storage import atomic_write_text, read_json_model
+from haptify.results import load_results
+from haptify.storage import atomic_write_text
 
 RENDERERS = {"md": to_markdown, "csv": to_csv, "html": to_html_document}
 
@@ -19,11 +19,6 @@ def register(sub) -> None:
     p.add_argument("--format", choices=sorted(RENDERERS), default="md")
     p.add_argument("-o", "--output", type=Path, help="write the table to this file instead of stdout")
     p.set_defaults(func=run)
-
-
-def load_results(path: Path) -> ResultsFile:
-    """Read and check a results.json (E104 names the file and every invalid field; spec §15.1)."""
-    return read_json_model(path, ResultsFile, "E104")
 
 
 def run(args, ui) -> int:

@@ -5,11 +5,11 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from haptify.cmd_compare import load_results
 from haptify.compute import ComputeContext, compute_session, family_modules
 from haptify.errors import fail
 from haptify.gate import as_result_warnings, require_valid_session
 from haptify.report import write_report
+from haptify.results import load_results
 
 
 def register(sub) -> None:

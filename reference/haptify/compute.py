@@ -1,8 +1,9 @@
 """Computing every metric a session allows (spec §15.4).
 
-The metric families are found through their definition files: each ``schemas/<v>/metrics/<family>.json``
-names, in ``module``, the reference module that computes it. That module exposes
-``compute(ctx: ComputeContext) -> list[MetricResult | Unavailable]``. Work shared between families
+The metric families are found through their definition files (``schemas/<v>/metrics/<family>.json``); the
+module that computes a family is the entry point of the family's id in the group
+:data:`FAMILY_ENTRY_POINTS` (declared in pyproject.toml), so the standard's data names no code. That module
+exposes ``compute(ctx: ComputeContext) -> list[MetricResult | Unavailable]``. Work shared between families
 (calibrated handle signals, plate wrenches) is cached on the context, so it is done once per trial.
 """
 
@@ -10,6 +11,8 @@ from __future__ import annotations
 
 import importlib
 from dataclasses import dataclass, field
+from functools import lru_cache
+from importlib.metadata import entry_points
 from typing import Any, Callable, Iterable
 
 from haptify.errors import Finding, HaptifyError
@@ -50,10 +53,22 @@ class ComputeContext:
         self.warnings.append(ResultWarning(code=code, message=message, metric=metric, trial=trial))
 
 
+#: The entry-point group naming, by family id, the module that computes each metric family (spec §15.4).
+FAMILY_ENTRY_POINTS = "haptify.metric_families"
+
+
+@lru_cache(maxsize=1)
 def family_modules() -> list[tuple[str, str]]:
-    """``(family, module)`` for every definition file that names a computing module.
-    Member ``module``, spec §15.4."""
-    return [(f.family, f.module) for f in all_families() if f.module]
+    """``(family, module)`` for every defined family that has a computing module, in definition order
+    (spec §15.4); families computed by nobody (e.g. calibration records) have no entry point."""
+    modules = {ep.name: ep.value for ep in entry_points(group=FAMILY_ENTRY_POINTS)}
+    return [(f.family, modules[f.family]) for f in all_families() if f.family in modules]
+
+
+def family_module(metric_id: str) -> str:
+    """The module computing ``metric_id`` (spec §15.4)."""
+    family = next(f.family for f in all_families() for m in f.metrics if m.id == metric_id)
+    return dict(family_modules())[family]
 
 
 def compute_session(session: SessionFolder, metrics: Iterable[str] | None = None,

@@ -47,7 +47,6 @@ class MetricFamily(BaseModel):
     family: str = Field(pattern=r"^[a-z_]+$")
     version: str = Field(pattern=r"^\d+\.\d+\.\d+$", description="Definition version; bumps when a parameter changes.")
     spec_section: str
-    module: str | None = Field(None, description="The reference module whose compute(ctx) computes this family's metrics.")
     parameters: dict[str, Parameter]
     metrics: list[MetricDefinition] = Field(default_factory=list)
 

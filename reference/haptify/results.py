@@ -9,6 +9,8 @@ from this model.
 from __future__ import annotations
 
 import math
+import os
+from pathlib import Path
 from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
@@ -141,3 +143,15 @@ class ResultsFile(BaseModel):
 
     def get(self, metric_id: str) -> MetricResult | None:
         return next((m for m in self.metrics if m.id == metric_id), None)
+
+
+def load_results(path: str | os.PathLike) -> ResultsFile:
+    """Read and check a results file (spec §15.1) — the one reader of ``compare``, ``report`` and ``view``:
+    E903 when the path names no file, E104 naming the file and every invalid field."""
+    from haptify.errors import fail
+    from haptify.storage import read_json_model
+
+    path = Path(path)
+    if not path.is_file():
+        raise fail("E903", f"results file {str(path)!r} does not exist", file=str(path))
+    return read_json_model(path, ResultsFile, "E104")

@@ -23,7 +23,8 @@ from pydantic import BaseModel, ConfigDict, Field
 from scipy import stats
 
 from haptify import schemas
-from haptify.metric_definitions import Parameter, all_families
+from haptify.compute import family_module
+from haptify.metric_definitions import Parameter
 from haptify.results import BudgetTerm, MetricResult, MetricUncertainty, ResultsFile, Unavailable
 
 
@@ -241,14 +242,10 @@ class PerturbedContext:
         return None
 
 
-def _family_module(metric_id: str) -> str:
-    return next(f.module for f in all_families() for m in f.metrics if m.id == metric_id)
-
-
 def draw_values(ctx: Any, metric_ids: Sequence[str], inputs: Sequence[Input], x: np.ndarray) -> dict[str, np.ndarray]:
     """The aggregated value of each metric under each draw (row of ``x``): NaN where a draw left the
     metric unavailable (spec §19.3). Families are run through their own ``compute``."""
-    modules = sorted({_family_module(m) for m in metric_ids})
+    modules = sorted({family_module(m) for m in metric_ids})
     out = {m: np.full(len(x), np.nan) for m in metric_ids}
     for j, row in enumerate(x):
         offset, delay, col = np.zeros(3), 0.0, 0

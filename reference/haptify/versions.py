@@ -1,13 +1,13 @@
-"""The one source of every version string (spec §2.8).
+"""Every version string (spec §2.8).
 
-The package version, the spec version and the schema version are defined here and nowhere else:
-pyproject.toml reads PACKAGE_VERSION, and the schema generator writes SCHEMA_VERSION into every
-``$id`` under ``schemas/``.
+The package version is defined here and nowhere else (pyproject.toml reads PACKAGE_VERSION); the spec
+version and the schema version belong to the normative data and are stated beside it, in ``haptify_schemas``
+(the schema generator writes SCHEMA_VERSION into every ``$id`` under ``schemas/``).
 """
 
+from haptify_schemas import SCHEMA_VERSION, SPEC_VERSION
+
 PACKAGE_VERSION = "0.1.0"
-SPEC_VERSION = "1.0"
-SCHEMA_VERSION = "1.0.0"
 SCHEMA_BASE_URI = "https://haptify.org/schemas"
 
 

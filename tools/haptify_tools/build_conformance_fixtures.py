@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import hashlib
 import json
 import math
 import shutil
@@ -35,7 +34,7 @@ from haptify.conventions import quat_from_axis_angle, quat_multiply, quat_rotate
 from haptify.metric_definitions import param
 from haptify.storage import SessionWriter
 from haptify.versions import SPEC_VERSION
-from haptify_tools.build_invalid_fixtures import logical_snapshot, trees_agree, values_agree
+from haptify_conform.fixture_digest import DIGESTS, snapshot_digest, trees_agree, values_agree
 from haptify_tools import rig_builders as rb
 from haptify_conform.requirements import requirements_for_case
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
@@ -1873,14 +1872,6 @@ def case_documents(fixtures: dict[str, list[Fixture]], fixtures_root: Path) -> d
             if c.get("tolerance") is None:
                 c.pop("tolerance", None)
     return {name: json.dumps(doc, indent=2, ensure_ascii=False) + "\n" for name, doc in docs.items()}
-
-
-DIGESTS = "digests.json"
-
-
-def snapshot_digest(folder: Path) -> str:
-    """sha256 of a fixture's logical content (what ``--check`` compares; see build_invalid_fixtures.logical_snapshot)."""
-    return hashlib.sha256(json.dumps(logical_snapshot(folder), sort_keys=True).encode()).hexdigest()
 
 
 def write_digests(root: Path, names: list[str]) -> None:

@@ -56,12 +56,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 import rerun as rr
-from pydantic import ValidationError
 
 from haptify.conventions import quat_multiply, quat_rotate
 from haptify.errors import HaptifyError, fail
 from haptify.session_format import Kinematics, Stream, Trial
-from haptify.storage import SessionFolder, pydantic_findings
+from haptify.storage import SessionFolder
 from haptify_tools.viewer.voxel_mesh import boundary_mesh
 
 if TYPE_CHECKING:  # imported where used: a raw-only recording needs neither (start-up, issue 21)
@@ -743,19 +742,6 @@ def rig_entries(session: SessionFolder) -> list[Entry]:
     out.append(Entry("/world/device", static=[rr.Transform3D(translation=placement.position, quaternion=xyzw(placement.quaternion)),
                                               rr.TransformAxes3D(0.05)]))
     return out
-
-
-def load_results(path: str | os.PathLike) -> ResultsFile:
-    """Read and validate ``results.json`` (spec §15.1); E903 when missing, E104 when invalid."""
-    from haptify.results import ResultsFile
-
-    path = Path(path)
-    if not path.is_file():
-        raise fail("E903", f"results file {str(path)!r} does not exist", file=str(path))
-    try:
-        return ResultsFile.model_validate_json(path.read_bytes())
-    except ValidationError as exc:
-        raise HaptifyError(*pydantic_findings(exc, "E104", str(path))) from None
 
 
 def _cell(text: Any) -> str:

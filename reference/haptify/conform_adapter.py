@@ -1,8 +1,8 @@
 """The reference implementation behind the conformance protocol (spec §16.4).
 
 ``analyse(session, metric, parameters)`` validates the session and, when it is valid, computes the
-asked-for metric with the reference; it is what ``--python haptify_conform.reference:analyse`` calls.
-``python -m haptify_conform.reference`` serves the JSON-lines protocol; with arguments
+asked-for metric with the reference; it is what ``--python haptify.conform_adapter:analyse`` calls.
+``python -m haptify.conform_adapter`` serves the JSON-lines protocol; with arguments
 ``SESSION OUT [METRIC [PARAMS]]`` it behaves as a ``--cmd`` program and writes its answer to OUT.
 
 Work shared by the cases of one fixture (the modeled workspace, a fitted dynamic model, calibrated
