@@ -74,6 +74,8 @@ class SimulationOptions:
     fmt: str = "parquet"
     compact: bool = False     # Parquet: float32 sensor columns, BYTE_STREAM_SPLIT (spec §3.2.1)
     session_id: str | None = None
+    lab_id: str = "lab-virtual"            # the manifest's lab.id (a round robin gives every lab its own)
+    examiner_id: str = "examiner-virtual"
     workers: int = 0          # processes simulating trials in parallel; 0 = one per CPU (at most 4)
 
     def duration(self, name: str) -> float:
@@ -97,6 +99,15 @@ def trial_rng(seed: int, trial_id: str) -> tuple[np.random.Generator, np.random.
     """Three independent generators (examiner, rig, device vibration) for one trial, from ``(seed, crc32(id))``."""
     ss = np.random.SeedSequence([int(seed) & 0xFFFFFFFF, zlib.crc32(trial_id.encode())])
     return tuple(np.random.default_rng(s) for s in ss.spawn(3))  # type: ignore[return-value]
+
+
+def trial_ft_gain(cfg: rg.RigConfig, seed: int, trial_id: str) -> float:
+    """The handle F/T's gain during one trial: ``ft_gain · (1 + δ)``, δ ~ N(0, ``ft_gain_drift_sd``) drawn
+    from ``(seed, crc32(trial id), 4)`` (its own generator, so a drift leaves every other draw unchanged)."""
+    if cfg.ft_gain_drift_sd <= 0:
+        return float(cfg.ft_gain)
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed) & 0xFFFFFFFF, zlib.crc32(trial_id.encode()), 4]))
+    return float(cfg.ft_gain * (1.0 + rng.normal(0.0, cfg.ft_gain_drift_sd)))
 
 
 # --- the plan ------------------------------------------------------------------------------------
@@ -201,8 +212,8 @@ class DossierSimulator:
 
     def manifest(self) -> dict:
         name = self.opt.session_id or f"sim-{_slug(self.twin.name)}-s{self.opt.seed}"
-        return {"session_id": name, "date": SESSION_DATE, "lab": {"id": "lab-virtual"},
-                "examiner": {"id": "examiner-virtual"},
+        return {"session_id": name, "date": SESSION_DATE, "lab": {"id": self.opt.lab_id},
+                "examiner": {"id": self.opt.examiner_id},
                 "device": self.twin.device.model_dump(mode="json", exclude_none=True),
                 "device_placement": self.twin.placement.model_dump(mode="json"), "rig": self.rig_description(),
                 "recorder": f"haptify-twin {PACKAGE_VERSION}"}
@@ -244,10 +255,11 @@ class DossierSimulator:
             res = simulate_passive(self.twin, t1k, traj.position_W[::step], traj.quaternion_W[::step])
         streams, rates, entities, offsets = {}, {}, {}, {}
         loads = rg.HandleLoads(res.force_W, res.torque_W)
+        gain = trial_ft_gain(cfg, self.opt.seed, p.trial_id)
         streams["handle_wrench"] = {"t": t1k, **rg.handle_wrench(
             rng_rig, cfg, position_W=traj.position_W, quaternion_W=traj.quaternion_W, rate_hz=traj.rate_hz,
             loads=loads, bias_force=self.bias_f, bias_torque=self.bias_t, connector_mass=self.conn_m,
-            connector_com_S=self.conn_r)}
+            connector_com_S=self.conn_r, gain=gain)}
         rates["handle_wrench"] = cfg.ft_rate_hz
         vib = device_vibration(self.twin, traj.t, traj.speed(), rng_vib)
         self._accel(streams, rates, offsets, traj, rng_rig, vib)
@@ -270,7 +282,8 @@ class DossierSimulator:
         if active:
             arrays.update({"commanded_W": res.commanded_W, "encoder_q": res.encoder_q, "motor_torque": res.motor_torque,
                            "cable_torque": res.cable_torque, "saturated": res.saturated, "cut_off": res.cut_off})
-        truth = {"examiner": traj.meta, "clock_offsets_s": offsets, "reachable_fraction": float(np.mean(res.ok))}
+        truth = {"examiner": traj.meta, "clock_offsets_s": offsets, "reachable_fraction": float(np.mean(res.ok)),
+                 "ft_gain": gain}
         return TrialOutput(p, active, streams, rates, entities, dict(self.surface) if active else None, truth, arrays,
                            float(traj.t[-1]))
 
@@ -292,14 +305,18 @@ class DossierSimulator:
         cfg = self.cfg
         streams, rates, entities, offsets = {}, {}, {}, {}
         t1k = traj.t[::rg.decimation(traj.rate_hz, cfg.ft_rate_hz)]
+        gain = trial_ft_gain(cfg, self.opt.seed, p.trial_id)
         streams["handle_wrench"] = {"t": t1k, **rg.handle_wrench(
             rng_rig, cfg, position_W=traj.position_W, quaternion_W=traj.quaternion_W, rate_hz=traj.rate_hz, loads=None,
-            bias_force=self.bias_f, bias_torque=self.bias_t, connector_mass=self.conn_m, connector_com_S=self.conn_r)}
+            bias_force=self.bias_f, bias_torque=self.bias_t, connector_mass=self.conn_m, connector_com_S=self.conn_r,
+            gain=gain)}
         rates["handle_wrench"] = cfg.ft_rate_hz
         self._accel(streams, rates, offsets, traj, rng_rig, None)
         self._handle_pose(streams, rates, offsets, traj, rng_rig)
         self._sync(streams, rates, t1k, t0)
-        return self._hand_only(p, traj, streams, rates, entities, offsets, t1k)
+        out = self._hand_only(p, traj, streams, rates, entities, offsets, t1k)
+        out.truth["ft_gain"] = gain
+        return out
 
     def _hand_only(self, p, traj, streams, rates, entities, offsets, t1k) -> TrialOutput:
         """A trial of the handle alone (no device): truth is the hand path at 1 kHz."""
