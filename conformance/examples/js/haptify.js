@@ -464,7 +464,7 @@ function main() {
 function commandMode([session, out, metric]) {
   let doc;
   try {
-    const wanted = metric ? [metric] : ["workspace.spec_box_volume", ...Object.keys(VIBRATION)];
+    const wanted = metric ? [metric] : ["workspace.spec_box_volume", ...Object.keys(VIBRATION), "free_space.force_mean"];
     doc = null;
     for (const id of wanted) {
       let r = null;
