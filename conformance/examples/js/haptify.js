@@ -172,23 +172,6 @@ function butterHighpassSos(order, fc, fs) {
   return sos;
 }
 
-function sosfilt(sos, x) {
-  let y = Float64Array.from(x);
-  for (const [b0, b1, b2, , a1, a2] of sos) {
-    let z1 = 0, z2 = 0;
-    const out = new Float64Array(y.length);
-    for (let n = 0; n < y.length; n++) {
-      const v = y[n];
-      const w = b0 * v + z1;
-      z1 = b1 * v - a1 * w + z2;
-      z2 = b2 * v - a2 * w;
-      out[n] = w;
-    }
-    y = out;
-  }
-  return y;
-}
-
 // Forward and backward with odd extension (scipy sosfiltfilt's default padding); zero initial state —
 // the start-up transient has decayed long before the edge_trim_s that is cut afterwards.
 function sosfiltfilt(sos, x) {
@@ -199,8 +182,8 @@ function sosfiltfilt(sos, x) {
     ext[n + pad + i] = 2 * x[n - 1] - x[n - 2 - i];
   }
   ext.set(x, pad);
-  let y = sosfilt(sos, ext).reverse();
-  y = sosfilt(sos, y).reverse();
+  let y = sosfiltState(sos, ext, null).reverse();
+  y = sosfiltState(sos, y, null).reverse();
   return y.subarray(pad, pad + n);
 }
 

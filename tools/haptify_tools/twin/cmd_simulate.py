@@ -14,7 +14,8 @@ from pathlib import Path
 from haptify.errors import fail
 
 from haptify_tools.twin.model import EFFECT_IDS, PRESETS, TwinFile, disable, load_twin, preset, set_param, write_twin
-from haptify_tools.twin.simulate import DEFAULT_DURATIONS, SimulationOptions, parse_protocols, plan, simulate_dossier
+from haptify_tools.twin.simulate import (DEFAULT_DURATIONS, SimulationOptions, name_number, parse_protocols, plan,
+                                         simulate_dossier)
 from haptify_tools.twin.rig import RigConfig
 from haptify_tools.twin.round_robin import SPREADS, parse_spreads, simulate_round_robin, trial_count
 
@@ -46,12 +47,8 @@ def twin_from_args(args: argparse.Namespace) -> TwinFile:
 def _durations(items: list[str]) -> dict[str, float]:
     out: dict[str, float] = {}
     for item in items:
-        name, sep, value = item.partition("=")
-        try:
-            seconds = float(value)
-        except ValueError:
-            seconds = -1.0
-        if not sep or name not in DEFAULT_DURATIONS or seconds <= 0:
+        name, seconds = name_number(item)
+        if name not in DEFAULT_DURATIONS or not seconds > 0:
             raise fail("E903", f"--duration expects NAME=SECONDS with a known protocol and a positive time, got {item!r}",
                        expected=sorted(DEFAULT_DURATIONS), found=item)
         out[name] = seconds

@@ -18,8 +18,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import shutil
-import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
@@ -31,7 +29,7 @@ from haptify.storage import atomic_write_json
 
 from haptify_tools.twin import rig as rg
 from haptify_tools.twin.model import TwinFile, set_param
-from haptify_tools.twin.simulate import SimulationOptions, _slug, plan, simulate_dossier
+from haptify_tools.twin.simulate import SimulationOptions, _slug, built_in_place, name_number, plan, simulate_dossier
 
 
 @dataclass(frozen=True)
@@ -63,15 +61,11 @@ def parse_spreads(items: list[str]) -> dict[str, float]:
     negative or non-numeric sd."""
     out = {name: s.default for name, s in SPREADS.items()}
     for item in items:
-        name, sep, value = item.partition("=")
-        try:
-            sd = float(value)
-        except ValueError:
-            sd = -1.0
-        if not sep or name.strip() not in SPREADS or not math.isfinite(sd) or sd < 0:
+        name, sd = name_number(item)
+        if name not in SPREADS or not sd >= 0 or math.isinf(sd):
             raise fail("E903", f"--lab-spread expects NAME=SD with a known property and SD ≥ 0, got {item!r}",
                        expected=sorted(SPREADS), found=item)
-        out[name.strip()] = sd
+        out[name] = sd
     return out
 
 
@@ -127,10 +121,8 @@ def simulate_round_robin(twin: TwinFile, out_dir: str | os.PathLike, options: Si
     out = Path(out_dir)
     if out.exists() and not overwrite:
         raise fail("E901", f"{str(out)!r} already exists", file=str(out))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    build = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
     records = []
-    try:
+    with built_in_place(out) as build:
         for lab in draw_labs(twin, options.rig, labs, options.seed, spreads):
             lab_twin = set_param(twin, "handle.connector_mass.mass_kg", lab.connector_mass_kg)
             opt = replace(options, seed=lab.seed, rig=lab.rig, lab_id=lab.lab, examiner_id=f"examiner-{lab.lab}",
@@ -151,12 +143,6 @@ def simulate_round_robin(twin: TwinFile, out_dir: str | os.PathLike, options: Si
                "note": "each lab folder holds session/, truth.json and truth.npz (haptify simulate); the lab's F/T "
                        "reading is the true one × trial_ft_gains[trial]"}
         atomic_write_json(build / "labs.json", doc)
-        if out.exists():
-            shutil.rmtree(out)
-        os.replace(build, out)
-    except BaseException:
-        shutil.rmtree(build, ignore_errors=True)
-        raise
     return RoundRobinResult(out, out / "labs.json", {r["lab"]: out / r["session"] for r in records})
 
 

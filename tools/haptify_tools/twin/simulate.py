@@ -18,15 +18,17 @@ protocols are simulated with it.
 
 from __future__ import annotations
 
+import math
 import os
 import shutil
 import tempfile
 import time
 import zipfile
 import zlib
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -93,6 +95,33 @@ def parse_protocols(text: str) -> tuple[str, ...]:
         raise fail("E903", f"unknown protocol(s) {bad or text!r}", expected=["all", *DEVICE_PROTOCOLS, *RIG_TRIALS],
                    found=text)
     return names
+
+
+def name_number(item: str) -> tuple[str, float]:
+    """``NAME=NUMBER`` (a command-line assignment) → ``(NAME, NUMBER)``; NaN when there is no ``=`` or the
+    value is not a number, for the caller to refuse with its own message."""
+    name, sep, value = item.partition("=")
+    try:
+        number = float(value) if sep else math.nan
+    except ValueError:
+        number = math.nan
+    return name.strip(), number
+
+
+@contextmanager
+def built_in_place(out: Path) -> Iterator[Path]:
+    """A fresh folder beside ``out`` to build in; when the block ends normally it replaces ``out`` in one rename,
+    otherwise it is removed, so an interrupted run leaves nothing half-written (spec §3.6)."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    build = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
+    try:
+        yield build
+        if out.exists():
+            shutil.rmtree(out)
+        os.replace(build, out)
+    except BaseException:
+        shutil.rmtree(build, ignore_errors=True)
+        raise
 
 
 def trial_rng(seed: int, trial_id: str) -> tuple[np.random.Generator, np.random.Generator, np.random.Generator]:
@@ -521,9 +550,7 @@ def simulate_dossier(twin: TwinFile, out_dir: str | os.PathLike, options: Simula
         "arrays_note": "per trial '<trial id>/<name>': true signals at 1 kHz (workspace: 100 Hz; vibration_W_2kHz: "
                        "2 kHz), SI units, W frame; float32 except the time base 't' (float64, session clock)",
     }
-    out.parent.mkdir(parents=True, exist_ok=True)
-    build = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
-    try:
+    with built_in_place(out) as build:
         from concurrent.futures import ThreadPoolExecutor
 
         clock0 = time.perf_counter()
@@ -535,12 +562,6 @@ def simulate_dossier(twin: TwinFile, out_dir: str | os.PathLike, options: Simula
             npz.result()
         atomic_write_json(build / "truth.json", _jsonable(truth))
         timings["write_all"] = time.perf_counter() - clock0
-        if out.exists():
-            shutil.rmtree(out)
-        os.replace(build, out)
-    except BaseException:
-        shutil.rmtree(build, ignore_errors=True)
-        raise
     return DossierResult(out, out / "session", out / "truth.json", out / "truth.npz", [p.trial_id for p in planned],
                          recorded, timings)
 
