@@ -3,7 +3,8 @@
 Every lab has its own rig and its own examiner, drawn from the round robin's seed: the lab's handle F/T
 calibration gain, its motion capture noise, its force plate (natural frequencies, and the corner gain and
 mounting errors every simulated plate draws from its seed), the mass of its handle's connector, and an
-examiner who performs the same protocols with their own random choices (press depths, paths, timing).
+examiner who performs the same protocols at their own pace and with their own random choices (press
+depths, paths, timing).
 How far the labs differ is set per property by :data:`SPREADS` (standard deviations, ``--lab-spread``).
 
 ``simulate_round_robin`` writes ``<out>/<lab>/`` (a dossier of :func:`~.simulate.simulate_dossier`:
@@ -53,6 +54,8 @@ SPREADS: dict[str, Spread] = {
                                 "mounting errors are drawn from the lab's seed as for any simulated plate"),
     "handle_mass": Spread(0.2, "relative sd of the handle connector's mass: nominal × max(0, 1 + sd·z) "
                                "(twin handle.connector_mass.mass_kg)"),
+    "examiner_pace": Spread(0.1, "log-sd of the examiner's pace: their speeds × exp(sd·z) in free space, on the "
+                                 "surface, in the presses and the figure eight (SimulationOptions.examiner_pace)"),
 }
 
 
@@ -71,12 +74,14 @@ def parse_spreads(items: list[str]) -> dict[str, float]:
 
 @dataclass
 class LabDraw:
-    """One virtual lab: its id, the seed of its dossier, its rig and its handle connector mass (kg)."""
+    """One virtual lab: its id, the seed of its dossier, its rig, its handle connector mass (kg) and its
+    examiner's pace."""
 
     lab: str
     seed: int
     rig: rg.RigConfig
     connector_mass_kg: float
+    examiner_pace: float
 
 
 def draw_labs(twin: TwinFile, base: rg.RigConfig, labs: int, seed: int, spreads: dict[str, float]) -> list[LabDraw]:
@@ -87,14 +92,15 @@ def draw_labs(twin: TwinFile, base: rg.RigConfig, labs: int, seed: int, spreads:
     for i in range(1, labs + 1):
         ss = np.random.SeedSequence([int(seed) & 0xFFFFFFFF, i, 5725])
         rng = np.random.default_rng(ss)
-        z = rng.standard_normal(6)
+        z = rng.standard_normal(7)
         modes = tuple(float(f * (1 + spreads["plate_modes"] * zk)) for f, zk in zip(base.plate_modes_hz, z[3:6]))
         rig = replace(base, ft_gain=float(base.ft_gain * (1 + spreads["ft_gain"] * z[0])),
                       ft_gain_drift_sd=float(spreads["ft_gain_drift"]),
                       mocap_noise_m=float(base.mocap_noise_m * math.exp(spreads["mocap_noise"] * z[1])),
                       plate_modes_hz=modes)
         mass = nominal_mass * max(0.0, 1 + spreads["handle_mass"] * z[2])
-        out.append(LabDraw(f"lab-{i:02d}", int(ss.generate_state(1)[0]), rig, mass))
+        pace = math.exp(spreads["examiner_pace"] * z[6])
+        out.append(LabDraw(f"lab-{i:02d}", int(ss.generate_state(1)[0]), rig, mass, pace))
     return out
 
 
@@ -126,7 +132,7 @@ def simulate_round_robin(twin: TwinFile, out_dir: str | os.PathLike, options: Si
         for lab in draw_labs(twin, options.rig, labs, options.seed, spreads):
             lab_twin = set_param(twin, "handle.connector_mass.mass_kg", lab.connector_mass_kg)
             opt = replace(options, seed=lab.seed, rig=lab.rig, lab_id=lab.lab, examiner_id=f"examiner-{lab.lab}",
-                          session_id=f"rr-{_slug(twin.name)}-{lab.lab}")
+                          examiner_pace=lab.examiner_pace, session_id=f"rr-{_slug(twin.name)}-{lab.lab}")
             simulate_dossier(lab_twin, build / lab.lab, opt, advance=advance)
             truth = json.loads((build / lab.lab / "truth.json").read_text())
             records.append({"lab": lab.lab, "folder": lab.lab, "session": f"{lab.lab}/session", "seed": lab.seed,
@@ -135,7 +141,7 @@ def simulate_round_robin(twin: TwinFile, out_dir: str | os.PathLike, options: Si
                                     "plate_corner_gains": truth["rig"]["plate_corner_gains"],
                                     "plate_corner_positions_m": truth["rig"]["plate_corner_positions_m"],
                                     "connector_mass_kg": lab.connector_mass_kg},
-                            "examiner": f"examiner-{lab.lab}",
+                            "examiner": {"id": f"examiner-{lab.lab}", "pace": lab.examiner_pace},
                             "trial_ft_gains": {t["id"]: t["ft_gain"] for t in truth["trials"] if "ft_gain" in t}})
         doc = {"format": "haptify-round-robin", "version": "1.0", "twin": twin.name, "seed": options.seed,
                "reps": options.reps, "protocols": list(options.protocols), "labs": records,

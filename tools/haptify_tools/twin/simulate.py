@@ -78,6 +78,7 @@ class SimulationOptions:
     session_id: str | None = None
     lab_id: str = "lab-virtual"            # the manifest's lab.id (a round robin gives every lab its own)
     examiner_id: str = "examiner-virtual"
+    examiner_pace: float = 1.0             # the examiner's speeds × pace (free space, surface, presses, figure eight)
     workers: int = 0          # processes simulating trials in parallel; 0 = one per CPU (at most 4)
 
     def duration(self, name: str) -> float:
@@ -258,18 +259,25 @@ class DossierSimulator:
         return method(p, t0, rng_ex, rng_rig, rng_vib)
 
     def _trajectory(self, name: str, rng: np.random.Generator, t0: float) -> ex.HandTrajectory:
-        d, r, rate = self.opt.duration(name), self.reach, self.opt.rate_hz
+        """The examiner's hand path of a device protocol; speeds × ``examiner_pace`` (periods ÷ it), except the
+        local dynamic protocol's oscillation band, which the protocol prescribes (paper §V-C)."""
+        d, r, rate, pace = self.opt.duration(name), self.reach, self.opt.rate_hz, self.opt.examiner_pace
         z = self.surface["surface_point_m"][2]
         if name == "free_space":
-            return ex.free_space_wander(rng, r, d, rate_hz=rate, t0=t0)
+            return ex.free_space_wander(rng, r, d, rate_hz=rate, t0=t0, mean_speed=pace * ex.FREE_SPACE_MEAN_SPEED,
+                                        max_speed=pace * 0.75 * ex.FREE_SPACE_MAX_SPEED,
+                                        mean_angular=pace * ex.FREE_SPACE_MEAN_ANGULAR,
+                                        max_angular=pace * 0.75 * ex.FREE_SPACE_MAX_ANGULAR)
         if name == "local_dynamic":
             return ex.local_oscillations(rng, r, d, rate_hz=rate, t0=t0)
         if name == "figure_eight":
-            return ex.figure_eight(rng, r, d, rate_hz=rate, t0=t0)
+            return ex.figure_eight(rng, r, d, rate_hz=rate, t0=t0,
+                                   period_range_s=tuple(x / pace for x in ex.FIGURE_EIGHT_PERIODS_S))
         if name == "frictionless_surface":
-            return ex.surface_circles(rng, r, z, d, rate_hz=rate, t0=t0)
+            return ex.surface_circles(rng, r, z, d, rate_hz=rate, t0=t0,
+                                      period_range_s=tuple(x / pace for x in ex.SURFACE_PERIODS_S))
         if name == "stiffness":
-            return ex.surface_presses(rng, r, z, d, rate_hz=rate, t0=t0)
+            return ex.surface_presses(rng, r, z, d, rate_hz=rate, t0=t0, press_speed=pace * ex.PRESS_SPEED)
         raise ValueError(f"no trajectory for {name!r}")
 
     def _device_trial(self, p, t0, rng_ex, rng_rig, rng_vib) -> TrialOutput:
@@ -536,6 +544,7 @@ def simulate_dossier(twin: TwinFile, out_dir: str | os.PathLike, options: Simula
         writer.manifest = {**writer.manifest, "calibration": clock_records}
     truth = {
         "format": "haptify-twin-truth", "version": "1.0", "seed": opt.seed, "reps": opt.reps,
+        "examiner": {"id": opt.examiner_id, "pace": opt.examiner_pace},
         "protocols": list(opt.protocols), "session_folder": "session",
         "twin": twin_to_dict(twin),
         "rig": {"config": opt.rig.to_dict(), "marker_layout_m": {k: v.tolist() for k, v in sim.layout.items()},
