@@ -112,7 +112,9 @@ def test_javascript_implementation_passes_its_cases_over_json_lines():
     adapter = JsonlAdapter(f"{node} {JS_DIR / 'haptify.js'}", timeout_s=60.0)
     verdicts = run_cases(cases, adapter, skips)
     ran = [v for v in verdicts if v.case_id not in skips]
-    assert {v.metric for v in ran} >= {"workspace.spec_box_volume", "vibration.rms", "vibration.spectral_centroid"}
+    assert {v.metric for v in ran} >= {"workspace.spec_box_volume", "vibration.rms", "vibration.spectral_centroid",
+                                       "free_space.force_mean"}
+    assert {v.case_id for v in ran} >= {c.id for c in cases if c.quantity != "value"}  # every uncertainty case (§19)
     assert [(v.case_id, v.message) for v in ran if v.status != "passed"] == []
     assert len(ran) >= 7
     assert adapter.implementation.get("name") == "haptify-js-example"

@@ -104,7 +104,8 @@ def test_deterministic_for_a_seed_and_independent_of_the_other_trials(tmp_path):
 
 def _args(**kw):
     base = dict(preset=None, twin=None, disable=[], set_params=[], protocol="all", reps=1, seed=0, out=None, overwrite=False,
-                no_rig_trials=True, clock_offsets=False, duration=[], workers=1, format="parquet", compact=False)
+                no_rig_trials=True, clock_offsets=False, duration=[], workers=1, format="parquet", compact=False,
+                lab_variation=0, lab_spread=[])
     base.update(kw)
     return argparse.Namespace(**base)
 

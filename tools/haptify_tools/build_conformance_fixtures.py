@@ -859,18 +859,20 @@ def write_vibration_session(path: Path, session_id: str, fmt: str, rate: float, 
     w.write(path)
 
 
-def free_space_repetitions(w: SessionWriter, gains: tuple[float, ...], truth: rb.HandleTruth, duration_s: float) -> None:
+def free_space_repetitions(w: SessionWriter, gains: tuple[float, ...], truth: rb.HandleTruth, duration_s: float,
+                           fmt: str = "parquet") -> None:
     """Free-space trials 1, 2, … whose hand force is ``gain ×`` the fs-typical force :func:`felt` of the
     trial's own clock (each trial starts 20 s after the previous one), on the fs-typical circle and spin."""
     for rep, gain in enumerate(gains, start=1):
         t0 = 20.0 * (rep - 1)
         handle_trial(w, f"free_space-{rep}", "free_space", duration_s=duration_s, position=circle(0.05, 1.0), quaternion=spin(0.07),
-                     force_w=lambda t, g=gain, t0=t0: g * felt(t - t0), truth=truth, repetition=rep, start_s=t0)
+                     force_w=lambda t, g=gain, t0=t0: g * felt(t - t0), truth=truth, repetition=rep, start_s=t0, fmt=fmt)
 
 
 def uncertainty_fixtures() -> list[Fixture]:
     """Type A uncertainty with a known answer (spec §19.2, §19.4): two free-space repetitions whose forces are
-    the fs-typical force and 1.1 × it, so their mean magnitudes are x₁ and 1.1·x₁ (x₁ analytic)."""
+    the fs-typical force and 1.1 × it, so their mean magnitudes are x₁ and 1.1·x₁ (x₁ analytic). CSV streams, so
+    that an implementation without a Parquet reader (the JavaScript example) can answer them too."""
     from scipy import stats
 
     truth = rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0, mass=0.06)
@@ -881,7 +883,7 @@ def uncertainty_fixtures() -> list[Fixture]:
 
     def two_reps(path: Path) -> None:
         w = manifest("conf-unc-fs-two-reps", example_rig(), truth=truth)
-        free_space_repetitions(w, (1.0, 1.1), truth, T)
+        free_space_repetitions(w, (1.0, 1.1), truth, T, fmt="csv")
         w.write(path)
 
     fx = Fixture("unc-fs-two-reps", two_reps)

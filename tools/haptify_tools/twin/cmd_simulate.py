@@ -14,8 +14,10 @@ from pathlib import Path
 from haptify.errors import fail
 
 from haptify_tools.twin.model import EFFECT_IDS, PRESETS, TwinFile, disable, load_twin, preset, set_param, write_twin
-from haptify_tools.twin.simulate import DEFAULT_DURATIONS, SimulationOptions, parse_protocols, plan, simulate_dossier
+from haptify_tools.twin.simulate import (DEFAULT_DURATIONS, SimulationOptions, name_number, parse_protocols, plan,
+                                         simulate_dossier)
 from haptify_tools.twin.rig import RigConfig
+from haptify_tools.twin.round_robin import SPREADS, parse_spreads, simulate_round_robin, trial_count
 
 
 def _add_twin_source(p: argparse.ArgumentParser, required: bool = True) -> None:
@@ -45,12 +47,8 @@ def twin_from_args(args: argparse.Namespace) -> TwinFile:
 def _durations(items: list[str]) -> dict[str, float]:
     out: dict[str, float] = {}
     for item in items:
-        name, sep, value = item.partition("=")
-        try:
-            seconds = float(value)
-        except ValueError:
-            seconds = -1.0
-        if not sep or name not in DEFAULT_DURATIONS or seconds <= 0:
+        name, seconds = name_number(item)
+        if name not in DEFAULT_DURATIONS or not seconds > 0:
             raise fail("E903", f"--duration expects NAME=SECONDS with a known protocol and a positive time, got {item!r}",
                        expected=sorted(DEFAULT_DURATIONS), found=item)
         out[name] = seconds
@@ -81,6 +79,12 @@ def register_simulate(subparsers) -> None:
     p.add_argument("--format", choices=("parquet", "csv"), default="parquet", help="stream file format")
     p.add_argument("--compact", action="store_true",
                    help="Parquet: store the sensor columns as float32 (every simulated sensor is far coarser; spec §3.2.1)")
+    p.add_argument("--lab-variation", type=int, default=0, metavar="N",
+                   help="a round robin: N virtual labs (own rig, own examiner, drawn from --seed) each measure the twin "
+                        "--reps times; writes OUT/lab-01/ … and OUT/labs.json (what each lab's rig was)")
+    p.add_argument("--lab-spread", action="append", default=[], metavar="NAME=SD",
+                   help="how far the labs differ (repeatable; with --lab-variation): " +
+                        "; ".join(f"{k} (default {s.default:g})" for k, s in SPREADS.items()))
     p.set_defaults(func=run_simulate)
 
 
@@ -88,11 +92,17 @@ def run_simulate(args: argparse.Namespace, ui) -> int:
     """Run ``haptify simulate``; exit 0 when the dossier was written."""
     if args.reps < 1:
         raise fail("E903", "--reps must be at least 1", expected=">= 1", found=args.reps)
+    if args.lab_variation < 0 or args.lab_variation == 1 or (args.lab_spread and not args.lab_variation):
+        raise fail("E903", "--lab-variation needs at least two labs (and --lab-spread needs --lab-variation)",
+                   expected="--lab-variation N, N ≥ 2", found=args.lab_variation)
+    spreads = parse_spreads(args.lab_spread)
     twin = twin_from_args(args)
     options = SimulationOptions(protocols=parse_protocols(args.protocol), reps=args.reps, seed=args.seed,
                                 rig_trials=not args.no_rig_trials, durations=_durations(args.duration),
                                 rig=RigConfig(clock_offsets=args.clock_offsets), workers=args.workers, fmt=args.format,
                                 compact=args.compact)
+    if args.lab_variation:
+        return _run_round_robin(twin, options, args, spreads, ui)
     total = len(plan(options))
     with ui.progress(f"simulating {twin.name}", total) as advance:
         result = simulate_dossier(twin, Path(args.out), options, overwrite=args.overwrite, advance=advance)
@@ -100,6 +110,18 @@ def run_simulate(args: argparse.Namespace, ui) -> int:
            f"truth in {result.truth_json.name} and {result.truth_npz.name}")
     ui.emit_json({"ok": True, "session": str(result.session), "truth": str(result.truth_json),
                   "arrays": str(result.truth_npz), "trials": result.trials, "recorded_s": result.recorded_s})
+    return 0
+
+
+def _run_round_robin(twin: TwinFile, options: SimulationOptions, args: argparse.Namespace, spreads: dict[str, float],
+                     ui) -> int:
+    with ui.progress(f"round robin of {twin.name}: {args.lab_variation} labs", trial_count(options, args.lab_variation)) as advance:
+        result = simulate_round_robin(twin, Path(args.out), options, args.lab_variation, spreads,
+                                      overwrite=args.overwrite, advance=advance)
+    ui.say(f"wrote {len(result.sessions)} lab sessions under {result.out_dir} and what each lab's rig was in "
+           f"{result.labs_json.name}")
+    ui.emit_json({"ok": True, "labs": str(result.labs_json), "sessions": {k: str(v) for k, v in result.sessions.items()},
+                  "spreads": spreads})
     return 0
 
 

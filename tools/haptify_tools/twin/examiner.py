@@ -41,6 +41,9 @@ FREE_SPACE_MAX_SPEED = 0.16          # m/s, paper §V-B
 FREE_SPACE_MAX_ANGULAR = 16 * DEG    # rad/s, paper §V-B
 FREE_SPACE_MEAN_SPEED = 0.05         # m/s, paper §VI-B
 FREE_SPACE_MEAN_ANGULAR = 4 * DEG    # rad/s, paper §VI-B
+FIGURE_EIGHT_PERIODS_S = (4.0, 1.2)   # s, the first and the last loop of the figure eight
+SURFACE_PERIODS_S = (4.0, 1.0)        # s, the first and the last circle on the frictionless surface
+PRESS_SPEED = 0.04                    # m/s, the stiffness presses' descent
 OSCILLATION_BAND_HZ = (0.5, 4.0)     # paper §V-C
 LOCAL_DYNAMIC_DURATION = 140.0       # s, paper §V-C
 TREMOR_BAND_HZ = (8.0, 12.0)         # physiological tremor band
@@ -575,7 +578,7 @@ def local_oscillations(rng: np.random.Generator, reach: Reach, duration_s: float
 
 
 def figure_eight(rng: np.random.Generator, reach: Reach, duration_s: float = 30.0, *, rate_hz: float = DEFAULT_RATE_HZ,
-                 width: float = 0.08, height: float = 0.04, period_range_s: tuple[float, float] = (4.0, 1.2),
+                 width: float = 0.08, height: float = 0.04, period_range_s: tuple[float, float] = FIGURE_EIGHT_PERIODS_S,
                  t0: float = 0.0) -> HandTrajectory:
     """Figure-eight (the paper's test set 3, §VI-D): an infinity shape near the workspace centre at varied speed.
 
@@ -609,7 +612,7 @@ def figure_eight(rng: np.random.Generator, reach: Reach, duration_s: float = 30.
 
 def surface_circles(rng: np.random.Generator, reach: Reach, surface_z: float, duration_s: float = 30.0, *,
                     rate_hz: float = DEFAULT_RATE_HZ, radius: float = 0.03, depth_m: float = 0.0025,
-                    period_range_s: tuple[float, float] = (4.0, 1.0), approach_s: float = 1.5,
+                    period_range_s: tuple[float, float] = SURFACE_PERIODS_S, approach_s: float = 1.5,
                     t0: float = 0.0) -> HandTrajectory:
     """Frictionless-surface protocol (paper §V-D): circles in the xy plane on the surface, pressing lightly.
 
@@ -643,7 +646,7 @@ def surface_circles(rng: np.random.Generator, reach: Reach, surface_z: float, du
 
 
 def surface_presses(rng: np.random.Generator, reach: Reach, surface_z: float, duration_s: float = 30.0, *,
-                    rate_hz: float = DEFAULT_RATE_HZ, presses: int | None = None, press_speed: float = 0.04,
+                    rate_hz: float = DEFAULT_RATE_HZ, presses: int | None = None, press_speed: float = PRESS_SPEED,
                     above_m: float = 0.01, edge_margin: float = 0.002, t0: float = 0.0) -> HandTrajectory:
     """Stiffness protocol (paper §V-E): repeated presses down (−z) into the surface up to the workspace edge.
 

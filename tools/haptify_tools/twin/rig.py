@@ -62,6 +62,8 @@ class RigConfig:
     ft_pose_yaw_rad: float = 90 * DEG                                      # S rotated about H's z axis
     ft_range_force_N: tuple[float, float, float] = (80.0, 80.0, 160.0)   # ATI Mini27 Ti SI-80-4
     ft_range_torque_Nm: tuple[float, float, float] = (4.0, 4.0, 2.0)
+    ft_gain: float = 1.0                      # the F/T's calibration gain error: its whole reading × ft_gain
+    ft_gain_drift_sd: float = 0.0             # relative sd of that gain's drift from trial to trial
     accel_rate_hz: float = 2000.0
     accel_white_noise_m_per_s2: float = 0.0   # extra white noise on top of the twin's noise floor
     accel_range_m_per_s2: float = 40.0
@@ -236,7 +238,7 @@ class HandleLoads:
 
 def handle_wrench(rng: np.random.Generator, cfg: RigConfig, *, position_W: np.ndarray, quaternion_W: np.ndarray,
                   rate_hz: float, loads: HandleLoads | None, bias_force: np.ndarray, bias_torque: np.ndarray,
-                  connector_mass: float, connector_com_S: np.ndarray) -> dict:
+                  connector_mass: float, connector_com_S: np.ndarray, gain: float = 1.0) -> dict:
     """Raw ``handle_wrench`` columns at ``cfg.ft_rate_hz`` (spec §2.6; sign convention of spec §6.1).
 
     ``position_W``/``quaternion_W`` are the handle pose on the examiner clock (``rate_hz``, a multiple of
@@ -245,6 +247,9 @@ def handle_wrench(rng: np.random.Generator, cfg: RigConfig, *, position_W: np.nd
 
         F_S = R_WSᵀ (F_dev + m (g − a_c)) + b_F + n_F
         τ_S = R_WSᵀ (τ_dev + (p_H − p_S) × F_dev + (R_WS r) × m (g − a_c)) + b_τ + n_τ
+
+    ``gain`` is the sensor's calibration error: its whole reading (load, bias and noise, all of which pass
+    through the sensor's calibration matrix) comes out multiplied by it (1 = a perfectly calibrated sensor).
     """
     step = decimation(rate_hz, cfg.ft_rate_hz)
     q_hs = yaw_quat(cfg.ft_pose_yaw_rad)
@@ -268,6 +273,8 @@ def handle_wrench(rng: np.random.Generator, cfg: RigConfig, *, position_W: np.nd
     inv = quat_conjugate(q_ws)
     f_s = quat_rotate(inv, force) + bias_force + rng.normal(0.0, cfg.ft_force_noise_N, (n, 3))
     t_s = quat_rotate(inv, torque) + bias_torque + rng.normal(0.0, cfg.ft_torque_noise_Nm, (n, 3))
+    if gain != 1.0:
+        f_s, t_s = gain * f_s, gain * t_s
     return {"fx": f_s[:, 0], "fy": f_s[:, 1], "fz": f_s[:, 2], "tx": t_s[:, 0], "ty": t_s[:, 1], "tz": t_s[:, 2]}
 
 

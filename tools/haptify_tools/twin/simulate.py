@@ -18,15 +18,17 @@ protocols are simulated with it.
 
 from __future__ import annotations
 
+import math
 import os
 import shutil
 import tempfile
 import time
 import zipfile
 import zlib
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -74,6 +76,9 @@ class SimulationOptions:
     fmt: str = "parquet"
     compact: bool = False     # Parquet: float32 sensor columns, BYTE_STREAM_SPLIT (spec §3.2.1)
     session_id: str | None = None
+    lab_id: str = "lab-virtual"            # the manifest's lab.id (a round robin gives every lab its own)
+    examiner_id: str = "examiner-virtual"
+    examiner_pace: float = 1.0             # the examiner's speeds × pace (free space, surface, presses, figure eight)
     workers: int = 0          # processes simulating trials in parallel; 0 = one per CPU (at most 4)
 
     def duration(self, name: str) -> float:
@@ -93,10 +98,46 @@ def parse_protocols(text: str) -> tuple[str, ...]:
     return names
 
 
+def name_number(item: str) -> tuple[str, float]:
+    """``NAME=NUMBER`` (a command-line assignment) → ``(NAME, NUMBER)``; NaN when there is no ``=`` or the
+    value is not a number, for the caller to refuse with its own message."""
+    name, sep, value = item.partition("=")
+    try:
+        number = float(value) if sep else math.nan
+    except ValueError:
+        number = math.nan
+    return name.strip(), number
+
+
+@contextmanager
+def built_in_place(out: Path) -> Iterator[Path]:
+    """A fresh folder beside ``out`` to build in; when the block ends normally it replaces ``out`` in one rename,
+    otherwise it is removed, so an interrupted run leaves nothing half-written (spec §3.6)."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    build = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
+    try:
+        yield build
+        if out.exists():
+            shutil.rmtree(out)
+        os.replace(build, out)
+    except BaseException:
+        shutil.rmtree(build, ignore_errors=True)
+        raise
+
+
 def trial_rng(seed: int, trial_id: str) -> tuple[np.random.Generator, np.random.Generator, np.random.Generator]:
     """Three independent generators (examiner, rig, device vibration) for one trial, from ``(seed, crc32(id))``."""
     ss = np.random.SeedSequence([int(seed) & 0xFFFFFFFF, zlib.crc32(trial_id.encode())])
     return tuple(np.random.default_rng(s) for s in ss.spawn(3))  # type: ignore[return-value]
+
+
+def trial_ft_gain(cfg: rg.RigConfig, seed: int, trial_id: str) -> float:
+    """The handle F/T's gain during one trial: ``ft_gain · (1 + δ)``, δ ~ N(0, ``ft_gain_drift_sd``) drawn
+    from ``(seed, crc32(trial id), 4)`` (its own generator, so a drift leaves every other draw unchanged)."""
+    if cfg.ft_gain_drift_sd <= 0:
+        return float(cfg.ft_gain)
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed) & 0xFFFFFFFF, zlib.crc32(trial_id.encode()), 4]))
+    return float(cfg.ft_gain * (1.0 + rng.normal(0.0, cfg.ft_gain_drift_sd)))
 
 
 # --- the plan ------------------------------------------------------------------------------------
@@ -201,8 +242,8 @@ class DossierSimulator:
 
     def manifest(self) -> dict:
         name = self.opt.session_id or f"sim-{_slug(self.twin.name)}-s{self.opt.seed}"
-        return {"session_id": name, "date": SESSION_DATE, "lab": {"id": "lab-virtual"},
-                "examiner": {"id": "examiner-virtual"},
+        return {"session_id": name, "date": SESSION_DATE, "lab": {"id": self.opt.lab_id},
+                "examiner": {"id": self.opt.examiner_id},
                 "device": self.twin.device.model_dump(mode="json", exclude_none=True),
                 "device_placement": self.twin.placement.model_dump(mode="json"), "rig": self.rig_description(),
                 "recorder": f"haptify-twin {PACKAGE_VERSION}"}
@@ -218,18 +259,25 @@ class DossierSimulator:
         return method(p, t0, rng_ex, rng_rig, rng_vib)
 
     def _trajectory(self, name: str, rng: np.random.Generator, t0: float) -> ex.HandTrajectory:
-        d, r, rate = self.opt.duration(name), self.reach, self.opt.rate_hz
+        """The examiner's hand path of a device protocol; speeds × ``examiner_pace`` (periods ÷ it), except the
+        local dynamic protocol's oscillation band, which the protocol prescribes (paper §V-C)."""
+        d, r, rate, pace = self.opt.duration(name), self.reach, self.opt.rate_hz, self.opt.examiner_pace
         z = self.surface["surface_point_m"][2]
         if name == "free_space":
-            return ex.free_space_wander(rng, r, d, rate_hz=rate, t0=t0)
+            return ex.free_space_wander(rng, r, d, rate_hz=rate, t0=t0, mean_speed=pace * ex.FREE_SPACE_MEAN_SPEED,
+                                        max_speed=pace * 0.75 * ex.FREE_SPACE_MAX_SPEED,
+                                        mean_angular=pace * ex.FREE_SPACE_MEAN_ANGULAR,
+                                        max_angular=pace * 0.75 * ex.FREE_SPACE_MAX_ANGULAR)
         if name == "local_dynamic":
             return ex.local_oscillations(rng, r, d, rate_hz=rate, t0=t0)
         if name == "figure_eight":
-            return ex.figure_eight(rng, r, d, rate_hz=rate, t0=t0)
+            return ex.figure_eight(rng, r, d, rate_hz=rate, t0=t0,
+                                   period_range_s=tuple(x / pace for x in ex.FIGURE_EIGHT_PERIODS_S))
         if name == "frictionless_surface":
-            return ex.surface_circles(rng, r, z, d, rate_hz=rate, t0=t0)
+            return ex.surface_circles(rng, r, z, d, rate_hz=rate, t0=t0,
+                                      period_range_s=tuple(x / pace for x in ex.SURFACE_PERIODS_S))
         if name == "stiffness":
-            return ex.surface_presses(rng, r, z, d, rate_hz=rate, t0=t0)
+            return ex.surface_presses(rng, r, z, d, rate_hz=rate, t0=t0, press_speed=pace * ex.PRESS_SPEED)
         raise ValueError(f"no trajectory for {name!r}")
 
     def _device_trial(self, p, t0, rng_ex, rng_rig, rng_vib) -> TrialOutput:
@@ -244,10 +292,11 @@ class DossierSimulator:
             res = simulate_passive(self.twin, t1k, traj.position_W[::step], traj.quaternion_W[::step])
         streams, rates, entities, offsets = {}, {}, {}, {}
         loads = rg.HandleLoads(res.force_W, res.torque_W)
+        gain = trial_ft_gain(cfg, self.opt.seed, p.trial_id)
         streams["handle_wrench"] = {"t": t1k, **rg.handle_wrench(
             rng_rig, cfg, position_W=traj.position_W, quaternion_W=traj.quaternion_W, rate_hz=traj.rate_hz,
             loads=loads, bias_force=self.bias_f, bias_torque=self.bias_t, connector_mass=self.conn_m,
-            connector_com_S=self.conn_r)}
+            connector_com_S=self.conn_r, gain=gain)}
         rates["handle_wrench"] = cfg.ft_rate_hz
         vib = device_vibration(self.twin, traj.t, traj.speed(), rng_vib)
         self._accel(streams, rates, offsets, traj, rng_rig, vib)
@@ -270,7 +319,8 @@ class DossierSimulator:
         if active:
             arrays.update({"commanded_W": res.commanded_W, "encoder_q": res.encoder_q, "motor_torque": res.motor_torque,
                            "cable_torque": res.cable_torque, "saturated": res.saturated, "cut_off": res.cut_off})
-        truth = {"examiner": traj.meta, "clock_offsets_s": offsets, "reachable_fraction": float(np.mean(res.ok))}
+        truth = {"examiner": traj.meta, "clock_offsets_s": offsets, "reachable_fraction": float(np.mean(res.ok)),
+                 "ft_gain": gain}
         return TrialOutput(p, active, streams, rates, entities, dict(self.surface) if active else None, truth, arrays,
                            float(traj.t[-1]))
 
@@ -292,14 +342,18 @@ class DossierSimulator:
         cfg = self.cfg
         streams, rates, entities, offsets = {}, {}, {}, {}
         t1k = traj.t[::rg.decimation(traj.rate_hz, cfg.ft_rate_hz)]
+        gain = trial_ft_gain(cfg, self.opt.seed, p.trial_id)
         streams["handle_wrench"] = {"t": t1k, **rg.handle_wrench(
             rng_rig, cfg, position_W=traj.position_W, quaternion_W=traj.quaternion_W, rate_hz=traj.rate_hz, loads=None,
-            bias_force=self.bias_f, bias_torque=self.bias_t, connector_mass=self.conn_m, connector_com_S=self.conn_r)}
+            bias_force=self.bias_f, bias_torque=self.bias_t, connector_mass=self.conn_m, connector_com_S=self.conn_r,
+            gain=gain)}
         rates["handle_wrench"] = cfg.ft_rate_hz
         self._accel(streams, rates, offsets, traj, rng_rig, None)
         self._handle_pose(streams, rates, offsets, traj, rng_rig)
         self._sync(streams, rates, t1k, t0)
-        return self._hand_only(p, traj, streams, rates, entities, offsets, t1k)
+        out = self._hand_only(p, traj, streams, rates, entities, offsets, t1k)
+        out.truth["ft_gain"] = gain
+        return out
 
     def _hand_only(self, p, traj, streams, rates, entities, offsets, t1k) -> TrialOutput:
         """A trial of the handle alone (no device): truth is the hand path at 1 kHz."""
@@ -490,6 +544,7 @@ def simulate_dossier(twin: TwinFile, out_dir: str | os.PathLike, options: Simula
         writer.manifest = {**writer.manifest, "calibration": clock_records}
     truth = {
         "format": "haptify-twin-truth", "version": "1.0", "seed": opt.seed, "reps": opt.reps,
+        "examiner": {"id": opt.examiner_id, "pace": opt.examiner_pace},
         "protocols": list(opt.protocols), "session_folder": "session",
         "twin": twin_to_dict(twin),
         "rig": {"config": opt.rig.to_dict(), "marker_layout_m": {k: v.tolist() for k, v in sim.layout.items()},
@@ -504,9 +559,7 @@ def simulate_dossier(twin: TwinFile, out_dir: str | os.PathLike, options: Simula
         "arrays_note": "per trial '<trial id>/<name>': true signals at 1 kHz (workspace: 100 Hz; vibration_W_2kHz: "
                        "2 kHz), SI units, W frame; float32 except the time base 't' (float64, session clock)",
     }
-    out.parent.mkdir(parents=True, exist_ok=True)
-    build = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
-    try:
+    with built_in_place(out) as build:
         from concurrent.futures import ThreadPoolExecutor
 
         clock0 = time.perf_counter()
@@ -518,12 +571,6 @@ def simulate_dossier(twin: TwinFile, out_dir: str | os.PathLike, options: Simula
             npz.result()
         atomic_write_json(build / "truth.json", _jsonable(truth))
         timings["write_all"] = time.perf_counter() - clock0
-        if out.exists():
-            shutil.rmtree(out)
-        os.replace(build, out)
-    except BaseException:
-        shutil.rmtree(build, ignore_errors=True)
-        raise
     return DossierResult(out, out / "session", out / "truth.json", out / "truth.npz", [p.trial_id for p in planned],
                          recorded, timings)
 
