@@ -16,7 +16,7 @@ device_joint_angles, sync and plate_wrench at 1 kHz, handle_accel at 2 kHz, hand
 (9 markers on 3 links) and link_poses (3 links) at 100 Hz — about 1.0 million samples — with calibration
 records, so the calibrated hand signals (haptify.signals) and the plate force and COP
 (haptify.force_plate) are computed as well (``derived="full"``). The figure is
-the process CPU time (all threads) of ``haptify_tools.viewer.recording.build`` (reading the streams,
+the process CPU time (all threads) of ``haptify_tools.viewer.save.build`` (reading the streams,
 planning, blueprint, writing and closing the .rrd), best of three; the wall time is printed beside it
 (the issue stated the target in wall time, which a shared machine's load inflates).
 
@@ -39,7 +39,7 @@ from bench_gate import dossier
 from figures import report
 from haptify.storage import SessionWriter, open_session
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
-from haptify_tools.viewer.recording import build
+from haptify_tools.viewer.save import build
 
 DURATION_S = 140.0
 TARGET_S = 2.0

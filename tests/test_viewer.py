@@ -39,7 +39,6 @@ from haptify.results import load_results
 from haptify_tools.viewer.recording import (
     HAND_FORCE_M_PER_N,
     PLATE_FORCE_M_PER_N,
-    build,
     decimation_factor,
     envelope,
     nan_split,
@@ -50,6 +49,7 @@ from haptify_tools.viewer.recording import (
     time_ns,
     write_rrd,
 )
+from haptify_tools.viewer.save import build
 
 CHROMIUM = Path("/usr/bin/chromium")
 SURFACE_Z = 0.05

@@ -10,7 +10,7 @@
 * ``/submissions/{id}/report/index.html`` — for a submission with raw streams, the output of
   ``haptify report`` (figures, sounds) drawn by the reference from its session and results on first
   request, and ``/submissions/{id}/recording.rrd`` — its recording for the viewer (rerun), built with
-  ``haptify_tools.viewer.recording.build``. Both are derived data, kept next to the unpacked session
+  ``haptify_tools.viewer.save.build``. Both are derived data, kept next to the unpacked session
   (:meth:`Registry.session_folder`) and written atomically.
 
 Every number comes from the same queries as the JSON API (``app.state.registry``).
@@ -233,7 +233,7 @@ def ensure_recording(reg, sid: str) -> Path:
         return out
     from haptify.results import ResultsFile
     from haptify.storage import open_session
-    from haptify_tools.viewer.recording import build
+    from haptify_tools.viewer.save import build
 
     with _derive_lock:
         if not out.is_file():

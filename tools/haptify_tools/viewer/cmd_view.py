@@ -27,7 +27,8 @@ from haptify.errors import fail
 from haptify.gate import CheckedSession, open_checked_session
 from haptify.results import load_results
 from haptify.storage import MANIFEST
-from haptify_tools.viewer.recording import DEFAULT_DERIVED, DERIVED_MODES, build
+from haptify_tools.viewer.recording import DEFAULT_DERIVED, DERIVED_MODES
+from haptify_tools.viewer.save import build
 
 LOOPBACK = "127.0.0.1"
 DEFAULT_WEB_PORT = 9090  # rerun's own default web-viewer port

@@ -925,25 +925,3 @@ def write_rrd(plan: Plan, path: str | os.PathLike, blueprint: Any, *, chunk_rows
 
 def recording_id(session: SessionFolder, trial_id: str | None, other: SessionFolder | None) -> str:
     return session.session_id + (f"/{trial_id}" if trial_id else "") + (f"+{other.session_id}" if other else "")
-
-
-def build(session: SessionFolder, out: str | os.PathLike, *, trial_id: str | None = None,
-          results: ResultsFile | None = None, other: SessionFolder | None = None, derived: str = DEFAULT_DERIVED,
-          chunk_rows: int = CHUNK_ROWS, before_commit: Callable[[], Any] | None = None) -> Plan:
-    """Stream the recording of ``session`` to ``out`` entry by entry, then its blueprint; returns the plan's
-    metadata (for summaries and tests). ``before_commit`` runs after everything was logged and before the
-    file is renamed into place (the gate's final checks, spec §4.8): when it raises, nothing is written."""
-    from haptify_tools.viewer.blueprints import blueprint_for
-
-    done: list[Plan] = []
-
-    def fill(rec: rr.RecordingStream) -> None:
-        plan = plan_recording(session, trial_id=trial_id, results=results, other=other, derived=derived,
-                              writer=RrdWriter(rec, chunk_rows))
-        rec.send_blueprint(blueprint_for(plan), make_active=True, make_default=True)
-        if before_commit is not None:
-            before_commit()
-        done.append(plan)
-
-    atomic_rrd(out, recording_id(session, trial_id, other), fill)
-    return done[0]
