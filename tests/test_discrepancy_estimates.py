@@ -22,7 +22,7 @@ def _trials(folder, truth, protocol, seconds, seed):
 
 
 def test_per_axis_coulomb_friction_at_three_times_the_preset_is_named_per_drive_and_explained(tmp_path):
-    """The Touch's own per-drive Coulomb torques (0.0385 / 0.033 / 0.033 N·m) ×3, hidden: one shared value left ≈ 0.1 N
+    """The Touch's own per-drive Coulomb torques (0.0308 / 0.0264 / 0.0264 N·m) ×3, hidden: one shared value left ≈ 0.1 N
     and read "unexplained residual" (issue 20); per drive they are named within 2 % and the verdict is "explained"."""
     truth_values = [3 * v for v in preset("touch").effects.friction_coulomb.torque_Nm]
     truth = set_param(preset("touch"), "friction.coulomb.torque_Nm", truth_values)
