@@ -7,8 +7,10 @@ without it. Prints, per effect, the share of seeds where it was named first, the
 the share whose held-out gap shrank by half — as it is, and above the floor (the gap the true twin
 itself leaves, :func:`~haptify_tools.discrepancy.floor.gap_above_floor`: an effect smaller than the
 path's floor cannot halve the raw gap) — and the worst relative error. ``python
-benchmarks/bench_discrepancy_seeds.py [SEEDS [EFFECT,…]]`` (default 10 seeds, every effect: about 8 minutes —
-2–4 s a seed, 10–14 s for the local-dynamic effects — before the floor's six replays of issue 20).
+benchmarks/bench_discrepancy_seeds.py [SEEDS [EFFECT,…]]`` (default 10 seeds, every effect: about 8 minutes on a
+quiet machine — 2–4 s a seed, 10–14 s for the local-dynamic effects). The naming is the forward selection alone
+(:func:`~haptify_tools.discrepancy.identify.select_effects`, as in the workflow): the floor's six replays (issue 20)
+decide the verdict, never what is named, and are left out here; the verdict cases below make them.
 
 The verdict cases of issue 20 (:data:`VERDICT_CASES`; pass their names as EFFECT): per seed, does the workflow reach
 the right verdict — the Touch's per-drive Coulomb torques ×3 named per drive within 2 % and "explained"; a cogging
@@ -39,7 +41,8 @@ from haptify_tools.discrepancy import workspace as ws
 from haptify_tools.discrepancy.data import load_measured, simulate_all
 from haptify_tools.discrepancy.floor import gap_above_floor, heldout_gap
 from haptify_tools.discrepancy.outside import Cogging, SpeedSquared, with_field
-from haptify_tools.discrepancy.workflow import assess, run_discrepancy
+from haptify_tools.discrepancy.identify import select_effects
+from haptify_tools.discrepancy.workflow import assess, workspace_gaps
 from haptify_tools.twin.model import TwinFile, disable, preset, set_param
 from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
 
@@ -78,20 +81,22 @@ def one(effect: str, seed: int, folder: Path) -> tuple[bool, float, float, float
     opt = SimulationOptions(protocols=(*protocols, *rig), reps=1, seed=seed, durations=DURATIONS, rig_trials=False,
                             workers=1)
     truth = truth_of(effect, parameter, value)
-    session = simulate_dossier(truth, folder / f"{effect}-{seed}", opt).session
-    result, sel = run_discrepancy(session, disable(preset("touch"), effect), None, max_effects=1, workers=0)
-    if not result.accepted or result.accepted[0].effect_id != effect:
+    session = open_session(simulate_dossier(truth, folder / f"{effect}-{seed}", opt).session)
+    sweeps = ws.load_sweeps(session)
+    trials = load_measured(session, required=not sweeps)
+    # the naming itself (the floor's replays decide the verdict, never what is named: they are not needed here)
+    sel = select_effects(disable(preset("touch"), effect), trials, max_effects=1, workers=0, sweeps=sweeps)
+    if not sel.accepted or sel.accepted[0].candidate.effect_id != effect:
         return False, float("nan"), float("nan"), float("nan")
     if effect == ws.EFFECT_ID:
-        g = result.workspace_gaps[0]
+        g = workspace_gaps(sel)[0]
         ratio = above = g.rms_after_m / g.rms_before_m
     else:
-        before, after = result.heldout_gap_before_N, result.heldout_gap_after_N
-        trials = sel.rounds[0].design.trials
+        before, after = heldout_gap(trials, sel.initial_sim), heldout_gap(trials, sel.final_sim)
         floor = heldout_gap(trials, simulate_all(truth, trials))
         ratio = after / before
         above = gap_above_floor(after, floor) / max(gap_above_floor(before, floor), 1e-12)
-    return True, abs(result.accepted[0].value - value) / value, ratio, above
+    return True, abs(sel.accepted[0].value - value) / value, ratio, above
 
 
 def _per_drive_truth(values) -> Callable[[np.random.Generator], tuple]:

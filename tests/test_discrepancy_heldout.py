@@ -63,19 +63,23 @@ def test_two_hidden_effects_viscous_friction_and_backlash_are_both_named(tmp_pat
     assert result.verdict == "explained"
 
 
-@pytest.mark.parametrize("factor, seed", [(0.31, 53), (2.9, 54)])
-def test_a_series_elasticity_at_a_third_or_three_times_the_stored_value_is_found_within_its_interval(tmp_path, factor, seed):
+@pytest.mark.parametrize("factor, seed, tolerance", [(0.31, 53, 0.01), (2.9, 54, 0.05)])
+def test_a_series_elasticity_at_a_third_or_three_times_the_stored_value_is_found_within_its_interval(tmp_path, factor, seed,
+                                                                                                     tolerance):
     """The hidden stiffness is the preset's 11.5 N·m/rad × 0.31 or × 2.9 — between the search grid's points (×¼, ½, 1,
-    2, 4 of the stored value the search starts from): the estimate within 1 %, its 95 % interval covering the truth,
-    the verdict "explained" (issue 20: 35.88 ± 0.05 against a true 34.5, and a left-over residual that flipped the
-    verdict)."""
+    2, 4 of the stored value the search starts from): its 95 % interval covers the truth and the verdict is "explained"
+    (issue 20: 35.88 ± 0.05 against a true 34.5, and a left-over residual that flipped the verdict). The stiff cable
+    is seen less: at the handle, 33 N·m/rad over the ≈ 0.13 m arm is ≈ 2000 N/m in series with the rendered 750 N/m,
+    so a 3 % error moves the rendered stiffness by under 1 % — there the interval is ±4 % and the estimate within 5 %;
+    the soft one within 1 %."""
     value = factor * 11.5
     truth, start = _hide("touch", {"drive.series_elasticity.stiffness_Nm_per_rad": value})
     result, _ = assess(start, _trials(tmp_path, truth, {"stiffness": 12.0}, seed), {"stiffness": 12.0})
     first = result.accepted[0]
     assert [a.effect_id for a in result.accepted] == ["drive.series_elasticity"]
-    assert abs(first.value / value - 1) < 0.01
+    assert abs(first.value / value - 1) < tolerance
     assert first.ci95[0] <= value <= first.ci95[1]
+    assert first.ci95[1] - first.ci95[0] < 2 * tolerance * value
     assert result.verdict == "explained"
 
 
