@@ -1,6 +1,6 @@
 """The discrepancy workflow on held-out-like cases (issue 20, item 5): another preset (Touch X), another pair of hidden
 effects, magnitudes ×0.3 and ×3 of the stored value with the search started from the stored value (off the truth and
-off the search grid), and per-axis values of an effect other than Coulomb friction. The cases outside the library
+off the search grid), per-axis values of an effect other than Coulomb friction, and a null Touch X session. The cases outside the library
 (a cogging force periodic in position, a force growing with the speed squared) and the null case on a short session
 are in ``test_discrepancy_verdict.py``; the per-drive Coulomb ×3 and an off-grid series elasticity started from the
 truth in ``test_discrepancy_estimates.py``.
@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from haptify.storage import open_session
-from haptify_tools.discrepancy.data import load_measured
+from haptify_tools.discrepancy.data import load_measured, simulate_all
+from haptify_tools.discrepancy.floor import heldout_gap
 from haptify_tools.discrepancy.workflow import assess
 from haptify_tools.twin.model import disable, preset, set_param
 from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
@@ -46,6 +47,18 @@ def test_a_hidden_coulomb_friction_on_the_touch_x_is_named_and_explained(tmp_pat
     assert result.verdict == "explained"
     assert result.heldout_gap_after_N < result.floor_N < result.heldout_gap_before_N
     assert sel.twin.on("friction.coulomb")
+
+
+def test_a_null_touch_x_session_with_slow_reversals_names_nothing_and_reads_no_discrepancy(tmp_path):
+    """The Touch X twin that generated the session (16 s of free space, seed 51): its own held-out gap, 0.0068 N, is
+    twice the median of six replays (a few slow reversals flip the friction along the rebuilt path) and lay above the
+    former bound, 0.0049 N — the null session read "unexplained residual". Nothing is named, "no discrepancy"."""
+    twin = preset("touch-x")
+    trials = _trials(tmp_path, twin, {"free_space": 16.0}, 51)
+    result, _ = assess(twin, trials, {"free_space": 16.0})
+    assert result.accepted == []
+    assert result.verdict == "no discrepancy"
+    assert heldout_gap(trials, simulate_all(twin, trials)) < result.floor_N
 
 
 def test_two_hidden_effects_viscous_friction_and_backlash_are_both_named(tmp_path):
