@@ -99,16 +99,18 @@ class Parameter:
         return set_param(twin, f"{self.candidate.effect_id}.{self.candidate.parameter}[{self.drive}]", value)
 
 
-def reestimate(twin: TwinFile, params: tuple[Parameter, ...], trials: list[dt.MeasuredTrial], sim: dict) -> list[float]:
-    """The values ``params`` would be identified at on ``trials`` (simulated ``sim`` by ``twin``, which holds them): one
-    Gauss–Newton step from the twin's values, the residual's slope in each parameter by central differences at ±2 %
-    (two simulations a parameter), all parameters fitted together on the training rows (discrepancy README §3); NaN
-    for a value the replay's rows do not determine."""
-    residual = {tr.trial_id: tr.force - sim[tr.trial_id] for tr in trials}
+def gauss_newton_step(twin: TwinFile, params: tuple[Parameter, ...], trials: list[dt.MeasuredTrial], residual: dict,
+                      simulate=None) -> list[float]:
+    """One Gauss–Newton step for ``params`` from the values ``twin`` holds, fitted to ``residual`` (N, measured − the
+    twin's prediction): the residual's slope in each parameter by central differences at ±2 % (two simulations a
+    parameter; ``simulate(twins)`` → their predictions, default :func:`.data.simulate_many` on ``trials``), all
+    parameters together by least squares on the training rows (discrepancy README §2, joint refinement; §3); NaN for a
+    value the rows do not determine."""
+    simulate = simulate or (lambda twins: dt.simulate_many(twins, trials))
     design = st.make_design(trials, residual)
     steps = [st.SLOPE_STEP * abs(q.value) for q in params]
     twins = [q.set(twin, q.value + f * h) for q, h in zip(params, steps) for f in (-1, 1)]
-    sims = iter(dt.simulate_many(twins, trials))
+    sims = iter(simulate(twins))
     slopes = []
     for h in steps:
         lo, hi = next(sims), next(sims)
@@ -116,6 +118,12 @@ def reestimate(twin: TwinFile, params: tuple[Parameter, ...], trials: list[dt.Me
     zero = {k: np.zeros_like(v) for k, v in residual.items()}
     step, se = st.affine_fit_many(design, residual, zero, slopes)
     return [q.value + float(d) if np.isfinite(e) else float("nan") for q, d, e in zip(params, step, se)]
+
+
+def reestimate(twin: TwinFile, params: tuple[Parameter, ...], trials: list[dt.MeasuredTrial], sim: dict) -> list[float]:
+    """The values ``params`` would be identified at on ``trials`` (simulated ``sim`` by ``twin``, which holds them): one
+    :func:`gauss_newton_step` from the twin's values, all parameters together (discrepancy README §3)."""
+    return gauss_newton_step(twin, params, trials, {tr.trial_id: tr.force - sim[tr.trial_id] for tr in trials})
 
 
 def replay_floor(twin: TwinFile, durations: dict[str, float], seed: int = REPLAY_SEED,
