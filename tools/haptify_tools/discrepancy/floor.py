@@ -40,9 +40,9 @@ FLOOR_REPLAYS = 6        # replays whose spread makes the floor's prediction bou
 GAP_ALPHA = 0.05         # a held-out gap above the floor's one-sided 95 % prediction bound is significant
 #: the log scale is never taken below 0.4, the spread of the true twin's log gap between paths: six replays cannot see a
 #: heavy tail — a gap is mostly a few slow reversals, where the path's velocity error flips the friction, and one
-#: session in five or six has one or two and a gap 2–2.5× the median (the true Touch X twin over 21 sessions of 16 s free
-#: space: 0.0027–0.0084 N, median 0.0034; 23 of 4 s: 0.0019–0.0054 N, median 0.0024 N). With the former 0.15 its gap
-#: exceeded the bound in 13–14 % of sessions, with 0.4 in 7 % (16 s) and 0.7 % (4 s), a 6-of-21 subsampling
+#: session in five to ten has one or two and a gap 2–2.5× the median (the true Touch X twin over 24 sessions of 16 s
+#: free space: 0.0027–0.0084 N, median 0.0032; 24 of 4 s: 0.0019–0.0054 N, median 0.0024 N). With the former 0.15 its
+#: gap exceeded a six-replay bound in 13–14 % of sessions, with 0.4 in 6.4 % (16 s) and 0.5 % (4 s); benchmarks/RESULTS.md
 #: (issue 20, item 5: a null Touch X session read "unexplained residual")
 MIN_LOG_SCALE = 0.4
 #: session protocols (spec §2.5) the simulator's examiner can replay; ``other`` only with its label
