@@ -33,7 +33,7 @@ from haptify_tools.discrepancy import workspace as ws
 from haptify_tools.discrepancy.floor import (
     FLOOR_REPLAYS, GAP_ALPHA, Floor, Parameter, gap_above_floor, heldout_gap, replay_durations, replay_floors,
 )
-from haptify_tools.discrepancy.identify import Selection, pool_size, process_pool, select_effects
+from haptify_tools.discrepancy.identify import Selection, accepted_parameters, pool_size, process_pool, select_effects
 from haptify_tools.discrepancy.library import NOT_OBSERVABLE
 from haptify_tools.discrepancy.model import (
     AcceptedEffect, BenchmarkGap, BenchmarkNotComputed, CandidateFit, DiscrepancyFile, Place, ResidualCell, ResidualShape,
@@ -307,16 +307,8 @@ def residual_shape(shape: dict | None) -> ResidualShape | None:
 
 def replay_parameters(sel: Selection) -> tuple[Parameter, ...]:
     """The accepted force effects' identified values, one per drive when identified per drive, for the replays to
-    estimate again (discrepancy README §3, uncertainty); the workspace effect is fitted to the sweep, not replayed."""
-    out: list[Parameter] = []
-    for f in sel.accepted:
-        if f.candidate.scope == "workspace":
-            continue
-        if f.values is not None:
-            out += [Parameter(f.candidate, i, v) for i, v in enumerate(f.values)]
-        else:
-            out.append(Parameter(f.candidate, None, f.value))
-    return tuple(out)
+    estimate again (discrepancy README §3, uncertainty; :func:`.identify.accepted_parameters`)."""
+    return accepted_parameters(sel.accepted)
 
 
 def _replay_uncertainty(accepted: list[AcceptedEffect], floor: Floor) -> list[AcceptedEffect]:
