@@ -1,6 +1,7 @@
 """The device twin's presets against the paper's Table III over seeds (issue 20, item 4): every row within
 ±20 % of the paper and in the paper's order between the two devices on 10 seeds out of 10, and the modelled
-workspace volumes within 3 % (spec §14.6 says which paper value each preset parameter was fitted to).
+workspace volumes within 3 % (tools/haptify_tools/twin/TWIN.md says which paper value each preset parameter
+is fitted to; the twin is a tool, the spec has no chapter on it).
 
 Per preset (``touch``, ``touch-x``) and seed: a dossier of the protocols Table III needs, 3 repetitions at
 the simulator's default durations, with the rig trials (``simulate_dossier``), computed by the reference
