@@ -1,4 +1,4 @@
-"""The table "Preset parameters fitted to the paper" (tools/haptify_tools/twin/TWIN.md, issue 20 item 4)
+"""The table "Preset parameters fitted to the paper" (spec §20.1, informative; issue 20 item 4)
 against the preset files and the paper's values: every listed value is the preset's, every cited paper
 value is the one in schemas/1.0/paper-values.json, and every parameter whose source says "tuned" is listed.
 
@@ -17,14 +17,14 @@ import pytest
 from haptify import schemas
 from haptify_tools.twin.model import preset, twin_to_dict
 
-TWIN_MD = Path(__file__).resolve().parents[1] / "tools" / "haptify_tools" / "twin" / "TWIN.md"
+SPEC_TWIN = Path(__file__).resolve().parents[1] / "spec" / "20-device-twin.md"
 PRESETS = {"touch": "Touch", "touch-x": "Touch X"}
 
 
 def fitted_table() -> list[dict]:
-    """The rows of TWIN.md's table of fitted parameters: preset, parameter path, values, {metric: paper value}."""
-    text = TWIN_MD.read_text(encoding="utf-8")
-    section = text.split("### Preset parameters fitted to the paper", 1)[1]
+    """The rows of spec §20.1's table of fitted parameters: preset, parameter path, values, {metric: paper value}."""
+    text = SPEC_TWIN.read_text(encoding="utf-8")
+    section = text.split("## 20.1 Preset parameters fitted to the paper", 1)[1]
     rows = []
     for line in section.splitlines():
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
@@ -84,7 +84,7 @@ def test_every_tuned_parameter_is_in_the_table(name):
     listed = [r["parameter"] for r in ROWS if r["preset"] == name]
     missing = [p for p in sorted(tuned_paths(twin_to_dict(preset(name))))
                if not any(q == p or q.startswith(p + ".") for q in listed)]
-    assert not missing, f"{name}: tuned but not in TWIN.md's table: {missing}"
+    assert not missing, f"{name}: tuned but not in spec §20.1's table: {missing}"
 
 
 def test_the_table_parser_rejects_a_value_that_differs_from_the_preset():
