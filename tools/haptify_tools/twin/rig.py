@@ -287,14 +287,13 @@ def noise_floor(rng: np.random.Generator, n: int, rate_hz: float, floor) -> np.n
     return out
 
 
-def handle_accel(rng: np.random.Generator, cfg: RigConfig, *, position_W: np.ndarray, quaternion_W: np.ndarray,
-                 rate_hz: float, vibration_W: np.ndarray | None, floor_W: np.ndarray | None, bias: np.ndarray) -> dict:
-    """Raw ``handle_accel`` columns at ``cfg.accel_rate_hz`` (specific force in the accelerometer frame A).
+def specific_force(cfg: RigConfig, *, position_W: np.ndarray, quaternion_W: np.ndarray, rate_hz: float,
+                   vibration_W: np.ndarray | None, floor_W: np.ndarray | None) -> np.ndarray:
+    """What a perfect accelerometer reads ``(n, 3)`` at ``cfg.accel_rate_hz``: ``R_WAᵀ (a − g_W + v + f)``.
 
-    ``a_A = R_WAᵀ (a − g_W + v) + b_a + n``, with ``a`` the acceleration of the accelerometer's origin
-    (finite differences of the rigid-body path), ``v`` the device vibration (W, physics
-    ``device_vibration``) and ``n`` the rig's noise floor (W, physics ``rig_accel_floor``), both on the
-    accelerometer clock (None: absent); then clipped to ``±accel_range`` and quantised to ``accel_lsb``.
+    ``a`` is the acceleration of the accelerometer's origin (finite differences of the rigid-body path),
+    ``v`` the device vibration (W, physics ``device_vibration``) and ``f`` the rig's noise floor (W, physics
+    ``rig_accel_floor``: the table's own vibration), both on the accelerometer clock (None: absent); m/s².
     """
     step = decimation(rate_hz, cfg.accel_rate_hz)
     q_ha = yaw_quat(cfg.accel_pose_yaw_rad)
@@ -309,7 +308,13 @@ def handle_accel(rng: np.random.Generator, cfg: RigConfig, *, position_W: np.nda
             if len(extra) != n:
                 raise ValueError(f"{name} has {len(extra)} samples, the accelerometer clock {n}")
             total = total + extra
-    a_s = quat_rotate(quat_conjugate(q_wa), total) + bias
+    return quat_rotate(quat_conjugate(q_wa), total)
+
+
+def handle_accel(rng: np.random.Generator, cfg: RigConfig, *, specific_force_A: np.ndarray, bias: np.ndarray) -> dict:
+    """Raw ``handle_accel`` columns from a perfect accelerometer's reading ``specific_force_A`` (:func:`specific_force`):
+    ``a_A + b_a + n`` (``n``: ``accel_white_noise``), clipped to ``±accel_range`` and quantised to ``accel_lsb``."""
+    a_s = specific_force_A + bias
     if cfg.accel_white_noise_m_per_s2 > 0:
         a_s = a_s + rng.normal(0.0, cfg.accel_white_noise_m_per_s2, a_s.shape)
     a_s = np.clip(a_s, -cfg.accel_range_m_per_s2, cfg.accel_range_m_per_s2)
