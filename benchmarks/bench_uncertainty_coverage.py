@@ -168,7 +168,9 @@ def one_session(seed: int, reps: int, durations: dict[str, float], tmp: Path) ->
     for m in results.metrics:
         if m.uncertainty is not None:
             row["metrics"][m.id] = {"value": m.value, "u": m.uncertainty.u, "U": m.uncertainty.U, "k": m.uncertainty.k,
-                                    "trials": m.trials, "missing": m.uncertainty.sources_missing}
+                                    "trials": m.trials, "per_repetition": m.per_repetition,
+                                    "budget": {b.source: b.contribution for b in m.uncertainty.budget},
+                                    "missing": m.uncertainty.sources_missing}
     shutil.rmtree(tmp / f"s{seed}", ignore_errors=True)
     return row
 
@@ -177,12 +179,28 @@ def _one(job: tuple) -> dict:
     return one_session(*job)
 
 
+def used_truths(rows: list[dict], metric_id: str) -> np.ndarray:
+    """The per-trial truths of ``metric_id`` over the trials its measured values rest on (a trial the
+    computation left out, e.g. a workspace sweep that did not close, §8.7, is no sample of its measurand)."""
+    return np.array([r["truth_per_trial"][tid][metric_id] for r in rows if metric_id in r["metrics"]
+                     for tid in r["metrics"][metric_id]["trials"] if metric_id in r["truth_per_trial"].get(tid, {})])
+
+
+def own_error(rows: list[dict], metric_id: str) -> float:
+    """Mean over trials of (measured per-trial value − that trial's own truth), over the mean u: the
+    measurement's bias with the examiner's variation taken out."""
+    got = [(r["metrics"][metric_id], r["truth_per_trial"]) for r in rows if "per_repetition" in r["metrics"].get(metric_id, {})]
+    err = [v - tt[tid][metric_id] for g, tt in got for tid, v in zip(g["trials"], g["per_repetition"]) if metric_id in tt.get(tid, {})]
+    return float(np.mean(err) / np.mean([g["u"] for g, _ in got])) if err else math.nan
+
+
 def summarise(rows: list[dict]) -> None:
     print(f"{len(rows)} sessions")
-    print("| metric | truth (mean over trials ± its SE) | sessions | inside U | coverage | mean k | mean (value − truth) / mean u |")
-    print("|---|---|---|---|---|---|---|")
+    print("| metric | truth (mean over trials ± its SE) | sessions | inside U | coverage | mean k | mean (value − truth) / mean u "
+          "| mean (trial value − its own truth) / mean u |")
+    print("|---|---|---|---|---|---|---|---|")
     for mid in METRICS:
-        per_trial = np.array([tv[mid] for r in rows for tv in r["truth_per_trial"].values() if mid in tv])
+        per_trial = used_truths(rows, mid)
         got = [r["metrics"][mid] for r in rows if mid in r["metrics"]]
         if not got or len(per_trial) < 2:
             continue
@@ -192,7 +210,7 @@ def summarise(rows: list[dict]) -> None:
         cov = float(np.mean(inside))
         dropped = method_of(mid).method == "none"  # rows measured before the method became none (spec §19.1)
         print(f"| `{mid}`{' (method now none)' if dropped else ''} | {truth:.5g} ± {se:.2g} | {len(got)} | {sum(inside)} | "
-              f"**{cov:.1%}** | {np.mean([g['k'] for g in got]):.3g} | {bias:+.3f} |")
+              f"**{cov:.1%}** | {np.mean([g['k'] for g in got]):.3g} | {bias:+.3f} | {own_error(rows, mid):+.3f} |")
         if dropped:
             continue
         report(f"coverage of U (k≈t, p = 95 %) for {mid}, {len(got)} twin sessions", f"{TARGET:.0%} ± {BAND:.0%}",
