@@ -8,9 +8,10 @@ overrides one). Each session is computed by the reference with ``uncertainty=Tru
 
 The truth of a metric is its measurand (§19 preamble): the value of the same protocol on a perfect rig —
 the reference's own per-trial computation (one :class:`Study` per group of metrics names it) on the twin's
-true signals (truth.npz: the hand's pose, the force on it, the force on the plate, a perfect
-accelerometer's reading), at the samples the measurement used — and its expectation over the examiner's
-repetitions, the mean over every trial of every session (its own standard error is printed). A session
+true signals (truth.npz: the hand's pose, the force on it as the reference defines it — the connector's
+inertial force included, spec §6.1 —, the force on the plate, a perfect accelerometer's reading), at the
+samples the measurement used, over the trials it used — and its expectation over the examiner's
+repetitions, the mean over every such trial of every session (its own standard error is printed). A session
 covers a metric when |value − truth| ≤ U. Target: 95 % ± 3 % for every metric that reports an uncertainty
 (a metric whose method is ``none`` is shown, from rows of runs before it became so, but not reported as a
 figure).
@@ -54,10 +55,17 @@ DURATIONS = {"free_space": 15.0, "frictionless_surface": 12.0, "stiffness": 15.0
 RIG_TRIALS = ("rig.plate_bias", "rig.handle_calibration")
 
 
-def true_force(truth, trial_id: str, grid: np.ndarray, key: str = "force_W") -> np.ndarray:
-    """A true 1 kHz force of truth.npz (the hand's by default) low-passed onto ``grid`` as the reference
-    filters the measured one (spec §7.2), N."""
-    return lowpass_resample(truth[f"{trial_id}/t"], truth[f"{trial_id}/{key}"].astype(float), grid, float(sp("wrench_cutoff_hz")))
+def true_force(truth, trial_id: str, grid: np.ndarray) -> np.ndarray:
+    """The true hand force as the reference defines it — the device's force less the connector's inertial
+    force ``m a_c``, which the calibration keeps (spec §6.1) — low-passed onto ``grid`` as the measured one
+    is (spec §7.2), N, W."""
+    force = truth[f"{trial_id}/force_W"].astype(float) - truth[f"{trial_id}/connector_inertia_W"].astype(float)
+    return lowpass_resample(truth[f"{trial_id}/t"], force, grid, float(sp("wrench_cutoff_hz")))
+
+
+def true_plate_force(truth, trial_id: str, grid: np.ndarray) -> np.ndarray:
+    """The true force on the plate low-passed onto ``grid`` as the measured one is (spec §9.3), N, W."""
+    return lowpass_resample(truth[f"{trial_id}/t"], truth[f"{trial_id}/base_force_W"].astype(float), grid, float(sp("wrench_cutoff_hz")))
 
 
 def true_pose(truth, trial_id: str, times: np.ndarray):
@@ -86,7 +94,7 @@ def speed_truth(ctx, truth, trial_id: str) -> tuple:
 def plate_truth(ctx, truth, trial_id: str) -> tuple:
     """free_space.plate_force_mean (spec §9.3) of the true force on the plate on the measurement's grid."""
     grid, _ = plate_force_samples(ctx, trial_id)
-    return (float(np.linalg.norm(plate_force_about_weight(true_force(truth, trial_id, grid, "base_force_W")), axis=1).mean()),)
+    return (float(np.linalg.norm(plate_force_about_weight(true_plate_force(truth, trial_id, grid)), axis=1).mean()),)
 
 
 def vibration_truth(ctx, truth, trial_id: str) -> tuple:

@@ -234,6 +234,21 @@ class HandleLoads:
     torque_W: np.ndarray
 
 
+def connector_motion(cfg: RigConfig, *, position_W: np.ndarray, quaternion_W: np.ndarray, rate_hz: float,
+                     connector_com_S: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """On the F/T clock: the sensor's orientation ``q_WS`` and origin ``p_S`` (m, W), the connector's centre of
+    mass from ``p_S`` (m, W) and that centre's acceleration ``a_c`` (m/s², W; finite differences of the
+    rigid-body path). ``m a_c`` is the connector's inertial force, which the reported force keeps (spec §6.1)."""
+    step = decimation(rate_hz, cfg.ft_rate_hz)
+    q_hs = yaw_quat(cfg.ft_pose_yaw_rad)
+    p_hs = np.asarray(cfg.ft_pose_position_m, float)
+    q_ws = quat_multiply(quaternion_W, np.broadcast_to(q_hs, quaternion_W.shape))
+    p_s = position_W + quat_rotate(quaternion_W, np.broadcast_to(p_hs, position_W.shape))
+    r_c_W = quat_rotate(q_ws, np.broadcast_to(np.asarray(connector_com_S, float), position_W.shape))
+    a_c = derivative(p_s + r_c_W, rate_hz, 2)
+    return q_ws[::step], p_s[::step], r_c_W[::step], a_c[::step]
+
+
 def handle_wrench(rng: np.random.Generator, cfg: RigConfig, *, position_W: np.ndarray, quaternion_W: np.ndarray,
                   rate_hz: float, loads: HandleLoads | None, bias_force: np.ndarray, bias_torque: np.ndarray,
                   connector_mass: float, connector_com_S: np.ndarray) -> dict:
@@ -246,16 +261,9 @@ def handle_wrench(rng: np.random.Generator, cfg: RigConfig, *, position_W: np.nd
         F_S = R_WSᵀ (F_dev + m (g − a_c)) + b_F + n_F
         τ_S = R_WSᵀ (τ_dev + (p_H − p_S) × F_dev + (R_WS r) × m (g − a_c)) + b_τ + n_τ
     """
-    step = decimation(rate_hz, cfg.ft_rate_hz)
-    q_hs = yaw_quat(cfg.ft_pose_yaw_rad)
-    p_hs = np.asarray(cfg.ft_pose_position_m, float)
-    q_ws = quat_multiply(quaternion_W, np.broadcast_to(q_hs, quaternion_W.shape))
-    p_s = position_W + quat_rotate(quaternion_W, np.broadcast_to(p_hs, position_W.shape))
-    r_c_W = quat_rotate(q_ws, np.broadcast_to(np.asarray(connector_com_S, float), position_W.shape))
-    a_c = derivative(p_s + r_c_W, rate_hz, 2)
-    sl = slice(None, None, step)
-    q_ws, p_s, r_c_W, a_c = q_ws[sl], p_s[sl], r_c_W[sl], a_c[sl]
-    p_h = position_W[sl]
+    q_ws, p_s, r_c_W, a_c = connector_motion(cfg, position_W=position_W, quaternion_W=quaternion_W, rate_hz=rate_hz,
+                                             connector_com_S=connector_com_S)
+    p_h = position_W[::decimation(rate_hz, cfg.ft_rate_hz)]
     n = len(q_ws)
     conn = connector_mass * (GRAVITY_W[None, :] - a_c)
     force = conn.copy()

@@ -9,7 +9,8 @@ raw streams with the virtual rig (:mod:`.rig`) and writes:
   :class:`haptify.storage.SessionWriter`; nothing in it reveals the truth;
 - ``<out>/truth.json`` — every effect's parameters (the whole twin), the rig's noise levels, biases and
   geometry, every trial's examiner parameters and clock offsets;
-- ``<out>/truth.npz`` — the true trajectories, joint and gimbal angles and wrenches per trial (1 kHz), and
+- ``<out>/truth.npz`` — the true trajectories, joint and gimbal angles and wrenches per trial (1 kHz), the
+  connector's inertial force ``m a_c`` (``connector_inertia_W``, which the reported hand force keeps, spec §6.1),
   a perfect accelerometer's reading (``accel_t``, ``accel_A``: the accelerometer's clock and frame).
 
 Everything is a deterministic function of the twin, the options and the seed: each trial draws from
@@ -264,8 +265,11 @@ class DossierSimulator:
             streams["device_joint_angles"] = {"t": t1k, **{f"q{k + 1}": res.encoder_q[:, k] for k in range(res.encoder_q.shape[1])}}
             rates["device_joint_angles"] = cfg.ft_rate_hz
         self._sync(streams, rates, t1k, t0)
+        a_c = rg.connector_motion(cfg, position_W=traj.position_W, quaternion_W=traj.quaternion_W, rate_hz=traj.rate_hz,
+                                  connector_com_S=self.conn_r)[3]
         arrays = {"t": t1k, "position_W": traj.position_W[::step], "quaternion_W": traj.quaternion_W[::step],
                   "q": res.q, "gimbal": res.gimbal, "force_W": res.force_W, "torque_W": res.torque_W,
+                  "connector_inertia_W": self.conn_m * a_c,
                   "base_force_W": res.base_force_W, "base_torque_W": res.base_torque_W, "reachable": res.ok,
                   "vibration_W_2kHz": vib, **accel_truth}
         if active:
