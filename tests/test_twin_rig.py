@@ -108,6 +108,22 @@ def test_accelerometer_clips_at_its_range():
     assert np.abs(a).max() <= lim + cfg.accel_lsb_m_per_s2 and np.isclose(np.abs(a).max(), lim, atol=cfg.accel_lsb_m_per_s2)
 
 
+@given(radius=st.floats(0.01, 0.1), hz=st.floats(0.5, 3.0))
+@settings(max_examples=10, deadline=None)
+def test_connector_acceleration_on_a_circle_is_centripetal(radius, hz):
+    # a handle translating (no rotation) on a horizontal circle: the connector's centre accelerates by r ω²
+    # towards the centre, whatever its offset from the handle (truth.npz's connector_inertia_W = m a_c)
+    cfg = rg.RigConfig()
+    t = np.arange(N) / RATE
+    w = 2 * np.pi * hz
+    pos = np.stack([radius * np.cos(w * t), radius * np.sin(w * t), np.zeros(N)], axis=1)
+    quat = np.tile([1.0, 0, 0, 0], (N, 1))
+    *_, a_c = rg.connector_motion(cfg, position_W=pos, quaternion_W=quat, rate_hz=RATE, connector_com_S=np.array([0.0, 0.01, 0.02]))
+    inner = slice(10, -10)                               # the finite differences' ends
+    expected = -radius * w ** 2 * pos[::2][inner] / radius
+    assert np.allclose(a_c[inner], expected, atol=1e-3 * radius * w ** 2 + 1e-9)
+
+
 def test_noise_floor_levels_per_axis():
     floor = NoiseFloor(low_rms_m_per_s2=0.02, low_band_hz=[10.0, 100.0], high_rms_m_per_s2=0.03, high_band_hz=[100.0, 200.0])
     x = rg.noise_floor(np.random.default_rng(3), 40000, 2000.0, floor)
