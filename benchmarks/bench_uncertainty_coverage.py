@@ -16,8 +16,10 @@ covers a metric when |value − truth| ≤ U. Target: 95 % ± 3 % for every metr
 (a metric whose method is ``none`` is shown, from rows of runs before it became so, but not reported as a
 figure).
 
-Rows are appended to ``--out`` (JSON lines) as sessions finish, so an interrupted run keeps what it did;
-``--summarise`` only reads that file.
+Rows are appended to ``--out`` (JSON lines) as sessions finish, so an interrupted run keeps what it did
+and ``--sessions N`` resumes it; ``--summarise`` only reads that file. Without ``--sessions`` (as
+``benchmarks/run.py`` runs it) the script summarises the rows ``--out`` holds, and simulates 200 sessions
+only when it holds none: the figures say how many sessions they rest on.
 
     python benchmarks/bench_uncertainty_coverage.py [--sessions 200] [--reps 3] [--duration free_space=15] [--workers 2] [--out FILE] [--summarise]
 """
@@ -227,7 +229,7 @@ def summarise(rows: list[dict]) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--sessions", type=int, default=200)
+    ap.add_argument("--sessions", type=int, default=None, help="simulate up to this many (default: 200 when --out holds no rows)")
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--duration", action="append", default=[], metavar="NAME=S",
                     help=f"a trial's length in s (default {DURATIONS})")
@@ -237,11 +239,13 @@ def main() -> None:
     args = ap.parse_args()
     durations = DURATIONS | {k: float(v) for k, v in (d.split("=", 1) for d in args.duration)}
     rows = [json.loads(line) for line in args.out.read_text().splitlines()] if args.out.is_file() else []
+    if args.sessions is None and rows:
+        args.summarise = True
     if not args.summarise:
         done = {r["seed"] for r in rows}
         clock = time.perf_counter()
         with tempfile.TemporaryDirectory() as tmp, multiprocessing.get_context("fork").Pool(args.workers) as pool:
-            todo = [(seed, args.reps, durations, Path(tmp)) for seed in range(args.sessions) if seed not in done]
+            todo = [(seed, args.reps, durations, Path(tmp)) for seed in range(args.sessions or 200) if seed not in done]
             for row in pool.imap_unordered(_one, todo):
                 with args.out.open("a") as fh:
                     fh.write(json.dumps(row) + "\n")
