@@ -44,6 +44,7 @@ from haptify import stiffness, surface, workspace
 from haptify.compute import ComputeContext, compute_session
 from haptify.errors import HaptifyError
 from haptify.free_space import FORCE_IDS, PLATE_ID, SPEED_IDS, magnitude_stats, plate_force_about_weight, plate_force_samples
+from haptify.repetitions import definition_of
 from haptify.signals import handle_signals, lowpass_resample, mocap_track, process_mocap, resample_track, sp
 from haptify.storage import open_session
 from haptify.uncertainty import method_of
@@ -219,7 +220,8 @@ def summarise(rows: list[dict]) -> None:
         bias = np.mean([g["value"] - truth for g in got]) / np.mean([g["u"] for g in got])
         cov = float(np.mean(inside))
         dropped = method_of(mid).method == "none"  # rows measured before the method became none (spec §19.1)
-        print(f"| `{mid}`{' (method now none)' if dropped else ''} | {truth:.5g} ± {se:.2g} | {len(got)} | {sum(inside)} | "
+        unit = definition_of(mid.split(".")[0], mid).unit
+        print(f"| `{mid}`{' (method now none)' if dropped else ''} | {truth:.5g} ± {se:.2g} {unit} | {len(got)} | {sum(inside)} | "
               f"**{cov:.1%}** | {np.mean([g['k'] for g in got]):.3g} | {bias:+.3f} | {own_error(rows, mid):+.3f} |")
         if dropped:
             continue
