@@ -235,7 +235,7 @@ def summarise(rows: list[dict]) -> None:
         unit = definition_of(mid.split(".")[0], mid).unit
         print(f"| `{mid}`{' (method now none)' if dropped else ''} | {truth:.5g} ± {se:.2g} {unit} | {len(got)} | {sum(inside)} | "
               f"**{cov:.1%}** | {np.mean([g['k'] for g in got]):.3g} | {bias:+.3f} | {own_error(rows, mid):+.3f} | "
-              f"{resampled_type_a_coverage(per_trial, len(got[0]['trials'])):.1%} |")
+              f"{resampled_type_a_coverage(per_trial, max(len(g['trials']) for g in got)):.1%} |")
         if dropped:
             continue
         report(f"coverage of U (k≈t, p = 95 %) for {mid}, {len(got)} twin sessions", f"{TARGET:.0%} ± {BAND:.0%}",
