@@ -1,20 +1,27 @@
 """Are the reported uncertainties honest? A coverage study with the device twin (issue 23; spec chapter 19).
 
 Simulates ``--sessions`` independent short sessions of the ``touch`` preset (seed = session number: the
-examiner's paths, every sensor's noise, the rig's biases and plate errors drawn afresh): the handle
-calibration trial and ``--reps`` free-space trials of ``--duration`` s. Each is computed by the reference
-with ``uncertainty=True``. The truth of a metric is its measurand (§19 preamble): the value of the same
-protocol on a perfect rig — the reference's own per-trial computation on the twin's true 1 kHz signals
-(truth.npz: the hand's pose and the force on it), evaluated at the samples the measurement used — and
-its expectation over the examiner's repetitions, the mean over every trial of every session (its own
-standard error is printed). A session covers a metric when |value − truth| ≤ U. Target: 95 % ± 3 % for
-every metric that reports an uncertainty (a metric whose method is ``none`` is shown, from rows of runs
-before it became so, but not reported as a figure).
+examiner's paths, every sensor's noise, the rig's biases and plate errors drawn afresh): the plate bias and
+handle calibration trials, then ``--reps`` trials of each device protocol of :data:`STUDIES` (workspace,
+free space, frictionless surface, stiffness) at the lengths of :data:`DURATIONS` (``--duration NAME=S``
+overrides one). Each session is computed by the reference with ``uncertainty=True``.
 
-Rows are appended to ``--out`` (JSON lines) as sessions finish, so an interrupted run keeps what it did;
-``--summarise`` only reads that file.
+The truth of a metric is its measurand (§19 preamble): the value of the same protocol on a perfect rig —
+the reference's own per-trial computation (one :class:`Study` per group of metrics names it) on the twin's
+true signals (truth.npz: the hand's pose, the force on it as the reference defines it — the connector's
+inertial force included, spec §6.1 —, the force on the plate, a perfect accelerometer's reading), at the
+samples the measurement used, over the trials it used — and its expectation over the examiner's
+repetitions, the mean over every such trial of every session (its own standard error is printed). A session
+covers a metric when |value − truth| ≤ U. Target: 95 % ± 3 % for every metric that reports an uncertainty
+(a metric whose method is ``none`` is shown, from rows of runs before it became so, but not reported as a
+figure).
 
-    python benchmarks/bench_uncertainty_coverage.py [--sessions 200] [--reps 3] [--duration 15] [--workers 2] [--out FILE] [--summarise]
+Rows are appended to ``--out`` (JSON lines) as sessions finish, so an interrupted run keeps what it did
+and ``--sessions N`` resumes it; ``--summarise`` only reads that file. Without ``--sessions`` (as
+``benchmarks/run.py`` runs it) the script summarises the rows ``--out`` holds, and simulates 200 sessions
+only when it holds none: the figures say how many sessions they rest on.
+
+    python benchmarks/bench_uncertainty_coverage.py [--sessions 200] [--reps 3] [--duration free_space=15] [--workers 2] [--out FILE] [--summarise]
 """
 
 from __future__ import annotations
@@ -23,58 +30,159 @@ import argparse
 import json
 import math
 import multiprocessing
+import shutil
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
 from figures import report
+from haptify import stiffness, surface, workspace
 from haptify.compute import ComputeContext, compute_session
-from haptify.free_space import FORCE_IDS, SPEED_IDS, hand_force_samples, speeds
+from haptify.errors import HaptifyError
+from haptify.free_space import FORCE_IDS, PLATE_ID, SPEED_IDS, magnitude_stats, plate_force_about_weight, plate_force_samples
+from haptify.repetitions import definition_of
 from haptify.signals import handle_signals, lowpass_resample, mocap_track, process_mocap, resample_track, sp
 from haptify.storage import open_session
 from haptify.uncertainty import method_of
+from haptify.vibration import GROUPS, combine
 
-METRICS = FORCE_IDS + SPEED_IDS
 TARGET, BAND = 0.95, 0.03
+#: Trial lengths (s): free space as the first study; surface and stiffness long enough for several
+#: contacts and presses (spec §12–13), the workspace sweep long enough to close (spec §8.4 step 7).
+DURATIONS = {"free_space": 15.0, "frictionless_surface": 12.0, "stiffness": 15.0, "workspace": 40.0,
+             "rig.handle_calibration": 30.0, "rig.plate_bias": 5.0}
+RIG_TRIALS = ("rig.plate_bias", "rig.handle_calibration")
 
 
-def true_trial_values(ctx, truth: np.lib.npyio.NpzFile, trial_id: str) -> dict[str, float]:
-    """Per-trial values of :data:`METRICS` on the twin's true signals, at the samples the measurement used."""
-    t = truth[f"{trial_id}/t"]
+def true_force(truth, trial_id: str, grid: np.ndarray) -> np.ndarray:
+    """The true hand force as the reference defines it — the device's force less the connector's inertial
+    force ``m a_c``, which the calibration keeps (spec §6.1) — low-passed onto ``grid`` as the measured one
+    is (spec §7.2), N, W."""
+    force = truth[f"{trial_id}/force_W"].astype(float) - truth[f"{trial_id}/connector_inertia_W"].astype(float)
+    return lowpass_resample(truth[f"{trial_id}/t"], force, grid, float(sp("wrench_cutoff_hz")))
+
+
+def true_plate_force(truth, trial_id: str, grid: np.ndarray) -> np.ndarray:
+    """The true force on the plate low-passed onto ``grid`` as the measured one is (spec §9.3), N, W."""
+    return lowpass_resample(truth[f"{trial_id}/t"], truth[f"{trial_id}/base_force_W"].astype(float), grid, float(sp("wrench_cutoff_hz")))
+
+
+def true_pose(truth, trial_id: str, times: np.ndarray):
+    """The true hand pose processed as motion capture is (spec §7.4) and resampled at ``times`` (s)."""
+    return resample_track(process_mocap(truth[f"{trial_id}/t"], truth[f"{trial_id}/position_W"].astype(float),
+                                        truth[f"{trial_id}/quaternion_W"].astype(float)), times)
+
+
+def hand_force_truth(ctx, truth, trial_id: str) -> tuple:
+    """free_space.force_* (spec §9.2) of the true hand force at the samples with a usable measured force."""
     hs = handle_signals(ctx, trial_id)
     ok = hs.valid & np.all(np.isfinite(hs.force), axis=1)
-    grid = hs.t[ok]
-    force = lowpass_resample(t, truth[f"{trial_id}/force_W"].astype(float), grid, float(sp("wrench_cutoff_hz")))
-    mag = np.linalg.norm(force, axis=1)
+    s = magnitude_stats(true_force(truth, trial_id, hs.t[ok]))
+    return s["mean"], s["sd"], s["min"], s["max"]
+
+
+def speed_truth(ctx, truth, trial_id: str) -> tuple:
+    """free_space.speed_mean and angular_speed_mean (spec §9.4) of the true pose at the usable mocap samples."""
     track = mocap_track(ctx, trial_id)
     used = track.valid & np.all(np.isfinite(track.velocity), axis=1) & np.all(np.isfinite(track.angular_velocity), axis=1)
-    true_track = resample_track(process_mocap(t, truth[f"{trial_id}/position_W"].astype(float),
-                                              truth[f"{trial_id}/quaternion_W"].astype(float)), track.t[used])
-    return {"free_space.force_mean": float(mag.mean()), "free_space.force_sd": float(mag.std(ddof=1)),
-            "free_space.force_min": float(mag.min()), "free_space.force_max": float(mag.max()),
-            "free_space.speed_mean": float(np.nanmean(np.linalg.norm(true_track.velocity, axis=1))),
-            "free_space.angular_speed_mean": float(np.nanmean(np.linalg.norm(true_track.angular_velocity, axis=1)))}
+    pose = true_pose(truth, trial_id, track.t[used])
+    return (float(np.nanmean(np.linalg.norm(pose.velocity, axis=1))),
+            float(np.nanmean(np.linalg.norm(pose.angular_velocity, axis=1))))
 
 
-def one_session(seed: int, reps: int, duration: float, tmp: Path) -> dict:
+def plate_truth(ctx, truth, trial_id: str) -> tuple:
+    """free_space.plate_force_mean (spec §9.3) of the true force on the plate on the measurement's grid."""
+    grid, _ = plate_force_samples(ctx, trial_id)
+    return (float(np.linalg.norm(plate_force_about_weight(true_plate_force(truth, trial_id, grid)), axis=1).mean()),)
+
+
+def vibration_truth(ctx, truth, trial_id: str) -> tuple:
+    """RMS and centroid (spec §10) of what a perfect accelerometer reads (no bias, noise, clipping or
+    quantisation; the table's floor vibration is motion, so it is in)."""
+    v = combine(truth[f"{trial_id}/accel_t"], truth[f"{trial_id}/accel_A"].astype(float), trial_id)
+    return v.rms, v.centroid
+
+
+def surface_truth(ctx, truth, trial_id: str) -> tuple:
+    """surface.planar_force_mean / sd (spec §12.3) of the true hand force at the guarded contact samples."""
+    cs = surface.contact_signals(ctx, trial_id)
+    s = surface.planar_stats(true_force(truth, trial_id, cs.t[cs.used]), cs.normal)
+    return s["mean"], s["sd"]
+
+
+def stiffness_truth(ctx, truth, trial_id: str) -> tuple:
+    """stiffness.* (spec §13.3–13.5): the trial's fit of the true normal force on the true penetration, with
+    the contact and validity the measurement read."""
+    cs = surface.contact_signals(ctx, trial_id)
+    penetration = (cs.plane_point - true_pose(truth, trial_id, cs.t).position) @ cs.normal
+    fit = stiffness.fit_stiffness(cs.t, penetration, true_force(truth, trial_id, cs.t) @ cs.normal, cs.contact, trial_id, cs.valid)
+    return fit.stiffness, 100.0 * fit.stiffness / cs.stiffness_N_per_m, fit.peak_force
+
+
+def workspace_truth(ctx, truth, trial_id: str) -> tuple:
+    """workspace.measured_volume, volume_ratio, coverage (spec §8.7) of the true gimbal positions at the
+    handle_pose samples whose measured position is finite."""
+    pose = ctx.session.read(trial_id, "handle_pose")
+    finite = np.all(np.isfinite(pose[["px", "py", "pz"]].to_numpy()), axis=1)
+    solid = workspace.volume_solid(truth[f"{trial_id}/position_W"].astype(float)[finite])
+    placement = ctx.session.manifest.device_placement
+    model = ctx.cached(("workspace_model",), lambda: workspace.modeled_solid(ctx.session.device().kinematics, placement.position,
+                                                                           placement.quaternion))
+    return solid.volume, solid.volume / model.volume, workspace.overlap_volume(solid, model) / model.volume
+
+
+@dataclass(frozen=True)
+class Study:
+    """Metrics whose truth one function gives per trial of ``protocol`` (values in the order of ``ids``)."""
+
+    protocol: str
+    ids: tuple[str, ...]
+    truth: Callable
+
+
+STUDIES = (
+    Study("free_space", FORCE_IDS, hand_force_truth),
+    Study("free_space", SPEED_IDS, speed_truth),
+    Study("free_space", (PLATE_ID,), plate_truth),
+    Study("free_space", GROUPS["free_space"], vibration_truth),
+    Study("frictionless_surface", surface.IDS, surface_truth),
+    Study("stiffness", stiffness.IDS, stiffness_truth),
+    Study("workspace", ("workspace.measured_volume", "workspace.volume_ratio", "workspace.coverage"), workspace_truth),
+)
+METRICS = tuple(m for s in STUDIES for m in s.ids)
+
+
+def one_session(seed: int, reps: int, durations: dict[str, float], tmp: Path) -> dict:
     """Simulate, compute and compare one session (module docstring)."""
     from haptify_tools.twin.model import preset
     from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
 
-    opt = SimulationOptions(protocols=("rig.handle_calibration", "free_space"), reps=reps, seed=seed, rig_trials=False,
-                            durations={"free_space": duration}, workers=1)
+    protocols = tuple(dict.fromkeys(s.protocol for s in STUDIES))
+    opt = SimulationOptions(protocols=RIG_TRIALS + protocols, reps=reps, seed=seed, rig_trials=False,
+                            durations=durations, workers=1)
     res = simulate_dossier(preset("touch"), tmp / f"s{seed}", opt, overwrite=True)
     ctx = ComputeContext(session=open_session(res.session))
     results = compute_session(ctx.session, list(METRICS), ctx=ctx, uncertainty=True)
     truth = np.load(res.truth_npz)
-    trials = [t.id for t in ctx.session.trials_of("free_space")]
-    row = {"seed": seed, "truth_per_trial": {tid: true_trial_values(ctx, truth, tid) for tid in trials}, "metrics": {}}
+    per_trial: dict[str, dict[str, float]] = {}
+    for study in STUDIES:
+        for trial in ctx.session.trials_of(study.protocol):
+            try:
+                per_trial.setdefault(trial.id, {}).update(zip(study.ids, map(float, study.truth(ctx, truth, trial.id))))
+            except HaptifyError as exc:  # e.g. no press qualifies on the true signals: recorded, not fatal
+                per_trial.setdefault(trial.id, {})[f"error:{study.ids[0]}"] = repr(exc)
+    row = {"seed": seed, "truth_per_trial": per_trial, "metrics": {}}
     for m in results.metrics:
         if m.uncertainty is not None:
             row["metrics"][m.id] = {"value": m.value, "u": m.uncertainty.u, "U": m.uncertainty.U, "k": m.uncertainty.k,
-                                    "trials": m.trials, "missing": m.uncertainty.sources_missing}
+                                    "trials": m.trials, "per_repetition": m.per_repetition,
+                                    "budget": {b.source: b.contribution for b in m.uncertainty.budget},
+                                    "missing": m.uncertainty.sources_missing}
+    shutil.rmtree(tmp / f"s{seed}", ignore_errors=True)
     return row
 
 
@@ -82,22 +190,52 @@ def _one(job: tuple) -> dict:
     return one_session(*job)
 
 
+def used_truths(rows: list[dict], metric_id: str) -> np.ndarray:
+    """The per-trial truths of ``metric_id`` over the trials its measured values rest on (a trial the
+    computation left out, e.g. a workspace sweep that did not close, §8.7, is no sample of its measurand)."""
+    return np.array([r["truth_per_trial"][tid][metric_id] for r in rows if metric_id in r["metrics"]
+                     for tid in r["metrics"][metric_id]["trials"] if metric_id in r["truth_per_trial"].get(tid, {})])
+
+
+def own_error(rows: list[dict], metric_id: str) -> float:
+    """Mean over trials of (measured per-trial value − that trial's own truth), over the mean u: the
+    measurement's bias with the examiner's variation taken out."""
+    got = [(r["metrics"][metric_id], r["truth_per_trial"]) for r in rows if "per_repetition" in r["metrics"].get(metric_id, {})]
+    err = [v - tt[tid][metric_id] for g, tt in got for tid, v in zip(g["trials"], g["per_repetition"]) if metric_id in tt.get(tid, {})]
+    return float(np.mean(err) / np.mean([g["u"] for g, _ in got])) if err else math.nan
+
+
+def resampled_type_a_coverage(per_trial: np.ndarray, reps: int, draws: int = 20000) -> float:
+    """Coverage of the Type A interval alone (mean ± t_{0.975}(n − 1)·s/√n, §19.2) for sessions of ``reps``
+    trials drawn with replacement from the pooled per-trial truths: what the examiner's own distribution
+    allows with no measurement error at all (95 % when it is normal)."""
+    from scipy.stats import t as student
+
+    rng = np.random.default_rng(0)
+    x = rng.choice(per_trial, size=(draws, reps))
+    half = student.ppf(0.975, reps - 1) * x.std(axis=1, ddof=1) / math.sqrt(reps)
+    return float(np.mean(np.abs(x.mean(axis=1) - per_trial.mean()) <= half))
+
+
 def summarise(rows: list[dict]) -> None:
     print(f"{len(rows)} sessions")
-    print("| metric | truth (mean over trials ± its SE) | sessions | inside U | coverage | mean k | mean (value − truth) / mean u |")
-    print("|---|---|---|---|---|---|---|")
+    print("| metric | truth (mean over trials ± its SE) | sessions | inside U | coverage | mean k | mean (value − truth) / mean u "
+          "| mean (trial value − its own truth) / mean u | Type A alone on resampled truths |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for mid in METRICS:
-        per_trial = np.array([tv[mid] for r in rows for tv in r["truth_per_trial"].values()])
-        truth, se = per_trial.mean(), per_trial.std(ddof=1) / math.sqrt(len(per_trial))
+        per_trial = used_truths(rows, mid)
         got = [r["metrics"][mid] for r in rows if mid in r["metrics"]]
-        if not got:
+        if not got or len(per_trial) < 2:
             continue
+        truth, se = per_trial.mean(), per_trial.std(ddof=1) / math.sqrt(len(per_trial))
         inside = [abs(g["value"] - truth) <= g["U"] for g in got]
         bias = np.mean([g["value"] - truth for g in got]) / np.mean([g["u"] for g in got])
         cov = float(np.mean(inside))
         dropped = method_of(mid).method == "none"  # rows measured before the method became none (spec §19.1)
-        print(f"| `{mid}`{' (method now none)' if dropped else ''} | {truth:.5g} ± {se:.2g} | {len(got)} | {sum(inside)} | "
-              f"**{cov:.1%}** | {np.mean([g['k'] for g in got]):.3g} | {bias:+.3f} |")
+        unit = definition_of(mid.split(".")[0], mid).unit
+        print(f"| `{mid}`{' (method now none)' if dropped else ''} | {truth:.5g} ± {se:.2g} {unit} | {len(got)} | {sum(inside)} | "
+              f"**{cov:.1%}** | {np.mean([g['k'] for g in got]):.3g} | {bias:+.3f} | {own_error(rows, mid):+.3f} | "
+              f"{resampled_type_a_coverage(per_trial, max(len(g['trials']) for g in got)):.1%} |")
         if dropped:
             continue
         report(f"coverage of U (k≈t, p = 95 %) for {mid}, {len(got)} twin sessions", f"{TARGET:.0%} ± {BAND:.0%}",
@@ -106,19 +244,23 @@ def summarise(rows: list[dict]) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--sessions", type=int, default=200)
+    ap.add_argument("--sessions", type=int, default=None, help="simulate up to this many (default: 200 when --out holds no rows)")
     ap.add_argument("--reps", type=int, default=3)
-    ap.add_argument("--duration", type=float, default=15.0, help="free-space trial length, s")
-    ap.add_argument("--out", type=Path, default=Path(tempfile.gettempdir()) / "haptify-uncertainty-coverage.jsonl")
+    ap.add_argument("--duration", action="append", default=[], metavar="NAME=S",
+                    help=f"a trial's length in s (default {DURATIONS})")
+    ap.add_argument("--out", type=Path, default=Path(tempfile.gettempdir()) / "haptify-uncertainty-coverage-families.jsonl")
     ap.add_argument("--workers", type=int, default=2, help="sessions simulated at once (processes)")
     ap.add_argument("--summarise", action="store_true", help="only summarise the rows already in --out")
     args = ap.parse_args()
+    durations = DURATIONS | {k: float(v) for k, v in (d.split("=", 1) for d in args.duration)}
     rows = [json.loads(line) for line in args.out.read_text().splitlines()] if args.out.is_file() else []
+    if args.sessions is None and rows:
+        args.summarise = True
     if not args.summarise:
         done = {r["seed"] for r in rows}
         clock = time.perf_counter()
         with tempfile.TemporaryDirectory() as tmp, multiprocessing.get_context("fork").Pool(args.workers) as pool:
-            todo = [(seed, args.reps, args.duration, Path(tmp)) for seed in range(args.sessions) if seed not in done]
+            todo = [(seed, args.reps, durations, Path(tmp)) for seed in range(args.sessions or 200) if seed not in done]
             for row in pool.imap_unordered(_one, todo):
                 with args.out.open("a") as fh:
                     fh.write(json.dumps(row) + "\n")

@@ -72,6 +72,12 @@ def test_truth_holds_every_effect_and_the_true_signals(dossier):
     err = err[np.all(np.isfinite(err), axis=1)]
     assert np.std(err) == pytest.approx(0.15e-3 / np.sqrt(3), rel=0.3)
     assert arrays["free_space-1/q"].shape[1] == 3
+    # the accelerometer = a perfect accelerometer's reading (truth.npz) + its constant bias, quantised
+    acc = s.read("free_space-1", "handle_accel")
+    assert np.allclose(acc["t"].to_numpy(), arrays["free_space-1/accel_t"], atol=1e-6)
+    diff = acc[["ax", "ay", "az"]].to_numpy() - arrays["free_space-1/accel_A"]
+    lsb = truth["rig"]["config"]["accel_lsb_m_per_s2"]
+    assert np.ptp(diff, axis=0).max() <= lsb + 1e-5 and np.abs(diff).max() > 0.01       # the bias is there
 
 
 def test_calibration_trial_recovers_the_true_rig(dossier):

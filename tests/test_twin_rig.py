@@ -80,10 +80,12 @@ def test_accelerometer_reads_plus_g_up_at_rest_with_bias_and_quantisation():
     q = _random_quats(rng, 1)[0]
     pos, quat = _static(q)
     bias = np.array([0.15, -0.1, 0.2])
-    cols = rg.handle_accel(rng, cfg, position_W=pos, quaternion_W=quat, rate_hz=RATE, vibration_W=None, floor_W=None, bias=bias)
+    true_a = rg.specific_force(cfg, position_W=pos, quaternion_W=quat, rate_hz=RATE, vibration_W=None, floor_W=None)
+    cols = rg.handle_accel(rng, cfg, specific_force_A=true_a, bias=bias)
     a = np.stack([cols["ax"], cols["ay"], cols["az"]], axis=1)
     q_wa = rg.quat_multiply(q, rg.yaw_quat(cfg.accel_pose_yaw_rad))
     up = quat_rotate(quat_conjugate(q_wa), np.array([0, 0, STANDARD_GRAVITY]))
+    assert np.allclose(true_a, up, atol=1e-9)                                           # the perfect reading (truth.npz)
     assert np.allclose(a, up + bias, atol=cfg.accel_lsb_m_per_s2 / 2 + 1e-12)       # paper eq. 2, +g up
     assert np.allclose(a / cfg.accel_lsb_m_per_s2, np.round(a / cfg.accel_lsb_m_per_s2), atol=1e-6)
     # the reference removes it again
@@ -99,11 +101,27 @@ def test_accelerometer_clips_at_its_range():
     pos = np.zeros((N, 3))
     pos[:, 0] = 0.05 * np.sin(2 * np.pi * 8 * t)              # 126 m/s² peak
     quat = np.tile([1.0, 0, 0, 0], (N, 1))
-    cols = rg.handle_accel(np.random.default_rng(0), cfg, position_W=pos, quaternion_W=quat, rate_hz=RATE, vibration_W=None,
-                           floor_W=None, bias=np.zeros(3))
+    true_a = rg.specific_force(cfg, position_W=pos, quaternion_W=quat, rate_hz=RATE, vibration_W=None, floor_W=None)
+    cols = rg.handle_accel(np.random.default_rng(0), cfg, specific_force_A=true_a, bias=np.zeros(3))
     a = np.stack([cols["ax"], cols["ay"]], axis=1)
     lim = cfg.accel_range_m_per_s2
     assert np.abs(a).max() <= lim + cfg.accel_lsb_m_per_s2 and np.isclose(np.abs(a).max(), lim, atol=cfg.accel_lsb_m_per_s2)
+
+
+@given(radius=st.floats(0.01, 0.1), hz=st.floats(0.5, 3.0))
+@settings(max_examples=10, deadline=None)
+def test_connector_acceleration_on_a_circle_is_centripetal(radius, hz):
+    # a handle translating (no rotation) on a horizontal circle: the connector's centre accelerates by r ω²
+    # towards the centre, whatever its offset from the handle (truth.npz's connector_inertia_W = m a_c)
+    cfg = rg.RigConfig()
+    t = np.arange(N) / RATE
+    w = 2 * np.pi * hz
+    pos = np.stack([radius * np.cos(w * t), radius * np.sin(w * t), np.zeros(N)], axis=1)
+    quat = np.tile([1.0, 0, 0, 0], (N, 1))
+    *_, a_c = rg.connector_motion(cfg, position_W=pos, quaternion_W=quat, rate_hz=RATE, connector_com_S=np.array([0.0, 0.01, 0.02]))
+    inner = slice(10, -10)                               # the finite differences' ends
+    expected = -radius * w ** 2 * pos[::2][inner] / radius
+    assert np.allclose(a_c[inner], expected, atol=1e-3 * radius * w ** 2 + 1e-9)
 
 
 def test_noise_floor_levels_per_axis():

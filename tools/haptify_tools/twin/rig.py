@@ -236,6 +236,21 @@ class HandleLoads:
     torque_W: np.ndarray
 
 
+def connector_motion(cfg: RigConfig, *, position_W: np.ndarray, quaternion_W: np.ndarray, rate_hz: float,
+                     connector_com_S: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """On the F/T clock: the sensor's orientation ``q_WS`` and origin ``p_S`` (m, W), the connector's centre of
+    mass from ``p_S`` (m, W) and that centre's acceleration ``a_c`` (m/s², W; finite differences of the
+    rigid-body path). ``m a_c`` is the connector's inertial force, which the reported force keeps (spec §6.1)."""
+    step = decimation(rate_hz, cfg.ft_rate_hz)
+    q_hs = yaw_quat(cfg.ft_pose_yaw_rad)
+    p_hs = np.asarray(cfg.ft_pose_position_m, float)
+    q_ws = quat_multiply(quaternion_W, np.broadcast_to(q_hs, quaternion_W.shape))
+    p_s = position_W + quat_rotate(quaternion_W, np.broadcast_to(p_hs, position_W.shape))
+    r_c_W = quat_rotate(q_ws, np.broadcast_to(np.asarray(connector_com_S, float), position_W.shape))
+    a_c = derivative(p_s + r_c_W, rate_hz, 2)
+    return q_ws[::step], p_s[::step], r_c_W[::step], a_c[::step]
+
+
 def handle_wrench(rng: np.random.Generator, cfg: RigConfig, *, position_W: np.ndarray, quaternion_W: np.ndarray,
                   rate_hz: float, loads: HandleLoads | None, bias_force: np.ndarray, bias_torque: np.ndarray,
                   connector_mass: float, connector_com_S: np.ndarray, gain: float = 1.0) -> dict:
@@ -251,16 +266,9 @@ def handle_wrench(rng: np.random.Generator, cfg: RigConfig, *, position_W: np.nd
     ``gain`` is the sensor's calibration error: its whole reading (load, bias and noise, all of which pass
     through the sensor's calibration matrix) comes out multiplied by it (1 = a perfectly calibrated sensor).
     """
-    step = decimation(rate_hz, cfg.ft_rate_hz)
-    q_hs = yaw_quat(cfg.ft_pose_yaw_rad)
-    p_hs = np.asarray(cfg.ft_pose_position_m, float)
-    q_ws = quat_multiply(quaternion_W, np.broadcast_to(q_hs, quaternion_W.shape))
-    p_s = position_W + quat_rotate(quaternion_W, np.broadcast_to(p_hs, position_W.shape))
-    r_c_W = quat_rotate(q_ws, np.broadcast_to(np.asarray(connector_com_S, float), position_W.shape))
-    a_c = derivative(p_s + r_c_W, rate_hz, 2)
-    sl = slice(None, None, step)
-    q_ws, p_s, r_c_W, a_c = q_ws[sl], p_s[sl], r_c_W[sl], a_c[sl]
-    p_h = position_W[sl]
+    q_ws, p_s, r_c_W, a_c = connector_motion(cfg, position_W=position_W, quaternion_W=quaternion_W, rate_hz=rate_hz,
+                                             connector_com_S=connector_com_S)
+    p_h = position_W[::decimation(rate_hz, cfg.ft_rate_hz)]
     n = len(q_ws)
     conn = connector_mass * (GRAVITY_W[None, :] - a_c)
     force = conn.copy()
@@ -294,14 +302,13 @@ def noise_floor(rng: np.random.Generator, n: int, rate_hz: float, floor) -> np.n
     return out
 
 
-def handle_accel(rng: np.random.Generator, cfg: RigConfig, *, position_W: np.ndarray, quaternion_W: np.ndarray,
-                 rate_hz: float, vibration_W: np.ndarray | None, floor_W: np.ndarray | None, bias: np.ndarray) -> dict:
-    """Raw ``handle_accel`` columns at ``cfg.accel_rate_hz`` (specific force in the accelerometer frame A).
+def specific_force(cfg: RigConfig, *, position_W: np.ndarray, quaternion_W: np.ndarray, rate_hz: float,
+                   vibration_W: np.ndarray | None, floor_W: np.ndarray | None) -> np.ndarray:
+    """What a perfect accelerometer reads ``(n, 3)`` at ``cfg.accel_rate_hz``: ``R_WAᵀ (a − g_W + v + f)``.
 
-    ``a_A = R_WAᵀ (a − g_W + v) + b_a + n``, with ``a`` the acceleration of the accelerometer's origin
-    (finite differences of the rigid-body path), ``v`` the device vibration (W, physics
-    ``device_vibration``) and ``n`` the rig's noise floor (W, physics ``rig_accel_floor``), both on the
-    accelerometer clock (None: absent); then clipped to ``±accel_range`` and quantised to ``accel_lsb``.
+    ``a`` is the acceleration of the accelerometer's origin (finite differences of the rigid-body path),
+    ``v`` the device vibration (W, physics ``device_vibration``) and ``f`` the rig's noise floor (W, physics
+    ``rig_accel_floor``: the table's own vibration), both on the accelerometer clock (None: absent); m/s².
     """
     step = decimation(rate_hz, cfg.accel_rate_hz)
     q_ha = yaw_quat(cfg.accel_pose_yaw_rad)
@@ -316,7 +323,13 @@ def handle_accel(rng: np.random.Generator, cfg: RigConfig, *, position_W: np.nda
             if len(extra) != n:
                 raise ValueError(f"{name} has {len(extra)} samples, the accelerometer clock {n}")
             total = total + extra
-    a_s = quat_rotate(quat_conjugate(q_wa), total) + bias
+    return quat_rotate(quat_conjugate(q_wa), total)
+
+
+def handle_accel(rng: np.random.Generator, cfg: RigConfig, *, specific_force_A: np.ndarray, bias: np.ndarray) -> dict:
+    """Raw ``handle_accel`` columns from a perfect accelerometer's reading ``specific_force_A`` (:func:`specific_force`):
+    ``a_A + b_a + n`` (``n``: ``accel_white_noise``), clipped to ``±accel_range`` and quantised to ``accel_lsb``."""
+    a_s = specific_force_A + bias
     if cfg.accel_white_noise_m_per_s2 > 0:
         a_s = a_s + rng.normal(0.0, cfg.accel_white_noise_m_per_s2, a_s.shape)
     a_s = np.clip(a_s, -cfg.accel_range_m_per_s2, cfg.accel_range_m_per_s2)

@@ -9,7 +9,9 @@ raw streams with the virtual rig (:mod:`.rig`) and writes:
   :class:`haptify.storage.SessionWriter`; nothing in it reveals the truth;
 - ``<out>/truth.json`` — every effect's parameters (the whole twin), the rig's noise levels, biases and
   geometry, every trial's examiner parameters and clock offsets;
-- ``<out>/truth.npz`` — the true trajectories, joint and gimbal angles and wrenches per trial (1 kHz).
+- ``<out>/truth.npz`` — the true trajectories, joint and gimbal angles and wrenches per trial (1 kHz), the
+  connector's inertial force ``m a_c`` (``connector_inertia_W``, which the reported hand force keeps, spec §6.1),
+  a perfect accelerometer's reading (``accel_t``, ``accel_A``: the accelerometer's clock and frame).
 
 Everything is a deterministic function of the twin, the options and the seed: each trial draws from
 its own generator seeded by ``(seed, crc32(trial id))``, so a trial is identical whichever other
@@ -299,7 +301,7 @@ class DossierSimulator:
             connector_com_S=self.conn_r, gain=gain)}
         rates["handle_wrench"] = cfg.ft_rate_hz
         vib = device_vibration(self.twin, traj.t, traj.speed(), rng_vib)
-        self._accel(streams, rates, offsets, traj, rng_rig, vib)
+        accel_truth = self._accel(streams, rates, offsets, traj, rng_rig, vib)
         streams["plate_wrench"] = {"t": t1k, **rg.plate_wrench(rng_rig, cfg, force_W=res.base_force_W,
                                                                 moment_W=res.base_torque_W, bias_force=self.bias_p,
                                                                 errors=self.plate_errors)}
@@ -312,10 +314,13 @@ class DossierSimulator:
             streams["device_joint_angles"] = {"t": t1k, **{f"q{k + 1}": res.encoder_q[:, k] for k in range(res.encoder_q.shape[1])}}
             rates["device_joint_angles"] = cfg.ft_rate_hz
         self._sync(streams, rates, t1k, t0)
+        a_c = rg.connector_motion(cfg, position_W=traj.position_W, quaternion_W=traj.quaternion_W, rate_hz=traj.rate_hz,
+                                  connector_com_S=self.conn_r)[3]
         arrays = {"t": t1k, "position_W": traj.position_W[::step], "quaternion_W": traj.quaternion_W[::step],
                   "q": res.q, "gimbal": res.gimbal, "force_W": res.force_W, "torque_W": res.torque_W,
+                  "connector_inertia_W": self.conn_m * a_c,
                   "base_force_W": res.base_force_W, "base_torque_W": res.base_torque_W, "reachable": res.ok,
-                  "vibration_W_2kHz": vib}
+                  "vibration_W_2kHz": vib, **accel_truth}
         if active:
             arrays.update({"commanded_W": res.commanded_W, "encoder_q": res.encoder_q, "motor_torque": res.motor_torque,
                            "cable_torque": res.cable_torque, "saturated": res.saturated, "cut_off": res.cut_off})
@@ -348,28 +353,29 @@ class DossierSimulator:
             bias_force=self.bias_f, bias_torque=self.bias_t, connector_mass=self.conn_m, connector_com_S=self.conn_r,
             gain=gain)}
         rates["handle_wrench"] = cfg.ft_rate_hz
-        self._accel(streams, rates, offsets, traj, rng_rig, None)
+        accel_truth = self._accel(streams, rates, offsets, traj, rng_rig, None)
         self._handle_pose(streams, rates, offsets, traj, rng_rig)
         self._sync(streams, rates, t1k, t0)
-        out = self._hand_only(p, traj, streams, rates, entities, offsets, t1k)
+        out = self._hand_only(p, traj, streams, rates, entities, offsets, t1k, accel_truth)
         out.truth["ft_gain"] = gain
         return out
 
-    def _hand_only(self, p, traj, streams, rates, entities, offsets, t1k) -> TrialOutput:
-        """A trial of the handle alone (no device): truth is the hand path at 1 kHz."""
+    def _hand_only(self, p, traj, streams, rates, entities, offsets, t1k, accel_truth) -> TrialOutput:
+        """A trial of the handle alone (no device): truth is the hand path at 1 kHz and the perfect
+        accelerometer's reading (:meth:`_accel`)."""
         step = rg.decimation(traj.rate_hz, self.cfg.ft_rate_hz)
-        arrays = {"t": t1k, "position_W": traj.position_W[::step], "quaternion_W": traj.quaternion_W[::step]}
+        arrays = {"t": t1k, "position_W": traj.position_W[::step], "quaternion_W": traj.quaternion_W[::step], **accel_truth}
         return TrialOutput(p, False, streams, rates, entities, None, {"examiner": traj.meta, "clock_offsets_s": offsets},
                            arrays, float(traj.t[-1]))
 
     def _baseline(self, p, t0, rng_ex, rng_rig, rng_vib) -> TrialOutput:
         traj = ex.baseline_wander(rng_ex, self.opt.duration(p.name), rate_hz=self.opt.rate_hz, t0=t0)
         streams, rates, entities, offsets = {}, {}, {}, {}
-        self._accel(streams, rates, offsets, traj, rng_rig, None)
+        accel_truth = self._accel(streams, rates, offsets, traj, rng_rig, None)
         self._handle_pose(streams, rates, offsets, traj, rng_rig)
         t1k = traj.t[::rg.decimation(traj.rate_hz, self.cfg.sync_rate_hz)]
         self._sync(streams, rates, t1k, t0)
-        return self._hand_only(p, traj, streams, rates, entities, offsets, t1k)
+        return self._hand_only(p, traj, streams, rates, entities, offsets, t1k, accel_truth)
 
     def _plate_trial(self, p, t0, load: ex.PlateLoad | None, duration: float, rng_rig) -> TrialOutput:
         cfg = self.cfg
@@ -407,16 +413,18 @@ class DossierSimulator:
         return self._plate_trial(p, t0, load, 0.0, rng_rig)
 
     # -- stream helpers --------------------------------------------------------------------------
-    def _accel(self, streams, rates, offsets, traj, rng_rig, vib) -> None:
+    def _accel(self, streams, rates, offsets, traj, rng_rig, vib) -> dict[str, np.ndarray]:
+        """The handle_accel stream; returns its truth arrays: times and a perfect accelerometer's reading."""
         cfg = self.cfg
         t2k = traj.t[::rg.decimation(traj.rate_hz, cfg.accel_rate_hz)]
         floor = rg.noise_floor(rng_rig, len(t2k), cfg.accel_rate_hz, self.twin.rig.accel_floor)
         off = rg.clock_offset(rng_rig, cfg)
-        streams["handle_accel"] = {"t": t2k - off, **rg.handle_accel(
-            rng_rig, cfg, position_W=traj.position_W, quaternion_W=traj.quaternion_W, rate_hz=traj.rate_hz,
-            vibration_W=vib, floor_W=floor, bias=self.bias_a)}
+        true_a = rg.specific_force(cfg, position_W=traj.position_W, quaternion_W=traj.quaternion_W, rate_hz=traj.rate_hz,
+                                   vibration_W=vib, floor_W=floor)
+        streams["handle_accel"] = {"t": t2k - off, **rg.handle_accel(rng_rig, cfg, specific_force_A=true_a, bias=self.bias_a)}
         rates["handle_accel"] = cfg.accel_rate_hz
         offsets["handle_accel"] = off
+        return {"accel_t": t2k, "accel_A": true_a}
 
     def _handle_pose(self, streams, rates, offsets, traj, rng_rig, occluded=None, off=None) -> None:
         cfg = self.cfg
