@@ -15,6 +15,7 @@ import math
 import os
 import subprocess
 import sys
+import tempfile
 import time
 import urllib.request
 import warnings
@@ -608,6 +609,39 @@ def test_web_viewer_on_a_busy_port_is_a_coded_error(recorded):
         assert viewer.proc.poll() is not None
 
 
+VIEW_WEB = ("import argparse, sys; from haptify.cli import UI; from haptify_tools.viewer import cmd_view; "
+            "p = argparse.ArgumentParser(); cmd_view.register(p.add_subparsers()); "
+            "a = p.parse_args(sys.argv[1:]); sys.exit(a.func(a, UI()))")
+
+
+def start_view_web(session_root: Path, port: int, wait_s: float = 90) -> tuple[subprocess.Popen, str]:
+    """`haptify view SESSION --trial free_space-1 --web --port PORT` in a child process, and the line that
+    announces the web viewer. Its stderr (progress, messages) goes to a file, never to a pipe no one reads:
+    a full pipe would block the child's next message."""
+    log = tempfile.TemporaryFile("w+")
+    proc = subprocess.Popen([sys.executable, "-c", VIEW_WEB, "view", str(session_root), "--trial", "free_space-1",
+                             "--web", "--port", str(port)], stdout=subprocess.PIPE, stderr=log, text=True)
+    line = ""
+    deadline = time.monotonic() + wait_s
+    while "web viewer:" not in line and time.monotonic() < deadline and proc.poll() is None:
+        line = proc.stdout.readline()
+    if "web viewer:" not in line:  # what the child said instead, for the failing assertion
+        log.seek(0)
+        line += log.read()[-2000:]
+    return proc, line
+
+
+def stop_child(proc: subprocess.Popen) -> None:
+    """A failed check: SIGTERM stops `haptify view --web` with its viewer (a bare kill would orphan it)."""
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
 def test_view_web_command_serves_until_interrupted(sessions, tmp_path):
     """`haptify view SESSION --web --port N` end to end: prints the address, answers, and Ctrl-C stops
     the viewer (no rerun process keeps the port)."""
@@ -616,17 +650,9 @@ def test_view_web_command_serves_until_interrupted(sessions, tmp_path):
 
     main, _, _ = sessions
     port = cmd_view.free_port()
-    code = ("import argparse, sys; from haptify.cli import UI; from haptify_tools.viewer import cmd_view; "
-            "p = argparse.ArgumentParser(); cmd_view.register(p.add_subparsers()); "
-            "a = p.parse_args(sys.argv[1:]); sys.exit(a.func(a, UI()))")
-    proc = subprocess.Popen([sys.executable, "-c", code, "view", str(main.root), "--trial", "free_space-1", "--web",
-                             "--port", str(port)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc, line = start_view_web(main.root, port)
     try:
-        line = ""
-        deadline = time.monotonic() + 40
-        while "web viewer:" not in line and time.monotonic() < deadline and proc.poll() is None:
-            line = proc.stdout.readline()
-        assert f"http://127.0.0.1:{port}/?url=" in line, proc.stderr.read() if proc.poll() is not None else line
+        assert f"http://127.0.0.1:{port}/?url=" in line, line
         assert "rerun%2Bhttp%3A%2F%2F127.0.0.1%3A" in line  # the viewer is pointed at a loopback gRPC proxy
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=5) as resp:
             assert resp.status == 200
@@ -634,9 +660,7 @@ def test_view_web_command_serves_until_interrupted(sessions, tmp_path):
         proc.send_signal(signal.SIGINT)
         assert proc.wait(timeout=20) == 0
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+        stop_child(proc)
     with socket.socket() as s:  # the port is free again: the rerun binary is gone
         s.bind(("127.0.0.1", port))
 
@@ -886,3 +910,22 @@ def test_forget_trial_drops_only_that_trials_memos(sessions):
         ctx.cached(key, lambda: object())
     ctx.forget_trial("stiffness-1")
     assert set(ctx._cache) == {("handle_calibration",), ("plate_signals", "free_space-1")}
+
+
+def test_view_web_command_stopped_by_sigterm_leaves_no_viewer(sessions):
+    """`kill` (SIGTERM) of `haptify view --web` stops the rerun viewer it started, as Ctrl-C does: the port is
+    free again afterwards (an orphaned viewer would keep it and a CPU core)."""
+    import signal
+    import socket
+
+    main, _, _ = sessions
+    port = cmd_view.free_port()
+    proc, line = start_view_web(main.root, port)
+    try:
+        assert "web viewer:" in line, line
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=30) == 0
+    finally:
+        stop_child(proc)
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", port))

@@ -80,6 +80,11 @@ def web_url(web_port: int, grpc_port: int) -> str:
     return f"http://{LOOPBACK}:{web_port}/?url={urllib.parse.quote(proxy, safe='')}"
 
 
+def _interrupt(signum: int, frame: object) -> None:
+    """SIGTERM while serving: leave as Ctrl-C does, so the viewer process group is stopped, never orphaned."""
+    raise KeyboardInterrupt
+
+
 def _signal_group(pid: int, sig: int) -> bool:
     """Send ``sig`` to the process group ``pid`` (a viewer started here); False when the group is gone."""
     try:
@@ -194,16 +199,21 @@ def run(args: argparse.Namespace, ui) -> int:
         if args.web:
             port = args.port or DEFAULT_WEB_PORT
             viewer = serve_web(out, port)
-            viewer.wait_until_serving()
+            previous = signal.signal(signal.SIGTERM, _interrupt)  # `kill` stops the viewer as Ctrl-C does
+            interrupted = False
             try:
+                viewer.wait_until_serving()
                 summary["url"] = viewer.url
                 ui.emit_json(summary)
                 ui.say(f"web viewer: {viewer.url}\n(serving on {LOOPBACK} only; Ctrl-C stops it)")
                 viewer.proc.wait()
             except KeyboardInterrupt:
-                ui.say("stopped the web viewer")
-            finally:
+                interrupted = True
+            finally:  # the viewer is stopped before anything else is written (an output that blocks cannot orphan it)
+                signal.signal(signal.SIGTERM, previous)
                 viewer.stop()
+            if interrupted:
+                ui.say("stopped the web viewer")
             return 0
         if args.save:
             ui.emit_json(summary)
