@@ -609,7 +609,10 @@ def test_web_viewer_on_a_busy_port_is_a_coded_error(recorded):
         assert viewer.proc.poll() is not None
 
 
-VIEW_WEB = ("import argparse, sys; from haptify.cli import UI; from haptify_tools.viewer import cmd_view; "
+# The child is the command as typed at a terminal: Ctrl-C raises KeyboardInterrupt there even when this test
+# runs where SIGINT is ignored (a background job of a non-interactive shell passes SIG_IGN on to its children).
+VIEW_WEB = ("import argparse, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+            "from haptify.cli import UI; from haptify_tools.viewer import cmd_view; "
             "p = argparse.ArgumentParser(); cmd_view.register(p.add_subparsers()); "
             "a = p.parse_args(sys.argv[1:]); sys.exit(a.func(a, UI()))")
 
