@@ -260,8 +260,8 @@ def main() -> None:
         done = {r["seed"] for r in rows}
         clock = time.perf_counter()
         with tempfile.TemporaryDirectory() as tmp, multiprocessing.get_context("fork").Pool(args.workers) as pool:
-            todo = [(seed, args.reps, durations, Path(tmp)) for seed in range(args.sessions or 200) if seed not in done]
-            for row in pool.imap_unordered(_one, todo):
+            remaining = [(seed, args.reps, durations, Path(tmp)) for seed in range(args.sessions or 200) if seed not in done]
+            for row in pool.imap_unordered(_one, remaining):
                 with args.out.open("a") as fh:
                     fh.write(json.dumps(row) + "\n")
                 rows.append(row)
