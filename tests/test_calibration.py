@@ -33,6 +33,54 @@ def test_sphere_fit_recovers_centre_radius_and_noise():
     assert fit.coverage == pytest.approx(1 / 3, abs=0.02)
 
 
+def _tumble_directions(n: int, periods: float) -> np.ndarray:
+    """Unit vectors along a slow continuous path that visits the whole sphere (time-ordered samples)."""
+    t = np.linspace(0.0, 1.0, n)
+    az, pol = 2 * np.pi * 2.3 * periods * t, np.pi * (0.5 + 0.45 * np.sin(2 * np.pi * 1.7 * periods * t))
+    return np.column_stack([np.sin(pol) * np.cos(az), np.sin(pol) * np.sin(az), np.cos(pol)])
+
+
+@pytest.mark.parametrize("phi", [0.0, 0.9])
+def test_offset_uncertainty_matches_the_known_long_run_variance(phi):
+    """Spec §6.2 step 5: for AR(1) noise e_k = φe_{k−1} + w_k (per axis, sd σ_w), the long-run variance is
+    σ_w²/(1 − φ)², so Cov(c, ρ) = σ_w²/(1 − φ)²·(JᵀJ)⁻¹ with Jᵢ = −(uᵢ, 1); the batch-means estimate averaged over
+    seeds agrees within its sampling spread, while σ²(JᵀJ)⁻¹ from the per-sample RMS misses by √((1 + φ)/(1 − φ))."""
+    from scipy.signal import lfilter
+
+    n, sigma_w, centre, radius = 3000, 0.002, np.array([0.31, -0.12, 0.45]), 0.51
+    d = _tumble_directions(n, 1.0)
+    jac = np.column_stack([d, np.ones(n)])
+    cov = sigma_w ** 2 / (1 - phi) ** 2 * np.linalg.inv(jac.T @ jac)
+    expected = np.sqrt(np.max(np.diag(cov)[:3]) + cov[3, 3])
+    got = []
+    for seed in range(12):
+        noise = lfilter([1.0], [1.0, -phi], np.random.default_rng(seed).normal(0, sigma_w, (n, 3)), axis=0)
+        got.append(calibration.fit_sphere(centre + radius * d + noise).offset_u)
+    # 20 blocks: each estimate's u has a relative sd of 1/√38 ≈ 16 % (the mean of 12: 5 %), and batch means read
+    # low by about the correlation time over the block length (φ = 0.9: 19 of 150 samples, ≈ −10 % on u)
+    assert np.mean(got) == pytest.approx(expected, rel=0.2)
+    per_sample = calibration.fit_sphere(centre + radius * d).rms  # noise-free: the fit is exact
+    assert per_sample < 1e-9
+
+
+def test_offset_uncertainty_of_a_twin_like_trial_covers_the_actual_bias_error(tmp_path):
+    """Spec §14.7: rig.handle_force_offset_u of calibration trials with known white F/T noise is the spread of the
+    fitted bias's actual error over independent trials (not the per-sample fit RMS, an order of magnitude larger)."""
+    truth = rb.HandleTruth(force_noise=0.006)
+    errors, us, rms = [], [], []
+    for seed in range(8):
+        w = rb.writer(sid=f"cal{seed}")
+        rb.add_calibration_trial(w, truth, np.random.default_rng(seed), duration_s=12.0)
+        w.write(tmp_path / f"s{seed}")
+        cal = calibration.fit_trial(open_session(tmp_path / f"s{seed}"), "cal-1")
+        errors.append(cal.force_bias_N - truth.force_bias)
+        us.append(cal.force_offset_u_N)
+        rms.append(cal.rms_force_N)
+    actual = np.sqrt(np.max(np.mean(np.square(errors), axis=0)))
+    assert 0.5 < np.mean(us) / actual < 2.0  # 8 trials: the actual spread itself is known to ~25 %
+    assert np.mean(rms) > 4 * np.mean(us)  # 12 s of a 20 Hz low-passed noise: the fit RMS is ≈ 6× u_off
+
+
 def test_sphere_fit_is_exact_without_noise():
     rng = np.random.default_rng(1)
     pts = np.array([1.0, 2.0, -3.0]) + 9.81 * _unit_vectors(200, rng)

@@ -147,10 +147,10 @@ def test_attach_without_rig_figures_is_type_a_only(two_rep_free_space):
 
 
 def test_attach_with_a_rig_figure_combines_a_and_b(two_rep_free_space, monkeypatch):
-    """With a handle-calibration figure of 0.05 N: u² = u_A² + u_B², ν_eff by Welch–Satterthwaite."""
+    """With an offset-uncertainty figure of 0.05 N (rig.handle_force_offset_u): u² = u_A² + u_B², ν_eff by Welch–Satterthwaite."""
     ctx = ComputeContext(session=open_session(two_rep_free_space))
     res = compute_session(ctx.session, ["free_space.force_mean"], ctx=ctx)
-    monkeypatch.setattr(unc, "rig_figure", lambda c, r, mid: type("Fig", (), {"value": [0.05, 0.1, 0.01]})())
+    monkeypatch.setattr(unc, "rig_figure", lambda c, r, mid: type("Fig", (), {"value": 0.05})())
     unc.attach(ctx, res, draws=200)
     rec = res.get("free_space.force_mean")
     a, b = rec.uncertainty.budget

@@ -769,6 +769,9 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant("calibration_fit_on_raw_samples", "6.2", "R6.2-1", "the calibration fits use the low-passed samples resampled to 100 Hz",
            "the raw samples at their native rates", (Patch(calibration, "fit_trial", _fit_raw_samples),),
            ("rig.handle_calibration_rms",)),
+    Mutant("offset_u_is_fit_rms", "6.2", "R6.2-2", "the offset uncertainty is the fitted bias and weight's batch-means "
+           "standard uncertainty", "the force fit's per-sample RMS", (Patch(calibration, "fit_from_samples", _post(
+               lambda cal, *_: dataclasses.replace(cal, force_offset_u_N=cal.rms_force_N))),), ("rig.handle_force_offset_u",)),
     Mutant("torque_rms_per_vector", "6.3", "R6.3-1", "torque fit RMS = √(Σ|e_i|² / 3N) (per component)",
            "√(Σ|e_i|² / N) (per vector)", (Patch(calibration, "fit_torque", _post(lambda r, *_: (r[0], r[1], r[2] * math.sqrt(3)))),),
            ("rig.handle_calibration_rms",)),

@@ -39,6 +39,13 @@ class SphereFit:
     radius: float
     rms: float
     coverage: float  # smallest eigenvalue of the mean outer product of unit directions (1/3 = full sphere)
+    covariance: np.ndarray  # (4, 4) of (centre x, y, z, radius), input units squared: :func:`batch_means_covariance`
+
+    @property
+    def offset_u(self) -> float:
+        """Standard uncertainty (input units) of a common offset of what the fit removes (spec §6.2, §14.7):
+        √(largest per-axis variance of the centre + variance of the radius)."""
+        return float(np.sqrt(np.max(np.diag(self.covariance)[:3]) + self.covariance[3, 3]))
 
 
 @dataclass(frozen=True)
@@ -47,7 +54,8 @@ class HandleCalibration:
 
     ``connector_mass_kg`` is the fitted weight divided by standard gravity; the weight removed from
     each reading is ``connector_mass_kg · g0`` along g, so the fitted weight is removed exactly.
-    The ``rms_*`` fields and ``n_samples`` are set when the parameters were fitted from a trial.
+    The ``rms_*`` fields, ``force_offset_u_N`` (:attr:`SphereFit.offset_u` of the force sphere) and
+    ``n_samples`` are set when the parameters were fitted from a trial.
     """
 
     force_bias_N: np.ndarray
@@ -60,6 +68,7 @@ class HandleCalibration:
     rms_force_N: float | None = None
     rms_accel_m_per_s2: float | None = None
     rms_torque_Nm: float | None = None
+    force_offset_u_N: float | None = None
     n_samples: int = 0
     diagnostics: dict[str, Any] = field(default_factory=dict)
 
@@ -118,8 +127,26 @@ def fit_sphere(points: np.ndarray, *, min_coverage: float | None = None, min_sam
     if not np.isfinite(radius) or coverage < min_coverage:
         raise fail("E602", f"{label}: orientations cover too little of the sphere (coverage {coverage:.3f})",
                    expected=f"coverage >= {min_coverage}", found=round(coverage, 4))
-    rms = float(np.sqrt(np.mean(resid(np.concatenate([centre, [radius]])) ** 2)))
-    return SphereFit(centre=centre, radius=radius, rms=rms, coverage=coverage)
+    r = resid(np.concatenate([centre, [radius]]))
+    jac = -np.column_stack([u, np.ones(len(u))])
+    cov = batch_means_covariance(jac, r, int(param(FAMILY, "offset_batches")))
+    return SphereFit(centre=centre, radius=radius, rms=float(np.sqrt(np.mean(r ** 2))), coverage=coverage, covariance=cov)
+
+
+def batch_means_covariance(jac: np.ndarray, resid: np.ndarray, batches: int) -> np.ndarray:
+    """Covariance of least-squares parameters whose time-ordered residuals are correlated (spec §6.2).
+
+    The sandwich (JᵀJ)⁻¹ S (JᵀJ)⁻¹ with S the batch-means long-run covariance of the scores Jᵢᵀrᵢ: the
+    samples cut into ``batches`` contiguous blocks, Gᵦ = Σ over block β of Jᵢᵀrᵢ, S = B/(B − 1)·Σᵦ (Gᵦ − Ḡ)(Gᵦ − Ḡ)ᵀ.
+    Blocks longer than the residuals' correlation time make it consistent where the per-sample formula
+    σ²(JᵀJ)⁻¹ would understate a correlated residual's effect and overstate an independent one's RMS.
+    """
+    scores = jac * resid[:, None]
+    sums = np.array([blk.sum(axis=0) for blk in np.array_split(scores, batches)])
+    dev = sums - sums.mean(axis=0)
+    s = batches / (batches - 1) * dev.T @ dev
+    inv = np.linalg.inv(jac.T @ jac)
+    return inv @ s @ inv
 
 
 def _cross_matrix(v: np.ndarray) -> np.ndarray:
@@ -163,7 +190,7 @@ def fit_from_samples(force: np.ndarray, torque: np.ndarray, accel: np.ndarray, *
     return HandleCalibration(force_bias_N=fs.centre, connector_mass_kg=fs.radius / STANDARD_GRAVITY, connector_com_m=com,
                              torque_bias_Nm=b_tau, accel_bias_m_per_s2=acc.centre, gravity_m_per_s2=acc.radius,
                              source=source, rms_force_N=fs.rms, rms_accel_m_per_s2=acc.rms, rms_torque_Nm=rms_tau,
-                             n_samples=int(len(force)),
+                             force_offset_u_N=fs.offset_u, n_samples=int(len(force)),
                              diagnostics={"force_coverage": fs.coverage, "accel_coverage": acc.coverage})
 
 

@@ -1,7 +1,7 @@
 """Rig metrics and the rig check against the paper's requirements (spec chapter 14, §14.4–14.8).
 
 Metrics (``schemas/<v>/metrics/rig.json``): ``rig.plate_natural_frequency``, ``rig.cop_error``,
-``rig.handle_calibration_rms``, ``rig.sync_offset``. :func:`check_rig` turns them and the rig
+``rig.handle_calibration_rms``, ``rig.handle_force_offset_u``, ``rig.sync_offset``. :func:`check_rig` turns them and the rig
 description into PASS / FAIL / WARN / SKIP lines for ``haptify rig-check``.
 """
 
@@ -168,6 +168,11 @@ def _calibration_rms(ctx: Any, mid: str, got: dict[str, calibration.HandleCalibr
     return _vector_result(mid, rms, diag)
 
 
+def _force_offset_u(ctx: Any, mid: str, got: dict[str, calibration.HandleCalibration]) -> MetricResult:
+    """``rig.handle_force_offset_u`` (spec §6.2, §14.7): the force sphere's offset uncertainty, mean over repetitions."""
+    return aggregate(FAMILY, mid, [TrialValue(tid, c.force_offset_u_N) for tid, c in got.items()])
+
+
 def _sync_offset(ctx: Any, mid: str, got: dict[str, dict[str, float]]) -> MetricResult:
     """``rig.sync_offset`` (spec §14.6): largest |delay| over recorder pairs, mean over repetitions."""
     vals = [TrialValue(tid, max(abs(v) for v in d.values())) for tid, d in got.items()]
@@ -179,6 +184,7 @@ METRIC_STEPS: dict[str, tuple[Callable[[Any, str], Any], Callable[[Any, str, dic
     "rig.plate_natural_frequency": (impact_frequencies, _natural_frequency),
     "rig.cop_error": (force_plate.cop_trial_placements, _cop_error),
     "rig.handle_calibration_rms": (calibration.trial_fit, _calibration_rms),
+    "rig.handle_force_offset_u": (calibration.trial_fit, _force_offset_u),
     "rig.sync_offset": (recorder_delays, _sync_offset),
 }
 

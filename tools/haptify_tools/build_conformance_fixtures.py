@@ -30,7 +30,7 @@ from typing import Any, Callable
 import numpy as np
 from scipy.signal import butter, lfilter, sosfiltfilt
 
-from haptify.conventions import quat_from_axis_angle, quat_multiply, quat_rotate
+from haptify.conventions import GRAVITY_W, quat_conjugate, quat_from_axis_angle, quat_multiply, quat_rotate
 from haptify.metric_definitions import param
 from haptify.storage import SessionWriter
 from haptify.versions import SPEC_VERSION
@@ -1380,6 +1380,20 @@ def calibration_rms(truth: rb.HandleTruth) -> list[float]:
     return [truth.force_noise * math.sqrt(ft_var), truth.accel_noise * math.sqrt(acc_var), torque_sigma * math.sqrt(ft_var)]
 
 
+def calibration_offset_u(truth: rb.HandleTruth, rig: dict, duration_s: float) -> float:
+    """The known rig.handle_force_offset_u (spec §6.2 step 5, §14.7) of a calibration trial of ``truth``'s white F/T
+    noise σ (1 kHz) over ``duration_s`` of :func:`rig_builders.tumbling_orientation`: the low-pass keeps the noise's
+    spectral density at 0 Hz, so on the fit grid (rate r) the scores' long-run covariance is σ²·(r/1000)·JᵀJ and
+    Cov(c, ρ) = σ²·(r/1000)·(JᵀJ)⁻¹, Jᵢ = −(ĝᵢ, 1) with ĝᵢ the gravity direction in the sensor frame."""
+    rate = float(param("calibration", "fit_rate_hz"))
+    t = np.arange(int(duration_s * rate)) / rate
+    q_ws = quat_multiply(rb.tumbling_orientation(t), np.broadcast_to(np.asarray(rig["handle"]["ft_sensor"]["pose"]["quaternion"], float), (len(t), 4)))
+    g = quat_rotate(quat_conjugate(q_ws), np.broadcast_to(GRAVITY_W, (len(t), 3)))
+    jac = np.column_stack([g / np.linalg.norm(g, axis=1, keepdims=True), np.ones(len(t))])
+    cov = truth.force_noise ** 2 * rate / 1000.0 * np.linalg.inv(jac.T @ jac)
+    return float(np.sqrt(np.max(np.diag(cov)[:3]) + cov[3, 3]))
+
+
 def rig_fixtures() -> list[Fixture]:
     out: list[Fixture] = []
     variants = [
@@ -1410,6 +1424,7 @@ def rig_fixtures() -> list[Fixture]:
         short = name.removeprefix("rig-")
         peaks = [damped_peak(f, zeta) for f in modes]
         expected_rms = calibration_rms(truth)
+        rig_desc = {"rotated": rb.rotated_rig, "example": example_rig, "rotated-plate": rotated_rig_full}[rig_kind]()
         quiet = truth.force_noise == 0.0
         fx.cases += [
             case(f"rig.plate_natural_frequency.{short}", "rig.plate_natural_frequency", "14.4", name, peaks, "Hz", "analytic", f"a ball drop rings each axis as e^(−ζωt) sin(ω_d t) with f_n = {modes} Hz, ζ = {zeta}: the "
@@ -1429,6 +1444,12 @@ def rig_fixtures() -> list[Fixture]:
                   "of an isotropic error has the per-axis σ; the torque residual adds the force noise through the centre of "
                   "mass, √(σ_τ² + ⅔|c|²σ_F²); tolerance 15 % = the sampling spread of an RMS over a few hundred "
                   "independent samples"), desc),
+            case(f"rig.handle_force_offset_u.{short}", "rig.handle_force_offset_u", "14.7", name,
+                 calibration_offset_u(truth, rig_desc, 12.0), "N", "analytic",
+                 ("noise-free sensors: only the filters' end effects on the tumbling gravity are left to the fit" if quiet else
+                  f"white F/T noise σ = {truth.force_noise} N per axis at 1 kHz over 12 s of the tumble: the low-pass keeps its "
+                  "density at 0 Hz, so the fitted bias and weight have Cov = σ²·(r/1 kHz)·(JᵀJ)⁻¹ on the 100 Hz fit grid "
+                  "(Jᵢ = −(ĝᵢ, 1)); value √(max per-axis variance of the bias + variance of the weight)"), desc),
         ]
         out.append(fx)
     out.append(impact_fixture())
