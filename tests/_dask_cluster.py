@@ -1,5 +1,5 @@
 """A Dask cluster started as separate commands, as one is on real machines: ``dask scheduler`` and ``dask worker
-tcp://…`` subprocesses on loopback ports (issue 24). For the tests and benchmarks/bench_reverify.py."""
+tcp://…`` subprocesses on loopback ports (spec §17.9). For the tests and benchmarks/bench_reverify.py."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""``haptify batch compute`` (issue 24): many sessions, each into its own output folder, on a Dask LocalCluster,
+"""``haptify batch compute`` (spec §15.4, §17.9): many sessions, each into its own output folder, on a Dask LocalCluster,
 with exactly the files ``haptify compute`` writes and the serial run's bytes; a refused session gets its
 findings document and does not stop the others."""
 

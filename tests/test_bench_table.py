@@ -1,4 +1,4 @@
-"""The generated benchmark table stays true (issue 21, item 5): benchmarks/RESULTS-table.md was written by
+"""The generated benchmark table stays true: benchmarks/RESULTS-table.md was written by
 `make bench` from the scripts as they are now."""
 
 from __future__ import annotations

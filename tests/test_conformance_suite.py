@@ -1,4 +1,4 @@
-"""The conformance suite's content (spec chapter 16, issues 6 and 16): the reference passes every case, every
+"""The conformance suite's content (spec chapter 16, §16.8.3): the reference passes every case, every
 cheap mutant of ``haptify_mutants.catalogue`` fails a case of a metric it breaks, the mutant set is well formed
 and its recorded result current, the suite lints clean, the committed fixtures and case files are what the
 builder makes, and a JavaScript implementation passes its cases."""

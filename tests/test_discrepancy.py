@@ -1,4 +1,4 @@
-"""The discrepancy workflow on hidden effects (issue 8): sessions simulated by the twin WITH an effect, the
+"""The discrepancy workflow on hidden effects (design §5): sessions simulated by the twin WITH an effect, the
 workflow started from the twin WITHOUT it must name it, identify its parameter and shrink the gap; with
 nothing hidden nothing is named; an effect outside the library is reported as unexplained."""
 
@@ -126,7 +126,7 @@ def test_hidden_effect_is_named_first_and_identified(tmp_path, effect, parameter
     # the workflow's own floor (replays the updated twin generates along other examiner paths): their median estimates
     # the true one to within the spread of the floor between paths (0.0035–0.019 N, a factor of 5.4, over nine 12 s
     # stiffness sessions; 0.008–0.018 N in 16 s of free space; benchmarks/RESULTS.md), and their prediction bound,
-    # the floor the verdict uses, lies above what the true twin leaves (issue 20)
+    # the floor the verdict uses, lies above what the true twin leaves
     assert 1 / 6 < result.floor_median_N / floor < 6
     assert floor < result.floor_N
 

@@ -1,4 +1,4 @@
-"""The discrepancy workflow's candidate search on a Dask cluster (issue 24): the same fits, values and
+"""The discrepancy workflow's candidate search on a Dask cluster (spec §17.9): the same fits, values and
 simulations as the serial search, to the bit, for a session with a hidden Coulomb friction."""
 
 from __future__ import annotations

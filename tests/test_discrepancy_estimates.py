@@ -1,4 +1,4 @@
-"""The discrepancy workflow's estimates (issue 20, items 1–2; discrepancy README §2 per drive, §3 uncertainty): effects
+"""The discrepancy workflow's estimates (discrepancy README §2 per drive, §3 uncertainty): effects
 whose parameter holds one value per drive are identified per drive when the data support it (decided by the acceptance
 rule itself on the shared fit's residual); a searched value off the grid is found to well under 1 % and its 95 %
 interval (the replays' parametric bootstrap) covers it. Known answers: sessions simulated by the ``touch`` preset with
@@ -22,8 +22,8 @@ def _trials(folder, truth, protocol, seconds, seed):
 
 
 def test_per_axis_coulomb_friction_at_three_times_the_preset_is_named_per_drive_and_explained(tmp_path):
-    """The Touch's own per-drive Coulomb torques (0.0308 / 0.0264 / 0.0264 N·m) ×3, hidden: one shared value left ≈ 0.1 N
-    and read "unexplained residual" (issue 20); per drive they are named within 2 % and the verdict is "explained"."""
+    """The Touch's own per-drive Coulomb torques (0.0308 / 0.0264 / 0.0264 N·m) ×3, hidden: one shared value leaves ≈ 0.1 N
+    and reads "unexplained residual"; per drive they are named within 2 % and the verdict is "explained"."""
     truth_values = [3 * v for v in preset("touch").effects.friction_coulomb.torque_Nm]
     truth = set_param(preset("touch"), "friction.coulomb.torque_Nm", truth_values)
     trials = _trials(tmp_path, truth, "free_space", 16.0, 201)
@@ -38,8 +38,8 @@ def test_per_axis_coulomb_friction_at_three_times_the_preset_is_named_per_drive_
 
 
 def test_an_off_grid_series_elasticity_is_found_within_one_percent_and_its_interval_covers_it(tmp_path):
-    """13.7 N·m/rad, between the grid's 11.5 and 23 N·m/rad (the preset's value ×1, ×2): the former parabolic steps stopped
-    1.5–4 % off such values with standard errors 20–65× too small (issue 20)."""
+    """13.7 N·m/rad, between the grid's 11.5 and 23 N·m/rad (the preset's value ×1, ×2): off the grid the
+    estimate is within 1 % and its interval covers the truth."""
     truth = set_param(preset("touch"), "drive.series_elasticity.stiffness_Nm_per_rad", 13.7)
     trials = _trials(tmp_path, truth, "stiffness", 12.0, 301)
     result, _ = assess(disable(truth, "drive.series_elasticity"), trials, {"stiffness": 12.0}, max_effects=1)

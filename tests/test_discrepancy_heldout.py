@@ -1,5 +1,5 @@
-"""The discrepancy workflow on held-out-like cases (issue 20, item 5): another preset (Touch X), another pair of hidden
-effects, magnitudes ×0.3 and ×3 of the stored value with the search started from the stored value (off the truth and
+"""The discrepancy workflow on held-out-like cases (discrepancy README, Known limits): another preset (Touch X),
+another pair of hidden effects, magnitudes ×0.3 and ×3 of the stored value with the search started from the stored value (off the truth and
 off the search grid), per-axis values of an effect other than Coulomb friction, and a null Touch X session. The cases outside the library
 (a cogging force periodic in position, a force growing with the speed squared) and the null case on a short session
 are in ``test_discrepancy_verdict.py``; the per-drive Coulomb ×3 and an off-grid series elasticity started from the
@@ -80,9 +80,8 @@ def test_two_hidden_effects_viscous_friction_and_backlash_are_both_named(tmp_pat
 def test_a_series_elasticity_at_a_third_or_three_times_the_stored_value_is_found_within_its_interval(tmp_path, factor, seed,
                                                                                                      tolerance):
     """The hidden stiffness is the preset's 11.5 N·m/rad × 0.31 or × 2.9 — between the search grid's points (×¼, ½, 1,
-    2, 4 of the stored value the search starts from): its 95 % interval covers the truth and the verdict is "explained"
-    (issue 20: 35.88 ± 0.05 against a true 34.5, and a left-over residual that flipped the verdict). The stiff cable
-    is seen less: at the handle, 33 N·m/rad over the ≈ 0.13 m arm is ≈ 2000 N/m in series with the rendered 750 N/m,
+    2, 4 of the stored value the search starts from): its 95 % interval covers the truth and the verdict is "explained".
+    The stiff cable is seen less: at the handle, 33 N·m/rad over the ≈ 0.13 m arm is ≈ 2000 N/m in series with the rendered 750 N/m,
     so a 3 % error moves the rendered stiffness by under 1 % — there the interval is ±4 % and the estimate within 5 %;
     the soft one within 1 %."""
     value = factor * 11.5

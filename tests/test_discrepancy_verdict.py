@@ -1,4 +1,4 @@
-"""The verdict cannot say "fine" wrongly (issue 20, item 3): a force outside the effect library is "unexplained
+"""The verdict cannot say "fine" wrongly (discrepancy README §3): a force outside the effect library is "unexplained
 residual" with its shape described, never "no discrepancy"; null sessions, long and short, name nothing and their true
 twin's held-out gap stays under the floor; benchmarks the operators cannot compute are listed with their code.
 
@@ -35,7 +35,7 @@ def free16(tmp_path_factory):
 
 
 def test_a_cogging_force_outside_the_library_is_unexplained_with_its_period_and_amplitude(free16):
-    """0.2 N · sin(2πx / 5 mm) along x: the issue's case that read "no discrepancy"."""
+    """0.2 N · sin(2πx / 5 mm) along x: a field that must never read "no discrepancy"."""
     result, _ = assess(preset("touch"), with_field(free16, Cogging(0.2, 0.005)), {"free_space": 16.0})
     assert result.verdict == "unexplained residual"
     assert result.accepted == []
@@ -59,7 +59,7 @@ def test_a_speed_dependent_force_outside_the_library_is_unexplained_and_follows_
 @pytest.mark.parametrize("seconds, seed", [(4.0, 41), (16.0, 42)])
 def test_a_null_session_long_or_short_names_nothing_and_its_true_gap_is_under_the_floor(tmp_path, seconds, seed):
     """The twin that generated the session: nothing named, "no discrepancy", and the floor (the replays' prediction
-    bound) above the gap the true twin leaves — the issue's short session had 0.0175 N against a 0.0104 N floor."""
+    bound) above the gap the true twin leaves, on a long and on a short session."""
     trials = _trials(tmp_path, seconds, seed)
     twin = preset("touch")
     result, _ = assess(twin, trials, {"free_space": seconds})

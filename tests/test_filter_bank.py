@@ -1,4 +1,4 @@
-"""The filter bank of the Hammerstein–Wiener fit (haptify.filter_bank; spec §11.3, §11.4.3; issue 21)."""
+"""The filter bank of the Hammerstein–Wiener fit (haptify.filter_bank; spec §11.3, §11.4.3)."""
 
 from __future__ import annotations
 

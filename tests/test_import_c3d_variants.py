@@ -1,4 +1,4 @@
-"""C3D files as every system writes them (spec §5.5–5.6, issue 19): analog-only files, header/data
+"""C3D files as every system writes them (spec §5.5–5.6): analog-only files, header/data
 disagreements, 25–2000 Hz, non-mm units, force platforms of types 1–4 with near-planar or meaningless
 corners, and 6-DoF bodies from the ROTATION group — each built with ezc3d's writer from known values
 (haptify_tools.c3d_variants) and imported, validated, and for 6-DoF bodies computed."""
@@ -197,7 +197,7 @@ def test_platform_types_1_to_4_define_w_and_the_plate(tmp_path, kind, cal):
 
 
 def test_near_planar_corners_are_accepted_with_the_deviation(tmp_path):
-    """A real calibration (the issue's type-3 file): the corners twisted 1.28 mm off a plane — corners
+    """A real calibration (a type-3 file): the corners twisted 1.28 mm off a plane — corners
     1 and 3 up, 2 and 4 down — so the best-fitting plane is the mean and every corner is 1.28 mm off it."""
     corners = rectangle_corners([0.0, 0.0, 0.0], 600.0, 400.0) + TWIST * 1.28
     path = write_c3d(tmp_path / "np.c3d", platform_spec(3, corners, origin=(210.0, 260.0, -45.0)))

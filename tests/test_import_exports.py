@@ -1,4 +1,4 @@
-"""The common motion-capture exports (spec §5.10, issue 19): Qualisys TSV (3-D and 6DOF), OptiTrack
+"""The common motion-capture exports (spec §5.10): Qualisys TSV (3-D and 6DOF), OptiTrack
 Motive CSV (markers and rigid bodies) and Vicon Nexus CSV (devices, segments, trajectories, model
 outputs), written here from the formats' published layouts with known values; each builds a session
 that validates and computes, through ``haptify import FORMAT`` and ``haptify import auto``."""

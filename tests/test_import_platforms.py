@@ -1,4 +1,4 @@
-"""Force platforms of types 1–4 become the trial's plate_wrench (spec §5.6.1, issue 19).
+"""Force platforms of types 1–4 become the trial's plate_wrench (spec §5.6.1).
 
 Each file carries a known load by construction — an integer force (N) applied at an integer point of
 the top surface (mm) with a free moment (N·mm) — recorded as each platform type records it

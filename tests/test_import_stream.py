@@ -1,4 +1,4 @@
-"""Large C3D files stream (spec §5.5.1, issue 19): the chunked reader of the data block reads what
+"""Large C3D files stream (spec §5.5.1): the chunked reader of the data block reads what
 ezc3d reads, on every variant the importer meets (REAL and INTEGER words, scaled and offset analog
 channels, truncated files, header/data disagreements, analog-only files, a long file past 65535
 frames, the real recordings when present), and an import in small chunks writes exactly the streams

@@ -289,7 +289,7 @@ def test_unit_gain_model_is_linear_and_time_invariant(b, p, nk, shift, gain):
 
 
 # ---------------------------------------------------------------------------------------------
-# the batched simulation and Jacobian of the fit (spec §11.4.3; issue 21)
+# the batched simulation and Jacobian of the fit (spec §11.4.3)
 # ---------------------------------------------------------------------------------------------
 
 def _random_structure(rng: np.random.Generator, nk: int):

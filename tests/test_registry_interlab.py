@@ -1,4 +1,4 @@
-"""Inter-lab precision and ties in the registry (issue 23, spec §17.5.3, §19.6), on SQLite, with values drawn
+"""Inter-lab precision and ties in the registry (spec §17.5.3, §19.6), on SQLite, with values drawn
 from a known model: lab effect σ_L, repeatability σ_r, and uncertainties chosen so that the significance
 threshold of each difference is known."""
 

@@ -1,4 +1,4 @@
-"""Leaderboard ordering of the registry on device results known by construction (issue 9)."""
+"""Leaderboard ordering of the registry on device results known by construction (spec §17.5)."""
 
 from __future__ import annotations
 

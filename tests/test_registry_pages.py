@@ -1,4 +1,4 @@
-"""The registry's web pages and read-side endpoints on real submissions (issue 9).
+"""The registry's web pages and read-side endpoints on real submissions (spec §17.5).
 
 Submissions go through the core's API (TestClient ``POST /api/v1/submissions`` with lab tokens): three
 devices from two labs with repetition values chosen by construction, so every mean, spread and ranking

@@ -1,4 +1,4 @@
-"""Registry-wide re-verification on Dask (spec §17.9, issue 24): a small registry of five submissions with raw
+"""Registry-wide re-verification on Dask (spec §17.9): a small registry of five submissions with raw
 streams (four agreeing, one with vibration.rms submitted × 1.05) re-verified serially, on a LocalCluster, on a
 scheduler and workers started as separate commands, with a worker killed mid-run, interrupted and resumed; and
 a planted earlier re-computation that differs by more than the tolerance is marked as moved."""

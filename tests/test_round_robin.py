@@ -1,4 +1,4 @@
-"""A simulated round robin (issue 23, item 5; tools/haptify_tools/twin/round_robin.py): N virtual labs measure one
+"""A simulated round robin (TWIN.md, Round robins; tools/haptify_tools/twin/round_robin.py): N virtual labs measure one
 Touch twin, the reference computes each lab's session, the labs submit to a registry on SQLite, and the
 registry's ISO 5725-2 s_r and s_R (spec §17.5.3) are checked against the variation that was simulated."""
 

@@ -1,4 +1,4 @@
-"""Simulated dossiers (issue 3): one valid standard session, truth beside it, deterministic for a seed."""
+"""Simulated dossiers (design §4): one valid standard session, truth beside it, deterministic for a seed."""
 
 from __future__ import annotations
 

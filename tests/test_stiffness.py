@@ -330,7 +330,7 @@ def test_a_fast_press_in_a_session_raises_w415(tmp_path):
     assert res["stiffness.measured"].value == pytest.approx(K_TRUE, rel=0.02)
 
 
-# --- the conformance fixtures pin the window (issue 16: a plausible wrong reading moves ≥ 5× the tolerance) ---
+# --- the conformance fixtures pin the window (spec §16.8.3: a plausible wrong reading moves ≥ 5× the tolerance) ---
 
 def previous_rule(t, d, f, contact, valid):
     """The rule before this fit (spec 1.0 as first written): peak = the largest force of the whole contact run,

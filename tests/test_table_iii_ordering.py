@@ -1,4 +1,4 @@
-"""The device twin's `touch` and `touch-x` presets through the five benchmark families (issue 4 acceptance):
+"""The device twin's `touch` and `touch-x` presets through the five benchmark families (design §4):
 every Table III row of these families orders the two devices as the paper does.
 
 One repetition per protocol and short rendered trials keep this end-to-end check to seconds; the seed is

@@ -1,4 +1,4 @@
-"""The virtual examiner (issue 3): protocol limits, coverage and determinism, known by construction."""
+"""The virtual examiner (design §4): protocol limits, coverage and determinism, known by construction."""
 
 from __future__ import annotations
 

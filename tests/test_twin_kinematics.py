@@ -1,4 +1,4 @@
-"""Twin kinematics (issue 3): forward kinematics = paper eq. 4, inverse-kinematics round trips,
+"""Twin kinematics (TWIN.md, Physics): forward kinematics = paper eq. 4, inverse-kinematics round trips,
 joint limits and base collisions respected, gimbal angles."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The device twin file (issue 3): presets, effect ids, switching effects off, setting parameters, errors."""
+"""The device twin file (TWIN.md): presets, effect ids, switching effects off, setting parameters, errors."""
 
 from __future__ import annotations
 
@@ -43,7 +43,7 @@ def test_presets_load_and_name_every_effect(name):
 
 @pytest.mark.parametrize("name", PRESETS)
 def test_every_preset_number_has_a_source(name):
-    """Each effect with parameters says where they come from (issue: 'documented with the source of every number')."""
+    """Each effect with parameters says where they come from (TWIN.md: every effect carries per-parameter ``sources``)."""
     data = twin_to_dict(preset(name))
     effects = {**data["effects"], "sensor.bias": data["rig"]["sensor.bias"],
                "handle.connector_mass": data["rig"]["handle.connector_mass"]}

@@ -1,4 +1,4 @@
-"""Known-answer physics of the device twin (issue 3): gravity, Coulomb friction, series stiffness,
+"""Known-answer physics of the device twin (TWIN.md, Physics): gravity, Coulomb friction, series stiffness,
 saturation, cut-off, energy balance, base reaction, vibration."""
 
 from __future__ import annotations
@@ -67,7 +67,7 @@ def test_one_link_under_gravity_gives_the_analytic_torque(q2):
 
 
 def test_static_balance_of_the_whole_device_on_the_plate():
-    """Weight = plate reaction + hand support, and the moments balance (base reaction, issue 3)."""
+    """Weight = plate reaction + hand support, and the moments balance (the base's reaction)."""
     tw = only(preset("touch"), "gravity")
     q = np.array([0.4, 0.7, -1.4])
     t, p, quat = hold(tw, q)
@@ -296,7 +296,7 @@ def test_force_cutoff_drops_the_force_suddenly():
 
 def test_frictionless_surface_planar_forces_come_from_friction_and_inertia():
     """Circles on a frictionless plane: zero commanded planar force, nonzero felt planar force,
-    which vanishes when friction and inertia are switched off (mechanism emerges, issue 3)."""
+    which vanishes when friction and inertia are switched off (the mechanism emerges from the model)."""
     base = preset("touch")
     q = centre_q(base)
     t, p, quat = hold(base, q, n=3000)

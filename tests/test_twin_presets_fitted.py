@@ -1,4 +1,4 @@
-"""The table "Preset parameters fitted to the paper" (spec §20.1, informative; issue 20 item 4)
+"""The table "Preset parameters fitted to the paper" (spec §20.1, informative)
 against the preset files and the paper's values: every listed value is the preset's, every cited paper
 value is the one in schemas/1.0/paper-values.json, and every parameter whose source says "tuned" is listed.
 

@@ -1,4 +1,4 @@
-"""The virtual rig's sensor models (issue 3): noise levels and biases come out as configured, and the raw
+"""The virtual rig's sensor models (design §4): noise levels and biases come out as configured, and the raw
 streams follow the reference's sign conventions (haptify.calibration, spec §6.1)."""
 
 from __future__ import annotations

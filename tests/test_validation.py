@@ -49,7 +49,7 @@ def test_there_are_at_least_30_invalid_fixtures_each_with_catalogued_codes():
         assert (INVALID / _name(side)).is_dir(), side
         assert exp["codes"] and all(c in codes for c in exp["codes"]), side
         assert exp["exit_code"] == (1 if any(codes[c]["severity"] == "error" for c in exp["codes"]) else 0)
-    # the list of defects is covered
+    # the defects every validator must catch are covered
     must = {"malformed-json", "wrong-types", "unknown-protocol", "stream-file-missing", "truncated-parquet",
             "csv-wrong-header", "time-not-increasing", "wrong-units", "non-unit-quaternion", "nan-in-force",
             "checksum-mismatch", "empty-stream", "path-traversal", "absolute-path", "symlink-absolute",

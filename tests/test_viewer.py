@@ -1,4 +1,4 @@
-"""The rerun session viewer (issue 7): .rrd completeness, entity paths, exact rows and timestamps,
+"""The rerun session viewer: .rrd completeness, entity paths, exact rows and timestamps,
 blueprints per protocol, --compare, results table, the CLI, web-viewer smoke and screenshot tests.
 
 Every expectation comes from the analytic session built here (known by construction), never from a
@@ -716,7 +716,7 @@ def test_web_viewer_screenshot(recorded, tmp_path):
     assert colours > 1500, f"the viewer did not draw the recording within 120 s ({colours} colours: loading screen)"
 
 
-# --- streaming, chunks and derived modes (issue 21) -------------------------------------------------
+# --- streaming, chunks and derived modes -------------------------------------------------
 
 # Raw stream kind → the time series that show its columns exactly (None: every column of the stream).
 RAW_SERIES = {

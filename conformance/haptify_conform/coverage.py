@@ -18,7 +18,7 @@ from pathlib import Path
 from haptify_conform.cases import Case, case_files, load_cases
 from haptify_conform.requirements import Requirement, all_requirements
 
-#: How far (in tolerances) a plausible wrong reading must move a case for the case to distinguish it (issue 16).
+#: How far (in tolerances) a plausible wrong reading must move a case for the case to distinguish it (spec §16.8.3).
 DISTINGUISHING_RATIO = 5.0
 MUTANT_RESULTS = Path("mutants") / "results.json"
 

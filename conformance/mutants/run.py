@@ -1,4 +1,4 @@
-"""``make mutants``: the whole conformance suite against every mutant of the catalogue (spec §16.8.3, issue 16).
+"""``make mutants``: the whole conformance suite against every mutant of the catalogue (spec §16.8.3).
 
 Every case file runs in-process (the reference's ``analyse`` with the mutant's patches applied for the whole
 run, one compute context per session as the JSON-lines reference keeps them) in ``--workers`` processes. A

@@ -502,9 +502,9 @@ def write_table(path: Path, frame: pd.DataFrame, fmt: str, *, compact: bool = Fa
     """Write a float64 table as Parquet (zstd) or CSV (shortest round-trip decimal, NaN as 'NaN'), spec §3.2.
 
     Parquet columns are PLAIN-encoded: dictionary encoding never pays off for measured floats and makes
-    files larger and reading ~2x slower (benchmarks/bench_io.py). ``compact`` (Parquet only, spec §3.2.1)
+    files larger and reading slower (benchmarks/RESULTS.md, session I/O). ``compact`` (Parquet only, spec §3.2.1)
     stores every column but ``t`` as float32 with the BYTE_STREAM_SPLIT encoding, which zstd compresses
-    far better than interleaved bytes: a simulated three-repetition dossier takes 46 % of its float64 size.
+    far better than interleaved bytes (sizes in benchmarks/RESULTS.md).
     """
     if fmt == "parquet":
         table, narrow = _arrow_table(frame, compact)

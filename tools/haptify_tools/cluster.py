@@ -1,4 +1,4 @@
-"""The executor for work that outgrows one process: Dask's distributed scheduler (issue 24; spec §17.9).
+"""The executor for work that outgrows one process: Dask's distributed scheduler (spec §17.9).
 
 Three ways to run the same tasks, chosen by the commands' ``--workers N`` / ``--scheduler ADDRESS``:
 

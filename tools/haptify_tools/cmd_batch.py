@@ -1,5 +1,5 @@
 """``haptify batch compute SESSION… -o OUT [--metrics ID,…] [--params FILE] [--workers N | --scheduler ADDRESS]``:
-many sessions computed at once on a Dask cluster (issue 24; spec §15.4, §17.9).
+many sessions computed at once on a Dask cluster (spec §15.4, §17.9).
 
 Each session is one task doing exactly what ``haptify compute SESSION -o OUT/<name>/results.json`` does
 (:func:`haptify.cmd_compute.compute_folder`): the session passes the gate, its metrics are computed, the
@@ -25,7 +25,7 @@ FINDINGS = "findings.json"
 
 
 def register(sub) -> None:
-    """Add ``haptify batch compute`` (issue 24)."""
+    """Add ``haptify batch compute`` (spec §15.4, §17.9)."""
     p = sub.add_parser("batch", help="run a command on many sessions at once, on a Dask cluster")
     bsub = p.add_subparsers(dest="batch_command", metavar="ACTION", required=True)
     c = bsub.add_parser("compute", help="`haptify compute` for many sessions, each into its own output folder",

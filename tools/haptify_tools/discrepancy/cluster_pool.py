@@ -1,4 +1,4 @@
-"""The candidate search's simulations on a Dask cluster (issue 24): :class:`ClusterPool` stands where
+"""The candidate search's simulations on a Dask cluster (spec §17.9): :class:`ClusterPool` stands where
 :func:`.identify.process_pool` stands, with the same ``submit``; imported only when a client is given."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""``haptify discrepancy``: where twin and measurement disagree, the missing effect, the gap before/after (issue 8).
+"""``haptify discrepancy``: where twin and measurement disagree, the missing effect, the gap before/after (discrepancy README).
 
 Plugin of the ``haptify.commands`` entry-point group:
 ``discrepancy = "haptify_tools.discrepancy.cmd_discrepancy:register"``.
@@ -17,7 +17,7 @@ from haptify_tools.twin.model import load_twin
 
 
 def register(subparsers) -> None:
-    """Add ``haptify discrepancy`` (issue 8)."""
+    """Add ``haptify discrepancy`` (discrepancy README, command line)."""
     p = subparsers.add_parser(
         "discrepancy", help="find where a device twin and a measured session disagree and name the missing effect",
         description="Re-simulate every force trial of the measured session with the twin along the measured hand "
@@ -37,7 +37,7 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace, ui) -> int:
-    """Run ``haptify discrepancy`` (discrepancy README, command line; issue 8); exit 0 when the outputs were written (whatever the verdict)."""
+    """Run ``haptify discrepancy`` (discrepancy README, command line); exit 0 when the outputs were written (whatever the verdict)."""
     if args.max_effects < 0:
         raise fail("E903", "--max-effects must be at least 0", expected=">= 0", found=args.max_effects)
     out = Path(args.out)

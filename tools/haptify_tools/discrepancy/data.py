@@ -1,4 +1,4 @@
-"""Measured trials on the residual grid and their re-simulation with a twin (issue 8, step 1 "where").
+"""Measured trials on the residual grid and their re-simulation with a twin (discrepancy README §1, "where").
 
 Every trial with a ``handle_wrench`` stream is read once through the reference's calibrated handle
 signals (spec §7.5, default 100 Hz grid). The hand path that drives the twin blends motion capture

@@ -1,5 +1,5 @@
 """``make demo``: the discrepancy workflow on a ``touch`` session with hidden series elasticity and Coulomb
-friction (issue 8). Call :func:`demo`; it prints the effects named and the gap before and after."""
+friction (discrepancy README, demo). Call :func:`demo`; it prints the effects named and the gap before and after."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ DEMO_DURATIONS = {"free_space": 12.0, "stiffness": 12.0, "rig.handle_calibration
 
 
 def demo_session(folder: Path, seed: int = 0) -> Path:
-    """Simulate the demo's measured session (free-space and stiffness trials, hidden effects) into ``folder`` (discrepancy README, demo; issue 8)."""
+    """Simulate the demo's measured session (free-space and stiffness trials, hidden effects) into ``folder`` (discrepancy README, demo)."""
     truth = preset("touch")
     for key, value in DEMO_TRUTH.items():
         truth = set_param(truth, key, value)
@@ -25,7 +25,7 @@ def demo_session(folder: Path, seed: int = 0) -> Path:
 
 
 def demo(out: str | Path | None = None, print_fn=print) -> dict:
-    """Run the demo (≈ 1 min on 2 cores); writes the workflow's outputs into ``out`` (default: a temporary folder) (discrepancy README, demo; issue 8)."""
+    """Run the demo; writes the workflow's outputs into ``out`` (default: a temporary folder) (discrepancy README, demo)."""
     from haptify_tools.discrepancy.workflow import run_discrepancy
 
     with tempfile.TemporaryDirectory() as tmp:

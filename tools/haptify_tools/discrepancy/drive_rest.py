@@ -1,4 +1,4 @@
-"""Drives at rest stay at rest in the replay (issue 8, step 1 "where"; discrepancy README §1, drives at rest).
+"""Drives at rest stay at rest in the replay (discrepancy README §1, drives at rest).
 
 The twin's drive friction is ``τ_c·tanh(ω/ω_s)`` with ``ω_s`` a few mrad/s (the Touch preset: 5 mrad/s), so its
 sign follows the drive's speed wherever that speed is above a few mrad/s. The measured hand path resolves a drive's

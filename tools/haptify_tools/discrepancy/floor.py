@@ -1,4 +1,4 @@
-"""The gap and its floor (issue 8, step 4 "show"): how far the twin is from the measurement on held-out
+"""The gap and its floor (discrepancy README §4, the floor): how far the twin is from the measurement on held-out
 rows, and how far the right twin would still be.
 
 No twin closes the whole gap. The hand path the twin is driven along is rebuilt from motion capture and the handle
@@ -10,8 +10,8 @@ updated twin plays the measured session's protocols through the virtual rig
 (:func:`haptify_tools.twin.simulate.simulate_dossier`, one trial per protocol at the measured duration), each replay
 is analysed exactly like the measured session, and its held-out gap is one draw of the floor. The floor depends on
 the path (how often and how slowly the hand reverses): between simulated sessions of the same twin it varies by a
-factor of two to five (0.008–0.018 N in 16 s of free space, 0.0035–0.019 N in 12 s of stiffness presses), and one
-replay at one seed (0.0104 N) fell below what the true twin left on a short session (0.0175 N, issue 20). So
+factor of two to five (0.008–0.018 N in 16 s of free space, 0.0035–0.019 N in 12 s of stiffness presses), so one
+replay can fall below what the true twin leaves on another session. So
 :data:`FLOOR_REPLAYS` replays with their own paths (seeds 0, 1, …) are made, and the floor is the one-sided upper
 prediction bound of their log gaps (:class:`Floor`): the held-out gap one more session of the same twin stays under
 with probability 1 − :data:`GAP_ALPHA`. A gap above it is significant and the verdict is never "no discrepancy"; the
@@ -41,9 +41,9 @@ GAP_ALPHA = 0.05         # a held-out gap above the floor's one-sided 95 % predi
 #: the log scale is never taken below 0.4, the spread of the true twin's log gap between paths: six replays cannot see a
 #: heavy tail — a gap is mostly a few slow reversals, where the path's velocity error flips the friction, and one
 #: session in five to ten has one or two and a gap 2–2.5× the median (the true Touch X twin over 24 sessions of 16 s
-#: free space: 0.0027–0.0084 N, median 0.0032; 24 of 4 s: 0.0019–0.0054 N, median 0.0024 N). With the former 0.15 its
-#: gap exceeded a six-replay bound in 13–14 % of sessions, with 0.4 in 6.4 % (16 s) and 0.5 % (4 s); benchmarks/RESULTS.md
-#: (issue 20, item 5: a null Touch X session read "unexplained residual")
+#: free space: 0.0027–0.0084 N, median 0.0032; 24 of 4 s: 0.0019–0.0054 N, median 0.0024 N). At 0.15 its gap would
+#: exceed a six-replay bound in 13–14 % of such sessions, at 0.4 in 6.4 % (16 s) and 0.5 % (4 s) (benchmarks/RESULTS.md)
+#: — a null session must not read "unexplained residual"
 MIN_LOG_SCALE = 0.4
 #: session protocols (spec §2.5) the simulator's examiner can replay; ``other`` only with its label
 REPLAYABLE = ("free_space", "local_dynamic", "frictionless_surface", "stiffness")

@@ -1,4 +1,4 @@
-"""The hand path that drives the twin (issue 8, step 1 "where"; discrepancy README §1, the hand path).
+"""The hand path that drives the twin (discrepancy README §1, the hand path).
 
 The twin is driven along the measured path, and its friction turns every error of that path's velocity
 into a force error: on simulated Touch sessions the twin that generated the data, driven along the

@@ -1,4 +1,4 @@
-"""Grouped forward selection of library effects (issue 8, steps 2–3; shared notes, method steps 2–4).
+"""Grouped forward selection of library effects (discrepancy README §2–3; shared notes, method steps 2–4).
 
 Each round: simulate the current twin along the measured paths, form the residual, fit every
 available library candidate to it (:mod:`.library`), score the fits (:mod:`.stats`), take the one with

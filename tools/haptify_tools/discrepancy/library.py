@@ -1,4 +1,4 @@
-"""The library of candidate effects (issue 8, step 2 "name"): one entry per simulator effect id.
+"""The library of candidate effects (discrepancy README §2, "name"): one entry per simulator effect id.
 
 Every candidate is the twin's own component (:mod:`haptify_tools.twin.model`), switched on with ONE
 identified parameter — the same value on every drive axis — while its other parameters keep the values
@@ -115,7 +115,7 @@ class _BoxTop:
         return ws.box_top(twin)[0]
 
 
-#: The library, in the order of the simulator's effect ids (issue 8).
+#: The library, in the order of the simulator's effect ids (discrepancy README §2).
 LIBRARY: tuple[Candidate, ...] = (
     Candidate("gravity", "g_m_per_s2", "m/s²", "affine", "all", _mean_of("gravity", "g_m_per_s2", 9.80665)),
     Candidate("inertia", "rotor_inertia_kg_m2", "kg·m²", "affine", "all", _mean_of("inertia", "rotor_inertia_kg_m2", 1e-6),

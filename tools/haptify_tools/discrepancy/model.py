@@ -1,4 +1,4 @@
-"""``discrepancy.json``: the result of the discrepancy workflow (issue 8, step 4 "show").
+"""``discrepancy.json``: the result of the discrepancy workflow (discrepancy README §4, "show").
 
 Class path for the schema generator: ``haptify_tools.discrepancy.model.DiscrepancyFile``.
 """
@@ -176,7 +176,7 @@ class WorkspaceGap(_M):
 
 
 class DiscrepancyFile(_M):
-    """The whole result of ``haptify discrepancy`` (issue 8)."""
+    """The whole result of ``haptify discrepancy`` (discrepancy README §4)."""
 
     format: Literal["haptify-discrepancy"] = "haptify-discrepancy"
     version: Literal["1.0"] = "1.0"

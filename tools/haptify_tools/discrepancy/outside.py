@@ -1,4 +1,4 @@
-"""Forces outside the effect library, added to measured trials as if the device produced them (issue 20: the
+"""Forces outside the effect library, added to measured trials as if the device produced them (the
 verdict's known answers in tests and benchmarks; discrepancy README §3, "unexplained").
 
 No simulator effect id models a cogging force periodic in the hand's position or a force that grows with the

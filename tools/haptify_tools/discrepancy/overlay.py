@@ -1,5 +1,5 @@
 """``overlay.rrd``: the measured session with the updated twin's hand force overlaid, for ``haptify view``
-(issue 8, step 4). Built on the viewer's own recording plan (:mod:`haptify_tools.viewer.recording`): the
+(discrepancy README §4). Built on the viewer's own recording plan (:mod:`haptify_tools.viewer.recording`): the
 measured session's compared trials are planned as usual and, for every compared trial, the twin's force (after the update)
 is added as the ``compare`` role of ``hand_force/calibrated`` — so the viewer's hand-force views overlay
 measured and simulated; a markdown note ``/discrepancy`` says what the compared lines are.

@@ -1,4 +1,4 @@
-"""``report.html`` of the discrepancy workflow with its figures (issue 8, step 4 "show").
+"""``report.html`` of the discrepancy workflow with its figures (discrepancy README §4, "show").
 
 Figures (PNG beside the page): residual before/after against speed and height, the residual over the
 workspace (x–z projection) before/after, the stiffness curves (normal force against penetration)

@@ -1,4 +1,4 @@
-"""What an unexplained residual looks like (issue 20, item 3; discrepancy README §3 "characterising the residual").
+"""What an unexplained residual looks like (discrepancy README §3 "characterising the residual").
 
 When no library effect explains the residual the workflow describes it instead of naming an effect: where it lives
 (protocols × force axes) and which state it follows best, with the shape. A small set of nonparametric regressions,

@@ -1,4 +1,4 @@
-"""Statistics of the discrepancy workflow (issue 8; method of shared notes "finding the missing effect").
+"""Statistics of the discrepancy workflow (discrepancy README §3; method of shared notes "finding the missing effect").
 
 - Contiguous blocks: each trial's rows are cut into ten consecutive blocks, roles
   train · validation · train · test · train, twice (60 / 20 / 20 %), so that every held-out role sees

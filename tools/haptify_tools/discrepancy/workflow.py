@@ -1,4 +1,4 @@
-"""The discrepancy workflow end to end (issue 8): where → name → add → show.
+"""The discrepancy workflow end to end (design §5; discrepancy README §1–4): where → name → add → show.
 
 :func:`run_discrepancy` reads the measured session, re-simulates every force trial with the twin
 along the measured path, names missing effects by forward selection (:mod:`.identify`), writes the
@@ -52,7 +52,7 @@ def _finite(x: float) -> float | None:
 
 def localise(trials: list[dt.MeasuredTrial], before: dict, after: dict) -> list[Place]:
     """Rank the places of disagreement (benchmark, trial, contact/free space, speed band, workspace
-    region = tertiles of the path along each world axis) by residual RMS before (spec-free, issue 8 step 1)."""
+    region = tertiles of the path along each world axis) by residual RMS before (spec-free; discrepancy README §1)."""
     rows = []
     for tr in trials:
         v = tr.valid
@@ -185,7 +185,7 @@ def _tertile_labels(points: np.ndarray) -> list[str]:
 
 def workspace_gaps(sel: Selection) -> list[WorkspaceGap]:
     """Per workspace trial: residual RMS and volumes (reference operator) measured / twin before / after,
-    and the regions where the sweep and the twin disagree (issue 8: the missing lobe)."""
+    and the regions where the sweep and the twin disagree (the Touch's missing lower lobe, paper §VI-A)."""
     from haptify.workspace import volume_solid
 
     out = []
@@ -358,12 +358,12 @@ def assess(twin: TwinFile, trials: list[dt.MeasuredTrial], durations: dict[str, 
 def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | None = None, *, max_effects: int = 5,
                     overwrite: bool = False, log: Callable[[str], object] | None = None,
                     report: bool = True, workers: int = 1, overlay: bool = True, client=None) -> tuple[DiscrepancyFile, Selection]:
-    """Run the workflow (discrepancy README §1–4; issue 8); with ``out`` write ``discrepancy.json``, ``twin.json`` and ``report.html`` there.
+    """Run the workflow (discrepancy README §1–4); with ``out`` write ``discrepancy.json``, ``twin.json`` and ``report.html`` there.
 
     ``overlay``: also write ``overlay.rrd`` for the viewer (when ``report``). ``workers``: processes that run the
     simulations trial by trial (0: one per CPU, at most 4; results do not depend on it, :func:`.identify.select_effects`);
     with more than one, the floor's replay runs in its own process while the figures and the overlay are drawn. With a Dask
-    ``client`` the simulations and the floor's replay run on its cluster instead (issue 24). Returns the result and the selection
+    ``client`` the simulations and the floor's replay run on its cluster instead (spec §17.9). Returns the result and the selection
     (its simulations, for callers that draw or test).
     """
     session, _ = require_valid_session(session_path)

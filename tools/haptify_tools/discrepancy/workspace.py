@@ -1,4 +1,4 @@
-"""The workspace part of the discrepancy workflow: the base-collision candidate (issue 8; paper §VI-A, Fig. 5).
+"""The workspace part of the discrepancy workflow: the base-collision candidate (discrepancy README §2; paper §VI-A, Fig. 5).
 
 The workspace protocol records only positions, so the twin is compared with it through the examiner's
 own rule (:meth:`haptify_tools.twin.examiner.Reach.radial_stop`): every measured point is mapped to its

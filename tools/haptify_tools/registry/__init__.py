@@ -1,1 +1,1 @@
-"""The Haptify results registry: labs submit verified device results; everyone compares devices (issue 9)."""
+"""The Haptify results registry: labs submit verified device results; everyone compares devices (spec chapter 17)."""

@@ -1,4 +1,4 @@
-"""Read side for the web pages: a cache over the core's queries and the leaderboard endpoints (issue 9, spec §17.5).
+"""Read side for the web pages: a cache over the core's queries and the leaderboard endpoints (spec §17.5).
 
 The core API (``app.py``) already serves devices, per-device aggregates, the comparison and the CSV
 export. This router adds the leaderboard of one metric (devices ranked by their mean, see

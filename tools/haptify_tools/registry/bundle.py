@@ -214,8 +214,8 @@ def pack(bundle: Bundle, files: list[tuple[str, Path]], target: str | os.PathLik
 class Limits:
     """The registry's size limits (spec §17.4); every one is a setting of the service."""
 
-    # Sized from the demo dossier (3 repetitions of every protocol, spec §17.4): 257 MiB as a float64 bundle,
-    # about 120 MiB compact (§3.2.1); 1 GiB leaves four times that, and a bundle unpacks to about its size.
+    # Sized from the demo dossier (3 repetitions of every protocol, spec §17.4; its bundle sizes, float64 and compact
+    # §3.2.1, in benchmarks/RESULTS.md): 1 GiB leaves four times its float64 bundle, and a bundle unpacks to about its size.
     max_archive_bytes: int = 1 << 30  # the upload as sent
     max_unpacked_bytes: int = 2 << 30  # sum of the bytes the archive decompresses to
     max_ratio: float = 100.0  # decompressed / compressed, judged once more than ratio_floor_bytes came out

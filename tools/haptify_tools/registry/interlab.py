@@ -1,4 +1,4 @@
-"""Inter-laboratory statistics of one metric of one device model: ISO 5725-2 (issue 23, item 5).
+"""Inter-laboratory statistics of one metric of one device model: ISO 5725-2 (spec §17.5.3).
 
 Pure functions on numbers, no database: each lab contributes its repetitions of the metric (a cell, in
 ISO 5725-2's words). From the cells: the repeatability standard deviation s_r (pooled within-lab), the

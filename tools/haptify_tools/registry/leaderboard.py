@@ -1,4 +1,4 @@
-"""Leaderboards of the registry: devices ranked by one metric (issue 9, spec §17.5).
+"""Leaderboards of the registry: devices ranked by one metric (spec §17.5).
 
 The per-device statistics are the registry's (:meth:`haptify_tools.registry.service.Registry.device_results`:
 mean and sd over every repetition of every current submission, lab means, between-lab sd, the pooled

@@ -1,4 +1,4 @@
-"""Registry-wide re-verification (spec §17.9; issue 24): re-compute every stored submission that has raw
+"""Registry-wide re-verification (spec §17.9): re-compute every stored submission that has raw
 streams with the installed reference, on a Dask cluster, and record the new values beside the old ones.
 
 The work is split so that nothing but the driver touches the database:

@@ -1,4 +1,4 @@
-"""Web pages of the registry, served by the same app as the JSON API (issue 9, spec §17.5).
+"""Web pages of the registry, served by the same app as the JSON API (spec §17.5).
 
 * ``/`` — the devices (check boxes to compare them) and the leaderboards;
 * ``/leaderboard/{metric}`` — one metric's leaderboard (ranking rule from ``rankings.json``);

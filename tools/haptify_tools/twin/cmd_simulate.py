@@ -1,4 +1,4 @@
-"""``haptify simulate`` and ``haptify twin export``: the device twin on the command line (issue 3).
+"""``haptify simulate`` and ``haptify twin export``: the device twin on the command line (TWIN.md).
 
 Two plugins of the ``haptify.commands`` entry-point group:
 
@@ -58,7 +58,7 @@ def _durations(items: list[str]) -> dict[str, float]:
 # --- haptify simulate --------------------------------------------------------------------------
 
 def register_simulate(subparsers) -> None:
-    """Add ``haptify simulate`` (spec: tools; issue 3)."""
+    """Add ``haptify simulate`` (tools, not the standard; TWIN.md)."""
     p = subparsers.add_parser("simulate", help="simulate a benchmarking dossier of a device twin into a standard session",
                               description="Simulate every protocol (× repetitions) and the rig's calibration trials "
                                           "into ONE standard session OUT/session, with the ground truth in "
@@ -128,7 +128,7 @@ def _run_round_robin(twin: TwinFile, options: SimulationOptions, args: argparse.
 # --- haptify twin export -----------------------------------------------------------------------
 
 def register_twin(subparsers) -> None:
-    """Add ``haptify twin export`` (issue 3)."""
+    """Add ``haptify twin export`` (TWIN.md)."""
     p = subparsers.add_parser("twin", help="device twin files", description="Work with device twin files.")
     sub = p.add_subparsers(dest="twin_command", metavar="ACTION", required=True)
     e = sub.add_parser("export", help="write a preset (optionally modified) as a twin file")

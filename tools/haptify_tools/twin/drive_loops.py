@@ -1,4 +1,4 @@
-"""The twin's sequential drive loops, compiled with numba (issue 3; TWIN.md, the drive).
+"""The twin's sequential drive loops, compiled with numba (TWIN.md, Physics).
 
 The elastic cable (``drive.series_elasticity``, ``drive.backlash``) makes the drive a state machine that
 must be stepped sample by sample: the powered rendering loop (:func:`render_loop`, used by
@@ -7,7 +7,8 @@ must be stepped sample by sample: the powered rendering loop (:func:`render_loop
 (:func:`cutoff_latch`) is the rigid drive's only sequential part. Everything here works on plain arrays
 in drive-axis units (rad, rad/s, N·m) and the device frame D; :mod:`.physics` prepares the inputs. The
 functions are compiled on first use and cached on disk (numba ``cache=True``): the discrepancy workflow
-re-simulates every active trial dozens of times, and in Python these loops took ≈ 27 µs per sample.
+re-simulates every active trial dozens of times, which plain-Python loops make slow (figures in
+benchmarks/RESULTS.md).
 """
 
 from __future__ import annotations

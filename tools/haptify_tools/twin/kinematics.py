@@ -1,4 +1,4 @@
-"""Twin-side kinematics: inverse kinematics, joint-limit and base-collision checks, gimbal angles (issue 3).
+"""Twin-side kinematics: inverse kinematics, joint-limit and base-collision checks, gimbal angles (paper eq. 4; TWIN.md, Physics).
 
 Forward kinematics and the Jacobian are the reference's (:mod:`haptify.kinematics`, spec §8.2); this
 module adds what only the simulator needs. Positions are in the device frame D unless a name ends in

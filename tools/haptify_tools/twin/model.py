@@ -1,4 +1,4 @@
-"""The device twin file: a versioned model of a grounded force-feedback device (issue 3, design §4).
+"""The device twin file: a versioned model of a grounded force-feedback device (design §4).
 
 A twin file is a superset of the standard device description (:class:`haptify.session_format.Device`,
 spec §2.3): ``device`` is the NOMINAL description that goes into simulated sessions, and the other
@@ -41,7 +41,7 @@ TWIN_VERSION = "1.0"
 PRESET_DIR = Path(__file__).resolve().parent / "presets"
 PRESETS: tuple[str, ...] = ("touch", "touch-x")
 
-#: Every effect id, in the order the discrepancy workflow lists them (issue 3).
+#: Every effect id, in the order the discrepancy workflow lists them (TWIN.md, Effects).
 EFFECT_IDS: tuple[str, ...] = (
     "gravity", "inertia", "friction.coulomb", "friction.viscous", "friction.stribeck",
     "drive.series_elasticity", "drive.torque_saturation", "drive.force_cutoff", "drive.backlash",
@@ -59,7 +59,7 @@ class _Strict(BaseModel):
 
 
 class Effect(_Strict):
-    """Common part of every twin effect: the switch and where its numbers come from (issue 3; twin/TWIN.md, Effects)."""
+    """Common part of every twin effect: the switch and where its numbers come from (twin/TWIN.md, Effects)."""
 
     enabled: bool = Field(True, description="False switches the effect off (as if the device did not have it).")
     description: str | None = Field(None, description="What the effect models, in one sentence.")
@@ -69,19 +69,19 @@ class Effect(_Strict):
 # --- dynamics effects ---------------------------------------------------------------------------
 
 class GravityEffect(Effect):
-    """Effect ``gravity``: weight of every moving part (links and gimbal body) in the world's uniform field, −z, m/s² (issue 3; TWIN.md, Effects)."""
+    """Effect ``gravity``: weight of every moving part (links and gimbal body) in the world's uniform field, −z, m/s² (TWIN.md, Effects)."""
 
     g_m_per_s2: float = Field(STANDARD_GRAVITY, gt=0, description="Gravitational acceleration, m/s².")
 
 
 class InertiaEffect(Effect):
-    """Effect ``inertia``: inertial forces of the links, the gimbal body and the motor rotors (reflected through the capstans), kg·m² (issue 3; TWIN.md, Effects)."""
+    """Effect ``inertia``: inertial forces of the links, the gimbal body and the motor rotors (reflected through the capstans), kg·m² (TWIN.md, Effects)."""
 
     rotor_inertia_kg_m2: PerJoint = Field(description="Rotor (plus capstan drum) inertia per motor, on the motor shaft, kg·m².")
 
 
 class CoulombFriction(Effect):
-    """Effect ``friction.coulomb`` (issue 3; TWIN.md, Effects), torques in N·m, speeds in rad/s.
+    """Effect ``friction.coulomb`` (TWIN.md, Effects), torques in N·m, speeds in rad/s.
 
     ``τ = −τ_c·(1 + r·sin(2π·c·θ))·tanh(ω/ω_s)`` per drive axis (a smooth zero crossing; the level may
     ripple along the drive angle θ), and ``−τ_g·tanh(ω/ω_s)`` at the gimbal joints.
@@ -95,14 +95,14 @@ class CoulombFriction(Effect):
 
 
 class ViscousFriction(Effect):
-    """Effect ``friction.viscous``: ``τ = −b · ω`` per drive axis and gimbal joint, b in N·m·s/rad (issue 3; TWIN.md, Effects)."""
+    """Effect ``friction.viscous``: ``τ = −b · ω`` per drive axis and gimbal joint, b in N·m·s/rad (TWIN.md, Effects)."""
 
     damping_Nms_per_rad: PerJoint = Field(description="Viscous coefficient per drive axis, N·m·s/rad.")
     gimbal_damping_Nms_per_rad: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0], description="Viscous coefficient of the gimbal joints, N·m·s/rad.")
 
 
 class StribeckFriction(Effect):
-    """Effect ``friction.stribeck``: extra friction near zero speed, ``τ = −Δτ_s · exp(−(ω/ω_st)²) · tanh(ω/ω_s)``; N·m, rad/s (issue 3; TWIN.md, Effects)."""
+    """Effect ``friction.stribeck``: extra friction near zero speed, ``τ = −Δτ_s · exp(−(ω/ω_st)²) · tanh(ω/ω_s)``; N·m, rad/s (TWIN.md, Effects)."""
 
     excess_torque_Nm: PerJoint = Field(description="Breakaway torque minus Coulomb torque per drive axis, N·m.")
     stribeck_velocity_rad_per_s: float = Field(gt=0, description="ω_st: speed at which the excess has fallen to 1/e, rad/s.")
@@ -110,7 +110,7 @@ class StribeckFriction(Effect):
 
 
 class SeriesElasticity(Effect):
-    """Effect ``drive.series_elasticity`` (issue 3; TWIN.md, Effects): cable drive compliance between motor (encoder side) and
+    """Effect ``drive.series_elasticity`` (TWIN.md, Effects): cable drive compliance between motor (encoder side) and
     link, ``τ = k·(θ_motor − θ_link) + c·(θ̇_motor − θ̇_link)`` with k in N·m/rad, c in N·m·s/rad.
 
     When disabled the cable is rigid (the motor angle equals the link-side drive angle).
@@ -121,13 +121,13 @@ class SeriesElasticity(Effect):
 
 
 class TorqueSaturation(Effect):
-    """Effect ``drive.torque_saturation``: motor torque limit per drive axis in N·m (amplifier current limit × torque constant × capstan ratio); the Touch's force plateau, paper §VI-F (issue 3; TWIN.md, Effects)."""
+    """Effect ``drive.torque_saturation``: motor torque limit per drive axis in N·m (amplifier current limit × torque constant × capstan ratio); the Touch's force plateau, paper §VI-F (TWIN.md, Effects)."""
 
     max_torque_Nm: PerJoint = Field(description="Largest torque per drive axis at the capstan output, N·m.")
 
 
 class ForceCutoff(Effect):
-    """Effect ``drive.force_cutoff`` (issue 3; TWIN.md, Effects): when the commanded force magnitude exceeds ``trip_force_N`` (N)
+    """Effect ``drive.force_cutoff`` (TWIN.md, Effects): when the commanded force magnitude exceeds ``trip_force_N`` (N)
     the drive outputs zero torque until the commanded force has fallen below ``rearm_force_N`` (N) — the Touch X's
     sudden drop, paper §VI-F.
     """
@@ -137,7 +137,7 @@ class ForceCutoff(Effect):
 
 
 class Backlash(Effect):
-    """Effect ``drive.backlash``: dead band in the cable/capstan, no torque is transmitted within ``±width/2`` (rad) of the rest deflection (issue 3; TWIN.md, Effects)."""
+    """Effect ``drive.backlash``: dead band in the cable/capstan, no torque is transmitted within ``±width/2`` (rad) of the rest deflection (TWIN.md, Effects)."""
 
     width_rad: PerJoint = Field(description="Total play per drive axis at the capstan output, rad.")
 
@@ -145,7 +145,7 @@ class Backlash(Effect):
 # --- kinematic effects --------------------------------------------------------------------------
 
 class Box(_Strict):
-    """A box primitive of ``kinematics.base_collision`` in the device frame: centre and half extents in m, orientation quaternion wxyz (issue 3; TWIN.md, Effects)."""
+    """A box primitive of ``kinematics.base_collision`` in the device frame: centre and half extents in m, orientation quaternion wxyz (TWIN.md, Effects)."""
 
     shape: Literal["box"] = "box"
     name: str
@@ -155,7 +155,7 @@ class Box(_Strict):
 
 
 class Cylinder(_Strict):
-    """A cylinder primitive of ``kinematics.base_collision`` with a vertical (device z) axis: centre of its axis segment, radius, half height, all m (issue 3; TWIN.md, Effects)."""
+    """A cylinder primitive of ``kinematics.base_collision`` with a vertical (device z) axis: centre of its axis segment, radius, half height, all m (TWIN.md, Effects)."""
 
     shape: Literal["cylinder"] = "cylinder"
     name: str
@@ -165,7 +165,7 @@ class Cylinder(_Strict):
 
 
 class Sphere(_Strict):
-    """A sphere primitive of ``kinematics.base_collision`` in the device frame: centre and radius in m (issue 3; TWIN.md, Effects)."""
+    """A sphere primitive of ``kinematics.base_collision`` in the device frame: centre and radius in m (TWIN.md, Effects)."""
 
     shape: Literal["sphere"] = "sphere"
     name: str
@@ -174,7 +174,7 @@ class Sphere(_Strict):
 
 
 class HalfSpace(_Strict):
-    """A half-space primitive of ``kinematics.base_collision``: everything on the ``normal`` side of the plane through ``point_m`` (m, device frame) is solid, e.g. the table: normal −z (issue 3; TWIN.md, Effects)."""
+    """A half-space primitive of ``kinematics.base_collision``: everything on the ``normal`` side of the plane through ``point_m`` (m, device frame) is solid, e.g. the table: normal −z (TWIN.md, Effects)."""
 
     shape: Literal["half_space"] = "half_space"
     name: str
@@ -186,7 +186,7 @@ Primitive = Annotated[Union[Box, Cylinder, Sphere, HalfSpace], Field(discriminat
 
 
 class BaseCollision(Effect):
-    """Effect ``kinematics.base_collision`` (issue 3; TWIN.md, Effects): the base and the table as solid primitives (device
+    """Effect ``kinematics.base_collision`` (TWIN.md, Effects): the base and the table as solid primitives (device
     frame); the end-effector, a sphere of radius ``clearance_m`` (m) around the gimbal centre, cannot enter them (the
     Touch's missing lower lobe, paper §VI-A, Fig. 5).
     """
@@ -196,7 +196,7 @@ class BaseCollision(Effect):
 
 
 class LinkLength(Effect):
-    """Effect ``kinematics.link_length``: true DH lengths differ from the nominal ones, ``a_true = a + delta_a``, ``d_true = d + delta_d``, in m (issue 3; TWIN.md, Effects)."""
+    """Effect ``kinematics.link_length``: true DH lengths differ from the nominal ones, ``a_true = a + delta_a``, ``d_true = d + delta_d``, in m (TWIN.md, Effects)."""
 
     delta_a_m: PerJoint
     delta_d_m: PerJoint
@@ -205,7 +205,7 @@ class LinkLength(Effect):
 # --- vibration ----------------------------------------------------------------------------------
 
 class BroadbandSource(_Strict):
-    """A broadband source of ``vibration.device``: band-limited noise whose RMS (m/s²) grows with handle speed, ``rms(v) = rms_ref · (v / v_ref)^p``; band in Hz (issue 3; TWIN.md, Effects)."""
+    """A broadband source of ``vibration.device``: band-limited noise whose RMS (m/s²) grows with handle speed, ``rms(v) = rms_ref · (v / v_ref)^p``; band in Hz (TWIN.md, Effects)."""
 
     rms_at_ref_speed_m_per_s2: float = Field(ge=0)
     band_hz: Annotated[list[float], Field(min_length=2, max_length=2, description="Pass band [low, high], Hz.")]
@@ -213,7 +213,7 @@ class BroadbandSource(_Strict):
 
 
 class ResonantSource(_Strict):
-    """A resonant source of ``vibration.device``: a lightly damped mode (frequency in Hz, Q dimensionless) driven by speed-modulated noise, RMS in m/s² (issue 3; TWIN.md, Effects)."""
+    """A resonant source of ``vibration.device``: a lightly damped mode (frequency in Hz, Q dimensionless) driven by speed-modulated noise, RMS in m/s² (TWIN.md, Effects)."""
 
     frequency_hz: float = Field(gt=0)
     q_factor: float = Field(gt=0.5)
@@ -222,7 +222,7 @@ class ResonantSource(_Strict):
 
 
 class DeviceVibration(Effect):
-    """Effect ``vibration.device``: parasitic acceleration the device adds at the handle (bearings, cable, backlash), world frame, m/s² (issue 3; TWIN.md, Effects)."""
+    """Effect ``vibration.device``: parasitic acceleration the device adds at the handle (bearings, cable, backlash), world frame, m/s² (TWIN.md, Effects)."""
 
     ref_speed_m_per_s: float = Field(gt=0, description="v_ref of the speed law, m/s.")
     speed_exponent: float = Field(ge=0, description="p of the speed law.")
@@ -249,7 +249,7 @@ class NoiseFloor(_Strict):
 # --- rig effects (behaviour implemented by the virtual rig) --------------------------------------
 
 class SensorBias(Effect):
-    """Rig effect ``sensor.bias``: constant offsets of the raw sensors in their own frames, N, N·m, m/s² (the calibration must remove them) (issue 3; TWIN.md, Effects)."""
+    """Rig effect ``sensor.bias``: constant offsets of the raw sensors in their own frames, N, N·m, m/s² (the calibration must remove them) (TWIN.md, Effects)."""
 
     handle_force_N: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0], description="F/T force bias, sensor frame, N.")
     handle_torque_Nm: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0], description="F/T torque bias, sensor frame, N·m.")
@@ -265,7 +265,7 @@ class ConnectorMass(Effect):
 
 
 class RigTwin(_Strict):
-    """Rig-side parts of the twin: the two rig effects and the accelerometer noise floor (issue 3; TWIN.md, section ``rig``)."""
+    """Rig-side parts of the twin: the two rig effects and the accelerometer noise floor (TWIN.md, section ``rig``)."""
 
     sensor_bias: SensorBias = Field(alias="sensor.bias")
     connector_mass: ConnectorMass = Field(alias="handle.connector_mass")
@@ -273,7 +273,7 @@ class RigTwin(_Strict):
 
 
 class Effects(_Strict):
-    """The device effects, keyed by effect id (issue 3; TWIN.md, Effects)."""
+    """The device effects, keyed by effect id (TWIN.md, Effects)."""
 
     gravity: GravityEffect
     inertia: InertiaEffect
@@ -292,7 +292,7 @@ class Effects(_Strict):
 # --- structure ----------------------------------------------------------------------------------
 
 class LinkDynamics(_Strict):
-    """Rigid-body data of one arm link in its own (distal DH) frame: kg, m, kg·m² (issue 3; TWIN.md, section ``links``)."""
+    """Rigid-body data of one arm link in its own (distal DH) frame: kg, m, kg·m² (TWIN.md, section ``links``)."""
 
     name: str
     mass_kg: float = Field(ge=0)
@@ -302,7 +302,7 @@ class LinkDynamics(_Strict):
 
 
 class GimbalBody(_Strict):
-    """The parts that turn with the handle (stylus, last gimbal ring), in the handle frame: kg, m, kg·m² (issue 3; TWIN.md, section ``gimbal_body``)."""
+    """The parts that turn with the handle (stylus, last gimbal ring), in the handle frame: kg, m, kg·m² (TWIN.md, section ``gimbal_body``)."""
 
     mass_kg: float = Field(ge=0)
     com_m: Vec3 = Field(description="Centre of mass relative to the gimbal centre, handle frame, m.")
@@ -313,7 +313,7 @@ class GimbalBody(_Strict):
 
 
 class Drive(_Strict):
-    """The transmission: capstan ratios (dimensionless) and the coupling θ = C·q of link-side drive angles, rad (issue 3; TWIN.md, section ``drive``)."""
+    """The transmission: capstan ratios (dimensionless) and the coupling θ = C·q of link-side drive angles, rad (TWIN.md, section ``drive``)."""
 
     capstan_ratio: PerJoint = Field(description="Motor angle / drive angle per axis (dimensionless).")
     coupling: list[list[float]] = Field(description="Square matrix C: drive angles θ = C · q (rad).")
@@ -321,14 +321,14 @@ class Drive(_Strict):
 
 
 class BaseBody(_Strict):
-    """The static base: mass in kg and centre of mass in m in the device frame (loads the force plate) (issue 3; TWIN.md, section ``base``)."""
+    """The static base: mass in kg and centre of mass in m in the device frame (loads the force plate) (TWIN.md, section ``base``)."""
 
     mass_kg: float = Field(ge=0)
     com_m: Vec3
 
 
 class TwinFile(_Strict):
-    """A device twin (issue 3): the nominal device description plus the behaviour of the real device."""
+    """A device twin (TWIN.md): the nominal device description plus the behaviour of the real device."""
 
     format: Literal["haptify-twin"] = TWIN_FORMAT
     twin_version: Literal["1.0"] = TWIN_VERSION

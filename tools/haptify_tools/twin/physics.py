@@ -1,4 +1,4 @@
-"""Physics of the device twin: passive inverse dynamics, the 1 kHz active rendering loop, vibration (issue 3).
+"""Physics of the device twin: passive inverse dynamics, the 1 kHz active rendering loop, vibration (TWIN.md, Physics).
 
 The examiner's hand is a kinematic input: it holds the handle rigidly, so the gimbal-centre position
 and the handle orientation are given, and the simulator computes what the device does to the hand.
@@ -571,7 +571,7 @@ def _rigid_part_of(twin, jp: _JointPath, t: np.ndarray, quaternion_W: np.ndarray
 
 
 def simulate_passive(twin: TwinFile, t: np.ndarray, position_W: np.ndarray, quaternion_W: np.ndarray) -> PassiveResult:
-    """Simulate the powered-off device moved by the examiner's hand (issue 3, design §4).
+    """Simulate the powered-off device moved by the examiner's hand (design §4; TWIN.md, Physics).
 
     ``t (N,)`` s, strictly increasing (E903 otherwise); ``position_W (N, 3)`` gimbal-centre path in W, m;
     ``quaternion_W (N, 4)`` handle orientation (wxyz, handle → W). Velocities and accelerations are
@@ -619,7 +619,7 @@ class ActiveResult(HandPathResult):
 
 def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, hand_quaternion_W: np.ndarray,
                     rendering: Rendering | dict) -> ActiveResult:
-    """Simulate the powered device rendering a frictionless virtual plane (issue 3; CHAI3D plane example).
+    """Simulate the powered device rendering a frictionless virtual plane (TWIN.md, Physics; CHAI3D plane example).
 
     The loop runs at ``rendering.loop_rate_hz`` (default 1 kHz, CHAI3D's rate) on the samples of ``t``
     (uniform, a multiple of the loop rate, e.g. the examiner's 2 kHz); each iteration:

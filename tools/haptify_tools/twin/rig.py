@@ -1,4 +1,4 @@
-"""The virtual rig: sensor models that turn true motion and loads into raw streams (issue 3; paper §II, §III, Appendix).
+"""The virtual rig: sensor models that turn true motion and loads into raw streams (design §4; paper §II, §III, Appendix).
 
 Every model is a pure function of the true signals, its parameters and a seeded random generator, and
 returns the columns of one standard stream kind (``schemas/1.0/stream-kinds.json``). Raw means raw

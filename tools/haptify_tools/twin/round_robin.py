@@ -1,4 +1,4 @@
-"""A simulated inter-laboratory round robin: N virtual labs measure the same device twin (issue 23, item 5).
+"""A simulated inter-laboratory round robin: N virtual labs measure the same device twin (TWIN.md, Round robins; spec §17.5.3).
 
 Every lab has its own rig and its own examiner, drawn from the round robin's seed: the lab's handle F/T
 calibration gain, its motion capture noise, its force plate (natural frequencies, and the corner gain and

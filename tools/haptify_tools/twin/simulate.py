@@ -1,4 +1,4 @@
-"""Simulate a full benchmarking dossier into ONE standard session, with its ground truth beside it (issue 3).
+"""Simulate a full benchmarking dossier into ONE standard session, with its ground truth beside it (design §4).
 
 ``simulate_dossier(twin, out_dir, options)`` runs the virtual examiner (:mod:`.examiner`) through every
 requested protocol and repetition plus the rig's calibration trials, drives the twin's physics

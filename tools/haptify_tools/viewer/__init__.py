@@ -1,1 +1,1 @@
-"""The session viewer on rerun (issue 7)."""
+"""The session viewer on rerun (design §1)."""

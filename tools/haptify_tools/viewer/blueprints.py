@@ -1,4 +1,4 @@
-"""A rerun blueprint per protocol: what a person wants to see first for each kind of trial (issue 7).
+"""A rerun blueprint per protocol: what a person wants to see first for each kind of trial (spec §2.5 protocols).
 
 Each trial gets a tab. The tab holds the 3-D view of the world (plate, device base, that trial's
 entities of every role) beside a column of time-series views chosen for the protocol (for example
@@ -87,7 +87,7 @@ def spatial_view(tp: TrialPlan) -> rrb.Spatial3DView:
 
 
 def trial_tab(plan: Plan, tp: TrialPlan) -> rrb.Container:
-    """The tab of one trial, laid out for its protocol (issue 7)."""
+    """The tab of one trial, laid out for its protocol (spec §2.5)."""
     layout = LAYOUTS[tp.trial.protocol]
     chosen = [v for v in (series_view(plan, tp, *VIEWS[name]) for name in layout.views) if v is not None]
     shown = {k for name in layout.views for key in VIEWS[name][1] for k in ((key,) if isinstance(key, str) else key)}

@@ -1,4 +1,4 @@
-"""``haptify view``: inspect a session, its results and a simulated counterpart in rerun (issue 7).
+"""``haptify view``: inspect a session, its results and a simulated counterpart in rerun (design §1).
 
 ``--save out.rrd`` writes a recording without any display; ``--web`` serves rerun's built-in web
 viewer on 127.0.0.1 only (the ``rerun`` CLI with ``--bind 127.0.0.1``; rerun's Python serve
@@ -171,7 +171,7 @@ def open_session_or_dossier(path: str) -> CheckedSession:
 
 
 def run(args: argparse.Namespace, ui) -> int:
-    """Build the recording, then save, serve or show it (issue 7)."""
+    """Build the recording, then save, serve or show it."""
     if args.port is not None and not args.web:
         raise fail("E903", "--port is only meaningful with --web", expected="--web --port N", found=f"--port {args.port}")
     if args.port is not None and not 0 < args.port < 65536:

@@ -1,6 +1,6 @@
-"""A Haptify session as a rerun recording (.rrd): scene graph, time series, blueprints (issue 7).
+"""A Haptify session as a rerun recording (.rrd): scene graph, time series, blueprints (spec chapter 2 streams).
 
-:func:`build` streams the recording straight to the .rrd (issue 21): the file sink is set before
+:func:`build` streams the recording straight to the .rrd: the file sink is set before
 anything is logged, each trial's streams are read one at a time (each read is also the stream's
 validation when the session came through the gate, spec §4.8), turned into :class:`Entry` objects —
 an entity path, its static archetypes and its time-indexed fields — and each entry is sent with bulk
@@ -63,7 +63,7 @@ from haptify.session_format import Kinematics, Stream, Trial
 from haptify.storage import SessionFolder
 from haptify_tools.viewer.voxel_mesh import boundary_mesh
 
-if TYPE_CHECKING:  # imported where used: a raw-only recording needs neither (start-up, issue 21)
+if TYPE_CHECKING:  # imported where used: a raw-only recording needs neither (start-up time)
     from haptify.compute import ComputeContext
     from haptify.results import ResultsFile
 
@@ -388,7 +388,7 @@ def series_entry(path: str, key: str, t: np.ndarray, values: np.ndarray, names: 
 
 
 class TrialPlanner:
-    """Turns one trial of one session (one role) into entries (issue 7, spec chapter 2 streams)."""
+    """Turns one trial of one session (one role) into entries (spec chapter 2 streams)."""
 
     def __init__(self, session: CachedStreams, ctx: ComputeContext | None, trial: Trial, role: str, key: str,
                  plan: Plan) -> None:

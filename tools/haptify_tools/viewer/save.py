@@ -1,4 +1,4 @@
-"""Saving a session's recording (issue 7, spec §4.8): the recording plan of :mod:`.recording` streamed entry by
+"""Saving a session's recording (spec §4.8): the recording plan of :mod:`.recording` streamed entry by
 entry into an .rrd, then the blueprint of :mod:`.blueprints` — the one module that needs both, so neither
 imports the other."""
 

@@ -1,4 +1,4 @@
-"""Boundary surface of a voxel solid as a triangle mesh, with numpy only (issue 7).
+"""Boundary surface of a voxel solid as a triangle mesh, with numpy only (the workspace solids of spec §8.4).
 
 The workspace chapter's volume operator (``haptify.workspace.volume_solid``, spec §8.4) yields a
 voxel solid on a W-anchored lattice. The viewer draws it as the set of exposed voxel faces: every
