@@ -22,13 +22,8 @@ WORK_ITEM = re.compile(r"issues? \d+", re.IGNORECASE)
 KNOWN_EXCEPTIONS = frozenset({
     "reference/haptify/local_dynamics.py",
     "reference/haptify/filter_bank.py",
-    "reference/haptify/uncertainty.py",
     "reference/haptify/workspace.py",
-    "reference/haptify/calibration.py",
-    "reference/haptify/rig_checks.py",
     "tools/haptify_tools/twin/examiner.py",
-    "tools/haptify_tools/build_conformance_fixtures.py",
-    "conformance/mutants/catalogue.py",
 })
 
 

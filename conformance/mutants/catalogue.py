@@ -1,4 +1,4 @@
-"""The mutant set: the reference with ONE realistic mistake each (spec §16.8.3, issue 16).
+"""The mutant set: the reference with ONE realistic mistake each (spec §16.8.3).
 
 Each :class:`Mutant` is a choice a lab engineer could plausibly make while reading the spec — averaging
 where the spec says something else, another filter, another frame, another unit — written as one or more

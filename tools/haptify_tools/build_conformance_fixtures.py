@@ -1338,7 +1338,7 @@ def falling_release_law(t: np.ndarray) -> np.ndarray:
 
 def falling_release_fixture() -> Fixture:
     """A device whose force saturates, then falls with depth, and pushes harder on the way back up than on the way
-    in (issue 16: the peak and the fit must come from the loading stroke), with its weight uncompensated (the line's
+    in (the peak and the fit must come from the loading stroke, spec §13.2), with its weight uncompensated (the line's
     intercept is −0.8 N, not 0)."""
     up = np.array([0.0, 0.0, 1.0])
     pp = np.array([0.01, 0.0, 0.12])
