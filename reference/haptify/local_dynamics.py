@@ -399,7 +399,10 @@ def place_breakpoints(signal: np.ndarray, count: int, quantiles: tuple[float, fl
 
 @dataclass
 class _Structure:
-    """Fixed parts of a model being fitted, and the index layout of its parameter vector θ."""
+    """Fixed parts of a model being fitted, and the index layout of its parameter vector θ: the shared
+    input-map values, then output by output its own parameters in the order of its Jacobian's columns
+    (:func:`_output_jacobian`): b_1 of every input, …, b_nb of every input, f_1 of every input, …, f_nf of
+    every input, then the output map's values."""
 
     nu: int
     ny: int
@@ -422,18 +425,14 @@ class _Structure:
             n += 0 if bp is None else len(bp)
         self.n_shared = n
         self.shared_input = np.array([i for i, bp in enumerate(self.in_bp) if bp is not None for _ in bp], dtype=int)
-        # The signal each Jacobian column before the output map filters, among [Φ | w | z_j] (_output_jacobian).
-        self.jacobian_source = np.concatenate([np.arange(n), [n + i + (0 if k < self.nb else self.nu)
-                                                              for i in range(self.nu) for k in range(self.nb + self.nf)]])
         self.b_idx = np.zeros((self.ny, self.nu, self.nb), dtype=int)
         self.f_idx = np.zeros((self.ny, self.nu, self.nf), dtype=int)
         self.c_idx = []
         for j in range(self.ny):
-            for i in range(self.nu):
-                self.b_idx[j, i] = np.arange(n, n + self.nb)
-                n += self.nb
-                self.f_idx[j, i] = np.arange(n, n + self.nf)
-                n += self.nf
+            self.b_idx[j] = n + np.arange(self.nb * self.nu).reshape(self.nb, self.nu).T
+            n += self.nb * self.nu
+            self.f_idx[j] = n + np.arange(self.nf * self.nu).reshape(self.nf, self.nu).T
+            n += self.nf * self.nu
             bp = self.out_bp[j]
             self.c_idx.append(None if bp is None else np.arange(n, n + len(bp)))
             n += 0 if bp is None else len(bp)
@@ -458,15 +457,6 @@ class _Record:
     basis: np.ndarray
     segments: list
     starts: np.ndarray
-    _signals: np.ndarray | None = None
-
-    def jacobian_inputs(self, st: _Structure) -> np.ndarray:
-        """A reused (N, shared + 2 nu) buffer: the input basis Φ, then room for w and z_j, the signals the
-        linear block's Jacobian columns filter (see :func:`_output_jacobian`)."""
-        if self._signals is None:
-            self._signals = np.empty((len(self.u), st.n_shared + 2 * st.nu))
-            self._signals[:, : st.n_shared] = self.basis
-        return self._signals
 
     @classmethod
     def of(cls, st: _Structure, u: np.ndarray, y: np.ndarray, starts: Sequence[int] = (0,)) -> "_Record":
@@ -537,33 +527,25 @@ def _linear_responses(st: _Structure, theta: np.ndarray, rec: _Record) -> tuple[
     return w, lfilter_columns(num, den, np.tile(w, (1, st.ny)), starts=rec.starts)
 
 
-def _jacobian_filters(st: _Structure, theta: np.ndarray, j: int) -> tuple[np.ndarray, np.ndarray]:
-    """Numerator and denominator of every column of output j's Jacobian before the output map (spec §11.4.3):
-    ∂z_ji/∂v_ik = q^-nk B_ji/F_ji φ_ik, ∂z_ji/∂b_k = q^-(nk+k-1)/F_ji w_i, ∂z_ji/∂f_l = −q^-l/F_ji z_ji."""
-    nu, nb, nf, nk = st.nu, st.nb, st.nf, st.nk
-    num, den = _polynomials(st, theta, j)
-    width = max(nk + nb, nf + 1)
-    lin_num = np.zeros((nu, nb + nf, width))
-    for k in range(nb):
-        lin_num[:, k, nk + k] = 1.0
-    for l in range(1, nf + 1):
-        lin_num[:, nb + l - 1, l] = -1.0
-    shared_num = np.zeros((st.n_shared, width))
-    shared_num[:, : nk + nb] = num[st.shared_input]
-    numerators = np.vstack([shared_num, lin_num.reshape(nu * (nb + nf), width)])
-    denominators = np.vstack([den[st.shared_input], np.repeat(den, nb + nf, axis=0)])
-    return numerators, denominators
+def _delay_filters(den: np.ndarray, delay: int, sign: float) -> np.ndarray:
+    """Numerators ``sign · q^-delay`` for the denominators ``den`` (one row each): the filters
+    ``sign · q^-delay / F`` of the B and F columns of a Jacobian (spec §11.4.3)."""
+    num = np.zeros((len(den), delay + 1))
+    num[:, delay] = sign
+    return num
 
 
 def _output_jacobian(st: _Structure, theta: np.ndarray, rec: _Record, j: int, weight: float = 1.0,
                      out: np.ndarray | None = None, responses: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
     """ŷ_j and ``weight`` times its analytic Jacobian (spec §11.4.3): one row per sample, one column per
-    parameter in the order ``[shared input-map values, output j's own B, F and output-map values]``.
+    parameter in θ's order (:class:`_Structure`): ``[shared input-map values, output j's own b_1 … b_nb,
+    f_1 … f_nf (each for every input), output-map values]``.
 
     ``responses`` is :func:`_linear_responses` (computed when not given); ``out``, if given, is an
-    (N, ≥ columns) buffer the Jacobian is written into. Every column but the output map's is one
-    filter-bank call (:func:`_jacobian_filters` applied to φ, w and z), written straight into the Jacobian
-    already multiplied by the output map's slope and the weight.
+    (N, ≥ columns) buffer the Jacobian is written into. The columns are filter-bank calls written straight
+    into the Jacobian, already multiplied by the output map's slope and the weight:
+    ∂z_ji/∂v_ik = q^-nk B_ji/F_ji φ_ik (one call over Φ), ∂z_ji/∂b_k = q^-(nk+k-1)/F_ji w_i (one call per k
+    over w) and ∂z_ji/∂f_l = −q^-l/F_ji z_ji (one call per l over z_j).
     """
     from haptify.filter_bank import lfilter_columns
 
@@ -572,7 +554,7 @@ def _output_jacobian(st: _Structure, theta: np.ndarray, rec: _Record, j: int, we
     cols = ns + n_lin + (0 if st.c_idx[j] is None else len(st.c_idx[j]))
     jac = np.empty((n, cols)) if out is None else out[:n, :cols]
     w, z = _linear_responses(st, theta, rec) if responses is None else responses
-    z = z[:, j * nu: (j + 1) * nu]
+    z = np.ascontiguousarray(z[:, j * nu: (j + 1) * nu])
     x = z @ np.ones(nu)
     bp = st.out_bp[j]
     if bp is None:
@@ -581,12 +563,14 @@ def _output_jacobian(st: _Structure, theta: np.ndarray, rec: _Record, j: int, we
         yhat, slope, basis = _pwl_parts(bp, theta[st.c_idx[j]], x)
         gain = weight * slope
         np.multiply(basis, weight, out=jac[:, ns + n_lin:])
-    signals = rec.jacobian_inputs(st)                             # [φ | w | z_j]
-    signals[:, ns: ns + nu] = w
-    signals[:, ns + nu:] = z
-    numerators, denominators = _jacobian_filters(st, theta, j)
-    lfilter_columns(numerators, denominators, signals, out=jac[:, : ns + n_lin], gain=gain, source=st.jacobian_source,
-                    starts=rec.starts)
+    num, den = _polynomials(st, theta, j)
+    if ns:
+        lfilter_columns(num[st.shared_input], den[st.shared_input], rec.basis, out=jac[:, :ns], gain=gain,
+                        starts=rec.starts)
+    blocks = [(w, st.nk + k, 1.0) for k in range(nb)] + [(z, l, -1.0) for l in range(1, nf + 1)]
+    for m, (signal, delay, sign) in enumerate(blocks):
+        lfilter_columns(_delay_filters(den, delay, sign), den, signal, out=jac[:, ns + m * nu: ns + (m + 1) * nu],
+                        gain=gain, starts=rec.starts)
     return yhat, jac
 
 
