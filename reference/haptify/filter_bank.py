@@ -29,35 +29,38 @@ def _kernel():
     if _KERNEL is None:
         from numba import njit
 
-        @njit("void(f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1], u1[::1], f8[::1], i8)", cache=True, nogil=True)
-        def run(b, a, x, gain, rest, out, stride):
-            # b, a: (order + 1, M) coefficients, order ≥ 2; x: (N, M) signals; gain: (N,); rest: (N,) 1 where
-            # every filter restarts from rest; out: row t of the result is out[t * stride: t * stride + M]
+        @njit("void(f8[:, ::1], f8[:, ::1], f8[::1], i8, f8[::1], u1[::1], f8[::1], i8, f8[:, ::1])", cache=True, nogil=True)
+        def run(b, a, x, x_stride, gain, rest, out, out_stride, state):
+            # b, a: (order + 1, M) coefficients, order ≥ 2; row t of the M signals is x[t * x_stride:][:M];
+            # gain: (N,); rest: (N,) 1 where every filter restarts from rest; row t of the result is
+            # out[t * out_stride:][:M]; state: (order, M) the delays before row 0, left as they are after row N − 1
             order = b.shape[0] - 1
-            n, m = x.shape[0], b.shape[1]
+            n, m = len(gain), b.shape[1]
             if order == 2:
-                z0, z1 = np.zeros(m), np.zeros(m)
+                z0, z1 = state[0].copy(), state[1].copy()
                 b0, b1, b2, a1, a2 = b[0].copy(), b[1].copy(), b[2].copy(), a[1].copy(), a[2].copy()
                 for t in range(n):
                     if rest[t]:
                         z0[:] = 0.0
                         z1[:] = 0.0
-                    xt = x[t]
+                    xt = x[t * x_stride: t * x_stride + m]
+                    ot = out[t * out_stride: t * out_stride + m]
                     g = gain[t]
-                    ot = out[t * stride: t * stride + m]
                     for r in range(m):
                         xr = xt[r]
                         yr = z0[r] + b0[r] * xr
                         z0[r] = z1[r] + xr * b1[r] - yr * a1[r]
                         z1[r] = 0.0 + xr * b2[r] - yr * a2[r]
                         ot[r] = yr * g
+                state[0], state[1] = z0, z1
                 return
             z = np.zeros((order + 1, m))          # z[order] stays 0: the last delay has no successor
+            z[:order] = state
             y = np.empty(m)
             for t in range(n):
                 if rest[t]:
                     z[:] = 0.0
-                xt = x[t]
+                xt = x[t * x_stride: t * x_stride + m]
                 z0, b0 = z[0], b[0]
                 for r in range(m):
                     y[r] = z0[r] + b0[r] * xt[r]
@@ -66,37 +69,49 @@ def _kernel():
                     for r in range(m):
                         zk[r] = zk1[r] + xt[r] * bk[r] - y[r] * ak[r]
                 g = gain[t]
-                ot = out[t * stride: t * stride + m]
+                ot = out[t * out_stride: t * out_stride + m]
                 for r in range(m):
                     ot[r] = y[r] * g
+            state[:] = z[:order]
 
         _KERNEL = run
     return _KERNEL
 
 
-def _rows(out: np.ndarray) -> tuple[np.ndarray, int]:
-    """A 1-D view of the memory from ``out[0, 0]`` to ``out[-1, -1]`` and its row stride in elements: row t of
-    ``out`` (N, M), whose rows are contiguous, is ``flat[t * stride: t * stride + M]``."""
-    n, m = out.shape
-    stride = out.strides[0] // out.itemsize if n > 1 else m
-    return as_strided(out, shape=((n - 1) * stride + m,), strides=(out.itemsize,)), stride
+def _rows(array: np.ndarray) -> tuple[np.ndarray, int]:
+    """A 1-D view of the memory from ``array[0, 0]`` to ``array[-1, -1]`` and its row stride in elements: row t
+    of ``array`` (N, M), whose rows are contiguous, is ``flat[t * stride: t * stride + M]``."""
+    n, m = array.shape
+    stride = array.strides[0] // array.itemsize if n > 1 else m
+    return as_strided(array, shape=((n - 1) * stride + m,), strides=(array.itemsize,)), stride
+
+
+def _row_major(array: np.ndarray) -> bool:
+    """Whether the rows of a 2-D array are contiguous and do not overlap (what :func:`_rows` needs)."""
+    n, m = array.shape
+    return array.strides[1] == array.itemsize and (n < 2 or array.strides[0] >= array.itemsize * m) \
+        and array.strides[0] % array.itemsize == 0
 
 
 def lfilter_columns(b: np.ndarray, a: np.ndarray, x: np.ndarray, out: np.ndarray | None = None,
                     gain: np.ndarray | None = None, source: np.ndarray | None = None,
-                    starts: np.ndarray | None = None) -> np.ndarray:
-    """Column m of the result is ``x[:, source[m]]`` (default ``x[:, m]``) filtered by ``b[m] / a[m]`` from
+                    starts: np.ndarray | None = None, state: np.ndarray | None = None) -> np.ndarray:
+    """Column m of the result is ``x[:, source[m]]`` (default ``x[:, m % S]``) filtered by ``b[m] / a[m]`` from
     zero initial conditions, each output sample t then multiplied by ``gain[t]`` when a gain (N,) is given.
     ``starts`` lists rows where every filter restarts from rest (records stacked one after the other, each
-    simulated from zero initial conditions as spec §11.3 requires); row 0 always starts.
+    simulated from zero initial conditions as spec §11.3 requires); row 0 always starts unless a ``state``
+    is given.
 
     ``b`` (M, nb) and ``a`` (M, na) hold one numerator and one denominator per column, each denominator
     with a leading 1 (F(q) = 1 + f_1 q^-1 + …, as every transfer function of spec §11.2); the shorter of
-    the two is padded with zeros. ``x`` is (N, S); ``source`` (M,) picks a signal per column, so one
-    signal may feed several filters (the picked columns are copied first: the compiled loop reads
-    ``x`` column by column). ``out`` (N, M), if given, receives the result; it may be a view with
-    strided rows, e.g. some columns of a Jacobian. Raises ValueError on inconsistent shapes or a
-    denominator not starting with 1.
+    the two is padded with zeros. ``x`` is (N, S) with M a multiple of S: the signals are used in turn,
+    column m filtering ``x[:, m % S]`` (``x`` is tiled to M columns first). ``source`` (M,) instead
+    picks any signal per column (the picked columns are copied first). ``x`` and ``out`` (N, M), which
+    receives the result when given, may be views with strided rows, e.g. some columns of a Jacobian.
+    ``state`` (order, M), order = max(nb, na) − 1, if given, holds the filters' delays before row 0 (zeros:
+    at rest) and is left holding them after the last row, so that consecutive blocks of rows filtered one
+    after the other with one state give the result of filtering all rows at once. Raises ValueError on
+    inconsistent shapes or a denominator not starting with 1.
     """
     b = np.atleast_2d(np.asarray(b, dtype=float))
     a = np.atleast_2d(np.asarray(a, dtype=float))
@@ -108,31 +123,44 @@ def lfilter_columns(b: np.ndarray, a: np.ndarray, x: np.ndarray, out: np.ndarray
         if len(src) and (src.min() < 0 or src.max() >= x.shape[1]):
             raise ValueError(f"source must pick signals among the {x.shape[1]} columns of x")
         x = x[:, src]
-    x = np.ascontiguousarray(x)
-    if len(b) != x.shape[1] or len(a) != x.shape[1]:
-        raise ValueError(f"{x.shape[1]} columns need one numerator and one denominator per column; got {len(b)} and {len(a)}")
+    n, signals = x.shape
+    if len(b) != len(a) or len(b) % max(signals, 1) or (len(b) and not signals):
+        raise ValueError(f"{signals} signals need one numerator and one denominator per column, a multiple of "
+                         f"{signals} columns; got {len(b)} and {len(a)}")
+    if signals and len(b) > signals:
+        x = np.tile(x, (1, len(b) // signals))    # the compiled loop reads one signal per column, in order
+    elif not _row_major(x):
+        x = np.ascontiguousarray(x)
     if not np.all(a[:, 0] == 1.0):
         raise ValueError("every denominator must start with 1 (F(q) = 1 + f_1 q^-1 + …)")
-    width = max(b.shape[1], a.shape[1], 3)
-    coef_b = np.zeros((width, len(b)))
-    coef_a = np.zeros((width, len(a)))
+    order = max(b.shape[1], a.shape[1]) - 1
+    coef_b = np.zeros((max(order, 2) + 1, len(b)))
+    coef_a = np.zeros_like(coef_b)
     coef_b[: b.shape[1]] = b.T
     coef_a[: a.shape[1]] = a.T
-    shape = x.shape
+    shape = (n, len(b))
     if out is None:
         out = np.empty(shape)
-    elif out.shape != shape or out.strides[1] != out.itemsize or out.strides[0] < out.itemsize * shape[1]:
+    elif out.shape != shape or not _row_major(out):
         raise ValueError(f"out must have shape {shape} with contiguous rows; got {out.shape}")
-    gain = np.ones(len(x)) if gain is None else np.ascontiguousarray(gain, dtype=float)
-    if gain.shape != (len(x),):
-        raise ValueError(f"gain must hold one factor per sample ({len(x)}); got shape {gain.shape}")
-    rest = np.zeros(len(x), dtype=np.uint8)
-    if starts is not None and len(x):
+    if state is not None and (state.shape != (order, len(b)) or state.dtype != np.float64):
+        raise ValueError(f"state must be a float array of shape {(order, len(b))}; got {state.shape}")
+    gain = np.ones(n) if gain is None else np.ascontiguousarray(gain, dtype=float)
+    if gain.shape != (n,):
+        raise ValueError(f"gain must hold one factor per sample ({n}); got shape {gain.shape}")
+    rest = np.zeros(n, dtype=np.uint8)
+    if starts is not None and n:
         starts = np.asarray(starts, dtype=np.int64)
-        if len(starts) and (starts.min() < 0 or starts.max() >= len(x)):
-            raise ValueError(f"starts must be rows of x (0 … {len(x) - 1})")
+        if len(starts) and (starts.min() < 0 or starts.max() >= n):
+            raise ValueError(f"starts must be rows of x (0 … {n - 1})")
         rest[starts] = 1
-    if out.size:
-        flat, stride = _rows(out)
-        _kernel()(coef_b, coef_a, x, gain, rest, flat, stride)
+    if out.size:  # then n ≥ 1 and signals ≥ 1
+        delays = np.zeros((max(order, 2), len(b)))    # orders below 2 run as order 2 with zero coefficients
+        if state is not None:
+            delays[:order] = state
+        x_flat, x_stride = _rows(x)
+        out_flat, out_stride = _rows(out)
+        _kernel()(coef_b, coef_a, x_flat, x_stride, gain, rest, out_flat, out_stride, delays)
+        if state is not None:
+            state[:] = delays[:order]
     return out

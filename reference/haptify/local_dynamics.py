@@ -261,11 +261,18 @@ def pwl_basis(breakpoints: np.ndarray, u: np.ndarray) -> np.ndarray:
     Φ of spec §11.4.3."""
     bp = np.asarray(breakpoints, dtype=float)
     k, s = _segments(bp, np.asarray(u, dtype=float))
-    phi = np.zeros((len(k), len(bp)))
+    return _hat_columns(np.empty((len(k), len(bp))), k, s)
+
+
+def _hat_columns(out: np.ndarray, k: np.ndarray, s: np.ndarray, scale: float = 1.0) -> np.ndarray:
+    """``scale`` times the hat functions of the segments (k, s) of :func:`_segments` written into ``out``
+    (N, K), which may be a view (e.g. some columns of a Jacobian): row t is zero but for
+    scale·(1 − s_t) in column k_t and scale·s_t in column k_t + 1."""
+    out[:] = 0.0
     rows = np.arange(len(k))
-    phi[rows, k] = 1.0 - s
-    phi[rows, k + 1] = s
-    return phi
+    out[rows, k] = scale * (1.0 - s)
+    out[rows, k + 1] = scale * s
+    return out
 
 
 def pwl_slope(breakpoints: np.ndarray, values: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -457,6 +464,13 @@ class _Record:
     basis: np.ndarray
     segments: list
     starts: np.ndarray
+    _scratch: np.ndarray | None = None
+
+    def linear_signals(self, width: int) -> np.ndarray:
+        """A reused (N, width) buffer for the signals the B and F columns of a Jacobian filter."""
+        if self._scratch is None or self._scratch.shape[1] != width:
+            self._scratch = np.empty((len(self.u), width))
+        return self._scratch
 
     @classmethod
     def of(cls, st: _Structure, u: np.ndarray, y: np.ndarray, starts: Sequence[int] = (0,)) -> "_Record":
@@ -506,72 +520,129 @@ def _simulate(st: _Structure, theta: np.ndarray, rec: _Record, responses: tuple 
     return y
 
 
-def _pwl_parts(breakpoints: np.ndarray, values: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`pwl_eval`, :func:`pwl_slope` and :func:`pwl_basis` of one map at ``x`` from one segment search."""
+def _pwl_parts(breakpoints: np.ndarray, values: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, ...]:
+    """:func:`pwl_eval` and :func:`pwl_slope` of one map at ``x``, and the segments (k, s) that
+    :func:`_hat_columns` turns into :func:`pwl_basis`, from one segment search."""
     k, s = _segments(breakpoints, x)
     lo, hi = values[k], values[k + 1]
-    basis = np.zeros((len(k), len(breakpoints)))
-    rows = np.arange(len(k))
-    basis[rows, k] = 1.0 - s
-    basis[rows, k + 1] = s
-    return lo + s * (hi - lo), (hi - lo) / (breakpoints[k + 1] - breakpoints[k]), basis
+    return lo + s * (hi - lo), (hi - lo) / (breakpoints[k + 1] - breakpoints[k]), k, s
 
 
 def _linear_responses(st: _Structure, theta: np.ndarray, rec: _Record) -> tuple[np.ndarray, np.ndarray]:
     """w (N, nu), the inputs through their maps, and z (N, ny · nu, output-major) = q^-nk B_ji/F_ji w_i for
-    every transfer function (one filter-bank call)."""
+    every transfer function (one filter-bank call, w feeding the nu filters of every output in turn)."""
     from haptify.filter_bank import lfilter_columns
 
     w = _inputs_mapped(st, theta, rec)
     num, den = _polynomials(st, theta)
-    return w, lfilter_columns(num, den, np.tile(w, (1, st.ny)), starts=rec.starts)
+    return w, lfilter_columns(num, den, w, starts=rec.starts)
 
 
-def _delay_filters(den: np.ndarray, delay: int, sign: float) -> np.ndarray:
-    """Numerators ``sign · q^-delay`` for the denominators ``den`` (one row each): the filters
-    ``sign · q^-delay / F`` of the B and F columns of a Jacobian (spec §11.4.3)."""
-    num = np.zeros((len(den), delay + 1))
-    num[:, delay] = sign
-    return num
+def _delay_filters(den: np.ndarray, taps: Sequence[tuple[int, float]]) -> tuple[np.ndarray, np.ndarray]:
+    """Numerators ``sign · q^-delay`` and denominators F for every (delay, sign) of ``taps`` in turn, each over
+    every row of ``den``: the filters ``sign · q^-delay / F`` of the B and F columns of a Jacobian (spec §11.4.3)."""
+    num = np.zeros((len(taps), len(den), max(d for d, _ in taps) + 1))
+    for m, (delay, sign) in enumerate(taps):
+        num[m, :, delay] = sign
+    return num.reshape(-1, num.shape[2]), np.tile(den, (len(taps), 1))
+
+
+@dataclass
+class _JacobianPass:
+    """Output j's Jacobian (spec §11.4.3) being formed block of rows by block of rows: what every block needs
+    (ŷ_j, the output map's slope times the weight, its segments, the filters and their signals) and the
+    filters' delays carried from one block to the next (:func:`haptify.filter_bank.lfilter_columns`)."""
+
+    yhat: np.ndarray
+    gain: np.ndarray                    # weight · h_j'(x_j) per sample
+    weight: float
+    segments: tuple | None              # (k, s) of the output map at x_j; None: unit gain
+    hats: int                           # the output map's breakpoints (0: unit gain)
+    shared: tuple                       # numerators, denominators of the columns of the input-map values (over Φ)
+    linear: tuple                       # numerators, denominators of the B and F columns (over ``signals``)
+    signals: np.ndarray                 # (N, nu (nb + nf)): w repeated nb times, then z_j repeated nf times
+    states: list[np.ndarray]
+
+    @property
+    def columns(self) -> int:
+        """The Jacobian's width: shared input-map values, output j's B and F, its output-map values."""
+        return len(self.shared[0]) + len(self.linear[0]) + self.hats
+
+    @classmethod
+    def of(cls, st: _Structure, theta: np.ndarray, rec: _Record, j: int, weight: float,
+           responses: tuple) -> "_JacobianPass":
+        nu, nb, nf = st.nu, st.nb, st.nf
+        w, z = responses
+        z = z[:, j * nu: (j + 1) * nu]
+        x = z @ np.ones(nu)
+        bp = st.out_bp[j]
+        if bp is None:
+            yhat, gain, segments = x, np.full(len(x), weight), None
+        else:
+            yhat, slope, k, s = _pwl_parts(bp, theta[st.c_idx[j]], x)
+            gain, segments = weight * slope, (k, s)
+        num, den = _polynomials(st, theta, j)
+        shared = (num[st.shared_input], den[st.shared_input])
+        linear = _delay_filters(den, [(st.nk + k, 1.0) for k in range(nb)] + [(l, -1.0) for l in range(1, nf + 1)])
+        signals = rec.linear_signals(nu * (nb + nf))
+        for m in range(nb + nf):
+            signals[:, m * nu: (m + 1) * nu] = w if m < nb else z
+        states = [np.zeros((max(f.shape[1], g.shape[1]) - 1, len(f))) for f, g in (shared, linear)]
+        return cls(yhat=yhat, gain=gain, weight=weight, segments=segments, hats=0 if bp is None else len(bp),
+                   shared=shared, linear=linear, signals=signals, states=states)
+
+    def rows(self, rec: _Record, rows: slice, out: np.ndarray) -> None:
+        """Write the Jacobian's rows ``rows`` (the next block after the previous call's) into ``out``:
+        ∂z_ji/∂v_ik = q^-nk B_ji/F_ji φ_ik over Φ, ∂z_ji/∂b_k = q^-(nk+k-1)/F_ji w_i and ∂z_ji/∂f_l =
+        −q^-l/F_ji z_ji over ``signals``, each times the gain; the output map's hat functions times the weight."""
+        from haptify.filter_bank import lfilter_columns
+
+        ns, n_lin = len(self.shared[0]), len(self.linear[0])
+        starts = rec.starts[(rec.starts >= rows.start) & (rec.starts < rows.stop)] - rows.start
+        gain = self.gain[rows]
+        if ns:
+            lfilter_columns(*self.shared, rec.basis[rows], out=out[:, :ns], gain=gain, starts=starts,
+                            state=self.states[0])
+        lfilter_columns(*self.linear, self.signals[rows], out=out[:, ns: ns + n_lin], gain=gain, starts=starts,
+                        state=self.states[1])
+        if self.segments is not None:
+            _hat_columns(out[:, ns + n_lin:], self.segments[0][rows], self.segments[1][rows], self.weight)
 
 
 def _output_jacobian(st: _Structure, theta: np.ndarray, rec: _Record, j: int, weight: float = 1.0,
-                     out: np.ndarray | None = None, responses: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """ŷ_j and ``weight`` times its analytic Jacobian (spec §11.4.3): one row per sample, one column per
-    parameter in θ's order (:class:`_Structure`): ``[shared input-map values, output j's own b_1 … b_nb,
-    f_1 … f_nf (each for every input), output-map values]``.
+                     responses: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """ŷ_j and ``weight`` times its analytic Jacobian (spec §11.4.3) at once (:class:`_JacobianPass` over all
+    rows): one row per sample, one column per parameter in θ's order (:class:`_Structure`): ``[shared
+    input-map values, output j's own b_1 … b_nb, f_1 … f_nf (each for every input), output-map values]``.
+    ``responses`` is :func:`_linear_responses` (computed when not given)."""
+    responses = _linear_responses(st, theta, rec) if responses is None else responses
+    jacobian = _JacobianPass.of(st, theta, rec, j, weight, responses)
+    jac = np.empty((len(rec.u), jacobian.columns))
+    jacobian.rows(rec, slice(0, len(rec.u)), jac)
+    return jacobian.yhat, jac
 
-    ``responses`` is :func:`_linear_responses` (computed when not given); ``out``, if given, is an
-    (N, ≥ columns) buffer the Jacobian is written into. The columns are filter-bank calls written straight
-    into the Jacobian, already multiplied by the output map's slope and the weight:
-    ∂z_ji/∂v_ik = q^-nk B_ji/F_ji φ_ik (one call over Φ), ∂z_ji/∂b_k = q^-(nk+k-1)/F_ji w_i (one call per k
-    over w) and ∂z_ji/∂f_l = −q^-l/F_ji z_ji (one call per l over z_j).
-    """
-    from haptify.filter_bank import lfilter_columns
 
-    n, nu, nb, nf, ns = len(rec.u), st.nu, st.nb, st.nf, st.n_shared
-    n_lin = nu * (nb + nf)
-    cols = ns + n_lin + (0 if st.c_idx[j] is None else len(st.c_idx[j]))
-    jac = np.empty((n, cols)) if out is None else out[:n, :cols]
-    w, z = _linear_responses(st, theta, rec) if responses is None else responses
-    z = np.ascontiguousarray(z[:, j * nu: (j + 1) * nu])
-    x = z @ np.ones(nu)
-    bp = st.out_bp[j]
-    if bp is None:
-        gain, yhat = np.full(n, weight), x
-    else:
-        yhat, slope, basis = _pwl_parts(bp, theta[st.c_idx[j]], x)
-        gain = weight * slope
-        np.multiply(basis, weight, out=jac[:, ns + n_lin:])
-    num, den = _polynomials(st, theta, j)
-    if ns:
-        lfilter_columns(num[st.shared_input], den[st.shared_input], rec.basis, out=jac[:, :ns], gain=gain,
-                        starts=rec.starts)
-    blocks = [(w, st.nk + k, 1.0) for k in range(nb)] + [(z, l, -1.0) for l in range(1, nf + 1)]
-    for m, (signal, delay, sign) in enumerate(blocks):
-        lfilter_columns(_delay_filters(den, delay, sign), den, signal, out=jac[:, ns + m * nu: ns + (m + 1) * nu],
-                        gain=gain, starts=rec.starts)
-    return yhat, jac
+#: Rows of the Jacobian formed at a time by :func:`_output_normal_equations`: a block of 2048 × ~200 columns
+#: (3 MiB) stays in the processor's cache between being filtered and entering the Gram matrix.
+BLOCK_ROWS = 2048
+
+
+def _output_normal_equations(st: _Structure, theta: np.ndarray, rec: _Record, j: int, weight: float,
+                             responses: tuple, buffer: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """JᵀJ and Jᵀe of output j (spec §11.4.3; J of :func:`_output_jacobian`, e the weighted residuals),
+    accumulated over blocks of :data:`BLOCK_ROWS` rows formed in ``buffer`` (≥ BLOCK_ROWS × columns + 1):
+    one symmetric product per block of ``[J | e]``."""
+    jacobian = _JacobianPass.of(st, theta, rec, j, weight, responses)
+    cols, n = jacobian.columns, len(rec.u)
+    e = (rec.y[:, j] - jacobian.yhat) * weight
+    gram = np.zeros((cols + 1, cols + 1))
+    for start in range(0, n, BLOCK_ROWS):
+        rows = slice(start, min(start + BLOCK_ROWS, n))
+        block = buffer[: rows.stop - rows.start, : cols + 1]
+        jacobian.rows(rec, rows, block[:, :cols])
+        block[:, cols] = e[rows]
+        gram += block.T @ block
+    return gram[:cols, :cols], gram[:cols, cols]
 
 
 def _add_normal_equations(hess: np.ndarray, grad: np.ndarray, ns: int, own: slice, gram: np.ndarray,
@@ -716,7 +787,7 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
             scale[st.c_idx[j]] = 1.0 / sd_y[j]
 
     rec = _Record.of(st, u_all, y_all, starts=np.cumsum([0] + [len(a) for a in us[:-1]]))
-    work = np.empty((n, st.n_shared + max(st.own(j).stop - st.own(j).start for j in range(ny))))
+    block = np.empty((min(n, BLOCK_ROWS), st.n_shared + max(st.own(j).stop - st.own(j).start for j in range(ny)) + 1))
     wy = 1.0 / (sd_y * math.sqrt(n))                          # residual weights (spec §11.4.2)
     d2 = opts.ridge * scale ** 2
 
@@ -739,8 +810,7 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
         hess = np.diag(d2)
         grad = d2 * (theta - theta0)                           # half the gradient of the cost
         for j in range(ny):
-            yhat, jac = _output_jacobian(st, theta, rec, j, weight=wy[j], out=work, responses=responses)
-            _add_normal_equations(hess, grad, ns, own[j], jac.T @ jac, ((rec.y[:, j] - yhat) * wy[j]) @ jac)
+            _add_normal_equations(hess, grad, ns, own[j], *_output_normal_equations(st, theta, rec, j, wy[j], responses, block))
         accepted = False
         while mu <= mu_max:
             try:
