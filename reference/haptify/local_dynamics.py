@@ -466,11 +466,11 @@ class _Record:
     starts: np.ndarray
     _scratch: np.ndarray | None = None
 
-    def linear_signals(self, width: int) -> np.ndarray:
-        """A reused (N, width) buffer for the signals the B and F columns of a Jacobian filter."""
-        if self._scratch is None or self._scratch.shape[1] != width:
-            self._scratch = np.empty((len(self.u), width))
-        return self._scratch
+    def scratch(self, rows: int, width: int) -> np.ndarray:
+        """A reused (rows, width) buffer (for the signals the B and F columns of a block of Jacobian rows filter)."""
+        if self._scratch is None or self._scratch.shape[0] < rows or self._scratch.shape[1] != width:
+            self._scratch = np.empty((rows, width))
+        return self._scratch[:rows]
 
     @classmethod
     def of(cls, st: _Structure, u: np.ndarray, y: np.ndarray, starts: Sequence[int] = (0,)) -> "_Record":
@@ -507,17 +507,41 @@ def _polynomials(st: _Structure, theta: np.ndarray, j: int | None = None) -> tup
     return num, den
 
 
-def _simulate(st: _Structure, theta: np.ndarray, rec: _Record, responses: tuple | None = None) -> np.ndarray:
-    """ŷ (N, ny) of the model under fit (same algorithm as :func:`predict`), the ny · nu transfer
-    functions in one filter-bank call (:func:`_linear_responses`, unless ``responses`` holds them)."""
-    n = len(rec.u)
-    _, z = _linear_responses(st, theta, rec) if responses is None else responses
+@dataclass
+class _Simulation:
+    """The model under fit simulated on the stacked records (same algorithm as :func:`predict`, spec §11.3):
+    the mapped inputs w (N, nu), the responses z (N, ny · nu, output-major) = q^-nk B_ji/F_ji w_i, their
+    sums x (N, ny), the outputs ŷ (N, ny), and per output map its slope at x_j and segments (k, s), None for
+    a unit gain (what the Jacobian of spec §11.4.3 reuses)."""
+
+    w: np.ndarray
+    z: np.ndarray
+    x: np.ndarray
+    yhat: np.ndarray
+    slopes: list[np.ndarray | None]
+    segments: list[tuple | None]
+
+
+def _simulation(st: _Structure, theta: np.ndarray, rec: _Record) -> _Simulation:
+    """Simulate the model under fit: the ny · nu transfer functions in one filter-bank call, w feeding the
+    nu filters of every output in turn."""
+    from haptify.filter_bank import lfilter_columns
+
+    w = _inputs_mapped(st, theta, rec)
+    num, den = _polynomials(st, theta)
+    z = lfilter_columns(num, den, w, starts=rec.starts)
     x = z @ np.kron(np.eye(st.ny), np.ones((st.nu, 1)))           # Σ_i z_ji for every output j
-    y = np.empty((n, st.ny))
-    for j in range(st.ny):
-        bp = st.out_bp[j]
-        y[:, j] = x[:, j] if bp is None else pwl_eval(bp, theta[st.c_idx[j]], x[:, j])
-    return y
+    yhat, slopes, segments = x.copy(), [None] * st.ny, [None] * st.ny
+    for j, bp in enumerate(st.out_bp):
+        if bp is not None:
+            value, slopes[j], k, s = _pwl_parts(bp, theta[st.c_idx[j]], x[:, j])
+            yhat[:, j], segments[j] = value, (k, s)
+    return _Simulation(w=w, z=z, x=x, yhat=yhat, slopes=slopes, segments=segments)
+
+
+def _simulate(st: _Structure, theta: np.ndarray, rec: _Record) -> np.ndarray:
+    """ŷ (N, ny) of the model under fit (:func:`_simulation`)."""
+    return _simulation(st, theta, rec).yhat
 
 
 def _pwl_parts(breakpoints: np.ndarray, values: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -526,16 +550,6 @@ def _pwl_parts(breakpoints: np.ndarray, values: np.ndarray, x: np.ndarray) -> tu
     k, s = _segments(breakpoints, x)
     lo, hi = values[k], values[k + 1]
     return lo + s * (hi - lo), (hi - lo) / (breakpoints[k + 1] - breakpoints[k]), k, s
-
-
-def _linear_responses(st: _Structure, theta: np.ndarray, rec: _Record) -> tuple[np.ndarray, np.ndarray]:
-    """w (N, nu), the inputs through their maps, and z (N, ny · nu, output-major) = q^-nk B_ji/F_ji w_i for
-    every transfer function (one filter-bank call, w feeding the nu filters of every output in turn)."""
-    from haptify.filter_bank import lfilter_columns
-
-    w = _inputs_mapped(st, theta, rec)
-    num, den = _polynomials(st, theta)
-    return w, lfilter_columns(num, den, w, starts=rec.starts)
 
 
 def _delay_filters(den: np.ndarray, taps: Sequence[tuple[int, float]]) -> tuple[np.ndarray, np.ndarray]:
@@ -560,7 +574,7 @@ class _JacobianPass:
     hats: int                           # the output map's breakpoints (0: unit gain)
     shared: tuple                       # numerators, denominators of the columns of the input-map values (over Φ)
     linear: tuple                       # numerators, denominators of the B and F columns (over ``signals``)
-    signals: np.ndarray                 # (N, nu (nb + nf)): w repeated nb times, then z_j repeated nf times
+    signals: list[np.ndarray]           # w (N, nu) nb times, then z_j (N, nu) nf times
     states: list[np.ndarray]
 
     @property
@@ -570,26 +584,18 @@ class _JacobianPass:
 
     @classmethod
     def of(cls, st: _Structure, theta: np.ndarray, rec: _Record, j: int, weight: float,
-           responses: tuple) -> "_JacobianPass":
+           sim: _Simulation) -> "_JacobianPass":
         nu, nb, nf = st.nu, st.nb, st.nf
-        w, z = responses
-        z = z[:, j * nu: (j + 1) * nu]
-        x = z @ np.ones(nu)
-        bp = st.out_bp[j]
-        if bp is None:
-            yhat, gain, segments = x, np.full(len(x), weight), None
-        else:
-            yhat, slope, k, s = _pwl_parts(bp, theta[st.c_idx[j]], x)
-            gain, segments = weight * slope, (k, s)
+        segments = sim.segments[j]
+        gain = np.full(len(rec.u), weight) if segments is None else weight * sim.slopes[j]
         num, den = _polynomials(st, theta, j)
         shared = (num[st.shared_input], den[st.shared_input])
         linear = _delay_filters(den, [(st.nk + k, 1.0) for k in range(nb)] + [(l, -1.0) for l in range(1, nf + 1)])
-        signals = rec.linear_signals(nu * (nb + nf))
-        for m in range(nb + nf):
-            signals[:, m * nu: (m + 1) * nu] = w if m < nb else z
+        signals = [sim.w] * nb + [sim.z[:, j * nu: (j + 1) * nu]] * nf
         states = [np.zeros((max(f.shape[1], g.shape[1]) - 1, len(f))) for f, g in (shared, linear)]
-        return cls(yhat=yhat, gain=gain, weight=weight, segments=segments, hats=0 if bp is None else len(bp),
-                   shared=shared, linear=linear, signals=signals, states=states)
+        return cls(yhat=sim.yhat[:, j], gain=gain, weight=weight, segments=segments,
+                   hats=0 if segments is None else len(st.out_bp[j]), shared=shared, linear=linear, signals=signals,
+                   states=states)
 
     def rows(self, rec: _Record, rows: slice, out: np.ndarray) -> None:
         """Write the Jacobian's rows ``rows`` (the next block after the previous call's) into ``out``:
@@ -603,20 +609,23 @@ class _JacobianPass:
         if ns:
             lfilter_columns(*self.shared, rec.basis[rows], out=out[:, :ns], gain=gain, starts=starts,
                             state=self.states[0])
-        lfilter_columns(*self.linear, self.signals[rows], out=out[:, ns: ns + n_lin], gain=gain, starts=starts,
+        signals = rec.scratch(len(gain), n_lin)
+        width = n_lin // len(self.signals)
+        for m, signal in enumerate(self.signals):
+            signals[:, m * width: (m + 1) * width] = signal[rows]
+        lfilter_columns(*self.linear, signals, out=out[:, ns: ns + n_lin], gain=gain, starts=starts,
                         state=self.states[1])
         if self.segments is not None:
             _hat_columns(out[:, ns + n_lin:], self.segments[0][rows], self.segments[1][rows], self.weight)
 
 
 def _output_jacobian(st: _Structure, theta: np.ndarray, rec: _Record, j: int, weight: float = 1.0,
-                     responses: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
+                     sim: _Simulation | None = None) -> tuple[np.ndarray, np.ndarray]:
     """ŷ_j and ``weight`` times its analytic Jacobian (spec §11.4.3) at once (:class:`_JacobianPass` over all
     rows): one row per sample, one column per parameter in θ's order (:class:`_Structure`): ``[shared
     input-map values, output j's own b_1 … b_nb, f_1 … f_nf (each for every input), output-map values]``.
-    ``responses`` is :func:`_linear_responses` (computed when not given)."""
-    responses = _linear_responses(st, theta, rec) if responses is None else responses
-    jacobian = _JacobianPass.of(st, theta, rec, j, weight, responses)
+    ``sim`` is :func:`_simulation` at θ (computed when not given)."""
+    jacobian = _JacobianPass.of(st, theta, rec, j, weight, _simulation(st, theta, rec) if sim is None else sim)
     jac = np.empty((len(rec.u), jacobian.columns))
     jacobian.rows(rec, slice(0, len(rec.u)), jac)
     return jacobian.yhat, jac
@@ -628,11 +637,11 @@ BLOCK_ROWS = 2048
 
 
 def _output_normal_equations(st: _Structure, theta: np.ndarray, rec: _Record, j: int, weight: float,
-                             responses: tuple, buffer: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                             sim: _Simulation, buffer: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """JᵀJ and Jᵀe of output j (spec §11.4.3; J of :func:`_output_jacobian`, e the weighted residuals),
     accumulated over blocks of :data:`BLOCK_ROWS` rows formed in ``buffer`` (≥ BLOCK_ROWS × columns + 1):
     one symmetric product per block of ``[J | e]``."""
-    jacobian = _JacobianPass.of(st, theta, rec, j, weight, responses)
+    jacobian = _JacobianPass.of(st, theta, rec, j, weight, sim)
     cols, n = jacobian.columns, len(rec.u)
     e = (rec.y[:, j] - jacobian.yhat) * weight
     gram = np.zeros((cols + 1, cols + 1))
@@ -791,16 +800,16 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
     wy = 1.0 / (sd_y * math.sqrt(n))                          # residual weights (spec §11.4.2)
     d2 = opts.ridge * scale ** 2
 
-    def cost(theta: np.ndarray) -> tuple[float, tuple]:
-        """The cost of spec §11.4.2 and the linear responses it simulated (the next Jacobian's, if accepted)."""
-        responses = _linear_responses(st, theta, rec)
-        e = (rec.y - _simulate(st, theta, rec, responses)) * wy
-        return float(np.sum(d2 * (theta - theta0) ** 2)) + float(np.sum(e * e)), responses
+    def cost(theta: np.ndarray) -> tuple[float, _Simulation]:
+        """The cost of spec §11.4.2 and the simulation it ran (the next Jacobian's, if accepted)."""
+        sim = _simulation(st, theta, rec)
+        e = (rec.y - sim.yhat) * wy
+        return float(np.sum(d2 * (theta - theta0) ** 2)) + float(np.sum(e * e)), sim
 
     # -- §11.4.3 Levenberg–Marquardt ------------------------------------------------------------------
     mu, up, down, mu_max = opts.lm_damping
     theta = theta0.copy()
-    current, responses = cost(theta)
+    current, sim = cost(theta)
     history = [current]
     ns = st.n_shared
     own = [st.own(j) for j in range(ny)]
@@ -810,7 +819,7 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
         hess = np.diag(d2)
         grad = d2 * (theta - theta0)                           # half the gradient of the cost
         for j in range(ny):
-            _add_normal_equations(hess, grad, ns, own[j], *_output_normal_equations(st, theta, rec, j, wy[j], responses, block))
+            _add_normal_equations(hess, grad, ns, own[j], *_output_normal_equations(st, theta, rec, j, wy[j], sim, block))
         accepted = False
         while mu <= mu_max:
             try:
@@ -822,7 +831,7 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
             if _max_pole_modulus(st, trial) >= opts.stability_radius:
                 mu *= up
                 continue
-            new, trial_responses = cost(trial)
+            new, trial_sim = cost(trial)
             if np.isfinite(new) and new < current:
                 accepted = True
                 break
@@ -832,7 +841,7 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
             iterations -= 1
             break
         gain = (current - new) / current if current > 0 else 0.0
-        theta, current, responses = trial, new, trial_responses
+        theta, current, sim = trial, new, trial_sim
         history.append(current)
         mu = max(mu * down, 1e-12)
         if gain < opts.tolerance:
@@ -841,7 +850,7 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
 
     model = _assemble(st, theta, sample_rate_hz, hemi,
                       _as_channels(input_names, input_units, nu, "u"), _as_channels(output_names, output_units, ny, "y"))
-    yhat = np.vstack([predict(model, a) for a in us])
+    yhat = sim.yhat                                            # the records simulated at the final θ (spec §11.3)
     err = np.linalg.norm(y_all - yhat, axis=0)
     denom = np.linalg.norm(y_all - mu_y, axis=0)
     fit_pct = np.where(denom > 0, 100.0 * (1.0 - err / np.where(denom > 0, denom, 1.0)), 0.0)
