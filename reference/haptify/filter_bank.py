@@ -82,7 +82,9 @@ def _rows(array: np.ndarray) -> tuple[np.ndarray, int]:
     """A 1-D view of the memory from ``array[0, 0]`` to ``array[-1, -1]`` and its row stride in elements: row t
     of ``array`` (N, M), whose rows are contiguous, is ``flat[t * stride: t * stride + M]``."""
     n, m = array.shape
-    stride = array.strides[0] // array.itemsize if n > 1 else m
+    if array.flags.c_contiguous:
+        return array.reshape(-1), m
+    stride = array.strides[0] // array.itemsize
     return as_strided(array, shape=((n - 1) * stride + m,), strides=(array.itemsize,)), stride
 
 
@@ -93,74 +95,94 @@ def _row_major(array: np.ndarray) -> bool:
         and array.strides[0] % array.itemsize == 0
 
 
+class FilterBank:
+    """M filters ``b[m] / a[m]`` (spec §11.2: F(q) = 1 + f_1 q^-1 + …) and their delays, which carry over
+    from one call to the next: consecutive blocks of rows filtered one after the other give the result of
+    filtering all rows at once (the fit forms its Jacobian a block of rows at a time, spec §11.4.3).
+
+    ``b`` (M, nb) and ``a`` (M, na) hold one numerator and one denominator per column, each denominator
+    with a leading 1; the shorter of the two is padded with zeros. Raises ValueError when they are not
+    one per column or a denominator does not start with 1.
+    """
+
+    def __init__(self, b: np.ndarray, a: np.ndarray) -> None:
+        b = np.atleast_2d(np.asarray(b, dtype=float))
+        a = np.atleast_2d(np.asarray(a, dtype=float))
+        if len(b) != len(a):
+            raise ValueError(f"one numerator and one denominator per column; got {len(b)} and {len(a)}")
+        if not np.all(a[:, 0] == 1.0):
+            raise ValueError("every denominator must start with 1 (F(q) = 1 + f_1 q^-1 + …)")
+        order = max(b.shape[1], a.shape[1]) - 1
+        self.columns = len(b)
+        self._b = np.zeros((max(order, 2) + 1, len(b)))      # orders below 2 run as order 2 with zero coefficients
+        self._a = np.zeros_like(self._b)
+        self._b[: b.shape[1]] = b.T
+        self._a[: a.shape[1]] = a.T
+        self._delays = np.zeros((max(order, 2), len(b)))     # at rest
+
+    def __call__(self, x: np.ndarray, out: np.ndarray | None = None, gain: np.ndarray | None = None,
+                 starts: np.ndarray | None = None) -> np.ndarray:
+        """Filter the next block of rows: column m of the result is ``x[:, m % S]`` through filter m, continuing
+        from the delays the previous block left (at rest before the first), times ``gain[t]`` at row t when a
+        gain (N,) is given; every filter restarts from rest at the rows ``starts`` (records stacked one after
+        the other, each simulated from zero initial conditions as spec §11.3 requires).
+
+        ``x`` is (N, S) with M a multiple of S (the signals are used in turn; ``x`` is then tiled to M
+        columns first). ``x`` and ``out`` (N, M), which receives the result when given, may be views with
+        strided rows, e.g. some columns of a Jacobian.
+        """
+        x = np.asarray(x, dtype=float)
+        if x.ndim != 2:
+            raise ValueError(f"x must be (samples, signals); got shape {x.shape}")
+        n, signals = x.shape
+        m = self.columns
+        if m % max(signals, 1) or (m and not signals):
+            raise ValueError(f"{m} filters need one numerator and one denominator per column, a multiple of "
+                             f"the {signals} signals")
+        if signals and m > signals:
+            x = np.tile(x, (1, m // signals))          # the compiled loop reads one signal per column, in order
+        elif not _row_major(x):
+            x = np.ascontiguousarray(x)
+        if out is None:
+            out = np.empty((n, m))
+        elif out.shape != (n, m) or not _row_major(out):
+            raise ValueError(f"out must have shape {(n, m)} with contiguous rows; got {out.shape}")
+        gain = np.ones(n) if gain is None else np.ascontiguousarray(gain, dtype=float)
+        if gain.shape != (n,):
+            raise ValueError(f"gain must hold one factor per sample ({n}); got shape {gain.shape}")
+        rest = np.zeros(n, dtype=np.uint8)
+        if starts is not None and n:
+            starts = np.asarray(starts, dtype=np.int64)
+            if len(starts) and (starts.min() < 0 or starts.max() >= n):
+                raise ValueError(f"starts must be rows of x (0 … {n - 1})")
+            rest[starts] = 1
+        if out.size:  # then n ≥ 1 and signals ≥ 1
+            x_flat, x_stride = _rows(x)
+            out_flat, out_stride = _rows(out)
+            _kernel()(self._b, self._a, x_flat, x_stride, gain, rest, out_flat, out_stride, self._delays)
+        return out
+
+
 def lfilter_columns(b: np.ndarray, a: np.ndarray, x: np.ndarray, out: np.ndarray | None = None,
                     gain: np.ndarray | None = None, source: np.ndarray | None = None,
-                    starts: np.ndarray | None = None, state: np.ndarray | None = None) -> np.ndarray:
+                    starts: np.ndarray | None = None) -> np.ndarray:
     """Column m of the result is ``x[:, source[m]]`` (default ``x[:, m % S]``) filtered by ``b[m] / a[m]`` from
     zero initial conditions, each output sample t then multiplied by ``gain[t]`` when a gain (N,) is given.
     ``starts`` lists rows where every filter restarts from rest (records stacked one after the other, each
-    simulated from zero initial conditions as spec §11.3 requires); row 0 always starts unless a ``state``
-    is given.
+    simulated from zero initial conditions as spec §11.3 requires); row 0 always starts.
 
     ``b`` (M, nb) and ``a`` (M, na) hold one numerator and one denominator per column, each denominator
     with a leading 1 (F(q) = 1 + f_1 q^-1 + …, as every transfer function of spec §11.2); the shorter of
     the two is padded with zeros. ``x`` is (N, S) with M a multiple of S: the signals are used in turn,
-    column m filtering ``x[:, m % S]`` (``x`` is tiled to M columns first). ``source`` (M,) instead
-    picks any signal per column (the picked columns are copied first). ``x`` and ``out`` (N, M), which
-    receives the result when given, may be views with strided rows, e.g. some columns of a Jacobian.
-    ``state`` (order, M), order = max(nb, na) − 1, if given, holds the filters' delays before row 0 (zeros:
-    at rest) and is left holding them after the last row, so that consecutive blocks of rows filtered one
-    after the other with one state give the result of filtering all rows at once. Raises ValueError on
-    inconsistent shapes or a denominator not starting with 1.
+    column m filtering ``x[:, m % S]``. ``source`` (M,) instead picks any signal per column (the picked
+    columns are copied first). ``x`` and ``out`` (N, M), which receives the result when given, may be
+    views with strided rows, e.g. some columns of a Jacobian. One call of a fresh :class:`FilterBank`;
+    raises ValueError on inconsistent shapes or a denominator not starting with 1.
     """
-    b = np.atleast_2d(np.asarray(b, dtype=float))
-    a = np.atleast_2d(np.asarray(a, dtype=float))
     x = np.asarray(x, dtype=float)
-    if x.ndim != 2:
-        raise ValueError(f"x must be (samples, signals); got shape {x.shape}")
     if source is not None:
         src = np.asarray(source, dtype=np.int64)
-        if len(src) and (src.min() < 0 or src.max() >= x.shape[1]):
-            raise ValueError(f"source must pick signals among the {x.shape[1]} columns of x")
+        if x.ndim != 2 or (len(src) and (src.min() < 0 or src.max() >= x.shape[1])):
+            raise ValueError(f"source must pick signals among the columns of x (shape {x.shape})")
         x = x[:, src]
-    n, signals = x.shape
-    if len(b) != len(a) or len(b) % max(signals, 1) or (len(b) and not signals):
-        raise ValueError(f"{signals} signals need one numerator and one denominator per column, a multiple of "
-                         f"{signals} columns; got {len(b)} and {len(a)}")
-    if signals and len(b) > signals:
-        x = np.tile(x, (1, len(b) // signals))    # the compiled loop reads one signal per column, in order
-    elif not _row_major(x):
-        x = np.ascontiguousarray(x)
-    if not np.all(a[:, 0] == 1.0):
-        raise ValueError("every denominator must start with 1 (F(q) = 1 + f_1 q^-1 + …)")
-    order = max(b.shape[1], a.shape[1]) - 1
-    coef_b = np.zeros((max(order, 2) + 1, len(b)))
-    coef_a = np.zeros_like(coef_b)
-    coef_b[: b.shape[1]] = b.T
-    coef_a[: a.shape[1]] = a.T
-    shape = (n, len(b))
-    if out is None:
-        out = np.empty(shape)
-    elif out.shape != shape or not _row_major(out):
-        raise ValueError(f"out must have shape {shape} with contiguous rows; got {out.shape}")
-    if state is not None and (state.shape != (order, len(b)) or state.dtype != np.float64):
-        raise ValueError(f"state must be a float array of shape {(order, len(b))}; got {state.shape}")
-    gain = np.ones(n) if gain is None else np.ascontiguousarray(gain, dtype=float)
-    if gain.shape != (n,):
-        raise ValueError(f"gain must hold one factor per sample ({n}); got shape {gain.shape}")
-    rest = np.zeros(n, dtype=np.uint8)
-    if starts is not None and n:
-        starts = np.asarray(starts, dtype=np.int64)
-        if len(starts) and (starts.min() < 0 or starts.max() >= n):
-            raise ValueError(f"starts must be rows of x (0 … {n - 1})")
-        rest[starts] = 1
-    if out.size:  # then n ≥ 1 and signals ≥ 1
-        delays = np.zeros((max(order, 2), len(b)))    # orders below 2 run as order 2 with zero coefficients
-        if state is not None:
-            delays[:order] = state
-        x_flat, x_stride = _rows(x)
-        out_flat, out_stride = _rows(out)
-        _kernel()(coef_b, coef_a, x_flat, x_stride, gain, rest, out_flat, out_stride, delays)
-        if state is not None:
-            state[:] = delays[:order]
-    return out
+    return FilterBank(b, a)(x, out=out, gain=gain, starts=starts)

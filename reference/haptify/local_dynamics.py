@@ -564,57 +564,53 @@ def _delay_filters(den: np.ndarray, taps: Sequence[tuple[int, float]]) -> tuple[
 @dataclass
 class _JacobianPass:
     """Output j's Jacobian (spec §11.4.3) being formed block of rows by block of rows: what every block needs
-    (ŷ_j, the output map's slope times the weight, its segments, the filters and their signals) and the
-    filters' delays carried from one block to the next (:func:`haptify.filter_bank.lfilter_columns`)."""
+    (ŷ_j, the output map's slope times the weight, its segments) and the filter banks of its columns, whose
+    delays carry from one block to the next (:class:`haptify.filter_bank.FilterBank`)."""
 
     yhat: np.ndarray
     gain: np.ndarray                    # weight · h_j'(x_j) per sample
     weight: float
     segments: tuple | None              # (k, s) of the output map at x_j; None: unit gain
     hats: int                           # the output map's breakpoints (0: unit gain)
-    shared: tuple                       # numerators, denominators of the columns of the input-map values (over Φ)
-    linear: tuple                       # numerators, denominators of the B and F columns (over ``signals``)
+    shared: Any                         # FilterBank of the columns of the input-map values (over Φ)
+    linear: Any                         # FilterBank of the B and F columns (over ``signals``)
     signals: list[np.ndarray]           # w (N, nu) nb times, then z_j (N, nu) nf times
-    states: list[np.ndarray]
 
     @property
     def columns(self) -> int:
         """The Jacobian's width: shared input-map values, output j's B and F, its output-map values."""
-        return len(self.shared[0]) + len(self.linear[0]) + self.hats
+        return self.shared.columns + self.linear.columns + self.hats
 
     @classmethod
     def of(cls, st: _Structure, theta: np.ndarray, rec: _Record, j: int, weight: float,
            sim: _Simulation) -> "_JacobianPass":
+        from haptify.filter_bank import FilterBank
+
         nu, nb, nf = st.nu, st.nb, st.nf
         segments = sim.segments[j]
         gain = np.full(len(rec.u), weight) if segments is None else weight * sim.slopes[j]
         num, den = _polynomials(st, theta, j)
-        shared = (num[st.shared_input], den[st.shared_input])
-        linear = _delay_filters(den, [(st.nk + k, 1.0) for k in range(nb)] + [(l, -1.0) for l in range(1, nf + 1)])
-        signals = [sim.w] * nb + [sim.z[:, j * nu: (j + 1) * nu]] * nf
-        states = [np.zeros((max(f.shape[1], g.shape[1]) - 1, len(f))) for f, g in (shared, linear)]
+        taps = [(st.nk + k, 1.0) for k in range(nb)] + [(l, -1.0) for l in range(1, nf + 1)]
         return cls(yhat=sim.yhat[:, j], gain=gain, weight=weight, segments=segments,
-                   hats=0 if segments is None else len(st.out_bp[j]), shared=shared, linear=linear, signals=signals,
-                   states=states)
+                   hats=0 if segments is None else len(st.out_bp[j]),
+                   shared=FilterBank(num[st.shared_input], den[st.shared_input]),
+                   linear=FilterBank(*_delay_filters(den, taps)),
+                   signals=[sim.w] * nb + [sim.z[:, j * nu: (j + 1) * nu]] * nf)
 
     def rows(self, rec: _Record, rows: slice, out: np.ndarray) -> None:
-        """Write the Jacobian's rows ``rows`` (the next block after the previous call's) into ``out``:
+        """Write the Jacobian's rows ``rows`` (the block after the previous call's) into ``out``:
         ∂z_ji/∂v_ik = q^-nk B_ji/F_ji φ_ik over Φ, ∂z_ji/∂b_k = q^-(nk+k-1)/F_ji w_i and ∂z_ji/∂f_l =
         −q^-l/F_ji z_ji over ``signals``, each times the gain; the output map's hat functions times the weight."""
-        from haptify.filter_bank import lfilter_columns
-
-        ns, n_lin = len(self.shared[0]), len(self.linear[0])
+        ns, n_lin = self.shared.columns, self.linear.columns
         starts = rec.starts[(rec.starts >= rows.start) & (rec.starts < rows.stop)] - rows.start
         gain = self.gain[rows]
         if ns:
-            lfilter_columns(*self.shared, rec.basis[rows], out=out[:, :ns], gain=gain, starts=starts,
-                            state=self.states[0])
+            self.shared(rec.basis[rows], out=out[:, :ns], gain=gain, starts=starts)
         signals = rec.scratch(len(gain), n_lin)
         width = n_lin // len(self.signals)
         for m, signal in enumerate(self.signals):
             signals[:, m * width: (m + 1) * width] = signal[rows]
-        lfilter_columns(*self.linear, signals, out=out[:, ns: ns + n_lin], gain=gain, starts=starts,
-                        state=self.states[1])
+        self.linear(signals, out=out[:, ns: ns + n_lin], gain=gain, starts=starts)
         if self.segments is not None:
             _hat_columns(out[:, ns + n_lin:], self.segments[0][rows], self.segments[1][rows], self.weight)
 
@@ -631,9 +627,9 @@ def _output_jacobian(st: _Structure, theta: np.ndarray, rec: _Record, j: int, we
     return jacobian.yhat, jac
 
 
-#: Rows of the Jacobian formed at a time by :func:`_output_normal_equations`: a block of 2048 × ~200 columns
-#: (3 MiB) stays in the processor's cache between being filtered and entering the Gram matrix.
-BLOCK_ROWS = 2048
+#: Rows of the Jacobian formed at a time by :func:`_output_normal_equations`: a block of 4096 × ~200 columns
+#: (6 MiB) stays in the processor's cache between being filtered and entering the Gram matrix.
+BLOCK_ROWS = 4096
 
 
 def _output_normal_equations(st: _Structure, theta: np.ndarray, rec: _Record, j: int, weight: float,
