@@ -627,9 +627,9 @@ def _output_jacobian(st: _Structure, theta: np.ndarray, rec: _Record, j: int, we
     return jacobian.yhat, jac
 
 
-#: Rows of the Jacobian formed at a time by :func:`_output_normal_equations`: a block of 4096 × ~200 columns
-#: (6 MiB) stays in the processor's cache between being filtered and entering the Gram matrix.
-BLOCK_ROWS = 4096
+#: Rows of the Jacobian formed at a time by :func:`_output_normal_equations`: a block of 2048 × ~200 columns
+#: (3 MiB) stays in the processor's cache between being filtered and entering the Gram matrix.
+BLOCK_ROWS = 2048
 
 
 def _output_normal_equations(st: _Structure, theta: np.ndarray, rec: _Record, j: int, weight: float,
