@@ -30,6 +30,7 @@ from scipy.signal import lfilter
 
 from haptify.conventions import quat_mean
 from haptify.errors import HaptifyError, fail
+from haptify.filter_bank import FilterBank, lfilter_columns
 from haptify.metric_definitions import family, param
 from haptify.versions import SPEC_VERSION
 
@@ -525,8 +526,6 @@ class _Simulation:
 def _simulation(st: _Structure, theta: np.ndarray, rec: _Record) -> _Simulation:
     """Simulate the model under fit: the ny · nu transfer functions in one filter-bank call, w feeding the
     nu filters of every output in turn."""
-    from haptify.filter_bank import lfilter_columns
-
     w = _inputs_mapped(st, theta, rec)
     num, den = _polynomials(st, theta)
     z = lfilter_columns(num, den, w, starts=rec.starts)
@@ -572,8 +571,8 @@ class _JacobianPass:
     weight: float
     segments: tuple | None              # (k, s) of the output map at x_j; None: unit gain
     hats: int                           # the output map's breakpoints (0: unit gain)
-    shared: Any                         # FilterBank of the columns of the input-map values (over Φ)
-    linear: Any                         # FilterBank of the B and F columns (over ``signals``)
+    shared: FilterBank                  # the columns of the input-map values (over Φ)
+    linear: FilterBank                  # the B and F columns (over ``signals``)
     signals: list[np.ndarray]           # w (N, nu) nb times, then z_j (N, nu) nf times
 
     @property
@@ -584,8 +583,6 @@ class _JacobianPass:
     @classmethod
     def of(cls, st: _Structure, theta: np.ndarray, rec: _Record, j: int, weight: float,
            sim: _Simulation) -> "_JacobianPass":
-        from haptify.filter_bank import FilterBank
-
         nu, nb, nf = st.nu, st.nb, st.nf
         segments = sim.segments[j]
         gain = np.full(len(rec.u), weight) if segments is None else weight * sim.slopes[j]
