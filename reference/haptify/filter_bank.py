@@ -3,16 +3,19 @@
 The Hammerstein–Wiener fit of spec §11.4 filters ny · nu · (breakpoints + 2) signals per Jacobian, each
 by a different transfer function B_ji(q)/F_ji(q). ``scipy.signal.lfilter`` takes one denominator per
 call, so a Python loop over transfer functions made the calls' overhead and its generic inner loop the
-fit's main cost (issue 21). :func:`lfilter_columns` runs them all in one compiled loop (numba, compiled
-on first use and cached on disk) over time-major data, one SIMD lane per column, with exactly
-``lfilter``'s arithmetic: the transposed direct form II in the same order of operations and without
-fused multiply-adds, so column m equals ``lfilter(b[m], a[m], x[:, m])`` to the last bit whenever F has an
-order ≥ 1 (scipy computes a pure FIR filter by convolution, which sums in another order).
+fit's main cost (issue 21). :class:`FilterBank` runs them all in one compiled loop (numba, compiled on
+first use and cached on disk) over time-major data, one SIMD lane per column, with exactly ``lfilter``'s
+arithmetic: the transposed direct form II in the same order of operations and without fused
+multiply-adds, so column m equals ``lfilter(b[m], a[m], x[:, m])`` to the last bit whenever F has an order
+≥ 1 (scipy computes a pure FIR filter by convolution, which sums in another order). A bank keeps its
+filters' delays between calls, so a long signal can be filtered a block of rows at a time (the fit forms
+its Jacobian in blocks that stay in the processor's cache); :func:`lfilter_columns` is one call of a
+fresh bank.
 
 Filters of order ≤ 2 (every transfer function of the default structure, nk = 0, nb = nf = 2) take a
-loop that keeps the two delays of every column in their own arrays and reads each sample once; higher
-orders take the general loop. Filters of order < 2 are padded with zero coefficients, which adds and
-subtracts exact zeros (the same values, up to the sign of a zero).
+loop that keeps the two delays of every column in their own arrays and reads each row of the signals
+once; higher orders take the general loop. Filters of order < 2 run as order 2 with zero coefficients,
+which adds and subtracts exact zeros (the same values, up to the sign of a zero).
 """
 
 from __future__ import annotations
