@@ -465,13 +465,15 @@ class _Record:
     basis: np.ndarray
     segments: list
     starts: np.ndarray
-    _scratch: np.ndarray | None = None
+    _scratch: dict = field(default_factory=dict)
 
-    def scratch(self, rows: int, width: int) -> np.ndarray:
-        """A reused (rows, width) buffer (for the signals the B and F columns of a block of Jacobian rows filter)."""
-        if self._scratch is None or self._scratch.shape[0] < rows or self._scratch.shape[1] != width:
-            self._scratch = np.empty((rows, width))
-        return self._scratch[:rows]
+    def scratch(self, name: str, rows: int, width: int) -> np.ndarray:
+        """A (rows, width) buffer reused from call to call under ``name`` (a fresh array of megabytes per call
+        costs its page faults every time)."""
+        buffer = self._scratch.get(name)
+        if buffer is None or buffer.shape[0] < rows or buffer.shape[1] != width:
+            buffer = self._scratch[name] = np.empty((rows, width))
+        return buffer[:rows]
 
     @classmethod
     def of(cls, st: _Structure, u: np.ndarray, y: np.ndarray, starts: Sequence[int] = (0,)) -> "_Record":
@@ -524,11 +526,13 @@ class _Simulation:
 
 
 def _simulation(st: _Structure, theta: np.ndarray, rec: _Record) -> _Simulation:
-    """Simulate the model under fit: the ny · nu transfer functions in one filter-bank call, w feeding the
-    nu filters of every output in turn."""
+    """Simulate the model under fit: the ny · nu transfer functions in one filter-bank call over w repeated
+    for every output."""
     w = _inputs_mapped(st, theta, rec)
     num, den = _polynomials(st, theta)
-    z = lfilter_columns(num, den, w, starts=rec.starts)
+    tiled = rec.scratch("inputs", len(w), st.ny * st.nu)        # w once per output
+    tiled.reshape(len(w), st.ny, st.nu)[:] = w[:, None, :]
+    z = lfilter_columns(num, den, tiled, starts=rec.starts)
     x = z @ np.kron(np.eye(st.ny), np.ones((st.nu, 1)))           # Σ_i z_ji for every output j
     yhat, slopes, segments = x.copy(), [None] * st.ny, [None] * st.ny
     for j, bp in enumerate(st.out_bp):
@@ -603,7 +607,7 @@ class _JacobianPass:
         gain = self.gain[rows]
         if ns:
             self.shared(rec.basis[rows], out=out[:, :ns], gain=gain, starts=starts)
-        signals = rec.scratch(len(gain), n_lin)
+        signals = rec.scratch("signals", len(gain), n_lin)
         width = n_lin // len(self.signals)
         for m, signal in enumerate(self.signals):
             signals[:, m * width: (m + 1) * width] = signal[rows]
