@@ -341,11 +341,11 @@ def test_normal_equations_by_blocks_of_rows_are_those_of_the_whole_jacobian(monk
     rec = ld._Record.of(st_, rec.u, np.random.default_rng(31).normal(size=(len(rec.u), 2)), starts=[0, 150, 151])
     monkeypatch.setattr(ld, "BLOCK_ROWS", block_rows)
     sim = ld._simulation(st_, theta, rec)
-    for j in range(2):
-        yhat, jac = ld._output_jacobian(st_, theta, rec, j, weight=0.7, sim=sim)
-        buffer = np.full((block_rows, jac.shape[1] + 3), np.nan)
-        gram, jac_e = ld._output_normal_equations(st_, theta, rec, j, 0.7, sim, buffer)
-        e = (rec.y[:, j] - yhat) * 0.7
+    weights = np.array([0.7, 1.3])
+    buffer = np.full((block_rows, st_.n_shared + max(st_.own(j).stop - st_.own(j).start for j in range(2)) + 3), np.nan)
+    for j, (gram, jac_e) in enumerate(ld._normal_equations(st_, theta, rec, weights, sim, buffer)):
+        yhat, jac = ld._output_jacobian(st_, theta, rec, j, weight=weights[j], sim=sim)
+        e = (rec.y[:, j] - yhat) * weights[j]
         np.testing.assert_allclose(gram, jac.T @ jac, rtol=1e-12, atol=1e-12 * np.abs(jac.T @ jac).max())
         np.testing.assert_allclose(jac_e, e @ jac, rtol=1e-12, atol=1e-12 * np.abs(e @ jac).max())
 

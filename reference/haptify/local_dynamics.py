@@ -628,27 +628,29 @@ def _output_jacobian(st: _Structure, theta: np.ndarray, rec: _Record, j: int, we
     return jacobian.yhat, jac
 
 
-#: Rows of the Jacobian formed at a time by :func:`_output_normal_equations`: a block of 2048 × ~200 columns
-#: (3 MiB) stays in the processor's cache between being filtered and entering the Gram matrix.
+#: Rows of the Jacobians formed at a time by :func:`_normal_equations`: a block of 2048 × ~200 columns (3 MiB)
+#: stays in the processor's cache between being filtered and entering the Gram matrix.
 BLOCK_ROWS = 2048
 
 
-def _output_normal_equations(st: _Structure, theta: np.ndarray, rec: _Record, j: int, weight: float,
-                             sim: _Simulation, buffer: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """JᵀJ and Jᵀe of output j (spec §11.4.3; J of :func:`_output_jacobian`, e the weighted residuals),
-    accumulated over blocks of :data:`BLOCK_ROWS` rows formed in ``buffer`` (≥ BLOCK_ROWS × columns + 1):
-    one symmetric product per block of ``[J | e]``."""
-    jacobian = _JacobianPass.of(st, theta, rec, j, weight, sim)
-    cols, n = jacobian.columns, len(rec.u)
-    e = (rec.y[:, j] - jacobian.yhat) * weight
-    gram = np.zeros((cols + 1, cols + 1))
+def _normal_equations(st: _Structure, theta: np.ndarray, rec: _Record, weights: np.ndarray, sim: _Simulation,
+                      buffer: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """JᵀJ and Jᵀe of every output j (spec §11.4.3; J of :func:`_output_jacobian` with weight ``weights[j]``,
+    e the weighted residuals), accumulated over blocks of :data:`BLOCK_ROWS` rows formed in ``buffer``
+    (≥ BLOCK_ROWS × columns + 1): one symmetric product per block of ``[J | e]``, the outputs' blocks of the
+    same rows one after the other (so a block of the input basis Φ is read once for all outputs)."""
+    passes = [_JacobianPass.of(st, theta, rec, j, weights[j], sim) for j in range(st.ny)]
+    residuals = [(rec.y[:, j] - p.yhat) * weights[j] for j, p in enumerate(passes)]
+    grams = [np.zeros((p.columns + 1, p.columns + 1)) for p in passes]
+    n = len(rec.u)
     for start in range(0, n, BLOCK_ROWS):
         rows = slice(start, min(start + BLOCK_ROWS, n))
-        block = buffer[: rows.stop - rows.start, : cols + 1]
-        jacobian.rows(rec, rows, block[:, :cols])
-        block[:, cols] = e[rows]
-        gram += block.T @ block
-    return gram[:cols, :cols], gram[:cols, cols]
+        for jacobian, e, gram in zip(passes, residuals, grams):
+            block = buffer[: rows.stop - rows.start, : jacobian.columns + 1]
+            jacobian.rows(rec, rows, block[:, :-1])
+            block[:, -1] = e[rows]
+            gram += block.T @ block
+    return [(gram[:-1, :-1], gram[:-1, -1]) for gram in grams]
 
 
 def _add_normal_equations(hess: np.ndarray, grad: np.ndarray, ns: int, own: slice, gram: np.ndarray,
@@ -815,8 +817,8 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
     for iterations in range(1, opts.max_iterations + 1):
         hess = np.diag(d2)
         grad = d2 * (theta - theta0)                           # half the gradient of the cost
-        for j in range(ny):
-            _add_normal_equations(hess, grad, ns, own[j], *_output_normal_equations(st, theta, rec, j, wy[j], sim, block))
+        for j, (gram, jac_e) in enumerate(_normal_equations(st, theta, rec, wy, sim, block)):
+            _add_normal_equations(hess, grad, ns, own[j], gram, jac_e)
         accepted = False
         while mu <= mu_max:
             try:
