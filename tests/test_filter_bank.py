@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.signal import lfilter
 
-from haptify.filter_bank import lfilter_columns
+from haptify.filter_bank import FilterBank, lfilter_columns
 
 
 def test_first_order_impulse_response_is_the_geometric_sequence():
@@ -92,3 +92,34 @@ def test_stacked_records_restart_from_rest_at_their_starts():
             assert np.array_equal(y[s:s + n, m], lfilter(b[m], a[m], x[s:s + n, m]))
     with pytest.raises(ValueError, match="starts must be rows"):
         lfilter_columns(b, a, x, starts=[len(x)])
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), order=st.integers(0, 3), cuts=st.lists(st.integers(0, 120), max_size=4),
+       starts=st.lists(st.integers(0, 119), max_size=3))
+def test_a_bank_filtering_blocks_in_turn_equals_one_call_over_all_rows(seed, order, cuts, starts):
+    rng = np.random.default_rng(seed)
+    b = rng.standard_normal((5, order + 1))
+    a = np.column_stack([np.ones(5), rng.uniform(-0.4, 0.4, (5, order))])
+    x = rng.standard_normal((120, 5))
+    gain = rng.uniform(0.5, 2.0, 120)
+    whole = lfilter_columns(b, a, x, gain=gain, starts=starts)
+    bank, edges = FilterBank(b, a), [0, *sorted(cuts), 120]
+    out = np.full((120, 5), np.nan)
+    for lo, hi in zip(edges, edges[1:]):
+        local = [s - lo for s in starts if lo <= s < hi]
+        bank(x[lo:hi], out=out[lo:hi], gain=gain[lo:hi], starts=local)
+    np.testing.assert_array_equal(out, whole)
+
+
+def test_signals_are_used_in_turn_when_the_filters_are_a_multiple_of_them_and_may_have_strided_rows():
+    rng = np.random.default_rng(9)
+    wide = rng.standard_normal((150, 7))
+    x = wide[:, 2:5]                                       # rows 7 apart in memory
+    b = rng.standard_normal((6, 2))
+    a = np.column_stack([np.ones(6), rng.uniform(-0.5, 0.5, (6, 2))])
+    y = lfilter_columns(b, a, x)
+    for m in range(6):
+        assert np.array_equal(y[:, m], lfilter(b[m], a[m], x[:, m % 3]))
+    with pytest.raises(ValueError, match="a multiple of"):
+        lfilter_columns(b[:4], a[:4], x)

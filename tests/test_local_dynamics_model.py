@@ -331,3 +331,34 @@ def test_analytic_jacobian_matches_central_differences(nk):
             step[p] = h
             numeric = (ld._simulate(st_, theta + step, rec)[:, j] - ld._simulate(st_, theta - step, rec)[:, j]) / (2 * h)
             np.testing.assert_allclose(jac[:, col], 0.5 * numeric, rtol=0, atol=2e-6 * max(1.0, np.abs(numeric).max()))
+
+
+@pytest.mark.parametrize("block_rows", [37, 400])
+def test_normal_equations_by_blocks_of_rows_are_those_of_the_whole_jacobian(monkeypatch, block_rows):
+    # Blocks of 37 rows cut the stacked records (starting at rows 0, 150 and 151) mid-block, and a record of one
+    # row lies inside a block: the filters' delays carry across blocks and restart at every record's first row.
+    ld, st_, theta, rec = _random_structure(np.random.default_rng(30), 1)
+    rec = ld._Record.of(st_, rec.u, np.random.default_rng(31).normal(size=(len(rec.u), 2)), starts=[0, 150, 151])
+    monkeypatch.setattr(ld, "BLOCK_ROWS", block_rows)
+    sim = ld._simulation(st_, theta, rec)
+    weights = np.array([0.7, 1.3])
+    buffer = np.full((block_rows, st_.n_shared + max(st_.own(j).stop - st_.own(j).start for j in range(2)) + 3), np.nan)
+    for j, (gram, jac_e) in enumerate(ld._normal_equations(st_, theta, rec, weights, sim, buffer)):
+        yhat, jac = ld._output_jacobian(st_, theta, rec, j, weight=weights[j], sim=sim)
+        e = (rec.y[:, j] - yhat) * weights[j]
+        np.testing.assert_allclose(gram, jac.T @ jac, rtol=1e-12, atol=1e-12 * np.abs(jac.T @ jac).max())
+        np.testing.assert_allclose(jac_e, e @ jac, rtol=1e-12, atol=1e-12 * np.abs(e @ jac).max())
+
+
+def test_parameter_layout_puts_each_outputs_own_parameters_in_jacobian_order():
+    ld, st_, _, _ = _random_structure(np.random.default_rng(40), 0)
+    nu, nb, nf = 3, 2, 2
+    for j in range(2):
+        own = st_.own(j)
+        expected = np.concatenate([st_.b_idx[j].T.ravel(), st_.f_idx[j].T.ravel()]
+                                  + ([] if st_.c_idx[j] is None else [st_.c_idx[j]]))
+        np.testing.assert_array_equal(expected, np.arange(own.start, own.stop))      # b_1 of every input first
+        assert st_.b_idx[j, 1, 0] == own.start + 1 and st_.f_idx[j, 0, 1] == own.start + nb * nu + nu
+    every = np.concatenate([np.arange(st_.n_shared)] + [np.arange(st_.own(j).start, st_.own(j).stop) for j in range(2)])
+    np.testing.assert_array_equal(every, np.arange(st_.size))                        # θ covered once, no gap
+    assert nf == st_.nf

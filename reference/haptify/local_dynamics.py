@@ -30,6 +30,7 @@ from scipy.signal import lfilter
 
 from haptify.conventions import quat_mean
 from haptify.errors import HaptifyError, fail
+from haptify.filter_bank import FilterBank, lfilter_columns
 from haptify.metric_definitions import family, param
 from haptify.versions import SPEC_VERSION
 
@@ -261,11 +262,18 @@ def pwl_basis(breakpoints: np.ndarray, u: np.ndarray) -> np.ndarray:
     Φ of spec §11.4.3."""
     bp = np.asarray(breakpoints, dtype=float)
     k, s = _segments(bp, np.asarray(u, dtype=float))
-    phi = np.zeros((len(k), len(bp)))
+    return _hat_columns(np.empty((len(k), len(bp))), k, s)
+
+
+def _hat_columns(out: np.ndarray, k: np.ndarray, s: np.ndarray, scale: float = 1.0) -> np.ndarray:
+    """``scale`` times the hat functions of the segments (k, s) of :func:`_segments` written into ``out``
+    (N, K), which may be a view (e.g. some columns of a Jacobian): row t is zero but for
+    scale·(1 − s_t) in column k_t and scale·s_t in column k_t + 1."""
+    out[:] = 0.0
     rows = np.arange(len(k))
-    phi[rows, k] = 1.0 - s
-    phi[rows, k + 1] = s
-    return phi
+    out[rows, k] = scale * (1.0 - s)
+    out[rows, k + 1] = scale * s
+    return out
 
 
 def pwl_slope(breakpoints: np.ndarray, values: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -399,7 +407,10 @@ def place_breakpoints(signal: np.ndarray, count: int, quantiles: tuple[float, fl
 
 @dataclass
 class _Structure:
-    """Fixed parts of a model being fitted, and the index layout of its parameter vector θ."""
+    """Fixed parts of a model being fitted, and the index layout of its parameter vector θ: the shared
+    input-map values, then output by output its own parameters in the order of its Jacobian's columns
+    (:func:`_output_jacobian`): b_1 of every input, …, b_nb of every input, f_1 of every input, …, f_nf of
+    every input, then the output map's values."""
 
     nu: int
     ny: int
@@ -422,18 +433,14 @@ class _Structure:
             n += 0 if bp is None else len(bp)
         self.n_shared = n
         self.shared_input = np.array([i for i, bp in enumerate(self.in_bp) if bp is not None for _ in bp], dtype=int)
-        # The signal each Jacobian column before the output map filters, among [Φ | w | z_j] (_output_jacobian).
-        self.jacobian_source = np.concatenate([np.arange(n), [n + i + (0 if k < self.nb else self.nu)
-                                                              for i in range(self.nu) for k in range(self.nb + self.nf)]])
         self.b_idx = np.zeros((self.ny, self.nu, self.nb), dtype=int)
         self.f_idx = np.zeros((self.ny, self.nu, self.nf), dtype=int)
         self.c_idx = []
         for j in range(self.ny):
-            for i in range(self.nu):
-                self.b_idx[j, i] = np.arange(n, n + self.nb)
-                n += self.nb
-                self.f_idx[j, i] = np.arange(n, n + self.nf)
-                n += self.nf
+            self.b_idx[j] = n + np.arange(self.nb * self.nu).reshape(self.nb, self.nu).T
+            n += self.nb * self.nu
+            self.f_idx[j] = n + np.arange(self.nf * self.nu).reshape(self.nf, self.nu).T
+            n += self.nf * self.nu
             bp = self.out_bp[j]
             self.c_idx.append(None if bp is None else np.arange(n, n + len(bp)))
             n += 0 if bp is None else len(bp)
@@ -458,15 +465,15 @@ class _Record:
     basis: np.ndarray
     segments: list
     starts: np.ndarray
-    _signals: np.ndarray | None = None
+    _scratch: dict = field(default_factory=dict)
 
-    def jacobian_inputs(self, st: _Structure) -> np.ndarray:
-        """A reused (N, shared + 2 nu) buffer: the input basis Φ, then room for w and z_j, the signals the
-        linear block's Jacobian columns filter (see :func:`_output_jacobian`)."""
-        if self._signals is None:
-            self._signals = np.empty((len(self.u), st.n_shared + 2 * st.nu))
-            self._signals[:, : st.n_shared] = self.basis
-        return self._signals
+    def scratch(self, name: str, rows: int, width: int) -> np.ndarray:
+        """A (rows, width) buffer reused from call to call under ``name`` (a fresh array of megabytes per call
+        costs its page faults every time)."""
+        buffer = self._scratch.get(name)
+        if buffer is None or buffer.shape[0] < rows or buffer.shape[1] != width:
+            buffer = self._scratch[name] = np.empty((rows, width))
+        return buffer[:rows]
 
     @classmethod
     def of(cls, st: _Structure, u: np.ndarray, y: np.ndarray, starts: Sequence[int] = (0,)) -> "_Record":
@@ -503,91 +510,147 @@ def _polynomials(st: _Structure, theta: np.ndarray, j: int | None = None) -> tup
     return num, den
 
 
-def _simulate(st: _Structure, theta: np.ndarray, rec: _Record, responses: tuple | None = None) -> np.ndarray:
-    """ŷ (N, ny) of the model under fit (same algorithm as :func:`predict`), the ny · nu transfer
-    functions in one filter-bank call (:func:`_linear_responses`, unless ``responses`` holds them)."""
-    n = len(rec.u)
-    _, z = _linear_responses(st, theta, rec) if responses is None else responses
-    x = z @ np.kron(np.eye(st.ny), np.ones((st.nu, 1)))           # Σ_i z_ji for every output j
-    y = np.empty((n, st.ny))
-    for j in range(st.ny):
-        bp = st.out_bp[j]
-        y[:, j] = x[:, j] if bp is None else pwl_eval(bp, theta[st.c_idx[j]], x[:, j])
-    return y
+@dataclass
+class _Simulation:
+    """The model under fit simulated on the stacked records (same algorithm as :func:`predict`, spec §11.3):
+    the mapped inputs w (N, nu), the responses z (N, ny · nu, output-major) = q^-nk B_ji/F_ji w_i, their
+    sums x (N, ny), the outputs ŷ (N, ny), and per output map its slope at x_j and segments (k, s), None for
+    a unit gain (what the Jacobian of spec §11.4.3 reuses)."""
+
+    w: np.ndarray
+    z: np.ndarray
+    x: np.ndarray
+    yhat: np.ndarray
+    slopes: list[np.ndarray | None]
+    segments: list[tuple | None]
 
 
-def _pwl_parts(breakpoints: np.ndarray, values: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`pwl_eval`, :func:`pwl_slope` and :func:`pwl_basis` of one map at ``x`` from one segment search."""
-    k, s = _segments(breakpoints, x)
-    lo, hi = values[k], values[k + 1]
-    basis = np.zeros((len(k), len(breakpoints)))
-    rows = np.arange(len(k))
-    basis[rows, k] = 1.0 - s
-    basis[rows, k + 1] = s
-    return lo + s * (hi - lo), (hi - lo) / (breakpoints[k + 1] - breakpoints[k]), basis
-
-
-def _linear_responses(st: _Structure, theta: np.ndarray, rec: _Record) -> tuple[np.ndarray, np.ndarray]:
-    """w (N, nu), the inputs through their maps, and z (N, ny · nu, output-major) = q^-nk B_ji/F_ji w_i for
-    every transfer function (one filter-bank call)."""
-    from haptify.filter_bank import lfilter_columns
-
+def _simulation(st: _Structure, theta: np.ndarray, rec: _Record) -> _Simulation:
+    """Simulate the model under fit: the ny · nu transfer functions in one filter-bank call over w repeated
+    for every output."""
     w = _inputs_mapped(st, theta, rec)
     num, den = _polynomials(st, theta)
-    return w, lfilter_columns(num, den, np.tile(w, (1, st.ny)), starts=rec.starts)
+    tiled = rec.scratch("inputs", len(w), st.ny * st.nu)        # w once per output
+    tiled.reshape(len(w), st.ny, st.nu)[:] = w[:, None, :]
+    z = lfilter_columns(num, den, tiled, starts=rec.starts)
+    x = z @ np.kron(np.eye(st.ny), np.ones((st.nu, 1)))           # Σ_i z_ji for every output j
+    yhat, slopes, segments = x.copy(), [None] * st.ny, [None] * st.ny
+    for j, bp in enumerate(st.out_bp):
+        if bp is not None:
+            value, slopes[j], k, s = _pwl_parts(bp, theta[st.c_idx[j]], x[:, j])
+            yhat[:, j], segments[j] = value, (k, s)
+    return _Simulation(w=w, z=z, x=x, yhat=yhat, slopes=slopes, segments=segments)
 
 
-def _jacobian_filters(st: _Structure, theta: np.ndarray, j: int) -> tuple[np.ndarray, np.ndarray]:
-    """Numerator and denominator of every column of output j's Jacobian before the output map (spec §11.4.3):
-    ∂z_ji/∂v_ik = q^-nk B_ji/F_ji φ_ik, ∂z_ji/∂b_k = q^-(nk+k-1)/F_ji w_i, ∂z_ji/∂f_l = −q^-l/F_ji z_ji."""
-    nu, nb, nf, nk = st.nu, st.nb, st.nf, st.nk
-    num, den = _polynomials(st, theta, j)
-    width = max(nk + nb, nf + 1)
-    lin_num = np.zeros((nu, nb + nf, width))
-    for k in range(nb):
-        lin_num[:, k, nk + k] = 1.0
-    for l in range(1, nf + 1):
-        lin_num[:, nb + l - 1, l] = -1.0
-    shared_num = np.zeros((st.n_shared, width))
-    shared_num[:, : nk + nb] = num[st.shared_input]
-    numerators = np.vstack([shared_num, lin_num.reshape(nu * (nb + nf), width)])
-    denominators = np.vstack([den[st.shared_input], np.repeat(den, nb + nf, axis=0)])
-    return numerators, denominators
+def _simulate(st: _Structure, theta: np.ndarray, rec: _Record) -> np.ndarray:
+    """ŷ (N, ny) of the model under fit (:func:`_simulation`)."""
+    return _simulation(st, theta, rec).yhat
+
+
+def _pwl_parts(breakpoints: np.ndarray, values: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, ...]:
+    """:func:`pwl_eval` and :func:`pwl_slope` of one map at ``x``, and the segments (k, s) that
+    :func:`_hat_columns` turns into :func:`pwl_basis`, from one segment search."""
+    k, s = _segments(breakpoints, x)
+    lo, hi = values[k], values[k + 1]
+    return lo + s * (hi - lo), (hi - lo) / (breakpoints[k + 1] - breakpoints[k]), k, s
+
+
+def _delay_filters(den: np.ndarray, taps: Sequence[tuple[int, float]]) -> tuple[np.ndarray, np.ndarray]:
+    """Numerators ``sign · q^-delay`` and denominators F for every (delay, sign) of ``taps`` in turn, each over
+    every row of ``den``: the filters ``sign · q^-delay / F`` of the B and F columns of a Jacobian (spec §11.4.3)."""
+    num = np.zeros((len(taps), len(den), max(d for d, _ in taps) + 1))
+    for m, (delay, sign) in enumerate(taps):
+        num[m, :, delay] = sign
+    return num.reshape(-1, num.shape[2]), np.tile(den, (len(taps), 1))
+
+
+@dataclass
+class _JacobianPass:
+    """Output j's Jacobian (spec §11.4.3) being formed block of rows by block of rows: what every block needs
+    (ŷ_j, the output map's slope times the weight, its segments) and the filter banks of its columns, whose
+    delays carry from one block to the next (:class:`haptify.filter_bank.FilterBank`)."""
+
+    yhat: np.ndarray
+    gain: np.ndarray                    # weight · h_j'(x_j) per sample
+    weight: float
+    segments: tuple | None              # (k, s) of the output map at x_j; None: unit gain
+    hats: int                           # the output map's breakpoints (0: unit gain)
+    shared: FilterBank                  # the columns of the input-map values (over Φ)
+    linear: FilterBank                  # the B and F columns (over ``signals``)
+    signals: list[np.ndarray]           # w (N, nu) nb times, then z_j (N, nu) nf times
+
+    @property
+    def columns(self) -> int:
+        """The Jacobian's width: shared input-map values, output j's B and F, its output-map values."""
+        return self.shared.columns + self.linear.columns + self.hats
+
+    @classmethod
+    def of(cls, st: _Structure, theta: np.ndarray, rec: _Record, j: int, weight: float,
+           sim: _Simulation) -> "_JacobianPass":
+        nu, nb, nf = st.nu, st.nb, st.nf
+        segments = sim.segments[j]
+        gain = np.full(len(rec.u), weight) if segments is None else weight * sim.slopes[j]
+        num, den = _polynomials(st, theta, j)
+        taps = [(st.nk + k, 1.0) for k in range(nb)] + [(l, -1.0) for l in range(1, nf + 1)]
+        return cls(yhat=sim.yhat[:, j], gain=gain, weight=weight, segments=segments,
+                   hats=0 if segments is None else len(st.out_bp[j]),
+                   shared=FilterBank(num[st.shared_input], den[st.shared_input]),
+                   linear=FilterBank(*_delay_filters(den, taps)),
+                   signals=[sim.w] * nb + [sim.z[:, j * nu: (j + 1) * nu]] * nf)
+
+    def rows(self, rec: _Record, rows: slice, out: np.ndarray) -> None:
+        """Write the Jacobian's rows ``rows`` (the block after the previous call's) into ``out``:
+        ∂z_ji/∂v_ik = q^-nk B_ji/F_ji φ_ik over Φ, ∂z_ji/∂b_k = q^-(nk+k-1)/F_ji w_i and ∂z_ji/∂f_l =
+        −q^-l/F_ji z_ji over ``signals``, each times the gain; the output map's hat functions times the weight."""
+        ns, n_lin = self.shared.columns, self.linear.columns
+        starts = rec.starts[(rec.starts >= rows.start) & (rec.starts < rows.stop)] - rows.start
+        gain = self.gain[rows]
+        if ns:
+            self.shared(rec.basis[rows], out=out[:, :ns], gain=gain, starts=starts)
+        signals = rec.scratch("signals", len(gain), n_lin)
+        width = n_lin // len(self.signals)
+        for m, signal in enumerate(self.signals):
+            signals[:, m * width: (m + 1) * width] = signal[rows]
+        self.linear(signals, out=out[:, ns: ns + n_lin], gain=gain, starts=starts)
+        if self.segments is not None:
+            _hat_columns(out[:, ns + n_lin:], self.segments[0][rows], self.segments[1][rows], self.weight)
 
 
 def _output_jacobian(st: _Structure, theta: np.ndarray, rec: _Record, j: int, weight: float = 1.0,
-                     out: np.ndarray | None = None, responses: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """ŷ_j and ``weight`` times its analytic Jacobian (spec §11.4.3): one row per sample, one column per
-    parameter in the order ``[shared input-map values, output j's own B, F and output-map values]``.
+                     sim: _Simulation | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """ŷ_j and ``weight`` times its analytic Jacobian (spec §11.4.3) at once (:class:`_JacobianPass` over all
+    rows): one row per sample, one column per parameter in θ's order (:class:`_Structure`): ``[shared
+    input-map values, output j's own b_1 … b_nb, f_1 … f_nf (each for every input), output-map values]``.
+    ``sim`` is :func:`_simulation` at θ (computed when not given)."""
+    jacobian = _JacobianPass.of(st, theta, rec, j, weight, _simulation(st, theta, rec) if sim is None else sim)
+    jac = np.empty((len(rec.u), jacobian.columns))
+    jacobian.rows(rec, slice(0, len(rec.u)), jac)
+    return jacobian.yhat, jac
 
-    ``responses`` is :func:`_linear_responses` (computed when not given); ``out``, if given, is an
-    (N, ≥ columns) buffer the Jacobian is written into. Every column but the output map's is one
-    filter-bank call (:func:`_jacobian_filters` applied to φ, w and z), written straight into the Jacobian
-    already multiplied by the output map's slope and the weight.
-    """
-    from haptify.filter_bank import lfilter_columns
 
-    n, nu, nb, nf, ns = len(rec.u), st.nu, st.nb, st.nf, st.n_shared
-    n_lin = nu * (nb + nf)
-    cols = ns + n_lin + (0 if st.c_idx[j] is None else len(st.c_idx[j]))
-    jac = np.empty((n, cols)) if out is None else out[:n, :cols]
-    w, z = _linear_responses(st, theta, rec) if responses is None else responses
-    z = z[:, j * nu: (j + 1) * nu]
-    x = z @ np.ones(nu)
-    bp = st.out_bp[j]
-    if bp is None:
-        gain, yhat = np.full(n, weight), x
-    else:
-        yhat, slope, basis = _pwl_parts(bp, theta[st.c_idx[j]], x)
-        gain = weight * slope
-        np.multiply(basis, weight, out=jac[:, ns + n_lin:])
-    signals = rec.jacobian_inputs(st)                             # [φ | w | z_j]
-    signals[:, ns: ns + nu] = w
-    signals[:, ns + nu:] = z
-    numerators, denominators = _jacobian_filters(st, theta, j)
-    lfilter_columns(numerators, denominators, signals, out=jac[:, : ns + n_lin], gain=gain, source=st.jacobian_source,
-                    starts=rec.starts)
-    return yhat, jac
+#: Rows of the Jacobians formed at a time by :func:`_normal_equations`: a block of 2048 × ~200 columns (3 MiB)
+#: stays in the processor's cache between being filtered and entering the Gram matrix.
+BLOCK_ROWS = 2048
+
+
+def _normal_equations(st: _Structure, theta: np.ndarray, rec: _Record, weights: np.ndarray, sim: _Simulation,
+                      buffer: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """JᵀJ and Jᵀe of every output j (spec §11.4.3; J of :func:`_output_jacobian` with weight ``weights[j]``,
+    e the weighted residuals), accumulated over blocks of :data:`BLOCK_ROWS` rows formed in ``buffer``
+    (≥ BLOCK_ROWS × columns + 1): one symmetric product per block of ``[J | e]``, the outputs' blocks of the
+    same rows one after the other (so a block of the input basis Φ is read once for all outputs)."""
+    passes = [_JacobianPass.of(st, theta, rec, j, weights[j], sim) for j in range(st.ny)]
+    residuals = [(rec.y[:, j] - p.yhat) * weights[j] for j, p in enumerate(passes)]
+    grams = [np.zeros((p.columns + 1, p.columns + 1)) for p in passes]
+    n = len(rec.u)
+    for start in range(0, n, BLOCK_ROWS):
+        rows = slice(start, min(start + BLOCK_ROWS, n))
+        for jacobian, e, gram in zip(passes, residuals, grams):
+            block = buffer[: rows.stop - rows.start, : jacobian.columns + 1]
+            jacobian.rows(rec, rows, block[:, :-1])
+            block[:, -1] = e[rows]
+            gram += block.T @ block
+    return [(gram[:-1, :-1], gram[:-1, -1]) for gram in grams]
 
 
 def _add_normal_equations(hess: np.ndarray, grad: np.ndarray, ns: int, own: slice, gram: np.ndarray,
@@ -732,20 +795,20 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
             scale[st.c_idx[j]] = 1.0 / sd_y[j]
 
     rec = _Record.of(st, u_all, y_all, starts=np.cumsum([0] + [len(a) for a in us[:-1]]))
-    work = np.empty((n, st.n_shared + max(st.own(j).stop - st.own(j).start for j in range(ny))))
+    block = np.empty((min(n, BLOCK_ROWS), st.n_shared + max(st.own(j).stop - st.own(j).start for j in range(ny)) + 1))
     wy = 1.0 / (sd_y * math.sqrt(n))                          # residual weights (spec §11.4.2)
     d2 = opts.ridge * scale ** 2
 
-    def cost(theta: np.ndarray) -> tuple[float, tuple]:
-        """The cost of spec §11.4.2 and the linear responses it simulated (the next Jacobian's, if accepted)."""
-        responses = _linear_responses(st, theta, rec)
-        e = (rec.y - _simulate(st, theta, rec, responses)) * wy
-        return float(np.sum(d2 * (theta - theta0) ** 2)) + float(np.sum(e * e)), responses
+    def cost(theta: np.ndarray) -> tuple[float, _Simulation]:
+        """The cost of spec §11.4.2 and the simulation it ran (the next Jacobian's, if accepted)."""
+        sim = _simulation(st, theta, rec)
+        e = (rec.y - sim.yhat) * wy
+        return float(np.sum(d2 * (theta - theta0) ** 2)) + float(np.sum(e * e)), sim
 
     # -- §11.4.3 Levenberg–Marquardt ------------------------------------------------------------------
     mu, up, down, mu_max = opts.lm_damping
     theta = theta0.copy()
-    current, responses = cost(theta)
+    current, sim = cost(theta)
     history = [current]
     ns = st.n_shared
     own = [st.own(j) for j in range(ny)]
@@ -754,9 +817,8 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
     for iterations in range(1, opts.max_iterations + 1):
         hess = np.diag(d2)
         grad = d2 * (theta - theta0)                           # half the gradient of the cost
-        for j in range(ny):
-            yhat, jac = _output_jacobian(st, theta, rec, j, weight=wy[j], out=work, responses=responses)
-            _add_normal_equations(hess, grad, ns, own[j], jac.T @ jac, ((rec.y[:, j] - yhat) * wy[j]) @ jac)
+        for j, (gram, jac_e) in enumerate(_normal_equations(st, theta, rec, wy, sim, block)):
+            _add_normal_equations(hess, grad, ns, own[j], gram, jac_e)
         accepted = False
         while mu <= mu_max:
             try:
@@ -768,7 +830,7 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
             if _max_pole_modulus(st, trial) >= opts.stability_radius:
                 mu *= up
                 continue
-            new, trial_responses = cost(trial)
+            new, trial_sim = cost(trial)
             if np.isfinite(new) and new < current:
                 accepted = True
                 break
@@ -778,7 +840,7 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
             iterations -= 1
             break
         gain = (current - new) / current if current > 0 else 0.0
-        theta, current, responses = trial, new, trial_responses
+        theta, current, sim = trial, new, trial_sim
         history.append(current)
         mu = max(mu * down, 1e-12)
         if gain < opts.tolerance:
@@ -787,7 +849,7 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
 
     model = _assemble(st, theta, sample_rate_hz, hemi,
                       _as_channels(input_names, input_units, nu, "u"), _as_channels(output_names, output_units, ny, "y"))
-    yhat = np.vstack([predict(model, a) for a in us])
+    yhat = sim.yhat                                            # the records simulated at the final θ (spec §11.3)
     err = np.linalg.norm(y_all - yhat, axis=0)
     denom = np.linalg.norm(y_all - mu_y, axis=0)
     fit_pct = np.where(denom > 0, 100.0 * (1.0 - err / np.where(denom > 0, denom, 1.0)), 0.0)
