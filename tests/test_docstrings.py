@@ -20,8 +20,6 @@ WORK_ITEM = re.compile(r"issues? \d+", re.IGNORECASE)
 
 #: being edited; cleaned when merged
 KNOWN_EXCEPTIONS = frozenset({
-    "reference/haptify/local_dynamics.py",
-    "reference/haptify/filter_bank.py",
     "reference/haptify/workspace.py",
     "tools/haptify_tools/twin/examiner.py",
 })

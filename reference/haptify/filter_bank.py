@@ -3,7 +3,7 @@
 The Hammerstein–Wiener fit of spec §11.4 filters ny · nu · (breakpoints + 2) signals per Jacobian, each
 by a different transfer function B_ji(q)/F_ji(q). ``scipy.signal.lfilter`` takes one denominator per
 call, so a Python loop over transfer functions made the calls' overhead and its generic inner loop the
-fit's main cost (issue 21). :class:`FilterBank` runs them all in one compiled loop (numba, compiled on
+fit's main cost. :class:`FilterBank` runs them all in one compiled loop (numba, compiled on
 first use and cached on disk) over time-major data, one SIMD lane per column, with exactly ``lfilter``'s
 arithmetic: the transposed direct form II in the same order of operations and without fused
 multiply-adds, so column m equals ``lfilter(b[m], a[m], x[:, m])`` to the last bit whenever F has an order

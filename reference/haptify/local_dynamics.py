@@ -725,8 +725,8 @@ def _one_blas_thread():
     """BLAS limited to one thread while fitting, when ``threadpoolctl`` is installed.
 
     The fit's matrix products are tall and thin (≈ 200 × 14 000); a threaded BLAS gains little on them
-    and collapses when the cores are shared (measured: 83 s instead of 14 s for the 140 s benchmark on a
-    loaded 2-core machine). Results do not depend on it beyond floating-point rounding.
+    and collapses when the cores are shared (benchmarks/RESULTS.md, the local dynamic model). Results do not
+    depend on it beyond floating-point rounding.
     """
     try:
         from threadpoolctl import threadpool_limits
