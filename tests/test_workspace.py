@@ -24,7 +24,7 @@ from haptify.metric_definitions import param
 from haptify.results import MetricResult, Unavailable
 from haptify.session_format import Device
 from haptify.storage import SessionWriter, open_session
-from haptify.workspace import compute, modeled_solid, overlap_volume, report_figures, volume_solid
+from haptify.workspace import compute, longest_occlusion_gap, modeled_solid, overlap_volume, report_figures, volume_solid
 from haptify_tools.build_conformance_fixtures import box_cloud
 from haptify_tools.build_conformance_fixtures import sphere_cloud as sphere_surface
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
@@ -295,6 +295,10 @@ def test_session_metrics_for_a_full_sweep_and_a_missing_lobe(tmp_path, mini_mode
     assert cov[1] < cov[0] - 0.02
     ratio = res["workspace.volume_ratio"].per_repetition
     assert ratio[0] == pytest.approx(measured.per_repetition[0] / modeled)
+    # every 97th row occluded (workspace_session): each gap is one row, its chord joins the rows either side
+    for cloud, gap in zip((full, lobeless), measured.diagnostics["longest_occlusion_gap_m"]):
+        rows = np.arange(97, len(cloud) - 1, 97)
+        assert gap == pytest.approx(np.linalg.norm(cloud[rows + 1] - cloud[rows - 1], axis=1).max())
     assert not ctx.warnings
     assert [f.name for f in report_figures(ctx, None)] == ["workspace"]
     plt.close("all")
@@ -361,3 +365,22 @@ def test_degenerate_joint_limits_give_e311_and_the_measured_volume_stands(tmp_pa
     assert res["workspace.modeled_volume"].code == "E311"
     assert res["workspace.volume_ratio"].code == "E311" and res["workspace.coverage"].code == "E311"
     assert isinstance(res["workspace.measured_volume"], MetricResult)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 300), st.integers(1, 80), st.integers(1, 40), st.floats(0.01, 0.5), st.booleans())
+def test_longest_occlusion_gap_is_the_chord_across_the_longest_gap(start, long_gap, short_gap, speed, occluded_ends):
+    """A straight sweep at ``speed`` m/s, 100 Hz: the occlusion run of ``long_gap`` rows is bridged by a chord of
+    (long_gap + 1) steps; a shorter run elsewhere and occluded first/last rows (no finite row beyond) do not count."""
+    n = start + long_gap + 200
+    step = speed / 100.0
+    p = np.arange(n)[:, None] * np.array([step, 0.0, 0.0]) + np.array([0.01, -0.02, 0.15])
+    p[start + 1:start + 1 + long_gap] = np.nan
+    short = min(short_gap, long_gap)
+    p[start + long_gap + 50:start + long_gap + 50 + short] = np.nan
+    if occluded_ends:
+        p[:1] = np.nan
+        p[-20:] = np.nan
+    expected = (long_gap + 1) * step if start >= 1 or not occluded_ends else (short + 1) * step
+    assert longest_occlusion_gap(p) == pytest.approx(expected, rel=1e-9)
+    assert longest_occlusion_gap(p[~np.isnan(p).any(axis=1)]) == 0.0

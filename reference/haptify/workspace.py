@@ -267,11 +267,28 @@ def spec_box_volume(box: Any) -> float:
 
 # --- session level (spec §8.7) -------------------------------------------------------------------
 
+def trial_positions(session: Any, trial_id: str) -> np.ndarray:
+    """The gimbal-centre positions (m, W) of a workspace trial's handle_pose stream in time order, NaN where
+    occluded (spec §8.7)."""
+    return session.read(trial_id, "handle_pose")[["px", "py", "pz"]].to_numpy()
+
+
 def measured_points(session: Any, trial_id: str) -> np.ndarray:
     """The finite gimbal-centre positions (m, W) of a workspace trial's handle_pose stream (spec §8.7)."""
-    pose = session.read(trial_id, "handle_pose")
-    p = pose[["px", "py", "pz"]].to_numpy()
+    p = trial_positions(session, trial_id)
     return p[np.all(np.isfinite(p), axis=1)]
+
+
+def longest_occlusion_gap(position: np.ndarray) -> float:
+    """The longest occlusion gap of a trial's positions ``(N, 3)`` in time order, m (spec §8.7): the largest
+    distance between two consecutive finite rows with occluded (non-finite) rows between them; 0 when no
+    occluded row lies between finite ones. The boundary along that stretch of the sweep went unrecorded."""
+    finite = np.all(np.isfinite(position), axis=1)
+    idx = np.flatnonzero(finite)
+    around = np.diff(idx) > 1
+    if not around.any():
+        return 0.0
+    return float(np.linalg.norm(position[idx[1:][around]] - position[idx[:-1][around]], axis=1).max())
 
 
 def compute(ctx: Any) -> list:
@@ -332,7 +349,8 @@ def compute(ctx: Any) -> list:
     out.append(aggregate(FAMILY, "workspace.measured_volume",
                          [TrialValue(tid, s.volume, codes[tid]) for tid, s in solids.items()],
                          diagnostics={"hull_volume_m3": [s.hull_volume for s in solids.values()],
-                                      "points": [s.n_points for s in solids.values()]}))
+                                      "points": [s.n_points for s in solids.values()],
+                                      "longest_occlusion_gap_m": [longest_occlusion_gap(trial_positions(session, tid)) for tid in solids]}))
     if model is None:
         if model_error is None:  # neither ratio nor coverage was asked for
             return out
