@@ -21,7 +21,6 @@ WORK_ITEM = re.compile(r"issues? \d+", re.IGNORECASE)
 #: being edited; cleaned when merged
 KNOWN_EXCEPTIONS = frozenset({
     "reference/haptify/workspace.py",
-    "tools/haptify_tools/twin/examiner.py",
 })
 
 

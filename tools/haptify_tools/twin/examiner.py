@@ -1,4 +1,4 @@
-"""The virtual examiner: seeded hand trajectories for every protocol (issue 3; paper §V, §III-C, Appendix).
+"""The virtual examiner: seeded hand trajectories for every protocol (design §4; paper §V, §III-C, Appendix).
 
 Every generator takes a :class:`numpy.random.Generator` and returns samples on a uniform clock
 (default 2 kHz, the fastest sensor of the rig, so the accelerometer model can differentiate the path
