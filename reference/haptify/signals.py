@@ -17,6 +17,7 @@ Rules (parameters in ``schemas/<v>/metrics/signals.json``):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -75,12 +76,22 @@ def lowpass(x: np.ndarray, rate_hz: float, cutoff_hz: float, *, order: int | Non
     if len(x) < 2:  # nothing to filter; also no rate (nominal_rate of one sample is inf)
         return x.copy()
     order = int(sp("filter_order")) if order is None else order
-    fc = effective_cutoff(cutoff_hz, rate_hz)
-    sos = butter(order, fc, btype="low", fs=rate_hz, output="sos")
+    sos = butter_lowpass(order, effective_cutoff(cutoff_hz, rate_hz), rate_hz)
     padlen = min(3 * (2 * len(sos) + 1), len(x) - 1)
     ramp = np.linspace(0.0, 1.0, len(x)).reshape((-1,) + (1,) * (x.ndim - 1))
     chord = x[0] + ramp * (x[-1] - x[0])
     return sosfiltfilt(sos, x - chord, axis=0, padtype="odd", padlen=padlen) + chord
+
+
+def butter_lowpass(order: int, cutoff_hz: float, rate_hz: float) -> np.ndarray:
+    """Second-order sections (a fresh array) of the Butterworth low-pass of ``order`` with its −3 dB point
+    at ``cutoff_hz`` for ``rate_hz`` (Hz; spec §7.2); the design is made once per distinct triple."""
+    return _butter_lowpass(order, cutoff_hz, rate_hz).copy()
+
+
+@lru_cache(maxsize=256)
+def _butter_lowpass(order: int, cutoff_hz: float, rate_hz: float) -> np.ndarray:
+    return butter(order, cutoff_hz, btype="low", fs=rate_hz, output="sos")
 
 
 def interp_columns(t_src: np.ndarray, x_src: np.ndarray, t_dst: np.ndarray) -> np.ndarray:
