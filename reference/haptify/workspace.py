@@ -270,7 +270,10 @@ def modeled_points(kin: Kinematics, *, step: float | None = None, interior_step:
     interior_step = float(wp("model_interior_step_m") if interior_step is None else interior_step)
     faces = _positions(kin, _boundary_lattice(_counts(kin, step)))
     interior = _positions(kin, unit_lattice(_counts(kin, interior_step)))
-    dist, _ = cKDTree(faces).query(interior, k=1, distance_upper_bound=float(wp("model_interior_clearance_m")))
+    # only whether a face sample lies within the clearance matters: any tree answers alike, and the
+    # sliding-midpoint one without median balancing suits samples on a lattice
+    tree = cKDTree(faces, balanced_tree=False, compact_nodes=False)
+    dist, _ = tree.query(interior, k=1, distance_upper_bound=float(wp("model_interior_clearance_m")))
     return np.concatenate([faces, interior[~np.isfinite(dist)]])
 
 
