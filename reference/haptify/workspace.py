@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -43,9 +44,9 @@ class VoxelSolid:
     hull_volume: float
     n_points: int
 
-    @property
+    @cached_property
     def volume(self) -> float:
-        """Volume in m³: h³ · Σ fraction."""
+        """Volume in m³: h³ · Σ fraction (summed once per solid)."""
         return float(self.fraction.sum(dtype=np.float64)) * self.pitch ** 3
 
     @property
