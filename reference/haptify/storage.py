@@ -384,13 +384,14 @@ def _checked_chunks(chunks: Iterator[pd.DataFrame], fmt: str, label: str) -> Ite
 def as_float64(frame: pd.DataFrame, label: str) -> pd.DataFrame:
     """The stream table as float64 columns (spec §3.2): ``t`` must be float64; any other column may also
     be a compact float32 column, widened exactly. Any other type is E212."""
-    for name, dtype in frame.dtypes.items():
+    dtypes = list(zip(frame.columns.tolist(), frame.dtypes.tolist()))
+    for name, dtype in dtypes:
         if dtype == np.float64 or (dtype == np.float32 and name != "t"):
             continue
         expected = "float64" if name == "t" else "float64 or float32"
         raise fail("E212", f"column {name!r} of {label!r} is {dtype}, not {expected}", file=label,
                    column=str(name), expected=expected, found=str(dtype))
-    narrow = [name for name, dtype in frame.dtypes.items() if dtype == np.float32]
+    narrow = [name for name, dtype in dtypes if dtype == np.float32]
     return frame.astype({name: np.float64 for name in narrow}) if narrow else frame
 
 
