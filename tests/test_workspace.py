@@ -24,7 +24,7 @@ from haptify.metric_definitions import param
 from haptify.results import MetricResult, Unavailable
 from haptify.session_format import Device
 from haptify.storage import SessionWriter, open_session
-from haptify.workspace import compute, longest_occlusion_gap, modeled_solid, overlap_volume, report_figures, volume_solid
+from haptify.workspace import _blocks_near, compute, longest_occlusion_gap, modeled_solid, overlap_volume, report_figures, volume_solid
 from haptify_tools.build_conformance_fixtures import box_cloud
 from haptify_tools.build_conformance_fixtures import sphere_cloud as sphere_surface
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
@@ -147,6 +147,21 @@ def test_volume_does_not_depend_on_the_world_frame(ax, ay, az, angle, dx, dy):
     pts, base = box_reference()
     moved = quat_rotate(quat_from_axis_angle(np.array([ax, ay, az]), np.array(angle)), pts) + [dx, dy, 0.0]
     assert volume_solid(moved).volume == pytest.approx(base, rel=0.01)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(*[st.floats(2.0, 9.0, allow_nan=False)] * 3), min_size=1, max_size=4),
+       st.sampled_from([1, 2, 3]), st.floats(0.5, 5.0))
+def test_the_nearest_sample_search_skips_only_coarse_voxels_out_of_reach(points, c, reach):
+    """§8.4 step 5's search is limited to the coarse voxels :func:`_blocks_near` marks: every fine voxel
+    centre within ``reach`` fine voxels of a point (coordinates in fine voxels) lies in a marked one."""
+    pts = np.array(points)
+    shape = (12 // c + 1,) * 3
+    near = _blocks_near(shape, np.floor(pts).astype(np.int64) // c, c, reach)
+    centres = np.stack(np.meshgrid(*[np.arange(shape[0] * c)] * 3, indexing="ij"), axis=-1).reshape(-1, 3) + 0.5
+    within = (np.linalg.norm(centres[:, None, :] - pts[None], axis=2) <= reach).any(axis=1)
+    blocks = (centres[within] // c).astype(np.int64)
+    assert near[tuple(blocks.T)].all()
 
 
 @functools.lru_cache(maxsize=1)

@@ -45,9 +45,14 @@ def impact_frequencies(ctx_or_session: Any, trial_id: str) -> np.ndarray:
     return force_plate.natural_frequencies(t, force, signals.nominal_rate(t))
 
 
+def _row_sums(x: np.ndarray) -> np.ndarray:
+    """Sums of the rows of ``x (n, 3)``, (x₀ + x₁) + x₂ — what ``x.sum(axis=1)`` computes, one column at a time."""
+    return x[:, 0] + x[:, 1] + x[:, 2]
+
+
 def _gravity_dirs_h(raw: np.ndarray, bias: np.ndarray, r_hs: np.ndarray, sign: float) -> np.ndarray:
     v = sign * (np.asarray(raw, float) - bias) @ r_hs.T
-    return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-300)
+    return v / np.maximum(np.sqrt(_row_sums(v * v)), 1e-300)[:, None]
 
 
 def _best_lag(score: Callable[[float], float], max_lag: float, coarse: float, fine: float, label: str) -> float:
@@ -114,12 +119,12 @@ def recorder_delays(ctx_or_session: Any, trial_id: str) -> dict[str, float]:
 
     def score_accel(tau: float) -> float:
         u = _gravity_dirs_h(signals.interp_columns(t_a, acc_f, grid + tau), cal.accel_bias_m_per_s2, r_ha, -1.0)
-        return float(np.mean(np.sum(u_f * u, axis=1)))
+        return float(np.mean(_row_sums(u_f * u)))
 
     def score_mocap(tau: float) -> float:
         u = signals.interp_columns(track.t, down_h, grid + tau)  # NaN next to unusable samples
-        u /= np.linalg.norm(u, axis=1, keepdims=True)
-        return float(np.nanmean(np.sum(u_f * u, axis=1)))
+        u /= np.sqrt(_row_sums(u * u))[:, None]
+        return float(np.nanmean(_row_sums(u_f * u)))
 
     coarse, fine = float(rp("sync_coarse_step_s")), 1.0 / rate
     return {"accel_minus_ft_s": _best_lag(score_accel, max_lag, coarse, fine, f"trial {trial_id!r} accelerometer"),

@@ -17,6 +17,7 @@ Rules (parameters in ``schemas/<v>/metrics/signals.json``):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -75,12 +76,22 @@ def lowpass(x: np.ndarray, rate_hz: float, cutoff_hz: float, *, order: int | Non
     if len(x) < 2:  # nothing to filter; also no rate (nominal_rate of one sample is inf)
         return x.copy()
     order = int(sp("filter_order")) if order is None else order
-    fc = effective_cutoff(cutoff_hz, rate_hz)
-    sos = butter(order, fc, btype="low", fs=rate_hz, output="sos")
+    sos = butter_lowpass(order, effective_cutoff(cutoff_hz, rate_hz), rate_hz)
     padlen = min(3 * (2 * len(sos) + 1), len(x) - 1)
     ramp = np.linspace(0.0, 1.0, len(x)).reshape((-1,) + (1,) * (x.ndim - 1))
     chord = x[0] + ramp * (x[-1] - x[0])
     return sosfiltfilt(sos, x - chord, axis=0, padtype="odd", padlen=padlen) + chord
+
+
+def butter_lowpass(order: int, cutoff_hz: float, rate_hz: float) -> np.ndarray:
+    """Second-order sections (a fresh array) of the Butterworth low-pass of ``order`` with its −3 dB point
+    at ``cutoff_hz`` for ``rate_hz`` (Hz; spec §7.2); the design is made once per distinct triple."""
+    return _butter_lowpass(order, cutoff_hz, rate_hz).copy()
+
+
+@lru_cache(maxsize=256)
+def _butter_lowpass(order: int, cutoff_hz: float, rate_hz: float) -> np.ndarray:
+    return butter(order, cutoff_hz, btype="low", fs=rate_hz, output="sos")
 
 
 def interp_columns(t_src: np.ndarray, x_src: np.ndarray, t_dst: np.ndarray) -> np.ndarray:
@@ -334,17 +345,20 @@ class HandleSignals(Kinematics):
 
 
 
-def build_handle_signals(session: Any, trial_id: str, rate_hz: float, calibration: Any = None) -> HandleSignals:
-    """:func:`handle_signals` without caching; ``calibration`` defaults to the session's (spec §6.4)."""
-    streams = {kind: session.read(trial_id, kind) for kind in ("handle_pose", "handle_wrench", "handle_accel")
-               if kind == "handle_pose" or session.stream(trial_id, kind) is not None}
-    t0 = max(df["t"].iloc[0] for df in streams.values())
-    t1 = min(df["t"].iloc[-1] for df in streams.values())
+def build_handle_signals(ctx_or_session: Any, trial_id: str, rate_hz: float, calibration: Any = None) -> HandleSignals:
+    """:func:`handle_signals` without caching the result; ``calibration`` defaults to the session's (spec §6.4).
+    With a context, the processed motion capture (§7.4) is the one cached for the trial's other users."""
+    session = session_of(ctx_or_session)
+    track = mocap_track(ctx_or_session, trial_id)  # reads handle_pose: its span is the track's
+    streams = {kind: session.read(trial_id, kind) for kind in ("handle_wrench", "handle_accel")
+               if session.stream(trial_id, kind) is not None}
+    t0 = max([track.t[0]] + [df["t"].iloc[0] for df in streams.values()])
+    t1 = min([track.t[-1]] + [df["t"].iloc[-1] for df in streams.values()])
     grid = uniform_grid(float(t0), float(t1), rate_hz)
     if len(grid) < 2:
         raise fail("E305", f"the handle streams of trial {trial_id!r} do not overlap in time", file="session.json",
                    expected="overlapping handle_pose, handle_wrench and handle_accel", found=[float(t0), float(t1)])
-    pose = pose_on_grid(session, trial_id, grid)
+    pose = pose_on_grid(ctx_or_session, trial_id, grid)
     v = pose.valid
     force = torque = accel = None
     if "handle_wrench" in streams or "handle_accel" in streams:
@@ -379,7 +393,7 @@ def handle_signals(ctx_or_session: Any, trial_id: str, rate_hz: float | None = N
         cal = None
         if session.stream(trial_id, "handle_wrench") is not None or session.stream(trial_id, "handle_accel") is not None:
             cal = cal_mod.handle_calibration(ctx_or_session)
-        return build_handle_signals(session, trial_id, rate, cal)
+        return build_handle_signals(ctx_or_session, trial_id, rate, cal)
 
     return cached(ctx_or_session, ("handle_signals", trial_id, rate), build)
 

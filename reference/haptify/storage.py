@@ -275,7 +275,7 @@ def read_table(path: Path, fmt: str, columns: list[str], *, label: str) -> pd.Da
     if fmt != "parquet":
         return read_stream_file(path, fmt, columns, label=label)[0]
     try:
-        frame = pq.read_table(path).to_pandas(ignore_metadata=True)
+        frame = arrow_frame(pq.read_table(path))
     except MemoryError:  # Arrow's allocation failure is the reader's, not the file's (never E112)
         raise
     except (OSError, pa.ArrowException, ValueError) as exc:
@@ -320,7 +320,7 @@ def read_stream_chunks(path: Path, fmt: str, columns: list[str], *, label: str,
             # pre-buffering would fetch every row group's bytes at once: memory would grow with the file
             parquet = pq.ParquetFile(source, pre_buffer=chunk_rows is None)
             # the columns are the data (spec §3.2); pandas' own metadata is neither needed nor trusted
-            as_float64(parquet.schema_arrow.empty_table().to_pandas(ignore_metadata=True), label)
+            as_float64(arrow_frame(parquet.schema_arrow.empty_table()), label)
             return digest, _checked_chunks(_parquet_chunks(parquet, chunk_rows), fmt, label)
         digest = check_csv_grammar(path, columns, label)
     except (HaptifyError, MemoryError):  # out of memory is the reader's failure, not the file's (never E112)
@@ -336,14 +336,28 @@ _READ_ERRORS = (OSError, pa.ArrowException, ValueError, pd.errors.ParserError, U
 def _parquet_chunks(parquet: pq.ParquetFile, chunk_rows: int | None) -> Iterator[pd.DataFrame]:
     """A Parquet file's table whole, or batch by batch; an empty file yields its empty table."""
     if chunk_rows is None:
-        yield parquet.read().to_pandas(ignore_metadata=True)
+        yield arrow_frame(parquet.read())
         return
     empty = True
     for batch in parquet.iter_batches(batch_size=chunk_rows, use_pandas_metadata=False):
         empty = False
-        yield pa.Table.from_batches([batch]).to_pandas(ignore_metadata=True)
+        yield arrow_frame(pa.Table.from_batches([batch]))
     if empty:
-        yield parquet.schema_arrow.empty_table().to_pandas(ignore_metadata=True)
+        yield arrow_frame(parquet.schema_arrow.empty_table())
+
+
+def arrow_frame(table: pa.Table) -> pd.DataFrame:
+    """A decoded Parquet table as the float64 frame of spec §3.2: every column copied once into one
+    (columns × rows) float64 block, float32 columns widened exactly, nulls as NaN — what
+    ``to_pandas`` then :func:`as_float64` give, without pandas' per-call conversion machinery. A table
+    with a column of any other type (or a float32 ``t``) goes through ``to_pandas``, so that
+    :func:`as_float64` reports it (E212)."""
+    if not all(pa.types.is_float64(f.type) or (pa.types.is_float32(f.type) and f.name != "t") for f in table.schema):
+        return table.to_pandas(ignore_metadata=True)
+    block = np.empty((table.num_columns, table.num_rows))
+    for row, column in zip(block, table.columns):
+        row[:] = column.to_numpy()
+    return pd.DataFrame(block.T, columns=table.column_names, copy=False)
 
 
 def _csv_chunks(path: Path, chunk_rows: int | None) -> Iterator[pd.DataFrame]:
@@ -370,13 +384,14 @@ def _checked_chunks(chunks: Iterator[pd.DataFrame], fmt: str, label: str) -> Ite
 def as_float64(frame: pd.DataFrame, label: str) -> pd.DataFrame:
     """The stream table as float64 columns (spec §3.2): ``t`` must be float64; any other column may also
     be a compact float32 column, widened exactly. Any other type is E212."""
-    for name, dtype in frame.dtypes.items():
+    dtypes = list(zip(frame.columns.tolist(), frame.dtypes.tolist()))
+    for name, dtype in dtypes:
         if dtype == np.float64 or (dtype == np.float32 and name != "t"):
             continue
         expected = "float64" if name == "t" else "float64 or float32"
         raise fail("E212", f"column {name!r} of {label!r} is {dtype}, not {expected}", file=label,
                    column=str(name), expected=expected, found=str(dtype))
-    narrow = [name for name, dtype in frame.dtypes.items() if dtype == np.float32]
+    narrow = [name for name, dtype in dtypes if dtype == np.float32]
     return frame.astype({name: np.float64 for name in narrow}) if narrow else frame
 
 

@@ -987,8 +987,9 @@ class SessionValidator:
         first = next(chunks)
         if keep is not None:
             keep(first)
-        columns = [str(c) for c in first.columns]
-        same = list(first.columns) == declared
+        names = first.columns.tolist()
+        columns = [str(c) for c in names]
+        same = names == declared
         times = _TimeScan(s.rate_hz)
         values = self._value_scan(s, columns[1:]) if same and entry.names_ok else None  # else the columns' meaning is unknown
         chunks = itertools.chain([first], chunks)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -43,9 +44,9 @@ class VoxelSolid:
     hull_volume: float
     n_points: int
 
-    @property
+    @cached_property
     def volume(self) -> float:
-        """Volume in m³: h³ · Σ fraction."""
+        """Volume in m³: h³ · Σ fraction (summed once per solid)."""
         return float(self.fraction.sum(dtype=np.float64)) * self.pitch ** 3
 
     @property
@@ -100,9 +101,9 @@ def volume_solid(points: np.ndarray, *, pitch: float | None = None, closing_radi
     band_c = ndi.binary_dilation(coarse, iterations=band) & ~ndi.binary_erosion(coarse, iterations=band)
 
     fraction = _refine(coarse, c).astype(np.float32)
-    band_mask = _refine(band_c, c)
     in_band = band_c[tuple((vox // c).T)]
-    fraction[band_mask] = _band_fractions(coarse, c, band_mask, lo, h, means[in_band])
+    fine, band_fraction = _band_fractions(coarse, c, band_c, lo, h, means[in_band])
+    fraction[tuple(fine.T)] = band_fraction
     return VoxelSolid(origin=tuple(int(x) for x in lo), pitch=h, fraction=fraction,
                       hull_volume=_hull_volume(vox, means, counts), n_points=len(pts))
 
@@ -112,8 +113,29 @@ def _refine(coarse: np.ndarray, c: int) -> np.ndarray:
     return coarse.repeat(c, axis=0).repeat(c, axis=1).repeat(c, axis=2)
 
 
-def _band_fractions(coarse: np.ndarray, c: int, band_mask: np.ndarray, lo: np.ndarray, h: float, samples: np.ndarray) -> np.ndarray:
-    """Sub-voxel inside-fractions of the band voxels (spec §8.4 step 5).
+def _block_voxels(blocks: np.ndarray, c: int) -> np.ndarray:
+    """Fine-lattice indices (n·c³, 3) of the fine voxels of the coarse voxels ``blocks`` (n, 3), block by block."""
+    offsets = np.stack(np.unravel_index(np.arange(c ** 3), (c, c, c)), axis=1)
+    return (blocks[:, None, :] * c + offsets[None]).reshape(-1, 3)
+
+
+def _blocks_near(shape: tuple[int, ...], blocks: np.ndarray, c: int, reach_voxels: float) -> np.ndarray:
+    """Mask of the coarse voxels of a lattice of ``shape`` that may hold a fine voxel centre within
+    ``reach_voxels`` fine voxels of a point lying in one of the coarse voxels ``blocks`` (n, 3).
+
+    Such a centre and point are at most ⌊reach + ½⌋ fine voxels apart along each axis; one voxel more
+    absorbs rounding, and ⌈(that + c − 1) / c⌉ coarse voxels hold it. Outside the mask nothing is in reach."""
+    fine = int(math.floor(reach_voxels + 0.5)) + 1
+    half = (fine + c - 1) // c
+    occupied = np.zeros(shape, dtype=np.uint8)
+    occupied[tuple(blocks.T)] = 1
+    return ndi.maximum_filter(occupied, size=2 * half + 1, mode="constant").astype(bool)
+
+
+def _band_fractions(coarse: np.ndarray, c: int, band_c: np.ndarray, lo: np.ndarray, h: float,
+                    samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sub-voxel inside-fractions of the band voxels (spec §8.4 step 5): the fine indices (n, 3) of the
+    fine voxels of the coarse band ``band_c`` and their fractions (n,).
 
     ``samples`` are the sample means of the occupied band voxels. Each sample's normal: the eigenvector
     of the smallest eigenvalue of the covariance of its ``normal_neighbours`` nearest samples within
@@ -122,12 +144,14 @@ def _band_fractions(coarse: np.ndarray, c: int, band_mask: np.ndarray, lo: np.nd
     fewer than ``min_normal_neighbours`` neighbours, −∇ itself.
     A band voxel with centre c takes the nearest sample p within ``surface_search_voxels`` and its normal
     n: signed depth s = (p − c)·n, fraction clip(1/2 + s / (h‖n‖₁), 0, 1). Without a sample in reach
-    the voxel keeps its solid indicator (0 or 1).
+    the voxel keeps its solid indicator (0 or 1); the nearest sample is searched only for the voxels of
+    coarse voxels near a sample's (:func:`_blocks_near`).
     """
-    bi = np.nonzero(band_mask)
-    inside = coarse[tuple(np.stack(bi) // c)].astype(np.float32)
+    blocks = np.argwhere(band_c)
+    fine = _block_voxels(blocks, c)
+    inside = np.repeat(coarse[band_c].astype(np.float32), c ** 3)
     if len(samples) < 3:
-        return inside
+        return fine, inside
     smooth = ndi.gaussian_filter(coarse.astype(np.float32), float(wp("normal_smoothing_voxels")))
     ijk = (np.floor(samples / h).astype(np.int64) - lo) // c
     outward = np.empty((len(samples), 3))
@@ -152,8 +176,10 @@ def _band_fractions(coarse: np.ndarray, c: int, band_mask: np.ndarray, lo: np.nd
     normal = np.where((np.sum(normal * outward, axis=1) < 0)[:, None], -normal, normal)
     normal = np.where((count < int(wp("min_normal_neighbours")))[:, None], outward, normal)
 
-    centres = (np.stack(bi, axis=1) + lo + 0.5) * h
-    dist, near = tree.query(centres, k=1, distance_upper_bound=float(wp("surface_search_voxels")) * h)
+    reach = float(wp("surface_search_voxels"))
+    searched = np.repeat(_blocks_near(band_c.shape, ijk, c, reach)[band_c], c ** 3)
+    centres = (fine[searched] + lo + 0.5) * h
+    dist, near = tree.query(centres, k=1, distance_upper_bound=reach * h)
     ok = np.isfinite(dist)
     near = np.where(ok, near, 0)
     n = normal[near]
@@ -161,7 +187,8 @@ def _band_fractions(coarse: np.ndarray, c: int, band_mask: np.ndarray, lo: np.nd
     l1 = np.abs(n).sum(axis=1)
     ok &= l1 > 0.5  # a unit normal has 1 ≤ ‖n‖₁ ≤ √3; 0 where no normal is defined
     frac = np.clip(0.5 + s / (h * np.where(ok, l1, 1.0)), 0.0, 1.0)
-    return np.where(ok, frac, inside).astype(np.float32)
+    inside[searched] = np.where(ok, frac, inside[searched])
+    return fine, inside
 
 
 def _hull_volume(vox: np.ndarray, means: np.ndarray, counts: np.ndarray) -> float:
@@ -244,7 +271,10 @@ def modeled_points(kin: Kinematics, *, step: float | None = None, interior_step:
     interior_step = float(wp("model_interior_step_m") if interior_step is None else interior_step)
     faces = _positions(kin, _boundary_lattice(_counts(kin, step)))
     interior = _positions(kin, unit_lattice(_counts(kin, interior_step)))
-    dist, _ = cKDTree(faces).query(interior, k=1, distance_upper_bound=float(wp("model_interior_clearance_m")))
+    # only whether a face sample lies within the clearance matters: any tree answers alike, and the
+    # sliding-midpoint one without median balancing suits samples on a lattice
+    tree = cKDTree(faces, balanced_tree=False, compact_nodes=False)
+    dist, _ = tree.query(interior, k=1, distance_upper_bound=float(wp("model_interior_clearance_m")))
     return np.concatenate([faces, interior[~np.isfinite(dist)]])
 
 
