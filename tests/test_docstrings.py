@@ -18,10 +18,6 @@ REPO = Path(__file__).resolve().parents[1]
 SCANNED = ("reference", "conformance/haptify_conform", "conformance/mutants", "tools")
 WORK_ITEM = re.compile(r"issues? \d+", re.IGNORECASE)
 
-#: being edited; cleaned when merged
-KNOWN_EXCEPTIONS = frozenset({
-    "reference/haptify/workspace.py",
-})
 
 
 def _sources() -> list[Path]:
@@ -70,17 +66,10 @@ def test_the_scan_sees_the_source_trees():
         assert expected in files
 
 
-def test_every_known_exception_is_a_scanned_file():
-    """An exception for a file that was moved or split would hide nothing and linger: each names a scanned file."""
-    files = {p.relative_to(REPO).as_posix() for p in _sources()}
-    assert sorted(KNOWN_EXCEPTIONS - files) == []
-
-
 def test_no_work_item_reference_in_the_sources():
     hits = []
     for path in _sources():
         rel = path.relative_to(REPO).as_posix()
-        if rel not in KNOWN_EXCEPTIONS:
-            hits += [f"{rel}:{n}: {line}" for n, line in work_item_references(path.read_text(encoding="utf-8"))]
+        hits += [f"{rel}:{n}: {line}" for n, line in work_item_references(path.read_text(encoding="utf-8"))]
     assert not hits, ("name the spec / design / README section instead of the work item (history: CHANGELOG; "
                       "figures: benchmarks/RESULTS.md):\n" + "\n".join(hits))
