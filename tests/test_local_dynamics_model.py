@@ -69,7 +69,7 @@ def reference_simulation(model: HWModelFile, u: np.ndarray) -> np.ndarray:
             z = np.zeros(n)
             for t in range(n):
                 acc = sum(b * w[t - tf.nk - k, i] for k, b in enumerate(tf.b) if t - tf.nk - k >= 0)
-                acc -= sum(f * z[t - l - 1] for l, f in enumerate(tf.f) if t - l - 1 >= 0)
+                acc -= sum(f * z[t - lag - 1] for lag, f in enumerate(tf.f) if t - lag - 1 >= 0)
                 z[t] = acc
             x += z
         m = model.output_maps[j]

@@ -40,11 +40,11 @@ from haptify.storage import sha256_file
 from haptify_tools import build_invalid_fixtures as fx
 from haptify_tools.example_session import example_writer
 from haptify_tools.registry.app import EXPORT_COLUMNS, FORMULA_LEAD, create_app, csv_cell, neutralised
-
-NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")  # a signed number is data, not a formula
 from haptify_tools.registry.bundle import Limits, unpack
 from haptify_tools.registry.service import Settings
 from haptify_tools.registry.worker import run_contained
+
+NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")  # a signed number is data, not a formula
 
 SPARSE_SIZE = 3_000_000_010  # what the archive claims the member expands to
 

@@ -72,7 +72,7 @@ def test_static_balance_of_the_whole_device_on_the_plate():
     q = np.array([0.4, 0.7, -1.4])
     t, p, quat = hold(tw, q)
     res = ph.simulate_passive(tw, t, p, quat)
-    m_total = tw.base.mass_kg + sum(l.mass_kg for l in tw.links) + tw.gimbal_body.mass_kg
+    m_total = tw.base.mass_kg + sum(link.mass_kg for link in tw.links) + tw.gimbal_body.mass_kg
     weight = np.array([0.0, 0.0, -m_total * G])
     # forces on the device: weight, plate (−base_force), hand (−force_W) sum to zero
     assert res.base_force_W[100] == pytest.approx(weight - res.force_W[100], abs=1e-9)

@@ -14,7 +14,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from haptify import storage, validation
+from haptify import storage
 from haptify.errors import HaptifyError
 from haptify.kinematics import RANGE_LATTICE_POINTS as LIMIT_LATTICE_POINTS
 from haptify.kinematics import configurations_from_unit

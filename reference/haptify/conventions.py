@@ -61,13 +61,13 @@ def matrix_to_quat(m: np.ndarray) -> np.ndarray:
             out[i] = [0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
         else:
             k = int(np.argmax(np.diag(r)))
-            j, l = (k + 1) % 3, (k + 2) % 3
-            s = 2.0 * np.sqrt(1.0 + r[k, k] - r[j, j] - r[l, l])
+            j, n = (k + 1) % 3, (k + 2) % 3
+            s = 2.0 * np.sqrt(1.0 + r[k, k] - r[j, j] - r[n, n])
             v = np.empty(4)
-            v[0] = (r[l, j] - r[j, l]) / s
+            v[0] = (r[n, j] - r[j, n]) / s
             v[1 + k] = 0.25 * s
             v[1 + j] = (r[j, k] + r[k, j]) / s
-            v[1 + l] = (r[l, k] + r[k, l]) / s
+            v[1 + n] = (r[n, k] + r[k, n]) / s
             out[i] = v
     out *= np.where(out[:, :1] < 0, -1.0, 1.0)
     return out.reshape(m.shape[:-2] + (4,))

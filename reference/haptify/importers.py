@@ -426,7 +426,7 @@ class Recording:
                        "residuals": self.body_residuals is not None},
             "analog": {"count": len(self.analog_labels), "rate_hz": self.analog_rate,
                        "samples": int(self.analogs.shape[1]),
-                       "channels": [{"label": l, "unit": u} for l, u in zip(self.analog_labels, self.analog_units)]},
+                       "channels": [{"label": lab, "unit": u} for lab, u in zip(self.analog_labels, self.analog_units)]},
             "force_platforms": [{"number": p.number, "type": p.type,
                                  "corners": None if p.corners is None else p.corners.tolist(),
                                  "origin": None if p.origin is None else p.origin.tolist(),
@@ -1304,7 +1304,7 @@ def import_c3d(path: str | Path, out: str | Path | Destination, mapping: str | P
                             progress=progress)
 
 
-def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, device: dict,
+def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, device: dict,  # noqa: C901 (over ruff's limit of 15: to be split)
                      extra: dict[str, str], *, chunk_frames: int | None = None,
                      progress: Callable[[int, int], None] | None = None) -> ImportResult:
     """One motion-capture recording (C3D, Qualisys TSV, Motive or Nexus CSV) as one trial (spec §5.5, §5.10).

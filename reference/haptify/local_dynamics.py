@@ -591,7 +591,7 @@ class _JacobianPass:
         segments = sim.segments[j]
         gain = np.full(len(rec.u), weight) if segments is None else weight * sim.slopes[j]
         num, den = _polynomials(st, theta, j)
-        taps = [(st.nk + k, 1.0) for k in range(nb)] + [(l, -1.0) for l in range(1, nf + 1)]
+        taps = [(st.nk + k, 1.0) for k in range(nb)] + [(lag, -1.0) for lag in range(1, nf + 1)]
         return cls(yhat=sim.yhat[:, j], gain=gain, weight=weight, segments=segments,
                    hats=0 if segments is None else len(st.out_bp[j]),
                    shared=FilterBank(num[st.shared_input], den[st.shared_input]),
@@ -735,7 +735,7 @@ def _one_blas_thread():
     return threadpool_limits(limits=1, user_api="blas")
 
 
-def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_names, output_units,
+def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_names, output_units,  # noqa: C901 (over ruff's limit of 15: to be split)
          quaternion_columns, session_id, trial_id) -> tuple[HWModelFile, FitReport]:
     opts = options
     us = _as_records(u, "inputs")

@@ -368,7 +368,7 @@ def rotation_vector_matrix(v: np.ndarray) -> np.ndarray:
                      np.stack([z * x * C - y * s, z * y * C + x * s, c + z * z * C], -1)], -2)
 
 
-def read_nexus_csv(path: str | Path) -> Recording:
+def read_nexus_csv(path: str | Path) -> Recording:  # noqa: C901 (over ruff's limit of 15: to be split)
     """A Vicon Nexus CSV export (spec §5.10): sections (name, rate, label, column and unit lines,
     data). ``Trajectories`` and the ``Model Outputs`` in a length unit become markers; ``Segments``
     (RX, RY, RZ a rotation vector in the unit line's angle unit; TX, TY, TZ) 6-DoF bodies; ``Devices``

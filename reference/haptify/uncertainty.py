@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import importlib
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from typing import Any, Callable, Literal, Sequence
 
@@ -25,7 +25,7 @@ from scipy import stats
 from haptify import schemas
 from haptify.compute import family_module
 from haptify.metric_definitions import Parameter
-from haptify.results import BudgetTerm, MetricResult, MetricUncertainty, ResultsFile, Unavailable
+from haptify.results import BudgetTerm, MetricResult, MetricUncertainty, ResultsFile
 
 
 # --- the definition file (spec §19.1) ------------------------------------------------------------

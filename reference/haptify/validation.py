@@ -36,7 +36,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from haptify import schemas
 from haptify.conventions import QUATERNION_NORM_TOLERANCE
-from haptify.errors import Finding, HaptifyError, fail
+from haptify.errors import Finding, HaptifyError
 from haptify.kinematics import empty_joint_range, limit_order_violations
 from haptify.session_format import (
     ALLOWED_VALUES,

@@ -22,7 +22,7 @@ from haptify.errors import HaptifyError
 from haptify.free_space import magnitude_stats
 from haptify.stiffness import FitRule, fit_stiffness
 from haptify.gate import require_valid_session
-from haptify.storage import atomic_write_json, open_session, replace_folder_atomically
+from haptify.storage import atomic_write_json, replace_folder_atomically
 from haptify.surface import planar_stats
 
 from haptify_tools.discrepancy import data as dt

@@ -155,7 +155,7 @@ def _command(th_m, dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_ma
 
 
 @njit(cache=True)
-def render_loop(th_l, thd_l, friction, dts, dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_max, trip, rearm,
+def render_loop(th_l, thd_l, friction, dts, dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_max, trip, rearm,  # noqa: C901 (over ruff's limit of 15: to be split)
                 stiffness, damping, half_gap, rotor_inertia, exact):
     """The rendering loop with an elastic cable, one iteration per row of ``th_l (N, n)`` (link-side drive
     angles, rad; ``thd_l`` their rates, rad/s; ``friction (N, n)`` drive friction at them, N·m; ``dts`` the
