@@ -34,8 +34,9 @@ class SeparateCluster:
 
 def _dask(*args: str, log: Path) -> subprocess.Popen:
     env = {**os.environ, **ONE_THREAD}
-    return subprocess.Popen([sys.executable, "-m", "dask", *args], stdout=subprocess.DEVNULL, stderr=open(log, "wb"),
-                            env=env, start_new_session=True)
+    return subprocess.Popen(
+        [sys.executable, "-m", "dask", *args], stdout=subprocess.DEVNULL, stderr=open(log, "wb"), env=env, start_new_session=True
+    )
 
 
 @contextlib.contextmanager
@@ -53,8 +54,22 @@ def separate_cluster(n_workers: int, logs: Path, timeout: float = 120.0):
         for i in range(n_workers):
             wport = free_port()
             cluster.workers[f"tcp://127.0.0.1:{wport}"] = _dask(
-                "worker", address, "--host", "127.0.0.1", "--worker-port", str(wport), "--nthreads", "1", "--no-nanny",
-                "--no-dashboard", "--name", f"w{i}", "--death-timeout", "60", log=logs / f"worker{i}.log")
+                "worker",
+                address,
+                "--host",
+                "127.0.0.1",
+                "--worker-port",
+                str(wport),
+                "--nthreads",
+                "1",
+                "--no-nanny",
+                "--no-dashboard",
+                "--name",
+                f"w{i}",
+                "--death-timeout",
+                "60",
+                log=logs / f"worker{i}.log",
+            )
         deadline = time.monotonic() + timeout
         with Client(address, timeout=timeout) as client:
             client.wait_for_workers(n_workers, timeout=max(1.0, deadline - time.monotonic()))

@@ -29,12 +29,22 @@ from haptify_conform.report import ConformReport, build_report, header
 from haptify_tools.example_session import write_example
 from haptify_tools.registry.bundle import build_bundle, pack
 
-FAST_METRICS = ["free_space.speed_mean", "free_space.angular_speed_mean", "vibration.rms", "vibration.spectral_centroid",
-                "workspace.spec_box_volume"]
+FAST_METRICS = [
+    "free_space.speed_mean",
+    "free_space.angular_speed_mean",
+    "vibration.rms",
+    "vibration.spectral_centroid",
+    "workspace.spec_box_volume",
+]
+
+
 def _pg_bin() -> Path:
     """The folder of PostgreSQL's initdb and pg_ctl: /usr/local/bin, else Debian's /usr/lib/postgresql/<newest>/bin."""
-    candidates = [Path("/usr/local/bin")] + sorted(Path("/usr/lib/postgresql").glob("*/bin"),
-                                                   key=lambda p: int(p.parent.name) if p.parent.name.isdigit() else 0, reverse=True)
+    candidates = [Path("/usr/local/bin")] + sorted(
+        Path("/usr/lib/postgresql").glob("*/bin"),
+        key=lambda p: int(p.parent.name) if p.parent.name.isdigit() else 0,
+        reverse=True,
+    )
     return next((c for c in candidates if (c / "initdb").exists()), candidates[0])
 
 
@@ -49,8 +59,13 @@ def skip_or_fail(reason: str) -> None:
     pytest.skip(reason)
 
 
-def example_session(root: Path, lab: str = "lab-example", session_id: str = "example-0001",
-                    manufacturer: str | None = None, model: str | None = None) -> Path:
+def example_session(
+    root: Path,
+    lab: str = "lab-example",
+    session_id: str = "example-0001",
+    manufacturer: str | None = None,
+    model: str | None = None,
+) -> Path:
     """The analytic example session, optionally re-labelled (lab, id, device) by editing its manifest."""
     path = write_example(root)
     manifest = json.loads((path / "session.json").read_text())
@@ -75,9 +90,18 @@ def write_results(session: Path, target: Path, *, metrics=FAST_METRICS, edit=Non
 
 def passing_report(target: Path, implementation: dict, *, fail_case: str | None = None, spec_version: str = "1.0") -> Path:
     """A conformance report in which every case of the suite passed (or ``fail_case`` failed)."""
-    verdicts = [Verdict(case_id=c.id, metric=c.metric, status="failed" if c.id == fail_case else "passed",
-                        message="", level=c.level, spec_section=c.spec_section, duration_s=0.01)
-                for c in select(load_cases(), spec_version="1.0")]
+    verdicts = [
+        Verdict(
+            case_id=c.id,
+            metric=c.metric,
+            status="failed" if c.id == fail_case else "passed",
+            message="",
+            level=c.level,
+            spec_section=c.spec_section,
+            duration_s=0.01,
+        )
+        for c in select(load_cases(), spec_version="1.0")
+    ]
     report = build_report(header("python", implementation, "2026-11-22T12:00:00Z"), verdicts)
     data = report.model_dump(mode="json")
     data["header"]["spec_version"] = spec_version
@@ -96,7 +120,10 @@ def bundle_for(session: Path, results: Path, conformance: Path | None, target: P
 def tar_gz(members: list[tuple[tarfile.TarInfo, bytes | None]]) -> bytes:
     """A .tar.gz from hand-made members (for hostile archives)."""
     buf = io.BytesIO()
-    with gzip.GzipFile(fileobj=buf, mode="wb", mtime=0) as gz, tarfile.open(fileobj=gz, mode="w", format=tarfile.PAX_FORMAT) as tar:
+    with (
+        gzip.GzipFile(fileobj=buf, mode="wb", mtime=0) as gz,
+        tarfile.open(fileobj=gz, mode="w", format=tarfile.PAX_FORMAT) as tar,
+    ):
         for info, data in members:
             if data is not None:
                 info.size = len(data)
@@ -136,8 +163,17 @@ class PostgresServer:
     def start(self) -> str:
         data = self.root / "data"
         self._run(str(PG_BIN / "initdb"), "-D", str(data), "-A", "trust", "-U", "postgres", "--no-sync")
-        self._run(str(PG_BIN / "pg_ctl"), "-D", str(data), "-l", str(self.root / "log"), "-w", "-o",
-                  f"-p {self.port} -k {self.root} -c listen_addresses=127.0.0.1 -c fsync=off", "start")
+        self._run(
+            str(PG_BIN / "pg_ctl"),
+            "-D",
+            str(data),
+            "-l",
+            str(self.root / "log"),
+            "-w",
+            "-o",
+            f"-p {self.port} -k {self.root} -c listen_addresses=127.0.0.1 -c fsync=off",
+            "start",
+        )
         return f"postgresql://postgres@127.0.0.1:{self.port}/postgres"
 
     def new_database(self, name: str) -> str:
@@ -197,9 +233,11 @@ def wait_http(url: str, timeout: float = 20.0, alive: subprocess.Popen | None = 
             time.sleep(0.05)
 
 
-SERVE = "import argparse, sys; from haptify.cli import UI; from haptify_tools.registry import cmd_registry; " \
-        "p = argparse.ArgumentParser(); cmd_registry.register(p.add_subparsers()); a = p.parse_args(sys.argv[1:]); " \
-        "sys.exit(a.func(a, UI(quiet=True)))"
+SERVE = (
+    "import argparse, sys; from haptify.cli import UI; from haptify_tools.registry import cmd_registry; "
+    "p = argparse.ArgumentParser(); cmd_registry.register(p.add_subparsers()); a = p.parse_args(sys.argv[1:]); "
+    "sys.exit(a.func(a, UI(quiet=True)))"
+)
 
 
 def start(data: Path, db_url: str | None = None) -> tuple[subprocess.Popen, int]:
@@ -209,8 +247,11 @@ def start(data: Path, db_url: str | None = None) -> tuple[subprocess.Popen, int]
     server (another xdist worker) before the restart binds it."""
     port = free_port()
     db = ["--db", db_url] if db_url else []
-    proc = subprocess.Popen([sys.executable, "-c", SERVE, "registry", "serve", "--data", str(data), *db, "--port", str(port)],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", SERVE, "registry", "serve", "--data", str(data), *db, "--port", str(port)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
     try:
         wait_http(f"http://127.0.0.1:{port}/api/v1/health", alive=proc)
     except Exception:
@@ -220,8 +261,16 @@ def start(data: Path, db_url: str | None = None) -> tuple[subprocess.Popen, int]
 
 
 CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+CHROMIUM_FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
 
 
 @contextlib.contextmanager
@@ -235,8 +284,9 @@ def browser(profile: Path):
     except ImportError:
         skip_or_fail("browser test skipped: the playwright package is not installed")
     with sync_api.sync_playwright() as pw:
-        ctx = pw.chromium.launch_persistent_context(str(profile), executable_path=str(CHROMIUM), headless=True,
-                                                    args=CHROMIUM_FLAGS, timeout=30_000)
+        ctx = pw.chromium.launch_persistent_context(
+            str(profile), executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_FLAGS, timeout=30_000
+        )
         try:
             page = ctx.new_page()
             page.set_default_timeout(15_000)
@@ -256,8 +306,16 @@ def base(tmp_path_factory):
     return root, session, results, report, impl
 
 
-def variant(base, tmp: Path, name: str, *, lab: str = "lab-a", model: str | None = None, rms: list[float] | None = None,
-            scale: float | None = None) -> tuple[Path, Path]:
+def variant(
+    base,
+    tmp: Path,
+    name: str,
+    *,
+    lab: str = "lab-a",
+    model: str | None = None,
+    rms: list[float] | None = None,
+    scale: float | None = None,
+) -> tuple[Path, Path]:
     """A copy of the base session re-labelled (lab, device model) with results edited to known values.
 
     The results' manifest_sha256 follows the edited manifest, so the bundle is consistent (no raw streams)."""

@@ -22,6 +22,7 @@ def pytest_collection_modifyitems(items):
     """The longest test (``slow(longest=True)``) first, then the other ``slow`` ones: with ``-n 2 --dist worksteal``
     the longest then starts at once on one worker while the other takes the rest (stealing what the first has not
     started), instead of starting last and running alone at the end."""
+
     def rank(item) -> int:
         slow = item.get_closest_marker("slow")
         return 2 if slow is None else (0 if slow.kwargs.get("longest") else 1)

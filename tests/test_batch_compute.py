@@ -52,8 +52,9 @@ def test_batch_on_a_local_cluster_writes_what_compute_and_the_serial_batch_write
 
 def test_the_command_exits_1_when_a_session_is_refused_and_refuses_clashing_names(sessions, tmp_path):
     good, broken = sessions
-    args = argparse.Namespace(sessions=[good[0], broken], out=tmp_path / "out", metrics=",".join(METRICS), params=None,
-                              workers=0, scheduler=None)
+    args = argparse.Namespace(
+        sessions=[good[0], broken], out=tmp_path / "out", metrics=",".join(METRICS), params=None, workers=0, scheduler=None
+    )
     assert cmd_batch.run_compute(args, UI(quiet=True)) == 1
     assert (tmp_path / "out" / good[0].name / "results.json").is_file()
     args.sessions = [good[0]]

@@ -29,8 +29,11 @@ def test_every_reported_script_has_figures_measured_with_its_current_code():
     assert reporting, "no benchmark script reports figures"
     missing = sorted(reporting - set(state["scripts"]))
     assert not missing, f"never measured into RESULTS-table.md (run `make bench` or `benchmarks/run.py NAME`): {missing}"
-    stale = sorted(name for name, entry in state["scripts"].items()
-                   if not (BENCH / name).is_file() or entry["sha256"] != run.digest(BENCH / name))
+    stale = sorted(
+        name
+        for name, entry in state["scripts"].items()
+        if not (BENCH / name).is_file() or entry["sha256"] != run.digest(BENCH / name)
+    )
     assert not stale, f"changed or removed since their figures were measured (rerun them): {stale}"
 
 
@@ -63,12 +66,21 @@ def test_a_changed_script_or_helper_changes_the_digest(tmp_path, monkeypatch):
 
 def test_rows_of_scripts_not_rerun_are_kept(tmp_path):
     table = tmp_path / "t.md"
-    state = {"scripts": {"bench_a.py": {"sha256": "0" * 64, "run_at": "2026-11-25 10:00 UTC", "cores": 2, "load": 1.0,
-                                        "python": "3.11", "rows": [{"figure": "f|g", "target": "≤ 1", "measured": "0.5",
-                                                                    "peer": "", "ratio": None, "holds": True}]}}}
+    state = {
+        "scripts": {
+            "bench_a.py": {
+                "sha256": "0" * 64,
+                "run_at": "2026-11-25 10:00 UTC",
+                "cores": 2,
+                "load": 1.0,
+                "python": "3.11",
+                "rows": [{"figure": "f|g", "target": "≤ 1", "measured": "0.5", "peer": "", "ratio": None, "holds": True}],
+            }
+        }
+    }
     run.write_table(state, table)
     assert run.read_state(table) == state
-    assert "f\\|g" in table.read_text()                        # a bar inside a cell does not split the row
+    assert "f\\|g" in table.read_text()  # a bar inside a cell does not split the row
 
 
 @pytest.mark.parametrize("holds, shown", [(True, "yes"), (False, "**no**"), (None, "—")])

@@ -50,7 +50,7 @@ def test_offset_uncertainty_matches_the_known_long_run_variance(phi):
     n, sigma_w, centre, radius = 3000, 0.002, np.array([0.31, -0.12, 0.45]), 0.51
     d = _tumble_directions(n, 1.0)
     jac = np.column_stack([d, np.ones(n)])
-    cov = sigma_w ** 2 / (1 - phi) ** 2 * np.linalg.inv(jac.T @ jac)
+    cov = sigma_w**2 / (1 - phi) ** 2 * np.linalg.inv(jac.T @ jac)
     expected = np.sqrt(np.max(np.diag(cov)[:3]) + cov[3, 3])
     got = []
     for seed in range(12):
@@ -146,8 +146,9 @@ def test_record_takes_precedence_and_trial_is_the_fallback(calibration_session, 
     rb.add_calibration_trial(w, rb.HandleTruth(), np.random.default_rng(5), duration_s=4.0)
     c = calibration.handle_calibration(open_session(w.write(tmp_path / "with-record")))
     assert c.source == "record:lab-cal" and c.connector_mass_kg == 0.1
-    assert calibration.HandleCalibration.from_record(open_session(tmp_path / "with-record").manifest.calibration[0]).to_record("lab-cal") == \
-        {k: v for k, v in rec.items()}
+    assert calibration.HandleCalibration.from_record(open_session(tmp_path / "with-record").manifest.calibration[0]).to_record(
+        "lab-cal"
+    ) == {k: v for k, v in rec.items()}
 
 
 def test_no_calibration_is_a_coded_error(example_session):
@@ -171,25 +172,40 @@ def test_compensation_returns_exactly_the_hand_wrench_and_acceleration():
     f_hand, t_hand, acc = rng.normal(0, 2, (n, 3)), rng.normal(0, 0.1, (n, 3)), rng.normal(0, 5, (n, 3))
     t = np.arange(n) / 1000.0
     wrench, accel = rb.raw_handle(truth, rig, t, q, t, q, rng, f_hand, t_hand, acc)
-    cal = calibration.HandleCalibration(force_bias_N=truth.force_bias, connector_mass_kg=truth.mass, connector_com_m=truth.com,
-                                        torque_bias_Nm=truth.torque_bias, accel_bias_m_per_s2=truth.accel_bias,
-                                        gravity_m_per_s2=truth.gravity)
+    cal = calibration.HandleCalibration(
+        force_bias_N=truth.force_bias,
+        connector_mass_kg=truth.mass,
+        connector_com_m=truth.com,
+        torque_bias_Nm=truth.torque_bias,
+        accel_bias_m_per_s2=truth.accel_bias,
+        gravity_m_per_s2=truth.gravity,
+    )
     raw = np.column_stack([wrench[c] for c in ("fx", "fy", "fz", "tx", "ty", "tz")])
     f, tq = calibration.compensate_wrench(raw, q, cal, Pose.model_validate(rig["handle"]["ft_sensor"]["pose"]))
     assert np.allclose(f, f_hand, atol=1e-10) and np.allclose(tq, t_hand, atol=1e-10)
-    a = calibration.compensate_accel(np.column_stack([accel[c] for c in ("ax", "ay", "az")]), q, cal,
-                                     Pose.model_validate(rig["handle"]["accelerometer"]["pose"]))
+    a = calibration.compensate_accel(
+        np.column_stack([accel[c] for c in ("ax", "ay", "az")]),
+        q,
+        cal,
+        Pose.model_validate(rig["handle"]["accelerometer"]["pose"]),
+    )
     assert np.allclose(a, acc, atol=1e-10)
 
 
 @settings(max_examples=25, deadline=None)
-@given(yaw=st.floats(-np.pi, np.pi), seed=st.integers(0, 2 ** 16))
+@given(yaw=st.floats(-np.pi, np.pi), seed=st.integers(0, 2**16))
 def test_rotating_the_world_about_vertical_rotates_outputs_and_keeps_magnitudes(yaw, seed):
     """A world frame turned about z (gravity unchanged) leaves the raw readings unchanged: the reported
     vectors turn with the frame and their magnitudes stay the same."""
     rng = np.random.default_rng(seed)
-    cal = calibration.HandleCalibration(force_bias_N=rng.normal(0, 0.3, 3), connector_mass_kg=0.05, connector_com_m=rng.normal(0, 0.01, 3),
-                                        torque_bias_Nm=rng.normal(0, 0.01, 3), accel_bias_m_per_s2=rng.normal(0, 0.1, 3), gravity_m_per_s2=9.8)
+    cal = calibration.HandleCalibration(
+        force_bias_N=rng.normal(0, 0.3, 3),
+        connector_mass_kg=0.05,
+        connector_com_m=rng.normal(0, 0.01, 3),
+        torque_bias_Nm=rng.normal(0, 0.01, 3),
+        accel_bias_m_per_s2=rng.normal(0, 0.1, 3),
+        gravity_m_per_s2=9.8,
+    )
     pose = Pose.model_validate(rb.rotated_rig()["handle"]["ft_sensor"]["pose"])
     q = _random_quats(20, rng)
     raw = rng.normal(0, 1, (20, 6))
@@ -213,8 +229,10 @@ def test_a_wrong_sensor_pose_in_the_rig_shows_as_orientation_error(tmp_path):
     10°·sqrt(E[sin²θ]) = 10°·sqrt(2/3) ≈ 8.2° (spec §6.3); the fitted parameters do not depend on the pose."""
     w = rb.writer()
     rb.add_calibration_trial(w, rb.HandleTruth(), np.random.default_rng(12), duration_s=12.0)
-    wrong = quat_multiply(np.asarray(w.manifest["rig"]["handle"]["ft_sensor"]["pose"]["quaternion"]),
-                          quat_from_axis_angle(np.array([1.0, 0.0, 0.0]), np.array(np.radians(10.0))))
+    wrong = quat_multiply(
+        np.asarray(w.manifest["rig"]["handle"]["ft_sensor"]["pose"]["quaternion"]),
+        quat_from_axis_angle(np.array([1.0, 0.0, 0.0]), np.array(np.radians(10.0))),
+    )
     w.manifest["rig"]["handle"]["ft_sensor"]["pose"]["quaternion"] = wrong.tolist()
     c = calibration.fit_trial(open_session(w.write(tmp_path / "s")), "cal-1")
     assert c.diagnostics["orientation_error_deg"] == pytest.approx(10.0 * np.sqrt(2 / 3), abs=0.5)

@@ -14,8 +14,7 @@ def test_version_human_and_json(capsys):
     assert main(["--version"]) == 0
     assert f"haptify {PACKAGE_VERSION} (spec {SPEC_VERSION}" in capsys.readouterr().out
     assert main(["--json", "--version"]) == 0
-    assert json.loads(capsys.readouterr().out) == {"package": PACKAGE_VERSION, "spec": SPEC_VERSION,
-                                                   "schema": SCHEMA_VERSION}
+    assert json.loads(capsys.readouterr().out) == {"package": PACKAGE_VERSION, "spec": SPEC_VERSION, "schema": SCHEMA_VERSION}
 
 
 def test_unknown_command_and_no_command_exit_2(capsys):

@@ -52,8 +52,9 @@ def test_compact_session_validates_and_reads_the_float32_values_exactly(tmp_path
     for trial in s_plain.manifest.trials:
         for stream in trial.streams:
             a = s_plain.read_stream(stream)
-            b = s_compact.read_stream(next(x for x in next(t for t in s_compact.manifest.trials if t.id == trial.id).streams
-                                           if x.kind == stream.kind))
+            b = s_compact.read_stream(
+                next(x for x in next(t for t in s_compact.manifest.trials if t.id == trial.id).streams if x.kind == stream.kind)
+            )
             assert list(b.dtypes.unique()) == [np.float64]
             assert np.array_equal(b["t"].to_numpy(), a["t"].to_numpy())  # t is kept as float64
             others = [c for c in a.columns if c != "t"]
@@ -70,10 +71,13 @@ def test_compact_metrics_agree_within_float32_precision(tmp_path):
         assert b[k] == pytest.approx(a[k], rel=1e-5, abs=1e-9), k
 
 
-@pytest.mark.parametrize("columns, bad", [
-    ({"t": pa.float32(), "x": pa.float64()}, "t"),   # a float32 time column loses the sample period
-    ({"t": pa.float64(), "x": pa.int64()}, "x"),     # not a float at all
-])
+@pytest.mark.parametrize(
+    "columns, bad",
+    [
+        ({"t": pa.float32(), "x": pa.float64()}, "t"),  # a float32 time column loses the sample period
+        ({"t": pa.float64(), "x": pa.int64()}, "x"),  # not a float at all
+    ],
+)
 def test_other_column_types_are_E212(tmp_path, columns, bad):
     path = tmp_path / "s.parquet"
     table = pa.table({n: pa.array(np.arange(5), type=t) for n, t in columns.items()})

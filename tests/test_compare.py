@@ -11,11 +11,23 @@ from haptify.results import DeviceSummary, Implementation, MetricResult, Results
 
 def _results(model: str, force: float, volume: float) -> ResultsFile:
     return ResultsFile(
-        implementation=Implementation(name="test", version="0"), session_id=f"s-{model}",
-        device=DeviceSummary(manufacturer="Acme", model=model), manifest_sha256="0" * 64,
-        metrics=[MetricResult(id="free_space.force_mean", value=force, unit="N", per_repetition=[force - 0.1, force + 0.1],
-                              n=2, sd=0.1414, definition_version="1.0.0"),
-                 MetricResult(id="workspace.measured_volume", value=volume, unit="m^3", n=1, definition_version="1.0.0")])
+        implementation=Implementation(name="test", version="0"),
+        session_id=f"s-{model}",
+        device=DeviceSummary(manufacturer="Acme", model=model),
+        manifest_sha256="0" * 64,
+        metrics=[
+            MetricResult(
+                id="free_space.force_mean",
+                value=force,
+                unit="N",
+                per_repetition=[force - 0.1, force + 0.1],
+                n=2,
+                sd=0.1414,
+                definition_version="1.0.0",
+            ),
+            MetricResult(id="workspace.measured_volume", value=volume, unit="m^3", n=1, definition_version="1.0.0"),
+        ],
+    )
 
 
 def test_table_has_paper_rows_devices_and_display_units():

@@ -21,19 +21,35 @@ TOY = Path(__file__).parent / "conform_impls" / "toy_jsonl.py"
 
 
 def case(cid: str, fixture: str, value=1.5, unit="N", tol=(0.01, 0.0), codes=None, metric="x.y") -> Case:
-    return Case(id=cid, metric=metric, spec_section="9.9", level="MUST", fixture=fixture,
-                expected=Expected(value=None if codes else value, unit=None if codes else unit, codes=codes),
-                tolerance=None if codes else Tolerance(abs=tol[0], rel=tol[1]),
-                provenance=Provenance(kind="analytic", note="test"), spec_versions=["1.0"], description="t")
+    return Case(
+        id=cid,
+        metric=metric,
+        spec_section="9.9",
+        level="MUST",
+        fixture=fixture,
+        expected=Expected(value=None if codes else value, unit=None if codes else unit, codes=codes),
+        tolerance=None if codes else Tolerance(abs=tol[0], rel=tol[1]),
+        provenance=Provenance(kind="analytic", note="test"),
+        spec_versions=["1.0"],
+        description="t",
+    )
 
 
 def results(value, unit="N", metric="x.y"):
     return {"metrics": [{"id": metric, "value": value, "unit": unit}]}
 
 
-@pytest.mark.parametrize("value,unit,status", [
-    (1.505, "N", "passed"), (1.52, "N", "failed"), (1.5, "kN", "failed"), (float("nan"), "N", "failed"),
-    ([1.5, 1.5], "N", "failed"), ("1.5", "N", "failed")])
+@pytest.mark.parametrize(
+    "value,unit,status",
+    [
+        (1.505, "N", "passed"),
+        (1.52, "N", "failed"),
+        (1.5, "kN", "failed"),
+        (float("nan"), "N", "failed"),
+        ([1.5, 1.5], "N", "failed"),
+        ("1.5", "N", "failed"),
+    ],
+)
 def test_tolerance_rule_and_failures_of_their_own(value, unit, status):
     assert judge_metric(case("c", "f"), results(value, unit)).status == status
 
@@ -58,8 +74,16 @@ def _fixtures(tmp_path: Path, *names: str) -> Path:
 
 def test_jsonl_adapter_isolates_crashes_hangs_and_garbage(tmp_path):
     repo = _fixtures(tmp_path, "v1.5", "crash", "hang", "garbage", "skip", "reject", "v2.0")
-    cases = [case("a", "v1.5"), case("b", "crash"), case("c", "hang"), case("d", "garbage"), case("e", "skip"),
-             case("f", "reject", codes=["E203"]), case("g", "v2.0"), case("h", "missing")]
+    cases = [
+        case("a", "v1.5"),
+        case("b", "crash"),
+        case("c", "hang"),
+        case("d", "garbage"),
+        case("e", "skip"),
+        case("f", "reject", codes=["E203"]),
+        case("g", "v2.0"),
+        case("h", "missing"),
+    ]
     adapter = JsonlAdapter(f"{sys.executable} {TOY}", timeout_s=2.0)
     verdicts = {v.case_id: v for v in run_cases(cases, adapter, repo=repo)}
     assert verdicts["a"].status == "passed"
@@ -84,7 +108,9 @@ def test_jsonl_restarts_are_bounded(tmp_path):
 def test_cmd_adapter_reads_out_file_and_reports_no_output(tmp_path):
     repo = _fixtures(tmp_path, "s")
     prog = tmp_path / "impl.py"
-    prog.write_text("import json, sys\njson.dump({'metrics': [{'id': 'x.y', 'value': 1.5, 'unit': 'N'}]}, open(sys.argv[2], 'w'))\n")
+    prog.write_text(
+        "import json, sys\njson.dump({'metrics': [{'id': 'x.y', 'value': 1.5, 'unit': 'N'}]}, open(sys.argv[2], 'w'))\n"
+    )
     verdicts = run_cases([case("a", "s")], CmdAdapter(f"{sys.executable} {prog} {{session}} {{out}}", 10), repo=repo)
     assert verdicts[0].status == "passed"
     silent = tmp_path / "silent.py"
@@ -134,15 +160,26 @@ def test_self_test_fails_an_implementation_that_accepts_everything(tmp_path):
 def test_cmd_adapter_names_the_implementation_from_its_results(tmp_path):
     repo = _fixtures(tmp_path, "s")
     prog = tmp_path / "impl.py"
-    prog.write_text("import json, sys\njson.dump({'implementation': {'name': 'acme-haptify', 'version': '2.1'}, "
-                    "'metrics': [{'id': 'x.y', 'value': 1.5, 'unit': 'N'}]}, open(sys.argv[2], 'w'))\n")
+    prog.write_text(
+        "import json, sys\njson.dump({'implementation': {'name': 'acme-haptify', 'version': '2.1'}, "
+        "'metrics': [{'id': 'x.y', 'value': 1.5, 'unit': 'N'}]}, open(sys.argv[2], 'w'))\n"
+    )
     adapter = CmdAdapter(f"{sys.executable} {prog} {{session}} {{out}}", 10)
     run_cases([case("a", "s")], adapter, repo=repo)
     assert adapter.implementation == {"name": "acme-haptify", "version": "2.1"}
 
 
-@pytest.mark.parametrize("document", [{"metrics": None}, {"metrics": {"x.y": 1.5}}, {"metrics": [], "unavailable": None},
-                                      {"metrics": [], "warnings": 3}, {"findings": "E203"}, {"findings": None}])
+@pytest.mark.parametrize(
+    "document",
+    [
+        {"metrics": None},
+        {"metrics": {"x.y": 1.5}},
+        {"metrics": [], "unavailable": None},
+        {"metrics": [], "warnings": 3},
+        {"findings": "E203"},
+        {"findings": None},
+    ],
+)
 def test_a_document_whose_lists_are_not_arrays_is_an_error_of_the_implementation(document):
     # before: {"metrics": null} stopped the whole run with a TypeError; {"findings": "E203"} passed as an acceptance
     from haptify_conform.adapters import classify
@@ -177,19 +214,23 @@ def test_a_broken_suite_means_the_run_cannot_start(monkeypatch, capsys):
 
 # --- conformance is not claimed by judging nothing or by skipping what must be answered (spec §16, §16.6) --
 
+
 def _verdict(cid: str, metric: str, status: str, level: str = "MUST"):
     from haptify_conform.judge import Verdict
 
     return Verdict(case_id=cid, metric=metric, status=status, level=level)
 
 
-@pytest.mark.parametrize("verdicts, conforms, must_skipped", [
-    ([("a", "m.x", "passed"), ("b", "m.y", "skipped")], True, []),                       # m.y left out of the claim
-    ([("a", "m.x", "passed"), ("b", "m.x", "skipped")], False, ["b"]),                   # m.x reported, one case skipped
-    ([("a", "m.x", "passed"), ("v", "validate", "skipped")], False, ["v"]),              # a negative case skipped
-    ([("a", "m.x", "passed"), ("b", "m.x", "skipped", "SHOULD")], True, []),             # a SHOULD case may be skipped
-    ([], False, []),                                                                     # nothing judged
-])
+@pytest.mark.parametrize(
+    "verdicts, conforms, must_skipped",
+    [
+        ([("a", "m.x", "passed"), ("b", "m.y", "skipped")], True, []),  # m.y left out of the claim
+        ([("a", "m.x", "passed"), ("b", "m.x", "skipped")], False, ["b"]),  # m.x reported, one case skipped
+        ([("a", "m.x", "passed"), ("v", "validate", "skipped")], False, ["v"]),  # a negative case skipped
+        ([("a", "m.x", "passed"), ("b", "m.x", "skipped", "SHOULD")], True, []),  # a SHOULD case may be skipped
+        ([], False, []),  # nothing judged
+    ],
+)
 def test_a_run_conforms_only_without_forbidden_skips(verdicts, conforms, must_skipped):
     report = build_report(header("cmd", {}, "2026-01-01T00:00:00Z"), [_verdict(*v) for v in verdicts])
     assert (report.summary.conforms, report.summary.must_skipped) == (conforms, must_skipped)
@@ -212,11 +253,16 @@ def test_no_suite_found_cannot_start(tmp_path, monkeypatch, capsys):
     assert main(["--lint"]) == 2
 
 
-@pytest.mark.parametrize("template, says", [
-    ("/nonexistent/haptify-impl {session} {out}", "No such file"),
-    (f"{sys.executable} -c \"import sys; sys.stderr.write('boom: missing module'); sys.exit(127)\" {{session}} {{out}}",
-     "boom: missing module"),
-])
+@pytest.mark.parametrize(
+    "template, says",
+    [
+        ("/nonexistent/haptify-impl {session} {out}", "No such file"),
+        (
+            f"{sys.executable} -c \"import sys; sys.stderr.write('boom: missing module'); sys.exit(127)\" {{session}} {{out}}",
+            "boom: missing module",
+        ),
+    ],
+)
 def test_an_implementation_that_cannot_start_is_exit_2_with_its_stderr(template, says, capsys):
     from haptify_conform.cli import main
 
@@ -245,18 +291,32 @@ def test_the_runner_installed_from_a_wheel_needs_and_finds_the_suite(tmp_path):
     for part in ("pyproject.toml", "README.md"):
         shutil.copy(repo / part, source / part)
     wheels = tmp_path / "wheels"
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(wheels), str(source)],
-                   check=True, capture_output=True)
+    subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(wheels), str(source)], check=True, capture_output=True
+    )
     target = tmp_path / "site"
     (wheel,) = wheels.glob("haptify-*.whl")
-    subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(target), str(wheel)],
-                   check=True, capture_output=True)
+    subprocess.run(
+        [sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(target), str(wheel)],
+        check=True,
+        capture_output=True,
+    )
     env = {k: v for k, v in __import__("os").environ.items() if k != "HAPTIFY_CONFORMANCE_SUITE"}
     env["PYTHONPATH"] = str(target)
 
     def conform(*args):
-        return subprocess.run([sys.executable, "-c", "import sys, haptify_conform.cli as c; print(c.__file__, file=sys.stderr); "
-                               "sys.exit(c.main())", *args], capture_output=True, text=True, env=env, cwd=tmp_path)
+        return subprocess.run(
+            [
+                sys.executable,
+                "-c",
+                "import sys, haptify_conform.cli as c; print(c.__file__, file=sys.stderr); sys.exit(c.main())",
+                *args,
+            ],
+            capture_output=True,
+            text=True,
+            env=env,
+            cwd=tmp_path,
+        )
 
     alone = conform("--python", "haptify.conform_adapter:analyse")
     assert str(target) in alone.stderr and alone.returncode == 2 and "no conformance suite" in alone.stderr

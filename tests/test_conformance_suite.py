@@ -27,8 +27,21 @@ JS_DIR = REPO_ROOT / "conformance" / "examples" / "js"
 def test_the_reference_passes_every_case_over_json_lines(tmp_path):
     """One run of the whole suite through the JSON-lines protocol (also the speed check's workload)."""
     report = tmp_path / "report.json"
-    proc = subprocess.run([sys.executable, "-m", "haptify_conform.cli", "--jsonl", f"{sys.executable} -m haptify.conform_adapter",
-                           "--json-report", str(report), "--quiet"], capture_output=True, text=True, timeout=600)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "haptify_conform.cli",
+            "--jsonl",
+            f"{sys.executable} -m haptify.conform_adapter",
+            "--json-report",
+            str(report),
+            "--quiet",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     data = json.loads(report.read_text())
     bad = [(c["case_id"], c["status"], c["message"]) for c in data["cases"] if c["status"] != "passed"]
     assert not bad, bad
@@ -59,8 +72,9 @@ def test_the_mutant_set_is_well_formed_and_its_recorded_result_current():
     requirement_ids = set(by_id())
     mutants = catalogue.MUTANTS
     assert len(mutants) >= 40 and len({m.name for m in mutants}) == len(mutants)
-    headings = set(re.findall(r"^#+ (\d+(?:\.\d+)*)\.? ", "\n".join(p.read_text() for p in (REPO_ROOT / "spec").glob("*.md")),
-                              flags=re.M))
+    headings = set(
+        re.findall(r"^#+ (\d+(?:\.\d+)*)\.? ", "\n".join(p.read_text() for p in (REPO_ROOT / "spec").glob("*.md")), flags=re.M)
+    )
     known = {m.id for f in all_families() for m in f.metrics}
     for m in mutants:
         assert m.section in headings, (m.name, m.section)
@@ -112,8 +126,12 @@ def test_javascript_implementation_passes_its_cases_over_json_lines():
     adapter = JsonlAdapter(f"{node} {JS_DIR / 'haptify.js'}", timeout_s=60.0)
     verdicts = run_cases(cases, adapter, skips)
     ran = [v for v in verdicts if v.case_id not in skips]
-    assert {v.metric for v in ran} >= {"workspace.spec_box_volume", "vibration.rms", "vibration.spectral_centroid",
-                                       "free_space.force_mean"}
+    assert {v.metric for v in ran} >= {
+        "workspace.spec_box_volume",
+        "vibration.rms",
+        "vibration.spectral_centroid",
+        "free_space.force_mean",
+    }
     assert {v.case_id for v in ran} >= {c.id for c in cases if c.quantity != "value"}  # every uncertainty case (§19)
     assert [(v.case_id, v.message) for v in ran if v.status != "passed"] == []
     assert len(ran) >= 7
@@ -155,6 +173,8 @@ def test_the_spec_table_of_case_files_states_their_case_counts():
 
     table = (REPO_ROOT / "spec" / "16-conformance.md").read_text(encoding="utf-8")
     stated = {m.group(1): int(m.group(2)) for m in re.finditer(r"^\| `(\w+\.json)` \| (\d+) \|", table, re.M)}
-    actual = {p.name: len(json.loads(p.read_text(encoding="utf-8"))["cases"])
-              for p in sorted((REPO_ROOT / "conformance" / "cases").glob("*.json"))}
+    actual = {
+        p.name: len(json.loads(p.read_text(encoding="utf-8"))["cases"])
+        for p in sorted((REPO_ROOT / "conformance" / "cases").glob("*.json"))
+    }
     assert stated == actual

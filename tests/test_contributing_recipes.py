@@ -22,11 +22,21 @@ from metric_sessions import add_handle_trial, circle, spin, writer
 REPO = Path(__file__).resolve().parents[1]
 
 TOY_DEFINITION = {
-    "family": "toy", "version": "1.0.0", "spec_section": "99",
+    "family": "toy",
+    "version": "1.0.0",
+    "spec_section": "99",
     "parameters": {"min_duration_s": {"value": 1.0, "unit": "s", "description": "Shortest trial the metric accepts."}},
-    "metrics": [{"id": "toy.trial_duration", "title": "Recorded length of a free-space trial", "unit": "s",
-                 "protocols": ["free_space"], "inputs": ["handle_wrench"], "aggregation": "mean over repetitions",
-                 "description": "Last minus first time stamp of the trial's handle_wrench stream."}],
+    "metrics": [
+        {
+            "id": "toy.trial_duration",
+            "title": "Recorded length of a free-space trial",
+            "unit": "s",
+            "protocols": ["free_space"],
+            "inputs": ["handle_wrench"],
+            "aggregation": "mean over repetitions",
+            "description": "Last minus first time stamp of the trial's handle_wrench stream.",
+        }
+    ],
 }
 
 TOY_MODULE = '''
@@ -71,8 +81,11 @@ def toy_family(tmp_path, monkeypatch):
     monkeypatch.syspath_prepend(str(code))
     monkeypatch.setattr(haptify_schemas, "_root", lambda: defs)
     plugin = EntryPoint(name="toy", value="toy_family", group=compute.FAMILY_ENTRY_POINTS)
-    monkeypatch.setattr(compute, "entry_points",
-                        lambda group: [*entry_points(group=group), *([plugin] if group == compute.FAMILY_ENTRY_POINTS else [])])
+    monkeypatch.setattr(
+        compute,
+        "entry_points",
+        lambda group: [*entry_points(group=group), *([plugin] if group == compute.FAMILY_ENTRY_POINTS else [])],
+    )
     _clear_caches()
     yield
     monkeypatch.undo()
@@ -88,8 +101,16 @@ def _clear_caches() -> None:
 def _session(folder: Path, durations: list[float]) -> Path:
     w = writer("toy")
     for rep, d in enumerate(durations, start=1):
-        add_handle_trial(w, f"free_space-{rep}", "free_space", duration_s=d, position=circle(), quaternion=spin(),
-                         force_w=lambda t: 0.0 * circle()(t), repetition=rep)
+        add_handle_trial(
+            w,
+            f"free_space-{rep}",
+            "free_space",
+            duration_s=d,
+            position=circle(),
+            quaternion=spin(),
+            force_w=lambda t: 0.0 * circle()(t),
+            repetition=rep,
+        )
     return w.write(folder)
 
 
@@ -98,7 +119,7 @@ def test_a_family_from_a_definition_a_module_and_an_entry_point_is_computed_and_
     res = compute_session(session, ["toy.trial_duration"])
     rec = res.get("toy.trial_duration")
     # 4 s and 6 s recorded (1 kHz stamps 0 … d); the 0.5 s trial is below the family's parameter
-    assert rec.value == pytest.approx(5.0) and rec.n == 2 and rec.sd == pytest.approx(2 ** 0.5)
+    assert rec.value == pytest.approx(5.0) and rec.n == 2 and rec.sd == pytest.approx(2**0.5)
     assert rec.unit == "s" and rec.definition_version == "1.0.0"
     jsonschema.validate(res.model_dump(mode="json", exclude_none=True), haptify_schemas.schema("results"))
 

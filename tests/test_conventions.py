@@ -20,8 +20,11 @@ from haptify.conventions import (
     quat_to_matrix,
 )
 
-unit_quats = st.lists(st.floats(-1, 1), min_size=4, max_size=4).filter(lambda v: np.linalg.norm(v) > 0.1).map(
-    lambda v: quat_normalize(np.array(v)))
+unit_quats = (
+    st.lists(st.floats(-1, 1), min_size=4, max_size=4)
+    .filter(lambda v: np.linalg.norm(v) > 0.1)
+    .map(lambda v: quat_normalize(np.array(v)))
+)
 
 
 def test_rotation_about_z_by_90_degrees_maps_x_to_y():

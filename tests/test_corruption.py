@@ -112,8 +112,12 @@ def _commands(s: str, out: Path, inputs: dict[str, Path]) -> list[list[str]]:
 
 
 @pytest.mark.slow
-@settings(max_examples=EXAMPLES, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@settings(
+    max_examples=EXAMPLES,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
 @given(fmt=st.sampled_from(["parquet", "csv"]), data=st.data())
 def test_no_corrupt_input_ends_in_an_internal_error(pristine, tmp_path_factory, fmt, data):
     work = tmp_path_factory.mktemp("corrupt")

@@ -27,8 +27,7 @@ FREE = {"free_space": 16.0, "figure_eight": 16.0, "stiffness": 8.0, "workspace":
 
 def _session(folder, truth, seed, durations=FREE, protocols=("free_space",), reps=1):
     rig = () if protocols == ("workspace",) else ("rig.handle_calibration",)
-    opt = SimulationOptions(protocols=(*protocols, *rig), reps=reps, seed=seed, durations=durations,
-                            rig_trials=False, workers=1)
+    opt = SimulationOptions(protocols=(*protocols, *rig), reps=reps, seed=seed, durations=durations, rig_trials=False, workers=1)
     return simulate_dossier(truth, folder / f"measured-{seed}", opt).session
 
 
@@ -50,11 +49,18 @@ def test_hidden_coulomb_friction_is_named_identified_and_the_gap_shrinks(tmp_pat
     truth = set_param(preset("touch"), "friction.coulomb.torque_Nm", torque)
     session = _session(tmp_path, truth, seed)
     start = disable(truth, "friction.coulomb")
-    if seed == 11:       # once through the command line: every output written, the twin updated
+    if seed == 11:  # once through the command line: every output written, the twin updated
         twin_file = tmp_path / "start.json"
         write_twin(start, twin_file)
-        args = argparse.Namespace(session=str(session), twin=str(twin_file), out=str(tmp_path / "out"), max_effects=5, workers=1, no_overlay=False,
-                                  overwrite=False)
+        args = argparse.Namespace(
+            session=str(session),
+            twin=str(twin_file),
+            out=str(tmp_path / "out"),
+            max_effects=5,
+            workers=1,
+            no_overlay=False,
+            overwrite=False,
+        )
         assert cmd_discrepancy.run(args, UI(quiet=True)) == 0
         result = DiscrepancyFile.model_validate(json.loads((tmp_path / "out" / "discrepancy.json").read_text()))
         for name in ("twin.json", "report.html", "residual_vs_state.png", "workspace_residual.png", "overlay.rrd"):
@@ -67,7 +73,7 @@ def test_hidden_coulomb_friction_is_named_identified_and_the_gap_shrinks(tmp_pat
         result, _ = run_discrepancy(session, start, None)
     assert result.accepted and result.accepted[0].effect_id == "friction.coulomb"
     assert _rel(result.accepted[0].value, torque) < 0.15
-    assert result.accepted[0].per_drive is None     # equal on every drive: the shared value is kept (README §2)
+    assert result.accepted[0].per_drive is None  # equal on every drive: the shared value is kept (README §2)
     assert result.accepted[0].stderr is not None and result.accepted[0].stderr < 0.15 * torque
     assert result.heldout_gap_after_N <= 0.5 * result.heldout_gap_before_N
     assert result.verdict == "explained"
@@ -93,18 +99,21 @@ def _benchmark_gap_halves(result, metric):
     assert abs(gap.twin_after - gap.measured) < 0.5 * abs(gap.twin_before - gap.measured)
 
 
-@pytest.mark.parametrize("effect, parameter, low, high, protocols", [
-    ("friction.viscous", "damping_Nms_per_rad", 0.005, 0.02, ("figure_eight",)),
-    ("kinematics.link_length", "delta_a_m", 0.003, 0.01, ("free_space",)),
-    ("drive.torque_saturation", "max_torque_Nm", 0.12, 0.22, ("stiffness",)),
-    ("drive.force_cutoff", "trip_force_N", 1.5, 2.5, ("stiffness",)),
-    ("inertia", "rotor_inertia_kg_m2", 0.5e-6, 2e-6, ("local_dynamic",)),
-    ("handle.connector_mass", "mass_kg", 0.02, 0.06, ("local_dynamic",)),
-    # the play shows where the drive torque reverses while the motors render: sliding on the surface
-    ("drive.backlash", "width_rad", 0.003, 0.008, ("frictionless_surface",)),
-    # the Stribeck excess lives at the reversals, where the path's velocity error matters most
-    ("friction.stribeck", "excess_torque_Nm", 0.035, 0.105, ("free_space",)),
-])
+@pytest.mark.parametrize(
+    "effect, parameter, low, high, protocols",
+    [
+        ("friction.viscous", "damping_Nms_per_rad", 0.005, 0.02, ("figure_eight",)),
+        ("kinematics.link_length", "delta_a_m", 0.003, 0.01, ("free_space",)),
+        ("drive.torque_saturation", "max_torque_Nm", 0.12, 0.22, ("stiffness",)),
+        ("drive.force_cutoff", "trip_force_N", 1.5, 2.5, ("stiffness",)),
+        ("inertia", "rotor_inertia_kg_m2", 0.5e-6, 2e-6, ("local_dynamic",)),
+        ("handle.connector_mass", "mass_kg", 0.02, 0.06, ("local_dynamic",)),
+        # the play shows where the drive torque reverses while the motors render: sliding on the surface
+        ("drive.backlash", "width_rad", 0.003, 0.008, ("frictionless_surface",)),
+        # the Stribeck excess lives at the reversals, where the path's velocity error matters most
+        ("friction.stribeck", "excess_torque_Nm", 0.035, 0.105, ("free_space",)),
+    ],
+)
 def test_hidden_effect_is_named_first_and_identified(tmp_path, effect, parameter, low, high, protocols):
     """One library effect hidden with a random plausible value; the twin starts from the preset without it
     (its stored, different value is only the search's starting point).
@@ -113,8 +122,9 @@ def test_hidden_effect_is_named_first_and_identified(tmp_path, effect, parameter
     is 0.09–0.10 N, benchmarks/RESULTS.md)."""
     value = float(np.random.default_rng(7).uniform(low, high))
     truth = set_param(set_param(preset("touch"), f"{effect}.{parameter}", value), f"{effect}.enabled", True)
-    result, sel = run_discrepancy(_session(tmp_path, truth, 7, FREE, protocols), disable(preset("touch"), effect), None,
-                                  max_effects=1)
+    result, sel = run_discrepancy(
+        _session(tmp_path, truth, 7, FREE, protocols), disable(preset("touch"), effect), None, max_effects=1
+    )
     assert result.accepted[0].effect_id == effect
     assert _rel(result.accepted[0].value, value) < 0.15
     trials = sel.rounds[0].design.trials
@@ -193,8 +203,11 @@ def test_a_hidden_sensor_bias_is_reported_not_observable_and_nothing_is_named(tm
     without them: the session's handle calibration removes them, so the force residual cannot see them — nothing
     is named and the output says why."""
     truth = preset("touch")
-    for name, value in (("handle_force_N", [2.0, -1.5, 2.5]), ("handle_torque_Nm", [0.05, -0.04, 0.03]),
-                        ("accel_m_per_s2", [0.5, -0.4, 0.6])):
+    for name, value in (
+        ("handle_force_N", [2.0, -1.5, 2.5]),
+        ("handle_torque_Nm", [0.05, -0.04, 0.03]),
+        ("accel_m_per_s2", [0.5, -0.4, 0.6]),
+    ):
         truth = set_param(truth, f"sensor.bias.{name}", value)
     result, _ = run_discrepancy(_session(tmp_path, truth, 9), disable(truth, "sensor.bias"), None)
     assert result.accepted == []

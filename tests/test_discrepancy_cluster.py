@@ -19,8 +19,14 @@ TORQUE = 0.04  # N·m, the hidden friction
 @pytest.fixture(scope="module")
 def case(tmp_path_factory):
     truth = set_param(preset("touch"), "friction.coulomb.torque_Nm", TORQUE)
-    opt = SimulationOptions(protocols=("free_space", "rig.handle_calibration"), reps=1, seed=21, rig_trials=False, workers=1,
-                            durations={"free_space": 8.0, "rig.handle_calibration": 12.0})
+    opt = SimulationOptions(
+        protocols=("free_space", "rig.handle_calibration"),
+        reps=1,
+        seed=21,
+        rig_trials=False,
+        workers=1,
+        durations={"free_space": 8.0, "rig.handle_calibration": 12.0},
+    )
     session = simulate_dossier(truth, tmp_path_factory.mktemp("disc") / "measured", opt).session
     return disable(truth, "friction.coulomb"), load_measured(open_session(session))
 
@@ -32,8 +38,10 @@ def _trials_held() -> int:
 
 
 def _digest(sel):
-    return ([(f.candidate.effect_id, f.value, f.stderr, f.score.delta_bic) for r in sel.rounds for f in r.fits],
-            [(f.candidate.effect_id, f.value) for f in sel.accepted])
+    return (
+        [(f.candidate.effect_id, f.value, f.stderr, f.score.delta_bic) for r in sel.rounds for f in r.fits],
+        [(f.candidate.effect_id, f.value) for f in sel.accepted],
+    )
 
 
 def test_candidate_search_on_a_cluster_equals_the_serial_search(case):

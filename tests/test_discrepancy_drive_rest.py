@@ -30,7 +30,7 @@ def test_a_still_drive_is_found_and_a_moving_one_is_not():
     assert len(runs) == 1
     a, b = runs[0]
     assert abs(T[a] - 4.0) <= 0.02 and abs(T[b - 1] - 7.0) <= 0.02
-    creeping = 0.003 * T          # 3 mrad/s: more than REST_RANGE_RAD in every window
+    creeping = 0.003 * T  # 3 mrad/s: more than REST_RANGE_RAD in every window
     assert dr.resting_runs(creeping, RATE) == []
     assert dr.resting_runs(0.05 * np.sin(2 * np.pi * 0.5 * T), RATE) == []
 
@@ -50,7 +50,7 @@ def test_a_run_is_held_at_its_mean_and_eased_in_and_out():
     outside = np.ones(len(T), bool)
     outside[a:b] = False
     np.testing.assert_array_equal(held[outside], angle[outside])
-    assert held[a] == angle[a] and held[b - 1] == angle[b - 1]     # no jump where the hold begins or ends
+    assert held[a] == angle[a] and held[b - 1] == angle[b - 1]  # no jump where the hold begins or ends
 
 
 def _arm_path(seed=0):
@@ -59,7 +59,7 @@ def _arm_path(seed=0):
     rng = np.random.default_rng(seed)
     q = np.zeros((len(T), 3))
     still = (T >= 3.0) & (T < 9.0)
-    turning = 0.2 * np.sin(0.5 * (T - np.where(T < 3.0, 3.0, 9.0)))      # slow turns into and out of the rest
+    turning = 0.2 * np.sin(0.5 * (T - np.where(T < 3.0, 3.0, 9.0)))  # slow turns into and out of the rest
     q[:, 0] = np.where(still, 0.1, 0.1 + turning)
     q[:, 0] += still * rng.normal(0.0, 1e-4, len(T))
     q[:, 1] = 0.8 + 0.15 * np.sin(2 * np.pi * 3.0 * T)
@@ -78,15 +78,22 @@ def test_the_resting_base_drive_is_held_and_the_other_drives_are_untouched():
     core = (T >= 3.0 + dr.REST_WINDOW_S) & (T < 9.0 - dr.REST_WINDOW_S)
     np.testing.assert_allclose(theta_out[core, 0], theta[still, 0].mean(), atol=2e-5)
     moving = ~still
-    np.testing.assert_array_equal(out[moving & (np.abs(T - 3.0) > 0.6) & (np.abs(T - 9.0) > 0.6)],
-                                  position[moving & (np.abs(T - 3.0) > 0.6) & (np.abs(T - 9.0) > 0.6)])
+    np.testing.assert_array_equal(
+        out[moving & (np.abs(T - 3.0) > 0.6) & (np.abs(T - 9.0) > 0.6)],
+        position[moving & (np.abs(T - 3.0) > 0.6) & (np.abs(T - 9.0) > 0.6)],
+    )
 
 
 @settings(max_examples=10, deadline=None)
 @given(amplitude=hst.floats(0.02, 0.3), frequency=hst.floats(0.3, 4.0))
 def test_a_path_whose_drives_all_move_is_returned_unchanged(amplitude, frequency):
-    q = np.stack([0.1 + amplitude * np.sin(2 * np.pi * frequency * T),
-                  0.8 + amplitude * np.cos(2 * np.pi * frequency * T),
-                  -1.6 + 0.5 * amplitude * np.sin(2 * np.pi * frequency * T + 1.0)], axis=1)
+    q = np.stack(
+        [
+            0.1 + amplitude * np.sin(2 * np.pi * frequency * T),
+            0.8 + amplitude * np.cos(2 * np.pi * frequency * T),
+            -1.6 + 0.5 * amplitude * np.sin(2 * np.pi * frequency * T + 1.0),
+        ],
+        axis=1,
+    )
     position = dr.gimbal_centre(TWIN, q)
     np.testing.assert_array_equal(dr.hold_resting_drives(TWIN, T, position), position)

@@ -16,8 +16,14 @@ from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
 
 
 def _trials(folder, truth, protocol, seconds, seed):
-    opt = SimulationOptions(protocols=(protocol, "rig.handle_calibration"), reps=1, seed=seed,
-                            durations={protocol: seconds, "rig.handle_calibration": 12.0}, rig_trials=False, workers=1)
+    opt = SimulationOptions(
+        protocols=(protocol, "rig.handle_calibration"),
+        reps=1,
+        seed=seed,
+        durations={protocol: seconds, "rig.handle_calibration": 12.0},
+        rig_trials=False,
+        workers=1,
+    )
     return load_measured(open_session(simulate_dossier(truth, folder / "measured", opt).session))
 
 
@@ -47,7 +53,7 @@ def test_an_off_grid_series_elasticity_is_found_within_one_percent_and_its_inter
     assert first.effect_id == "drive.series_elasticity"
     assert abs(first.value / 13.7 - 1) < 0.01
     assert first.ci95[0] <= 13.7 <= first.ci95[1]
-    assert first.ci95[1] - first.ci95[0] < 0.1 * 13.7          # honest, and still informative
+    assert first.ci95[1] - first.ci95[0] < 0.1 * 13.7  # honest, and still informative
 
 
 def test_the_replays_interval_is_the_t_interval_of_their_root_mean_square_error():

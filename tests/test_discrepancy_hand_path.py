@@ -46,7 +46,7 @@ def _accel_path(shift=(0.0, 0.0, 0.0)):
 
 
 def _interior(x):
-    return x[200:-200]      # 2 s from each end: the zero-phase filters' edges
+    return x[200:-200]  # 2 s from each end: the zero-phase filters' edges
 
 
 def test_exact_measurements_give_the_path_back():
@@ -83,19 +83,20 @@ def test_capture_noise_above_the_crossover_is_removed():
     noisy = p + np.random.default_rng(3).normal(0.0, sigma, p.shape)
     err = _interior(hp.blend(T, RATE, noisy, _accel_path(), ALL) - p)
     expected = sigma * np.sqrt(hp.PATH_CROSSOVER_HZ / (RATE / 2) * (np.pi / 8) * (7 / 8) / np.sin(np.pi / 8))
-    assert np.sqrt(np.mean(err ** 2)) == pytest.approx(expected, rel=0.15)
-    only_mocap = _interior(hp.smooth(T, RATE, noisy, hp.POSE_CUTOFF_HZ) - p)      # the fallback without an accelerometer
+    assert np.sqrt(np.mean(err**2)) == pytest.approx(expected, rel=0.15)
+    only_mocap = _interior(hp.smooth(T, RATE, noisy, hp.POSE_CUTOFF_HZ) - p)  # the fallback without an accelerometer
     v_err = np.gradient(err, axis=0) * RATE
     v_mocap = np.gradient(only_mocap, axis=0) * RATE
-    assert np.sqrt(np.mean(v_err ** 2)) < 0.2 * np.sqrt(np.mean(v_mocap ** 2))
+    assert np.sqrt(np.mean(v_err**2)) < 0.2 * np.sqrt(np.mean(v_mocap**2))
 
 
 ACCEL_PATH = _accel_path()
 
 
 @settings(max_examples=25, deadline=None)
-@given(q=hst.lists(hst.floats(-1, 1), min_size=4, max_size=4).filter(lambda v: np.linalg.norm(v) > 0.1),
-       scale=hst.floats(1e-3, 1e3))
+@given(
+    q=hst.lists(hst.floats(-1, 1), min_size=4, max_size=4).filter(lambda v: np.linalg.norm(v) > 0.1), scale=hst.floats(1e-3, 1e3)
+)
 def test_the_blend_turns_with_the_frame_and_scales_with_the_unit(q, scale):
     p, _ = _path(T)
     noisy = p + np.random.default_rng(5).normal(0.0, 1e-4, p.shape)
@@ -108,8 +109,14 @@ def test_the_blend_turns_with_the_frame_and_scales_with_the_unit(q, scale):
 
 @pytest.fixture(scope="module")
 def figure_eight(tmp_path_factory):
-    opt = SimulationOptions(protocols=("figure_eight", "rig.handle_calibration"), reps=1, seed=4,
-                            durations={"figure_eight": 16.0, "rig.handle_calibration": 12.0}, rig_trials=False, workers=1)
+    opt = SimulationOptions(
+        protocols=("figure_eight", "rig.handle_calibration"),
+        reps=1,
+        seed=4,
+        durations={"figure_eight": 16.0, "rig.handle_calibration": 12.0},
+        rig_trials=False,
+        workers=1,
+    )
     return simulate_dossier(preset("touch"), tmp_path_factory.mktemp("hand-path") / "s", opt)
 
 
@@ -131,7 +138,7 @@ def test_on_a_simulated_session_the_blend_follows_the_true_path(figure_eight):
     hs = handle_signals(ComputeContext(session=session), trial.trial_id)
     mocap = hp.smooth(hs.t, hs.rate_hz, hp.fill_gaps(hs.t, hs.position, hs.valid), hp.POSE_CUTOFF_HZ)  # the fallback
     v_mocap = (np.gradient(mocap, trial.t, axis=0) - v_true)[ok]
-    assert np.sqrt(np.mean(v_err ** 2)) < 0.5 * np.sqrt(np.mean(v_mocap ** 2))
+    assert np.sqrt(np.mean(v_err**2)) < 0.5 * np.sqrt(np.mean(v_mocap**2))
     assert np.sqrt(np.mean((trial.position - truth)[ok] ** 2)) < 1e-4
 
 
@@ -149,15 +156,17 @@ def test_rows_near_a_reading_at_the_accelerometers_range_are_not_compared(figure
     values = np.abs(reading[["ax", "ay", "az"]].to_numpy())
     peak_row = int(np.argmax(values.max(axis=1)))
     peak, t_peak = float(values.max()), float(reading["t"].iloc[peak_row])
-    monkeypatch.setattr(session.manifest.rig.handle.accelerometer, "range",
-                        SensorRange(accel_m_per_s2=[peak / hp.RANGE_FRACTION] * 3))
+    monkeypatch.setattr(
+        session.manifest.rig.handle.accelerometer, "range", SensorRange(accel_m_per_s2=[peak / hp.RANGE_FRACTION] * 3)
+    )
     clipped = _eight(session)
     assert clipped.path_source == hp.FROM_BOTH
     near = np.abs(clipped.t - t_peak) <= hp.CLIP_MARGIN_S
     assert near.any()
     np.testing.assert_array_equal(clipped.valid, free.valid & ~near)
-    monkeypatch.setattr(session.manifest.rig.handle.accelerometer, "range",
-                        SensorRange(accel_m_per_s2=[1.01 * peak / hp.RANGE_FRACTION] * 3))
+    monkeypatch.setattr(
+        session.manifest.rig.handle.accelerometer, "range", SensorRange(accel_m_per_s2=[1.01 * peak / hp.RANGE_FRACTION] * 3)
+    )
     np.testing.assert_array_equal(_eight(session).valid, free.valid)
 
 
@@ -172,7 +181,9 @@ def test_rows_near_a_capture_gap_are_not_compared(figure_eight, monkeypatch):
         df = read(trial_id, kind)
         if (trial_id, kind) == (eight, "handle_pose"):
             df = df.copy()
-            df.loc[(df["t"] >= df["t"].iloc[0] + 8.0) & (df["t"] < df["t"].iloc[0] + 8.3), ["px", "py", "pz", "qw", "qx", "qy", "qz"]] = np.nan
+            df.loc[
+                (df["t"] >= df["t"].iloc[0] + 8.0) & (df["t"] < df["t"].iloc[0] + 8.3), ["px", "py", "pz", "qw", "qx", "qy", "qz"]
+            ] = np.nan
         return df
 
     monkeypatch.setattr(session, "read", read_with_gap)
@@ -192,16 +203,18 @@ def test_near_marks_the_rows_within_the_margin_of_an_event():
     assert not hp.near(t, np.array([]), 0.5).any()
 
 
-def test_without_an_accelerometer_or_when_it_is_mostly_at_its_range_the_path_is_motion_capture_alone(figure_eight,
-                                                                                                     monkeypatch):
+def test_without_an_accelerometer_or_when_it_is_mostly_at_its_range_the_path_is_motion_capture_alone(figure_eight, monkeypatch):
     session = open_session(figure_eight.session)
     assert _eight(session).path_source == hp.FROM_BOTH
     monkeypatch.setattr(session.manifest.rig.handle.accelerometer, "range", SensorRange(accel_m_per_s2=[1.0, 1.0, 1.0]))
-    trial = _eight(session)          # gravity alone is past 1 m/s² on some axis all the time
+    trial = _eight(session)  # gravity alone is past 1 m/s² on some axis all the time
     assert trial.path_source == hp.FROM_MOCAP and trial.valid.sum() > 0.8 * len(trial.t)
     monkeypatch.setattr(session.manifest.rig.handle.accelerometer, "range", None)
     stream = type(session).stream
     eight = trial.trial_id
-    monkeypatch.setattr(type(session), "stream", lambda self, trial_id, kind:
-                        None if (trial_id, kind) == (eight, "handle_accel") else stream(self, trial_id, kind))
+    monkeypatch.setattr(
+        type(session),
+        "stream",
+        lambda self, trial_id, kind: None if (trial_id, kind) == (eight, "handle_accel") else stream(self, trial_id, kind),
+    )
     assert _eight(session).path_source == hp.FROM_MOCAP

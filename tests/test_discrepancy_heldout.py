@@ -22,8 +22,14 @@ from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
 
 
 def _trials(folder, truth, durations: dict[str, float], seed: int):
-    opt = SimulationOptions(protocols=(*durations, "rig.handle_calibration"), reps=1, seed=seed,
-                            durations={**durations, "rig.handle_calibration": 12.0}, rig_trials=False, workers=1)
+    opt = SimulationOptions(
+        protocols=(*durations, "rig.handle_calibration"),
+        reps=1,
+        seed=seed,
+        durations={**durations, "rig.handle_calibration": 12.0},
+        rig_trials=False,
+        workers=1,
+    )
     return load_measured(open_session(simulate_dossier(truth, folder / "measured", opt).session))
 
 
@@ -77,8 +83,9 @@ def test_two_hidden_effects_viscous_friction_and_backlash_are_both_named(tmp_pat
 
 
 @pytest.mark.parametrize("factor, seed, tolerance", [(0.31, 53, 0.01), (2.9, 54, 0.05)])
-def test_a_series_elasticity_at_a_third_or_three_times_the_stored_value_is_found_within_its_interval(tmp_path, factor, seed,
-                                                                                                     tolerance):
+def test_a_series_elasticity_at_a_third_or_three_times_the_stored_value_is_found_within_its_interval(
+    tmp_path, factor, seed, tolerance
+):
     """The hidden stiffness is the preset's 11.5 N·m/rad × 0.31 or × 2.9 — between the search grid's points (×¼, ½, 1,
     2, 4 of the stored value the search starts from): its 95 % interval covers the truth and the verdict is "explained".
     The stiff cable is seen less: at the handle, 33 N·m/rad over the ≈ 0.13 m arm is ≈ 2000 N/m in series with the rendered 750 N/m,

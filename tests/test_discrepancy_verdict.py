@@ -24,8 +24,14 @@ from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
 
 
 def _trials(folder, seconds, seed, protocol="free_space"):
-    opt = SimulationOptions(protocols=(protocol, "rig.handle_calibration"), reps=1, seed=seed,
-                            durations={protocol: seconds, "rig.handle_calibration": 12.0}, rig_trials=False, workers=1)
+    opt = SimulationOptions(
+        protocols=(protocol, "rig.handle_calibration"),
+        reps=1,
+        seed=seed,
+        durations={protocol: seconds, "rig.handle_calibration": 12.0},
+        rig_trials=False,
+        workers=1,
+    )
     return load_measured(open_session(simulate_dossier(preset("touch"), folder / f"{protocol}-{seconds}-{seed}", opt).session))
 
 

@@ -19,7 +19,6 @@ SCANNED = ("reference", "conformance/haptify_conform", "conformance/mutants", "t
 WORK_ITEM = re.compile(r"issues? \d+", re.IGNORECASE)
 
 
-
 def _sources() -> list[Path]:
     """Every .py file of the scanned trees, outside hidden folders and byte-code caches."""
     out = []
@@ -36,24 +35,31 @@ def work_item_references(text: str) -> list[tuple[int, str]]:
     return [(n, line.strip()) for n, line in enumerate(text.splitlines(), 1) if WORK_ITEM.search(line)]
 
 
-@pytest.mark.parametrize("text, found", [
-    ('"""The discrepancy workflow (issue 8)."""', True),
-    ("# (issue 3; TWIN.md, Effects)", True),
-    ("spec chapter 16, issues 6 and 16", True),
-    ("Issue 20, item 5: a null session", True),
-    ("ISSUES 21", True),
-    ("return challenge.issue(reg, caller)", False),
-    ("the issue's type-3 file", False),
-    ("def issue(reg, caller) -> dict:", False),
-    ("spec §16.8.3 (the mutant set)", False),
-    ("issue-8 or #8", False),
-])
+@pytest.mark.parametrize(
+    "text, found",
+    [
+        ('"""The discrepancy workflow (issue 8)."""', True),
+        ("# (issue 3; TWIN.md, Effects)", True),
+        ("spec chapter 16, issues 6 and 16", True),
+        ("Issue 20, item 5: a null session", True),
+        ("ISSUES 21", True),
+        ("return challenge.issue(reg, caller)", False),
+        ("the issue's type-3 file", False),
+        ("def issue(reg, caller) -> dict:", False),
+        ("spec §16.8.3 (the mutant set)", False),
+        ("issue-8 or #8", False),
+    ],
+)
 def test_the_pattern_finds_tracker_numbers_and_nothing_else(text, found):
     assert bool(work_item_references(text)) is found
 
 
-@given(st.sampled_from(["issue", "issues", "Issue", "ISSUES", "iSsUe"]), st.integers(0, 10**6),
-       st.text(alphabet="abc ,;:(", max_size=8), st.text(alphabet="abc ,;:)", max_size=8))
+@given(
+    st.sampled_from(["issue", "issues", "Issue", "ISSUES", "iSsUe"]),
+    st.integers(0, 10**6),
+    st.text(alphabet="abc ,;:(", max_size=8),
+    st.text(alphabet="abc ,;:)", max_size=8),
+)
 def test_any_tracker_number_in_any_case_is_found_on_its_line(word, number, before, after):
     text = f"first line\n{before}{word} {number}{after}\nlast line"
     assert [n for n, _ in work_item_references(text)] == [2]
@@ -61,8 +67,12 @@ def test_any_tracker_number_in_any_case_is_found_on_its_line(word, number, befor
 
 def test_the_scan_sees_the_source_trees():
     files = {p.relative_to(REPO).as_posix() for p in _sources()}
-    for expected in ("reference/haptify/vibration.py", "conformance/haptify_conform/coverage.py",
-                     "conformance/mutants/run.py", "tools/haptify_tools/discrepancy/floor.py"):
+    for expected in (
+        "reference/haptify/vibration.py",
+        "conformance/haptify_conform/coverage.py",
+        "conformance/mutants/run.py",
+        "tools/haptify_tools/discrepancy/floor.py",
+    ):
         assert expected in files
 
 
@@ -71,5 +81,7 @@ def test_no_work_item_reference_in_the_sources():
     for path in _sources():
         rel = path.relative_to(REPO).as_posix()
         hits += [f"{rel}:{n}: {line}" for n, line in work_item_references(path.read_text(encoding="utf-8"))]
-    assert not hits, ("name the spec / design / README section instead of the work item (history: CHANGELOG; "
-                      "figures: benchmarks/RESULTS.md):\n" + "\n".join(hits))
+    assert not hits, (
+        "name the spec / design / README section instead of the work item (history: CHANGELOG; "
+        "figures: benchmarks/RESULTS.md):\n" + "\n".join(hits)
+    )

@@ -29,8 +29,13 @@ def test_fir_with_delay_shifts_and_scales():
 
 
 @settings(max_examples=40, deadline=None)
-@given(seed=st.integers(0, 2**31 - 1), order_b=st.integers(1, 4), order_a=st.integers(0, 3),
-       columns=st.integers(1, 9), n=st.integers(1, 300))
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    order_b=st.integers(1, 4),
+    order_a=st.integers(0, 3),
+    columns=st.integers(1, 9),
+    n=st.integers(1, 300),
+)
 def test_every_column_is_scipy_lfilter_bitwise_when_recursive(seed, order_b, order_a, columns, n):
     rng = np.random.default_rng(seed)
     b = rng.standard_normal((columns, order_b))
@@ -58,10 +63,13 @@ def test_gain_scales_each_output_sample_and_out_may_be_a_strided_view():
     assert np.isnan(big[:, :2]).all() and np.isnan(big[:, 6:]).all()
 
 
-@pytest.mark.parametrize("b, a, x, message", [
-    (np.ones((2, 1)), np.ones((3, 1)), np.ones((5, 2)), "one numerator and one denominator per column"),
-    (np.ones((2, 1)), np.array([[2.0, 0.1], [1.0, 0.1]]), np.ones((5, 2)), "start with 1"),
-])
+@pytest.mark.parametrize(
+    "b, a, x, message",
+    [
+        (np.ones((2, 1)), np.ones((3, 1)), np.ones((5, 2)), "one numerator and one denominator per column"),
+        (np.ones((2, 1)), np.array([[2.0, 0.1], [1.0, 0.1]]), np.ones((5, 2)), "start with 1"),
+    ],
+)
 def test_inconsistent_filters_are_refused(b, a, x, message):
     with pytest.raises(ValueError, match=message):
         lfilter_columns(b, a, x)
@@ -89,14 +97,18 @@ def test_stacked_records_restart_from_rest_at_their_starts():
     y = lfilter_columns(b, a, x, starts=starts)
     for s, n in zip(starts, lengths):
         for m in range(3):
-            assert np.array_equal(y[s:s + n, m], lfilter(b[m], a[m], x[s:s + n, m]))
+            assert np.array_equal(y[s : s + n, m], lfilter(b[m], a[m], x[s : s + n, m]))
     with pytest.raises(ValueError, match="starts must be rows"):
         lfilter_columns(b, a, x, starts=[len(x)])
 
 
 @settings(max_examples=30, deadline=None)
-@given(seed=st.integers(0, 2**31 - 1), order=st.integers(0, 3), cuts=st.lists(st.integers(0, 120), max_size=4),
-       starts=st.lists(st.integers(0, 119), max_size=3))
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    order=st.integers(0, 3),
+    cuts=st.lists(st.integers(0, 120), max_size=4),
+    starts=st.lists(st.integers(0, 119), max_size=3),
+)
 def test_a_bank_filtering_blocks_in_turn_equals_one_call_over_all_rows(seed, order, cuts, starts):
     rng = np.random.default_rng(seed)
     b = rng.standard_normal((5, order + 1))
@@ -115,7 +127,7 @@ def test_a_bank_filtering_blocks_in_turn_equals_one_call_over_all_rows(seed, ord
 def test_signals_are_used_in_turn_when_the_filters_are_a_multiple_of_them_and_may_have_strided_rows():
     rng = np.random.default_rng(9)
     wide = rng.standard_normal((150, 7))
-    x = wide[:, 2:5]                                       # rows 7 apart in memory
+    x = wide[:, 2:5]  # rows 7 apart in memory
     b = rng.standard_normal((6, 2))
     a = np.column_stack([np.ones(6), rng.uniform(-0.5, 0.5, (6, 2))])
     y = lfilter_columns(b, a, x)

@@ -25,8 +25,14 @@ def turned_corner_rig() -> dict:
 
 
 @settings(max_examples=40, deadline=None)
-@given(x=st.floats(-0.29, 0.29), y=st.floats(-0.29, 0.29), fx=st.floats(-20, 20), fy=st.floats(-20, 20),
-       fz=st.floats(-200, -5), turned=st.booleans())
+@given(
+    x=st.floats(-0.29, 0.29),
+    y=st.floats(-0.29, 0.29),
+    fx=st.floats(-20, 20),
+    fy=st.floats(-20, 20),
+    fz=st.floats(-200, -5),
+    turned=st.booleans(),
+)
 def test_point_load_gives_its_wrench_and_position(x, y, fx, fy, fz, turned):
     rig_dict = turned_corner_rig() if turned else rb.example_rig()
     pos, rot = force_plate.corner_geometry(Rig.model_validate(rig_dict))
@@ -77,8 +83,9 @@ def test_damped_sinusoid_gives_its_frequency(f_hz):
 
 def test_three_axes_get_their_own_frequencies():
     t = np.arange(3000) / 1000.0
-    force = np.column_stack([rb.damped(t, 205.0, 0.03, 1.0, 4.0), rb.damped(t, 206.0, 0.03, 1.0, 3.0),
-                             rb.damped(t, 182.0, 0.03, 1.0, 20.0)])
+    force = np.column_stack(
+        [rb.damped(t, 205.0, 0.03, 1.0, 4.0), rb.damped(t, 206.0, 0.03, 1.0, 3.0), rb.damped(t, 182.0, 0.03, 1.0, 20.0)]
+    )
     assert np.allclose(force_plate.natural_frequencies(t, force, 1000.0), [205.0, 206.0, 182.0], atol=0.3)
 
 
@@ -130,7 +137,7 @@ def test_rig_without_plate_is_coded():
 
 
 @settings(max_examples=30, deadline=None)
-@given(scale=st.floats(0.01, 100.0), seed=st.integers(0, 2 ** 16))
+@given(scale=st.floats(0.01, 100.0), seed=st.integers(0, 2**16))
 def test_unit_scaled_readings_scale_the_wrench_and_keep_the_cop(scale, seed):
     """Readings (and bias) multiplied by s give s·F and s·M; the COP, a ratio, does not change."""
     rng = np.random.default_rng(seed)
@@ -148,7 +155,7 @@ def test_unit_scaled_readings_scale_the_wrench_and_keep_the_cop(scale, seed):
 
 
 @settings(max_examples=30, deadline=None)
-@given(yaw=st.floats(-np.pi, np.pi), seed=st.integers(0, 2 ** 16))
+@given(yaw=st.floats(-np.pi, np.pi), seed=st.integers(0, 2**16))
 def test_rotating_the_world_about_vertical_rotates_wrench_and_cop(yaw, seed):
     """The same raw readings with the world frame (corner poses) turned about z: F, M and the COP turn
     with it and their magnitudes stay the same."""

@@ -21,7 +21,6 @@ from haptify.storage import open_session
 from metric_sessions import add_handle_trial, circle, spin, writer
 
 
-
 def test_magnitude_statistics_of_a_known_force():
     # |F| = 1 + 0.5 sin: mean 1, sd known, extremes 0.5 and 1.5 (sampled on whole periods, both peaks hit)
     s = np.linspace(0, 2 * np.pi, 4001)[:-1]
@@ -34,7 +33,9 @@ def test_magnitude_statistics_of_a_known_force():
 
 
 @settings(max_examples=40, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.floats(-1, 1), st.floats(-1, 1), st.floats(0.1, 1), st.floats(0, math.pi), st.floats(1e-3, 1e3))
+@given(
+    st.integers(0, 2**32 - 1), st.floats(-1, 1), st.floats(-1, 1), st.floats(0.1, 1), st.floats(0, math.pi), st.floats(1e-3, 1e3)
+)
 def test_rotation_leaves_magnitudes_unchanged_and_units_scale(seed, ax, ay, az, angle, scale):
     f = np.random.default_rng(seed).normal(size=(200, 3))
     r = quat_to_matrix(quat_from_axis_angle(np.array([ax, ay, az]), np.array(angle)))
@@ -70,6 +71,7 @@ def test_force_field_bins_on_the_world_lattice():
 
 # --- session level (spec §9.6) -------------------------------------------------------------------
 
+
 def felt(t):
     """A force on the hand with |F| = √(0.5² + 0.4² + (0.3 + 0.2 sin 0.5t)²)."""
     return np.column_stack([0.5 + 0 * t, -0.4 + 0 * t, 0.3 + 0.2 * np.sin(0.5 * t)])
@@ -83,10 +85,28 @@ def plate(t):
 def session(tmp_path_factory):
     w = writer("free-space")
     for i in (1, 2):
-        add_handle_trial(w, f"fs-{i}", "free_space", repetition=i, duration_s=12.0, position=circle(0.05, 1.0),
-                         quaternion=spin(0.07), force_w=felt, plate_force_w=plate)
-    add_handle_trial(w, "fs-3", "free_space", repetition=3, duration_s=12.0, position=circle(0.05, 4.0),
-                     quaternion=spin(0.35), force_w=felt, plate_force_w=None)  # too fast; no plate stream
+        add_handle_trial(
+            w,
+            f"fs-{i}",
+            "free_space",
+            repetition=i,
+            duration_s=12.0,
+            position=circle(0.05, 1.0),
+            quaternion=spin(0.07),
+            force_w=felt,
+            plate_force_w=plate,
+        )
+    add_handle_trial(
+        w,
+        "fs-3",
+        "free_space",
+        repetition=3,
+        duration_s=12.0,
+        position=circle(0.05, 4.0),
+        quaternion=spin(0.35),
+        force_w=felt,
+        plate_force_w=None,
+    )  # too fast; no plate stream
     return open_session(w.write(tmp_path_factory.mktemp("fs") / "s"))
 
 

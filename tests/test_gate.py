@@ -98,6 +98,7 @@ def test_compute_without_output_writes_nothing_beside_a_refused_session(tmp_path
 
 # --- the gate reads each stream once and checks the streams no metric reads -----------------------------
 
+
 def test_a_broken_stream_no_metric_reads_still_refuses_the_session(tmp_path):
     """The vibration metrics read only handle_accel; a corrupted handle_wrench must refuse them too."""
     folder = _build("checksum-mismatch", tmp_path)
@@ -143,6 +144,7 @@ def test_params_must_be_a_json_object(tmp_path, capsys):
 
 # --- the reference through its own suite ----------------------------------------------------------------
 
+
 @pytest.mark.slow(longest=True)
 def test_the_reference_command_passes_every_case_through_cmd(tmp_path):
     """The exact line of spec §16.4.1 and the README's tour."""
@@ -150,8 +152,20 @@ def test_the_reference_command_passes_every_case_through_cmd(tmp_path):
     env = {**os.environ, "PATH": f"{bindir}{os.pathsep}{os.environ.get('PATH', '')}"}
     assert shutil.which("haptify", path=env["PATH"]), "the haptify console script is not installed beside python"
     report = tmp_path / "report.json"
-    run = subprocess.run([str(bindir / "haptify-conform"), "--cmd", "haptify compute {session} -o {out} --params {params}",
-                          "--quiet", "--json-report", str(report)], capture_output=True, text=True, env=env, timeout=1500)
+    run = subprocess.run(
+        [
+            str(bindir / "haptify-conform"),
+            "--cmd",
+            "haptify compute {session} -o {out} --params {params}",
+            "--quiet",
+            "--json-report",
+            str(report),
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=1500,
+    )
     summary = json.loads(report.read_text())["summary"]
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
     assert summary["failed"] == summary["error"] == summary["skipped"] == 0 and summary["passed"] >= 179, summary
@@ -159,16 +173,28 @@ def test_the_reference_command_passes_every_case_through_cmd(tmp_path):
 
 # --- start-up: the parser imports only what the command needs -------------------------------------------
 
-HEAVY = ("rerun", "fastapi", "matplotlib", "numba", "haptify_tools.discrepancy", "haptify_tools.viewer",
-         "haptify_tools.registry", "haptify_tools.twin", "sqlalchemy", "scipy")
+HEAVY = (
+    "rerun",
+    "fastapi",
+    "matplotlib",
+    "numba",
+    "haptify_tools.discrepancy",
+    "haptify_tools.viewer",
+    "haptify_tools.registry",
+    "haptify_tools.twin",
+    "sqlalchemy",
+    "scipy",
+)
 
 
 @pytest.mark.parametrize("argv", [[], ["validate"], ["compute"], ["--json", "validate", "--help"]])
 def test_building_the_parser_imports_none_of_the_heavy_packages(argv):
-    code = ("import sys; from haptify.cli import build_parser, split_global_flags; "
-            f"rest, flags, command = split_global_flags({argv!r}); build_parser(command); "
-            f"print(sorted(m for m in sys.modules if m.split('.')[0] in {{h.split('.')[0] for h in {HEAVY!r}}} "
-            f"and any(m == h or m.startswith(h + '.') for h in {HEAVY!r})))")
+    code = (
+        "import sys; from haptify.cli import build_parser, split_global_flags; "
+        f"rest, flags, command = split_global_flags({argv!r}); build_parser(command); "
+        f"print(sorted(m for m in sys.modules if m.split('.')[0] in {{h.split('.')[0] for h in {HEAVY!r}}} "
+        f"and any(m == h or m.startswith(h + '.') for h in {HEAVY!r})))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]", out.stdout
 
@@ -181,6 +207,7 @@ def test_help_lists_every_command_without_loading_them(capsys):
 
 
 # --- global flags where users put them (spec §0.5) ------------------------------------------------------
+
 
 @pytest.mark.parametrize("before, after", [(["--json", "validate"], ["validate"]), (["-q", "validate"], ["validate"])])
 def test_global_flags_work_before_and_after_the_command(before, after, capsys):

@@ -20,9 +20,16 @@ from haptify.validation import validate_session
 from haptify_tools.c3d_variants import C3DSpec, Platform, float32, header_words, patch_header, rectangle_corners, write_c3d
 from haptify_tools.example_session import TOUCH_DEVICE
 
-FACTS = {"session": {"date": "2026-11-22", "lab": {"id": "lab-t"}, "examiner": {"id": "ex-t"}, "device": TOUCH_DEVICE,
-                     "device_placement": {"position": [0.0, 0.0, 0.0], "quaternion": [1.0, 0.0, 0.0, 0.0]}},
-         "trial": {"powered": False}}
+FACTS = {
+    "session": {
+        "date": "2026-11-22",
+        "lab": {"id": "lab-t"},
+        "examiner": {"id": "ex-t"},
+        "device": TOUCH_DEVICE,
+        "device_placement": {"position": [0.0, 0.0, 0.0], "quaternion": [1.0, 0.0, 0.0, 0.0]},
+    },
+    "trial": {"powered": False},
+}
 
 
 def c3d_map(**members) -> dict:
@@ -58,13 +65,21 @@ def markers_spec(n: int = 30, rate: float = 100.0, units: str = "mm", scale: flo
 
 # --- 1. read what ezc3d reads --------------------------------------------------------------------
 
+
 def analog_only(n_frames: int = 100, per_frame: int = 2, rate: float = 1000.0, **kw) -> C3DSpec:
     """No point, point rate 0: a trigger (V) and three accelerometer channels (g), known ramps."""
     n = n_frames * per_frame
     j = np.arange(n, dtype=float)
     analogs = np.vstack([np.where(j >= n // 2, 5.0, 0.0), 0.001 * j, -0.002 * j, 1.0 + 0 * j])
-    return C3DSpec(point_rate=0.0, analog_rate=rate, analog_labels=["Sync", "AX", "AY", "AZ"],
-                   analog_units=["V", "g", "g", "g"], analogs=float32(analogs), frames=n_frames, **kw)
+    return C3DSpec(
+        point_rate=0.0,
+        analog_rate=rate,
+        analog_labels=["Sync", "AX", "AY", "AZ"],
+        analog_units=["V", "g", "g", "g"],
+        analogs=float32(analogs),
+        frames=n_frames,
+        **kw,
+    )
 
 
 def test_an_analog_only_file_imports_its_streams_at_analog_rate(tmp_path):
@@ -72,8 +87,12 @@ def test_an_analog_only_file_imports_its_streams_at_analog_rate(tmp_path):
     path = write_c3d(tmp_path / "ao.c3d", spec)
     rec = read_c3d(path)
     assert (rec.point_rate, rec.analog_rate, rec.analogs.shape, rec.warnings) == (0.0, 1000.0, (4, 200), [])
-    m = c3d_map(streams={"sync": {"columns": {"trigger": {"source": "Sync", "threshold": 2.5}}},
-                         "handle_accel": {"columns": {"ax": "AX", "ay": "AY", "az": "AZ"}}})
+    m = c3d_map(
+        streams={
+            "sync": {"columns": {"trigger": {"source": "Sync", "threshold": 2.5}}},
+            "handle_accel": {"columns": {"ax": "AX", "ay": "AY", "az": "AZ"}},
+        }
+    )
     (tmp_path / "m.json").write_text(json.dumps(m))
     result = import_c3d(path, tmp_path / "s", tmp_path / "m.json")
     assert result.warnings == []
@@ -136,8 +155,9 @@ def test_header_rate_and_parameter_rate_disagree_ezc3d_followed(tmp_path):
     assert w.code == "W501" and w.pointer == "/POINT/RATE" and (w.expected, w.found) == (120.0, 100.0)
 
 
-@pytest.mark.parametrize("rate,units,scale,div", [(25.0, "m", 0.001, 1.0), (2000.0, "cm", 0.1, 100.0),
-                                                  (120.0, "mm", 1.0, 1000.0)])
+@pytest.mark.parametrize(
+    "rate,units,scale,div", [(25.0, "m", 0.001, 1.0), (2000.0, "cm", 0.1, 100.0), (120.0, "mm", 1.0, 1000.0)]
+)
 def test_rates_from_25_to_2000_hz_and_units_other_than_mm(tmp_path, rate, units, scale, div):
     spec = markers_spec(n=40, rate=rate, units=units, scale=scale, first_frame=7)
     path = write_c3d(tmp_path / "u.c3d", spec)
@@ -169,8 +189,9 @@ def platform_spec(kind: int, corners: np.ndarray, origin=(0.0, 0.0, -40.0), cal:
 TWIST = np.array([[0, 0, 1.0], [0, 0, -1.0], [0, 0, 1.0], [0, 0, -1.0]])
 
 
-@pytest.mark.parametrize("kind,cal", [(1, None), (2, None), (3, np.diag(np.arange(1.0, 9.0))),
-                                      (4, np.arange(36.0).reshape(6, 6))])
+@pytest.mark.parametrize(
+    "kind,cal", [(1, None), (2, None), (3, np.diag(np.arange(1.0, 9.0))), (4, np.arange(36.0).reshape(6, 6))]
+)
 def test_platform_types_1_to_4_define_w_and_the_plate(tmp_path, kind, cal):
     # platform x along lab +y, z down: W's x is lab +y, W's y is lab −x
     corners = rectangle_corners([500.0, 300.0, 0.0], 600.0, 400.0, x_axis=(0, 1, 0))
@@ -209,12 +230,15 @@ def test_near_planar_corners_are_accepted_with_the_deviation(tmp_path):
     assert "W502" in open_session(tmp_path / "s").trials[0].notes
 
 
-@pytest.mark.parametrize("why,edit", [
-    ("coincide", lambda c: np.repeat(c[:1], 4, axis=0)),
-    ("not in C3D order", lambda c: c[[0, 2, 1, 3]]),
-    ("not finite", lambda c: np.where(np.arange(12).reshape(4, 3) == 4, np.nan, c)),
-    ("from a flat rectangle", lambda c: c + TWIST * 50.0),  # 50 mm > 10 % of the 400 mm side
-])
+@pytest.mark.parametrize(
+    "why,edit",
+    [
+        ("coincide", lambda c: np.repeat(c[:1], 4, axis=0)),
+        ("not in C3D order", lambda c: c[[0, 2, 1, 3]]),
+        ("not finite", lambda c: np.where(np.arange(12).reshape(4, 3) == 4, np.nan, c)),
+        ("from a flat rectangle", lambda c: c + TWIST * 50.0),  # 50 mm > 10 % of the 400 mm side
+    ],
+)
 def test_meaningless_plate_geometry_is_refused_with_the_reason(tmp_path, why, edit):
     corners = edit(rectangle_corners([0.0, 0.0, 0.0], 600.0, 400.0))
     path = write_c3d(tmp_path / "bad.c3d", platform_spec(2, corners))
@@ -227,6 +251,7 @@ def test_meaningless_plate_geometry_is_refused_with_the_reason(tmp_path, why, ed
 
 # --- 3. 6-DoF bodies -----------------------------------------------------------------------------
 
+
 def rot_z(a: float) -> np.ndarray:
     return np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
 
@@ -237,8 +262,9 @@ def sweep(n: int) -> np.ndarray:
     polar = np.arccos(1 - 2 * (k + 0.5) / n)
     azimuth = math.pi * (3 - math.sqrt(5)) * k
     r = 60.0 * (0.4 + 0.6 * ((k * 7919) % n) / n)
-    return np.column_stack([r * np.sin(polar) * np.cos(azimuth), 50.0 + r * np.sin(polar) * np.sin(azimuth),
-                            100.0 + r * np.cos(polar)])
+    return np.column_stack(
+        [r * np.sin(polar) * np.cos(azimuth), 50.0 + r * np.sin(polar) * np.sin(azimuth), 100.0 + r * np.cos(polar)]
+    )
 
 
 def bodies_spec(n: int = 3000) -> tuple[C3DSpec, np.ndarray]:
@@ -252,8 +278,9 @@ def bodies_spec(n: int = 3000) -> tuple[C3DSpec, np.ndarray]:
     rot[:, 1, :3, :3] = rot_z(math.pi / 2)
     rot[:, 1, :3, 3] = [10.0, 20.0, 30.0]
     rot[10:13, 0] = np.nan
-    return C3DSpec(point_rate=100.0, rotation_labels=["Handle", "Link2"], rotations=float32(rot),
-                   company="Markerless", software="Bodies 1.0"), angles
+    return C3DSpec(
+        point_rate=100.0, rotation_labels=["Handle", "Link2"], rotations=float32(rot), company="Markerless", software="Bodies 1.0"
+    ), angles
 
 
 def test_a_session_of_6dof_bodies_alone_imports_validates_and_computes(tmp_path, capsys):
@@ -261,9 +288,11 @@ def test_a_session_of_6dof_bodies_alone_imports_validates_and_computes(tmp_path,
     path = write_c3d(tmp_path / "bodies.c3d", spec)
     rec = read_c3d(path)
     assert rec.body_labels == ["Handle", "Link2"] and rec.point_labels == [] and rec.frames == 3000
-    m = c3d_map(trial={"powered": False, "protocol": "workspace", "id": "ws"},
-                lab_to_world={"position": [0.0, 0.0, 0.0], "quaternion": [1.0, 0.0, 0.0, 0.0]},
-                bodies={"handle": "Handle"})
+    m = c3d_map(
+        trial={"powered": False, "protocol": "workspace", "id": "ws"},
+        lab_to_world={"position": [0.0, 0.0, 0.0], "quaternion": [1.0, 0.0, 0.0, 0.0]},
+        bodies={"handle": "Handle"},
+    )
     (tmp_path / "m.json").write_text(json.dumps(m))
     device = tmp_path / "device.json"
     device.write_text(json.dumps(TOUCH_DEVICE))
@@ -286,7 +315,7 @@ def test_a_session_of_6dof_bodies_alone_imports_validates_and_computes(tmp_path,
     results = {r["id"]: r for r in json.loads((tmp_path / "results.json").read_text())["metrics"]}
     measured = results["workspace.measured_volume"]
     assert measured["trials"] == ["ws"] and measured["diagnostics"]["points"] == [2997]  # 3 occluded frames
-    ball = 4 / 3 * math.pi * 0.06 ** 3  # the sweep fills a 60 mm ball: its sampled hull is a little smaller
+    ball = 4 / 3 * math.pi * 0.06**3  # the sweep fills a 60 mm ball: its sampled hull is a little smaller
     assert 0.8 * ball < measured["diagnostics"]["hull_volume_m3"][0] < ball
 
 
@@ -295,19 +324,23 @@ def test_link_bodies_become_link_poses_in_w(tmp_path):
     path = write_c3d(tmp_path / "bodies.c3d", spec)
     # W: the lab turned −90° about z and shifted: the link's 90° turn cancels
     half = math.sqrt(0.5)
-    m = c3d_map(lab_to_world={"position": [0.1, 0.0, 0.0], "quaternion": [half, 0.0, 0.0, -half]},
-                markers={"rigid_bodies": [{"name": "link2", "markers": ["l2a", "l2b", "l2c"]}]},
-                bodies={"handle": "Handle", "links": {"link2": "Link2"}})
+    m = c3d_map(
+        lab_to_world={"position": [0.1, 0.0, 0.0], "quaternion": [half, 0.0, 0.0, -half]},
+        markers={"rigid_bodies": [{"name": "link2", "markers": ["l2a", "l2b", "l2c"]}]},
+        bodies={"handle": "Handle", "links": {"link2": "Link2"}},
+    )
     result = import_c3d(path, tmp_path / "s", None, overrides=m)
     valid(tmp_path / "s")
     s = open_session(tmp_path / "s")
     assert s.stream(result.trial_id, "link_poses").entities == ["link2"]
     lp = s.read(result.trial_id, "link_poses")
-    np.testing.assert_allclose(lp[["link2_qw", "link2_qx", "link2_qy", "link2_qz"]].to_numpy(),
-                               np.tile([1.0, 0, 0, 0], (50, 1)), atol=1e-7)
+    np.testing.assert_allclose(
+        lp[["link2_qw", "link2_qx", "link2_qy", "link2_qz"]].to_numpy(), np.tile([1.0, 0, 0, 0], (50, 1)), atol=1e-7
+    )
     # lab (10, 20, 30) mm turned −90° about z is (20, −10, 30) mm; plus 0.1 m in x
-    np.testing.assert_allclose(lp[["link2_px", "link2_py", "link2_pz"]].to_numpy(),
-                               np.tile([0.12, -0.01, 0.03], (50, 1)), atol=1e-9)
+    np.testing.assert_allclose(
+        lp[["link2_px", "link2_py", "link2_pz"]].to_numpy(), np.tile([0.12, -0.01, 0.03], (50, 1)), atol=1e-9
+    )
 
 
 def test_body_errors(tmp_path):

@@ -22,9 +22,16 @@ from test_import_c3d_variants import rot_z, sweep
 
 N = 2000
 RATE = 100.0
-FACTS = {"session": {"date": "2026-11-22", "lab": {"id": "lab-t"}, "examiner": {"id": "ex-t"}, "device": TOUCH_DEVICE,
-                     "device_placement": {"position": [0.0, 0.0, 0.0], "quaternion": [1.0, 0.0, 0.0, 0.0]}},
-         "trial": {"powered": False, "protocol": "workspace", "id": "ws"}}
+FACTS = {
+    "session": {
+        "date": "2026-11-22",
+        "lab": {"id": "lab-t"},
+        "examiner": {"id": "ex-t"},
+        "device": TOUCH_DEVICE,
+        "device_placement": {"position": [0.0, 0.0, 0.0], "quaternion": [1.0, 0.0, 0.0, 0.0]},
+    },
+    "trial": {"powered": False, "protocol": "workspace", "id": "ws"},
+}
 ANGLES = 0.001 * np.arange(N)
 OCCLUDED = slice(20, 24)
 
@@ -52,7 +59,7 @@ def run_pipeline(tmp_path: Path, capsys, fmt: str, path: Path, m: dict, cli_form
     measured = results["workspace.measured_volume"]
     n_valid = N - (OCCLUDED.stop - OCCLUDED.start)
     assert measured["trials"] == ["ws"] and measured["diagnostics"]["points"] == [n_valid]
-    ball = 4 / 3 * math.pi * 0.06 ** 3
+    ball = 4 / 3 * math.pi * 0.06**3
     assert 0.8 * ball < measured["diagnostics"]["hull_volume_m3"][0] < ball
     return tmp_path / "s"
 
@@ -72,10 +79,20 @@ def assert_handle(session: Path, scale_to_m: float, positions: np.ndarray) -> No
 
 # --- Qualisys TSV --------------------------------------------------------------------------------
 
+
 def qtm_header(kind: str, names_key: str, names: list[str], frames: int) -> list[str]:
-    return [f"NO_OF_FRAMES\t{frames}", "NO_OF_CAMERAS\t8", f"NO_OF_{'BODIES' if kind == '6D' else 'MARKERS'}\t{len(names)}",
-            f"FREQUENCY\t{RATE:g}", "NO_OF_ANALOG\t0", "ANALOG_FREQUENCY\t0", "DESCRIPTION\t--",
-            "TIME_STAMP\t2026-11-22, 10:00:00.000\t0.000", f"DATA_INCLUDED\t{kind}", "\t".join([names_key, *names])]
+    return [
+        f"NO_OF_FRAMES\t{frames}",
+        "NO_OF_CAMERAS\t8",
+        f"NO_OF_{'BODIES' if kind == '6D' else 'MARKERS'}\t{len(names)}",
+        f"FREQUENCY\t{RATE:g}",
+        "NO_OF_ANALOG\t0",
+        "ANALOG_FREQUENCY\t0",
+        "DESCRIPTION\t--",
+        "TIME_STAMP\t2026-11-22, 10:00:00.000\t0.000",
+        f"DATA_INCLUDED\t{kind}",
+        "\t".join([names_key, *names]),
+    ]
 
 
 def write_qtm_6d(path: Path, frames: int = N) -> np.ndarray:
@@ -157,15 +174,33 @@ def write_motive(path: Path, frames: int = N, rotation_type: str = "Quaternion")
     Motive's axes) and one marker; a gap is empty cells."""
     pos_w = sweep(frames) / 1000.0  # metres, W (z up)
     to_lab = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])  # W → Motive lab (y up): R_x(−90°)
-    meta = ["Format Version", "1.23", "Take Name", "take", "Capture Frame Rate", f"{RATE:.6f}",
-            "Export Frame Rate", f"{RATE:.6f}", "Total Exported Frames", str(frames), "Rotation Type", rotation_type,
-            "Length Units", "Meters", "Coordinate Space", "Global"]
-    head = [",".join(meta), "",
-            ",,Rigid Body,Rigid Body,Rigid Body,Rigid Body,Rigid Body,Rigid Body,Rigid Body,Rigid Body,Marker,Marker,Marker",
-            ",,Handle,Handle,Handle,Handle,Handle,Handle,Handle,Handle,Unlabeled 1000,Unlabeled 1000,Unlabeled 1000",
-            ",,1,1,1,1,1,1,1,1,2,2,2",
-            ",,Rotation,Rotation,Rotation,Rotation,Position,Position,Position,Mean Marker Error,Position,Position,Position",
-            "Frame,Time (Seconds),X,Y,Z,W,X,Y,Z,,X,Y,Z"]
+    meta = [
+        "Format Version",
+        "1.23",
+        "Take Name",
+        "take",
+        "Capture Frame Rate",
+        f"{RATE:.6f}",
+        "Export Frame Rate",
+        f"{RATE:.6f}",
+        "Total Exported Frames",
+        str(frames),
+        "Rotation Type",
+        rotation_type,
+        "Length Units",
+        "Meters",
+        "Coordinate Space",
+        "Global",
+    ]
+    head = [
+        ",".join(meta),
+        "",
+        ",,Rigid Body,Rigid Body,Rigid Body,Rigid Body,Rigid Body,Rigid Body,Rigid Body,Rigid Body,Marker,Marker,Marker",
+        ",,Handle,Handle,Handle,Handle,Handle,Handle,Handle,Handle,Unlabeled 1000,Unlabeled 1000,Unlabeled 1000",
+        ",,1,1,1,1,1,1,1,1,2,2,2",
+        ",,Rotation,Rotation,Rotation,Rotation,Position,Position,Position,Mean Marker Error,Position,Position,Position",
+        "Frame,Time (Seconds),X,Y,Z,W,X,Y,Z,,X,Y,Z",
+    ]
     rows = []
     for k in range(frames):
         q = matrix_to_quat(to_lab @ rot_z(ANGLES[k]))  # w, x, y, z
@@ -183,16 +218,19 @@ def test_motive_csv_rigid_body_session_validates_and_computes(tmp_path, capsys):
     assert detect_format(tmp_path / "take.csv") == "motive"
     rec = read_export("motive", tmp_path / "take.csv")
     assert rec.body_labels == ["Handle"] and rec.point_labels == ["Unlabeled 1000"] and rec.point_units == "m"
-    m = workspace_map("motive", lab_to_world={"position": [0, 0, 0], "quaternion": Y_UP_TO_Z_UP},
-                      markers={"include": []})
+    m = workspace_map("motive", lab_to_world={"position": [0, 0, 0], "quaternion": Y_UP_TO_Z_UP}, markers={"include": []})
     session = run_pipeline(tmp_path, capsys, "motive", tmp_path / "take.csv", m)
     assert_handle(session, 1.0, np.round(pos, 6))
 
 
 def test_motive_markers_and_euler_export_refused(tmp_path):
     write_motive(tmp_path / "take.csv", frames=20)
-    m = {"source": "motive", **json.loads(json.dumps(FACTS)), "trial": {"powered": False, "id": "mk"},
-         "markers": {"rename": {"Unlabeled 1000": "u1"}}}
+    m = {
+        "source": "motive",
+        **json.loads(json.dumps(FACTS)),
+        "trial": {"powered": False, "id": "mk"},
+        "markers": {"rename": {"Unlabeled 1000": "u1"}},
+    }
     import_export("motive", tmp_path / "take.csv", tmp_path / "s", None, overrides=m)
     mk = open_session(tmp_path / "s").read("mk", "markers")
     np.testing.assert_allclose(mk["u1_y"].to_numpy(), 0.2 + 0.001 * np.arange(20), atol=1e-12)
@@ -204,6 +242,7 @@ def test_motive_markers_and_euler_export_refused(tmp_path):
 
 # --- Vicon Nexus CSV -----------------------------------------------------------------------------
 
+
 def write_nexus(path: Path, frames: int = N) -> tuple[np.ndarray, np.ndarray]:
     """A Nexus CSV: Devices (a 1 kHz trigger, 10 samples a frame), Segments ('Rig:Handle', RX RY RZ a
     rotation vector in deg, TX TY TZ mm), Trajectories ('Rig:h1') and a Model Output in mm and one in deg."""
@@ -213,15 +252,20 @@ def write_nexus(path: Path, frames: int = N) -> tuple[np.ndarray, np.ndarray]:
     trigger = np.where(np.arange(frames * ratio) >= frames * ratio // 2, 5.0, 0.0)
     for k in range(frames * ratio):
         lines.append(f"{k // ratio + 1},{k % ratio},{trigger[k]:.1f}")
-    lines += ["", "Segments", f"{RATE:g}", ",,Rig:Handle,,,,,", "Frame,Sub Frame,RX,RY,RZ,TX,TY,TZ",
-              ",,deg,deg,deg,mm,mm,mm"]
+    lines += ["", "Segments", f"{RATE:g}", ",,Rig:Handle,,,,,", "Frame,Sub Frame,RX,RY,RZ,TX,TY,TZ", ",,deg,deg,deg,mm,mm,mm"]
     for k in range(frames):
         row = [0.0, 0.0, math.degrees(ANGLES[k]), *pos[k]]
         if OCCLUDED.start <= k < OCCLUDED.stop:
             row = [math.nan] * 6
         lines.append(",".join([str(k + 1), "0", *fmt_row(row)]))
-    lines += ["", "Model Outputs", f"{RATE:g}", ",,Rig:HJC,,,Rig:Angle,,", "Frame,Sub Frame,X,Y,Z,X,Y,Z",
-              ",,mm,mm,mm,deg,deg,deg"]
+    lines += [
+        "",
+        "Model Outputs",
+        f"{RATE:g}",
+        ",,Rig:HJC,,,Rig:Angle,,",
+        "Frame,Sub Frame,X,Y,Z,X,Y,Z",
+        ",,mm,mm,mm,deg,deg,deg",
+    ]
     for k in range(frames):
         lines.append(f"{k + 1},0,{5.0 + k:.3f},6.000,7.000,1.000,2.000,3.000")
     lines += ["", "Trajectories", f"{RATE:g}", ",,Rig:h1,,", "Frame,Sub Frame,X,Y,Z", ",,mm,mm,mm"]
@@ -238,8 +282,11 @@ def test_nexus_csv_segments_session_validates_and_computes(tmp_path, capsys):
     assert rec.point_labels == ["Rig:h1", "Rig:HJC"]  # trajectories, then model outputs; the angle is no point
     assert rec.body_labels == ["Rig:Handle"] and rec.analog_labels == ["Trigger - Voltage - Pin"]
     assert (rec.analog_rate, rec.analog_first_sample, rec.point_first_frame) == (1000.0, 0, 0)
-    m = workspace_map("nexus", bodies={"handle": "Rig:Handle"},
-                      streams={"sync": {"columns": {"trigger": {"source": "Trigger - Voltage - Pin", "threshold": 2.5}}}})
+    m = workspace_map(
+        "nexus",
+        bodies={"handle": "Rig:Handle"},
+        streams={"sync": {"columns": {"trigger": {"source": "Trigger - Voltage - Pin", "threshold": 2.5}}}},
+    )
     m["trial"]["protocol"] = "workspace"
     session = run_pipeline(tmp_path, capsys, "nexus", tmp_path / "trial.csv", m, cli_format="")
     assert_handle(session, 1e-3, np.round(pos, 6))

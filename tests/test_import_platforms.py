@@ -35,9 +35,16 @@ from haptify_tools.c3d_variants import (
 )
 from haptify_tools.example_session import TOUCH_DEVICE
 
-FACTS = {"session": {"date": "2026-11-25", "lab": {"id": "lab-p"}, "examiner": {"id": "ex-p"}, "device": TOUCH_DEVICE,
-                     "device_placement": {"position": [0.0, 0.0, 0.0], "quaternion": [1.0, 0.0, 0.0, 0.0]}},
-         "trial": {"powered": False, "protocol": "rig.plate_bias"}}
+FACTS = {
+    "session": {
+        "date": "2026-11-25",
+        "lab": {"id": "lab-p"},
+        "examiner": {"id": "ex-p"},
+        "device": TOUCH_DEVICE,
+        "device_placement": {"position": [0.0, 0.0, 0.0], "quaternion": [1.0, 0.0, 0.0, 0.0]},
+    },
+    "trial": {"powered": False, "protocol": "rig.plate_bias"},
+}
 ORIGINS = {1: (2.0, -3.0, -40.0), 2: (1.0, 2.0, -40.0), 3: (128.0, 256.0, -64.0), 4: (0.0, 0.0, -38.0)}
 N = 30  # analog samples: three frames at 10 samples per frame
 
@@ -61,13 +68,25 @@ def expected_in_w(force, point, tz, axes: np.ndarray) -> tuple[np.ndarray, np.nd
 FLIP = np.diag([1.0, -1.0, -1.0])  # a level platform: x as W's, y and z reversed (z points into the plate)
 
 
-def plate_file(path: Path, kind: int, channels: np.ndarray, corners: np.ndarray, origin, cal=None,
-               points: bool = True, platform_type: int | None = None) -> Path:
+def plate_file(
+    path: Path,
+    kind: int,
+    channels: np.ndarray,
+    corners: np.ndarray,
+    origin,
+    cal=None,
+    points: bool = True,
+    platform_type: int | None = None,
+) -> Path:
     n_ch = channels.shape[0]
-    spec = C3DSpec(point_rate=100.0, analog_rate=1000.0, analog_labels=[f"FP1_{i}" for i in range(n_ch)],
-                   analog_units=PLATFORM_UNITS.get(kind, ["N"] * n_ch), analogs=channels,
-                   platforms=[Platform(platform_type or kind, corners, np.asarray(origin, float),
-                                       list(range(1, n_ch + 1)), cal)])
+    spec = C3DSpec(
+        point_rate=100.0,
+        analog_rate=1000.0,
+        analog_labels=[f"FP1_{i}" for i in range(n_ch)],
+        analog_units=PLATFORM_UNITS.get(kind, ["N"] * n_ch),
+        analogs=channels,
+        platforms=[Platform(platform_type or kind, corners, np.asarray(origin, float), list(range(1, n_ch + 1)), cal)],
+    )
     if points:
         k = np.arange(channels.shape[1] // 10, dtype=float)
         spec.labels, spec.points = ["w"], np.stack([np.column_stack([k, 2 * k, 3 * k])], axis=1)
@@ -120,21 +139,22 @@ def test_the_calibration_matrix_is_applied_to_a_kistler_platform(tmp_path):
     cal = unimodular(3, 8)
     outputs = known_load_channels(3, force, point, tz, ORIGINS[3])
     channels = np.rint(np.linalg.inv(cal)) @ outputs  # what the amplifiers recorded
-    run_import(tmp_path, plate_file(tmp_path / "k.c3d", 3, channels, rectangle_corners([0, 0, 0], 600.0, 400.0),
-                                    ORIGINS[3], cal))
+    run_import(tmp_path, plate_file(tmp_path / "k.c3d", 3, channels, rectangle_corners([0, 0, 0], 600.0, 400.0), ORIGINS[3], cal))
     got_f, got_m, _ = imported_wrench(tmp_path / "s")
     want_f, want_m = expected_in_w(force, point, tz, FLIP)
     assert_relative(got_f, want_f, 1e-9)
     assert_relative(got_m, want_m, 1e-9)
 
 
-@pytest.mark.parametrize("kind,written", [(2, (-1.0, -2.0, 40.0)), (1, (-2.0, 3.0, 40.0)), (3, (128.0, 256.0, 64.0)),
-                                          (3, (-128.0, -256.0, -64.0))])
+@pytest.mark.parametrize(
+    "kind,written", [(2, (-1.0, -2.0, 40.0)), (1, (-2.0, 3.0, 40.0)), (3, (128.0, 256.0, 64.0)), (3, (-128.0, -256.0, -64.0))]
+)
 def test_an_origin_written_with_the_other_sign_is_read_by_the_rule_with_w503(tmp_path, kind, written):
     force, point, tz = load(seed=3)
     channels = known_load_channels(kind, force, point, tz, ORIGINS[kind])  # the standard's origin
-    result = run_import(tmp_path, plate_file(tmp_path / "o.c3d", kind, channels,
-                                             rectangle_corners([0, 0, 0], 600.0, 400.0), written))
+    result = run_import(
+        tmp_path, plate_file(tmp_path / "o.c3d", kind, channels, rectangle_corners([0, 0, 0], 600.0, 400.0), written)
+    )
     [w] = result.warnings
     assert w.code == "W503" and w.pointer == "/FORCE_PLATFORM/ORIGIN"
     assert "W503" in open_session(tmp_path / "s").trials[0].notes
@@ -147,8 +167,7 @@ def test_an_origin_written_with_the_other_sign_is_read_by_the_rule_with_w503(tmp
 def test_an_analog_only_file_imports_its_platform(tmp_path):
     force, point, tz = load(seed=11)
     channels = known_load_channels(2, force, point, tz, ORIGINS[2])
-    path = plate_file(tmp_path / "ao.c3d", 2, channels, rectangle_corners([0, 0, 0], 500.0, 500.0), ORIGINS[2],
-                      points=False)
+    path = plate_file(tmp_path / "ao.c3d", 2, channels, rectangle_corners([0, 0, 0], 500.0, 500.0), ORIGINS[2], points=False)
     rec = read_c3d(path)
     assert rec.point_labels == [] and rec.point_rate == 0.0 and rec.warnings == []
     result = run_import(tmp_path, path)
@@ -163,17 +182,25 @@ def test_an_analog_only_file_imports_its_platform(tmp_path):
 
 def rotation(q: tuple[float, float, float, float]) -> np.ndarray:
     w, x, y, z = np.asarray(q) / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 quaternions = st.tuples(*[st.floats(-1, 1) for _ in range(4)]).filter(lambda q: math.hypot(*q) > 0.2)
 
 
 @settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(q=quaternions, kind=st.sampled_from([1, 2, 3, 4]), seed=st.integers(0, 2**16),
-       centre=st.tuples(*[st.integers(-2000, 2000) for _ in range(3)]))
+@given(
+    q=quaternions,
+    kind=st.sampled_from([1, 2, 3, 4]),
+    seed=st.integers(0, 2**16),
+    centre=st.tuples(*[st.integers(-2000, 2000) for _ in range(3)]),
+)
 def test_the_load_in_w_does_not_depend_on_the_plates_pose_in_the_lab(tmp_path_factory, q, kind, seed, centre):
     """W follows the plate (§5.6): a platform placed anywhere, in any orientation, in the lab gives the
     same wrench in W. Its corners are stored as float32 (a 2 m lab coordinate to ~0.1 µm), which turns W
@@ -191,19 +218,28 @@ def test_the_load_in_w_does_not_depend_on_the_plates_pose_in_the_lab(tmp_path_fa
     assert_relative(got_m, want_m, 1e-6)
 
 
-@pytest.mark.parametrize("why,kind,change", [
-    ("type 4 but the file has no FORCE_PLATFORM:CAL_MATRIX", 4, {}),
-    ("of type 6", 2, {"platform_type": 6}),
-    ("sensor offsets a, b", 3, {"origin": (0.0, 256.0, -64.0)}),
-    ("names 6 of the 8 analog channels", 3, {"channels": 6}),
-])
+@pytest.mark.parametrize(
+    "why,kind,change",
+    [
+        ("type 4 but the file has no FORCE_PLATFORM:CAL_MATRIX", 4, {}),
+        ("of type 6", 2, {"platform_type": 6}),
+        ("sensor offsets a, b", 3, {"origin": (0.0, 256.0, -64.0)}),
+        ("names 6 of the 8 analog channels", 3, {"channels": 6}),
+    ],
+)
 def test_a_platform_whose_channels_give_no_wrench_is_refused_with_e506(tmp_path, why, kind, change):
     force, point, tz = load(seed=5)
     origin = change.get("origin", ORIGINS[kind])
     channels = known_load_channels({4: 2}.get(kind, kind), force, point, tz, ORIGINS[kind])  # type 4's, uncalibrated
     channels = channels[: change.get("channels", len(channels))]
-    path = plate_file(tmp_path / "bad.c3d", kind, channels, rectangle_corners([0, 0, 0], 600.0, 400.0), origin,
-                      platform_type=change.get("platform_type"))
+    path = plate_file(
+        tmp_path / "bad.c3d",
+        kind,
+        channels,
+        rectangle_corners([0, 0, 0], 600.0, 400.0),
+        origin,
+        platform_type=change.get("platform_type"),
+    )
     with pytest.raises(HaptifyError) as err:
         run_import(tmp_path, path)
     assert err.value.code == "E506" and why in str(err.value)
@@ -232,8 +268,9 @@ def test_the_platform_reads_as_ezc3d_computes_it(tmp_path, kind):
     force, point, tz = load(seed=kind + 20)
     cal = unimodular(kind, 6) if kind == 4 else None
     channels = known_load_channels(kind, force, point, tz, ORIGINS[kind], cal)
-    path = plate_file(tmp_path / "e.c3d", kind, channels, rectangle_corners([300.0, -200.0, 0.0], 600.0, 400.0),
-                      ORIGINS[kind], cal)
+    path = plate_file(
+        tmp_path / "e.c3d", kind, channels, rectangle_corners([300.0, -200.0, 0.0], 600.0, 400.0), ORIGINS[kind], cal
+    )
     run_import(tmp_path, path)
     got_f, got_m, _ = imported_wrench(tmp_path / "s")
     theirs = ezc3d.c3d(str(path), extract_forceplat_data=True)["data"]["platform"][0]
@@ -244,8 +281,14 @@ def test_the_platform_reads_as_ezc3d_computes_it(tmp_path, kind):
     np.testing.assert_allclose(cop * 1000.0 + [300.0, -200.0], theirs["center_of_pressure"][:2].T, rtol=0, atol=1e-6)
 
 
-REAL = next((d / "shared" / "data" / "c3d" / "Qualisys.c3d" for d in Path(__file__).resolve().parents[1:4]
-             if (d / "shared" / "data" / "c3d" / "Qualisys.c3d").is_file()), None)
+REAL = next(
+    (
+        d / "shared" / "data" / "c3d" / "Qualisys.c3d"
+        for d in Path(__file__).resolve().parents[1:4]
+        if (d / "shared" / "data" / "c3d" / "Qualisys.c3d").is_file()
+    ),
+    None,
+)
 
 
 @pytest.mark.skipif(REAL is None, reason="the real Qualisys recording (../shared/data/c3d) is absent")

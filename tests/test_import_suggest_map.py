@@ -17,8 +17,13 @@ from haptify_tools.c3d_variants import C3DSpec, Platform, float32, rectangle_cor
 from haptify_tools.example_session import TOUCH_DEVICE
 
 REPO = Path(__file__).resolve().parents[1]
-FILLED = {"date": "2026-11-22", "lab": {"id": "lab-t"}, "examiner": {"id": "ex-t"}, "device": TOUCH_DEVICE,
-          "device_placement": {"position": [0.0, 0.0, 0.0], "quaternion": [1.0, 0.0, 0.0, 0.0]}}
+FILLED = {
+    "date": "2026-11-22",
+    "lab": {"id": "lab-t"},
+    "examiner": {"id": "ex-t"},
+    "device": TOUCH_DEVICE,
+    "device_placement": {"position": [0.0, 0.0, 0.0], "quaternion": [1.0, 0.0, 0.0, 0.0]},
+}
 
 
 def suggest(argv, capsys) -> tuple[dict, list[str]]:
@@ -39,12 +44,18 @@ def test_rules_place_known_names_and_leave_the_rest():
 def test_c3d_suggestion_places_bodies_platform_and_channels_and_imports_once_filled(tmp_path, capsys):
     n = 20
     rot = np.tile(np.eye(4), (n, 2, 1, 1))
-    spec = C3DSpec(point_rate=100.0, labels=["h1"], points=float32(np.ones((n, 1, 3))), analog_rate=1000.0,
-                   analog_labels=["Trigger", "ACC_X", "ACC_Y", "ACC_Z", "EMG", *[f"P{i}" for i in range(6)]],
-                   analog_units=["V", "g", "g", "g", "V", *["N"] * 6], analogs=float32(np.zeros((11, 10 * n))),
-                   rotation_labels=["Stylus", "Link 2"], rotations=rot,
-                   platforms=[Platform(2, rectangle_corners([0, 0, 0], 600.0, 400.0), np.array([0, 0, -40.0]),
-                                       list(range(6, 12)))])
+    spec = C3DSpec(
+        point_rate=100.0,
+        labels=["h1"],
+        points=float32(np.ones((n, 1, 3))),
+        analog_rate=1000.0,
+        analog_labels=["Trigger", "ACC_X", "ACC_Y", "ACC_Z", "EMG", *[f"P{i}" for i in range(6)]],
+        analog_units=["V", "g", "g", "g", "V", *["N"] * 6],
+        analogs=float32(np.zeros((11, 10 * n))),
+        rotation_labels=["Stylus", "Link 2"],
+        rotations=rot,
+        platforms=[Platform(2, rectangle_corners([0, 0, 0], 600.0, 400.0), np.array([0, 0, -40.0]), list(range(6, 12)))],
+    )
     path = write_c3d(tmp_path / "f.c3d", spec)
     m, unplaced = suggest(["c3d", str(path)], capsys)
     assert m["bodies"] == {"handle": "Stylus", "links": {"link2": "Link 2"}}
@@ -81,8 +92,17 @@ def test_csv_suggestion_finds_preamble_time_and_stated_units(tmp_path, capsys):
 def test_an_unedited_suggestion_is_refused_naming_the_placeholders(tmp_path, capsys):
     m, _ = suggest(["csv", str(REPO / "fixtures" / "import" / "ati-log.csv")], capsys)
     (tmp_path / "m.json").write_text(json.dumps(m))
-    code = main(["import", "csv", str(REPO / "fixtures" / "import" / "ati-log.csv"), "-o", str(tmp_path / "s"),
-                 "--map", str(tmp_path / "m.json")])
+    code = main(
+        [
+            "import",
+            "csv",
+            str(REPO / "fixtures" / "import" / "ati-log.csv"),
+            "-o",
+            str(tmp_path / "s"),
+            "--map",
+            str(tmp_path / "m.json"),
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 2 and "E502" in err and "/session/date" in err and not (tmp_path / "s").exists()
 
@@ -90,10 +110,15 @@ def test_an_unedited_suggestion_is_refused_naming_the_placeholders(tmp_path, cap
 def test_a_platform_whose_channel_units_are_stated_is_suggested_as_plate_wrench(tmp_path, capsys):
     from haptify_tools.c3d_variants import PLATFORM_UNITS
 
-    spec = C3DSpec(point_rate=0.0, frames=5, analog_rate=1000.0, analog_labels=[f"F{i}" for i in range(6)],
-                   analog_units=PLATFORM_UNITS[2], analogs=float32(np.ones((6, 50))),
-                   platforms=[Platform(2, rectangle_corners([0, 0, 0], 600.0, 400.0), np.array([0, 0, -40.0]),
-                                       list(range(1, 7)))])
+    spec = C3DSpec(
+        point_rate=0.0,
+        frames=5,
+        analog_rate=1000.0,
+        analog_labels=[f"F{i}" for i in range(6)],
+        analog_units=PLATFORM_UNITS[2],
+        analogs=float32(np.ones((6, 50))),
+        platforms=[Platform(2, rectangle_corners([0, 0, 0], 600.0, 400.0), np.array([0, 0, -40.0]), list(range(1, 7)))],
+    )
     path = write_c3d(tmp_path / "p.c3d", spec)
     m, unplaced = suggest(["c3d", str(path)], capsys)
     assert m["force_plate"] == 1 and m["platform_wrench"] == {}

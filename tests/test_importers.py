@@ -25,14 +25,22 @@ REPO = Path(__file__).resolve().parents[1]
 C3D_DIR = REPO.parent / "shared" / "data" / "c3d"
 FIX = REPO / "fixtures" / "import"
 VICON, QUALISYS = C3D_DIR / "Vicon.c3d", C3D_DIR / "Qualisys.c3d"
-needs_c3d = pytest.mark.skipif(not (VICON.is_file() and QUALISYS.is_file()),
-                               reason=f"the real C3D recordings (GPL-3.0) are read from {C3D_DIR}, which is absent")
+needs_c3d = pytest.mark.skipif(
+    not (VICON.is_file() and QUALISYS.is_file()),
+    reason=f"the real C3D recordings (GPL-3.0) are read from {C3D_DIR}, which is absent",
+)
 
 DATE = {"session": {"date": "2026-11-22"}}
-FACTS = {"session": {"date": "2026-11-22", "lab": {"id": "lab-t"}, "examiner": {"id": "ex-t"},
-                     "device": TOUCH_DEVICE,
-                     "device_placement": {"position": [0.0, 0.0, 0.0], "quaternion": [1.0, 0.0, 0.0, 0.0]}},
-         "trial": {"powered": False}}
+FACTS = {
+    "session": {
+        "date": "2026-11-22",
+        "lab": {"id": "lab-t"},
+        "examiner": {"id": "ex-t"},
+        "device": TOUCH_DEVICE,
+        "device_placement": {"position": [0.0, 0.0, 0.0], "quaternion": [1.0, 0.0, 0.0, 0.0]},
+    },
+    "trial": {"powered": False},
+}
 
 
 def assert_valid(path: Path) -> None:
@@ -80,12 +88,33 @@ def run_cli(argv: list[str], capsys) -> tuple[int, str, str]:
 
 # --- real recordings ---------------------------------------------------------------------------
 
+
 @needs_c3d
 def test_vicon_without_map_imports_every_marker_in_metres(tmp_path, capsys):
     device = write_map(tmp_path, "device.json", TOUCH_DEVICE)
-    code, out, err = run_cli(["--json", "import", "c3d", str(VICON), "-o", str(tmp_path / "s"), "--device", str(device),
-                              "--lab", "lab-t", "--examiner", "ex-t", "--date", "2026-11-22",
-                              "--placement", "0,0,0.1", "--powered", "no"], capsys)
+    code, out, err = run_cli(
+        [
+            "--json",
+            "import",
+            "c3d",
+            str(VICON),
+            "-o",
+            str(tmp_path / "s"),
+            "--device",
+            str(device),
+            "--lab",
+            "lab-t",
+            "--examiner",
+            "ex-t",
+            "--date",
+            "2026-11-22",
+            "--placement",
+            "0,0,0.1",
+            "--powered",
+            "no",
+        ],
+        capsys,
+    )
     assert code == 0, err
     report = json.loads(out)
     assert report["validation"]["valid"] and report["session_id"] == "Vicon"
@@ -152,9 +181,13 @@ def test_qualisys_second_platform_and_real_newton_millimetre_channels(tmp_path):
     labels = read_c3d(QUALISYS).analog_labels
     amti = [lab for lab in labels if lab.startswith("Amti Gen 5 OR6-5-1000 3582")]
     cols = dict(zip(["fx", "fy", "fz", "tx", "ty", "tz"], amti))
-    overrides = {**FACTS, "trial": {"powered": False, "id": "amti"}, "force_plate": 2,
-                 "markers": {"include": ["L_*"], "exclude": ["L_WAND*"], "rename": {"L_IAS": "pelvis_left"}},
-                 "streams": {"commanded_wrench": {"columns": cols}}}
+    overrides = {
+        **FACTS,
+        "trial": {"powered": False, "id": "amti"},
+        "force_plate": 2,
+        "markers": {"include": ["L_*"], "exclude": ["L_WAND*"], "rename": {"L_IAS": "pelvis_left"}},
+        "streams": {"commanded_wrench": {"columns": cols}},
+    }
     import_c3d(QUALISYS, tmp_path / "q2", None, overrides={"source": "c3d", **overrides})
     assert_valid(tmp_path / "q2")
     session = open_session(tmp_path / "q2")
@@ -175,9 +208,24 @@ def test_qualisys_second_platform_and_real_newton_millimetre_channels(tmp_path):
 
 @needs_c3d
 def test_vicon_map_and_cli_overrides(tmp_path, capsys):
-    code, out, err = run_cli(["import", "c3d", str(VICON), "-o", str(tmp_path / "v"), "--map",
-                              str(FIX / "vicon-map.json"), "--date", "2026-11-22", "--trial-id", "box-2",
-                              "--repetition", "2"], capsys)
+    code, out, err = run_cli(
+        [
+            "import",
+            "c3d",
+            str(VICON),
+            "-o",
+            str(tmp_path / "v"),
+            "--map",
+            str(FIX / "vicon-map.json"),
+            "--date",
+            "2026-11-22",
+            "--trial-id",
+            "box-2",
+            "--repetition",
+            "2",
+        ],
+        capsys,
+    )
     assert code == 0, err
     assert "markers" in out and "580 rows" in out and "the session validates" in out
     assert_valid(tmp_path / "v")
@@ -188,15 +236,31 @@ def test_vicon_map_and_cli_overrides(tmp_path, capsys):
     assert session.manifest.rig.motion_capture.system == "Vicon Nexus 2.4"
     assert (tmp_path / "v" / "device.json").read_text() == (FIX / "touch-device.json").read_text()
     inline = {**json.loads((FIX / "vicon-map.json").read_text()), "session": {**FACTS["session"]}}
-    minimal = write_map(tmp_path, "minimal-device.json", {"manufacturer": "Force Dimension", "model": "omega.3",
-                                                          "dof": 3, "mechanism": "parallel"})
-    code, out, err = run_cli(["import", "c3d", str(VICON), "-o", str(tmp_path / "w"), "--map",
-                              str(write_map(tmp_path, "inline.json", inline)), "--device", str(minimal)], capsys)
+    minimal = write_map(
+        tmp_path,
+        "minimal-device.json",
+        {"manufacturer": "Force Dimension", "model": "omega.3", "dof": 3, "mechanism": "parallel"},
+    )
+    code, out, err = run_cli(
+        [
+            "import",
+            "c3d",
+            str(VICON),
+            "-o",
+            str(tmp_path / "w"),
+            "--map",
+            str(write_map(tmp_path, "inline.json", inline)),
+            "--device",
+            str(minimal),
+        ],
+        capsys,
+    )
     assert code == 0, err  # --device replaces the map's inline device as a whole
     assert open_session(tmp_path / "w").device().model == "omega.3"
 
 
 # --- a synthetic C3D with known values -----------------------------------------------------------
+
 
 def synthetic_c3d(path: Path) -> dict:
     """A C3D whose every value is known: 3 markers (mm, one occluded), 24 plate channels (N, Nmm),
@@ -251,17 +315,29 @@ def synthetic(tmp_path_factory):
 
 
 def full_map(labels: list[str]) -> dict:
-    plate = {f"c{i}_{ax}": f"C{i}{src}" for i in range(1, 5)
-             for ax, src in (("fx", "FX"), ("fy", "FY"), ("fz", "FZ"), ("tx", "MX"), ("ty", "MY"), ("tz", "MZ"))}
-    return {"source": "c3d", **FACTS, "session": {**FACTS["session"], "rig": {"handle": example_rig()["handle"]}},
-            "trial": {"id": "syn", "protocol": "free_space", "powered": False},
-            "markers": {"rename": {"*3": "h3"}, "rigid_bodies": [{"name": "handle", "markers": ["rig.h1", "h2", "h3"]}]},
-            "streams": {"plate_wrench": {"columns": plate},
-                        "handle_accel": {"columns": {"ax": "ACCX", "ay": "ACCY", "az": "ACCZ"}},
-                        "handle_wrench": {"columns": {c: {"value": 0.0, "unit": u} for c, u in
-                                                      (("fx", "N"), ("fy", "N"), ("fz", "N"),
-                                                       ("tx", "N*m"), ("ty", "N*m"), ("tz", "N*m"))}},
-                        "sync": {"columns": {"trigger": {"source": "TRIG", "threshold": 2.5}}}}}
+    plate = {
+        f"c{i}_{ax}": f"C{i}{src}"
+        for i in range(1, 5)
+        for ax, src in (("fx", "FX"), ("fy", "FY"), ("fz", "FZ"), ("tx", "MX"), ("ty", "MY"), ("tz", "MZ"))
+    }
+    return {
+        "source": "c3d",
+        **FACTS,
+        "session": {**FACTS["session"], "rig": {"handle": example_rig()["handle"]}},
+        "trial": {"id": "syn", "protocol": "free_space", "powered": False},
+        "markers": {"rename": {"*3": "h3"}, "rigid_bodies": [{"name": "handle", "markers": ["rig.h1", "h2", "h3"]}]},
+        "streams": {
+            "plate_wrench": {"columns": plate},
+            "handle_accel": {"columns": {"ax": "ACCX", "ay": "ACCY", "az": "ACCZ"}},
+            "handle_wrench": {
+                "columns": {
+                    c: {"value": 0.0, "unit": u}
+                    for c, u in (("fx", "N"), ("fy", "N"), ("fz", "N"), ("tx", "N*m"), ("ty", "N*m"), ("tz", "N*m"))
+                }
+            },
+            "sync": {"columns": {"trigger": {"source": "TRIG", "threshold": 2.5}}},
+        },
+    }
 
 
 def test_synthetic_c3d_every_value_known(tmp_path, synthetic):
@@ -324,6 +400,7 @@ def test_a_sync_trigger_in_volts_without_threshold_is_refused_before_writing(tmp
 
 # --- CSV logs --------------------------------------------------------------------------------
 
+
 def test_ati_fixture_converts_newton_millimetres_exactly(tmp_path):
     result = import_csv(FIX / "ati-log.csv", tmp_path / "a", FIX / "ati-map.json")
     assert result.streams[0]["rows"] == 20
@@ -374,8 +451,14 @@ def test_chai3d_forces_in_the_device_frame_rotate_into_world(tmp_path):
 
 
 def csv_map(columns: dict, kind: str = "handle_accel", time_unit: str = "s", **extra) -> dict:
-    return {"source": "csv", **FACTS, "trial": {"id": "t1", "powered": False},
-            "time": {"source": "time", "unit": time_unit}, "streams": {kind: {"columns": columns, "format": "csv"}}, **extra}
+    return {
+        "source": "csv",
+        **FACTS,
+        "trial": {"id": "t1", "powered": False},
+        "time": {"source": "time", "unit": time_unit},
+        "streams": {kind: {"columns": columns, "format": "csv"}},
+        **extra,
+    }
 
 
 def write_csv(path: Path, header: list[str], rows: list[list]) -> Path:
@@ -386,10 +469,13 @@ def write_csv(path: Path, header: list[str], rows: list[list]) -> Path:
 def test_csv_millimetres_g_and_pose(tmp_path):
     rows = [[0.1 * i, 1000.0 + i, -250.0, 0.5, 1.0, 0.0, 0.0, 0.0, 0.25 * i, -1.0, 1.0] for i in range(10)]
     src = write_csv(tmp_path / "log.csv", ["time", "px", "py", "pz", "qw", "qx", "qy", "qz", "ax", "ay", "az"], rows)
-    m = csv_map({"ax": {"source": "ax", "unit": "g"}, "ay": {"source": "ay", "unit": "g"},
-                 "az": {"source": "az", "unit": "g"}})
-    m["streams"]["handle_pose"] = {"columns": {**{c: {"source": c, "unit": "mm"} for c in ("px", "py", "pz")},
-                                               **{c: {"source": c, "unit": "1"} for c in ("qw", "qx", "qy", "qz")}}}
+    m = csv_map({"ax": {"source": "ax", "unit": "g"}, "ay": {"source": "ay", "unit": "g"}, "az": {"source": "az", "unit": "g"}})
+    m["streams"]["handle_pose"] = {
+        "columns": {
+            **{c: {"source": c, "unit": "mm"} for c in ("px", "py", "pz")},
+            **{c: {"source": c, "unit": "1"} for c in ("qw", "qx", "qy", "qz")},
+        }
+    }
     import_csv(src, tmp_path / "s", write_map(tmp_path, "m.json", m))
     assert_valid(tmp_path / "s")
     s = open_session(tmp_path / "s")
@@ -406,17 +492,22 @@ finite = st.floats(min_value=-1e6, max_value=1e6, allow_nan=False, allow_infinit
 
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(st.lists(st.tuples(finite, finite, finite), min_size=2, max_size=12),
-       st.sampled_from([("N", 1.0, 1.0), ("kN", 1000.0, 1.0), ("lbf", 4.4482216152605, 1.0)]),
-       st.sampled_from([("N*m", 1.0, 1.0), ("N-mm", 1.0, 1000.0), ("Nmm", 1.0, 1000.0), ("lbf-in", 0.1129848290276167, 1.0)]))
+@given(
+    st.lists(st.tuples(finite, finite, finite), min_size=2, max_size=12),
+    st.sampled_from([("N", 1.0, 1.0), ("kN", 1000.0, 1.0), ("lbf", 4.4482216152605, 1.0)]),
+    st.sampled_from([("N*m", 1.0, 1.0), ("N-mm", 1.0, 1000.0), ("Nmm", 1.0, 1000.0), ("lbf-in", 0.1129848290276167, 1.0)]),
+)
 def test_csv_import_is_exact_under_unit_scaling(tmp_path_factory, values, force_unit, torque_unit):
     tmp = tmp_path_factory.mktemp("h")
     rows = [[i / 1000.0 * 1000.0, f, t, g] for i, (f, t, g) in enumerate(values)]  # time in ms: 0, 1, 2, …
     src = write_csv(tmp / "log.csv", ["time", "f", "t", "g"], rows)
-    cols = {**{c: {"source": "f", "unit": force_unit[0]} for c in ("fx", "fy", "fz")},
-            **{c: {"source": "t", "unit": torque_unit[0]} for c in ("tx", "ty", "tz")}}
-    m = csv_map(cols, kind="handle_wrench", time_unit="ms",
-                session={**FACTS["session"], "rig": {"handle": example_rig()["handle"]}})
+    cols = {
+        **{c: {"source": "f", "unit": force_unit[0]} for c in ("fx", "fy", "fz")},
+        **{c: {"source": "t", "unit": torque_unit[0]} for c in ("tx", "ty", "tz")},
+    }
+    m = csv_map(
+        cols, kind="handle_wrench", time_unit="ms", session={**FACTS["session"], "rig": {"handle": example_rig()["handle"]}}
+    )
     m["streams"]["handle_accel"] = {"columns": {c: {"source": "g", "unit": "g"} for c in ("ax", "ay", "az")}}
     import_csv(src, tmp / "s", write_map(tmp, "m.json", m))
     s = open_session(tmp / "s")
@@ -429,6 +520,7 @@ def test_csv_import_is_exact_under_unit_scaling(tmp_path_factory, values, force_
 
 
 # --- bad input: a code, and nothing written ------------------------------------------------------
+
 
 def expect_code(tmp_path: Path, code: str, fn, *args, **kw) -> HaptifyError:
     before = listing(tmp_path)
@@ -445,8 +537,14 @@ def test_missing_source_and_not_a_c3d(tmp_path, synthetic):
     text = tmp_path / "text.c3d"
     text.write_text("not a c3d file at all\n")
     expect_code(tmp_path, "E501", import_c3d, text, tmp_path / "s", m)
-    expect_code(tmp_path, "E501", import_csv, tmp_path / "nope.csv", tmp_path / "s",
-                write_map(tmp_path, "c.json", csv_map({"ax": "a", "ay": "a", "az": "a"})))
+    expect_code(
+        tmp_path,
+        "E501",
+        import_csv,
+        tmp_path / "nope.csv",
+        tmp_path / "s",
+        write_map(tmp_path, "c.json", csv_map({"ax": "a", "ay": "a", "az": "a"})),
+    )
 
 
 def test_bad_maps(tmp_path, synthetic):
@@ -518,8 +616,7 @@ def test_output_exists_is_e901_unless_overwrite(tmp_path):
 
 
 def test_cli_without_map_names_every_missing_option(tmp_path, synthetic, capsys):
-    code, out, err = run_cli(["--json", "import", "c3d", str(synthetic[0]), "-o", str(tmp_path / "s"),
-                              "--lab", "lab-t"], capsys)
+    code, out, err = run_cli(["--json", "import", "c3d", str(synthetic[0]), "-o", str(tmp_path / "s"), "--lab", "lab-t"], capsys)
     assert code == 2
     finding = json.loads(out)["findings"][0]
     assert finding["code"] == "E903"
@@ -563,6 +660,7 @@ def test_example_maps_are_valid_import_maps_and_the_schema_agrees():
 
 # --- appending a trial to an existing session (spec §5.9) ----------------------------------------
 
+
 def unchanged(folder: Path):
     """A snapshot of a folder's files and bytes, to show a refused append changed nothing."""
     return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
@@ -573,8 +671,25 @@ def test_append_a_second_recording_as_another_trial(tmp_path, capsys):
     out = tmp_path / "q"
     import_c3d(QUALISYS, out, FIX / "qualisys-map.json", overrides=DATE)
     before = unchanged(out)
-    code, _, err = run_cli(["import", "c3d", str(QUALISYS), "-o", str(out), "--map", str(FIX / "qualisys-map.json"),
-                            "--append", "--date", "2026-11-22", "--trial-id", "gait-2", "--repetition", "2"], capsys)
+    code, _, err = run_cli(
+        [
+            "import",
+            "c3d",
+            str(QUALISYS),
+            "-o",
+            str(out),
+            "--map",
+            str(FIX / "qualisys-map.json"),
+            "--append",
+            "--date",
+            "2026-11-22",
+            "--trial-id",
+            "gait-2",
+            "--repetition",
+            "2",
+        ],
+        capsys,
+    )
     assert code == 0, err
     assert_valid(out)
     after = unchanged(out)
@@ -594,13 +709,24 @@ def test_refused_appends_change_nothing(tmp_path):
     cases = [
         ("E107", QUALISYS, {**DATE}),  # the trial id exists
         ("E502", QUALISYS, {"session": {"date": "2026-11-23"}, "trial": {"id": "t2"}}),  # another sitting
-        ("E502", VICON, {"session": {"date": "2026-11-22", "session_id": "qualisys-demo"},  # no platform: its
-                         "trial": {"id": "t3"}}),                              # markers would not be in the session's W
+        (
+            "E502",
+            VICON,
+            {
+                "session": {"date": "2026-11-22", "session_id": "qualisys-demo"},  # no platform: its
+                "trial": {"id": "t3"},
+            },
+        ),  # markers would not be in the session's W
     ]
     for code, source, overrides in cases:
         with pytest.raises(HaptifyError) as err:
-            import_c3d(source, out, FIX / ("vicon-map.json" if source == VICON else "qualisys-map.json"),
-                       overrides=overrides, append=True)
+            import_c3d(
+                source,
+                out,
+                FIX / ("vicon-map.json" if source == VICON else "qualisys-map.json"),
+                overrides=overrides,
+                append=True,
+            )
         assert err.value.code == code, str(err.value)
         if source == VICON:
             assert "lab frame" in str(err.value)
@@ -618,26 +744,43 @@ def test_append_unites_marker_lists_and_adds_rig_parts(tmp_path, synthetic):
     path, truth = synthetic
     base = {"source": "c3d", **FACTS, "trial": {"id": "a", "powered": False}, "markers": {"include": ["rig:h1"]}}
     import_c3d(path, tmp_path / "s", write_map(tmp_path, "a.json", base))
-    second = {"source": "c3d", "trial": {"id": "b", "powered": False}, "markers": {"include": ["h2", "[*]3"]},
-              "session": {"rig": {"handle": example_rig()["handle"]}}}
+    second = {
+        "source": "c3d",
+        "trial": {"id": "b", "powered": False},
+        "markers": {"include": ["h2", "[*]3"]},
+        "session": {"rig": {"handle": example_rig()["handle"]}},
+    }
     import_c3d(path, tmp_path / "s", write_map(tmp_path, "b.json", second), append=True)
     assert_valid(tmp_path / "s")
     session = open_session(tmp_path / "s")
     assert session.manifest.rig.motion_capture.markers == ["rig.h1", "h2", "m_3"]
     assert session.manifest.rig.handle is not None and session.manifest.rig.force_plate is not None
     assert session.stream("b", "markers").entities == ["h2", "m_3"]
-    other_rate = {**second, "trial": {"id": "c", "powered": False},
-                  "session": {"rig": {"handle": {**example_rig()["handle"], "ft_sensor": {
-                      "pose": {"position": [0.0, 0.0, -0.04], "quaternion": [1.0, 0.0, 0.0, 0.0]}}}}}}
-    err = expect_code(tmp_path, "E502", import_c3d, path, tmp_path / "s", write_map(tmp_path, "c.json", other_rate),
-                      append=True)
+    other_rate = {
+        **second,
+        "trial": {"id": "c", "powered": False},
+        "session": {
+            "rig": {
+                "handle": {
+                    **example_rig()["handle"],
+                    "ft_sensor": {"pose": {"position": [0.0, 0.0, -0.04], "quaternion": [1.0, 0.0, 0.0, 0.0]}},
+                }
+            }
+        },
+    }
+    err = expect_code(tmp_path, "E502", import_c3d, path, tmp_path / "s", write_map(tmp_path, "c.json", other_rate), append=True)
     assert err.findings[0].pointer == "/session/rig/handle"
 
 
 def test_append_csv_log_to_a_csv_session(tmp_path):
     import_csv(FIX / "chai3d-log.csv", tmp_path / "s", FIX / "chai3d-map.json")
-    import_csv(FIX / "ati-log.csv", tmp_path / "s", FIX / "ati-map.json",
-               overrides={"session": {"session_id": "chai3d-log-demo"}}, append=True)
+    import_csv(
+        FIX / "ati-log.csv",
+        tmp_path / "s",
+        FIX / "ati-map.json",
+        overrides={"session": {"session_id": "chai3d-log-demo"}},
+        append=True,
+    )
     assert_valid(tmp_path / "s")
     session = open_session(tmp_path / "s")
     assert [t.id for t in session.trials] == ["chai3d-plane", "ati-log"]

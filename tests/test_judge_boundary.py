@@ -42,13 +42,15 @@ def test_no_judge_module_imports_the_reference_or_the_tools(module):
 
 def test_linting_the_suite_loads_nothing_of_the_reference_or_the_tools():
     """Run the linter and the CLI's parser in a fresh interpreter, then list what got imported."""
-    probe = ("import sys, json\n"
-             "from haptify_conform import cli\n"
-             "from haptify_conform.lint import lint\n"
-             "cli.build_parser()\n"
-             "problems = lint()\n"
-             f"bad = sorted(m for m in sys.modules if m.split('.')[0] in {FORBIDDEN!r})\n"
-             "print(json.dumps({'problems': problems, 'bad': bad}))\n")
+    probe = (
+        "import sys, json\n"
+        "from haptify_conform import cli\n"
+        "from haptify_conform.lint import lint\n"
+        "cli.build_parser()\n"
+        "problems = lint()\n"
+        f"bad = sorted(m for m in sys.modules if m.split('.')[0] in {FORBIDDEN!r})\n"
+        "print(json.dumps({'problems': problems, 'bad': bad}))\n"
+    )
     proc = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True, cwd=REPO)
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     assert out["problems"] == []

@@ -22,9 +22,11 @@ def test_forward_kinematics_is_the_papers_eq_4(q):
     q1, q2, q3 = q
     a2 = a3 = 0.135
     c1, s1, c2, s2, c3, s3 = math.cos(q1), math.sin(q1), math.cos(q2), math.sin(q2), math.cos(q3), math.sin(q3)
-    expected = [a2 * c1 * c2 + a3 * c1 * c2 * c3 - a3 * c1 * s2 * s3,
-                a2 * s1 * c2 + a3 * s1 * c2 * c3 - a3 * s1 * s2 * s3,
-                a2 * s2 + a3 * c2 * s3 + a3 * s2 * c3]
+    expected = [
+        a2 * c1 * c2 + a3 * c1 * c2 * c3 - a3 * c1 * s2 * s3,
+        a2 * s1 * c2 + a3 * s1 * c2 * c3 - a3 * s1 * s2 * s3,
+        a2 * s2 + a3 * c2 * s3 + a3 * s2 * c3,
+    ]
     np.testing.assert_allclose(forward_positions(KIN, np.array([q]))[0], expected, atol=1e-15)
 
 

@@ -37,10 +37,12 @@ def motion(rng: np.random.Generator, n: int) -> dict[str, np.ndarray]:
     """Random smooth-ish signals for position, velocity, acceleration and orientation."""
     axis = rng.standard_normal(3)
     ang = 0.3 * np.sin(np.arange(n) / 40.0)
-    return {"position": 0.05 * rng.standard_normal((n, 3)).cumsum(axis=0) / 10,
-            "velocity": 0.2 * rng.standard_normal((n, 3)),
-            "acceleration": 5.0 * rng.standard_normal((n, 3)),
-            "quaternion": quat_from_axis_angle(np.tile(axis, (n, 1)), ang)}
+    return {
+        "position": 0.05 * rng.standard_normal((n, 3)).cumsum(axis=0) / 10,
+        "velocity": 0.2 * rng.standard_normal((n, 3)),
+        "acceleration": 5.0 * rng.standard_normal((n, 3)),
+        "quaternion": quat_from_axis_angle(np.tile(axis, (n, 1)), ang),
+    }
 
 
 def features(sig: dict[str, np.ndarray]) -> WindowFeatures:
@@ -82,6 +84,7 @@ def test_an_orientation_offset_of_86_degrees_gives_one():
     turned = dict(sig)
     extra = quat_from_axis_angle(np.array([[0.0, 0.0, 1.0]]), np.array([math.radians(86.0)]))[0]
     from haptify.conventions import quat_multiply
+
     turned["quaternion"] = quat_multiply(np.tile(extra, (n, 1)), sig["quaternion"])  # rotated in the world frame
     d = np.diag(pair_distance(features(turned), features(sig), R))
     assert np.allclose(d, 1.0, atol=1e-9)
@@ -91,8 +94,9 @@ def test_the_segment_distance_is_the_mean_of_its_window_minima():
     """Training: a still pose. Test windows offset by 0, 1, 2, … R_p: each minimum is its offset."""
     train = WindowFeatures(np.zeros((5, 3)), np.zeros((5, 3)), np.zeros((5, 3)), np.tile([1.0, 0, 0, 0], (5, 1)))
     k = np.arange(50.0)
-    test = WindowFeatures(np.column_stack([k * R.p, 0 * k, 0 * k]), np.zeros((50, 3)), np.zeros((50, 3)),
-                          np.tile([1.0, 0, 0, 0], (50, 1)))
+    test = WindowFeatures(
+        np.column_stack([k * R.p, 0 * k, 0 * k]), np.zeros((50, 3)), np.zeros((50, 3)), np.tile([1.0, 0, 0, 0], (50, 1))
+    )
     minima = nearest_distances(test, train, R, chunk=7)
     assert np.allclose(minima, k)
     assert np.allclose(segment_distances(minima, 25), [k[:25].mean(), k[25:].mean()])
@@ -101,8 +105,20 @@ def test_the_segment_distance_is_the_mean_of_its_window_minima():
 def test_nearest_distances_agree_with_a_plain_double_loop():
     rng = np.random.default_rng(4)
     a, b = features(motion(rng, 30 * WIN)), features(motion(rng, 17 * WIN))
-    loop = np.array([min(pair_distance(WindowFeatures(a.position[i:i + 1], a.velocity[i:i + 1], a.acceleration[i:i + 1],
-                                                      a.orientation[i:i + 1]), b, R)[0]) for i in range(len(a))])
+    loop = np.array(
+        [
+            min(
+                pair_distance(
+                    WindowFeatures(
+                        a.position[i : i + 1], a.velocity[i : i + 1], a.acceleration[i : i + 1], a.orientation[i : i + 1]
+                    ),
+                    b,
+                    R,
+                )[0]
+            )
+            for i in range(len(a))
+        ]
+    )
     assert np.allclose(nearest_distances(a, b, R, chunk=4), loop)
 
 
@@ -130,7 +146,7 @@ def test_segment_force_error_is_the_mean_of_axis_rms():
     seg = 500
     force = np.zeros((2 * seg + 30, 3))
     predicted = force.copy()
-    predicted[:seg] += [0.1, 0.2, 0.3]                        # constant errors: RMS = |offset|
+    predicted[:seg] += [0.1, 0.2, 0.3]  # constant errors: RMS = |offset|
     predicted[seg:, 0] += 0.4 * np.where(np.arange(len(force) - seg) % 2, 1.0, -1.0)
     assert np.allclose(segment_force_errors(force, predicted, seg), [0.2, 0.4 / 3])
 

@@ -35,25 +35,41 @@ from haptify.local_dynamics import (
 # helpers: a known model and smooth random inputs
 # ---------------------------------------------------------------------------------------------
 
+
 def smooth_inputs(rng: np.random.Generator, n: int, k: int) -> np.ndarray:
     """Low-passed white noise (first-order, pole 0.9), standard deviation ≈ 0.57."""
     return lfilter([0.1], [1.0, -0.9], rng.standard_normal((n, k)), axis=0) * 2.5
 
 
-def known_model(rng: np.random.Generator, nu: int, ny: int, input_map: bool = True, output_map: bool = True,
-                nk: int = 0) -> HWModelFile:
+def known_model(
+    rng: np.random.Generator, nu: int, ny: int, input_map: bool = True, output_map: bool = True, nk: int = 0
+) -> HWModelFile:
     """A H-W model: saturating input maps, expanding output maps, stable 2nd-order blocks."""
     bpi = np.linspace(-1.5, 1.5, 9)
     bpo = np.linspace(-2.0, 2.0, 9)
-    ins = [PiecewiseLinearMap(breakpoints=bpi.tolist(), values=(bpi + 0.5 * np.tanh(2 * bpi)).tolist())
-           if input_map else UnitGainMap() for _ in range(nu)]
-    outs = [PiecewiseLinearMap(breakpoints=bpo.tolist(), values=(bpo + 0.2 * bpo * np.abs(bpo)).tolist())
-            if output_map else UnitGainMap() for _ in range(ny)]
-    lin = [[TransferFunction(b=(0.4 * rng.standard_normal(2)).tolist(), f=[-0.6, 0.2], nk=nk) for _ in range(nu)]
-           for _ in range(ny)]
-    return HWModelFile(sample_rate_hz=100.0, inputs=[Channel(name=f"u{i}", unit="1") for i in range(nu)],
-                       outputs=[Channel(name=f"y{j}", unit="N") for j in range(ny)],
-                       input_maps=ins, output_maps=outs, linear=lin)
+    ins = [
+        PiecewiseLinearMap(breakpoints=bpi.tolist(), values=(bpi + 0.5 * np.tanh(2 * bpi)).tolist())
+        if input_map
+        else UnitGainMap()
+        for _ in range(nu)
+    ]
+    outs = [
+        PiecewiseLinearMap(breakpoints=bpo.tolist(), values=(bpo + 0.2 * bpo * np.abs(bpo)).tolist())
+        if output_map
+        else UnitGainMap()
+        for _ in range(ny)
+    ]
+    lin = [
+        [TransferFunction(b=(0.4 * rng.standard_normal(2)).tolist(), f=[-0.6, 0.2], nk=nk) for _ in range(nu)] for _ in range(ny)
+    ]
+    return HWModelFile(
+        sample_rate_hz=100.0,
+        inputs=[Channel(name=f"u{i}", unit="1") for i in range(nu)],
+        outputs=[Channel(name=f"y{j}", unit="N") for j in range(ny)],
+        input_maps=ins,
+        output_maps=outs,
+        linear=lin,
+    )
 
 
 def reference_simulation(model: HWModelFile, u: np.ndarray) -> np.ndarray:
@@ -89,6 +105,7 @@ def _pwl_scalar(m: PiecewiseLinearMap, x: float) -> float:
 # static maps
 # ---------------------------------------------------------------------------------------------
 
+
 def test_pwl_interpolates_and_extends_linearly():
     bp = np.array([-1.0, 0.0, 2.0])
     v = np.array([3.0, 1.0, 5.0])
@@ -98,8 +115,7 @@ def test_pwl_interpolates_and_extends_linearly():
 
 
 @settings(max_examples=50, deadline=None)
-@given(st.lists(st.floats(-5, 5), min_size=1, max_size=30),
-       st.lists(st.floats(-3, 3), min_size=4, max_size=4))
+@given(st.lists(st.floats(-5, 5), min_size=1, max_size=30), st.lists(st.floats(-3, 3), min_size=4, max_size=4))
 def test_basis_times_values_is_the_map(xs, values):
     bp = np.array([-1.0, -0.2, 0.5, 2.0])
     x = np.array(xs)
@@ -120,10 +136,11 @@ def test_breakpoints_follow_quantiles_and_stay_increasing():
 # prediction and the parameter file
 # ---------------------------------------------------------------------------------------------
 
+
 def test_prediction_is_the_difference_equation_of_the_spec():
     rng = np.random.default_rng(3)
     model = known_model(rng, nu=2, ny=2, nk=1)
-    model.linear[1][0] = TransferFunction(b=[0.3, -0.1, 0.05], f=[-0.5], nk=2)   # orders differ per pair
+    model.linear[1][0] = TransferFunction(b=[0.3, -0.1, 0.05], f=[-0.5], nk=2)  # orders differ per pair
     model.input_maps[1] = UnitGainMap()
     u = smooth_inputs(rng, 150, 2)
     assert np.allclose(predict(model, u), reference_simulation(model, u), rtol=0, atol=1e-12)
@@ -153,8 +170,15 @@ def test_mat_export_holds_the_same_model(tmp_path):
         return x if nl.Type == "unit_gain" else pwl_eval(nl.BreakPoints[0], nl.BreakPoints[1], x)
 
     w = np.column_stack([apply(s.InputNonlinearity[i], u[:, i]) for i in range(2)])
-    y = np.column_stack([apply(s.OutputNonlinearity[j], sum(lfilter(np.atleast_1d(s.B[j, i]), np.atleast_1d(s.F[j, i]), w[:, i])
-                                                            for i in range(2))) for j in range(2)])
+    y = np.column_stack(
+        [
+            apply(
+                s.OutputNonlinearity[j],
+                sum(lfilter(np.atleast_1d(s.B[j, i]), np.atleast_1d(s.F[j, i]), w[:, i]) for i in range(2)),
+            )
+            for j in range(2)
+        ]
+    )
     assert np.allclose(y, predict(model, u), atol=1e-12)
     assert s.nk[0, 0] == 1 and np.atleast_1d(s.B[0, 0])[0] == 0.0 and np.atleast_1d(s.F[0, 0])[0] == 1.0
 
@@ -162,14 +186,14 @@ def test_mat_export_holds_the_same_model(tmp_path):
 def test_invalid_model_file_is_a_coded_error(tmp_path):
     rng = np.random.default_rng(6)
     data = json.loads(known_model(rng, 2, 1).model_dump_json())
-    data["input_maps"][1]["breakpoints"][3] = -10.0            # no longer increasing
+    data["input_maps"][1]["breakpoints"][3] = -10.0  # no longer increasing
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps(data))
     with pytest.raises(HaptifyError) as err:
         load_model(bad)
     assert err.value.code == "E702" and err.value.findings[0].pointer.startswith("/input_maps/1")
     data = json.loads(known_model(rng, 2, 1).model_dump_json())
-    data["linear"][0].pop()                                   # ny × nu block with a missing entry
+    data["linear"][0].pop()  # ny × nu block with a missing entry
     bad.write_text(json.dumps(data))
     with pytest.raises(HaptifyError, match="linear must be"):
         load_model(bad)
@@ -207,8 +231,12 @@ def test_quaternion_sign_does_not_change_the_prediction():
 # fitting: data from a known model with known white noise
 # ---------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("input_map, output_map", [(True, True), (True, False), (False, True)],
-                         ids=["hammerstein-wiener", "pure-hammerstein", "pure-wiener"])
+
+@pytest.mark.parametrize(
+    "input_map, output_map",
+    [(True, True), (True, False), (False, True)],
+    ids=["hammerstein-wiener", "pure-hammerstein", "pure-wiener"],
+)
 @pytest.mark.parametrize("seed", [0, 1])
 def test_fit_reaches_the_noise_floor_on_held_out_data(input_map, output_map, seed):
     """Held-out RMSE within 10 % of the known noise σ, for the matching structure and for the default H-W."""
@@ -219,13 +247,14 @@ def test_fit_reaches_the_noise_floor_on_held_out_data(input_map, output_map, see
     sigma = 0.1 * y_train0.std(axis=0)
     y_train = y_train0 + sigma * rng.standard_normal(y_train0.shape)
     y_test = y_test0 + sigma * rng.standard_normal(y_test0.shape)
-    structure = FitOptions.from_definition(input_map="piecewise_linear" if input_map else "unit_gain",
-                                           output_map="piecewise_linear" if output_map else "unit_gain")
+    structure = FitOptions.from_definition(
+        input_map="piecewise_linear" if input_map else "unit_gain", output_map="piecewise_linear" if output_map else "unit_gain"
+    )
     for options in (structure, FitOptions.from_definition()):
         model, report = fit(u_train, y_train, sample_rate_hz=100.0, options=options)
         ratio = rmse(y_test, predict(model, u_test)) / sigma
         assert np.all(np.abs(ratio - 1.0) < 0.10), (options.input_map, options.output_map, ratio)
-        assert report.cost_history == sorted(report.cost_history, reverse=True)      # LM never goes uphill
+        assert report.cost_history == sorted(report.cost_history, reverse=True)  # LM never goes uphill
         assert model.fit.samples == 4000 and len(model.fit.rmse) == 2
 
 
@@ -246,7 +275,7 @@ def test_fit_of_several_records_matches_one_long_record():
 def test_fitted_model_is_stable_and_valid_against_its_schema():
     rng = np.random.default_rng(12)
     u = smooth_inputs(rng, 3000, 2)
-    y = np.cumsum(u[:, :1], axis=0) * 0.02 + 0.01 * rng.standard_normal((3000, 1))   # near-integrator
+    y = np.cumsum(u[:, :1], axis=0) * 0.02 + 0.01 * rng.standard_normal((3000, 1))  # near-integrator
     model, _ = fit(u, y, sample_rate_hz=100.0)
     radius = FitOptions.from_definition().stability_radius
     for tf in model.linear[0]:
@@ -276,10 +305,14 @@ poles = st.lists(st.floats(-0.9, 0.9), min_size=0, max_size=2)
 def test_unit_gain_model_is_linear_and_time_invariant(b, p, nk, shift, gain):
     """With unit-gain maps the model is the LTI block: superposition and delay-shift hold exactly (spec §11.3)."""
     f = np.poly(p)[1:].tolist() if p else []
-    model = HWModelFile(sample_rate_hz=100.0, inputs=[Channel(name="u", unit="1"), Channel(name="v", unit="1")],
-                        outputs=[Channel(name="y", unit="1")], input_maps=[UnitGainMap(), UnitGainMap()],
-                        output_maps=[UnitGainMap()],
-                        linear=[[TransferFunction(b=b, f=f, nk=nk), TransferFunction(b=b[::-1], f=f, nk=0)]])
+    model = HWModelFile(
+        sample_rate_hz=100.0,
+        inputs=[Channel(name="u", unit="1"), Channel(name="v", unit="1")],
+        outputs=[Channel(name="y", unit="1")],
+        input_maps=[UnitGainMap(), UnitGainMap()],
+        output_maps=[UnitGainMap()],
+        linear=[[TransferFunction(b=b, f=f, nk=nk), TransferFunction(b=b[::-1], f=f, nk=0)]],
+    )
     rng = np.random.default_rng(len(b) + nk)
     u1, u2 = rng.standard_normal((60, 2)), rng.standard_normal((60, 2))
     y1, y2 = predict(model, u1), predict(model, u2)
@@ -292,17 +325,18 @@ def test_unit_gain_model_is_linear_and_time_invariant(b, p, nk, shift, gain):
 # the batched simulation and Jacobian of the fit (spec §11.4.3)
 # ---------------------------------------------------------------------------------------------
 
+
 def _random_structure(rng: np.random.Generator, nk: int):
     from haptify import local_dynamics as ld
 
     u = smooth_inputs(rng, 400, 3)
-    in_bp = [np.sort(rng.uniform(-1.0, 1.0, 5)), None, np.linspace(-0.8, 0.8, 4)]   # a unit-gain input among maps
+    in_bp = [np.sort(rng.uniform(-1.0, 1.0, 5)), None, np.linspace(-0.8, 0.8, 4)]  # a unit-gain input among maps
     out_bp = [np.linspace(-1.5, 1.5, 6), None]
     st_ = ld._Structure(nu=3, ny=2, nb=2, nf=2, nk=nk, in_bp=in_bp, out_bp=out_bp)
     theta = rng.normal(0.0, 0.5, st_.size)
     for j in range(2):
         for i in range(3):
-            theta[st_.f_idx[j, i]] = np.poly(rng.uniform(-0.8, 0.8, 2))[1:]   # stable real poles
+            theta[st_.f_idx[j, i]] = np.poly(rng.uniform(-0.8, 0.8, 2))[1:]  # stable real poles
         if out_bp[j] is not None:
             theta[st_.c_idx[j]] = np.sort(rng.normal(0.0, 1.0, 6))
     return ld, st_, theta, ld._Record.of(st_, u, np.zeros((len(u), 2)))
@@ -311,8 +345,14 @@ def _random_structure(rng: np.random.Generator, nk: int):
 @pytest.mark.parametrize("nk", [0, 2])
 def test_batched_simulation_is_the_prediction_of_the_same_parameters(nk):
     ld, st_, theta, rec = _random_structure(np.random.default_rng(10 + nk), nk)
-    model = ld._assemble(st_, theta, 100.0, None, [Channel(name=f"u{i}", unit="1") for i in range(3)],
-                         [Channel(name=f"y{j}", unit="1") for j in range(2)])
+    model = ld._assemble(
+        st_,
+        theta,
+        100.0,
+        None,
+        [Channel(name=f"u{i}", unit="1") for i in range(3)],
+        [Channel(name=f"y{j}", unit="1") for j in range(2)],
+    )
     np.testing.assert_allclose(ld._simulate(st_, theta, rec), predict(model, rec.u), rtol=1e-12, atol=1e-12)
 
 
@@ -355,10 +395,11 @@ def test_parameter_layout_puts_each_outputs_own_parameters_in_jacobian_order():
     nu, nb, nf = 3, 2, 2
     for j in range(2):
         own = st_.own(j)
-        expected = np.concatenate([st_.b_idx[j].T.ravel(), st_.f_idx[j].T.ravel()]
-                                  + ([] if st_.c_idx[j] is None else [st_.c_idx[j]]))
-        np.testing.assert_array_equal(expected, np.arange(own.start, own.stop))      # b_1 of every input first
+        expected = np.concatenate(
+            [st_.b_idx[j].T.ravel(), st_.f_idx[j].T.ravel()] + ([] if st_.c_idx[j] is None else [st_.c_idx[j]])
+        )
+        np.testing.assert_array_equal(expected, np.arange(own.start, own.stop))  # b_1 of every input first
         assert st_.b_idx[j, 1, 0] == own.start + 1 and st_.f_idx[j, 0, 1] == own.start + nb * nu + nu
     every = np.concatenate([np.arange(st_.n_shared)] + [np.arange(st_.own(j).start, st_.own(j).stop) for j in range(2)])
-    np.testing.assert_array_equal(every, np.arange(st_.size))                        # θ covered once, no gap
+    np.testing.assert_array_equal(every, np.arange(st_.size))  # θ covered once, no gap
     assert nf == st_.nf

@@ -30,7 +30,7 @@ pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
 def _trial_signals(rng: np.random.Generator, seconds: float, amplitude: float, centre: np.ndarray, freq: float) -> dict:
     """Analytic motion on a 1 kHz clock: oscillation in x, y, z with rising frequency, slow yaw."""
     t = np.arange(int(seconds * 1000)) / 1000.0
-    chirp = 2 * np.pi * (freq * t + 0.02 * t ** 2)
+    chirp = 2 * np.pi * (freq * t + 0.02 * t**2)
     dphase = 2 * np.pi * (freq + 0.04 * t)
     ddphase = 2 * np.pi * 0.04
     amp = amplitude * np.array([1.0, 0.7, 0.5])
@@ -45,23 +45,35 @@ def _trial_signals(rng: np.random.Generator, seconds: float, amplitude: float, c
     return {"t": t, "pos": pos, "q": q, "acc": acc, "force_w": force_w}
 
 
-def _add_trial(w: SessionWriter, rng, trial_id: str, protocol: str, repetition: int,
-               gap: tuple[float, float] | None = None, **motion) -> None:
+def _add_trial(
+    w: SessionWriter, rng, trial_id: str, protocol: str, repetition: int, gap: tuple[float, float] | None = None, **motion
+) -> None:
     s = _trial_signals(rng, **motion)
     w.add_trial(trial_id, protocol, powered=False, repetition=repetition, label="figure_eight" if protocol == "other" else None)
     t, q = s["t"], s["q"]
-    p_sensor = np.array([0.0, 0.0, -0.03])                     # example_rig: F/T sensor below the gimbal centre
-    f_h = quat_rotate(quat_conjugate(q), s["force_w"])          # handle frame = sensor frame (identity rotation)
-    tau_s = -np.cross(p_sensor, f_h)                            # zero torque about the gimbal centre
-    wrench = {"t": t, **{c: f_h[:, k] for k, c in enumerate(("fx", "fy", "fz"))},
-              **{c: tau_s[:, k] for k, c in enumerate(("tx", "ty", "tz"))}}
+    p_sensor = np.array([0.0, 0.0, -0.03])  # example_rig: F/T sensor below the gimbal centre
+    f_h = quat_rotate(quat_conjugate(q), s["force_w"])  # handle frame = sensor frame (identity rotation)
+    tau_s = -np.cross(p_sensor, f_h)  # zero torque about the gimbal centre
+    wrench = {
+        "t": t,
+        **{c: f_h[:, k] for k, c in enumerate(("fx", "fy", "fz"))},
+        **{c: tau_s[:, k] for k, c in enumerate(("tx", "ty", "tz"))},
+    }
     w.add_stream(trial_id, "handle_wrench", wrench, rate_hz=1000)
     a_h = quat_rotate(quat_conjugate(q), s["acc"] - GRAVITY_W)  # specific force: +g up at rest
     w.add_stream(trial_id, "handle_accel", {"t": t, "ax": a_h[:, 0], "ay": a_h[:, 1], "az": a_h[:, 2]}, rate_hz=1000)
     k = slice(None, None, 10)
-    pose = {"t": t[k], "px": s["pos"][k, 0], "py": s["pos"][k, 1], "pz": s["pos"][k, 2],
-            "qw": q[k, 0], "qx": q[k, 1], "qy": q[k, 2], "qz": q[k, 3]}
-    if gap is not None:                                         # a motion-capture occlusion
+    pose = {
+        "t": t[k],
+        "px": s["pos"][k, 0],
+        "py": s["pos"][k, 1],
+        "pz": s["pos"][k, 2],
+        "qw": q[k, 0],
+        "qx": q[k, 1],
+        "qy": q[k, 2],
+        "qz": q[k, 3],
+    }
+    if gap is not None:  # a motion-capture occlusion
         hidden = (pose["t"] >= gap[0]) & (pose["t"] < gap[1])
         for c in ("px", "py", "pz", "qw", "qx", "qy", "qz"):
             pose[c] = np.where(hidden, np.nan, pose[c])
@@ -70,12 +82,28 @@ def _add_trial(w: SessionWriter, rng, trial_id: str, protocol: str, repetition: 
 
 def build_session(path: Path, tests: bool = True, train_s: float = 21.0, gap: tuple[float, float] | None = None) -> Path:
     rng = np.random.default_rng(0)
-    calib = {"kind": "handle_gravity", "id": "cal-1", "force_bias_N": [0.0, 0.0, 0.0], "connector_mass_kg": 0.0,
-             "connector_com_m": [0.0, 0.0, 0.0], "torque_bias_Nm": [0.0, 0.0, 0.0],
-             "accel_bias_m_per_s2": [0.0, 0.0, 0.0], "gravity_m_per_s2": float(-GRAVITY_W[2])}
-    w = SessionWriter(manifest={"session_id": "dyn-0001", "date": "2026-11-22", "lab": {"id": "lab"}, "examiner": {"id": "ex"},
-                                "device": TOUCH_DEVICE, "device_placement": IDENTITY, "rig": example_rig(),
-                                "calibration": [calib]})
+    calib = {
+        "kind": "handle_gravity",
+        "id": "cal-1",
+        "force_bias_N": [0.0, 0.0, 0.0],
+        "connector_mass_kg": 0.0,
+        "connector_com_m": [0.0, 0.0, 0.0],
+        "torque_bias_Nm": [0.0, 0.0, 0.0],
+        "accel_bias_m_per_s2": [0.0, 0.0, 0.0],
+        "gravity_m_per_s2": float(-GRAVITY_W[2]),
+    }
+    w = SessionWriter(
+        manifest={
+            "session_id": "dyn-0001",
+            "date": "2026-11-22",
+            "lab": {"id": "lab"},
+            "examiner": {"id": "ex"},
+            "device": TOUCH_DEVICE,
+            "device_placement": IDENTITY,
+            "rig": example_rig(),
+            "calibration": [calib],
+        }
+    )
     centre = np.array([0.0, 0.0, 0.15])
     _add_trial(w, rng, "ld-1", "local_dynamic", 1, seconds=train_s, amplitude=0.03, centre=centre, freq=0.8)
     if tests:
@@ -116,7 +144,7 @@ def test_error_vs_distance_segments_and_line(results):
     for r in rows:
         by_set.setdefault(r["set"], []).append(r)
     assert len(by_set["training"]) == 4 and len(by_set["local_dynamic"]) == 2 and len(by_set["free_space"]) == 2
-    assert all(r["distance"] < 1e-6 for r in by_set["training"])            # every window matches itself
+    assert all(r["distance"] < 1e-6 for r in by_set["training"])  # every window matches itself
     assert max(r["distance"] for r in by_set["local_dynamic"]) < min(r["distance"] for r in by_set["free_space"])
     slope, intercept = line_fit(np.array([r["distance"] for r in rows]), np.array([r["force_error"] for r in rows]))
     assert evd.value == pytest.approx([slope, intercept])
@@ -149,8 +177,13 @@ def test_an_occlusion_splits_runs_and_drops_its_segment(tmp_path, results):
 def test_short_training_trial_is_unavailable_not_nan(tmp_path):
     ctx = ComputeContext(session=open_session(build_session(tmp_path / "s", tests=False, train_s=8.0)))
     items = compute(ctx)
-    assert {i.id for i in items} == {"dynamics.force_rmse", "dynamics.force_rmse_mean", "dynamics.torque_rmse",
-                                     "dynamics.torque_rmse_mean", "dynamics.error_vs_distance"}
+    assert {i.id for i in items} == {
+        "dynamics.force_rmse",
+        "dynamics.force_rmse_mean",
+        "dynamics.torque_rmse",
+        "dynamics.torque_rmse_mean",
+        "dynamics.error_vs_distance",
+    }
     assert all(i.code == "E701" for i in items)
 
 
@@ -179,14 +212,14 @@ def test_fit_and_predict_commands(session_path, tmp_path):
     assert mat_path.stat().st_size > 0
     model = load_model(model_path)
     assert model.fit.trial_id == "ld-1" and [c.name for c in model.inputs][:4] == ["qw", "qx", "qy", "qz"]
-    with pytest.raises(HaptifyError) as err:                     # no silent overwrite
+    with pytest.raises(HaptifyError) as err:  # no silent overwrite
         _haptify(fit_cmd)
     assert err.value.code == "E901"
     assert _haptify(["dynamics", "predict", str(model_path), str(session_path), "--trial", "ld-2", "-o", str(pred_path)]) == 0
     table = pd.read_parquet(pred_path)
     assert list(table.columns[:7]) == ["t", "fx", "fy", "fz", "tx", "ty", "tz"]
     data = trial_data(open_session(session_path), "ld-2")
-    expected = predict(model, data.u[data.valid])               # one valid run: the whole trial
+    expected = predict(model, data.u[data.valid])  # one valid run: the whole trial
     assert np.allclose(table[["fx", "fy", "fz", "tx", "ty", "tz"]].to_numpy()[data.valid], expected, atol=1e-12)
     assert json.loads(model_path.read_text())["format"] == "haptify-hw-model"
     with pytest.raises(HaptifyError) as err:

@@ -77,8 +77,9 @@ def test_raw_bundle_is_verified_and_a_replay_is_idempotent(base, tmp_path):
         assert detail["state"] == "current" and detail["has_raw"] and detail["lab"] == "lab-a"
         folder = app.state.registry.session_folder(body["id"])  # for report figures and the viewer
         assert (folder / "session.json").read_bytes() == (session / "session.json").read_bytes()
-        assert sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*.parquet")) == \
-            sorted(p.relative_to(session).as_posix() for p in session.rglob("*.parquet"))
+        assert sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*.parquet")) == sorted(
+            p.relative_to(session).as_posix() for p in session.rglob("*.parquet")
+        )
 
 
 def disagreeing_bundle(base, tmp_path) -> Path:
@@ -156,8 +157,11 @@ def test_refusals_are_coded(registry, base, tmp_path):
     r = client.post(f"{API}/submissions", content=b"garbage", headers=auth(tokens["a"]))
     assert r.status_code == 422 and codes(r) == ["E961"]
     assert codes(client.get(f"{API}/devices/no-such-device")) == ["E973"]
-    r = client.post(f"{API}/submissions/abc/withdraw", content=b'{"reason": ', headers={"Authorization": f"Bearer {tokens['a']}",
-                                                                                      "Content-Type": "application/json"})
+    r = client.post(
+        f"{API}/submissions/abc/withdraw",
+        content=b'{"reason": ',
+        headers={"Authorization": f"Bearer {tokens['a']}", "Content-Type": "application/json"},
+    )
     assert r.status_code == 400 and codes(r) == ["E975"]  # malformed JSON body
     # nothing was stored by any refusal
     assert client.get(f"{API}/submissions").json() == []
@@ -200,14 +204,24 @@ def test_supersede_and_withdraw_keep_every_record(registry, base, tmp_path):
     r = post(client, bundle_for(s3, r3, report, tmp_path / "3.tar.gz", supersedes=first)[0], tokens["a"])
     assert r.status_code == 409 and codes(r) == ["E974"]
     # withdrawal: reason required, own lab only (admin any), once
-    assert codes(client.post(f"{API}/submissions/{second}/withdraw", json={"reason": ""},
-                             headers={"Authorization": f"Bearer {tokens['a']}"})) == ["E975"]
-    r = client.post(f"{API}/submissions/{second}/withdraw", json={"reason": "wrong rig"}, headers={"Authorization": f"Bearer {tokens['b']}"})
+    assert codes(
+        client.post(
+            f"{API}/submissions/{second}/withdraw", json={"reason": ""}, headers={"Authorization": f"Bearer {tokens['a']}"}
+        )
+    ) == ["E975"]
+    r = client.post(
+        f"{API}/submissions/{second}/withdraw", json={"reason": "wrong rig"}, headers={"Authorization": f"Bearer {tokens['b']}"}
+    )
     assert r.status_code == 403 and codes(r) == ["E971"]
-    r = client.post(f"{API}/submissions/{second}/withdraw", json={"reason": "sensor cable loose"},
-                    headers={"Authorization": f"Bearer {tokens['a']}"})
+    r = client.post(
+        f"{API}/submissions/{second}/withdraw",
+        json={"reason": "sensor cable loose"},
+        headers={"Authorization": f"Bearer {tokens['a']}"},
+    )
     assert r.status_code == 200 and r.json()["state"] == "withdrawn" and r.json()["withdrawal"]["reason"] == "sensor cable loose"
-    r = client.post(f"{API}/submissions/{second}/withdraw", json={"reason": "again"}, headers={"Authorization": f"Bearer {tokens['admin']}"})
+    r = client.post(
+        f"{API}/submissions/{second}/withdraw", json={"reason": "again"}, headers={"Authorization": f"Bearer {tokens['admin']}"}
+    )
     assert r.status_code == 409 and codes(r) == ["E974"]
     states = {s["id"]: s["state"] for s in client.get(f"{API}/submissions").json()}
     assert states == {first: "superseded", second: "withdrawn"}
@@ -219,8 +233,12 @@ def test_records_are_append_only_in_the_database(registry, base, tmp_path):
     s1, r1 = variant(base, tmp_path, "one")
     sid = post(client, bundle_for(s1, r1, base[3], tmp_path / "1.tar.gz")[0], tokens["a"]).json()["id"]
     engine = app.state.registry.engine
-    for statement in ("UPDATE submissions SET verification = 'verified'", "DELETE FROM submissions",
-                      "UPDATE metric_values SET value = 0", "DELETE FROM metric_values"):
+    for statement in (
+        "UPDATE submissions SET verification = 'verified'",
+        "DELETE FROM submissions",
+        "UPDATE metric_values SET value = 0",
+        "DELETE FROM metric_values",
+    ):
         with pytest.raises(Exception, match="append-only"):
             with engine.begin() as conn:
                 conn.execute(text(statement))
@@ -317,8 +335,9 @@ def test_the_disagreeing_state_is_converted_by_its_migration_both_ways(base, tmp
 
     def stored(sid: str) -> tuple[str, str]:
         with reg.engine.connect() as conn:
-            state, record = conn.execute(text("SELECT verification, verification_json FROM submissions WHERE id = :i"),
-                                         {"i": sid}).one()
+            state, record = conn.execute(
+                text("SELECT verification, verification_json FROM submissions WHERE id = :i"), {"i": sid}
+            ).one()
         return state, json.loads(record)["status"]
 
     try:

@@ -14,7 +14,15 @@ from hypothesis import strategies as st
 
 from _registry_fixtures import base, bundle_for, member, tar_gz  # noqa: F401  (base: fixture)
 from haptify.errors import HaptifyError
-from haptify_tools.registry.bundle import Bundle, Limits, _member_name_problem, bundle_digest, canonical_json, read_manifest, unpack
+from haptify_tools.registry.bundle import (
+    Bundle,
+    Limits,
+    _member_name_problem,
+    bundle_digest,
+    canonical_json,
+    read_manifest,
+    unpack,
+)
 from haptify_tools.registry.checks import agrees, check_bundle, tolerances
 
 
@@ -81,10 +89,17 @@ def test_size_limits(material, tmp_path):
     assert codes(e) == ["E960"]
 
 
-@pytest.mark.parametrize("name, why", [
-    ("../evil.txt", "climbs"), ("session/../../evil.txt", "climbs"), ("/etc/passwd", "absolute"),
-    ("C:/x.txt", "absolute"), ("a\\b.txt", "plain relative"), ("./bundle.json", "plain relative"),
-])
+@pytest.mark.parametrize(
+    "name, why",
+    [
+        ("../evil.txt", "climbs"),
+        ("session/../../evil.txt", "climbs"),
+        ("/etc/passwd", "absolute"),
+        ("C:/x.txt", "absolute"),
+        ("a\\b.txt", "plain relative"),
+        ("./bundle.json", "plain relative"),
+    ],
+)
 def test_unsafe_paths_are_refused(tmp_path, name, why):
     data = tar_gz([(member(name), b"x")])
     (tmp_path / "a.tar.gz").write_bytes(data)
@@ -94,11 +109,16 @@ def test_unsafe_paths_are_refused(tmp_path, name, why):
     assert not (tmp_path / "evil.txt").exists() and not (tmp_path.parent / "evil.txt").exists()
 
 
-@pytest.mark.parametrize("kind, linkname, word", [
-    (tarfile.SYMTYPE, "/etc/passwd", "symbolic link"), (tarfile.SYMTYPE, "results.json", "symbolic link"),
-    (tarfile.LNKTYPE, "results.json", "hard link"), (tarfile.CHRTYPE, "", "not a regular file"),
-    (tarfile.FIFOTYPE, "", "not a regular file"),
-])
+@pytest.mark.parametrize(
+    "kind, linkname, word",
+    [
+        (tarfile.SYMTYPE, "/etc/passwd", "symbolic link"),
+        (tarfile.SYMTYPE, "results.json", "symbolic link"),
+        (tarfile.LNKTYPE, "results.json", "hard link"),
+        (tarfile.CHRTYPE, "", "not a regular file"),
+        (tarfile.FIFOTYPE, "", "not a regular file"),
+    ],
+)
 def test_links_and_special_files_are_refused(tmp_path, kind, linkname, word):
     data = tar_gz([(member("results.json"), b"{}"), (member("session/x", kind, linkname), None)])
     (tmp_path / "a.tar.gz").write_bytes(data)
@@ -173,12 +193,21 @@ def _rewrite(archive: Path, target: Path, change) -> Path:
     return target
 
 
-@pytest.mark.parametrize("case, code", [
-    ("malformed-bundle-json", "E964"), ("schema-invalid-bundle-json", "E964"), ("missing-bundle-json", "E964"),
-    ("file-changed", "E965"), ("file-missing", "E965"), ("file-undeclared", "E965"),
-    ("malformed-results", "E966"), ("schema-invalid-results", "E966"), ("non-finite-results", "E966"),
-    ("malformed-conformance", "E966"),
-])
+@pytest.mark.parametrize(
+    "case, code",
+    [
+        ("malformed-bundle-json", "E964"),
+        ("schema-invalid-bundle-json", "E964"),
+        ("missing-bundle-json", "E964"),
+        ("file-changed", "E965"),
+        ("file-missing", "E965"),
+        ("file-undeclared", "E965"),
+        ("malformed-results", "E966"),
+        ("schema-invalid-results", "E966"),
+        ("non-finite-results", "E966"),
+        ("malformed-conformance", "E966"),
+    ],
+)
 def test_malformed_and_invalid_documents(material, tmp_path, case, code):
     root, session, results, report = material
     archive, _ = bundle_for(session, results, report, tmp_path / "a.tar.gz")
@@ -199,10 +228,15 @@ def test_malformed_and_invalid_documents(material, tmp_path, case, code):
                 return None
         if name == "bundle.json" and case.endswith("-results") or (case == "malformed-conformance" and name == "bundle.json"):
             target = "results.json" if case.endswith("-results") else "conformance.json"
-            new = {"malformed-results": b"{\"metrics\": [", "schema-invalid-results": json.dumps({**json.loads(results.read_text()), "session_id": 5}).encode(),
-                   "non-finite-results": results.read_text().replace("\"value\": 0.0", "\"value\": NaN", 1).replace(
-                       "\"n\": 1", "\"n\": Infinity", 1).encode(),
-                   "malformed-conformance": b"{]"}[case]
+            new = {
+                "malformed-results": b'{"metrics": [',
+                "schema-invalid-results": json.dumps({**json.loads(results.read_text()), "session_id": 5}).encode(),
+                "non-finite-results": results.read_text()
+                .replace('"value": 0.0', '"value": NaN', 1)
+                .replace('"n": 1', '"n": Infinity', 1)
+                .encode(),
+                "malformed-conformance": b"{]",
+            }[case]
             change.new = (target, new)
             import hashlib
 
@@ -257,8 +291,13 @@ def test_metric_records_must_match_their_definitions(material):
     data["metrics"][3]["definition_version"] = "0.9.0"
     data["metrics"].append(dict(data["metrics"][4]))
     found = {(f.pointer, str(f.found)) for f in metric_findings(ResultsFile.model_validate(data))}
-    assert found == {("/metrics/0/unit", "km/h"), ("/metrics/1/id", "vibration.loudness"), ("/metrics/2/value", "list of 2"),
-                     ("/metrics/3/definition_version", "0.9.0"), ("/metrics/5", data["metrics"][4]["id"])}
+    assert found == {
+        ("/metrics/0/unit", "km/h"),
+        ("/metrics/1/id", "vibration.loudness"),
+        ("/metrics/2/value", "list of 2"),
+        ("/metrics/3/definition_version", "0.9.0"),
+        ("/metrics/5", data["metrics"][4]["id"]),
+    }
 
 
 @settings(max_examples=300, deadline=None)
@@ -274,12 +313,15 @@ def test_an_accepted_member_name_never_leaves_the_bundle_folder(parts):
         assert resolved.startswith(root + "/") and "\\" not in name and "\x00" not in name
 
 
-@pytest.mark.parametrize("edit, code, pointer", [
-    (lambda d: d.update(spec_version="2.0"), "E968", "/spec_version"),
-    (lambda d: d.update(manifest_sha256="0" * 64), "E966", "/manifest_sha256"),
-    (lambda d: d["device"].update(model="Falcon"), "E966", "/device"),
-    (lambda d: d.update(metrics=[]), "E966", "/metrics"),
-])
+@pytest.mark.parametrize(
+    "edit, code, pointer",
+    [
+        (lambda d: d.update(spec_version="2.0"), "E968", "/spec_version"),
+        (lambda d: d.update(manifest_sha256="0" * 64), "E966", "/manifest_sha256"),
+        (lambda d: d["device"].update(model="Falcon"), "E966", "/device"),
+        (lambda d: d.update(metrics=[]), "E966", "/metrics"),
+    ],
+)
 def test_documents_must_agree(material, tmp_path, edit, code, pointer):
     root, session, results, report = material
     data = json.loads(results.read_text())

@@ -53,9 +53,15 @@ def test_the_reference_meets_the_known_answers_of_generated_challenges(tmp_path,
     """Every family the reference computes is challenged, one session each, and the reference passes."""
     cases = generate(seed, tmp_path, f"t{seed % 1000}")
     assert {c.family for c in cases} == set(FAMILIES) and all(c.session == c.family for c in cases)
-    assert {c.metric for c in cases} >= {"workspace.measured_volume", "free_space.force_mean", "vibration.rms",
-                                         "dynamics.force_rmse", "surface.planar_force_mean", "stiffness.measured",
-                                         "rig.sync_offset"}
+    assert {c.metric for c in cases} >= {
+        "workspace.measured_volume",
+        "free_space.force_mean",
+        "vibration.rms",
+        "dynamics.force_rmse",
+        "surface.planar_force_mean",
+        "stiffness.measured",
+        "rig.sync_offset",
+    }
     for c in cases:
         assert judge_answer(c, analyse(str(tmp_path / c.session), c.metric, c.parameters))["status"] == "passed", c
 
@@ -96,21 +102,32 @@ def test_answers_are_judged_once_and_a_replay_is_refused(registry, tmp_path):
     judged = client.post(f"{API}/challenges/{a['id']}/answers", json=body, headers=auth(tokens["lab-a"]))
     assert judged.status_code == 200 and judged.json()["state"] == "passed", judged.text
     cases = judged.json()["result"]["cases"]
-    assert all(c["status"] == "passed" and all(abs(a - e) <= c["tolerance"]["rel"] * abs(e) + c["tolerance"]["abs"]
-                                               for a, e in zip(np.atleast_1d(c["actual"]), np.atleast_1d(c["expected"])))
-               for c in cases)
+    assert all(
+        c["status"] == "passed"
+        and all(
+            abs(a - e) <= c["tolerance"]["rel"] * abs(e) + c["tolerance"]["abs"]
+            for a, e in zip(np.atleast_1d(c["actual"]), np.atleast_1d(c["expected"]))
+        )
+        for c in cases
+    )
     again = client.post(f"{API}/challenges/{a['id']}/answers", json=body, headers=auth(tokens["lab-a"]))
     assert again.status_code == 410 and again.json()["findings"][0]["code"] == "E979"
     b = client.post(f"{API}/challenges", headers=auth(tokens["lab-a"])).json()
     replay = client.post(f"{API}/challenges/{b['id']}/answers", json=body, headers=auth(tokens["lab-a"]))
     assert replay.status_code == 400 and replay.json()["findings"][0]["code"] == "E975"  # the cases of another challenge
-    renamed = {"implementation": body["implementation"],
-               "answers": {cb["id"]: answers[ca["id"]] for ca, cb in zip(a["cases"], b["cases"])}}
+    renamed = {
+        "implementation": body["implementation"],
+        "answers": {cb["id"]: answers[ca["id"]] for ca, cb in zip(a["cases"], b["cases"])},
+    }
     judged_b = client.post(f"{API}/challenges/{b['id']}/answers", json=renamed, headers=auth(tokens["lab-a"])).json()
     assert judged_b["state"] == "failed"  # the old values relabelled: new sessions, new answers
     assert client.get(f"{API}/challenges/{a['id']}/sessions.tar.gz").json()["findings"][0]["code"] == "E979"
-    for statement in ("UPDATE challenge_results SET passed = true", "DELETE FROM challenge_results",
-                      "UPDATE challenges SET expires_at = created_at", "DELETE FROM challenges"):
+    for statement in (
+        "UPDATE challenge_results SET passed = true",
+        "DELETE FROM challenge_results",
+        "UPDATE challenges SET expires_at = created_at",
+        "DELETE FROM challenges",
+    ):
         with pytest.raises(Exception, match="append-only"):  # a verdict cannot be rewritten
             with app.state.registry.engine.begin() as conn:
                 conn.execute(text(statement))
@@ -123,8 +140,11 @@ def test_a_challenge_expires(tmp_path):
         issued = client.post(f"{API}/challenges", headers=auth(token)).json()
         time.sleep(0.5)
         assert client.get(f"{API}/challenges/{issued['id']}").json()["state"] == "expired"
-        late = client.post(f"{API}/challenges/{issued['id']}/answers", headers=auth(token),
-                           json={"implementation": {"name": "x", "version": "1"}, "answers": {}})
+        late = client.post(
+            f"{API}/challenges/{issued['id']}/answers",
+            headers=auth(token),
+            json={"implementation": {"name": "x", "version": "1"}, "answers": {}},
+        )
         assert late.status_code == 410 and "expired" in late.json()["findings"][0]["message"]
     app.state.registry.close()
 
@@ -141,11 +161,15 @@ def test_the_reference_passes_and_a_wrong_implementation_fails_through_haptify_c
     archive, _ = bundle_for(session, results, report, tmp_path / "b.tar.gz")
     try:
         with serve_in_thread(app) as url, TestClient(app) as client:
-            sub = client.post(f"{API}/submissions", content=archive.read_bytes(),
-                              headers={**auth(token), "Content-Type": "application/gzip"}).json()
+            sub = client.post(
+                f"{API}/submissions", content=archive.read_bytes(), headers={**auth(token), "Content-Type": "application/gzip"}
+            ).json()
             # the uploaded report (hand-made by the fixtures, as a forger would) proves nothing
             assert client.get(f"{API}/submissions/{sub['id']}").json()["conformance"] == {
-                "status": "self-asserted", "challenge": None, "families": []}
+                "status": "self-asserted",
+                "challenge": None,
+                "families": [],
+            }
             assert run_cli(url, token, "--python", "_challenge_impls:off_by_one_percent", report=tmp_path / "w.json") == 1
             wrong = json.loads((tmp_path / "w.json").read_text())
             failed = [c for c in wrong["result"]["cases"] if c["status"] == "failed"]
@@ -153,18 +177,29 @@ def test_the_reference_passes_and_a_wrong_implementation_fails_through_haptify_c
             assert run_cli(url, token, "--python", "_challenge_impls:stiffness_ten_percent", report=tmp_path / "s.json") == 1
             stiff = json.loads((tmp_path / "s.json").read_text())
             assert stiff["state"] == "failed" and {c["metric"] for c in stiff["result"]["cases"] if c["status"] == "failed"} == {
-                "stiffness.measured", "stiffness.accuracy"}
+                "stiffness.measured",
+                "stiffness.accuracy",
+            }
             assert client.get(f"{API}/submissions/{sub['id']}").json()["conformance"]["status"] == "self-asserted"
             assert run_cli(url, token, "--python", "haptify.conform_adapter:analyse", report=tmp_path / "r.json") == 0
             passed = json.loads((tmp_path / "r.json").read_text())
             assert passed["state"] == "passed" and passed["result"]["implementation"] == impl
             assert client.get(f"{API}/submissions/{sub['id']}").json()["conformance"] == {
-                "status": "proven", "challenge": passed["id"], "families": list(FAMILIES)}
+                "status": "proven",
+                "challenge": passed["id"],
+                "families": list(FAMILIES),
+            }
             listed = {(i["name"], i["version"]): i for i in client.get(f"{API}/implementations").json()}
             assert listed[(impl["name"], impl["version"])]["latest_passed"] == passed["id"]
             assert listed[(impl["name"], impl["version"])]["families"] == list(FAMILIES)
-            assert listed[("off-by-one-percent", "0.1")] == {"name": "off-by-one-percent", "version": "0.1", "passed": 0,
-                                                              "failed": 1, "latest_passed": None, "families": []}
+            assert listed[("off-by-one-percent", "0.1")] == {
+                "name": "off-by-one-percent",
+                "version": "0.1",
+                "passed": 0,
+                "failed": 1,
+                "latest_passed": None,
+                "families": [],
+            }
             slug = client.get(f"{API}/submissions/{sub['id']}").json()["device"]["slug"]
             device = client.get(f"/devices/{slug}").text
             assert f'/challenges/{passed["id"]}">proven by challenge</a> <span class="families">({", ".join(FAMILIES)})' in device
@@ -176,7 +211,7 @@ def test_the_reference_passes_and_a_wrong_implementation_fails_through_haptify_c
                 assert set(rows.locator("td.mark").all_inner_texts()) == {"passed"}
                 assert page.locator("#challenge-state").inner_text() == "passed"
                 page.goto(f"{url}/challenges/{wrong['id']}")
-                bad = page.locator('#challenge-cases tbody tr.status-failed td:nth-child(2)').all_inner_texts()
+                bad = page.locator("#challenge-cases tbody tr.status-failed td:nth-child(2)").all_inner_texts()
                 assert bad and set(bad) == {"vibration.rms"}
             out = capsys.readouterr().out
             assert "FAILED" in out and "PASSED" in out

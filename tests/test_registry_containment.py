@@ -52,17 +52,22 @@ SPARSE_SIZE = 3_000_000_010  # what the archive claims the member expands to
 def sparse_archive() -> bytes:
     """A 0.2 KB archive whose one member is a PAX sparse file of 3 GB: 10 data bytes after a 3 GB hole."""
     info = member("session/big.csv")
-    info.pax_headers = {"GNU.sparse.map": f"{SPARSE_SIZE - 10},10", "GNU.sparse.size": str(SPARSE_SIZE),
-                        "GNU.sparse.numblocks": "1"}
+    info.pax_headers = {
+        "GNU.sparse.map": f"{SPARSE_SIZE - 10},10",
+        "GNU.sparse.size": str(SPARSE_SIZE),
+        "GNU.sparse.numblocks": "1",
+    }
     return tar_gz([(info, b"0123456789")])
 
 
 def post(client, data: bytes, token: str):
-    return client.post("/api/v1/submissions", content=data,
-                       headers={"Authorization": f"Bearer {token}", "Content-Type": "application/gzip"})
+    return client.post(
+        "/api/v1/submissions", content=data, headers={"Authorization": f"Bearer {token}", "Content-Type": "application/gzip"}
+    )
 
 
 # --- sparse members ------------------------------------------------------------------------------
+
 
 def test_a_sparse_member_is_refused_before_anything_is_written(tmp_path):
     archive = tmp_path / "sparse.tar.gz"
@@ -87,11 +92,14 @@ def test_the_worker_returns_the_value_and_passes_coded_refusals_through():
     assert (f.code, f.message, f.file, f.expected, f.found) == ("E962", "a coded refusal from the worker", "x", "y", "z")
 
 
-@pytest.mark.parametrize("fn, args, found", [
-    (jobs.allocate, (4 << 30,), "MemoryError"),  # 4 GiB in one array, over the worker's 1.5 GiB address space
-    (jobs.sleep, (30.0,), "time limit"),
-    (jobs.kill_self, (), "SIGKILL"),
-])
+@pytest.mark.parametrize(
+    "fn, args, found",
+    [
+        (jobs.allocate, (4 << 30,), "MemoryError"),  # 4 GiB in one array, over the worker's 1.5 GiB address space
+        (jobs.sleep, (30.0,), "time limit"),
+        (jobs.kill_self, (), "SIGKILL"),
+    ],
+)
 def test_a_worker_over_its_limits_fails_alone_with_E976(fn, args, found):
     t0 = time.monotonic()
     with pytest.raises(HaptifyError) as err:
@@ -101,13 +109,16 @@ def test_a_worker_over_its_limits_fails_alone_with_E976(fn, args, found):
     assert run_contained(jobs.allocate, 8 * 10, limits=WORKER) == 10.0  # the next job runs as before
 
 
-@pytest.mark.parametrize("limits, codes, says", [
-    # No time at all: the worker cannot even unpack, and is killed.
-    (Limits(worker_seconds=0.001), ["E976"], "took longer than"),
-    # An address space below what the worker already maps: the first new mapping (Arrow's, reading the
-    # streams) fails, and the validator reports the stream as too large to check (E112, spec §4.6).
-    (Limits(worker_memory_bytes=1 << 20), ["E966", "E112"], "MemoryError"),
-])
+@pytest.mark.parametrize(
+    "limits, codes, says",
+    [
+        # No time at all: the worker cannot even unpack, and is killed.
+        (Limits(worker_seconds=0.001), ["E976"], "took longer than"),
+        # An address space below what the worker already maps: the first new mapping (Arrow's, reading the
+        # streams) fails, and the validator reports the stream as too large to check (E112, spec §4.6).
+        (Limits(worker_memory_bytes=1 << 20), ["E966", "E112"], "MemoryError"),
+    ],
+)
 def test_a_bundle_the_worker_cannot_check_within_its_limits_fails_alone(base, tmp_path, limits, codes, says, caplog):
     import logging
 
@@ -119,7 +130,7 @@ def test_a_bundle_the_worker_cannot_check_within_its_limits_fails_alone(base, tm
         r = post(client, archive.read_bytes(), token)
         assert any("POST /api/v1/submissions" in m.getMessage() and codes[0] in m.getMessage() for m in caplog.records)
         found = [f["code"] for f in r.json()["findings"]]
-        assert r.status_code == 422 and found[:len(codes)] == codes and says in json.dumps(r.json()), r.json()
+        assert r.status_code == 422 and found[: len(codes)] == codes and says in json.dumps(r.json()), r.json()
         assert client.get("/api/v1/health").status_code == 200
         assert client.get("/api/v1/submissions").json() == []
         assert list((tmp_path / "data" / "tmp").iterdir()) == []
@@ -211,6 +222,7 @@ def test_the_sparse_and_the_nul_csv_bundles_are_refused_while_the_server_stays_s
 
 # --- CSV formula neutralisation -----------------------------------------------------------------------
 
+
 @given(st.text(max_size=40))
 def test_no_csv_cell_starts_a_formula_unless_it_is_a_number(text):
     cell = csv_cell(text)
@@ -227,7 +239,7 @@ def test_numbers_stay_numbers(number):
 
 
 def test_export_and_compare_csv_carry_no_formula(base, tmp_path):
-    evil = "=HYPERLINK(\"http://x\",\"y\")"
+    evil = '=HYPERLINK("http://x","y")'
     session, results = variant(base, tmp_path, "evil", model=evil)
     archive, _ = bundle_for(session, results, base[3], tmp_path / "evil.tar.gz")
     app = create_app(Settings(data_dir=tmp_path / "data"))
@@ -247,15 +259,22 @@ def test_a_comparison_table_is_neutralised_cell_by_cell():
     assert neutralised(table) == Table(["Metric", "'@SUM(A1)"], [["'+cmd|' /C calc'!A0", "-1.5", "'-1.5 ± 0.2"]], [])
 
 
-
-
 # --- headers and file modes -------------------------------------------------------------------------
+
 
 def test_every_response_carries_the_security_headers(base, tmp_path):
     app = create_app(Settings(data_dir=tmp_path / "data"))
     with TestClient(app) as client:
-        for path in ["/", "/api/v1/health", "/api/v1/devices", "/api/v1/submissions/nothere", "/no/such/page",
-                     "/openapi.json", "/docs", "/api/v1/export.csv"]:
+        for path in [
+            "/",
+            "/api/v1/health",
+            "/api/v1/devices",
+            "/api/v1/submissions/nothere",
+            "/no/such/page",
+            "/openapi.json",
+            "/docs",
+            "/api/v1/export.csv",
+        ]:
             h = client.get(path).headers
             csp = h["content-security-policy"]
             assert "frame-ancestors 'none'" in csp and "default-src 'none'" in csp, path
@@ -282,9 +301,13 @@ def test_error_responses_and_a_forced_500_carry_the_security_headers(tmp_path, m
 
     monkeypatch.setattr(app.state.registry, "labs", broken)
     with TestClient(app, raise_server_exceptions=False) as client, caplog.at_level(logging.WARNING, logger="haptify.registry"):
-        for method, path, status in [("POST", "/api/v1/submissions", 401), ("GET", "/no/such/page", 404),
-                                     ("DELETE", "/api/v1/health", 405), ("GET", "/api/v1/submissions?limit=0", 400),
-                                     ("GET", "/api/v1/submissions/nothere", 404)]:
+        for method, path, status in [
+            ("POST", "/api/v1/submissions", 401),
+            ("GET", "/no/such/page", 404),
+            ("DELETE", "/api/v1/health", 405),
+            ("GET", "/api/v1/submissions?limit=0", 400),
+            ("GET", "/api/v1/submissions/nothere", 404),
+        ]:
             r = client.request(method, path)
             assert r.status_code == status, (path, r.status_code)
             assert_secured(r)
@@ -310,7 +333,6 @@ def test_the_database_and_the_archives_are_the_service_users_only(base, tmp_path
             assert stat.S_IMODE(p.stat().st_mode) == 0o600, p
         for d in [data, data / "bundles", stored.parent, data / "tmp"]:
             assert stat.S_IMODE(d.stat().st_mode) == 0o700, d
-
 
 
 def test_every_refusal_is_logged_with_its_code(tmp_path, caplog):

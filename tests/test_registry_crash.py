@@ -21,6 +21,7 @@ from haptify.errors import HaptifyError
 from haptify_tools.registry import cmd_registry, cmd_submit
 from haptify_tools.registry.service import Registry, Settings
 
+
 def _parse(argv: list[str]):
     import argparse
 
@@ -136,20 +137,35 @@ def test_submit_and_registry_commands_end_to_end(base, tmp_path, capsys):
     proc, port = start(data)
     try:
         url = f"http://127.0.0.1:{port}"
-        args = _parse(["submit", str(session), "--results", str(results), "--conformance", str(report), "--registry", url,
-                       "--token", token, "--dry-run"])
+        args = _parse(
+            [
+                "submit",
+                str(session),
+                "--results",
+                str(results),
+                "--conformance",
+                str(report),
+                "--registry",
+                url,
+                "--token",
+                token,
+                "--dry-run",
+            ]
+        )
         assert args.func(args, UI()) == 0
         assert "the registry says:" in capsys.readouterr().out
-        args = _parse(["submit", str(session), "--results", str(results), "--conformance", str(report), "--registry", url,
-                       "--token", token])
+        args = _parse(
+            ["submit", str(session), "--results", str(results), "--conformance", str(report), "--registry", url, "--token", token]
+        )
         assert args.func(args, UI()) == 0
         out = capsys.readouterr().out
         assert out.startswith("accepted: submission ")
         args = _parse(["submit", str(session), "--results", str(results), "--registry", url, "--token", "hpt_wrong"])
         assert args.func(args, UI()) == 1  # refused: the findings go to stderr
         assert "E970" in capsys.readouterr().err
-        args = _parse(["submit", str(session), "--results", str(results), "--registry", f"http://127.0.0.1:{free_port()}",
-                       "--token", token])
+        args = _parse(
+            ["submit", str(session), "--results", str(results), "--registry", f"http://127.0.0.1:{free_port()}", "--token", token]
+        )
         with pytest.raises(HaptifyError) as e:  # nobody listens there: a wrong URL, not "retry later" (exit 2)
             args.func(args, UI())
         assert e.value.findings[0].code == "E903" and "check the URL" in e.value.findings[0].message
@@ -158,12 +174,15 @@ def test_submit_and_registry_commands_end_to_end(base, tmp_path, capsys):
         proc.wait()
 
 
-@pytest.mark.parametrize("registry, reason, code", [
-    ("http://regsitry.example.org", socket.gaierror(-2, "Name or service not known"), "E903"),  # a typo in the host
-    ("registry.example.org", OSError("unknown url type"), "E903"),                             # no scheme: no host
-    ("http://127.0.0.1:9", ConnectionRefusedError(111, "Connection refused"), "E903"),          # nothing listens
-    ("http://registry.example.org", TimeoutError("timed out"), "E978"),                          # may pass: retry
-])
+@pytest.mark.parametrize(
+    "registry, reason, code",
+    [
+        ("http://regsitry.example.org", socket.gaierror(-2, "Name or service not known"), "E903"),  # a typo in the host
+        ("registry.example.org", OSError("unknown url type"), "E903"),  # no scheme: no host
+        ("http://127.0.0.1:9", ConnectionRefusedError(111, "Connection refused"), "E903"),  # nothing listens
+        ("http://registry.example.org", TimeoutError("timed out"), "E978"),  # may pass: retry
+    ],
+)
 def test_an_unreachable_registry_says_whether_to_check_the_url_or_retry(registry, reason, code):
     from haptify_tools.registry.cmd_submit import unreachable
 

@@ -27,9 +27,26 @@ P = 0.95
 def type_a(u: float, dof: float | None) -> dict:
     """An uncertainty record of repeatability only (spec §19.4) with standard uncertainty ``u``."""
     k = float(stats.norm.ppf(0.5 + P / 2) if dof is None else stats.t.ppf(0.5 + P / 2, dof))
-    return {"method": "type_a", "u": u, "U": k * u, "k": k, "coverage_probability": P, "dof_eff": dof,
-            "budget": [{"source": "repeatability", "type": "A", "distribution": "t", "u_input": u, "unit": "m/s^2",
-                        "sensitivity": 1.0, "contribution": u, "dof": dof}]}
+    return {
+        "method": "type_a",
+        "u": u,
+        "U": k * u,
+        "k": k,
+        "coverage_probability": P,
+        "dof_eff": dof,
+        "budget": [
+            {
+                "source": "repeatability",
+                "type": "A",
+                "distribution": "t",
+                "u_input": u,
+                "unit": "m/s^2",
+                "sensitivity": 1.0,
+                "contribution": u,
+                "dof": dof,
+            }
+        ],
+    }
 
 
 class Lab:
@@ -41,8 +58,16 @@ class Lab:
         self.client = TestClient(self.app)
         self.tokens: dict[str, str] = {}
 
-    def submit(self, name: str, lab: str, values: list[float], *, model: str | None = None, u: float | None = None,
-               dof: float | None = None) -> None:
+    def submit(
+        self,
+        name: str,
+        lab: str,
+        values: list[float],
+        *,
+        model: str | None = None,
+        u: float | None = None,
+        dof: float | None = None,
+    ) -> None:
         session, results = variant(self.base, self.tmp, name, lab=lab, model=model, rms=values)
         if u is not None:
             data = json.loads(results.read_text())
@@ -51,8 +76,11 @@ class Lab:
         if lab not in self.tokens:
             self.tokens[lab] = self.app.state.registry.create_token(lab)
         archive = bundle_for(session, results, self.base[3], self.tmp / f"{name}.tar.gz")[0]
-        r = self.client.post(f"{API}/submissions", content=archive.read_bytes(),
-                             headers={"Authorization": f"Bearer {self.tokens[lab]}", "Content-Type": "application/gzip"})
+        r = self.client.post(
+            f"{API}/submissions",
+            content=archive.read_bytes(),
+            headers={"Authorization": f"Bearer {self.tokens[lab]}", "Content-Type": "application/gzip"},
+        )
         assert r.status_code == 201, r.text
 
 
@@ -127,8 +155,10 @@ def test_leaderboard_ties_follow_the_significance_threshold(base, tmp_path):
 
 def row(model: str, mean: float, u: float | None) -> dict:
     record = None if u is None else {"u": u, "U": 1.96 * u, "k": 1.96, "coverage_probability": P, "dof_eff": None}
-    return {"device": {"slug": model.lower(), "manufacturer": "M", "model": model},
-            "metrics": [{"metric": METRIC, "mean": mean, "unit": "m/s^2", "uncertainty": record}]}
+    return {
+        "device": {"slug": model.lower(), "manufacturer": "M", "model": model},
+        "metrics": [{"metric": METRIC, "mean": mean, "unit": "m/s^2", "uncertainty": record}],
+    }
 
 
 @settings(max_examples=60, deadline=None)
@@ -142,12 +172,25 @@ def test_two_devices_tie_exactly_below_the_threshold(u1, u2, fraction):
 
 def test_target_metric_ties_on_the_distance_to_the_target():
     """stiffness.accuracy (closest to 100 % is better): 97 and 103 are equally good, so tied however small u."""
-    devices = [{"device": {"slug": s, "manufacturer": "M", "model": s}, "metrics": [
-        {"metric": "stiffness.accuracy", "mean": x, "unit": "%", "uncertainty": {"u": 0.1, "U": 0.196, "k": 1.96,
-                                                                                  "coverage_probability": P, "dof_eff": None}}]}
-               for s, x in (("lo", 97.0), ("hi", 103.0), ("far", 110.0))]
+    devices = [
+        {
+            "device": {"slug": s, "manufacturer": "M", "model": s},
+            "metrics": [
+                {
+                    "metric": "stiffness.accuracy",
+                    "mean": x,
+                    "unit": "%",
+                    "uncertainty": {"u": 0.1, "U": 0.196, "k": 1.96, "coverage_probability": P, "dof_eff": None},
+                }
+            ],
+        }
+        for s, x in (("lo", 97.0), ("hi", 103.0), ("far", 110.0))
+    ]
     assert [(r.device["slug"], r.tie_group) for r in leaderboard("stiffness.accuracy", devices)] == [
-        ("hi", 1), ("lo", 1), ("far", 2)]
+        ("hi", 1),
+        ("lo", 1),
+        ("far", 2),
+    ]
 
 
 def test_pooled_uncertainty_of_a_mean_by_hand():
@@ -159,7 +202,7 @@ def test_pooled_uncertainty_of_a_mean_by_hand():
     rec = lambda u, dof: {"u": u, "dof_eff": dof, "coverage_probability": P}  # noqa: E731
     got = pooled_uncertainty([(2, rec(0.04, 4.0)), (6, rec(0.02, 10.0))])
     u = math.hypot(0.01, 0.015)
-    nu = u ** 4 / (0.01 ** 4 / 4 + 0.015 ** 4 / 10)
+    nu = u**4 / (0.01**4 / 4 + 0.015**4 / 10)
     assert got["u"] == pytest.approx(u) and got["dof_eff"] == pytest.approx(nu)
     assert got["k"] == pytest.approx(stats.t.ppf(0.975, nu)) and got["U"] == pytest.approx(got["k"] * u)
     assert pooled_uncertainty([(2, rec(0.04, 4.0)), (6, None)]) is None

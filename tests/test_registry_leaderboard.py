@@ -10,14 +10,19 @@ from haptify_tools.registry.leaderboard import leaderboard, rankings, rule_text
 
 def device(model: str, **means: float | list[float]) -> dict:
     """A ``Registry.device_results`` answer with the given metric means (ids with '_' for '.')."""
-    return {"device": {"slug": model.lower(), "manufacturer": "Maker", "model": model},
-            "metrics": [{"metric": k.replace("__", "."), "mean": v, "unit": "u"} for k, v in means.items()]}
+    return {
+        "device": {"slug": model.lower(), "manufacturer": "Maker", "model": model},
+        "metrics": [{"metric": k.replace("__", "."), "mean": v, "unit": "u"} for k, v in means.items()],
+    }
 
 
-DEVICES = [device("A", vibration__rms=0.05, workspace__measured_volume=0.010, stiffness__accuracy=90.0, free_space__speed_mean=0.2),
-           device("B", vibration__rms=0.03, workspace__measured_volume=0.012, stiffness__accuracy=104.0, free_space__speed_mean=0.1),
-           device("C", vibration__rms=0.05, workspace__measured_volume=0.011, stiffness__accuracy=97.0,
-                  dynamics__force_rmse=[0.1, 0.2, 0.3])]
+DEVICES = [
+    device("A", vibration__rms=0.05, workspace__measured_volume=0.010, stiffness__accuracy=90.0, free_space__speed_mean=0.2),
+    device("B", vibration__rms=0.03, workspace__measured_volume=0.012, stiffness__accuracy=104.0, free_space__speed_mean=0.1),
+    device(
+        "C", vibration__rms=0.05, workspace__measured_volume=0.011, stiffness__accuracy=97.0, dynamics__force_rmse=[0.1, 0.2, 0.3]
+    ),
+]
 
 
 def order(metric: str) -> list[tuple[int | None, str]]:
@@ -77,13 +82,23 @@ def test_a_vector_metric_with_one_repetition_compares_without_an_sd():
     from haptify.results import DeviceSummary, Implementation, MetricResult, ResultsFile
     from haptify_tools.registry.service import aggregate, defined_sd
 
-    row = SimpleNamespace(per_repetition_json="[]", value_json="[0.1, 0.2, 0.3]", unit="N",
-                          definition_version="1.0.0")
+    row = SimpleNamespace(per_repetition_json="[]", value_json="[0.1, 0.2, 0.3]", unit="N", definition_version="1.0.0")
     agg = aggregate("dynamics.error_vs_distance", [({"lab": "lab-a"}, row)])
     assert agg["mean"] == [0.1, 0.2, 0.3] and agg["sd"] == [None, None, None]
-    metric = MetricResult(id=agg["metric"], value=agg["mean"], unit=agg["unit"], n=agg["repetitions"],
-                          sd=defined_sd(agg["sd"]), definition_version=agg["definition_version"])
+    metric = MetricResult(
+        id=agg["metric"],
+        value=agg["mean"],
+        unit=agg["unit"],
+        n=agg["repetitions"],
+        sd=defined_sd(agg["sd"]),
+        definition_version=agg["definition_version"],
+    )
     assert metric.sd is None and defined_sd([0.5, 0.25]) == [0.5, 0.25] and defined_sd(0.5) == 0.5
-    results = ResultsFile(implementation=Implementation(name="r", version="0"), session_id="s",
-                          device=DeviceSummary(manufacturer="Acme", model="A"), manifest_sha256="0" * 64, metrics=[metric])
+    results = ResultsFile(
+        implementation=Implementation(name="r", version="0"),
+        session_id="s",
+        device=DeviceSummary(manufacturer="Acme", model="A"),
+        manifest_sha256="0" * 64,
+        metrics=[metric],
+    )
     assert build_table([results]).header == ["Metric", "Acme A"]

@@ -31,12 +31,24 @@ def test_the_limits_are_advertised(tmp_path):
 
 def test_an_over_limit_bundle_is_refused_before_sending(base, tmp_path, capsys, caplog):
     root, session, results, report, impl = base
-    app = create_app(Settings(data_dir=tmp_path / "data", limits=Limits(max_archive_bytes=16 << 10)))  # raw: 34 KiB, without: 5 KiB
+    app = create_app(
+        Settings(data_dir=tmp_path / "data", limits=Limits(max_archive_bytes=16 << 10))
+    )  # raw: 34 KiB, without: 5 KiB
     token = app.state.registry.create_token("lab-a")
     try:
         with serve_in_thread(app) as url, caplog.at_level(logging.WARNING, logger="haptify.registry"):
-            argv = ["submit", str(session), "--results", str(results), "--conformance", str(report),
-                    "--registry", url, "--token", token]
+            argv = [
+                "submit",
+                str(session),
+                "--results",
+                str(results),
+                "--conformance",
+                str(report),
+                "--registry",
+                url,
+                "--token",
+                token,
+            ]
             args = _parse(argv + ["--include-raw"])
             assert args.func(args, UI()) == 1
             err = capsys.readouterr().err
@@ -51,12 +63,15 @@ def test_an_over_limit_bundle_is_refused_before_sending(base, tmp_path, capsys, 
 
 # --- resumable chunked upload (spec §17.5.2) ------------------------------------------------------------
 
+
 def _raw_patch_cut_short(url: str, uid: str, token: str, offset: int, declared: int, data: bytes) -> None:
     """A PATCH whose connection drops after ``data``: Content-Length says ``declared`` bytes, fewer come."""
     host, port = url.removeprefix("http://").split(":")
-    head = (f"PATCH /api/v1/uploads/{uid} HTTP/1.1\r\nHost: {host}\r\nAuthorization: Bearer {token}\r\n"
-            f"Upload-Offset: {offset}\r\nContent-Type: application/offset+octet-stream\r\n"
-            f"Content-Length: {declared}\r\nConnection: close\r\n\r\n").encode()
+    head = (
+        f"PATCH /api/v1/uploads/{uid} HTTP/1.1\r\nHost: {host}\r\nAuthorization: Bearer {token}\r\n"
+        f"Upload-Offset: {offset}\r\nContent-Type: application/offset+octet-stream\r\n"
+        f"Content-Length: {declared}\r\nConnection: close\r\n\r\n"
+    ).encode()
     with socket.create_connection((host, int(port)), timeout=10) as sock:
         sock.sendall(head + data)
         time.sleep(0.5)  # the server reads what arrived (bytes still in its buffer at the drop are lost to it)
@@ -72,7 +87,10 @@ def test_an_upload_cut_short_keeps_what_arrived_and_resumes(base, tmp_path):
     h = {"Authorization": f"Bearer {token}"}
     try:
         with serve_in_thread(app) as url, TestClient(app) as client:
-            assert client.post("/api/v1/uploads", headers={**h, "Upload-Length": str(2 << 20)}).json()["findings"][0]["code"] == "E960"
+            assert (
+                client.post("/api/v1/uploads", headers={**h, "Upload-Length": str(2 << 20)}).json()["findings"][0]["code"]
+                == "E960"
+            )
             up = client.post("/api/v1/uploads", headers={**h, "Upload-Length": str(len(data))}).json()
             assert up["offset"] == 0 and up["length"] == len(data)
             first = client.patch(f"/api/v1/uploads/{up['id']}", content=data[:10_000], headers={**h, "Upload-Offset": "0"})
@@ -109,8 +127,12 @@ def test_an_upload_survives_a_restart_of_the_registry(base, tmp_path):
     try:
         with TestClient(first) as client:
             up = client.post("/api/v1/uploads", headers={**h, "Upload-Length": str(len(data))}).json()
-            assert client.patch(f"/api/v1/uploads/{up['id']}", content=data[:12_345],
-                                headers={**h, "Upload-Offset": "0"}).json()["offset"] == 12_345
+            assert (
+                client.patch(f"/api/v1/uploads/{up['id']}", content=data[:12_345], headers={**h, "Upload-Offset": "0"}).json()[
+                    "offset"
+                ]
+                == 12_345
+            )
     finally:
         first.state.registry.close()
     part = tmp_path / "data" / "uploads" / f"{up['id']}.part"
@@ -144,7 +166,10 @@ def test_stale_uploads_expire_and_are_deleted(tmp_path):
         with TestClient(app) as client:
             assert client.get("/api/v1/limits").json()["upload_ttl_s"] == 0.5
             a = client.post("/api/v1/uploads", headers={**h, "Upload-Length": "100"}).json()
-            assert client.patch(f"/api/v1/uploads/{a['id']}", content=b"x" * 10, headers={**h, "Upload-Offset": "0"}).status_code == 200
+            assert (
+                client.patch(f"/api/v1/uploads/{a['id']}", content=b"x" * 10, headers={**h, "Upload-Offset": "0"}).status_code
+                == 200
+            )
             time.sleep(0.8)
             assert client.get(f"/api/v1/uploads/{a['id']}", headers=h).json()["findings"][0]["code"] == "E973"
             assert not list(folder.iterdir())
@@ -184,8 +209,23 @@ def test_haptify_submit_resumes_after_a_dropped_chunk(base, tmp_path, capsys, mo
     monkeypatch.setattr(cmd_submit, "request_json", flaky)
     try:
         with serve_in_thread(app) as url:
-            args = _parse(["submit", str(session), "--results", str(results), "--conformance", str(report),
-                           "--registry", url, "--token", token, "--include-raw", "--chunk-mib", str(8 / 1024)])
+            args = _parse(
+                [
+                    "submit",
+                    str(session),
+                    "--results",
+                    str(results),
+                    "--conformance",
+                    str(report),
+                    "--registry",
+                    url,
+                    "--token",
+                    token,
+                    "--include-raw",
+                    "--chunk-mib",
+                    str(8 / 1024),
+                ]
+            )
             assert args.func(args, UI()) == 0
             out = capsys.readouterr().out
             assert out.startswith("accepted: submission ") and "verification: verified" in out

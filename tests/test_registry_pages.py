@@ -50,17 +50,31 @@ class Populated:
 @pytest.fixture(scope="module")
 def base_results() -> dict:
     """A results file of the reference implementation; its device, session and metrics are set per plan line."""
-    results = ResultsFile(implementation=Implementation(name="haptify-reference", version=PACKAGE_VERSION),
-                          session_id="-", manifest_sha256="0" * 64,
-                          metrics=[MetricResult(id="free_space.speed_mean", value=0.05, unit="m/s", n=1,
-                                                definition_version=family("free_space").version)])
+    results = ResultsFile(
+        implementation=Implementation(name="haptify-reference", version=PACKAGE_VERSION),
+        session_id="-",
+        manifest_sha256="0" * 64,
+        metrics=[
+            MetricResult(id="free_space.speed_mean", value=0.05, unit="m/s", n=1, definition_version=family("free_space").version)
+        ],
+    )
     return results.model_dump(mode="json")
 
 
 def set_metric(results: dict, metric_id: str, unit: str, reps: list[float]) -> None:
     """Put ``metric_id`` with these repetitions (value = their mean, sd ddof 1) into a results dict."""
-    m = {**copy.deepcopy(results["metrics"][0]), "id": metric_id, "unit": unit, "value": fmean(reps), "per_repetition": reps,
-         "trials": [], "n": len(reps), "sd": stdev(reps) if len(reps) > 1 else None, "diagnostics": {}, "warnings": []}
+    m = {
+        **copy.deepcopy(results["metrics"][0]),
+        "id": metric_id,
+        "unit": unit,
+        "value": fmean(reps),
+        "per_repetition": reps,
+        "trials": [],
+        "n": len(reps),
+        "sd": stdev(reps) if len(reps) > 1 else None,
+        "diagnostics": {},
+        "warnings": [],
+    }
     results["metrics"] = [x for x in results["metrics"] if x["id"] != metric_id] + [m]
 
 
@@ -95,8 +109,11 @@ def populate(data_dir: Path, bundles: list[tuple[str, Path]], db_url: str | None
     client = TestClient(app)
     ids = []
     for lab, archive in bundles:
-        r = client.post("/api/v1/submissions", content=archive.read_bytes(),
-                        headers={"Authorization": f"Bearer {tokens[lab]}", "Content-Type": "application/gzip"})
+        r = client.post(
+            "/api/v1/submissions",
+            content=archive.read_bytes(),
+            headers={"Authorization": f"Bearer {tokens[lab]}", "Content-Type": "application/gzip"},
+        )
         assert r.status_code == 201, r.text
         ids.append(r.json()["id"])
     return Populated(client, app, tokens, ids)
@@ -144,6 +161,7 @@ def all_reps(model: str, column: int) -> list[float]:
 
 # --- pages on SQLite and PostgreSQL --------------------------------------------------------------
 
+
 def test_index_lists_devices_and_leaderboards(registry):
     html = registry.client.get("/").text
     assert devices_in_order(html, "device-list") == ["3d-systems-touch", "3d-systems-touch-x", "novint-falcon"]
@@ -164,8 +182,11 @@ def test_leaderboard_order_and_values(registry):
     vol = registry.client.get("/leaderboard/workspace.measured_volume?verification=all").text
     assert devices_in_order(vol, "leaderboard") == ["3d-systems-touch", "3d-systems-touch-x", "novint-falcon"]
     api = registry.client.get("/api/v1/leaderboard/vibration.rms?verification=all").json()
-    assert [(row["rank"], row["device"]) for row in api["rows"]] == [(1, "3d-systems-touch-x"), (2, "novint-falcon"),
-                                                                     (3, "3d-systems-touch")]
+    assert [(row["rank"], row["device"]) for row in api["rows"]] == [
+        (1, "3d-systems-touch-x"),
+        (2, "novint-falcon"),
+        (3, "3d-systems-touch"),
+    ]
     assert api["rows"][2]["mean"] == pytest.approx(fmean(all_reps("Touch", 3)))
     menu = {m["id"]: m["devices"] for m in registry.client.get("/api/v1/leaderboards").json()}
     assert menu["vibration.rms"] == 3 and menu["workspace.measured_volume"] == 3
@@ -190,8 +211,11 @@ def test_withdrawn_submission_leaves_the_aggregates(fresh_registry):
     before = registry.client.get("/devices/3d-systems-touch?verification=all").text  # the read cache now holds this state
     assert "lab-b" in re.search(r'<tr data-metric="vibration.rms">(.*?)</tr>', before, re.S).group(1)
     sid = registry.ids[1]  # lab-b's Touch
-    r = registry.client.post(f"/api/v1/submissions/{sid}/withdraw", json={"reason": "wrong calibration file"},
-                             headers={"Authorization": f"Bearer {registry.tokens['lab-b']}"})
+    r = registry.client.post(
+        f"/api/v1/submissions/{sid}/withdraw",
+        json={"reason": "wrong calibration file"},
+        headers={"Authorization": f"Bearer {registry.tokens['lab-b']}"},
+    )
     assert r.status_code == 200, r.text
     html = registry.client.get("/devices/3d-systems-touch?verification=all").text
     row = re.search(r'<tr data-metric="vibration.rms">(.*?)</tr>', html, re.S).group(1)
@@ -202,8 +226,10 @@ def test_withdrawn_submission_leaves_the_aggregates(fresh_registry):
 
 
 def test_compare_page_is_table_iii_for_the_chosen_devices(registry):
-    r = registry.client.get("/compare", params=[("device", "3d-systems-touch"), ("device", "3d-systems-touch-x"), ("paper", "true"),
-                                                ("verification", "all")])
+    r = registry.client.get(
+        "/compare",
+        params=[("device", "3d-systems-touch"), ("device", "3d-systems-touch-x"), ("paper", "true"), ("verification", "all")],
+    )
     assert r.status_code == 200
     table = re.search(r'<div id="comparison">(.*?)</div>', r.text, re.S).group(1)
     header = re.findall(r"<th>(.*?)</th>", table)
@@ -242,8 +268,11 @@ def test_raw_submission_has_report_figures_and_a_recording(base, tmp_path):  # n
     app = create_app(Settings(data_dir=tmp_path / "registry"))
     token = app.state.registry.create_token("lab-a")
     with TestClient(app) as client:
-        r = client.post("/api/v1/submissions", content=archive.read_bytes(),
-                        headers={"Authorization": f"Bearer {token}", "Content-Type": "application/gzip"})
+        r = client.post(
+            "/api/v1/submissions",
+            content=archive.read_bytes(),
+            headers={"Authorization": f"Bearer {token}", "Content-Type": "application/gzip"},
+        )
         assert r.status_code == 201 and r.json()["verification"]["status"] == "verified", r.text
         sid = r.json()["id"]
         page = client.get("/devices/3d-systems-touch").text
@@ -275,6 +304,7 @@ def test_results_only_submission_has_no_report(registry):
 
 # --- a real browser against a live server --------------------------------------------------------
 
+
 def test_pages_in_a_real_headless_browser(tmp_path, bundles):
     from haptify_tools.registry.live import serve_in_thread
 
@@ -290,7 +320,8 @@ def test_pages_in_a_real_headless_browser(tmp_path, bundles):
             marks = page.locator("#not-ranked-table tbody td.mark").all_inner_texts()
             assert len(marks) == len(PLAN) and set(marks) == {"unverified"}
             mark = page.locator("#not-ranked-table tbody td.mark").first.evaluate(
-                "el => getComputedStyle(el, '::before').content")
+                "el => getComputedStyle(el, '::before').content"
+            )
             assert mark == '"? "'  # the stylesheet marks the state
             page.get_by_role("link", name="include results that are not verified").click()
             page.wait_for_url(f"{url}/leaderboard/vibration.rms?verification=all")

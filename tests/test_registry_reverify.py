@@ -105,8 +105,9 @@ def test_separately_started_scheduler_and_workers_give_the_serial_records(regist
     reg, store, ids = registry
     serial = serial_values(reg, store)
     with separate_cluster(2, tmp_path / "logs") as cluster:
-        args = argparse.Namespace(data=reg.data, db=None, storage=None, since_version=None, resume=None, workers=2,
-                                  scheduler=cluster.address)
+        args = argparse.Namespace(
+            data=reg.data, db=None, storage=None, since_version=None, resume=None, workers=2, scheduler=cluster.address
+        )
         assert cmd_registry.run_reverify_command(args, UI(quiet=True)) == 0
     with DBSession(reg.engine) as s:
         run = s.scalar(select(db.ReverifyRun.id).where(db.ReverifyRun.executor == f"dask scheduler {cluster.address}"))
@@ -122,6 +123,7 @@ def test_a_worker_killed_mid_run_loses_nothing_and_records_nothing_twice(registr
     serial = serial_values(reg, store)
     killed = []
     with separate_cluster(2, tmp_path / "logs") as cluster, Client(cluster.address) as client:
+
         def kill_a_busy_worker(sid, status):
             if killed:
                 return
@@ -160,9 +162,20 @@ def test_an_interrupted_run_resumes_without_recomputing_or_duplicating(registry)
     again = run_reverify(reg.engine, store, run)
     assert (again.computed_now, again.recorded) == (0, N)
     with DBSession(db.writer(reg.engine)) as s, pytest.raises(IntegrityError), s.begin():  # the key refuses a second row
-        s.add(db.ReverifyRecord(submission_id=ids["s0"], reference_version=PACKAGE_VERSION, run_id=run, status="unchanged",
-                                verification=None, previous_verification="x", checks_json="[]", findings_json="[]",
-                                worker="test", seconds=0.0))
+        s.add(
+            db.ReverifyRecord(
+                submission_id=ids["s0"],
+                reference_version=PACKAGE_VERSION,
+                run_id=run,
+                status="unchanged",
+                verification=None,
+                previous_verification="x",
+                checks_json="[]",
+                findings_json="[]",
+                worker="test",
+                seconds=0.0,
+            )
+        )
     with reg.writer.begin() as conn, pytest.raises(Exception, match="append-only"):
         conn.execute(text("UPDATE reverify_records SET status = 'changed'"))
 
@@ -172,14 +185,35 @@ def _plant(reg, sid: str, factors: dict[str, float], version: str = "0.0.9") -> 
     metric of ``factors`` multiplied by its factor."""
     with DBSession(db.writer(reg.engine)) as s, s.begin():
         sub = s.get(db.Submission, sid)
-        checks = [{**c, "recomputed": c["recomputed"] * factors.get(c["metric"], 1.0), "status": "unchanged"}
-                  for c in json.loads(sub.verification_json)["checks"]]
-        s.add(db.ReverifyRun(id="planted", reference_version=version, spec_version=sub.spec_version, since_version=None,
-                             executor="planted", planned_json=json.dumps([sid])))
+        checks = [
+            {**c, "recomputed": c["recomputed"] * factors.get(c["metric"], 1.0), "status": "unchanged"}
+            for c in json.loads(sub.verification_json)["checks"]
+        ]
+        s.add(
+            db.ReverifyRun(
+                id="planted",
+                reference_version=version,
+                spec_version=sub.spec_version,
+                since_version=None,
+                executor="planted",
+                planned_json=json.dumps([sid]),
+            )
+        )
         s.flush()
-        s.add(db.ReverifyRecord(submission_id=sid, reference_version=version, run_id="planted", status="unchanged",
-                                verification=sub.verification, previous_verification=sub.verification,
-                                checks_json=json.dumps(checks), findings_json="[]", worker="planted", seconds=0.0))
+        s.add(
+            db.ReverifyRecord(
+                submission_id=sid,
+                reference_version=version,
+                run_id="planted",
+                status="unchanged",
+                verification=sub.verification,
+                previous_verification=sub.verification,
+                checks_json=json.dumps(checks),
+                findings_json="[]",
+                worker="planted",
+                seconds=0.0,
+            )
+        )
 
 
 def test_a_value_that_moved_beyond_its_tolerance_is_marked(registry):
@@ -230,8 +264,9 @@ def test_bad_locations_and_runs_are_coded_errors(registry):
     with pytest.raises(HaptifyError) as err:
         run_reverify(reg.engine, store, "planted")
     assert err.value.findings[0].code == "E981"
-    args = argparse.Namespace(data=reg.data, db=None, storage=None, since_version="0.1.0", resume="planted", workers=0,
-                              scheduler=None)
+    args = argparse.Namespace(
+        data=reg.data, db=None, storage=None, since_version="0.1.0", resume="planted", workers=0, scheduler=None
+    )
     with pytest.raises(HaptifyError) as err:
         cmd_registry.run_reverify_command(args, UI(quiet=True))
     assert err.value.findings[0].code == "E903"

@@ -34,8 +34,11 @@ def three(base, tmp_path_factory):  # noqa: F811 (base is a fixture)
     for name, model, scale, raw in plan:
         s, r = variant(base, tmp, name, model=model, scale=scale)
         archive, _ = bundle_for(s, r, report, tmp / f"{name}.tar.gz", include_raw=raw)
-        resp = client.post(f"{API}/submissions", content=archive.read_bytes(),
-                           headers={"Authorization": f"Bearer {token}", "Content-Type": "application/gzip"})
+        resp = client.post(
+            f"{API}/submissions",
+            content=archive.read_bytes(),
+            headers={"Authorization": f"Bearer {token}", "Content-Type": "application/gzip"},
+        )
         assert resp.status_code == 201, resp.text
         ids[name] = resp.json()["id"]
         rms[name] = next(m["value"] for m in json.loads(r.read_text())["metrics"] if m["id"] == "vibration.rms")
@@ -90,10 +93,15 @@ def test_the_comparison_counts_only_verified_results_and_says_what_it_left_out(t
     table = client.get(f"{API}/compare", params=q).json()
     row = next(r for r in table["rows"] if r[0].startswith("Free-space vibration RMS"))
     assert row[1] != "—" and row[2] == "—"
-    assert any(n.startswith("3d-systems-falcon: 1 current submission(s) not verified") and "1 disagreeing" in n for n in table["notes"])
+    assert any(
+        n.startswith("3d-systems-falcon: 1 current submission(s) not verified") and "1 disagreeing" in n for n in table["notes"]
+    )
     assert [e["verification"] for e in table["not_counted"]["3d-systems-falcon"]][0] == "disagreeing"
-    row_all = next(r for r in client.get(f"{API}/compare", params={**q, "verification": "all"}).json()["rows"]
-                   if r[0].startswith("Free-space vibration RMS"))
+    row_all = next(
+        r
+        for r in client.get(f"{API}/compare", params={**q, "verification": "all"}).json()["rows"]
+        if r[0].startswith("Free-space vibration RMS")
+    )
     assert row_all[2] != "—"
 
 
@@ -101,7 +109,10 @@ def test_the_export_carries_the_state_and_filters_by_it(three):
     client, ids, rms = three
     rows = list(csv.DictReader(io.StringIO(client.get(f"{API}/export.csv").text)))
     assert {r["submission"]: r["verification"] for r in rows} == {
-        ids["touch"]: "verified", ids["falcon"]: "disagreeing", ids["omega"]: "unverified"}
+        ids["touch"]: "verified",
+        ids["falcon"]: "disagreeing",
+        ids["omega"]: "unverified",
+    }
     only = list(csv.DictReader(io.StringIO(client.get(f"{API}/export.csv", params={"verification": "disagreeing"}).text)))
     assert only and {r["submission"] for r in only} == {ids["falcon"]}
 
@@ -121,7 +132,7 @@ def test_the_pages_mark_the_states_and_filter(three):
     assert float(recomputed) == pytest.approx(rms["falcon"] / SCALE, rel=1e-4)
     assert 'href="?verification=all"' in html
     every = client.get("/leaderboard/vibration.rms?verification=all").text
-    assert 'id="not-ranked"' not in every and len(re.findall(r'<tr data-device=', every)) == 3
+    assert 'id="not-ranked"' not in every and len(re.findall(r"<tr data-device=", every)) == 3
     device = client.get("/devices/3d-systems-falcon").text
     assert 'id="not-counted"' in device and 'data-verification="disagreeing"' in device
     compare = client.get("/compare", params=[("device", "3d-systems-touch"), ("device", "3d-systems-falcon")]).text

@@ -18,7 +18,7 @@ def test_wav_samples_are_resampled_to_44k1_and_scaled():
     t = np.arange(4000) / rate  # 2 s of a 100 Hz tone of amplitude 0.5 m/s²
     out = to_wav_samples(0.5 * np.sin(2 * np.pi * 100 * t), rate, scale=0.8443)
     assert out.dtype == np.float32 and len(out) == 2 * WAV_RATE_HZ
-    middle = out[WAV_RATE_HZ // 2: 3 * WAV_RATE_HZ // 2]
+    middle = out[WAV_RATE_HZ // 2 : 3 * WAV_RATE_HZ // 2]
     np.testing.assert_allclose(np.max(np.abs(middle)), 0.5 / 0.8443, rtol=2e-3)
     spectrum = np.abs(np.fft.rfft(middle))
     assert np.argmax(spectrum) * WAV_RATE_HZ / len(middle) == 100.0
@@ -26,12 +26,26 @@ def test_wav_samples_are_resampled_to_44k1_and_scaled():
 
 
 def test_dynamics_figure_plots_every_segment_and_the_line():
-    rows = [{"trial": "a", "set": "training", "start_s": 0.0, "distance": 0.0, "force_error": 0.1},
-            {"trial": "b", "set": "test set 1", "start_s": 0.0, "distance": 1.0, "force_error": 0.3},
-            {"trial": "b", "set": "test set 1", "start_s": 5.0, "distance": 2.0, "force_error": 0.5}]
-    results = ResultsFile(implementation=Implementation(name="t", version="0"), session_id="s", manifest_sha256="0" * 64,
-                          metrics=[MetricResult(id="dynamics.error_vs_distance", value=[0.2, 0.1], unit="N", n=3,
-                                                definition_version="1.0.0", diagnostics={"segments": rows})])
+    rows = [
+        {"trial": "a", "set": "training", "start_s": 0.0, "distance": 0.0, "force_error": 0.1},
+        {"trial": "b", "set": "test set 1", "start_s": 0.0, "distance": 1.0, "force_error": 0.3},
+        {"trial": "b", "set": "test set 1", "start_s": 5.0, "distance": 2.0, "force_error": 0.5},
+    ]
+    results = ResultsFile(
+        implementation=Implementation(name="t", version="0"),
+        session_id="s",
+        manifest_sha256="0" * 64,
+        metrics=[
+            MetricResult(
+                id="dynamics.error_vs_distance",
+                value=[0.2, 0.1],
+                unit="N",
+                n=3,
+                definition_version="1.0.0",
+                diagnostics={"segments": rows},
+            )
+        ],
+    )
     [fig] = dynamics_figures(None, results)
     ax = fig.figure.axes[0]
     assert sum(len(c.get_offsets()) for c in ax.collections) == 3

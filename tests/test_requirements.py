@@ -50,21 +50,38 @@ def test_a_metric_case_lists_the_value_requirements_that_decide_its_metric():
 def test_a_case_on_an_uncertainty_adds_the_chapter_19_requirements():
     assert requirements_for_case("free_space.force_mean", quantity="u")[-1:] == ["R19.2-1"]
     assert requirements_for_case("free_space.force_mean", quantity="k")[-2:] == ["R19.2-1", "R19.4-1"]
-    assert set(requirements_for_case("free_space.force_mean")) == set(requirements_for_case("free_space.force_mean", quantity="u")) - {"R19.2-1"}
+    assert set(requirements_for_case("free_space.force_mean")) == set(
+        requirements_for_case("free_space.force_mean", quantity="u")
+    ) - {"R19.2-1"}
 
 
 def _case(**over) -> Case:
-    base = {"id": "x.case", "metric": "vibration.rms", "spec_section": "10.4", "level": "MUST",
-            "requirements": ["R10.3-1"], "fixture": "conformance/vib-tones", "expected": {"value": 1.0, "unit": "m/s^2"},
-            "tolerance": {"abs": 0.0, "rel": 1e-3},
-            "provenance": {"kind": "analytic", "note": "n", "budget": [{"source": "a", "rel": 6e-4}, {"source": "b", "rel": 4e-4}]},
-            "spec_versions": ["1.0"], "description": "d"}
+    base = {
+        "id": "x.case",
+        "metric": "vibration.rms",
+        "spec_section": "10.4",
+        "level": "MUST",
+        "requirements": ["R10.3-1"],
+        "fixture": "conformance/vib-tones",
+        "expected": {"value": 1.0, "unit": "m/s^2"},
+        "tolerance": {"abs": 0.0, "rel": 1e-3},
+        "provenance": {"kind": "analytic", "note": "n", "budget": [{"source": "a", "rel": 6e-4}, {"source": "b", "rel": 4e-4}]},
+        "spec_versions": ["1.0"],
+        "description": "d",
+    }
     base.update(over)
     return Case.model_validate(base)
 
 
-@pytest.mark.parametrize("tol, flagged", [({"abs": 0.0, "rel": 1e-3}, False), ({"abs": 0.0, "rel": 9e-4}, False),
-                                          ({"abs": 0.0, "rel": 1.1e-3}, True), ({"abs": 1e-6, "rel": 1e-3}, True)])
+@pytest.mark.parametrize(
+    "tol, flagged",
+    [
+        ({"abs": 0.0, "rel": 1e-3}, False),
+        ({"abs": 0.0, "rel": 9e-4}, False),
+        ({"abs": 0.0, "rel": 1.1e-3}, True),
+        ({"abs": 1e-6, "rel": 1e-3}, True),
+    ],
+)
 def test_a_tolerance_looser_than_its_budget_is_flagged(tol, flagged):
     assert bool(_budget_problems(_case(tolerance=tol))) is flagged
 
@@ -84,8 +101,9 @@ def test_every_committed_metric_case_has_the_budget_its_builder_table_gives():
     assert all(terms for _, terms in BUDGETS)
 
 
-@pytest.mark.parametrize("ratio, distinguished", [(DISTINGUISHING_RATIO, True), (0.99 * DISTINGUISHING_RATIO, False),
-                                                  (None, True), ("inf", True)])
+@pytest.mark.parametrize(
+    "ratio, distinguished", [(DISTINGUISHING_RATIO, True), (0.99 * DISTINGUISHING_RATIO, False), (None, True), ("inf", True)]
+)
 def test_a_requirement_is_distinguished_by_a_mutant_moving_a_case_that_lists_it(ratio, distinguished):
     case = _case()
     mutants = {"m": {"requirement": "R10.3-1", "failing_cases": [{"case": case.id, "ratio": ratio}]}}

@@ -17,19 +17,25 @@ from haptify.compute import compute_session
 from haptify.session_format import Rig
 from haptify.storage import open_session
 
-RIG_IDS = ["rig.plate_natural_frequency", "rig.cop_error", "rig.handle_calibration_rms", "rig.handle_force_offset_u", "rig.sync_offset"]
+RIG_IDS = [
+    "rig.plate_natural_frequency",
+    "rig.cop_error",
+    "rig.handle_calibration_rms",
+    "rig.handle_force_offset_u",
+    "rig.sync_offset",
+]
 
 
 @pytest.fixture(scope="module")
 def good(tmp_path_factory):
-    return rb.full_rig_session(tmp_path_factory.mktemp("good"), np.random.default_rng(10),
-                               accel_delay_s=0.003, mocap_delay_s=-0.001, cop_offset_m=0.005)
+    return rb.full_rig_session(
+        tmp_path_factory.mktemp("good"), np.random.default_rng(10), accel_delay_s=0.003, mocap_delay_s=-0.001, cop_offset_m=0.005
+    )
 
 
 @pytest.fixture(scope="module")
 def bad(tmp_path_factory):
-    return rb.full_rig_session(tmp_path_factory.mktemp("bad"), np.random.default_rng(11),
-                               accel_delay_s=0.015, cop_offset_m=0.012)
+    return rb.full_rig_session(tmp_path_factory.mktemp("bad"), np.random.default_rng(11), accel_delay_s=0.015, cop_offset_m=0.012)
 
 
 def test_rig_metrics_have_their_known_values(good):
@@ -75,8 +81,14 @@ def test_rig_check_passes_a_good_rig(good, capsys):
     assert _run(good) == 0
     out = capsys.readouterr().out
     assert "FAIL" not in out.split("checks did not fail")[0]
-    for name in ("plate force range", "plate natural frequency", "COP error", "handle calibration RMS",
-                 "F/T sensor pose", "recorder synchronisation"):
+    for name in (
+        "plate force range",
+        "plate natural frequency",
+        "COP error",
+        "handle calibration RMS",
+        "F/T sensor pose",
+        "recorder synchronisation",
+    ):
         assert f"PASS  {name}" in out
     assert "WARN  handle F/T torque range" in out  # the Mini27 is below Table I's 5 N·m, as in the paper
 

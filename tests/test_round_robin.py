@@ -27,7 +27,7 @@ from haptify_tools.twin.simulate import SimulationOptions
 
 METRIC = "stiffness.measured"
 LABS, REPS = 14, 7
-SIGMA_G, SIGMA_W = 0.03, 0.06      # between-lab F/T gain sd, within-lab (trial to trial) gain drift sd
+SIGMA_G, SIGMA_W = 0.03, 0.06  # between-lab F/T gain sd, within-lab (trial to trial) gain drift sd
 API = "/api/v1"
 
 
@@ -41,14 +41,20 @@ def round_robin(tmp_path_factory):
     """14 labs × 7 stiffness trials of 8 s (plus each lab's handle calibration), every other lab property at its
     default spread; each lab's session computed by the reference and submitted (results only) to a registry."""
     root = tmp_path_factory.mktemp("rr")
-    opt = SimulationOptions(protocols=("rig.handle_calibration", "stiffness"), reps=REPS, seed=23, rig_trials=False,
-                            durations={"stiffness": 8.0, "rig.handle_calibration": 10.0}, workers=1)
+    opt = SimulationOptions(
+        protocols=("rig.handle_calibration", "stiffness"),
+        reps=REPS,
+        seed=23,
+        rig_trials=False,
+        durations={"stiffness": 8.0, "rig.handle_calibration": 10.0},
+        workers=1,
+    )
     spreads = parse_spreads([f"ft_gain={SIGMA_G}", f"ft_gain_drift={SIGMA_W}"])
     res = simulate_round_robin(preset("touch"), root / "rr", opt, LABS, spreads)
     labs = json.loads(res.labs_json.read_text())
     app = create_app(Settings(data_dir=root / "registry"))
     client = TestClient(app)
-    measured: dict[str, tuple[list[float], list[float]]] = {}   # lab → (values, the F/T gains of their trials)
+    measured: dict[str, tuple[list[float], list[float]]] = {}  # lab → (values, the F/T gains of their trials)
     report = None
     for rec in labs["labs"]:
         session = res.sessions[rec["lab"]]
@@ -61,8 +67,11 @@ def round_robin(tmp_path_factory):
         measured[rec["lab"]] = (m["per_repetition"], [rec["trial_ft_gains"][t] for t in m["trials"]])
         archive = bundle_for(session, target, report, root / f"{rec['lab']}.tar.gz")[0]
         token = app.state.registry.create_token(rec["lab"])
-        r = client.post(f"{API}/submissions", content=archive.read_bytes(),
-                        headers={"Authorization": f"Bearer {token}", "Content-Type": "application/gzip"})
+        r = client.post(
+            f"{API}/submissions",
+            content=archive.read_bytes(),
+            headers={"Authorization": f"Bearer {token}", "Content-Type": "application/gzip"},
+        )
         assert r.status_code == 201, r.text
     with client:
         body = client.get(f"{API}/devices/3d-systems-touch", params={"verification": "all"}).json()
@@ -97,8 +106,8 @@ def test_registry_recovers_the_simulated_s_r_and_s_R(round_robin):
     x_cells = [np.array(v) / np.array(g) for v, g in measured.values()]
     mu = float(np.mean(np.concatenate(x_cells)))
     sigma_n = pooled_sd(x_cells)
-    assert sigma_n < 0.5 * SIGMA_W * mu      # the injected drift dominates the within-lab spread
-    s_r = math.sqrt((1 + SIGMA_G ** 2) * ((mu * SIGMA_W) ** 2 + (1 + SIGMA_W ** 2) * sigma_n ** 2))
+    assert sigma_n < 0.5 * SIGMA_W * mu  # the injected drift dominates the within-lab spread
+    s_r = math.sqrt((1 + SIGMA_G**2) * ((mu * SIGMA_W) ** 2 + (1 + SIGMA_W**2) * sigma_n**2))
     s_R = math.hypot(mu * SIGMA_G, s_r)
     assert got["s_r"] == pytest.approx(s_r, rel=0.2)
     assert got["s_R"] == pytest.approx(s_R, rel=0.2)
@@ -113,13 +122,12 @@ def test_labs_json_says_what_each_lab_was_given(round_robin):
     """Every lab has its own seed, examiner and rig; the lab gains are those :func:`draw_labs` draws from the
     round robin's seed, every trial's gain is its lab's times its drift, and the drift has the asked sd."""
     labs, measured, _, _ = round_robin
-    again = draw_labs(preset("touch"), RigConfig(), LABS, 23, parse_spreads([f"ft_gain={SIGMA_G}",
-                                                                              f"ft_gain_drift={SIGMA_W}"]))
+    again = draw_labs(preset("touch"), RigConfig(), LABS, 23, parse_spreads([f"ft_gain={SIGMA_G}", f"ft_gain_drift={SIGMA_W}"]))
     assert [r["lab"] for r in labs["labs"]] == [d.lab for d in again] == sorted(measured)
     assert len({r["seed"] for r in labs["labs"]}) == LABS and len({r["examiner"]["id"] for r in labs["labs"]}) == LABS
     assert [r["rig"]["ft_gain"] for r in labs["labs"]] == [d.rig.ft_gain for d in again]
     drift = np.concatenate([np.array(list(r["trial_ft_gains"].values())) / r["rig"]["ft_gain"] - 1 for r in labs["labs"]])
-    assert len(drift) == LABS * (REPS + 1)   # the stiffness trials and the handle calibration
+    assert len(drift) == LABS * (REPS + 1)  # the stiffness trials and the handle calibration
     # 112 draws: the sample sd of N(0, 0.06) is within 20 % with probability > 0.99 (relative se 6.7 %)
     assert np.std(drift, ddof=1) == pytest.approx(SIGMA_W, rel=0.2)
     assert len({tuple(r["rig"]["plate_modes_hz"]) for r in labs["labs"]}) == LABS
@@ -134,8 +142,15 @@ def test_a_lab_does_not_depend_on_how_many_labs_there_are():
     assert all(d.rig.ft_gain_drift_sd == 0.0 for d in many)
 
 
-@pytest.mark.parametrize("argv", [["--lab-variation", "1"], ["--lab-variation", "3", "--lab-spread", "ft_gain=-0.1"],
-                                  ["--lab-variation", "3", "--lab-spread", "colour=0.1"], ["--lab-spread", "ft_gain=0.1"]])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["--lab-variation", "1"],
+        ["--lab-variation", "3", "--lab-spread", "ft_gain=-0.1"],
+        ["--lab-variation", "3", "--lab-spread", "colour=0.1"],
+        ["--lab-spread", "ft_gain=0.1"],
+    ],
+)
 def test_bad_round_robin_options_are_refused_with_e903(tmp_path, argv):
     parser = argparse.ArgumentParser()
     cmd_simulate.register_simulate(parser.add_subparsers())

@@ -31,8 +31,17 @@ VALID = [REPO / "fixtures" / "valid" / "parquet-basic", REPO / "fixtures" / "val
 SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 
 ENTITY_KINDS = {"markers": ["h1", "h2", "h3"], "link_poses": ["handle"]}
-KINDS = ["handle_wrench", "handle_accel", "plate_wrench", "handle_pose", "markers", "link_poses",
-         "commanded_wrench", "device_joint_angles", "sync"]
+KINDS = [
+    "handle_wrench",
+    "handle_accel",
+    "plate_wrench",
+    "handle_pose",
+    "markers",
+    "link_poses",
+    "commanded_wrench",
+    "device_joint_angles",
+    "sync",
+]
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 
@@ -62,7 +71,7 @@ def stream_data(draw, kind: str, t0: float) -> tuple[dict, float, list[str] | No
             data[c] = unit[:, k]
     if kind in MOCAP_KINDS:
         width = len(kind_table(kind).get("entity_columns", kind_table(kind).get("columns")))
-        groups = [cols[1 + k * width: 1 + (k + 1) * width] for k in range(len(entities or [None]))]
+        groups = [cols[1 + k * width : 1 + (k + 1) * width] for k in range(len(entities or [None]))]
         for g in groups:
             mask = np.array(draw(st.lists(st.booleans(), min_size=n, max_size=n)))
             for c in g:
@@ -108,8 +117,22 @@ def test_random_sessions_round_trip_bit_for_bit_and_validate(case):
 
 @pytest.mark.parametrize("fmt", ["parquet", "csv"])
 def test_extreme_floats_round_trip_exactly(fmt: str, tmp_path: Path):
-    tricky = np.array([-0.0, 0.0, 5e-324, -2.2250738585072014e-308, 1.7976931348623157e308, -1.7976931348623157e308,
-                       0.1, 1 / 3, 2.0**-1074 * 3, 123456789.12345679, -1e-300, 9.999999999999999e22])
+    tricky = np.array(
+        [
+            -0.0,
+            0.0,
+            5e-324,
+            -2.2250738585072014e-308,
+            1.7976931348623157e308,
+            -1.7976931348623157e308,
+            0.1,
+            1 / 3,
+            2.0**-1074 * 3,
+            123456789.12345679,
+            -1e-300,
+            9.999999999999999e22,
+        ]
+    )
     n = len(tricky)
     data = {"t": np.arange(n) / 1000.0, **{c: np.roll(tricky, k) for k, c in enumerate(["fx", "fy", "fz", "tx", "ty", "tz"])}}
     w = SessionWriter(manifest={**example_writer().manifest, "session_id": "extremes"})
@@ -124,7 +147,7 @@ def test_extreme_floats_round_trip_exactly(fmt: str, tmp_path: Path):
 # --- mutations -------------------------------------------------------------------------------------
 
 json_values = st.recursive(
-    st.none() | st.booleans() | st.integers(-10**15, 10**15) | finite | st.text(max_size=12),
+    st.none() | st.booleans() | st.integers(-(10**15), 10**15) | finite | st.text(max_size=12),
     lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=8), inner, max_size=3),
     max_leaves=6,
 )
@@ -210,7 +233,7 @@ def _apply_data(folder: Path, manifest: dict, mutation) -> None:
         path.write_bytes(raw[: int(rng.integers(0, len(raw)))])
     elif op == "flip":
         k = int(rng.integers(0, len(raw)))
-        path.write_bytes(raw[:k] + bytes([raw[k] ^ (1 << int(rng.integers(0, 8)))]) + raw[k + 1:])
+        path.write_bytes(raw[:k] + bytes([raw[k] ^ (1 << int(rng.integers(0, 8)))]) + raw[k + 1 :])
     elif op == "append":
         path.write_bytes(raw + rng.bytes(int(rng.integers(1, 64))))
     elif op == "delete":

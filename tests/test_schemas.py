@@ -41,8 +41,16 @@ def test_every_metric_definition_validates_and_ids_are_unique():
         assert fam.family == name.removesuffix(".json")
         ids += [m.id for m in fam.metrics]
         for m in fam.metrics:
-            assert m.id.split(".")[0] in (fam.family, "rig", "surface", "stiffness", "vibration", "workspace",
-                                          "free_space", "dynamics")
+            assert m.id.split(".")[0] in (
+                fam.family,
+                "rig",
+                "surface",
+                "stiffness",
+                "vibration",
+                "workspace",
+                "free_space",
+                "dynamics",
+            )
     assert len(ids) == len(set(ids))
 
 

@@ -122,8 +122,18 @@ def _handle_session(tmp, shift: float = 0.0, gap: bool = False):
     dur = 6.0
     t_ft, t_acc, t_m = np.arange(int(dur * 1000)) / 1000.0, np.arange(int(dur * 2000)) / 2000.0, np.arange(int(dur * 100)) / 100.0
     q = rb.tumbling_orientation
-    wrench, accel = rb.raw_handle(truth, w.manifest["rig"], t_ft, q(t_ft), t_acc, q(t_acc), rng,
-                                  np.tile(HAND_F, (len(t_ft), 1)), np.tile(HAND_T, (len(t_ft), 1)), np.zeros((len(t_acc), 3)))
+    wrench, accel = rb.raw_handle(
+        truth,
+        w.manifest["rig"],
+        t_ft,
+        q(t_ft),
+        t_acc,
+        q(t_acc),
+        rng,
+        np.tile(HAND_F, (len(t_ft), 1)),
+        np.tile(HAND_T, (len(t_ft), 1)),
+        np.zeros((len(t_acc), 3)),
+    )
     pos = np.column_stack([0.02 * t_m, 0.01 * np.ones_like(t_m), 0.15 + 0 * t_m])
     qm = q(t_m)
     if gap:

@@ -16,8 +16,16 @@ from haptify_tools.twin import cmd_simulate
 from haptify_tools.twin.model import EFFECT_IDS, load_twin, preset
 from haptify_tools.twin.simulate import SimulationOptions, plan, simulate_dossier
 
-SHORT = {"free_space": 4.0, "stiffness": 8.0, "figure_eight": 3.0, "rig.plate_bias": 1.0, "rig.handle_calibration": 16.0,
-         "rig.plate_impact": 1.5, "rig.plate_cop": 28.0, "rig.baseline_vibration": 2.0}
+SHORT = {
+    "free_space": 4.0,
+    "stiffness": 8.0,
+    "figure_eight": 3.0,
+    "rig.plate_bias": 1.0,
+    "rig.handle_calibration": 16.0,
+    "rig.plate_impact": 1.5,
+    "rig.plate_cop": 28.0,
+    "rig.baseline_vibration": 2.0,
+}
 
 
 @pytest.fixture(scope="module")
@@ -44,9 +52,9 @@ def test_short_session_is_valid_and_truth_lies_beside_it(dossier):
     truth = json.loads(res.truth_json.read_text())["trials"]
     for tr, prev in zip(truth, [None] + truth[:-1]):
         if tr["id"].startswith("rig.plate_cop"):
-            continue                                  # its length follows the 30-position schedule
+            continue  # its length follows the 30-position schedule
         name = tr["label"] or tr["protocol"]
-        assert tr["t_end_s"] - tr["t_start_s"] == pytest.approx(SHORT[name], abs=1.5e-3)   # t_end: the last sample
+        assert tr["t_end_s"] - tr["t_start_s"] == pytest.approx(SHORT[name], abs=1.5e-3)  # t_end: the last sample
         assert prev is None or tr["t_start_s"] > prev["t_end_s"]
         sync = s.read(tr["id"], "sync")
         assert sync["t"].iloc[0] == pytest.approx(tr["t_start_s"]) and sync["trigger"].sum() > 0
@@ -77,7 +85,7 @@ def test_truth_holds_every_effect_and_the_true_signals(dossier):
     assert np.allclose(acc["t"].to_numpy(), arrays["free_space-1/accel_t"], atol=1e-6)
     diff = acc[["ax", "ay", "az"]].to_numpy() - arrays["free_space-1/accel_A"]
     lsb = truth["rig"]["config"]["accel_lsb_m_per_s2"]
-    assert np.ptp(diff, axis=0).max() <= lsb + 1e-5 and np.abs(diff).max() > 0.01       # the bias is there
+    assert np.ptp(diff, axis=0).max() <= lsb + 1e-5 and np.abs(diff).max() > 0.01  # the bias is there
 
 
 def test_calibration_trial_recovers_the_true_rig(dossier):
@@ -98,34 +106,61 @@ def test_deterministic_for_a_seed_and_independent_of_the_other_trials(tmp_path):
     c = simulate_dossier(twin, tmp_path / "c", SimulationOptions(protocols=("free_space",), **{**kw, "seed": 10}))
     ma, mb, mc = (json.loads((r.session / "session.json").read_text()) for r in (a, b, c))
     assert ma == mb
-    sha = lambda m: [s["sha256"] for t in m["trials"] for s in t["streams"]]   # noqa: E731
+    sha = lambda m: [s["sha256"] for t in m["trials"] for s in t["streams"]]  # noqa: E731
     assert sha(ma) != sha(mc)
-    assert (a.truth_json.read_text() == b.truth_json.read_text())
+    assert a.truth_json.read_text() == b.truth_json.read_text()
     # a trial draws only from its own seeded generators: adding another protocol leaves it unchanged
-    d = simulate_dossier(twin, tmp_path / "d", SimulationOptions(protocols=("free_space", "figure_eight"),
-                                                                 **{**kw, "durations": {"free_space": 2.0, "figure_eight": 1.0}}))
+    d = simulate_dossier(
+        twin,
+        tmp_path / "d",
+        SimulationOptions(
+            protocols=("free_space", "figure_eight"), **{**kw, "durations": {"free_space": 2.0, "figure_eight": 1.0}}
+        ),
+    )
     md = json.loads((d.session / "session.json").read_text())
     assert md["trials"][0]["streams"] == ma["trials"][0]["streams"]
 
 
 def _args(**kw):
-    base = dict(preset=None, twin=None, disable=[], set_params=[], protocol="all", reps=1, seed=0, out=None, overwrite=False,
-                no_rig_trials=True, clock_offsets=False, duration=[], workers=1, format="parquet", compact=False,
-                lab_variation=0, lab_spread=[])
+    base = dict(
+        preset=None,
+        twin=None,
+        disable=[],
+        set_params=[],
+        protocol="all",
+        reps=1,
+        seed=0,
+        out=None,
+        overwrite=False,
+        no_rig_trials=True,
+        clock_offsets=False,
+        duration=[],
+        workers=1,
+        format="parquet",
+        compact=False,
+        lab_variation=0,
+        lab_spread=[],
+    )
     base.update(kw)
     return argparse.Namespace(**base)
 
 
 def test_cli_twin_export_and_simulate(tmp_path):
     twin_file = tmp_path / "t.json"
-    code = cmd_simulate.run_twin_export(_args(preset="touch", disable=["drive.backlash"],
-                                              set_params=["friction.coulomb.torque_Nm=0.01"], out=str(twin_file)), UI(quiet=True))
+    code = cmd_simulate.run_twin_export(
+        _args(preset="touch", disable=["drive.backlash"], set_params=["friction.coulomb.torque_Nm=0.01"], out=str(twin_file)),
+        UI(quiet=True),
+    )
     assert code == 0
     twin = load_twin(twin_file)
     assert not twin.on("drive.backlash") and twin.effects.friction_coulomb.torque_Nm == [0.01] * 3
     out = tmp_path / "run"
-    code = cmd_simulate.run_simulate(_args(twin=str(twin_file), protocol="stiffness", out=str(out), clock_offsets=True,
-                                           duration=["stiffness=6"], compact=True), UI(quiet=True))
+    code = cmd_simulate.run_simulate(
+        _args(
+            twin=str(twin_file), protocol="stiffness", out=str(out), clock_offsets=True, duration=["stiffness=6"], compact=True
+        ),
+        UI(quiet=True),
+    )
     assert code == 0
     s = open_session(out / "session")
     import pyarrow.parquet as pq  # --compact: sensor columns FLOAT, t DOUBLE (spec §3.2.1)

@@ -60,7 +60,9 @@ def manifest(session_dir) -> dict:
 def _centre_w(folder) -> np.ndarray:
     """Gimbal centre in W at Q_CENTRE: the reference's DH forward kinematics plus the device placement."""
     place = folder.manifest.device_placement
-    return quat_to_matrix(np.array(place.quaternion)) @ forward_positions(folder.device().kinematics, Q_CENTRE)[0] + np.array(place.position)
+    return quat_to_matrix(np.array(place.quaternion)) @ forward_positions(folder.device().kinematics, Q_CENTRE)[0] + np.array(
+        place.position
+    )
 
 
 def test_validates_without_any_finding(session_dir):

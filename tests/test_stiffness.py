@@ -79,9 +79,9 @@ def test_runs():
 
 def test_end_of_rise_is_the_first_sample_not_exceeded_within_the_hold():
     f = np.array([0.0, 1.0, 2.0, 3.0, 2.5, 2.4, 2.6, 2.9, 3.5, 3.1])
-    assert end_of_rise(f, 3) == 3        # 2.5, 2.4, 2.6 stay below 3.0
-    assert end_of_rise(f, 5) == 8        # 3.5 comes within five samples of the first top
-    assert end_of_rise(np.arange(6.0), 4) == 5   # still rising at the end: the last sample
+    assert end_of_rise(f, 3) == 3  # 2.5, 2.4, 2.6 stay below 3.0
+    assert end_of_rise(f, 5) == 8  # 3.5 comes within five samples of the first top
+    assert end_of_rise(np.arange(6.0), 4) == 5  # still rising at the end: the last sample
     assert end_of_rise(f, 0) == 0
 
 
@@ -104,8 +104,11 @@ def test_linear_spring_with_saturation_is_recovered_exactly():
     for p in fit.presses:
         # the fit: the samples after the 4-sample contact transient up to 90 % of the rise that follows
         s = p.start + 4
-        assert list(p.fit) == list(np.flatnonzero((np.arange(len(f)) >= s) & (np.arange(len(f)) <= p.rise_end)
-                                                  & (f <= f[s] + 0.9 * (F_SAT - f[s]) + 1e-12)))
+        assert list(p.fit) == list(
+            np.flatnonzero(
+                (np.arange(len(f)) >= s) & (np.arange(len(f)) <= p.rise_end) & (f <= f[s] + 0.9 * (F_SAT - f[s]) + 1e-12)
+            )
+        )
         assert p.fit[0] == s and p.rise_end <= p.deepest
         assert f[p.rise_end] == pytest.approx(F_SAT)
         assert len(p.fit) >= 5 and p.overshoot == pytest.approx(0.0, abs=1e-12)
@@ -122,16 +125,16 @@ def test_a_force_that_saturates_then_falls_with_depth_is_fitted_on_its_loading_s
         return np.where(d < 0, 0.0, np.where(d <= d_sat, k * d, f_sat - (f_sat / 2) * (d - d_sat) / (DEPTH - d_sat)))
 
     t, d, _, contact = arrays()
-    f = law(d) + np.where(loading(t), 0.0, 0.1 * (d > d_sat))   # the release stroke 0.1 N higher on the falling branch
-    assert f[contact & ~loading(t)].max() > f_sat                # the whole press's largest force is on the release
+    f = law(d) + np.where(loading(t), 0.0, 0.1 * (d > d_sat))  # the release stroke 0.1 N higher on the falling branch
+    assert f[contact & ~loading(t)].max() > f_sat  # the whole press's largest force is on the release
     fit = fit_stiffness(t, d, f, contact)
     assert len(fit.presses) == N_PRESSES
     assert fit.stiffness == pytest.approx(k, rel=1e-9)
-    top = law(d[contact & loading(t)]).max()          # the largest loading sample, just below the knee at 2.2 N
+    top = law(d[contact & loading(t)]).max()  # the largest loading sample, just below the knee at 2.2 N
     assert f_sat - 0.12 < top < f_sat
     assert fit.peak_force == pytest.approx(top, rel=1e-12)
     for p in fit.presses:
-        assert p.deepest_force == pytest.approx(f_sat / 2, rel=1e-3)   # the bottom of the falling branch
+        assert p.deepest_force == pytest.approx(f_sat / 2, rel=1e-3)  # the bottom of the falling branch
 
 
 def test_a_spring_that_gives_way_is_fitted_on_its_rising_phase():
@@ -165,7 +168,7 @@ def test_contact_overshoot_is_the_kick_above_the_line_and_enters_no_value():
     t, d, f, contact = arrays()
     f = f.copy()
     for a, _ in runs(contact):
-        f[a:a + 3] += [4.0, 2.0, 1.0]
+        f[a : a + 3] += [4.0, 2.0, 1.0]
     fit = fit_stiffness(t, d, f, contact)
     assert fit.stiffness == pytest.approx(K_TRUE, rel=1e-9)
     assert fit.peak_force == pytest.approx(F_SAT, rel=1e-12)
@@ -282,8 +285,20 @@ def test_session_metrics(tmp_path):
     w = writer("stiffness")
     position, felt, commanded = session_fns()
     for i in (1, 2):
-        add_handle_trial(w, f"stiff-{i}", "stiffness", repetition=i, duration_s=DURATION, powered=True, rendering=RENDERING,
-                         position=position, quaternion=spin(0.03), force_w=felt, commanded_w=commanded, accel=False)
+        add_handle_trial(
+            w,
+            f"stiff-{i}",
+            "stiffness",
+            repetition=i,
+            duration_s=DURATION,
+            powered=True,
+            rendering=RENDERING,
+            position=position,
+            quaternion=spin(0.03),
+            force_w=felt,
+            commanded_w=commanded,
+            accel=False,
+        )
     ctx = ComputeContext(session=open_session(w.write(tmp_path / "s")))
     res = {m.id: m for m in compute(ctx)}
     assert all(isinstance(m, MetricResult) for m in res.values())
@@ -304,8 +319,19 @@ def test_few_presses_warn_and_no_trial_is_unavailable(tmp_path):
     w = writer("stiffness-short")
     short = GAP_S + 1 * (PRESS_S + GAP_S)  # one press, two recommended
     position, felt, commanded = session_fns()
-    add_handle_trial(w, "stiff-1", "stiffness", duration_s=short, powered=True, rendering=RENDERING,
-                     position=position, quaternion=spin(0.03), force_w=felt, commanded_w=commanded, accel=False)
+    add_handle_trial(
+        w,
+        "stiff-1",
+        "stiffness",
+        duration_s=short,
+        powered=True,
+        rendering=RENDERING,
+        position=position,
+        quaternion=spin(0.03),
+        force_w=felt,
+        commanded_w=commanded,
+        accel=False,
+    )
     ctx = ComputeContext(session=open_session(w.write(tmp_path / "s")))
     res = {m.id: m for m in compute(ctx)}
     assert "W414" in res["stiffness.measured"].warnings
@@ -320,8 +346,19 @@ def test_a_fast_press_in_a_session_raises_w415(tmp_path):
     durations = (PRESS_S, 0.25, PRESS_S)
     position, felt, commanded = session_fns(durations)
     w = writer("stiffness-fast")
-    add_handle_trial(w, "stiff-1", "stiffness", duration_s=GAP_S + sum(x + GAP_S for x in durations) + 0.5, powered=True,
-                     rendering=RENDERING, position=position, quaternion=spin(0.03), force_w=felt, commanded_w=commanded, accel=False)
+    add_handle_trial(
+        w,
+        "stiff-1",
+        "stiffness",
+        duration_s=GAP_S + sum(x + GAP_S for x in durations) + 0.5,
+        powered=True,
+        rendering=RENDERING,
+        position=position,
+        quaternion=spin(0.03),
+        force_w=felt,
+        commanded_w=commanded,
+        accel=False,
+    )
     ctx = ComputeContext(session=open_session(w.write(tmp_path / "s")))
     res = {m.id: m for m in compute(ctx)}
     assert "W415" in res["stiffness.measured"].warnings
@@ -331,6 +368,7 @@ def test_a_fast_press_in_a_session_raises_w415(tmp_path):
 
 
 # --- the conformance fixtures pin the window (spec §16.8.3: a plausible wrong reading moves ≥ 5× the tolerance) ---
+
 
 def previous_rule(t, d, f, contact, valid):
     """The rule before this fit (spec 1.0 as first written): peak = the largest force of the whole contact run,
@@ -351,7 +389,7 @@ def whole_loading_stroke(t, d, f, contact, valid):
     """Every loading sample from the first contact sample to the deepest one, contact transient included."""
     xs, ys = [], []
     for p in find_presses(t, d, f, contact, valid):
-        xs.append(d[p.start:p.deepest + 1]), ys.append(f[p.start:p.deepest + 1])
+        xs.append(d[p.start : p.deepest + 1]), ys.append(f[p.start : p.deepest + 1])
     return float(np.polyfit(np.concatenate(xs), np.concatenate(ys), 1)[0])
 
 
@@ -378,8 +416,8 @@ def test_the_window_fixtures_move_five_tolerances_under_each_plausible_wrong_rea
     old_k, old_peak = previous_rule(*args, cs.valid)
     assert off(old_k, measured) >= 5
     assert off(whole_loading_stroke(*args, cs.valid), measured) >= 5
-    if fixture == "kick-dip":    # the contact transient kept: the rise from the first contact sample
+    if fixture == "kick-dip":  # the contact transient kept: the rise from the first contact sample
         kept = fit_stiffness(*args, valid=cs.valid, rule=replace(FitRule.at_rate(grid_rate(cs.t)), settle=0))
         assert off(kept.stiffness, measured) >= 5
-    else:                        # the peak over the whole contact run lies on the release stroke
+    else:  # the peak over the whole contact run lies on the release stroke
         assert off(old_peak, peak) >= 5

@@ -111,8 +111,9 @@ def test_atomic_text_write_replaces_whole_file(tmp_path):
 
 def test_clock_offset_records_shift_time(tmp_path):
     writer = example_writer()
-    writer.manifest["calibration"] = [{"kind": "clock_offset", "id": "off1",
-                                       "stream_file": "trials/free_space-1/handle_accel.parquet", "offset_s": 0.25}]
+    writer.manifest["calibration"] = [
+        {"kind": "clock_offset", "id": "off1", "stream_file": "trials/free_space-1/handle_accel.parquet", "offset_s": 0.25}
+    ]
     session = open_session(writer.write(tmp_path / "s"))
     shifted = session.read("free_space-1", "handle_accel")
     raw = session.read("free_space-1", "handle_accel", session_clock=False)

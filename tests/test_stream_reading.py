@@ -29,6 +29,7 @@ def _session(tmp_path: Path, fmt: str = "parquet", name: str = "s") -> Path:
 
 # --- hash as you read ------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("fmt", ["parquet", "csv"])
 def test_one_read_gives_the_table_and_the_sha256_of_the_bytes(tmp_path: Path, fmt: str):
     folder = _session(tmp_path, fmt)
@@ -40,6 +41,7 @@ def test_one_read_gives_the_table_and_the_sha256_of_the_bytes(tmp_path: Path, fm
 
 
 # --- Parquet row groups (spec §3.2, §4.2) -------------------------------------------------------------
+
 
 @settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(group_rows=st.integers(min_value=1, max_value=600))
@@ -58,11 +60,15 @@ def test_a_parquet_stream_in_any_number_of_row_groups_is_valid_and_reads_the_sam
 
 # --- duplicate JSON members (spec §3.1: E117) ------------------------------------------------------
 
-@pytest.mark.parametrize("old, new", [
-    ('"date": "2026-11-22",', '"date": "2026-11-22", "date": "2026-11-23",'),          # top level
-    ('"model": "Touch",', '"model": "Touch", "model": "Touch X",'),                      # inside the device
-    ('"rate_hz": 1000.0,', '"rate_hz": 1000.0, "rate_hz": 500.0,'),                      # inside a stream
-])
+
+@pytest.mark.parametrize(
+    "old, new",
+    [
+        ('"date": "2026-11-22",', '"date": "2026-11-22", "date": "2026-11-23",'),  # top level
+        ('"model": "Touch",', '"model": "Touch", "model": "Touch X",'),  # inside the device
+        ('"rate_hz": 1000.0,', '"rate_hz": 1000.0, "rate_hz": 500.0,'),  # inside a stream
+    ],
+)
 def test_a_member_named_twice_anywhere_in_session_json_is_e117(tmp_path: Path, old: str, new: str):
     folder = _session(tmp_path)
     text = (folder / "session.json").read_text(encoding="utf-8")
@@ -116,8 +122,9 @@ def test_a_csv_stream_of_nul_bytes_is_refused_within_a_memory_limit(tmp_path: Pa
     stream.update(rows=rows)
     fx.save_manifest(folder, m)
     fx.rehash(folder, "handle_pose")
-    out = subprocess.run([sys.executable, "-c", _CHILD, str(folder), str(MEMORY_BUDGET_MIB)],
-                         capture_output=True, text=True, timeout=300)
+    out = subprocess.run(
+        [sys.executable, "-c", _CHILD, str(folder), str(MEMORY_BUDGET_MIB)], capture_output=True, text=True, timeout=300
+    )
     assert out.returncode == 0, out.stderr
     codes = [item.split(":")[0] for item in out.stdout.split()]
     assert codes and codes[0] == ("E112" if header else "E211"), out.stdout

@@ -40,7 +40,9 @@ def test_planar_force_removes_exactly_the_normal_part():
 
 
 @settings(max_examples=40, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.floats(-1, 1), st.floats(-1, 1), st.floats(0.1, 1), st.floats(0, math.pi), st.floats(1e-3, 1e3))
+@given(
+    st.integers(0, 2**32 - 1), st.floats(-1, 1), st.floats(-1, 1), st.floats(0.1, 1), st.floats(0, math.pi), st.floats(1e-3, 1e3)
+)
 def test_planar_stats_ignore_the_world_frame_and_scale_with_units(seed, ax, ay, az, angle, scale):
     f = np.random.default_rng(seed).normal(size=(100, 3))
     r = quat_to_matrix(quat_from_axis_angle(np.array([ax, ay, az]), np.array(angle)))
@@ -69,6 +71,7 @@ def test_zero_normal_is_a_coded_error():
 
 
 # --- session level (spec §12.4) ------------------------------------------------------------------
+
 
 def in_contact(t):
     return (t >= T_ON) & (t <= T_OFF)
@@ -103,10 +106,32 @@ RENDERING = {"surface_point_m": PLANE_POINT.tolist(), "surface_normal": [0.0, 0.
 def session(tmp_path_factory):
     w = writer("surface")
     for i in (1, 2):
-        add_handle_trial(w, f"surf-{i}", "frictionless_surface", repetition=i, duration_s=10.0, powered=True,
-                         rendering=RENDERING, position=position, quaternion=spin(0.05), force_w=felt, commanded_w=commanded)
-    add_handle_trial(w, "surf-3", "frictionless_surface", repetition=3, duration_s=10.0, powered=True, rendering=RENDERING,
-                     position=position, quaternion=spin(0.05), force_w=felt, commanded_w=lambda t: 0 * commanded(t))
+        add_handle_trial(
+            w,
+            f"surf-{i}",
+            "frictionless_surface",
+            repetition=i,
+            duration_s=10.0,
+            powered=True,
+            rendering=RENDERING,
+            position=position,
+            quaternion=spin(0.05),
+            force_w=felt,
+            commanded_w=commanded,
+        )
+    add_handle_trial(
+        w,
+        "surf-3",
+        "frictionless_surface",
+        repetition=3,
+        duration_s=10.0,
+        powered=True,
+        rendering=RENDERING,
+        position=position,
+        quaternion=spin(0.05),
+        force_w=felt,
+        commanded_w=lambda t: 0 * commanded(t),
+    )
     return open_session(w.write(tmp_path_factory.mktemp("surf") / "s"))
 
 

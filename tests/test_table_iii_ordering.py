@@ -14,18 +14,25 @@ from haptify.storage import open_session
 
 pytestmark = pytest.mark.slow
 
-PROTOCOLS = ("workspace", "free_space", "frictionless_surface", "stiffness", "rig.plate_bias", "rig.handle_calibration",
-             "rig.baseline_vibration")
+PROTOCOLS = (
+    "workspace",
+    "free_space",
+    "frictionless_surface",
+    "stiffness",
+    "rig.plate_bias",
+    "rig.handle_calibration",
+    "rig.baseline_vibration",
+)
 DURATIONS = {"frictionless_surface": 10.0, "stiffness": 12.0, "rig.handle_calibration": 15.0, "rig.baseline_vibration": 6.0}
 # metric id → True when the paper's Touch value is the larger one (Table III, §VI)
 ROWS = {
-    "workspace.measured_volume": True,       # 11 799 vs 10 418 cm³
-    "free_space.force_mean": True,           # 0.98 vs 0.87 N
-    "vibration.rms": True,                   # 0.0685 vs 0.0408 m/s²
-    "vibration.spectral_centroid": False,    # 122.96 vs 162.81 Hz
-    "surface.planar_force_mean": True,       # 0.53 vs 0.38 (text: 0.34) N
-    "stiffness.accuracy": False,             # 47.3 vs 80 %
-    "stiffness.peak_force": False,           # 2.7 vs 5.7 N (Table III: 27 vs 57)
+    "workspace.measured_volume": True,  # 11 799 vs 10 418 cm³
+    "free_space.force_mean": True,  # 0.98 vs 0.87 N
+    "vibration.rms": True,  # 0.0685 vs 0.0408 m/s²
+    "vibration.spectral_centroid": False,  # 122.96 vs 162.81 Hz
+    "surface.planar_force_mean": True,  # 0.53 vs 0.38 (text: 0.34) N
+    "stiffness.accuracy": False,  # 47.3 vs 80 %
+    "stiffness.peak_force": False,  # 2.7 vs 5.7 N (Table III: 27 vs 57)
 }
 
 

@@ -16,7 +16,7 @@ from haptify_tools.twin.kinematics import inverse_kinematics, true_kinematics, w
 from haptify_tools.twin.model import preset
 
 DEG = math.pi / 180
-RATE = 500.0          # a slower examiner clock keeps the tests fast; every generator takes rate_hz
+RATE = 500.0  # a slower examiner clock keeps the tests fast; every generator takes rate_hz
 
 
 @pytest.fixture(scope="module")
@@ -35,10 +35,10 @@ def test_free_space_respects_paper_limits(reach, seed):
     rng = np.random.default_rng(seed)
     tr = ex.free_space_wander(rng, reach, 25.0, rate_hz=RATE)
     speed, ang = tr.speed(), tr.angular_speed()
-    assert speed.max() < ex.FREE_SPACE_MAX_SPEED            # paper §V-B: < 0.16 m/s
-    assert 0.03 < speed.mean() < 0.07                        # paper §VI-B: ≈ 0.05 m/s
-    assert ang.max() < ex.FREE_SPACE_MAX_ANGULAR             # < 16 °/s
-    assert 2 * DEG < ang.mean() < 6 * DEG                    # ≈ 4 °/s
+    assert speed.max() < ex.FREE_SPACE_MAX_SPEED  # paper §V-B: < 0.16 m/s
+    assert 0.03 < speed.mean() < 0.07  # paper §VI-B: ≈ 0.05 m/s
+    assert ang.max() < ex.FREE_SPACE_MAX_ANGULAR  # < 16 °/s
+    assert 2 * DEG < ang.mean() < 6 * DEG  # ≈ 4 °/s
     # never touches the base (kept 1 cm away, less the tremor's micrometres)
     assert reach.clearance(tr.position_W).min() > 0.009
     assert reach.reachable(tr.position_W).all()
@@ -59,7 +59,7 @@ def test_local_oscillations_band_directions_and_centre(reach):
     f = np.fft.rfftfreq(len(disp), 1 / RATE)
     share = mag[(f > 0.35) & (f < 4.5)].sum() / mag[f > 0].sum()
     assert share > 0.95
-    first, last = disp[: int(8 * RATE)], disp[-int(8 * RATE):]
+    first, last = disp[: int(8 * RATE)], disp[-int(8 * RATE) :]
     assert _dominant_hz(first, RATE) < 1.0 and _dominant_hz(last, RATE) > 2.5
     assert reach.reachable(tr.position_W).all()
 
@@ -91,15 +91,15 @@ def test_local_dynamic_default_is_about_140_s():
 
 def test_boundary_sweep_stays_on_the_joint_box_or_the_base(twin, reach):
     tr = ex.boundary_sweep(np.random.default_rng(2), reach, 60.0, rate_hz=RATE)
-    pts = tr.position_W[int(0.6 * RATE):-int(0.6 * RATE)]
+    pts = tr.position_W[int(0.6 * RATE) : -int(0.6 * RATE)]
     kin = true_kinematics(twin)
     q, _ = inverse_kinematics(kin, world_to_device(twin, pts))
     lo, hi = joint_limits(kin, q)
     at_limit = np.any((np.abs(q - lo) < 2e-3) | (np.abs(q - hi) < 2e-3), axis=1)
     on_base = reach.clearance(pts) < 2e-3
-    assert np.mean(at_limit | on_base) > 0.85                # the rest: strokes lifted over the base
-    assert reach.clearance(pts).min() > -2e-4                # never inside the base (tremor aside)
-    assert np.all((q >= lo - 2e-3) & (q <= hi + 2e-3))       # never beyond a joint limit
+    assert np.mean(at_limit | on_base) > 0.85  # the rest: strokes lifted over the base
+    assert reach.clearance(pts).min() > -2e-4  # never inside the base (tremor aside)
+    assert np.all((q >= lo - 2e-3) & (q <= hi + 2e-3))  # never beyond a joint limit
     # the raster spacing is what the volume operator needs
     assert tr.meta["line_spacing_m"] <= 0.03 and tr.speed().max() < 1.0
 
@@ -107,14 +107,14 @@ def test_boundary_sweep_stays_on_the_joint_box_or_the_base(twin, reach):
 def test_surface_trials_press_into_the_plane(reach):
     z = float(reach.centre()[2])
     circ = ex.surface_circles(np.random.default_rng(3), reach, z, 12.0, rate_hz=RATE)
-    mid = circ.position_W[int(3 * RATE):-int(3 * RATE)]
-    assert np.all(mid[:, 2] < z) and np.all(mid[:, 2] > z - 0.006)       # lightly pressed, ≈ 2.5 mm
-    assert circ.position_W[0, 2] > z + 0.009                            # starts above the surface
+    mid = circ.position_W[int(3 * RATE) : -int(3 * RATE)]
+    assert np.all(mid[:, 2] < z) and np.all(mid[:, 2] > z - 0.006)  # lightly pressed, ≈ 2.5 mm
+    assert circ.position_W[0, 2] > z + 0.009  # starts above the surface
     press = ex.surface_presses(np.random.default_rng(3), reach, z, 20.0, rate_hz=RATE)
     assert press.meta["press_count"] >= 3
     deepest = z - press.position_W[:, 2].min()
-    edge = press.meta["edge_distance_m"]                                  # measured from 1 cm above the plane
-    assert deepest > 0.85 * (edge - 0.002) - 0.01 - 1e-4                  # down to the workspace edge
+    edge = press.meta["edge_distance_m"]  # measured from 1 cm above the plane
+    assert deepest > 0.85 * (edge - 0.002) - 0.01 - 1e-4  # down to the workspace edge
     assert reach.reachable(press.position_W).all()
 
 
@@ -138,20 +138,20 @@ def test_tremor_has_configured_level_and_band(accel, seed):
     rate = 1000.0
     disp, rot = ex.tremor(np.random.default_rng(seed), 8000, rate, accel_rms=accel, angle_rms=1e-4)
     acc = ex.derivative(disp, rate, 2)
-    assert np.sqrt(np.mean(acc ** 2, axis=0)) == pytest.approx(accel, rel=0.02)
+    assert np.sqrt(np.mean(acc**2, axis=0)) == pytest.approx(accel, rel=0.02)
     spec = np.abs(np.fft.rfft(disp, axis=0)) ** 2
     f = np.fft.rfftfreq(len(disp), 1 / rate)
     inside = spec[(f >= 8.0) & (f <= 12.0)].sum() / spec.sum()
     assert inside > 0.999
-    assert np.sqrt(np.mean(rot ** 2, axis=0)) == pytest.approx(1e-4, rel=1e-9)
+    assert np.sqrt(np.mean(rot**2, axis=0)) == pytest.approx(1e-4, rel=1e-9)
 
 
 def test_handle_rotation_shows_gravity_from_every_direction():
     tr = ex.handle_rotation(np.random.default_rng(0), 20.0, rate_hz=RATE)
     g_body = quat_rotate(quat_conjugate(tr.quaternion_W), np.broadcast_to([0, 0, -1.0], (len(tr.t), 3)))
     coverage = np.linalg.eigvalsh(g_body.T @ g_body / len(g_body))[0]
-    assert coverage > 0.1                                    # 1/3 would be a perfectly even sphere
-    assert tr.speed().max() < 0.1                            # held in place, only drifting
+    assert coverage > 0.1  # 1/3 would be a perfectly even sphere
+    assert tr.speed().max() < 0.1  # held in place, only drifting
 
 
 def test_ball_impact_carries_the_momentum():

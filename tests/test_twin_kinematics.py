@@ -26,11 +26,14 @@ def eq4(a2, a3, q):
     c1, s1 = np.cos(q[:, 0]), np.sin(q[:, 0])
     c2, s2 = np.cos(q[:, 1]), np.sin(q[:, 1])
     c3, s3 = np.cos(q[:, 2]), np.sin(q[:, 2])
-    return np.stack([
-        a2 * c1 * c2 + a3 * c1 * c2 * c3 - a3 * c1 * s2 * s3,
-        a2 * s1 * c2 + a3 * s1 * c2 * c3 - a3 * s1 * s2 * s3,
-        a2 * s2 + a3 * c2 * s3 + a3 * s2 * c3,
-    ], axis=1)
+    return np.stack(
+        [
+            a2 * c1 * c2 + a3 * c1 * c2 * c3 - a3 * c1 * s2 * s3,
+            a2 * s1 * c2 + a3 * s1 * c2 * c3 - a3 * s1 * s2 * s3,
+            a2 * s2 + a3 * c2 * s3 + a3 * s2 * c3,
+        ],
+        axis=1,
+    )
 
 
 @pytest.mark.parametrize("twin", [TOUCH, TOUCH_X], ids=["touch", "touch-x"])
@@ -74,7 +77,7 @@ def test_inverse_kinematics_round_trip(s, name):
 def test_numeric_fallback_for_other_chains():
     kin = TOUCH.device.kinematics
     joints = [j.model_copy() for j in kin.joints]
-    joints[1] = joints[1].model_copy(update={"d": 0.01})          # lateral offset: not eq. 4's structure
+    joints[1] = joints[1].model_copy(update={"d": 0.01})  # lateral offset: not eq. 4's structure
     joints[2] = joints[2].model_copy(update={"alpha": 0.05})
     other = Kinematics(joints=joints, base=kin.base)
     assert not tk._analytic_ok(other)
@@ -89,9 +92,9 @@ def test_numeric_fallback_for_other_chains():
 def test_unreachable_and_out_of_limit_points_are_flagged():
     kin = tk.true_kinematics(TOUCH)
     base = np.asarray(kin.base.position)
-    far = base + np.array([[0.5, 0.0, 0.0]])                # beyond a2 + a3
-    behind = base + np.array([[-0.2, 0.0, 0.0]])            # needs |q1| = 180°, outside ±56°
-    above = base + np.array([[0.01, 0.0, 0.26]])            # needs q2 > 101°
+    far = base + np.array([[0.5, 0.0, 0.0]])  # beyond a2 + a3
+    behind = base + np.array([[-0.2, 0.0, 0.0]])  # needs |q1| = 180°, outside ±56°
+    above = base + np.array([[0.01, 0.0, 0.26]])  # needs q2 > 101°
     q, ok = tk.inverse_kinematics(kin, np.concatenate([far, behind, above]))
     assert not ok.any()
     with pytest.raises(HaptifyError) as err:
@@ -117,7 +120,9 @@ def test_collisions_with_base_and_table():
     prims = {p.name: p for p in tw.effects.kinematics_base_collision.primitives}
     inside_base = np.asarray(prims["base"].center_m)[None]
     below_table = np.array([[0.15, 0.0, -0.01]])
-    free = ref.forward_positions(tk.true_kinematics(tw), tk.ref.configurations_from_unit(tk.true_kinematics(tw), np.array([[0.5, 0.5, 0.5]])))
+    free = ref.forward_positions(
+        tk.true_kinematics(tw), tk.ref.configurations_from_unit(tk.true_kinematics(tw), np.array([[0.5, 0.5, 0.5]]))
+    )
     assert tk.in_collision(tw, np.concatenate([inside_base, below_table])).all()
     assert not tk.in_collision(tw, free).any()
     # clearance grows the end-effector sphere

@@ -10,13 +10,32 @@ from haptify.errors import HaptifyError
 from haptify.session_format import Device
 from haptify_tools.example_session import TOUCH_DEVICE
 from haptify_tools.twin.model import (
-    EFFECT_IDS, PRESETS, TwinFile, disable, load_twin, preset, set_param, twin_from_dict, twin_to_dict, write_twin,
+    EFFECT_IDS,
+    PRESETS,
+    TwinFile,
+    disable,
+    load_twin,
+    preset,
+    set_param,
+    twin_from_dict,
+    twin_to_dict,
+    write_twin,
 )
 
 ISSUE_EFFECT_IDS = (
-    "gravity", "inertia", "friction.coulomb", "friction.viscous", "friction.stribeck",
-    "drive.series_elasticity", "drive.torque_saturation", "drive.force_cutoff", "drive.backlash",
-    "kinematics.base_collision", "kinematics.link_length", "sensor.bias", "handle.connector_mass",
+    "gravity",
+    "inertia",
+    "friction.coulomb",
+    "friction.viscous",
+    "friction.stribeck",
+    "drive.series_elasticity",
+    "drive.torque_saturation",
+    "drive.force_cutoff",
+    "drive.backlash",
+    "kinematics.base_collision",
+    "kinematics.link_length",
+    "sensor.bias",
+    "handle.connector_mass",
     "vibration.device",
 )
 
@@ -45,8 +64,11 @@ def test_presets_load_and_name_every_effect(name):
 def test_every_preset_number_has_a_source(name):
     """Each effect with parameters says where they come from (TWIN.md: every effect carries per-parameter ``sources``)."""
     data = twin_to_dict(preset(name))
-    effects = {**data["effects"], "sensor.bias": data["rig"]["sensor.bias"],
-               "handle.connector_mass": data["rig"]["handle.connector_mass"]}
+    effects = {
+        **data["effects"],
+        "sensor.bias": data["rig"]["sensor.bias"],
+        "handle.connector_mass": data["rig"]["handle.connector_mass"],
+    }
     for eid, eff in effects.items():
         params = [k for k in eff if k not in ("enabled", "description", "sources")]
         assert eff["description"], f"{name}: effect {eid} has no description"
@@ -82,23 +104,25 @@ def test_disable_switches_one_effect_off_and_leaves_the_original(eid):
 
 def test_set_param_forms():
     tw = preset("touch")
-    a = set_param(tw, "friction.coulomb.torque_Nm", "0.02")          # CLI string, broadcast to every joint
+    a = set_param(tw, "friction.coulomb.torque_Nm", "0.02")  # CLI string, broadcast to every joint
     assert a.effects.friction_coulomb.torque_Nm == [0.02, 0.02, 0.02]
-    b = set_param(tw, "friction.coulomb.torque_Nm[2]", 0.05)          # one entry
+    b = set_param(tw, "friction.coulomb.torque_Nm[2]", 0.05)  # one entry
     assert b.effects.friction_coulomb.torque_Nm == tw.effects.friction_coulomb.torque_Nm[:2] + [0.05]
     c = set_param(tw, "drive.series_elasticity.stiffness_Nm_per_rad", "[10, 11, 12]")
     assert c.effects.drive_series_elasticity.stiffness_Nm_per_rad == [10, 11, 12]
     d = set_param(tw, "handle.connector_mass.mass_kg", 0.05)
     assert d.rig.connector_mass.mass_kg == 0.05
-    e = set_param(tw, "links.1.mass_kg", 0.1)                          # a structural field by dotted path
+    e = set_param(tw, "links.1.mass_kg", 0.1)  # a structural field by dotted path
     assert e.links[1].mass_kg == 0.1
     f = set_param(tw, "drive.force_cutoff.enabled", "false")
     assert not f.on("drive.force_cutoff")
-    assert tw.effects.friction_coulomb.torque_Nm != [0.02, 0.02, 0.02]      # original unchanged
+    assert tw.effects.friction_coulomb.torque_Nm != [0.02, 0.02, 0.02]  # original unchanged
 
 
-@pytest.mark.parametrize("path", ["friction.magic.torque_Nm", "friction.coulomb.nothing", "gravity", "links.9.mass_kg",
-                                  "friction.coulomb.torque_Nm[7]"])
+@pytest.mark.parametrize(
+    "path",
+    ["friction.magic.torque_Nm", "friction.coulomb.nothing", "gravity", "links.9.mass_kg", "friction.coulomb.torque_Nm[7]"],
+)
 def test_set_param_unknown_is_e801(path):
     with pytest.raises(HaptifyError) as err:
         set_param(preset("touch"), path, 1.0)
@@ -114,12 +138,15 @@ def test_unknown_effect_and_preset_are_e801():
     assert codes(err.value) == ["E801"]
 
 
-@pytest.mark.parametrize("path,value", [
-    ("links.0.mass_kg", -1.0),
-    ("friction.coulomb.torque_Nm", [0.1, 0.1]),                 # wrong number of joints
-    ("drive.force_cutoff.rearm_force_N", 100.0),               # above the trip level
-    ("drive.coupling", [[1, 0, 0], [0, 1, 0], [0, 1, 0]]),      # singular
-])
+@pytest.mark.parametrize(
+    "path,value",
+    [
+        ("links.0.mass_kg", -1.0),
+        ("friction.coulomb.torque_Nm", [0.1, 0.1]),  # wrong number of joints
+        ("drive.force_cutoff.rearm_force_N", 100.0),  # above the trip level
+        ("drive.coupling", [[1, 0, 0], [0, 1, 0], [0, 1, 0]]),  # singular
+    ],
+)
 def test_invalid_values_are_e802(path, value):
     with pytest.raises(HaptifyError) as err:
         set_param(preset("touch"), path, value)

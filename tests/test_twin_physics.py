@@ -46,6 +46,7 @@ def hold(twin, q, n=200, rate=1000.0):
 
 # --- gravity ------------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("q2", [0.1, 0.6, 1.2])
 def test_one_link_under_gravity_gives_the_analytic_torque(q2):
     tw = massless(only(preset("touch"), "gravity"))
@@ -91,6 +92,7 @@ def test_static_balance_of_the_whole_device_on_the_plate():
 
 # --- friction -----------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("ripple", [0.0, 0.5])
 def test_pure_coulomb_friction_opposes_the_motion_with_known_magnitude(ripple):
     tw = massless(only(preset("touch"), "friction.coulomb"))
@@ -100,7 +102,7 @@ def test_pure_coulomb_friction_opposes_the_motion_with_known_magnitude(ripple):
     tw = set_param(tw, "friction.coulomb.torque_Nm", tau_c)
     kin = tk.true_kinematics(tw)
     t = np.arange(0, 1.0, 1e-3)
-    w1 = 0.5   # rad/s about the vertical joint-1 axis: only drive axis 1 moves
+    w1 = 0.5  # rad/s about the vertical joint-1 axis: only drive axis 1 moves
     q = np.stack([-0.25 + w1 * t, 0.8 + 0 * t, -1.5 + 0 * t], axis=1)
     p = tk.device_to_world(tw, ref.forward_positions(kin, q))
     quat = np.tile([1.0, 0, 0, 0], (len(t), 1))
@@ -111,7 +113,8 @@ def test_pure_coulomb_friction_opposes_the_motion_with_known_magnitude(ripple):
     mid = slice(100, 900)
     mag = np.linalg.norm(res.force_W[mid], axis=1)
     ripple = 1.0 + tw.effects.friction_coulomb.ripple_fraction * np.sin(
-        2 * np.pi * tw.effects.friction_coulomb.ripple_cycles_per_rad * q[mid, 0])
+        2 * np.pi * tw.effects.friction_coulomb.ripple_cycles_per_rad * q[mid, 0]
+    )
     assert mag == pytest.approx(tau_c * ripple / rho[mid], rel=1e-6)
     cosang = np.sum(res.force_W[mid] * v[mid], axis=1) / (mag * np.linalg.norm(v[mid], axis=1))
     assert cosang == pytest.approx(-1.0, abs=1e-6)
@@ -141,8 +144,11 @@ def test_passive_elastic_drive_tends_to_the_rigid_one():
     q = qc + 0.15 * np.stack([np.sin(2 * np.pi * 1.0 * t), np.sin(2 * np.pi * 0.7 * t), np.sin(2 * np.pi * 1.3 * t)], axis=1)
     p = tk.device_to_world(base, ref.forward_positions(kin, q))
     quat = np.tile([1.0, 0, 0, 0], (len(t), 1))
-    stiff = set_param(set_param(base, "drive.series_elasticity.stiffness_Nm_per_rad", 2000.0),
-                      "drive.series_elasticity.damping_Nms_per_rad", 1.0)
+    stiff = set_param(
+        set_param(base, "drive.series_elasticity.stiffness_Nm_per_rad", 2000.0),
+        "drive.series_elasticity.damping_Nms_per_rad",
+        1.0,
+    )
     elastic = ph.simulate_passive(stiff, t, p, quat)
     rigid = ph.simulate_passive(disable(base, "drive.series_elasticity"), t, p, quat)
     sl = slice(200, -200)
@@ -164,8 +170,12 @@ def test_rendering_loop_runs_at_its_own_rate_on_a_faster_hand_clock():
     s = t / t[-1]
     p = p.copy()
     p[:, 2] = surface[2] + 0.002 - 0.005 * 0.5 * (1 - np.cos(np.pi * s))
-    rend = {"surface_point_m": surface.tolist(), "surface_normal": [0.0, 0.0, 1.0], "stiffness_N_per_m": 750.0,
-            "loop_rate_hz": 1000.0}
+    rend = {
+        "surface_point_m": surface.tolist(),
+        "surface_normal": [0.0, 0.0, 1.0],
+        "stiffness_N_per_m": 750.0,
+        "loop_rate_hz": 1000.0,
+    }
     res = ph.simulate_active(tw, t, p, quat, rend)
     fz = res.commanded_W[:, 2]
     assert np.all(fz[0::2] == fz[1::2])
@@ -177,6 +187,7 @@ def test_rendering_loop_runs_at_its_own_rate_on_a_faster_hand_clock():
 
 # --- energy -------------------------------------------------------------------------------------
 
+
 def test_passive_arm_energy_balance():
     """Work done by the hand = change of kinetic plus potential energy (no friction)."""
     tw = only(preset("touch"), "gravity", "inertia")
@@ -185,8 +196,10 @@ def test_passive_arm_energy_balance():
     rate = 4000.0
     t = np.arange(0, 1.5, 1 / rate)
     qc = centre_q(tw)
-    q = qc + np.stack([0.3 * np.sin(2 * np.pi * 1.1 * t), 0.25 * np.sin(2 * np.pi * 0.7 * t + 0.4),
-                       0.3 * np.sin(2 * np.pi * 1.7 * t + 1.0)], axis=1)
+    q = qc + np.stack(
+        [0.3 * np.sin(2 * np.pi * 1.1 * t), 0.25 * np.sin(2 * np.pi * 0.7 * t + 0.4), 0.3 * np.sin(2 * np.pi * 1.7 * t + 1.0)],
+        axis=1,
+    )
     p = tk.device_to_world(tw, ref.forward_positions(kin, q))
     ang = 0.3 * np.sin(2 * np.pi * 0.9 * t)
     quat = quat_from_axis_angle(np.array([0.3, 0.5, 0.8]), ang)
@@ -211,6 +224,7 @@ def test_passive_arm_energy_balance():
 
 
 # --- active rendering ---------------------------------------------------------------------------
+
 
 def press(tw, depth_max, duration=4.0, rate=1000.0, stiffness=750.0):
     """A slow press straight down at the joint-box centre; returns result, true depth, rendering."""
@@ -245,7 +259,7 @@ def test_commanded_stiffness_in_series_with_the_drive_gives_the_series_value(rot
     j = len(depth) - 1
     slope = (res.force_W[j, 2] - res.force_W[i, 2]) / (depth[j] - depth[i])
     assert slope == pytest.approx(expected, rel=0.02)
-    assert expected < 0.9 * 750.0          # the drive really softens the rendering
+    assert expected < 0.9 * 750.0  # the drive really softens the rendering
     # the commanded force is along the plane's normal only
     assert np.all(res.commanded_W[:, :2] == 0.0) and np.all(res.commanded_W[:, 3:] == 0.0)
     assert np.all(res.commanded_W[:, 2] >= 0.0)
@@ -289,8 +303,8 @@ def test_force_cutoff_drops_the_force_suddenly():
     assert res.commanded_W[i, 2] > 4.0 and res.commanded_W[i - 1, 2] <= 4.0
     before = res.force_W[i - 5, 2]
     assert before > 3.0
-    assert np.max(np.abs(res.force_W[i + 20:, 2])) < 0.6 * before     # a sudden drop (the drive mode rings out)
-    assert np.all(np.abs(res.force_W[i + 400:, 2]) < 0.1)             # and the drive has let go
+    assert np.max(np.abs(res.force_W[i + 20 :, 2])) < 0.6 * before  # a sudden drop (the drive mode rings out)
+    assert np.all(np.abs(res.force_W[i + 400 :, 2]) < 0.1)  # and the drive has let go
     assert np.all(res.motor_torque[i:] == 0.0)
 
 
@@ -318,6 +332,7 @@ def test_frictionless_surface_planar_forces_come_from_friction_and_inertia():
 
 # --- vibration ----------------------------------------------------------------------------------
 
+
 def test_device_vibration_rms_and_speed_law():
     tw = preset("touch")
     eff = tw.effects.vibration_device
@@ -326,12 +341,12 @@ def test_device_vibration_rms_and_speed_law():
     rng = np.random.default_rng(7)
     v_ref = eff.ref_speed_m_per_s
     a = ph.device_vibration(tw, t, np.full(len(t), v_ref), rng)
-    expected = np.sqrt(sum(s.rms_at_ref_speed_m_per_s2 ** 2 for s in eff.broadband + eff.resonances))
-    rms = np.sqrt(np.mean(np.sum(a ** 2, axis=1)))
+    expected = np.sqrt(sum(s.rms_at_ref_speed_m_per_s2**2 for s in eff.broadband + eff.resonances))
+    rms = np.sqrt(np.mean(np.sum(a**2, axis=1)))
     assert rms == pytest.approx(expected, rel=0.05)
     a2 = ph.device_vibration(tw, t, np.full(len(t), 2 * v_ref), np.random.default_rng(7))
-    rms2 = np.sqrt(np.mean(np.sum(a2 ** 2, axis=1)))
-    law = eff.idle_fraction + (1 - eff.idle_fraction) * 2 ** eff.speed_exponent
+    rms2 = np.sqrt(np.mean(np.sum(a2**2, axis=1)))
+    law = eff.idle_fraction + (1 - eff.idle_fraction) * 2**eff.speed_exponent
     assert rms2 == pytest.approx(expected * law, rel=0.05)
     assert not np.any(ph.device_vibration(disable(tw, "vibration.device"), t, np.full(len(t), v_ref), rng))
     # deterministic for a seed
@@ -354,6 +369,7 @@ def test_resonant_vibration_peaks_at_its_frequency():
 
 
 # --- bad input ----------------------------------------------------------------------------------
+
 
 @pytest.mark.parametrize("case", ["short", "shape", "nan", "backwards", "friction"])
 def test_bad_hand_paths_are_e903(case):
@@ -391,7 +407,7 @@ def test_backlash_delays_the_force_but_keeps_the_series_slope():
         res, depth, q = press(tw, 0.006)
         results.append(res.force_W[:, 2])
         touching = depth > 0.0002
-        assert np.all(np.abs(res.force_W[touching & (depth < 0.0005), 2]) < 1e-3)   # lost motion first
+        assert np.all(np.abs(res.force_W[touching & (depth < 0.0005), 2]) < 1e-3)  # lost motion first
         i, j = np.argmax(depth > 0.003), len(depth) - 1
         slope = (res.force_W[j, 2] - res.force_W[i, 2]) / (depth[j] - depth[i])
         assert slope == pytest.approx(series_value(tw, q), rel=0.03)
@@ -420,6 +436,7 @@ def test_a_twin_without_effects_does_nothing_to_the_hand():
 
 # --- remembered paths ---------------------------------------------------------------------------
 
+
 def _variants(base):
     """The preset with each effect switched the other way, with longer links and with a stronger gravity."""
     out = {}
@@ -429,10 +446,14 @@ def _variants(base):
     links = set_param(base, "kinematics.link_length.delta_a_m", [0.004, 0.004, 0.004])
     out["link length +4 mm"] = set_param(links, "kinematics.link_length.enabled", True)
     out["gravity 10.5"] = set_param(base, "gravity.g_m_per_s2", 10.5)
-    for key, value in (("friction.coulomb.gimbal_torque_Nm", [0.004, 0.004, 0.004]), ("friction.coulomb.torque_Nm", [0.05] * 3),
-                       ("friction.coulomb.zero_crossing_velocity_rad_per_s", 0.01),
-                       ("friction.viscous.gimbal_damping_Nms_per_rad", [2e-4, 2e-4, 2e-4]),
-                       ("friction.viscous.damping_Nms_per_rad", [2e-3] * 3), ("inertia.rotor_inertia_kg_m2", [3e-6] * 3)):
+    for key, value in (
+        ("friction.coulomb.gimbal_torque_Nm", [0.004, 0.004, 0.004]),
+        ("friction.coulomb.torque_Nm", [0.05] * 3),
+        ("friction.coulomb.zero_crossing_velocity_rad_per_s", 0.01),
+        ("friction.viscous.gimbal_damping_Nms_per_rad", [2e-4, 2e-4, 2e-4]),
+        ("friction.viscous.damping_Nms_per_rad", [2e-3] * 3),
+        ("inertia.rotor_inertia_kg_m2", [3e-6] * 3),
+    ):
         out[f"{key} changed"] = set_param(base, key, value)
     return out
 
@@ -444,7 +465,7 @@ def test_remembered_joint_paths_and_rigid_parts_never_change_a_result(kind):
     base = preset("touch")
     q = centre_q(base)
     t, p, quat = hold(base, q, n=3000)
-    p = p + 0.02 * np.sin(2 * np.pi * 0.7 * t)[:, None] * np.array([1.0, 0.5, -0.8])     # reversals, some contact
+    p = p + 0.02 * np.sin(2 * np.pi * 0.7 * t)[:, None] * np.array([1.0, 0.5, -0.8])  # reversals, some contact
     surface = p[0] - np.array([0.0, 0.0, 0.01])
     rend = {"surface_point_m": surface.tolist(), "surface_normal": [0.0, 0.0, 1.0], "stiffness_N_per_m": 750.0}
 
@@ -458,5 +479,5 @@ def test_remembered_joint_paths_and_rigid_parts_never_change_a_result(kind):
         ph._MEMO.clear()
         run(base)
         assert np.array_equal(run(tw), fresh, equal_nan=True), name
-        if name.startswith(("gravity", "inertia", "friction.", "link length")):    # they act on any moving hand
+        if name.startswith(("gravity", "inertia", "friction.", "link length")):  # they act on any moving hand
             assert not np.array_equal(fresh, run(base), equal_nan=True), name

@@ -31,15 +31,21 @@ def fitted_table() -> list[dict]:
         if len(cells) != 4 or cells[0] not in PRESETS:
             continue
         cited = dict(part.split(" = ") for part in cells[3].split("; "))
-        rows.append({"preset": cells[0], "parameter": cells[1], "value": [float(v) for v in cells[2].split(",")],
-                     "cited": {m: float(v) for m, v in cited.items()}})
+        rows.append(
+            {
+                "preset": cells[0],
+                "parameter": cells[1],
+                "value": [float(v) for v in cells[2].split(",")],
+                "cited": {m: float(v) for m, v in cited.items()},
+            }
+        )
     return rows
 
 
 def resolve(data: dict, path: str):
     """The value at a table path: ``<effect id>.<parameter>…`` under ``effects``, else dotted from the file's root."""
     effect = next((e for e in sorted(data["effects"], key=len, reverse=True) if path.startswith(e + ".")), None)
-    node, keys = (data["effects"][effect], path[len(effect) + 1:].split(".")) if effect else (data, path.split("."))
+    node, keys = (data["effects"][effect], path[len(effect) + 1 :].split(".")) if effect else (data, path.split("."))
     for key in keys:
         node = node[int(key)] if isinstance(node, list) else node[key]
     return node
@@ -82,8 +88,9 @@ def test_a_listed_value_is_the_presets_and_its_paper_values_are_the_papers(row):
 @pytest.mark.parametrize("name", sorted(PRESETS))
 def test_every_tuned_parameter_is_in_the_table(name):
     listed = [r["parameter"] for r in ROWS if r["preset"] == name]
-    missing = [p for p in sorted(tuned_paths(twin_to_dict(preset(name))))
-               if not any(q == p or q.startswith(p + ".") for q in listed)]
+    missing = [
+        p for p in sorted(tuned_paths(twin_to_dict(preset(name)))) if not any(q == p or q.startswith(p + ".") for q in listed)
+    ]
     assert not missing, f"{name}: tuned but not in spec §20.1's table: {missing}"
 
 

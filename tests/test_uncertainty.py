@@ -21,6 +21,7 @@ from haptify.storage import open_session
 
 # --- the definition file (§19.1) -------------------------------------------------------------------
 
+
 def test_every_metric_has_exactly_one_method():
     ids = {m.id for f in all_families() for m in f.metrics}
     assert set(unc.definitions().metrics) == ids
@@ -38,6 +39,7 @@ def test_methods_name_known_sources_and_reasons():
 
 
 # --- GUM arithmetic (§19.2, §19.4) -----------------------------------------------------------------
+
 
 def test_type_a_of_four_values():
     u, dof = unc.type_a([1.0, 2.0, 3.0, 4.0])
@@ -72,8 +74,12 @@ def test_welch_satterthwaite_two_equal_terms_double_the_dof(u, nu):
 
 def test_combine_gum_example():
     """u_A = 3 (ν = 4) and u_B = 4 (ν = ∞): u = 5, ν_eff = 5⁴ / (3⁴/4) = 30.86, k = t_0.975(30.86)."""
-    terms = [BudgetTerm(source="repeatability", type="A", distribution="t", u_input=3.0, unit="N", sensitivity=1.0, contribution=3.0, dof=4),
-             BudgetTerm(source="b", type="B", distribution="normal", u_input=4.0, unit="N", sensitivity=1.0, contribution=4.0)]
+    terms = [
+        BudgetTerm(
+            source="repeatability", type="A", distribution="t", u_input=3.0, unit="N", sensitivity=1.0, contribution=3.0, dof=4
+        ),
+        BudgetTerm(source="b", type="B", distribution="normal", u_input=4.0, unit="N", sensitivity=1.0, contribution=4.0),
+    ]
     u, big_u, k, nu = unc.combine(terms, 0.95)
     assert u == pytest.approx(5.0)
     assert nu == pytest.approx(625 / (81 / 4))
@@ -100,6 +106,7 @@ def test_draws_have_the_declared_distributions():
 
 
 # --- Monte Carlo through the free-space family (§19.3) --------------------------------------------
+
 
 @pytest.fixture(scope="module")
 def two_rep_free_space():
@@ -158,7 +165,7 @@ def test_attach_with_a_rig_figure_combines_a_and_b(two_rep_free_space, monkeypat
     assert b.u_input == 0.05
     assert b.contribution == pytest.approx(0.05 * np.linalg.norm(mean_direction()), rel=3 / math.sqrt(2 * 199))
     assert rec.uncertainty.u == pytest.approx(math.hypot(a.contribution, b.contribution), rel=1e-12)
-    nu = rec.uncertainty.u ** 4 / (a.contribution ** 4 / 1 + b.contribution ** 4 / 199)
+    nu = rec.uncertainty.u**4 / (a.contribution**4 / 1 + b.contribution**4 / 199)
     assert rec.uncertainty.dof_eff == pytest.approx(nu, rel=1e-9)
     assert rec.uncertainty.mc_draws == 200 and not rec.uncertainty.sources_missing
 
@@ -177,6 +184,7 @@ def test_results_round_trip_through_the_schema(two_rep_free_space):
 
 # --- conformance: judging u, U and k (spec §16.3, §19.7) --------------------------------------------
 
+
 def test_the_judge_reads_the_uncertainty_record():
     from haptify_conform.cases import load_cases
     from haptify_conform.judge import judge_metric
@@ -192,13 +200,19 @@ def test_the_judge_reads_the_uncertainty_record():
 
 # --- comparing (spec §19.6) ------------------------------------------------------------------------
 
+
 def _record(value: float, u: float, dof: float | None):
     from haptify.results import MetricResult, MetricUncertainty
 
     k = unc.coverage_factor(math.inf if dof is None else dof, 0.95)
-    return MetricResult(id="free_space.force_mean", value=value, unit="N", n=3, definition_version="1.0.0",
-                        uncertainty=MetricUncertainty(method="type_a", u=u, U=k * u, k=k, coverage_probability=0.95,
-                                                      dof_eff=dof, budget=[]))
+    return MetricResult(
+        id="free_space.force_mean",
+        value=value,
+        unit="N",
+        n=3,
+        definition_version="1.0.0",
+        uncertainty=MetricUncertainty(method="type_a", u=u, U=k * u, k=k, coverage_probability=0.95, dof_eff=dof, budget=[]),
+    )
 
 
 def test_difference_test_welch():
@@ -225,9 +239,13 @@ def test_compare_shows_u_and_marks_significant_pairs():
     from haptify.results import DeviceSummary, Implementation
 
     def results(label: str, value: float, u: float) -> ResultsFile:
-        return ResultsFile(implementation=Implementation(name="t", version="1"), session_id=label,
-                           device=DeviceSummary(manufacturer="M", model=label), manifest_sha256="0" * 64,
-                           metrics=[_record(value, u, None)])
+        return ResultsFile(
+            implementation=Implementation(name="t", version="1"),
+            session_id=label,
+            device=DeviceSummary(manufacturer="M", model=label),
+            manifest_sha256="0" * 64,
+            metrics=[_record(value, u, None)],
+        )
 
     table = build_table([results("A", 1.0, 0.01), results("B", 1.5, 0.01), results("C", 1.01, 0.01)])
     row = next(r for r in table.rows if r[0].startswith("Mean free-space force"))
@@ -240,8 +258,13 @@ def test_compare_shows_u_and_marks_significant_pairs():
 
 def test_ties_group_indistinguishable_devices():
     """u = 0.01, ν = ∞: two values tie when they differ by less than 1.96·√2·0.01 = 0.0277."""
-    recs = [_record(1.00, 0.01, None), _record(1.50, 0.01, None), _record(1.02, 0.01, None), _record(1.04, 0.01, None),
-            _record(1.51, 0.01, None)]
+    recs = [
+        _record(1.00, 0.01, None),
+        _record(1.50, 0.01, None),
+        _record(1.02, 0.01, None),
+        _record(1.04, 0.01, None),
+        _record(1.51, 0.01, None),
+    ]
     assert unc.tie_groups(recs) == [[0, 2], [3], [1, 4]]  # 1.04 − 1.00 = 0.04 > 0.0277: a new group
     plain = recs[0].model_copy(update={"uncertainty": None})
     assert unc.tie_groups([plain, recs[2]]) == [[0], [1]]
@@ -265,12 +288,24 @@ def test_type_a_records_of_a_vector_and_of_placements():
     (sd/√10, 9 dof); no Type B source is involved, so no session is read."""
     from haptify.results import Implementation, MetricResult
 
-    freq = MetricResult(id="rig.plate_natural_frequency", value=[2.0, 2.0, 4.0], unit="Hz", per_repetition=[[1, 2, 3], [3, 2, 5]],
-                        n=2, sd=[math.sqrt(2), 0.0, math.sqrt(2)], definition_version="1.0.0")
-    cop = MetricResult(id="rig.cop_error", value=0.004, unit="m", per_repetition=[0.0035, 0.0045], n=10, sd=0.002,
-                       definition_version="1.0.0")
-    res = unc.attach(None, ResultsFile(implementation=Implementation(name="t", version="1"), session_id="s",
-                                       manifest_sha256="0" * 64, metrics=[freq, cop]))
+    freq = MetricResult(
+        id="rig.plate_natural_frequency",
+        value=[2.0, 2.0, 4.0],
+        unit="Hz",
+        per_repetition=[[1, 2, 3], [3, 2, 5]],
+        n=2,
+        sd=[math.sqrt(2), 0.0, math.sqrt(2)],
+        definition_version="1.0.0",
+    )
+    cop = MetricResult(
+        id="rig.cop_error", value=0.004, unit="m", per_repetition=[0.0035, 0.0045], n=10, sd=0.002, definition_version="1.0.0"
+    )
+    res = unc.attach(
+        None,
+        ResultsFile(
+            implementation=Implementation(name="t", version="1"), session_id="s", manifest_sha256="0" * 64, metrics=[freq, cop]
+        ),
+    )
     f, c = res.metrics[0].uncertainty, res.metrics[1].uncertainty
     np.testing.assert_allclose(f.u, [1.0, 0.0, 1.0])
     assert f.k == pytest.approx(12.706, abs=0.001) and f.U == pytest.approx([12.7062, 0.0, 12.7062], abs=1e-3)

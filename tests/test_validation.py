@@ -41,6 +41,7 @@ def _expected(sidecar: Path) -> dict:
 
 # --- the fixtures -----------------------------------------------------------------------------------
 
+
 def test_there_are_at_least_30_invalid_fixtures_each_with_catalogued_codes():
     assert len(SIDECARS) >= 30
     codes = catalogue()
@@ -50,10 +51,26 @@ def test_there_are_at_least_30_invalid_fixtures_each_with_catalogued_codes():
         assert exp["codes"] and all(c in codes for c in exp["codes"]), side
         assert exp["exit_code"] == (1 if any(codes[c]["severity"] == "error" for c in exp["codes"]) else 0)
     # the defects every validator must catch are covered
-    must = {"malformed-json", "wrong-types", "unknown-protocol", "stream-file-missing", "truncated-parquet",
-            "csv-wrong-header", "time-not-increasing", "wrong-units", "non-unit-quaternion", "nan-in-force",
-            "checksum-mismatch", "empty-stream", "path-traversal", "absolute-path", "symlink-absolute",
-            "symlink-relative-escape", "absurd-rows", "oversized-file"}
+    must = {
+        "malformed-json",
+        "wrong-types",
+        "unknown-protocol",
+        "stream-file-missing",
+        "truncated-parquet",
+        "csv-wrong-header",
+        "time-not-increasing",
+        "wrong-units",
+        "non-unit-quaternion",
+        "nan-in-force",
+        "checksum-mismatch",
+        "empty-stream",
+        "path-traversal",
+        "absolute-path",
+        "symlink-absolute",
+        "symlink-relative-escape",
+        "absurd-rows",
+        "oversized-file",
+    }
     assert must <= {_name(s) for s in SIDECARS}
 
 
@@ -83,9 +100,8 @@ def test_committed_fixtures_are_current(tmp_path: Path, monkeypatch):
     assert not stale, f"stale fixtures {stale[:5]}: run python -m haptify_tools.build_invalid_fixtures"
 
 
-
 @pytest.mark.parametrize("fmt", ["parquet", "csv"])
-@pytest.mark.parametrize("nudge, agree", [(4, True), (10 ** 8, False)])
+@pytest.mark.parametrize("nudge, agree", [(4, True), (10**8, False)])
 def test_rebuilt_trees_agree_up_to_the_cpus_rounding(tmp_path: Path, fmt: str, nudge: int, agree: bool):
     """A rebuild whose numbers differ from the committed tree by a few units in the last place (numpy's
     vectorised sin and exp round differently on different CPUs) is the same fixture; a real change is not."""
@@ -110,12 +126,20 @@ def test_rebuilt_trees_agree_up_to_the_cpus_rounding(tmp_path: Path, fmt: str, n
 
 # --- thresholds of spec §4.4, by construction ------------------------------------------------------
 
+
 def _session(tmp_path: Path, name: str = "s", **kw) -> Path:
     return example_writer(duration_s=0.2, **kw).write(tmp_path / name)
 
 
-@pytest.mark.parametrize("factor, flagged", [(1 + 0.9 * RATE_TOLERANCE, False), (1 - 0.9 * RATE_TOLERANCE, False),
-                                             (1 + 1.2 * RATE_TOLERANCE, True), (1 - 1.2 * RATE_TOLERANCE, True)])
+@pytest.mark.parametrize(
+    "factor, flagged",
+    [
+        (1 + 0.9 * RATE_TOLERANCE, False),
+        (1 - 0.9 * RATE_TOLERANCE, False),
+        (1 + 1.2 * RATE_TOLERANCE, True),
+        (1 - 1.2 * RATE_TOLERANCE, True),
+    ],
+)
 def test_rate_tolerance_is_one_percent_of_the_mean_rate(tmp_path: Path, factor: float, flagged: bool):
     folder = _session(tmp_path)
     fx.rewrite_data(folder, "handle_wrench", fx._retime(1000.0 * factor))
@@ -175,8 +199,12 @@ def test_clock_offset_records_put_streams_on_the_session_clock(tmp_path: Path):
     fx.rewrite_data(folder, "handle_pose", fx._shift_time(10.0))
     assert validate_session(folder).codes == ["E305"]
     pose_file = fx.stream_of(fx.manifest(folder), "handle_pose")["file"]
-    fx.edit(folder, lambda m: m.__setitem__("calibration", [
-        {"kind": "clock_offset", "id": "sync-pose", "stream_file": pose_file, "offset_s": -10.0}]))
+    fx.edit(
+        folder,
+        lambda m: m.__setitem__(
+            "calibration", [{"kind": "clock_offset", "id": "sync-pose", "stream_file": pose_file, "offset_s": -10.0}]
+        ),
+    )
     assert validate_session(folder).codes == []
 
 
@@ -190,9 +218,11 @@ def test_a_stream_without_time_column_is_a_column_finding_not_a_crash(tmp_path: 
 def test_all_findings_are_reported_not_only_the_first():
     report = validate_session(INVALID / "several-problems")
     assert [f.code for f in report.findings].count("W404") == 1
-    assert {f.file for f in report.errors} == {"trials/free_space-1/handle_wrench.parquet",
-                                               "trials/free_space-1/handle_accel.parquet",
-                                               "trials/free_space-1/handle_pose.parquet"}
+    assert {f.file for f in report.errors} == {
+        "trials/free_space-1/handle_wrench.parquet",
+        "trials/free_space-1/handle_accel.parquet",
+        "trials/free_space-1/handle_pose.parquet",
+    }
     groups = report.groups()
     assert all(trial == "free_space-1" for trial, _, _ in groups)
     assert groups[0][1] == "session.json"
@@ -200,8 +230,11 @@ def test_all_findings_are_reported_not_only_the_first():
 
 def test_schema_errors_carry_json_pointers():
     report = validate_session(INVALID / "wrong-types")
-    assert sorted(f.pointer for f in report.findings) == ["/trials/0/powered", "/trials/0/repetition",
-                                                           "/trials/0/streams/0/rate_hz"]
+    assert sorted(f.pointer for f in report.findings) == [
+        "/trials/0/powered",
+        "/trials/0/repetition",
+        "/trials/0/streams/0/rate_hz",
+    ]
     assert {f.code for f in validate_session(INVALID / "unknown-protocol").findings} == {"E301"}
     (rows,) = validate_session(INVALID / "absurd-rows").findings
     assert (rows.code, rows.pointer, rows.found) == ("E113", "/trials/0/streams/0/rows", 10**12)
@@ -230,10 +263,11 @@ def test_symlink_targets_outside_the_folder_are_never_opened(tmp_path: Path, mon
     accel = folder / fx.stream_of(m, "handle_accel")["file"]
     shutil.move(wrench, outside / "secret.parquet")
     shutil.move(accel, outside / "secret-accel.parquet")
-    os.symlink(outside / "secret.parquet", wrench)                      # absolute link out
-    os.symlink("../../../outside/secret-accel.parquet", accel)          # relative link out
+    os.symlink(outside / "secret.parquet", wrench)  # absolute link out
+    os.symlink("../../../outside/secret-accel.parquet", accel)  # relative link out
     arrow_reads: list[str] = []
     real_read = pq.read_table
+
     def audited_read(source, *a, **k):  # Arrow opens paths itself, beyond Python's audit hook
         if isinstance(source, (str, bytes, os.PathLike)):
             arrow_reads.append(os.fsdecode(source))
@@ -271,6 +305,7 @@ def test_a_fifo_stream_file_is_reported_without_blocking(tmp_path: Path):
 
 # --- the command --------------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("sidecar", SIDECARS[::4], ids=_name)
 def test_cli_exit_codes_and_json_report(sidecar: Path, capsys):
     exp = _expected(sidecar)
@@ -300,14 +335,15 @@ def test_cli_exit_code_0_for_a_valid_session_and_2_when_it_cannot_run(tmp_path: 
 
 @pytest.mark.parametrize("name", ["malformed-json", "truncated-parquet"])
 def test_no_traceback_reaches_the_user(name: str):
-    proc = subprocess.run([sys.executable, "-m", "haptify.cli", "validate", str(INVALID / name)],
-                          capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "haptify.cli", "validate", str(INVALID / name)], capture_output=True, text=True, timeout=120
+    )
     assert proc.returncode == 1
     assert "Traceback" not in proc.stdout + proc.stderr
     assert proc.stderr == ""
 
 
-@pytest.mark.parametrize("q", [[1e308, 0.0, 0.0, 0.0], [10 ** 400, 0, 0, 0]])
+@pytest.mark.parametrize("q", [[1e308, 0.0, 0.0, 0.0], [10**400, 0, 0, 0]])
 def test_a_huge_static_quaternion_is_e207_not_an_overflow(tmp_path: Path, q):
     # squaring 1e308 overflowed (E999); an integer beyond the float range cannot even be converted (spec §1.3, §4.3.3)
     folder = _session(tmp_path)

@@ -41,6 +41,7 @@ def _whole(folder: Path) -> dict:
 
 # --- every fixture ----------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("folder", FIXTURES, ids=lambda p: f"{p.parent.name}/{p.name}")
 def test_every_fixture_gives_the_whole_table_findings_in_chunks_of_1_and_7_rows(folder: Path):
     whole = _whole(folder)
@@ -52,6 +53,7 @@ def test_every_fixture_gives_the_whole_table_findings_in_chunks_of_1_and_7_rows(
 # --- findings across a chunk border, by construction -------------------------------------------------
 # handle_wrench: 200 samples at t = i / 1000 s; markers and handle_pose: 20 samples at t = i / 100 s.
 
+
 def _set(column: str, rows, value: float) -> Callable[[pd.DataFrame], pd.DataFrame]:
     return fx.set_column("", column, rows, value)
 
@@ -62,6 +64,7 @@ def _swap_times(k: int) -> Callable[[pd.DataFrame], pd.DataFrame]:
         t[k], t[k + 1] = t[k + 1], t[k]
         df["t"] = t
         return df
+
     return fn
 
 
@@ -71,6 +74,7 @@ def _delay_from(k: int, seconds: float) -> Callable[[pd.DataFrame], pd.DataFrame
         t[k:] += seconds
         df["t"] = t
         return df
+
     return fn
 
 
@@ -81,28 +85,67 @@ def _scale_rows(rows: slice, factor: float) -> Callable[[pd.DataFrame], pd.DataF
             v[rows] *= factor
             df[c] = v
         return df
+
     return fn
 
 
 # (stream kind, rewrite, formats, known findings: code, column, message, time range)
 BORDER_CASES = {
-    "nan-run": ("handle_wrench", _set("fz", slice(5, 13), float("nan")), ("parquet", "csv"),
-                [("E204", "fz", "column 'fz' holds 8 NaN values; handle_wrench allows none", (0.005, 0.012))]),
-    "time-reversal": ("handle_wrench", _swap_times(6), ("parquet", "csv"),
-                      [("E203", "t", "time does not strictly increase at 1 intervals (first at row 7)", (0.006, 0.007))]),
-    "gap": ("handle_wrench", _delay_from(7, 0.001), ("parquet", "csv"),
-            [("W402", "t", "1 sample intervals lie outside [0.5, 1.5] × 0.001 s (largest 0.002 s, smallest 0.001 s)",
-              (0.006, 0.008))]),
-    "nan-time": ("handle_wrench", _set("t", [7], float("nan")), ("parquet", "csv"),
-                 [("E203", "t", "time column holds 1 non-finite values", (0.006, 0.008))]),
-    "nan-time-run": ("handle_wrench", _set("t", slice(7, 10), float("nan")), ("parquet", "csv"),
-                     [("E203", "t", "time column holds 3 non-finite values", (0.006, 0.010))]),
-    "over-range": ("handle_wrench", _set("fz", slice(5, 13), -170.0), ("parquet", "csv"),
-                   [("W401", "fz", "column 'fz' exceeds the declared ±160 range at 8 samples (peak 170)", (0.005, 0.012))]),
-    "infinity": ("handle_wrench", _set("fx", slice(6, 8), float("inf")), ("parquet",),
-                 [("E210", "fx", "column 'fx' holds 2 infinite values", (0.006, 0.007))]),
-    "quaternions": ("handle_pose", _scale_rows(slice(5, 13), 1.5), ("parquet", "csv"),
-                    [("E207", "qw", "8 quaternions (qw, qx, qy, qz) are not unit; worst norm 1.5", (0.05, 0.12))]),
+    "nan-run": (
+        "handle_wrench",
+        _set("fz", slice(5, 13), float("nan")),
+        ("parquet", "csv"),
+        [("E204", "fz", "column 'fz' holds 8 NaN values; handle_wrench allows none", (0.005, 0.012))],
+    ),
+    "time-reversal": (
+        "handle_wrench",
+        _swap_times(6),
+        ("parquet", "csv"),
+        [("E203", "t", "time does not strictly increase at 1 intervals (first at row 7)", (0.006, 0.007))],
+    ),
+    "gap": (
+        "handle_wrench",
+        _delay_from(7, 0.001),
+        ("parquet", "csv"),
+        [
+            (
+                "W402",
+                "t",
+                "1 sample intervals lie outside [0.5, 1.5] × 0.001 s (largest 0.002 s, smallest 0.001 s)",
+                (0.006, 0.008),
+            )
+        ],
+    ),
+    "nan-time": (
+        "handle_wrench",
+        _set("t", [7], float("nan")),
+        ("parquet", "csv"),
+        [("E203", "t", "time column holds 1 non-finite values", (0.006, 0.008))],
+    ),
+    "nan-time-run": (
+        "handle_wrench",
+        _set("t", slice(7, 10), float("nan")),
+        ("parquet", "csv"),
+        [("E203", "t", "time column holds 3 non-finite values", (0.006, 0.010))],
+    ),
+    "over-range": (
+        "handle_wrench",
+        _set("fz", slice(5, 13), -170.0),
+        ("parquet", "csv"),
+        [("W401", "fz", "column 'fz' exceeds the declared ±160 range at 8 samples (peak 170)", (0.005, 0.012))],
+    ),
+    "infinity": (
+        "handle_wrench",
+        _set("fx", slice(6, 8), float("inf")),
+        ("parquet",),
+        [("E210", "fx", "column 'fx' holds 2 infinite values", (0.006, 0.007))],
+    ),
+    "quaternions": (
+        "handle_pose",
+        _scale_rows(slice(5, 13), 1.5),
+        ("parquet", "csv"),
+        [("E207", "qw", "8 quaternions (qw, qx, qy, qz) are not unit; worst norm 1.5", (0.05, 0.12))],
+    ),
 }
 
 
@@ -130,26 +173,35 @@ def test_an_occlusion_across_chunk_borders_is_counted_once(tmp_path: Path):
     w = example_writer(duration_s=0.2)
     fx.add_markers_trial(w, ["h1", "h2"])
     folder = w.write(tmp_path / "s")
-    fx._markers_nan(slice(5, 13), ["h1_x"])(folder)                    # partial: 8 samples
-    fx._markers_nan(slice(3, 9), ["h2_x", "h2_y", "h2_z"])(folder)     # whole entity: 6 of 20 samples
+    fx._markers_nan(slice(5, 13), ["h1_x"])(folder)  # partial: 8 samples
+    fx._markers_nan(slice(3, 9), ["h2_x", "h2_y", "h2_z"])(folder)  # whole entity: 6 of 20 samples
     whole = _whole(folder)
     for rows in CHUNKS:
         report = validate_session(folder, chunk_rows=rows)
         found = [(f.code, f.message, f.found) for f in report.findings]
-        assert found == [("E204", "h1: 8 samples have some but not all of ['h1_x', 'h1_y', 'h1_z'] NaN", "partial NaN"),
-                         ("W405", "h2 is occluded in 30% of the samples", 0.3)], rows
+        assert found == [
+            ("E204", "h1: 8 samples have some but not all of ['h1_x', 'h1_y', 'h1_z'] NaN", "partial NaN"),
+            ("W405", "h2 is occluded in 30% of the samples", 0.3),
+        ], rows
         assert [f.time_range for f in report.findings] == [pytest.approx((0.05, 0.12)), pytest.approx((0.03, 0.08))]
         assert _dump(report) == whole, rows
 
 
 # --- any damage, any chunking ------------------------------------------------------------------------
 
+
 @st.composite
 def damage(draw):
     """Random NaN, infinity, over-range, out-of-order and delayed samples in handle_wrench (200 rows)."""
     rows = st.lists(st.integers(0, 199), max_size=12, unique=True)
-    return {"nan": draw(rows), "inf": draw(rows), "over": draw(rows), "swap": draw(st.lists(st.integers(0, 198), max_size=3)),
-            "delay": draw(st.lists(st.integers(1, 199), max_size=3)), "chunk": draw(st.integers(1, 60))}
+    return {
+        "nan": draw(rows),
+        "inf": draw(rows),
+        "over": draw(rows),
+        "swap": draw(st.lists(st.integers(0, 198), max_size=3)),
+        "delay": draw(st.lists(st.integers(1, 199), max_size=3)),
+        "chunk": draw(st.integers(1, 60)),
+    }
 
 
 _BASE: dict[str, Path] = {}
@@ -188,6 +240,7 @@ def test_any_damage_gives_the_whole_table_findings_in_any_chunking(tmp_path: Pat
 
 
 # --- bounded memory ----------------------------------------------------------------------------------
+
 
 @pytest.mark.parametrize("fmt", ["parquet", "csv"])
 def test_validation_holds_one_chunk_of_a_stream_at_a_time(tmp_path: Path, monkeypatch, fmt: str):

@@ -39,6 +39,7 @@ def _write(tmp_path: Path, extend=None, name: str = "s") -> Path:
 
 # --- force-plate corner ids (spec §2.2, §2.4: E107) ------------------------------------------------
 
+
 @pytest.mark.parametrize("k, to", [(1, "c1"), (3, "c2"), (0, "c4")])
 def test_a_repeated_corner_id_is_e107_at_the_repeat_naming_the_missing_id(tmp_path: Path, k: int, to: str):
     folder = _write(tmp_path)
@@ -61,12 +62,20 @@ def test_corner_ids_in_any_order_are_valid(tmp_path: Path):
 
 # --- rendering surface normal (spec §2.5: E307) ------------------------------------------------------
 
+
 def _with_normal(tmp_path: Path, normal: list[float]) -> Path:
     return _write(tmp_path, lambda w: fx.add_active_trial(w, rendering={**fx.RENDERING, "surface_normal": normal}))
 
 
-@pytest.mark.parametrize("excess, flagged", [(0.9 * NORMAL_NORM_TOLERANCE, False), (-0.9 * NORMAL_NORM_TOLERANCE, False),
-                                             (1.5 * NORMAL_NORM_TOLERANCE, True), (-1.5 * NORMAL_NORM_TOLERANCE, True)])
+@pytest.mark.parametrize(
+    "excess, flagged",
+    [
+        (0.9 * NORMAL_NORM_TOLERANCE, False),
+        (-0.9 * NORMAL_NORM_TOLERANCE, False),
+        (1.5 * NORMAL_NORM_TOLERANCE, True),
+        (-1.5 * NORMAL_NORM_TOLERANCE, True),
+    ],
+)
 def test_surface_normal_tolerance_is_that_of_quaternions(tmp_path: Path, excess: float, flagged: bool):
     assert NORMAL_NORM_TOLERANCE == 1e-3
     direction = np.array([0.0, 0.6, 0.8])  # a unit vector, exactly
@@ -91,10 +100,12 @@ def test_zero_tilted_unnormalised_and_huge_normals_are_e307_never_e999(tmp_path:
 
 # --- the sync trigger (spec §2.6: E214) ----------------------------------------------------------------
 
+
 def _with_sync(tmp_path: Path, trigger: np.ndarray, name: str = "s") -> Path:
     def extend(w):
         t = np.arange(trigger.size) / 1000.0
         w.add_stream(fx.TRIAL, "sync", {"t": t, "trigger": trigger}, rate_hz=1000)
+
     return _write(tmp_path, extend, name)
 
 
@@ -121,9 +132,12 @@ def test_nan_in_the_trigger_is_e204_not_e214(tmp_path: Path):
 
 
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(bits=st.lists(st.sampled_from([0.0, 1.0]), min_size=200, max_size=200),
-       odd=st.dictionaries(st.integers(0, 199), st.floats(-10, 10, allow_nan=False).filter(lambda v: v not in (0.0, 1.0)),
-                           max_size=5))
+@given(
+    bits=st.lists(st.sampled_from([0.0, 1.0]), min_size=200, max_size=200),
+    odd=st.dictionaries(
+        st.integers(0, 199), st.floats(-10, 10, allow_nan=False).filter(lambda v: v not in (0.0, 1.0)), max_size=5
+    ),
+)
 def test_e214_counts_exactly_the_values_outside_zero_and_one(tmp_path_factory, bits, odd):
     trigger = np.array(bits)
     for i, v in odd.items():
@@ -139,6 +153,7 @@ def test_e214_counts_exactly_the_values_outside_zero_and_one(tmp_path_factory, b
 
 # --- entities only on markers and link_poses (spec §2.6: E215) --------------------------------------
 
+
 @pytest.mark.parametrize("kind, entities", [("handle_wrench", ["h1"]), ("handle_pose", []), ("plate_wrench", ["c1", "c2"])])
 def test_entities_on_a_kind_without_entities_are_e215(tmp_path: Path, kind: str, entities):
     folder = _write(tmp_path)
@@ -149,19 +164,29 @@ def test_entities_on_a_kind_without_entities_are_e215(tmp_path: Path, kind: str,
 
 
 def test_entities_on_markers_and_link_poses_stay_valid(tmp_path: Path):
-    folder = _write(tmp_path, lambda w: (fx.add_markers_trial(w, ["h1", "h2"]),
-                                         w.add_stream("workspace-1", "link_poses", fx._link_poses(["handle"]), rate_hz=100,
-                                                      entities=["handle"])))
+    folder = _write(
+        tmp_path,
+        lambda w: (
+            fx.add_markers_trial(w, ["h1", "h2"]),
+            w.add_stream("workspace-1", "link_poses", fx._link_poses(["handle"]), rate_hz=100, entities=["handle"]),
+        ),
+    )
     assert validate_session(folder).findings == []
 
 
 # --- the device's kinematic chain (spec §2.3: E115, E116) ----------------------------------------------
 
+
 def _kin(limits: list[tuple[dict, dict]], names: list[str] | None = None) -> Kinematics:
     names = names or [f"q{i + 1}" for i in range(len(limits))]
-    return Kinematics.model_validate({
-        "base": {"position": [0, 0, 0], "quaternion": [1, 0, 0, 0]},
-        "joints": [{"name": n, "a": 0.1, "alpha": 0.0, "d": 0.0, "lower": lo, "upper": hi} for n, (lo, hi) in zip(names, limits)]})
+    return Kinematics.model_validate(
+        {
+            "base": {"position": [0, 0, 0], "quaternion": [1, 0, 0, 0]},
+            "joints": [
+                {"name": n, "a": 0.1, "alpha": 0.0, "d": 0.0, "lower": lo, "upper": hi} for n, (lo, hi) in zip(names, limits)
+            ],
+        }
+    )
 
 
 def _codes(kin: Kinematics) -> list[tuple[str, str]]:
@@ -174,20 +199,27 @@ def test_the_touch_chain_is_valid():
 
 @pytest.mark.parametrize("lower, upper, flagged", [(0.0, -0.5, True), (0.0, -1e-12, True), (0.3, 0.3, False), (-1.0, 1.0, False)])
 def test_a_constant_range_is_empty_exactly_when_upper_is_below_lower(lower: float, upper: float, flagged: bool):
-    kin = _kin([({"constant": -1.0}, {"constant": 1.0}), ({"constant": lower}, {"constant": upper}),
-                ({"constant": -1.0}, {"constant": 1.0})])
+    kin = _kin(
+        [
+            ({"constant": -1.0}, {"constant": 1.0}),
+            ({"constant": lower}, {"constant": upper}),
+            ({"constant": -1.0}, {"constant": 1.0}),
+        ]
+    )
     assert _codes(kin) == ([("E115", "/kinematics/joints/1")] if flagged else [])
 
 
 def test_a_coupled_range_empty_everywhere_is_e115_and_empty_somewhere_is_allowed():
     q2 = ({"constant": 0.0}, {"constant": 1.7628})
     # q3 ≤ -2.5 - 0.85 q2 < -2.4435 = lower for every q2 in [0, 1.7628]: empty everywhere
-    everywhere = _kin([({"constant": -1.0}, {"constant": 1.0}), q2,
-                       ({"constant": -2.4435}, {"constant": -2.5, "coefficients": {"q2": -0.85}})])
+    everywhere = _kin(
+        [({"constant": -1.0}, {"constant": 1.0}), q2, ({"constant": -2.4435}, {"constant": -2.5, "coefficients": {"q2": -0.85}})]
+    )
     assert _codes(everywhere) == [("E115", "/kinematics/joints/2")]
     # q3 ≤ -2.0 - 0.85 q2: non-empty for q2 < 0.52 only — the rest of q2's range is unreachable, not an error
-    somewhere = _kin([({"constant": -1.0}, {"constant": 1.0}), q2,
-                      ({"constant": -2.4435}, {"constant": -2.0, "coefficients": {"q2": -0.85}})])
+    somewhere = _kin(
+        [({"constant": -1.0}, {"constant": 1.0}), q2, ({"constant": -2.4435}, {"constant": -2.0, "coefficients": {"q2": -0.85}})]
+    )
     assert _codes(somewhere) == []
 
 
@@ -201,8 +233,11 @@ def test_joints_are_named_q1_to_qn_in_chain_order(names: list[str], bad: list[in
 def test_a_limit_may_name_earlier_joints_only(joint: int, side: str, other: str):
     limits = [({"constant": -1.0}, {"constant": 1.0}) for _ in range(3)]
     lo, hi = limits[joint]
-    limits[joint] = (lo, {"constant": 1.0, "coefficients": {other: 0.1}}) if side == "upper" else \
-        ({"constant": -1.0, "coefficients": {other: 0.1}}, hi)
+    limits[joint] = (
+        (lo, {"constant": 1.0, "coefficients": {other: 0.1}})
+        if side == "upper"
+        else ({"constant": -1.0, "coefficients": {other: 0.1}}, hi)
+    )
     assert _codes(_kin(limits)) == [("E116", f"/kinematics/joints/{joint}/{side}/coefficients/{other}")]
 
 
@@ -243,7 +278,10 @@ def test_empty_limits_in_a_device_file_are_reported_in_that_file(tmp_path: Path)
 
 # --- the date (spec §2.1: E104) --------------------------------------------------------------------------
 
-@pytest.mark.parametrize("date, valid", [("2026-02-29", False), ("2028-02-29", True), ("2026-04-31", False), ("2026-12-31", True)])
+
+@pytest.mark.parametrize(
+    "date, valid", [("2026-02-29", False), ("2028-02-29", True), ("2026-04-31", False), ("2026-12-31", True)]
+)
 def test_the_date_is_a_calendar_date(tmp_path: Path, date: str, valid: bool):
     folder = _write(tmp_path)
     fx.edit(folder, lambda m: m.update(date=date))
@@ -252,6 +290,7 @@ def test_the_date_is_a_calendar_date(tmp_path: Path, date: str, valid: bool):
 
 
 # --- the CSV grammar (spec §3.2: E112) --------------------------------------------------------------
+
 
 def _grammar(tmp_path: Path, text: str, columns=("t", "x")):
     path = tmp_path / "s.csv"
@@ -265,20 +304,36 @@ def _grammar(tmp_path: Path, text: str, columns=("t", "x")):
 
 
 @pytest.mark.parametrize("chunk", [3, 64, CSV_CHUNK_BYTES])
-@pytest.mark.parametrize("text", ["t,x\n0,1\n1,NaN\n", "t,x\n0,1\n1,2", "t,x\r\n0,1\r\n1,-2.5e-3\r\n", "t,x\n0,1.\n1,1E+5\n",
-                                  "t,x\n-0,-1.e-300\n"])
+@pytest.mark.parametrize(
+    "text", ["t,x\n0,1\n1,NaN\n", "t,x\n0,1\n1,2", "t,x\r\n0,1\r\n1,-2.5e-3\r\n", "t,x\n0,1.\n1,1E+5\n", "t,x\n-0,-1.e-300\n"]
+)
 def test_csv_lines_of_the_grammar_pass(tmp_path: Path, monkeypatch, text: str, chunk: int):
     monkeypatch.setattr(storage, "CSV_CHUNK_BYTES", chunk)
     assert _grammar(tmp_path, text) is None
 
 
 @pytest.mark.parametrize("chunk", [3, CSV_CHUNK_BYTES])
-@pytest.mark.parametrize("text, line, column, found", [
-    ("t,x\n0,1\n1,nan\n", 3, "x", "nan"), ("t,x\n0,1\n1,inf\n", 3, "x", "inf"), ("t,x\n+0,1\n", 2, "t", "+0"),
-    ('t,x\n0,"1"\n', 2, "x", '"1"'), ("t,x\n0, 1\n", 2, "x", " 1"), ("t,x\n0,\n", 2, "x", ""), ("t,x\n0,.5\n", 2, "x", ".5"),
-    ("t,x\n0,1.2.3\n", 2, "x", "1.2.3"), ("t,x\n0,1\n\n1,2\n", 3, None, "a blank line"), ("t,x\n0,1\n1,2\n\n", 4, None, "a blank line"),
-    ("t,x\n0,1,2\n", 2, None, 3), ("t,x\n0,1\r1,2\n", 2, None, 3), ("t,x\r\n0,1\r\n1,2\r\r\n", 3, "x", "2\r")])
-def test_csv_lines_outside_the_grammar_are_e112_naming_line_and_column(tmp_path: Path, monkeypatch, text, line, column, found, chunk):
+@pytest.mark.parametrize(
+    "text, line, column, found",
+    [
+        ("t,x\n0,1\n1,nan\n", 3, "x", "nan"),
+        ("t,x\n0,1\n1,inf\n", 3, "x", "inf"),
+        ("t,x\n+0,1\n", 2, "t", "+0"),
+        ('t,x\n0,"1"\n', 2, "x", '"1"'),
+        ("t,x\n0, 1\n", 2, "x", " 1"),
+        ("t,x\n0,\n", 2, "x", ""),
+        ("t,x\n0,.5\n", 2, "x", ".5"),
+        ("t,x\n0,1.2.3\n", 2, "x", "1.2.3"),
+        ("t,x\n0,1\n\n1,2\n", 3, None, "a blank line"),
+        ("t,x\n0,1\n1,2\n\n", 4, None, "a blank line"),
+        ("t,x\n0,1,2\n", 2, None, 3),
+        ("t,x\n0,1\r1,2\n", 2, None, 3),
+        ("t,x\r\n0,1\r\n1,2\r\r\n", 3, "x", "2\r"),
+    ],
+)
+def test_csv_lines_outside_the_grammar_are_e112_naming_line_and_column(
+    tmp_path: Path, monkeypatch, text, line, column, found, chunk
+):
     monkeypatch.setattr(storage, "CSV_CHUNK_BYTES", chunk)
     f = _grammar(tmp_path, text)
     assert (f.code, f.column, f.found) == ("E112", column, found)
@@ -290,8 +345,12 @@ def test_a_lone_carriage_return_line_end_is_e112(tmp_path: Path):
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(values=st.lists(st.lists(st.floats(allow_infinity=False), min_size=3, max_size=3), min_size=1, max_size=30),
-       crlf=st.booleans(), last_eol=st.booleans(), chunk=st.sampled_from([5, 17, CSV_CHUNK_BYTES]))
+@given(
+    values=st.lists(st.lists(st.floats(allow_infinity=False), min_size=3, max_size=3), min_size=1, max_size=30),
+    crlf=st.booleans(),
+    last_eol=st.booleans(),
+    chunk=st.sampled_from([5, 17, CSV_CHUNK_BYTES]),
+)
 def test_every_shortest_round_trip_float_and_nan_passes(tmp_path: Path, monkeypatch, values, crlf, last_eol, chunk):
     """What spec §3.2 tells writers to print (Python's repr, NaN as 'NaN') always satisfies the grammar."""
     monkeypatch.setattr(storage, "CSV_CHUNK_BYTES", chunk)
@@ -303,13 +362,24 @@ def test_every_shortest_round_trip_float_and_nan_passes(tmp_path: Path, monkeypa
 
 # --- null members (spec §2.1: W407) ------------------------------------------------------------------
 
+
 def test_every_tolerated_null_is_w407_at_its_pointer_and_the_session_stays_valid(tmp_path: Path):
     folder = _write(tmp_path)
-    fx.edit(folder, lambda m: (fx.trial_of(m).update(notes=None, label=None), m["rig"].update(name=None),
-                               fx.stream_of(m, "handle_wrench").update(entities=None)))
+    fx.edit(
+        folder,
+        lambda m: (
+            fx.trial_of(m).update(notes=None, label=None),
+            m["rig"].update(name=None),
+            fx.stream_of(m, "handle_wrench").update(entities=None),
+        ),
+    )
     report = validate_session(folder)
     assert sorted((f.code, f.pointer) for f in report.findings) == [
-        ("W407", "/rig/name"), ("W407", "/trials/0/label"), ("W407", "/trials/0/notes"), ("W407", "/trials/0/streams/0/entities")]
+        ("W407", "/rig/name"),
+        ("W407", "/trials/0/label"),
+        ("W407", "/trials/0/notes"),
+        ("W407", "/trials/0/streams/0/entities"),
+    ]
     assert {i.trial for i in report.items if i.finding.pointer.startswith("/trials")} == {"free_space-1"}
     assert report.exit_code == 0
 

@@ -19,8 +19,17 @@ from haptify.errors import HaptifyError
 from haptify.metric_definitions import param
 from haptify.results import MetricResult, Unavailable
 from haptify.storage import SessionWriter, open_session
-from haptify.vibration import (combine, compute, dft321, highpass, power_spectrum, report_audio, report_figures, rms,
-                               spectral_centroid)
+from haptify.vibration import (
+    combine,
+    compute,
+    dft321,
+    highpass,
+    power_spectrum,
+    report_audio,
+    report_figures,
+    rms,
+    spectral_centroid,
+)
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
 
 RATE = 2000.0
@@ -53,13 +62,14 @@ def band_noise(n: int, f_lo: float, f_hi: float, rms_value: float, rng) -> np.nd
 
 # --- DFT321 (spec §10.3) ------------------------------------------------------------------------
 
+
 @settings(max_examples=30, deadline=None)
 @given(st.integers(8, 600), st.integers(0, 2**32 - 1))
 def test_dft321_preserves_energy_exactly(n, seed):
     x = np.random.default_rng(seed).normal(size=(n, 3)) * [1.0, 0.3, 2.0]
     a = dft321(x)
     assert a.shape == (n,)
-    assert np.sum(a ** 2) == pytest.approx(np.sum(x ** 2), rel=1e-12)
+    assert np.sum(a**2) == pytest.approx(np.sum(x**2), rel=1e-12)
 
 
 @settings(max_examples=30, deadline=None)
@@ -88,6 +98,7 @@ def test_rotating_the_sensor_frame_changes_neither_rms_nor_centroid(ax, ay, az, 
 
 
 # --- RMS and centroid of known signals (spec §10.4–10.5) -----------------------------------------
+
 
 def test_centroid_and_rms_of_a_pure_tone():
     t = times(2.0)
@@ -121,6 +132,7 @@ def test_periodogram_weights_dc_and_nyquist_once():
 
 # --- the pipeline on raw accelerometer data (spec §10.2, §10.6) ---------------------------------
 
+
 def raw_accel(t: np.ndarray, rng=None, noise=0.0) -> np.ndarray:
     """Gravity slowly rotating through the sensor (0.1 Hz), a bias, hand motion at 1.5 Hz and a 150 Hz tone
     of amplitude 0.05 m/s² on x and 0.02 m/s² at 230 Hz on z."""
@@ -140,7 +152,7 @@ def test_pipeline_removes_gravity_bias_and_hand_motion():
     v = combine(t, raw_accel(t))
     expected_power = (0.05 * gain(150)) ** 2 / 2 + (0.02 * gain(230)) ** 2 / 2
     assert v.rms == pytest.approx(math.sqrt(expected_power), rel=2e-3)
-    expected_centroid = (150 * 0.05 ** 2 + 230 * 0.02 ** 2) / (0.05 ** 2 + 0.02 ** 2)
+    expected_centroid = (150 * 0.05**2 + 230 * 0.02**2) / (0.05**2 + 0.02**2)
     assert v.centroid == pytest.approx(expected_centroid, rel=2e-3)
     assert len(v.signal) == len(t) - 2 * int(TRIM * RATE)
 
@@ -186,9 +198,19 @@ def test_a_few_samples_are_e316_not_a_filter_padding_error(n):
 
 # --- session level (spec §10.6) -----------------------------------------------------------------
 
+
 def vibration_session(tmp_path, *, with_baseline: bool):
-    w = SessionWriter(manifest={"session_id": "vib", "date": "2026-11-22", "lab": {"id": "lab"}, "examiner": {"id": "ex"},
-                                "device": TOUCH_DEVICE, "device_placement": IDENTITY, "rig": example_rig()})
+    w = SessionWriter(
+        manifest={
+            "session_id": "vib",
+            "date": "2026-11-22",
+            "lab": {"id": "lab"},
+            "examiner": {"id": "ex"},
+            "device": TOUCH_DEVICE,
+            "device_placement": IDENTITY,
+            "rig": example_rig(),
+        }
+    )
     rng = np.random.default_rng(3)
     t = times(6.0)
     amplitudes = [0.04, 0.05, 0.06]

@@ -76,10 +76,18 @@ def rich_writer(session_id: str = "viewer-0001", force_scale: float = 1.0):
     w = example_writer(session_id=session_id, duration_s=FREE_SPACE_S)
     w.manifest["device"] = small_device()
     w.manifest["calibration"] = [  # known parameters: 0.25 N force bias on x, no connector weight, zero plate bias
-        {"kind": "handle_gravity", "id": "hg", "force_bias_N": [FORCE_BIAS, 0.0, 0.0], "connector_mass_kg": 0.0,
-         "connector_com_m": [0.0, 0.0, 0.0], "torque_bias_Nm": [0.0, 0.0, 0.0], "accel_bias_m_per_s2": [0.0, 0.0, 0.0],
-         "gravity_m_per_s2": 9.81},
-        {"kind": "plate_bias", "id": "pb", "bias": [0.0] * 24}]
+        {
+            "kind": "handle_gravity",
+            "id": "hg",
+            "force_bias_N": [FORCE_BIAS, 0.0, 0.0],
+            "connector_mass_kg": 0.0,
+            "connector_com_m": [0.0, 0.0, 0.0],
+            "torque_bias_Nm": [0.0, 0.0, 0.0],
+            "accel_bias_m_per_s2": [0.0, 0.0, 0.0],
+            "gravity_m_per_s2": 9.81,
+        },
+        {"kind": "plate_bias", "id": "pb", "bias": [0.0] * 24},
+    ]
     mc = w.manifest["rig"]["motion_capture"]
     mc["rigid_bodies"] += [{"name": "link1", "markers": ["l1a", "l1b"]}, {"name": "link2", "markers": ["l2a", "l2b"]}]
     mc["markers"] += ["l1a", "l1b", "l2a", "l2b"]
@@ -90,27 +98,59 @@ def rich_writer(session_id: str = "viewer-0001", force_scale: float = 1.0):
     phi = np.sqrt(n * np.pi) * np.arcsin(z)
     xyz = SPHERE_C + SPHERE_R * np.column_stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z])
     w.add_trial("workspace-1", "workspace", powered=False)
-    w.add_stream("workspace-1", "handle_pose", {"t": t, "px": xyz[:, 0], "py": xyz[:, 1], "pz": xyz[:, 2],
-                                                "qw": 1 + 0 * t, "qx": 0 * t, "qy": 0 * t, "qz": 0 * t}, rate_hz=100)
+    w.add_stream(
+        "workspace-1",
+        "handle_pose",
+        {"t": t, "px": xyz[:, 0], "py": xyz[:, 1], "pz": xyz[:, 2], "qw": 1 + 0 * t, "qx": 0 * t, "qy": 0 * t, "qz": 0 * t},
+        rate_hz=100,
+    )
     # stiffness: presses into the plane z = SURFACE_Z; the handle is turned 90° about z
-    w.add_trial("stiffness-1", "stiffness", powered=True,
-                rendering={"surface_point_m": [0.0, 0.0, SURFACE_Z], "surface_normal": [0.0, 0.0, 1.0], "stiffness_N_per_m": 500.0})
+    w.add_trial(
+        "stiffness-1",
+        "stiffness",
+        powered=True,
+        rendering={"surface_point_m": [0.0, 0.0, SURFACE_Z], "surface_normal": [0.0, 0.0, 1.0], "stiffness_N_per_m": 500.0},
+    )
     t100 = np.arange(100) / 100.0
     pz = SURFACE_Z - 0.003 * np.sin(2 * np.pi * t100)
     c, s = math.cos(math.pi / 4), math.sin(math.pi / 4)
-    pose = {"t": t100, "px": 0 * t100, "py": 0 * t100, "pz": pz, "qw": c + 0 * t100, "qx": 0 * t100, "qy": 0 * t100, "qz": s + 0 * t100}
+    pose = {
+        "t": t100,
+        "px": 0 * t100,
+        "py": 0 * t100,
+        "pz": pz,
+        "qw": c + 0 * t100,
+        "qx": 0 * t100,
+        "qy": 0 * t100,
+        "qz": s + 0 * t100,
+    }
     for k in ("px", "py", "pz", "qw", "qx", "qy", "qz"):
         pose[k] = pose[k].copy()
         pose[k][OCCLUDED] = np.nan
     w.add_stream("stiffness-1", "handle_pose", pose, rate_hz=100)
     t1k = np.arange(1000) / 1000.0
-    wrench = {"t": t1k, "fx": force_scale * (1.0 + 0 * t1k), "fy": 0 * t1k, "fz": force_scale * 2.0 * np.sin(2 * np.pi * t1k),
-              "tx": 0 * t1k, "ty": 0 * t1k, "tz": 0.01 + 0 * t1k}
+    wrench = {
+        "t": t1k,
+        "fx": force_scale * (1.0 + 0 * t1k),
+        "fy": 0 * t1k,
+        "fz": force_scale * 2.0 * np.sin(2 * np.pi * t1k),
+        "tx": 0 * t1k,
+        "ty": 0 * t1k,
+        "tz": 0.01 + 0 * t1k,
+    }
     w.add_stream("stiffness-1", "handle_wrench", wrench, rate_hz=1000)
-    w.add_stream("stiffness-1", "commanded_wrench", {"t": t1k, "fx": 0 * t1k, "fy": 0 * t1k, "fz": 1.5 + 0 * t1k,
-                                                     "tx": 0 * t1k, "ty": 0 * t1k, "tz": 0 * t1k}, rate_hz=1000)
-    w.add_stream("stiffness-1", "device_joint_angles", {"t": t1k, "q1": 0.1 + 0 * t1k, "q2": 0.5 + 0 * t1k,
-                                                        "q3": -0.8 + 0 * t1k}, rate_hz=1000)
+    w.add_stream(
+        "stiffness-1",
+        "commanded_wrench",
+        {"t": t1k, "fx": 0 * t1k, "fy": 0 * t1k, "fz": 1.5 + 0 * t1k, "tx": 0 * t1k, "ty": 0 * t1k, "tz": 0 * t1k},
+        rate_hz=1000,
+    )
+    w.add_stream(
+        "stiffness-1",
+        "device_joint_angles",
+        {"t": t1k, "q1": 0.1 + 0 * t1k, "q2": 0.5 + 0 * t1k, "q3": -0.8 + 0 * t1k},
+        rate_hz=1000,
+    )
     w.add_stream("stiffness-1", "sync", {"t": t1k, "trigger": (t1k >= 0.25).astype(float)}, rate_hz=1000)
     markers = {"t": t100}
     for name, off in (("h1", 0.01), ("h2", 0.02), ("h3", 0.03), ("l2a", -0.05), ("l2b", -0.06)):
@@ -122,8 +162,17 @@ def rich_writer(session_id: str = "viewer-0001", force_scale: float = 1.0):
     w.add_stream("stiffness-1", "markers", markers, rate_hz=100, entities=["h1", "h2", "h3", "l2a", "l2b"])
     links = {"t": t100}
     for link in ("link1", "link2"):
-        links.update({f"{link}_px": 0 * t100, f"{link}_py": 0 * t100, f"{link}_pz": 0.1 + 0 * t100,
-                      f"{link}_qw": 1 + 0 * t100, f"{link}_qx": 0 * t100, f"{link}_qy": 0 * t100, f"{link}_qz": 0 * t100})
+        links.update(
+            {
+                f"{link}_px": 0 * t100,
+                f"{link}_py": 0 * t100,
+                f"{link}_pz": 0.1 + 0 * t100,
+                f"{link}_qw": 1 + 0 * t100,
+                f"{link}_qx": 0 * t100,
+                f"{link}_qy": 0 * t100,
+                f"{link}_qz": 0 * t100,
+            }
+        )
     w.add_stream("stiffness-1", "link_poses", links, rate_hz=100, entities=["link1", "link2"])
     return w
 
@@ -134,21 +183,35 @@ def sessions(tmp_path_factory):
     main = rich_writer().write(root / "main")
     sim = rich_writer("viewer-sim", force_scale=0.5)
     sim.manifest["calibration"] += [  # the simulated stiffness trial runs 3.25 s later on its session clock
-        {"kind": "clock_offset", "id": f"late-{i}", "stream_file": f"trials/stiffness-1/{kind}.parquet", "offset_s": COMPARE_LAG_S}
-        for i, kind in enumerate(("handle_pose", "handle_wrench", "commanded_wrench", "device_joint_angles", "sync",
-                                  "markers", "link_poses"))]
+        {
+            "kind": "clock_offset",
+            "id": f"late-{i}",
+            "stream_file": f"trials/stiffness-1/{kind}.parquet",
+            "offset_s": COMPARE_LAG_S,
+        }
+        for i, kind in enumerate(
+            ("handle_pose", "handle_wrench", "commanded_wrench", "device_joint_angles", "sync", "markers", "link_poses")
+        )
+    ]
     other = sim.write(root / "sim")
     return open_session(main), open_session(other), root
 
 
 def results_for(session_id: str) -> ResultsFile:
     return ResultsFile(
-        implementation=Implementation(name="haptify-reference", version="0.1.0"), session_id=session_id,
+        implementation=Implementation(name="haptify-reference", version="0.1.0"),
+        session_id=session_id,
         manifest_sha256="0" * 64,
-        metrics=[MetricResult(id="workspace.volume", value=0.000123456, unit="m^3", n=1, definition_version="1.0", trials=["workspace-1"]),
-                 MetricResult(id="stiffness.k_mean", value=[480.0, 470.0], unit="N/m", n=2, sd=7.07, definition_version="1.0",
-                              warnings=["W401"])],
-        unavailable=[Unavailable(id="vibration.rms", code="E302", reason="no handle_accel | stream")])
+        metrics=[
+            MetricResult(
+                id="workspace.volume", value=0.000123456, unit="m^3", n=1, definition_version="1.0", trials=["workspace-1"]
+            ),
+            MetricResult(
+                id="stiffness.k_mean", value=[480.0, 470.0], unit="N/m", n=2, sd=7.07, definition_version="1.0", warnings=["W401"]
+            ),
+        ],
+        unavailable=[Unavailable(id="vibration.rms", code="E302", reason="no handle_accel | stream")],
+    )
 
 
 @pytest.fixture(scope="module")
@@ -194,14 +257,19 @@ def static_text(path: Path, entity: str) -> str:
 
 # --- the .rrd file -----------------------------------------------------------------------------------
 
+
 def test_rrd_verify_accepts_the_file_and_rejects_it_truncated(recorded, tmp_path):
     """`python -m rerun rrd verify` exits 0 on the recording, and not on the same file cut short
     (which loses its footer): the completeness check can fail. Both run at once."""
     _, out = recorded
     cut = tmp_path / "cut.rrd"
     cut.write_bytes(out.read_bytes()[: out.stat().st_size // 2])
-    procs = [subprocess.Popen([sys.executable, "-m", "rerun", "rrd", "verify", str(f)], stdout=subprocess.PIPE,
-                              stderr=subprocess.PIPE, text=True) for f in (out, cut)]
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-m", "rerun", "rrd", "verify", str(f)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
+        for f in (out, cut)
+    ]
     results = [(p.wait(timeout=60), p.communicate()[1]) for p in procs]
     assert results[0][0] == 0, results[0][1]
     assert results[1][0] != 0
@@ -213,24 +281,42 @@ def test_expected_entity_paths(recorded):
     assert entry.recording_id == "viewer-0001+viewer-sim"
     paths = set(RrdReader(out).store().schema().entity_paths())
     expected = {
-        "/world", "/world/plate", "/world/plate/corners", "/world/device", "/session", "/results",
-        "/world/workspace-1/measured/workspace/points", "/world/workspace-1/measured/trajectory",
-        "/world/workspace-1/measured/workspace/measured", "/world/workspace-1/measured/workspace/modeled",
+        "/world",
+        "/world/plate",
+        "/world/plate/corners",
+        "/world/device",
+        "/session",
+        "/results",
+        "/world/workspace-1/measured/workspace/points",
+        "/world/workspace-1/measured/trajectory",
+        "/world/workspace-1/measured/workspace/measured",
+        "/world/workspace-1/measured/workspace/modeled",
         "/world/workspace-1/compare/workspace/measured",
-        "/world/free_space-1/measured/handle", "/world/free_space-1/measured/hand_force/calibrated",
-        "/world/free_space-1/measured/force_field", "/world/free_space-1/measured/plate_force",
-        "/series/free_space-1/measured/hand_force/calibrated", "/series/free_space-1/measured/hand_torque/calibrated",
-        "/series/free_space-1/measured/accel/world", "/series/free_space-1/measured/plate/force",
+        "/world/free_space-1/measured/handle",
+        "/world/free_space-1/measured/hand_force/calibrated",
+        "/world/free_space-1/measured/force_field",
+        "/world/free_space-1/measured/plate_force",
+        "/series/free_space-1/measured/hand_force/calibrated",
+        "/series/free_space-1/measured/hand_torque/calibrated",
+        "/series/free_space-1/measured/accel/world",
+        "/series/free_space-1/measured/plate/force",
         "/series/free_space-1/measured/plate/cop",
-        "/world/stiffness-1/measured/virtual_surface", "/world/stiffness-1/measured/markers/handle",
-        "/world/stiffness-1/measured/markers/link2", "/world/stiffness-1/measured/links/link1",
+        "/world/stiffness-1/measured/virtual_surface",
+        "/world/stiffness-1/measured/markers/handle",
+        "/world/stiffness-1/measured/markers/link2",
+        "/world/stiffness-1/measured/links/link1",
         "/world/stiffness-1/measured/links/link2",
-        "/series/free_space-1/measured/handle/force_raw", "/series/free_space-1/measured/handle/torque_raw",
+        "/series/free_space-1/measured/handle/force_raw",
+        "/series/free_space-1/measured/handle/torque_raw",
         "/series/free_space-1/measured/accel/raw",
-        "/series/free_space-1/measured/plate/corner_force_raw", "/series/free_space-1/measured/plate/corner_torque_raw",
-        "/series/stiffness-1/measured/commanded/force", "/series/stiffness-1/measured/penetration",
-        "/series/stiffness-1/measured/device/joint_angles", "/series/stiffness-1/measured/sync/trigger",
-        "/series/stiffness-1/compare/handle/force_raw", "/world/stiffness-1/compare/handle",
+        "/series/free_space-1/measured/plate/corner_force_raw",
+        "/series/free_space-1/measured/plate/corner_torque_raw",
+        "/series/stiffness-1/measured/commanded/force",
+        "/series/stiffness-1/measured/penetration",
+        "/series/stiffness-1/measured/device/joint_angles",
+        "/series/stiffness-1/measured/sync/trigger",
+        "/series/stiffness-1/compare/handle/force_raw",
+        "/world/stiffness-1/compare/handle",
     }
     assert expected <= paths, sorted(expected - paths)
     assert not any("/world/stiffness-1/measured/force_field" == p for p in paths)  # only for free space
@@ -356,6 +442,7 @@ def test_write_is_atomic_with_ordinary_permissions(tmp_path):
 
 # --- blueprints -------------------------------------------------------------------------------------
 
+
 def test_blueprint_per_protocol(recorded):
     plan, _ = recorded
     tabs = {tp.trial.protocol: blueprints.trial_tab(plan, tp) for tp in plan.trials}
@@ -390,6 +477,7 @@ def test_every_protocol_has_a_layout():
 
 
 # --- helpers known by construction ---------------------------------------------------------------------
+
 
 def test_raw_pose_at_interpolates_without_filtering():
     t = np.array([0.0, 1.0, 2.0])
@@ -515,23 +603,25 @@ def test_workspace_meshes_enclose_the_solids(recorded, sessions):
         triangles = np.array(mesh.triangle_indices.as_arrow_array().to_pylist(), dtype=np.int64)
         volume = SurfaceMesh(vertices, triangles, vertices).enclosed_volume()
         if expected is not None:
-            inside = float((expected.fraction >= 0.5).sum()) * expected.pitch ** 3
+            inside = float((expected.fraction >= 0.5).sum()) * expected.pitch**3
             assert volume == pytest.approx(inside, rel=1e-4)  # float32 vertices in the archetype
             assert volume == pytest.approx(expected.volume, rel=0.05)
-            assert volume == pytest.approx(4 / 3 * np.pi * SPHERE_R ** 3, rel=0.10)
+            assert volume == pytest.approx(4 / 3 * np.pi * SPHERE_R**3, rel=0.10)
         else:
             assert volume > 0
 
 
 @settings(max_examples=40, deadline=None)
-@given(arrays(np.bool_, st.tuples(st.integers(1, 5), st.integers(1, 5), st.integers(1, 5))),
-       st.tuples(st.integers(-50, 50), st.integers(-50, 50), st.integers(-50, 50)))
+@given(
+    arrays(np.bool_, st.tuples(st.integers(1, 5), st.integers(1, 5), st.integers(1, 5))),
+    st.tuples(st.integers(-50, 50), st.integers(-50, 50), st.integers(-50, 50)),
+)
 def test_voxel_boundary_mesh_is_closed_and_outward(grid, origin):
     from haptify_tools.viewer.voxel_mesh import SurfaceMesh, boundary_mesh
 
     pitch = 0.004
     mesh = boundary_mesh(grid, origin, pitch)
-    assert mesh.enclosed_volume() == pytest.approx(grid.sum() * pitch ** 3, rel=1e-9, abs=1e-15)
+    assert mesh.enclosed_volume() == pytest.approx(grid.sum() * pitch**3, rel=1e-9, abs=1e-15)
     padded = np.pad(grid, 1)
     exposed = sum(int((padded & ~np.roll(padded, s, axis=a)).sum()) for a in range(3) for s in (1, -1))
     assert len(mesh.triangles) == 2 * exposed
@@ -547,10 +637,13 @@ def test_voxel_boundary_mesh_is_closed_and_outward(grid, origin):
     vertices, triangles = mesh.shared(pitch)
     assert len(np.unique(np.round(vertices / pitch), axis=0)) == len(vertices)
     assert len(triangles) == len(mesh.triangles)
-    assert SurfaceMesh(vertices, triangles, vertices).enclosed_volume() == pytest.approx(grid.sum() * pitch ** 3, rel=1e-9, abs=1e-15)
+    assert SurfaceMesh(vertices, triangles, vertices).enclosed_volume() == pytest.approx(
+        grid.sum() * pitch**3, rel=1e-9, abs=1e-15
+    )
 
 
 # --- the command -------------------------------------------------------------------------------------
+
 
 def view_args(*argv: str) -> argparse.Namespace:
     parser = argparse.ArgumentParser()
@@ -584,8 +677,11 @@ def test_cli_without_display_explains_save_and_web(sessions, monkeypatch, capsys
 
 def test_cli_usage_errors(sessions):
     main, _, _ = sessions
-    for argv, code in ((["--port", "9000", "--save", "x.rrd"], "E903"), (["--web", "--port", "70000"], "E903"),
-                       (["--trial", "nope", "--save", "x.rrd"], "E903")):
+    for argv, code in (
+        (["--port", "9000", "--save", "x.rrd"], "E903"),
+        (["--web", "--port", "70000"], "E903"),
+        (["--trial", "nope", "--save", "x.rrd"], "E903"),
+    ):
         args = view_args(str(main.root), *argv)
         with pytest.raises(HaptifyError) as err:
             args.func(args, UI())
@@ -593,6 +689,7 @@ def test_cli_usage_errors(sessions):
 
 
 # --- serving --------------------------------------------------------------------------------------------
+
 
 def test_web_viewer_on_a_busy_port_is_a_coded_error(recorded):
     import socket
@@ -611,10 +708,12 @@ def test_web_viewer_on_a_busy_port_is_a_coded_error(recorded):
 
 # The child is the command as typed at a terminal: Ctrl-C raises KeyboardInterrupt there even when this test
 # runs where SIGINT is ignored (a background job of a non-interactive shell passes SIG_IGN on to its children).
-VIEW_WEB = ("import argparse, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-            "from haptify.cli import UI; from haptify_tools.viewer import cmd_view; "
-            "p = argparse.ArgumentParser(); cmd_view.register(p.add_subparsers()); "
-            "a = p.parse_args(sys.argv[1:]); sys.exit(a.func(a, UI()))")
+VIEW_WEB = (
+    "import argparse, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+    "from haptify.cli import UI; from haptify_tools.viewer import cmd_view; "
+    "p = argparse.ArgumentParser(); cmd_view.register(p.add_subparsers()); "
+    "a = p.parse_args(sys.argv[1:]); sys.exit(a.func(a, UI()))"
+)
 
 
 def start_view_web(session_root: Path, port: int, wait_s: float = 90) -> tuple[subprocess.Popen, str]:
@@ -622,8 +721,12 @@ def start_view_web(session_root: Path, port: int, wait_s: float = 90) -> tuple[s
     announces the web viewer. Its stderr (progress, messages) goes to a file, never to a pipe no one reads:
     a full pipe would block the child's next message."""
     log = tempfile.TemporaryFile("w+")
-    proc = subprocess.Popen([sys.executable, "-c", VIEW_WEB, "view", str(session_root), "--trial", "free_space-1",
-                             "--web", "--port", str(port)], stdout=subprocess.PIPE, stderr=log, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", VIEW_WEB, "view", str(session_root), "--trial", "free_space-1", "--web", "--port", str(port)],
+        stdout=subprocess.PIPE,
+        stderr=log,
+        text=True,
+    )
     line = ""
     deadline = time.monotonic() + wait_s
     while "web viewer:" not in line and time.monotonic() < deadline and proc.poll() is None:
@@ -696,9 +799,18 @@ def test_web_viewer_screenshot(recorded, tmp_path):
     try:
         viewer.wait_until_serving(timeout_s=20)
         with sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=[
-                "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-first-run",
-                "--disable-background-networking", "--disable-component-update", "--disable-sync"])
+            browser = pw.chromium.launch(
+                executable_path=str(CHROMIUM),
+                args=[
+                    "--no-sandbox",
+                    "--use-angle=swiftshader",
+                    "--enable-unsafe-swiftshader",
+                    "--no-first-run",
+                    "--disable-background-networking",
+                    "--disable-component-update",
+                    "--disable-sync",
+                ],
+            )
             try:
                 page = browser.new_page(viewport={"width": 1280, "height": 800})
                 page.goto(viewer.url, timeout=30_000)
@@ -724,13 +836,27 @@ RAW_SERIES = {
     "handle_wrench": [("handle/force_raw", ["fx", "fy", "fz"]), ("handle/torque_raw", ["tx", "ty", "tz"])],
     "commanded_wrench": [("commanded/force", ["fx", "fy", "fz"]), ("commanded/torque", ["tx", "ty", "tz"])],
     "handle_accel": [("accel/raw", ["ax", "ay", "az"])],
-    "plate_wrench": [("plate/corner_force_raw", [f"c{i}_f{a}" for i in range(1, 5) for a in "xyz"]),
-                     ("plate/corner_torque_raw", [f"c{i}_t{a}" for i in range(1, 5) for a in "xyz"])],
+    "plate_wrench": [
+        ("plate/corner_force_raw", [f"c{i}_f{a}" for i in range(1, 5) for a in "xyz"]),
+        ("plate/corner_torque_raw", [f"c{i}_t{a}" for i in range(1, 5) for a in "xyz"]),
+    ],
     "device_joint_angles": [("device/joint_angles", None)],
     "sync": [("sync/trigger", ["trigger"])],
 }
-DERIVED_PARTS = ("calibrated", "raw_world", "dft321", "accel/world", "plate/force", "plate/cop", "plate_force",
-                 "contact/", "force_field", "workspace/measured", "workspace/modeled", "hand_force/raw")
+DERIVED_PARTS = (
+    "calibrated",
+    "raw_world",
+    "dft321",
+    "accel/world",
+    "plate/force",
+    "plate/cop",
+    "plate_force",
+    "contact/",
+    "force_field",
+    "workspace/measured",
+    "workspace/modeled",
+    "hand_force/raw",
+)
 
 
 def column_values(path: Path, entity: str, component: str) -> tuple[np.ndarray, np.ndarray]:
@@ -808,8 +934,9 @@ def test_streamed_in_small_chunks_equals_the_recording_kept_whole(recorded, sess
     main, other, _ = sessions
     out = tmp_path / "chunked.rrd"
     streamed = build(main, out, results=results_for(main.session_id), other=other, derived="full", chunk_rows=7)
-    assert [(e.path, e.rows, e.series, e.stream) for e in streamed.entries] == \
-        [(e.path, e.rows, e.series, e.stream) for e in plan.entries]
+    assert [(e.path, e.rows, e.series, e.stream) for e in streamed.entries] == [
+        (e.path, e.rows, e.series, e.stream) for e in plan.entries
+    ]
     assert max(ch.num_rows for ch in RrdReader(out).stream().filter(is_static=False)) <= 7
     a, b = temporal_batches(whole), temporal_batches(out)
     assert sorted(a) == sorted(b)
@@ -831,14 +958,18 @@ def test_compact_derived_signals(recorded, sessions, tmp_path):
     out = tmp_path / "compact.rrd"
     build(main, out, derived="compact")
     for entity in ("/series/stiffness-1/measured/handle/force_raw", "/series/free_space-1/measured/plate/corner_force_raw"):
-        np.testing.assert_array_equal(column_values(out, entity, "Scalars:scalars")[1],
-                                      column_values(whole, entity, "Scalars:scalars")[1])
+        np.testing.assert_array_equal(
+            column_values(out, entity, "Scalars:scalars")[1], column_values(whole, entity, "Scalars:scalars")[1]
+        )
     n = int(FREE_SPACE_S * 1000)
     t_ns, f = column_values(out, "/series/free_space-1/measured/plate/force", "Scalars:scalars")
     all_ns = time_ns(np.arange(n) / 1000.0)
     np.testing.assert_array_equal(t_ns, np.sort(np.concatenate([all_ns[0::10], all_ns[5::10]])))
     np.testing.assert_array_equal(f, np.tile([0.0, 0.0, -18.5], (n // 5, 1)))
-    for entity, k in (("/series/free_space-1/measured/accel/dft321", 20), ("/series/stiffness-1/measured/hand_force/calibrated", 1)):
+    for entity, k in (
+        ("/series/free_space-1/measured/accel/dft321", 20),
+        ("/series/stiffness-1/measured/hand_force/calibrated", 1),
+    ):
         full_t, full = column_values(whole, entity, "Scalars:scalars")
         t_ns, env = column_values(out, entity, "Scalars:scalars")
         if k == 1:  # already at 100 Hz: only float32
@@ -848,7 +979,7 @@ def test_compact_derived_signals(recorded, sessions, tmp_path):
         bins = -(-len(full) // k)
         assert len(t_ns) == 2 * bins
         for b in range(bins):
-            chunk = full[b * k:(b + 1) * k].astype(np.float32)
+            chunk = full[b * k : (b + 1) * k].astype(np.float32)
             np.testing.assert_array_equal(env[2 * b], chunk.min(axis=0))
             np.testing.assert_array_equal(env[2 * b + 1], chunk.max(axis=0))
     arrows_t, _ = temporal(out, "/world/free_space-1/measured/plate_force", "Arrows3D:origins")
@@ -865,8 +996,9 @@ def test_compact_derived_signals(recorded, sessions, tmp_path):
             meshes.append((v, tri, "Mesh3D:vertex_normals" in rb.schema.names))
         (v_full, t_full, normals_full), (v_compact, t_compact, normals_compact) = meshes
         assert normals_full and not normals_compact and len(v_compact) < len(v_full) / 2
-        assert SurfaceMesh(v_compact, t_compact, v_compact).enclosed_volume() == \
-            pytest.approx(SurfaceMesh(v_full, t_full, v_full).enclosed_volume(), rel=1e-5)
+        assert SurfaceMesh(v_compact, t_compact, v_compact).enclosed_volume() == pytest.approx(
+            SurfaceMesh(v_full, t_full, v_full).enclosed_volume(), rel=1e-5
+        )
     assert out.stat().st_size < whole.stat().st_size
 
 
@@ -880,7 +1012,7 @@ def test_envelope_holds_each_bins_extremes(n, c, k, data):
     assert env.shape == (2 * bins, c) and len(t_env) == 2 * bins
     assert np.all(np.diff(t_env) >= 0)
     for b in range(bins):
-        chunk = values[b * k:(b + 1) * k]
+        chunk = values[b * k : (b + 1) * k]
         with np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             np.testing.assert_array_equal(env[2 * b], np.nanmin(chunk, axis=0))
@@ -908,8 +1040,12 @@ def test_forget_trial_drops_only_that_trials_memos(sessions):
 
     main, _, _ = sessions
     ctx = ComputeContext(session=main)
-    for key in (("handle_calibration",), ("handle_signals", "stiffness-1", 100.0), ("plate_signals", "free_space-1"),
-                ("vibration", "stiffness-1")):
+    for key in (
+        ("handle_calibration",),
+        ("handle_signals", "stiffness-1", 100.0),
+        ("plate_signals", "free_space-1"),
+        ("vibration", "stiffness-1"),
+    ):
         ctx.cached(key, lambda: object())
     ctx.forget_trial("stiffness-1")
     assert set(ctx._cache) == {("handle_calibration",), ("plate_signals", "free_space-1")}

@@ -41,22 +41,55 @@ def installed(tmp_path_factory) -> Path:
             shutil.copytree(REPO / name, source / name, ignore=shutil.ignore_patterns("__pycache__", "*.egg-info"))
         else:
             shutil.copy2(REPO / name, source / name)
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "--no-build-isolation",
-                    "-w", str(root / "dist"), str(source)], check=True, capture_output=True, text=True, timeout=600)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--quiet",
+            "--no-deps",
+            "--no-build-isolation",
+            "-w",
+            str(root / "dist"),
+            str(source),
+        ],
+        check=True,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     (wheel,) = (root / "dist").glob("haptify-*.whl")
     env_dir = root / "env"
     venv.EnvBuilder(with_pip=False).create(env_dir)
-    site = Path(subprocess.run([str(env_dir / "bin" / "python"), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
-                               check=True, capture_output=True, text=True).stdout.strip())
+    site = Path(
+        subprocess.run(
+            [str(env_dir / "bin" / "python"), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
+            check=True,
+            capture_output=True,
+            text=True,
+        ).stdout.strip()
+    )
     (site / "project-dependencies.pth").write_text(sysconfig.get_path("purelib") + "\n", encoding="utf-8")
-    subprocess.run([sys.executable, "-m", "pip", "--python", str(env_dir / "bin" / "python"), "install", "--quiet",
-                    "--no-deps", str(wheel)], check=True, capture_output=True, text=True, timeout=600)
+    subprocess.run(
+        [sys.executable, "-m", "pip", "--python", str(env_dir / "bin" / "python"), "install", "--quiet", "--no-deps", str(wheel)],
+        check=True,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     return env_dir / "bin"
 
 
 def run(bin_dir: Path, *args: str, cwd: Path, timeout: float = 600) -> subprocess.CompletedProcess:
-    return subprocess.run([str(bin_dir / args[0]), *args[1:]], cwd=cwd, capture_output=True, text=True, timeout=timeout,
-                          env={**os.environ, "PYTHONPATH": ""})
+    return subprocess.run(
+        [str(bin_dir / args[0]), *args[1:]],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env={**os.environ, "PYTHONPATH": ""},
+    )
 
 
 def test_every_package_is_imported_from_the_wheel(installed, tmp_path):
@@ -68,8 +101,23 @@ def test_every_package_is_imported_from_the_wheel(installed, tmp_path):
 
 
 def test_simulate_runs_from_the_wheel(installed, tmp_path):
-    proc = run(installed, "haptify", "simulate", "--preset", "touch", "--protocol", "free_space", "--reps", "1",
-               "--no-rig-trials", "--duration", "free_space=3", "-o", str(tmp_path / "sim"), cwd=tmp_path)
+    proc = run(
+        installed,
+        "haptify",
+        "simulate",
+        "--preset",
+        "touch",
+        "--protocol",
+        "free_space",
+        "--reps",
+        "1",
+        "--no-rig-trials",
+        "--duration",
+        "free_space=3",
+        "-o",
+        str(tmp_path / "sim"),
+        cwd=tmp_path,
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     session = json.loads((tmp_path / "sim" / "session" / "session.json").read_text(encoding="utf-8"))
     assert [t["protocol"] for t in session["trials"]] == ["free_space"]
@@ -86,9 +134,13 @@ def test_registry_serves_its_pages_from_the_wheel(installed, tmp_path):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    server = subprocess.Popen([str(installed / "haptify"), "registry", "serve", "--data", str(tmp_path / "data"),
-                               "--port", str(port)], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                              env={**os.environ, "PYTHONPATH": ""})
+    server = subprocess.Popen(
+        [str(installed / "haptify"), "registry", "serve", "--data", str(tmp_path / "data"), "--port", str(port)],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        env={**os.environ, "PYTHONPATH": ""},
+    )
     try:
         deadline, page = time.monotonic() + 60, None
         while page is None and time.monotonic() < deadline and server.poll() is None:

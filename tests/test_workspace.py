@@ -24,7 +24,15 @@ from haptify.metric_definitions import param
 from haptify.results import MetricResult, Unavailable
 from haptify.session_format import Device
 from haptify.storage import SessionWriter, open_session
-from haptify.workspace import _blocks_near, compute, longest_occlusion_gap, modeled_solid, overlap_volume, report_figures, volume_solid
+from haptify.workspace import (
+    _blocks_near,
+    compute,
+    longest_occlusion_gap,
+    modeled_solid,
+    overlap_volume,
+    report_figures,
+    volume_solid,
+)
 from haptify_tools.build_conformance_fixtures import box_cloud
 from haptify_tools.build_conformance_fixtures import sphere_cloud as sphere_surface
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
@@ -75,12 +83,13 @@ def pappus_volume(dev: dict, n: int = 1500) -> float:
 
 # --- the operator on analytic shapes (spec §8.4) ------------------------------------------------
 
+
 @pytest.mark.parametrize("n", [20_000, 100_000])
 def test_sphere_sampled_on_its_boundary(n):
     rng = np.random.default_rng(RNG_SEED)
     solid = volume_solid(sphere_surface(n, 0.1, [0.013, -0.021, 0.2], rng))
     assert solid.closed
-    assert solid.volume == pytest.approx(4 / 3 * math.pi * 0.1 ** 3, rel=0.01)
+    assert solid.volume == pytest.approx(4 / 3 * math.pi * 0.1**3, rel=0.01)
 
 
 @pytest.mark.parametrize("rotation", [None, quat_from_axis_angle(np.array([1.0, 2.0, 3.0]), np.array(0.7))])
@@ -98,7 +107,7 @@ def two_lobes(n: int, rng, radius=0.06, gap=0.1):
     p = np.concatenate([sphere_surface(n, radius, c1, rng), sphere_surface(n, radius, c2, rng)])
     keep = (np.linalg.norm(p - c1, axis=1) >= radius - 1e-12) & (np.linalg.norm(p - c2, axis=1) >= radius - 1e-12)
     cap = math.pi * (radius - gap / 2) ** 2 * (3 * radius - (radius - gap / 2)) / 3  # one lens half
-    return p[keep], 2 * (4 / 3 * math.pi * radius ** 3) - 2 * cap
+    return p[keep], 2 * (4 / 3 * math.pi * radius**3) - 2 * cap
 
 
 def test_two_lobes_non_convex_volume_is_not_the_hull():
@@ -125,7 +134,7 @@ def test_sparse_sweep_seals_with_the_closing_radius():
     sparse = sphere_surface(2_000, 0.1, [0.0, 0.0, 0.2], rng)  # ~8 mm between samples, well below 2r
     solid = volume_solid(sparse)
     assert solid.closed
-    assert solid.volume == pytest.approx(4 / 3 * math.pi * 0.1 ** 3, rel=0.015)
+    assert solid.volume == pytest.approx(4 / 3 * math.pi * 0.1**3, rel=0.015)
 
 
 def test_the_lattice_is_anchored_at_the_world_origin():
@@ -139,8 +148,14 @@ def test_the_lattice_is_anchored_at_the_world_origin():
 
 
 @settings(max_examples=4, deadline=None)
-@given(st.floats(-3.0, 3.0), st.floats(-3.0, 3.0), st.floats(-3.0, 3.0), st.floats(0.0, math.pi),
-       st.floats(-0.2, 0.2), st.floats(-0.2, 0.2))
+@given(
+    st.floats(-3.0, 3.0),
+    st.floats(-3.0, 3.0),
+    st.floats(-3.0, 3.0),
+    st.floats(0.0, math.pi),
+    st.floats(-0.2, 0.2),
+    st.floats(-0.2, 0.2),
+)
 def test_volume_does_not_depend_on_the_world_frame(ax, ay, az, angle, dx, dy):
     if ax * ax + ay * ay + az * az < 1e-6:
         ax = 1.0
@@ -150,8 +165,11 @@ def test_volume_does_not_depend_on_the_world_frame(ax, ay, az, angle, dx, dy):
 
 
 @settings(max_examples=40, deadline=None)
-@given(st.lists(st.tuples(*[st.floats(2.0, 9.0, allow_nan=False)] * 3), min_size=1, max_size=4),
-       st.sampled_from([1, 2, 3]), st.floats(0.5, 5.0))
+@given(
+    st.lists(st.tuples(*[st.floats(2.0, 9.0, allow_nan=False)] * 3), min_size=1, max_size=4),
+    st.sampled_from([1, 2, 3]),
+    st.floats(0.5, 5.0),
+)
 def test_the_nearest_sample_search_skips_only_coarse_voxels_out_of_reach(points, c, reach):
     """§8.4 step 5's search is limited to the coarse voxels :func:`_blocks_near` marks: every fine voxel
     centre within ``reach`` fine voxels of a point (coordinates in fine voxels) lies in a marked one."""
@@ -176,7 +194,7 @@ def test_coverage_of_half_a_sphere():
     half_pts = sphere_surface(30_000, 0.08, [0.0, 0.0, 0.2], rng)
     half_pts = half_pts[half_pts[:, 2] >= 0.2]
     disc = rng.random((20_000, 2)) * 2 - 1
-    disc = disc[np.sum(disc ** 2, axis=1) <= 1] * 0.08
+    disc = disc[np.sum(disc**2, axis=1) <= 1] * 0.08
     half = volume_solid(np.concatenate([half_pts, np.column_stack([disc, np.full(len(disc), 0.2)])]))
     assert half.volume == pytest.approx(whole.volume / 2, rel=0.02)
     assert overlap_volume(half, whole) / whole.volume == pytest.approx(0.5, abs=0.01)
@@ -198,6 +216,7 @@ def test_too_few_points_and_absurd_extent_are_coded_errors():
 
 
 # --- the modeled workspace (spec §8.3) ----------------------------------------------------------
+
 
 @pytest.fixture(scope="module")
 def touch_model():
@@ -244,7 +263,7 @@ def mini_model():
 
 def test_model_volume_scales_with_the_cube_of_the_links(mini_model):
     assert mini_model.volume == pytest.approx(pappus_volume(mini_device()), rel=0.015)
-    assert pappus_volume(mini_device()) == pytest.approx(0.45 ** 3 * pappus_volume(TOUCH_DEVICE), rel=1e-9)
+    assert pappus_volume(mini_device()) == pytest.approx(0.45**3 * pappus_volume(TOUCH_DEVICE), rel=1e-9)
 
 
 def test_model_placement_moves_the_solid_not_its_volume(mini_model):
@@ -272,15 +291,37 @@ def boundary_sweep(dev: dict, n: int, rng, drop_lower_lobe: bool = False) -> np.
 
 
 def workspace_session(tmp_path: Path, device: dict, clouds: list[np.ndarray]) -> Path:
-    w = SessionWriter(manifest={"session_id": "ws-test", "date": "2026-11-22", "lab": {"id": "lab"}, "examiner": {"id": "ex"},
-                                "device": device, "device_placement": PLACEMENT, "rig": example_rig()})
+    w = SessionWriter(
+        manifest={
+            "session_id": "ws-test",
+            "date": "2026-11-22",
+            "lab": {"id": "lab"},
+            "examiner": {"id": "ex"},
+            "device": device,
+            "device_placement": PLACEMENT,
+            "rig": example_rig(),
+        }
+    )
     for i, cloud in enumerate(clouds, start=1):
         w.add_trial(f"workspace-{i}", "workspace", powered=False, repetition=i)
         t = np.arange(len(cloud)) / 100.0
         cloud = cloud.copy()
         cloud[::97] = np.nan  # occlusions
-        w.add_stream(f"workspace-{i}", "handle_pose", {"t": t, "px": cloud[:, 0], "py": cloud[:, 1], "pz": cloud[:, 2],
-                                                       "qw": 1 + 0 * t, "qx": 0 * t, "qy": 0 * t, "qz": 0 * t}, rate_hz=100)
+        w.add_stream(
+            f"workspace-{i}",
+            "handle_pose",
+            {
+                "t": t,
+                "px": cloud[:, 0],
+                "py": cloud[:, 1],
+                "pz": cloud[:, 2],
+                "qw": 1 + 0 * t,
+                "qx": 0 * t,
+                "qy": 0 * t,
+                "qz": 0 * t,
+            },
+            rate_hz=100,
+        )
     return w.write(tmp_path / "session")
 
 
@@ -323,16 +364,30 @@ def test_missing_kinematics_trials_and_datasheet_are_unavailable_with_codes(tmp_
     dev = copy.deepcopy(TOUCH_DEVICE)
     del dev["kinematics"]
     dev["datasheet"] = {}
-    w = SessionWriter(manifest={"session_id": "ws-none", "date": "2026-11-22", "lab": {"id": "lab"}, "examiner": {"id": "ex"},
-                                "device": dev, "device_placement": IDENTITY, "rig": example_rig()})
+    w = SessionWriter(
+        manifest={
+            "session_id": "ws-none",
+            "date": "2026-11-22",
+            "lab": {"id": "lab"},
+            "examiner": {"id": "ex"},
+            "device": dev,
+            "device_placement": IDENTITY,
+            "rig": example_rig(),
+        }
+    )
     w.add_trial("other-1", "other", powered=False, label="nothing")
     res = by_id(compute(ComputeContext(session=open_session(w.write(tmp_path / "s")))))
     assert all(isinstance(m, Unavailable) for m in res.values())
     assert res["workspace.modeled_volume"].code == "E311"
     assert res["workspace.spec_box_volume"].code == "E312"
     assert res["workspace.measured_volume"].code == "E310"
-    assert set(res) == {"workspace.modeled_volume", "workspace.spec_box_volume", "workspace.measured_volume",
-                        "workspace.volume_ratio", "workspace.coverage"}
+    assert set(res) == {
+        "workspace.modeled_volume",
+        "workspace.spec_box_volume",
+        "workspace.measured_volume",
+        "workspace.volume_ratio",
+        "workspace.coverage",
+    }
 
 
 def test_an_open_sweep_is_left_out_when_a_closed_one_exists(tmp_path):
@@ -340,7 +395,9 @@ def test_an_open_sweep_is_left_out_when_a_closed_one_exists(tmp_path):
     dev = mini_device()
     full = boundary_sweep(dev, 15_000, rng)
     open_top = full[full[:, 2] > np.median(full[:, 2])]
-    ctx = ComputeContext(session=open_session(workspace_session(tmp_path, dev, [full, open_top])), wanted={"workspace.measured_volume"})
+    ctx = ComputeContext(
+        session=open_session(workspace_session(tmp_path, dev, [full, open_top])), wanted={"workspace.measured_volume"}
+    )
     res = by_id(compute(ctx))
     measured = res["workspace.measured_volume"]
     assert measured.trials == ["workspace-1"] and not measured.warnings
@@ -351,8 +408,9 @@ def test_an_open_sweep_is_reported_with_w410(tmp_path):
     rng = np.random.default_rng(RNG_SEED)
     sparse_top = sphere_surface(3_000, 0.1, [0.0, 0.0, 0.2], rng)
     sparse_top = sparse_top[sparse_top[:, 2] > 0.23]
-    ctx = ComputeContext(session=open_session(workspace_session(tmp_path, mini_device(), [sparse_top])),
-                         wanted={"workspace.measured_volume"})
+    ctx = ComputeContext(
+        session=open_session(workspace_session(tmp_path, mini_device(), [sparse_top])), wanted={"workspace.measured_volume"}
+    )
     res = by_id(compute(ctx))
     assert "W410" in res["workspace.measured_volume"].warnings
     assert any(w.code == "W410" and w.trial == "workspace-1" for w in ctx.warnings)
@@ -390,9 +448,9 @@ def test_longest_occlusion_gap_is_the_chord_across_the_longest_gap(start, long_g
     n = start + long_gap + 200
     step = speed / 100.0
     p = np.arange(n)[:, None] * np.array([step, 0.0, 0.0]) + np.array([0.01, -0.02, 0.15])
-    p[start + 1:start + 1 + long_gap] = np.nan
+    p[start + 1 : start + 1 + long_gap] = np.nan
     short = min(short_gap, long_gap)
-    p[start + long_gap + 50:start + long_gap + 50 + short] = np.nan
+    p[start + long_gap + 50 : start + long_gap + 50 + short] = np.nan
     if occluded_ends:
         p[:1] = np.nan
         p[-20:] = np.nan

@@ -46,9 +46,13 @@ def classify(document: Any) -> Answer:
     Any other document is an error of the implementation, spec §16.4.1."""
     if not isinstance(document, dict):
         return Answer("error", message=f"output is not a JSON object but {type(document).__name__}")
-    not_lists = [k for k in ("metrics", "unavailable", "warnings", "findings") if k in document and not isinstance(document[k], list)]
+    not_lists = [
+        k for k in ("metrics", "unavailable", "warnings", "findings") if k in document and not isinstance(document[k], list)
+    ]
     if not_lists:  # judged as written, a malformed document would stop the runner or pass as an acceptance
-        return Answer("error", message=f"output field(s) {', '.join(map(repr, not_lists))} must be JSON arrays (spec §15.1, §16.4.1)")
+        return Answer(
+            "error", message=f"output field(s) {', '.join(map(repr, not_lists))} must be JSON arrays (spec §15.1, §16.4.1)"
+        )
     if "metrics" in document:
         return Answer("results", document)
     if "findings" in document:
@@ -85,8 +89,13 @@ class CmdAdapter:
             out = Path(tmp) / "out.json"
             params = Path(tmp) / "params.json"
             params.write_text(json.dumps(case.parameters))
-            subst = {"{session}": str(session), "{out}": str(out), "{metric}": case.metric, "{case}": case.id,
-                     "{params}": str(params)}
+            subst = {
+                "{session}": str(session),
+                "{out}": str(out),
+                "{metric}": case.metric,
+                "{case}": case.id,
+                "{params}": str(params),
+            }
             argv = []
             for a in self.argv:
                 for k, v in subst.items():
@@ -101,8 +110,10 @@ class CmdAdapter:
                 raise CannotStart(f"cannot start {argv[0]!r}: {exc.strerror}") from None
             elapsed = time.perf_counter() - start
             if not out.exists() and proc.returncode in (EXIT_NOT_EXECUTABLE, EXIT_NOT_FOUND) and not self.answered:
-                raise CannotStart(f"{argv[0]!r} exited {proc.returncode} without output on the first case; "
-                                  f"its stderr:\n{proc.stderr.strip()[-2000:]}")
+                raise CannotStart(
+                    f"{argv[0]!r} exited {proc.returncode} without output on the first case; "
+                    f"its stderr:\n{proc.stderr.strip()[-2000:]}"
+                )
             self.answered = True
             if not out.exists():
                 tail = (proc.stderr or proc.stdout).strip().splitlines()[-3:]
@@ -140,8 +151,9 @@ class JsonlAdapter:
 
     # -- process management ---------------------------------------------------------------------
     def _start(self) -> None:
-        self.proc = subprocess.Popen(self.argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-                                     text=True, bufsize=1)
+        self.proc = subprocess.Popen(
+            self.argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, bufsize=1
+        )
         self.lines = queue.Queue()
         threading.Thread(target=self._pump, args=(self.proc, self.lines), daemon=True).start()
         hello = self.request({"op": "hello", "protocol": PROTOCOL_VERSION})
@@ -205,8 +217,9 @@ class JsonlAdapter:
                 return Answer("error", message=f"cannot start the implementation: {exc}")
         start = time.perf_counter()
         try:
-            reply = self.request({"op": "run", "case": case.id, "session": str(session), "metric": case.metric,
-                                  "parameters": case.parameters})
+            reply = self.request(
+                {"op": "run", "case": case.id, "session": str(session), "metric": case.metric, "parameters": case.parameters}
+            )
         except (TimeoutError, RuntimeError) as exc:
             self._kill()  # crash isolation: the next case gets a fresh process
             return Answer("error", message=str(exc), duration_s=time.perf_counter() - start)
@@ -298,4 +311,3 @@ def serve_jsonl(analyse: Callable[[str, str, dict], dict], implementation: dict,
         else:
             reply({"seq": seq, "status": "error", "message": f"unknown op {op!r}", "findings": []})
     return 0
-

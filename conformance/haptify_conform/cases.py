@@ -35,8 +35,10 @@ def find_suite(option: Path | None = None, environ: dict[str, str] | None = None
         if (root / "conformance" / "cases").is_dir() and (root / "fixtures").is_dir():
             return Suite(cases_root=root / "conformance", repo=root)
     where = f"{str(named)!r}" if named is not None else f"the installed package's checkout ({str(REPO_ROOT)!r})"
-    raise ValueError(f"no conformance suite in {where}: expected conformance/cases/ and fixtures/ there; "
-                     f"pass --suite DIR or set {SUITE_ENV} to a checkout of the Haptify standard")
+    raise ValueError(
+        f"no conformance suite in {where}: expected conformance/cases/ and fixtures/ there; "
+        f"pass --suite DIR or set {SUITE_ENV} to a checkout of the Haptify standard"
+    )
 
 
 class Tolerance(BaseModel):
@@ -73,7 +75,9 @@ class Provenance(BaseModel):
     model_config = ConfigDict(extra="forbid")
     kind: Literal["analytic", "generated", "paper", "spec"]
     note: str
-    budget: list[BudgetTerm] | None = Field(None, description="Sources of allowed difference; the tolerance must not exceed their sum.")
+    budget: list[BudgetTerm] | None = Field(
+        None, description="Sources of allowed difference; the tolerance must not exceed their sum."
+    )
 
 
 class Case(BaseModel):
@@ -83,12 +87,17 @@ class Case(BaseModel):
     id: str = Field(pattern=r"^[a-z0-9][a-z0-9._-]*$", description="Permanent; never reused for another case.")
     metric: str = Field(description="A metric id from schemas/<v>/metrics, or 'validate'.")
     quantity: Literal["value", "u", "U", "k"] = Field(
-        "value", description="What of the metric record is judged: its value, or u, U or k of its uncertainty record "
-                             "(spec §19.4; the case's parameters then ask for it: {\"uncertainty\": true}).")
+        "value",
+        description="What of the metric record is judged: its value, or u, U or k of its uncertainty record "
+        '(spec §19.4; the case\'s parameters then ask for it: {"uncertainty": true}).',
+    )
     spec_section: str
     level: Literal["MUST", "SHOULD"]
-    requirements: list[str] = Field(default_factory=list, description="Ids of the requirements the case tests "
-                                    "(schemas/<v>/requirements.json, or R<section>-<code> for a validation code; spec §16.7).")
+    requirements: list[str] = Field(
+        default_factory=list,
+        description="Ids of the requirements the case tests "
+        "(schemas/<v>/requirements.json, or R<section>-<code> for a validation code; spec §16.7).",
+    )
     fixture: str = Field(description="Session folder, relative to the repository's fixtures/ folder.")
     parameters: dict[str, Any] = Field(default_factory=dict)
     expected: Expected
@@ -128,8 +137,9 @@ def load_cases(root: Path = SUITE_ROOT) -> list[Case]:
     return list(_load(root))
 
 
-def select(cases: list[Case], *, level: str | None = None, metrics: set[str] | None = None,
-           spec_version: str | None = None) -> list[Case]:
+def select(
+    cases: list[Case], *, level: str | None = None, metrics: set[str] | None = None, spec_version: str | None = None
+) -> list[Case]:
     """Cases filtered by ``--level``, ``--metric`` and spec version; the suite itself never skips."""
     out = []
     for c in cases:

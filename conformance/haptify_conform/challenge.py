@@ -91,8 +91,10 @@ def run_challenge(registry: str, token: str, adapter) -> dict:
         adapter.close()
     implementation = getattr(adapter, "implementation", None) or {}
     if not (implementation.get("name") and implementation.get("version")):
-        raise ChallengeError("the implementation did not name itself (name and version: the JSON-lines greeting or the "
-                             "results' 'implementation'), so the registry cannot record whose answer this is")
+        raise ChallengeError(
+            "the implementation did not name itself (name and version: the JSON-lines greeting or the "
+            "results' 'implementation'), so the registry cannot record whose answer this is"
+        )
     body = {"implementation": {"name": implementation["name"], "version": implementation["version"]}, "answers": answers}
     return _call(f"{base}/challenges/{issued['id']}/answers", token, body)
 
@@ -105,11 +107,15 @@ def _g(value: Any) -> str:
 def summary(record: dict) -> str:
     """One line per case and a verdict line, for people."""
     result = record["result"]
-    lines = [f"{'PASS' if c['status'] == 'passed' else 'FAIL'}  {c['case']}  expected {_g(c['expected'])}  found "
-             f"{c['actual'] if c['actual'] is not None else '—'}{'  ' + c['message'] if c['message'] else ''}"
-             for c in result["cases"]]
+    lines = [
+        f"{'PASS' if c['status'] == 'passed' else 'FAIL'}  {c['case']}  expected {_g(c['expected'])}  found "
+        f"{c['actual'] if c['actual'] is not None else '—'}{'  ' + c['message'] if c['message'] else ''}"
+        for c in result["cases"]
+    ]
     impl = result["implementation"]
-    lines.append(f"challenge {record['id']}: {impl['name']} {impl['version']} "
-                 f"{'PASSED' if result['passed'] else 'FAILED'} ({sum(c['status'] == 'passed' for c in result['cases'])}"
-                 f"/{len(result['cases'])} cases)")
+    lines.append(
+        f"challenge {record['id']}: {impl['name']} {impl['version']} "
+        f"{'PASSED' if result['passed'] else 'FAILED'} ({sum(c['status'] == 'passed' for c in result['cases'])}"
+        f"/{len(result['cases'])} cases)"
+    )
     return "\n".join(lines)

@@ -25,7 +25,9 @@ from haptify_conform.selftest import self_test
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``haptify-conform`` options: adapters (spec §16.4), selection, timeouts (§16.5), reports (§16.6)."""
-    p = argparse.ArgumentParser(prog="haptify-conform", description="Check an implementation against the Haptify conformance suite.")
+    p = argparse.ArgumentParser(
+        prog="haptify-conform", description="Check an implementation against the Haptify conformance suite."
+    )
     how = p.add_mutually_exclusive_group()
     how.add_argument("--cmd", help='a command per case, e.g. "mytool {session} {out}" (also {metric} {case} {params})')
     how.add_argument("--jsonl", help="a program speaking the JSON-lines protocol on stdin/stdout")
@@ -40,12 +42,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json-report", type=Path, help="write the JSON report here")
     p.add_argument("--junit", type=Path, help="write a JUnit XML report here")
     p.add_argument("--quiet", action="store_true", help="print only the summary line")
-    p.add_argument("--challenge", metavar="URL",
-                   help="instead of the suite, answer a fresh challenge of the results registry at URL (spec §17.8)")
+    p.add_argument(
+        "--challenge",
+        metavar="URL",
+        help="instead of the suite, answer a fresh challenge of the results registry at URL (spec §17.8)",
+    )
     p.add_argument("--token", help="the registry API token for --challenge (default: $HAPTIFY_TOKEN)")
-    p.add_argument("--suite", type=Path, metavar="DIR",
-                   help=f"a checkout of the standard holding conformance/cases/ and fixtures/ (default: ${SUITE_ENV}, "
-                        "else the checkout this package was installed from)")
+    p.add_argument(
+        "--suite",
+        type=Path,
+        metavar="DIR",
+        help=f"a checkout of the standard holding conformance/cases/ and fixtures/ (default: ${SUITE_ENV}, "
+        "else the checkout this package was installed from)",
+    )
     return p
 
 
@@ -89,8 +98,12 @@ def main(argv: list[str] | None = None) -> int:
         return run_challenge_command(args)
     try:  # the suite first: a missing or broken suite means the run cannot start (exit 2, spec §16.6)
         suite = find_suite(args.suite)
-        cases = select(load_cases(suite.cases_root), level=args.level, metrics=set(args.metric) if args.metric else None,
-                       spec_version=SPEC_VERSION)
+        cases = select(
+            load_cases(suite.cases_root),
+            level=args.level,
+            metrics=set(args.metric) if args.metric else None,
+            spec_version=SPEC_VERSION,
+        )
         if not cases:
             raise ValueError(f"no case of {str(suite.cases_root / 'cases')!r} is selected: nothing would be judged")
         adapter = make_adapter(args)

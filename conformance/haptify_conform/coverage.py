@@ -107,15 +107,24 @@ def requirement_problems(cases: list[Case], cases_root: Path) -> list[str]:
             problems.append(f"requirement {r.id} (§{r.section}) is tested by no case")
         elif r.kind == "value" and r.level.startswith("MUST") and not row.distinguished:
             best = row.best
-            found = f"best: mutant {best[0]} moves case {best[1]} by {best[2]:.2g}× its tolerance" if best else "no mutant of it fails a case listing it"
-            problems.append(f"requirement {r.id} (§{r.section}) is not distinguished (needs ≥ {DISTINGUISHING_RATIO:g}× a case's "
-                            f"tolerance; {found})")
+            found = (
+                f"best: mutant {best[0]} moves case {best[1]} by {best[2]:.2g}× its tolerance"
+                if best
+                else "no mutant of it fails a case listing it"
+            )
+            problems.append(
+                f"requirement {r.id} (§{r.section}) is not distinguished (needs ≥ {DISTINGUISHING_RATIO:g}× a case's "
+                f"tolerance; {found})"
+            )
     return problems
 
 
 def coverage_table(rows: list[Coverage]) -> str:
     """Markdown: requirement → cases and distinguishing evidence (the spec's coverage appendix, ``--lint``)."""
-    lines = ["| requirement | § | level | cases | distinguished by (mutant → case, deviation / tolerance) |", "|---|---|---|---|---|"]
+    lines = [
+        "| requirement | § | level | cases | distinguished by (mutant → case, deviation / tolerance) |",
+        "|---|---|---|---|---|",
+    ]
     for row in rows:
         r = row.requirement
         best = row.best

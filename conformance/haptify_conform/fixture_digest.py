@@ -40,8 +40,12 @@ def _file_sha256(path: Path) -> str:
 
 def _inside(relative: str) -> bool:
     """Whether a manifest's file name stays inside the session (relative, '/', no '..'; spec §3.3)."""
-    return bool(relative) and not re.match(r"^([/\\]|[A-Za-z]:)", relative) and "\\" not in relative \
+    return (
+        bool(relative)
+        and not re.match(r"^([/\\]|[A-Za-z]:)", relative)
+        and "\\" not in relative
         and all(part not in ("", ".", "..") for part in relative.split("/"))
+    )
 
 
 def _parquet_digest(path: Path, values: bool = False) -> Any:
@@ -73,6 +77,7 @@ def _csv_tokens(raw: bytes) -> Any:
             return float(token)
         except ValueError:
             return token
+
     return {"csv": [[field(t) for t in line.split(",")] for line in text.split("\n")]}
 
 
@@ -134,9 +139,11 @@ def values_agree(x: Any, y: Any) -> bool:
             return bool(np.array_equal(x, y))
         finite = np.isfinite(y)
         scale = float(np.max(np.abs(y[finite]), initial=0.0))
-        return bool(np.array_equal(finite, np.isfinite(x))
-                    and np.array_equal(x[~finite], y[~finite], equal_nan=True)
-                    and np.all(np.abs(x[finite] - y[finite]) <= AGREEMENT_RTOL * scale))
+        return bool(
+            np.array_equal(finite, np.isfinite(x))
+            and np.array_equal(x[~finite], y[~finite], equal_nan=True)
+            and np.all(np.abs(x[finite] - y[finite]) <= AGREEMENT_RTOL * scale)
+        )
     if isinstance(x, float) and isinstance(y, float):
         return x == y or (math.isnan(x) and math.isnan(y)) or math.isclose(x, y, rel_tol=AGREEMENT_RTOL)
     return type(x) is type(y) and x == y

@@ -42,8 +42,11 @@ def judge_metric(case: Case, results: dict) -> Verdict:
     Spec §16.3."""
     base = dict(case_id=case.id, metric=case.metric, spec_section=case.spec_section, level=case.level)
     if case.expected.codes:
-        return Verdict(status="failed", message=f"expected the session to be rejected with {case.expected.codes}, "
-                       "but the implementation returned results", **base)
+        return Verdict(
+            status="failed",
+            message=f"expected the session to be rejected with {case.expected.codes}, but the implementation returned results",
+            **base,
+        )
     records = [m for m in results.get("metrics", []) if isinstance(m, dict) and m.get("id") == case.metric]
     if not records:
         why = next((u for u in results.get("unavailable", []) if isinstance(u, dict) and u.get("id") == case.metric), None)
@@ -68,23 +71,35 @@ def _judge_number(case: Case, found: Any, base: dict, unit: str | None) -> Verdi
     case's unless None (an uncertainty's unit is its metric's, a coverage factor's is 1). Spec §16.3."""
     what = "value" if case.quantity == "value" else f"uncertainty {case.quantity}"
     if case.quantity != "value" and found is None:
-        return Verdict(status="failed", message=f"the record of {case.metric} has no uncertainty {case.quantity} (spec §19.4)", **base)
+        return Verdict(
+            status="failed", message=f"the record of {case.metric} has no uncertainty {case.quantity} (spec §19.4)", **base
+        )
     if unit is not None and unit != case.expected.unit:
-        return Verdict(status="failed", message=f"unit mismatch: expected {case.expected.unit!r}, found {unit!r}", actual=found, **base)
+        return Verdict(
+            status="failed", message=f"unit mismatch: expected {case.expected.unit!r}, found {unit!r}", actual=found, **base
+        )
     actual = _components(found)
     expected = _components(case.expected.value)
     if actual is None or expected is None or len(actual) != len(expected):
-        return Verdict(status="failed", message=f"{what} has the wrong shape: expected {case.expected.value!r}, found {found!r}",
-                       actual=found, **base)
+        return Verdict(
+            status="failed",
+            message=f"{what} has the wrong shape: expected {case.expected.value!r}, found {found!r}",
+            actual=found,
+            **base,
+        )
     if any(math.isnan(a) or math.isinf(a) for a in actual):
         return Verdict(status="failed", message=f"{what} is NaN or infinite", actual=found, **base)
     tol = case.tolerance
     abs_err = [abs(a - e) for a, e in zip(actual, expected)]
     rel_err = [d / abs(e) if e else (0.0 if d == 0 else math.inf) for d, e in zip(abs_err, expected)]
     ok = all(d <= tol.abs + tol.rel * abs(e) for d, e in zip(abs_err, expected))
-    verdict = Verdict(status="passed" if ok else "failed", actual=found, max_abs_error=max(abs_err), max_rel_error=max(rel_err), **base)
+    verdict = Verdict(
+        status="passed" if ok else "failed", actual=found, max_abs_error=max(abs_err), max_rel_error=max(rel_err), **base
+    )
     if not ok:
-        verdict.message = f"expected {what} {case.expected.value} ± ({tol.abs} + {tol.rel}·|expected|) {case.expected.unit}, found {found}"
+        verdict.message = (
+            f"expected {what} {case.expected.value} ± ({tol.abs} + {tol.rel}·|expected|) {case.expected.unit}, found {found}"
+        )
     return verdict
 
 
@@ -94,12 +109,20 @@ def judge_rejection(case: Case, findings: list[dict]) -> Verdict:
     base = dict(case_id=case.id, metric=case.metric, spec_section=case.spec_section, level=case.level)
     codes = sorted({str(f.get("code")) for f in findings if isinstance(f, dict)})
     if not case.expected.codes or case.expected.valid:
-        return Verdict(status="failed", message=f"the session was rejected ({', '.join(codes) or 'no codes'}) but the "
-                       "case expects it to be accepted", actual=codes, **base)
+        return Verdict(
+            status="failed",
+            message=f"the session was rejected ({', '.join(codes) or 'no codes'}) but the case expects it to be accepted",
+            actual=codes,
+            **base,
+        )
     missing = sorted(set(case.expected.codes) - set(codes))
     if missing:
-        return Verdict(status="failed", message=f"expected codes {case.expected.codes}, found {codes} (missing {missing})",
-                       actual=codes, **base)
+        return Verdict(
+            status="failed",
+            message=f"expected codes {case.expected.codes}, found {codes} (missing {missing})",
+            actual=codes,
+            **base,
+        )
     return Verdict(status="passed", actual=codes, **base)
 
 
@@ -112,14 +135,19 @@ def judge_acceptance(case: Case, report: dict) -> Verdict:
     """
     base = dict(case_id=case.id, metric=case.metric, spec_section=case.spec_section, level=case.level)
     if case.expected.codes and not case.expected.valid:
-        return Verdict(status="failed", message=f"expected rejection with {case.expected.codes}, but the session was accepted",
-                       **base)
+        return Verdict(
+            status="failed", message=f"expected rejection with {case.expected.codes}, but the session was accepted", **base
+        )
     if case.expected.codes:
         notes = [*(report.get("findings") or []), *(report.get("warnings") or [])]
         codes = sorted({str(f.get("code")) for f in notes if isinstance(f, dict)})
         missing = sorted(set(case.expected.codes) - set(codes))
         if missing:
-            return Verdict(status="failed", message=f"accepted, but expected warnings {case.expected.codes}, found {codes} "
-                           f"(missing {missing})", actual=codes, **base)
+            return Verdict(
+                status="failed",
+                message=f"accepted, but expected warnings {case.expected.codes}, found {codes} (missing {missing})",
+                actual=codes,
+                **base,
+            )
         return Verdict(status="passed", actual=codes, **base)
     return Verdict(status="passed", **base)

@@ -69,12 +69,16 @@ BUDGET_SLACK = 1.0 + 1e-9
 def _budget_problems(c) -> list[str]:
     """A metric case states the budget of its tolerance, and its tolerance is not looser than the budget (spec §16.7)."""
     if not c.provenance.budget:
-        return [f"case {c.id}: no tolerance budget in its provenance (where does ±{c.tolerance.abs} + {c.tolerance.rel}·|x| come from?)"]
+        return [
+            f"case {c.id}: no tolerance budget in its provenance (where does ±{c.tolerance.abs} + {c.tolerance.rel}·|x| come from?)"
+        ]
     need_abs = sum(t.abs for t in c.provenance.budget)
     need_rel = sum(t.rel for t in c.provenance.budget)
     if c.tolerance.abs > need_abs * BUDGET_SLACK or c.tolerance.rel > need_rel * BUDGET_SLACK:
-        return [f"case {c.id}: tolerance (abs {c.tolerance.abs:g}, rel {c.tolerance.rel:g}) is looser than its budget "
-                f"(abs {need_abs:g}, rel {need_rel:g})"]
+        return [
+            f"case {c.id}: tolerance (abs {c.tolerance.abs:g}, rel {c.tolerance.rel:g}) is looser than its budget "
+            f"(abs {need_abs:g}, rel {need_rel:g})"
+        ]
     return []
 
 

@@ -55,7 +55,9 @@ class Summary(BaseModel):
     failed: int
     error: int
     skipped: int
-    must_skipped: list[str] = Field(default_factory=list, description="MUST cases skipped that a conforming implementation answers.")
+    must_skipped: list[str] = Field(
+        default_factory=list, description="MUST cases skipped that a conforming implementation answers."
+    )
     conforms: bool
 
 
@@ -73,9 +75,15 @@ def build_report(header: ReportHeader, verdicts: list[Verdict]) -> ConformReport
     counts = Counter(v.status for v in verdicts)
     records = [CaseRecord(**{k: v for k, v in asdict(verdict).items() if k != "extra"}) for verdict in verdicts]
     must_skipped = skipped_must_cases(verdicts)
-    summary = Summary(total=len(verdicts), passed=counts["passed"], failed=counts["failed"], error=counts["error"],
-                      skipped=counts["skipped"], must_skipped=must_skipped,
-                      conforms=bool(verdicts) and counts["failed"] == 0 and counts["error"] == 0 and not must_skipped)
+    summary = Summary(
+        total=len(verdicts),
+        passed=counts["passed"],
+        failed=counts["failed"],
+        error=counts["error"],
+        skipped=counts["skipped"],
+        must_skipped=must_skipped,
+        conforms=bool(verdicts) and counts["failed"] == 0 and counts["error"] == 0 and not must_skipped,
+    )
     return ConformReport(header=header, cases=records, summary=summary)
 
 
@@ -84,8 +92,11 @@ def skipped_must_cases(verdicts: list[Verdict]) -> list[str]:
     every metric the implementation reports (it passed a case of it). Skipping all cases of a metric
     leaves that metric out of the claim instead."""
     reported = {v.metric for v in verdicts if v.status == "passed"}
-    return [v.case_id for v in verdicts
-            if v.status == "skipped" and v.level == "MUST" and (v.metric == "validate" or v.metric in reported)]
+    return [
+        v.case_id
+        for v in verdicts
+        if v.status == "skipped" and v.level == "MUST" and (v.metric == "validate" or v.metric in reported)
+    ]
 
 
 def _err(value: float | None) -> str:
@@ -101,20 +112,31 @@ def to_table(report: ConformReport) -> str:
             lines.append(f"         {c.message} (spec §{c.spec_section})")
     s = report.summary
     if s.must_skipped:
-        lines.append(f"\n{len(s.must_skipped)} MUST case(s) skipped that a conforming implementation answers "
-                     f"(every negative case, every case of a metric it reports): {', '.join(s.must_skipped[:8])}"
-                     + (" …" if len(s.must_skipped) > 8 else ""))
-    lines.append(f"\n{s.passed} passed, {s.failed} failed, {s.error} errors, {s.skipped} skipped of {s.total} cases — "
-                 + ("CONFORMS" if s.conforms else "DOES NOT CONFORM") + f" to Haptify {report.header.spec_version}")
+        lines.append(
+            f"\n{len(s.must_skipped)} MUST case(s) skipped that a conforming implementation answers "
+            f"(every negative case, every case of a metric it reports): {', '.join(s.must_skipped[:8])}"
+            + (" …" if len(s.must_skipped) > 8 else "")
+        )
+    lines.append(
+        f"\n{s.passed} passed, {s.failed} failed, {s.error} errors, {s.skipped} skipped of {s.total} cases — "
+        + ("CONFORMS" if s.conforms else "DOES NOT CONFORM")
+        + f" to Haptify {report.header.spec_version}"
+    )
     return "\n".join(lines) + "\n"
 
 
 def to_junit(report: ConformReport) -> str:
     """The report as JUnit XML, one ``testcase`` per case (``--junit``; spec §16.6)."""
     s = report.summary
-    suite = ET.Element("testsuite", name=f"haptify-conform {report.header.suite_version}", tests=str(s.total),
-                       failures=str(s.failed), errors=str(s.error), skipped=str(s.skipped),
-                       time=f"{sum(c.duration_s for c in report.cases):.3f}")
+    suite = ET.Element(
+        "testsuite",
+        name=f"haptify-conform {report.header.suite_version}",
+        tests=str(s.total),
+        failures=str(s.failed),
+        errors=str(s.error),
+        skipped=str(s.skipped),
+        time=f"{sum(c.duration_s for c in report.cases):.3f}",
+    )
     for c in report.cases:
         case = ET.SubElement(suite, "testcase", classname=c.metric, name=c.case_id, time=f"{c.duration_s:.3f}")
         if c.status == "failed":
@@ -128,8 +150,14 @@ def to_junit(report: ConformReport) -> str:
 
 def header(adapter: str, implementation: dict, started: str) -> ReportHeader:
     """The report header: suite, spec and protocol versions, adapter, implementation, start time (spec §16.6)."""
-    return ReportHeader(suite_version=SUITE_VERSION, spec_version=SPEC_VERSION, protocol_version=PROTOCOL_VERSION,
-                        adapter=adapter, implementation=implementation, started=started)
+    return ReportHeader(
+        suite_version=SUITE_VERSION,
+        spec_version=SPEC_VERSION,
+        protocol_version=PROTOCOL_VERSION,
+        adapter=adapter,
+        implementation=implementation,
+        started=started,
+    )
 
 
 def write_report(path: Path, text: str) -> None:

@@ -57,13 +57,19 @@ def verdict_exemptions() -> dict[str, str]:
 @lru_cache(maxsize=1)
 def all_requirements() -> tuple[Requirement, ...]:
     """Every requirement of the spec version, value requirements first, in data order."""
-    value = [Requirement(r["id"], r["section"], r["level"], r["statement"], tuple(r["metrics"]))
-             for r in _data()["requirements"]]
+    value = [Requirement(r["id"], r["section"], r["level"], r["statement"], tuple(r["metrics"])) for r in _data()["requirements"]]
     exempt = verdict_exemptions()
-    verdict = [Requirement(f"R{c['spec_section']}-{c['code']}", c["spec_section"], "MUST",
-                           f"{c['title']}: reported as {c['code']} ({c['severity']}).", code=c["code"])
-               for c in schemas.load("codes.json")["codes"]
-               if c["spec_section"].split(".")[0] in VERDICT_CHAPTERS and c["code"] not in exempt]
+    verdict = [
+        Requirement(
+            f"R{c['spec_section']}-{c['code']}",
+            c["spec_section"],
+            "MUST",
+            f"{c['title']}: reported as {c['code']} ({c['severity']}).",
+            code=c["code"],
+        )
+        for c in schemas.load("codes.json")["codes"]
+        if c["spec_section"].split(".")[0] in VERDICT_CHAPTERS and c["code"] not in exempt
+    ]
     return tuple(value + verdict)
 
 

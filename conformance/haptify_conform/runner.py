@@ -18,7 +18,7 @@ def load_skips(path: Path | None) -> dict[str, str]:
     data = json.loads(Path(path).read_text(encoding="utf-8"))
     skips = data.get("skips") if isinstance(data, dict) else None
     if not isinstance(skips, dict) or not all(isinstance(v, str) and v for v in skips.values()):
-        raise ValueError(f"{path}: expected {{\"skips\": {{case id: reason}}}}")
+        raise ValueError(f'{path}: expected {{"skips": {{case id: reason}}}}')
     return skips
 
 
@@ -39,8 +39,13 @@ def judge(case: Case, answer: Answer) -> Verdict:
     return verdict
 
 
-def run_cases(cases: Iterable[Case], adapter, skips: dict[str, str] | None = None,
-              on_verdict: Callable[[Verdict], None] | None = None, repo: Path = REPO_ROOT) -> list[Verdict]:
+def run_cases(
+    cases: Iterable[Case],
+    adapter,
+    skips: dict[str, str] | None = None,
+    on_verdict: Callable[[Verdict], None] | None = None,
+    repo: Path = REPO_ROOT,
+) -> list[Verdict]:
     """Run every case (skip-listed ones are reported as skipped, never silently dropped; spec §16.5).
 
     Fixtures are looked up under ``repo/fixtures``.
@@ -50,13 +55,25 @@ def run_cases(cases: Iterable[Case], adapter, skips: dict[str, str] | None = Non
     try:
         for case in cases:
             if case.id in skips:
-                v = Verdict(case_id=case.id, metric=case.metric, status="skipped", spec_section=case.spec_section,
-                            level=case.level, message=f"skip list: {skips[case.id]}")
+                v = Verdict(
+                    case_id=case.id,
+                    metric=case.metric,
+                    status="skipped",
+                    spec_section=case.spec_section,
+                    level=case.level,
+                    message=f"skip list: {skips[case.id]}",
+                )
             else:
                 session = fixture_path(case, repo)
                 if not session.exists():
-                    v = Verdict(case_id=case.id, metric=case.metric, status="error", spec_section=case.spec_section,
-                                level=case.level, message=f"fixture {case.fixture} is missing from the suite")
+                    v = Verdict(
+                        case_id=case.id,
+                        metric=case.metric,
+                        status="error",
+                        spec_section=case.spec_section,
+                        level=case.level,
+                        message=f"fixture {case.fixture} is missing from the suite",
+                    )
                 else:
                     v = judge(case, adapter.run(case, session))
             verdicts.append(v)

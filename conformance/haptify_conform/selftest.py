@@ -8,9 +8,17 @@ from pathlib import Path
 from haptify_conform.adapters import JsonlAdapter
 from haptify_conform.cases import Case, Expected, Provenance
 
-PROBE = Case(id="self-test.missing-session", metric="validate", spec_section="16.4", level="MUST",
-             fixture="-", expected=Expected(codes=["E101"]), provenance=Provenance(kind="spec", note="protocol probe"),
-             spec_versions=["1.0"], description="a session folder that does not exist must be rejected with E101")
+PROBE = Case(
+    id="self-test.missing-session",
+    metric="validate",
+    spec_section="16.4",
+    level="MUST",
+    fixture="-",
+    expected=Expected(codes=["E101"]),
+    provenance=Provenance(kind="spec", note="protocol probe"),
+    spec_versions=["1.0"],
+    description="a session folder that does not exist must be rejected with E101",
+)
 
 
 def self_test(adapter) -> tuple[bool, list[str]]:
@@ -26,14 +34,18 @@ def self_test(adapter) -> tuple[bool, list[str]]:
     with tempfile.TemporaryDirectory() as tmp:
         missing = Path(tmp) / "no-such-session"
         answer = adapter.run(PROBE, missing)
-        results.append(check(answer.kind != "error", f"answers a request ({answer.kind}{': ' + answer.message if answer.message else ''})"))
+        results.append(
+            check(answer.kind != "error", f"answers a request ({answer.kind}{': ' + answer.message if answer.message else ''})")
+        )
         codes = {f.get("code") for f in answer.payload or [] if isinstance(f, dict)} if answer.kind == "rejected" else set()
         results.append(check("E101" in codes, f"rejects a missing session with E101 (found {sorted(codes)})"))
         if isinstance(adapter, JsonlAdapter) and adapter.proc is not None:
             results.append(check(adapter.implementation.get("name") is not None, "handshake names the implementation"))
             try:
                 reply = adapter.request({"op": "no-such-op"})
-                results.append(check(reply.get("status") == "error", "answers an unknown op with status 'error' and the same seq"))
+                results.append(
+                    check(reply.get("status") == "error", "answers an unknown op with status 'error' and the same seq")
+                )
             except (TimeoutError, RuntimeError) as exc:
                 results.append(check(False, f"answers an unknown op ({exc})"))
     adapter.close()

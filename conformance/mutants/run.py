@@ -72,6 +72,7 @@ def _validate_once(real: Callable) -> Callable:
         if key not in _VALIDATED:
             _VALIDATED[key] = real(path)
         return _VALIDATED[key]
+
     return validate_session
 
 
@@ -93,26 +94,42 @@ def run_one(name: str) -> dict[str, Any]:
     for v in verdicts:
         if v.status in ("failed", "error"):
             ratio = deviation_ratio(cases[v.case_id], v)
-            failing.append({"case": v.case_id, "metric": v.metric, "status": v.status,
-                            "ratio": None if ratio is None else (ratio if math.isfinite(ratio) else "inf"),
-                            "message": "" if ratio is not None else v.message[:300]})
+            failing.append(
+                {
+                    "case": v.case_id,
+                    "metric": v.metric,
+                    "status": v.status,
+                    "ratio": None if ratio is None else (ratio if math.isfinite(ratio) else "inf"),
+                    "message": "" if ratio is not None else v.message[:300],
+                }
+            )
     failing.sort(key=lambda f: (f["ratio"] is None, -(math.inf if f["ratio"] == "inf" else (f["ratio"] or 0.0))))
     return {"name": name, "cases": len(verdicts), "failing": failing, "seconds": round(time.perf_counter() - start, 2)}
 
 
 def _record(name: str, outcome: dict[str, Any]) -> dict[str, Any]:
     m = BY_NAME[name]
-    return {"section": m.section, "requirement": m.requirement, "rule": m.rule, "wrong": m.wrong,
-            "expected_metrics": list(m.metrics), "caught": bool(outcome["failing"]),
-            "failing_cases": outcome["failing"], "seconds": outcome["seconds"]}
+    return {
+        "section": m.section,
+        "requirement": m.requirement,
+        "rule": m.rule,
+        "wrong": m.wrong,
+        "expected_metrics": list(m.metrics),
+        "caught": bool(outcome["failing"]),
+        "failing_cases": outcome["failing"],
+        "seconds": outcome["seconds"],
+    }
 
 
 def _best(failing: list[dict]) -> str:
     if not failing:
         return ""
     f = failing[0]
-    how = f"{f['ratio']:.3g} × tolerance" if isinstance(f["ratio"], float) else (
-        "∞ × tolerance" if f["ratio"] == "inf" else f"{f['status']}: {f['message'][:90]}")
+    how = (
+        f"{f['ratio']:.3g} × tolerance"
+        if isinstance(f["ratio"], float)
+        else ("∞ × tolerance" if f["ratio"] == "inf" else f"{f['status']}: {f['message'][:90]}")
+    )
     return f"best {f['case']} ({how})"
 
 
@@ -135,8 +152,11 @@ def main(argv: list[str] | None = None) -> int:
             if outcome["name"] == CONTROL:
                 continue
             verdict = "CAUGHT " if outcome["failing"] else "ESCAPED"
-            print(f"{verdict} {outcome['name']:36s} §{BY_NAME[outcome['name']].section:7s} "
-                  f"{len(outcome['failing']):3d} failing  {_best(outcome['failing'])}  [{outcome['seconds']:.0f} s]", flush=True)
+            print(
+                f"{verdict} {outcome['name']:36s} §{BY_NAME[outcome['name']].section:7s} "
+                f"{len(outcome['failing']):3d} failing  {_best(outcome['failing'])}  [{outcome['seconds']:.0f} s]",
+                flush=True,
+            )
     wall = time.perf_counter() - start
     control = outcomes[CONTROL]
     if control["failing"]:
@@ -149,10 +169,19 @@ def main(argv: list[str] | None = None) -> int:
     if escaped:
         print("escaped: " + ", ".join(escaped))
     if not args.only:
-        doc = {"$comment": "written by `make mutants` (python -m haptify_mutants.run); read by the suite's lint",
-               "date": time.strftime("%Y-%m-%d", time.gmtime()), "workers": args.workers, "cpu_count": os.cpu_count(),
-               "wall_s": round(wall, 1), "cases_digest": cases_digest(SUITE_ROOT), "cases": control["cases"], "caught": caught, "total": len(records),
-               "escaped": escaped, "mutants": records}
+        doc = {
+            "$comment": "written by `make mutants` (python -m haptify_mutants.run); read by the suite's lint",
+            "date": time.strftime("%Y-%m-%d", time.gmtime()),
+            "workers": args.workers,
+            "cpu_count": os.cpu_count(),
+            "wall_s": round(wall, 1),
+            "cases_digest": cases_digest(SUITE_ROOT),
+            "cases": control["cases"],
+            "caught": caught,
+            "total": len(records),
+            "escaped": escaped,
+            "mutants": records,
+        }
         atomic_write_text(args.out, json.dumps(doc, indent=1, ensure_ascii=False) + "\n")
     return 1 if escaped else 0
 

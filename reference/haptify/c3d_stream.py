@@ -76,14 +76,14 @@ def parameter_records(data: bytes) -> dict[tuple[str, str], tuple[int, str, tupl
         n_chars, gid = struct.unpack_from("<bb", data, pos)
         if n_chars == 0:
             break
-        name = data[pos + 2: pos + 2 + abs(n_chars)].decode("ascii").upper()
+        name = data[pos + 2 : pos + 2 + abs(n_chars)].decode("ascii").upper()
         here = pos + 2 + abs(n_chars)
         (step,) = struct.unpack_from("<h", data, here)
         if gid < 0:
             groups[-gid] = name
         else:
             kind, ndim = struct.unpack_from("<bB", data, here + 2)
-            dims = tuple(data[here + 4: here + 4 + ndim])
+            dims = tuple(data[here + 4 : here + 4 + ndim])
             params.setdefault(gid, []).append((name, here + 4 + ndim, PARAM_TYPES[kind], dims))
         if step == 0:
             break
@@ -143,8 +143,9 @@ def declared_frames(params: Any, header_frames: int, header_long: bool) -> int |
     return None if frames == LONG_FILE_MARK else frames
 
 
-def c3d_layout(path: Path, c: Any, data_start: int, analog_values: int, header_frames: int,
-               header_long: bool) -> C3DLayout | None:
+def c3d_layout(
+    path: Path, c: Any, data_start: int, analog_values: int, header_frames: int, header_long: bool
+) -> C3DLayout | None:
     """The data layout of a C3D file from ezc3d's header and parameters and the header's analog values
     per frame (word 3) and frame count; None when the file is not read here (DEC or MIPS byte order, a
     ROTATION group)."""
@@ -163,9 +164,21 @@ def c3d_layout(path: Path, c: Any, data_start: int, analog_values: int, header_f
     fmt = params.get("ANALOG", {}).get("FORMAT", {}).get("value", ["SIGNED"]) if "ANALOG" in params else ["SIGNED"]
     unsigned = bool(fmt) and str(fmt[0]).strip().upper() == "UNSIGNED"
     gen = float(_values(params, "ANALOG", "GEN_SCALE", 1, 1.0)[0])
-    layout = C3DLayout(path, (data_start - 1) * C3D_BLOCK, PROCESSOR_ORDER[processor], real, points, channels,
-                       per_frame, 0, abs(scale), _values(params, "ANALOG", "SCALE", channels, 1.0),
-                       np.abs(_values(params, "ANALOG", "OFFSET", channels, 0.0)), gen, unsigned)
+    layout = C3DLayout(
+        path,
+        (data_start - 1) * C3D_BLOCK,
+        PROCESSOR_ORDER[processor],
+        real,
+        points,
+        channels,
+        per_frame,
+        0,
+        abs(scale),
+        _values(params, "ANALOG", "SCALE", channels, 1.0),
+        np.abs(_values(params, "ANALOG", "OFFSET", channels, 0.0)),
+        gen,
+        unsigned,
+    )
     held = max(0, (path.stat().st_size - layout.data_offset) // layout.frame_bytes) if layout.frame_bytes else 0
     declared = declared_frames(params, header_frames, header_long)
     frames = held if declared is None else min(declared, held)

@@ -79,17 +79,28 @@ class HandleCalibration:
     @classmethod
     def from_record(cls, rec: HandleGravityCalibration) -> "HandleCalibration":
         """The parameters of a ``handle_gravity`` calibration record (spec §2.8)."""
-        return cls(force_bias_N=np.asarray(rec.force_bias_N, float), connector_mass_kg=float(rec.connector_mass_kg),
-                   connector_com_m=np.asarray(rec.connector_com_m, float), torque_bias_Nm=np.asarray(rec.torque_bias_Nm, float),
-                   accel_bias_m_per_s2=np.asarray(rec.accel_bias_m_per_s2, float),
-                   gravity_m_per_s2=float(rec.gravity_m_per_s2), source=f"record:{rec.id}")
+        return cls(
+            force_bias_N=np.asarray(rec.force_bias_N, float),
+            connector_mass_kg=float(rec.connector_mass_kg),
+            connector_com_m=np.asarray(rec.connector_com_m, float),
+            torque_bias_Nm=np.asarray(rec.torque_bias_Nm, float),
+            accel_bias_m_per_s2=np.asarray(rec.accel_bias_m_per_s2, float),
+            gravity_m_per_s2=float(rec.gravity_m_per_s2),
+            source=f"record:{rec.id}",
+        )
 
     def to_record(self, record_id: str, source_trial: str | None = None) -> dict:
         """A ``handle_gravity`` record (JSON-ready dict) holding these parameters (spec §2.8)."""
-        rec = {"kind": "handle_gravity", "id": record_id, "force_bias_N": self.force_bias_N.tolist(),
-               "connector_mass_kg": float(self.connector_mass_kg), "connector_com_m": self.connector_com_m.tolist(),
-               "torque_bias_Nm": self.torque_bias_Nm.tolist(), "accel_bias_m_per_s2": self.accel_bias_m_per_s2.tolist(),
-               "gravity_m_per_s2": float(self.gravity_m_per_s2)}
+        rec = {
+            "kind": "handle_gravity",
+            "id": record_id,
+            "force_bias_N": self.force_bias_N.tolist(),
+            "connector_mass_kg": float(self.connector_mass_kg),
+            "connector_com_m": self.connector_com_m.tolist(),
+            "torque_bias_Nm": self.torque_bias_Nm.tolist(),
+            "accel_bias_m_per_s2": self.accel_bias_m_per_s2.tolist(),
+            "gravity_m_per_s2": float(self.gravity_m_per_s2),
+        }
         if source_trial:
             rec["source_trial"] = source_trial
         return rec
@@ -97,8 +108,10 @@ class HandleCalibration:
 
 # --- fits (spec §6.2, §6.3) ---------------------------------------------------------------------
 
-def fit_sphere(points: np.ndarray, *, min_coverage: float | None = None, min_samples: int | None = None,
-               label: str = "calibration") -> SphereFit:
+
+def fit_sphere(
+    points: np.ndarray, *, min_coverage: float | None = None, min_samples: int | None = None, label: str = "calibration"
+) -> SphereFit:
     """Least-squares sphere through ``points (N, 3)`` (spec §6.2).
 
     Algebraic (Kåsa) solution of ``|x|² = 2c·x + (r² − |c|²)`` as the start, then the geometric fit
@@ -125,12 +138,16 @@ def fit_sphere(points: np.ndarray, *, min_coverage: float | None = None, min_sam
     u = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
     coverage = float(np.linalg.eigvalsh(u.T @ u / len(u))[0])
     if not np.isfinite(radius) or coverage < min_coverage:
-        raise fail("E602", f"{label}: orientations cover too little of the sphere (coverage {coverage:.3f})",
-                   expected=f"coverage >= {min_coverage}", found=round(coverage, 4))
+        raise fail(
+            "E602",
+            f"{label}: orientations cover too little of the sphere (coverage {coverage:.3f})",
+            expected=f"coverage >= {min_coverage}",
+            found=round(coverage, 4),
+        )
     r = resid(np.concatenate([centre, [radius]]))
     jac = -np.column_stack([u, np.ones(len(u))])
     cov = batch_means_covariance(jac, r, int(param(FAMILY, "offset_batches")))
-    return SphereFit(centre=centre, radius=radius, rms=float(np.sqrt(np.mean(r ** 2))), coverage=coverage, covariance=cov)
+    return SphereFit(centre=centre, radius=radius, rms=float(np.sqrt(np.mean(r**2))), coverage=coverage, covariance=cov)
 
 
 def batch_means_covariance(jac: np.ndarray, resid: np.ndarray, batches: int) -> np.ndarray:
@@ -152,12 +169,15 @@ def batch_means_covariance(jac: np.ndarray, resid: np.ndarray, batches: int) -> 
 def _cross_matrix(v: np.ndarray) -> np.ndarray:
     """Skew matrices ``[v]×`` of vectors ``(N, 3)`` → ``(N, 3, 3)`` with ``[v]× w = v × w``."""
     z = np.zeros(len(v))
-    return np.stack([np.stack([z, -v[:, 2], v[:, 1]], -1), np.stack([v[:, 2], z, -v[:, 0]], -1),
-                     np.stack([-v[:, 1], v[:, 0], z], -1)], axis=-2)
+    return np.stack(
+        [np.stack([z, -v[:, 2], v[:, 1]], -1), np.stack([v[:, 2], z, -v[:, 0]], -1), np.stack([-v[:, 1], v[:, 0], z], -1)],
+        axis=-2,
+    )
 
 
-def fit_torque(torque: np.ndarray, load: np.ndarray, *, loss: str | None = None,
-               f_scale: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+def fit_torque(
+    torque: np.ndarray, load: np.ndarray, *, loss: str | None = None, f_scale: float | None = None
+) -> tuple[np.ndarray, np.ndarray, float]:
     """Robust fit of paper eq. 3, ``τ_i = b_τ + r × L_i`` (spec §6.3).
 
     ``torque (N, 3)`` in N·m and ``load (N, 3)`` = the connector's weight in S (``F_i − b_F``), N.
@@ -175,7 +195,7 @@ def fit_torque(torque: np.ndarray, load: np.ndarray, *, loss: str | None = None,
     p0, *_ = np.linalg.lstsq(A, y, rcond=None)
     res = least_squares(lambda p: A @ p - y, p0, loss=loss, f_scale=f_scale, method="trf", x_scale="jac")
     e = A @ res.x - y
-    return res.x[:3].copy(), res.x[3:].copy(), float(np.sqrt(np.mean(e ** 2)))
+    return res.x[:3].copy(), res.x[3:].copy(), float(np.sqrt(np.mean(e**2)))
 
 
 def fit_from_samples(force: np.ndarray, torque: np.ndarray, accel: np.ndarray, *, source: str = "") -> HandleCalibration:
@@ -187,11 +207,21 @@ def fit_from_samples(force: np.ndarray, torque: np.ndarray, accel: np.ndarray, *
     fs = fit_sphere(force, label=f"{source} force")
     acc = fit_sphere(accel, label=f"{source} acceleration")
     b_tau, com, rms_tau = fit_torque(torque, np.asarray(force, float) - fs.centre)
-    return HandleCalibration(force_bias_N=fs.centre, connector_mass_kg=fs.radius / STANDARD_GRAVITY, connector_com_m=com,
-                             torque_bias_Nm=b_tau, accel_bias_m_per_s2=acc.centre, gravity_m_per_s2=acc.radius,
-                             source=source, rms_force_N=fs.rms, rms_accel_m_per_s2=acc.rms, rms_torque_Nm=rms_tau,
-                             force_offset_u_N=fs.offset_u, n_samples=int(len(force)),
-                             diagnostics={"force_coverage": fs.coverage, "accel_coverage": acc.coverage})
+    return HandleCalibration(
+        force_bias_N=fs.centre,
+        connector_mass_kg=fs.radius / STANDARD_GRAVITY,
+        connector_com_m=com,
+        torque_bias_Nm=b_tau,
+        accel_bias_m_per_s2=acc.centre,
+        gravity_m_per_s2=acc.radius,
+        source=source,
+        rms_force_N=fs.rms,
+        rms_accel_m_per_s2=acc.rms,
+        rms_torque_Nm=rms_tau,
+        force_offset_u_N=fs.offset_u,
+        n_samples=int(len(force)),
+        diagnostics={"force_coverage": fs.coverage, "accel_coverage": acc.coverage},
+    )
 
 
 def fit_trial(ctx_or_session: Any, trial_id: str) -> HandleCalibration:
@@ -213,8 +243,9 @@ def fit_trial(ctx_or_session: Any, trial_id: str) -> HandleCalibration:
     grid = signals.uniform_grid(t0, t1, rate)
     if len(grid) < 2:
         raise fail("E305", f"handle_wrench and handle_accel of trial {trial_id!r} do not overlap", expected="overlapping streams")
-    wr = signals.lowpass_resample(w["t"].to_numpy(), w[["fx", "fy", "fz", "tx", "ty", "tz"]].to_numpy(), grid,
-                                  signals.sp("wrench_cutoff_hz"))
+    wr = signals.lowpass_resample(
+        w["t"].to_numpy(), w[["fx", "fy", "fz", "tx", "ty", "tz"]].to_numpy(), grid, signals.sp("wrench_cutoff_hz")
+    )
     ac = signals.lowpass_resample(a["t"].to_numpy(), a[["ax", "ay", "az"]].to_numpy(), grid, signals.sp("accel_cutoff_hz"))
     cal = fit_from_samples(wr[:, :3], wr[:, 3:], ac, source=f"trial:{trial_id}")
     if session.stream(trial_id, "handle_pose") is not None:
@@ -253,6 +284,7 @@ def handle_calibration(ctx_or_session: Any) -> HandleCalibration:
     The last ``handle_gravity`` record in manifest order; otherwise a fit of the last
     ``rig.handle_calibration`` trial (highest repetition); otherwise E601. Cached on a ComputeContext.
     """
+
     def build() -> HandleCalibration:
         session = session_of(ctx_or_session)
         records = [c for c in session.manifest.calibration if c.kind == "handle_gravity"]
@@ -260,9 +292,14 @@ def handle_calibration(ctx_or_session: Any) -> HandleCalibration:
             return HandleCalibration.from_record(records[-1])
         trials = session.trials_of("rig.handle_calibration")
         if not trials:
-            raise fail("E601", f"session {session.session_id!r} has no handle_gravity record and no rig.handle_calibration trial",
-                       file="session.json", pointer="/calibration", expected="a handle_gravity record or a rig.handle_calibration trial",
-                       found=None)
+            raise fail(
+                "E601",
+                f"session {session.session_id!r} has no handle_gravity record and no rig.handle_calibration trial",
+                file="session.json",
+                pointer="/calibration",
+                expected="a handle_gravity record or a rig.handle_calibration trial",
+                found=None,
+            )
         return trial_fit(ctx_or_session, trials[-1].id)
 
     return cached(ctx_or_session, ("handle_calibration",), build)
@@ -276,13 +313,20 @@ def trial_fit(ctx_or_session: Any, trial_id: str) -> HandleCalibration:
 
 # --- applying it (spec §6.5, §6.6) ---------------------------------------------------------------
 
+
 def sensor_pose(session: Any, part: str) -> Pose:
     """Pose of the handle's ``ft_sensor`` or ``accelerometer`` frame in the handle body frame (E603 if absent).
     Position in m; spec §1.2, §2.4."""
     handle = session.manifest.rig.handle
     if handle is None:
-        raise fail("E603", f"the rig of session {session.session_id!r} does not describe the handle sensors",
-                   file="session.json", pointer="/rig/handle", expected="rig.handle with ft_sensor and accelerometer poses", found=None)
+        raise fail(
+            "E603",
+            f"the rig of session {session.session_id!r} does not describe the handle sensors",
+            file="session.json",
+            pointer="/rig/handle",
+            expected="rig.handle with ft_sensor and accelerometer poses",
+            found=None,
+        )
     return getattr(handle, part).pose
 
 

@@ -20,18 +20,32 @@ from haptify.storage import atomic_write_text, parse_json_file
 
 def register(sub) -> None:
     """Add the ``compute`` sub-command (spec §15.4)."""
-    p = sub.add_parser("compute", help="compute every metric the session's trials allow",
-                       description="Validate the session (refused sessions exit 1 with the validator's codes) and compute "
-                                   "every metric its trials allow.")
+    p = sub.add_parser(
+        "compute",
+        help="compute every metric the session's trials allow",
+        description="Validate the session (refused sessions exit 1 with the validator's codes) and compute "
+        "every metric its trials allow.",
+    )
     p.add_argument("session", type=Path)
-    p.add_argument("-o", "--output", type=Path,
-                   help="results file (default SESSION/../<id>.results.json); a refused session writes "
-                        "{\"findings\": [...]} here (spec §16.4.1)")
+    p.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        help="results file (default SESSION/../<id>.results.json); a refused session writes "
+        '{"findings": [...]} here (spec §16.4.1)',
+    )
     p.add_argument("--metrics", help="comma-separated metric ids (default: all)")
-    p.add_argument("--params", type=Path, metavar="FILE",
-                   help="case parameters, a JSON object (spec §16.2), e.g. {\"model\": \"<model file in the session>\"}")
-    p.add_argument("--uncertainty", action="store_true",
-                   help="add each metric's measurement uncertainty: u, U = k·u at 95 %%, the budget (spec chapter 19)")
+    p.add_argument(
+        "--params",
+        type=Path,
+        metavar="FILE",
+        help='case parameters, a JSON object (spec §16.2), e.g. {"model": "<model file in the session>"}',
+    )
+    p.add_argument(
+        "--uncertainty",
+        action="store_true",
+        help="add each metric's measurement uncertainty: u, U = k·u at 95 %%, the budget (spec chapter 19)",
+    )
     p.set_defaults(func=run)
 
 
@@ -83,13 +97,19 @@ def case_parameters(path: Path | None) -> dict[str, Any]:
         raise fail("E903", f"--params file {str(path)!r} does not exist", file=str(path), expected="a JSON file", found=None)
     params = parse_json_file(path, "E903", str(path))
     if not isinstance(params, dict):
-        raise fail("E903", f"--params file {str(path)!r} is not a JSON object", file=str(path),
-                   expected="a JSON object", found=type(params).__name__)
+        raise fail(
+            "E903",
+            f"--params file {str(path)!r} is not a JSON object",
+            file=str(path),
+            expected="a JSON object",
+            found=type(params).__name__,
+        )
     return params
 
 
-def compute_folder(path: Path, wanted: list[str] | None = None, parameters: dict[str, Any] | None = None, ui=None,
-                   uncertainty: bool = False) -> ResultsFile:
+def compute_folder(
+    path: Path, wanted: list[str] | None = None, parameters: dict[str, Any] | None = None, ui=None, uncertainty: bool = False
+) -> ResultsFile:
     """What ``haptify compute`` computes for the session folder ``path``: the session through the gate, every
     (or every ``wanted``) metric (with its uncertainty, chapter 19, when asked), then the rest of its validation
     (spec §15.4, §4.8); ``ui`` shows progress."""
@@ -98,8 +118,9 @@ def compute_folder(path: Path, wanted: list[str] | None = None, parameters: dict
     return _compute_checked(open_checked_session(path), wanted, parameters or {}, ui or UI(quiet=True), uncertainty)
 
 
-def _compute_checked(session: CheckedSession, wanted: list[str] | None, parameters: dict[str, Any], ui,
-                     uncertainty: bool = False) -> ResultsFile:
+def _compute_checked(
+    session: CheckedSession, wanted: list[str] | None, parameters: dict[str, Any], ui, uncertainty: bool = False
+) -> ResultsFile:
     """Compute on a gated session, then finish its validation (spec §4.8): the streams no metric read
     are checked too, so a result exists only for a session that validates whole. A coded failure of the
     computation is reported as the session's refusal when the session turns out invalid."""

@@ -57,7 +57,9 @@ def _usage(parser) -> int:
 def _check_free(paths: list[Path | None], overwrite: bool) -> None:
     for path in paths:
         if path is not None and path.exists() and not overwrite:
-            raise fail("E901", f"{str(path)!r} already exists", file=str(path), expected="a new path or --overwrite", found=str(path))
+            raise fail(
+                "E901", f"{str(path)!r} already exists", file=str(path), expected="a new path or --overwrite", found=str(path)
+            )
 
 
 def run_fit(args, ui) -> int:
@@ -70,9 +72,15 @@ def run_fit(args, ui) -> int:
     save_model(model, args.output)
     if args.mat:
         export_mat(model, args.mat)
-    summary = {"trial": trial_id, "model": str(args.output), "mat": str(args.mat) if args.mat else None,
-               "iterations": model.fit.iterations, "stop_reason": model.fit.stop_reason,
-               "rmse": dict(zip(OUTPUT_NAMES, model.fit.rmse)), "fit_percent": dict(zip(OUTPUT_NAMES, model.fit.fit_percent))}
+    summary = {
+        "trial": trial_id,
+        "model": str(args.output),
+        "mat": str(args.mat) if args.mat else None,
+        "iterations": model.fit.iterations,
+        "stop_reason": model.fit.stop_reason,
+        "rmse": dict(zip(OUTPUT_NAMES, model.fit.rmse)),
+        "fit_percent": dict(zip(OUTPUT_NAMES, model.fit.fit_percent)),
+    }
     ui.emit_json(summary)
     ui.say(f"fitted {trial_id}: {model.fit.iterations} iterations ({model.fit.stop_reason})")
     for name, e, pct in zip(OUTPUT_NAMES, model.fit.rmse, model.fit.fit_percent):
@@ -100,8 +108,14 @@ def run_predict(args, ui) -> int:
     write_atomically(args.output, lambda tmp: table.to_parquet(tmp, index=False))
     ok = data.valid & np.all(np.isfinite(predicted), axis=1)
     errors = rmse(data.y[ok], predicted[ok]) if ok.any() else np.full(len(OUTPUT_NAMES), np.nan)
-    ui.emit_json({"trial": trial_id, "output": str(args.output), "samples": int(ok.sum()),
-                  "rmse": {n: (float(e) if np.isfinite(e) else None) for n, e in zip(OUTPUT_NAMES, errors)}})
+    ui.emit_json(
+        {
+            "trial": trial_id,
+            "output": str(args.output),
+            "samples": int(ok.sum()),
+            "rmse": {n: (float(e) if np.isfinite(e) else None) for n, e in zip(OUTPUT_NAMES, errors)},
+        }
+    )
     ui.say(f"predicted {trial_id}: {int(ok.sum())} valid samples of {len(data.t)}")
     for name, e in zip(OUTPUT_NAMES, errors):
         ui.say(f"  {name}: RMS error {e:.4g}")

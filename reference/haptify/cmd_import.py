@@ -19,49 +19,68 @@ from haptify.importers import MOCAP_SOURCES, Destination, import_c3d, import_csv
 from haptify.validation import validate_session
 
 # option name -> the map field it fills (for the error that lists what is missing without a map)
-_OPTION_OF_FIELD = {"/session/date": "--date", "/session/lab": "--lab", "/session/examiner": "--examiner",
-                    "/session/device": "--device", "/session/device_placement": "--placement",
-                    "/trial/powered": "--powered", "/session": "--device, --lab, --examiner, --date, --placement",
-                    "/trial": "--powered"}
+_OPTION_OF_FIELD = {
+    "/session/date": "--date",
+    "/session/lab": "--lab",
+    "/session/examiner": "--examiner",
+    "/session/device": "--device",
+    "/session/device_placement": "--placement",
+    "/trial/powered": "--powered",
+    "/session": "--device, --lab, --examiner, --date, --placement",
+    "/trial": "--powered",
+}
 
 
 def register(sub) -> None:
     """Add ``import c3d`` and ``import csv`` with their options (spec §5.8)."""
-    p = sub.add_parser("import", help="import a C3D file or a CSV log as a session",
-                       description=__doc__.splitlines()[0])
+    p = sub.add_parser("import", help="import a C3D file or a CSV log as a session", description=__doc__.splitlines()[0])
     kinds = p.add_subparsers(dest="import_kind", metavar="FORMAT", required=True)
     for fmt, text in FORMATS.items():
         q = kinds.add_parser(fmt, help=f"import {text}")
         q.add_argument("file", type=Path, help="the source file")
         q.add_argument("-o", "--output", type=Path, help="the session folder to create")
-        q.add_argument("--map", type=Path, help="import map (JSON; import-map.schema.json)" + (" — required" if fmt == "csv" else ""))
-        q.add_argument("--suggest-map", action="store_true",
-                       help="print a map guessed from the file's labels, bodies, platforms or columns (placeholders for the facts it cannot hold) and what it could not place; write nothing")
+        q.add_argument(
+            "--map", type=Path, help="import map (JSON; import-map.schema.json)" + (" — required" if fmt == "csv" else "")
+        )
+        q.add_argument(
+            "--suggest-map",
+            action="store_true",
+            help="print a map guessed from the file's labels, bodies, platforms or columns (placeholders for the facts it cannot hold) and what it could not place; write nothing",
+        )
         q.add_argument("--overwrite", action="store_true", help="replace an existing session folder")
-        q.add_argument("--append", action="store_true",
-                       help="add the file as one more trial of the existing session SESSION (its facts need not be repeated)")
+        q.add_argument(
+            "--append",
+            action="store_true",
+            help="add the file as one more trial of the existing session SESSION (its facts need not be repeated)",
+        )
         g = q.add_argument_group("session facts (override the map; required for a motion-capture file without --map)")
         g.add_argument("--device", type=Path, help="device description (device.json), copied into the session")
         g.add_argument("--lab", help="pseudonymous lab id")
         g.add_argument("--examiner", help="pseudonymous examiner id")
         g.add_argument("--date", help="recording date, YYYY-MM-DD")
-        g.add_argument("--placement", help="device frame in W: 'x,y,z' in m, optionally ',qw,qx,qy,qz' (default orientation: aligned with W)")
+        g.add_argument(
+            "--placement", help="device frame in W: 'x,y,z' in m, optionally ',qw,qx,qy,qz' (default orientation: aligned with W)"
+        )
         g.add_argument("--powered", choices=["yes", "no"], help="was the device powered during the trial")
         g.add_argument("--session-id", help="session id (default: the file's name)")
         g.add_argument("--trial-id", help="trial id (default: the file's name)")
         g.add_argument("--repetition", type=int, help="repetition number of the trial")
         if fmt != "csv":
             g.add_argument("--plate", help="force platform that defines W: a number, or 'none' (default: 1 when present)")
-            q.add_argument("--list", action="store_true", help="describe the file (labels, bodies, units, rates, platforms) and exit")
+            q.add_argument(
+                "--list", action="store_true", help="describe the file (labels, bodies, units, rates, platforms) and exit"
+            )
         q.set_defaults(func=run)
 
 
-FORMATS = {"c3d": "a C3D motion-capture file (Vicon, Qualisys, OptiTrack, markerless, …)",
-           "tsv": "a Qualisys Track Manager TSV export (3-D markers and 6DOF bodies)",
-           "motive": "an OptiTrack Motive CSV export (markers and rigid bodies)",
-           "nexus": "a Vicon Nexus CSV export (trajectories, model outputs, segments, devices)",
-           "auto": "a motion-capture file of any of the formats above, recognised from its content (the default: `haptify import FILE`)",
-           "csv": "a column-mapped CSV log (ATI F/T log, CHAI3D log, …)"}
+FORMATS = {
+    "c3d": "a C3D motion-capture file (Vicon, Qualisys, OptiTrack, markerless, …)",
+    "tsv": "a Qualisys Track Manager TSV export (3-D markers and 6DOF bodies)",
+    "motive": "an OptiTrack Motive CSV export (markers and rigid bodies)",
+    "nexus": "a Vicon Nexus CSV export (trajectories, model outputs, segments, devices)",
+    "auto": "a motion-capture file of any of the formats above, recognised from its content (the default: `haptify import FILE`)",
+    "csv": "a column-mapped CSV log (ATI F/T log, CHAI3D log, …)",
+}
 
 
 def implicit_format(argv: list[str]) -> list[str]:
@@ -84,8 +103,13 @@ def _format_of(args) -> str:
 
     fmt = detect_format(args.file)
     if fmt is None:
-        raise fail("E501", f"{str(args.file)!r} is none of the motion-capture formats {list(MOCAP_SOURCES)}",
-                   file=str(args.file), expected=list(MOCAP_SOURCES), found=None)
+        raise fail(
+            "E501",
+            f"{str(args.file)!r} is none of the motion-capture formats {list(MOCAP_SOURCES)}",
+            file=str(args.file),
+            expected=list(MOCAP_SOURCES),
+            found=None,
+        )
     return fmt
 
 
@@ -145,11 +169,13 @@ def _load(args, fmt: str, facts: dict | None):
     except HaptifyError as err:
         if args.map is not None:
             raise
-        missing = sorted({_OPTION_OF_FIELD.get(f.pointer or "", f.pointer or "") for f in err.findings
-                          if "missing" in (f.expected, f.found)})
+        missing = sorted(
+            {_OPTION_OF_FIELD.get(f.pointer or "", f.pointer or "") for f in err.findings if "missing" in (f.expected, f.found)}
+        )
         if missing:
-            raise fail("E903", "without --map, give the session facts on the command line", expected=missing,
-                       found="missing") from None
+            raise fail(
+                "E903", "without --map, give the session facts on the command line", expected=missing, found="missing"
+            ) from None
         raise fail("E903", "; ".join(f"{f.pointer}: {f.message}" for f in err.findings), found="invalid option") from None
 
 
@@ -197,8 +223,12 @@ def run(args, ui) -> int:
     if args.suggest_map:
         return _suggest(fmt, args, ui)
     if fmt == "csv" and args.map is None:
-        raise fail("E903", "haptify import csv needs --map MAP.json (--suggest-map prints one to start from)",
-                   expected="--map MAP.json", found=None)
+        raise fail(
+            "E903",
+            "haptify import csv needs --map MAP.json (--suggest-map prints one to start from)",
+            expected="--map MAP.json",
+            found=None,
+        )
     if fmt != "csv" and args.list:
         summary = _read(fmt, args.file).summary()
         if ui.json_mode:
@@ -214,8 +244,11 @@ def run(args, ui) -> int:
             ui.say(f"analog: {an['count']} channels at {an['rate_hz']:g} Hz, {an['samples']} samples")
             ui.say("  " + ", ".join(f"{c['label']} [{c['unit']}]" for c in an["channels"]))
             for p in summary["force_platforms"]:
-                ui.say(f"force platform {p['number']}: type {p['type']}, channels " + (", ".join(p["channels"]) or "none")
-                       + (" (calibration matrix)" if p["calibrated"] else ""))
+                ui.say(
+                    f"force platform {p['number']}: type {p['type']}, channels "
+                    + (", ".join(p["channels"]) or "none")
+                    + (" (calibration matrix)" if p["calibrated"] else "")
+                )
             for w in summary["warnings"]:
                 ui.warn(f"{w['code']} warning: {w['message']}")
         return 0
@@ -227,8 +260,9 @@ def run(args, ui) -> int:
         result = _importer(fmt, advance)(args.file, dest, loaded)
         report = validate_session(result.session)
     if ui.json_mode:
-        ui.emit_json({**result.to_dict(), "validation": {"valid": report.valid,
-                                                         "findings": [f.to_dict() for f in report.findings]}})
+        ui.emit_json(
+            {**result.to_dict(), "validation": {"valid": report.valid, "findings": [f.to_dict() for f in report.findings]}}
+        )
         return report.exit_code
     ui.say(f"wrote {result.session} (session {result.session_id}, trial {result.trial_id})")
     for s in result.streams:
@@ -238,6 +272,9 @@ def run(args, ui) -> int:
         ui.warn(str(w))
     for f in report.findings:
         ui.warn(str(f))
-    ui.say("the session validates" + (f" ({len(report.warnings)} warnings)" if report.warnings else "")
-           if report.valid else "the session does NOT validate (see above)")
+    ui.say(
+        "the session validates" + (f" ({len(report.warnings)} warnings)" if report.warnings else "")
+        if report.valid
+        else "the session does NOT validate (see above)"
+    )
     return report.exit_code

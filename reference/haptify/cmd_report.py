@@ -18,11 +18,18 @@ def register(sub) -> None:
     p.add_argument("session", type=Path)
     p.add_argument("-o", "--output", type=Path, required=True, help="report folder to create")
     p.add_argument("--results", type=Path, help="use these results instead of computing them")
-    p.add_argument("--wav-scale", type=float, help="divide vibration audio by this (m/s^2), as the paper did, "
-                                                    "to compare devices; default: this session's largest amplitude")
+    p.add_argument(
+        "--wav-scale",
+        type=float,
+        help="divide vibration audio by this (m/s^2), as the paper did, "
+        "to compare devices; default: this session's largest amplitude",
+    )
     p.add_argument("--overwrite", action="store_true")
-    p.add_argument("--uncertainty", action="store_true", help="compute each metric's uncertainty too (spec chapter 19; "
-                   "results given with --results keep theirs)")
+    p.add_argument(
+        "--uncertainty",
+        action="store_true",
+        help="compute each metric's uncertainty too (spec chapter 19; results given with --results keep theirs)",
+    )
     p.set_defaults(func=run)
 
 
@@ -36,8 +43,13 @@ def run(args, ui) -> int:
     if args.results:
         results = load_results(args.results)
         if results.session_id != session.session_id:
-            raise fail("E903", "the results belong to another session", file=str(args.results),
-                       expected=session.session_id, found=results.session_id)
+            raise fail(
+                "E903",
+                "the results belong to another session",
+                file=str(args.results),
+                expected=session.session_id,
+                found=results.session_id,
+            )
     else:
         with ui.progress("computing metrics", total=len(family_modules())) as advance:
             results = compute_session(session, progress=advance, ctx=ctx, uncertainty=args.uncertainty)

@@ -33,5 +33,7 @@ def run(args, ui) -> int:
             if c.detail:
                 line += f"  [{c.detail}]"
             ui.say(line)
-        ui.say(f"{len(checks) - len(failed)} of {len(checks)} checks did not fail" + (f"; {len(failed)} FAILED" if failed else ""))
+        ui.say(
+            f"{len(checks) - len(failed)} of {len(checks)} checks did not fail" + (f"; {len(failed)} FAILED" if failed else "")
+        )
     return 1 if failed else 0

@@ -18,11 +18,13 @@ def register(subparsers: Any) -> None:
     """Add the ``validate`` sub-command (entry point ``validate = "haptify.cmd_validate:register"``).
     Spec §4.6."""
     parser = subparsers.add_parser(
-        "validate", help="check a session folder against the Haptify spec",
+        "validate",
+        help="check a session folder against the Haptify spec",
         description="Check a session folder (session.json and its stream files) against the Haptify spec and "
-                    "report every problem, grouped by trial and file. Exit code: 0 valid (warnings allowed), "
-                    "1 invalid, 2 could not run. --json (before or after the sub-command) prints the report as JSON "
-                    "(validation-report.schema.json).")
+        "report every problem, grouped by trial and file. Exit code: 0 valid (warnings allowed), "
+        "1 invalid, 2 could not run. --json (before or after the sub-command) prints the report as JSON "
+        "(validation-report.schema.json).",
+    )
     parser.add_argument("session", metavar="SESSION", help="the session folder")
     parser.set_defaults(func=run)
 
@@ -63,7 +65,9 @@ def render_text(report: ValidationReport, errors_only: bool = False) -> list[str
             lines.extend("    " + part for part in str(f).splitlines())
     if not errors_only:
         verdict = {0: "valid", 1: "INVALID", 2: "could not be validated"}[report.exit_code]
-        summary = (f"{report.session}: {verdict} — {len(report.errors)} error(s), {len(report.warnings)} warning(s), "
-                   f"{report.streams_checked} stream(s) checked")
+        summary = (
+            f"{report.session}: {verdict} — {len(report.errors)} error(s), {len(report.warnings)} warning(s), "
+            f"{report.streams_checked} stream(s) checked"
+        )
         lines.extend(["", summary] if lines else [summary])
     return lines

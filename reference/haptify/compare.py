@@ -29,7 +29,7 @@ class Table:
 
 def _num(value: float, significant: int) -> str:
     """``significant`` digits, never in exponent form for values of 1000 and more (11799, not 1.2e+04)."""
-    return f"{value:.0f}" if abs(value) >= 10 ** significant else f"{value:.{significant}g}"
+    return f"{value:.0f}" if abs(value) >= 10**significant else f"{value:.{significant}g}"
 
 
 def _fmt(value: float | None, sd: float | None = None, expanded: float | None = None) -> str:
@@ -54,9 +54,11 @@ def _cell(m: MetricResult | None, factor: float) -> str:
 
 
 SIGNIFICANCE = "significant differences"
-SIGNIFICANCE_NOTE = ("± … (U): expanded uncertainty at 95 % (spec §19.4); ± without (U): the repetitions' sd. "
-                     "Significant differences: device columns i–j with |x_i − x_j| > k·√(u_i² + u_j²), k Student's t at the "
-                     "Welch–Satterthwaite degrees of freedom (spec §19.6).")
+SIGNIFICANCE_NOTE = (
+    "± … (U): expanded uncertainty at 95 % (spec §19.4); ± without (U): the repetitions' sd. "
+    "Significant differences: device columns i–j with |x_i − x_j| > k·√(u_i² + u_j²), k Student's t at the "
+    "Welch–Satterthwaite degrees of freedom (spec §19.6)."
+)
 
 
 def significance(records: list[MetricResult | None]) -> str:
@@ -129,8 +131,10 @@ def to_csv(table: Table) -> str:
 
 def to_html_document(table: Table) -> str:
     """The comparison table as a complete HTML page, UTF-8 (``--format html``; spec §15.5)."""
-    return ("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
-            "<title>Haptify comparison</title>\n</head>\n<body>\n" + to_html(table) + "\n</body>\n</html>\n")
+    return (
+        '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
+        "<title>Haptify comparison</title>\n</head>\n<body>\n" + to_html(table) + "\n</body>\n</html>\n"
+    )
 
 
 def to_html(table: Table) -> str:
@@ -138,5 +142,6 @@ def to_html(table: Table) -> str:
     head = "".join(f"<th>{html.escape(h)}</th>" for h in table.header)
     body = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>" for r in table.rows)
     notes = "".join(f"<li>{html.escape(n)}</li>" for n in table.notes)
-    return (f"<table class=\"haptify-compare\"><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
-            + (f"<ul>{notes}</ul>" if notes else ""))
+    return f'<table class="haptify-compare"><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>' + (
+        f"<ul>{notes}</ul>" if notes else ""
+    )

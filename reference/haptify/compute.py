@@ -71,9 +71,13 @@ def family_module(metric_id: str) -> str:
     return dict(family_modules())[family]
 
 
-def compute_session(session: SessionFolder, metrics: Iterable[str] | None = None,
-                    progress: Callable[[int], None] | None = None, ctx: ComputeContext | None = None,
-                    uncertainty: bool = False) -> ResultsFile:
+def compute_session(
+    session: SessionFolder,
+    metrics: Iterable[str] | None = None,
+    progress: Callable[[int], None] | None = None,
+    ctx: ComputeContext | None = None,
+    uncertainty: bool = False,
+) -> ResultsFile:
     """Compute every metric (or those in ``metrics``) that the session's trials allow (spec §15.4).
 
     Pass ``ctx`` to share its cache with later work on the same session (the report's figures). With
@@ -88,10 +92,12 @@ def compute_session(session: SessionFolder, metrics: Iterable[str] | None = None
     ctx = ctx or ComputeContext(session=session)
     ctx.wanted = wanted
     device = session.device()
-    out = ResultsFile(implementation=Implementation(name="haptify-reference", version=PACKAGE_VERSION),
-                      session_id=session.session_id,
-                      device=DeviceSummary(manufacturer=device.manufacturer, model=device.model, serial=device.serial),
-                      manifest_sha256=sha256_file(session.root / MANIFEST))
+    out = ResultsFile(
+        implementation=Implementation(name="haptify-reference", version=PACKAGE_VERSION),
+        session_id=session.session_id,
+        device=DeviceSummary(manufacturer=device.manufacturer, model=device.model, serial=device.serial),
+        manifest_sha256=sha256_file(session.root / MANIFEST),
+    )
     for family, module_name in family_modules():
         fam_ids = {m.id for f in all_families() if f.family == family for m in f.metrics}
         if wanted is not None and not (fam_ids & wanted):

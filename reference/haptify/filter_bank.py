@@ -46,8 +46,8 @@ def _kernel():
                     if rest[t]:
                         z0[:] = 0.0
                         z1[:] = 0.0
-                    xt = x[t * x_stride: t * x_stride + m]
-                    ot = out[t * out_stride: t * out_stride + m]
+                    xt = x[t * x_stride : t * x_stride + m]
+                    ot = out[t * out_stride : t * out_stride + m]
                     g = gain[t]
                     for r in range(m):
                         xr = xt[r]
@@ -57,13 +57,13 @@ def _kernel():
                         ot[r] = yr * g
                 state[0], state[1] = z0, z1
                 return
-            z = np.zeros((order + 1, m))          # z[order] stays 0: the last delay has no successor
+            z = np.zeros((order + 1, m))  # z[order] stays 0: the last delay has no successor
             z[:order] = state
             y = np.empty(m)
             for t in range(n):
                 if rest[t]:
                     z[:] = 0.0
-                xt = x[t * x_stride: t * x_stride + m]
+                xt = x[t * x_stride : t * x_stride + m]
                 z0, b0 = z[0], b[0]
                 for r in range(m):
                     y[r] = z0[r] + b0[r] * xt[r]
@@ -72,7 +72,7 @@ def _kernel():
                     for r in range(m):
                         zk[r] = zk1[r] + xt[r] * bk[r] - y[r] * ak[r]
                 g = gain[t]
-                ot = out[t * out_stride: t * out_stride + m]
+                ot = out[t * out_stride : t * out_stride + m]
                 for r in range(m):
                     ot[r] = y[r] * g
             state[:] = z[:order]
@@ -94,8 +94,11 @@ def _rows(array: np.ndarray) -> tuple[np.ndarray, int]:
 def _row_major(array: np.ndarray) -> bool:
     """Whether the rows of a 2-D array are contiguous and do not overlap (what :func:`_rows` needs)."""
     n, m = array.shape
-    return array.strides[1] == array.itemsize and (n < 2 or array.strides[0] >= array.itemsize * m) \
+    return (
+        array.strides[1] == array.itemsize
+        and (n < 2 or array.strides[0] >= array.itemsize * m)
         and array.strides[0] % array.itemsize == 0
+    )
 
 
 class FilterBank:
@@ -117,14 +120,15 @@ class FilterBank:
             raise ValueError("every denominator must start with 1 (F(q) = 1 + f_1 q^-1 + …)")
         order = max(b.shape[1], a.shape[1]) - 1
         self.columns = len(b)
-        self._b = np.zeros((max(order, 2) + 1, len(b)))      # orders below 2 run as order 2 with zero coefficients
+        self._b = np.zeros((max(order, 2) + 1, len(b)))  # orders below 2 run as order 2 with zero coefficients
         self._a = np.zeros_like(self._b)
         self._b[: b.shape[1]] = b.T
         self._a[: a.shape[1]] = a.T
-        self._delays = np.zeros((max(order, 2), len(b)))     # at rest
+        self._delays = np.zeros((max(order, 2), len(b)))  # at rest
 
-    def __call__(self, x: np.ndarray, out: np.ndarray | None = None, gain: np.ndarray | None = None,
-                 starts: np.ndarray | None = None) -> np.ndarray:
+    def __call__(
+        self, x: np.ndarray, out: np.ndarray | None = None, gain: np.ndarray | None = None, starts: np.ndarray | None = None
+    ) -> np.ndarray:
         """Filter the next block of rows: column m of the result is ``x[:, m % S]`` through filter m, continuing
         from the delays the previous block left (at rest before the first), times ``gain[t]`` at row t when a
         gain (N,) is given; every filter restarts from rest at the rows ``starts`` (records stacked one after
@@ -140,10 +144,11 @@ class FilterBank:
         n, signals = x.shape
         m = self.columns
         if m % max(signals, 1) or (m and not signals):
-            raise ValueError(f"{m} filters need one numerator and one denominator per column, a multiple of "
-                             f"the {signals} signals")
+            raise ValueError(
+                f"{m} filters need one numerator and one denominator per column, a multiple of the {signals} signals"
+            )
         if signals and m > signals:
-            x = np.tile(x, (1, m // signals))          # the compiled loop reads one signal per column, in order
+            x = np.tile(x, (1, m // signals))  # the compiled loop reads one signal per column, in order
         elif not _row_major(x):
             x = np.ascontiguousarray(x)
         if out is None:
@@ -166,9 +171,15 @@ class FilterBank:
         return out
 
 
-def lfilter_columns(b: np.ndarray, a: np.ndarray, x: np.ndarray, out: np.ndarray | None = None,
-                    gain: np.ndarray | None = None, source: np.ndarray | None = None,
-                    starts: np.ndarray | None = None) -> np.ndarray:
+def lfilter_columns(
+    b: np.ndarray,
+    a: np.ndarray,
+    x: np.ndarray,
+    out: np.ndarray | None = None,
+    gain: np.ndarray | None = None,
+    source: np.ndarray | None = None,
+    starts: np.ndarray | None = None,
+) -> np.ndarray:
     """Column m of the result is ``x[:, source[m]]`` (default ``x[:, m % S]``) filtered by ``b[m] / a[m]`` from
     zero initial conditions, each output sample t then multiplied by ``gain[t]`` when a gain (N,) is given.
     ``starts`` lists rows where every filter restarts from rest (records stacked one after the other, each

@@ -30,8 +30,6 @@ AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
 PLATE_COLUMNS = [f"{c}_{a}" for c in CORNERS for a in AXES]
 
 
-
-
 def corner_geometry(rig: Any) -> tuple[np.ndarray, np.ndarray]:
     """Corner sensor positions ``(4, 3)`` (m, in W) and rotations ``(4, 3, 3)`` (C_i → W), ordered c1…c4.
     Spec §14.1.
@@ -40,16 +38,23 @@ def corner_geometry(rig: Any) -> tuple[np.ndarray, np.ndarray]:
     """
     plate = getattr(rig, "force_plate", None)
     if plate is None:
-        raise fail("E603", "the rig does not describe the force plate", file="session.json", pointer="/rig/force_plate",
-                   expected="rig.force_plate with four corner poses", found=None)
+        raise fail(
+            "E603",
+            "the rig does not describe the force plate",
+            file="session.json",
+            pointer="/rig/force_plate",
+            expected="rig.force_plate with four corner poses",
+            found=None,
+        )
     by_id = {c.id: c.pose for c in plate.corners}
     pos = np.array([by_id[c].position for c in CORNERS], float)
     rot = quat_to_matrix(np.array([by_id[c].quaternion for c in CORNERS], float))
     return pos, rot
 
 
-def total_wrench(raw: np.ndarray, positions: np.ndarray, rotations: np.ndarray,
-                 bias: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def total_wrench(
+    raw: np.ndarray, positions: np.ndarray, rotations: np.ndarray, bias: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Force (N) and moment about the world origin (N·m) the load exerts on the plate (spec §14.1).
 
     ``raw (N, 24)`` in the column order c1_fx … c4_tz; ``bias (24,)`` subtracted first (zeros if None).
@@ -87,6 +92,7 @@ def plate_bias(ctx_or_session: Any) -> tuple[np.ndarray, str]:
     The last ``plate_bias`` record in manifest order; otherwise the mean of every column over the last
     ``rig.plate_bias`` trial (highest repetition); otherwise E621. Cached on a context.
     """
+
     def build() -> tuple[np.ndarray, str]:
         session = session_of(ctx_or_session)
         recs = [c for c in session.manifest.calibration if c.kind == "plate_bias"]
@@ -94,8 +100,14 @@ def plate_bias(ctx_or_session: Any) -> tuple[np.ndarray, str]:
             return np.asarray(recs[-1].bias, float), f"record:{recs[-1].id}"
         trials = session.trials_of("rig.plate_bias")
         if not trials:
-            raise fail("E621", f"session {session.session_id!r} has no plate_bias record and no rig.plate_bias trial",
-                       file="session.json", pointer="/calibration", expected="a plate_bias record or a rig.plate_bias trial", found=None)
+            raise fail(
+                "E621",
+                f"session {session.session_id!r} has no plate_bias record and no rig.plate_bias trial",
+                file="session.json",
+                pointer="/calibration",
+                expected="a plate_bias record or a rig.plate_bias trial",
+                found=None,
+            )
         df = session.read(trials[-1].id, "plate_wrench")
         return df[PLATE_COLUMNS].to_numpy().mean(axis=0), f"trial:{trials[-1].id}"
 
@@ -121,6 +133,7 @@ def plate_signals(ctx_or_session: Any, trial_id: str) -> PlateSignals:
 
     Raises E302 when the trial has no plate_wrench, E603 without a plate in the rig, E621 without a bias.
     """
+
     def build() -> PlateSignals:
         session = session_of(ctx_or_session)
         df = session.read(trial_id, "plate_wrench")
@@ -129,13 +142,15 @@ def plate_signals(ctx_or_session: Any, trial_id: str) -> PlateSignals:
         force, moment = total_wrench(df[PLATE_COLUMNS].to_numpy(), pos, rot, bias)
         cop, ok = center_of_pressure(force, moment)
         t = df["t"].to_numpy()
-        return PlateSignals(trial_id=trial_id, t=t, force=force, moment=moment, cop=cop, cop_valid=ok,
-                            bias_source=source, rate_hz=nominal_rate(t))
+        return PlateSignals(
+            trial_id=trial_id, t=t, force=force, moment=moment, cop=cop, cop_valid=ok, bias_source=source, rate_hz=nominal_rate(t)
+        )
 
     return cached(ctx_or_session, ("plate_signals", trial_id), build)
 
 
 # --- natural frequency (spec §14.4) --------------------------------------------------------------
+
 
 def impact_window(t: np.ndarray, force: np.ndarray) -> np.ndarray:
     """Indices of the analysis window of an impact trial (spec §14.4).
@@ -169,11 +184,15 @@ def dominant_frequency(x: np.ndarray, rate_hz: float, band_hz: tuple[float, floa
     freqs = np.fft.rfftfreq(nfft, 1.0 / rate_hz)
     band = np.flatnonzero((freqs >= band_hz[0]) & (freqs <= band_hz[1]))
     if len(band) < 3 or not np.any(mag[band] > 0):
-        raise fail("E622", f"no spectral peak between {band_hz[0]:.1f} and {band_hz[1]:.1f} Hz",
-                   expected="an impact response inside the band", found="flat spectrum" if len(band) >= 3 else "band empty")
+        raise fail(
+            "E622",
+            f"no spectral peak between {band_hz[0]:.1f} and {band_hz[1]:.1f} Hz",
+            expected="an impact response inside the band",
+            found="flat spectrum" if len(band) >= 3 else "band empty",
+        )
     k = band[int(np.argmax(mag[band]))]
-    if 0 < k < len(mag) - 1 and np.all(mag[k - 1:k + 2] > 0):
-        a, b, c = np.log(mag[k - 1:k + 2])
+    if 0 < k < len(mag) - 1 and np.all(mag[k - 1 : k + 2] > 0):
+        a, b, c = np.log(mag[k - 1 : k + 2])
         denom = a - 2 * b + c
         delta = 0.5 * (a - c) / denom if denom < 0 else 0.0
         return float(freqs[k] + np.clip(delta, -0.5, 0.5) * (freqs[1] - freqs[0]))
@@ -188,6 +207,7 @@ def natural_frequencies(t: np.ndarray, force: np.ndarray, rate_hz: float) -> np.
 
 # --- COP error against motion capture (spec §14.5) --------------------------------------------------
 
+
 @dataclass
 class Placement:
     """One static placement of the weight: time span, plate COP and mocap position (m), error (m).
@@ -200,8 +220,9 @@ class Placement:
     error: float
 
 
-def placements(t: np.ndarray, force: np.ndarray, cop: np.ndarray, cop_valid: np.ndarray,
-               marker_t: np.ndarray, marker_xy: np.ndarray) -> list[Placement]:
+def placements(
+    t: np.ndarray, force: np.ndarray, cop: np.ndarray, cop_valid: np.ndarray, marker_t: np.ndarray, marker_xy: np.ndarray
+) -> list[Placement]:
     """Static placements of the weight and their COP errors (spec §14.5).
 
     A placement is a maximal run of samples with a valid COP lasting at least ``cop_min_hold_s``;
@@ -240,7 +261,10 @@ def cop_trial_placements(ctx_or_session: Any, trial_id: str) -> list[Placement]:
         xy = np.column_stack([xs.mean(axis=1), ys.mean(axis=1)])  # NaN when any marker is occluded
     found = placements(ps.t, ps.force, ps.cop, ps.cop_valid, mk["t"].to_numpy(), xy)
     if not found:
-        raise fail("E623", f"trial {trial_id!r}: no static placement of the weight found",
-                   expected=f"loads of |Fz| >= {param(FAMILY, 'cop_min_force_N')} N held >= {param(FAMILY, 'cop_min_hold_s')} s with visible markers",
-                   found="none")
+        raise fail(
+            "E623",
+            f"trial {trial_id!r}: no static placement of the weight found",
+            expected=f"loads of |Fz| >= {param(FAMILY, 'cop_min_force_N')} N held >= {param(FAMILY, 'cop_min_hold_s')} s with visible markers",
+            found="none",
+        )
     return found

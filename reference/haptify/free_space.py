@@ -62,12 +62,18 @@ class ForceField:
     counts: np.ndarray
 
     def to_dict(self) -> dict:
-        return {"bin_m": self.bin_m,
-                "bins": [{"centre_m": [round(float(x), 6) for x in c], "mean_force_N": [round(float(x), 6) for x in f], "n": int(n)}
-                         for c, f, n in zip(self.centres, self.mean_force, self.counts)]}
+        return {
+            "bin_m": self.bin_m,
+            "bins": [
+                {"centre_m": [round(float(x), 6) for x in c], "mean_force_N": [round(float(x), 6) for x in f], "n": int(n)}
+                for c, f, n in zip(self.centres, self.mean_force, self.counts)
+            ],
+        }
 
 
-def force_field(position: np.ndarray, force: np.ndarray, *, bin_m: float | None = None, min_samples: int | None = None) -> ForceField:
+def force_field(
+    position: np.ndarray, force: np.ndarray, *, bin_m: float | None = None, min_samples: int | None = None
+) -> ForceField:
     """Bin ``force (N, 3)`` by ``position (N, 3)`` on the W-anchored lattice of edge ``force_field_bin_m`` and
     average each bin holding at least ``force_field_min_samples`` samples (spec §9.5); bins sorted by index."""
     b = float(fp("force_field_bin_m") if bin_m is None else bin_m)
@@ -86,20 +92,29 @@ def force_field(position: np.ndarray, force: np.ndarray, *, bin_m: float | None 
 
 # --- session level (spec §9.6) -------------------------------------------------------------------
 
+
 def hand_force_samples(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
     """Calibrated hand force (N) and gimbal position (m), W, at a trial's usable samples (chapter 7)."""
     hs = handle_signals(ctx, trial_id)
     if hs.force is None:
-        raise fail("E302", f"trial {trial_id!r} has no handle_wrench stream", file="session.json", expected="handle_wrench", found=None)
+        raise fail(
+            "E302", f"trial {trial_id!r} has no handle_wrench stream", file="session.json", expected="handle_wrench", found=None
+        )
     ok = hs.valid & np.all(np.isfinite(hs.force), axis=1)
     if ok.sum() < 2:
-        raise fail("E611", f"trial {trial_id!r} has no usable samples with motion capture and force", expected=">= 2 samples", found=int(ok.sum()))
+        raise fail(
+            "E611",
+            f"trial {trial_id!r} has no usable samples with motion capture and force",
+            expected=">= 2 samples",
+            found=int(ok.sum()),
+        )
     return hs.force[ok], hs.position[ok]
 
 
 def plate_force_samples(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
     """Times (s) and bias-removed total plate force (N, W), low-passed at the handle-force cut-off and
     resampled onto the uniform grid of the plate stream's span at the common rate (spec §9.3; chapter 7)."""
+
     def build() -> tuple[np.ndarray, np.ndarray]:
         plate = plate_signals(ctx, trial_id)
         grid = uniform_grid(float(plate.t[0]), float(plate.t[-1]), float(sp("rate_hz")))
@@ -113,24 +128,39 @@ def speeds(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
     track = mocap_track(ctx, trial_id)
     ok = track.valid & np.all(np.isfinite(track.velocity), axis=1) & np.all(np.isfinite(track.angular_velocity), axis=1)
     if not ok.any():
-        raise fail("E611", f"trial {trial_id!r} has no usable motion-capture samples", expected="usable handle_pose samples", found=0)
+        raise fail(
+            "E611", f"trial {trial_id!r} has no usable motion-capture samples", expected="usable handle_pose samples", found=0
+        )
     return np.linalg.norm(track.velocity[ok], axis=1), np.linalg.norm(track.angular_velocity[ok], axis=1)
 
 
 def _speed_summary(ctx: Any, trial_id: str) -> dict:
     v, w = speeds(ctx, trial_id)
-    out = {"speed": float(v.mean()), "angular": float(w.mean()), "codes": [],
-           "over_speed": exceedance(v, float(fp("speed_limit_m_per_s"))),
-           "over_angular": exceedance(w, float(fp("angular_speed_limit_rad_per_s")))}
+    out = {
+        "speed": float(v.mean()),
+        "angular": float(w.mean()),
+        "codes": [],
+        "over_speed": exceedance(v, float(fp("speed_limit_m_per_s"))),
+        "over_angular": exceedance(w, float(fp("angular_speed_limit_rad_per_s"))),
+    }
     limit = float(fp("max_fraction_over_limit"))
     if out["over_speed"] > limit:
         out["codes"].append("W411")
-        ctx.warn("W411", f"trial {trial_id!r}: {out['over_speed']:.0%} of the samples exceed {fp('speed_limit_m_per_s')} m/s",
-                 metric="free_space.speed_mean", trial=trial_id)
+        ctx.warn(
+            "W411",
+            f"trial {trial_id!r}: {out['over_speed']:.0%} of the samples exceed {fp('speed_limit_m_per_s')} m/s",
+            metric="free_space.speed_mean",
+            trial=trial_id,
+        )
     if out["over_angular"] > limit:
         out["codes"].append("W412")
-        ctx.warn("W412", f"trial {trial_id!r}: {out['over_angular']:.0%} of the samples exceed "
-                 f"{np.degrees(float(fp('angular_speed_limit_rad_per_s'))):.3g} deg/s", metric="free_space.angular_speed_mean", trial=trial_id)
+        ctx.warn(
+            "W412",
+            f"trial {trial_id!r}: {out['over_angular']:.0%} of the samples exceed "
+            f"{np.degrees(float(fp('angular_speed_limit_rad_per_s'))):.3g} deg/s",
+            metric="free_space.angular_speed_mean",
+            trial=trial_id,
+        )
     return out
 
 
@@ -147,10 +177,26 @@ def compute(ctx: Any) -> list:
         done, first = per_trial(ctx, trials, lambda tid: _speed_summary(ctx, tid), "free_space.speed_mean")
         compliance = {tid: d["codes"] for tid, d in done.items()}
         if done:
-            diag = {"share_over_speed_limit": [d["over_speed"] for d in done.values()],
-                    "share_over_angular_speed_limit": [d["over_angular"] for d in done.values()]}
-            out.append(aggregate(FAMILY, "free_space.speed_mean", [TrialValue(t, d["speed"], d["codes"]) for t, d in done.items()], diagnostics=diag))
-            out.append(aggregate(FAMILY, "free_space.angular_speed_mean", [TrialValue(t, d["angular"], d["codes"]) for t, d in done.items()], diagnostics=diag))
+            diag = {
+                "share_over_speed_limit": [d["over_speed"] for d in done.values()],
+                "share_over_angular_speed_limit": [d["over_angular"] for d in done.values()],
+            }
+            out.append(
+                aggregate(
+                    FAMILY,
+                    "free_space.speed_mean",
+                    [TrialValue(t, d["speed"], d["codes"]) for t, d in done.items()],
+                    diagnostics=diag,
+                )
+            )
+            out.append(
+                aggregate(
+                    FAMILY,
+                    "free_space.angular_speed_mean",
+                    [TrialValue(t, d["angular"], d["codes"]) for t, d in done.items()],
+                    diagnostics=diag,
+                )
+            )
         else:
             out += [unavailable(m, first) for m in SPEED_IDS]
     if any(ctx.wants(m) for m in FORCE_IDS):
@@ -161,20 +207,36 @@ def compute(ctx: Any) -> list:
             for metric_id in FORCE_IDS:
                 key = metric_id.rsplit("_", 1)[1]
                 diag = {"force_field": field.to_dict()} if key == "mean" else {}
-                out.append(aggregate(FAMILY, metric_id, [TrialValue(t, s[key], compliance.get(t, [])) for t, s in stats.items()], diagnostics=diag))
+                out.append(
+                    aggregate(
+                        FAMILY,
+                        metric_id,
+                        [TrialValue(t, s[key], compliance.get(t, [])) for t, s in stats.items()],
+                        diagnostics=diag,
+                    )
+                )
         else:
             out += [unavailable(m, first) for m in FORCE_IDS]
     if ctx.wants(PLATE_ID):
         done, first = per_trial(ctx, trials, lambda tid: plate_force_samples(ctx, tid), PLATE_ID)
         if done:
-            out.append(aggregate(FAMILY, PLATE_ID, [TrialValue(t, float(np.linalg.norm(plate_force_about_weight(f), axis=1).mean()), compliance.get(t, []))
-                                                    for t, (_, f) in done.items()]))
+            out.append(
+                aggregate(
+                    FAMILY,
+                    PLATE_ID,
+                    [
+                        TrialValue(t, float(np.linalg.norm(plate_force_about_weight(f), axis=1).mean()), compliance.get(t, []))
+                        for t, (_, f) in done.items()
+                    ],
+                )
+            )
         else:
             out.append(unavailable(PLATE_ID, first))
     return out
 
 
 # --- report figures (spec §15.6; paper Fig. 6) ----------------------------------------------------
+
 
 def report_figures(ctx: Any, results: Any) -> list:
     """Speeds and forces over time for the first usable free-space trial, and the force field (top view).
@@ -207,11 +269,14 @@ def report_figures(ctx: Any, results: Any) -> list:
         axes[2].set_ylabel("force (N)")
         axes[2].set_xlabel("t (s)")
         axes[2].legend(fontsize=8, loc="upper right")
-        figures.append(ReportFigure(f"free_space_{trial.id}", f"Speeds and forces in free-space trial {trial.id} "
-                                    "(paper Fig. 6; spec §9.2–9.4).", fig))
+        figures.append(
+            ReportFigure(
+                f"free_space_{trial.id}", f"Speeds and forces in free-space trial {trial.id} (paper Fig. 6; spec §9.2–9.4).", fig
+            )
+        )
         break
     record = results.get("free_space.force_mean") if results is not None else None
-    bins = (record.diagnostics.get("force_field", {}).get("bins", []) if record is not None else [])
+    bins = record.diagnostics.get("force_field", {}).get("bins", []) if record is not None else []
     if bins:
         c = np.array([b["centre_m"] for b in bins])
         f = np.array([b["mean_force_N"] for b in bins])
@@ -221,6 +286,12 @@ def report_figures(ctx: Any, results: Any) -> list:
         ax.set_xlabel("x (m, W)")
         ax.set_ylabel("y (m, W)")
         ax.set_aspect("equal")
-        figures.append(ReportFigure("free_space_force_field", "Free-space force field: mean force on the hand per "
-                                    f"{fp('force_field_bin_m') * 100:g} cm bin, top view (spec §9.5).", fig))
+        figures.append(
+            ReportFigure(
+                "free_space_force_field",
+                "Free-space force field: mean force on the hand per "
+                f"{fp('force_field_bin_m') * 100:g} cm bin, top view (spec §9.5).",
+                fig,
+            )
+        )
     return figures

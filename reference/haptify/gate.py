@@ -102,8 +102,9 @@ def open_checked_session(path: str | os.PathLike) -> CheckedSession:
     return CheckedSession(SessionFolder(Path(path), validator.manifest, validator.raw), validator)
 
 
-def require_valid_session(path: str | os.PathLike,
-                          advance: Callable[[int], Any] | None = None) -> tuple[CheckedSession, list[ReportItem]]:
+def require_valid_session(
+    path: str | os.PathLike, advance: Callable[[int], Any] | None = None
+) -> tuple[CheckedSession, list[ReportItem]]:
     """Validate the whole session before anything is done with it (spec §4.8) — for commands that
     read streams through other means or must not start on a session that will be refused. Returns the
     checked session and the validation warnings."""

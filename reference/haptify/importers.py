@@ -73,6 +73,7 @@ from haptify.versions import PACKAGE_VERSION
 
 # --- units (spec §5.3) ---------------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class Unit:
     """A source unit: its dimension and the conversion ``si = (value · mul) / div`` (spec §5.3)."""
@@ -93,8 +94,9 @@ class Unit:
 
 def _unit_table() -> tuple[dict[str, Unit], dict[str, str]]:
     table = schemas.load("import-units.json")
-    units = {name: Unit(row["dimension"], float(row["mul"]), float(row["div"]))
-             for row in table["units"] for name in row["spellings"]}
+    units = {
+        name: Unit(row["dimension"], float(row["mul"]), float(row["div"])) for row in table["units"] for name in row["spellings"]
+    }
     return units, dict(table["si_units"])
 
 
@@ -115,18 +117,25 @@ def unit_conversion(unit: str | None, target: str, **where: Any) -> Unit:
     known = UNITS.get(spelled)
     accepted = sorted(n for n, u in UNITS.items() if u.dimension == dim)
     if known is None:
-        raise fail("E504", f"unit {spelled!r} is not in the conversion table (spec §5.3)",
-                   expected=accepted, found=spelled, **where)
+        raise fail(
+            "E504", f"unit {spelled!r} is not in the conversion table (spec §5.3)", expected=accepted, found=spelled, **where
+        )
     if known.dimension != dim:
-        raise fail("E504", f"unit {spelled!r} is a {known.dimension}, the column needs a {dim} ({target})",
-                   expected=accepted, found=spelled, **where)
+        raise fail(
+            "E504",
+            f"unit {spelled!r} is a {known.dimension}, the column needs a {dim} ({target})",
+            expected=accepted,
+            found=spelled,
+            **where,
+        )
     return known
 
 
 # --- the import map (spec §5.2) -------------------------------------------------------------------
 
-FIXED_KINDS: tuple[str, ...] = tuple(k for k, v in schemas.load("stream-kinds.json")["kinds"].items()
-                                     if "entity_columns" not in v)
+FIXED_KINDS: tuple[str, ...] = tuple(
+    k for k, v in schemas.load("stream-kinds.json")["kinds"].items() if "entity_columns" not in v
+)
 
 
 class _Strict(BaseModel):
@@ -142,7 +151,10 @@ class ChannelMap(_Strict):
     """
 
     source: str | None = Field(None, description="C3D analog label or CSV column header.")
-    value: float | None = Field(None, description="A constant, for a quantity the source does not log because it is zero by construction (e.g. the torque of a 3-DOF force command).")
+    value: float | None = Field(
+        None,
+        description="A constant, for a quantity the source does not log because it is zero by construction (e.g. the torque of a 3-DOF force command).",
+    )
     unit: str | None = Field(None, description="Unit of scale·raw+offset; one of the spellings of spec §5.3.")
     scale: float = Field(1.0, description="Multiplies the raw value first (e.g. a sensor gain in unit per volt).")
     offset: float = Field(0.0, description="Added after scaling, in `unit`.")
@@ -158,17 +170,28 @@ class ChannelMap(_Strict):
 class StreamMap(_Strict):
     """One output stream (spec §5.2): the kind's columns (``t`` excluded) mapped to source channels; rate in Hz."""
 
-    columns: dict[str, Union[ChannelMap, str]] = Field(description="Column name → channel; a string is short for {\"source\": string}.")
-    rate_hz: float | None = Field(None, gt=0, description="Nominal rate; C3D: must equal ANALOG:RATE when given; CSV: default 1/median(Δt) to 6 significant digits.")
+    columns: dict[str, Union[ChannelMap, str]] = Field(
+        description='Column name → channel; a string is short for {"source": string}.'
+    )
+    rate_hz: float | None = Field(
+        None,
+        gt=0,
+        description="Nominal rate; C3D: must equal ANALOG:RATE when given; CSV: default 1/median(Δt) to 6 significant digits.",
+    )
     format: Literal["parquet", "csv"] = "parquet"
     frame: str | None = Field(None, description="Default: the kind's frame.")
-    from_frame: Literal["device"] | None = Field(None, description="commanded_wrench only: the log holds the vectors in the device frame D (as CHAI3D logs them); the importer rotates them into W by session.device_placement.")
+    from_frame: Literal["device"] | None = Field(
+        None,
+        description="commanded_wrench only: the log holds the vectors in the device frame D (as CHAI3D logs them); the importer rotates them into W by session.device_placement.",
+    )
 
 
 class MarkerMap(_Strict):
     """Which C3D point labels become markers, and their entity ids (spec §5.4, §5.5)."""
 
-    include: list[str] | None = Field(None, description="Labels or shell patterns ('boite:*'); default every label; [] imports no markers.")
+    include: list[str] | None = Field(
+        None, description="Labels or shell patterns ('boite:*'); default every label; [] imports no markers."
+    )
     exclude: list[str] = Field(default_factory=list, description="Labels or shell patterns to leave out.")
     rename: dict[str, Id] = Field(default_factory=dict, description="C3D label → entity id; other labels are sanitised (§5.4).")
     rigid_bodies: list[RigidBody] = Field(default_factory=list, description="Rigid bodies of the rig, by entity id.")
@@ -180,9 +203,18 @@ class BodyMap(_Strict):
     """Which 6-DoF bodies (C3D ROTATION group, Qualisys 6DOF, Motive rigid bodies) become pose streams
     (spec §5.5): the handle's pose and the device links' poses."""
 
-    handle: str | None = Field(None, description="The body label whose pose becomes handle_pose (its origin must be the gimbal centre).")
-    links: dict[Id, str] = Field(default_factory=dict, description="Link name → body label; each becomes one entity of link_poses (the link must be a rigid body of markers.rigid_bodies).")
-    max_residual: float | None = Field(None, gt=0, description="A sample whose residual (in the file's point units) exceeds this is occluded; default: only the file's own invalid samples are.")
+    handle: str | None = Field(
+        None, description="The body label whose pose becomes handle_pose (its origin must be the gimbal centre)."
+    )
+    links: dict[Id, str] = Field(
+        default_factory=dict,
+        description="Link name → body label; each becomes one entity of link_poses (the link must be a rigid body of markers.rigid_bodies).",
+    )
+    max_residual: float | None = Field(
+        None,
+        gt=0,
+        description="A sample whose residual (in the file's point units) exceeds this is occluded; default: only the file's own invalid samples are.",
+    )
     format: Literal["parquet", "csv"] = "parquet"
 
 
@@ -200,19 +232,28 @@ class PlatformWrenchMap(_Strict):
 class DeviceFile(_Strict):
     """The device given as a device.json file beside the map instead of inline (spec §5.2)."""
 
-    file: str = Field(description="Path of a device.json, relative to the map file's folder; copied into the session as device.json.")
+    file: str = Field(
+        description="Path of a device.json, relative to the map file's folder; copied into the session as device.json."
+    )
 
 
 class SessionFields(_Strict):
     """The session-level facts a source file does not hold (spec §5.2)."""
 
     session_id: Id | None = Field(None, description="Default: the source file's name, sanitised (§5.4).")
-    date: str | None = Field(None, pattern=r"^\d{4}-\d{2}-\d{2}$", description="ISO date of the recording; required, but usually given per file on the command line (--date) so that one map serves many recordings.")
+    date: str | None = Field(
+        None,
+        pattern=r"^\d{4}-\d{2}-\d{2}$",
+        description="ISO date of the recording; required, but usually given per file on the command line (--date) so that one map serves many recordings.",
+    )
     lab: Party
     examiner: Party
     device: Union[Device, DeviceFile]
     device_placement: Pose = Field(description="The device frame in W.")
-    rig: Rig = Field(default_factory=Rig, description="Rig parts the source does not describe (handle sensors, ranges); the importer adds motion_capture and the force plate from a C3D.")
+    rig: Rig = Field(
+        default_factory=Rig,
+        description="Rig parts the source does not describe (handle sensors, ranges); the importer adds motion_capture and the force plate from a C3D.",
+    )
 
 
 class TrialFields(_Strict):
@@ -255,10 +296,20 @@ class ImportMap(_Strict):
     time_offset_s: float = Field(0.0, description="Added to every imported time, s (puts the source on the session clock).")
     streams: dict[Literal[FIXED_KINDS], StreamMap] = Field(default_factory=dict)  # type: ignore[valid-type]
     markers: MarkerMap | None = Field(None, description="Motion-capture sources only; default: every point label.")
-    bodies: BodyMap | None = Field(None, description="Motion-capture sources only: 6-DoF bodies that become handle_pose and link_poses; default none.")
-    force_plate: Union[Annotated[int, Field(ge=1)], Literal["auto", "none"]] = Field("auto", description="C3D only: the FORCE_PLATFORM number (1-based) that becomes the rig's plate and defines W; 'auto' = 1 when the file has platforms.")
-    platform_wrench: PlatformWrenchMap | None = Field(None, description="C3D only: the force platform that defines W also gives the trial's plate_wrench, from its channels (types 1–4); default: its channels are not imported.")
-    lab_to_world: Pose | None = Field(None, description="C3D only, without a force plate: the C3D lab frame in W (default: W is the lab frame).")
+    bodies: BodyMap | None = Field(
+        None, description="Motion-capture sources only: 6-DoF bodies that become handle_pose and link_poses; default none."
+    )
+    force_plate: Union[Annotated[int, Field(ge=1)], Literal["auto", "none"]] = Field(
+        "auto",
+        description="C3D only: the FORCE_PLATFORM number (1-based) that becomes the rig's plate and defines W; 'auto' = 1 when the file has platforms.",
+    )
+    platform_wrench: PlatformWrenchMap | None = Field(
+        None,
+        description="C3D only: the force platform that defines W also gives the trial's plate_wrench, from its channels (types 1–4); default: its channels are not imported.",
+    )
+    lab_to_world: Pose | None = Field(
+        None, description="C3D only, without a force plate: the C3D lab frame in W (default: W is the lab frame)."
+    )
     time: CsvTime | None = Field(None, description="CSV only, required: the time column and its unit.")
     csv: CsvOptions | None = Field(None, description="CSV only: parsing options.")
 
@@ -285,8 +336,7 @@ class LoadedMap:
     label: str
 
 
-def load_map(path: str | Path | None, source: str, overrides: dict | None = None,
-             session_facts: dict | None = None) -> LoadedMap:
+def load_map(path: str | Path | None, source: str, overrides: dict | None = None, session_facts: dict | None = None) -> LoadedMap:
     """Read and validate an import map (spec §5.2); ``overrides`` is deep-merged over the file's JSON.
 
     ``session_facts`` (appending, §5.9) fill the ``session`` members the map leaves out. E502 on a
@@ -312,8 +362,14 @@ def load_map(path: str | Path | None, source: str, overrides: dict | None = None
     session = raw.get("session")
     no_date = None
     if not isinstance(session, dict) or session.get("date") is None:
-        no_date = fail("E502", "the recording date is missing: give session.date in the map or --date", file=label,
-                       pointer="/session/date", expected="YYYY-MM-DD", found="missing")
+        no_date = fail(
+            "E502",
+            "the recording date is missing: give session.date in the map or --date",
+            file=label,
+            pointer="/session/date",
+            expected="YYYY-MM-DD",
+            found="missing",
+        )
     try:
         m = ImportMap.model_validate(raw)
     except ValidationError as exc:
@@ -324,19 +380,32 @@ def load_map(path: str | Path | None, source: str, overrides: dict | None = None
     if no_date is not None:
         raise no_date
     if m.source != source:
-        raise fail("E502", f"the map is for the {m.source} importer, not {source}", file=label, pointer="/source",
-                   expected=source, found=m.source)
+        raise fail(
+            "E502",
+            f"the map is for the {m.source} importer, not {source}",
+            file=label,
+            pointer="/source",
+            expected=source,
+            found=m.source,
+        )
     wrong = ("markers", "bodies", "lab_to_world", "platform_wrench") if source == "csv" else ("time", "csv")
     for key in wrong:
         if getattr(m, key) is not None:
-            raise fail("E502", f"{key!r} does not apply to {source} imports", file=label, pointer=f"/{key}",
-                       expected=None, found=key)
+            raise fail(
+                "E502", f"{key!r} does not apply to {source} imports", file=label, pointer=f"/{key}", expected=None, found=key
+            )
     if source == "csv":
         if m.force_plate != "auto":
             raise fail("E502", "'force_plate' does not apply to csv imports", file=label, pointer="/force_plate")
         if m.time is None:
-            raise fail("E502", "a csv map needs 'time' (the time column and its unit)", file=label, pointer="/time",
-                       expected={"source": "<header>", "unit": "s|ms|us"}, found=None)
+            raise fail(
+                "E502",
+                "a csv map needs 'time' (the time column and its unit)",
+                file=label,
+                pointer="/time",
+                expected={"source": "<header>", "unit": "s|ms|us"},
+                found=None,
+            )
     return LoadedMap(m, base, label)
 
 
@@ -359,6 +428,7 @@ def sanitize_id(text: str, fallback: str) -> str:
 
 
 # --- C3D reading (spec §5.5) ----------------------------------------------------------------------
+
 
 @dataclass
 class C3DPlatform:
@@ -419,19 +489,38 @@ class Recording:
     def summary(self) -> dict:
         """A JSON-able description of the file (what ``haptify import FORMAT --list`` prints)."""
         return {
-            "file": self.path.name, "format": self.format, "manufacturer": self.manufacturer,
-            "markers": {"count": len(self.point_labels), "rate_hz": self.point_rate, "frames": self.frames,
-                        "units": self.point_units, "labels": list(self.point_labels)},
-            "bodies": {"count": len(self.body_labels), "labels": list(self.body_labels),
-                       "residuals": self.body_residuals is not None},
-            "analog": {"count": len(self.analog_labels), "rate_hz": self.analog_rate,
-                       "samples": int(self.analogs.shape[1]),
-                       "channels": [{"label": lab, "unit": u} for lab, u in zip(self.analog_labels, self.analog_units)]},
-            "force_platforms": [{"number": p.number, "type": p.type,
-                                 "corners": None if p.corners is None else p.corners.tolist(),
-                                 "origin": None if p.origin is None else p.origin.tolist(),
-                                 "channels": [self.analog_labels[i] for i in p.channels if i < len(self.analog_labels)],
-                                 "calibrated": p.cal_matrix is not None} for p in self.platforms],
+            "file": self.path.name,
+            "format": self.format,
+            "manufacturer": self.manufacturer,
+            "markers": {
+                "count": len(self.point_labels),
+                "rate_hz": self.point_rate,
+                "frames": self.frames,
+                "units": self.point_units,
+                "labels": list(self.point_labels),
+            },
+            "bodies": {
+                "count": len(self.body_labels),
+                "labels": list(self.body_labels),
+                "residuals": self.body_residuals is not None,
+            },
+            "analog": {
+                "count": len(self.analog_labels),
+                "rate_hz": self.analog_rate,
+                "samples": int(self.analogs.shape[1]),
+                "channels": [{"label": lab, "unit": u} for lab, u in zip(self.analog_labels, self.analog_units)],
+            },
+            "force_platforms": [
+                {
+                    "number": p.number,
+                    "type": p.type,
+                    "corners": None if p.corners is None else p.corners.tolist(),
+                    "origin": None if p.origin is None else p.origin.tolist(),
+                    "channels": [self.analog_labels[i] for i in p.channels if i < len(self.analog_labels)],
+                    "calibrated": p.cal_matrix is not None,
+                }
+                for p in self.platforms
+            ],
             "warnings": [f.to_dict() for f in self.warnings],
         }
 
@@ -482,8 +571,13 @@ def read_c3d_header(path: Path) -> C3DHeader:
     with open(path, "rb") as fh:
         head = fh.read(C3D_BLOCK)
         if len(head) < 24 or head[0] == 0:
-            raise fail("E501", f"{str(path)!r} is too short for a C3D header", file=str(path),
-                       expected=f"≥ {C3D_BLOCK} bytes", found=len(head))
+            raise fail(
+                "E501",
+                f"{str(path)!r} is too short for a C3D header",
+                file=str(path),
+                expected=f"≥ {C3D_BLOCK} bytes",
+                found=len(head),
+            )
         fh.seek((head[0] - 1) * C3D_BLOCK + 3)
         processor = fh.read(1)
     order = ">" if processor == bytes([86]) else "<"
@@ -493,37 +587,93 @@ def read_c3d_header(path: Path) -> C3DHeader:
 
 
 def _disagreement(path: Path, what: str, header: Any, other: Any, followed: str, pointer: str) -> Finding:
-    return Finding("W501", f"{path.name}: {what}; {followed}", file=str(path), pointer=pointer,
-                   expected=header, found=other)
+    return Finding("W501", f"{path.name}: {what}; {followed}", file=str(path), pointer=pointer, expected=header, found=other)
 
 
-def c3d_disagreements(path: Path, header: C3DHeader, params: Any, frames_read: int, analog_per_frame: int,
-                      point_rate: float, analog_rate: float, header_analog_rate: float) -> list[Finding]:
+def c3d_disagreements(
+    path: Path,
+    header: C3DHeader,
+    params: Any,
+    frames_read: int,
+    analog_per_frame: int,
+    point_rate: float,
+    analog_rate: float,
+    header_analog_rate: float,
+) -> list[Finding]:
     """W501 findings: where the header, the POINT/ANALOG parameters and the data as read disagree
     (spec §5.5). The data as read, and the rates chosen by §5.5's rule, are what is imported."""
     out = []
     long_file = header.last_frame == C3D_LONG_FILE_LAST_FRAME and frames_read >= header.frames
     if header.frames != frames_read and not long_file:
-        out.append(_disagreement(path, f"the header declares {header.frames} frames, the data hold {frames_read}",
-                                 header.frames, frames_read, f"the {frames_read} frames read are imported", "/header/last_frame"))
+        out.append(
+            _disagreement(
+                path,
+                f"the header declares {header.frames} frames, the data hold {frames_read}",
+                header.frames,
+                frames_read,
+                f"the {frames_read} frames read are imported",
+                "/header/last_frame",
+            )
+        )
     frames_param = _number(params, "POINT", "FRAMES")
     if frames_param is not None and frames_param >= 0 and int(frames_param) != frames_read and not long_file:
-        out.append(_disagreement(path, f"POINT:FRAMES is {int(frames_param)}, the data hold {frames_read} frames",
-                                 int(frames_param), frames_read, f"the {frames_read} frames read are imported", "/POINT/FRAMES"))
+        out.append(
+            _disagreement(
+                path,
+                f"POINT:FRAMES is {int(frames_param)}, the data hold {frames_read} frames",
+                int(frames_param),
+                frames_read,
+                f"the {frames_read} frames read are imported",
+                "/POINT/FRAMES",
+            )
+        )
     used = _number(params, "POINT", "USED")
     if used is not None and int(used) != header.points:
-        out.append(_disagreement(path, f"POINT:USED is {int(used)}, the header holds {header.points} points",
-                                 header.points, int(used), "the header's points are read", "/POINT/USED"))
+        out.append(
+            _disagreement(
+                path,
+                f"POINT:USED is {int(used)}, the header holds {header.points} points",
+                header.points,
+                int(used),
+                "the header's points are read",
+                "/POINT/USED",
+            )
+        )
     rate_param = _number(params, "POINT", "RATE")
-    if rate_param is not None and header.rate > 0 and rate_param > 0 and \
-            abs(rate_param - header.rate) > RATE_AGREEMENT * header.rate:
-        out.append(_disagreement(path, f"POINT:RATE is {rate_param:g} Hz, the header says {header.rate:g} Hz",
-                                 header.rate, rate_param, f"{point_rate:g} Hz is used", "/POINT/RATE"))
+    if (
+        rate_param is not None
+        and header.rate > 0
+        and rate_param > 0
+        and abs(rate_param - header.rate) > RATE_AGREEMENT * header.rate
+    ):
+        out.append(
+            _disagreement(
+                path,
+                f"POINT:RATE is {rate_param:g} Hz, the header says {header.rate:g} Hz",
+                header.rate,
+                rate_param,
+                f"{point_rate:g} Hz is used",
+                "/POINT/RATE",
+            )
+        )
     an_param = _number(params, "ANALOG", "RATE")
-    if analog_per_frame and an_param is not None and header_analog_rate > 0 and an_param > 0 and \
-            abs(an_param - header_analog_rate) > RATE_AGREEMENT * header_analog_rate:
-        out.append(_disagreement(path, f"ANALOG:RATE is {an_param:g} Hz, the header implies {header_analog_rate:g} Hz",
-                                 header_analog_rate, an_param, f"{analog_rate:g} Hz is used", "/ANALOG/RATE"))
+    if (
+        analog_per_frame
+        and an_param is not None
+        and header_analog_rate > 0
+        and an_param > 0
+        and abs(an_param - header_analog_rate) > RATE_AGREEMENT * header_analog_rate
+    ):
+        out.append(
+            _disagreement(
+                path,
+                f"ANALOG:RATE is {an_param:g} Hz, the header implies {header_analog_rate:g} Hz",
+                header_analog_rate,
+                an_param,
+                f"{analog_rate:g} Hz is used",
+                "/ANALOG/RATE",
+            )
+        )
     return out
 
 
@@ -546,10 +696,17 @@ def _platforms(params: Any, n_analogs: int, path: Path) -> tuple[list[C3DPlatfor
         chans = [int(c) - 1 for c in channel[:, i]] if channel.ndim == 2 and channel.shape[1] > i else []
         chans = [c for c in chans if c >= 0]
         if any(c >= n_analogs for c in chans):
-            notes.append(Finding("W501", f"{path.name}: FORCE_PLATFORM:CHANNEL of platform {i + 1} names analog "
-                                 f"channels beyond the {n_analogs} the file holds; its channels are not used",
-                                 file=str(path), pointer="/FORCE_PLATFORM/CHANNEL", expected=f"≤ {n_analogs}",
-                                 found=[c + 1 for c in chans]))
+            notes.append(
+                Finding(
+                    "W501",
+                    f"{path.name}: FORCE_PLATFORM:CHANNEL of platform {i + 1} names analog "
+                    f"channels beyond the {n_analogs} the file holds; its channels are not used",
+                    file=str(path),
+                    pointer="/FORCE_PLATFORM/CHANNEL",
+                    expected=f"≤ {n_analogs}",
+                    found=[c + 1 for c in chans],
+                )
+            )
             chans = []
         matrix = None
         if cal.ndim == 3 and cal.shape[2] > i and cal.shape[0] == cal.shape[1] and cal[:, :, i].any():
@@ -558,7 +715,9 @@ def _platforms(params: Any, n_analogs: int, path: Path) -> tuple[list[C3DPlatfor
     return out, notes
 
 
-def _rotations(c: Any, params: Any, n_frames: int, path: Path) -> tuple[list[str], np.ndarray | None, np.ndarray | None, list[Finding]]:
+def _rotations(
+    c: Any, params: Any, n_frames: int, path: Path
+) -> tuple[list[str], np.ndarray | None, np.ndarray | None, list[Finding]]:
     """The ROTATION group's 6-DoF bodies (spec §5.5): labels, positions (POINT units) and rotation
     matrices (body → lab) per point frame; NaN where the writer marked a sample invalid."""
     rot = np.asarray(c["data"].get("rotations", np.zeros((4, 4, 0, 0))), dtype=np.float64)
@@ -567,8 +726,16 @@ def _rotations(c: Any, params: Any, n_frames: int, path: Path) -> tuple[list[str
     notes = []
     ratio = max(1, int(_number(params, "ROTATION", "RATIO") or 1))
     if ratio > 1:  # several rotation samples per point frame: the point clock keeps the first of each
-        notes.append(Finding("W501", f"{path.name}: ROTATION:RATIO is {ratio}; one rotation sample per point frame "
-                             "(the first) is imported", file=str(path), pointer="/ROTATION/RATIO", expected=1, found=ratio))
+        notes.append(
+            Finding(
+                "W501",
+                f"{path.name}: ROTATION:RATIO is {ratio}; one rotation sample per point frame (the first) is imported",
+                file=str(path),
+                pointer="/ROTATION/RATIO",
+                expected=1,
+                found=ratio,
+            )
+        )
         rot = rot[:, :, :, ::ratio]
     labels = _strings(_param(params, "ROTATION", "LABELS"), rot.shape[2])
     m = rot.transpose(3, 2, 0, 1)  # (frames, bodies, 4, 4)
@@ -592,15 +759,21 @@ def read_c3d(path: str | Path, *, stream: bool | None = None) -> Recording:
     with open(p, "rb") as fh:
         head = fh.read(2)
     if len(head) < 2 or head[1] != 0x50:
-        raise fail("E501", f"{label!r} is not a C3D file (its second byte is not 0x50)", file=label,
-                   expected="0x50", found=head[1:2].hex() or "end of file")
+        raise fail(
+            "E501",
+            f"{label!r} is not a C3D file (its second byte is not 0x50)",
+            file=label,
+            expected="0x50",
+            found=head[1:2].hex() or "end of file",
+        )
     header = read_c3d_header(p)
     layout = None
     try:
         if stream or (stream is None and p.stat().st_size > STREAM_ABOVE_BYTES):
             c, data_start = read_head(p)
-            layout = c3d_layout(p, c, data_start, header.analog_values, header.frames,
-                                header.last_frame == C3D_LONG_FILE_LAST_FRAME)
+            layout = c3d_layout(
+                p, c, data_start, header.analog_values, header.frames, header.last_frame == C3D_LONG_FILE_LAST_FRAME
+            )
         if layout is None:
             c = ezc3d.c3d(str(p), extract_forceplat_data=False)
     except (OSError, RuntimeError, ValueError, IndexError) as exc:
@@ -628,8 +801,14 @@ def read_c3d(path: str | Path, *, stream: bool | None = None) -> Recording:
     analog_rate = header_analog_rate or (_number(params, "ANALOG", "RATE") or 0.0)
     warnings = c3d_disagreements(p, header, params, n_frames, per_frame, point_rate, analog_rate, header_analog_rate)
     if n_ch and analog_rate <= 0:
-        raise fail("E501", f"{label!r} holds {n_ch} analog channels but states no analog rate", file=label,
-                   pointer="/ANALOG/RATE", expected="a rate > 0", found=analog_rate)
+        raise fail(
+            "E501",
+            f"{label!r} holds {n_ch} analog channels but states no analog rate",
+            file=label,
+            pointer="/ANALOG/RATE",
+            expected="a rate > 0",
+            found=analog_rate,
+        )
     company = _strings(_param(params, "MANUFACTURER", "COMPANY"), 1)[0]
     software = _strings(_param(params, "MANUFACTURER", "SOFTWARE"), 1)[0]
     if software.startswith(company):
@@ -638,21 +817,42 @@ def read_c3d(path: str | Path, *, stream: bool | None = None) -> Recording:
     platforms, notes = _platforms(params, n_ch, p)
     body_labels, body_pos, body_rot, rot_notes = _rotations(c, params, n_frames, p)
     if body_labels and point_rate <= 0:
-        raise fail("E501", f"{label!r} holds 6-DoF bodies but states no frame rate", file=label,
-                   pointer="/POINT/RATE", expected="a rate > 0", found=point_rate)
+        raise fail(
+            "E501",
+            f"{label!r} holds 6-DoF bodies but states no frame rate",
+            file=label,
+            pointer="/POINT/RATE",
+            expected="a rate > 0",
+            found=point_rate,
+        )
     if n_markers and point_rate <= 0:
-        raise fail("E501", f"{label!r} holds {n_markers} points but states no point rate", file=label,
-                   pointer="/POINT/RATE", expected="a rate > 0", found=point_rate)
+        raise fail(
+            "E501",
+            f"{label!r} holds {n_markers} points but states no point rate",
+            file=label,
+            pointer="/POINT/RATE",
+            expected="a rate > 0",
+            found=point_rate,
+        )
     return Recording(
-        path=p, manufacturer=" ".join(s for s in (company, software) if s),
-        point_labels=_strings(_param(params, "POINT", "LABELS"), n_markers), point_units=units,
-        point_rate=point_rate, point_first_frame=int(head_info["points"]["first_frame"]),
+        path=p,
+        manufacturer=" ".join(s for s in (company, software) if s),
+        point_labels=_strings(_param(params, "POINT", "LABELS"), n_markers),
+        point_units=units,
+        point_rate=point_rate,
+        point_first_frame=int(head_info["points"]["first_frame"]),
         points=xyz,
         analog_labels=_strings(_param(params, "ANALOG", "LABELS"), n_ch),
         analog_units=_strings(_param(params, "ANALOG", "UNITS"), n_ch),
-        analog_rate=analog_rate, analog_first_sample=int(head_info["points"]["first_frame"]) * max(per_frame, 1),
-        analogs=analogs, platforms=platforms, body_labels=body_labels, body_positions=body_pos,
-        body_rotations=body_rot, warnings=warnings + notes + rot_notes, layout=layout,
+        analog_rate=analog_rate,
+        analog_first_sample=int(head_info["points"]["first_frame"]) * max(per_frame, 1),
+        analogs=analogs,
+        platforms=platforms,
+        body_labels=body_labels,
+        body_positions=body_pos,
+        body_rotations=body_rot,
+        warnings=warnings + notes + rot_notes,
+        layout=layout,
     )
 
 
@@ -667,8 +867,17 @@ def recording_chunks(rec: Recording, chunk_frames: int | None = None) -> Iterato
         return
     per_frame = rec.layout.per_frame
     for start, points, analogs in iter_frames(rec.layout, chunk_frames or chunk_frames_for(rec.layout)):
-        yield start, replace(rec, points=points, analogs=analogs, point_first_frame=rec.point_first_frame + start,
-                             analog_first_sample=rec.analog_first_sample + start * per_frame, layout=None)
+        yield (
+            start,
+            replace(
+                rec,
+                points=points,
+                analogs=analogs,
+                point_first_frame=rec.point_first_frame + start,
+                analog_first_sample=rec.analog_first_sample + start * per_frame,
+                layout=None,
+            ),
+        )
 
 
 # --- geometry: the world frame from a force platform (spec §5.6) ----------------------------------
@@ -692,8 +901,14 @@ class WorldFrame:
 
 
 def _meaningless(number: int, why: str, file: str, found: Any) -> HaptifyError:
-    return fail("E505", f"force platform {number}: {why}", file=file, pointer="/FORCE_PLATFORM/CORNERS",
-                expected="four corners of a plate, in C3D order", found=found)
+    return fail(
+        "E505",
+        f"force platform {number}: {why}",
+        file=file,
+        pointer="/FORCE_PLATFORM/CORNERS",
+        expected="four corners of a plate, in C3D order",
+        found=found,
+    )
 
 
 def plate_frame(corners_m: np.ndarray, *, file: str, number: int) -> tuple[WorldFrame, np.ndarray, list[float], float]:
@@ -735,11 +950,17 @@ def plate_frame(corners_m: np.ndarray, *, file: str, number: int) -> tuple[World
     ideal = quadrants * np.array(size) / 2
     deviation = float(max(np.abs(local[:, :2] - ideal).max(), np.abs(local[:, 2]).max()))
     if deviation > PLATE_SHAPE_LIMIT * min(size):
-        raise _meaningless(number, f"its corners are {deviation * 1000:.3g} mm from a flat rectangle, more than "
-                           f"{PLATE_SHAPE_LIMIT:.0%} of its shorter side", file, c.tolist())
+        raise _meaningless(
+            number,
+            f"its corners are {deviation * 1000:.3g} mm from a flat rectangle, more than "
+            f"{PLATE_SHAPE_LIMIT:.0%} of its shorter side",
+            file,
+            c.tolist(),
+        )
     axes_in_w = rotation @ np.stack([x, y_plate, z_plate], axis=1)
-    desc = (f"W: centre of C3D force platform {number}'s corners, x along the platform's x axis, "
-            f"z up (opposite to the platform's z)")
+    desc = (
+        f"W: centre of C3D force platform {number}'s corners, x along the platform's x axis, z up (opposite to the platform's z)"
+    )
     return WorldFrame(rotation, centre, desc), axes_in_w, size, deviation
 
 
@@ -754,20 +975,39 @@ def plate_description(platform: C3DPlatform, to_m: Unit, *, file: str) -> tuple[
     platform's sensing origin and oriented as the platform's frame. A W502 finding gives the corners'
     deviation from a flat rectangle when it exceeds 1 mm."""
     if platform.corners is None:
-        raise fail("E503", f"force platform {platform.number} has no FORCE_PLATFORM:CORNERS", file=file,
-                   pointer="/FORCE_PLATFORM/CORNERS", expected="corners", found=None)
+        raise fail(
+            "E503",
+            f"force platform {platform.number} has no FORCE_PLATFORM:CORNERS",
+            file=file,
+            pointer="/FORCE_PLATFORM/CORNERS",
+            expected="corners",
+            found=None,
+        )
     corners = to_m.to_si(platform.corners)
     world, axes, size, deviation = plate_frame(corners, file=file, number=platform.number)
     warnings = []
     if deviation > PLATE_RECTANGLE_TOLERANCE_M:
-        warnings.append(Finding("W502", f"the corners of force platform {platform.number} are {deviation * 1000:.3g} mm "
-                                "from a flat rectangle; W and the plate size come from the best-fitting rectangle",
-                                file=file, pointer="/FORCE_PLATFORM/CORNERS",
-                                expected=f"≤ {PLATE_RECTANGLE_TOLERANCE_M * 1000:g} mm", found=f"{deviation * 1000:.3g} mm"))
+        warnings.append(
+            Finding(
+                "W502",
+                f"the corners of force platform {platform.number} are {deviation * 1000:.3g} mm "
+                "from a flat rectangle; W and the plate size come from the best-fitting rectangle",
+                file=file,
+                pointer="/FORCE_PLATFORM/CORNERS",
+                expected=f"≤ {PLATE_RECTANGLE_TOLERANCE_M * 1000:g} mm",
+                found=f"{deviation * 1000:.3g} mm",
+            )
+        )
     origin = to_m.to_si(platform.origin) if platform.origin is not None else np.zeros(3)
     if not np.isfinite(origin).all():
-        raise fail("E505", f"force platform {platform.number}: its origin is not finite", file=file,
-                   pointer="/FORCE_PLATFORM/ORIGIN", expected="a finite origin", found=origin.tolist())
+        raise fail(
+            "E505",
+            f"force platform {platform.number}: its origin is not finite",
+            file=file,
+            pointer="/FORCE_PLATFORM/ORIGIN",
+            expected="a finite origin",
+            found=origin.tolist(),
+        )
     depth = float(abs(origin[2]))
     q = [float(v) for v in matrix_to_quat(axes)]
     in_w = world.apply(corners)
@@ -791,8 +1031,9 @@ def pose_frame(pose: Pose) -> WorldFrame:
 _SI_OF_DIMENSION = {"force": "N", "torque": "N*m", "length": "m"}
 
 
-def platform_plate_wrench(rec: Recording, platform: C3DPlatform, pm: PlatformWrenchMap, plate: dict, to_m: Unit, *,
-                          label: str) -> tuple[dict[str, np.ndarray], list[Finding]]:
+def platform_plate_wrench(
+    rec: Recording, platform: C3DPlatform, pm: PlatformWrenchMap, plate: dict, to_m: Unit, *, label: str
+) -> tuple[dict[str, np.ndarray], list[Finding]]:
     """The ``plate_wrench`` columns (``t`` excluded) of the platform that defines W (spec §5.6.1): its
     outputs (types 1–4, calibration matrix applied) in SI, the wrench moved to the top surface's
     centre (W's origin), rotated into W and reversed (the channels hold the reaction), shared among the rig's four corner sensors
@@ -804,32 +1045,58 @@ def platform_plate_wrench(rec: Recording, platform: C3DPlatform, pm: PlatformWre
     src, number = str(rec.path), platform.number
     kind = platform.type
     if kind not in PLATFORM_CHANNELS:
-        raise fail("E506", f"force platform {number} is of type {kind}; its wrench is imported for types "
-                   f"{sorted(PLATFORM_CHANNELS)}", file=src, pointer="/FORCE_PLATFORM/TYPE",
-                   expected=sorted(PLATFORM_CHANNELS), found=kind)
+        raise fail(
+            "E506",
+            f"force platform {number} is of type {kind}; its wrench is imported for types {sorted(PLATFORM_CHANNELS)}",
+            file=src,
+            pointer="/FORCE_PLATFORM/TYPE",
+            expected=sorted(PLATFORM_CHANNELS),
+            found=kind,
+        )
     need = PLATFORM_CHANNELS[kind]
     if len(platform.channels) < need:
-        raise fail("E506", f"force platform {number} (type {kind}) names {len(platform.channels)} of the {need} analog "
-                   "channels its type records in FORCE_PLATFORM:CHANNEL", file=src, pointer="/FORCE_PLATFORM/CHANNEL",
-                   expected=need, found=[c + 1 for c in platform.channels])
+        raise fail(
+            "E506",
+            f"force platform {number} (type {kind}) names {len(platform.channels)} of the {need} analog "
+            "channels its type records in FORCE_PLATFORM:CHANNEL",
+            file=src,
+            pointer="/FORCE_PLATFORM/CHANNEL",
+            expected=need,
+            found=[c + 1 for c in platform.channels],
+        )
     if platform.origin is None:
-        raise fail("E506", f"force platform {number} has no FORCE_PLATFORM:ORIGIN", file=src,
-                   pointer="/FORCE_PLATFORM/ORIGIN", expected="3 numbers", found=None)
+        raise fail(
+            "E506",
+            f"force platform {number} has no FORCE_PLATFORM:ORIGIN",
+            file=src,
+            pointer="/FORCE_PLATFORM/ORIGIN",
+            expected="3 numbers",
+            found=None,
+        )
     chans = platform.channels[:need]
     out = calibrated(kind, rec.analogs[chans], platform.cal_matrix, number=number, file=src)
     given = {"force": pm.force_unit, "torque": pm.torque_unit, "length": pm.length_unit}
     si = np.empty_like(out)
     for row, (ch, dim) in enumerate(zip(chans, CHANNEL_DIMENSIONS[kind])):
         unit = given[dim] if given[dim] is not None else (rec.analog_units[ch] or None)
-        si[row] = unit_conversion(unit, _SI_OF_DIMENSION[dim], file=label if given[dim] else src,
-                                  pointer=f"/platform_wrench/{dim}_unit" if given[dim] else "/ANALOG/UNITS",
-                                  column=rec.analog_labels[ch]).to_si(out[row])
+        si[row] = unit_conversion(
+            unit,
+            _SI_OF_DIMENSION[dim],
+            file=label if given[dim] else src,
+            pointer=f"/platform_wrench/{dim}_unit" if given[dim] else "/ANALOG/UNITS",
+            column=rec.analog_labels[ch],
+        ).to_si(out[row])
     bad = ~np.isfinite(si)
     if bad.any():
         row, i = (int(v[0]) for v in np.nonzero(bad))
-        raise fail("E204", f"force platform {number}: channel {rec.analog_labels[chans[row]]!r} is not finite at "
-                   f"sample {i}", file=src, column=rec.analog_labels[chans[row]], expected="finite values",
-                   found=str(si[row, i]))
+        raise fail(
+            "E204",
+            f"force platform {number}: channel {rec.analog_labels[chans[row]]!r} is not finite at sample {i}",
+            file=src,
+            column=rec.analog_labels[chans[row]],
+            expected="finite values",
+            found=str(si[row, i]),
+        )
     geometry, notes = origin_by_rule(kind, to_m.to_si(platform.origin), number=number, file=src)
     force, moment_o = wrench_at_origin(kind, si, geometry)
     moment_c = wrench_at_surface(force, moment_o, geometry)
@@ -851,8 +1118,9 @@ def _as_channel(spec: ChannelMap | str) -> ChannelMap:
     return ChannelMap(source=spec) if isinstance(spec, str) else spec
 
 
-def build_stream_columns(kind: str, smap: StreamMap, n: int, read: SourceReader, *, label: str, source_file: str,
-                         unit_required: bool) -> dict[str, np.ndarray]:
+def build_stream_columns(
+    kind: str, smap: StreamMap, n: int, read: SourceReader, *, label: str, source_file: str, unit_required: bool
+) -> dict[str, np.ndarray]:
     """The SI columns (``t`` excluded) of one mapped stream (spec §5.3).
 
     ``read(source)`` returns a channel's raw values and its unit as the source states it (None when the
@@ -862,12 +1130,24 @@ def build_stream_columns(kind: str, smap: StreamMap, n: int, read: SourceReader,
     allowed = [c for c, _ in expected_columns(kind, present=list(smap.columns))][1:]
     unknown = [c for c in smap.columns if c not in allowed]
     if unknown:
-        raise fail("E502", f"{kind} has no column {unknown[0]!r}", file=label, pointer=f"{pointer}/{unknown[0]}",
-                   expected=allowed, found=unknown[0])
+        raise fail(
+            "E502",
+            f"{kind} has no column {unknown[0]!r}",
+            file=label,
+            pointer=f"{pointer}/{unknown[0]}",
+            expected=allowed,
+            found=unknown[0],
+        )
     missing = [c for c in allowed if c not in smap.columns]
     if missing:
-        raise fail("E502", f"the {kind} map lacks columns {missing}", file=label, pointer=pointer,
-                   expected=allowed, found=list(smap.columns))
+        raise fail(
+            "E502",
+            f"the {kind} map lacks columns {missing}",
+            file=label,
+            pointer=pointer,
+            expected=allowed,
+            found=list(smap.columns),
+        )
     units = dict(expected_columns(kind, present=list(smap.columns)))
     nan_allowed = kind_table(kind)["nan_allowed"]
     out: dict[str, np.ndarray] = {}
@@ -880,17 +1160,32 @@ def build_stream_columns(kind: str, smap: StreamMap, n: int, read: SourceReader,
             raw, stated = read(ch.source)
         unit = ch.unit if ch.unit is not None else stated
         if unit is None and (unit_required or ch.value is not None):
-            raise fail("E502", f"column {col!r} of {kind} needs a 'unit' (this source states none)",
-                       expected="a unit of spec §5.3", found=None, **where)
+            raise fail(
+                "E502",
+                f"column {col!r} of {kind} needs a 'unit' (this source states none)",
+                expected="a unit of spec §5.3",
+                found=None,
+                **where,
+            )
         values = raw if (ch.scale == 1.0 and ch.offset == 0.0) else raw * ch.scale + ch.offset
         target = units[col]
         if ch.threshold is not None:
             if target != "1":
-                raise fail("E502", f"'threshold' applies only to dimensionless columns; {col!r} is in {target}",
-                           expected="1", found=target, **where)
+                raise fail(
+                    "E502",
+                    f"'threshold' applies only to dimensionless columns; {col!r} is in {target}",
+                    expected="1",
+                    found=target,
+                    **where,
+                )
             if (unit or "").strip() not in UNITS:
-                raise fail("E504", f"unit {unit!r} is not in the conversion table (spec §5.3)",
-                           expected=sorted(UNITS), found=unit, **where)
+                raise fail(
+                    "E504",
+                    f"unit {unit!r} is not in the conversion table (spec §5.3)",
+                    expected=sorted(UNITS),
+                    found=unit,
+                    **where,
+                )
             values = np.where(values >= ch.threshold, 1.0, 0.0)
         else:
             values = unit_conversion(unit, target, **where).to_si(values)
@@ -899,15 +1194,27 @@ def build_stream_columns(kind: str, smap: StreamMap, n: int, read: SourceReader,
             if bad.any():
                 i = int(np.argmax(bad))
                 code = "E204" if np.isnan(values[i]) else "E210"
-                raise fail(code, f"{kind} column {col!r} (from {ch.source!r}) holds a non-finite value at sample {i}",
-                           file=source_file, column=ch.source, expected="finite values", found=str(values[i]))
+                raise fail(
+                    code,
+                    f"{kind} column {col!r} (from {ch.source!r}) holds a non-finite value at sample {i}",
+                    file=source_file,
+                    column=ch.source,
+                    expected="finite values",
+                    found=str(values[i]),
+                )
         outside = values_outside_set(kind, col, values)
         if outside is not None and outside[0].any():
             other, words = outside
             i = int(np.argmax(other))
-            raise fail("E214", f"{kind} column {col!r} (from {ch.source!r}) holds {int(other.sum())} values other than "
-                       f"{words}, first at sample {i}; map it with a 'threshold'",
-                       file=source_file, column=ch.source, expected=list(ALLOWED_VALUES[(kind, col)]), found=float(values[i]))
+            raise fail(
+                "E214",
+                f"{kind} column {col!r} (from {ch.source!r}) holds {int(other.sum())} values other than "
+                f"{words}, first at sample {i}; map it with a 'threshold'",
+                file=source_file,
+                column=ch.source,
+                expected=list(ALLOWED_VALUES[(kind, col)]),
+                found=float(values[i]),
+            )
         out[col] = values
     return out
 
@@ -920,8 +1227,14 @@ def rotate_into_world(kind: str, columns: dict[str, np.ndarray], placement: Pose
     triplet of the kind is rotated by the quaternion of ``device_placement`` (D → W). A wrench's
     reference point does not move, so its torque rotates like its force."""
     if kind not in VECTOR_TRIPLETS:
-        raise fail("E502", f"from_frame applies to {sorted(VECTOR_TRIPLETS)}, not {kind}", file=label,
-                   pointer=f"/streams/{kind}/from_frame", expected=sorted(VECTOR_TRIPLETS), found=kind)
+        raise fail(
+            "E502",
+            f"from_frame applies to {sorted(VECTOR_TRIPLETS)}, not {kind}",
+            file=label,
+            pointer=f"/streams/{kind}/from_frame",
+            expected=sorted(VECTOR_TRIPLETS),
+            found=kind,
+        )
     rotation = quat_to_matrix(np.asarray(placement.quaternion, dtype=np.float64))
     out = dict(columns)
     for triplet in VECTOR_TRIPLETS[kind]:
@@ -930,13 +1243,13 @@ def rotate_into_world(kind: str, columns: dict[str, np.ndarray], placement: Pose
     return out
 
 
-def _mapped_streams(m: ImportMap, n: int, read: SourceReader, *, label: str, source_file: str,
-                    unit_required: bool) -> dict[str, dict[str, np.ndarray]]:
+def _mapped_streams(
+    m: ImportMap, n: int, read: SourceReader, *, label: str, source_file: str, unit_required: bool
+) -> dict[str, dict[str, np.ndarray]]:
     """Every mapped stream's SI columns (``t`` excluded), rotated into W where ``from_frame`` asks."""
     out = {}
     for kind, smap in m.streams.items():
-        cols = build_stream_columns(kind, smap, n, read, label=label, source_file=source_file,
-                                    unit_required=unit_required)
+        cols = build_stream_columns(kind, smap, n, read, label=label, source_file=source_file, unit_required=unit_required)
         if smap.from_frame == "device":
             cols = rotate_into_world(kind, cols, m.session.device_placement, label=label)
         out[kind] = cols
@@ -948,11 +1261,23 @@ def _check_trial_streams(m: ImportMap, kinds: list[str], label: str) -> None:
     proto = schemas.load("protocols.json")["protocols"][m.trial.protocol]
     missing = [k for k in proto["required"] if k not in kinds]
     if missing:
-        raise fail("E502", f"protocol {m.trial.protocol!r} requires streams {missing} the map does not produce",
-                   file=label, pointer="/streams", expected=proto["required"], found=sorted(kinds))
+        raise fail(
+            "E502",
+            f"protocol {m.trial.protocol!r} requires streams {missing} the map does not produce",
+            file=label,
+            pointer="/streams",
+            expected=proto["required"],
+            found=sorted(kinds),
+        )
     if proto["passive"] is False and m.trial.rendering is None:
-        raise fail("E502", f"protocol {m.trial.protocol!r} is active: the trial needs 'rendering'", file=label,
-                   pointer="/trial/rendering", expected="rendering parameters", found=None)
+        raise fail(
+            "E502",
+            f"protocol {m.trial.protocol!r} is active: the trial needs 'rendering'",
+            file=label,
+            pointer="/trial/rendering",
+            expected="rendering parameters",
+            found=None,
+        )
 
 
 def _resolve_device(m: ImportMap, base: Path, label: str) -> tuple[Device, dict, dict[str, str]]:
@@ -985,9 +1310,16 @@ class ImportResult:
     warnings: list[Finding] = field(default_factory=list)
 
     def to_dict(self) -> dict:
-        return {"ok": True, "session": str(self.session), "session_id": self.session_id, "trial_id": self.trial_id,
-                "streams": self.streams, "world_frame": self.world_frame, "source": self.source,
-                "warnings": [w.to_dict() for w in self.warnings]}
+        return {
+            "ok": True,
+            "session": str(self.session),
+            "session_id": self.session_id,
+            "trial_id": self.trial_id,
+            "streams": self.streams,
+            "world_frame": self.world_frame,
+            "source": self.source,
+            "warnings": [w.to_dict() for w in self.warnings],
+        }
 
 
 @dataclass
@@ -1008,8 +1340,9 @@ class Destination:
                 raise fail("E903", "append and overwrite exclude each other", expected="one of them", found="both")
             return cls(out, existing=open_session(out))
         if out.exists() and not overwrite:
-            raise fail("E901", f"{str(out)!r} already exists", file=str(out), expected="a new path or --overwrite",
-                       found="exists")
+            raise fail(
+                "E901", f"{str(out)!r} already exists", file=str(out), expected="a new path or --overwrite", found="exists"
+            )
         return cls(out, overwrite=overwrite)
 
     def session_facts(self) -> dict | None:
@@ -1017,9 +1350,14 @@ class Destination:
         if self.existing is None:
             return None
         man = self.existing.manifest
-        return {"session_id": man.session_id, "date": man.date, "lab": man.lab.model_dump(),
-                "examiner": man.examiner.model_dump(), "device": self.existing.device().model_dump(mode="json", exclude_none=True),
-                "device_placement": man.device_placement.model_dump()}
+        return {
+            "session_id": man.session_id,
+            "date": man.date,
+            "lab": man.lab.model_dump(),
+            "examiner": man.examiner.model_dump(),
+            "device": self.existing.device().model_dump(mode="json", exclude_none=True),
+            "device_placement": man.device_placement.model_dump(),
+        }
 
     def check_facts(self, m: ImportMap, device: Device, label: str) -> None:
         """Appending: every session fact the map states must be the session's own (E502)."""
@@ -1029,11 +1367,23 @@ class Destination:
         for key in ("session_id", "date", "lab", "examiner", "device_placement"):
             mine, theirs = getattr(m.session, key), getattr(man, key)
             if mine != theirs:
-                raise fail("E502", f"the map's session.{key} differs from the session it appends to", file=label,
-                           pointer=f"/session/{key}", expected=_plain(theirs), found=_plain(mine))
+                raise fail(
+                    "E502",
+                    f"the map's session.{key} differs from the session it appends to",
+                    file=label,
+                    pointer=f"/session/{key}",
+                    expected=_plain(theirs),
+                    found=_plain(mine),
+                )
         if device != self.existing.device():
-            raise fail("E502", "the map's device differs from the session's device", file=label,
-                       pointer="/session/device", expected=self.existing.device().model, found=device.model)
+            raise fail(
+                "E502",
+                "the map's device differs from the session's device",
+                file=label,
+                pointer="/session/device",
+                expected=self.existing.device().model,
+                found=device.model,
+            )
 
     def rig(self, new_rig: dict, world_rule: str | None, label: str) -> dict:
         """The rig to write: a new session's own, or the existing rig with this import's parts merged."""
@@ -1041,18 +1391,23 @@ class Destination:
             return new_rig
         return merge_rig(self.existing, new_rig, world_rule, label)
 
-    def writer(self, m: ImportMap, source: Path, rig: dict, device: dict, extra: dict[str, str],
-               recorder: str) -> tuple[SessionWriter, str]:
+    def writer(
+        self, m: ImportMap, source: Path, rig: dict, device: dict, extra: dict[str, str], recorder: str
+    ) -> tuple[SessionWriter, str]:
         """A writer holding the session-level manifest; the trial and streams are added by the caller."""
         stem = sanitize_id(source.stem, "import")
         if self.existing is not None:
             manifest = {k: v for k, v in self.existing.raw.items() if k not in ("spec_version", "trials")}
             return SessionWriter(manifest={**manifest, "rig": rig}), stem
         manifest = {
-            "session_id": m.session.session_id or stem, "date": m.session.date,
-            "lab": m.session.lab.model_dump(), "examiner": m.session.examiner.model_dump(),
-            "device": device, "device_placement": m.session.device_placement.model_dump(),
-            "rig": rig, "recorder": recorder,
+            "session_id": m.session.session_id or stem,
+            "date": m.session.date,
+            "lab": m.session.lab.model_dump(),
+            "examiner": m.session.examiner.model_dump(),
+            "device": device,
+            "device_placement": m.session.device_placement.model_dump(),
+            "rig": rig,
+            "recorder": recorder,
         }
         return SessionWriter(manifest=manifest, extra_files=extra), stem
 
@@ -1061,8 +1416,14 @@ class Destination:
         if self.existing is None:
             return writer.write(self.out, overwrite=self.overwrite)
         if any(t.id == trial_id for t in self.existing.trials):
-            raise fail("E107", f"the session already has a trial {trial_id!r}", file=MANIFEST, pointer="/trials",
-                       expected="a new trial id (--trial-id)", found=trial_id)
+            raise fail(
+                "E107",
+                f"the session already has a trial {trial_id!r}",
+                file=MANIFEST,
+                pointer="/trials",
+                expected="a new trial id (--trial-id)",
+                found=trial_id,
+            )
         return append_trial(writer, self.existing)
 
 
@@ -1080,9 +1441,15 @@ def merge_rig(existing: SessionFolder, new_rig: dict, world_rule: str | None, la
     """
     old = existing.manifest.rig.model_dump(mode="json", exclude_none=True)
     if "force_plate" in old and world_rule == "lab":
-        raise fail("E502", "the session's W is the centre of its force plate; this file would be imported in its lab "
-                   "frame: choose its force platform or give lab_to_world", file=label, pointer="/force_plate",
-                   expected="a platform or lab_to_world", found="none")
+        raise fail(
+            "E502",
+            "the session's W is the centre of its force plate; this file would be imported in its lab "
+            "frame: choose its force platform or give lab_to_world",
+            file=label,
+            pointer="/force_plate",
+            expected="a platform or lab_to_world",
+            found="none",
+        )
     merged = dict(old)
     world_streams = [s.file for t in existing.trials for s in t.streams if s.frame == "world"]
     for key, part in new_rig.items():
@@ -1090,12 +1457,23 @@ def merge_rig(existing: SessionFolder, new_rig: dict, world_rule: str | None, la
         if key == "motion_capture" and key in old:
             merged[key] = _merge_motion_capture(old[key], part, label)
         elif key in old and old[key] != part:
-            raise fail("E502", f"rig.{key} of this import differs from the session's", file=label, pointer=pointer,
-                       expected=old[key], found=part)
+            raise fail(
+                "E502",
+                f"rig.{key} of this import differs from the session's",
+                file=label,
+                pointer=pointer,
+                expected=old[key],
+                found=part,
+            )
         elif key == "force_plate" and key not in old and world_streams:
-            raise fail("E502", "this import's force platform would define W, but the session's world-frame streams "
-                       "use a W without a plate", file=label, pointer=pointer, expected="force_plate 'none'",
-                       found=world_streams[0])
+            raise fail(
+                "E502",
+                "this import's force platform would define W, but the session's world-frame streams use a W without a plate",
+                file=label,
+                pointer=pointer,
+                expected="force_plate 'none'",
+                found=world_streams[0],
+            )
         else:
             merged[key] = part
     return merged
@@ -1105,13 +1483,25 @@ def _merge_motion_capture(old: dict, new: dict, label: str) -> dict:
     pointer = "/session/rig/motion_capture"
     for key in ("rate_hz", "system"):
         if key in old and key in new and old[key] != new[key]:
-            raise fail("E502", f"motion-capture {key} differs from the session's", file=label, pointer=f"{pointer}/{key}",
-                       expected=old[key], found=new[key])
+            raise fail(
+                "E502",
+                f"motion-capture {key} differs from the session's",
+                file=label,
+                pointer=f"{pointer}/{key}",
+                expected=old[key],
+                found=new[key],
+            )
     bodies = {b["name"]: b for b in old.get("rigid_bodies", [])}
     for body in new.get("rigid_bodies", []):
         if body["name"] in bodies and bodies[body["name"]] != body:
-            raise fail("E502", f"rigid body {body['name']!r} differs from the session's", file=label,
-                       pointer="/markers/rigid_bodies", expected=bodies[body["name"]], found=body)
+            raise fail(
+                "E502",
+                f"rigid body {body['name']!r} differs from the session's",
+                file=label,
+                pointer="/markers/rigid_bodies",
+                expected=bodies[body["name"]],
+                found=body,
+            )
         bodies.setdefault(body["name"], body)
     markers = list(old.get("markers", []))
     markers += [e for e in new.get("markers", []) if e not in markers]
@@ -1132,8 +1522,13 @@ def append_trial(writer: SessionWriter, existing: SessionFolder) -> Path:
         for stream in trial["streams"]:
             dst = resolve_inside(build, stream["file"])
             if dst.exists():
-                raise fail("E107", f"the session already holds a file {stream['file']!r}", file=stream["file"],
-                           expected="a new stream file", found=stream["file"])
+                raise fail(
+                    "E107",
+                    f"the session already holds a file {stream['file']!r}",
+                    file=stream["file"],
+                    expected="a new stream file",
+                    found=stream["file"],
+                )
             dst.parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(staging / "trial" / stream["file"], dst)
         manifest = {**existing.raw, "rig": writer.manifest["rig"], "trials": [*existing.raw["trials"], trial]}
@@ -1156,17 +1551,30 @@ def _add_trial(writer: SessionWriter, m: ImportMap, stem: str, source: Path, pro
     trial_id = t.id or stem
     label = t.label if t.label is not None else (source.stem if t.protocol == "other" else None)
     notes = f"{t.notes}\n{provenance}" if t.notes else provenance
-    writer.add_trial(trial_id, t.protocol, powered=t.powered, repetition=t.repetition, label=label,
-                     rendering=t.rendering.model_dump(exclude_none=True) if t.rendering else None, notes=notes)
+    writer.add_trial(
+        trial_id,
+        t.protocol,
+        powered=t.powered,
+        repetition=t.repetition,
+        label=label,
+        rendering=t.rendering.model_dump(exclude_none=True) if t.rendering else None,
+        notes=notes,
+    )
     return trial_id
 
 
 def _stream_summary(stream: dict) -> dict:
-    return {"kind": stream["kind"], "file": stream["file"], "rows": stream["rows"], "rate_hz": stream["rate_hz"],
-            "columns": len(stream["columns"]) - 1}
+    return {
+        "kind": stream["kind"],
+        "file": stream["file"],
+        "rows": stream["rows"],
+        "rate_hz": stream["rate_hz"],
+        "columns": len(stream["columns"]) - 1,
+    }
 
 
 # --- C3D import (spec §5.5) -----------------------------------------------------------------------
+
 
 def _select_markers(c3d: Recording, mm: MarkerMap, label: str) -> tuple[list[int], list[str]]:
     """Indices of the imported point labels and their entity ids (spec §5.4)."""
@@ -1179,22 +1587,40 @@ def _select_markers(c3d: Recording, mm: MarkerMap, label: str) -> tuple[list[int
     for key, patterns in (("include", mm.include or []), ("exclude", mm.exclude)):
         for j, pat in enumerate(patterns):
             if not matches(pat):
-                raise fail("E503", f"marker {key} {pat!r} matches no point label of {c3d.path.name}",
-                           pointer=f"/markers/{key}/{j}", expected=labels, found=pat, **where)
+                raise fail(
+                    "E503",
+                    f"marker {key} {pat!r} matches no point label of {c3d.path.name}",
+                    pointer=f"/markers/{key}/{j}",
+                    expected=labels,
+                    found=pat,
+                    **where,
+                )
     chosen = sorted({i for pat in mm.include for i in matches(pat)}) if mm.include is not None else list(range(len(labels)))
     dropped = {i for pat in mm.exclude for i in matches(pat)}
     chosen = [i for i in chosen if i not in dropped]
     for old in mm.rename:
         if old not in [labels[i] for i in chosen]:
-            raise fail("E503", f"rename names {old!r}, which is not an imported point label", pointer=f"/markers/rename/{old}",
-                       expected=[labels[i] for i in chosen], found=old, **where)
+            raise fail(
+                "E503",
+                f"rename names {old!r}, which is not an imported point label",
+                pointer=f"/markers/rename/{old}",
+                expected=[labels[i] for i in chosen],
+                found=old,
+                **where,
+            )
     ids: list[str] = []
     seen: dict[str, str] = {}
     for i in chosen:
         ent = mm.rename.get(labels[i]) or sanitize_id(labels[i], f"m{i + 1}")
         if ent in seen:
-            raise fail("E503", f"point labels {seen[ent]!r} and {labels[i]!r} both become entity {ent!r}; rename one",
-                       pointer="/markers/rename", expected="distinct entity ids", found=ent, **where)
+            raise fail(
+                "E503",
+                f"point labels {seen[ent]!r} and {labels[i]!r} both become entity {ent!r}; rename one",
+                pointer="/markers/rename",
+                expected="distinct entity ids",
+                found=ent,
+                **where,
+            )
         seen[ent] = labels[i]
         ids.append(ent)
     return chosen, ids
@@ -1205,15 +1631,23 @@ def _analog_reader(c3d: Recording, label: str) -> SourceReader:
         hits = [i for i, lab in enumerate(c3d.analog_labels) if lab == name]
         if len(hits) != 1:
             why = "no" if not hits else f"{len(hits)} channels labelled"
-            raise fail("E503", f"{c3d.path.name} has {why} analog channel {name!r}", file=label,
-                       expected=c3d.analog_labels, found=name)
+            raise fail(
+                "E503", f"{c3d.path.name} has {why} analog channel {name!r}", file=label, expected=c3d.analog_labels, found=name
+            )
         i = hits[0]
         return c3d.analogs[i], c3d.analog_units[i] or None
+
     return read
 
 
-def _prepare(out: str | Path | Destination, mapping: str | Path | LoadedMap | None, source: str, overrides: dict | None,
-             overwrite: bool, append: bool) -> tuple[Destination, LoadedMap, Device, dict, dict[str, str]]:
+def _prepare(
+    out: str | Path | Destination,
+    mapping: str | Path | LoadedMap | None,
+    source: str,
+    overrides: dict | None,
+    overwrite: bool,
+    append: bool,
+) -> tuple[Destination, LoadedMap, Device, dict, dict[str, str]]:
     """Destination, map and device of an import, all checked before the source is read."""
     dest = out if isinstance(out, Destination) else Destination.of(out, overwrite=overwrite, append=append)
     loaded = mapping if isinstance(mapping, LoadedMap) else load_map(mapping, source, overrides, dest.session_facts())
@@ -1225,8 +1659,9 @@ def _prepare(out: str | Path | Destination, mapping: str | Path | LoadedMap | No
 ROTATION_TOLERANCE = 1e-3  # |RᵀR − I| and |det R − 1| allowed in a stored rotation (float32 storage)
 
 
-def body_poses(rec: Recording, index: int, world: WorldFrame | None, to_m: Unit, max_residual: float | None,
-               *, label: str) -> tuple[np.ndarray, np.ndarray]:
+def body_poses(
+    rec: Recording, index: int, world: WorldFrame | None, to_m: Unit, max_residual: float | None, *, label: str
+) -> tuple[np.ndarray, np.ndarray]:
     """One 6-DoF body as pose columns (spec §5.5): positions (n × 3, m, in W) and unit quaternions
     (n × 4, body → W, w ≥ 0). A sample the file marks invalid, or whose residual exceeds
     ``max_residual``, is occluded: all seven values NaN. E501 when a valid sample is not a rotation."""
@@ -1243,9 +1678,14 @@ def body_poses(rec: Recording, index: int, world: WorldFrame | None, to_m: Unit,
     err = np.maximum(err, np.abs(np.linalg.det(r) - 1.0))
     if (err > ROTATION_TOLERANCE).any():
         k = int(np.argmax(err > ROTATION_TOLERANCE))
-        raise fail("E501", f"6-DoF body {rec.body_labels[index]!r} of {rec.path.name} holds no rotation at frame {k}",
-                   file=str(rec.path), column=rec.body_labels[index], expected="an orthonormal matrix, det 1",
-                   found=np.round(r[k], 6).tolist())
+        raise fail(
+            "E501",
+            f"6-DoF body {rec.body_labels[index]!r} of {rec.path.name} holds no rotation at frame {k}",
+            file=str(rec.path),
+            column=rec.body_labels[index],
+            expected="an orthonormal matrix, det 1",
+            found=np.round(r[k], 6).tolist(),
+        )
     if world is not None:
         pos = world.apply(pos)
         r = world.rotation @ r
@@ -1259,13 +1699,26 @@ def _body_index(rec: Recording, body: str, pointer: str, label: str) -> int:
     hits = [i for i, b in enumerate(rec.body_labels) if b == body]
     if len(hits) != 1:
         why = "no" if not hits else f"{len(hits)} bodies labelled"
-        raise fail("E503", f"{rec.path.name} has {why} 6-DoF body {body!r}", file=label, pointer=pointer,
-                   expected=rec.body_labels, found=body)
+        raise fail(
+            "E503",
+            f"{rec.path.name} has {why} 6-DoF body {body!r}",
+            file=label,
+            pointer=pointer,
+            expected=rec.body_labels,
+            found=body,
+        )
     return hits[0]
 
 
-def _pose_streams(rec: Recording, m: ImportMap, world: WorldFrame | None, to_m: Unit | None, t: np.ndarray,
-                  rigid_bodies: list[RigidBody], label: str) -> dict[str, tuple[dict[str, np.ndarray], list[str] | None]]:
+def _pose_streams(
+    rec: Recording,
+    m: ImportMap,
+    world: WorldFrame | None,
+    to_m: Unit | None,
+    t: np.ndarray,
+    rigid_bodies: list[RigidBody],
+    label: str,
+) -> dict[str, tuple[dict[str, np.ndarray], list[str] | None]]:
     """handle_pose and link_poses from the map's ``bodies`` (spec §5.5): kind → (columns, entities)."""
     bm = m.bodies
     if bm is None or (bm.handle is None and not bm.links):
@@ -1273,8 +1726,9 @@ def _pose_streams(rec: Recording, m: ImportMap, world: WorldFrame | None, to_m: 
     out: dict[str, tuple[dict[str, np.ndarray], list[str] | None]] = {}
     names = {b.name for b in rigid_bodies}
     if bm.handle is not None:
-        pos, quat = body_poses(rec, _body_index(rec, bm.handle, "/bodies/handle", label), world, to_m,
-                               bm.max_residual, label=label)
+        pos, quat = body_poses(
+            rec, _body_index(rec, bm.handle, "/bodies/handle", label), world, to_m, bm.max_residual, label=label
+        )
         cols = {c: pos[:, k] for k, c in enumerate(("px", "py", "pz"))}
         cols.update({c: quat[:, k] for k, c in enumerate(("qw", "qx", "qy", "qz"))})
         out["handle_pose"] = ({"t": t, **cols}, None)
@@ -1282,31 +1736,54 @@ def _pose_streams(rec: Recording, m: ImportMap, world: WorldFrame | None, to_m: 
         cols = {"t": t}
         for link, body in bm.links.items():
             if link not in names:
-                raise fail("E502", f"link {link!r} of bodies.links is not a rigid body of markers.rigid_bodies", file=label,
-                           pointer=f"/bodies/links/{link}", expected=sorted(names), found=link)
-            pos, quat = body_poses(rec, _body_index(rec, body, f"/bodies/links/{link}", label), world, to_m,
-                                   bm.max_residual, label=label)
+                raise fail(
+                    "E502",
+                    f"link {link!r} of bodies.links is not a rigid body of markers.rigid_bodies",
+                    file=label,
+                    pointer=f"/bodies/links/{link}",
+                    expected=sorted(names),
+                    found=link,
+                )
+            pos, quat = body_poses(
+                rec, _body_index(rec, body, f"/bodies/links/{link}", label), world, to_m, bm.max_residual, label=label
+            )
             cols.update({f"{link}_{c}": pos[:, k] for k, c in enumerate(("px", "py", "pz"))})
             cols.update({f"{link}_{c}": quat[:, k] for k, c in enumerate(("qw", "qx", "qy", "qz"))})
         out["link_poses"] = (cols, list(bm.links))
     return out
 
 
-def import_c3d(path: str | Path, out: str | Path | Destination, mapping: str | Path | LoadedMap | None = None, *,
-               overrides: dict | None = None, overwrite: bool = False, append: bool = False,
-               stream: bool | None = None, chunk_frames: int | None = None,
-               progress: Callable[[int, int], None] | None = None) -> ImportResult:
+def import_c3d(
+    path: str | Path,
+    out: str | Path | Destination,
+    mapping: str | Path | LoadedMap | None = None,
+    *,
+    overrides: dict | None = None,
+    overwrite: bool = False,
+    append: bool = False,
+    stream: bool | None = None,
+    chunk_frames: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> ImportResult:
     """Import a C3D file as one trial of a new session at ``out`` (spec §5.5), or append it as one
     more trial to the session at ``out`` (``append``, §5.9). See :func:`import_recording`; ``stream``
     as :func:`read_c3d`."""
     dest, loaded, _, device, extra = _prepare(out, mapping, "c3d", overrides, overwrite, append)
-    return import_recording(read_c3d(path, stream=stream), dest, loaded, device, extra, chunk_frames=chunk_frames,
-                            progress=progress)
+    return import_recording(
+        read_c3d(path, stream=stream), dest, loaded, device, extra, chunk_frames=chunk_frames, progress=progress
+    )
 
 
-def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, device: dict,  # noqa: C901 (over ruff's limit of 15: to be split)
-                     extra: dict[str, str], *, chunk_frames: int | None = None,
-                     progress: Callable[[int, int], None] | None = None) -> ImportResult:
+def import_recording(  # noqa: C901 (over ruff's limit of 15: to be split)
+    rec: Recording,
+    dest: Destination,
+    loaded: LoadedMap,
+    device: dict,
+    extra: dict[str, str],
+    *,
+    chunk_frames: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> ImportResult:
     """One motion-capture recording (C3D, Qualisys TSV, Motive or Nexus CSV) as one trial (spec §5.5, §5.10).
 
     Markers become a ``markers`` stream (point units → m, invalid → NaN), the map's 6-DoF bodies
@@ -1327,14 +1804,26 @@ def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, devic
     plate_number = None
     if isinstance(m.force_plate, int):
         if m.force_plate > len(rec.platforms):
-            raise fail("E503", f"{rec.path.name} has no force platform {m.force_plate}", file=label, pointer="/force_plate",
-                       expected=[p.number for p in rec.platforms], found=m.force_plate)
+            raise fail(
+                "E503",
+                f"{rec.path.name} has no force platform {m.force_plate}",
+                file=label,
+                pointer="/force_plate",
+                expected=[p.number for p in rec.platforms],
+                found=m.force_plate,
+            )
         plate_number = m.force_plate
     elif m.force_plate == "auto" and rec.platforms and m.lab_to_world is None:
         plate_number = 1
     if plate_number is not None and m.lab_to_world is not None:
-        raise fail("E502", "give either a force platform or lab_to_world: the platform defines W", file=label,
-                   pointer="/lab_to_world", expected="one of them", found="both")
+        raise fail(
+            "E502",
+            "give either a force platform or lab_to_world: the platform defines W",
+            file=label,
+            pointer="/lab_to_world",
+            expected="one of them",
+            found="both",
+        )
     rig = m.session.rig.model_dump(mode="json", exclude_none=True)
     point_unit = None
     chosen, entities = _select_markers(rec, mm, label)
@@ -1344,31 +1833,60 @@ def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, devic
     world: WorldFrame | None = None
     if plate_number is not None:
         if "force_plate" in rig:
-            raise fail("E502", "the map's rig has a force_plate and the C3D platform would replace it; set force_plate to 'none' or remove one",
-                       file=label, pointer="/session/rig/force_plate", expected="one plate description", found="two")
+            raise fail(
+                "E502",
+                "the map's rig has a force_plate and the C3D platform would replace it; set force_plate to 'none' or remove one",
+                file=label,
+                pointer="/session/rig/force_plate",
+                expected="one plate description",
+                found="two",
+            )
         world, rig["force_plate"], plate_warnings = plate_description(rec.platforms[plate_number - 1], point_unit, file=src)
         warnings += plate_warnings
     elif m.lab_to_world is not None:
         world = pose_frame(m.lab_to_world)
-    frame_note = world.description if world else f"W: the {rec.format.upper()} lab frame as recorded (no force platform, no lab_to_world)"
+    frame_note = (
+        world.description if world else f"W: the {rec.format.upper()} lab frame as recorded (no force platform, no lab_to_world)"
+    )
 
     # markers and 6-DoF bodies, on the point clock
     mocap_streams: dict[str, tuple[dict[str, np.ndarray], list[str] | None]] = {}
     if chosen or wants_bodies:
         if rec.frames < 2:
-            raise fail("E205", f"{rec.path.name} holds {rec.frames} frame(s); a stream needs two", file=src,
-                       expected="≥ 2 frames", found=rec.frames)
+            raise fail(
+                "E205",
+                f"{rec.path.name} holds {rec.frames} frame(s); a stream needs two",
+                file=src,
+                expected="≥ 2 frames",
+                found=rec.frames,
+            )
         if "motion_capture" in rig:
-            raise fail("E502", "the importer writes rig.motion_capture from the source; give rigid bodies and the system under 'markers'",
-                       file=label, pointer="/session/rig/motion_capture", expected=None, found="motion_capture")
+            raise fail(
+                "E502",
+                "the importer writes rig.motion_capture from the source; give rigid bodies and the system under 'markers'",
+                file=label,
+                pointer="/session/rig/motion_capture",
+                expected=None,
+                found="motion_capture",
+            )
         if chosen:
             for j, body in enumerate(mm.rigid_bodies):
                 unknown = [e for e in body.markers if e not in entities]
                 if unknown:
-                    raise fail("E503", f"rigid body {body.name!r} names markers that are not imported: {unknown}", file=label,
-                               pointer=f"/markers/rigid_bodies/{j}/markers", expected=entities, found=unknown)
-        rig["motion_capture"] = {"system": mm.system or rec.manufacturer or None, "rate_hz": rec.point_rate,
-                                 "rigid_bodies": [b.model_dump() for b in mm.rigid_bodies], "markers": entities}
+                    raise fail(
+                        "E503",
+                        f"rigid body {body.name!r} names markers that are not imported: {unknown}",
+                        file=label,
+                        pointer=f"/markers/rigid_bodies/{j}/markers",
+                        expected=entities,
+                        found=unknown,
+                    )
+        rig["motion_capture"] = {
+            "system": mm.system or rec.manufacturer or None,
+            "rate_hz": rec.point_rate,
+            "rigid_bodies": [b.model_dump() for b in mm.rigid_bodies],
+            "markers": entities,
+        }
         if rig["motion_capture"]["system"] is None:
             del rig["motion_capture"]["system"]
 
@@ -1376,20 +1894,43 @@ def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, devic
     analog_wanted = bool(m.streams) or m.platform_wrench is not None
     if m.platform_wrench is not None:
         if plate_number is None:
-            raise fail("E502", "platform_wrench needs the force platform that defines W (force_plate)", file=label,
-                       pointer="/platform_wrench", expected="a force platform", found=m.force_plate)
+            raise fail(
+                "E502",
+                "platform_wrench needs the force platform that defines W (force_plate)",
+                file=label,
+                pointer="/platform_wrench",
+                expected="a force platform",
+                found=m.force_plate,
+            )
         if "plate_wrench" in m.streams:
-            raise fail("E502", "plate_wrench is both mapped from channels and taken from the platform; keep one",
-                       file=label, pointer="/streams/plate_wrench", expected="one source", found="two")
+            raise fail(
+                "E502",
+                "plate_wrench is both mapped from channels and taken from the platform; keep one",
+                file=label,
+                pointer="/streams/plate_wrench",
+                expected="one source",
+                found="two",
+            )
     if analog_wanted:
         n = rec.analogs.shape[1]
         if n < 2:
-            raise fail("E205", f"{rec.path.name} holds {n} analog sample(s); a stream needs two", file=src,
-                       expected="≥ 2 analog samples", found=n)
+            raise fail(
+                "E205",
+                f"{rec.path.name} holds {n} analog sample(s); a stream needs two",
+                file=src,
+                expected="≥ 2 analog samples",
+                found=n,
+            )
         for kind, smap in m.streams.items():
             if smap.rate_hz is not None and smap.rate_hz != rec.analog_rate:
-                raise fail("E502", f"{kind} rate_hz {smap.rate_hz} differs from the file's analog rate {rec.analog_rate}",
-                           file=label, pointer=f"/streams/{kind}/rate_hz", expected=rec.analog_rate, found=smap.rate_hz)
+                raise fail(
+                    "E502",
+                    f"{kind} rate_hz {smap.rate_hz} differs from the file's analog rate {rec.analog_rate}",
+                    file=label,
+                    pointer=f"/streams/{kind}/rate_hz",
+                    expected=rec.analog_rate,
+                    found=smap.rate_hz,
+                )
 
     def streams_of(part: Recording) -> tuple[dict, dict[str, dict[str, np.ndarray]], list[Finding]]:
         """The trial's streams from the frames of ``part`` (the whole recording, or one chunk of it)."""
@@ -1415,7 +1956,8 @@ def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, devic
             mapped = _mapped_streams(m, n, _analog_reader(part, label), label=label, source_file=src, unit_required=False)
             if m.platform_wrench is not None:
                 mapped["plate_wrench"], notes = platform_plate_wrench(
-                    part, part.platforms[plate_number - 1], m.platform_wrench, rig["force_plate"], point_unit, label=label)
+                    part, part.platforms[plate_number - 1], m.platform_wrench, rig["force_plate"], point_unit, label=label
+                )
             analog = {kind: {"t": t_an, **cols} for kind, cols in mapped.items()}
         return mocap, analog, notes
 
@@ -1426,8 +1968,14 @@ def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, devic
 
     kinds = list(mocap_streams) + list(analog_streams)
     if not kinds:
-        raise fail("E502", f"nothing to import from {rec.path.name}: no markers selected, no bodies and no streams mapped",
-                   file=label, pointer="/streams", expected="markers, bodies or mapped analog streams", found=None)
+        raise fail(
+            "E502",
+            f"nothing to import from {rec.path.name}: no markers selected, no bodies and no streams mapped",
+            file=label,
+            pointer="/streams",
+            expected="markers, bodies or mapped analog streams",
+            found=None,
+        )
     _check_trial_streams(m, kinds, label)
     world_rule = ("plate" if plate_number is not None else "pose" if world is not None else "lab") if mocap_streams else None
     rig = dest.rig(rig, world_rule, label)
@@ -1454,6 +2002,7 @@ def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, devic
         fmt, frame = (smap.format, smap.frame) if smap is not None else (m.platform_wrench.format, None)  # type: ignore[union-attr]
         add(kind, cols, rate_hz=rec.analog_rate, fmt=fmt, frame=frame)
     if streamed:
+
         def chunks() -> Iterator[dict[str, dict[str, np.ndarray]]]:
             done = first.frames
             yield {**{k: c for k, (c, _) in mocap_streams.items()}, **analog_streams}
@@ -1465,10 +2014,18 @@ def import_recording(rec: Recording, dest: Destination, loaded: LoadedMap, devic
                 done += part.frames
                 if progress:
                     progress(done, rec.frames)
+
         writer.chunks = chunks
     dest.write(writer, trial_id)
-    return ImportResult(dest.out, writer.manifest["session_id"], trial_id, [_stream_summary(s) for s in written],
-                        frame_note, rec.summary(), warnings)
+    return ImportResult(
+        dest.out,
+        writer.manifest["session_id"],
+        trial_id,
+        [_stream_summary(s) for s in written],
+        frame_note,
+        rec.summary(),
+        warnings,
+    )
 
 
 # --- CSV import (spec §5.7) -----------------------------------------------------------------------
@@ -1489,8 +2046,14 @@ def read_csv_columns(path: Path, names: list[str], opts: CsvOptions, *, map_labe
     label = str(path)
     if not path.is_file():
         raise fail("E501", f"{label!r} does not exist or is not a file", file=label)
-    common = {"sep": opts.delimiter, "skiprows": opts.skip_rows, "comment": opts.comment, "skipinitialspace": True,
-              "engine": "c", "encoding": "utf-8"}
+    common = {
+        "sep": opts.delimiter,
+        "skiprows": opts.skip_rows,
+        "comment": opts.comment,
+        "skipinitialspace": True,
+        "engine": "c",
+        "encoding": "utf-8",
+    }
     try:
         raw_header = [str(h) for h in pd.read_csv(path, nrows=0, **common).columns]
     except (OSError, UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError, ValueError) as exc:
@@ -1514,14 +2077,27 @@ def read_csv_columns(path: Path, names: list[str], opts: CsvOptions, *, map_labe
             bad = np.flatnonzero(parsed.isna() & ~cells.str.lower().isin(["nan"]))
             if bad.size:
                 i = int(bad[0])
-                raise fail("E501", f"{path.name} column {name!r}, data row {i + 1} (line ≈{first_data_line + i}) is not "
-                           "a number", file=label, column=name, expected="a number", found=cells.iloc[i]) from None
+                raise fail(
+                    "E501",
+                    f"{path.name} column {name!r}, data row {i + 1} (line ≈{first_data_line + i}) is not a number",
+                    file=label,
+                    column=name,
+                    expected="a number",
+                    found=cells.iloc[i],
+                ) from None
         raise fail("E501", f"{label!r} cannot be read as numbers", file=label) from None
     return {name: table[raw].to_numpy(dtype=np.float64) for raw, name in columns.items()}
 
 
-def import_csv(path: str | Path, out: str | Path | Destination, mapping: str | Path | LoadedMap, *,
-               overrides: dict | None = None, overwrite: bool = False, append: bool = False) -> ImportResult:
+def import_csv(
+    path: str | Path,
+    out: str | Path | Destination,
+    mapping: str | Path | LoadedMap,
+    *,
+    overrides: dict | None = None,
+    overwrite: bool = False,
+    append: bool = False,
+) -> ImportResult:
     """Import a column-mapped CSV log as one trial of a new session at ``out`` (spec §5.7), or append
     it as one more trial to the session at ``out`` (``append``, §5.9).
 
@@ -1533,25 +2109,32 @@ def import_csv(path: str | Path, out: str | Path | Destination, mapping: str | P
     src_path = Path(path)
     src = str(src_path)
     if not m.streams:
-        raise fail("E502", "a csv map needs at least one stream", file=label, pointer="/streams",
-                   expected="streams", found={})
+        raise fail("E502", "a csv map needs at least one stream", file=label, pointer="/streams", expected="streams", found={})
     opts = m.csv or CsvOptions()
-    wanted = [m.time.source] + sorted({_as_channel(c).source for s in m.streams.values() for c in s.columns.values()
-                                       if _as_channel(c).source is not None} - {m.time.source})
+    wanted = [m.time.source] + sorted(
+        {_as_channel(c).source for s in m.streams.values() for c in s.columns.values() if _as_channel(c).source is not None}
+        - {m.time.source}
+    )
     data = read_csv_columns(src_path, wanted, opts, map_label=label)
     time_unit = unit_conversion(m.time.unit, "s", file=label, pointer="/time/unit", column=m.time.source)
     t = time_unit.to_si(data[m.time.source])
     if m.time_offset_s != 0.0:
         t = t + m.time_offset_s
     if t.size < 2:
-        raise fail("E205", f"{src_path.name} holds {t.size} row(s); a stream needs two", file=src, expected="≥ 2 rows",
-                   found=int(t.size))
+        raise fail(
+            "E205", f"{src_path.name} holds {t.size} row(s); a stream needs two", file=src, expected="≥ 2 rows", found=int(t.size)
+        )
     steps = np.diff(t)
     if not np.isfinite(t).all() or (steps <= 0).any():
         i = int(np.argmax(~np.isfinite(t))) if not np.isfinite(t).all() else int(np.argmax(steps <= 0)) + 1
-        raise fail("E203", f"time column {m.time.source!r} of {src_path.name} is not finite and strictly increasing "
-                   f"at data row {i + 1}", file=src, column=m.time.source, expected="strictly increasing",
-                   found=f"{data[m.time.source][i - 1] if i else ''} → {data[m.time.source][i]}")
+        raise fail(
+            "E203",
+            f"time column {m.time.source!r} of {src_path.name} is not finite and strictly increasing at data row {i + 1}",
+            file=src,
+            column=m.time.source,
+            expected="strictly increasing",
+            found=f"{data[m.time.source][i - 1] if i else ''} → {data[m.time.source][i]}",
+        )
 
     def read(name: str) -> tuple[np.ndarray, str | None]:
         return data[name], None
@@ -1565,9 +2148,17 @@ def import_csv(path: str | Path, out: str | Path | Destination, mapping: str | P
     written = []
     for kind, cols in streams.items():
         smap = m.streams[kind]
-        written.append(writer.add_stream(trial_id, kind, {"t": t, **cols}, rate_hz=smap.rate_hz or default_rate,
-                                         fmt=smap.format, frame=smap.frame))
+        written.append(
+            writer.add_stream(
+                trial_id, kind, {"t": t, **cols}, rate_hz=smap.rate_hz or default_rate, fmt=smap.format, frame=smap.frame
+            )
+        )
     dest.write(writer, trial_id)
-    return ImportResult(dest.out, writer.manifest["session_id"], trial_id, [_stream_summary(s) for s in written],
-                        "CSV values are stored as logged (rotated into W only where from_frame says so)",
-                        {"file": src_path.name, "rows": int(t.size), "columns": wanted})
+    return ImportResult(
+        dest.out,
+        writer.manifest["session_id"],
+        trial_id,
+        [_stream_summary(s) for s in written],
+        "CSV values are stored as logged (rotated into W only where from_frame says so)",
+        {"file": src_path.name, "rows": int(t.size), "columns": wanted},
+    )

@@ -90,8 +90,13 @@ def limit_order_violations(kin: Kinematics) -> list[tuple[int, str, str]]:
     """Every limit that names a joint that is not an earlier one: ``(joint index, "lower"|"upper", named joint)``
     (spec §2.3, §8.2)."""
     names = [j.name for j in kin.joints]
-    return [(i, side, other) for i, j in enumerate(kin.joints) for side in ("lower", "upper")
-            for other in getattr(j, side).coefficients if other not in names[:i]]
+    return [
+        (i, side, other)
+        for i, j in enumerate(kin.joints)
+        for side in ("lower", "upper")
+        for other in getattr(j, side).coefficients
+        if other not in names[:i]
+    ]
 
 
 def check_limit_order(kin: Kinematics) -> None:

@@ -48,6 +48,7 @@ OUTPUT_UNITS = ("N",) * 3 + ("N*m",) * 3
 # The parameter file (spec §11.5)
 # =============================================================================================
 
+
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
@@ -216,7 +217,11 @@ def model_to_mat_dict(model: HWModelFile) -> dict:
         "OutputUnit": _cell([c.unit for c in model.outputs]),
         "InputNonlinearity": _cell([_mat_map(m) for m in model.input_maps]),
         "OutputNonlinearity": _cell([_mat_map(m) for m in model.output_maps]),
-        "B": B, "F": F, "nb": nb, "nf": nf, "nk": nk,
+        "B": B,
+        "F": F,
+        "nb": nb,
+        "nf": nf,
+        "nk": nk,
         "QuaternionColumns": (np.array(hemi.columns, dtype=float) + 1.0) if hemi else np.zeros(0),
         "QuaternionReference": np.array(hemi.reference, dtype=float) if hemi else np.zeros(0),
     }
@@ -237,6 +242,7 @@ def export_mat(model: HWModelFile, path: str | os.PathLike) -> Path:
 # =============================================================================================
 # Static maps and prediction (spec §11.3)
 # =============================================================================================
+
 
 def _segments(breakpoints: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Segment index k (0 … K−2) and local coordinate s of every u (spec §11.3 step 2).
@@ -315,12 +321,17 @@ def hemisphere_align(u: np.ndarray, hemi: QuaternionHemisphere | None) -> np.nda
 def _check_inputs(model: HWModelFile, u: np.ndarray) -> np.ndarray:
     u = np.asarray(u, dtype=float)
     if u.ndim != 2 or u.shape[1] != model.nu:
-        raise fail("E703", f"the model has {model.nu} inputs but the data have shape {u.shape}",
-                   expected=f"(N, {model.nu})", found=list(u.shape))
+        raise fail(
+            "E703",
+            f"the model has {model.nu} inputs but the data have shape {u.shape}",
+            expected=f"(N, {model.nu})",
+            found=list(u.shape),
+        )
     if not np.all(np.isfinite(u)):
         bad = int(np.argmax(~np.all(np.isfinite(u), axis=1)))
-        raise fail("E703", f"model inputs hold a non-finite value (first at sample {bad})",
-                   expected="finite inputs", found="NaN or inf")
+        raise fail(
+            "E703", f"model inputs hold a non-finite value (first at sample {bad})", expected="finite inputs", found="NaN or inf"
+        )
     return u
 
 
@@ -346,6 +357,7 @@ def predict(model: HWModelFile, u: np.ndarray) -> np.ndarray:
 # =============================================================================================
 # Fitting (spec §11.4)
 # =============================================================================================
+
 
 @dataclass(frozen=True)
 class FitOptions:
@@ -378,8 +390,18 @@ class FitOptions:
             if m not in ("piecewise_linear", "unit_gain"):
                 raise fail("E903", f"unknown map type {m!r}", expected=["piecewise_linear", "unit_gain"], found=m)
         if opts.nb < 1 or opts.nf < 0 or opts.nk < 0 or opts.breakpoints < 2 or not abs(opts.initial_pole) < 1:
-            raise fail("E903", "invalid model orders or initialisation", expected="nb ≥ 1, nf ≥ 0, nk ≥ 0, breakpoints ≥ 2, |initial_pole| < 1",
-                       found={"nb": opts.nb, "nf": opts.nf, "nk": opts.nk, "breakpoints": opts.breakpoints, "initial_pole": opts.initial_pole})
+            raise fail(
+                "E903",
+                "invalid model orders or initialisation",
+                expected="nb ≥ 1, nf ≥ 0, nk ≥ 0, breakpoints ≥ 2, |initial_pole| < 1",
+                found={
+                    "nb": opts.nb,
+                    "nf": opts.nf,
+                    "nk": opts.nk,
+                    "breakpoints": opts.breakpoints,
+                    "initial_pole": opts.initial_pole,
+                },
+            )
         return opts
 
 
@@ -417,12 +439,12 @@ class _Structure:
     nb: int
     nf: int
     nk: int
-    in_bp: list[np.ndarray | None]      # input breakpoints (None: unit gain)
-    out_bp: list[np.ndarray | None]     # output breakpoints (None: unit gain)
-    v_idx: list[np.ndarray | None] = field(default_factory=list)   # θ indices of input map values
-    b_idx: np.ndarray = field(default=None)    # (ny, nu, nb)
-    f_idx: np.ndarray = field(default=None)    # (ny, nu, nf)
-    c_idx: list[np.ndarray | None] = field(default_factory=list)   # θ indices of output map values
+    in_bp: list[np.ndarray | None]  # input breakpoints (None: unit gain)
+    out_bp: list[np.ndarray | None]  # output breakpoints (None: unit gain)
+    v_idx: list[np.ndarray | None] = field(default_factory=list)  # θ indices of input map values
+    b_idx: np.ndarray = field(default=None)  # (ny, nu, nb)
+    f_idx: np.ndarray = field(default=None)  # (ny, nu, nf)
+    c_idx: list[np.ndarray | None] = field(default_factory=list)  # θ indices of output map values
     size: int = 0
 
     def __post_init__(self) -> None:
@@ -500,11 +522,11 @@ def _inputs_mapped(st: _Structure, theta: np.ndarray, rec: _Record) -> np.ndarra
 def _polynomials(st: _Structure, theta: np.ndarray, j: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Numerators q^-nk B (rows of nk + nb coefficients) and denominators F (rows of 1 + nf) of the
     transfer functions of output ``j`` (nu rows) or of all outputs (ny · nu rows, output-major)."""
-    b_idx = st.b_idx if j is None else st.b_idx[j:j + 1]
-    f_idx = st.f_idx if j is None else st.f_idx[j:j + 1]
+    b_idx = st.b_idx if j is None else st.b_idx[j : j + 1]
+    f_idx = st.f_idx if j is None else st.f_idx[j : j + 1]
     rows = b_idx.shape[0] * st.nu
     num = np.zeros((rows, st.nk + st.nb))
-    num[:, st.nk:] = theta[b_idx].reshape(rows, st.nb)
+    num[:, st.nk :] = theta[b_idx].reshape(rows, st.nb)
     den = np.ones((rows, 1 + st.nf))
     den[:, 1:] = theta[f_idx].reshape(rows, st.nf)
     return num, den
@@ -530,10 +552,10 @@ def _simulation(st: _Structure, theta: np.ndarray, rec: _Record) -> _Simulation:
     for every output."""
     w = _inputs_mapped(st, theta, rec)
     num, den = _polynomials(st, theta)
-    tiled = rec.scratch("inputs", len(w), st.ny * st.nu)        # w once per output
+    tiled = rec.scratch("inputs", len(w), st.ny * st.nu)  # w once per output
     tiled.reshape(len(w), st.ny, st.nu)[:] = w[:, None, :]
     z = lfilter_columns(num, den, tiled, starts=rec.starts)
-    x = z @ np.kron(np.eye(st.ny), np.ones((st.nu, 1)))           # Σ_i z_ji for every output j
+    x = z @ np.kron(np.eye(st.ny), np.ones((st.nu, 1)))  # Σ_i z_ji for every output j
     yhat, slopes, segments = x.copy(), [None] * st.ny, [None] * st.ny
     for j, bp in enumerate(st.out_bp):
         if bp is not None:
@@ -571,13 +593,13 @@ class _JacobianPass:
     delays carry from one block to the next (:class:`haptify.filter_bank.FilterBank`)."""
 
     yhat: np.ndarray
-    gain: np.ndarray                    # weight · h_j'(x_j) per sample
+    gain: np.ndarray  # weight · h_j'(x_j) per sample
     weight: float
-    segments: tuple | None              # (k, s) of the output map at x_j; None: unit gain
-    hats: int                           # the output map's breakpoints (0: unit gain)
-    shared: FilterBank                  # the columns of the input-map values (over Φ)
-    linear: FilterBank                  # the B and F columns (over ``signals``)
-    signals: list[np.ndarray]           # w (N, nu) nb times, then z_j (N, nu) nf times
+    segments: tuple | None  # (k, s) of the output map at x_j; None: unit gain
+    hats: int  # the output map's breakpoints (0: unit gain)
+    shared: FilterBank  # the columns of the input-map values (over Φ)
+    linear: FilterBank  # the B and F columns (over ``signals``)
+    signals: list[np.ndarray]  # w (N, nu) nb times, then z_j (N, nu) nf times
 
     @property
     def columns(self) -> int:
@@ -585,18 +607,22 @@ class _JacobianPass:
         return self.shared.columns + self.linear.columns + self.hats
 
     @classmethod
-    def of(cls, st: _Structure, theta: np.ndarray, rec: _Record, j: int, weight: float,
-           sim: _Simulation) -> "_JacobianPass":
+    def of(cls, st: _Structure, theta: np.ndarray, rec: _Record, j: int, weight: float, sim: _Simulation) -> "_JacobianPass":
         nu, nb, nf = st.nu, st.nb, st.nf
         segments = sim.segments[j]
         gain = np.full(len(rec.u), weight) if segments is None else weight * sim.slopes[j]
         num, den = _polynomials(st, theta, j)
         taps = [(st.nk + k, 1.0) for k in range(nb)] + [(lag, -1.0) for lag in range(1, nf + 1)]
-        return cls(yhat=sim.yhat[:, j], gain=gain, weight=weight, segments=segments,
-                   hats=0 if segments is None else len(st.out_bp[j]),
-                   shared=FilterBank(num[st.shared_input], den[st.shared_input]),
-                   linear=FilterBank(*_delay_filters(den, taps)),
-                   signals=[sim.w] * nb + [sim.z[:, j * nu: (j + 1) * nu]] * nf)
+        return cls(
+            yhat=sim.yhat[:, j],
+            gain=gain,
+            weight=weight,
+            segments=segments,
+            hats=0 if segments is None else len(st.out_bp[j]),
+            shared=FilterBank(num[st.shared_input], den[st.shared_input]),
+            linear=FilterBank(*_delay_filters(den, taps)),
+            signals=[sim.w] * nb + [sim.z[:, j * nu : (j + 1) * nu]] * nf,
+        )
 
     def rows(self, rec: _Record, rows: slice, out: np.ndarray) -> None:
         """Write the Jacobian's rows ``rows`` (the block after the previous call's) into ``out``:
@@ -610,14 +636,15 @@ class _JacobianPass:
         signals = rec.scratch("signals", len(gain), n_lin)
         width = n_lin // len(self.signals)
         for m, signal in enumerate(self.signals):
-            signals[:, m * width: (m + 1) * width] = signal[rows]
-        self.linear(signals, out=out[:, ns: ns + n_lin], gain=gain, starts=starts)
+            signals[:, m * width : (m + 1) * width] = signal[rows]
+        self.linear(signals, out=out[:, ns : ns + n_lin], gain=gain, starts=starts)
         if self.segments is not None:
-            _hat_columns(out[:, ns + n_lin:], self.segments[0][rows], self.segments[1][rows], self.weight)
+            _hat_columns(out[:, ns + n_lin :], self.segments[0][rows], self.segments[1][rows], self.weight)
 
 
-def _output_jacobian(st: _Structure, theta: np.ndarray, rec: _Record, j: int, weight: float = 1.0,
-                     sim: _Simulation | None = None) -> tuple[np.ndarray, np.ndarray]:
+def _output_jacobian(
+    st: _Structure, theta: np.ndarray, rec: _Record, j: int, weight: float = 1.0, sim: _Simulation | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """ŷ_j and ``weight`` times its analytic Jacobian (spec §11.4.3) at once (:class:`_JacobianPass` over all
     rows): one row per sample, one column per parameter in θ's order (:class:`_Structure`): ``[shared
     input-map values, output j's own b_1 … b_nb, f_1 … f_nf (each for every input), output-map values]``.
@@ -633,8 +660,9 @@ def _output_jacobian(st: _Structure, theta: np.ndarray, rec: _Record, j: int, we
 BLOCK_ROWS = 2048
 
 
-def _normal_equations(st: _Structure, theta: np.ndarray, rec: _Record, weights: np.ndarray, sim: _Simulation,
-                      buffer: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+def _normal_equations(
+    st: _Structure, theta: np.ndarray, rec: _Record, weights: np.ndarray, sim: _Simulation, buffer: np.ndarray
+) -> list[tuple[np.ndarray, np.ndarray]]:
     """JᵀJ and Jᵀe of every output j (spec §11.4.3; J of :func:`_output_jacobian` with weight ``weights[j]``,
     e the weighted residuals), accumulated over blocks of :data:`BLOCK_ROWS` rows formed in ``buffer``
     (≥ BLOCK_ROWS × columns + 1): one symmetric product per block of ``[J | e]``, the outputs' blocks of the
@@ -653,8 +681,7 @@ def _normal_equations(st: _Structure, theta: np.ndarray, rec: _Record, weights: 
     return [(gram[:-1, :-1], gram[:-1, -1]) for gram in grams]
 
 
-def _add_normal_equations(hess: np.ndarray, grad: np.ndarray, ns: int, own: slice, gram: np.ndarray,
-                          jac_e: np.ndarray) -> None:
+def _add_normal_equations(hess: np.ndarray, grad: np.ndarray, ns: int, own: slice, gram: np.ndarray, jac_e: np.ndarray) -> None:
     """Add one output's JᵀJ and −Jᵀe (rows ``[shared, own]`` of :func:`_output_jacobian`) to the normal
     equations of spec §11.4.3: the shared parameters are θ[:ns], the output's own a contiguous range."""
     hess[:ns, :ns] += gram[:ns, :ns]
@@ -696,17 +723,29 @@ def _as_channels(names: Sequence[str] | None, units: Sequence[str] | None, n: in
 def _as_records(data: np.ndarray | Sequence[np.ndarray], what: str) -> list[np.ndarray]:
     records = [np.asarray(data, dtype=float)] if isinstance(data, np.ndarray) else [np.asarray(r, dtype=float) for r in data]
     if not records or any(r.ndim != 2 for r in records):
-        raise fail("E703", f"{what} must be a 2-D array (N, channels) or a list of them", expected="(N, channels)",
-                   found=[list(r.shape) for r in records])
+        raise fail(
+            "E703",
+            f"{what} must be a 2-D array (N, channels) or a list of them",
+            expected="(N, channels)",
+            found=[list(r.shape) for r in records],
+        )
     return records
 
 
-def fit(u: np.ndarray | Sequence[np.ndarray], y: np.ndarray | Sequence[np.ndarray], *, sample_rate_hz: float,
-        options: FitOptions | None = None,
-        input_names: Sequence[str] | None = None, input_units: Sequence[str] | None = None,
-        output_names: Sequence[str] | None = None, output_units: Sequence[str] | None = None,
-        quaternion_columns: Sequence[int] | None = None,
-        session_id: str | None = None, trial_id: str | None = None) -> tuple[HWModelFile, FitReport]:
+def fit(
+    u: np.ndarray | Sequence[np.ndarray],
+    y: np.ndarray | Sequence[np.ndarray],
+    *,
+    sample_rate_hz: float,
+    options: FitOptions | None = None,
+    input_names: Sequence[str] | None = None,
+    input_units: Sequence[str] | None = None,
+    output_names: Sequence[str] | None = None,
+    output_units: Sequence[str] | None = None,
+    quaternion_columns: Sequence[int] | None = None,
+    session_id: str | None = None,
+    trial_id: str | None = None,
+) -> tuple[HWModelFile, FitReport]:
     """Fit a Hammerstein–Wiener model to inputs ``u (N, nu)`` and outputs ``y (N, ny)`` (spec §11.4).
 
     ``u`` and ``y`` may also be lists of records (contiguous runs of one trial split by gaps); each
@@ -716,9 +755,19 @@ def fit(u: np.ndarray | Sequence[np.ndarray], y: np.ndarray | Sequence[np.ndarra
     analytic Jacobian. Returns the parameter file model and a :class:`FitReport`.
     """
     with _one_blas_thread():
-        return _fit(u, y, sample_rate_hz=sample_rate_hz, options=options or FitOptions.from_definition(),
-                    input_names=input_names, input_units=input_units, output_names=output_names, output_units=output_units,
-                    quaternion_columns=quaternion_columns, session_id=session_id, trial_id=trial_id)
+        return _fit(
+            u,
+            y,
+            sample_rate_hz=sample_rate_hz,
+            options=options or FitOptions.from_definition(),
+            input_names=input_names,
+            input_units=input_units,
+            output_names=output_names,
+            output_units=output_units,
+            quaternion_columns=quaternion_columns,
+            session_id=session_id,
+            trial_id=trial_id,
+        )
 
 
 def _one_blas_thread():
@@ -735,15 +784,35 @@ def _one_blas_thread():
     return threadpool_limits(limits=1, user_api="blas")
 
 
-def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_names, output_units,  # noqa: C901 (over ruff's limit of 15: to be split)
-         quaternion_columns, session_id, trial_id) -> tuple[HWModelFile, FitReport]:
+def _fit(  # noqa: C901 (over ruff's limit of 15: to be split)
+    u,
+    y,
+    *,
+    sample_rate_hz,
+    options,
+    input_names,
+    input_units,
+    output_names,
+    output_units,
+    quaternion_columns,
+    session_id,
+    trial_id,
+) -> tuple[HWModelFile, FitReport]:
     opts = options
     us = _as_records(u, "inputs")
     ys = _as_records(y, "outputs")
-    if len(us) != len(ys) or any(len(a) != len(b) for a, b in zip(us, ys)) \
-            or len({a.shape[1] for a in us}) != 1 or len({b.shape[1] for b in ys}) != 1:
-        raise fail("E703", "input and output records must pair up with equal lengths and channel counts",
-                   expected="matching records", found=[[list(a.shape), list(b.shape)] for a, b in zip(us, ys)])
+    if (
+        len(us) != len(ys)
+        or any(len(a) != len(b) for a, b in zip(us, ys))
+        or len({a.shape[1] for a in us}) != 1
+        or len({b.shape[1] for b in ys}) != 1
+    ):
+        raise fail(
+            "E703",
+            "input and output records must pair up with equal lengths and channel counts",
+            expected="matching records",
+            found=[[list(a.shape), list(b.shape)] for a, b in zip(us, ys)],
+        )
     if not all(np.all(np.isfinite(a)) for a in us + ys):
         raise fail("E703", "training data hold non-finite values", expected="finite", found="NaN or inf")
     nu, ny = us[0].shape[1], ys[0].shape[1]
@@ -759,8 +828,7 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
     mu_u = u_all.mean(axis=0)
     sd_u = np.where(u_all.std(axis=0) > 0, u_all.std(axis=0), 1.0)
     pwl_in = opts.input_map == "piecewise_linear"
-    in_bp = [place_breakpoints(u_all[:, i], opts.breakpoints, opts.breakpoint_quantiles) if pwl_in else None
-             for i in range(nu)]
+    in_bp = [place_breakpoints(u_all[:, i], opts.breakpoints, opts.breakpoint_quantiles) if pwl_in else None for i in range(nu)]
     mu_y = y_all.mean(axis=0)
     sd_y = np.where(y_all.std(axis=0) > 0, y_all.std(axis=0), 1.0)
     pwl_out = opts.output_map == "piecewise_linear"
@@ -775,20 +843,19 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
     reg = np.vstack(regs)
     target = (y_all - mu_y) / sd_y if pwl_out else y_all
     gram = reg.T @ reg / n + opts.ridge * np.eye(reg.shape[1])
-    b0 = np.linalg.solve(gram, reg.T @ target / n)            # (nu·nb, ny)
+    b0 = np.linalg.solve(gram, reg.T @ target / n)  # (nu·nb, ny)
     x0 = reg @ b0
-    out_bp = [place_breakpoints(x0[:, j], opts.breakpoints, opts.breakpoint_quantiles) if pwl_out else None
-              for j in range(ny)]
+    out_bp = [place_breakpoints(x0[:, j], opts.breakpoints, opts.breakpoint_quantiles) if pwl_out else None for j in range(ny)]
 
     st = _Structure(nu=nu, ny=ny, nb=opts.nb, nf=opts.nf, nk=opts.nk, in_bp=in_bp, out_bp=out_bp)
     theta0 = np.zeros(st.size)
-    scale = np.ones(st.size)                                   # D of the ridge term
+    scale = np.ones(st.size)  # D of the ridge term
     for i in range(nu):
         if in_bp[i] is not None:
             theta0[st.v_idx[i]] = (in_bp[i] - mu_u[i]) / sd_u[i]
     for j in range(ny):
         for i in range(nu):
-            theta0[st.b_idx[j, i]] = b0[i * opts.nb:(i + 1) * opts.nb, j]
+            theta0[st.b_idx[j, i]] = b0[i * opts.nb : (i + 1) * opts.nb, j]
             theta0[st.f_idx[j, i]] = f0
         if out_bp[j] is not None:
             theta0[st.c_idx[j]] = mu_y[j] + sd_y[j] * out_bp[j]
@@ -796,8 +863,8 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
 
     rec = _Record.of(st, u_all, y_all, starts=np.cumsum([0] + [len(a) for a in us[:-1]]))
     block = np.empty((min(n, BLOCK_ROWS), st.n_shared + max(st.own(j).stop - st.own(j).start for j in range(ny)) + 1))
-    wy = 1.0 / (sd_y * math.sqrt(n))                          # residual weights (spec §11.4.2)
-    d2 = opts.ridge * scale ** 2
+    wy = 1.0 / (sd_y * math.sqrt(n))  # residual weights (spec §11.4.2)
+    d2 = opts.ridge * scale**2
 
     def cost(theta: np.ndarray) -> tuple[float, _Simulation]:
         """The cost of spec §11.4.2 and the simulation it ran (the next Jacobian's, if accepted)."""
@@ -816,14 +883,14 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
     iterations = 0
     for iterations in range(1, opts.max_iterations + 1):
         hess = np.diag(d2)
-        grad = d2 * (theta - theta0)                           # half the gradient of the cost
+        grad = d2 * (theta - theta0)  # half the gradient of the cost
         for j, (gram, jac_e) in enumerate(_normal_equations(st, theta, rec, wy, sim, block)):
             _add_normal_equations(hess, grad, ns, own[j], gram, jac_e)
         accepted = False
         while mu <= mu_max:
             try:
                 step = -cho_solve(cho_factor(hess + mu * np.diag(np.diag(hess))), grad)
-            except (np.linalg.LinAlgError, ValueError):           # not positive definite, or not finite
+            except (np.linalg.LinAlgError, ValueError):  # not positive definite, or not finite
                 mu *= up
                 continue
             trial = theta + step
@@ -847,30 +914,55 @@ def _fit(u, y, *, sample_rate_hz, options, input_names, input_units, output_name
             stop = "tolerance"
             break
 
-    model = _assemble(st, theta, sample_rate_hz, hemi,
-                      _as_channels(input_names, input_units, nu, "u"), _as_channels(output_names, output_units, ny, "y"))
-    yhat = sim.yhat                                            # the records simulated at the final θ (spec §11.3)
+    model = _assemble(
+        st,
+        theta,
+        sample_rate_hz,
+        hemi,
+        _as_channels(input_names, input_units, nu, "u"),
+        _as_channels(output_names, output_units, ny, "y"),
+    )
+    yhat = sim.yhat  # the records simulated at the final θ (spec §11.3)
     err = np.linalg.norm(y_all - yhat, axis=0)
     denom = np.linalg.norm(y_all - mu_y, axis=0)
     fit_pct = np.where(denom > 0, 100.0 * (1.0 - err / np.where(denom > 0, denom, 1.0)), 0.0)
-    model.fit = FitSummary(session_id=session_id, trial_id=trial_id, samples=n, iterations=iterations, stop_reason=stop,
-                           cost=current, rmse=rmse(y_all, yhat).tolist(), fit_percent=fit_pct.tolist(),
-                           definition_version=family(FAMILY).version)
+    model.fit = FitSummary(
+        session_id=session_id,
+        trial_id=trial_id,
+        samples=n,
+        iterations=iterations,
+        stop_reason=stop,
+        cost=current,
+        rmse=rmse(y_all, yhat).tolist(),
+        fit_percent=fit_pct.tolist(),
+        definition_version=family(FAMILY).version,
+    )
     return model, FitReport(iterations=iterations, stop_reason=stop, cost_history=history)
 
 
-def _assemble(st: _Structure, theta: np.ndarray, rate: float, hemi: QuaternionHemisphere | None,
-              inputs: list[Channel], outputs: list[Channel]) -> HWModelFile:
+def _assemble(
+    st: _Structure,
+    theta: np.ndarray,
+    rate: float,
+    hemi: QuaternionHemisphere | None,
+    inputs: list[Channel],
+    outputs: list[Channel],
+) -> HWModelFile:
     def pwl(bp, idx):
         return UnitGainMap() if bp is None else PiecewiseLinearMap(breakpoints=bp.tolist(), values=theta[idx].tolist())
 
     return HWModelFile(
-        sample_rate_hz=rate, inputs=inputs, outputs=outputs,
+        sample_rate_hz=rate,
+        inputs=inputs,
+        outputs=outputs,
         input_maps=[pwl(st.in_bp[i], st.v_idx[i]) for i in range(st.nu)],
         output_maps=[pwl(st.out_bp[j], st.c_idx[j]) for j in range(st.ny)],
-        linear=[[TransferFunction(b=theta[st.b_idx[j, i]].tolist(), f=theta[st.f_idx[j, i]].tolist(), nk=st.nk)
-                 for i in range(st.nu)] for j in range(st.ny)],
-        quaternion_hemisphere=hemi)
+        linear=[
+            [TransferFunction(b=theta[st.b_idx[j, i]].tolist(), f=theta[st.f_idx[j, i]].tolist(), nk=st.nk) for i in range(st.nu)]
+            for j in range(st.ny)
+        ],
+        quaternion_hemisphere=hemi,
+    )
 
 
 def rmse(y: np.ndarray, yhat: np.ndarray) -> np.ndarray:
@@ -882,6 +974,7 @@ def rmse(y: np.ndarray, yhat: np.ndarray) -> np.ndarray:
 # =============================================================================================
 # Kinematic distance (paper eq. 9; spec §11.6)
 # =============================================================================================
+
 
 @dataclass(frozen=True)
 class DistanceScales:
@@ -895,8 +988,9 @@ class DistanceScales:
     @classmethod
     def from_definition(cls) -> "DistanceScales":
         """R_p, R_v, R_a, R_θ from the definition file (R_θ converted from degrees; spec §11.6.2)."""
-        return cls(p=param(FAMILY, "R_p"), v=param(FAMILY, "R_v"), a=param(FAMILY, "R_a"),
-                   theta=math.radians(param(FAMILY, "R_theta")))
+        return cls(
+            p=param(FAMILY, "R_p"), v=param(FAMILY, "R_v"), a=param(FAMILY, "R_a"), theta=math.radians(param(FAMILY, "R_theta"))
+        )
 
 
 @dataclass(frozen=True)
@@ -912,8 +1006,9 @@ class WindowFeatures:
         return len(self.position)
 
 
-def window_features(position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray,
-                    quaternion: np.ndarray, window_samples: int) -> WindowFeatures:
+def window_features(
+    position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray, quaternion: np.ndarray, window_samples: int
+) -> WindowFeatures:
     """Split signals (N, 3)/(N, 4) into consecutive windows of ``window_samples`` samples, dropping the
     incomplete tail, and average each (spec §11.6.1): arithmetic means of position, velocity and
     acceleration; the Markley mean of the quaternions (:func:`haptify.conventions.quat_mean`)."""
@@ -941,8 +1036,7 @@ def pair_distance(a: WindowFeatures, b: WindowFeatures, scales: DistanceScales) 
     return out
 
 
-def nearest_distances(test: WindowFeatures, train: WindowFeatures, scales: DistanceScales,
-                      chunk: int = 512) -> np.ndarray:
+def nearest_distances(test: WindowFeatures, train: WindowFeatures, scales: DistanceScales, chunk: int = 512) -> np.ndarray:
     """For each test window, the minimum over training windows of Δ (paper eq. 9; spec §11.6.2).
 
     Exact brute force, vectorised in chunks of ``chunk`` test windows (memory ≈ chunk × training
@@ -954,8 +1048,9 @@ def nearest_distances(test: WindowFeatures, train: WindowFeatures, scales: Dista
     with _one_blas_thread():
         for start in range(0, len(test), chunk):
             stop = min(start + chunk, len(test))
-            part = WindowFeatures(test.position[start:stop], test.velocity[start:stop],
-                                  test.acceleration[start:stop], test.orientation[start:stop])
+            part = WindowFeatures(
+                test.position[start:stop], test.velocity[start:stop], test.acceleration[start:stop], test.orientation[start:stop]
+            )
             out[start:stop] = pair_distance(part, train, scales).min(axis=1)
     return out
 
@@ -982,8 +1077,12 @@ def line_fit(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     x = np.asarray(x, dtype=float)
     y = np.asarray(y, dtype=float)
     if len(x) < 2 or np.ptp(x) <= 1e-6:
-        raise fail("E701", "a line needs at least two segments at different distances", expected="≥ 2 distinct distances",
-                   found=len(np.unique(x)))
+        raise fail(
+            "E701",
+            "a line needs at least two segments at different distances",
+            expected="≥ 2 distinct distances",
+            found=len(np.unique(x)),
+        )
     xm, ym = x.mean(), y.mean()
     slope = float(np.sum((x - xm) * (y - ym)) / np.sum((x - xm) ** 2))
     return slope, float(ym - slope * xm)
@@ -1032,8 +1131,13 @@ def trial_data(ctx_or_session: Any, trial_id: str, rate_hz: float | None = None)
     sig = handle_signals(ctx_or_session, trial_id, rate_hz=rate)
     missing = [name for name, arr in (("handle_accel", sig.acceleration), ("handle_wrench", sig.force)) if arr is None]
     if missing:
-        raise fail("E302", f"trial {trial_id!r} has no {' or '.join(missing)} stream; the dynamic model needs it",
-                   file="session.json", expected=list(REQUIRED_STREAMS), found=missing)
+        raise fail(
+            "E302",
+            f"trial {trial_id!r} has no {' or '.join(missing)} stream; the dynamic model needs it",
+            file="session.json",
+            expected=list(REQUIRED_STREAMS),
+            found=missing,
+        )
     u = np.column_stack([sig.quaternion, sig.position, sig.velocity, sig.acceleration])
     y = np.column_stack([sig.force, sig.torque])
     valid = np.asarray(sig.valid, dtype=bool) & np.all(np.isfinite(u), axis=1) & np.all(np.isfinite(y), axis=1)
@@ -1052,15 +1156,26 @@ def training_trial(session: Any) -> Any:
     """The training trial: the local_dynamic trial with the lowest repetition (normally 1; spec §11.7)."""
     trials = session.trials_of("local_dynamic")
     if not trials:
-        raise fail("E302", "the session has no local_dynamic trial to fit the dynamic model to", file="session.json",
-                   expected="a local_dynamic trial", found=[t.protocol for t in session.trials])
+        raise fail(
+            "E302",
+            "the session has no local_dynamic trial to fit the dynamic model to",
+            file="session.json",
+            expected="a local_dynamic trial",
+            found=[t.protocol for t in session.trials],
+        )
     return trials[0]
 
 
 def held_out_trials(session: Any, train_id: str) -> list[Any]:
     """Test trials (spec §11.7): every other unpowered local_dynamic, free_space or other trial with all three handle streams."""
-    return [t for t in session.trials if t.id != train_id and t.protocol in TEST_PROTOCOLS and not t.powered
-            and all(session.stream(t.id, k) is not None for k in REQUIRED_STREAMS)]
+    return [
+        t
+        for t in session.trials
+        if t.id != train_id
+        and t.protocol in TEST_PROTOCOLS
+        and not t.powered
+        and all(session.stream(t.id, k) is not None for k in REQUIRED_STREAMS)
+    ]
 
 
 def fit_trial(ctx_or_session: Any, trial_id: str, options: FitOptions | None = None) -> tuple[HWModelFile, TrialData]:
@@ -1070,12 +1185,27 @@ def fit_trial(ctx_or_session: Any, trial_id: str, options: FitOptions | None = N
     runs = data.runs()
     seconds = sum(r.stop - r.start for r in runs) / rate
     if seconds < param(FAMILY, "min_training_s"):
-        raise fail("E701", f"trial {trial_id!r} has {seconds:.1f} s of valid data; the dynamic model needs at least "
-                   f"{param(FAMILY, 'min_training_s')} s", expected=f">= {param(FAMILY, 'min_training_s')} s", found=round(seconds, 2))
+        raise fail(
+            "E701",
+            f"trial {trial_id!r} has {seconds:.1f} s of valid data; the dynamic model needs at least "
+            f"{param(FAMILY, 'min_training_s')} s",
+            expected=f">= {param(FAMILY, 'min_training_s')} s",
+            found=round(seconds, 2),
+        )
     session = getattr(ctx_or_session, "session", ctx_or_session)
-    model, _ = fit([data.u[r] for r in runs], [data.y[r] for r in runs], sample_rate_hz=rate, options=options,
-                   input_names=INPUT_NAMES, input_units=INPUT_UNITS, output_names=OUTPUT_NAMES, output_units=OUTPUT_UNITS,
-                   quaternion_columns=[0, 1, 2, 3], session_id=session.session_id, trial_id=trial_id)
+    model, _ = fit(
+        [data.u[r] for r in runs],
+        [data.y[r] for r in runs],
+        sample_rate_hz=rate,
+        options=options,
+        input_names=INPUT_NAMES,
+        input_units=INPUT_UNITS,
+        output_names=OUTPUT_NAMES,
+        output_units=OUTPUT_UNITS,
+        quaternion_columns=[0, 1, 2, 3],
+        session_id=session.session_id,
+        trial_id=trial_id,
+    )
     return model, data
 
 
@@ -1098,7 +1228,7 @@ def _window_valid(valid: np.ndarray, window: int) -> np.ndarray:
 
 def trial_features(data: TrialData, window: int) -> tuple[WindowFeatures, np.ndarray]:
     """Window features of a trial and which windows are wholly valid (spec §11.6.1)."""
-    filled = np.where(data.valid[:, None], data.u, np.r_[1.0, np.zeros(12)])   # rows outside valid stretches are masked out
+    filled = np.where(data.valid[:, None], data.u, np.r_[1.0, np.zeros(12)])  # rows outside valid stretches are masked out
     feats = window_features(filled[:, 4:7], filled[:, 7:10], filled[:, 10:13], filled[:, 0:4], window)
     return feats, _window_valid(data.valid, window)
 
@@ -1113,8 +1243,12 @@ def segment_table(model: HWModelFile, train: TrialData, tests: list[TrialData], 
     rate = model.sample_rate_hz
     window = int(round(param(FAMILY, "window_s") * rate))
     if window < 1:  # a parameter file at a few Hz: windows of round(window_s · rate) = 0 samples
-        raise fail("E701", f"at the model's {rate:g} Hz a {param(FAMILY, 'window_s')} s distance window holds no sample",
-                   expected="round(window_s · sample_rate_hz) >= 1", found=rate)
+        raise fail(
+            "E701",
+            f"at the model's {rate:g} Hz a {param(FAMILY, 'window_s')} s distance window holds no sample",
+            expected="round(window_s · sample_rate_hz) >= 1",
+            found=rate,
+        )
     per_segment = int(round(param(FAMILY, "segment_s") / param(FAMILY, "window_s")))
     scales = DistanceScales.from_definition()
     train_feats, train_ok = trial_features(train, window)
@@ -1131,9 +1265,15 @@ def segment_table(model: HWModelFile, train: TrialData, tests: list[TrialData], 
         predicted = predict_trial(model, data)
         errors = segment_force_errors(data.y[:, :3], predicted[:, :3], window * per_segment)
         for k in np.flatnonzero(seg_ok):
-            rows.append({"trial": data.trial_id, "set": labels[data.trial_id],
-                         "start_s": float(data.t[k * per_segment * window]),
-                         "distance": float(distances[k]), "force_error": float(errors[k])})
+            rows.append(
+                {
+                    "trial": data.trial_id,
+                    "set": labels[data.trial_id],
+                    "start_s": float(data.t[k * per_segment * window]),
+                    "distance": float(distances[k]),
+                    "force_error": float(errors[k]),
+                }
+            )
     return rows
 
 
@@ -1166,30 +1306,63 @@ def compute(ctx: Any) -> list:
     unit = {m.id: m.unit for m in fam.metrics}
     out: list = []
     predicted = predict_trial(model, data)
-    ok = data.valid & np.all(np.isfinite(predicted), axis=1)     # runs of one row have no prediction
+    ok = data.valid & np.all(np.isfinite(predicted), axis=1)  # runs of one row have no prediction
     n = int(ok.sum())
     if n == 0:  # e.g. a given parameter file whose rate leaves single-row runs: no RMS, not NaN (spec §15.2)
-        return _unavailable_all("E701", f"training trial {train.id!r} has no valid run of at least 2 samples at "
-                                f"{model.sample_rate_hz:g} Hz to predict", ids)
+        return _unavailable_all(
+            "E701",
+            f"training trial {train.id!r} has no valid run of at least 2 samples at {model.sample_rate_hz:g} Hz to predict",
+            ids,
+        )
     err_rmse = rmse(data.y[ok], predicted[ok])
-    summary = ({"iterations": model.fit.iterations, "stop_reason": model.fit.stop_reason,
-                "fit_percent": model.fit.fit_percent, "samples": n} if model.fit else {"model": given, "samples": n})
+    summary = (
+        {
+            "iterations": model.fit.iterations,
+            "stop_reason": model.fit.stop_reason,
+            "fit_percent": model.fit.fit_percent,
+            "samples": n,
+        }
+        if model.fit
+        else {"model": given, "samples": n}
+    )
     for name, cols in (("force", slice(0, 3)), ("torque", slice(3, 6))):
         vec = [float(v) for v in err_rmse[cols]]
         mid = f"dynamics.{name}_rmse"
-        out.append(MetricResult(id=mid, value=vec, unit=unit[mid], per_repetition=[vec], trials=[train.id], n=n,
-                                diagnostics=summary, definition_version=fam.version))
-        out.append(MetricResult(id=mid + "_mean", value=float(np.mean(vec)), unit=unit[mid + "_mean"],
-                                per_repetition=[float(np.mean(vec))], trials=[train.id], n=n,
-                                definition_version=fam.version))
+        out.append(
+            MetricResult(
+                id=mid,
+                value=vec,
+                unit=unit[mid],
+                per_repetition=[vec],
+                trials=[train.id],
+                n=n,
+                diagnostics=summary,
+                definition_version=fam.version,
+            )
+        )
+        out.append(
+            MetricResult(
+                id=mid + "_mean",
+                value=float(np.mean(vec)),
+                unit=unit[mid + "_mean"],
+                per_repetition=[float(np.mean(vec))],
+                trials=[train.id],
+                n=n,
+                definition_version=fam.version,
+            )
+        )
 
     eid = "dynamics.error_vs_distance"
     if not ctx.wants(eid):
         return out
     tests = held_out_trials(session, train.id)
     if not tests:
-        return out + _unavailable_all("E701", "no test trial (another local_dynamic repetition, free_space or an unpowered "
-                                      "'other' trial) with handle pose, wrench and acceleration", [eid])
+        return out + _unavailable_all(
+            "E701",
+            "no test trial (another local_dynamic repetition, free_space or an unpowered "
+            "'other' trial) with handle pose, wrench and acceleration",
+            [eid],
+        )
     try:
         labels = {train.id: "training"}
         datasets = []
@@ -1201,9 +1374,17 @@ def compute(ctx: Any) -> list:
     except HaptifyError as err:
         return out + _unavailable_all(err.code, err.findings[0].message, [eid])
     used = [train.id] + [t.id for t in tests if any(r["trial"] == t.id for r in rows)]
-    out.append(MetricResult(id=eid, value=[slope, intercept], unit=unit[eid], trials=used, n=len(rows),
-                            diagnostics={"order": ["slope", "intercept"], "segments": rows},
-                            definition_version=fam.version))
+    out.append(
+        MetricResult(
+            id=eid,
+            value=[slope, intercept],
+            unit=unit[eid],
+            trials=used,
+            n=len(rows),
+            diagnostics={"order": ["slope", "intercept"], "segments": rows},
+            definition_version=fam.version,
+        )
+    )
     return out
 
 
@@ -1228,5 +1409,11 @@ def report_figures(ctx: Any, results: Any) -> list:
     ax.set_xlabel("kinematic distance to the training set (paper eq. 9, dimensionless)")
     ax.set_ylabel("RMS force error of the segment (N)")
     ax.legend(fontsize=8)
-    return [ReportFigure("dynamics_error_vs_distance", "Force prediction error of the local dynamic model against the "
-                         "kinematic distance of each 5 s segment (paper Fig. 9; spec chapter 11).", fig)]
+    return [
+        ReportFigure(
+            "dynamics_error_vs_distance",
+            "Force prediction error of the local dynamic model against the "
+            "kinematic distance of each 5 s segment (paper Fig. 9; spec chapter 11).",
+            fig,
+        )
+    ]

@@ -32,7 +32,9 @@ class MetricDefinition(BaseModel):
     id: str = Field(pattern=r"^[a-z_]+(\.[a-z0-9_]+)+$")
     title: str
     unit: str
-    shape: str = Field("scalar", pattern=r"^(scalar|vector3|vector6|table)$", description="scalar, or a per-axis vector, or a diagnostic table.")
+    shape: str = Field(
+        "scalar", pattern=r"^(scalar|vector3|vector6|table)$", description="scalar, or a per-axis vector, or a diagnostic table."
+    )
     protocols: list[str] = Field(description="Trials whose data feed the metric.")
     inputs: list[str] = Field(description="Stream kinds (and calibration records) it reads.")
     aggregation: str = Field(description="How repetitions combine into the reported value.")

@@ -41,9 +41,17 @@ def _table(lines: list[str], sep: str, path: Path, first_line: int, width: int |
     if not lines:
         return np.zeros((0, width or 0))
     try:
-        frame = pd.read_csv(io.StringIO("\n".join(lines)), sep=sep, header=None, dtype=np.float64,
-                            na_values=["", "NaN", "nan"], keep_default_na=False, skipinitialspace=True,
-                            names=range(width) if width else None, engine="c")
+        frame = pd.read_csv(
+            io.StringIO("\n".join(lines)),
+            sep=sep,
+            header=None,
+            dtype=np.float64,
+            na_values=["", "NaN", "nan"],
+            keep_default_na=False,
+            skipinitialspace=True,
+            names=range(width) if width else None,
+            engine="c",
+        )
     except ValueError as exc:
         for i, line in enumerate(lines):
             for cell in line.split(sep):
@@ -52,8 +60,13 @@ def _table(lines: list[str], sep: str, path: Path, first_line: int, width: int |
                     try:
                         float(cell)
                     except ValueError:
-                        raise fail("E501", f"{path.name} line {first_line + i}: {cell!r} is not a number", file=str(path),
-                                   expected="a number", found=cell) from None
+                        raise fail(
+                            "E501",
+                            f"{path.name} line {first_line + i}: {cell!r} is not a number",
+                            file=str(path),
+                            expected="a number",
+                            found=cell,
+                        ) from None
         raise fail("E501", f"{path.name} cannot be read: {exc}", file=str(path)) from None
     return frame.to_numpy(dtype=np.float64)
 
@@ -79,12 +92,25 @@ def detect_format(path: Path) -> str | None:
 
 
 def _empty(path: Path, fmt: str, manufacturer: str) -> dict:
-    return {"path": path, "manufacturer": manufacturer, "format": fmt, "point_labels": [], "point_units": "mm",
-            "point_rate": 0.0, "point_first_frame": 0, "points": np.zeros((0, 0, 3)), "analog_labels": [],
-            "analog_units": [], "analog_rate": 0.0, "analog_first_sample": 0, "analogs": np.zeros((0, 0))}
+    return {
+        "path": path,
+        "manufacturer": manufacturer,
+        "format": fmt,
+        "point_labels": [],
+        "point_units": "mm",
+        "point_rate": 0.0,
+        "point_first_frame": 0,
+        "points": np.zeros((0, 0, 3)),
+        "analog_labels": [],
+        "analog_units": [],
+        "analog_rate": 0.0,
+        "analog_first_sample": 0,
+        "analogs": np.zeros((0, 0)),
+    }
 
 
 # --- Qualisys TSV (QTM "Export to TSV": 3D and 6D files) -----------------------------------------
+
 
 def qtm_rotation(cells: np.ndarray) -> np.ndarray:
     """QTM's Rot[0]…Rot[8] (column by column: r11, r21, r31, r12, …) as (…, 3, 3) matrices."""
@@ -102,14 +128,22 @@ def _qtm_head(lines: list[str], p: Path) -> dict:
         i += 1
     has_columns = i < len(lines) and lines[i].split("\t")[0] == "Frame"
     if "FREQUENCY" not in meta:
-        raise fail("E501", f"{p.name} is not a QTM TSV export: no FREQUENCY line", file=str(p), expected="FREQUENCY",
-                   found=sorted(meta))
+        raise fail(
+            "E501", f"{p.name} is not a QTM TSV export: no FREQUENCY line", file=str(p), expected="FREQUENCY", found=sorted(meta)
+        )
     markers = [m for m in meta.get("MARKER_NAMES", []) if m]
     bodies = [b for b in meta.get("BODY_NAMES", []) if b]
     lead = 2 if has_columns else 0
-    return {"meta": meta, "has_columns": has_columns, "data_start": i + 1 if has_columns else i, "markers": markers,
-            "bodies": bodies, "lead": lead, "width": lead + 3 * len(markers) + QTM_PER_BODY * len(bodies),
-            "rate": float(meta["FREQUENCY"][0])}
+    return {
+        "meta": meta,
+        "has_columns": has_columns,
+        "data_start": i + 1 if has_columns else i,
+        "markers": markers,
+        "bodies": bodies,
+        "lead": lead,
+        "width": lead + 3 * len(markers) + QTM_PER_BODY * len(bodies),
+        "rate": float(meta["FREQUENCY"][0]),
+    }
 
 
 QTM_PER_BODY = 16  # X, Y, Z, Roll, Pitch, Yaw, Residual, Rot[0]…Rot[8]
@@ -120,14 +154,18 @@ def _qtm_part(p: Path, head: dict, data: np.ndarray, first_frame: int) -> Record
     markers, bodies, lead = head["markers"], head["bodies"], head["lead"]
     rec = _empty(p, "tsv", "Qualisys Track Manager")
     rec.update(point_rate=head["rate"], point_first_frame=first_frame, point_labels=markers)
-    pts = data[:, lead:lead + 3 * len(markers)].reshape(len(data), len(markers), 3)
+    pts = data[:, lead : lead + 3 * len(markers)].reshape(len(data), len(markers), 3)
     gap = (pts == 0.0).all(axis=2) | ~np.isfinite(pts).all(axis=2)
     pts[gap] = np.nan
     rec["points"] = pts
     if bodies:
-        b = data[:, lead + 3 * len(markers):].reshape(len(data), len(bodies), QTM_PER_BODY)
-        rec.update(body_labels=bodies, body_positions=b[:, :, 0:3].copy(), body_residuals=b[:, :, 6].copy(),
-                   body_rotations=qtm_rotation(b[:, :, 7:16]))
+        b = data[:, lead + 3 * len(markers) :].reshape(len(data), len(bodies), QTM_PER_BODY)
+        rec.update(
+            body_labels=bodies,
+            body_positions=b[:, :, 0:3].copy(),
+            body_residuals=b[:, :, 6].copy(),
+            body_rotations=qtm_rotation(b[:, :, 7:16]),
+        )
     return Recording(**rec)
 
 
@@ -140,19 +178,28 @@ def read_qualisys_tsv(path: str | Path, *, stream: bool | None = None) -> Record
     p = Path(path)
     if _stream_wanted(p, stream):
         head = _qtm_head(_head_lines(p), p)
-        rec, rows = _streamed(p, "\t", head, _qtm_part, lambda first: int(first[0]) - 1 if head["has_columns"] and math.isfinite(first[0]) else 0)
+        rec, rows = _streamed(
+            p, "\t", head, _qtm_part, lambda first: int(first[0]) - 1 if head["has_columns"] and math.isfinite(first[0]) else 0
+        )
     else:
         lines = _text(p).splitlines()
         head = _qtm_head(lines, p)
-        data = _table([ln for ln in lines[head["data_start"]:] if ln.strip()], "\t", p, head["data_start"] + 1, head["width"])
+        data = _table([ln for ln in lines[head["data_start"] :] if ln.strip()], "\t", p, head["data_start"] + 1, head["width"])
         first = int(data[0, 0]) - 1 if head["has_columns"] and len(data) and math.isfinite(data[0, 0]) else 0
         rec, rows = _qtm_part(p, head, data, first), len(data)
     meta = head["meta"]
     expected = int(meta["NO_OF_FRAMES"][0]) if meta.get("NO_OF_FRAMES") else rows
     if expected != rows:
-        rec.warnings.append(Finding("W501", f"{p.name}: NO_OF_FRAMES is {expected}, the file holds {rows} frames; "
-                                    f"the {rows} frames read are imported", file=str(p), pointer="/NO_OF_FRAMES",
-                                    expected=expected, found=rows))
+        rec.warnings.append(
+            Finding(
+                "W501",
+                f"{p.name}: NO_OF_FRAMES is {expected}, the file holds {rows} frames; the {rows} frames read are imported",
+                file=str(p),
+                pointer="/NO_OF_FRAMES",
+                expected=expected,
+                found=rows,
+            )
+        )
     return rec
 
 
@@ -178,9 +225,21 @@ def _head_lines(p: Path) -> list[str]:
 def _data_chunks(p: Path, sep: str, head: dict, rows: int) -> Iterator[np.ndarray]:
     """The numeric rows after the header, ``rows`` at a time, parsed as :func:`_table` parses them."""
     try:
-        reader = pd.read_csv(p, sep=sep, header=None, skiprows=head["data_start"], chunksize=rows, dtype=np.float64,
-                             na_values=["", "NaN", "nan"], keep_default_na=False, skipinitialspace=True,
-                             names=range(head["width"]), engine="c", encoding="utf-8-sig", skip_blank_lines=True)
+        reader = pd.read_csv(
+            p,
+            sep=sep,
+            header=None,
+            skiprows=head["data_start"],
+            chunksize=rows,
+            dtype=np.float64,
+            na_values=["", "NaN", "nan"],
+            keep_default_na=False,
+            skipinitialspace=True,
+            names=range(head["width"]),
+            engine="c",
+            encoding="utf-8-sig",
+            skip_blank_lines=True,
+        )
         for frame in reader:
             yield frame.to_numpy(dtype=np.float64)
     except ValueError as exc:
@@ -197,8 +256,11 @@ def _streamed(p: Path, sep: str, head: dict, part, first_frame_of) -> tuple[Reco
                 rows += 1
                 if first is None:
                     first = line
-    first_frame = first_frame_of(_table([first.decode("utf-8")], sep, p, head["data_start"] + 1, head["width"])[0]) \
-        if first is not None else 0
+    first_frame = (
+        first_frame_of(_table([first.decode("utf-8")], sep, p, head["data_start"] + 1, head["width"])[0])
+        if first is not None
+        else 0
+    )
     shape = part(p, head, np.zeros((0, head["width"])), first_frame)
     shape_only = {"points": np.broadcast_to(np.float64(np.nan), (rows, *shape.points.shape[1:]))}
     for name in ("body_positions", "body_rotations", "body_residuals"):
@@ -236,26 +298,47 @@ def _motive_head(lines: list[str], p: Path) -> dict:
     if "Format Version" not in meta:
         raise fail("E501", f"{p.name} is not a Motive CSV export: no 'Format Version'", file=str(p))
     if meta.get("Rotation Type", "Quaternion") != "Quaternion":
-        raise fail("E501", f"{p.name} holds rotations as {meta['Rotation Type']}: export with Rotation Type Quaternion",
-                   file=str(p), pointer="/Rotation Type", expected="Quaternion", found=meta["Rotation Type"])
+        raise fail(
+            "E501",
+            f"{p.name} holds rotations as {meta['Rotation Type']}: export with Rotation Type Quaternion",
+            file=str(p),
+            pointer="/Rotation Type",
+            expected="Quaternion",
+            found=meta["Rotation Type"],
+        )
     units = MOTIVE_UNITS.get(meta.get("Length Units", "Meters"))
     if units is None:
-        raise fail("E504", f"{p.name}: Length Units {meta['Length Units']!r} is not known", file=str(p),
-                   expected=sorted(MOTIVE_UNITS), found=meta["Length Units"])
+        raise fail(
+            "E504",
+            f"{p.name}: Length Units {meta['Length Units']!r} is not known",
+            file=str(p),
+            expected=sorted(MOTIVE_UNITS),
+            found=meta["Length Units"],
+        )
     k = 1
     while k < len(lines) and not lines[k].strip():
         k += 1
     rows = [[c.strip() for c in lines[k + j].split(",")] for j in range(5)] if len(lines) >= k + 5 else []
     if len(rows) < 5 or rows[4][:1] != ["Frame"]:
-        raise fail("E501", f"{p.name}: the Type, Name, ID, quantity and axis lines are missing", file=str(p),
-                   expected="Frame, Time, …", found=rows[-1][:2] if rows else None)
+        raise fail(
+            "E501",
+            f"{p.name}: the Type, Name, ID, quantity and axis lines are missing",
+            file=str(p),
+            expected="Frame, Time, …",
+            found=rows[-1][:2] if rows else None,
+        )
     types, names, _, quantity, axes = rows
     width = len(axes)
-    return {"meta": meta, "units": units, "rate": float(meta.get("Export Frame Rate") or meta.get("Capture Frame Rate") or 0),
-            "data_start": k + 5, "width": width,
-            "col": {(types[j], names[j], quantity[j], axes[j]): j for j in range(2, width)},
-            "markers": list(dict.fromkeys(names[j] for j in range(2, width) if types[j] == "Marker" and quantity[j] == "Position")),
-            "bodies": list(dict.fromkeys(names[j] for j in range(2, width) if types[j] == "Rigid Body"))}
+    return {
+        "meta": meta,
+        "units": units,
+        "rate": float(meta.get("Export Frame Rate") or meta.get("Capture Frame Rate") or 0),
+        "data_start": k + 5,
+        "width": width,
+        "col": {(types[j], names[j], quantity[j], axes[j]): j for j in range(2, width)},
+        "markers": list(dict.fromkeys(names[j] for j in range(2, width) if types[j] == "Marker" and quantity[j] == "Position")),
+        "bodies": list(dict.fromkeys(names[j] for j in range(2, width) if types[j] == "Rigid Body")),
+    }
 
 
 def _motive_part(p: Path, head: dict, data: np.ndarray, first_frame: int) -> Recording:
@@ -267,8 +350,9 @@ def _motive_part(p: Path, head: dict, data: np.ndarray, first_frame: int) -> Rec
     for i, name in enumerate(markers):
         for a, axis in enumerate("XYZ"):
             pts[:, i, a] = data[:, col[("Marker", name, "Position", axis)]]
-    rec.update(point_rate=head["rate"], point_units=head["units"], point_labels=markers, points=pts,
-               point_first_frame=first_frame)
+    rec.update(
+        point_rate=head["rate"], point_units=head["units"], point_labels=markers, points=pts, point_first_frame=first_frame
+    )
     if bodies:
         pos = np.full((n, len(bodies), 3), np.nan)
         quat = np.full((n, len(bodies), 4), np.nan)
@@ -280,8 +364,13 @@ def _motive_part(p: Path, head: dict, data: np.ndarray, first_frame: int) -> Rec
                 for a, axis in enumerate("WXYZ"):
                     quat[:, i, a] = data[:, col[("Rigid Body", name, "Rotation", axis)]]
             except KeyError as exc:
-                raise fail("E501", f"{p.name}: rigid body {name!r} lacks column {exc.args[0][2:]}", file=str(p),
-                           expected="Rotation X, Y, Z, W and Position X, Y, Z", found=None) from None
+                raise fail(
+                    "E501",
+                    f"{p.name}: rigid body {name!r} lacks column {exc.args[0][2:]}",
+                    file=str(p),
+                    expected="Rotation X, Y, Z, W and Position X, Y, Z",
+                    found=None,
+                ) from None
             err = col.get(("Rigid Body", name, "Mean Marker Error", ""))
             if err is not None:
                 res[:, i] = data[:, err]
@@ -291,11 +380,20 @@ def _motive_part(p: Path, head: dict, data: np.ndarray, first_frame: int) -> Rec
         norm_err = np.abs(np.linalg.norm(np.where(valid[..., None], quat, [1.0, 0.0, 0.0, 0.0]), axis=2) - 1.0)
         if (norm_err > 1e-3).any():
             f, b = np.argwhere(norm_err > 1e-3)[0]
-            raise fail("E501", f"{p.name}: rigid body {bodies[b]!r} holds no unit quaternion at frame {first_frame + f}",
-                       file=str(p), expected="|q| = 1", found=float(np.linalg.norm(quat[f, b])))
+            raise fail(
+                "E501",
+                f"{p.name}: rigid body {bodies[b]!r} holds no unit quaternion at frame {first_frame + f}",
+                file=str(p),
+                expected="|q| = 1",
+                found=float(np.linalg.norm(quat[f, b])),
+            )
         has_residuals = any(("Rigid Body", name, "Mean Marker Error", "") in col for name in bodies)
-        rec.update(body_labels=bodies, body_positions=pos, body_rotations=rot,
-                   body_residuals=np.where(np.isnan(res) & valid, 0.0, res) if has_residuals else None)
+        rec.update(
+            body_labels=bodies,
+            body_positions=pos,
+            body_rotations=rot,
+            body_residuals=np.where(np.isnan(res) & valid, 0.0, res) if has_residuals else None,
+        )
     return Recording(**rec)
 
 
@@ -312,7 +410,7 @@ def read_motive_csv(path: str | Path, *, stream: bool | None = None) -> Recordin
         return _streamed(p, ",", head, _motive_part, lambda first: int(first[0]) if math.isfinite(first[0]) else 0)[0]
     lines = _text(p).splitlines()
     head = _motive_head(lines, p)
-    data = _table([ln for ln in lines[head["data_start"]:] if ln.strip()], ",", p, head["data_start"] + 1, head["width"])
+    data = _table([ln for ln in lines[head["data_start"] :] if ln.strip()], ",", p, head["data_start"] + 1, head["width"])
     return _motive_part(p, head, data, int(data[0, 0]) if len(data) and math.isfinite(data[0, 0]) else 0)
 
 
@@ -337,11 +435,10 @@ def _nexus_sections(lines: list[str], path: Path) -> dict[str, tuple[float, list
         j = i + 5
         while j < len(lines) and lines[j].strip() and lines[j].strip().strip(",") not in NEXUS_SECTIONS:
             j += 1
-        out[name] = (rate, labels, columns, units, i + 6, lines[i + 5:j])
+        out[name] = (rate, labels, columns, units, i + 6, lines[i + 5 : j])
         i = j
     if not out:
-        raise fail("E501", f"{path.name} is not a Nexus CSV export: no section ({', '.join(NEXUS_SECTIONS)})",
-                   file=str(path))
+        raise fail("E501", f"{path.name} is not a Nexus CSV export: no section ({', '.join(NEXUS_SECTIONS)})", file=str(path))
     return out
 
 
@@ -363,9 +460,14 @@ def rotation_vector_matrix(v: np.ndarray) -> np.ndarray:
     x, y, z = np.moveaxis(axis, -1, 0)
     c, s = np.cos(angle), np.sin(angle)
     C = 1 - c
-    return np.stack([np.stack([c + x * x * C, x * y * C - z * s, x * z * C + y * s], -1),
-                     np.stack([y * x * C + z * s, c + y * y * C, y * z * C - x * s], -1),
-                     np.stack([z * x * C - y * s, z * y * C + x * s, c + z * z * C], -1)], -2)
+    return np.stack(
+        [
+            np.stack([c + x * x * C, x * y * C - z * s, x * z * C + y * s], -1),
+            np.stack([y * x * C + z * s, c + y * y * C, y * z * C - x * s], -1),
+            np.stack([z * x * C - y * s, z * y * C + x * s, c + z * z * C], -1),
+        ],
+        -2,
+    )
 
 
 def read_nexus_csv(path: str | Path) -> Recording:  # noqa: C901 (over ruff's limit of 15: to be split)
@@ -385,12 +487,20 @@ def read_nexus_csv(path: str | Path) -> Recording:  # noqa: C901 (over ruff's li
         rate, labels, columns, units, first, body = sections[name]
         data = _table(body, ",", p, first, len(columns))
         for label, cols in _groups(labels, columns):
-            if not all(a in cols for a in "XYZ") or UNITS.get(units[cols["X"]], None) is None \
-                    or UNITS[units[cols["X"]]].dimension != "length":
+            if (
+                not all(a in cols for a in "XYZ")
+                or UNITS.get(units[cols["X"]], None) is None
+                or UNITS[units[cols["X"]]].dimension != "length"
+            ):
                 continue
             if unit is not None and units[cols["X"]] != unit:
-                raise fail("E504", f"{p.name}: {label!r} is in {units[cols['X']]}, other points in {unit}", file=str(p),
-                           expected=unit, found=units[cols["X"]])
+                raise fail(
+                    "E504",
+                    f"{p.name}: {label!r} is in {units[cols['X']]}, other points in {unit}",
+                    file=str(p),
+                    expected=unit,
+                    found=units[cols["X"]],
+                )
             unit = units[cols["X"]]
             point_labels.append(label)
             point_cols.append(data[:, [cols[a] for a in "XYZ"]])
@@ -406,11 +516,21 @@ def read_nexus_csv(path: str | Path) -> Recording:  # noqa: C901 (over ruff's li
                 continue
             angle = UNITS.get(units[cols["RX"]])
             if angle is None or angle.dimension != "angle":
-                raise fail("E504", f"{p.name}: segment {label!r} rotation unit {units[cols['RX']]!r} is not an angle",
-                           file=str(p), expected=["deg", "rad"], found=units[cols["RX"]])
+                raise fail(
+                    "E504",
+                    f"{p.name}: segment {label!r} rotation unit {units[cols['RX']]!r} is not an angle",
+                    file=str(p),
+                    expected=["deg", "rad"],
+                    found=units[cols["RX"]],
+                )
             if unit is not None and units[cols["TX"]] != unit:
-                raise fail("E504", f"{p.name}: segment {label!r} is in {units[cols['TX']]}, points in {unit}", file=str(p),
-                           expected=unit, found=units[cols["TX"]])
+                raise fail(
+                    "E504",
+                    f"{p.name}: segment {label!r} is in {units[cols['TX']]}, points in {unit}",
+                    file=str(p),
+                    expected=unit,
+                    found=units[cols["TX"]],
+                )
             unit = units[cols["TX"]]
             names.append(label)
             pos.append(data[:, [cols[c] for c in ("TX", "TY", "TZ")]])
@@ -418,10 +538,16 @@ def read_nexus_csv(path: str | Path) -> Recording:  # noqa: C901 (over ruff's li
         if names:
             n_frames = len(data)
             if point_labels and n_frames != rec["points"].shape[0]:
-                raise fail("E501", f"{p.name}: Segments hold {n_frames} frames, Trajectories {rec['points'].shape[0]}",
-                           file=str(p), expected=rec["points"].shape[0], found=n_frames)
-            rec.update(body_labels=names, body_positions=np.stack(pos, axis=1), body_rotations=np.stack(rot, axis=1),
-                       point_units=unit)
+                raise fail(
+                    "E501",
+                    f"{p.name}: Segments hold {n_frames} frames, Trajectories {rec['points'].shape[0]}",
+                    file=str(p),
+                    expected=rec["points"].shape[0],
+                    found=n_frames,
+                )
+            rec.update(
+                body_labels=names, body_positions=np.stack(pos, axis=1), body_rotations=np.stack(rot, axis=1), point_units=unit
+            )
             point_rate, frames = rate, data[:, 0]
             if not point_labels:
                 rec["points"] = np.zeros((n_frames, 0, 3))
@@ -438,8 +564,13 @@ def read_nexus_csv(path: str | Path) -> Recording:  # noqa: C901 (over ruff's li
                 values.append(data[:, j])
         per_frame = int(round(rate / point_rate)) if point_rate else 1
         first_sample = (int(data[0, 0]) - 1) * per_frame + int(data[0, 1]) if len(data) else 0
-        rec.update(analog_labels=an_labels, analog_units=an_units, analog_rate=rate, analog_first_sample=first_sample,
-                   analogs=np.array(values) if values else np.zeros((0, len(data))))
+        rec.update(
+            analog_labels=an_labels,
+            analog_units=an_units,
+            analog_rate=rate,
+            analog_first_sample=first_sample,
+            analogs=np.array(values) if values else np.zeros((0, len(data))),
+        )
     return Recording(**rec)
 
 
@@ -452,12 +583,23 @@ def read_export(fmt: str, path: str | Path, *, stream: bool | None = None) -> Re
     return READERS[fmt](path) if fmt == "nexus" else READERS[fmt](path, stream=stream)
 
 
-def import_export(fmt: str, path: str | Path, out: str | Path | Destination, mapping: str | Path | LoadedMap | None = None,
-                  *, overrides: dict | None = None, overwrite: bool = False, append: bool = False,
-                  stream: bool | None = None, chunk_frames: int | None = None, progress=None) -> ImportResult:
+def import_export(
+    fmt: str,
+    path: str | Path,
+    out: str | Path | Destination,
+    mapping: str | Path | LoadedMap | None = None,
+    *,
+    overrides: dict | None = None,
+    overwrite: bool = False,
+    append: bool = False,
+    stream: bool | None = None,
+    chunk_frames: int | None = None,
+    progress=None,
+) -> ImportResult:
     """Import a Qualisys TSV, Motive CSV or Nexus CSV export as one trial (spec §5.10), through the
     map rules of a C3D file (:func:`~haptify.importers.import_recording`); ``stream``, ``chunk_frames``
     and ``progress`` as for a C3D file (§5.5.1)."""
     dest, loaded, _, device, extra = _prepare(out, mapping, fmt, overrides, overwrite, append)
-    return import_recording(read_export(fmt, path, stream=stream), dest, loaded, device, extra,
-                            chunk_frames=chunk_frames, progress=progress)
+    return import_recording(
+        read_export(fmt, path, stream=stream), dest, loaded, device, extra, chunk_frames=chunk_frames, progress=progress
+    )

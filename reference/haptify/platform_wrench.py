@@ -66,31 +66,64 @@ def origin_by_rule(kind: int, origin_m: np.ndarray, *, number: int, file: str) -
     """
     o = np.asarray(origin_m, dtype=np.float64)
     if o.shape != (3,) or not np.isfinite(o).all():
-        raise fail("E506", f"force platform {number}: FORCE_PLATFORM:ORIGIN is not three finite numbers", file=file,
-                   pointer="/FORCE_PLATFORM/ORIGIN", expected="3 finite numbers", found=np.ravel(o).tolist())
+        raise fail(
+            "E506",
+            f"force platform {number}: FORCE_PLATFORM:ORIGIN is not three finite numbers",
+            file=file,
+            pointer="/FORCE_PLATFORM/ORIGIN",
+            expected="3 finite numbers",
+            found=np.ravel(o).tolist(),
+        )
     notes = []
     if kind == 3:
         a, b = abs(float(o[0])), abs(float(o[1]))
         if min(a, b) == 0.0:
-            raise fail("E506", f"force platform {number} (type 3): the sensor offsets a, b in FORCE_PLATFORM:ORIGIN "
-                       "must be non-zero to form a moment", file=file, pointer="/FORCE_PLATFORM/ORIGIN",
-                       expected="a > 0 and b > 0", found=o.tolist())
+            raise fail(
+                "E506",
+                f"force platform {number} (type 3): the sensor offsets a, b in FORCE_PLATFORM:ORIGIN "
+                "must be non-zero to form a moment",
+                file=file,
+                pointer="/FORCE_PLATFORM/ORIGIN",
+                expected="a > 0 and b > 0",
+                found=o.tolist(),
+            )
         read = np.array([0.0, 0.0, -abs(float(o[2]))])
         if o[0] < 0 or o[1] < 0 or o[2] > 0:
-            notes.append(_sign_note(number, file, o, np.array([a, b, read[2]]),
-                                    "Kistler's (a, b, az0) has a, b > 0 and az0 ≤ 0; the magnitudes are used"))
+            notes.append(
+                _sign_note(
+                    number,
+                    file,
+                    o,
+                    np.array([a, b, read[2]]),
+                    "Kistler's (a, b, az0) has a, b > 0 and az0 ≤ 0; the magnitudes are used",
+                )
+            )
         return PlatformGeometry(read, (a, b)), notes
     if o[2] > 0:
-        notes.append(_sign_note(number, file, o, -o, "the vector from the sensing origin to the top surface has "
-                                "z ≤ 0; this one is read as written from the surface to the origin and negated"))
+        notes.append(
+            _sign_note(
+                number,
+                file,
+                o,
+                -o,
+                "the vector from the sensing origin to the top surface has "
+                "z ≤ 0; this one is read as written from the surface to the origin and negated",
+            )
+        )
         o = -o
     return PlatformGeometry(o), notes
 
 
 def _sign_note(number: int, file: str, written: np.ndarray, used: np.ndarray, why: str) -> Finding:
-    return Finding("W503", f"force platform {number}: FORCE_PLATFORM:ORIGIN {np.round(written * 1000, 6).tolist()} mm "
-                   f"follows the other sign convention ({why})", file=file, pointer="/FORCE_PLATFORM/ORIGIN",
-                   expected=np.round(used * 1000, 6).tolist(), found=np.round(written * 1000, 6).tolist())
+    return Finding(
+        "W503",
+        f"force platform {number}: FORCE_PLATFORM:ORIGIN {np.round(written * 1000, 6).tolist()} mm "
+        f"follows the other sign convention ({why})",
+        file=file,
+        pointer="/FORCE_PLATFORM/ORIGIN",
+        expected=np.round(used * 1000, 6).tolist(),
+        found=np.round(written * 1000, 6).tolist(),
+    )
 
 
 def calibrated(kind: int, channels: np.ndarray, cal: np.ndarray | None, *, number: int, file: str) -> np.ndarray:
@@ -98,14 +131,25 @@ def calibrated(kind: int, channels: np.ndarray, cal: np.ndarray | None, *, numbe
     type 3 with a calibration matrix; the channels themselves otherwise (spec §5.6.1)."""
     x = np.asarray(channels, dtype=np.float64)
     if kind == 4 and cal is None:
-        raise fail("E506", f"force platform {number} is type 4 but the file has no FORCE_PLATFORM:CAL_MATRIX for it",
-                   file=file, pointer="/FORCE_PLATFORM/CAL_MATRIX", expected="a 6 × 6 matrix", found=None)
+        raise fail(
+            "E506",
+            f"force platform {number} is type 4 but the file has no FORCE_PLATFORM:CAL_MATRIX for it",
+            file=file,
+            pointer="/FORCE_PLATFORM/CAL_MATRIX",
+            expected="a 6 × 6 matrix",
+            found=None,
+        )
     if kind not in (3, 4) or cal is None:
         return x
     if cal.shape != (x.shape[0], x.shape[0]):
-        raise fail("E506", f"force platform {number}: its CAL_MATRIX is {cal.shape[0]} × {cal.shape[1]}, its type "
-                   f"records {x.shape[0]} channels", file=file, pointer="/FORCE_PLATFORM/CAL_MATRIX",
-                   expected=f"{x.shape[0]} × {x.shape[0]}", found=list(cal.shape))
+        raise fail(
+            "E506",
+            f"force platform {number}: its CAL_MATRIX is {cal.shape[0]} × {cal.shape[1]}, its type records {x.shape[0]} channels",
+            file=file,
+            pointer="/FORCE_PLATFORM/CAL_MATRIX",
+            expected=f"{x.shape[0]} × {x.shape[0]}",
+            found=list(cal.shape),
+        )
     return cal @ x
 
 
@@ -140,8 +184,7 @@ def wrench_at_surface(force: np.ndarray, moment_o: np.ndarray, geometry: Platfor
     return moment_o - cross(geometry.origin, force)
 
 
-def equivalent_corners(force_w: np.ndarray, moment_w: np.ndarray, positions: np.ndarray,
-                       rotations: np.ndarray) -> np.ndarray:
+def equivalent_corners(force_w: np.ndarray, moment_w: np.ndarray, positions: np.ndarray, rotations: np.ndarray) -> np.ndarray:
     """Four corner readings ``(24, N)`` (c1_fx … c4_tz, sensor frames) whose total wrench by §14.1 is
     ``force_w`` and ``moment_w`` (``(3, N)``, about W's origin, in W): each corner carries ``F/4`` and the
     moment ``(M − p̄ × F)/4`` with ``p̄`` the corners' mean position, both rotated into its frame (§5.6.1)."""

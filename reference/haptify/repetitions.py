@@ -40,8 +40,14 @@ def definition_of(family_name: str, metric_id: str):
     raise KeyError(f"{metric_id} is not defined in metrics/{family_name}.json")
 
 
-def aggregate(family_name: str, metric_id: str, values: Sequence[TrialValue], *,
-              diagnostics: dict[str, Any] | None = None, warnings: Sequence[str] = ()) -> MetricResult | Unavailable:
+def aggregate(
+    family_name: str,
+    metric_id: str,
+    values: Sequence[TrialValue],
+    *,
+    diagnostics: dict[str, Any] | None = None,
+    warnings: Sequence[str] = (),
+) -> MetricResult | Unavailable:
     """Mean of the per-repetition values, sd with ddof = 1 when n ≥ 2 (spec §15.3).
 
     Per-trial values must be finite (spec §15.2): a family turns degenerate data into a coded error
@@ -69,14 +75,29 @@ def aggregate(family_name: str, metric_id: str, values: Sequence[TrialValue], *,
     )
 
 
-def single(family_name: str, metric_id: str, value: float, *, n: int = 1, trials: Sequence[str] = (),
-           diagnostics: dict[str, Any] | None = None, warnings: Sequence[str] = ()) -> MetricResult:
+def single(
+    family_name: str,
+    metric_id: str,
+    value: float,
+    *,
+    n: int = 1,
+    trials: Sequence[str] = (),
+    diagnostics: dict[str, Any] | None = None,
+    warnings: Sequence[str] = (),
+) -> MetricResult:
     """A metric with one value that is not a mean over repetitions (e.g. the modeled workspace volume).
     Its definition's ``aggregation``, spec §15.3."""
     return MetricResult(
-        id=metric_id, value=float(value), unit=definition_of(family_name, metric_id).unit,
-        per_repetition=[], trials=list(trials), n=n, sd=None, diagnostics=dict(diagnostics or {}),
-        definition_version=family(family_name).version, warnings=sorted(set(warnings)),
+        id=metric_id,
+        value=float(value),
+        unit=definition_of(family_name, metric_id).unit,
+        per_repetition=[],
+        trials=list(trials),
+        n=n,
+        sd=None,
+        diagnostics=dict(diagnostics or {}),
+        definition_version=family(family_name).version,
+        warnings=sorted(set(warnings)),
     )
 
 
@@ -91,7 +112,9 @@ def no_trials(protocol: str) -> HaptifyError:
     return fail("E310", f"the session has no {protocol} trial", expected=f"a trial of protocol {protocol!r}", found=None)
 
 
-def per_trial(ctx: Any, trial_ids: Sequence[str], compute_one: Callable[[str], Any], what: str) -> tuple[dict[str, Any], HaptifyError | None]:
+def per_trial(
+    ctx: Any, trial_ids: Sequence[str], compute_one: Callable[[str], Any], what: str
+) -> tuple[dict[str, Any], HaptifyError | None]:
     """Run ``compute_one`` on every trial; return the results of those that worked and the first coded error.
 
     A metric rests on the trials that worked, and each trial that failed is then reported on ``ctx`` as
@@ -111,8 +134,9 @@ def per_trial(ctx: Any, trial_ids: Sequence[str], compute_one: Callable[[str], A
     return out, next(iter(failed.values()), None)
 
 
-def protocol_trials(ctx: Any, protocol: str, metric_ids: Sequence[str], compute_one: Callable[[str], Any],
-                    what: str) -> tuple[dict[str, Any], list[Unavailable]]:
+def protocol_trials(
+    ctx: Any, protocol: str, metric_ids: Sequence[str], compute_one: Callable[[str], Any], what: str
+) -> tuple[dict[str, Any], list[Unavailable]]:
     """:func:`per_trial` over every trial of ``protocol`` (spec §15.2).
 
     Returns the per-trial results and an empty list, or — when the session has no trial of the protocol

@@ -67,13 +67,18 @@ def _html_page(session_id: str, results: ResultsFile, figures: list[ReportFigure
         f"<td>{html.escape(m.unit)}</td><td>{m.n}</td><td>{html.escape(_value(m.sd) if m.sd is not None else '—')}</td>"
         f"<td>{html.escape(_value(m.uncertainty.U) if m.uncertainty else '—')}</td>"
         f"<td>{html.escape(f'{m.uncertainty.k:.3g}' if m.uncertainty else '—')}</td></tr>"
-        for m in results.metrics)
-    missing = "".join(f"<li><code>{html.escape(u.id)}</code>: {html.escape(u.code)} {html.escape(u.reason)}</li>"
-                      for u in results.unavailable)
+        for m in results.metrics
+    )
+    missing = "".join(
+        f"<li><code>{html.escape(u.id)}</code>: {html.escape(u.code)} {html.escape(u.reason)}</li>" for u in results.unavailable
+    )
     warnings = "".join(f"<li>{html.escape(w.code)}: {html.escape(w.message)}</li>" for w in results.warnings)
-    figs = "".join(f"<figure><img src=\"{html.escape(f.name)}.png\" alt=\"{html.escape(f.caption)}\">"
-                   f"<figcaption>{html.escape(f.caption)}</figcaption></figure>" for f in figures)
-    sounds = "".join(f"<p>{html.escape(c)}<br><audio controls src=\"{html.escape(n)}.wav\"></audio></p>" for n, c in audio)
+    figs = "".join(
+        f'<figure><img src="{html.escape(f.name)}.png" alt="{html.escape(f.caption)}">'
+        f"<figcaption>{html.escape(f.caption)}</figcaption></figure>"
+        for f in figures
+    )
+    sounds = "".join(f'<p>{html.escape(c)}<br><audio controls src="{html.escape(n)}.wav"></audio></p>' for n, c in audio)
     device = results.device.label if results.device else ""
     return f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>Haptify report — {html.escape(session_id)}</title>
@@ -84,10 +89,10 @@ td,th{{border:1px solid #ccc;padding:3px 8px}}figure{{margin:1.5em 0}}img{{max-w
 <h2>Benchmarks (the paper's Table III)</h2>{to_html(build_table([results], with_paper=True))}
 <h2>Every metric</h2><table><thead><tr><th>metric</th><th>value</th><th>unit</th><th>n</th><th>sd</th><th>U (95 %, spec §19.4)</th><th>k</th></tr></thead>
 <tbody>{rows}</tbody></table>
-{f'<h2>Not computed</h2><ul>{missing}</ul>' if missing else ''}
-{f'<h2>Warnings</h2><ul>{warnings}</ul>' if warnings else ''}
+{f"<h2>Not computed</h2><ul>{missing}</ul>" if missing else ""}
+{f"<h2>Warnings</h2><ul>{warnings}</ul>" if warnings else ""}
 <h2>Figures</h2>{figs}
-{f'<h2>Vibrations as sound</h2>{sounds}' if sounds else ''}
+{f"<h2>Vibrations as sound</h2>{sounds}" if sounds else ""}
 </body></html>
 """
 
@@ -98,8 +103,9 @@ def _value(v: Any) -> str:
     return f"{v:.6g}"
 
 
-def write_report(ctx: ComputeContext, results: ResultsFile, out_dir: Path, *, wav_scale: float | None = None,
-                 overwrite: bool = False) -> Path:
+def write_report(
+    ctx: ComputeContext, results: ResultsFile, out_dir: Path, *, wav_scale: float | None = None, overwrite: bool = False
+) -> Path:
     """Write ``out_dir`` with index.html, one PNG per figure and one WAV per audio signal (spec §15.6)."""
     import matplotlib
 
@@ -126,8 +132,9 @@ def write_report(ctx: ComputeContext, results: ResultsFile, out_dir: Path, *, wa
         for a in audio:
             wavfile.write(build / f"{a.name}.wav", WAV_RATE_HZ, to_wav_samples(a.samples, a.rate_hz, scale))
         atomic_write_text(build / "results.json", results.model_dump_json(indent=2) + "\n")
-        atomic_write_text(build / "index.html", _html_page(results.session_id, results, figures,
-                                                           [(a.name, a.caption) for a in audio]))
+        atomic_write_text(
+            build / "index.html", _html_page(results.session_id, results, figures, [(a.name, a.caption) for a in audio])
+        )
         replace_folder_atomically(build, out_dir, overwrite)
     except BaseException:
         shutil.rmtree(build, ignore_errors=True)

@@ -41,7 +41,9 @@ class MetricUncertainty(BaseModel):
     effective degrees of freedom (Welch–Satterthwaite) and the budget."""
 
     model_config = ConfigDict(extra="forbid")
-    method: Literal["type_a", "type_a_mc"] = Field(description="type_a: repetitions only; type_a_mc: plus Monte Carlo Type B (§19.3).")
+    method: Literal["type_a", "type_a_mc"] = Field(
+        description="type_a: repetitions only; type_a_mc: plus Monte Carlo Type B (§19.3)."
+    )
     u: Value = Field(description="Combined standard uncertainty, in the metric's unit (per component for a vector).")
     U: Value = Field(description="Expanded uncertainty k·u.")
     k: float = Field(gt=0, description="Coverage factor: Student's t at dof_eff for the coverage probability.")
@@ -49,12 +51,15 @@ class MetricUncertainty(BaseModel):
     dof_eff: float | None = Field(None, gt=0, description="Effective degrees of freedom (GUM G.4); absent: infinite.")
     budget: list[BudgetTerm]
     mc_draws: int | None = Field(None, ge=2, description="Monte Carlo draws behind the Type B terms.")
-    sources_missing: list[str] = Field(default_factory=list, description="Type B sources of the method this session's rig figures could not give (left out of u).")
+    sources_missing: list[str] = Field(
+        default_factory=list,
+        description="Type B sources of the method this session's rig figures could not give (left out of u).",
+    )
 
     @field_validator("u", "U")
     @classmethod
     def _finite(cls, v: Any) -> Any:
-        for x in (v if isinstance(v, list) else [v]):
+        for x in v if isinstance(v, list) else [v]:
             if not math.isfinite(x) or x < 0:
                 raise ValueError("uncertainties are finite and non-negative")
         return v
@@ -74,7 +79,9 @@ class MetricResult(BaseModel):
     diagnostics: dict[str, Any] = Field(default_factory=dict)
     definition_version: str
     warnings: list[str] = Field(default_factory=list, description="Codes of findings about this metric.")
-    uncertainty: MetricUncertainty | None = Field(None, description="Measurement uncertainty (spec chapter 19), with `haptify compute --uncertainty`.")
+    uncertainty: MetricUncertainty | None = Field(
+        None, description="Measurement uncertainty (spec chapter 19), with `haptify compute --uncertainty`."
+    )
 
     @field_validator("value", "per_repetition", "sd")
     @classmethod
@@ -82,7 +89,7 @@ class MetricResult(BaseModel):
         """No metric silently returns NaN (spec §15.2)."""
         flat = v if isinstance(v, list) else [v]
         for x in flat:
-            for y in (x if isinstance(x, list) else [x]):
+            for y in x if isinstance(x, list) else [x]:
                 if y is not None and not math.isfinite(y):
                     raise ValueError("metric values must be finite; report Unavailable instead")
         return v

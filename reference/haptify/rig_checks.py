@@ -28,9 +28,8 @@ def rp(key: str) -> Any:
     return param(FAMILY, key)
 
 
-
-
 # --- per-trial computations --------------------------------------------------------------------
+
 
 def impact_frequencies(ctx_or_session: Any, trial_id: str) -> np.ndarray:
     """Natural frequency per axis (Hz) of one ``rig.plate_impact`` trial (spec §14.4).
@@ -57,24 +56,35 @@ def _gravity_dirs_h(raw: np.ndarray, bias: np.ndarray, r_hs: np.ndarray, sign: f
 
 def _best_lag(score: Callable[[float], float], max_lag: float, coarse: float, fine: float, label: str) -> float:
     """Lag (s) maximising ``score``: a coarse search over ±max_lag, a fine one around the coarse best, a parabola."""
+
     def search(centre: float, half: float, step: float) -> tuple[np.ndarray, np.ndarray]:
         lags = centre + np.arange(-int(round(half / step)), int(round(half / step)) + 1) * step
         return lags, np.array([score(float(x)) for x in lags])
 
     lags, c = search(0.0, max_lag, coarse)
     if not np.isfinite(c).any():  # no lag pairs a usable sample with the F/T grid
-        raise fail("E624", f"{label}: no lag within ±{max_lag} s finds usable samples to align",
-                   expected="usable samples overlapping the F/T grid", found="none")
+        raise fail(
+            "E624",
+            f"{label}: no lag within ±{max_lag} s finds usable samples to align",
+            expected="usable samples overlapping the F/T grid",
+            found="none",
+        )
     k = int(np.nanargmax(c))
     if k == 0 or k == len(c) - 1:
-        raise fail("E624", f"{label}: the best alignment lies at the edge of the ±{max_lag} s search",
-                   expected=f"a delay within ±{max_lag} s", found=float(lags[k]))
+        raise fail(
+            "E624",
+            f"{label}: the best alignment lies at the edge of the ±{max_lag} s search",
+            expected=f"a delay within ±{max_lag} s",
+            found=float(lags[k]),
+        )
     lags, c = search(float(lags[k]), coarse, fine)
     k = int(np.nanargmax(c))
-    a, b, d = c[k - 1:k + 2] if 0 < k < len(c) - 1 else (np.nan, np.nan, np.nan)
+    a, b, d = c[k - 1 : k + 2] if 0 < k < len(c) - 1 else (np.nan, np.nan, np.nan)
     denom = a - 2 * b + d
     if not denom < 0:
-        raise fail("E624", f"{label}: the alignment score has no peak (did the handle rotate?)", expected="a peaked score", found="flat")
+        raise fail(
+            "E624", f"{label}: the alignment score has no peak (did the handle rotate?)", expected="a peaked score", found="flat"
+        )
     return float(lags[k] + 0.5 * (a - d) / denom * fine)
 
 
@@ -97,15 +107,25 @@ def recorder_delays(ctx_or_session: Any, trial_id: str) -> dict[str, float]:
     track = signals.mocap_track(ctx_or_session, trial_id)
     if not track.valid.any():
         stream = session.stream(trial_id, "handle_pose")
-        raise fail("E611", f"trial {trial_id!r}: no usable motion-capture samples to align with the F/T recorder",
-                   file=stream.file if stream else None, expected=f"valid runs of at least {signals.sp('min_segment_s')} s", found="none")
+        raise fail(
+            "E611",
+            f"trial {trial_id!r}: no usable motion-capture samples to align with the F/T recorder",
+            file=stream.file if stream else None,
+            expected=f"valid runs of at least {signals.sp('min_segment_s')} s",
+            found="none",
+        )
     rate = float(rp("sync_rate_hz"))
     max_lag = float(rp("sync_max_lag_s"))
     t0 = max(w["t"].iloc[0], a["t"].iloc[0], track.t[0]) + max_lag
     t1 = min(w["t"].iloc[-1], a["t"].iloc[-1], track.t[-1]) - max_lag
     grid = signals.uniform_grid(float(t0), float(t1), rate)
     if len(grid) < 10:
-        raise fail("E624", f"trial {trial_id!r} is too short for the sync check", expected=f"> {2 * max_lag} s of overlap", found=len(grid))
+        raise fail(
+            "E624",
+            f"trial {trial_id!r} is too short for the sync check",
+            expected=f"> {2 * max_lag} s of overlap",
+            found=len(grid),
+        )
     r_hs = calibration.sensor_rotation(session, "ft_sensor")
     r_ha = calibration.sensor_rotation(session, "accelerometer")
     fc = float(rp("sync_cutoff_hz"))
@@ -127,18 +147,28 @@ def recorder_delays(ctx_or_session: Any, trial_id: str) -> dict[str, float]:
         return float(np.nanmean(_row_sums(u_f * u)))
 
     coarse, fine = float(rp("sync_coarse_step_s")), 1.0 / rate
-    return {"accel_minus_ft_s": _best_lag(score_accel, max_lag, coarse, fine, f"trial {trial_id!r} accelerometer"),
-            "mocap_minus_ft_s": _best_lag(score_mocap, max_lag, coarse, fine, f"trial {trial_id!r} motion capture")}
+    return {
+        "accel_minus_ft_s": _best_lag(score_accel, max_lag, coarse, fine, f"trial {trial_id!r} accelerometer"),
+        "mocap_minus_ft_s": _best_lag(score_mocap, max_lag, coarse, fine, f"trial {trial_id!r} motion capture"),
+    }
 
 
 # --- metric records -----------------------------------------------------------------------------
 
+
 def _vector_result(metric_id: str, per_trial_values: dict[str, np.ndarray], diagnostics: dict[str, Any]) -> MetricResult:
     vals = np.array(list(per_trial_values.values()), float)
-    return MetricResult(id=metric_id, value=[float(x) for x in vals.mean(axis=0)], unit=definition_of(FAMILY, metric_id).unit,
-                        per_repetition=[[float(x) for x in row] for row in vals], trials=list(per_trial_values), n=len(vals),
-                        sd=[float(x) for x in vals.std(axis=0, ddof=1)] if len(vals) >= 2 else None,
-                        diagnostics=diagnostics, definition_version=family(FAMILY).version)
+    return MetricResult(
+        id=metric_id,
+        value=[float(x) for x in vals.mean(axis=0)],
+        unit=definition_of(FAMILY, metric_id).unit,
+        per_repetition=[[float(x) for x in row] for row in vals],
+        trials=list(per_trial_values),
+        n=len(vals),
+        sd=[float(x) for x in vals.std(axis=0, ddof=1)] if len(vals) >= 2 else None,
+        diagnostics=diagnostics,
+        definition_version=family(FAMILY).version,
+    )
 
 
 def _trial_results(ctx: Any, metric_id: str, compute_one: Callable[[str], Any]) -> dict[str, Any] | Unavailable:
@@ -157,19 +187,33 @@ def _cop_error(ctx: Any, mid: str, got: dict[str, list]) -> MetricResult:
     """``rig.cop_error`` (spec §14.5): mean over all placements, sd over placements."""
     errors = np.array([p.error for ps in got.values() for p in ps])
     per_rep = [float(np.mean([p.error for p in ps])) for ps in got.values()]
-    return MetricResult(id=mid, value=float(errors.mean()), unit=definition_of(FAMILY, mid).unit, per_repetition=per_rep,
-                        trials=list(got), n=int(len(errors)), sd=float(errors.std(ddof=1)) if len(errors) >= 2 else None,
-                        diagnostics={"placements": [{"trial": tid, "t": [p.t0, p.t1], "cop_m": p.cop.tolist(), "mocap_m": p.mocap.tolist(),
-                                                     "error_m": p.error} for tid, ps in got.items() for p in ps],
-                                     "bias_source": force_plate.plate_bias(ctx)[1]},
-                        definition_version=family(FAMILY).version)
+    return MetricResult(
+        id=mid,
+        value=float(errors.mean()),
+        unit=definition_of(FAMILY, mid).unit,
+        per_repetition=per_rep,
+        trials=list(got),
+        n=int(len(errors)),
+        sd=float(errors.std(ddof=1)) if len(errors) >= 2 else None,
+        diagnostics={
+            "placements": [
+                {"trial": tid, "t": [p.t0, p.t1], "cop_m": p.cop.tolist(), "mocap_m": p.mocap.tolist(), "error_m": p.error}
+                for tid, ps in got.items()
+                for p in ps
+            ],
+            "bias_source": force_plate.plate_bias(ctx)[1],
+        },
+        definition_version=family(FAMILY).version,
+    )
 
 
 def _calibration_rms(ctx: Any, mid: str, got: dict[str, calibration.HandleCalibration]) -> MetricResult:
     """``rig.handle_calibration_rms`` (spec §6.2–6.3, §14.7): force, acceleration, torque fit RMS."""
     rms = {tid: np.array([c.rms_force_N, c.rms_accel_m_per_s2, c.rms_torque_Nm]) for tid, c in got.items()}
-    diag = {"components": ["force_N", "accel_m_per_s2", "torque_Nm"],
-            "fits": {tid: {**c.to_record(f"fit-{tid}", tid), "n_samples": c.n_samples, **c.diagnostics} for tid, c in got.items()}}
+    diag = {
+        "components": ["force_N", "accel_m_per_s2", "torque_Nm"],
+        "fits": {tid: {**c.to_record(f"fit-{tid}", tid), "n_samples": c.n_samples, **c.diagnostics} for tid, c in got.items()},
+    }
     return _vector_result(mid, rms, diag)
 
 
@@ -207,6 +251,7 @@ def compute(ctx: Any) -> list[MetricResult | Unavailable]:
 
 
 # --- the rig check (spec §14.8) ------------------------------------------------------------------
+
 
 @dataclass
 class Check:
@@ -248,13 +293,18 @@ def plate_capacity(rig: Any) -> tuple[np.ndarray, np.ndarray] | None:
     moments = []
     for lever_axis in (1, 0):  # Mx from y levers, My from x levers
         arm = pos[:, lever_axis]
-        moments.append(min(_axis_capacity(frange, rot[i:i + 1], np.array([0.0, 0.0, 1.0]), abs(arm[i]) / np.sum(arm ** 2))
-                           for i in range(4) if abs(arm[i]) > 0))
+        moments.append(
+            min(
+                _axis_capacity(frange, rot[i : i + 1], np.array([0.0, 0.0, 1.0]), abs(arm[i]) / np.sum(arm**2))
+                for i in range(4)
+                if abs(arm[i]) > 0
+            )
+        )
     rad = np.linalg.norm(pos[:, :2], axis=1)
     mz = []
     for i in range(4):
         tangent = np.array([-pos[i, 1], pos[i, 0], 0.0]) / rad[i]
-        mz.append(_axis_capacity(frange, rot[i:i + 1], tangent, rad[i] / np.sum(rad ** 2)))
+        mz.append(_axis_capacity(frange, rot[i : i + 1], tangent, rad[i] / np.sum(rad**2)))
     moments.append(min(mz))
     return force, np.array(moments)
 
@@ -268,7 +318,15 @@ def _range_checks(session: Any, ctx: Any) -> list[Check]:
     out: list[Check] = []
     cap = plate_capacity(rig)
     if cap is None:
-        out.append(Check("plate force/moment range (Table I)", "SKIP", None, "rig.force_plate.corner_range", "the rig does not describe the plate's corner ranges"))
+        out.append(
+            Check(
+                "plate force/moment range (Table I)",
+                "SKIP",
+                None,
+                "rig.force_plate.corner_range",
+                "the rig does not describe the plate's corner ranges",
+            )
+        )
     else:
         force, moment = cap
         note = ""
@@ -282,14 +340,47 @@ def _range_checks(session: Any, ctx: Any) -> list[Check]:
             note = "plate weight unknown (no bias); vertical range not reduced by it"
         req_f = np.asarray(rp("req_plate_force_N"), float)
         req_m = np.asarray(rp("req_plate_moment_Nm"), float)
-        out.append(Check("plate force range (Table I)", _status(bool(np.all(force >= req_f))), force.round(1).tolist(),
-                         f">= {req_f.tolist()} N", note))
-        out.append(Check("plate moment range (Table I)", _status(bool(np.all(moment >= req_m))), moment.round(1).tolist(),
-                         f">= {req_m.tolist()} N*m"))
+        out.append(
+            Check(
+                "plate force range (Table I)",
+                _status(bool(np.all(force >= req_f))),
+                force.round(1).tolist(),
+                f">= {req_f.tolist()} N",
+                note,
+            )
+        )
+        out.append(
+            Check(
+                "plate moment range (Table I)",
+                _status(bool(np.all(moment >= req_m))),
+                moment.round(1).tolist(),
+                f">= {req_m.tolist()} N*m",
+            )
+        )
     handle = rig.handle
-    items = [("handle F/T force range (Table I)", handle and handle.ft_sensor.range and handle.ft_sensor.range.force_N, "req_handle_force_N", "N", "FAIL"),
-             ("handle F/T torque range (Table I)", handle and handle.ft_sensor.range and handle.ft_sensor.range.torque_Nm, "req_handle_torque_Nm", "N*m", "WARN"),
-             ("accelerometer range (Table I)", handle and handle.accelerometer.range and handle.accelerometer.range.accel_m_per_s2, "req_accel_m_per_s2", "m/s^2", "FAIL")]
+    items = [
+        (
+            "handle F/T force range (Table I)",
+            handle and handle.ft_sensor.range and handle.ft_sensor.range.force_N,
+            "req_handle_force_N",
+            "N",
+            "FAIL",
+        ),
+        (
+            "handle F/T torque range (Table I)",
+            handle and handle.ft_sensor.range and handle.ft_sensor.range.torque_Nm,
+            "req_handle_torque_Nm",
+            "N*m",
+            "WARN",
+        ),
+        (
+            "accelerometer range (Table I)",
+            handle and handle.accelerometer.range and handle.accelerometer.range.accel_m_per_s2,
+            "req_accel_m_per_s2",
+            "m/s^2",
+            "FAIL",
+        ),
+    ]
     for name, rng, key, unit, shortfall in items:
         req = float(np.max(rp(key)))
         if not rng:
@@ -329,23 +420,55 @@ def check_rig(ctx: Any) -> list[Check]:
     omax, smax = float(rp("req_orientation_error_deg")), float(rp("req_sync_offset_s"))
     # (metric, line name, requirement, pass?, shown value, why the line is skipped although the metric exists)
     lines: list[tuple[str, str, str, Callable[[Any], bool], Callable[[Any], Any], Callable[[Any], str | None]]] = [
-        ("rig.plate_natural_frequency", "plate natural frequency (Appendix 1)", f">= {fmin} Hz on every axis",
-         lambda r: min(r.value) >= fmin, lambda r: [round(x, 1) for x in r.value], lambda r: None),
-        ("rig.cop_error", "COP error (Appendix 2)", f"mean <= {cmax * 1000:.1f} mm (Kistler 9281B11)", lambda r: r.value <= cmax,
-         lambda r: {"mean_mm": round(r.value * 1000, 2), "sd_mm": round((r.sd or 0.0) * 1000, 2), "n": r.n}, lambda r: None),
-        ("rig.handle_calibration_rms", "handle calibration RMS (§III-C)", f"<= {rmax} (N, m/s^2, N*m)",
-         lambda r: all(v <= m for v, m in zip(r.value, rmax)), lambda r: [float(f"{x:.3g}") for x in r.value], lambda r: None),
-        ("rig.handle_calibration_rms", "F/T sensor pose vs motion capture", f"<= {omax} deg RMS",
-         lambda r: max(_orientation_errors(r)) <= omax, lambda r: round(max(_orientation_errors(r)), 2),
-         lambda r: None if _orientation_errors(r) else "no usable handle_pose in the calibration trials"),
-        ("rig.sync_offset", "recorder synchronisation", f"|delay| <= {smax * 1000:.1f} ms", lambda r: r.value <= smax,
-         lambda r: {"max_abs_ms": round(r.value * 1000, 2),
-                    **{tid: {k: round(v * 1000, 2) for k, v in d.items()} for tid, d in r.diagnostics["delays_s"].items()}},
-         lambda r: None),
+        (
+            "rig.plate_natural_frequency",
+            "plate natural frequency (Appendix 1)",
+            f">= {fmin} Hz on every axis",
+            lambda r: min(r.value) >= fmin,
+            lambda r: [round(x, 1) for x in r.value],
+            lambda r: None,
+        ),
+        (
+            "rig.cop_error",
+            "COP error (Appendix 2)",
+            f"mean <= {cmax * 1000:.1f} mm (Kistler 9281B11)",
+            lambda r: r.value <= cmax,
+            lambda r: {"mean_mm": round(r.value * 1000, 2), "sd_mm": round((r.sd or 0.0) * 1000, 2), "n": r.n},
+            lambda r: None,
+        ),
+        (
+            "rig.handle_calibration_rms",
+            "handle calibration RMS (§III-C)",
+            f"<= {rmax} (N, m/s^2, N*m)",
+            lambda r: all(v <= m for v, m in zip(r.value, rmax)),
+            lambda r: [float(f"{x:.3g}") for x in r.value],
+            lambda r: None,
+        ),
+        (
+            "rig.handle_calibration_rms",
+            "F/T sensor pose vs motion capture",
+            f"<= {omax} deg RMS",
+            lambda r: max(_orientation_errors(r)) <= omax,
+            lambda r: round(max(_orientation_errors(r)), 2),
+            lambda r: None if _orientation_errors(r) else "no usable handle_pose in the calibration trials",
+        ),
+        (
+            "rig.sync_offset",
+            "recorder synchronisation",
+            f"|delay| <= {smax * 1000:.1f} ms",
+            lambda r: r.value <= smax,
+            lambda r: {
+                "max_abs_ms": round(r.value * 1000, 2),
+                **{tid: {k: round(v * 1000, 2) for k, v in d.items()} for tid, d in r.diagnostics["delays_s"].items()},
+            },
+            lambda r: None,
+        ),
     ]
     checks = _range_checks(session_of(ctx), ctx)
     for mid, name, requirement, judge, show, skip in lines:
         res = results[mid]
         why = f"{res.code}: {res.reason}" if isinstance(res, Unavailable) else skip(res)
-        checks.append(Check(name, "SKIP", None, requirement, why) if why else Check(name, _status(judge(res)), show(res), requirement))
+        checks.append(
+            Check(name, "SKIP", None, requirement, why) if why else Check(name, _status(judge(res)), show(res), requirement)
+        )
     return checks

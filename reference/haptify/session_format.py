@@ -17,9 +17,22 @@ from pydantic import BaseModel, ConfigDict, Field
 from haptify import schemas
 from haptify.versions import SPEC_VERSION
 
-Id = Annotated[str, Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$", description="An identifier: letters, digits, '.', '_' or '-', at most 64 characters.")]
+Id = Annotated[
+    str,
+    Field(
+        pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$",
+        description="An identifier: letters, digits, '.', '_' or '-', at most 64 characters.",
+    ),
+]
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3, description="A 3-vector in SI units.")]
-Quat = Annotated[list[float], Field(min_length=4, max_length=4, description="A unit quaternion, scalar first [w, x, y, z], rotating the body frame to the parent frame.")]
+Quat = Annotated[
+    list[float],
+    Field(
+        min_length=4,
+        max_length=4,
+        description="A unit quaternion, scalar first [w, x, y, z], rotating the body frame to the parent frame.",
+    ),
+]
 
 PROTOCOLS: tuple[str, ...] = tuple(schemas.load("protocols.json")["protocols"])
 STREAM_KINDS: tuple[str, ...] = tuple(schemas.load("stream-kinds.json")["kinds"])
@@ -42,11 +55,14 @@ class Pose(_Strict):
 
 # --- device (spec §2.3) -------------------------------------------------------------------------
 
+
 class LinearLimit(_Strict):
     """A joint limit ``constant + Σ coefficients[q_k] · q_k`` in rad, keyed by earlier joint names (``"q2"``) (spec §2.3)."""
 
     constant: float = Field(description="Offset in rad.")
-    coefficients: dict[Annotated[str, Field(pattern=r"^q[1-9]$")], float] = Field(default_factory=dict, description="Dimensionless slope per other joint, e.g. {\"q2\": -0.85}.")
+    coefficients: dict[Annotated[str, Field(pattern=r"^q[1-9]$")], float] = Field(
+        default_factory=dict, description='Dimensionless slope per other joint, e.g. {"q2": -0.85}.'
+    )
 
 
 class DHJoint(_Strict):
@@ -108,6 +124,7 @@ class DeviceRef(_Strict):
 
 
 # --- rig (spec §2.4) ----------------------------------------------------------------------------
+
 
 class SensorRange(_Strict):
     """Symmetric measuring range per axis: ``|reading| ≤ range`` in N, N·m or m/s² (spec §2.4)."""
@@ -174,6 +191,7 @@ class Rig(_Strict):
 
 # --- calibration records (spec §2.8) -------------------------------------------------------------
 
+
 class HandleGravityCalibration(_Strict):
     """Parameters of paper eqs. 1–3, in the sensor frames."""
 
@@ -194,7 +212,9 @@ class PlateBiasCalibration(_Strict):
     kind: Literal["plate_bias"] = "plate_bias"
     id: Id
     source_trial: Id | None = None
-    bias: Annotated[list[float], Field(min_length=24, max_length=24, description="Mean of every plate_wrench column (c1_fx … c4_tz) at rest.")]
+    bias: Annotated[
+        list[float], Field(min_length=24, max_length=24, description="Mean of every plate_wrench column (c1_fx … c4_tz) at rest.")
+    ]
 
 
 class ClockOffset(_Strict):
@@ -210,6 +230,7 @@ Calibration = Annotated[Union[HandleGravityCalibration, PlateBiasCalibration, Cl
 
 
 # --- trials and streams (spec §2.5–2.7) ----------------------------------------------------------
+
 
 class Column(_Strict):
     """One column of a stream: its name and unit (``t`` in s first) (spec §2.6)."""
@@ -268,7 +289,9 @@ class Session(_Strict):
 
     spec_version: Literal[SPEC_VERSION]  # type: ignore[valid-type]
     session_id: Id
-    date: str = Field(pattern=r"^\d{4}-(0[1-9]|1[0-2])-(0[1-9]|[12]\d|3[01])$", description="ISO date of the recording (YYYY-MM-DD).")
+    date: str = Field(
+        pattern=r"^\d{4}-(0[1-9]|1[0-2])-(0[1-9]|[12]\d|3[01])$", description="ISO date of the recording (YYYY-MM-DD)."
+    )
     lab: Party
     examiner: Party
     device: Union[Device, DeviceRef]
@@ -328,7 +351,7 @@ def quaternion_groups(kind: str, entities: list[str] | None = None) -> list[list
 
 def default_stream_file(trial_id: str, kind: str, fmt: str = "parquet") -> str:
     """The conventional relative path of a stream file: ``trials/<trial>/<kind>.<ext>``."""
-    return f"trials/{trial_id}/{kind}.{ 'parquet' if fmt == 'parquet' else 'csv'}"
+    return f"trials/{trial_id}/{kind}.{'parquet' if fmt == 'parquet' else 'csv'}"
 
 
 def is_safe_relative_path(path: str) -> bool:

@@ -42,6 +42,7 @@ def sp(key: str) -> Any:
 
 # --- primitives (spec §7.2) ----------------------------------------------------------------------
 
+
 def nominal_rate(t: np.ndarray) -> float:
     """Mean sample rate of a time column, Hz: ``(n − 1) / (t_last − t_first)`` (spec §2.6)."""
     t = np.asarray(t, float)
@@ -146,6 +147,7 @@ def angular_velocity(t: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 # --- motion capture (spec §7.4) --------------------------------------------------------------------
 
+
 @dataclass
 class Kinematics:
     """Handle motion in W at times ``t`` (s): position (m), unit quaternion body → world, velocity (m/s),
@@ -170,8 +172,9 @@ class MocapTrack(Kinematics):
         return self.segment >= 0
 
 
-def bridge_gaps(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray,
-                max_gap_s: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def bridge_gaps(
+    t: np.ndarray, position: np.ndarray, quaternion: np.ndarray, max_gap_s: float | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Fill occlusion gaps no longer than ``max_gap_s`` (spec §7.4).
 
     A gap is a run of samples with any NaN between valid samples i and j; it is bridged when
@@ -292,6 +295,7 @@ def resample_track(track: MocapTrack, grid: np.ndarray) -> PoseOnGrid:
 
 def mocap_track(ctx_or_session: Any, trial_id: str) -> MocapTrack:
     """The processed ``handle_pose`` of a trial at its native samples (spec §7.4); cached on a context."""
+
     def build() -> MocapTrack:
         session = session_of(ctx_or_session)
         pose = session.read(trial_id, "handle_pose")
@@ -308,12 +312,18 @@ def pose_on_grid(ctx_or_session: Any, trial_id: str, grid: np.ndarray) -> PoseOn
     if not out.valid.any():
         session = session_of(ctx_or_session)
         stream = session.stream(trial_id, "handle_pose")
-        raise fail("E611", f"trial {trial_id!r}: no usable motion-capture samples in the analysed time span",
-                   file=stream.file if stream else None, expected=f"valid runs of at least {sp('min_segment_s')} s", found="none")
+        raise fail(
+            "E611",
+            f"trial {trial_id!r}: no usable motion-capture samples in the analysed time span",
+            file=stream.file if stream else None,
+            expected=f"valid runs of at least {sp('min_segment_s')} s",
+            found="none",
+        )
     return out
 
 
 # --- the calibrated handle signals (spec §7.5) ------------------------------------------------------
+
 
 @dataclass
 class HandleSignals(Kinematics):
@@ -343,21 +353,27 @@ class HandleSignals(Kinematics):
         return np.linalg.norm(self.angular_velocity, axis=1)
 
 
-
-
 def build_handle_signals(ctx_or_session: Any, trial_id: str, rate_hz: float, calibration: Any = None) -> HandleSignals:
     """:func:`handle_signals` without caching the result; ``calibration`` defaults to the session's (spec §6.4).
     With a context, the processed motion capture (§7.4) is the one cached for the trial's other users."""
     session = session_of(ctx_or_session)
     track = mocap_track(ctx_or_session, trial_id)  # reads handle_pose: its span is the track's
-    streams = {kind: session.read(trial_id, kind) for kind in ("handle_wrench", "handle_accel")
-               if session.stream(trial_id, kind) is not None}
+    streams = {
+        kind: session.read(trial_id, kind)
+        for kind in ("handle_wrench", "handle_accel")
+        if session.stream(trial_id, kind) is not None
+    }
     t0 = max([track.t[0]] + [df["t"].iloc[0] for df in streams.values()])
     t1 = min([track.t[-1]] + [df["t"].iloc[-1] for df in streams.values()])
     grid = uniform_grid(float(t0), float(t1), rate_hz)
     if len(grid) < 2:
-        raise fail("E305", f"the handle streams of trial {trial_id!r} do not overlap in time", file="session.json",
-                   expected="overlapping handle_pose, handle_wrench and handle_accel", found=[float(t0), float(t1)])
+        raise fail(
+            "E305",
+            f"the handle streams of trial {trial_id!r} do not overlap in time",
+            file="session.json",
+            expected="overlapping handle_pose, handle_wrench and handle_accel",
+            found=[float(t0), float(t1)],
+        )
     pose = pose_on_grid(ctx_or_session, trial_id, grid)
     v = pose.valid
     force = torque = accel = None
@@ -367,15 +383,27 @@ def build_handle_signals(ctx_or_session: Any, trial_id: str, rate_hz: float, cal
         w = streams["handle_wrench"]
         raw = lowpass_resample(w["t"].to_numpy(), w[WRENCH_COLUMNS].to_numpy(), grid, float(sp("wrench_cutoff_hz")))
         force, torque = np.full((len(grid), 3), np.nan), np.full((len(grid), 3), np.nan)
-        force[v], torque[v] = cal_mod.compensate_wrench(raw[v], pose.quaternion[v], cal, cal_mod.sensor_pose(session, "ft_sensor"))
+        force[v], torque[v] = cal_mod.compensate_wrench(
+            raw[v], pose.quaternion[v], cal, cal_mod.sensor_pose(session, "ft_sensor")
+        )
     if "handle_accel" in streams:
         a = streams["handle_accel"]
         raw = lowpass_resample(a["t"].to_numpy(), a[ACCEL_COLUMNS].to_numpy(), grid, float(sp("accel_cutoff_hz")))
         accel = np.full((len(grid), 3), np.nan)
         accel[v] = cal_mod.compensate_accel(raw[v], pose.quaternion[v], cal, cal_mod.sensor_pose(session, "accelerometer"))
-    return HandleSignals(trial_id=trial_id, rate_hz=float(rate_hz), t=grid, position=pose.position, quaternion=pose.quaternion,
-                         velocity=pose.velocity, angular_velocity=pose.angular_velocity, acceleration=accel,
-                         force=force, torque=torque, valid=v)
+    return HandleSignals(
+        trial_id=trial_id,
+        rate_hz=float(rate_hz),
+        t=grid,
+        position=pose.position,
+        quaternion=pose.quaternion,
+        velocity=pose.velocity,
+        angular_velocity=pose.angular_velocity,
+        acceleration=accel,
+        force=force,
+        torque=torque,
+        valid=v,
+    )
 
 
 def handle_signals(ctx_or_session: Any, trial_id: str, rate_hz: float | None = None) -> HandleSignals:
@@ -416,6 +444,7 @@ def handle_accel_native(ctx_or_session: Any, trial_id: str) -> NativeAccel:
     ``acceleration`` is that rotated to W with gravity removed, using the orientation slerped from
     motion capture (§7.4), NaN where motion capture is unusable or absent. Cached on a context.
     """
+
     def build() -> NativeAccel:
         session = session_of(ctx_or_session)
         a = session.read(trial_id, "handle_accel")

@@ -52,10 +52,14 @@ class FitRule:
     @classmethod
     def at_rate(cls, rate_hz: float) -> "FitRule":
         """The rule of the definition file on a grid of ``rate_hz`` (Hz)."""
-        return cls(min_press_s=float(stp("min_press_s")), min_press_depth_m=float(stp("min_press_depth_m")),
-                   settle=round(float(stp("contact_settle_s")) * rate_hz), hold=round(float(stp("rise_hold_s")) * rate_hz),
-                   high=float(stp("fit_high_fraction")),
-                   min_samples=int(stp("min_fit_samples")))
+        return cls(
+            min_press_s=float(stp("min_press_s")),
+            min_press_depth_m=float(stp("min_press_depth_m")),
+            settle=round(float(stp("contact_settle_s")) * rate_hz),
+            hold=round(float(stp("rise_hold_s")) * rate_hz),
+            high=float(stp("fit_high_fraction")),
+            min_samples=int(stp("min_fit_samples")),
+        )
 
 
 def grid_rate(t: np.ndarray) -> float:
@@ -122,16 +126,22 @@ def press_of(t: np.ndarray, penetration: np.ndarray, normal_force: np.ndarray, a
     s = a + rule.settle
     if s > m:
         return Press(a, b, m, s, m, float("nan"), float("nan"), float(f[m]), depth, np.empty(0, dtype=int))
-    r = s + end_of_rise(f[s:m + 1], rule.hold)
+    r = s + end_of_rise(f[s : m + 1], rule.hold)
     f_s = float(f[s])
     rise = float(f[r]) - f_s
     rising = np.arange(s, r + 1)
     fit = rising[(f[rising] >= f_s) & (f[rising] <= f_s + rule.high * rise)] if rise > 0 else rising[:0]
-    return Press(a, b, m, s, r, f_s, float(np.max(f[s:m + 1])), float(f[m]), depth, fit)
+    return Press(a, b, m, s, r, f_s, float(np.max(f[s : m + 1])), float(f[m]), depth, fit)
 
 
-def find_presses(t: np.ndarray, penetration: np.ndarray, normal_force: np.ndarray, contact: np.ndarray,
-                 valid: np.ndarray | None = None, rule: FitRule | None = None) -> list[Press]:
+def find_presses(
+    t: np.ndarray,
+    penetration: np.ndarray,
+    normal_force: np.ndarray,
+    contact: np.ndarray,
+    valid: np.ndarray | None = None,
+    rule: FitRule | None = None,
+) -> list[Press]:
     """Every press of a trial, qualifying or not (spec §13.2).
 
     A press is a maximal run of ``contact`` samples lasting at least ``min_press_s`` and reaching a
@@ -186,8 +196,15 @@ def least_squares_line(x: np.ndarray, y: np.ndarray) -> tuple[float, float, floa
     return float(k), float(c), r2
 
 
-def fit_stiffness(t: np.ndarray, penetration: np.ndarray, normal_force: np.ndarray, contact: np.ndarray, trial_id: str = "",
-                  valid: np.ndarray | None = None, rule: FitRule | None = None) -> StiffnessFit:
+def fit_stiffness(
+    t: np.ndarray,
+    penetration: np.ndarray,
+    normal_force: np.ndarray,
+    contact: np.ndarray,
+    trial_id: str = "",
+    valid: np.ndarray | None = None,
+    rule: FitRule | None = None,
+) -> StiffnessFit:
     """Least-squares line normal_force = k · penetration + c through the fit samples of every qualifying
     press (spec §13.3), and each press's contact overshoot above that line (§13.4).
 
@@ -201,13 +218,22 @@ def fit_stiffness(t: np.ndarray, penetration: np.ndarray, normal_force: np.ndarr
     presses = [p for p in found if p.qualifies(rule)]
     thin = [p for p in found if not p.qualifies(rule)]
     if not presses:
-        raise fail("E315", f"trial {trial_id!r}: no press qualifies (>= {rule.min_press_s} s of contact, >= {rule.min_press_depth_m} m "
-                   f"deep, >= {rule.min_samples} fit samples on the rise); {len(thin)} press(es) had too few fit samples",
-                   expected="at least one press", found=0)
+        raise fail(
+            "E315",
+            f"trial {trial_id!r}: no press qualifies (>= {rule.min_press_s} s of contact, >= {rule.min_press_depth_m} m "
+            f"deep, >= {rule.min_samples} fit samples on the rise); {len(thin)} press(es) had too few fit samples",
+            expected="at least one press",
+            found=0,
+        )
     idx = np.concatenate([p.fit for p in presses])
     x, y = penetration[idx], normal_force[idx]
     if float(np.ptp(x)) <= 0:
-        raise fail("E315", f"trial {trial_id!r}: the fit samples do not span any penetration", expected="varying penetration", found=float(x[0]))
+        raise fail(
+            "E315",
+            f"trial {trial_id!r}: the fit samples do not span any penetration",
+            expected="varying penetration",
+            found=float(x[0]),
+        )
     k, c, r2 = least_squares_line(x, y)
     presses = [replace(p, overshoot=contact_overshoot(p, penetration, normal_force, k, c)) for p in presses]
     return StiffnessFit(k, c, r2, presses, thin, x, y)
@@ -215,6 +241,7 @@ def fit_stiffness(t: np.ndarray, penetration: np.ndarray, normal_force: np.ndarr
 
 def trial_fit(ctx: Any, trial_id: str) -> StiffnessFit:
     """:func:`fit_stiffness` on a stiffness trial's contact signals (spec §13.5); cached on a ComputeContext."""
+
     def build() -> StiffnessFit:
         cs = contact_signals(ctx, trial_id)  # contact is False wherever the sample is not valid
         return fit_stiffness(cs.t, cs.penetration, cs.normal_force, cs.contact, trial_id, cs.valid)
@@ -228,13 +255,22 @@ def trial_codes(ctx: Any, trial_id: str, fit: StiffnessFit) -> list[str]:
     codes = []
     if len(fit.presses) < int(stp("recommended_presses")):
         codes.append("W414")
-        ctx.warn("W414", f"trial {trial_id!r}: {len(fit.presses)} press(es) qualified, {stp('recommended_presses')} recommended",
-                 metric="stiffness.measured", trial=trial_id)
+        ctx.warn(
+            "W414",
+            f"trial {trial_id!r}: {len(fit.presses)} press(es) qualified, {stp('recommended_presses')} recommended",
+            metric="stiffness.measured",
+            trial=trial_id,
+        )
     if fit.thin:
         codes.append("W415")
         where = ", ".join(f"sample {p.start} ({len(p.fit)} fit samples)" for p in fit.thin)
-        ctx.warn("W415", f"trial {trial_id!r}: {len(fit.thin)} press(es) left out with fewer than {stp('min_fit_samples')} "
-                 f"fit samples: {where}", metric="stiffness.measured", trial=trial_id)
+        ctx.warn(
+            "W415",
+            f"trial {trial_id!r}: {len(fit.thin)} press(es) left out with fewer than {stp('min_fit_samples')} "
+            f"fit samples: {where}",
+            metric="stiffness.measured",
+            trial=trial_id,
+        )
     return codes
 
 
@@ -248,20 +284,36 @@ def compute(ctx: Any) -> list:
     codes = {tid: trial_codes(ctx, tid, f) for tid, f in done.items()}
     commanded = {tid: contact_signals(ctx, tid).stiffness_N_per_m for tid in done}
     fits = list(done.values())
-    diag = {"intercept_N": [f.intercept for f in fits], "r2": [f.r2 for f in fits],
-            "presses": [len(f.presses) for f in fits], "commanded_N_per_m": list(commanded.values()),
-            "press_fit_samples": [[len(p.fit) for p in f.presses] for f in fits],
-            "presses_left_out": [len(f.thin) for f in fits]}
-    peak_diag = {"press_peaks_N": [[p.peak_force for p in f.presses] for f in fits],
-                 "press_overshoot_N": [[p.overshoot for p in f.presses] for f in fits]}
+    diag = {
+        "intercept_N": [f.intercept for f in fits],
+        "r2": [f.r2 for f in fits],
+        "presses": [len(f.presses) for f in fits],
+        "commanded_N_per_m": list(commanded.values()),
+        "press_fit_samples": [[len(p.fit) for p in f.presses] for f in fits],
+        "presses_left_out": [len(f.thin) for f in fits],
+    }
+    peak_diag = {
+        "press_peaks_N": [[p.peak_force for p in f.presses] for f in fits],
+        "press_overshoot_N": [[p.overshoot for p in f.presses] for f in fits],
+    }
     return [
-        aggregate(FAMILY, "stiffness.measured", [TrialValue(t, f.stiffness, codes[t]) for t, f in done.items()], diagnostics=diag),
-        aggregate(FAMILY, "stiffness.accuracy", [TrialValue(t, 100.0 * f.stiffness / commanded[t], codes[t]) for t, f in done.items()]),
-        aggregate(FAMILY, "stiffness.peak_force", [TrialValue(t, f.peak_force, codes[t]) for t, f in done.items()], diagnostics=peak_diag),
+        aggregate(
+            FAMILY, "stiffness.measured", [TrialValue(t, f.stiffness, codes[t]) for t, f in done.items()], diagnostics=diag
+        ),
+        aggregate(
+            FAMILY, "stiffness.accuracy", [TrialValue(t, 100.0 * f.stiffness / commanded[t], codes[t]) for t, f in done.items()]
+        ),
+        aggregate(
+            FAMILY,
+            "stiffness.peak_force",
+            [TrialValue(t, f.peak_force, codes[t]) for t, f in done.items()],
+            diagnostics=peak_diag,
+        ),
     ]
 
 
 # --- report figures (spec §15.6; paper Fig. 11) ---------------------------------------------------
+
 
 def report_figures(ctx: Any, results: Any) -> list:
     """Normal force against penetration for every stiffness trial, fit samples marked, fitted and commanded
@@ -294,5 +346,8 @@ def report_figures(ctx: Any, results: Any) -> list:
     ax.set_xlabel("penetration (mm)")
     ax.set_ylabel("normal force on the hand (N)")
     ax.legend(fontsize=8, loc="upper left")
-    return [ReportFigure("stiffness", "Normal force against penetration; black: the samples of the fit "
-                                      "(paper Fig. 11; spec chapter 13).", fig)]
+    return [
+        ReportFigure(
+            "stiffness", "Normal force against penetration; black: the samples of the fit (paper Fig. 11; spec chapter 13).", fig
+        )
+    ]

@@ -63,17 +63,30 @@ def resolve_inside(root: Path, relative: str, *, label: str | None = None) -> Pa
     """
     label = label or relative
     if not is_safe_relative_path(relative):
-        raise HaptifyError(Finding("E108", f"path {relative!r} is absolute or leaves the session folder", file=label,
-                                   expected="a relative POSIX path inside the session folder", found=relative))
+        raise HaptifyError(
+            Finding(
+                "E108",
+                f"path {relative!r} is absolute or leaves the session folder",
+                file=label,
+                expected="a relative POSIX path inside the session folder",
+                found=relative,
+            )
+        )
     current: list[str] = []
     pending = relative.split("/")
     hops = 0
     link = last_target = ""
 
     def escape(target: str) -> HaptifyError:
-        return HaptifyError(Finding("E109", f"{relative!r} passes through the symbolic link {link!r} → {target!r}, "
-                                            "which leads outside the session folder", file=label,
-                                    expected="a link target inside the session folder", found=target))
+        return HaptifyError(
+            Finding(
+                "E109",
+                f"{relative!r} passes through the symbolic link {link!r} → {target!r}, which leads outside the session folder",
+                file=label,
+                expected="a link target inside the session folder",
+                found=target,
+            )
+        )
 
     while pending:
         part = pending.pop(0)
@@ -140,20 +153,43 @@ def parse_json_file(path: Path, code: str, label: str) -> Any:
     try:
         text = path.read_bytes().decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise HaptifyError(Finding(code, f"{label} is not UTF-8 text: {exc.reason} at byte {exc.start}", file=label,
-                                   expected="UTF-8 JSON", found=f"byte 0x{exc.object[exc.start]:02x}")) from None
+        raise HaptifyError(
+            Finding(
+                code,
+                f"{label} is not UTF-8 text: {exc.reason} at byte {exc.start}",
+                file=label,
+                expected="UTF-8 JSON",
+                found=f"byte 0x{exc.object[exc.start]:02x}",
+            )
+        ) from None
     except OSError as exc:
         raise HaptifyError(Finding(code, f"{label} cannot be read: {exc.strerror}", file=label)) from None
     try:
         return json.loads(text, parse_constant=_reject_constant, parse_float=_finite_float, object_pairs_hook=_unique_members)
     except json.JSONDecodeError as exc:
-        raise HaptifyError(Finding(code, f"{label} is not well-formed JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})",
-                                   file=label, expected="JSON", found=text[max(0, exc.pos - 20): exc.pos + 20])) from None
+        raise HaptifyError(
+            Finding(
+                code,
+                f"{label} is not well-formed JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})",
+                file=label,
+                expected="JSON",
+                found=text[max(0, exc.pos - 20) : exc.pos + 20],
+            )
+        ) from None
     except _DuplicateKey as exc:
-        raise HaptifyError(Finding("E117", f"{label} names the member {_short_text(exc.key)!r} twice in one object", file=label,
-                                   expected="unique member names", found=_short_text(exc.key))) from None
+        raise HaptifyError(
+            Finding(
+                "E117",
+                f"{label} names the member {_short_text(exc.key)!r} twice in one object",
+                file=label,
+                expected="unique member names",
+                found=_short_text(exc.key),
+            )
+        ) from None
     except _NonFinite as exc:
-        raise HaptifyError(Finding(code, f"{label} is not well-formed JSON: {exc}", file=label, expected="a finite JSON number")) from None
+        raise HaptifyError(
+            Finding(code, f"{label} is not well-formed JSON: {exc}", file=label, expected="a finite JSON number")
+        ) from None
     except RecursionError:
         raise HaptifyError(Finding(code, f"{label} nests too deeply to be a Haptify document", file=label)) from None
 
@@ -165,8 +201,16 @@ def pydantic_findings(exc: ValidationError, code: str, label: str) -> list[Findi
         found = err.get("input")
         if isinstance(found, (dict, list)):
             found = f"<{type(found).__name__}>"
-        out.append(Finding(code, f"{err['msg']}", file=label, pointer=pointer_of(err["loc"]),
-                           expected=err.get("ctx", {}).get("expected", err["type"]), found=found))
+        out.append(
+            Finding(
+                code,
+                f"{err['msg']}",
+                file=label,
+                pointer=pointer_of(err["loc"]),
+                expected=err.get("ctx", {}).get("expected", err["type"]),
+                found=found,
+            )
+        )
     return out
 
 
@@ -208,8 +252,13 @@ class SessionFolder:
         for t in self.manifest.trials:
             if t.id == trial_id:
                 return t
-        raise fail("E903", f"no trial {trial_id!r} in session {self.session_id}", file=MANIFEST,
-                   expected=[t.id for t in self.manifest.trials], found=trial_id)
+        raise fail(
+            "E903",
+            f"no trial {trial_id!r} in session {self.session_id}",
+            file=MANIFEST,
+            expected=[t.id for t in self.manifest.trials],
+            found=trial_id,
+        )
 
     def trials_of(self, protocol: str) -> list[Trial]:
         """Trials of one protocol, ordered by repetition."""
@@ -252,8 +301,13 @@ class SessionFolder:
         if verify:
             digest = sha256_file(path)
             if digest != stream.sha256:
-                raise fail("E111", f"checksum of {stream.file!r} does not match the manifest", file=stream.file,
-                           expected=stream.sha256, found=digest)
+                raise fail(
+                    "E111",
+                    f"checksum of {stream.file!r} does not match the manifest",
+                    file=stream.file,
+                    expected=stream.sha256,
+                    found=digest,
+                )
         table = read_table(path, stream.format, [c.name for c in stream.columns], label=stream.file)
         if session_clock:
             offset = self.clock_offset(stream)
@@ -293,8 +347,9 @@ def read_stream_file(path: Path, fmt: str, columns: list[str], *, label: str) ->
     return next(chunks), digest
 
 
-def read_stream_chunks(path: Path, fmt: str, columns: list[str], *, label: str,
-                       chunk_rows: int | None = None) -> tuple[str, Iterator[pd.DataFrame]]:
+def read_stream_chunks(
+    path: Path, fmt: str, columns: list[str], *, label: str, chunk_rows: int | None = None
+) -> tuple[str, Iterator[pd.DataFrame]]:
     """The sha256 of a stream file's bytes and its table as consecutive float64 chunks of at most
     ``chunk_rows`` rows — at least one chunk, the first possibly empty (spec §3.2, §3.4).
 
@@ -389,8 +444,14 @@ def as_float64(frame: pd.DataFrame, label: str) -> pd.DataFrame:
         if dtype == np.float64 or (dtype == np.float32 and name != "t"):
             continue
         expected = "float64" if name == "t" else "float64 or float32"
-        raise fail("E212", f"column {name!r} of {label!r} is {dtype}, not {expected}", file=label,
-                   column=str(name), expected=expected, found=str(dtype))
+        raise fail(
+            "E212",
+            f"column {name!r} of {label!r} is {dtype}, not {expected}",
+            file=label,
+            column=str(name),
+            expected=expected,
+            found=str(dtype),
+        )
     narrow = [name for name, dtype in dtypes if dtype == np.float32]
     return frame.astype({name: np.float64 for name in narrow}) if narrow else frame
 
@@ -440,9 +501,14 @@ def check_csv_grammar(path: Path, columns: list[str], label: str) -> str:
                 data, rest = data[:cut], data[cut:]
                 if len(rest) > limit:
                     long_line = line_no + data.count(b"\n") + 1
-                    raise fail("E112", f"line {long_line} of {label!r} is longer than the {limit} bytes "
-                               f"a line of {len(columns)} numbers can take", file=label,
-                               expected=f"at most {limit} bytes per line", found=f"more than {len(rest)} bytes")
+                    raise fail(
+                        "E112",
+                        f"line {long_line} of {label!r} is longer than the {limit} bytes "
+                        f"a line of {len(columns)} numbers can take",
+                        file=label,
+                        expected=f"at most {limit} bytes per line",
+                        found=f"more than {len(rest)} bytes",
+                    )
             else:
                 rest = b""
             if data:
@@ -460,16 +526,31 @@ def check_csv_grammar(path: Path, columns: list[str], label: str) -> str:
 def _check_csv_header(header: bytes, columns: list[str], label: str, limit: int) -> None:
     r"""The header line names exactly ``columns`` and ends in ``\n`` or ``\r\n`` (E211, E112; spec §3.2)."""
     if len(header) > limit:
-        raise fail("E211", f"the header line of {label!r} is longer than the {limit} bytes its columns take", file=label,
-                   expected=columns, found=f"more than {limit} bytes")
+        raise fail(
+            "E211",
+            f"the header line of {label!r} is longer than the {limit} bytes its columns take",
+            file=label,
+            expected=columns,
+            found=f"more than {limit} bytes",
+        )
     body = header.removesuffix(b"\n").removesuffix(b"\r")
     if b"\r" in body:
-        raise fail("E112", f"{label!r} ends a line with a lone carriage return", file=label,
-                   expected="lines ending in \\n or \\r\\n", found="\\r")
+        raise fail(
+            "E112",
+            f"{label!r} ends a line with a lone carriage return",
+            file=label,
+            expected="lines ending in \\n or \\r\\n",
+            found="\\r",
+        )
     found = body.decode("utf-8", errors="replace").split(",")
     if found != columns:
-        raise fail("E211", f"CSV header of {label!r} differs from the declared columns", file=label,
-                   expected=columns, found=[_short_text(f) for f in found[:len(columns) + 2]])
+        raise fail(
+            "E211",
+            f"CSV header of {label!r} differs from the declared columns",
+            file=label,
+            expected=columns,
+            found=[_short_text(f) for f in found[: len(columns) + 2]],
+        )
 
 
 def _csv_line_error(raw: bytes, line_no: int, columns: list[str], label: str) -> None:
@@ -477,14 +558,30 @@ def _csv_line_error(raw: bytes, line_no: int, columns: list[str], label: str) ->
     text = raw.decode("utf-8", errors="replace").removesuffix("\r")
     fields = text.split(",")
     if text == "":
-        raise fail("E112", f"line {line_no} of {label!r} is blank", file=label, expected="one sample per line, no blank lines",
-                   found="a blank line")
+        raise fail(
+            "E112",
+            f"line {line_no} of {label!r} is blank",
+            file=label,
+            expected="one sample per line, no blank lines",
+            found="a blank line",
+        )
     if len(fields) != len(columns):
-        raise fail("E112", f"line {line_no} of {label!r} has {len(fields)} fields, not {len(columns)}", file=label,
-                   expected=len(columns), found=len(fields))
+        raise fail(
+            "E112",
+            f"line {line_no} of {label!r} has {len(fields)} fields, not {len(columns)}",
+            file=label,
+            expected=len(columns),
+            found=len(fields),
+        )
     k = next((i for i, f in enumerate(fields) if not CSV_FIELD_TEXT.fullmatch(f)), 0)
-    raise fail("E112", f"line {line_no} of {label!r}: field {_short_text(fields[k])!r} is not a number as spec §3.2 writes it",
-               file=label, column=columns[k], expected="NaN or -?[0-9]+(.[0-9]*)?([eE][+-]?[0-9]+)?", found=_short_text(fields[k]))
+    raise fail(
+        "E112",
+        f"line {line_no} of {label!r}: field {_short_text(fields[k])!r} is not a number as spec §3.2 writes it",
+        file=label,
+        column=columns[k],
+        expected="NaN or -?[0-9]+(.[0-9]*)?([eE][+-]?[0-9]+)?",
+        found=_short_text(fields[k]),
+    )
 
 
 def _short_text(text: str) -> str:
@@ -502,8 +599,14 @@ def open_session(path: str | os.PathLike) -> SessionFolder:
         raise fail("E102", f"no {MANIFEST} in {str(root)!r}", file=MANIFEST)
     raw = parse_json_file(manifest_path, "E103", MANIFEST)
     if isinstance(raw, dict) and raw.get("spec_version") not in (None, SPEC_VERSION):
-        raise fail("E105", f"spec version {raw.get('spec_version')!r} is not supported", file=MANIFEST,
-                   pointer="/spec_version", expected=SPEC_VERSION, found=raw.get("spec_version"))
+        raise fail(
+            "E105",
+            f"spec version {raw.get('spec_version')!r} is not supported",
+            file=MANIFEST,
+            pointer="/spec_version",
+            expected=SPEC_VERSION,
+            found=raw.get("spec_version"),
+        )
     try:
         manifest = Session.model_validate(raw)
     except ValidationError as exc:
@@ -512,6 +615,7 @@ def open_session(path: str | os.PathLike) -> SessionFolder:
 
 
 # --- writing -----------------------------------------------------------------------------------
+
 
 def write_table(path: Path, frame: pd.DataFrame, fmt: str, *, compact: bool = False) -> None:
     """Write a float64 table as Parquet (zstd) or CSV (shortest round-trip decimal, NaN as 'NaN'), spec §3.2.
@@ -553,12 +657,20 @@ class TableSink:
         if self.fmt == "parquet":
             table, narrow = _arrow_table(frame, self.compact)
             if self._parquet is None:
-                self._parquet = pq.ParquetWriter(self.path, table.schema, **_PARQUET_OPTIONS,
-                                                 use_byte_stream_split=narrow or False)
+                self._parquet = pq.ParquetWriter(
+                    self.path, table.schema, **_PARQUET_OPTIONS, use_byte_stream_split=narrow or False
+                )
             self._parquet.write_table(table)
         else:
-            frame.to_csv(self.path, mode="a" if self.rows else "w", header=not self.rows, index=False, na_rep="NaN",
-                         float_format=None, lineterminator="\n")
+            frame.to_csv(
+                self.path,
+                mode="a" if self.rows else "w",
+                header=not self.rows,
+                index=False,
+                na_rep="NaN",
+                float_format=None,
+                lineterminator="\n",
+            )
         self.rows += len(frame)
 
     def close(self) -> int:
@@ -639,8 +751,17 @@ class SessionWriter:
     _streams: list[_PendingStream] = field(default_factory=list)
     chunks: Callable[[], Iterable[Mapping[str, Mapping[str, Any]]]] | None = None  # rows of the chunked streams
 
-    def add_trial(self, trial_id: str, protocol: str, *, powered: bool, repetition: int = 1, label: str | None = None,
-                  rendering: Mapping | None = None, notes: str | None = None) -> dict:
+    def add_trial(
+        self,
+        trial_id: str,
+        protocol: str,
+        *,
+        powered: bool,
+        repetition: int = 1,
+        label: str | None = None,
+        rendering: Mapping | None = None,
+        notes: str | None = None,
+    ) -> dict:
         trial = {"id": trial_id, "protocol": protocol, "repetition": repetition, "powered": powered, "streams": []}
         for key, val in (("label", label), ("rendering", rendering), ("notes", notes)):
             if val is not None:
@@ -648,17 +769,31 @@ class SessionWriter:
         self._trials.append(trial)
         return trial
 
-    def add_stream(self, trial_id: str, kind: str, data: Mapping[str, Any] | pd.DataFrame, *, rate_hz: float,
-                   frame: str | None = None, fmt: str = "parquet", entities: list[str] | None = None,
-                   file: str | None = None) -> dict:
+    def add_stream(
+        self,
+        trial_id: str,
+        kind: str,
+        data: Mapping[str, Any] | pd.DataFrame,
+        *,
+        rate_hz: float,
+        frame: str | None = None,
+        fmt: str = "parquet",
+        entities: list[str] | None = None,
+        file: str | None = None,
+    ) -> dict:
         """Add a stream; ``data`` maps every expected column name (``t`` first) to a 1-D array."""
         trial = next(t for t in self._trials if t["id"] == trial_id)
         present = list(data.keys()) if isinstance(data, Mapping) else list(data.columns)
         cols = expected_columns(kind, entities, present)
         missing = [c for c, _ in cols if c not in present]
         if missing:
-            raise fail("E201", f"{kind} stream of trial {trial_id!r} lacks columns {missing}", column=missing[0],
-                       expected=[c for c, _ in cols], found=present)
+            raise fail(
+                "E201",
+                f"{kind} stream of trial {trial_id!r} lacks columns {missing}",
+                column=missing[0],
+                expected=[c for c, _ in cols],
+                found=present,
+            )
         table = pd.DataFrame({c: np.asarray(data[c], dtype=np.float64) for c, _ in cols})
         stream = {
             "kind": kind,
@@ -676,17 +811,32 @@ class SessionWriter:
         self._streams.append(_PendingStream(trial_id, stream, table))
         return stream
 
-    def add_chunked_stream(self, trial_id: str, kind: str, columns: list[str], *, rate_hz: float,
-                           frame: str | None = None, fmt: str = "parquet", entities: list[str] | None = None) -> dict:
+    def add_chunked_stream(
+        self,
+        trial_id: str,
+        kind: str,
+        columns: list[str],
+        *,
+        rate_hz: float,
+        frame: str | None = None,
+        fmt: str = "parquet",
+        entities: list[str] | None = None,
+    ) -> dict:
         """Add a stream whose rows come from :attr:`chunks` at :meth:`write` time (spec §5.5.1): each item
         of ``chunks()`` maps stream kinds to their columns for the next rows (``t`` first)."""
         cols = expected_columns(kind, entities, columns)
         missing = [c for c, _ in cols if c not in columns]
         if missing:
-            raise fail("E201", f"{kind} stream of trial {trial_id!r} lacks columns {missing}", column=missing[0],
-                       expected=[c for c, _ in cols], found=columns)
-        stream = self.add_stream(trial_id, kind, {c: np.zeros(0) for c, _ in cols}, rate_hz=rate_hz, frame=frame,
-                                 fmt=fmt, entities=entities)
+            raise fail(
+                "E201",
+                f"{kind} stream of trial {trial_id!r} lacks columns {missing}",
+                column=missing[0],
+                expected=[c for c, _ in cols],
+                found=columns,
+            )
+        stream = self.add_stream(
+            trial_id, kind, {c: np.zeros(0) for c, _ in cols}, rate_hz=rate_hz, frame=frame, fmt=fmt, entities=entities
+        )
         self._streams[-1].frame = None  # type: ignore[assignment]
         return stream
 

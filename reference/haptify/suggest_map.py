@@ -16,7 +16,9 @@ from haptify.importers import UNITS, Recording, sanitize_id
 from haptify.platform_wrench import CHANNEL_DIMENSIONS, PLATFORM_CHANNELS
 
 PLACEHOLDER_SESSION = {
-    "date": "<YYYY-MM-DD, or --date per file>", "lab": {"id": "<lab id>"}, "examiner": {"id": "<examiner id>"},
+    "date": "<YYYY-MM-DD, or --date per file>",
+    "lab": {"id": "<lab id>"},
+    "examiner": {"id": "<examiner id>"},
     "device": {"file": "<device.json>"},
     "device_placement": {"position": ["<x m>", "<y m>", "<z m>"], "quaternion": [1.0, 0.0, 0.0, 0.0]},
 }
@@ -69,8 +71,10 @@ def _complete(streams: dict[str, dict], unplaced: list[str]) -> dict[str, dict]:
         if all(c in cols for c in need):
             out[kind] = cols
         else:
-            unplaced.append(f"{kind}: only {sorted(cols)} found ({', '.join(cols.values())}); "
-                            f"it needs {need} — map the rest or leave the stream out")
+            unplaced.append(
+                f"{kind}: only {sorted(cols)} found ({', '.join(cols.values())}); "
+                f"it needs {need} — map the rest or leave the stream out"
+            )
     return out
 
 
@@ -78,7 +82,7 @@ def _wrench_units_known(rec: Recording, platform) -> bool:
     """Whether a platform's channels state the units its type's outputs need (§5.6.1), so that
     ``platform_wrench: {}`` imports it as written."""
     dims = CHANNEL_DIMENSIONS.get(platform.type)
-    chans = platform.channels[:PLATFORM_CHANNELS.get(platform.type, 0)]
+    chans = platform.channels[: PLATFORM_CHANNELS.get(platform.type, 0)]
     if dims is None or len(chans) < len(dims) or (platform.type == 4 and platform.cal_matrix is None):
         return False
     units = [UNITS.get(rec.analog_units[i].strip()) for i in chans]
@@ -92,8 +96,10 @@ def suggest_recording_map(rec: Recording) -> tuple[dict, list[str]]:
     if rec.point_labels:
         m["markers"] = {"include": list(rec.point_labels)}
         renamed = {lab: sanitize_id(lab, f"m{i + 1}") for i, lab in enumerate(rec.point_labels)}
-        unplaced.append("markers: every point label is imported; which markers form a link's rigid body "
-                        f"(markers.rigid_bodies) is not in the file ({len(renamed)} ids, e.g. {list(renamed.values())[:3]})")
+        unplaced.append(
+            "markers: every point label is imported; which markers form a link's rigid body "
+            f"(markers.rigid_bodies) is not in the file ({len(renamed)} ids, e.g. {list(renamed.values())[:3]})"
+        )
     bodies: dict = {}
     for label in rec.body_labels:
         link = LINK_BODY.search(label)
@@ -114,21 +120,30 @@ def suggest_recording_map(rec: Recording) -> tuple[dict, list[str]]:
             platform_channels.update(names)
             if p.number == 1 and _wrench_units_known(rec, p):
                 m["platform_wrench"] = {}
-                unplaced.append(f"force platform 1 (type {p.type}) defines W and its channels {names} become "
-                                "plate_wrench (§5.6.1): check their units")
+                unplaced.append(
+                    f"force platform 1 (type {p.type}) defines W and its channels {names} become "
+                    "plate_wrench (§5.6.1): check their units"
+                )
             else:
-                unplaced.append(f"force platform {p.number} (type {p.type}): channels {names} not imported — "
-                                + ("platform 1 defines W; give platform_wrench with its output units to import its wrench"
-                                   if p.number == 1 else "the rig holds one plate (§5.5)"))
+                unplaced.append(
+                    f"force platform {p.number} (type {p.type}): channels {names} not imported — "
+                    + (
+                        "platform 1 defines W; give platform_wrench with its output units to import its wrench"
+                        if p.number == 1
+                        else "the rig holds one plate (§5.5)"
+                    )
+                )
     elif rec.point_labels or rec.body_labels:
         m["lab_to_world"] = {"position": [0.0, 0.0, 0.0], "quaternion": [1.0, 0.0, 0.0, 0.0]}
-        unplaced.append("lab_to_world: the file has no force platform; the identity keeps W = the lab frame — give "
-                        "the lab frame's pose in W")
+        unplaced.append(
+            "lab_to_world: the file has no force platform; the identity keeps W = the lab frame — give the lab frame's pose in W"
+        )
     streams, left = guess_streams(rec.analog_labels, platform_channels)
     streams = _complete(streams, unplaced)
     if streams:
-        m["streams"] = {kind: {"columns": {c: _channel(kind, c, lab) for c, lab in cols.items()}}
-                        for kind, cols in streams.items()}
+        m["streams"] = {
+            kind: {"columns": {c: _channel(kind, c, lab) for c, lab in cols.items()}} for kind, cols in streams.items()
+        }
         if "sync" in streams:
             unplaced.append("sync: threshold 2.5 (V) assumed for a 0–5 V trigger; check the level")
     unplaced += [f"analog channel {lab!r}: no stream by its name" for lab in left]
@@ -156,14 +171,26 @@ def suggest_csv_map(path: Path) -> tuple[dict, list[str]]:
     if time is None:
         unplaced.append(f"time: no column named like a time among {header}")
     unit = re.search(r"\((s|ms|us)\)|_(s|ms|us)$", time or "")
-    m: dict = {"source": "csv", "session": dict(PLACEHOLDER_SESSION), "trial": dict(PLACEHOLDER_TRIAL),
-               "time": {"source": time or "<time column>", "unit": next((g for g in unit.groups() if g), "s") if unit else "<s|ms|us>"},
-               "csv": {"delimiter": delimiter, "skip_rows": skip}}
+    m: dict = {
+        "source": "csv",
+        "session": dict(PLACEHOLDER_SESSION),
+        "trial": dict(PLACEHOLDER_TRIAL),
+        "time": {"source": time or "<time column>", "unit": next((g for g in unit.groups() if g), "s") if unit else "<s|ms|us>"},
+        "csv": {"delimiter": delimiter, "skip_rows": skip},
+    }
     streams, left = guess_streams([h for h in header if h != time])
     streams = _complete(streams, unplaced)
-    m["streams"] = {kind: {"columns": {c: {"source": lab, "unit": _stated_unit(lab)} if kind != "sync" else
-                                       {"source": lab, "unit": "V", "threshold": 2.5} for c, lab in cols.items()}}
-                    for kind, cols in streams.items()}
+    m["streams"] = {
+        kind: {
+            "columns": {
+                c: {"source": lab, "unit": _stated_unit(lab)}
+                if kind != "sync"
+                else {"source": lab, "unit": "V", "threshold": 2.5}
+                for c, lab in cols.items()
+            }
+        }
+        for kind, cols in streams.items()
+    }
     unplaced += [f"column {h!r}: no stream by its name" for h in left]
     if any(ch.get("unit") == "<unit>" for st in m["streams"].values() for ch in st["columns"].values()):
         unplaced.append("units: a CSV states none; replace every '<unit>' (§5.3)")

@@ -36,8 +36,14 @@ def unit_normal(normal: Any, trial_id: str = "") -> np.ndarray:
     n = np.asarray(normal, dtype=float)
     norm = float(np.linalg.norm(n))
     if not np.isfinite(norm) or norm < 1e-9:
-        raise fail("E303", f"trial {trial_id!r}: the rendering's surface_normal {list(n)} has no direction",
-                   file="session.json", pointer="/trials/*/rendering/surface_normal", expected="a non-zero vector", found=list(n))
+        raise fail(
+            "E303",
+            f"trial {trial_id!r}: the rendering's surface_normal {list(n)} has no direction",
+            file="session.json",
+            pointer="/trials/*/rendering/surface_normal",
+            expected="a non-zero vector",
+            found=list(n),
+        )
     return n / norm
 
 
@@ -101,27 +107,49 @@ def contact_signals(ctx_or_session: Any, trial_id: str) -> ContactSignals:
 
     E303 without rendering parameters, E302 without a commanded_wrench or handle_wrench stream.
     """
+
     def build() -> ContactSignals:
         session = session_of(ctx_or_session)
         trial = session.trial(trial_id)
         if trial.rendering is None:
-            raise fail("E303", f"active trial {trial_id!r} has no rendering parameters", file="session.json",
-                       pointer="/trials/*/rendering", expected="surface_point_m, surface_normal, stiffness_N_per_m", found=None)
+            raise fail(
+                "E303",
+                f"active trial {trial_id!r} has no rendering parameters",
+                file="session.json",
+                pointer="/trials/*/rendering",
+                expected="surface_point_m, surface_normal, stiffness_N_per_m",
+                found=None,
+            )
         n = unit_normal(trial.rendering.surface_normal, trial_id)
         cmd = session.read(trial_id, "commanded_wrench")
         hs = handle_signals(ctx_or_session, trial_id)
         if hs.force is None:
-            raise fail("E302", f"trial {trial_id!r} has no handle_wrench stream", file="session.json", expected="handle_wrench", found=None)
+            raise fail(
+                "E302",
+                f"trial {trial_id!r} has no handle_wrench stream",
+                file="session.json",
+                expected="handle_wrench",
+                found=None,
+            )
         t_cmd = cmd["t"].to_numpy()
         cmd_n = cmd[FORCE_COLUMNS].to_numpy() @ n
         on_grid = interp_columns(t_cmd, cmd_n, hs.t)
         valid = hs.valid & np.all(np.isfinite(hs.force), axis=1) & (hs.t >= t_cmd[0]) & (hs.t <= t_cmd[-1])
         contact = contact_of(on_grid) & valid
         used = guarded(t_cmd, contact_of(cmd_n), hs.t) & valid
-        return ContactSignals(trial_id=trial_id, t=hs.t, position=hs.position, force=hs.force, valid=valid,
-                              commanded_normal=on_grid, contact=contact, used=used, normal=n,
-                              plane_point=np.asarray(trial.rendering.surface_point_m, float),
-                              stiffness_N_per_m=float(trial.rendering.stiffness_N_per_m))
+        return ContactSignals(
+            trial_id=trial_id,
+            t=hs.t,
+            position=hs.position,
+            force=hs.force,
+            valid=valid,
+            commanded_normal=on_grid,
+            contact=contact,
+            used=used,
+            normal=n,
+            plane_point=np.asarray(trial.rendering.surface_point_m, float),
+            stiffness_N_per_m=float(trial.rendering.stiffness_N_per_m),
+        )
 
     return cached(ctx_or_session, ("contact_signals", trial_id), build)
 
@@ -137,9 +165,13 @@ def planar_stats(force: np.ndarray, normal: np.ndarray) -> dict[str, float]:
 def _trial(ctx: Any, trial_id: str) -> dict:
     cs = contact_signals(ctx, trial_id)
     if cs.used.sum() < 2:
-        raise fail("E314", f"trial {trial_id!r}: no sample is in contact with the rendered surface "
-                   f"(commanded normal force above {sfp('contact_force_threshold_N')} N for ± {sfp('contact_guard_s')} s)",
-                   expected=">= 2 contact samples", found=int(cs.used.sum()))
+        raise fail(
+            "E314",
+            f"trial {trial_id!r}: no sample is in contact with the rendered surface "
+            f"(commanded normal force above {sfp('contact_force_threshold_N')} N for ± {sfp('contact_guard_s')} s)",
+            expected=">= 2 contact samples",
+            found=int(cs.used.sum()),
+        )
     stats = planar_stats(cs.force[cs.used], cs.normal)
     stats["contact_share"] = float(cs.used.sum() / max(cs.valid.sum(), 1))
     stats["normal_force_mean"] = float(cs.normal_force[cs.used].mean())
@@ -153,13 +185,18 @@ def compute(ctx: Any) -> list:
     done, missing = protocol_trials(ctx, PROTOCOL, IDS, lambda tid: _trial(ctx, tid), "surface.planar_force_mean")
     if missing:
         return missing
-    diag = {"contact_share": [d["contact_share"] for d in done.values()],
-            "normal_force_mean_N": [d["normal_force_mean"] for d in done.values()]}
-    return [aggregate(FAMILY, "surface.planar_force_mean", [TrialValue(t, d["mean"]) for t, d in done.items()], diagnostics=diag),
-            aggregate(FAMILY, "surface.planar_force_sd", [TrialValue(t, d["sd"]) for t, d in done.items()])]
+    diag = {
+        "contact_share": [d["contact_share"] for d in done.values()],
+        "normal_force_mean_N": [d["normal_force_mean"] for d in done.values()],
+    }
+    return [
+        aggregate(FAMILY, "surface.planar_force_mean", [TrialValue(t, d["mean"]) for t, d in done.items()], diagnostics=diag),
+        aggregate(FAMILY, "surface.planar_force_sd", [TrialValue(t, d["sd"]) for t, d in done.items()]),
+    ]
 
 
 # --- report figures (spec §15.6; paper Fig. 10) ---------------------------------------------------
+
 
 def report_figures(ctx: Any, results: Any) -> list:
     """Planar force magnitude over the contact positions of each surface trial, top view (paper Fig. 10)."""
@@ -185,6 +222,11 @@ def report_figures(ctx: Any, results: Any) -> list:
         ax.set_ylabel("y (m, W)")
         ax.set_aspect("equal")
         ax.set_title(f"{trial.id}: mean {mag.mean():.3g} N")
-        figures.append(ReportFigure(f"surface_{trial.id}", f"Planar force on the hand while in contact, trial {trial.id} "
-                                    "(paper Fig. 10; spec chapter 12).", fig))
+        figures.append(
+            ReportFigure(
+                f"surface_{trial.id}",
+                f"Planar force on the hand while in contact, trial {trial.id} (paper Fig. 10; spec chapter 12).",
+                fig,
+            )
+        )
     return figures

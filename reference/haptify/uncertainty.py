@@ -30,6 +30,7 @@ from haptify.results import BudgetTerm, MetricResult, MetricUncertainty, Results
 
 # --- the definition file (spec §19.1) ------------------------------------------------------------
 
+
 class Source(BaseModel):
     """One source of uncertainty (spec §19.2–19.3): Type A (the repetitions) or a Type B input whose
     standard uncertainty comes from a rig figure of the same session."""
@@ -37,11 +38,14 @@ class Source(BaseModel):
     model_config = ConfigDict(extra="forbid")
     type: Literal["A", "B"]
     distribution: Literal["t", "normal", "rectangular"]
-    figure: str | None = Field(description="The rig metric whose value gives the input's standard uncertainty (normal) or half-width (rectangular).")
+    figure: str | None = Field(
+        description="The rig metric whose value gives the input's standard uncertainty (normal) or half-width (rectangular)."
+    )
     component: int | None = Field(description="Which component of a vector figure; null for a scalar.")
     unit: str
     perturbs: Literal["handle_force_offset", "handle_force_delay"] | None = Field(
-        description="What one Monte Carlo draw changes in the cached calibrated hand force (§19.3).")
+        description="What one Monte Carlo draw changes in the cached calibrated hand force (§19.3)."
+    )
     description: str
 
 
@@ -84,6 +88,7 @@ def method_of(metric_id: str) -> MetricMethod:
 
 # --- GUM arithmetic (spec §19.2, §19.4) ----------------------------------------------------------
 
+
 def type_a(per_repetition: Sequence[Any]) -> tuple[np.ndarray, int]:
     """Standard uncertainty of the mean s/√n (ddof = 1) per component and its degrees of freedom n − 1
     (GUM 4.2.3; spec §19.2). ValueError below two repetitions."""
@@ -98,8 +103,8 @@ def welch_satterthwaite(contributions: Sequence[Any], dofs: Sequence[float]) -> 
     (GUM G.4.1, eq. G.2b; spec §19.4); an infinite νᵢ adds nothing to the denominator."""
     c = np.asarray(contributions, dtype=float)
     nu = np.asarray(dofs, dtype=float).reshape((-1,) + (1,) * (c.ndim - 1))
-    u4 = np.sum(c ** 2, axis=0) ** 2
-    den = np.sum(np.where(np.isinf(nu), 0.0, c ** 4 / np.where(np.isinf(nu), 1.0, nu)), axis=0)
+    u4 = np.sum(c**2, axis=0) ** 2
+    den = np.sum(np.where(np.isinf(nu), 0.0, c**4 / np.where(np.isinf(nu), 1.0, nu)), axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(den > 0, u4 / np.where(den > 0, den, 1.0), np.inf)
 
@@ -115,7 +120,7 @@ def combine(terms: list[BudgetTerm], p: float) -> tuple[Any, Any, float, float |
     when infinite (JSON has no infinity)."""
     c = np.array([t.contribution for t in terms], dtype=float)
     nus = [math.inf if t.dof is None else t.dof for t in terms]
-    u = np.sqrt(np.sum(c ** 2, axis=0))
+    u = np.sqrt(np.sum(c**2, axis=0))
     nu = float(np.min(welch_satterthwaite(c, nus)))
     k = coverage_factor(nu, p)
     as_value = (lambda a: [float(x) for x in a]) if u.ndim else float
@@ -123,6 +128,7 @@ def combine(terms: list[BudgetTerm], p: float) -> tuple[Any, Any, float, float |
 
 
 # --- Type B inputs from the session's rig figures (spec §19.3) -------------------------------------
+
 
 @dataclass
 class Input:
@@ -188,9 +194,22 @@ def draw_inputs(inputs: Sequence[Input], m: int, rng: np.random.Generator) -> np
 
 # Cache entries (by their key's first element) that do not depend on the calibrated hand force: a draw
 # shares them with the plain computation. Everything else a family caches is recomputed per draw.
-SHARED_KEYS = frozenset({"handle_calibration", "handle_calibration_fit", "plate_bias", "plate_signals", "mocap_track",
-                         "handle_accel_native", "vibration", "free_space_plate", "workspace_model", "workspace_solid",
-                         "dynamics_model", "dynamics_given_model"})
+SHARED_KEYS = frozenset(
+    {
+        "handle_calibration",
+        "handle_calibration_fit",
+        "plate_bias",
+        "plate_signals",
+        "mocap_track",
+        "handle_accel_native",
+        "vibration",
+        "free_space_plate",
+        "workspace_model",
+        "workspace_solid",
+        "dynamics_model",
+        "dynamics_given_model",
+    }
+)
 
 
 def delayed(t: np.ndarray, x: np.ndarray, valid: np.ndarray, delay_s: float) -> np.ndarray:
@@ -251,7 +270,7 @@ def draw_values(ctx: Any, metric_ids: Sequence[str], inputs: Sequence[Input], x:
         offset, delay, col = np.zeros(3), 0.0, 0
         for inp in inputs:
             if inp.spec.perturbs == "handle_force_offset":
-                offset = offset + row[col:col + 3]
+                offset = offset + row[col : col + 3]
             else:
                 delay += float(row[col])
             col += inp.dimension
@@ -285,10 +304,20 @@ def mc_terms(inputs: Sequence[Input], x: np.ndarray, y: np.ndarray) -> list[Budg
     shares = [float(np.sqrt(np.sum((slope[a:b] * spread[a:b]) ** 2))) for a, b in zip(bounds[:-1], bounds[1:])]
     if not any(shares):  # no linear part (e.g. a symmetric dependence): equal shares
         shares = [1.0] * len(shares)
-    scale = u_mc / math.sqrt(sum(v ** 2 for v in shares))
-    return [BudgetTerm(source=inp.source, type="B", distribution=inp.spec.distribution, u_input=inp.u, unit=inp.spec.unit,
-                       sensitivity=float(np.linalg.norm(slope[a:b])), contribution=share * scale, dof=m - 1)
-            for inp, share, a, b in zip(inputs, shares, bounds[:-1], bounds[1:])]
+    scale = u_mc / math.sqrt(sum(v**2 for v in shares))
+    return [
+        BudgetTerm(
+            source=inp.source,
+            type="B",
+            distribution=inp.spec.distribution,
+            u_input=inp.u,
+            unit=inp.spec.unit,
+            sensitivity=float(np.linalg.norm(slope[a:b])),
+            contribution=share * scale,
+            dof=m - 1,
+        )
+        for inp, share, a, b in zip(inputs, shares, bounds[:-1], bounds[1:])
+    ]
 
 
 def repeatability_term(result: MetricResult) -> BudgetTerm:
@@ -300,8 +329,16 @@ def repeatability_term(result: MetricResult) -> BudgetTerm:
     else:
         u, dof = type_a(result.per_repetition)
     contrib = [float(v) for v in u] if np.ndim(u) else float(u)
-    return BudgetTerm(source="repeatability", type="A", distribution="t", u_input=contrib, unit=result.unit,
-                      sensitivity=1.0, contribution=contrib, dof=float(dof))
+    return BudgetTerm(
+        source="repeatability",
+        type="A",
+        distribution="t",
+        u_input=contrib,
+        unit=result.unit,
+        sensitivity=1.0,
+        contribution=contrib,
+        dof=float(dof),
+    )
 
 
 def attach(ctx: Any, results: ResultsFile, *, draws: int | None = None, seed: int | None = None) -> ResultsFile:
@@ -339,12 +376,21 @@ def attach(ctx: Any, results: ResultsFile, *, draws: int | None = None, seed: in
             terms += mc_terms(*samples[r.id])
         u, big_u, k, nu = combine(terms, p)
         r.uncertainty = MetricUncertainty(
-            method=method.method, u=u, U=big_u, k=k, coverage_probability=p, dof_eff=nu, budget=terms,
-            mc_draws=m if r.id in samples else None, sources_missing=sorted(s for s in method.sources if s in missing))
+            method=method.method,
+            u=u,
+            U=big_u,
+            k=k,
+            coverage_probability=p,
+            dof_eff=nu,
+            budget=terms,
+            mc_draws=m if r.id in samples else None,
+            sources_missing=sorted(s for s in method.sources if s in missing),
+        )
     return results
 
 
 # --- comparing two results (spec §19.6) -------------------------------------------------------------
+
 
 @dataclass
 class Difference:
@@ -371,8 +417,9 @@ def difference(a: MetricUncertainty, x_a: float, b: MetricUncertainty, x_b: floa
     return welch_difference(x_a, a.u, a.dof_eff, x_b, b.u, b.dof_eff, p)
 
 
-def welch_difference(x_a: float, u_a: float, dof_a: float | None, x_b: float, u_b: float, dof_b: float | None,
-                     p: float | None = None) -> Difference:
+def welch_difference(
+    x_a: float, u_a: float, dof_a: float | None, x_b: float, u_b: float, dof_b: float | None, p: float | None = None
+) -> Difference:
     """The test of spec §19.6 on two values with their standard uncertainties and degrees of freedom (None: ∞)."""
     p = float(up("coverage_probability")) if p is None else p
     dofs = [math.inf if d is None else d for d in (dof_a, dof_b)]
@@ -382,7 +429,14 @@ def welch_difference(x_a: float, u_a: float, dof_a: float | None, x_b: float, u_
 
 def compared(ra: MetricResult | None, rb: MetricResult | None) -> Difference | None:
     """:func:`difference` of two scalar metric records when both carry an uncertainty, else None (spec §19.6)."""
-    if ra is None or rb is None or ra.uncertainty is None or rb.uncertainty is None or isinstance(ra.value, list) or isinstance(rb.value, list):
+    if (
+        ra is None
+        or rb is None
+        or ra.uncertainty is None
+        or rb.uncertainty is None
+        or isinstance(ra.value, list)
+        or isinstance(rb.value, list)
+    ):
         return None
     return difference(ra.uncertainty, float(ra.value), rb.uncertainty, float(rb.value))
 

@@ -65,23 +65,24 @@ from haptify.storage import (
 from haptify.versions import PACKAGE_VERSION, SPEC_VERSION
 
 # --- tolerances and limits of spec chapter 4 (§4.4, §4.5) ----------------------------------------
-RATE_TOLERANCE = 0.01                 # |actual mean rate / rate_hz − 1| allowed (E206)
+RATE_TOLERANCE = 0.01  # |actual mean rate / rate_hz − 1| allowed (E206)
 INTERVAL_LOW, INTERVAL_HIGH = 0.5, 1.5  # an interval outside [0.5, 1.5] / rate_hz is irregular (W402)
-OCCLUSION_WARNING_SHARE = 0.20        # share of occluded samples above which W405 is raised
+OCCLUSION_WARNING_SHARE = 0.20  # share of occluded samples above which W405 is raised
 NORMAL_NORM_TOLERANCE = QUATERNION_NORM_TOLERANCE  # |‖n‖ − 1| allowed in a rendering's surface_normal (E307, spec §2.5)
-MANIFEST_MAX_BYTES = 16 * 2**20       # session.json larger than this is not read (E113)
-DEVICE_MAX_BYTES = 4 * 2**20          # device.json larger than this is not read (E113)
-STREAM_MAX_BYTES = 8 * 2**30          # spec §3.5: no stream file exceeds 8 GiB (E113)
-STREAM_BYTES_BASE = 16 * 2**10        # plausibility bound of a stream file's size from its declared
-STREAM_BYTES_PER_COLUMN = 2**10       # rows and columns: base + per column + per value (E113), so a
-STREAM_BYTES_PER_VALUE = 32           # tiny declared stream never makes the validator read gigabytes
-STREAM_CHUNK_BYTES = 32 * 2**20       # a stream is validated in chunks of about this many float64 bytes
+MANIFEST_MAX_BYTES = 16 * 2**20  # session.json larger than this is not read (E113)
+DEVICE_MAX_BYTES = 4 * 2**20  # device.json larger than this is not read (E113)
+STREAM_MAX_BYTES = 8 * 2**30  # spec §3.5: no stream file exceeds 8 GiB (E113)
+STREAM_BYTES_BASE = 16 * 2**10  # plausibility bound of a stream file's size from its declared
+STREAM_BYTES_PER_COLUMN = 2**10  # rows and columns: base + per column + per value (E113), so a
+STREAM_BYTES_PER_VALUE = 32  # tiny declared stream never makes the validator read gigabytes
+STREAM_CHUNK_BYTES = 32 * 2**20  # a stream is validated in chunks of about this many float64 bytes
 
 MOCAP_KINDS = frozenset(k for k, v in schemas.load("stream-kinds.json")["kinds"].items() if v.get("nan_allowed"))
 EXIT_VALID, EXIT_INVALID, EXIT_CANNOT_RUN = 0, 1, 2
 
 
 # --- the report ----------------------------------------------------------------------------------
+
 
 @dataclass
 class ReportItem:
@@ -140,8 +141,13 @@ class ValidationReport:
     def to_model(self) -> "ValidationReportModel":
         """The machine-readable report (``validation-report.schema.json``)."""
         return ValidationReportModel(
-            spec_version=SPEC_VERSION, haptify_version=PACKAGE_VERSION, session=self.session,
-            valid=self.valid, exit_code=self.exit_code, errors=len(self.errors), warnings=len(self.warnings),
+            spec_version=SPEC_VERSION,
+            haptify_version=PACKAGE_VERSION,
+            session=self.session,
+            valid=self.valid,
+            exit_code=self.exit_code,
+            errors=len(self.errors),
+            warnings=len(self.warnings),
             streams_checked=self.streams_checked,
             findings=[FindingModel(trial=i.trial, **_jsonable(i.finding.to_dict())) for i in self.items],
         )
@@ -162,7 +168,9 @@ class FindingModel(BaseModel):
     file: str | None = Field(None, description="Path of the file, relative to the session folder.")
     pointer: str | None = Field(None, description="JSON pointer (RFC 6901) into that file when it is JSON.")
     column: str | None = Field(None, description="The stream column concerned.")
-    time_range: list[float] | None = Field(None, min_length=2, max_length=2, description="First and last affected sample time, s.")
+    time_range: list[float] | None = Field(
+        None, min_length=2, max_length=2, description="First and last affected sample time, s."
+    )
     expected: Any = None
     found: Any = None
 
@@ -211,6 +219,7 @@ def _short(value: Any) -> Any:
 
 # --- schema validation (spec §4.3.1) -------------------------------------------------------------
 
+
 @lru_cache(maxsize=None)
 def _schema_validator(name: str) -> Draft202012Validator:
     """The Draft 2020-12 validator of ``<name>.schema.json``; from the pydantic model when not yet generated."""
@@ -244,8 +253,9 @@ def _branch_errors(err: SchemaError) -> list[SchemaError]:
             return [err]
         branch = by_branch[chosen[0]]
     else:
-        fitting = {i: errs for i, errs in by_branch.items()
-                   if not any(e.validator == "type" and not e.relative_path for e in errs)}
+        fitting = {
+            i: errs for i, errs in by_branch.items() if not any(e.validator == "type" and not e.relative_path for e in errs)
+        }
         if not fitting:
             return [err]
         branch = min(fitting.values(), key=len)
@@ -280,14 +290,22 @@ def schema_findings(instance: Any, schema_name: str, code: str, label: str) -> l
             if isinstance(expected, (dict, list)) and len(json.dumps(expected, default=str)) > 200:
                 expected = None
             message = err.message if len(err.message) <= 300 else err.message[:297] + "..."
-            out.append(Finding(_code_for(err, code), f"{schema_name}.schema.json: {message}", file=label,
-                               pointer=pointer_of(err.absolute_path), expected=_jsonable(expected) if expected is not None else err.validator,
-                               found=_jsonable(_short(err.instance))))
+            out.append(
+                Finding(
+                    _code_for(err, code),
+                    f"{schema_name}.schema.json: {message}",
+                    file=label,
+                    pointer=pointer_of(err.absolute_path),
+                    expected=_jsonable(expected) if expected is not None else err.validator,
+                    found=_jsonable(_short(err.instance)),
+                )
+            )
     out.sort(key=lambda f: f.pointer or "")
     return out
 
 
 # --- the device's kinematic chain (spec §2.3) ------------------------------------------------------
+
 
 def kinematics_findings(kin: Kinematics, file: str, base: str) -> list[Finding]:
     """The rules of spec §2.3 on a DH chain, as findings located at ``file`` + ``base`` (a JSON pointer).
@@ -299,28 +317,53 @@ def kinematics_findings(kin: Kinematics, file: str, base: str) -> list[Finding]:
     It is the very lattice the modeled workspace samples, so a session that validates never fails
     ``workspace.modeled_volume`` for its limits.
     """
-    out = [Finding("E116", f"joint {i + 1} of the chain is named {joint.name!r}", file=file,
-                   pointer=f"{base}/joints/{i}/name", expected=f"q{i + 1}", found=joint.name)
-           for i, joint in enumerate(kin.joints) if joint.name != f"q{i + 1}"]
+    out = [
+        Finding(
+            "E116",
+            f"joint {i + 1} of the chain is named {joint.name!r}",
+            file=file,
+            pointer=f"{base}/joints/{i}/name",
+            expected=f"q{i + 1}",
+            found=joint.name,
+        )
+        for i, joint in enumerate(kin.joints)
+        if joint.name != f"q{i + 1}"
+    ]
     if out:
         return out
     names = [j.name for j in kin.joints]
-    out = [Finding("E116", f"the {side} limit of {names[i]} depends on {other}, which is not an earlier joint",
-                   file=file, pointer=f"{base}/joints/{i}/{side}/coefficients/{other}", expected=names[:i], found=other)
-           for i, side, other in limit_order_violations(kin)]
+    out = [
+        Finding(
+            "E116",
+            f"the {side} limit of {names[i]} depends on {other}, which is not an earlier joint",
+            file=file,
+            pointer=f"{base}/joints/{i}/{side}/coefficients/{other}",
+            expected=names[:i],
+            found=other,
+        )
+        for i, side, other in limit_order_violations(kin)
+    ]
     if out:
         return out
     empty = empty_joint_range(kin)
     if empty is not None:
         joint = kin.joints[empty.joint]
-        out.append(Finding("E115", f"the upper limit of {joint.name} lies below its lower limit (by at least "
-                           f"{-empty.widest_rad:.6g} rad) for every configuration of the earlier joints", file=file,
-                           pointer=f"{base}/joints/{empty.joint}", expected="upper ≥ lower for some configuration",
-                           found={"lower": joint.lower.model_dump(), "upper": joint.upper.model_dump()}))
+        out.append(
+            Finding(
+                "E115",
+                f"the upper limit of {joint.name} lies below its lower limit (by at least "
+                f"{-empty.widest_rad:.6g} rad) for every configuration of the earlier joints",
+                file=file,
+                pointer=f"{base}/joints/{empty.joint}",
+                expected="upper ≥ lower for some configuration",
+                found={"lower": joint.lower.model_dump(), "upper": joint.upper.model_dump()},
+            )
+        )
     return out
 
 
 # --- files inside the folder (spec §4.2) ---------------------------------------------------------
+
 
 def _regular_file(path: Path, label: str, missing_code: str, missing_text: str, limit: int) -> int:
     """``lstat`` a resolved path: its size when it is a regular file within ``limit``; coded errors otherwise."""
@@ -331,11 +374,25 @@ def _regular_file(path: Path, label: str, missing_code: str, missing_text: str, 
     except OSError as exc:
         raise HaptifyError(Finding("E112", f"{label!r} cannot be examined: {exc.strerror}", file=label)) from None
     if not stat.S_ISREG(st.st_mode):
-        raise HaptifyError(Finding("E112", f"{label!r} is not a regular file", file=label,
-                                   expected="a regular file", found="a folder" if stat.S_ISDIR(st.st_mode) else "a special file"))
+        raise HaptifyError(
+            Finding(
+                "E112",
+                f"{label!r} is not a regular file",
+                file=label,
+                expected="a regular file",
+                found="a folder" if stat.S_ISDIR(st.st_mode) else "a special file",
+            )
+        )
     if st.st_size > limit:
-        raise HaptifyError(Finding("E113", f"{label!r} is {st.st_size} bytes, more than the {limit} bytes allowed", file=label,
-                                   expected=f"at most {limit} bytes", found=st.st_size))
+        raise HaptifyError(
+            Finding(
+                "E113",
+                f"{label!r} is {st.st_size} bytes, more than the {limit} bytes allowed",
+                file=label,
+                expected=f"at most {limit} bytes",
+                found=st.st_size,
+            )
+        )
     return st.st_size
 
 
@@ -343,7 +400,9 @@ def stream_size_limit(columns: int, rows: int, row_groups: int = 1) -> int:
     """The largest plausible size (bytes) of a stream file with ``columns`` × ``rows`` declared values
     and ``row_groups`` Parquet row groups (1 for CSV): min(8 GiB, 16 KiB + C · (1 KiB · G + 32 B · R)),
     spec §4.2 (E113)."""
-    return min(STREAM_MAX_BYTES, STREAM_BYTES_BASE + columns * (STREAM_BYTES_PER_COLUMN * row_groups + STREAM_BYTES_PER_VALUE * rows))
+    return min(
+        STREAM_MAX_BYTES, STREAM_BYTES_BASE + columns * (STREAM_BYTES_PER_COLUMN * row_groups + STREAM_BYTES_PER_VALUE * rows)
+    )
 
 
 def _parquet_row_groups(path: Path, label: str, rows: int) -> int:
@@ -356,12 +415,20 @@ def _parquet_row_groups(path: Path, label: str, rows: int) -> int:
     except (OSError, pa.ArrowException, ValueError) as exc:
         raise HaptifyError(Finding("E112", f"{label!r} cannot be read as parquet: {exc}", file=label)) from None
     if groups > max(1, rows):
-        raise HaptifyError(Finding("E113", f"{label!r} declares {groups} row groups for {rows} rows", file=label,
-                                   expected=f"at most {max(1, rows)} row groups", found=groups))
+        raise HaptifyError(
+            Finding(
+                "E113",
+                f"{label!r} declares {groups} row groups for {rows} rows",
+                file=label,
+                expected=f"at most {max(1, rows)} row groups",
+                found=groups,
+            )
+        )
     return max(1, groups)
 
 
 # --- the validator -------------------------------------------------------------------------------
+
 
 @dataclass
 class StreamEntry:
@@ -410,16 +477,16 @@ class _TimeScan:
 
     rate_hz: float
     rows: int = 0
-    first: float = math.nan          # t of the first and of the last sample
+    first: float = math.nan  # t of the first and of the last sample
     last: float = math.nan
     non_finite: int = 0
     last_finite: float | None = None
     gap: list[float | None] | None = None  # finite times before and after the first non-finite one
-    gap_open: bool = False           # no finite time seen yet after the first non-finite one
+    gap_open: bool = False  # no finite time seen yet after the first non-finite one
     reversals: int = 0
     first_reversal: tuple[int, float, float] | None = None  # row k, t[k], t[k+1]
-    odd: int = 0                     # intervals outside [INTERVAL_LOW, INTERVAL_HIGH] / rate_hz
-    odd_span: list[float] = field(default_factory=list)   # start of the first, end of the last
+    odd: int = 0  # intervals outside [INTERVAL_LOW, INTERVAL_HIGH] / rate_hz
+    odd_span: list[float] = field(default_factory=list)  # start of the first, end of the last
     dt_max: float = -math.inf
     dt_min: float = math.inf
 
@@ -436,7 +503,7 @@ class _TimeScan:
             self.non_finite += int(bad.size)
             if self.gap is None:
                 k = int(bad[0])
-                before, after = t[:k][finite[:k]], t[k + 1:][finite[k + 1:]]
+                before, after = t[:k][finite[:k]], t[k + 1 :][finite[k + 1 :]]
                 self.gap = [float(before[-1]) if before.size else self.last_finite, float(after[0]) if after.size else None]
                 self.gap_open = not after.size
         if finite.any():
@@ -462,24 +529,60 @@ class _TimeScan:
     def findings(self, label: str, add: Callable[[Finding], None]) -> bool:
         """Add the time findings (E203, E206, W402); True when the time column is sound (finite, increasing)."""
         if self.non_finite:
-            add(Finding("E203", f"time column holds {self.non_finite} non-finite values", file=label, column="t",
-                        time_range=self._gap_span(), expected="finite seconds", found="NaN or infinity"))
+            add(
+                Finding(
+                    "E203",
+                    f"time column holds {self.non_finite} non-finite values",
+                    file=label,
+                    column="t",
+                    time_range=self._gap_span(),
+                    expected="finite seconds",
+                    found="NaN or infinity",
+                )
+            )
         if self.reversals:
             k, a, b = self.first_reversal  # type: ignore[misc]
-            add(Finding("E203", f"time does not strictly increase at {self.reversals} intervals (first at row {k + 1})", file=label,
-                        column="t", time_range=(min(a, b), max(a, b)), expected="t[i+1] > t[i]", found=f"t[{k}]={a!r}, t[{k + 1}]={b!r}"))
+            add(
+                Finding(
+                    "E203",
+                    f"time does not strictly increase at {self.reversals} intervals (first at row {k + 1})",
+                    file=label,
+                    column="t",
+                    time_range=(min(a, b), max(a, b)),
+                    expected="t[i+1] > t[i]",
+                    found=f"t[{k}]={a!r}, t[{k + 1}]={b!r}",
+                )
+            )
         if self.non_finite or self.reversals:
             return False
         actual = (self.rows - 1) / (self.last - self.first)
         if abs(actual / self.rate_hz - 1.0) > RATE_TOLERANCE:
-            add(Finding("E206", f"actual mean rate {actual:.6g} Hz differs from the declared {self.rate_hz:g} Hz by more than "
-                        f"{RATE_TOLERANCE:.0%}", file=label, column="t", time_range=(self.first, self.last),
-                        expected=self.rate_hz, found=round(actual, 6)))
+            add(
+                Finding(
+                    "E206",
+                    f"actual mean rate {actual:.6g} Hz differs from the declared {self.rate_hz:g} Hz by more than "
+                    f"{RATE_TOLERANCE:.0%}",
+                    file=label,
+                    column="t",
+                    time_range=(self.first, self.last),
+                    expected=self.rate_hz,
+                    found=round(actual, 6),
+                )
+            )
         if self.odd:
             nominal = 1.0 / self.rate_hz
-            add(Finding("W402", f"{self.odd} sample intervals lie outside [{INTERVAL_LOW}, {INTERVAL_HIGH}] × {nominal:.6g} s "
-                        f"(largest {self.dt_max:.6g} s, smallest {self.dt_min:.6g} s)", file=label, column="t",
-                        time_range=tuple(self.odd_span), expected=nominal, found=self.odd))
+            add(
+                Finding(
+                    "W402",
+                    f"{self.odd} sample intervals lie outside [{INTERVAL_LOW}, {INTERVAL_HIGH}] × {nominal:.6g} s "
+                    f"(largest {self.dt_max:.6g} s, smallest {self.dt_min:.6g} s)",
+                    file=label,
+                    column="t",
+                    time_range=tuple(self.odd_span),
+                    expected=nominal,
+                    found=self.odd,
+                )
+            )
         return True
 
     def _gap_span(self) -> tuple[float, float] | None:
@@ -507,11 +610,16 @@ class _ValueScan:
             groups = [(ent, list(range(k * width, (k + 1) * width))) for k, ent in enumerate(s.entities or [])]
         else:
             groups = [(s.kind, list(range(len(cols))))]
-        self.groups = [(name, idx, _Tally(), _Tally()) for name, idx in groups if idx and idx[-1] < len(cols)]  # partial, occluded
+        self.groups = [
+            (name, idx, _Tally(), _Tally()) for name, idx in groups if idx and idx[-1] < len(cols)
+        ]  # partial, occluded
         self.sets = [(k, _Tally(), []) for k, c in enumerate(cols) if values_outside_set(s.kind, c, np.empty(0)) is not None]
         index = {c: k for k, c in enumerate(cols)}
-        self.quats = [(list(g), [index[c] for c in g], _Tally(), [None]) for g in quaternion_groups(s.kind, s.entities)
-                      if all(c in index for c in g)]
+        self.quats = [
+            (list(g), [index[c] for c in g], _Tally(), [None])
+            for g in quaternion_groups(s.kind, s.entities)
+            if all(c in index for c in g)
+        ]
         limits = [(k, _range_limit(c, rng)) for k, c in enumerate(cols)] if rng is not None else []
         self.ranges = [(k, limit, _Tally(), [0.0]) for k, limit in limits if limit is not None]
 
@@ -553,38 +661,99 @@ class _ValueScan:
         s, cols, label = self.stream, self.cols, self.stream.file
         for k, tally in enumerate(self.inf):
             if tally.count:
-                add(Finding("E210", f"column {cols[k]!r} holds {tally.count} infinite values", file=label,
-                            column=cols[k], time_range=tally.span, expected="finite values", found="inf"))
+                add(
+                    Finding(
+                        "E210",
+                        f"column {cols[k]!r} holds {tally.count} infinite values",
+                        file=label,
+                        column=cols[k],
+                        time_range=tally.span,
+                        expected="finite values",
+                        found="inf",
+                    )
+                )
         if self.mocap:  # mocap NaN policy (spec §2.7): whole entities NaN together; warn above the occlusion share
             for name, idx, partial, occluded in self.groups:
                 if partial.count:
-                    add(Finding("E204", f"{name}: {partial.count} samples have some but not all of {[cols[i] for i in idx]} NaN",
-                                file=label, column=cols[idx[0]], time_range=partial.span,
-                                expected="all columns of an occluded entity NaN together", found="partial NaN"))
+                    add(
+                        Finding(
+                            "E204",
+                            f"{name}: {partial.count} samples have some but not all of {[cols[i] for i in idx]} NaN",
+                            file=label,
+                            column=cols[idx[0]],
+                            time_range=partial.span,
+                            expected="all columns of an occluded entity NaN together",
+                            found="partial NaN",
+                        )
+                    )
                 share = occluded.count / rows
                 if share > OCCLUSION_WARNING_SHARE:
-                    add(Finding("W405", f"{name} is occluded in {share:.0%} of the samples", file=label, column=cols[idx[0]],
-                                time_range=occluded.span, expected=f"at most {OCCLUSION_WARNING_SHARE:.0%}", found=round(share, 4)))
+                    add(
+                        Finding(
+                            "W405",
+                            f"{name} is occluded in {share:.0%} of the samples",
+                            file=label,
+                            column=cols[idx[0]],
+                            time_range=occluded.span,
+                            expected=f"at most {OCCLUSION_WARNING_SHARE:.0%}",
+                            found=round(share, 4),
+                        )
+                    )
         else:
             for k, tally in enumerate(self.nan):
                 if tally.count:
-                    add(Finding("E204", f"column {cols[k]!r} holds {tally.count} NaN values; {s.kind} allows none",
-                                file=label, column=cols[k], time_range=tally.span, expected="no NaN", found="NaN"))
+                    add(
+                        Finding(
+                            "E204",
+                            f"column {cols[k]!r} holds {tally.count} NaN values; {s.kind} allows none",
+                            file=label,
+                            column=cols[k],
+                            time_range=tally.span,
+                            expected="no NaN",
+                            found="NaN",
+                        )
+                    )
         for k, tally, seen in self.sets:
             if tally.count:
                 col = cols[k]
-                add(Finding("E214", f"column {col!r} holds {tally.count} values other than {values_outside_set(s.kind, col, np.empty(0))[1]} "  # type: ignore[index]
-                            f"({seen[0].size} distinct, e.g. {float(seen[0][0])!r})", file=label, column=col, time_range=tally.span,
-                            expected=list(ALLOWED_VALUES[(s.kind, col)]), found=[float(v) for v in seen[0][:5]]))
+                add(
+                    Finding(
+                        "E214",
+                        f"column {col!r} holds {tally.count} values other than {values_outside_set(s.kind, col, np.empty(0))[1]} "  # type: ignore[index]
+                        f"({seen[0].size} distinct, e.g. {float(seen[0][0])!r})",
+                        file=label,
+                        column=col,
+                        time_range=tally.span,
+                        expected=list(ALLOWED_VALUES[(s.kind, col)]),
+                        found=[float(v) for v in seen[0][:5]],
+                    )
+                )
         for group, _, tally, worst in self.quats:
             if tally.count:
-                add(Finding("E207", f"{tally.count} quaternions ({', '.join(group)}) are not unit; worst norm {worst[0]:.6g}",
-                            file=label, column=group[0], time_range=tally.span,
-                            expected=f"norm 1 ± {QUATERNION_NORM_TOLERANCE}", found=worst[0]))
+                add(
+                    Finding(
+                        "E207",
+                        f"{tally.count} quaternions ({', '.join(group)}) are not unit; worst norm {worst[0]:.6g}",
+                        file=label,
+                        column=group[0],
+                        time_range=tally.span,
+                        expected=f"norm 1 ± {QUATERNION_NORM_TOLERANCE}",
+                        found=worst[0],
+                    )
+                )
         for k, limit, tally, peak in self.ranges:
             if tally.count:
-                add(Finding("W401", f"column {cols[k]!r} exceeds the declared ±{limit:g} range at {tally.count} samples (peak {peak[0]:.6g})",
-                            file=label, column=cols[k], time_range=tally.span, expected=f"|value| ≤ {limit:g}", found=peak[0]))
+                add(
+                    Finding(
+                        "W401",
+                        f"column {cols[k]!r} exceeds the declared ±{limit:g} range at {tally.count} samples (peak {peak[0]:.6g})",
+                        file=label,
+                        column=cols[k],
+                        time_range=tally.span,
+                        expected=f"|value| ≤ {limit:g}",
+                        found=peak[0],
+                    )
+                )
 
 
 def _range_limit(column: str, rng: SensorRange) -> float | None:
@@ -638,8 +807,15 @@ class SessionValidator:
     def check_manifest(self) -> None:
         """Folder, session.json, schema, device, ids, references, trials (spec §4.3.1–4.3.3)."""
         if not self.root.is_dir():
-            self.add(Finding("E101", f"{str(self.root)!r} is not a session folder", file=str(self.root),
-                             expected="a folder holding session.json", found="missing" if not self.root.exists() else "not a folder"))
+            self.add(
+                Finding(
+                    "E101",
+                    f"{str(self.root)!r} is not a session folder",
+                    file=str(self.root),
+                    expected="a folder holding session.json",
+                    found="missing" if not self.root.exists() else "not a folder",
+                )
+            )
             return
         self._guard(self._load_manifest, file=MANIFEST)
         if self.raw is None:
@@ -663,8 +839,16 @@ class SessionValidator:
         _regular_file(path, MANIFEST, "E102", f"no {MANIFEST} in {str(self.root)!r}", MANIFEST_MAX_BYTES)
         raw = parse_json_file(path, "E103", MANIFEST)
         if isinstance(raw, dict) and "spec_version" in raw and raw["spec_version"] != SPEC_VERSION:
-            raise HaptifyError(Finding("E105", f"spec version {raw['spec_version']!r} is not supported", file=MANIFEST,
-                                       pointer="/spec_version", expected=SPEC_VERSION, found=_short(raw["spec_version"])))
+            raise HaptifyError(
+                Finding(
+                    "E105",
+                    f"spec version {raw['spec_version']!r} is not supported",
+                    file=MANIFEST,
+                    pointer="/spec_version",
+                    expected=SPEC_VERSION,
+                    found=_short(raw["spec_version"]),
+                )
+            )
         self.raw = raw
 
     def _check_schema(self) -> None:
@@ -718,7 +902,9 @@ class SessionValidator:
     def _collect_streams(self) -> None:
         for index, raw_trial, trial in self.trials:
             trial_id = trial.id if trial is not None else _str_or_none(raw_trial, "id")
-            raw_streams = trial.streams if trial is not None else (raw_trial.get("streams") if isinstance(raw_trial, dict) else None)
+            raw_streams = (
+                trial.streams if trial is not None else (raw_trial.get("streams") if isinstance(raw_trial, dict) else None)
+            )
             if not isinstance(raw_streams, list):
                 continue
             for j, s in enumerate(raw_streams):
@@ -761,8 +947,17 @@ class SessionValidator:
         judged = {f.pointer for f in self.report.findings if f.file == label and f.code in ("E104", "E106", "E113", "E301")}
         for pointer, _, value in _json_members(self.raw if document is None else document):
             if value is None and pointer not in judged:
-                self.add(Finding("W407", "a member is written as null; omit it instead", file=label, pointer=pointer,
-                                 expected="the member omitted", found=None), _trial_of_pointer(self.raw, pointer) if document is None else None)
+                self.add(
+                    Finding(
+                        "W407",
+                        "a member is written as null; omit it instead",
+                        file=label,
+                        pointer=pointer,
+                        expected="the member omitted",
+                        found=None,
+                    ),
+                    _trial_of_pointer(self.raw, pointer) if document is None else None,
+                )
 
     def _check_date(self) -> None:
         """``date`` is a calendar date, not only ``YYYY-MM-DD``-shaped (spec §2.1)."""
@@ -772,8 +967,16 @@ class SessionValidator:
         try:
             datetime.date.fromisoformat(date)
         except ValueError:
-            self.add(Finding("E104", f"date {date!r} is not a calendar date", file=MANIFEST, pointer="/date",
-                             expected="an existing date YYYY-MM-DD", found=date))
+            self.add(
+                Finding(
+                    "E104",
+                    f"date {date!r} is not a calendar date",
+                    file=MANIFEST,
+                    pointer="/date",
+                    expected="an existing date YYYY-MM-DD",
+                    found=date,
+                )
+            )
 
     def _check_rig(self) -> None:
         """The rig's corner sensors have distinct ids c1…c4 (spec §2.4, E107)."""
@@ -784,9 +987,16 @@ class SessionValidator:
         for k, cid in enumerate(ids):
             if cid in ids[:k]:
                 missing = sorted({"c1", "c2", "c3", "c4"} - set(ids))
-                self.add(Finding("E107", f"force-plate corner sensor id {cid!r} is used twice (missing: {', '.join(missing)})",
-                                 file=MANIFEST, pointer=f"/rig/force_plate/corners/{k}/id",
-                                 expected="the four distinct ids c1, c2, c3, c4", found=ids))
+                self.add(
+                    Finding(
+                        "E107",
+                        f"force-plate corner sensor id {cid!r} is used twice (missing: {', '.join(missing)})",
+                        file=MANIFEST,
+                        pointer=f"/rig/force_plate/corners/{k}/id",
+                        expected="the four distinct ids c1, c2, c3, c4",
+                        found=ids,
+                    )
+                )
 
     def _check_ids(self) -> None:
         raw = self.raw
@@ -796,24 +1006,50 @@ class SessionValidator:
             if tid is None:
                 continue
             if tid in seen:
-                self.add(Finding("E107", f"trial id {tid!r} is used twice", file=MANIFEST, pointer=f"/trials/{index}/id",
-                                 expected="a unique trial id", found=tid), tid)
+                self.add(
+                    Finding(
+                        "E107",
+                        f"trial id {tid!r} is used twice",
+                        file=MANIFEST,
+                        pointer=f"/trials/{index}/id",
+                        expected="a unique trial id",
+                        found=tid,
+                    ),
+                    tid,
+                )
             seen.setdefault(tid, f"/trials/{index}")
         calib = raw.get("calibration") if isinstance(raw.get("calibration"), list) else []
         cids: set[str] = set()
         for i, rec in enumerate(calib):
             cid = _str_or_none(rec, "id")
             if cid is not None and cid in cids:
-                self.add(Finding("E107", f"calibration id {cid!r} is used twice", file=MANIFEST, pointer=f"/calibration/{i}/id",
-                                 expected="a unique calibration id", found=cid))
+                self.add(
+                    Finding(
+                        "E107",
+                        f"calibration id {cid!r} is used twice",
+                        file=MANIFEST,
+                        pointer=f"/calibration/{i}/id",
+                        expected="a unique calibration id",
+                        found=cid,
+                    )
+                )
             if cid is not None:
                 cids.add(cid)
         files: dict[str, str] = {}
         for e in self.entries:
             key = PurePosixPath(e.stream.file).as_posix()
             if key in files:
-                self.add(Finding("E107", f"stream file {e.stream.file!r} is named twice (also at {files[key]})", file=MANIFEST,
-                                 pointer=f"{e.pointer}/file", expected="one stream per file", found=e.stream.file), e.trial)
+                self.add(
+                    Finding(
+                        "E107",
+                        f"stream file {e.stream.file!r} is named twice (also at {files[key]})",
+                        file=MANIFEST,
+                        pointer=f"{e.pointer}/file",
+                        expected="one stream per file",
+                        found=e.stream.file,
+                    ),
+                    e.trial,
+                )
             files.setdefault(key, e.pointer)
         stream_files = set(files)
         for i, rec in enumerate(calib):
@@ -821,25 +1057,51 @@ class SessionValidator:
                 continue
             src = rec.get("source_trial")
             if isinstance(src, str) and src not in seen:
-                self.add(Finding("E114", f"calibration {rec.get('id')!r} names trial {src!r}, which the session does not hold",
-                                 file=MANIFEST, pointer=f"/calibration/{i}/source_trial", expected=sorted(seen), found=src))
+                self.add(
+                    Finding(
+                        "E114",
+                        f"calibration {rec.get('id')!r} names trial {src!r}, which the session does not hold",
+                        file=MANIFEST,
+                        pointer=f"/calibration/{i}/source_trial",
+                        expected=sorted(seen),
+                        found=src,
+                    )
+                )
             sf = rec.get("stream_file")
             if rec.get("kind") == "clock_offset" and isinstance(sf, str) and sf not in stream_files:
-                self.add(Finding("E114", f"clock offset {rec.get('id')!r} names stream file {sf!r}, which no stream uses",
-                                 file=MANIFEST, pointer=f"/calibration/{i}/stream_file", expected="a stream file of this session", found=sf))
+                self.add(
+                    Finding(
+                        "E114",
+                        f"clock offset {rec.get('id')!r} names stream file {sf!r}, which no stream uses",
+                        file=MANIFEST,
+                        pointer=f"/calibration/{i}/stream_file",
+                        expected="a stream file of this session",
+                        found=sf,
+                    )
+                )
 
     def _check_static_quaternions(self, document: Any = None, label: str = MANIFEST) -> None:
         """Unit norm of the quaternions inside session.json (or device.json) itself (spec §1.3, §4.3.3)."""
         for pointer, q in _quaternions_in(self.raw if document is None else document, ""):
-            if not (isinstance(q, list) and len(q) == 4 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in q)):
+            if not (
+                isinstance(q, list) and len(q) == 4 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in q)
+            ):
                 continue
             try:
                 norm = math.hypot(*(float(v) for v in q))  # hypot: no overflow for components near 1e308
             except OverflowError:  # an integer beyond the float range
                 norm = math.inf
             if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
-                self.add(Finding("E207", f"quaternion has norm {norm:.6g}", file=label, pointer=pointer,
-                                 expected=f"norm 1 ± {QUATERNION_NORM_TOLERANCE}", found=q))
+                self.add(
+                    Finding(
+                        "E207",
+                        f"quaternion has norm {norm:.6g}",
+                        file=label,
+                        pointer=pointer,
+                        expected=f"norm 1 ± {QUATERNION_NORM_TOLERANCE}",
+                        found=q,
+                    )
+                )
 
     def _check_trial(self, index: int, trial: Trial) -> None:
         """Protocol requirements, rendering, label, powered flag, one stream per kind (spec §4.3.3)."""
@@ -848,20 +1110,56 @@ class SessionValidator:
         kinds = [s.kind for s in trial.streams]
         for j, kind in enumerate(kinds):
             if kind in kinds[:j]:
-                self.add(Finding("E306", f"trial {trial.id!r} has two {kind} streams", file=MANIFEST, pointer=f"{where}/streams/{j}/kind",
-                                 expected=f"one {kind} stream", found=kinds.count(kind)), trial.id)
+                self.add(
+                    Finding(
+                        "E306",
+                        f"trial {trial.id!r} has two {kind} streams",
+                        file=MANIFEST,
+                        pointer=f"{where}/streams/{j}/kind",
+                        expected=f"one {kind} stream",
+                        found=kinds.count(kind),
+                    ),
+                    trial.id,
+                )
         for kind in proto["required"]:
             if kind not in kinds:
-                self.add(Finding("E302", f"{trial.protocol} trial {trial.id!r} has no {kind} stream", file=MANIFEST,
-                                 pointer=f"{where}/streams", expected=proto["required"], found=kinds), trial.id)
+                self.add(
+                    Finding(
+                        "E302",
+                        f"{trial.protocol} trial {trial.id!r} has no {kind} stream",
+                        file=MANIFEST,
+                        pointer=f"{where}/streams",
+                        expected=proto["required"],
+                        found=kinds,
+                    ),
+                    trial.id,
+                )
         for kind in proto["recommended"]:
             if kind not in kinds:
-                self.add(Finding("W404", f"{trial.protocol} trial {trial.id!r} has no {kind} stream", file=MANIFEST,
-                                 pointer=f"{where}/streams", expected=proto["recommended"], found=kinds), trial.id)
+                self.add(
+                    Finding(
+                        "W404",
+                        f"{trial.protocol} trial {trial.id!r} has no {kind} stream",
+                        file=MANIFEST,
+                        pointer=f"{where}/streams",
+                        expected=proto["recommended"],
+                        found=kinds,
+                    ),
+                    trial.id,
+                )
         passive = proto["passive"]
         if passive is False and trial.rendering is None:
-            self.add(Finding("E303", f"active {trial.protocol} trial {trial.id!r} has no rendering parameters", file=MANIFEST,
-                             pointer=f"{where}/rendering", expected="a rendering object", found=None), trial.id)
+            self.add(
+                Finding(
+                    "E303",
+                    f"active {trial.protocol} trial {trial.id!r} has no rendering parameters",
+                    file=MANIFEST,
+                    pointer=f"{where}/rendering",
+                    expected="a rendering object",
+                    found=None,
+                ),
+                trial.id,
+            )
         if trial.rendering is not None:
             n = trial.rendering.surface_normal
             try:
@@ -869,14 +1167,41 @@ class SessionValidator:
             except OverflowError:
                 norm = math.inf
             if not abs(norm - 1.0) <= NORMAL_NORM_TOLERANCE:
-                self.add(Finding("E307", f"trial {trial.id!r}: the rendering's surface_normal has norm {norm:.6g}", file=MANIFEST,
-                                 pointer=f"{where}/rendering/surface_normal", expected=f"norm 1 ± {NORMAL_NORM_TOLERANCE}", found=list(n)), trial.id)
+                self.add(
+                    Finding(
+                        "E307",
+                        f"trial {trial.id!r}: the rendering's surface_normal has norm {norm:.6g}",
+                        file=MANIFEST,
+                        pointer=f"{where}/rendering/surface_normal",
+                        expected=f"norm 1 ± {NORMAL_NORM_TOLERANCE}",
+                        found=list(n),
+                    ),
+                    trial.id,
+                )
         if trial.protocol == "other" and not (trial.label or "").strip():
-            self.add(Finding("E304", f"trial {trial.id!r} of protocol 'other' has no label", file=MANIFEST,
-                             pointer=f"{where}/label", expected="a label such as 'figure_eight'", found=trial.label), trial.id)
+            self.add(
+                Finding(
+                    "E304",
+                    f"trial {trial.id!r} of protocol 'other' has no label",
+                    file=MANIFEST,
+                    pointer=f"{where}/label",
+                    expected="a label such as 'figure_eight'",
+                    found=trial.label,
+                ),
+                trial.id,
+            )
         if passive is not None and trial.powered == passive:
-            self.add(Finding("W403", f"{'passive' if passive else 'active'} protocol {trial.protocol!r} recorded with powered={str(trial.powered).lower()}",
-                             file=MANIFEST, pointer=f"{where}/powered", expected=not passive, found=trial.powered), trial.id)
+            self.add(
+                Finding(
+                    "W403",
+                    f"{'passive' if passive else 'active'} protocol {trial.protocol!r} recorded with powered={str(trial.powered).lower()}",
+                    file=MANIFEST,
+                    pointer=f"{where}/powered",
+                    expected=not passive,
+                    found=trial.powered,
+                ),
+                trial.id,
+            )
 
     # -- phase 2: the streams --------------------------------------------------------------------
     def check_streams(self, advance: Callable[[int], Any] | None = None) -> None:
@@ -906,8 +1231,9 @@ class SessionValidator:
         kept: list[pd.DataFrame] = []
         if entry.path is not None:
             found: list[Finding] = []
-            raised = _collect(lambda: self._check_contents(entry, entry.path, found.append, kept.append if keep else None),
-                              entry.stream.file)
+            raised = _collect(
+                lambda: self._check_contents(entry, entry.path, found.append, kept.append if keep else None), entry.stream.file
+            )
             self.add_all(found + raised, entry.trial)
         self.report.streams_checked += 1
         return kept[0] if kept else None
@@ -924,37 +1250,102 @@ class SessionValidator:
         if "entity_columns" in spec:
             entities = s.entities or []
             if not entities:
-                add(Finding("E201", f"{s.kind} stream names no entities", file=MANIFEST, pointer=f"{entry.pointer}/entities",
-                            expected="the marker or link names, in column order", found=s.entities))
+                add(
+                    Finding(
+                        "E201",
+                        f"{s.kind} stream names no entities",
+                        file=MANIFEST,
+                        pointer=f"{entry.pointer}/entities",
+                        expected="the marker or link names, in column order",
+                        found=s.entities,
+                    )
+                )
             dups = sorted({e for e in entities if entities.count(e) > 1})
             if dups:
-                add(Finding("E107", f"{s.kind} stream lists entities {dups} more than once", file=MANIFEST,
-                            pointer=f"{entry.pointer}/entities", expected="distinct entities", found=dups))
+                add(
+                    Finding(
+                        "E107",
+                        f"{s.kind} stream lists entities {dups} more than once",
+                        file=MANIFEST,
+                        pointer=f"{entry.pointer}/entities",
+                        expected="distinct entities",
+                        found=dups,
+                    )
+                )
             known = self._known_entities(s.kind)
             if known is not None:
                 for k, ent in enumerate(entities):
                     if ent not in known:
-                        add(Finding("E213", f"{s.kind} stream names {ent!r}, which the rig does not describe", file=MANIFEST,
-                                    pointer=f"{entry.pointer}/entities/{k}", expected=sorted(known), found=ent))
+                        add(
+                            Finding(
+                                "E213",
+                                f"{s.kind} stream names {ent!r}, which the rig does not describe",
+                                file=MANIFEST,
+                                pointer=f"{entry.pointer}/entities/{k}",
+                                expected=sorted(known),
+                                found=ent,
+                            )
+                        )
         elif s.entities is not None:
-            add(Finding("E215", f"{s.kind} stream declares entities, which only markers and link_poses have", file=MANIFEST,
-                        pointer=f"{entry.pointer}/entities", expected="no 'entities' member", found=s.entities))
+            add(
+                Finding(
+                    "E215",
+                    f"{s.kind} stream declares entities, which only markers and link_poses have",
+                    file=MANIFEST,
+                    pointer=f"{entry.pointer}/entities",
+                    expected="no 'entities' member",
+                    found=s.entities,
+                )
+            )
         expected = expected_columns(s.kind, s.entities, declared)
         entry.names_ok = [n for n, _ in expected] == declared and len(set(declared)) == len(declared)
         if [n for n, _ in expected] != declared:
-            add(Finding("E201", f"{s.kind} stream declares columns that differ from its kind's", file=MANIFEST,
-                        pointer=f"{entry.pointer}/columns", expected=[n for n, _ in expected], found=declared))
+            add(
+                Finding(
+                    "E201",
+                    f"{s.kind} stream declares columns that differ from its kind's",
+                    file=MANIFEST,
+                    pointer=f"{entry.pointer}/columns",
+                    expected=[n for n, _ in expected],
+                    found=declared,
+                )
+            )
         else:
             for k, ((name, unit), col) in enumerate(zip(expected, s.columns)):
                 if col.unit != unit:
-                    add(Finding("E202", f"column {name!r} is declared in {col.unit!r}", file=MANIFEST,
-                                pointer=f"{entry.pointer}/columns/{k}/unit", column=name, expected=unit, found=col.unit))
+                    add(
+                        Finding(
+                            "E202",
+                            f"column {name!r} is declared in {col.unit!r}",
+                            file=MANIFEST,
+                            pointer=f"{entry.pointer}/columns/{k}/unit",
+                            column=name,
+                            expected=unit,
+                            found=col.unit,
+                        )
+                    )
         if s.frame not in spec["frames"]:
-            add(Finding("E209", f"{s.kind} stream is declared in frame {s.frame!r}", file=MANIFEST, pointer=f"{entry.pointer}/frame",
-                        expected=spec["frames"], found=s.frame))
+            add(
+                Finding(
+                    "E209",
+                    f"{s.kind} stream is declared in frame {s.frame!r}",
+                    file=MANIFEST,
+                    pointer=f"{entry.pointer}/frame",
+                    expected=spec["frames"],
+                    found=s.frame,
+                )
+            )
         if s.rate_hz < spec["recommended_rate_hz"]:
-            add(Finding("W406", f"{s.kind} stream at {s.rate_hz:g} Hz is below the recommended {spec['recommended_rate_hz']} Hz",
-                        file=MANIFEST, pointer=f"{entry.pointer}/rate_hz", expected=spec["recommended_rate_hz"], found=s.rate_hz))
+            add(
+                Finding(
+                    "W406",
+                    f"{s.kind} stream at {s.rate_hz:g} Hz is below the recommended {spec['recommended_rate_hz']} Hz",
+                    file=MANIFEST,
+                    pointer=f"{entry.pointer}/rate_hz",
+                    expected=spec["recommended_rate_hz"],
+                    found=s.rate_hz,
+                )
+            )
         # the file: path safety, existence, size
         path = resolve_inside(self.root, s.file)
         missing = f"stream file {label!r} does not exist"
@@ -966,8 +1357,9 @@ class SessionValidator:
             _regular_file(path, label, "E110", missing, stream_size_limit(len(declared), s.rows))
         entry.path = path
 
-    def _check_contents(self, entry: StreamEntry, path: Path, add: Callable[[Finding], None],
-                        keep: Callable[[pd.DataFrame], Any] | None) -> None:
+    def _check_contents(
+        self, entry: StreamEntry, path: Path, add: Callable[[Finding], None], keep: Callable[[pd.DataFrame], Any] | None
+    ) -> None:
         """Checksum, readability, columns, rows and data of a stream file whose declaration was checked.
 
         The file is read chunk by chunk (:func:`~haptify.storage.read_stream_chunks`, :meth:`chunk_rows_for`)
@@ -978,8 +1370,9 @@ class SessionValidator:
         s, label = entry.stream, entry.stream.file
         declared = [c.name for c in s.columns]
         try:
-            digest, chunks = read_stream_chunks(path, s.format, declared, label=label,
-                                                chunk_rows=None if keep is not None else self.chunk_rows_for(len(declared)))
+            digest, chunks = read_stream_chunks(
+                path, s.format, declared, label=label, chunk_rows=None if keep is not None else self.chunk_rows_for(len(declared))
+            )
         except HaptifyError:
             self._check_digest(s, sha256_file(path), add)
             raise
@@ -1002,14 +1395,31 @@ class SessionValidator:
             times.feed(block[:, 0])
             values.feed(block[:, 0], block[:, 1:])
         if not same:
-            add(Finding("E201", "the file's columns differ from the columns declared in session.json", file=label,
-                        expected=declared, found=columns))
+            add(
+                Finding(
+                    "E201",
+                    "the file's columns differ from the columns declared in session.json",
+                    file=label,
+                    expected=declared,
+                    found=columns,
+                )
+            )
             return
         n = times.rows
         if n != s.rows:
-            add(Finding("E208", f"{label!r} holds {n} rows, session.json declares {s.rows}", file=label, expected=s.rows, found=n))
+            add(
+                Finding("E208", f"{label!r} holds {n} rows, session.json declares {s.rows}", file=label, expected=s.rows, found=n)
+            )
         if n < 2:
-            add(Finding("E205", f"{s.kind} stream holds {n} sample{'s' if n != 1 else ''}", file=label, expected="at least 2 samples", found=n))
+            add(
+                Finding(
+                    "E205",
+                    f"{s.kind} stream holds {n} sample{'s' if n != 1 else ''}",
+                    file=label,
+                    expected="at least 2 samples",
+                    found=n,
+                )
+            )
             return
         if values is None:
             return  # the columns' meaning is unknown (E201/E107 above): data checks would mislead
@@ -1027,7 +1437,11 @@ class SessionValidator:
     def _check_digest(s: Stream, digest: str, add: Callable[[Finding], None]) -> None:
         """The file's sha256 matches the manifest's (E111, spec §3.4)."""
         if digest != s.sha256:
-            add(Finding("E111", f"checksum of {s.file!r} does not match session.json", file=s.file, expected=s.sha256, found=digest))
+            add(
+                Finding(
+                    "E111", f"checksum of {s.file!r} does not match session.json", file=s.file, expected=s.sha256, found=digest
+                )
+            )
 
     def _known_entities(self, kind: str) -> set[str] | None:
         mocap = self.rig.motion_capture if self.rig is not None else None
@@ -1062,10 +1476,19 @@ class SessionValidator:
             late = max(entries, key=lambda e: e.span[0])
             early = min(entries, key=lambda e: e.span[1])
             if late.span[0] >= early.span[1]:
-                self.add(Finding("E305", f"{early.stream.kind} ends at t={early.span[1]:.6g} s before {late.stream.kind} starts at "
-                                 f"t={late.span[0]:.6g} s (session clock)", file=late.stream.file, column="t",
-                                 time_range=(early.span[1], late.span[0]), expected="overlapping time spans",
-                                 found={early.stream.kind: list(early.span), late.stream.kind: list(late.span)}), trial)
+                self.add(
+                    Finding(
+                        "E305",
+                        f"{early.stream.kind} ends at t={early.span[1]:.6g} s before {late.stream.kind} starts at "
+                        f"t={late.span[0]:.6g} s (session clock)",
+                        file=late.stream.file,
+                        column="t",
+                        time_range=(early.span[1], late.span[0]),
+                        expected="overlapping time spans",
+                        found={early.stream.kind: list(early.span), late.stream.kind: list(late.span)},
+                    ),
+                    trial,
+                )
 
     def finish(self) -> ValidationReport:
         """The report of everything checked so far (spec §4.6)."""
@@ -1080,7 +1503,9 @@ def _collect(step: Callable[[], None], file: str | None) -> list[Finding]:
     except HaptifyError as err:
         return list(err.findings)
     except (MemoryError, RecursionError) as exc:
-        return [Finding("E112", f"{file or 'the input'} is too large or too deeply nested to check: {type(exc).__name__}", file=file)]
+        return [
+            Finding("E112", f"{file or 'the input'} is too large or too deeply nested to check: {type(exc).__name__}", file=file)
+        ]
     except Exception as exc:  # a bug in the validator: report it, coded, and go on
         return [Finding("E999", f"{type(exc).__name__}: {exc}", file=file)]
     return []
@@ -1103,7 +1528,13 @@ def _quaternions_in(node: Any, pointer: str) -> Iterable[tuple[str, Any]]:
 def _trial_of_pointer(raw: Any, pointer: str | None) -> str | None:
     """The id of the trial a manifest pointer (``/trials/<i>/…``) lies in, when it has a string id."""
     parts = (pointer or "").split("/")
-    if len(parts) > 2 and parts[1] == "trials" and parts[2].isdigit() and isinstance(raw, dict) and isinstance(raw.get("trials"), list):
+    if (
+        len(parts) > 2
+        and parts[1] == "trials"
+        and parts[2].isdigit()
+        and isinstance(raw, dict)
+        and isinstance(raw.get("trials"), list)
+    ):
         i = int(parts[2])
         if i < len(raw["trials"]):
             return _str_or_none(raw["trials"][i], "id")
@@ -1122,8 +1553,9 @@ def _str_or_none(node: Any, key: str) -> str | None:
     return value if isinstance(value, str) else None
 
 
-def validate_session(path: str | os.PathLike, advance: Callable[[int], Any] | None = None,
-                     chunk_rows: int | None = None) -> ValidationReport:
+def validate_session(
+    path: str | os.PathLike, advance: Callable[[int], Any] | None = None, chunk_rows: int | None = None
+) -> ValidationReport:
     """Validate a session folder and return every finding (spec chapter 4); never raises for bad input.
 
     ``advance(n)`` is called after each stream (for a progress bar). Stream files are read in chunks

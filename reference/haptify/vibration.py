@@ -41,7 +41,9 @@ def highpass(x: np.ndarray, rate_hz: float) -> np.ndarray:
     """
     fc = float(vp("highpass_cutoff_hz"))
     if not rate_hz > 2.0 * fc:
-        raise fail("E316", f"a {rate_hz:g} Hz signal cannot be high-passed at {fc:g} Hz", expected=f"rate > {2 * fc:g} Hz", found=rate_hz)
+        raise fail(
+            "E316", f"a {rate_hz:g} Hz signal cannot be high-passed at {fc:g} Hz", expected=f"rate > {2 * fc:g} Hz", found=rate_hz
+        )
     sos = butter(int(vp("highpass_order")), fc, btype="highpass", fs=rate_hz, output="sos")
     x = np.asarray(x, dtype=float)
     return sosfiltfilt(sos, x - x.mean(axis=0), axis=0)
@@ -87,7 +89,12 @@ def spectral_centroid(a: np.ndarray, rate_hz: float) -> float:
     f, p = power_spectrum(a, rate_hz)
     total = float(p.sum())
     if not total > 0:
-        raise fail("E316", "the vibration signal is identically zero: its spectral centroid is undefined", expected="a non-zero signal", found=0.0)
+        raise fail(
+            "E316",
+            "the vibration signal is identically zero: its spectral centroid is undefined",
+            expected="a non-zero signal",
+            found=0.0,
+        )
     return float(np.sum(f * p) / total)
 
 
@@ -118,9 +125,13 @@ def combine(t: np.ndarray, accel: np.ndarray, trial_id: str = "") -> CombinedVib
     trim = int(round(float(vp("edge_trim_s")) * rate)) if np.isfinite(rate) else len(t)
     if len(t) - 2 * trim < 1 or (len(t) - 2 * trim) / rate < float(vp("min_duration_s")):
         duration = float(t[-1] - t[0]) if len(t) else 0.0
-        raise fail("E316", f"trial {trial_id!r}: {duration:.3g} s of acceleration leave less than "
-                   f"{vp('min_duration_s')} s after trimming {vp('edge_trim_s')} s at each end",
-                   expected=f">= {2 * float(vp('edge_trim_s')) + float(vp('min_duration_s'))} s", found=duration)
+        raise fail(
+            "E316",
+            f"trial {trial_id!r}: {duration:.3g} s of acceleration leave less than "
+            f"{vp('min_duration_s')} s after trimming {vp('edge_trim_s')} s at each end",
+            expected=f">= {2 * float(vp('edge_trim_s')) + float(vp('min_duration_s'))} s",
+            found=duration,
+        )
     filtered = highpass(accel, rate)
     keep = slice(trim, len(t) - trim)
     return CombinedVibration(trial_id=trial_id, t=t[keep], signal=dft321(filtered[keep]), rate_hz=rate)
@@ -128,6 +139,7 @@ def combine(t: np.ndarray, accel: np.ndarray, trial_id: str = "") -> CombinedVib
 
 def trial_vibration(ctx_or_session: Any, trial_id: str) -> CombinedVibration:
     """:func:`combine` on a trial's raw ``handle_accel`` stream (spec §10.6); cached on a ComputeContext."""
+
     def build() -> CombinedVibration:
         df = session_of(ctx_or_session).read(trial_id, "handle_accel")
         return combine(df["t"].to_numpy(), df[ACCEL_COLUMNS].to_numpy(), trial_id)
@@ -146,8 +158,11 @@ def compute(ctx: Any) -> list:
         if missing:
             out += missing
             continue
-        diag = {"peak_abs_m_per_s2": [d["peak"] for d in done.values()], "duration_s": [d["duration"] for d in done.values()],
-                "rate_hz": [d["rate"] for d in done.values()]}
+        diag = {
+            "peak_abs_m_per_s2": [d["peak"] for d in done.values()],
+            "duration_s": [d["duration"] for d in done.values()],
+            "rate_hz": [d["rate"] for d in done.values()],
+        }
         out.append(aggregate(FAMILY, rms_id, [TrialValue(tid, d["rms"]) for tid, d in done.items()], diagnostics=diag))
         out.append(aggregate(FAMILY, centroid_id, [TrialValue(tid, d["centroid"]) for tid, d in done.items()]))
     return out
@@ -155,11 +170,17 @@ def compute(ctx: Any) -> list:
 
 def _summary(ctx: Any, trial_id: str) -> dict:
     v = trial_vibration(ctx, trial_id)
-    return {"rms": v.rms, "centroid": v.centroid, "peak": float(np.max(np.abs(v.signal))),
-            "duration": float(len(v.signal) / v.rate_hz), "rate": v.rate_hz}
+    return {
+        "rms": v.rms,
+        "centroid": v.centroid,
+        "peak": float(np.max(np.abs(v.signal))),
+        "duration": float(len(v.signal) / v.rate_hz),
+        "rate": v.rate_hz,
+    }
 
 
 # --- report figures and audio (spec §15.6; paper Fig. 7) ------------------------------------------
+
 
 def _report_trials(ctx: Any) -> list[CombinedVibration]:
     out = []
@@ -192,8 +213,14 @@ def report_figures(ctx: Any, results: Any) -> list:
         ax2.axvline(v.centroid, color="r", lw=0.8)
         ax2.set_xlabel("frequency (Hz)")
         ax2.set_ylabel("power (periodogram, arbitrary units)")
-        figures.append(ReportFigure(f"vibration_{v.trial_id}", f"Combined (DFT321) vibration of {v.trial_id} with its RMS "
-                                    "and spectral centroid (paper Fig. 7; spec chapter 10).", fig))
+        figures.append(
+            ReportFigure(
+                f"vibration_{v.trial_id}",
+                f"Combined (DFT321) vibration of {v.trial_id} with its RMS "
+                "and spectral centroid (paper Fig. 7; spec chapter 10).",
+                fig,
+            )
+        )
     return figures
 
 
@@ -201,5 +228,7 @@ def report_audio(ctx: Any) -> list:
     """Each trial's combined vibration signal, for the report's WAV files (paper §VI-C)."""
     from haptify.report import ReportAudio
 
-    return [ReportAudio(f"vibration_{v.trial_id}", f"Combined vibration of {v.trial_id}", v.signal, v.rate_hz)
-            for v in _report_trials(ctx)]
+    return [
+        ReportAudio(f"vibration_{v.trial_id}", f"Combined vibration of {v.trial_id}", v.signal, v.rate_hz)
+        for v in _report_trials(ctx)
+    ]

@@ -47,7 +47,7 @@ class VoxelSolid:
     @cached_property
     def volume(self) -> float:
         """Volume in m³: h³ · Σ fraction (summed once per solid)."""
-        return float(self.fraction.sum(dtype=np.float64)) * self.pitch ** 3
+        return float(self.fraction.sum(dtype=np.float64)) * self.pitch**3
 
     @property
     def closed(self) -> bool:
@@ -75,7 +75,12 @@ def volume_solid(points: np.ndarray, *, pitch: float | None = None, closing_radi
     if pts.ndim != 2 or pts.shape[1] != 3 or not np.all(np.isfinite(pts)):
         raise ValueError("volume_solid needs finite points of shape (N, 3)")
     if len(pts) < int(wp("min_points")):
-        raise fail("E313", f"a workspace cloud needs at least {wp('min_points')} finite points", expected=f">= {wp('min_points')}", found=len(pts))
+        raise fail(
+            "E313",
+            f"a workspace cloud needs at least {wp('min_points')} finite points",
+            expected=f">= {wp('min_points')}",
+            found=len(pts),
+        )
     band = int(wp("band_voxels"))
     rc = r / (c * h)  # closing radius in coarse voxels
     idx = np.floor(pts / h).astype(np.int64)
@@ -86,8 +91,12 @@ def volume_solid(points: np.ndarray, *, pitch: float | None = None, closing_radi
     n_vox = math.prod(shape)
     if n_vox > int(wp("max_grid_voxels")):
         extent = (pts.max(axis=0) - pts.min(axis=0)).round(3).tolist()
-        raise fail("E313", f"the cloud spans {extent} m: its {n_vox} voxels exceed the grid limit",
-                   expected=f"<= {wp('max_grid_voxels')} voxels", found=n_vox)
+        raise fail(
+            "E313",
+            f"the cloud spans {extent} m: its {n_vox} voxels exceed the grid limit",
+            expected=f"<= {wp('max_grid_voxels')} voxels",
+            found=n_vox,
+        )
     flat = np.ravel_multi_index((idx - lo).T, shape)
     uniq, inv, counts = np.unique(flat, return_inverse=True, return_counts=True)
     means = np.stack([np.bincount(inv, weights=pts[:, k], minlength=len(uniq)) / counts for k in range(3)], axis=1)
@@ -104,8 +113,13 @@ def volume_solid(points: np.ndarray, *, pitch: float | None = None, closing_radi
     in_band = band_c[tuple((vox // c).T)]
     fine, band_fraction = _band_fractions(coarse, c, band_c, lo, h, means[in_band])
     fraction[tuple(fine.T)] = band_fraction
-    return VoxelSolid(origin=tuple(int(x) for x in lo), pitch=h, fraction=fraction,
-                      hull_volume=_hull_volume(vox, means, counts), n_points=len(pts))
+    return VoxelSolid(
+        origin=tuple(int(x) for x in lo),
+        pitch=h,
+        fraction=fraction,
+        hull_volume=_hull_volume(vox, means, counts),
+        n_points=len(pts),
+    )
 
 
 def _refine(coarse: np.ndarray, c: int) -> np.ndarray:
@@ -115,7 +129,7 @@ def _refine(coarse: np.ndarray, c: int) -> np.ndarray:
 
 def _block_voxels(blocks: np.ndarray, c: int) -> np.ndarray:
     """Fine-lattice indices (n·c³, 3) of the fine voxels of the coarse voxels ``blocks`` (n, 3), block by block."""
-    offsets = np.stack(np.unravel_index(np.arange(c ** 3), (c, c, c)), axis=1)
+    offsets = np.stack(np.unravel_index(np.arange(c**3), (c, c, c)), axis=1)
     return (blocks[:, None, :] * c + offsets[None]).reshape(-1, 3)
 
 
@@ -132,8 +146,9 @@ def _blocks_near(shape: tuple[int, ...], blocks: np.ndarray, c: int, reach_voxel
     return ndi.maximum_filter(occupied, size=2 * half + 1, mode="constant").astype(bool)
 
 
-def _band_fractions(coarse: np.ndarray, c: int, band_c: np.ndarray, lo: np.ndarray, h: float,
-                    samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _band_fractions(
+    coarse: np.ndarray, c: int, band_c: np.ndarray, lo: np.ndarray, h: float, samples: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Sub-voxel inside-fractions of the band voxels (spec §8.4 step 5): the fine indices (n, 3) of the
     fine voxels of the coarse band ``band_c`` and their fractions (n,).
 
@@ -149,7 +164,7 @@ def _band_fractions(coarse: np.ndarray, c: int, band_c: np.ndarray, lo: np.ndarr
     """
     blocks = np.argwhere(band_c)
     fine = _block_voxels(blocks, c)
-    inside = np.repeat(coarse[band_c].astype(np.float32), c ** 3)
+    inside = np.repeat(coarse[band_c].astype(np.float32), c**3)
     if len(samples) < 3:
         return fine, inside
     smooth = ndi.gaussian_filter(coarse.astype(np.float32), float(wp("normal_smoothing_voxels")))
@@ -177,7 +192,7 @@ def _band_fractions(coarse: np.ndarray, c: int, band_c: np.ndarray, lo: np.ndarr
     normal = np.where((count < int(wp("min_normal_neighbours")))[:, None], outward, normal)
 
     reach = float(wp("surface_search_voxels"))
-    searched = np.repeat(_blocks_near(band_c.shape, ijk, c, reach)[band_c], c ** 3)
+    searched = np.repeat(_blocks_near(band_c.shape, ijk, c, reach)[band_c], c**3)
     centres = (fine[searched] + lo + 0.5) * h
     dist, near = tree.query(centres, k=1, distance_upper_bound=reach * h)
     ok = np.isfinite(dist)
@@ -196,7 +211,10 @@ def _hull_volume(vox: np.ndarray, means: np.ndarray, counts: np.ndarray) -> floa
     (spec §8.4 step 7), from the occupied voxels' indices, sample means and counts; 0 for flat clouds."""
     block = vox // int(wp("hull_block_voxels"))
     flat = np.ravel_multi_index(block.T, tuple(int(x) + 1 for x in block.max(axis=0)))
-    _, inv, = np.unique(flat, return_inverse=True)
+    (
+        _,
+        inv,
+    ) = np.unique(flat, return_inverse=True)
     weight = np.bincount(inv, weights=counts)
     block_means = np.stack([np.bincount(inv, weights=means[:, k] * counts) / weight for k in range(3)], axis=1)
     if len(block_means) < 4:
@@ -217,10 +235,11 @@ def overlap_volume(a: VoxelSolid, b: VoxelSolid) -> float:
         return 0.0
     sa = tuple(slice(int(low - o), int(up - o)) for low, up, o in zip(lo, hi, a.origin))
     sb = tuple(slice(int(low - o), int(up - o)) for low, up, o in zip(lo, hi, b.origin))
-    return float(np.minimum(a.fraction[sa], b.fraction[sb]).sum(dtype=np.float64)) * a.pitch ** 3
+    return float(np.minimum(a.fraction[sa], b.fraction[sb]).sum(dtype=np.float64)) * a.pitch**3
 
 
 # --- the modeled workspace (spec §8.3) ---------------------------------------------------------
+
 
 def _levers(kin: Kinematics) -> list[float]:
     """Upper bound (m) of the distance from joint j's axis to the gimbal centre: Σ_{i ≥ j} (|a_i| + |d_i|)."""
@@ -234,8 +253,14 @@ def _joint_ranges(kin: Kinematics) -> np.ndarray:
     q = configurations_from_unit(kin, unit_lattice([RANGE_LATTICE_POINTS] * len(kin.joints)))
     q = q[~np.isnan(q).any(axis=1)]
     if len(q) == 0:  # every coupled range of the lattice is empty (e.g. an upper limit below the lower one)
-        raise fail("E311", "the device's joint limits admit no configuration (every sampled coupled range is empty)",
-                   file="session.json", pointer="/device/kinematics/joints", expected="lower <= upper for some configuration", found="none")
+        raise fail(
+            "E311",
+            "the device's joint limits admit no configuration (every sampled coupled range is empty)",
+            file="session.json",
+            pointer="/device/kinematics/joints",
+            expected="lower <= upper for some configuration",
+            found="none",
+        )
     lower, upper = joint_limits(kin, q)
     return np.max(upper - lower, axis=0)
 
@@ -283,8 +308,9 @@ def _positions(kin: Kinematics, unit: np.ndarray) -> np.ndarray:
     return forward_positions(kin, q[~np.isnan(q).any(axis=1)])
 
 
-def modeled_solid(kin: Kinematics, placement_position: Any = (0.0, 0.0, 0.0),
-                  placement_quaternion: Any = (1.0, 0.0, 0.0, 0.0)) -> VoxelSolid:
+def modeled_solid(
+    kin: Kinematics, placement_position: Any = (0.0, 0.0, 0.0), placement_quaternion: Any = (1.0, 0.0, 0.0, 0.0)
+) -> VoxelSolid:
     """The modeled workspace as a solid in W: :func:`modeled_points` placed by ``device_placement`` (spec §8.3)."""
     pts = pose_apply(np.asarray(placement_position, float), np.asarray(placement_quaternion, float), modeled_points(kin))
     return volume_solid(pts)
@@ -296,6 +322,7 @@ def spec_box_volume(box: Any) -> float:
 
 
 # --- session level (spec §8.7) -------------------------------------------------------------------
+
 
 def trial_positions(session: Any, trial_id: str) -> np.ndarray:
     """The gimbal-centre positions (m, W) of a workspace trial's handle_pose stream in time order, NaN where
@@ -334,17 +361,32 @@ def compute(ctx: Any) -> list:  # noqa: C901 (over ruff's limit of 15: to be spl
         model_error = fail("E311", f"device {device.manufacturer} {device.model} has no kinematics", pointer="/device/kinematics")
     elif any(ctx.wants(m) for m in ("workspace.modeled_volume", "workspace.volume_ratio", "workspace.coverage")):
         try:
-            model = ctx.cached(("workspace_model",), lambda: modeled_solid(device.kinematics, placement.position, placement.quaternion))
+            model = ctx.cached(
+                ("workspace_model",), lambda: modeled_solid(device.kinematics, placement.position, placement.quaternion)
+            )
         except HaptifyError as exc:
             model_error = exc
         if model is not None and not model.volume > 0:
-            model, model_error = None, fail("E311", "the device's kinematics reach no volume (empty or degenerate joint ranges)",
-                                            pointer="/device/kinematics", expected="a modeled volume > 0", found=0.0)
+            model, model_error = (
+                None,
+                fail(
+                    "E311",
+                    "the device's kinematics reach no volume (empty or degenerate joint ranges)",
+                    pointer="/device/kinematics",
+                    expected="a modeled volume > 0",
+                    found=0.0,
+                ),
+            )
     if model is not None:
-        out.append(single(FAMILY, "workspace.modeled_volume", model.volume,
-                          diagnostics={"voxels": int(model.fraction.size), "samples": model.n_points,
-                                       "hull_volume_m3": model.hull_volume},
-                          warnings=[] if model.closed else ["W410"]))
+        out.append(
+            single(
+                FAMILY,
+                "workspace.modeled_volume",
+                model.volume,
+                diagnostics={"voxels": int(model.fraction.size), "samples": model.n_points, "hull_volume_m3": model.hull_volume},
+                warnings=[] if model.closed else ["W410"],
+            )
+        )
     elif model_error is not None:
         out.append(unavailable("workspace.modeled_volume", model_error))
 
@@ -352,8 +394,12 @@ def compute(ctx: Any) -> list:  # noqa: C901 (over ruff's limit of 15: to be spl
     if box is not None:
         out.append(single(FAMILY, "workspace.spec_box_volume", spec_box_volume(box), diagnostics={"box_m": list(box)}))
     else:
-        out.append(unavailable("workspace.spec_box_volume",
-                               fail("E312", "the device datasheet has no workspace_box_m", pointer="/device/datasheet/workspace_box_m")))
+        out.append(
+            unavailable(
+                "workspace.spec_box_volume",
+                fail("E312", "the device datasheet has no workspace_box_m", pointer="/device/datasheet/workspace_box_m"),
+            )
+        )
 
     trials = [t.id for t in session.trials_of(PROTOCOL)]
     measured_ids = ("workspace.measured_volume", "workspace.volume_ratio", "workspace.coverage")
@@ -362,37 +408,62 @@ def compute(ctx: Any) -> list:  # noqa: C901 (over ruff's limit of 15: to be spl
     if not trials:
         err = no_trials(PROTOCOL)
         return out + [unavailable(m, err) for m in measured_ids]
-    solids, first_error = per_trial(ctx, trials, lambda tid: ctx.cached(("workspace_solid", tid), lambda: volume_solid(measured_points(session, tid))),
-                                    "workspace.measured_volume")
+    solids, first_error = per_trial(
+        ctx,
+        trials,
+        lambda tid: ctx.cached(("workspace_solid", tid), lambda: volume_solid(measured_points(session, tid))),
+        "workspace.measured_volume",
+    )
     if not solids:
         return out + [unavailable(m, first_error) for m in measured_ids]
     for tid, s in solids.items():
         if not s.closed:
-            ctx.warn("W410", f"the boundary sweep of trial {tid!r} did not close: volume {s.volume * 1e6:.0f} cm³ is "
-                     f"{s.volume / s.hull_volume if s.hull_volume else 0:.0%} of its convex hull", metric="workspace.measured_volume", trial=tid)
+            ctx.warn(
+                "W410",
+                f"the boundary sweep of trial {tid!r} did not close: volume {s.volume * 1e6:.0f} cm³ is "
+                f"{s.volume / s.hull_volume if s.hull_volume else 0:.0%} of its convex hull",
+                metric="workspace.measured_volume",
+                trial=tid,
+            )
     closed = {tid: s for tid, s in solids.items() if s.closed}
     if closed:  # open sweeps are left out when a closed one exists (spec §8.7)
         for tid in solids.keys() - closed.keys():
             ctx.warn("W413", f"workspace.measured_volume: trial {tid!r} skipped (W410: its sweep did not close)", trial=tid)
         solids = closed
     codes = {tid: [] if s.closed else ["W410"] for tid, s in solids.items()}
-    out.append(aggregate(FAMILY, "workspace.measured_volume",
-                         [TrialValue(tid, s.volume, codes[tid]) for tid, s in solids.items()],
-                         diagnostics={"hull_volume_m3": [s.hull_volume for s in solids.values()],
-                                      "points": [s.n_points for s in solids.values()],
-                                      "longest_occlusion_gap_m": [longest_occlusion_gap(trial_positions(session, tid)) for tid in solids]}))
+    out.append(
+        aggregate(
+            FAMILY,
+            "workspace.measured_volume",
+            [TrialValue(tid, s.volume, codes[tid]) for tid, s in solids.items()],
+            diagnostics={
+                "hull_volume_m3": [s.hull_volume for s in solids.values()],
+                "points": [s.n_points for s in solids.values()],
+                "longest_occlusion_gap_m": [longest_occlusion_gap(trial_positions(session, tid)) for tid in solids],
+            },
+        )
+    )
     if model is None:
         if model_error is None:  # neither ratio nor coverage was asked for
             return out
         return out + [unavailable(m, model_error) for m in ("workspace.volume_ratio", "workspace.coverage")]
-    out.append(aggregate(FAMILY, "workspace.volume_ratio",
-                         [TrialValue(tid, s.volume / model.volume, codes[tid]) for tid, s in solids.items()]))
-    out.append(aggregate(FAMILY, "workspace.coverage",
-                         [TrialValue(tid, overlap_volume(s, model) / model.volume, codes[tid]) for tid, s in solids.items()]))
+    out.append(
+        aggregate(
+            FAMILY, "workspace.volume_ratio", [TrialValue(tid, s.volume / model.volume, codes[tid]) for tid, s in solids.items()]
+        )
+    )
+    out.append(
+        aggregate(
+            FAMILY,
+            "workspace.coverage",
+            [TrialValue(tid, overlap_volume(s, model) / model.volume, codes[tid]) for tid, s in solids.items()],
+        )
+    )
     return out
 
 
 # --- report figures (spec §15.6; paper Fig. 5) ----------------------------------------------------
+
 
 def report_figures(ctx: Any, results: Any) -> list:
     """Measured gimbal-centre clouds over the modeled workspace, side (x–z) and top (x–y) views (paper Fig. 5)."""
@@ -412,7 +483,9 @@ def report_figures(ctx: Any, results: Any) -> list:
     if device.kinematics is not None:
         placement = session.manifest.device_placement
         try:
-            model = ctx.cached(("workspace_model",), lambda: modeled_solid(device.kinematics, placement.position, placement.quaternion))
+            model = ctx.cached(
+                ("workspace_model",), lambda: modeled_solid(device.kinematics, placement.position, placement.quaternion)
+            )
         except HaptifyError:
             model = None
     if not clouds and model is None:
@@ -429,5 +502,10 @@ def report_figures(ctx: Any, results: Any) -> list:
         ax.set_aspect("equal")
         ax.set_title(title)
     axes[0].legend(markerscale=8, fontsize=8, loc="upper right")
-    return [ReportFigure("workspace", "Measured gimbal-centre positions of the workspace trials over the modeled workspace "
-                                      "(paper Fig. 5; spec chapter 8).", fig)]
+    return [
+        ReportFigure(
+            "workspace",
+            "Measured gimbal-centre positions of the workspace trials over the modeled workspace (paper Fig. 5; spec chapter 8).",
+            fig,
+        )
+    ]

@@ -12,7 +12,9 @@ for line in sys.stdin:
     msg = json.loads(line)
     seq = msg["seq"]
     if msg["op"] == "hello":
-        print(json.dumps({"seq": seq, "status": "ok", "protocol": 1, "implementation": {"name": "toy", "version": "0"}}), flush=True)
+        print(
+            json.dumps({"seq": seq, "status": "ok", "protocol": 1, "implementation": {"name": "toy", "version": "0"}}), flush=True
+        )
         continue
     if msg["op"] == "bye":
         print(json.dumps({"seq": seq, "status": "ok"}), flush=True)
@@ -35,4 +37,6 @@ for line in sys.stdin:
         print(json.dumps({"seq": seq, "status": "error", "findings": [{"code": "E203", "severity": "error"}]}), flush=True)
         continue
     value = float(name[1:])
-    print(json.dumps({"seq": seq, "status": "ok", "results": {"metrics": [{"id": "x.y", "value": value, "unit": "N"}]}}), flush=True)
+    print(
+        json.dumps({"seq": seq, "status": "ok", "results": {"metrics": [{"id": "x.y", "value": value, "unit": "N"}]}}), flush=True
+    )

@@ -51,6 +51,7 @@ Fn = Callable[[np.ndarray], np.ndarray]
 
 # --- case records ----------------------------------------------------------------------------------
 
+
 @dataclass
 class Fixture:
     """One fixture: its folder name, the function that writes it, and the cases that run on it."""
@@ -60,18 +61,37 @@ class Fixture:
     cases: list[dict] = field(default_factory=list)
 
 
-def case(cid: str, metric: str, section: str, fixture: str, value: Any, unit: str, kind: str, note: str, description: str,
-         parameters: dict | None = None, level: str = "MUST", quantity: str = "value") -> dict:
+def case(
+    cid: str,
+    metric: str,
+    section: str,
+    fixture: str,
+    value: Any,
+    unit: str,
+    kind: str,
+    note: str,
+    description: str,
+    parameters: dict | None = None,
+    level: str = "MUST",
+    quantity: str = "value",
+) -> dict:
     """A metric case (spec §16.2) whose tolerance is the sum of its budget (:mod:`haptify_tools.tolerance_budgets`);
     ``quantity`` u, U or k judges the metric's uncertainty record instead of its value (§19.4)."""
     value = [float(v) for v in value] if isinstance(value, (list, tuple, np.ndarray)) else float(value)
     budget = budget_record(cid)
     head = {"id": cid, "metric": metric} | ({"quantity": quantity} if quantity != "value" else {})
-    return {**head, "spec_section": section, "level": level, "fixture": f"{FIXTURE_DIR}/{fixture}",
-            "parameters": parameters or {}, "expected": {"value": value, "unit": unit},
-            "tolerance": {"abs": math.fsum(t["abs"] for t in budget), "rel": math.fsum(t["rel"] for t in budget)},
-            "provenance": {"kind": kind, "note": note, "budget": budget},
-            "spec_versions": [SPEC_VERSION], "description": description}
+    return {
+        **head,
+        "spec_section": section,
+        "level": level,
+        "fixture": f"{FIXTURE_DIR}/{fixture}",
+        "parameters": parameters or {},
+        "expected": {"value": value, "unit": unit},
+        "tolerance": {"abs": math.fsum(t["abs"] for t in budget), "rel": math.fsum(t["rel"] for t in budget)},
+        "provenance": {"kind": kind, "note": note, "budget": budget},
+        "spec_versions": [SPEC_VERSION],
+        "description": description,
+    }
 
 
 # --- shared truth helpers ----------------------------------------------------------------------------
@@ -88,18 +108,34 @@ def rotated_rig_full() -> dict:
     return rig
 
 
-def manifest(sid: str, rig: dict, *, device: dict | None = None, placement: dict | None = None,
-             truth: rb.HandleTruth = QUIET, plate_bias: np.ndarray | None = None,
-             superseded: rb.HandleTruth | None = None) -> SessionWriter:
+def manifest(
+    sid: str,
+    rig: dict,
+    *,
+    device: dict | None = None,
+    placement: dict | None = None,
+    truth: rb.HandleTruth = QUIET,
+    plate_bias: np.ndarray | None = None,
+    superseded: rb.HandleTruth | None = None,
+) -> SessionWriter:
     """A session writer whose handle_gravity record holds ``truth`` — after a ``superseded`` record, when given,
     which §6.4 (the last record applies) sets aside."""
     cal: list = ([superseded.record("hg-0")] if superseded else []) + [truth.record("hg-1")]
     if plate_bias is not None:
         cal.append({"kind": "plate_bias", "id": "plate-bias-1", "bias": [float(v) for v in plate_bias]})
-    return SessionWriter(manifest={"session_id": sid, "date": "2026-11-22", "lab": {"id": "lab-conformance"},
-                                   "examiner": {"id": "ex-conformance"}, "device": device or TOUCH_DEVICE,
-                                   "device_placement": placement or IDENTITY, "rig": rig, "calibration": cal,
-                                   "recorder": "haptify_tools.build_conformance_fixtures"})
+    return SessionWriter(
+        manifest={
+            "session_id": sid,
+            "date": "2026-11-22",
+            "lab": {"id": "lab-conformance"},
+            "examiner": {"id": "ex-conformance"},
+            "device": device or TOUCH_DEVICE,
+            "device_placement": placement or IDENTITY,
+            "rig": rig,
+            "calibration": cal,
+            "recorder": "haptify_tools.build_conformance_fixtures",
+        }
+    )
 
 
 def clock(duration_s: float, rate: float) -> np.ndarray:
@@ -114,7 +150,9 @@ def spin(rate: float, axis=(0.3, -0.2, 1.0), tilt: float = 0.4) -> Fn:
     """Orientation turning at ``rate`` rad/s about a fixed world axis from a tilted start (exact angular speed)."""
     q0 = quat_from_axis_angle(np.array([1.0, 0.0, 0.0]), np.array(tilt))
     ax = np.asarray(axis, float)
-    return lambda t: quat_multiply(quat_from_axis_angle(np.broadcast_to(ax, (len(t), 3)), rate * t), np.broadcast_to(q0, (len(t), 4)))
+    return lambda t: quat_multiply(
+        quat_from_axis_angle(np.broadcast_to(ax, (len(t), 3)), rate * t), np.broadcast_to(q0, (len(t), 4))
+    )
 
 
 def circle(radius: float, omega: float, centre=(0.0, 0.05, 0.12)) -> Fn:
@@ -122,12 +160,30 @@ def circle(radius: float, omega: float, centre=(0.0, 0.05, 0.12)) -> Fn:
     return lambda t: c + np.column_stack([radius * np.cos(omega * t), radius * np.sin(omega * t), 0 * t])
 
 
-def handle_trial(w: SessionWriter, tid: str, protocol: str, *, duration_s: float, position: Fn, quaternion: Fn,
-                 force_w: Fn, truth: rb.HandleTruth = QUIET, rates=(500.0, 500.0, 100.0), fmt: str = "parquet",
-                 repetition: int = 1, powered: bool = False, rendering: dict | None = None, commanded_w: Fn | None = None,
-                 occluded: Callable[[np.ndarray], np.ndarray] | None = None, accel_extra: Fn | None = None,
-                 plate_force_w: Fn | None = None, plate_bias: np.ndarray | None = None, rng=None, start_s: float = 0.0,
-                 clock_offsets: dict[str, float] | None = None) -> None:
+def handle_trial(
+    w: SessionWriter,
+    tid: str,
+    protocol: str,
+    *,
+    duration_s: float,
+    position: Fn,
+    quaternion: Fn,
+    force_w: Fn,
+    truth: rb.HandleTruth = QUIET,
+    rates=(500.0, 500.0, 100.0),
+    fmt: str = "parquet",
+    repetition: int = 1,
+    powered: bool = False,
+    rendering: dict | None = None,
+    commanded_w: Fn | None = None,
+    occluded: Callable[[np.ndarray], np.ndarray] | None = None,
+    accel_extra: Fn | None = None,
+    plate_force_w: Fn | None = None,
+    plate_bias: np.ndarray | None = None,
+    rng=None,
+    start_s: float = 0.0,
+    clock_offsets: dict[str, float] | None = None,
+) -> None:
     """A trial whose raw streams realise the truth: ``force_w`` (N, on the hand, W; zero torque about the
     gimbal centre), the pose, and ``accel_extra`` (m/s², added in the accelerometer frame: vibrations).
 
@@ -143,11 +199,19 @@ def handle_trial(w: SessionWriter, tid: str, protocol: str, *, duration_s: float
         offset = (clock_offsets or {}).get(kind)
         stream = w.add_stream(tid, kind, {**data, "t": data["t"] - offset} if offset else data, rate_hz=rate, fmt=fmt)
         if offset:
-            w.manifest["calibration"].append({"kind": "clock_offset", "id": f"offset-{tid}-{kind}".replace("_", "-"),
-                                              "stream_file": stream["file"], "offset_s": offset})
+            w.manifest["calibration"].append(
+                {
+                    "kind": "clock_offset",
+                    "id": f"offset-{tid}-{kind}".replace("_", "-"),
+                    "stream_file": stream["file"],
+                    "offset_s": offset,
+                }
+            )
+
     f_w = force_w(t_ft)
-    wrench, accel = rb.raw_handle(truth, rig, t_ft, quaternion(t_ft), t_acc, quaternion(t_acc), rng,
-                                  hand_force_w=f_w, hand_torque_g_w=np.zeros_like(f_w))
+    wrench, accel = rb.raw_handle(
+        truth, rig, t_ft, quaternion(t_ft), t_acc, quaternion(t_acc), rng, hand_force_w=f_w, hand_torque_g_w=np.zeros_like(f_w)
+    )
     if accel_extra is not None:
         extra = accel_extra(t_acc)
         for k, c in enumerate(("ax", "ay", "az")):
@@ -159,27 +223,59 @@ def handle_trial(w: SessionWriter, tid: str, protocol: str, *, duration_s: float
         gone = occluded(t_m)
         p, q = p.copy(), q.copy()
         p[gone], q[gone] = np.nan, np.nan
-    add("handle_pose", {"t": t_m, "px": p[:, 0], "py": p[:, 1], "pz": p[:, 2], "qw": q[:, 0], "qx": q[:, 1], "qy": q[:, 2],
-                        "qz": q[:, 3]}, mocap_rate)
+    add(
+        "handle_pose",
+        {"t": t_m, "px": p[:, 0], "py": p[:, 1], "pz": p[:, 2], "qw": q[:, 0], "qx": q[:, 1], "qy": q[:, 2], "qz": q[:, 3]},
+        mocap_rate,
+    )
     if commanded_w is not None:
         c = commanded_w(t_ft)
-        add("commanded_wrench", {"t": t_ft, "fx": c[:, 0], "fy": c[:, 1], "fz": c[:, 2], "tx": 0 * t_ft, "ty": 0 * t_ft,
-                                 "tz": 0 * t_ft}, ft_rate)
+        add(
+            "commanded_wrench",
+            {"t": t_ft, "fx": c[:, 0], "fy": c[:, 1], "fz": c[:, 2], "tx": 0 * t_ft, "ty": 0 * t_ft, "tz": 0 * t_ft},
+            ft_rate,
+        )
     if plate_force_w is not None:
         pf = plate_force_w(t_ft)
         add("plate_wrench", rb.plate_stream(t_ft, rb.corner_readings(rig, pf, np.zeros_like(pf), plate_bias)), ft_rate)
 
 
-def active_session(name: str, rig_kind: str, tid: str, protocol: str, duration_s: float, spin_rate: float, position: Fn,
-                   force: Fn, commanded: Fn, rendering: dict, rates, fmt: str) -> Callable[[Path], None]:
+def active_session(
+    name: str,
+    rig_kind: str,
+    tid: str,
+    protocol: str,
+    duration_s: float,
+    spin_rate: float,
+    position: Fn,
+    force: Fn,
+    commanded: Fn,
+    rendering: dict,
+    rates,
+    fmt: str,
+) -> Callable[[Path], None]:
     """The builder of a one-trial session of a rendering protocol (surface, stiffness): powered, with the
     commanded wrench, in the example rig or the fully rotated one."""
+
     def build(path: Path) -> None:
         rig = example_rig() if rig_kind == "example" else rotated_rig_full()
         w = manifest(f"conf-{name}", rig)
-        handle_trial(w, tid, protocol, duration_s=duration_s, position=position, quaternion=spin(spin_rate), force_w=force,
-                     powered=True, rendering=rendering, commanded_w=commanded, rates=rates, fmt=fmt)
+        handle_trial(
+            w,
+            tid,
+            protocol,
+            duration_s=duration_s,
+            position=position,
+            quaternion=spin(spin_rate),
+            force_w=force,
+            powered=True,
+            rendering=rendering,
+            commanded_w=commanded,
+            rates=rates,
+            fmt=fmt,
+        )
         w.write(path)
+
     return build
 
 
@@ -215,6 +311,7 @@ def lowpass_noise_ratio(fc: float, fs: float, order: int) -> float:
 
 # --- workspace (spec chapter 8) ---------------------------------------------------------------------
 
+
 def sphere_cloud(n: int, radius: float, centre, rng) -> np.ndarray:
     v = rng.normal(size=(n, 3))
     return radius * v / np.linalg.norm(v, axis=1, keepdims=True) + np.asarray(centre, float)
@@ -225,7 +322,7 @@ def sphere_spiral(n: int, radius: float, centre) -> np.ndarray:
     k = np.arange(n) + 0.5
     z = 1 - 2 * k / n
     phi = math.pi * (3 - math.sqrt(5)) * k
-    r = np.sqrt(1 - z ** 2)
+    r = np.sqrt(1 - z**2)
     return radius * np.column_stack([r * np.cos(phi), r * np.sin(phi), z]) + np.asarray(centre, float)
 
 
@@ -248,8 +345,22 @@ def pose_cloud(w: SessionWriter, tid: str, cloud: np.ndarray, fmt: str, repetiti
     w.add_trial(tid, "workspace", powered=False, repetition=repetition)
     t = np.arange(len(cloud)) / rate
     seen = np.where(np.all(np.isfinite(cloud), axis=1), 1.0, np.nan)  # an occluded frame has no orientation either
-    w.add_stream(tid, "handle_pose", {"t": t, "px": cloud[:, 0], "py": cloud[:, 1], "pz": cloud[:, 2],
-                                      "qw": seen, "qx": 0 * seen, "qy": 0 * seen, "qz": 0 * seen}, rate_hz=rate, fmt=fmt)
+    w.add_stream(
+        tid,
+        "handle_pose",
+        {
+            "t": t,
+            "px": cloud[:, 0],
+            "py": cloud[:, 1],
+            "pz": cloud[:, 2],
+            "qw": seen,
+            "qx": 0 * seen,
+            "qy": 0 * seen,
+            "qz": 0 * seen,
+        },
+        rate_hz=rate,
+        fmt=fmt,
+    )
 
 
 def scaled_device(scale: float, box=None) -> dict:
@@ -266,8 +377,17 @@ def scaled_device(scale: float, box=None) -> dict:
 def limits(dev: dict) -> tuple:
     j1, j2, j3 = dev["kinematics"]["joints"]
     c = j3["upper"].get("coefficients", {}).get("q2", 0.0)
-    return (j1["lower"]["constant"], j1["upper"]["constant"], j2["lower"]["constant"], j2["upper"]["constant"],
-            j3["lower"]["constant"], j3["upper"]["constant"], c, j2["a"], j3["a"])
+    return (
+        j1["lower"]["constant"],
+        j1["upper"]["constant"],
+        j2["lower"]["constant"],
+        j2["upper"]["constant"],
+        j3["lower"]["constant"],
+        j3["upper"]["constant"],
+        c,
+        j2["a"],
+        j3["a"],
+    )
 
 
 def pappus_volume(dev: dict, q1_range: tuple[float, float] | None = None, n: int = 2000) -> float:
@@ -311,8 +431,10 @@ def workspace_fixtures() -> list[Fixture]:
     out: list[Fixture] = []
     pitch = param("workspace", "voxel_pitch_m")
     cr = param("workspace", "closing_radius_m")
-    model_bias = ("the operator reproduces the full-size Touch models' Pappus volumes closely (spec §8.8); the links here "
-                  "are scaled by 0.45, so the voxels are 2.2× coarser relative to the solid")
+    model_bias = (
+        "the operator reproduces the full-size Touch models' Pappus volumes closely (spec §8.8); the links here "
+        "are scaled by 0.45, so the voxels are 2.2× coarser relative to the solid"
+    )
     bias = f"the operator's stated bias (spec §8.8: sub-voxel boundary within 0.5 %; h = {pitch} m, r = {cr} m)"
     tiny = scaled_device(0.45)
 
@@ -325,17 +447,42 @@ def workspace_fixtures() -> list[Fixture]:
         w.write(path)
 
     fx = Fixture("ws-sphere", sphere)
-    v_sphere = 4 / 3 * math.pi * R ** 3
+    v_sphere = 4 / 3 * math.pi * R**3
     fx.cases += [
-        case("workspace.measured_volume.sphere", "workspace.measured_volume", "8.4", fx.name, v_sphere, "m^3", "analytic", f"4/3·π·R³ of the sphere (R = {R} m) whose surface the 6 000 positions sample; " + bias,
-             "Typical: a convex cloud sampled on its boundary."),
-        case("workspace.spec_box_volume.touch", "workspace.spec_box_volume", "8.6", fx.name, 0.16 * 0.12 * 0.07, "m^3",
-             "paper", "product of the Touch's datasheet box 16 × 12 × 7 cm (paper §IV-A, Table II)",
-             "Typical: the manufacturer's box."),
-        case("workspace.modeled_volume.touch-0.45", "workspace.modeled_volume", "8.3", fx.name, pappus_volume(tiny), "m^3",
-             "analytic", "Pappus integral of the coupled joint limits of the Touch with links × 0.45 "
-             "(V = Δq1·∬|r| a2 a3 |sin q3| dq2 dq3); " + model_bias,
-             "Typical: the DH model's reachable set within coupled joint limits."),
+        case(
+            "workspace.measured_volume.sphere",
+            "workspace.measured_volume",
+            "8.4",
+            fx.name,
+            v_sphere,
+            "m^3",
+            "analytic",
+            f"4/3·π·R³ of the sphere (R = {R} m) whose surface the 6 000 positions sample; " + bias,
+            "Typical: a convex cloud sampled on its boundary.",
+        ),
+        case(
+            "workspace.spec_box_volume.touch",
+            "workspace.spec_box_volume",
+            "8.6",
+            fx.name,
+            0.16 * 0.12 * 0.07,
+            "m^3",
+            "paper",
+            "product of the Touch's datasheet box 16 × 12 × 7 cm (paper §IV-A, Table II)",
+            "Typical: the manufacturer's box.",
+        ),
+        case(
+            "workspace.modeled_volume.touch-0.45",
+            "workspace.modeled_volume",
+            "8.3",
+            fx.name,
+            pappus_volume(tiny),
+            "m^3",
+            "analytic",
+            "Pappus integral of the coupled joint limits of the Touch with links × 0.45 "
+            "(V = Δq1·∬|r| a2 a3 |sin q3| dq2 dq3); " + model_bias,
+            "Typical: the DH model's reachable set within coupled joint limits.",
+        ),
     ]
     out.append(fx)
 
@@ -350,11 +497,29 @@ def workspace_fixtures() -> list[Fixture]:
 
     fx = Fixture("ws-box-rotated-csv", box)
     fx.cases += [
-        case("workspace.measured_volume.box-rotated-csv", "workspace.measured_volume", "8.4", fx.name, math.prod(edges), "m^3",
-             "analytic", f"edges {edges} m multiplied; the box is turned 0.7 rad about (0.3, −0.5, 0.8) so no face "
-             "is parallel to the voxel lattice; " + bias, "Tricky: rotated faces, CSV streams."),
-        case("workspace.spec_box_volume.touch-x", "workspace.spec_box_volume", "8.6", fx.name, 0.16 * 0.12 * 0.12, "m^3",
-             "paper", "product of the Touch X box 16 × 12 × 12 cm (paper §IV-A)", "Typical: another datasheet box."),
+        case(
+            "workspace.measured_volume.box-rotated-csv",
+            "workspace.measured_volume",
+            "8.4",
+            fx.name,
+            math.prod(edges),
+            "m^3",
+            "analytic",
+            f"edges {edges} m multiplied; the box is turned 0.7 rad about (0.3, −0.5, 0.8) so no face "
+            "is parallel to the voxel lattice; " + bias,
+            "Tricky: rotated faces, CSV streams.",
+        ),
+        case(
+            "workspace.spec_box_volume.touch-x",
+            "workspace.spec_box_volume",
+            "8.6",
+            fx.name,
+            0.16 * 0.12 * 0.12,
+            "m^3",
+            "paper",
+            "product of the Touch X box 16 × 12 × 12 cm (paper §IV-A)",
+            "Typical: another datasheet box.",
+        ),
     ]
     out.append(fx)
 
@@ -373,12 +538,29 @@ def workspace_fixtures() -> list[Fixture]:
 
     fx = Fixture("ws-two-lobes", lobes)
     fx.cases += [
-        case("workspace.measured_volume.two-lobes", "workspace.measured_volume", "8.4", fx.name,
-             2 * 4 / 3 * math.pi * RL ** 3 - lens_volume(RL, D), "m^3", "analytic",
-             f"union of two balls R = {RL} m, centres {D} m apart: 2·(4/3)πR³ − π(4R+d)(2R−d)²/12; the closing fills the "
-             "waist's crease with a fillet of radius r (spec §8.8: +0.5 % on two R = 6 cm lobes); the convex hull is ~9 % larger",
-             "Tricky: a non-convex workspace."),
-        case("workspace.spec_box_volume.cube", "workspace.spec_box_volume", "8.6", fx.name, 1e-3, "m^3", "analytic", "the datasheet box of this device is a 10 cm cube: 0.1³ m³", "Edge: a cubic datasheet box."),
+        case(
+            "workspace.measured_volume.two-lobes",
+            "workspace.measured_volume",
+            "8.4",
+            fx.name,
+            2 * 4 / 3 * math.pi * RL**3 - lens_volume(RL, D),
+            "m^3",
+            "analytic",
+            f"union of two balls R = {RL} m, centres {D} m apart: 2·(4/3)πR³ − π(4R+d)(2R−d)²/12; the closing fills the "
+            "waist's crease with a fillet of radius r (spec §8.8: +0.5 % on two R = 6 cm lobes); the convex hull is ~9 % larger",
+            "Tricky: a non-convex workspace.",
+        ),
+        case(
+            "workspace.spec_box_volume.cube",
+            "workspace.spec_box_volume",
+            "8.6",
+            fx.name,
+            1e-3,
+            "m^3",
+            "analytic",
+            "the datasheet box of this device is a 10 cm cube: 0.1³ m³",
+            "Edge: a cubic datasheet box.",
+        ),
     ]
     out.append(fx)
 
@@ -395,10 +577,18 @@ def workspace_fixtures() -> list[Fixture]:
 
     fx = Fixture("ws-sphere-occluded", occluded)
     fx.cases += [
-        case("workspace.measured_volume.occluded", "workspace.measured_volume", "8.7", fx.name, 4 / 3 * math.pi * RO ** 3, "m^3",
-             "analytic", f"sphere R = {RO} m swept along a spiral at 120 Hz; 15 % of the frames are NaN in runs "
-             "of 90; the finite rows still sample the whole surface more densely than 2r; " + bias,
-             "Tricky: occlusion gaps (NaN rows are dropped, never interpolated)."),
+        case(
+            "workspace.measured_volume.occluded",
+            "workspace.measured_volume",
+            "8.7",
+            fx.name,
+            4 / 3 * math.pi * RO**3,
+            "m^3",
+            "analytic",
+            f"sphere R = {RO} m swept along a spiral at 120 Hz; 15 % of the frames are NaN in runs "
+            "of 90; the finite rows still sample the whole surface more densely than 2r; " + bias,
+            "Tricky: occlusion gaps (NaN rows are dropped, never interpolated).",
+        ),
     ]
     out.append(fx)
 
@@ -407,20 +597,32 @@ def workspace_fixtures() -> list[Fixture]:
 
     def capless(path: Path) -> None:
         pts = sphere_cloud(7000, RC, CC, np.random.default_rng(SEED + 6))
-        pts = pts[pts[:, 2] - CC[2] <= math.sqrt(RC ** 2 - rim ** 2)]
+        pts = pts[pts[:, 2] - CC[2] <= math.sqrt(RC**2 - rim**2)]
         w = manifest("conf-ws-capless", example_rig(), device=tiny)
         pose_cloud(w, "workspace-1", pts, "csv")
         w.write(path)
 
     fx = Fixture("ws-sphere-capless-csv", capless)
-    h_sphere, h_ball = RC - math.sqrt(RC ** 2 - rim ** 2), cr - math.sqrt(cr ** 2 - rim ** 2)
-    dented = 4 / 3 * math.pi * RC ** 3 - math.pi * h_sphere ** 2 * (3 * RC - h_sphere) / 3 - math.pi * h_ball ** 2 * (3 * cr - h_ball) / 3
+    h_sphere, h_ball = RC - math.sqrt(RC**2 - rim**2), cr - math.sqrt(cr**2 - rim**2)
+    dented = (
+        4 / 3 * math.pi * RC**3 - math.pi * h_sphere**2 * (3 * RC - h_sphere) / 3 - math.pi * h_ball**2 * (3 * cr - h_ball) / 3
+    )
     fx.cases += [
-        case("workspace.measured_volume.capless", "workspace.measured_volume", "8.4", fx.name, dented, "m^3", "analytic", f"sphere R = {RC} m sampled on its surface except a polar cap whose rim has radius {rim} m: the hole "
-             f"(4 cm across) is narrower than 2r = {2 * cr:g} m, so the closing by a ball of radius r bridges it (§8.4 steps 2–4) "
-             "and the solid is the sphere minus its cap above the rim and minus the part of an r-ball resting on the rim "
-             "that dips below it (πh²(3R − h)/3 each: 0.5 % of the sphere in all); the dent has no boundary samples, so "
-             "it is resolved on the coarse lattice only (≤ 0.2 %); " + bias, "Tricky: a sweep that missed a cap."),
+        case(
+            "workspace.measured_volume.capless",
+            "workspace.measured_volume",
+            "8.4",
+            fx.name,
+            dented,
+            "m^3",
+            "analytic",
+            f"sphere R = {RC} m sampled on its surface except a polar cap whose rim has radius {rim} m: the hole "
+            f"(4 cm across) is narrower than 2r = {2 * cr:g} m, so the closing by a ball of radius r bridges it (§8.4 steps 2–4) "
+            "and the solid is the sphere minus its cap above the rim and minus the part of an r-ball resting on the rim "
+            "that dips below it (πh²(3R − h)/3 each: 0.5 % of the sphere in all); the dent has no boundary samples, so "
+            "it is resolved on the coarse lattice only (≤ 0.2 %); " + bias,
+            "Tricky: a sweep that missed a cap.",
+        ),
     ]
     out.append(fx)
 
@@ -429,16 +631,27 @@ def workspace_fixtures() -> list[Fixture]:
 
     def thin(path: Path) -> None:
         w = manifest("conf-ws-slab", example_rig(), device=tiny)
-        pose_cloud(w, "workspace-1", box_cloud(20_000, slab, np.random.default_rng(SEED + 7), q_slab, (0.02, 0.01, 0.15)),
-                   "parquet")
+        pose_cloud(
+            w, "workspace-1", box_cloud(20_000, slab, np.random.default_rng(SEED + 7), q_slab, (0.02, 0.01, 0.15)), "parquet"
+        )
         w.write(path)
 
     fx = Fixture("ws-thin-slab", thin)
     fx.cases += [
-        case("workspace.measured_volume.thin-slab", "workspace.measured_volume", "8.4", fx.name, math.prod(slab), "m^3", "analytic", f"a box of edges {slab} m turned 0.7 rad about (0.3, −0.5, 0.8), 20 000 samples on its faces; "
-             f"1 cm is four voxels of h = {pitch} m, twice the operator's resolution limit of about 2 h (spec §8.8): both "
-             "faces' samples lie within every band voxel's search radius, so the sub-voxel ramps place both faces; "
-             "tolerance 2 %, the bias allowed for a non-convex or thin solid", "Edge: a thin workspace."),
+        case(
+            "workspace.measured_volume.thin-slab",
+            "workspace.measured_volume",
+            "8.4",
+            fx.name,
+            math.prod(slab),
+            "m^3",
+            "analytic",
+            f"a box of edges {slab} m turned 0.7 rad about (0.3, −0.5, 0.8), 20 000 samples on its faces; "
+            f"1 cm is four voxels of h = {pitch} m, twice the operator's resolution limit of about 2 h (spec §8.8): both "
+            "faces' samples lie within every band voxel's search radius, so the sub-voxel ramps place both faces; "
+            "tolerance 2 %, the bias allowed for a non-convex or thin solid",
+            "Edge: a thin workspace.",
+        ),
     ]
     out.append(fx)
 
@@ -455,19 +668,55 @@ def workspace_fixtures() -> list[Fixture]:
 
     fx = Fixture("ws-model-swept-placed", swept)
     fx.cases += [
-        case("workspace.modeled_volume.placed", "workspace.modeled_volume", "8.3", fx.name, pappus_volume(mid), "m^3", "analytic", "Pappus integral of the model's joint limits; a placement (turned 2.2 rad about z, tilted 0.15 rad) "
-             "moves the solid, not its volume; " + model_bias, "Tricky: rotated device placement."),
-        case("workspace.volume_ratio.full-sweep", "workspace.volume_ratio", "8.5", fx.name, 1.0, "1", "analytic",
-             "the measured positions are the model's own boundary (joint-limit faces) placed by device_placement; both "
-             "solids come from the same operator, so the ratio is 1 within the two samplings' biases (each below 0.5 % "
-             "at this scale)",
-             "Typical: a complete boundary sweep."),
-        case("workspace.coverage.full-sweep", "workspace.coverage", "8.5", fx.name, 1.0, "1", "analytic",
-             "the measured sweep covers the placed model entirely; an implementation that ignores device_placement "
-             "(turned 2.2 rad) finds far less overlap", "Tricky: coverage needs the placement applied."),
-        case("workspace.measured_volume.model-sweep", "workspace.measured_volume", "8.4", fx.name, pappus_volume(mid), "m^3",
-             "analytic", "the measured sweep of the model's boundary encloses the model's reachable set (Pappus); "
-             "non-convex (the coupled q3 limit carves the inner side)", "Typical: a device-shaped, non-convex sweep."),
+        case(
+            "workspace.modeled_volume.placed",
+            "workspace.modeled_volume",
+            "8.3",
+            fx.name,
+            pappus_volume(mid),
+            "m^3",
+            "analytic",
+            "Pappus integral of the model's joint limits; a placement (turned 2.2 rad about z, tilted 0.15 rad) "
+            "moves the solid, not its volume; " + model_bias,
+            "Tricky: rotated device placement.",
+        ),
+        case(
+            "workspace.volume_ratio.full-sweep",
+            "workspace.volume_ratio",
+            "8.5",
+            fx.name,
+            1.0,
+            "1",
+            "analytic",
+            "the measured positions are the model's own boundary (joint-limit faces) placed by device_placement; both "
+            "solids come from the same operator, so the ratio is 1 within the two samplings' biases (each below 0.5 % "
+            "at this scale)",
+            "Typical: a complete boundary sweep.",
+        ),
+        case(
+            "workspace.coverage.full-sweep",
+            "workspace.coverage",
+            "8.5",
+            fx.name,
+            1.0,
+            "1",
+            "analytic",
+            "the measured sweep covers the placed model entirely; an implementation that ignores device_placement "
+            "(turned 2.2 rad) finds far less overlap",
+            "Tricky: coverage needs the placement applied.",
+        ),
+        case(
+            "workspace.measured_volume.model-sweep",
+            "workspace.measured_volume",
+            "8.4",
+            fx.name,
+            pappus_volume(mid),
+            "m^3",
+            "analytic",
+            "the measured sweep of the model's boundary encloses the model's reachable set (Pappus); "
+            "non-convex (the coupled q3 limit carves the inner side)",
+            "Typical: a device-shaped, non-convex sweep.",
+        ),
     ]
     out.append(fx)
 
@@ -483,51 +732,116 @@ def workspace_fixtures() -> list[Fixture]:
     q1lo, q1hi = limits(mid)[:2]
     half_share = q1hi / (q1hi - q1lo)
     fx.cases += [
-        case("workspace.volume_ratio.half", "workspace.volume_ratio", "8.5", fx.name, half_share, "1", "analytic",
-             "the examiner swept only q1 ∈ [0, 56°] of [−56°, 56°]; the volume of a solid of revolution is proportional to "
-             "its angle (Pappus), so measured/modeled = 1/2", "Edge: half of the workspace reached."),
-        case("workspace.coverage.half", "workspace.coverage", "8.5", fx.name, half_share, "1", "analytic",
-             "the half solid lies inside the model: the overlap is the half solid itself, 1/2 of the model",
-             "Edge: partial coverage."),
-        case("workspace.modeled_volume.csv", "workspace.modeled_volume", "8.3", fx.name, pappus_volume(mid), "m^3", "analytic", "Pappus integral of the model's joint limits (identity placement, CSV session); " + model_bias,
-             "Edge: the model of a CSV session."),
+        case(
+            "workspace.volume_ratio.half",
+            "workspace.volume_ratio",
+            "8.5",
+            fx.name,
+            half_share,
+            "1",
+            "analytic",
+            "the examiner swept only q1 ∈ [0, 56°] of [−56°, 56°]; the volume of a solid of revolution is proportional to "
+            "its angle (Pappus), so measured/modeled = 1/2",
+            "Edge: half of the workspace reached.",
+        ),
+        case(
+            "workspace.coverage.half",
+            "workspace.coverage",
+            "8.5",
+            fx.name,
+            half_share,
+            "1",
+            "analytic",
+            "the half solid lies inside the model: the overlap is the half solid itself, 1/2 of the model",
+            "Edge: partial coverage.",
+        ),
+        case(
+            "workspace.modeled_volume.csv",
+            "workspace.modeled_volume",
+            "8.3",
+            fx.name,
+            pappus_volume(mid),
+            "m^3",
+            "analytic",
+            "Pappus integral of the model's joint limits (identity placement, CSV session); " + model_bias,
+            "Edge: the model of a CSV session.",
+        ),
     ]
     out.append(fx)
 
     def ball_session(sid: str, n: int, radius: float, centre: tuple, seed: int) -> Callable[[Path], None]:
         """A workspace trial whose cloud samples the surface of one ball, with the mid-size model."""
+
         def build(path: Path) -> None:
             w = manifest(sid, example_rig(), device=mid)
             pose_cloud(w, "workspace-1", sphere_cloud(n, radius, centre, np.random.default_rng(seed)), "parquet")
             w.write(path)
+
         return build
 
     # Ratio below and above 1 by construction: a ball inside the model of known volume.
     fx = Fixture("ws-ball-in-model", ball_session("conf-ws-ball", 6000, 0.02, (0.07, 0.0, 0.02), SEED + 5))
-    v_ball = 4 / 3 * math.pi * 0.02 ** 3
+    v_ball = 4 / 3 * math.pi * 0.02**3
     fx.cases += [
-        case("workspace.volume_ratio.ball", "workspace.volume_ratio", "8.5", fx.name, v_ball / pappus_volume(mid), "1", "analytic", "a ball R = 2 cm (4/3πR³) divided by the model's Pappus volume; tolerance = both operators' biases",
-             "Tricky: a small measured solid against the model."),
-        case("workspace.coverage.ball", "workspace.coverage", "8.5", fx.name, v_ball / pappus_volume(mid), "1", "analytic", "the ball (centre (7, 0, 2) cm, R = 2 cm) lies inside the reachable set, so the overlap is the ball",
-             "Tricky: coverage of an interior solid."),
+        case(
+            "workspace.volume_ratio.ball",
+            "workspace.volume_ratio",
+            "8.5",
+            fx.name,
+            v_ball / pappus_volume(mid),
+            "1",
+            "analytic",
+            "a ball R = 2 cm (4/3πR³) divided by the model's Pappus volume; tolerance = both operators' biases",
+            "Tricky: a small measured solid against the model.",
+        ),
+        case(
+            "workspace.coverage.ball",
+            "workspace.coverage",
+            "8.5",
+            fx.name,
+            v_ball / pappus_volume(mid),
+            "1",
+            "analytic",
+            "the ball (centre (7, 0, 2) cm, R = 2 cm) lies inside the reachable set, so the overlap is the ball",
+            "Tricky: coverage of an interior solid.",
+        ),
     ]
     out.append(fx)
 
     # A solid outside the model: coverage (the overlap, §8.5) is 0 while the volume ratio is not.
     fx = Fixture("ws-ball-outside-model", ball_session("conf-ws-ball-outside", 8000, 0.03, (0.0, 0.0, 0.45), SEED + 6))
-    v_out = 4 / 3 * math.pi * 0.03 ** 3
+    v_out = 4 / 3 * math.pi * 0.03**3
     fx.cases += [
-        case("workspace.volume_ratio.ball-outside", "workspace.volume_ratio", "8.5", fx.name, v_out / pappus_volume(mid), "1",
-             "analytic", "a ball R = 3 cm (4/3πR³) divided by the model's Pappus volume", "Tricky: a solid the model does not contain."),
-        case("workspace.coverage.ball-outside", "workspace.coverage", "8.5", fx.name, 0.0, "1", "analytic",
-             "the ball (centre (0, 0, 45) cm, R = 3 cm) lies far outside the reachable set (under 15 cm from the base): no "
-             "overlap; the volume ratio would be 0.093", "Tricky: coverage of a solid outside the model."),
+        case(
+            "workspace.volume_ratio.ball-outside",
+            "workspace.volume_ratio",
+            "8.5",
+            fx.name,
+            v_out / pappus_volume(mid),
+            "1",
+            "analytic",
+            "a ball R = 3 cm (4/3πR³) divided by the model's Pappus volume",
+            "Tricky: a solid the model does not contain.",
+        ),
+        case(
+            "workspace.coverage.ball-outside",
+            "workspace.coverage",
+            "8.5",
+            fx.name,
+            0.0,
+            "1",
+            "analytic",
+            "the ball (centre (0, 0, 45) cm, R = 3 cm) lies far outside the reachable set (under 15 cm from the base): no "
+            "overlap; the volume ratio would be 0.093",
+            "Tricky: coverage of a solid outside the model.",
+        ),
     ]
     out.append(fx)
     return out
 
 
 # --- free space (spec chapter 9) ---------------------------------------------------------------------
+
 
 def felt(t: np.ndarray) -> np.ndarray:
     """|F| = √(0.5² + 0.4² + (0.3 + 0.2 sin 0.5t)²): min at sin = −1, max at sin = +1 (both reached in 12 s)."""
@@ -552,26 +866,104 @@ def free_space_fixtures() -> list[Fixture]:
         rig = example_rig()
         bias = rb.plate_bias_vector(rig)
         w = manifest("conf-fs-typical", rig, truth=truth, plate_bias=bias)
-        handle_trial(w, "free_space-1", "free_space", duration_s=T, position=circle(0.05, 1.0), quaternion=spin(0.07),
-                     force_w=felt, truth=truth, plate_force_w=plate_truth, plate_bias=bias)
+        handle_trial(
+            w,
+            "free_space-1",
+            "free_space",
+            duration_s=T,
+            position=circle(0.05, 1.0),
+            quaternion=spin(0.07),
+            force_w=felt,
+            truth=truth,
+            plate_force_w=plate_truth,
+            plate_bias=bias,
+        )
         w.write(path)
 
     fx = Fixture("fs-typical", typical)
-    weight = (f"the raw F/T stream holds a {truth.mass} kg connector's weight and a bias, removed by the handle_gravity record "
-              "(spec §6.5)")
+    weight = (
+        f"the raw F/T stream holds a {truth.mass} kg connector's weight and a bias, removed by the handle_gravity record "
+        "(spec §6.5)"
+    )
     fx.cases += [
-        case("free_space.force_mean.typical", "free_space.force_mean", sec_f, fx.name, mag.mean(), "N", "analytic",
-             "mean over the 100 Hz grid (t = 0 … 12 s) of |(0.5, −0.4, 0.3 + 0.2 sin 0.5t)| N; " + weight,
-             "Typical: a slowly varying force on the hand."),
-        case("free_space.force_sd.typical", "free_space.force_sd", sec_f, fx.name, mag.std(ddof=1), "N", "analytic",
-             "sample SD (ddof 1) of the same magnitudes on the grid", "Typical."),
-        case("free_space.force_min.typical", "free_space.force_min", sec_f, fx.name, math.hypot(0.5, 0.4, 0.1), "N", "analytic", "|(0.5, −0.4, 0.1)|: sin 0.5t reaches −1 at t = 3π", "Typical."),
-        case("free_space.force_max.typical", "free_space.force_max", sec_f, fx.name, math.hypot(0.5, 0.4, 0.5), "N", "analytic", "|(0.5, −0.4, 0.5)|: sin 0.5t reaches +1 at t = π", "Typical."),
-        case("free_space.plate_force_mean.typical", "free_space.plate_force_mean", sec_p, fx.name, plate_dev.mean(), "N", "analytic", "mean on the grid of |P − (0, 0, mean P_z)| for P = (0.2 cos 0.3t, 0, −17.4 + 0.3 sin 0.5t) N, "
-             "split over the four corner sensors (statically determinate) on top of the recorded plate bias", "Typical."),
-        case("free_space.speed_mean.typical", "free_space.speed_mean", sec_s, fx.name, 0.05, "m/s", "analytic",
-             "gimbal centre on a circle of radius 0.05 m at 1 rad/s: speed r·ω", "Typical: uniform circular motion."),
-        case("free_space.angular_speed_mean.typical", "free_space.angular_speed_mean", sec_s, fx.name, 0.07, "rad/s", "analytic", "handle turning at a constant 0.07 rad/s about a fixed axis", "Typical."),
+        case(
+            "free_space.force_mean.typical",
+            "free_space.force_mean",
+            sec_f,
+            fx.name,
+            mag.mean(),
+            "N",
+            "analytic",
+            "mean over the 100 Hz grid (t = 0 … 12 s) of |(0.5, −0.4, 0.3 + 0.2 sin 0.5t)| N; " + weight,
+            "Typical: a slowly varying force on the hand.",
+        ),
+        case(
+            "free_space.force_sd.typical",
+            "free_space.force_sd",
+            sec_f,
+            fx.name,
+            mag.std(ddof=1),
+            "N",
+            "analytic",
+            "sample SD (ddof 1) of the same magnitudes on the grid",
+            "Typical.",
+        ),
+        case(
+            "free_space.force_min.typical",
+            "free_space.force_min",
+            sec_f,
+            fx.name,
+            math.hypot(0.5, 0.4, 0.1),
+            "N",
+            "analytic",
+            "|(0.5, −0.4, 0.1)|: sin 0.5t reaches −1 at t = 3π",
+            "Typical.",
+        ),
+        case(
+            "free_space.force_max.typical",
+            "free_space.force_max",
+            sec_f,
+            fx.name,
+            math.hypot(0.5, 0.4, 0.5),
+            "N",
+            "analytic",
+            "|(0.5, −0.4, 0.5)|: sin 0.5t reaches +1 at t = π",
+            "Typical.",
+        ),
+        case(
+            "free_space.plate_force_mean.typical",
+            "free_space.plate_force_mean",
+            sec_p,
+            fx.name,
+            plate_dev.mean(),
+            "N",
+            "analytic",
+            "mean on the grid of |P − (0, 0, mean P_z)| for P = (0.2 cos 0.3t, 0, −17.4 + 0.3 sin 0.5t) N, "
+            "split over the four corner sensors (statically determinate) on top of the recorded plate bias",
+            "Typical.",
+        ),
+        case(
+            "free_space.speed_mean.typical",
+            "free_space.speed_mean",
+            sec_s,
+            fx.name,
+            0.05,
+            "m/s",
+            "analytic",
+            "gimbal centre on a circle of radius 0.05 m at 1 rad/s: speed r·ω",
+            "Typical: uniform circular motion.",
+        ),
+        case(
+            "free_space.angular_speed_mean.typical",
+            "free_space.angular_speed_mean",
+            sec_s,
+            fx.name,
+            0.07,
+            "rad/s",
+            "analytic",
+            "handle turning at a constant 0.07 rad/s about a fixed axis",
+            "Typical.",
+        ),
     ]
     out.append(fx)
 
@@ -581,31 +973,105 @@ def free_space_fixtures() -> list[Fixture]:
     def rotated(path: Path) -> None:
         rig = rotated_rig_full()
         bias = rb.plate_bias_vector(rig)
-        w = manifest("conf-fs-rotated", rig, truth=truth, plate_bias=bias,
-                     placement=placement_of((0.02, 0.0, 0.0), yaw=1.0))
-        handle_trial(w, "free_space-1", "free_space", duration_s=10.0, position=circle(0.04, 2.0, (0.01, 0.0, 0.15)),
-                     quaternion=spin(0.11, axis=(1.0, 0.4, 0.2), tilt=2.5), force_w=lambda t: np.tile(F0, (len(t), 1)),
-                     truth=truth, rates=(400.0, 250.0, 120.0), fmt="csv",
-                     plate_force_w=lambda t: np.column_stack([0 * t, 0.4 + 0 * t, -15.0 + 0 * t]), plate_bias=bias)
+        w = manifest("conf-fs-rotated", rig, truth=truth, plate_bias=bias, placement=placement_of((0.02, 0.0, 0.0), yaw=1.0))
+        handle_trial(
+            w,
+            "free_space-1",
+            "free_space",
+            duration_s=10.0,
+            position=circle(0.04, 2.0, (0.01, 0.0, 0.15)),
+            quaternion=spin(0.11, axis=(1.0, 0.4, 0.2), tilt=2.5),
+            force_w=lambda t: np.tile(F0, (len(t), 1)),
+            truth=truth,
+            rates=(400.0, 250.0, 120.0),
+            fmt="csv",
+            plate_force_w=lambda t: np.column_stack([0 * t, 0.4 + 0 * t, -15.0 + 0 * t]),
+            plate_bias=bias,
+        )
         w.write(path)
 
     fx = Fixture("fs-rotated-csv", rotated)
     f0 = float(np.linalg.norm(F0))
     rot = "handle F/T and accelerometer frames turned (90° about z, 180° about x), corner sensors yawed 0/90/180/270°"
     fx.cases += [
-        case("free_space.force_mean.rotated-csv", "free_space.force_mean", sec_f, fx.name, f0, "N", "analytic",
-             f"constant force (0.3, 0.6, −0.9) N on the hand in W; {rot}; F/T at 500 Hz, mocap at 120 Hz", "Tricky: rotated rig frames, CSV, unusual rates."),
-        case("free_space.force_sd.constant", "free_space.force_sd", sec_f, fx.name, 0.0, "N", "analytic",
-             "a constant force has SD 0 (tolerance: the rounding of the calibration under rotation)", "Edge: zero spread."),
-        case("free_space.force_min.constant", "free_space.force_min", sec_f, fx.name, f0, "N", "analytic",
-             "min of |F| over the trial equals |F| = |(0.3, 0.6, −0.9)| N of the constant force", "Edge."),
-        case("free_space.force_max.constant", "free_space.force_max", sec_f, fx.name, f0, "N", "analytic",
-             "max of |F| over the trial equals |F| = |(0.3, 0.6, −0.9)| N of the constant force", "Edge."),
-        case("free_space.plate_force_mean.rotated-corners", "free_space.plate_force_mean", sec_p, fx.name, 0.4, "N", "analytic", "constant plate force (0, 0.4, −15) N; removing the mean vertical leaves |(0, 0.4, 0)|; corner sensors "
-             "yawed by 0/90/180/270° must be rotated into W", "Tricky: rotated corner frames."),
-        case("free_space.speed_mean.rotated-csv", "free_space.speed_mean", sec_s, fx.name, 0.08, "m/s", "analytic",
-             "circle r = 0.04 m at 2 rad/s sampled at 120 Hz: speed 0.08 m/s", "Tricky: unusual mocap rate."),
-        case("free_space.angular_speed_mean.rotated-csv", "free_space.angular_speed_mean", sec_s, fx.name, 0.11, "rad/s", "analytic", "constant rotation at 0.11 rad/s about (1, 0.4, 0.2) from a 2.5 rad tilt", "Tricky: large tilt."),
+        case(
+            "free_space.force_mean.rotated-csv",
+            "free_space.force_mean",
+            sec_f,
+            fx.name,
+            f0,
+            "N",
+            "analytic",
+            f"constant force (0.3, 0.6, −0.9) N on the hand in W; {rot}; F/T at 500 Hz, mocap at 120 Hz",
+            "Tricky: rotated rig frames, CSV, unusual rates.",
+        ),
+        case(
+            "free_space.force_sd.constant",
+            "free_space.force_sd",
+            sec_f,
+            fx.name,
+            0.0,
+            "N",
+            "analytic",
+            "a constant force has SD 0 (tolerance: the rounding of the calibration under rotation)",
+            "Edge: zero spread.",
+        ),
+        case(
+            "free_space.force_min.constant",
+            "free_space.force_min",
+            sec_f,
+            fx.name,
+            f0,
+            "N",
+            "analytic",
+            "min of |F| over the trial equals |F| = |(0.3, 0.6, −0.9)| N of the constant force",
+            "Edge.",
+        ),
+        case(
+            "free_space.force_max.constant",
+            "free_space.force_max",
+            sec_f,
+            fx.name,
+            f0,
+            "N",
+            "analytic",
+            "max of |F| over the trial equals |F| = |(0.3, 0.6, −0.9)| N of the constant force",
+            "Edge.",
+        ),
+        case(
+            "free_space.plate_force_mean.rotated-corners",
+            "free_space.plate_force_mean",
+            sec_p,
+            fx.name,
+            0.4,
+            "N",
+            "analytic",
+            "constant plate force (0, 0.4, −15) N; removing the mean vertical leaves |(0, 0.4, 0)|; corner sensors "
+            "yawed by 0/90/180/270° must be rotated into W",
+            "Tricky: rotated corner frames.",
+        ),
+        case(
+            "free_space.speed_mean.rotated-csv",
+            "free_space.speed_mean",
+            sec_s,
+            fx.name,
+            0.08,
+            "m/s",
+            "analytic",
+            "circle r = 0.04 m at 2 rad/s sampled at 120 Hz: speed 0.08 m/s",
+            "Tricky: unusual mocap rate.",
+        ),
+        case(
+            "free_space.angular_speed_mean.rotated-csv",
+            "free_space.angular_speed_mean",
+            sec_s,
+            fx.name,
+            0.11,
+            "rad/s",
+            "analytic",
+            "constant rotation at 0.11 rad/s about (1, 0.4, 0.2) from a 2.5 rad tilt",
+            "Tricky: large tilt.",
+        ),
     ]
     out.append(fx)
 
@@ -619,9 +1085,19 @@ def free_space_fixtures() -> list[Fixture]:
             k = np.round(t * 100).astype(int)
             return ((t > 3.0) & (t < 6.0)) | (k % 150 == 77) | (k % 150 == 78)
 
-        handle_trial(w, "free_space-1", "free_space", duration_s=12.0, position=circle(0.05, 1.0), quaternion=spin(0.2),
-                     force_w=lambda t: np.column_stack([0.2 + 0 * t, 0.1 * np.sin(t), 0 * t]), truth=truth, occluded=gone,
-                     plate_force_w=lambda t: np.column_stack([0 * t, 0 * t, -16.0 + 0.5 * np.sin(2 * t)]), plate_bias=bias)
+        handle_trial(
+            w,
+            "free_space-1",
+            "free_space",
+            duration_s=12.0,
+            position=circle(0.05, 1.0),
+            quaternion=spin(0.2),
+            force_w=lambda t: np.column_stack([0.2 + 0 * t, 0.1 * np.sin(t), 0 * t]),
+            truth=truth,
+            occluded=gone,
+            plate_force_w=lambda t: np.column_stack([0 * t, 0 * t, -16.0 + 0.5 * np.sin(2 * t)]),
+            plate_bias=bias,
+        )
         w.write(path)
 
     fx = Fixture("fs-occlusion-gaps", occlusion)
@@ -629,23 +1105,85 @@ def free_space_fixtures() -> list[Fixture]:
     usable = ~((tg > 3.0 + 1e-9) & (tg < 6.0 - 1e-9))  # the samples at 3.00 s and 6.00 s are valid
     m_occ = np.hypot(0.2, 0.1 * np.sin(tg[usable]))
     fx.cases += [
-        case("free_space.speed_mean.occlusion", "free_space.speed_mean", sec_s, fx.name, 0.05, "m/s", "analytic",
-             "circle r = 0.05 m at 1 rad/s; motion capture lost for 3 s (t = 3 … 6 s: a 3 rad arc whose chord is 30 % shorter) "
-             "and for two frames every 1.5 s; only the short gaps may be bridged (spec §7.4), so the speed is r·ω",
-             "Tricky: occlusion gaps (interpolating across the long one lowers the speed)."),
-        case("free_space.angular_speed_mean.occlusion", "free_space.angular_speed_mean", sec_s, fx.name, 0.2, "rad/s", "analytic", "constant rotation at 0.2 rad/s; the rows of the 3 s gap are excluded, the two-frame gaps bridged "
-             "by slerp", "Tricky: occlusion gaps."),
-        case("free_space.force_mean.occlusion", "free_space.force_mean", sec_f, fx.name, m_occ.mean(), "N", "analytic",
-             "mean of |(0.2, 0.1 sin t, 0)| over the grid rows where motion capture is usable (t outside the 3 s gap): the "
-             "force is used only where the handle orientation is known (spec §7.5)", "Tricky: usable samples only."),
-        case("free_space.force_sd.occlusion", "free_space.force_sd", sec_f, fx.name, m_occ.std(ddof=1), "N", "analytic", "sample SD (ddof 1) of |(0.2, 0.1 sin t, 0)| over the usable grid rows", "Tricky: usable samples only."),
-        case("free_space.force_min.occlusion", "free_space.force_min", sec_f, fx.name, m_occ.min(), "N", "analytic",
-             "minimum of |(0.2, 0.1 sin t, 0)| over the usable rows (0.2 N where sin t = 0)", "Tricky: usable samples only."),
-        case("free_space.force_max.occlusion", "free_space.force_max", sec_f, fx.name, m_occ.max(), "N", "analytic",
-             "maximum of |(0.2, 0.1 sin t, 0)| over the usable rows (√0.05 N where sin t = ±1)", "Tricky: usable samples only."),
-        case("free_space.plate_force_mean.sinusoid", "free_space.plate_force_mean", sec_p, fx.name,
-             float(np.mean(np.abs(0.5 * np.sin(2 * grid(12.0)) - np.mean(0.5 * np.sin(2 * grid(12.0)))))), "N", "analytic", "vertical plate force −16 + 0.5 sin 2t N: mean of |P_z − mean P_z| over the grid; the plate stream "
-             "has no occlusion", "Edge: a purely vertical oscillation."),
+        case(
+            "free_space.speed_mean.occlusion",
+            "free_space.speed_mean",
+            sec_s,
+            fx.name,
+            0.05,
+            "m/s",
+            "analytic",
+            "circle r = 0.05 m at 1 rad/s; motion capture lost for 3 s (t = 3 … 6 s: a 3 rad arc whose chord is 30 % shorter) "
+            "and for two frames every 1.5 s; only the short gaps may be bridged (spec §7.4), so the speed is r·ω",
+            "Tricky: occlusion gaps (interpolating across the long one lowers the speed).",
+        ),
+        case(
+            "free_space.angular_speed_mean.occlusion",
+            "free_space.angular_speed_mean",
+            sec_s,
+            fx.name,
+            0.2,
+            "rad/s",
+            "analytic",
+            "constant rotation at 0.2 rad/s; the rows of the 3 s gap are excluded, the two-frame gaps bridged by slerp",
+            "Tricky: occlusion gaps.",
+        ),
+        case(
+            "free_space.force_mean.occlusion",
+            "free_space.force_mean",
+            sec_f,
+            fx.name,
+            m_occ.mean(),
+            "N",
+            "analytic",
+            "mean of |(0.2, 0.1 sin t, 0)| over the grid rows where motion capture is usable (t outside the 3 s gap): the "
+            "force is used only where the handle orientation is known (spec §7.5)",
+            "Tricky: usable samples only.",
+        ),
+        case(
+            "free_space.force_sd.occlusion",
+            "free_space.force_sd",
+            sec_f,
+            fx.name,
+            m_occ.std(ddof=1),
+            "N",
+            "analytic",
+            "sample SD (ddof 1) of |(0.2, 0.1 sin t, 0)| over the usable grid rows",
+            "Tricky: usable samples only.",
+        ),
+        case(
+            "free_space.force_min.occlusion",
+            "free_space.force_min",
+            sec_f,
+            fx.name,
+            m_occ.min(),
+            "N",
+            "analytic",
+            "minimum of |(0.2, 0.1 sin t, 0)| over the usable rows (0.2 N where sin t = 0)",
+            "Tricky: usable samples only.",
+        ),
+        case(
+            "free_space.force_max.occlusion",
+            "free_space.force_max",
+            sec_f,
+            fx.name,
+            m_occ.max(),
+            "N",
+            "analytic",
+            "maximum of |(0.2, 0.1 sin t, 0)| over the usable rows (√0.05 N where sin t = ±1)",
+            "Tricky: usable samples only.",
+        ),
+        case(
+            "free_space.plate_force_mean.sinusoid",
+            "free_space.plate_force_mean",
+            sec_p,
+            fx.name,
+            float(np.mean(np.abs(0.5 * np.sin(2 * grid(12.0)) - np.mean(0.5 * np.sin(2 * grid(12.0)))))),
+            "N",
+            "analytic",
+            "vertical plate force −16 + 0.5 sin 2t N: mean of |P_z − mean P_z| over the grid; the plate stream has no occlusion",
+            "Edge: a purely vertical oscillation.",
+        ),
     ]
     out.append(fx)
     out.append(jitter_fixture(truth))
@@ -668,26 +1206,74 @@ def glimpse_fixture(truth: rb.HandleTruth) -> Fixture:
 
     def build(path: Path) -> None:
         w = manifest(f"conf-{name}", example_rig(), truth=truth)
-        handle_trial(w, "free_space-1", "free_space", duration_s=T, position=circle(0.05, 1.0), quaternion=spin(0.07),
-                     force_w=force, truth=truth, fmt="csv", occluded=lambda t: ~seen(t))
+        handle_trial(
+            w,
+            "free_space-1",
+            "free_space",
+            duration_s=T,
+            position=circle(0.05, 1.0),
+            quaternion=spin(0.07),
+            force_w=force,
+            truth=truth,
+            fmt="csv",
+            occluded=lambda t: ~seen(t),
+        )
         w.write(path)
 
     fx = Fixture(name, build)
     tg = grid(T)
     mag = np.linalg.norm(force(tg[seen(tg)]), axis=1)
-    how = (f"|(0.3 + 0.4t, −0.2, 0.1)| N over the {len(mag)} grid rows t = 2.00 … 2.30 s, the only time motion capture "
-           "sees the handle (§7.5: the force counts only where the orientation is known); a force linear in time passes "
-           "the §7.2 low-pass exactly (chord removed), so the values are exact: tolerance 1e-4")
+    how = (
+        f"|(0.3 + 0.4t, −0.2, 0.1)| N over the {len(mag)} grid rows t = 2.00 … 2.30 s, the only time motion capture "
+        "sees the handle (§7.5: the force counts only where the orientation is known); a force linear in time passes "
+        "the §7.2 low-pass exactly (chord removed), so the values are exact: tolerance 1e-4"
+    )
     desc = "Edge: a trial whose motion capture is usable for 0.3 s only (sample statistics of 31 values)."
     fx.cases += [
-        case("free_space.force_sd.glimpse", "free_space.force_sd", "9.2", name, mag.std(ddof=1), "N", "analytic",
-             "sample SD (ddof = 1) of " + how + f"; ddof = 0 gives {mag.std():.6g} N (1.6 % less)", desc),
-        case("free_space.force_mean.glimpse", "free_space.force_mean", "9.2", name, mag.mean(), "N", "analytic",
-             "mean of " + how, desc),
-        case("free_space.force_min.glimpse", "free_space.force_min", "9.2", name, mag.min(), "N", "analytic",
-             "minimum (at t = 2.00 s) of " + how, desc),
-        case("free_space.force_max.glimpse", "free_space.force_max", "9.2", name, mag.max(), "N", "analytic",
-             "maximum (at t = 2.30 s) of " + how, desc),
+        case(
+            "free_space.force_sd.glimpse",
+            "free_space.force_sd",
+            "9.2",
+            name,
+            mag.std(ddof=1),
+            "N",
+            "analytic",
+            "sample SD (ddof = 1) of " + how + f"; ddof = 0 gives {mag.std():.6g} N (1.6 % less)",
+            desc,
+        ),
+        case(
+            "free_space.force_mean.glimpse",
+            "free_space.force_mean",
+            "9.2",
+            name,
+            mag.mean(),
+            "N",
+            "analytic",
+            "mean of " + how,
+            desc,
+        ),
+        case(
+            "free_space.force_min.glimpse",
+            "free_space.force_min",
+            "9.2",
+            name,
+            mag.min(),
+            "N",
+            "analytic",
+            "minimum (at t = 2.00 s) of " + how,
+            desc,
+        ),
+        case(
+            "free_space.force_max.glimpse",
+            "free_space.force_max",
+            "9.2",
+            name,
+            mag.max(),
+            "N",
+            "analytic",
+            "maximum (at t = 2.30 s) of " + how,
+            desc,
+        ),
     ]
     return fx
 
@@ -711,20 +1297,52 @@ def pushes_fixture(truth: rb.HandleTruth) -> Fixture:
 
     def build(path: Path) -> None:
         w = manifest(f"conf-{name}", example_rig(), truth=truth)
-        handle_trial(w, "free_space-1", "free_space", duration_s=T, position=circle(0.05, 1.0), quaternion=spin(0.07),
-                     force_w=force, truth=truth, rates=(1000.0, 500.0, rate), occluded=hidden)
+        handle_trial(
+            w,
+            "free_space-1",
+            "free_space",
+            duration_s=T,
+            position=circle(0.05, 1.0),
+            quaternion=spin(0.07),
+            force_w=force,
+            truth=truth,
+            rates=(1000.0, 500.0, rate),
+            occluded=hidden,
+        )
         w.write(path)
 
     fx = Fixture(name, build)
     mag = np.linalg.norm(force(grid(T)), axis=1)
-    how = (f"|(0.3, 0.1, 0.2) + p(t)·(0.6, 0, 0)| N with p four sin² pulses {width} s wide centred on t = {centres} s; "
-           f"motion capture at {rate:g} Hz misses 7 frames around each centre (t_j − t_i = 8/150 s = 53.3 ms ≤ max_gap_s + Δ "
-           "= 56.7 ms: bridged, §7.4), so every grid row counts; the pulses pass the §7.2 low-pass (flat to order 8) to "
-           "better than 1e-5: tolerance 1e-3")
+    how = (
+        f"|(0.3, 0.1, 0.2) + p(t)·(0.6, 0, 0)| N with p four sin² pulses {width} s wide centred on t = {centres} s; "
+        f"motion capture at {rate:g} Hz misses 7 frames around each centre (t_j − t_i = 8/150 s = 53.3 ms ≤ max_gap_s + Δ "
+        "= 56.7 ms: bridged, §7.4), so every grid row counts; the pulses pass the §7.2 low-pass (flat to order 8) to "
+        "better than 1e-5: tolerance 1e-3"
+    )
     desc = "Tricky: short occlusions exactly where the force peaks (bridged by §7.4's rule, Δ included)."
     fx.cases += [
-        case("free_space.force_max.occluded-pushes", "free_space.force_max", "7.4", name, mag.max(), "N", "analytic", "maximum (at each pulse's peak, inside a gap) of " + how, desc),
-        case("free_space.force_mean.occluded-pushes", "free_space.force_mean", "7.4", name, mag.mean(), "N", "analytic", "mean over the grid of " + how, desc),
+        case(
+            "free_space.force_max.occluded-pushes",
+            "free_space.force_max",
+            "7.4",
+            name,
+            mag.max(),
+            "N",
+            "analytic",
+            "maximum (at each pulse's peak, inside a gap) of " + how,
+            desc,
+        ),
+        case(
+            "free_space.force_mean.occluded-pushes",
+            "free_space.force_mean",
+            "7.4",
+            name,
+            mag.mean(),
+            "N",
+            "analytic",
+            "mean over the grid of " + how,
+            desc,
+        ),
     ]
     return fx
 
@@ -738,8 +1356,16 @@ def envelope(t: np.ndarray, start: float, stop: float, ramp: float = 0.5) -> np.
 
 
 SUPERSEDED = rb.HandleTruth(mass=0.09, force_bias=np.array([0.1, 0.2, -0.3]), force_noise=0.0, torque_noise=0.0, accel_noise=0.0)
-JITTER = {"position_m": 3e-4, "position_hz": 30.0, "angle_rad": math.radians(0.1), "angle_hz": 30.0,
-          "force_N": 0.5, "force_hz": 180.0, "plate_N": 2.0, "plate_hz": 130.0}
+JITTER = {
+    "position_m": 3e-4,
+    "position_hz": 30.0,
+    "angle_rad": math.radians(0.1),
+    "angle_hz": 30.0,
+    "force_N": 0.5,
+    "force_hz": 180.0,
+    "plate_N": 2.0,
+    "plate_hz": 130.0,
+}
 
 
 def jitter_fixture(truth: rb.HandleTruth) -> Fixture:
@@ -770,47 +1396,123 @@ def jitter_fixture(truth: rb.HandleTruth) -> Fixture:
         rig = example_rig()
         bias = rb.plate_bias_vector(rig)
         w = manifest(f"conf-{name}", rig, truth=truth, plate_bias=bias, superseded=SUPERSEDED)
-        handle_trial(w, "free_space-1", "free_space", duration_s=T, position=position, quaternion=quaternion, force_w=force,
-                     truth=truth, rates=(1000.0, 500.0, 100.0), plate_force_w=plate, plate_bias=bias)
+        handle_trial(
+            w,
+            "free_space-1",
+            "free_space",
+            duration_s=T,
+            position=position,
+            quaternion=quaternion,
+            force_w=force,
+            truth=truth,
+            rates=(1000.0, 500.0, 100.0),
+            plate_force_w=plate,
+            plate_bias=bias,
+        )
         w.write(path)
 
     fx = Fixture(name, build)
     fc = param("signals", "mocap_cutoff_hz")
-    gains = {k: lowpass_pair_gain(f, rate, cut) for k, f, rate, cut in (
-        ("mocap", j["position_hz"], 100.0, fc), ("force", j["force_hz"], 1000.0, param("signals", "wrench_cutoff_hz")),
-        ("plate", j["plate_hz"], 1000.0, param("signals", "wrench_cutoff_hz")))}
-    jit = (f"marker jitter {j['position_m'] * 1000:g} mm along z and {math.degrees(j['angle_rad']):g}° about the vertical "
-           f"at {j['position_hz']:g} Hz (switched on by sin² ramps 1 s from the ends), which the §7.4 low-pass at {fc:g} Hz "
-           f"passes with gain {gains['mocap']:.1e}")
+    gains = {
+        k: lowpass_pair_gain(f, rate, cut)
+        for k, f, rate, cut in (
+            ("mocap", j["position_hz"], 100.0, fc),
+            ("force", j["force_hz"], 1000.0, param("signals", "wrench_cutoff_hz")),
+            ("plate", j["plate_hz"], 1000.0, param("signals", "wrench_cutoff_hz")),
+        )
+    }
+    jit = (
+        f"marker jitter {j['position_m'] * 1000:g} mm along z and {math.degrees(j['angle_rad']):g}° about the vertical "
+        f"at {j['position_hz']:g} Hz (switched on by sin² ramps 1 s from the ends), which the §7.4 low-pass at {fc:g} Hz "
+        f"passes with gain {gains['mocap']:.1e}"
+    )
     f0 = float(np.linalg.norm(F0))
-    felt_note = (f"constant force {tuple(F0)} N on the hand plus {j['force_N']} N at {j['force_hz']:g} Hz along x (ramped on "
-                 f"1 s from the ends); the 20 Hz low-pass at the F/T's 1 kHz leaves {gains['force']:.1e} of it (§7.5: filter at "
-                 "the native rate, then interpolate; resampled first, 180 Hz aliases to 20 Hz on the 100 Hz grid)")
+    felt_note = (
+        f"constant force {tuple(F0)} N on the hand plus {j['force_N']} N at {j['force_hz']:g} Hz along x (ramped on "
+        f"1 s from the ends); the 20 Hz low-pass at the F/T's 1 kHz leaves {gains['force']:.1e} of it (§7.5: filter at "
+        "the native rate, then interpolate; resampled first, 180 Hz aliases to 20 Hz on the 100 Hz grid)"
+    )
     desc = "Tricky: vibrations above every cut-off of §7.2 (marker jitter, a motor hum in the force, a ringing plate)."
     fx.cases += [
-        case("free_space.speed_mean.jitter", "free_space.speed_mean", "7.4", name, 0.05, "m/s", "analytic",
-             f"circle r = 0.05 m at 1 rad/s (speed r·ω) with {jit}; velocity is the derivative of the LOW-PASSED position. "
-             "Tolerance 0.1 %: the circle passes the low-pass unchanged to 1e-5, the jitter adds its square (1e-11)", desc),
-        case("free_space.angular_speed_mean.jitter", "free_space.angular_speed_mean", "7.4", name, 0.07, "rad/s", "analytic", f"constant rotation at 0.07 rad/s with {jit}; the angular velocity is low-passed (§7.4 step 4). "
-             "Tolerance 0.1 %: a rotation about the vertical turns the spin axis without changing |ω| to first order", desc),
-        case("free_space.force_mean.jitter", "free_space.force_mean", "9.2", name, f0, "N", "analytic",
-             f"|F| of the {felt_note}; the jitter about the vertical leaves the connector's weight in the sensor frame "
-             f"unchanged; an earlier handle_gravity record (a {SUPERSEDED.mass * 1000:g} g connector) precedes the one that "
-             "applies (§6.4: the last). Tolerance 0.2 % as for the other constant forces", desc),
-        case("free_space.force_max.jitter", "free_space.force_max", "9.2", name, f0, "N", "analytic",
-             f"max |F| of the {felt_note}", desc),
-        case("free_space.force_sd.jitter", "free_space.force_sd", "9.2", name, 0.0, "N", "analytic",
-             f"SD of |F| of the {felt_note}: 0 (tolerance: the rounding of the calibration under rotation, as for the "
-             "other constant force)", desc),
-        case("free_space.plate_force_mean.jitter", "free_space.plate_force_mean", "9.3", name, 0.3, "N", "analytic",
-             f"plate force {tuple(P0)} N plus {j['plate_N']} N at {j['plate_hz']:g} Hz vertical (ramped on 1 s from the ends), "
-             f"low-passed at 20 Hz (gain {gains['plate']:.1e}) before resampling (§9.3); removing the mean vertical leaves "
-             "|(0.3, 0, 0)|. Tolerance 0.5 % as for the other plate cases", desc),
+        case(
+            "free_space.speed_mean.jitter",
+            "free_space.speed_mean",
+            "7.4",
+            name,
+            0.05,
+            "m/s",
+            "analytic",
+            f"circle r = 0.05 m at 1 rad/s (speed r·ω) with {jit}; velocity is the derivative of the LOW-PASSED position. "
+            "Tolerance 0.1 %: the circle passes the low-pass unchanged to 1e-5, the jitter adds its square (1e-11)",
+            desc,
+        ),
+        case(
+            "free_space.angular_speed_mean.jitter",
+            "free_space.angular_speed_mean",
+            "7.4",
+            name,
+            0.07,
+            "rad/s",
+            "analytic",
+            f"constant rotation at 0.07 rad/s with {jit}; the angular velocity is low-passed (§7.4 step 4). "
+            "Tolerance 0.1 %: a rotation about the vertical turns the spin axis without changing |ω| to first order",
+            desc,
+        ),
+        case(
+            "free_space.force_mean.jitter",
+            "free_space.force_mean",
+            "9.2",
+            name,
+            f0,
+            "N",
+            "analytic",
+            f"|F| of the {felt_note}; the jitter about the vertical leaves the connector's weight in the sensor frame "
+            f"unchanged; an earlier handle_gravity record (a {SUPERSEDED.mass * 1000:g} g connector) precedes the one that "
+            "applies (§6.4: the last). Tolerance 0.2 % as for the other constant forces",
+            desc,
+        ),
+        case(
+            "free_space.force_max.jitter",
+            "free_space.force_max",
+            "9.2",
+            name,
+            f0,
+            "N",
+            "analytic",
+            f"max |F| of the {felt_note}",
+            desc,
+        ),
+        case(
+            "free_space.force_sd.jitter",
+            "free_space.force_sd",
+            "9.2",
+            name,
+            0.0,
+            "N",
+            "analytic",
+            f"SD of |F| of the {felt_note}: 0 (tolerance: the rounding of the calibration under rotation, as for the "
+            "other constant force)",
+            desc,
+        ),
+        case(
+            "free_space.plate_force_mean.jitter",
+            "free_space.plate_force_mean",
+            "9.3",
+            name,
+            0.3,
+            "N",
+            "analytic",
+            f"plate force {tuple(P0)} N plus {j['plate_N']} N at {j['plate_hz']:g} Hz vertical (ramped on 1 s from the ends), "
+            f"low-passed at 20 Hz (gain {gains['plate']:.1e}) before resampling (§9.3); removing the mean vertical leaves "
+            "|(0.3, 0, 0)|. Tolerance 0.5 % as for the other plate cases",
+            desc,
+        ),
     ]
     return fx
 
 
 # --- vibration (spec chapter 10) --------------------------------------------------------------------
+
 
 def hp_gain(f: float) -> float:
     """Net amplitude gain of the zero-phase high-pass of spec §10.2 at f: 1 / (1 + (fc/f)^(2·order))."""
@@ -830,8 +1532,9 @@ def tones_centroid(tones: list[tuple[float, float]]) -> float:
 Tones = dict[int, list[tuple[float, float]]]  # axis → [(frequency Hz, amplitude m/s²)]
 
 
-def write_vibration_session(path: Path, session_id: str, fmt: str, rate: float, secs: float, fs_tones: Tones,
-                            base_tones: Tones, rig_kind: str) -> None:
+def write_vibration_session(
+    path: Path, session_id: str, fmt: str, rate: float, secs: float, fs_tones: Tones, base_tones: Tones, rig_kind: str
+) -> None:
     """A free-space trial whose handle acceleration carries ``fs_tones`` and a baseline trial carrying
     ``base_tones`` (spec §10), both at ``rate`` Hz for ``secs`` s, on the example or the rotated rig; the
     known answers are :func:`tones_rms` and :func:`tones_centroid` of the tones (every tone an integer
@@ -845,28 +1548,51 @@ def write_vibration_session(path: Path, session_id: str, fmt: str, rate: float, 
                 for f, amp in ts:
                     a[:, axis] += amp * np.sin(2 * np.pi * f * t)
             return a
+
         return fn
 
     w = manifest(session_id, rig)
-    handle_trial(w, "free_space-1", "free_space", duration_s=secs - 1 / rate, position=circle(0.03, 0.5), quaternion=spin(0.05),
-                 force_w=lambda t: np.tile([0.1, 0.0, -0.2], (len(t), 1)), rates=(250.0, rate, 100.0), fmt=fmt,
-                 accel_extra=extra(fs_tones))
+    handle_trial(
+        w,
+        "free_space-1",
+        "free_space",
+        duration_s=secs - 1 / rate,
+        position=circle(0.03, 0.5),
+        quaternion=spin(0.05),
+        force_w=lambda t: np.tile([0.1, 0.0, -0.2], (len(t), 1)),
+        rates=(250.0, rate, 100.0),
+        fmt=fmt,
+        accel_extra=extra(fs_tones),
+    )
     tb = clock(secs, rate)[:-1]
     a_base = rb.HandleTruth().accel_bias + np.array([0.0, 0.0, 9.81]) + extra(base_tones)(tb)
     w.add_trial("baseline-1", "rig.baseline_vibration", powered=False)
-    w.add_stream("baseline-1", "handle_accel", {"t": tb, "ax": a_base[:, 0], "ay": a_base[:, 1], "az": a_base[:, 2]},
-                 rate_hz=rate, fmt=fmt)
+    w.add_stream(
+        "baseline-1", "handle_accel", {"t": tb, "ax": a_base[:, 0], "ay": a_base[:, 1], "az": a_base[:, 2]}, rate_hz=rate, fmt=fmt
+    )
     w.write(path)
 
 
-def free_space_repetitions(w: SessionWriter, gains: tuple[float, ...], truth: rb.HandleTruth, duration_s: float,
-                           fmt: str = "parquet") -> None:
+def free_space_repetitions(
+    w: SessionWriter, gains: tuple[float, ...], truth: rb.HandleTruth, duration_s: float, fmt: str = "parquet"
+) -> None:
     """Free-space trials 1, 2, … whose hand force is ``gain ×`` the fs-typical force :func:`felt` of the
     trial's own clock (each trial starts 20 s after the previous one), on the fs-typical circle and spin."""
     for rep, gain in enumerate(gains, start=1):
         t0 = 20.0 * (rep - 1)
-        handle_trial(w, f"free_space-{rep}", "free_space", duration_s=duration_s, position=circle(0.05, 1.0), quaternion=spin(0.07),
-                     force_w=lambda t, g=gain, t0=t0: g * felt(t - t0), truth=truth, repetition=rep, start_s=t0, fmt=fmt)
+        handle_trial(
+            w,
+            f"free_space-{rep}",
+            "free_space",
+            duration_s=duration_s,
+            position=circle(0.05, 1.0),
+            quaternion=spin(0.07),
+            force_w=lambda t, g=gain, t0=t0: g * felt(t - t0),
+            truth=truth,
+            repetition=rep,
+            start_s=t0,
+            fmt=fmt,
+        )
 
 
 def uncertainty_fixtures() -> list[Fixture]:
@@ -887,18 +1613,52 @@ def uncertainty_fixtures() -> list[Fixture]:
         w.write(path)
 
     fx = Fixture("unc-fs-two-reps", two_reps)
-    why = (f"x₁ = {x1:.6f} N, the fs-typical mean |F| (analytic), and x₂ = 1.1·x₁; no rig trial, so no Type B source "
-           "is available (sources_missing) and u is Type A only")
+    why = (
+        f"x₁ = {x1:.6f} N, the fs-typical mean |F| (analytic), and x₂ = 1.1·x₁; no rig trial, so no Type B source "
+        "is available (sources_missing) and u is Type A only"
+    )
     params = {"uncertainty": True}
     m = "free_space.force_mean"
     fx.cases += [
-        case(f"{m}.uncertainty-u.two-reps", m, "19.2", fx.name, u, "N", "analytic", f"u = s/√2 = |x₂ − x₁|/2 = 0.05·x₁; {why}",
-             "Type A of two repetitions.", parameters=params, quantity="u"),
-        case(f"{m}.uncertainty-k.two-reps", m, "19.4", fx.name, k, "1", "analytic",
-             "k = t_0.975(ν_eff) with ν_eff = n − 1 = 1 (one Type A term): 12.706", "Coverage factor of two repetitions.",
-             parameters=params, quantity="k"),
-        case(f"{m}.uncertainty-expanded.two-reps", m, "19.4", fx.name, k * u, "N", "analytic", f"U = k·u = 12.706 × 0.05·x₁; {why}",
-             "Expanded uncertainty of two repetitions.", parameters=params, quantity="U"),
+        case(
+            f"{m}.uncertainty-u.two-reps",
+            m,
+            "19.2",
+            fx.name,
+            u,
+            "N",
+            "analytic",
+            f"u = s/√2 = |x₂ − x₁|/2 = 0.05·x₁; {why}",
+            "Type A of two repetitions.",
+            parameters=params,
+            quantity="u",
+        ),
+        case(
+            f"{m}.uncertainty-k.two-reps",
+            m,
+            "19.4",
+            fx.name,
+            k,
+            "1",
+            "analytic",
+            "k = t_0.975(ν_eff) with ν_eff = n − 1 = 1 (one Type A term): 12.706",
+            "Coverage factor of two repetitions.",
+            parameters=params,
+            quantity="k",
+        ),
+        case(
+            f"{m}.uncertainty-expanded.two-reps",
+            m,
+            "19.4",
+            fx.name,
+            k * u,
+            "N",
+            "analytic",
+            f"U = k·u = 12.706 × 0.05·x₁; {why}",
+            "Expanded uncertainty of two repetitions.",
+            parameters=params,
+            quantity="U",
+        ),
     ]
     return [fx]
 
@@ -907,21 +1667,57 @@ def vibration_fixtures() -> list[Fixture]:
     out: list[Fixture] = []
     variants = [
         # name, fmt, accel rate, seconds, free-space tones per axis, baseline tones, rig
-        ("vib-tones", "parquet", 2000.0, 6.0, {0: [(150.0, 0.05)], 2: [(230.0, 0.02)]}, {0: [(110.0, 0.03)]}, "example",
-         "Typical: two tones on two axes (DFT321 combines them)."),
-        ("vib-two-tone", "parquet", 2000.0, 6.0, {1: [(100.0, 0.1), (300.0, 0.2)]}, {2: [(60.0, 0.04), (180.0, 0.08)]}, "rotated",
-         "Tricky: two tones on one axis; a magnitude-weighted centroid differs from the power-weighted one."),
-        ("vib-near-cutoff-csv", "csv", 1500.0, 4.0, {0: [(12.0, 0.2)], 1: [(400.0, 0.02)]}, {0: [(15.0, 0.1)]}, "rotated",
-         "Edge: a tone just above the 10 Hz cut-off, an unusual 1.5 kHz rate, CSV (a single-pass filter shows here)."),
-        ("vib-antiphase-csv", "csv", 1500.0, 4.0, {0: [(200.0, 0.05)], 1: [(200.0, -0.05)]}, {1: [(90.0, 0.03)], 2: [(90.0, 0.03)]},
-         "example", "Tricky: one tone in antiphase on two axes; DFT321 keeps both axes' power (the sum of the axes cancels "
-         "it, the per-sample vector magnitude doubles its frequency)."),
+        (
+            "vib-tones",
+            "parquet",
+            2000.0,
+            6.0,
+            {0: [(150.0, 0.05)], 2: [(230.0, 0.02)]},
+            {0: [(110.0, 0.03)]},
+            "example",
+            "Typical: two tones on two axes (DFT321 combines them).",
+        ),
+        (
+            "vib-two-tone",
+            "parquet",
+            2000.0,
+            6.0,
+            {1: [(100.0, 0.1), (300.0, 0.2)]},
+            {2: [(60.0, 0.04), (180.0, 0.08)]},
+            "rotated",
+            "Tricky: two tones on one axis; a magnitude-weighted centroid differs from the power-weighted one.",
+        ),
+        (
+            "vib-near-cutoff-csv",
+            "csv",
+            1500.0,
+            4.0,
+            {0: [(12.0, 0.2)], 1: [(400.0, 0.02)]},
+            {0: [(15.0, 0.1)]},
+            "rotated",
+            "Edge: a tone just above the 10 Hz cut-off, an unusual 1.5 kHz rate, CSV (a single-pass filter shows here).",
+        ),
+        (
+            "vib-antiphase-csv",
+            "csv",
+            1500.0,
+            4.0,
+            {0: [(200.0, 0.05)], 1: [(200.0, -0.05)]},
+            {1: [(90.0, 0.03)], 2: [(90.0, 0.03)]},
+            "example",
+            "Tricky: one tone in antiphase on two axes; DFT321 keeps both axes' power (the sum of the axes cancels "
+            "it, the per-sample vector magnitude doubles its frequency).",
+        ),
     ]
-    note_filter = ("zero-phase Butterworth high-pass gain 1/(1+(10/f)^8) per tone (spec §10.2); every tone falls on a DFT "
-                   "bin of the trimmed signal")
+    note_filter = (
+        "zero-phase Butterworth high-pass gain 1/(1+(10/f)^8) per tone (spec §10.2); every tone falls on a DFT "
+        "bin of the trimmed signal"
+    )
     for name, fmt, rate, secs, fs_tones, base_tones, rig_kind, desc in variants:
-        def build(path: Path, fmt=fmt, rate=rate, secs=secs, fs_tones=fs_tones, base_tones=base_tones, rig_kind=rig_kind,
-                  name=name) -> None:
+
+        def build(
+            path: Path, fmt=fmt, rate=rate, secs=secs, fs_tones=fs_tones, base_tones=base_tones, rig_kind=rig_kind, name=name
+        ) -> None:
             write_vibration_session(path, f"conf-{name}", fmt, rate, secs, fs_tones, base_tones, rig_kind)
 
         fx = Fixture(name, build)
@@ -930,14 +1726,50 @@ def vibration_fixtures() -> list[Fixture]:
         short = name.removeprefix("vib-")
         fmt_tones = lambda ts: ", ".join(f"{a} m/s² at {f:g} Hz" for f, a in ts)  # noqa: E731
         fx.cases += [
-            case(f"vibration.rms.{short}", "vibration.rms", "10.4", name, tones_rms(all_fs), "m/s^2", "analytic",
-                 f"√(Σ (A·g(f))²/2) for {fmt_tones(all_fs)} at {rate:g} Hz; {note_filter}; DFT321 preserves energy", desc),
-            case(f"vibration.spectral_centroid.{short}", "vibration.spectral_centroid", "10.5", name, tones_centroid(all_fs), "Hz",
-                 "analytic", f"power-weighted mean frequency Σ f·(A g)² / Σ (A g)² of {fmt_tones(all_fs)}", desc),
-            case(f"vibration.baseline_rms.{short}", "vibration.baseline_rms", "10.6", name, tones_rms(all_base), "m/s^2", "analytic", f"baseline trial (no device): {fmt_tones(all_base)} on top of gravity and bias; {note_filter}",
-                 desc),
-            case(f"vibration.baseline_centroid.{short}", "vibration.baseline_centroid", "10.6", name, tones_centroid(all_base),
-                 "Hz", "analytic", f"power-weighted mean frequency of {fmt_tones(all_base)}", desc),
+            case(
+                f"vibration.rms.{short}",
+                "vibration.rms",
+                "10.4",
+                name,
+                tones_rms(all_fs),
+                "m/s^2",
+                "analytic",
+                f"√(Σ (A·g(f))²/2) for {fmt_tones(all_fs)} at {rate:g} Hz; {note_filter}; DFT321 preserves energy",
+                desc,
+            ),
+            case(
+                f"vibration.spectral_centroid.{short}",
+                "vibration.spectral_centroid",
+                "10.5",
+                name,
+                tones_centroid(all_fs),
+                "Hz",
+                "analytic",
+                f"power-weighted mean frequency Σ f·(A g)² / Σ (A g)² of {fmt_tones(all_fs)}",
+                desc,
+            ),
+            case(
+                f"vibration.baseline_rms.{short}",
+                "vibration.baseline_rms",
+                "10.6",
+                name,
+                tones_rms(all_base),
+                "m/s^2",
+                "analytic",
+                f"baseline trial (no device): {fmt_tones(all_base)} on top of gravity and bias; {note_filter}",
+                desc,
+            ),
+            case(
+                f"vibration.baseline_centroid.{short}",
+                "vibration.baseline_centroid",
+                "10.6",
+                name,
+                tones_centroid(all_base),
+                "Hz",
+                "analytic",
+                f"power-weighted mean frequency of {fmt_tones(all_base)}",
+                desc,
+            ),
         ]
         out.append(fx)
     out.append(repetitions_fixture(note_filter))
@@ -957,13 +1789,25 @@ def repetitions_fixture(note_filter: str) -> Fixture:
     def build(path: Path) -> None:
         w = manifest(f"conf-{name}", example_rig())
         for k, (f, amp) in enumerate(REPETITION_TONES):
+
             def tone(t: np.ndarray, f=f, amp=amp) -> np.ndarray:
                 a = np.zeros((len(t), 3))
                 a[:, k] = amp * np.sin(2 * np.pi * f * t)
                 return a
-            handle_trial(w, f"free_space-{k + 1}", "free_space", duration_s=secs - 1 / rate, position=circle(0.03, 0.5),
-                         quaternion=spin(0.05), force_w=lambda t: np.tile([0.1, 0.0, -0.2], (len(t), 1)),
-                         rates=(250.0, rate, 100.0), fmt="csv", repetition=k + 1, accel_extra=tone)
+
+            handle_trial(
+                w,
+                f"free_space-{k + 1}",
+                "free_space",
+                duration_s=secs - 1 / rate,
+                position=circle(0.03, 0.5),
+                quaternion=spin(0.05),
+                force_w=lambda t: np.tile([0.1, 0.0, -0.2], (len(t), 1)),
+                rates=(250.0, rate, 100.0),
+                fmt="csv",
+                repetition=k + 1,
+                accel_extra=tone,
+            )
         w.write(path)
 
     fx = Fixture(name, build)
@@ -972,12 +1816,30 @@ def repetitions_fixture(note_filter: str) -> Fixture:
     tones = "; ".join(f"repetition {k + 1}: {a} m/s² at {f:g} Hz on {'xyz'[k]}" for k, (f, a) in enumerate(REPETITION_TONES))
     desc = "Tricky: three repetitions, one outlying; the value is their mean (spec §15.3), not their median."
     fx.cases += [
-        case("vibration.rms.three-reps", "vibration.rms", "15.3", name, float(np.mean(rms)), "m/s^2", "analytic",
-             f"mean over repetitions of √((A·g(f))²/2) — {tones}; {note_filter}. The median "
-             f"({np.median(rms):.4g}) and the first repetition ({rms[0]:.4g}) lie ≥ 40 % away", desc),
-        case("vibration.spectral_centroid.three-reps", "vibration.spectral_centroid", "15.3", name, float(np.mean(centroids)),
-             "Hz", "analytic", f"mean over repetitions of each repetition's single tone frequency — {tones}. "
-             f"The median ({np.median(centroids):.4g} Hz) lies 33 % away", desc),
+        case(
+            "vibration.rms.three-reps",
+            "vibration.rms",
+            "15.3",
+            name,
+            float(np.mean(rms)),
+            "m/s^2",
+            "analytic",
+            f"mean over repetitions of √((A·g(f))²/2) — {tones}; {note_filter}. The median "
+            f"({np.median(rms):.4g}) and the first repetition ({rms[0]:.4g}) lie ≥ 40 % away",
+            desc,
+        ),
+        case(
+            "vibration.spectral_centroid.three-reps",
+            "vibration.spectral_centroid",
+            "15.3",
+            name,
+            float(np.mean(centroids)),
+            "Hz",
+            "analytic",
+            f"mean over repetitions of each repetition's single tone frequency — {tones}. "
+            f"The median ({np.median(centroids):.4g} Hz) lies 33 % away",
+            desc,
+        ),
     ]
     return fx
 
@@ -999,8 +1861,12 @@ def one_sided_power(a: np.ndarray) -> np.ndarray:
     return w * p
 
 
-BURSTS = {"tone": (100.0, 0.05), "inner": (400.0, 0.08, 0.55, 0.85), "start": (250.0, 0.3, 0.05, 0.45),
-          "end": (250.0, 0.3, 1.75, 2.15)}
+BURSTS = {
+    "tone": (100.0, 0.05),
+    "inner": (400.0, 0.08, 0.55, 0.85),
+    "start": (250.0, 0.3, 0.05, 0.45),
+    "end": (250.0, 0.3, 1.75, 2.15),
+}
 
 
 def bursts_fixture() -> Fixture:
@@ -1017,39 +1883,72 @@ def bursts_fixture() -> Fixture:
 
     def build(path: Path) -> None:
         w = manifest(f"conf-{name}", example_rig())
-        handle_trial(w, "free_space-1", "free_space", duration_s=secs - 1 / rate, position=circle(0.03, 0.5),
-                     quaternion=fixed(quat_from_axis_angle(np.array([1.0, 0.0, 0.0]), np.array(0.4))),
-                     force_w=lambda t: np.tile([0.1, 0.0, -0.2], (len(t), 1)), rates=(250.0, rate, 100.0), fmt="csv",
-                     accel_extra=extra)
+        handle_trial(
+            w,
+            "free_space-1",
+            "free_space",
+            duration_s=secs - 1 / rate,
+            position=circle(0.03, 0.5),
+            quaternion=fixed(quat_from_axis_angle(np.array([1.0, 0.0, 0.0]), np.array(0.4))),
+            force_w=lambda t: np.tile([0.1, 0.0, -0.2], (len(t), 1)),
+            rates=(250.0, rate, 100.0),
+            fmt="csv",
+            accel_extra=extra,
+        )
         w.write(path)
 
     fx = Fixture(name, build)
     t = clock(secs - 1 / rate, rate)
     trim = int(round(param("vibration", "edge_trim_s") * rate))
-    window = t[trim:len(t) - trim]
+    window = t[trim : len(t) - trim]
     x = hp_gain(f_tone) * a_tone * np.sin(2 * np.pi * f_tone * window)
     y = hp_gain(inner[0]) * burst(window, *inner)
     power = one_sided_power(x) + one_sided_power(y)  # DFT321 keeps |X|² + |Y|² per bin (§10.3)
     freqs = np.fft.rfftfreq(len(window), 1 / rate)
-    how = (f"{a_tone} m/s² at {f_tone:g} Hz on x (on a DFT bin), a {inner[1]} m/s² {inner[0]:g} Hz sin²-burst on y over "
-           f"[{inner[2]}, {inner[3]}] s, {first[1]} m/s² {first[0]:g} Hz sin²-bursts over [{first[2]}, {first[3]}] s on z and "
-           f"[{last[2]}, {last[3]}] s on y; after the high-pass (gain 1/(1+(10/f)^8)) and the {trim}-sample trims "
-           f"(§10.2) the analysed {len(window)} samples hold the tone and the inner burst only, exactly")
-    why_tol = ("tolerance 1e-4: the analysed signal is known to ~1e-6 of its amplitude (the high-pass's start-up "
-               "transient, from poles near 10 Hz, has decayed to e^−12 by the end of the trim; the bursts' sin² envelopes "
-               "keep their spectra within a few Hz of their tones, where the gain is exact)")
-    desc = ("Tricky: a burst early in the analysed window (a Hann window weighs it down) and bursts inside the trimmed "
-            "edges (analysing them, or combining the axes before trimming, lets them in).")
+    how = (
+        f"{a_tone} m/s² at {f_tone:g} Hz on x (on a DFT bin), a {inner[1]} m/s² {inner[0]:g} Hz sin²-burst on y over "
+        f"[{inner[2]}, {inner[3]}] s, {first[1]} m/s² {first[0]:g} Hz sin²-bursts over [{first[2]}, {first[3]}] s on z and "
+        f"[{last[2]}, {last[3]}] s on y; after the high-pass (gain 1/(1+(10/f)^8)) and the {trim}-sample trims "
+        f"(§10.2) the analysed {len(window)} samples hold the tone and the inner burst only, exactly"
+    )
+    why_tol = (
+        "tolerance 1e-4: the analysed signal is known to ~1e-6 of its amplitude (the high-pass's start-up "
+        "transient, from poles near 10 Hz, has decayed to e^−12 by the end of the trim; the bursts' sin² envelopes "
+        "keep their spectra within a few Hz of their tones, where the gain is exact)"
+    )
+    desc = (
+        "Tricky: a burst early in the analysed window (a Hann window weighs it down) and bursts inside the trimmed "
+        "edges (analysing them, or combining the axes before trimming, lets them in)."
+    )
     fx.cases += [
-        case("vibration.rms.bursts", "vibration.rms", "10.2", name, float(np.sqrt(np.mean(x ** 2 + y ** 2))), "m/s^2", "analytic", f"RMS over the analysed samples of {how} (DFT321 keeps the energy, §10.3); {why_tol}", desc),
-        case("vibration.spectral_centroid.bursts", "vibration.spectral_centroid", "10.5", name,
-             float(np.sum(freqs * power) / np.sum(power)), "Hz", "analytic",
-             f"Σ f_k P_k / Σ P_k of the one-sided rectangular periodograms of {how}; {why_tol}", desc),
+        case(
+            "vibration.rms.bursts",
+            "vibration.rms",
+            "10.2",
+            name,
+            float(np.sqrt(np.mean(x**2 + y**2))),
+            "m/s^2",
+            "analytic",
+            f"RMS over the analysed samples of {how} (DFT321 keeps the energy, §10.3); {why_tol}",
+            desc,
+        ),
+        case(
+            "vibration.spectral_centroid.bursts",
+            "vibration.spectral_centroid",
+            "10.5",
+            name,
+            float(np.sum(freqs * power) / np.sum(power)),
+            "Hz",
+            "analytic",
+            f"Σ f_k P_k / Σ P_k of the one-sided rectangular periodograms of {how}; {why_tol}",
+            desc,
+        ),
     ]
     return fx
 
 
 # --- frictionless surface (spec chapter 12) ----------------------------------------------------------
+
 
 def tangent_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     u = np.cross(n, [1.0, 0.0, 0.0])
@@ -1057,8 +1956,20 @@ def tangent_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u, np.cross(n, u)
 
 
-def surface_fixture(name: str, fmt: str, rig_kind: str, normal_raw, point, contacts, secs: float, planar: Fn, rates,
-                    desc: str, preload: float, outside: float | None = 2.0) -> Fixture:
+def surface_fixture(
+    name: str,
+    fmt: str,
+    rig_kind: str,
+    normal_raw,
+    point,
+    contacts,
+    secs: float,
+    planar: Fn,
+    rates,
+    desc: str,
+    preload: float,
+    outside: float | None = 2.0,
+) -> Fixture:
     """A frictionless-surface fixture (spec §12.2): a hand circling on the rendered plane (normal ``normal_raw``
     through ``point``) in contact during ``contacts`` (s), feeling ``planar(t)`` N against its motion and 1.5 N
     along the normal; outside contact ``outside`` N planar (None: ``planar``) and ``preload`` N along the normal.
@@ -1085,29 +1996,58 @@ def surface_fixture(name: str, fmt: str, rig_kind: str, normal_raw, point, conta
 
     rendering = {"surface_point_m": list(point), "surface_normal": [float(c) for c in n], "stiffness_N_per_m": 750.0}
 
-    fx = Fixture(name, active_session(name, rig_kind, "surface-1", "frictionless_surface", secs, 0.05, position, force,
-                                      commanded, rendering, rates, fmt))
+    fx = Fixture(
+        name,
+        active_session(
+            name, rig_kind, "surface-1", "frictionless_surface", secs, 0.05, position, force, commanded, rendering, rates, fmt
+        ),
+    )
     tg = grid(secs)
     used = np.any([(tg >= on + guard - 1e-9) & (tg <= off - guard + 1e-9) for on, off in contacts], axis=0)
     truth = planar(tg[used])
     if preload:  # the low-passed steps of the planar force still ring a little beyond the guard: superpose them
         fs, step = rates[0], planar(tg[used]) - outside
-        truth = outside + step * sum(pair_step(tg[used] - on, fs) - pair_step(tg[used] - off - 1 / fs, fs) for on, off in contacts)
+        truth = outside + step * sum(
+            pair_step(tg[used] - on, fs) - pair_step(tg[used] - off - 1 / fs, fs) for on, off in contacts
+        )
     short = name.removeprefix("surf-")
     spans = " and ".join(f"from {on} s to {off} s" for on, off in contacts)
-    how = (f"planar force of the stated magnitude against the motion plus 1.5 N along the normal {normal_raw}, in contact "
-           f"{spans} (commanded normal force 1.5 N), statistics over the 100 Hz grid rows inside the "
-           f"contact minus the {guard} s guard at both ends (spec §12.2)")
+    how = (
+        f"planar force of the stated magnitude against the motion plus 1.5 N along the normal {normal_raw}, in contact "
+        f"{spans} (commanded normal force 1.5 N), statistics over the 100 Hz grid rows inside the "
+        f"contact minus the {guard} s guard at both ends (spec §12.2)"
+    )
     if preload:
-        how += (f"; outside contact the hand feels {outside} N planar and {preload} N along the normal while the "
-                "commanded force is zero: contact is the COMMANDED force's (§12.2), so those rows never count. The "
-                "planar force steps at each transition; the values superpose the zero-phase low-pass's step response "
-                "(§7.2, 20 Hz at 1 kHz), whose ringing beyond the 50 ms guard moves them by up to 0.3 %; the hand "
-                "direction turns 0.1 rad within the filter's span, a second-order effect")
+        how += (
+            f"; outside contact the hand feels {outside} N planar and {preload} N along the normal while the "
+            "commanded force is zero: contact is the COMMANDED force's (§12.2), so those rows never count. The "
+            "planar force steps at each transition; the values superpose the zero-phase low-pass's step response "
+            "(§7.2, 20 Hz at 1 kHz), whose ringing beyond the 50 ms guard moves them by up to 0.3 %; the hand "
+            "direction turns 0.1 rad within the filter's span, a second-order effect"
+        )
     fx.cases += [
-        case(f"surface.planar_force_mean.{short}", "surface.planar_force_mean", "12.2", name, truth.mean(), "N", "analytic", how, desc),
-        case(f"surface.planar_force_sd.{short}", "surface.planar_force_sd", "12.2", name,
-             truth.std(ddof=1) if len(truth) > 1 else 0.0, "N", "analytic", how, desc),
+        case(
+            f"surface.planar_force_mean.{short}",
+            "surface.planar_force_mean",
+            "12.2",
+            name,
+            truth.mean(),
+            "N",
+            "analytic",
+            how,
+            desc,
+        ),
+        case(
+            f"surface.planar_force_sd.{short}",
+            "surface.planar_force_sd",
+            "12.2",
+            name,
+            truth.std(ddof=1) if len(truth) > 1 else 0.0,
+            "N",
+            "analytic",
+            how,
+            desc,
+        ),
     ]
     return fx
 
@@ -1116,17 +2056,59 @@ def surface_fixtures() -> list[Fixture]:
     # name, format, rig, normal, plane point, contact intervals (s), duration, planar force in contact, rates, description,
     # measured normal force outside contact (N: the device's own weight pushing the hand up)
     variants = [
-        ("surf-typical", "parquet", "example", [0.0, 0.0, 1.0], (0.0, 0.05, 0.10), ((1.0, 9.0),), 10.0,
-         lambda t: 0.53 + 0.1 * np.sin(2 * np.pi * 0.5 * t), (1000.0, 500.0, 100.0), "Typical: a horizontal surface.", 0.0),
-        ("surf-tilted-rotated-csv", "csv", "rotated", [0.0, 0.2, 1.0], (0.0, 0.05, 0.12), ((1.5, 8.5),), 10.0,
-         lambda t: 0.4 + 0.15 * np.cos(2 * np.pi * 0.25 * t), (400.0, 250.0, 150.0),
-         "Tricky: a tilted surface normal, rotated sensor frames, CSV, unusual rates.", 0.0),
-        ("surf-constant", "parquet", "example", [0.3, 0.0, 1.0], (0.01, 0.0, 0.10), ((0.8, 5.2),), 6.0, lambda t: 0.25 + 0 * t,
-         (1000.0, 500.0, 100.0), "Edge: a constant planar force (SD 0), short trial.", 0.0),
-        ("surf-preload", "parquet", "example", [0.0, 0.0, 1.0], (0.0, 0.02, 0.11), ((0.8, 1.8), (2.4, 3.4), (4.0, 5.0), (5.6, 6.6)),
-         7.4, lambda t: 0.3 + 0 * t, (1000.0, 500.0, 100.0),
-         "Tricky: four short contacts, and outside them the device's uncompensated weight pushes the hand up 0.5 N along "
-         "the normal (a measured-force contact rule counts those samples; the guard matters at eight transitions).", 0.5),
+        (
+            "surf-typical",
+            "parquet",
+            "example",
+            [0.0, 0.0, 1.0],
+            (0.0, 0.05, 0.10),
+            ((1.0, 9.0),),
+            10.0,
+            lambda t: 0.53 + 0.1 * np.sin(2 * np.pi * 0.5 * t),
+            (1000.0, 500.0, 100.0),
+            "Typical: a horizontal surface.",
+            0.0,
+        ),
+        (
+            "surf-tilted-rotated-csv",
+            "csv",
+            "rotated",
+            [0.0, 0.2, 1.0],
+            (0.0, 0.05, 0.12),
+            ((1.5, 8.5),),
+            10.0,
+            lambda t: 0.4 + 0.15 * np.cos(2 * np.pi * 0.25 * t),
+            (400.0, 250.0, 150.0),
+            "Tricky: a tilted surface normal, rotated sensor frames, CSV, unusual rates.",
+            0.0,
+        ),
+        (
+            "surf-constant",
+            "parquet",
+            "example",
+            [0.3, 0.0, 1.0],
+            (0.01, 0.0, 0.10),
+            ((0.8, 5.2),),
+            6.0,
+            lambda t: 0.25 + 0 * t,
+            (1000.0, 500.0, 100.0),
+            "Edge: a constant planar force (SD 0), short trial.",
+            0.0,
+        ),
+        (
+            "surf-preload",
+            "parquet",
+            "example",
+            [0.0, 0.0, 1.0],
+            (0.0, 0.02, 0.11),
+            ((0.8, 1.8), (2.4, 3.4), (4.0, 5.0), (5.6, 6.6)),
+            7.4,
+            lambda t: 0.3 + 0 * t,
+            (1000.0, 500.0, 100.0),
+            "Tricky: four short contacts, and outside them the device's uncompensated weight pushes the hand up 0.5 N along "
+            "the normal (a measured-force contact rule counts those samples; the guard matters at eight transitions).",
+            0.5,
+        ),
     ]
     return [surface_fixture(*v, outside=None if v[0] == "surf-constant" else 2.0) for v in variants]
 
@@ -1134,8 +2116,8 @@ def surface_fixtures() -> list[Fixture]:
 # --- stiffness (spec chapter 13) -------------------------------------------------------------------------
 
 K_CMD = 750.0
-HOVER = 0.005          # m above the plane between presses
-DEPTH = 0.012          # m, the deepest penetration of every press
+HOVER = 0.005  # m above the plane between presses
+DEPTH = 0.012  # m, the deepest penetration of every press
 PRESS_S, GAP_S, PRESSES = 1.2, 0.5, 5
 
 
@@ -1181,12 +2163,15 @@ def contact_kick(t: np.ndarray, amplitude: float, length_s: float, press_s: floa
     return np.where(on, amplitude * np.sin(np.pi * np.clip(tau, 0, length_s) / length_s) ** 2, 0.0)
 
 
-FIT_RULE = ("after the contact transient (the first 4 grid samples of a press), from the force there up to 90 % of "
-            "the rise to where the force stops rising (spec §13.2)")
+FIT_RULE = (
+    "after the contact transient (the first 4 grid samples of a press), from the force there up to 90 % of "
+    "the rise to where the force stops rising (spec §13.2)"
+)
 
 
-def spring_fixture(name: str, fmt: str, rig_kind: str, normal_raw, point, k: float, peak: float, after: float | None,
-                   rates, desc: str) -> Fixture:
+def spring_fixture(
+    name: str, fmt: str, rig_kind: str, normal_raw, point, k: float, peak: float, after: float | None, rates, desc: str
+) -> Fixture:
     """A stiffness fixture (spec §13.2–§13.4): five presses into a rendered K_CMD N/m plane (normal ``normal_raw``
     through ``point``) of a device whose force is ``k`` N/m × penetration, saturating at ``peak`` N (``after`` None)
     or giving way to ``after`` N once it reaches ``peak``. Cases: the measured stiffness, the accuracy and, when
@@ -1214,31 +2199,90 @@ def spring_fixture(name: str, fmt: str, rig_kind: str, normal_raw, point, k: flo
 
     rendering = {"surface_point_m": list(point), "surface_normal": [float(c) for c in n], "stiffness_N_per_m": K_CMD}
 
-    fx = Fixture(name, active_session(name, rig_kind, "stiffness-1", "stiffness", duration(), 0.03, position, force,
-                                      commanded, rendering, rates, fmt))
+    fx = Fixture(
+        name,
+        active_session(
+            name, rig_kind, "stiffness-1", "stiffness", duration(), 0.03, position, force, commanded, rendering, rates, fmt
+        ),
+    )
     short = name.removeprefix("stiff-")
-    how = (f"five presses from {HOVER * 1000:g} mm above to {DEPTH * 1000:g} mm into a rendered {K_CMD:g} N/m surface (normal "
-           f"{normal_raw}); the device's force is {k:g} N/m × penetration "
-           + (f"saturating at {peak} N" if after is None else f"up to {peak} N, then {after} N until the press ends")
-           + "; the fit samples, " + FIT_RULE + ", lie on the linear part")
+    how = (
+        f"five presses from {HOVER * 1000:g} mm above to {DEPTH * 1000:g} mm into a rendered {K_CMD:g} N/m surface (normal "
+        f"{normal_raw}); the device's force is {k:g} N/m × penetration "
+        + (f"saturating at {peak} N" if after is None else f"up to {peak} N, then {after} N until the press ends")
+        + "; the fit samples, "
+        + FIT_RULE
+        + ", lie on the linear part"
+    )
     fx.cases += [
         case(f"stiffness.measured.{short}", "stiffness.measured", "13.3", name, k, "N/m", "analytic", how, desc),
-        case(f"stiffness.accuracy.{short}", "stiffness.accuracy", "13.4", name, 100 * k / K_CMD, "%", "analytic",
-             how + f"; accuracy = 100·{k:g}/{K_CMD:g}", desc),
+        case(
+            f"stiffness.accuracy.{short}",
+            "stiffness.accuracy",
+            "13.4",
+            name,
+            100 * k / K_CMD,
+            "%",
+            "analytic",
+            how + f"; accuracy = 100·{k:g}/{K_CMD:g}",
+            desc,
+        ),
     ]
     if after is None:
-        fx.cases.append(case(f"stiffness.peak_force.{short}", "stiffness.peak_force", "13.4", name, peak, "N", "analytic", how + "; every press reaches the saturation plateau", desc))
+        fx.cases.append(
+            case(
+                f"stiffness.peak_force.{short}",
+                "stiffness.peak_force",
+                "13.4",
+                name,
+                peak,
+                "N",
+                "analytic",
+                how + "; every press reaches the saturation plateau",
+                desc,
+            )
+        )
     return fx
 
 
 def stiffness_fixtures() -> list[Fixture]:
     variants = [
-        ("stiff-saturating", "parquet", "example", [0.0, -0.15, 1.0], (0.01, 0.04, 0.11), 360.0, 2.7, None,
-         (1000.0, 500.0, 100.0), "Typical: a linear spring that saturates (the Touch, paper §VI-F)."),
-        ("stiff-rotated-csv", "csv", "rotated", [0.2, 0.1, 1.0], (0.0, 0.02, 0.09), 520.0, 4.0, None, (400.0, 250.0, 150.0),
-         "Tricky: rotated sensor frames, a tilted surface, CSV and unusual rates."),
-        ("stiff-giving-way", "parquet", "example", [0.0, 0.0, 1.0], (0.0, 0.0, 0.10), 600.0, 5.7, 1.0, (1000.0, 500.0, 100.0),
-         "Edge: a spring that gives way after its peak (the Touch X, paper §VI-F)."),
+        (
+            "stiff-saturating",
+            "parquet",
+            "example",
+            [0.0, -0.15, 1.0],
+            (0.01, 0.04, 0.11),
+            360.0,
+            2.7,
+            None,
+            (1000.0, 500.0, 100.0),
+            "Typical: a linear spring that saturates (the Touch, paper §VI-F).",
+        ),
+        (
+            "stiff-rotated-csv",
+            "csv",
+            "rotated",
+            [0.2, 0.1, 1.0],
+            (0.0, 0.02, 0.09),
+            520.0,
+            4.0,
+            None,
+            (400.0, 250.0, 150.0),
+            "Tricky: rotated sensor frames, a tilted surface, CSV and unusual rates.",
+        ),
+        (
+            "stiff-giving-way",
+            "parquet",
+            "example",
+            [0.0, 0.0, 1.0],
+            (0.0, 0.0, 0.10),
+            600.0,
+            5.7,
+            1.0,
+            (1000.0, 500.0, 100.0),
+            "Edge: a spring that gives way after its peak (the Touch X, paper §VI-F).",
+        ),
     ]
     out: list[Fixture] = [spring_fixture(*v) for v in variants]
     up = np.array([0.0, 0.0, 1.0])
@@ -1246,23 +2290,51 @@ def stiffness_fixtures() -> list[Fixture]:
     def linear_presses(name: str, scales: tuple[float, ...]) -> Fixture:
         """A purely linear 300 N/m spring pressed PRESSES times, press k ``scales[k]``·DEPTH deep."""
         depth = lambda t: press_depth(t, scales=scales)  # noqa: E731
-        return Fixture(name, active_session(
-            name, "example", "stiffness-1", "stiffness", duration(), 0.03,
-            lambda t: np.array([0.0, 0.01, 0.1]) - depth(t)[:, None] * up,
-            lambda t: np.clip(300.0 * depth(t), 0.0, None)[:, None] * up,
-            lambda t: (K_CMD * np.maximum(depth(t), 0.0))[:, None] * up,
-            {"surface_point_m": [0.0, 0.01, 0.1], "surface_normal": [0.0, 0.0, 1.0], "stiffness_N_per_m": K_CMD},
-            (500.0, 500.0, 100.0), "parquet"))
+        return Fixture(
+            name,
+            active_session(
+                name,
+                "example",
+                "stiffness-1",
+                "stiffness",
+                duration(),
+                0.03,
+                lambda t: np.array([0.0, 0.01, 0.1]) - depth(t)[:, None] * up,
+                lambda t: np.clip(300.0 * depth(t), 0.0, None)[:, None] * up,
+                lambda t: (K_CMD * np.maximum(depth(t), 0.0))[:, None] * up,
+                {"surface_point_m": [0.0, 0.01, 0.1], "surface_normal": [0.0, 0.0, 1.0], "stiffness_N_per_m": K_CMD},
+                (500.0, 500.0, 100.0),
+                "parquet",
+            ),
+        )
 
     # A third peak-force case: a press that never saturates, so its peak is k·depth.
     fx = linear_presses("stiff-linear", (1.0,) * PRESSES)
     fx.cases += [
-        case("stiffness.peak_force.linear", "stiffness.peak_force", "13.4", fx.name, 300.0 * DEPTH, "N", "analytic",
-             "a purely linear 300 N/m spring pressed 12 mm deep: the peak is 3.6 N (the sin² press is smooth at its bottom, "
-             "so the 20 Hz low-pass leaves the peak)", "Edge: no saturation."),
-        case("stiffness.measured.linear", "stiffness.measured", "13.3", fx.name, 300.0, "N/m", "analytic",
-             "a purely linear 300 N/m spring pressed five times 12 mm deep: the least-squares slope of force against "
-             "penetration over the fit samples is the spring constant (the rise ends at the deepest sample)", "Edge: no saturation."),
+        case(
+            "stiffness.peak_force.linear",
+            "stiffness.peak_force",
+            "13.4",
+            fx.name,
+            300.0 * DEPTH,
+            "N",
+            "analytic",
+            "a purely linear 300 N/m spring pressed 12 mm deep: the peak is 3.6 N (the sin² press is smooth at its bottom, "
+            "so the 20 Hz low-pass leaves the peak)",
+            "Edge: no saturation.",
+        ),
+        case(
+            "stiffness.measured.linear",
+            "stiffness.measured",
+            "13.3",
+            fx.name,
+            300.0,
+            "N/m",
+            "analytic",
+            "a purely linear 300 N/m spring pressed five times 12 mm deep: the least-squares slope of force against "
+            "penetration over the fit samples is the spring constant (the rise ends at the deepest sample)",
+            "Edge: no saturation.",
+        ),
     ]
     out.append(fx)
     # Presses of unequal depth: the peak force is the MEAN of the presses' peaks (§13.4), not the largest.
@@ -1270,21 +2342,38 @@ def stiffness_fixtures() -> list[Fixture]:
     fx = linear_presses("stiff-linear-uneven", scales)
     peaks = [300.0 * DEPTH * sc for sc in scales]
     fx.cases += [
-        case("stiffness.peak_force.linear-uneven", "stiffness.peak_force", "13.4", fx.name, float(np.mean(peaks)), "N",
-             "analytic", f"a purely linear 300 N/m spring pressed {', '.join(f'{1000 * DEPTH * sc:g}' for sc in scales)} mm "
-             f"deep: the press peaks are {', '.join(f'{pk:.3g}' for pk in peaks)} N and the value is their mean (the largest "
-             f"is {max(peaks) / np.mean(peaks) - 1:.0%} higher)", "Tricky: presses of unequal depth."),
-        case("stiffness.measured.linear-uneven", "stiffness.measured", "13.3", fx.name, 300.0, "N/m", "analytic",
-             "a purely linear 300 N/m spring: every press's fit samples lie on one line whatever its depth",
-             "Tricky: presses of unequal depth."),
+        case(
+            "stiffness.peak_force.linear-uneven",
+            "stiffness.peak_force",
+            "13.4",
+            fx.name,
+            float(np.mean(peaks)),
+            "N",
+            "analytic",
+            f"a purely linear 300 N/m spring pressed {', '.join(f'{1000 * DEPTH * sc:g}' for sc in scales)} mm "
+            f"deep: the press peaks are {', '.join(f'{pk:.3g}' for pk in peaks)} N and the value is their mean (the largest "
+            f"is {max(peaks) / np.mean(peaks) - 1:.0%} higher)",
+            "Tricky: presses of unequal depth.",
+        ),
+        case(
+            "stiffness.measured.linear-uneven",
+            "stiffness.measured",
+            "13.3",
+            fx.name,
+            300.0,
+            "N/m",
+            "analytic",
+            "a purely linear 300 N/m spring: every press's fit samples lie on one line whatever its depth",
+            "Tricky: presses of unequal depth.",
+        ),
     ]
     out.append(fx)
     out += [kick_dip_fixture(), falling_release_fixture()]
     return out
 
 
-KICK_N, KICK_S = 3.0, 0.01   # the contact kick of stiff-kick-dip: 3 N for 10 ms
-SLOW_S = 2.4                 # stiff-kick-dip's presses last 2.4 s: the plane is crossed at 0.02 m/s
+KICK_N, KICK_S = 3.0, 0.01  # the contact kick of stiff-kick-dip: 3 N for 10 ms
+SLOW_S = 2.4  # stiff-kick-dip's presses last 2.4 s: the plane is crossed at 0.02 m/s
 
 
 def kick_dip_law(t: np.ndarray) -> np.ndarray:
@@ -1303,26 +2392,49 @@ def kick_dip_fixture() -> Fixture:
     first contact sample takes in the kick."""
     up = np.array([0.0, 0.0, 1.0])
     pp = np.array([0.0, 0.02, 0.1])
-    fx = Fixture("stiff-kick-dip", active_session(
-        "stiff-kick-dip", "example", "stiffness-1", "stiffness", duration(SLOW_S), 0.03,
-        lambda t: pp - press_depth(t, SLOW_S)[:, None] * up, lambda t: kick_dip_law(t)[:, None] * up,
-        lambda t: (K_CMD * np.maximum(press_depth(t, SLOW_S), 0.0))[:, None] * up,
-        {"surface_point_m": pp.tolist(), "surface_normal": up.tolist(), "stiffness_N_per_m": K_CMD},
-        (1000.0, 500.0, 100.0), "parquet"))
-    how = ("five slow presses (2.4 s, crossing the plane at 0.02 m/s) 12 mm deep; force 400 N/m × penetration up to 1.6 N at 4 mm, a sag to 1.0 N and back to 1.6 N at "
-           "11 mm, then 400 N/m more to 2.0 N at the bottom; a 3 N, 10 ms sin² kick at each contact. The fit samples, "
-           + FIT_RULE + ", lie on the first 400 N/m part: the rise ends at the first top (the force stays below 1.6 N for "
-           "0.39 s after it), and the kick has decayed through the 20 Hz low-pass before the first settled sample")
+    fx = Fixture(
+        "stiff-kick-dip",
+        active_session(
+            "stiff-kick-dip",
+            "example",
+            "stiffness-1",
+            "stiffness",
+            duration(SLOW_S),
+            0.03,
+            lambda t: pp - press_depth(t, SLOW_S)[:, None] * up,
+            lambda t: kick_dip_law(t)[:, None] * up,
+            lambda t: (K_CMD * np.maximum(press_depth(t, SLOW_S), 0.0))[:, None] * up,
+            {"surface_point_m": pp.tolist(), "surface_normal": up.tolist(), "stiffness_N_per_m": K_CMD},
+            (1000.0, 500.0, 100.0),
+            "parquet",
+        ),
+    )
+    how = (
+        "five slow presses (2.4 s, crossing the plane at 0.02 m/s) 12 mm deep; force 400 N/m × penetration up to 1.6 N at 4 mm, a sag to 1.0 N and back to 1.6 N at "
+        "11 mm, then 400 N/m more to 2.0 N at the bottom; a 3 N, 10 ms sin² kick at each contact. The fit samples, "
+        + FIT_RULE
+        + ", lie on the first 400 N/m part: the rise ends at the first top (the force stays below 1.6 N for "
+        "0.39 s after it), and the kick has decayed through the 20 Hz low-pass before the first settled sample"
+    )
     desc = "Edge: a kick at contact and a plateau that sags and climbs again (the fit window of §13.2)."
     fx.cases += [
         case("stiffness.measured.kick-dip", "stiffness.measured", "13.3", fx.name, 400.0, "N/m", "analytic", how, desc),
-        case("stiffness.peak_force.kick-dip", "stiffness.peak_force", "13.4", fx.name, 2.0, "N", "analytic",
-             how + "; the peak is the loading stroke's largest force, 2.0 N at the smooth bottom of the press", desc),
+        case(
+            "stiffness.peak_force.kick-dip",
+            "stiffness.peak_force",
+            "13.4",
+            fx.name,
+            2.0,
+            "N",
+            "analytic",
+            how + "; the peak is the loading stroke's largest force, 2.0 N at the smooth bottom of the press",
+            desc,
+        ),
     ]
     return fx
 
 
-WEIGHT_N = 0.8   # stiff-falling-release: the device's uncompensated weight pulls the hand into the plane
+WEIGHT_N = 0.8  # stiff-falling-release: the device's uncompensated weight pulls the hand into the plane
 
 
 def falling_release_law(t: np.ndarray) -> np.ndarray:
@@ -1331,8 +2443,15 @@ def falling_release_law(t: np.ndarray) -> np.ndarray:
     knee; the device's weight (−0.8 N) throughout."""
     d = press_depth(t)
     d_sat, top = 0.008, 360.0 * 0.008
-    spring = np.where(d <= 0, 0.0, np.where(d <= d_sat, 360.0 * d, np.where(
-        d <= d_sat + 0.002, top, top - top / 2 * (d - d_sat - 0.002) / (DEPTH - d_sat - 0.002))))
+    spring = np.where(
+        d <= 0,
+        0.0,
+        np.where(
+            d <= d_sat,
+            360.0 * d,
+            np.where(d <= d_sat + 0.002, top, top - top / 2 * (d - d_sat - 0.002) / (DEPTH - d_sat - 0.002)),
+        ),
+    )
     return spring + np.where(loading_stroke(t) | (d <= d_sat), 0.0, 0.15) - WEIGHT_N
 
 
@@ -1342,31 +2461,55 @@ def falling_release_fixture() -> Fixture:
     intercept is −0.8 N, not 0)."""
     up = np.array([0.0, 0.0, 1.0])
     pp = np.array([0.01, 0.0, 0.12])
-    fx = Fixture("stiff-falling-release", active_session(
-        "stiff-falling-release", "example", "stiffness-1", "stiffness", duration(), 0.03,
-        lambda t: pp - press_depth(t)[:, None] * up, lambda t: falling_release_law(t)[:, None] * up,
-        lambda t: (K_CMD * np.maximum(press_depth(t), 0.0))[:, None] * up,
-        {"surface_point_m": pp.tolist(), "surface_normal": up.tolist(), "stiffness_N_per_m": K_CMD},
-        (1000.0, 500.0, 100.0), "parquet"))
-    how = ("five presses 12 mm deep; force 360 N/m × penetration up to 2.88 N at 8 mm, flat for 2 mm, then falling with "
-           "depth to 1.44 N at the bottom; 0.15 N more on the release stroke past the knee (the whole press's largest force, "
-           "3.03 N − the weight, "
-           f"lies on the release); the device's weight −{WEIGHT_N:g} N throughout. The fit samples, " + FIT_RULE
-           + ", lie on the 360 N/m part")
+    fx = Fixture(
+        "stiff-falling-release",
+        active_session(
+            "stiff-falling-release",
+            "example",
+            "stiffness-1",
+            "stiffness",
+            duration(),
+            0.03,
+            lambda t: pp - press_depth(t)[:, None] * up,
+            lambda t: falling_release_law(t)[:, None] * up,
+            lambda t: (K_CMD * np.maximum(press_depth(t), 0.0))[:, None] * up,
+            {"surface_point_m": pp.tolist(), "surface_normal": up.tolist(), "stiffness_N_per_m": K_CMD},
+            (1000.0, 500.0, 100.0),
+            "parquet",
+        ),
+    )
+    how = (
+        "five presses 12 mm deep; force 360 N/m × penetration up to 2.88 N at 8 mm, flat for 2 mm, then falling with "
+        "depth to 1.44 N at the bottom; 0.15 N more on the release stroke past the knee (the whole press's largest force, "
+        "3.03 N − the weight, "
+        f"lies on the release); the device's weight −{WEIGHT_N:g} N throughout. The fit samples, "
+        + FIT_RULE
+        + ", lie on the 360 N/m part"
+    )
     desc = "Edge: a force that falls with depth and is higher on the release stroke (the loading stroke of §13.2)."
     fx.cases += [
-        case("stiffness.measured.falling-release", "stiffness.measured", "13.3", fx.name, 360.0, "N/m", "analytic",
-             how, desc),
-        case("stiffness.peak_force.falling-release", "stiffness.peak_force", "13.4", fx.name, 2.88 - WEIGHT_N, "N", "analytic", how + f"; the peak is the loading stroke's largest force, 2.88 − {WEIGHT_N:g} N on its 2 mm plateau", desc),
+        case("stiffness.measured.falling-release", "stiffness.measured", "13.3", fx.name, 360.0, "N/m", "analytic", how, desc),
+        case(
+            "stiffness.peak_force.falling-release",
+            "stiffness.peak_force",
+            "13.4",
+            fx.name,
+            2.88 - WEIGHT_N,
+            "N",
+            "analytic",
+            how + f"; the peak is the loading stroke's largest force, 2.88 − {WEIGHT_N:g} N on its 2 mm plateau",
+            desc,
+        ),
     ]
     return fx
 
 
 # --- rig (spec chapter 14) ---------------------------------------------------------------------------------
 
+
 def damped_peak(f_n: float, zeta: float) -> float:
     """Frequency of the maximum of |Fourier transform| of e^(−ζωt) sin(ω_d t): ω_n √(1 − 2ζ²) / 2π."""
-    return f_n * math.sqrt(1 - 2 * zeta ** 2)
+    return f_n * math.sqrt(1 - 2 * zeta**2)
 
 
 def calibration_rms(truth: rb.HandleTruth) -> list[float]:
@@ -1376,7 +2519,7 @@ def calibration_rms(truth: rb.HandleTruth) -> list[float]:
     ⅔|c|²σ_F²)."""
     ft_var = lowpass_noise_ratio(param("signals", "wrench_cutoff_hz"), 1000.0, param("signals", "filter_order"))
     acc_var = lowpass_noise_ratio(param("signals", "accel_cutoff_hz"), 2000.0, param("signals", "filter_order"))
-    torque_sigma = math.sqrt(truth.torque_noise ** 2 + 2 / 3 * float(truth.com @ truth.com) * truth.force_noise ** 2)
+    torque_sigma = math.sqrt(truth.torque_noise**2 + 2 / 3 * float(truth.com @ truth.com) * truth.force_noise**2)
     return [truth.force_noise * math.sqrt(ft_var), truth.accel_noise * math.sqrt(acc_var), torque_sigma * math.sqrt(ft_var)]
 
 
@@ -1387,10 +2530,13 @@ def calibration_offset_u(truth: rb.HandleTruth, rig: dict, duration_s: float) ->
     Cov(c, ρ) = σ²·(r/1000)·(JᵀJ)⁻¹, Jᵢ = −(ĝᵢ, 1) with ĝᵢ the gravity direction in the sensor frame."""
     rate = float(param("calibration", "fit_rate_hz"))
     t = np.arange(int(duration_s * rate)) / rate
-    q_ws = quat_multiply(rb.tumbling_orientation(t), np.broadcast_to(np.asarray(rig["handle"]["ft_sensor"]["pose"]["quaternion"], float), (len(t), 4)))
+    q_ws = quat_multiply(
+        rb.tumbling_orientation(t),
+        np.broadcast_to(np.asarray(rig["handle"]["ft_sensor"]["pose"]["quaternion"], float), (len(t), 4)),
+    )
     g = quat_rotate(quat_conjugate(q_ws), np.broadcast_to(GRAVITY_W, (len(t), 3)))
     jac = np.column_stack([g / np.linalg.norm(g, axis=1, keepdims=True), np.ones(len(t))])
-    cov = truth.force_noise ** 2 * rate / 1000.0 * np.linalg.inv(jac.T @ jac)
+    cov = truth.force_noise**2 * rate / 1000.0 * np.linalg.inv(jac.T @ jac)
     return float(np.sqrt(np.max(np.diag(cov)[:3]) + cov[3, 3]))
 
 
@@ -1398,16 +2544,57 @@ def rig_fixtures() -> list[Fixture]:
     out: list[Fixture] = []
     variants = [
         # name, rig, modes, zeta, accel delay, mocap delay, cop offset, truth, seed
-        ("rig-rotated", "rotated", (205.0, 206.0, 182.0), 0.03, 0.003, -0.001, 0.005, rb.HandleTruth(), SEED + 10,
-         "Typical: the paper's plate modes, rotated handle sensors."),
-        ("rig-late-mocap", "example", (150.0, 163.0, 121.0), 0.02, -0.002, 0.004, 0.008, rb.HandleTruth(force_noise=0.006),
-         SEED + 11, "Tricky: late motion capture, an early accelerometer, a weaker plate."),
-        ("rig-quiet", "rotated-plate", (240.0, 230.0, 260.0), 0.04, 0.0, 0.0, 0.002, QUIET, SEED + 12,
-         "Edge: noise-free handle sensors (residuals vanish), synchronous recorders, yawed corner sensors."),
+        (
+            "rig-rotated",
+            "rotated",
+            (205.0, 206.0, 182.0),
+            0.03,
+            0.003,
+            -0.001,
+            0.005,
+            rb.HandleTruth(),
+            SEED + 10,
+            "Typical: the paper's plate modes, rotated handle sensors.",
+        ),
+        (
+            "rig-late-mocap",
+            "example",
+            (150.0, 163.0, 121.0),
+            0.02,
+            -0.002,
+            0.004,
+            0.008,
+            rb.HandleTruth(force_noise=0.006),
+            SEED + 11,
+            "Tricky: late motion capture, an early accelerometer, a weaker plate.",
+        ),
+        (
+            "rig-quiet",
+            "rotated-plate",
+            (240.0, 230.0, 260.0),
+            0.04,
+            0.0,
+            0.0,
+            0.002,
+            QUIET,
+            SEED + 12,
+            "Edge: noise-free handle sensors (residuals vanish), synchronous recorders, yawed corner sensors.",
+        ),
     ]
     for name, rig_kind, modes, zeta, acc_d, moc_d, cop_off, truth, seed, desc in variants:
-        def build(path: Path, rig_kind=rig_kind, modes=modes, zeta=zeta, acc_d=acc_d, moc_d=moc_d, cop_off=cop_off, truth=truth,
-                  seed=seed, name=name) -> None:
+
+        def build(
+            path: Path,
+            rig_kind=rig_kind,
+            modes=modes,
+            zeta=zeta,
+            acc_d=acc_d,
+            moc_d=moc_d,
+            cop_off=cop_off,
+            truth=truth,
+            seed=seed,
+            name=name,
+        ) -> None:
             rng = np.random.default_rng(seed)
             rig = {"rotated": rb.rotated_rig, "example": example_rig, "rotated-plate": rotated_rig_full}[rig_kind]()
             rig["motion_capture"]["markers"] = sorted(set(rig["motion_capture"]["markers"]) | {"w1"})
@@ -1427,29 +2614,79 @@ def rig_fixtures() -> list[Fixture]:
         rig_desc = {"rotated": rb.rotated_rig, "example": example_rig, "rotated-plate": rotated_rig_full}[rig_kind]()
         quiet = truth.force_noise == 0.0
         fx.cases += [
-            case(f"rig.plate_natural_frequency.{short}", "rig.plate_natural_frequency", "14.4", name, peaks, "Hz", "analytic", f"a ball drop rings each axis as e^(−ζωt) sin(ω_d t) with f_n = {modes} Hz, ζ = {zeta}: the "
-                 "magnitude spectrum peaks at f_n √(1 − 2ζ²); tolerance = the 0.5 s window's zero-padded bin (0.24 Hz) "
-                 "refined by a parabola, plus 0.01 N noise", desc),
-            case(f"rig.cop_error.{short}", "rig.cop_error", "14.5", name, cop_off, "m", "analytic",
-                 f"three placements of a 1 kg weight whose marker is offset by {cop_off} m from the load point in three "
-                 "directions; corner readings split the load statically (spec §14.1); noise 5 mN per channel", desc),
-            case(f"rig.sync_offset.{short}", "rig.sync_offset", "14.6", name, max(abs(acc_d), abs(moc_d)), "s", "analytic", f"accelerometer time stamps late by {acc_d} s, motion capture by {moc_d} s against the F/T "
-                 "recorder; the value is the larger |delay|; tolerance = a third of the 1 ms grid step", desc),
-            case(f"rig.handle_calibration_rms.{short}", "rig.handle_calibration_rms", "14.7", name, expected_rms,
-                 "[N, m/s^2, N*m]", "analytic",
-                 ("noise-free sensors: the residuals are only the filters' end effects on the tumbling gravity (< 2e-4)"
-                  if quiet else
-                  f"white noise σ = ({truth.force_noise} N, {truth.accel_noise} m/s², {truth.torque_noise} N·m) per axis, "
-                  "low-passed at 20 Hz (zero phase, order 4: variance × (2/fs)∫|H|⁴ df) before the fits: the radial residual "
-                  "of an isotropic error has the per-axis σ; the torque residual adds the force noise through the centre of "
-                  "mass, √(σ_τ² + ⅔|c|²σ_F²); tolerance 15 % = the sampling spread of an RMS over a few hundred "
-                  "independent samples"), desc),
-            case(f"rig.handle_force_offset_u.{short}", "rig.handle_force_offset_u", "14.7", name,
-                 calibration_offset_u(truth, rig_desc, 12.0), "N", "analytic",
-                 ("noise-free sensors: only the filters' end effects on the tumbling gravity are left to the fit" if quiet else
-                  f"white F/T noise σ = {truth.force_noise} N per axis at 1 kHz over 12 s of the tumble: the low-pass keeps its "
-                  "density at 0 Hz, so the fitted bias and weight have Cov = σ²·(r/1 kHz)·(JᵀJ)⁻¹ on the 100 Hz fit grid "
-                  "(Jᵢ = −(ĝᵢ, 1)); value √(max per-axis variance of the bias + variance of the weight)"), desc),
+            case(
+                f"rig.plate_natural_frequency.{short}",
+                "rig.plate_natural_frequency",
+                "14.4",
+                name,
+                peaks,
+                "Hz",
+                "analytic",
+                f"a ball drop rings each axis as e^(−ζωt) sin(ω_d t) with f_n = {modes} Hz, ζ = {zeta}: the "
+                "magnitude spectrum peaks at f_n √(1 − 2ζ²); tolerance = the 0.5 s window's zero-padded bin (0.24 Hz) "
+                "refined by a parabola, plus 0.01 N noise",
+                desc,
+            ),
+            case(
+                f"rig.cop_error.{short}",
+                "rig.cop_error",
+                "14.5",
+                name,
+                cop_off,
+                "m",
+                "analytic",
+                f"three placements of a 1 kg weight whose marker is offset by {cop_off} m from the load point in three "
+                "directions; corner readings split the load statically (spec §14.1); noise 5 mN per channel",
+                desc,
+            ),
+            case(
+                f"rig.sync_offset.{short}",
+                "rig.sync_offset",
+                "14.6",
+                name,
+                max(abs(acc_d), abs(moc_d)),
+                "s",
+                "analytic",
+                f"accelerometer time stamps late by {acc_d} s, motion capture by {moc_d} s against the F/T "
+                "recorder; the value is the larger |delay|; tolerance = a third of the 1 ms grid step",
+                desc,
+            ),
+            case(
+                f"rig.handle_calibration_rms.{short}",
+                "rig.handle_calibration_rms",
+                "14.7",
+                name,
+                expected_rms,
+                "[N, m/s^2, N*m]",
+                "analytic",
+                (
+                    "noise-free sensors: the residuals are only the filters' end effects on the tumbling gravity (< 2e-4)"
+                    if quiet
+                    else f"white noise σ = ({truth.force_noise} N, {truth.accel_noise} m/s², {truth.torque_noise} N·m) per axis, "
+                    "low-passed at 20 Hz (zero phase, order 4: variance × (2/fs)∫|H|⁴ df) before the fits: the radial residual "
+                    "of an isotropic error has the per-axis σ; the torque residual adds the force noise through the centre of "
+                    "mass, √(σ_τ² + ⅔|c|²σ_F²); tolerance 15 % = the sampling spread of an RMS over a few hundred "
+                    "independent samples"
+                ),
+                desc,
+            ),
+            case(
+                f"rig.handle_force_offset_u.{short}",
+                "rig.handle_force_offset_u",
+                "14.7",
+                name,
+                calibration_offset_u(truth, rig_desc, 12.0),
+                "N",
+                "analytic",
+                (
+                    "noise-free sensors: only the filters' end effects on the tumbling gravity are left to the fit"
+                    if quiet
+                    else f"white F/T noise σ = {truth.force_noise} N per axis at 1 kHz over 12 s of the tumble: the low-pass keeps its "
+                    "density at 0 Hz, so the fitted bias and weight have Cov = σ²·(r/1 kHz)·(JᵀJ)⁻¹ on the 100 Hz fit grid "
+                    "(Jᵢ = −(ĝᵢ, 1)); value √(max per-axis variance of the bias + variance of the weight)"
+                ),
+                desc,
+            ),
         ]
         out.append(fx)
     out.append(impact_fixture())
@@ -1474,11 +2711,21 @@ def cop_spread_fixture() -> Fixture:
 
     fx = Fixture(name, build)
     errors = np.linalg.norm(offsets, axis=1)
-    fx.cases.append(case("rig.cop_error.spread", "rig.cop_error", "14.5", name, float(errors.mean()), "m", "analytic",
-                         f"three placements of a 1 kg weight whose marker is offset from the load point by {errors.tolist()} m: "
-                         "the mean distance over the placements; corner readings split the load statically (spec §14.1); "
-                         "noise 5 mN per channel; tolerance 0.5 mm as for the other COP cases",
-                         "Tricky: placements of different errors (mean, not RMS or median)."))
+    fx.cases.append(
+        case(
+            "rig.cop_error.spread",
+            "rig.cop_error",
+            "14.5",
+            name,
+            float(errors.mean()),
+            "m",
+            "analytic",
+            f"three placements of a 1 kg weight whose marker is offset from the load point by {errors.tolist()} m: "
+            "the mean distance over the placements; corner readings split the load statically (spec §14.1); "
+            "noise 5 mN per channel; tolerance 0.5 mm as for the other COP cases",
+            "Tricky: placements of different errors (mean, not RMS or median).",
+        )
+    )
     return fx
 
 
@@ -1489,15 +2736,27 @@ def early_accel_fixture() -> Fixture:
 
     def build(path: Path) -> None:
         w = rb.writer(rig=rb.rotated_rig(), sid=f"conf-{name}")
-        rb.add_calibration_trial(w, rb.HandleTruth(), np.random.default_rng(SEED + 13), duration_s=12.0, accel_delay_s=acc_d,
-                                 mocap_delay_s=moc_d)
+        rb.add_calibration_trial(
+            w, rb.HandleTruth(), np.random.default_rng(SEED + 13), duration_s=12.0, accel_delay_s=acc_d, mocap_delay_s=moc_d
+        )
         w.write(path)
 
     fx = Fixture(name, build)
-    fx.cases.append(case("rig.sync_offset.early-accel", "rig.sync_offset", "14.6", name, max(abs(acc_d), abs(moc_d)), "s",
-                         "analytic", f"accelerometer time stamps early by {-acc_d} s (delay {acc_d} s), motion "
-                         f"capture late by {moc_d} s against the F/T recorder; the value is the larger |delay|, that of the "
-                         "early recorder; tolerance = a third of the 1 ms grid step", "Edge: the largest delay is negative."))
+    fx.cases.append(
+        case(
+            "rig.sync_offset.early-accel",
+            "rig.sync_offset",
+            "14.6",
+            name,
+            max(abs(acc_d), abs(moc_d)),
+            "s",
+            "analytic",
+            f"accelerometer time stamps early by {-acc_d} s (delay {acc_d} s), motion "
+            f"capture late by {moc_d} s against the F/T recorder; the value is the larger |delay|, that of the "
+            "early recorder; tolerance = a third of the 1 ms grid step",
+            "Edge: the largest delay is negative.",
+        )
+    )
     return fx
 
 
@@ -1515,7 +2774,7 @@ def impact_peaks(t: np.ndarray, force: np.ndarray, rate: float) -> list[float]:
         x = force[inside, axis]
         mag = np.abs(np.fft.rfft(x - x.mean(), nfft))
         k = int(np.flatnonzero(band)[np.argmax(mag[band])])
-        lo, mid, hi = np.log(mag[k - 1:k + 2])
+        lo, mid, hi = np.log(mag[k - 1 : k + 2])
         shift = 0.5 * (lo - hi) / (lo - 2 * mid + hi) if lo - 2 * mid + hi < 0 else 0.0
         peaks.append(float(freqs[k] + min(max(shift, -0.5), 0.5) * rate / nfft))
     return peaks
@@ -1529,22 +2788,35 @@ def impact_fixture() -> Fixture:
     def build(path: Path) -> None:
         w = rb.writer(rig=rotated_rig_full(), sid=f"conf-{name}")
         for rep, m in enumerate(modes, start=1):
-            rb.add_impact_trial(w, np.random.default_rng(SEED), modes=m, zeta=zeta, trial_id=f"impact-{rep}", repetition=rep,
-                                noise=0.0)
+            rb.add_impact_trial(
+                w, np.random.default_rng(SEED), modes=m, zeta=zeta, trial_id=f"impact-{rep}", repetition=rep, noise=0.0
+            )
         w.write(path)
 
     fx = Fixture(name, build)
     t = np.arange(3000) / 1000.0
-    per_trial = [impact_peaks(t, np.column_stack([rb.damped(t, f, zeta, 1.0, a) for f, a in zip(m, (4.0, 3.0, 20.0))]), 1000.0)
-                 for m in modes]
+    per_trial = [
+        impact_peaks(t, np.column_stack([rb.damped(t, f, zeta, 1.0, a) for f, a in zip(m, (4.0, 3.0, 20.0))]), 1000.0)
+        for m in modes
+    ]
     analytic = [[round(damped_peak(f, zeta), 3) for f in m] for m in modes]
-    fx.cases.append(case(
-        "rig.plate_natural_frequency.clean", "rig.plate_natural_frequency", "14.4", name, np.mean(per_trial, axis=0), "Hz",
-        "spec", f"two noise-free impact trials ringing as e^(−ζωt) sin(ω_d t), ζ = {zeta}, f_n = {modes} Hz (x, y, z), "
-        "split over four corner sensors yawed 0/90/180/270°; the value is the per-axis mean of §14.4's procedure applied to "
-        "the known ringing (0.5 s window, no taper, zero-padding to 8× the length, parabola on the log-magnitudes), "
-        f"close to the continuous peaks f_n √(1 − 2ζ²) = {analytic} Hz; tolerance 1e-4 Hz: the inputs are exact, only "
-        "rounding differs", "Tricky: broad, noise-free peaks, where a taper or a shorter FFT moves the estimate."))
+    fx.cases.append(
+        case(
+            "rig.plate_natural_frequency.clean",
+            "rig.plate_natural_frequency",
+            "14.4",
+            name,
+            np.mean(per_trial, axis=0),
+            "Hz",
+            "spec",
+            f"two noise-free impact trials ringing as e^(−ζωt) sin(ω_d t), ζ = {zeta}, f_n = {modes} Hz (x, y, z), "
+            "split over four corner sensors yawed 0/90/180/270°; the value is the per-axis mean of §14.4's procedure applied to "
+            "the known ringing (0.5 s window, no taper, zero-padding to 8× the length, parabola on the log-magnitudes), "
+            f"close to the continuous peaks f_n √(1 − 2ζ²) = {analytic} Hz; tolerance 1e-4 Hz: the inputs are exact, only "
+            "rounding differs",
+            "Tricky: broad, noise-free peaks, where a taper or a shorter FFT moves the estimate.",
+        )
+    )
     return fx
 
 
@@ -1584,11 +2856,17 @@ def hw_model(variant: str) -> dict:
         linear[2][7] = {"b": [0.5, 0.5], "f": [-0.2, 0.0], "nk": 0}
         linear[2][4] = {"b": [3.0, 0.0], "f": [0.0, 0.0], "nk": 0}
         linear[4][0] = {"b": [0.02, 0.0], "f": [-0.5, 0.0], "nk": 0}
-    return {"format": "haptify-hw-model", "spec_version": SPEC_VERSION, "sample_rate_hz": 100.0,
-            "inputs": [{"name": n, "unit": u} for n, u in zip(INPUTS, IN_UNITS)],
-            "outputs": [{"name": n, "unit": u} for n, u in zip(OUTPUTS, OUT_UNITS)],
-            "input_maps": in_maps, "output_maps": out_maps, "linear": linear,
-            "quaternion_hemisphere": {"columns": [0, 1, 2, 3], "reference": [1.0, 0.0, 0.0, 0.0]}}
+    return {
+        "format": "haptify-hw-model",
+        "spec_version": SPEC_VERSION,
+        "sample_rate_hz": 100.0,
+        "inputs": [{"name": n, "unit": u} for n, u in zip(INPUTS, IN_UNITS)],
+        "outputs": [{"name": n, "unit": u} for n, u in zip(OUTPUTS, OUT_UNITS)],
+        "input_maps": in_maps,
+        "output_maps": out_maps,
+        "linear": linear,
+        "quaternion_hemisphere": {"columns": [0, 1, 2, 3], "reference": [1.0, 0.0, 0.0, 0.0]},
+    }
 
 
 def pwl(m: dict, u: np.ndarray) -> np.ndarray:
@@ -1682,13 +2960,13 @@ def prediction_expectations(model: dict, pr: Prediction) -> dict:
     y_hat = hw_predict(model, train.inputs(tg))
     meas = np.column_stack([train.force(tg), np.zeros((len(tg), 3))])
     err = meas - y_hat
-    rm = np.sqrt(np.mean(err ** 2, axis=0))
+    rm = np.sqrt(np.mean(err**2, axis=0))
     y_test = hw_predict(model, test.inputs(tg))
     err_test = np.column_stack([test.force(tg), np.zeros((len(tg), 3))]) - y_test
 
     def seg_errors(e):
         nseg = len(tg) // seg
-        return [float(np.mean(np.sqrt(np.mean(e[s * seg:(s + 1) * seg, :3] ** 2, axis=0)))) for s in range(nseg)]
+        return [float(np.mean(np.sqrt(np.mean(e[s * seg : (s + 1) * seg, :3] ** 2, axis=0)))) for s in range(nseg)]
 
     tr, te = seg_errors(err), seg_errors(err_test)
     d_test = float(np.linalg.norm(pr.shift) / param("dynamics", "R_p") + pr.turn[1] / math.radians(param("dynamics", "R_theta")))
@@ -1707,38 +2985,105 @@ def prediction_fixture(pr: Prediction) -> Fixture:
         rig = example_rig() if pr.rig_kind == "example" else rb.rotated_rig()
         w = manifest(f"conf-{pr.name}", rig, truth=rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0))
         trials = (("local_dynamic-1", 1, pr.train), ("local_dynamic-2", 2, pr.test))
-        for tid, rep, m in (trials[::-1] if pr.test_listed_first else trials):
-            handle_trial(w, tid, "local_dynamic", duration_s=PREDICT_S, position=m.position, quaternion=fixed(m.q), force_w=m.force,
-                         truth=rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0),
-                         rates=pr.rates, fmt=pr.fmt, repetition=rep, start_s=pr.start_s, clock_offsets=pr.clock_offsets)
+        for tid, rep, m in trials[::-1] if pr.test_listed_first else trials:
+            handle_trial(
+                w,
+                tid,
+                "local_dynamic",
+                duration_s=PREDICT_S,
+                position=m.position,
+                quaternion=fixed(m.q),
+                force_w=m.force,
+                truth=rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0),
+                rates=pr.rates,
+                fmt=pr.fmt,
+                repetition=rep,
+                start_s=pr.start_s,
+                clock_offsets=pr.clock_offsets,
+            )
         w.write(path)
         for variant in pr.models:
             (path / f"model-{variant}.json").write_text(json.dumps(hw_model(variant), indent=1) + "\n", encoding="utf-8")
 
     fx = Fixture(pr.name, build)
     short, desc = pr.name.removeprefix("dyn-"), pr.desc
-    how = ("the handle moves on a straight line at constant velocity with a fixed orientation and the hand force is "
-           "linear in time, so the §7.2 filters (chord removed) pass every signal unchanged and the model inputs on "
-           "the 100 Hz grid are known exactly; the value is spec §11.3 applied to them (lfilter from rest, maps with "
-           "linear extension) against the measured force" + pr.how)
+    how = (
+        "the handle moves on a straight line at constant velocity with a fixed orientation and the hand force is "
+        "linear in time, so the §7.2 filters (chord removed) pass every signal unchanged and the model inputs on "
+        "the 100 Hz grid are known exactly; the value is spec §11.3 applied to them (lfilter from rest, maps with "
+        "linear extension) against the measured force" + pr.how
+    )
     for variant in pr.models:
         e = prediction_expectations(hw_model(variant), pr)
         params = {"model": f"model-{variant}.json"}
         sfx = f"{short}.model-{variant}"
-        away = (f"{np.linalg.norm(pr.shift) / R_p:g}·R_p away" + (f" and turned by {pr.turn[1]} rad = "
-                                                                  f"{pr.turn[1] / R_theta:.4g}·R_θ" if pr.turn[1] else ""))
+        away = f"{np.linalg.norm(pr.shift) / R_p:g}·R_p away" + (
+            f" and turned by {pr.turn[1]} rad = {pr.turn[1] / R_theta:.4g}·R_θ" if pr.turn[1] else ""
+        )
         fx.cases += [
-            case(f"dynamics.force_rmse.{sfx}", "dynamics.force_rmse", "11.3", pr.name, e["force"], "N", "spec",
-                 how + f"; model file model-{variant}.json given in parameters.model", desc, parameters=params),
-            case(f"dynamics.force_rmse_mean.{sfx}", "dynamics.force_rmse_mean", "11.7", pr.name, float(np.mean(e["force"])),
-                 "N", "spec", how, desc, parameters=params),
-            case(f"dynamics.torque_rmse.{sfx}", "dynamics.torque_rmse", "11.3", pr.name, e["torque"], "N*m", "spec", how + "; the measured torque about the gimbal centre is zero", desc, parameters=params),
-            case(f"dynamics.torque_rmse_mean.{sfx}", "dynamics.torque_rmse_mean", "11.7", pr.name,
-                 float(np.mean(e["torque"])), "N*m", "spec", how, desc, parameters=params),
-            case(f"dynamics.error_vs_distance.{sfx}", "dynamics.error_vs_distance", "11.6", pr.name, e["line"], "N", "spec", how + f"; the test trial repeats the motion {away}, perpendicular to its velocity (every window's nearest training "
-                 f"window is its twin: distance {e['distance']:g}), training segments at distance 0; "
-                 "the least-squares line through (distance, mean per-axis RMS error) of the 5 s segments",
-                 desc, parameters=params),
+            case(
+                f"dynamics.force_rmse.{sfx}",
+                "dynamics.force_rmse",
+                "11.3",
+                pr.name,
+                e["force"],
+                "N",
+                "spec",
+                how + f"; model file model-{variant}.json given in parameters.model",
+                desc,
+                parameters=params,
+            ),
+            case(
+                f"dynamics.force_rmse_mean.{sfx}",
+                "dynamics.force_rmse_mean",
+                "11.7",
+                pr.name,
+                float(np.mean(e["force"])),
+                "N",
+                "spec",
+                how,
+                desc,
+                parameters=params,
+            ),
+            case(
+                f"dynamics.torque_rmse.{sfx}",
+                "dynamics.torque_rmse",
+                "11.3",
+                pr.name,
+                e["torque"],
+                "N*m",
+                "spec",
+                how + "; the measured torque about the gimbal centre is zero",
+                desc,
+                parameters=params,
+            ),
+            case(
+                f"dynamics.torque_rmse_mean.{sfx}",
+                "dynamics.torque_rmse_mean",
+                "11.7",
+                pr.name,
+                float(np.mean(e["torque"])),
+                "N*m",
+                "spec",
+                how,
+                desc,
+                parameters=params,
+            ),
+            case(
+                f"dynamics.error_vs_distance.{sfx}",
+                "dynamics.error_vs_distance",
+                "11.6",
+                pr.name,
+                e["line"],
+                "N",
+                "spec",
+                how
+                + f"; the test trial repeats the motion {away}, perpendicular to its velocity (every window's nearest training "
+                f"window is its twin: distance {e['distance']:g}), training segments at distance 0; "
+                "the least-squares line through (distance, mean per-axis RMS error) of the 5 s segments",
+                desc,
+                parameters=params,
+            ),
         ]
     return fx
 
@@ -1749,30 +3094,67 @@ def dynamics_fixtures() -> list[Fixture]:
     q_tilt = quat_from_axis_angle(np.array([0.2, 1.0, 0.1]), np.array(0.6))
     turned_start, turn = 0.0037, 0.75
     variants = [
-        Prediction("dyn-predict", "parquet", "example", LineMotion(np.array([-0.04, 0.01, 0.15]), np.array([0.003, 0.0, 0.0]),
-                                                                   np.array([1.0, 0.0, 0.0, 0.0]), np.array([0.2, -0.1, 0.3]),
-                                                                   np.array([0.01, 0.004, 0.0])),
-                   np.array([0.0, 0.0, R_p]), np.array([0.5, 0.2, -0.1]), "Typical: a given model, a test trial one R_p away."),
-        Prediction("dyn-predict-hemisphere-csv", "csv", "rotated",
-                   LineMotion(np.array([0.05, -0.02, 0.12]), np.array([-0.002, 0.001, 0.0005]), -q_tilt, np.array([-0.3, 0.2, 0.1]),
-                              np.array([0.0, -0.01, 0.006])),
-                   0.5 * R_p * np.array([1.0, 2.0, 0.0]) / math.sqrt(5.0), np.array([0.1, 0.0, 0.2]),
-                   "Tricky: the motion-capture quaternion is stored as −q (hemisphere rule), rotated sensor frames, CSV."),
-        Prediction("dyn-predict-clock-csv", "csv", "rotated",
-                   LineMotion(np.array([0.02, 0.035, 0.13]), np.array([0.002, -0.0015, 0.001]), q_tilt, np.array([0.1, 0.3, -0.2]),
-                              np.array([0.008, 0.0, -0.005])),
-                   0.5 * R_p * np.array([0.6, 0.8, 0.0]), np.array([-0.2, 0.1, 0.05]),
-                   "Tricky: streams at 250, 400 and 120 Hz starting 3.7 ms into the session clock, motion capture and "
-                   "accelerometer shifted by clock-offset records, a test trial turned by 43°, a model that reads "
-                   "orientation, position beyond its map, velocity and the gravity-free acceleration.",
-                   models=("c",), turn=((0.3, -0.4, 0.87), turn), rates=(250.0, 400.0, 120.0), start_s=turned_start,
-                   clock_offsets={"handle_pose": 0.0213, "handle_accel": -0.0171}, test_listed_first=True,
-                   how=(f"; the streams start at t = {turned_start} s (the grid of §7.3 starts there, not at a multiple of "
-                        "10 ms), handle_pose is stored 21.3 ms early and handle_accel 17.1 ms late with clock_offset records "
-                        "+0.0213 s and −0.0171 s (§2.8: added to t), and at 250/400/120 Hz the 100 Hz grid falls between "
-                        "samples (linear interpolation is exact on lines); the calibrated acceleration is zero (gravity, "
-                        "bias and the rotated accelerometer frame removed, §6.6) and model-c maps it; the test trial "
-                        "(repetition 2) is listed first in the manifest, the training trial is repetition 1 (§11.7)")),
+        Prediction(
+            "dyn-predict",
+            "parquet",
+            "example",
+            LineMotion(
+                np.array([-0.04, 0.01, 0.15]),
+                np.array([0.003, 0.0, 0.0]),
+                np.array([1.0, 0.0, 0.0, 0.0]),
+                np.array([0.2, -0.1, 0.3]),
+                np.array([0.01, 0.004, 0.0]),
+            ),
+            np.array([0.0, 0.0, R_p]),
+            np.array([0.5, 0.2, -0.1]),
+            "Typical: a given model, a test trial one R_p away.",
+        ),
+        Prediction(
+            "dyn-predict-hemisphere-csv",
+            "csv",
+            "rotated",
+            LineMotion(
+                np.array([0.05, -0.02, 0.12]),
+                np.array([-0.002, 0.001, 0.0005]),
+                -q_tilt,
+                np.array([-0.3, 0.2, 0.1]),
+                np.array([0.0, -0.01, 0.006]),
+            ),
+            0.5 * R_p * np.array([1.0, 2.0, 0.0]) / math.sqrt(5.0),
+            np.array([0.1, 0.0, 0.2]),
+            "Tricky: the motion-capture quaternion is stored as −q (hemisphere rule), rotated sensor frames, CSV.",
+        ),
+        Prediction(
+            "dyn-predict-clock-csv",
+            "csv",
+            "rotated",
+            LineMotion(
+                np.array([0.02, 0.035, 0.13]),
+                np.array([0.002, -0.0015, 0.001]),
+                q_tilt,
+                np.array([0.1, 0.3, -0.2]),
+                np.array([0.008, 0.0, -0.005]),
+            ),
+            0.5 * R_p * np.array([0.6, 0.8, 0.0]),
+            np.array([-0.2, 0.1, 0.05]),
+            "Tricky: streams at 250, 400 and 120 Hz starting 3.7 ms into the session clock, motion capture and "
+            "accelerometer shifted by clock-offset records, a test trial turned by 43°, a model that reads "
+            "orientation, position beyond its map, velocity and the gravity-free acceleration.",
+            models=("c",),
+            turn=((0.3, -0.4, 0.87), turn),
+            rates=(250.0, 400.0, 120.0),
+            start_s=turned_start,
+            clock_offsets={"handle_pose": 0.0213, "handle_accel": -0.0171},
+            test_listed_first=True,
+            how=(
+                f"; the streams start at t = {turned_start} s (the grid of §7.3 starts there, not at a multiple of "
+                "10 ms), handle_pose is stored 21.3 ms early and handle_accel 17.1 ms late with clock_offset records "
+                "+0.0213 s and −0.0171 s (§2.8: added to t), and at 250/400/120 Hz the 100 Hz grid falls between "
+                "samples (linear interpolation is exact on lines); the calibrated acceleration is zero (gravity, "
+                "bias and the rotated accelerometer frame removed, §6.6) and model-c maps it; the test trial "
+                "(repetition 2) is listed first in the manifest, the training trial is repetition 1 (§11.7)"
+            ),
+        ),
     ]
     out: list[Fixture] = [prediction_fixture(pr) for pr in variants]
 
@@ -1783,7 +3165,7 @@ def dynamics_fixtures() -> list[Fixture]:
         rng = np.random.default_rng(SEED + 20)
         w = manifest("conf-dyn-fit", example_rig())
         t = clock(22.0, 1000.0)
-        chirp = 2 * np.pi * (0.8 * t + 0.02 * t ** 2)
+        chirp = 2 * np.pi * (0.8 * t + 0.02 * t**2)
         dph = 2 * np.pi * (0.8 + 0.04 * t)
         amp, shift = 0.03 * np.array([1.0, 0.7, 0.5]), np.array([0.0, 1.1, 2.3])
         ph = chirp[:, None] + shift
@@ -1794,35 +3176,96 @@ def dynamics_fixtures() -> list[Fixture]:
         q = quat_from_axis_angle(np.tile(Z, (len(t), 1)), 0.3 * np.sin(2 * np.pi * 0.05 * t))
         force = -mass * acc - damping * vel + sigma * rng.standard_normal((len(t), 3))
         w.add_trial("local_dynamic-1", "local_dynamic", powered=False, repetition=1)
-        wrench, accel = rb.raw_handle(QUIET, w.manifest["rig"], t, q, t, q, rng, hand_force_w=force,
-                                      hand_torque_g_w=np.zeros_like(force), lin_acc_w=acc)
+        wrench, accel = rb.raw_handle(
+            QUIET, w.manifest["rig"], t, q, t, q, rng, hand_force_w=force, hand_torque_g_w=np.zeros_like(force), lin_acc_w=acc
+        )
         w.add_stream("local_dynamic-1", "handle_wrench", wrench, rate_hz=1000.0)
         w.add_stream("local_dynamic-1", "handle_accel", accel, rate_hz=1000.0)
         k = slice(None, None, 10)
-        w.add_stream("local_dynamic-1", "handle_pose", {"t": t[k], "px": pos[k, 0], "py": pos[k, 1], "pz": pos[k, 2], "qw": q[k, 0],
-                                                        "qx": q[k, 1], "qy": q[k, 2], "qz": q[k, 3]}, rate_hz=100.0)
+        w.add_stream(
+            "local_dynamic-1",
+            "handle_pose",
+            {
+                "t": t[k],
+                "px": pos[k, 0],
+                "py": pos[k, 1],
+                "pz": pos[k, 2],
+                "qw": q[k, 0],
+                "qx": q[k, 1],
+                "qy": q[k, 2],
+                "qz": q[k, 3],
+            },
+            rate_hz=100.0,
+        )
         w.write(path)
 
     fx = Fixture("dyn-fit-linear-law", fitdata)
-    sigma_f = sigma * math.sqrt(lowpass_noise_ratio(param("signals", "wrench_cutoff_hz"), 1000.0, param("signals", "filter_order")))
-    law = (f"force on the hand F = −{mass} a − {damping} v + white noise σ = {sigma} N per axis at 1 kHz ({sigma_f:.4f} N "
-           "after the 20 Hz zero-phase low-pass); the force amplitude is ~0.1 N. A linear law lies inside the model class, "
-           "so a converged fit leaves only the noise and the pipeline's velocity and acceleration estimates: the quality "
-           f"bound is the raw noise σ = {sigma} N (an unfitted or diverged model is ~10× above it; spec §11.4.5 judges "
-           "quality, not parameters)")
+    sigma_f = sigma * math.sqrt(
+        lowpass_noise_ratio(param("signals", "wrench_cutoff_hz"), 1000.0, param("signals", "filter_order"))
+    )
+    law = (
+        f"force on the hand F = −{mass} a − {damping} v + white noise σ = {sigma} N per axis at 1 kHz ({sigma_f:.4f} N "
+        "after the 20 Hz zero-phase low-pass); the force amplitude is ~0.1 N. A linear law lies inside the model class, "
+        "so a converged fit leaves only the noise and the pipeline's velocity and acceleration estimates: the quality "
+        f"bound is the raw noise σ = {sigma} N (an unfitted or diverged model is ~10× above it; spec §11.4.5 judges "
+        "quality, not parameters)"
+    )
     fx.cases += [
-        case("dynamics.force_rmse.fit-quality", "dynamics.force_rmse", "11.4.5", fx.name, [0.0] * 3, "N", "generated", law, "Typical: H-W fitting on data from a known model with known noise."),
-        case("dynamics.force_rmse_mean.fit-quality", "dynamics.force_rmse_mean", "11.4.5", fx.name, 0.0, "N", "generated", law, "Typical: fit quality."),
-        case("dynamics.torque_rmse.fit-quality", "dynamics.torque_rmse", "11.4.5", fx.name, [0.0, 0.0, 0.0], "N*m", "generated", "the law applies no torque about the gimbal centre and the torque channel has no noise: a fitted "
-             "model predicts (nearly) zero torque", "Edge: a silent output channel.", level="SHOULD"),
-        case("dynamics.torque_rmse_mean.fit-quality", "dynamics.torque_rmse_mean", "11.4.5", fx.name, 0.0, "N*m", "generated", "the mean of the three torque RMS errors of dynamics.torque_rmse.fit-quality: no torque about the "
-             "gimbal centre, no torque noise, so a fitted model predicts (nearly) zero torque", "Edge.", level="SHOULD"),
+        case(
+            "dynamics.force_rmse.fit-quality",
+            "dynamics.force_rmse",
+            "11.4.5",
+            fx.name,
+            [0.0] * 3,
+            "N",
+            "generated",
+            law,
+            "Typical: H-W fitting on data from a known model with known noise.",
+        ),
+        case(
+            "dynamics.force_rmse_mean.fit-quality",
+            "dynamics.force_rmse_mean",
+            "11.4.5",
+            fx.name,
+            0.0,
+            "N",
+            "generated",
+            law,
+            "Typical: fit quality.",
+        ),
+        case(
+            "dynamics.torque_rmse.fit-quality",
+            "dynamics.torque_rmse",
+            "11.4.5",
+            fx.name,
+            [0.0, 0.0, 0.0],
+            "N*m",
+            "generated",
+            "the law applies no torque about the gimbal centre and the torque channel has no noise: a fitted "
+            "model predicts (nearly) zero torque",
+            "Edge: a silent output channel.",
+            level="SHOULD",
+        ),
+        case(
+            "dynamics.torque_rmse_mean.fit-quality",
+            "dynamics.torque_rmse_mean",
+            "11.4.5",
+            fx.name,
+            0.0,
+            "N*m",
+            "generated",
+            "the mean of the three torque RMS errors of dynamics.torque_rmse.fit-quality: no torque about the "
+            "gimbal centre, no torque noise, so a fitted model predicts (nearly) zero torque",
+            "Edge.",
+            level="SHOULD",
+        ),
     ]
     out.append(fx)
     return out
 
 
 # --- validate cases from fixtures/invalid and fixtures/valid --------------------------------------------------
+
 
 def validate_cases(fixtures_root: Path) -> list[dict]:
     cases = []
@@ -1838,20 +3281,38 @@ def validate_cases(fixtures_root: Path) -> list[dict]:
             if accepted:
                 expected["valid"] = True
             section = "4" if group == "invalid" else "2"
-            cases.append({"id": f"validate.{group}.{name}", "metric": "validate", "spec_section": section,
-                          "level": "MUST" if (not accepted or group == "valid") else "SHOULD", "fixture": f"{group}/{name}",
-                          "parameters": {}, "expected": expected, "tolerance": None,
-                          "provenance": {"kind": "spec", "note": f"built by tools/haptify_tools/build_invalid_fixtures.py with "
-                                         f"one known defect; the codes are the sidecar {group}/{sidecar.name}"},
-                          "spec_versions": [SPEC_VERSION], "description": meta.get("description", name)})
+            cases.append(
+                {
+                    "id": f"validate.{group}.{name}",
+                    "metric": "validate",
+                    "spec_section": section,
+                    "level": "MUST" if (not accepted or group == "valid") else "SHOULD",
+                    "fixture": f"{group}/{name}",
+                    "parameters": {},
+                    "expected": expected,
+                    "tolerance": None,
+                    "provenance": {
+                        "kind": "spec",
+                        "note": f"built by tools/haptify_tools/build_invalid_fixtures.py with "
+                        f"one known defect; the codes are the sidecar {group}/{sidecar.name}",
+                    },
+                    "spec_versions": [SPEC_VERSION],
+                    "description": meta.get("description", name),
+                }
+            )
     return cases
 
 
 # --- building and checking ------------------------------------------------------------------------------------
 
 FAMILIES: dict[str, Callable[[], list[Fixture]]] = {
-    "workspace": workspace_fixtures, "free_space": free_space_fixtures, "vibration": vibration_fixtures,
-    "surface": surface_fixtures, "stiffness": stiffness_fixtures, "rig": rig_fixtures, "dynamics": dynamics_fixtures,
+    "workspace": workspace_fixtures,
+    "free_space": free_space_fixtures,
+    "vibration": vibration_fixtures,
+    "surface": surface_fixtures,
+    "stiffness": stiffness_fixtures,
+    "rig": rig_fixtures,
+    "dynamics": dynamics_fixtures,
     "uncertainty": uncertainty_fixtures,
 }
 FAMILY_TEXT = {
@@ -1886,9 +3347,11 @@ def case_documents(fixtures: dict[str, list[Fixture]], fixtures_root: Path) -> d
     docs = {}
     for fam, fxs in fixtures.items():
         docs[f"{fam}.json"] = {"description": FAMILY_TEXT[fam], "cases": [c for fx in fxs for c in fx.cases]}
-    docs["validate.json"] = {"description": "Validation (spec chapters 2–4): every invalid session of fixtures/invalid must be "
-                             "rejected (or warned about) with its codes; every fixture of fixtures/valid must be accepted.",
-                             "cases": validate_cases(fixtures_root)}
+    docs["validate.json"] = {
+        "description": "Validation (spec chapters 2–4): every invalid session of fixtures/invalid must be "
+        "rejected (or warned about) with its codes; every fixture of fixtures/valid must be accepted.",
+        "cases": validate_cases(fixtures_root),
+    }
     for doc in docs.values():
         doc["cases"] = [with_requirements(c) for c in doc["cases"]]
         for c in doc["cases"]:
@@ -1900,8 +3363,17 @@ def case_documents(fixtures: dict[str, list[Fixture]], fixtures_root: Path) -> d
 def write_digests(root: Path, names: list[str]) -> None:
     """``fixtures/conformance/digests.json``: the logical digest of every fixture, for the suite linter (spec §16.7)."""
     digests = {n: snapshot_digest(root / n) for n in sorted(names)}
-    (root / DIGESTS).write_text(json.dumps({"$comment": "written by haptify_tools.build_conformance_fixtures; checked by "
-                                            "haptify-conform --lint", "digests": digests}, indent=1) + "\n", encoding="utf-8")
+    (root / DIGESTS).write_text(
+        json.dumps(
+            {
+                "$comment": "written by haptify_tools.build_conformance_fixtures; checked by haptify-conform --lint",
+                "digests": digests,
+            },
+            indent=1,
+        )
+        + "\n",
+        encoding="utf-8",
+    )
 
 
 def build_fixture(fx: Fixture, target: Path) -> None:

@@ -83,8 +83,13 @@ def write_c3d(path: Path, spec: C3DSpec) -> Path:
     from ezc3d import ezc3d as E
 
     c = E.c3d()
-    n_frames = (spec.points.shape[0] if spec.points is not None else
-                spec.rotations.shape[0] if spec.rotations is not None else spec.frames)
+    n_frames = (
+        spec.points.shape[0]
+        if spec.points is not None
+        else spec.rotations.shape[0]
+        if spec.rotations is not None
+        else spec.frames
+    )
     for label in spec.labels:
         c.point(label)
     for label in spec.analog_labels:
@@ -149,8 +154,7 @@ def header_words(path: Path) -> tuple[int, ...]:
     return struct.unpack("<9H", path.read_bytes()[:18])
 
 
-def patch_header(path: Path, *, first_frame: int | None = None, last_frame: int | None = None,
-                 rate: float | None = None) -> Path:
+def patch_header(path: Path, *, first_frame: int | None = None, last_frame: int | None = None, rate: float | None = None) -> Path:
     """Rewrite header words 4–5 (first and last frame, as stored) and the header frame rate of a file
     ezc3d wrote: the disagreements other writers leave between the header and the data."""
     data = bytearray(path.read_bytes())
@@ -176,8 +180,12 @@ def rectangle_corners(centre, size_x: float, size_y: float, x_axis=(1.0, 0.0, 0.
 
 # --- force platforms carrying a known load (spec §5.6.1) -------------------------------------------
 
-PLATFORM_UNITS = {1: ["N", "N", "N", "mm", "mm", "Nmm"], 2: ["N", "N", "N", "Nmm", "Nmm", "Nmm"],
-                  3: ["N"] * 8, 4: ["N", "N", "N", "Nmm", "Nmm", "Nmm"]}
+PLATFORM_UNITS = {
+    1: ["N", "N", "N", "mm", "mm", "Nmm"],
+    2: ["N", "N", "N", "Nmm", "Nmm", "Nmm"],
+    3: ["N"] * 8,
+    4: ["N", "N", "N", "Nmm", "Nmm", "Nmm"],
+}
 
 
 def unimodular(seed: int, n: int = 6) -> np.ndarray:
@@ -189,8 +197,15 @@ def unimodular(seed: int, n: int = 6) -> np.ndarray:
     return (lower @ upper).astype(np.float64)
 
 
-def known_load_channels(kind: int, force, point, free_moment: np.ndarray, origin, cal: np.ndarray | None = None,
-                        split: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+def known_load_channels(
+    kind: int,
+    force,
+    point,
+    free_moment: np.ndarray,
+    origin,
+    cal: np.ndarray | None = None,
+    split: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
     """The channels ``(n_channels, N)`` a platform of ``kind`` records for a load, all in the platform
     frame (x, y in the top surface, z down; N, mm, N·mm): ``force (N, 3)`` acting at ``point (N, 2)``
     of the top surface (measured from its centre) with the free moment ``free_moment (N,)`` about the
@@ -230,6 +245,7 @@ def known_load_channels(kind: int, force, point, free_moment: np.ndarray, origin
 
 # --- large files (benchmarks/bench_import.py, the streamed import's tests) --------------------------
 
+
 def patch_parameter(path: Path, group: str, name: str, values) -> Path:
     """Overwrite the values of an existing parameter in place (same count, its own element type): the
     scale factors and offsets other writers set (ezc3d writes 1 and 0)."""
@@ -239,7 +255,7 @@ def patch_parameter(path: Path, group: str, name: str, values) -> Path:
     count = int(np.prod(dims)) if dims else 1
     if vals.size != count:
         raise ValueError(f"{group}:{name} holds {count} values, not {vals.size}")
-    data[offset: offset + vals.nbytes] = vals.tobytes()
+    data[offset : offset + vals.nbytes] = vals.tobytes()
     path.write_bytes(bytes(data))
     return path
 
@@ -252,7 +268,7 @@ def to_integer(src: Path, dst: Path, point_scale: float) -> Path:
     recs = parameter_records(bytes(data))
     (start,) = np.frombuffer(bytes(data), "<i2", 1, recs[("POINT", "DATA_START")][0])
     points = struct.unpack_from("<H", data, 2)[0]
-    body = np.frombuffer(bytes(data[(start - 1) * C3D_BLOCK:]), "<f4").astype(np.float64)
+    body = np.frombuffer(bytes(data[(start - 1) * C3D_BLOCK :]), "<f4").astype(np.float64)
     analog_values = struct.unpack_from("<H", data, 4)[0]
     frame = 4 * points + analog_values
     words = body[: len(body) // frame * frame].reshape(-1, frame).copy()

@@ -23,17 +23,23 @@ from typing import Any, Callable, Iterable, Iterator
 
 from haptify.errors import fail
 
-RETRIES = 3                 # re-runs of a task that raised (a dead worker's tasks are re-run by the scheduler)
-CONNECT_TIMEOUT_S = 20.0    # how long to wait for an existing scheduler
+RETRIES = 3  # re-runs of a task that raised (a dead worker's tasks are re-run by the scheduler)
+CONNECT_TIMEOUT_S = 20.0  # how long to wait for an existing scheduler
 
 
 def add_executor_options(p, *, default_workers: int = 2) -> None:
     """``--workers N`` and ``--scheduler ADDRESS`` (mutually exclusive) on the parser ``p``."""
     group = p.add_mutually_exclusive_group()
-    group.add_argument("--workers", type=int, default=default_workers, metavar="N",
-                       help=f"worker processes of a local Dask cluster (default {default_workers}; 0: in this process, serially)")
-    group.add_argument("--scheduler", metavar="ADDRESS",
-                       help="an existing Dask scheduler, e.g. tcp://host:8786 (started with `dask scheduler`)")
+    group.add_argument(
+        "--workers",
+        type=int,
+        default=default_workers,
+        metavar="N",
+        help=f"worker processes of a local Dask cluster (default {default_workers}; 0: in this process, serially)",
+    )
+    group.add_argument(
+        "--scheduler", metavar="ADDRESS", help="an existing Dask scheduler, e.g. tcp://host:8786 (started with `dask scheduler`)"
+    )
 
 
 def describe(scheduler: str | None, workers: int) -> str:
@@ -58,15 +64,28 @@ def dask_client(scheduler: str | None = None, workers: int = 2) -> Iterator[Any]
         try:
             client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
         except (OSError, TimeoutError, ValueError) as exc:
-            raise fail("E980", f"the Dask scheduler at {scheduler!r} does not answer: {exc}", expected="a running `dask scheduler`",
-                       found=scheduler) from None
+            raise fail(
+                "E980",
+                f"the Dask scheduler at {scheduler!r} does not answer: {exc}",
+                expected="a running `dask scheduler`",
+                found=scheduler,
+            ) from None
         try:
             yield client
         finally:
             client.close()
         return
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                      scheduler_port=0, silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
+    with (
+        LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            scheduler_port=0,
+            silence_logs=logging.ERROR,
+        ) as cluster,
+        Client(cluster) as client,
+    ):
         yield client
 
 

@@ -28,9 +28,12 @@ def register(sub) -> None:
     """Add ``haptify batch compute`` (spec §15.4, §17.9)."""
     p = sub.add_parser("batch", help="run a command on many sessions at once, on a Dask cluster")
     bsub = p.add_subparsers(dest="batch_command", metavar="ACTION", required=True)
-    c = bsub.add_parser("compute", help="`haptify compute` for many sessions, each into its own output folder",
-                        description="Compute every session given, one Dask task each; OUT/<session folder name>/ gets "
-                                    "results.json, or findings.json when the session is refused.")
+    c = bsub.add_parser(
+        "compute",
+        help="`haptify compute` for many sessions, each into its own output folder",
+        description="Compute every session given, one Dask task each; OUT/<session folder name>/ gets "
+        "results.json, or findings.json when the session is refused.",
+    )
     c.add_argument("sessions", nargs="+", type=Path, metavar="SESSION")
     c.add_argument("-o", "--out", type=Path, required=True, help="output folder (one sub-folder per session)")
     c.add_argument("--metrics", help="comma-separated metric ids (default: all)")
@@ -46,8 +49,12 @@ def output_folders(sessions: list[Path], out: Path) -> dict[Path, Path]:
     for session in sessions:
         name = session.resolve().name
         if name in seen:
-            raise fail("E903", f"two sessions are named {name!r}; their outputs would share OUT/{name}",
-                       expected="session folders with different names", found=[str(seen[name]), str(session)])
+            raise fail(
+                "E903",
+                f"two sessions are named {name!r}; their outputs would share OUT/{name}",
+                expected="session folders with different names",
+                found=[str(seen[name]), str(session)],
+            )
         seen[name] = session
         folders[session] = out / name
     return folders
@@ -66,21 +73,40 @@ def compute_one(session: str, folder: str, wanted: list[str] | None, parameters:
     except HaptifyError as err:
         (target / RESULTS).unlink(missing_ok=True)
         write_findings(target / FINDINGS, err.findings)
-        return {"session": session, "status": "refused", "codes": sorted({f.code for f in err.findings}),
-                "worker": worker_name(), "seconds": time.perf_counter() - t0}
+        return {
+            "session": session,
+            "status": "refused",
+            "codes": sorted({f.code for f in err.findings}),
+            "worker": worker_name(),
+            "seconds": time.perf_counter() - t0,
+        }
     (target / FINDINGS).unlink(missing_ok=True)
     atomic_write_text(target / RESULTS, results.model_dump_json(indent=2) + "\n")
-    return {"session": session, "status": "computed", "metrics": len(results.metrics),
-            "unavailable": len(results.unavailable), "worker": worker_name(), "seconds": time.perf_counter() - t0}
+    return {
+        "session": session,
+        "status": "computed",
+        "metrics": len(results.metrics),
+        "unavailable": len(results.unavailable),
+        "worker": worker_name(),
+        "seconds": time.perf_counter() - t0,
+    }
 
 
-def batch_compute(sessions: list[Path], out: Path, client=None, wanted: list[str] | None = None,
-                  parameters: dict[str, Any] | None = None, progress=None) -> list[dict]:
+def batch_compute(
+    sessions: list[Path],
+    out: Path,
+    client=None,
+    wanted: list[str] | None = None,
+    parameters: dict[str, Any] | None = None,
+    progress=None,
+) -> list[dict]:
     """:func:`compute_one` for every session on ``client``'s cluster (serially when None); one entry per
     session in the order given, a task that failed after its retries as ``status: error``."""
     folders = output_folders(sessions, out)
-    jobs = [(f"compute-{i}-{folders[s].name}", (str(s.resolve()), str(folders[s].resolve()), wanted, parameters or {}))
-            for i, s in enumerate(sessions)]
+    jobs = [
+        (f"compute-{i}-{folders[s].name}", (str(s.resolve()), str(folders[s].resolve()), wanted, parameters or {}))
+        for i, s in enumerate(sessions)
+    ]
     done: dict[str, dict] = {}
     for d in each_completed(client, compute_one, jobs):
         done[d.key] = d.value if d.error is None else {"status": "error", "error": f"{type(d.error).__name__}: {d.error}"}
@@ -95,7 +121,10 @@ def run_compute(args, ui) -> int:
 
     wanted, parameters = _wanted_metrics(args.metrics), case_parameters(args.params)
     output_folders(args.sessions, args.out)
-    with dask_client(args.scheduler, args.workers) as client, ui.progress("computing sessions", total=len(args.sessions)) as advance:
+    with (
+        dask_client(args.scheduler, args.workers) as client,
+        ui.progress("computing sessions", total=len(args.sessions)) as advance,
+    ):
         entries = batch_compute(args.sessions, args.out, client, wanted, parameters, advance)
     ui.emit_json({"executor": describe(args.scheduler, args.workers), "sessions": entries})
     for e in entries:
@@ -106,5 +135,7 @@ def run_compute(args, ui) -> int:
         else:
             ui.warn(f"{e['session']}: not computed: {e['error']}")
     counts = {k: sum(e["status"] == k for e in entries) for k in ("computed", "refused", "error")}
-    ui.say(f"{counts['computed']} computed, {counts['refused']} refused, {counts['error']} failed ({describe(args.scheduler, args.workers)})")
+    ui.say(
+        f"{counts['computed']} computed, {counts['refused']} refused, {counts['error']} failed ({describe(args.scheduler, args.workers)})"
+    )
     return 0 if counts["computed"] == len(entries) else 1

@@ -40,31 +40,55 @@ def main(argv: list[str] | None = None) -> int:
     results = []
     for preset, seed in DEVICES:
         folder = out / preset
-        step(f"simulate the {preset} dossier (device twin + virtual rig)",
-             ["simulate", "--preset", preset, "--protocol", "all", "--reps", "3", "--seed", str(seed),
-              "--compact", "-o", str(folder), "--overwrite"])
+        step(
+            f"simulate the {preset} dossier (device twin + virtual rig)",
+            [
+                "simulate",
+                "--preset",
+                preset,
+                "--protocol",
+                "all",
+                "--reps",
+                "3",
+                "--seed",
+                str(seed),
+                "--compact",
+                "-o",
+                str(folder),
+                "--overwrite",
+            ],
+        )
         step(f"validate the {preset} session", ["validate", str(folder / "session")])
         result = out / f"{preset}.results.json"
         step(f"compute every benchmark of the {preset}", ["compute", str(folder / "session"), "-o", str(result)])
-        step(f"report for the {preset}", ["report", str(folder / "session"), "--results", str(result),
-                                          "-o", str(out / f"{preset}-report"), "--overwrite"])
+        step(
+            f"report for the {preset}",
+            ["report", str(folder / "session"), "--results", str(result), "-o", str(out / f"{preset}-report"), "--overwrite"],
+        )
         results.append(str(result))
     for fmt in ("csv", "html", "md"):
         step(f"Table III as {fmt}", ["compare", *results, "--paper", "--format", fmt, "-o", str(out / f"table.{fmt}")])
     print("\n" + (out / "table.md").read_text(encoding="utf-8"))
     rrd = out / "touch-stiffness.rrd"
-    step("viewer recording of the Touch's stiffness trial", ["view", str(out / "touch" / "session"), "--trial",
-                                                            "stiffness-1", "--results", results[0], "--save", str(rrd)])
-    print("\n== the discrepancy workflow: a touch session with hidden series elasticity and Coulomb friction, "
-          "the twin started without both", flush=True)
+    step(
+        "viewer recording of the Touch's stiffness trial",
+        ["view", str(out / "touch" / "session"), "--trial", "stiffness-1", "--results", results[0], "--save", str(rrd)],
+    )
+    print(
+        "\n== the discrepancy workflow: a touch session with hidden series elasticity and Coulomb friction, "
+        "the twin started without both",
+        flush=True,
+    )
     start = time.perf_counter()
     discrepancy_demo(out / "discrepancy")
     print(f"   ({time.perf_counter() - start:.1f} s)")
-    print(f"\nDone. Everything is in {out}/:\n"
-          f"  table.md / table.csv / table.html — the benchmark table beside the paper's Table III\n"
-          f"  touch-report/index.html, touch-x-report/index.html — figures, every metric, vibration sounds\n"
-          f"  discrepancy/ — the named effects, twin.json, report.html, overlay.rrd\n"
-          f"  {rrd.name} — open with  .venv/bin/rerun {rrd}  (or: .venv/bin/haptify view {out}/touch/session --web)")
+    print(
+        f"\nDone. Everything is in {out}/:\n"
+        f"  table.md / table.csv / table.html — the benchmark table beside the paper's Table III\n"
+        f"  touch-report/index.html, touch-x-report/index.html — figures, every metric, vibration sounds\n"
+        f"  discrepancy/ — the named effects, twin.json, report.html, overlay.rrd\n"
+        f"  {rrd.name} — open with  .venv/bin/rerun {rrd}  (or: .venv/bin/haptify view {out}/touch/session --web)"
+    )
     return 0
 
 

@@ -23,7 +23,9 @@ from haptify_tools.generated_files import generator_main
 
 REPO = Path(__file__).resolve().parents[2]
 SPEC_DIR = REPO / "spec"
-BLOCK = re.compile(r"(<!-- BEGIN GENERATED: (?P<what>[a-z-]+)(?: (?P<arg>[a-z_0-9]+))? -->\n)(?P<body>.*?)(<!-- END GENERATED -->)", re.S)
+BLOCK = re.compile(
+    r"(<!-- BEGIN GENERATED: (?P<what>[a-z-]+)(?: (?P<arg>[a-z_0-9]+))? -->\n)(?P<body>.*?)(<!-- END GENERATED -->)", re.S
+)
 
 
 def _cell(value: object) -> str:
@@ -40,12 +42,15 @@ def params_table(name: str) -> str:
     fam = family(name)
     out = f"Definition file `metrics/{name}.json`, version {fam.version}.\n\n"
     if fam.parameters:
-        out += _table(["parameter", "value", "unit", "meaning"],
-                      [[f"`{k}`", f"`{p.value}`", p.unit or "—", p.description] for k, p in fam.parameters.items()])
+        out += _table(
+            ["parameter", "value", "unit", "meaning"],
+            [[f"`{k}`", f"`{p.value}`", p.unit or "—", p.description] for k, p in fam.parameters.items()],
+        )
     if fam.metrics:
-        out += "\n" + _table(["metric id", "unit", "shape", "from protocols", "aggregation", "definition"],
-                             [[f"`{m.id}`", m.unit, m.shape, ", ".join(m.protocols), m.aggregation, m.description]
-                              for m in fam.metrics])
+        out += "\n" + _table(
+            ["metric id", "unit", "shape", "from protocols", "aggregation", "definition"],
+            [[f"`{m.id}`", m.unit, m.shape, ", ".join(m.protocols), m.aggregation, m.description] for m in fam.metrics],
+        )
     return out
 
 
@@ -59,28 +64,47 @@ def stream_kinds_table() -> str:
             cols = ", ".join(f"`{c['name']}` ({c['unit']})" for c in spec["columns"])
             if spec.get("optional_columns"):
                 cols += "; optional " + ", ".join(f"`{c['name']}`" for c in spec["optional_columns"])
-        rows.append([f"`{kind}`", cols, ", ".join(f"`{f}`" for f in spec["frames"]),
-                     "yes" if spec["nan_allowed"] else "no", spec["recommended_rate_hz"], spec["description"]])
+        rows.append(
+            [
+                f"`{kind}`",
+                cols,
+                ", ".join(f"`{f}`" for f in spec["frames"]),
+                "yes" if spec["nan_allowed"] else "no",
+                spec["recommended_rate_hz"],
+                spec["description"],
+            ]
+        )
     return _table(["kind", "columns after `t` (unit)", "frame", "NaN allowed", "recommended Hz", "content"], rows)
 
 
 def protocols_table() -> str:
     data = schemas.load("protocols.json")["protocols"]
-    rows = [[f"`{name}`", {True: "no (passive)", False: "yes (active)", None: "either"}[p["passive"]],
-             ", ".join(f"`{k}`" for k in p["required"]) or "—", ", ".join(f"`{k}`" for k in p["recommended"]) or "—",
-             p["description"]] for name, p in data.items()]
+    rows = [
+        [
+            f"`{name}`",
+            {True: "no (passive)", False: "yes (active)", None: "either"}[p["passive"]],
+            ", ".join(f"`{k}`" for k in p["required"]) or "—",
+            ", ".join(f"`{k}`" for k in p["recommended"]) or "—",
+            p["description"],
+        ]
+        for name, p in data.items()
+    ]
     return _table(["protocol", "powered", "required streams", "recommended streams", "what"], rows)
 
 
 def codes_table() -> str:
-    rows = [[f"`{c['code']}`", c["name"], c["severity"], f"§{c['spec_section']}", c["title"], c["hint"]]
-            for c in schemas.load("codes.json")["codes"]]
+    rows = [
+        [f"`{c['code']}`", c["name"], c["severity"], f"§{c['spec_section']}", c["title"], c["hint"]]
+        for c in schemas.load("codes.json")["codes"]
+    ]
     return _table(["code", "name", "severity", "spec", "meaning", "hint"], rows)
 
 
 def import_units_table() -> str:
-    rows = [[u["dimension"], ", ".join(f"`{s}`" for s in u["spellings"]), u["mul"], u["div"], u.get("note", "")]
-            for u in schemas.load("import-units.json")["units"]]
+    rows = [
+        [u["dimension"], ", ".join(f"`{s}`" for s in u["spellings"]), u["mul"], u["div"], u.get("note", "")]
+        for u in schemas.load("import-units.json")["units"]
+    ]
     return _table(["dimension", "spellings", "mul", "div", "note"], rows)
 
 
@@ -89,20 +113,35 @@ def uncertainty_table() -> str:
 
     d = definitions()
     out = f"Definition file `uncertainty.json`, version {d.version}.\n\n"
-    out += _table(["parameter", "value", "unit", "meaning"],
-                  [[f"`{k}`", f"`{p.value}`", p.unit or "—", p.description] for k, p in d.parameters.items()])
-    out += "\n" + _table(["source", "type", "distribution", "figure (component)", "perturbs", "meaning"],
-                         [[f"`{k}`", s.type, s.distribution, "—" if s.figure is None else f"`{s.figure}`" + ("" if s.component is None else f" ({s.component})"),
-                           f"`{s.perturbs}`" if s.perturbs else "—", s.description] for k, s in d.sources.items()])
-    out += "\n" + _table(["metric id", "method", "Type B sources", "why not (more)"],
-                         [[f"`{k}`", m.method, ", ".join(f"`{s}`" for s in m.sources) or "—", m.reason or "—"]
-                          for k, m in d.metrics.items()])
+    out += _table(
+        ["parameter", "value", "unit", "meaning"],
+        [[f"`{k}`", f"`{p.value}`", p.unit or "—", p.description] for k, p in d.parameters.items()],
+    )
+    out += "\n" + _table(
+        ["source", "type", "distribution", "figure (component)", "perturbs", "meaning"],
+        [
+            [
+                f"`{k}`",
+                s.type,
+                s.distribution,
+                "—" if s.figure is None else f"`{s.figure}`" + ("" if s.component is None else f" ({s.component})"),
+                f"`{s.perturbs}`" if s.perturbs else "—",
+                s.description,
+            ]
+            for k, s in d.sources.items()
+        ],
+    )
+    out += "\n" + _table(
+        ["metric id", "method", "Type B sources", "why not (more)"],
+        [[f"`{k}`", m.method, ", ".join(f"`{s}`" for s in m.sources) or "—", m.reason or "—"] for k, m in d.metrics.items()],
+    )
     return out
 
 
 def requirements_table(chapter: str) -> str:
-    rows = [[f"`{r.id}`", r.level, f"§{r.section}", r.statement] for r in all_requirements()
-            if r.section.split(".")[0] == chapter]
+    rows = [
+        [f"`{r.id}`", r.level, f"§{r.section}", r.statement] for r in all_requirements() if r.section.split(".")[0] == chapter
+    ]
     return _table(["id", "level", "spec", "requirement"], rows)
 
 
@@ -115,8 +154,14 @@ def render_block(what: str, arg: str | None) -> str:
         return params_table(arg)
     if what == "requirements" and arg:
         return requirements_table(arg)
-    return {"stream-kinds": stream_kinds_table, "protocols": protocols_table, "codes": codes_table,
-            "import-units": import_units_table, "coverage": coverage_appendix, "uncertainty": uncertainty_table}[what]()
+    return {
+        "stream-kinds": stream_kinds_table,
+        "protocols": protocols_table,
+        "codes": codes_table,
+        "import-units": import_units_table,
+        "coverage": coverage_appendix,
+        "uncertainty": uncertainty_table,
+    }[what]()
 
 
 def regenerate(text: str) -> str:

@@ -37,8 +37,10 @@ MODELS: dict[str, str] = {
 REPO = Path(__file__).resolve().parents[2]
 SCHEMA_DIR = REPO / "schemas" / SPEC_VERSION
 # Files of the tools are not part of the standard: their schemas live beside the tool.
-OUTSIDE_THE_STANDARD = {"twin": REPO / "tools" / "haptify_tools" / "twin" / "twin.schema.json",
-                        "discrepancy": REPO / "tools" / "haptify_tools" / "discrepancy" / "discrepancy.schema.json"}
+OUTSIDE_THE_STANDARD = {
+    "twin": REPO / "tools" / "haptify_tools" / "twin" / "twin.schema.json",
+    "discrepancy": REPO / "tools" / "haptify_tools" / "discrepancy" / "discrepancy.schema.json",
+}
 
 
 def render(name: str, target: str) -> str:
@@ -46,15 +48,20 @@ def render(name: str, target: str) -> str:
     module_name, cls_name = target.split(":")
     model = getattr(importlib.import_module(module_name), cls_name)
     body = model.model_json_schema(mode="validation")
-    doc = {"$schema": "https://json-schema.org/draft/2020-12/schema", "$id": schema_id(name),
-           "x-haptify-schema-version": SCHEMA_VERSION}
+    doc = {
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "$id": schema_id(name),
+        "x-haptify-schema-version": SCHEMA_VERSION,
+    }
     doc.update(body)
     return json.dumps(doc, indent=2, ensure_ascii=False, sort_keys=False) + "\n"
 
 
 def targets() -> dict[Path, str]:
-    return {OUTSIDE_THE_STANDARD.get(name, SCHEMA_DIR / f"{name}.schema.json"): render(name, target)
-            for name, target in MODELS.items()}
+    return {
+        OUTSIDE_THE_STANDARD.get(name, SCHEMA_DIR / f"{name}.schema.json"): render(name, target)
+        for name, target in MODELS.items()
+    }
 
 
 def main(argv: list[str] | None = None) -> int:

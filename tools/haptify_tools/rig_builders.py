@@ -31,9 +31,16 @@ class HandleTruth:
     accel_noise: float = 0.05
 
     def record(self, rid: str = "hg-1") -> dict:
-        return {"kind": "handle_gravity", "id": rid, "force_bias_N": self.force_bias.tolist(), "connector_mass_kg": self.mass,
-                "connector_com_m": self.com.tolist(), "torque_bias_Nm": self.torque_bias.tolist(),
-                "accel_bias_m_per_s2": self.accel_bias.tolist(), "gravity_m_per_s2": self.gravity}
+        return {
+            "kind": "handle_gravity",
+            "id": rid,
+            "force_bias_N": self.force_bias.tolist(),
+            "connector_mass_kg": self.mass,
+            "connector_com_m": self.com.tolist(),
+            "torque_bias_Nm": self.torque_bias.tolist(),
+            "accel_bias_m_per_s2": self.accel_bias.tolist(),
+            "gravity_m_per_s2": self.gravity,
+        }
 
 
 def tumbling_orientation(t: np.ndarray) -> np.ndarray:
@@ -41,9 +48,12 @@ def tumbling_orientation(t: np.ndarray) -> np.ndarray:
     z = np.array([0.0, 0.0, 1.0])
     x = np.array([1.0, 0.0, 0.0])
     n = len(t)
-    q = quat_multiply(quat_from_axis_angle(np.broadcast_to(z, (n, 3)), 0.7 * t),
-                      quat_multiply(quat_from_axis_angle(np.broadcast_to(x, (n, 3)), 0.43 * t),
-                                    quat_from_axis_angle(np.broadcast_to(z, (n, 3)), 0.29 * t)))
+    q = quat_multiply(
+        quat_from_axis_angle(np.broadcast_to(z, (n, 3)), 0.7 * t),
+        quat_multiply(
+            quat_from_axis_angle(np.broadcast_to(x, (n, 3)), 0.43 * t), quat_from_axis_angle(np.broadcast_to(z, (n, 3)), 0.29 * t)
+        ),
+    )
     return q * np.where(q[:, :1] < 0, -1.0, 1.0)
 
 
@@ -51,9 +61,18 @@ def _pose_quat(pose: dict) -> np.ndarray:
     return np.asarray(pose["quaternion"], float)
 
 
-def raw_handle(truth: HandleTruth, rig: dict, t_ft: np.ndarray, q_ft: np.ndarray, t_acc: np.ndarray, q_acc: np.ndarray,
-               rng: np.random.Generator, hand_force_w: np.ndarray | None = None, hand_torque_g_w: np.ndarray | None = None,
-               lin_acc_w: np.ndarray | None = None) -> tuple[dict, dict]:
+def raw_handle(
+    truth: HandleTruth,
+    rig: dict,
+    t_ft: np.ndarray,
+    q_ft: np.ndarray,
+    t_acc: np.ndarray,
+    q_acc: np.ndarray,
+    rng: np.random.Generator,
+    hand_force_w: np.ndarray | None = None,
+    hand_torque_g_w: np.ndarray | None = None,
+    lin_acc_w: np.ndarray | None = None,
+) -> tuple[dict, dict]:
     """Raw handle_wrench and handle_accel columns (spec §6.1 sign convention).
 
     ``hand_force_w``/``hand_torque_g_w``: the wrench the device applies to the hand (world, torque about
@@ -94,16 +113,31 @@ def rotated_rig() -> dict:
 
 
 def writer(rig: dict | None = None, calibration: list | None = None, sid: str = "rigtest") -> SessionWriter:
-    manifest = {"session_id": sid, "date": "2026-11-22", "lab": {"id": "lab-test"}, "examiner": {"id": "ex-01"},
-                "device": TOUCH_DEVICE, "device_placement": IDENTITY, "rig": rig or rotated_rig()}
+    manifest = {
+        "session_id": sid,
+        "date": "2026-11-22",
+        "lab": {"id": "lab-test"},
+        "examiner": {"id": "ex-01"},
+        "device": TOUCH_DEVICE,
+        "device_placement": IDENTITY,
+        "rig": rig or rotated_rig(),
+    }
     if calibration:
         manifest["calibration"] = calibration
     return SessionWriter(manifest=manifest)
 
 
-def add_calibration_trial(w: SessionWriter, truth: HandleTruth, rng: np.random.Generator, *, trial_id: str = "cal-1",
-                          duration_s: float = 24.0, accel_delay_s: float = 0.0, mocap_delay_s: float = 0.0,
-                          repetition: int = 1) -> None:
+def add_calibration_trial(
+    w: SessionWriter,
+    truth: HandleTruth,
+    rng: np.random.Generator,
+    *,
+    trial_id: str = "cal-1",
+    duration_s: float = 24.0,
+    accel_delay_s: float = 0.0,
+    mocap_delay_s: float = 0.0,
+    repetition: int = 1,
+) -> None:
     """A rig.handle_calibration trial: the tumble above, F/T 1 kHz, accelerometer 2 kHz, mocap 100 Hz.
 
     ``*_delay_s``: that recorder's time stamps are late by this much (its clock runs behind).
@@ -119,11 +153,25 @@ def add_calibration_trial(w: SessionWriter, truth: HandleTruth, rng: np.random.G
     w.add_trial(trial_id, "rig.handle_calibration", powered=False, repetition=repetition)
     w.add_stream(trial_id, "handle_wrench", wrench, rate_hz=1000)
     w.add_stream(trial_id, "handle_accel", accel, rate_hz=2000)
-    w.add_stream(trial_id, "handle_pose", {"t": t_m + mocap_delay_s, "px": pos[:, 0], "py": pos[:, 1], "pz": pos[:, 2],
-                                           "qw": q[:, 0], "qx": q[:, 1], "qy": q[:, 2], "qz": q[:, 3]}, rate_hz=100)
+    w.add_stream(
+        trial_id,
+        "handle_pose",
+        {
+            "t": t_m + mocap_delay_s,
+            "px": pos[:, 0],
+            "py": pos[:, 1],
+            "pz": pos[:, 2],
+            "qw": q[:, 0],
+            "qx": q[:, 1],
+            "qy": q[:, 2],
+            "qz": q[:, 3],
+        },
+        rate_hz=100,
+    )
 
 
 # --- force plate ---------------------------------------------------------------------------------
+
 
 def corner_readings(rig: dict, force_w: np.ndarray, point_w: np.ndarray, bias: np.ndarray | None = None) -> np.ndarray:
     """Corner readings ``(N, 24)`` for a load ``force_w (N, 3)`` acting at ``point_w (N, 3)`` (spec §14.1).
@@ -188,24 +236,40 @@ def damped(t: np.ndarray, f_hz: float, zeta: float, t0: float, amp: float) -> np
     """``amp · e^{−ζω(t−t0)} sin(ω_d (t − t0))`` after ``t0``, zero before (ω = 2π f, ω_d = ω√(1−ζ²))."""
     w = 2 * np.pi * f_hz
     tau = t - t0
-    return np.where(tau >= 0, amp * np.exp(-zeta * w * np.maximum(tau, 0)) * np.sin(w * np.sqrt(1 - zeta ** 2) * np.maximum(tau, 0)), 0.0)
+    return np.where(
+        tau >= 0, amp * np.exp(-zeta * w * np.maximum(tau, 0)) * np.sin(w * np.sqrt(1 - zeta**2) * np.maximum(tau, 0)), 0.0
+    )
 
 
-def add_impact_trial(w: SessionWriter, rng: np.random.Generator, modes=(205.0, 206.0, 182.0), zeta: float = 0.03,
-                     trial_id: str = "impact-1", repetition: int = 1, noise: float = 0.01) -> None:
+def add_impact_trial(
+    w: SessionWriter,
+    rng: np.random.Generator,
+    modes=(205.0, 206.0, 182.0),
+    zeta: float = 0.03,
+    trial_id: str = "impact-1",
+    repetition: int = 1,
+    noise: float = 0.01,
+) -> None:
     """A ball dropped at the plate centre: each axis rings at its mode frequency (plus the plate bias and white noise
     of ``noise`` N per channel)."""
     rig = w.manifest["rig"]
     t = np.arange(3000) / 1000.0
-    force = np.column_stack([damped(t, modes[0], zeta, 1.0, 4.0), damped(t, modes[1], zeta, 1.0, 3.0),
-                             damped(t, modes[2], zeta, 1.0, 20.0)])
+    force = np.column_stack(
+        [damped(t, modes[0], zeta, 1.0, 4.0), damped(t, modes[1], zeta, 1.0, 3.0), damped(t, modes[2], zeta, 1.0, 20.0)]
+    )
     raw = corner_readings(rig, force, np.zeros_like(force), plate_bias_vector(rig)) + rng.normal(0, noise, (len(t), 24))
     w.add_trial(trial_id, "rig.plate_impact", powered=False, repetition=repetition)
     w.add_stream(trial_id, "plate_wrench", plate_stream(t, raw), rate_hz=1000)
 
 
-def add_cop_trial(w: SessionWriter, rng: np.random.Generator, positions: np.ndarray, offsets: np.ndarray,
-                  weight_N: float = 9.81, trial_id: str = "cop-1") -> None:
+def add_cop_trial(
+    w: SessionWriter,
+    rng: np.random.Generator,
+    positions: np.ndarray,
+    offsets: np.ndarray,
+    weight_N: float = 9.81,
+    trial_id: str = "cop-1",
+) -> None:
     """A weight put down at each of ``positions`` (m, plate plane) for 1 s, with 0.3 s unloaded between.
 
     Motion capture sees the weight's marker at position + ``offsets`` (the COP error by construction);
@@ -227,12 +291,24 @@ def add_cop_trial(w: SessionWriter, rng: np.random.Generator, positions: np.ndar
     raw = corner_readings(rig, force, point, plate_bias_vector(rig)) + rng.normal(0, 0.005, (len(t), 24))
     w.add_trial(trial_id, "rig.plate_cop", powered=False)
     w.add_stream(trial_id, "plate_wrench", plate_stream(t, raw), rate_hz=1000)
-    w.add_stream(trial_id, "markers", {"t": tm, "w1_x": marker[:, 0], "w1_y": marker[:, 1], "w1_z": marker[:, 2]},
-                 rate_hz=100, entities=["w1"])
+    w.add_stream(
+        trial_id,
+        "markers",
+        {"t": tm, "w1_x": marker[:, 0], "w1_y": marker[:, 1], "w1_z": marker[:, 2]},
+        rate_hz=100,
+        entities=["w1"],
+    )
 
 
-def full_rig_session(tmp: Path, rng: np.random.Generator, *, accel_delay_s: float = 0.0, mocap_delay_s: float = 0.0,
-                     cop_offset_m: float = 0.005, rig: dict | None = None) -> Path:
+def full_rig_session(
+    tmp: Path,
+    rng: np.random.Generator,
+    *,
+    accel_delay_s: float = 0.0,
+    mocap_delay_s: float = 0.0,
+    cop_offset_m: float = 0.005,
+    rig: dict | None = None,
+) -> Path:
     """Every rig trial: handle calibration, plate bias, impact, COP (5 placements, each off by cop_offset_m)."""
     rig = rig or rotated_rig()
     rig["motion_capture"]["markers"] = sorted(set(rig["motion_capture"]["markers"]) | {"w1"})

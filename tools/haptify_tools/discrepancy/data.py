@@ -30,11 +30,11 @@ from haptify_tools.discrepancy.hand_path import FROM_MOCAP, fill_gaps, hand_path
 from haptify_tools.twin.model import TwinFile
 from haptify_tools.twin.physics import simulate_active, simulate_passive
 
-RESIDUAL_CUTOFF_HZ = 5.0      # both forces are compared below this frequency
-EDGE_S = 0.5                  # the first and last half second of a trial are not compared: there the path's
-                              # velocity rests on one side's data only (a hand at rest started 4 mm/s fast, its
-                              # friction 0.9 N off) and the low-passes are held at the ends
-SIM_RATE_HZ = 1000.0          # the rendering loop's rate (paper §V-D), active and passive trials alike
+RESIDUAL_CUTOFF_HZ = 5.0  # both forces are compared below this frequency
+EDGE_S = 0.5  # the first and last half second of a trial are not compared: there the path's
+# velocity rests on one side's data only (a hand at rest started 4 mm/s fast, its
+# friction 0.9 N off) and the low-passes are held at the ends
+SIM_RATE_HZ = 1000.0  # the rendering loop's rate (paper §V-D), active and passive trials alike
 FORCE_PROTOCOLS = ("free_space", "local_dynamic", "other", "frictionless_surface", "stiffness")
 
 
@@ -101,12 +101,31 @@ def load_measured(session: SessionFolder, ctx: ComputeContext | None = None, req
             cmd_n = cmd[["fx", "fy", "fz"]].to_numpy() @ n
             contact = contact_of(np.interp(hs.t, cmd["t"].to_numpy(), cmd_n))
             cmd_max = float(np.max(np.linalg.norm(cmd[["fx", "fy", "fz"]].to_numpy(), axis=1)))
-        out.append(MeasuredTrial(trial.id, trial.protocol, rendering, hs.t, rate, path.position, path.quaternion, force, usable,
-                                 contact, speed, cmd_max, path.source))
+        out.append(
+            MeasuredTrial(
+                trial.id,
+                trial.protocol,
+                rendering,
+                hs.t,
+                rate,
+                path.position,
+                path.quaternion,
+                force,
+                usable,
+                contact,
+                speed,
+                cmd_max,
+                path.source,
+            )
+        )
     if not out and required:
-        raise fail("E302", "the measured session has no trial with a handle_wrench stream to compare with the twin",
-                   file="session.json", expected="a free-space, local-dynamic, figure-eight, surface or stiffness trial",
-                   found=[t.id for t in session.trials])
+        raise fail(
+            "E302",
+            "the measured session has no trial with a handle_wrench stream to compare with the twin",
+            file="session.json",
+            expected="a free-space, local-dynamic, figure-eight, surface or stiffness trial",
+            found=[t.id for t in session.trials],
+        )
     return out
 
 
@@ -144,8 +163,9 @@ def connector_force(twin: TwinFile, t: np.ndarray, position: np.ndarray) -> np.n
     return c.mass_kg * second_derivative(position, t)
 
 
-def simulate_all(twin: TwinFile, trials: list[MeasuredTrial], only_active: bool = False,
-                 base: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
+def simulate_all(
+    twin: TwinFile, trials: list[MeasuredTrial], only_active: bool = False, base: dict[str, np.ndarray] | None = None
+) -> dict[str, np.ndarray]:
     """:func:`simulate_trial` for every trial (trial id → force, N); with ``only_active`` the passive trials
     are copied from ``base`` (effects that act only while the motors render) (discrepancy README §1, §2).
     """
@@ -166,8 +186,13 @@ def _simulate_shared(twin: TwinFile, trial_id: str) -> np.ndarray:
     return simulate_trial(twin, _WORKER_TRIALS[trial_id])
 
 
-def simulate_many(twins: list[TwinFile], trials: list[MeasuredTrial], only_active: bool = False,
-                  base: dict[str, np.ndarray] | None = None, pool=None) -> list[dict[str, np.ndarray]]:
+def simulate_many(
+    twins: list[TwinFile],
+    trials: list[MeasuredTrial],
+    only_active: bool = False,
+    base: dict[str, np.ndarray] | None = None,
+    pool=None,
+) -> list[dict[str, np.ndarray]]:
     """:func:`simulate_all` for several twins; with ``pool`` (workers initialised by :func:`share_trials` with
     these trials) every (twin, trial) pair is one job, the longest trials first (discrepancy README §1, §2)."""
     out: list[dict[str, np.ndarray]] = [{} for _ in twins]
@@ -182,8 +207,10 @@ def simulate_many(twins: list[TwinFile], trials: list[MeasuredTrial], only_activ
         for i, tr in jobs:
             out[i][tr.trial_id] = simulate_trial(twins[i], tr)
     else:
-        futures = {(i, tr.trial_id): pool.submit(_simulate_shared, twins[i], tr.trial_id)
-                   for i, tr in sorted(jobs, key=lambda job: -len(job[1].t))}
+        futures = {
+            (i, tr.trial_id): pool.submit(_simulate_shared, twins[i], tr.trial_id)
+            for i, tr in sorted(jobs, key=lambda job: -len(job[1].t))
+        }
         for (i, trial_id), future in futures.items():
             out[i][trial_id] = future.result()
     return [{tr.trial_id: o[tr.trial_id] for tr in trials} for o in out]

@@ -19,8 +19,14 @@ def demo_session(folder: Path, seed: int = 0) -> Path:
     truth = preset("touch")
     for key, value in DEMO_TRUTH.items():
         truth = set_param(truth, key, value)
-    opts = SimulationOptions(protocols=("free_space", "stiffness", "rig.handle_calibration"), reps=1, seed=seed,
-                             durations=DEMO_DURATIONS, rig_trials=False, workers=1)
+    opts = SimulationOptions(
+        protocols=("free_space", "stiffness", "rig.handle_calibration"),
+        reps=1,
+        seed=seed,
+        durations=DEMO_DURATIONS,
+        rig_trials=False,
+        workers=1,
+    )
     return simulate_dossier(truth, folder / "measured", opts).session
 
 
@@ -32,16 +38,21 @@ def demo(out: str | Path | None = None, print_fn=print) -> dict:
         session = demo_session(Path(tmp))
         start = disable(disable(preset("touch"), "drive.series_elasticity"), "friction.coulomb")
         print_fn("hidden: " + ", ".join(f"{k} = {v}" for k, v in DEMO_TRUTH.items()) + "; the twin starts without both")
-        result, _ = run_discrepancy(session, start, out, overwrite=True, log=lambda m: print_fn("  " + m),
-                                    report=out is not None, workers=0)
+        result, _ = run_discrepancy(
+            session, start, out, overwrite=True, log=lambda m: print_fn("  " + m), report=out is not None, workers=0
+        )
     for a in result.accepted:
         se = f" ± {a.stderr:.2g}" if a.stderr is not None else ""
-        print_fn(f"named #{a.order}: {a.effect_id} {a.parameter} = {a.value:.4g}{se} {a.unit} "
-                 f"(ΔBIC {a.delta_bic:.0f}, explains {100 * a.share_explained:.0f} % of the held-out residual)")
+        print_fn(
+            f"named #{a.order}: {a.effect_id} {a.parameter} = {a.value:.4g}{se} {a.unit} "
+            f"(ΔBIC {a.delta_bic:.0f}, explains {100 * a.share_explained:.0f} % of the held-out residual)"
+        )
     print_fn(f"verdict: {result.verdict}; {result.gap_summary()}")
     for b in result.benchmark_gaps:
-        print_fn(f"  {b.metric} ({b.trial_id}): measured {b.measured:.4g} {b.unit}, twin before {b.twin_before:.4g}, "
-                 f"after {b.twin_after:.4g}")
+        print_fn(
+            f"  {b.metric} ({b.trial_id}): measured {b.measured:.4g} {b.unit}, twin before {b.twin_before:.4g}, "
+            f"after {b.twin_after:.4g}"
+        )
     return result.model_dump(mode="json")
 
 

@@ -24,10 +24,10 @@ from scipy.ndimage import binary_dilation, maximum_filter1d, minimum_filter1d
 from haptify_tools.twin.kinematics import device_to_world, hand_to_joints, link_transforms, rows_times, true_kinematics
 from haptify_tools.twin.model import TwinFile
 
-REST_WINDOW_S = 1.0      # shortest rest: long against a drive's speed reversal (tens of ms), short against a hold
-REST_RANGE_RAD = 0.002   # a drive turning less than this in REST_WINDOW_S moves under 2 mrad/s — below what the path
-                         # resolves (0.4 mm at the Touch's 0.2 m reach; the path's angle noise spans ≈ 0.5 mrad a second)
-REST_EASE_S = 0.2        # the hold is eased in and out over this time at each end of a run
+REST_WINDOW_S = 1.0  # shortest rest: long against a drive's speed reversal (tens of ms), short against a hold
+REST_RANGE_RAD = 0.002  # a drive turning less than this in REST_WINDOW_S moves under 2 mrad/s — below what the path
+# resolves (0.4 mm at the Touch's 0.2 m reach; the path's angle noise spans ≈ 0.5 mrad a second)
+REST_EASE_S = 0.2  # the hold is eased in and out over this time at each end of a run
 
 
 def resting_runs(angle: np.ndarray, rate_hz: float) -> list[tuple[int, int]]:
@@ -35,9 +35,9 @@ def resting_runs(angle: np.ndarray, rate_hz: float) -> list[tuple[int, int]]:
     n = max(int(round(REST_WINDOW_S * rate_hz)) | 1, 3)
     if len(angle) < n:
         return []
-    span = maximum_filter1d(angle, n) - minimum_filter1d(angle, n)      # over the window centred on each row
-    span[: n // 2] = span[len(angle) - n // 2:] = np.inf                  # only whole windows count
-    rest = binary_dilation(span < REST_RANGE_RAD, np.ones(n, bool))      # every row of every such window
+    span = maximum_filter1d(angle, n) - minimum_filter1d(angle, n)  # over the window centred on each row
+    span[: n // 2] = span[len(angle) - n // 2 :] = np.inf  # only whole windows count
+    rest = binary_dilation(span < REST_RANGE_RAD, np.ones(n, bool))  # every row of every such window
     edges = np.diff(np.r_[0, rest.astype(np.int8), 0])
     return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist()))
 

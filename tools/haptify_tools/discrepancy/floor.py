@@ -35,9 +35,9 @@ from haptify_tools.discrepancy.library import Candidate
 from haptify_tools.twin.model import TwinFile, set_param
 from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
 
-REPLAY_SEED = 0          # the replays are deterministic (seeds 0, 1, …), like the rest of the workflow
-FLOOR_REPLAYS = 6        # replays whose spread makes the floor's prediction bound
-GAP_ALPHA = 0.05         # a held-out gap above the floor's one-sided 95 % prediction bound is significant
+REPLAY_SEED = 0  # the replays are deterministic (seeds 0, 1, …), like the rest of the workflow
+FLOOR_REPLAYS = 6  # replays whose spread makes the floor's prediction bound
+GAP_ALPHA = 0.05  # a held-out gap above the floor's one-sided 95 % prediction bound is significant
 #: the log scale is never taken below 0.4, the spread of the true twin's log gap between paths: six replays cannot see a
 #: heavy tail — a gap is mostly a few slow reversals, where the path's velocity error flips the friction, and one
 #: session in five to ten has one or two and a gap 2–2.5× the median (the true Touch X twin over 24 sessions of 16 s
@@ -54,7 +54,7 @@ def heldout_gap(trials: list[dt.MeasuredTrial], sim: dict) -> float:
     """RMS force residual (N, three axes pooled) over the validation and test blocks of every trial (discrepancy README §3, §4)."""
     parts = [(tr.force - sim[tr.trial_id])[st.heldout_rows(tr)] for tr in trials]
     r = np.concatenate(parts) if parts else np.zeros((0, 3))
-    return float(np.sqrt(np.mean(r ** 2))) if len(r) else 0.0
+    return float(np.sqrt(np.mean(r**2))) if len(r) else 0.0
 
 
 def gap_above_floor(gap: float, floor: float) -> float:
@@ -99,8 +99,9 @@ class Parameter:
         return set_param(twin, f"{self.candidate.effect_id}.{self.candidate.parameter}[{self.drive}]", value)
 
 
-def gauss_newton_step(twin: TwinFile, params: tuple[Parameter, ...], trials: list[dt.MeasuredTrial], residual: dict,
-                      simulate=None) -> list[float]:
+def gauss_newton_step(
+    twin: TwinFile, params: tuple[Parameter, ...], trials: list[dt.MeasuredTrial], residual: dict, simulate=None
+) -> list[float]:
     """One Gauss–Newton step for ``params`` from the values ``twin`` holds, fitted to ``residual`` (N, measured − the
     twin's prediction): the residual's slope in each parameter by central differences at ±2 % (two simulations a
     parameter; ``simulate(twins)`` → their predictions, default :func:`.data.simulate_many` on ``trials``), all
@@ -126,15 +127,17 @@ def reestimate(twin: TwinFile, params: tuple[Parameter, ...], trials: list[dt.Me
     return gauss_newton_step(twin, params, trials, {tr.trial_id: tr.force - sim[tr.trial_id] for tr in trials})
 
 
-def replay_floor(twin: TwinFile, durations: dict[str, float], seed: int = REPLAY_SEED,
-                 params: tuple[Parameter, ...] = ()) -> tuple[float, list[float]] | None:
+def replay_floor(
+    twin: TwinFile, durations: dict[str, float], seed: int = REPLAY_SEED, params: tuple[Parameter, ...] = ()
+) -> tuple[float, list[float]] | None:
     """One replay (``seed``) of the protocols in ``durations`` (simulator protocol → s) that ``twin`` itself generated:
     the held-out gap (N) ``twin`` leaves on it (module docstring; discrepancy README §4, the floor) and the values of
     ``params`` identified again on it (:func:`reestimate`); None when there is nothing to replay."""
     if not durations:
         return None
-    options = SimulationOptions(protocols=(*durations, "rig.handle_calibration"), reps=1, seed=seed,
-                                durations=durations, rig_trials=False, workers=1)
+    options = SimulationOptions(
+        protocols=(*durations, "rig.handle_calibration"), reps=1, seed=seed, durations=durations, rig_trials=False, workers=1
+    )
     with tempfile.TemporaryDirectory(prefix="haptify-floor-") as tmp:
         replay = dt.load_measured(open_session(simulate_dossier(twin, Path(tmp) / "replay", options).session))
         sim = dt.simulate_all(twin, replay)
@@ -183,7 +186,6 @@ class Floor:
             return 1.0
         return float(sps.t.sf((np.log(gap) - m) / (s * np.sqrt(1 + 1 / k)), k - 1))
 
-
     def uncertainty(self, j: int) -> tuple[float, tuple[float, float]]:
         """The ``j``-th parameter's standard error and 95 % interval from the replays (a parametric bootstrap: the replays
         are sessions of the updated twin, so each re-estimate's error is one draw of the identification's error, path
@@ -191,15 +193,16 @@ class Floor:
         ``p̂ ± t₀.₉₇₅,K · s`` (discrepancy README §3, uncertainty)."""
         v = self.params[j].value
         err = np.array([e[j] for e in self.estimates]) - v
-        if not np.all(np.isfinite(err)):        # a replay that cannot determine the value: no honest interval
+        if not np.all(np.isfinite(err)):  # a replay that cannot determine the value: no honest interval
             return float("inf"), (-float("inf"), float("inf"))
-        s = float(np.sqrt(np.mean(err ** 2)))
+        s = float(np.sqrt(np.mean(err**2)))
         half = float(sps.t.ppf(0.975, len(err))) * s
         return s, (v - half, v + half)
 
 
-def replay_floors(twin: TwinFile, durations: dict[str, float], replays: int = FLOOR_REPLAYS,
-                  params: tuple[Parameter, ...] = ()) -> Floor | None:
+def replay_floors(
+    twin: TwinFile, durations: dict[str, float], replays: int = FLOOR_REPLAYS, params: tuple[Parameter, ...] = ()
+) -> Floor | None:
     """:func:`replay_floor` for seeds ``0 … replays − 1`` (discrepancy README §4, the floor); None when nothing can be replayed."""
     if not durations:
         return None

@@ -49,19 +49,19 @@ from haptify.conventions import quat_normalize, quat_rotate
 from haptify.signals import ACCEL_COLUMNS, HandleSignals, effective_cutoff, interp_columns, lowpass, nominal_rate, sp
 from haptify.storage import SessionFolder
 
-PATH_CROSSOVER_HZ = 1.5       # motion capture below, the accelerometer above (the true twin's floor is lowest
-                              # for 1–1.5 Hz on figure-eight, free-space, stiffness and local-dynamic trials)
-ORIENTATION_CUTOFF_HZ = 1.0   # the hand's orientation wanders slowly (under 16°/s in free space, paper §V-B);
-                              # its noise becomes gimbal-friction noise and, through gravity, acceleration noise
-SLOW_KNOT_S = 1.0             # knot spacing of the splines that carry slow motion past the low-passes' edges
-RANGE_FRACTION = 0.999        # a reading at 99.9 % of the declared range is at the range (quantised clipping)
-CLIP_MARGIN_S = 0.5           # rows this close to a clipped reading are not compared (the clip's missing
-                              # acceleration stays in the integrated velocity until the blend's low-pass catches up)
-GAP_MARGIN_S = 0.5            # rows this close to a capture gap are not compared (the orientation bridged across
-                              # the gap turns gravity into the accelerometer's path; the blend spreads it ±0.5 s)
-GAP_WEIGHT = 1e-6             # weight of a bridged row in the slow spline (it keeps the fit defined over long gaps)
-MAX_CLIPPED_SHARE = 0.5       # a trial with more rows near clipped readings falls back to motion capture
-POSE_CUTOFF_HZ = 8.0          # without an accelerometer: above the local-dynamic 4 Hz oscillations (paper §V-C)
+PATH_CROSSOVER_HZ = 1.5  # motion capture below, the accelerometer above (the true twin's floor is lowest
+# for 1–1.5 Hz on figure-eight, free-space, stiffness and local-dynamic trials)
+ORIENTATION_CUTOFF_HZ = 1.0  # the hand's orientation wanders slowly (under 16°/s in free space, paper §V-B);
+# its noise becomes gimbal-friction noise and, through gravity, acceleration noise
+SLOW_KNOT_S = 1.0  # knot spacing of the splines that carry slow motion past the low-passes' edges
+RANGE_FRACTION = 0.999  # a reading at 99.9 % of the declared range is at the range (quantised clipping)
+CLIP_MARGIN_S = 0.5  # rows this close to a clipped reading are not compared (the clip's missing
+# acceleration stays in the integrated velocity until the blend's low-pass catches up)
+GAP_MARGIN_S = 0.5  # rows this close to a capture gap are not compared (the orientation bridged across
+# the gap turns gravity into the accelerometer's path; the blend spreads it ±0.5 s)
+GAP_WEIGHT = 1e-6  # weight of a bridged row in the slow spline (it keeps the fit defined over long gaps)
+MAX_CLIPPED_SHARE = 0.5  # a trial with more rows near clipped readings falls back to motion capture
+POSE_CUTOFF_HZ = 8.0  # without an accelerometer: above the local-dynamic 4 Hz oscillations (paper §V-C)
 #: slower protocols get a lower cut-off: free-space wandering stays under 0.16 m/s (paper §V-B)
 POSE_CUTOFF_BY_PROTOCOL_HZ = {"free_space": 4.0}
 FROM_BOTH = "motion capture + accelerometer"
@@ -112,8 +112,9 @@ def near(t: np.ndarray, events: np.ndarray, margin_s: float) -> np.ndarray:
     return nearest <= margin_s
 
 
-def accelerometer_path(session: SessionFolder, ctx: ComputeContext, trial_id: str, t: np.ndarray,
-                       quaternion: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+def accelerometer_path(
+    session: SessionFolder, ctx: ComputeContext, trial_id: str, t: np.ndarray, quaternion: np.ndarray
+) -> tuple[np.ndarray, np.ndarray] | None:
     """The gimbal centre's path ∬ a_W dt ``(N, 3)`` at times ``t`` (m, W; from rest at the origin) from the handle
     accelerometer, integrated at the sensor's own rate, and the rows within :data:`CLIP_MARGIN_S` of a reading at
     the sensor's declared range (module docstring); ``quaternion`` the orientation at ``t``. None without a

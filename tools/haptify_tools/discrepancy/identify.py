@@ -26,9 +26,9 @@ from haptify_tools.discrepancy.library import LIBRARY, Candidate
 from haptify_tools.discrepancy.shape import characterise
 from haptify_tools.twin.model import TwinFile
 
-EXTENSIONS = 2           # grid extensions when the best grid point is at an end
-XATOL_LOG = 2e-4         # the continuous refinement stops within 0.02 % of the optimum (Brent, in log p)
-JOINT_STEPS = 3          # Gauss–Newton steps of the joint refinement of the accepted values (each must lower the SSE)
+EXTENSIONS = 2  # grid extensions when the best grid point is at an end
+XATOL_LOG = 2e-4  # the continuous refinement stops within 0.02 % of the optimum (Brent, in log p)
+JOINT_STEPS = 3  # Gauss–Newton steps of the joint refinement of the accepted values (each must lower the SSE)
 
 
 @dataclass
@@ -37,10 +37,10 @@ class Dataset:
     predicts them (:func:`.data.simulate_all` or the examiner's radial stop, :mod:`.workspace`) (discrepancy README §1, §2).
     """
 
-    kind: str                       # "force" or "workspace"
+    kind: str  # "force" or "workspace"
     items: list
-    commands: dict | None = None    # workspace: trial id → (face commands, ok)
-    pool: ProcessPoolExecutor | None = None     # force: workers sharing the trials (:func:`.data.share_trials`)
+    commands: dict | None = None  # workspace: trial id → (face commands, ok)
+    pool: ProcessPoolExecutor | None = None  # force: workers sharing the trials (:func:`.data.share_trials`)
 
     @property
     def measured(self) -> dict[str, np.ndarray]:
@@ -74,8 +74,8 @@ class Fit:
     predicted: dict[str, np.ndarray]
     score: st.Score
     simulations: int
-    interval: tuple[float, float] | None = None     # 95 % block-bootstrap interval (:func:`.stats.bootstrap_linear`)
-    values: list[float] | None = None       # per drive (:func:`fit_per_drive`); ``value`` is then their mean
+    interval: tuple[float, float] | None = None  # 95 % block-bootstrap interval (:func:`.stats.bootstrap_linear`)
+    values: list[float] | None = None  # per drive (:func:`fit_per_drive`); ``value`` is then their mean
     stderrs: list[float] | None = None
     #: per drive against shared: the nested scores of the per-drive values on the shared fit's residual
     per_drive_score: st.Score | None = None
@@ -112,7 +112,7 @@ class Selection:
     sweeps: Dataset | None = None
     initial_sweep: dict[str, np.ndarray] | None = None
     final_sweep: dict[str, np.ndarray] | None = None
-    shape: dict | None = None       # the residual left, characterised (:func:`.shape.characterise`)
+    shape: dict | None = None  # the residual left, characterised (:func:`.shape.characterise`)
 
 
 def _minus(a: dict, b: dict) -> dict:
@@ -124,8 +124,14 @@ def _sse(design: st.Design, residual: dict, predicted: dict) -> float:
     return float(np.dot(e, e))
 
 
-def fit_candidate(cand: Candidate, twin: TwinFile, data: Dataset, design: st.Design,  # noqa: C901 (over ruff's limit of 15: to be split)
-                  residual: dict, base: dict) -> Fit:
+def fit_candidate(  # noqa: C901 (over ruff's limit of 15: to be split)
+    cand: Candidate,
+    twin: TwinFile,
+    data: Dataset,
+    design: st.Design,
+    residual: dict,
+    base: dict,
+) -> Fit:
     """Fit one candidate to ``residual`` (measured − ``base``, the current twin's prediction of ``data``; N or m): affine by
     least squares or searched on a logarithmic grid (discrepancy README §2).
     """
@@ -201,12 +207,16 @@ def fit_candidate(cand: Candidate, twin: TwinFile, data: Dataset, design: st.Des
     i = min(range(len(ps)), key=lambda j: evals[ps[j]][0])
     if 0 < i < len(ps) - 1:
         # continuous refinement to the optimum inside the bracket (not a grid point): bounded Brent in log p
-        minimize_scalar(lambda x: ev(float(np.exp(x))), bounds=(np.log(ps[i - 1]), np.log(ps[i + 1])), method="bounded",
-                        options={"xatol": XATOL_LOG})
+        minimize_scalar(
+            lambda x: ev(float(np.exp(x))),
+            bounds=(np.log(ps[i - 1]), np.log(ps[i + 1])),
+            method="bounded",
+            options={"xatol": XATOL_LOG},
+        )
     p = min(evals, key=lambda x: evals[x][0])
     pred = evals[p][1]
     se, interval = float("inf"), None
-    if ps[0] < p < ps[-1]:       # bracketed: the uncertainty from the model linearised at p̂ (central difference)
+    if ps[0] < p < ps[-1]:  # bracketed: the uncertainty from the model linearised at p̂ (central difference)
         lo, hi = p * (1 - st.SLOPE_STEP), p * (1 + st.SLOPE_STEP)
         ev_many([lo, hi])
         slope = {k: (evals[hi][1][k] - evals[lo][1][k]) / (hi - lo) for k in pred}
@@ -237,9 +247,17 @@ def fit_per_drive(shared: Fit, twin: TwinFile, data: Dataset, design: st.Design,
     nested = st.score(design, _minus(residual, shared.predicted), _minus(pred, shared.predicted), k=n_d - 1)
     if not nested.accepted():
         return replace(shared, simulations=shared.simulations + len(twins), per_drive_score=nested)
-    return Fit(cand, float(np.mean(p)), float(np.sqrt(np.sum(se ** 2)) / n_d), pred, st.score(design, residual, pred, k=n_d),
-               shared.simulations + len(twins), values=[float(x) for x in p], stderrs=[float(x) for x in se],
-               per_drive_score=nested)
+    return Fit(
+        cand,
+        float(np.mean(p)),
+        float(np.sqrt(np.sum(se**2)) / n_d),
+        pred,
+        st.score(design, residual, pred, k=n_d),
+        shared.simulations + len(twins),
+        values=[float(x) for x in p],
+        stderrs=[float(x) for x in se],
+        per_drive_score=nested,
+    )
 
 
 def accepted_parameters(accepted: list[Fit]) -> tuple[Parameter, ...]:
@@ -303,9 +321,16 @@ def refine_jointly(twin: TwinFile, accepted: list[Fit], forces: Dataset, base: d
     return twin, _with_values(accepted, params, [q.value for q in params]), base
 
 
-def select_effects(twin: TwinFile, trials: list[MeasuredTrial], max_effects: int = 5,
-                   library: tuple[Candidate, ...] = LIBRARY, log: Callable[[str], object] | None = None,
-                   workers: int = 1, sweeps: list | None = None, client=None) -> Selection:
+def select_effects(
+    twin: TwinFile,
+    trials: list[MeasuredTrial],
+    max_effects: int = 5,
+    library: tuple[Candidate, ...] = LIBRARY,
+    log: Callable[[str], object] | None = None,
+    workers: int = 1,
+    sweeps: list | None = None,
+    client=None,
+) -> Selection:
     """Forward selection (see the module docstring; discrepancy README §2, §3); deterministic for a given twin and session.
 
     ``sweeps``: the measured workspace sweeps (:func:`.workspace.load_sweeps`) for the workspace
@@ -350,27 +375,33 @@ def _select(twin, forces: Dataset, sweeps, max_effects, library, log) -> Selecti
         design = st.make_design(trials, residual)
         residual_w = _minus(sweep_data.measured, base_w) if sweep_data else None
         design_w = st.make_design(sweeps, residual_w, st.SWEEP_REPEATS) if sweep_data else None
-        cands = [c for c in library if c.available(current)
-                 and (sweep_data is not None if c.scope == "workspace" else bool(trials))]
+        cands = [
+            c for c in library if c.available(current) and (sweep_data is not None if c.scope == "workspace" else bool(trials))
+        ]
         if len(accepted) >= max_effects or not cands:
             rounds.append(Round(residual, design, [], None, False, workspace_residual=residual_w))
             break
-        jobs = [(c, current, sweep_data, design_w, residual_w, base_w) if c.scope == "workspace"
-                else (c, current, forces, design, residual, base) for c in cands]
+        jobs = [
+            (c, current, sweep_data, design_w, residual_w, base_w)
+            if c.scope == "workspace"
+            else (c, current, forces, design, residual, base)
+            for c in cands
+        ]
         fits = [fit_candidate(*job) for job in jobs]
         fits.sort(key=lambda f: -f.score.delta_bic)
-        if fits[0].candidate.per_drive:      # the best effect, per drive when the data support it
+        if fits[0].candidate.per_drive:  # the best effect, per drive when the data support it
             fits[0] = fit_per_drive(fits[0], current, forces, design, residual, base)
         best = fits[0]
         ok = best.score.accepted()
-        ties = [f.candidate.effect_id for f in fits[1:] if f.score.accepted()
-                and f.score.delta_bic >= 0.9 * best.score.delta_bic]
+        ties = [f.candidate.effect_id for f in fits[1:] if f.score.accepted() and f.score.delta_bic >= 0.9 * best.score.delta_bic]
         rounds.append(Round(residual, design, fits, best, ok, ties, workspace_residual=residual_w))
         if log:
             shown = ("[" + ", ".join(f"{v:.4g}" for v in best.values) + "]") if best.values else f"{best.value:.4g}"
-            log(f"round {len(rounds)}: best {best.candidate.effect_id} = {shown} {best.candidate.unit}, "
+            log(
+                f"round {len(rounds)}: best {best.candidate.effect_id} = {shown} {best.candidate.unit}, "
                 f"ΔBIC {best.score.delta_bic:.1f}, p {best.score.p_value:.2g}, "
-                f"validation residual {-100 * best.score.validation_improvement:+.0f} % → {'accepted' if ok else 'rejected'}")
+                f"validation residual {-100 * best.score.validation_improvement:+.0f} % → {'accepted' if ok else 'rejected'}"
+            )
         if not ok:
             break
         accepted.append(best)
@@ -383,13 +414,20 @@ def _select(twin, forces: Dataset, sweeps, max_effects, library, log) -> Selecti
             current, accepted, base = refine_jointly(current, accepted, forces, base)
             after = [q.value for q in accepted_parameters(accepted)]
             if log and after != before:
-                log("joint refinement: " + ", ".join(f"{q.candidate.effect_id}{'' if q.drive is None else f'[{q.drive}]'} "
-                                                     f"{b:.4g} → {q.value:.4g}"
-                                                     for q, b in zip(accepted_parameters(accepted), before)))
+                log(
+                    "joint refinement: "
+                    + ", ".join(
+                        f"{q.candidate.effect_id}{'' if q.drive is None else f'[{q.drive}]'} {b:.4g} → {q.value:.4g}"
+                        for q, b in zip(accepted_parameters(accepted), before)
+                    )
+                )
             if sweep_data and any(f.candidate.effect_id == "kinematics.link_length" for f in accepted):
                 sweep_data = Dataset.sweeps(current, sweeps)
                 base_w = sweep_data.simulate(current)
-    structure = (st.structure_left(rounds[-1].design, rounds[-1].residual) if trials else
-                 {"heldout_share": 0.0, "f_p_value": 1.0, "ljung_box_p_value": 1.0, "structured": False})
+    structure = (
+        st.structure_left(rounds[-1].design, rounds[-1].residual)
+        if trials
+        else {"heldout_share": 0.0, "f_p_value": 1.0, "ljung_box_p_value": 1.0, "structured": False}
+    )
     shape = characterise(rounds[-1].design, rounds[-1].residual, current) if trials else None
     return Selection(rounds, accepted, current, initial, base, structure, sweep_data, initial_w, base_w, shape)

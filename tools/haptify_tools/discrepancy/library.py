@@ -44,7 +44,7 @@ class Candidate:
     unit: str
     kind: Literal["affine", "search"]
     scope: Literal["all", "active", "workspace"]
-    probe: Callable[[TwinFile], float]          # affine: a typical value; search: the grid's centre
+    probe: Callable[[TwinFile], float]  # affine: a typical value; search: the grid's centre
     grid_factors: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0, 4.0)
     lower: float = 0.0
     #: the parameter is a force level compared with the commanded force: the grid is relative to the largest
@@ -61,7 +61,7 @@ class Candidate:
         if self.effect_id == ws.EFFECT_ID:
             return ws.apply(twin, value)
         t = twin
-        if self.effect_id == "drive.force_cutoff":      # keep the re-arm level below the new trip level
+        if self.effect_id == "drive.force_cutoff":  # keep the re-arm level below the new trip level
             rearm = min(t.effects.drive_force_cutoff.rearm_force_N, 0.5 * float(value))
             t = set_param(t, "drive.force_cutoff.rearm_force_N", rearm)
         v = [float(x) for x in value] if isinstance(value, (list, tuple, np.ndarray)) else float(value)
@@ -73,7 +73,7 @@ class Candidate:
         if self.effect_id == ws.EFFECT_ID:
             return ws.available(twin)
         if self.effect_id == "drive.backlash" and not twin.on("drive.series_elasticity"):
-            return False           # without an elastic cable the twin's drive has no play to model
+            return False  # without an elastic cable the twin's drive has no play to model
         if self.effect_id == "kinematics.link_length":
             e = twin.effects.kinematics_link_length
             return not e.enabled or not any(e.delta_a_m)
@@ -118,23 +118,64 @@ class _BoxTop:
 #: The library, in the order of the simulator's effect ids (discrepancy README §2).
 LIBRARY: tuple[Candidate, ...] = (
     Candidate("gravity", "g_m_per_s2", "m/s²", "affine", "all", _mean_of("gravity", "g_m_per_s2", 9.80665)),
-    Candidate("inertia", "rotor_inertia_kg_m2", "kg·m²", "affine", "all", _mean_of("inertia", "rotor_inertia_kg_m2", 1e-6),
-              per_drive=True),
-    Candidate("friction.coulomb", "torque_Nm", "N·m", "affine", "all", _mean_of("friction.coulomb", "torque_Nm", 0.03),
-              per_drive=True),
-    Candidate("friction.viscous", "damping_Nms_per_rad", "N·m·s/rad", "affine", "all",
-              _mean_of("friction.viscous", "damping_Nms_per_rad", 0.01), per_drive=True),
-    Candidate("friction.stribeck", "excess_torque_Nm", "N·m", "affine", "all", _mean_of("friction.stribeck", "excess_torque_Nm", 0.01),
-              per_drive=True),
-    Candidate("drive.series_elasticity", "stiffness_Nm_per_rad", "N·m/rad", "search", "active",
-              _mean_of("drive.series_elasticity", "stiffness_Nm_per_rad", 10.0)),
-    Candidate("drive.torque_saturation", "max_torque_Nm", "N·m", "search", "active",
-              _mean_of("drive.torque_saturation", "max_torque_Nm", 0.3)),
-    Candidate("drive.force_cutoff", "trip_force_N", "N", "search", "active", _Fixed(2.0),
-              grid_factors=(0.02, 0.05, 0.1, 0.2, 0.4, 0.8), commanded_scale=True),
+    Candidate(
+        "inertia",
+        "rotor_inertia_kg_m2",
+        "kg·m²",
+        "affine",
+        "all",
+        _mean_of("inertia", "rotor_inertia_kg_m2", 1e-6),
+        per_drive=True,
+    ),
+    Candidate(
+        "friction.coulomb", "torque_Nm", "N·m", "affine", "all", _mean_of("friction.coulomb", "torque_Nm", 0.03), per_drive=True
+    ),
+    Candidate(
+        "friction.viscous",
+        "damping_Nms_per_rad",
+        "N·m·s/rad",
+        "affine",
+        "all",
+        _mean_of("friction.viscous", "damping_Nms_per_rad", 0.01),
+        per_drive=True,
+    ),
+    Candidate(
+        "friction.stribeck",
+        "excess_torque_Nm",
+        "N·m",
+        "affine",
+        "all",
+        _mean_of("friction.stribeck", "excess_torque_Nm", 0.01),
+        per_drive=True,
+    ),
+    Candidate(
+        "drive.series_elasticity",
+        "stiffness_Nm_per_rad",
+        "N·m/rad",
+        "search",
+        "active",
+        _mean_of("drive.series_elasticity", "stiffness_Nm_per_rad", 10.0),
+    ),
+    Candidate(
+        "drive.torque_saturation",
+        "max_torque_Nm",
+        "N·m",
+        "search",
+        "active",
+        _mean_of("drive.torque_saturation", "max_torque_Nm", 0.3),
+    ),
+    Candidate(
+        "drive.force_cutoff",
+        "trip_force_N",
+        "N",
+        "search",
+        "active",
+        _Fixed(2.0),
+        grid_factors=(0.02, 0.05, 0.1, 0.2, 0.4, 0.8),
+        commanded_scale=True,
+    ),
     Candidate("drive.backlash", "width_rad", "rad", "search", "active", _mean_of("drive.backlash", "width_rad", 0.002)),
-    Candidate("kinematics.link_length", "delta_a_m", "m", "affine", "all", _Fixed(0.005), relinearise=2,
-              lower=-np.inf),
+    Candidate("kinematics.link_length", "delta_a_m", "m", "affine", "all", _Fixed(0.005), relinearise=2, lower=-np.inf),
     Candidate("handle.connector_mass", "mass_kg", "kg", "affine", "all", _mean_of("handle.connector_mass", "mass_kg", 0.03)),
     Candidate(ws.EFFECT_ID, ws.PARAMETER, "m", "search", "workspace", _BoxTop(), grid_factors=ws.GRID_FACTORS),
 )

@@ -29,13 +29,22 @@ class _Estimate(_M):
     """A parameter's 95 % interval, and the per-drive values of an effect whose parameter holds one value per drive
     (discrepancy README §2, per drive; §3, uncertainty)."""
 
-    ci95: list[float] | None = Field(None, description="95 % block-bootstrap interval of value [low, high] in unit (null "
-                                     "when not estimable: a per-drive fit, or a search whose minimum is at the grid's end).")
-    per_drive: list[float] | None = Field(None, description="The values per drive axis when identified per drive "
-                                          "(value is then their mean); null: one value shared by every drive.")
+    ci95: list[float] | None = Field(
+        None,
+        description="95 % block-bootstrap interval of value [low, high] in unit (null "
+        "when not estimable: a per-drive fit, or a search whose minimum is at the grid's end).",
+    )
+    per_drive: list[float] | None = Field(
+        None,
+        description="The values per drive axis when identified per drive "
+        "(value is then their mean); null: one value shared by every drive.",
+    )
     per_drive_stderr: list[float | None] | None = None
-    per_drive_delta_bic: float | None = Field(None, description="ΔBIC of the per-drive values over the shared one (on "
-                                              "the shared fit's residual, n − 1 extra parameters); null when not tried.")
+    per_drive_delta_bic: float | None = Field(
+        None,
+        description="ΔBIC of the per-drive values over the shared one (on "
+        "the shared fit's residual, n − 1 extra parameters); null when not tried.",
+    )
 
 
 class CandidateFit(_Estimate):
@@ -60,7 +69,9 @@ class RoundResult(_M):
     number: int
     decimation: int = Field(description="Rows kept every D-th sample for the statistics (correlation lag).")
     candidates: list[CandidateFit] = Field(description="Every fitted candidate, best ΔBIC first.")
-    near_ties: list[str] = Field(default_factory=list, description="Other accepted candidates within 10 % of the best ΔBIC (ambiguous).")
+    near_ties: list[str] = Field(
+        default_factory=list, description="Other accepted candidates within 10 % of the best ΔBIC (ambiguous)."
+    )
 
 
 class AcceptedEffect(_Estimate):
@@ -113,7 +124,9 @@ class BenchmarkGap(_M):
 class BenchmarkNotComputed(_M):
     """A benchmark the reference's operator could not compute on one trial's force, with the operator's code (discrepancy README §4)."""
 
-    metrics: list[str] = Field(description="The benchmarks of the trial's protocol left out (one operator computes them together).")
+    metrics: list[str] = Field(
+        description="The benchmarks of the trial's protocol left out (one operator computes them together)."
+    )
     trial_id: str
     force: Literal["measured", "twin before", "twin after"]
     code: str = Field(description="The operator's error code (schemas/1.0/codes.json).")
@@ -132,8 +145,10 @@ class ResidualCell(_M):
 class StateShape(_M):
     """The residual against one state (discrepancy README §3, characterising the residual)."""
 
-    state: str = Field(description="x, y, z (hand position, W, m), vx…vz, speed (m/s), ax…az (m/s²), q1…q3 (the twin's arm "
-                       "angles, rad) or time (s).")
+    state: str = Field(
+        description="x, y, z (hand position, W, m), vx…vz, speed (m/s), ax…az (m/s²), q1…q3 (the twin's arm "
+        "angles, rad) or time (s)."
+    )
     kind: Literal["binned", "periodic"]
     heldout_r2: float = Field(description="1 − SSE/SSE of a constant per trial and axis, on the held-out rows (all axes).")
     description: str
@@ -150,8 +165,10 @@ class ResidualShape(_M):
     states: list[StateShape] = Field(description="Every state's best shape, the best first.")
     follows: str | None = Field(description="The state the residual follows best (null without rows to judge).")
     description: str
-    structured: bool = Field(description="The best shape's held-out R² ≥ 0.25, or the constant removes ≥ 25 % (it counts "
-                             "in the verdict when the gap is above the floor's median).")
+    structured: bool = Field(
+        description="The best shape's held-out R² ≥ 0.25, or the constant removes ≥ 25 % (it counts "
+        "in the verdict when the gap is above the floor's median)."
+    )
 
 
 class WorkspaceRegion(_M):
@@ -184,9 +201,10 @@ class DiscrepancyFile(_M):
     twin_name: str
     verdict: Literal["explained", "unexplained residual", "no discrepancy"] = Field(
         description="explained: effects accepted, no structure left and the held-out gap not significantly above the "
-                    "floor; unexplained residual: structure left, or a held-out gap significantly above the floor, that "
-                    "no library effect explains (see `residual`); no discrepancy: nothing accepted, no structure left "
-                    "and the gap not significantly above the floor.")
+        "floor; unexplained residual: structure left, or a held-out gap significantly above the floor, that "
+        "no library effect explains (see `residual`); no discrepancy: nothing accepted, no structure left "
+        "and the gap not significantly above the floor."
+    )
     accepted: list[AcceptedEffect]
     rounds: list[RoundResult]
     structure: Structure
@@ -196,36 +214,52 @@ class DiscrepancyFile(_M):
     workspace_gaps: list[WorkspaceGap] = Field(default_factory=list)
     heldout_gap_before_N: float = Field(description="RMS force residual on the held-out blocks, all trials, before.")
     heldout_gap_after_N: float
-    floor_N: float | None = Field(None, description="The floor: the one-sided 95 % upper prediction bound of the held-out "
-                                  "gap the updated twin leaves against replays of the session's force protocols that it "
-                                  "generated itself through the virtual rig (the method's resolution: path reconstruction "
-                                  "and sensor noise), from floor_replays_N; null when no trial can be replayed.")
+    floor_N: float | None = Field(
+        None,
+        description="The floor: the one-sided 95 % upper prediction bound of the held-out "
+        "gap the updated twin leaves against replays of the session's force protocols that it "
+        "generated itself through the virtual rig (the method's resolution: path reconstruction "
+        "and sensor noise), from floor_replays_N; null when no trial can be replayed.",
+    )
     heldout_gap_above_floor_before_N: float | None = Field(None, description="√max(gap² − floor², 0) before (N).")
     heldout_gap_above_floor_after_N: float | None = Field(None, description="√max(gap² − floor², 0) after (N).")
-    floor_replays_N: list[float] = Field(default_factory=list, description="The held-out gap of each replay the floor "
-                                         "is made from (seeds 0, 1, …), N.")
+    floor_replays_N: list[float] = Field(
+        default_factory=list, description="The held-out gap of each replay the floor is made from (seeds 0, 1, …), N."
+    )
     floor_median_N: float | None = None
-    gap_p_value: float | None = Field(None, description="One-sided p-value of 'the held-out gap after is one more draw "
-                                      "of the floor' (Student-t predictive test on the replays' log gaps).")
+    gap_p_value: float | None = Field(
+        None,
+        description="One-sided p-value of 'the held-out gap after is one more draw "
+        "of the floor' (Student-t predictive test on the replays' log gaps).",
+    )
     gap_significant: bool | None = Field(None, description="gap_p_value < 0.05, i.e. the gap after is above floor_N.")
-    residual: ResidualShape | None = Field(None, description="The residual left, characterised (always computed; it "
-                                           "is what an 'unexplained residual' verdict reports instead of an effect).")
+    residual: ResidualShape | None = Field(
+        None,
+        description="The residual left, characterised (always computed; it "
+        "is what an 'unexplained residual' verdict reports instead of an effect).",
+    )
     benchmarks_not_computed: list[BenchmarkNotComputed] = Field(default_factory=list)
     not_observable: dict[str, str] = Field(description="Library effect ids the force residual cannot reveal, and why.")
     hand_path: dict[str, Literal["motion capture + accelerometer", "motion capture"]] = Field(
-        default_factory=dict, description="Per force trial id, what the path driving the twin came from: motion "
+        default_factory=dict,
+        description="Per force trial id, what the path driving the twin came from: motion "
         "capture below the crossover and the handle accelerometer above it, or motion capture alone (no "
-        "handle_accel stream, or more than half of the trial's rows near readings at the accelerometer's range).")
-    settings: dict[str, float] = Field(description="The workflow's constants, each named with its unit (_hz, _s, _rad; "
-                                       "the statistics' thresholds are plain numbers): the hand path's filters and "
-                                       "margins, the replay's rest detection, the residual's low-pass and simulation "
-                                       "rate, the acceptance thresholds (discrepancy README).")
+        "handle_accel stream, or more than half of the trial's rows near readings at the accelerometer's range).",
+    )
+    settings: dict[str, float] = Field(
+        description="The workflow's constants, each named with its unit (_hz, _s, _rad; "
+        "the statistics' thresholds are plain numbers): the hand path's filters and "
+        "margins, the replay's rest detection, the residual's low-pass and simulation "
+        "rate, the acceptance thresholds (discrepancy README)."
+    )
     files: dict[str, str] = Field(default_factory=dict, description="Outputs written beside this file.")
 
     def gap_summary(self) -> str:
         """One line: the held-out force gap before → after (N), and the same above the floor when known."""
         text = f"held-out force gap {self.heldout_gap_before_N:.4g} N → {self.heldout_gap_after_N:.4g} N"
         if self.floor_N is not None:
-            text += (f" (floor {self.floor_N:.4g} N; above it {self.heldout_gap_above_floor_before_N:.4g} N → "
-                     f"{self.heldout_gap_above_floor_after_N:.4g} N)")
+            text += (
+                f" (floor {self.floor_N:.4g} N; above it {self.heldout_gap_above_floor_before_N:.4g} N → "
+                f"{self.heldout_gap_above_floor_after_N:.4g} N)"
+            )
         return text

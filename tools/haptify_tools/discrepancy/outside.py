@@ -50,7 +50,7 @@ class SpeedSquared:
 
     def __call__(self, t: np.ndarray, p: np.ndarray, v: np.ndarray) -> np.ndarray:
         f = np.zeros_like(p)
-        f[:, self.direction] = self.coefficient_Ns2_per_m2 * np.sum(v ** 2, axis=1)
+        f[:, self.direction] = self.coefficient_Ns2_per_m2 * np.sum(v**2, axis=1)
         return f
 
 

@@ -22,7 +22,9 @@ def overlay_plan(session: SessionFolder, trials: list[MeasuredTrial], twin_force
     role (discrepancy README §4); :func:`write_overlay` adds the note and writes it."""
     from haptify_tools.viewer.recording import plan_recording, series_entry
 
-    plan = plan_recording(session, trial_ids={tr.trial_id for tr in trials}, derived="full")  # the compared trials, with the calibrated force
+    plan = plan_recording(
+        session, trial_ids={tr.trial_id for tr in trials}, derived="full"
+    )  # the compared trials, with the calibrated force
     by_id = {tp.trial.id: tp for tp in plan.trials}
     for tr in trials:
         tp = by_id.get(tr.trial_id)
@@ -30,8 +32,17 @@ def overlay_plan(session: SessionFolder, trials: list[MeasuredTrial], twin_force
             continue
         tp.counterpart["compare"] = f"{tr.trial_id} (twin after the update)"
         force = np.where(tr.valid[:, None], twin_force[tr.trial_id], np.nan)
-        plan.add(series_entry(f"/series/{tp.key}/compare/hand_force/calibrated", "hand_force/calibrated", tr.t, force,
-                              ["fx", "fy", "fz"], "compare", "haptify discrepancy"))
+        plan.add(
+            series_entry(
+                f"/series/{tp.key}/compare/hand_force/calibrated",
+                "hand_force/calibrated",
+                tr.t,
+                force,
+                ["fx", "fy", "fz"],
+                "compare",
+                "haptify discrepancy",
+            )
+        )
     return plan
 
 
@@ -45,8 +56,10 @@ def write_overlay(plan, result: DiscrepancyFile, path: Path) -> Path:
     from haptify_tools.viewer.recording import Entry, write_rrd
 
     named = ", ".join(f"{a.effect_id} {a.parameter} = {a.value:.4g} {a.unit}" for a in result.accepted) or "none"
-    note = ("# Twin versus measurement\n\nLines marked *(compare)* in the hand-force views are the updated twin's "
-            f"force along the measured path (low-passed at the workflow's comparison band).\n\nEffects added: {named}.\n\n"
-            f"Verdict: {result.verdict}; {result.gap_summary()}.")
+    note = (
+        "# Twin versus measurement\n\nLines marked *(compare)* in the hand-force views are the updated twin's "
+        f"force along the measured path (low-passed at the workflow's comparison band).\n\nEffects added: {named}.\n\n"
+        f"Verdict: {result.verdict}; {result.gap_summary()}."
+    )
     plan.add(Entry("/discrepancy", static=[rr.TextDocument(note, media_type=rr.MediaType.MARKDOWN)]))
     return write_rrd(plan, path, blueprint_for(plan))

@@ -33,8 +33,8 @@ from haptify_tools.discrepancy.data import RESIDUAL_CUTOFF_HZ, MeasuredTrial
 from haptify_tools.twin.kinematics import hand_to_joints
 from haptify_tools.twin.model import TwinFile
 
-BINS = 12                       # quantile bins of a state for the binned means
-STRUCTURE_R2 = 0.25             # a shape removing this share of the held-out residual beyond a constant is structure
+BINS = 12  # quantile bins of a state for the binned means
+STRUCTURE_R2 = 0.25  # a shape removing this share of the held-out residual beyond a constant is structure
 #: periodogram grids (log-spaced): position in m, configuration in rad
 #: (the shortest periods are 2 mm and 0.02 rad, ≈ 2.6 mm at the hand: shorter ones fit the path's own noise)
 PERIODS = {"position": (0.002, 0.05), "configuration": (0.02, 0.5)}
@@ -44,7 +44,7 @@ REFINE_STEPS = 15
 #: 5 Hz cut-off comes only from faster strokes than the protocols make), low-passed, and put on the trial's grid
 WAVE_RATE_HZ = 250.0
 CHANNELS = ("fx", "fy", "fz")
-WHERE_SHARE = 0.8               # "where": the protocol × axis cells holding this share of the held-out energy
+WHERE_SHARE = 0.8  # "where": the protocol × axis cells holding this share of the held-out energy
 
 
 @dataclass
@@ -52,7 +52,7 @@ class StateFit:
     """One shape of the residual against one state: held-out R² beyond a constant, and its description."""
 
     state: str
-    kind: str                   # "binned" or "periodic"
+    kind: str  # "binned" or "periodic"
     heldout_r2: float
     description: str
     period: float | None = None
@@ -106,7 +106,7 @@ def _held_energy(rows: list[_Rows], fitted: list[np.ndarray] | None = None) -> f
     e = 0.0
     for i, rw in enumerate(rows):
         x = rw.r[~rw.train] - (0.0 if fitted is None else fitted[i][~rw.train])
-        e += float(np.sum(x ** 2))
+        e += float(np.sum(x**2))
     return e
 
 
@@ -154,10 +154,10 @@ def _periodic_sse(rows: list[_Rows], waves: list[np.ndarray]) -> tuple[np.ndarra
     ata = np.zeros((p, 2, 2))
     atb = np.zeros((p, 2, 3))
     for rw, w in zip(rows, waves):
-        wt = w[rw.train]                                         # (n, 2, P)
+        wt = w[rw.train]  # (n, 2, P)
         ata += np.einsum("nip,njp->pij", wt, wt)
         atb += np.einsum("nip,nk->pik", wt, rw.r[rw.train])
-    coef = np.linalg.solve(ata + 1e-12 * np.eye(2)[None], atb)   # (P, 2, 3)
+    coef = np.linalg.solve(ata + 1e-12 * np.eye(2)[None], atb)  # (P, 2, 3)
     gain = np.einsum("pik,pik->p", coef, atb)
     held = np.zeros(p)
     for rw, w in zip(rows, waves):
@@ -167,8 +167,9 @@ def _periodic_sse(rows: list[_Rows], waves: list[np.ndarray]) -> tuple[np.ndarra
     return gain, held, coef
 
 
-def periodic_fit(rows: list[_Rows], fine_values: list[np.ndarray], lo: float, hi: float, unit: str,
-                 state: str, base: float) -> StateFit:
+def periodic_fit(
+    rows: list[_Rows], fine_values: list[np.ndarray], lo: float, hi: float, unit: str, state: str, base: float
+) -> StateFit:
     """The least-squares periodogram of the residual against one state (module docstring): the period with the largest
     training gain on a log grid from ``lo`` to ``hi``, refined on a finer grid around it (±one step)."""
     grid = np.geomspace(lo, hi, PERIOD_STEPS)
@@ -180,14 +181,20 @@ def periodic_fit(rows: list[_Rows], fine_values: list[np.ndarray], lo: float, hi
     waves = [_filtered_waves(rw.trial, rw.idx, s, fine) for rw, s in zip(rows, fine_values)]
     gain, held, coef = _periodic_sse(rows, waves)
     j = int(np.argmax(gain))
-    amp = np.hypot(coef[j, 0], coef[j, 1])                      # per axis, N
+    amp = np.hypot(coef[j, 0], coef[j, 1])  # per axis, N
     total = float(np.linalg.norm(amp))
     r2 = 1.0 - held[j] / base if base > 0 else 0.0
     scale, u = (1e3, "mm") if unit == "m" else (1.0, unit)
     per_axis = ", ".join(f"{c} {a:.2g}" for c, a in zip(CHANNELS, amp))
-    return StateFit(state, "periodic", float(r2),
-                    f"periodic in {state}, period ≈ {fine[j] * scale:.3g} {u}, amplitude ≈ {total:.2g} N ({per_axis} N)",
-                    float(fine[j]), total, [float(a) for a in amp])
+    return StateFit(
+        state,
+        "periodic",
+        float(r2),
+        f"periodic in {state}, period ≈ {fine[j] * scale:.3g} {u}, amplitude ≈ {total:.2g} N ({per_axis} N)",
+        float(fine[j]),
+        total,
+        [float(a) for a in amp],
+    )
 
 
 def _binned_description(state: str, unit: str, curves: list[tuple[np.ndarray, np.ndarray]], r2: float) -> str:
@@ -196,9 +203,11 @@ def _binned_description(state: str, unit: str, curves: list[tuple[np.ndarray, np
     k = int(np.argmax(np.ptp(means, axis=0)))
     order = np.argsort(centres)
     lo_i, hi_i = order[0], order[-1]
-    return (f"follows {state} (binned means, held-out R² {r2:.2f}): {CHANNELS[k]} residual "
-            f"{means[lo_i, k]:+.2g} N at {state} = {centres[lo_i]:.3g} {unit} → {means[hi_i, k]:+.2g} N at "
-            f"{centres[hi_i]:.3g} {unit} (range {np.ptp(means[:, k]):.2g} N)")
+    return (
+        f"follows {state} (binned means, held-out R² {r2:.2f}): {CHANNELS[k]} residual "
+        f"{means[lo_i, k]:+.2g} N at {state} = {centres[lo_i]:.3g} {unit} → {means[hi_i, k]:+.2g} N at "
+        f"{centres[hi_i]:.3g} {unit} (range {np.ptp(means[:, k]):.2g} N)"
+    )
 
 
 UNITS = {"position": "m", "velocity": "m/s", "acceleration": "m/s²", "configuration": "rad", "time": "s"}
@@ -250,5 +259,10 @@ def characterise(design: st.Design, residual: dict[str, np.ndarray], twin: TwinF
     fits.sort(key=lambda f: -f.heldout_r2)
     top = fits[0] if fits else None
     structured = bool((top is not None and top.heldout_r2 >= STRUCTURE_R2) or offset_share >= st.STRUCTURE_SHARE)
-    return {"where": where_it_lives(rows), "offset_share": float(offset_share), "fits": fits, "best": top,
-            "structured": structured}
+    return {
+        "where": where_it_lives(rows),
+        "offset_share": float(offset_share),
+        "fits": fits,
+        "best": top,
+        "structured": structured,
+    }

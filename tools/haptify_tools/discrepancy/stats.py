@@ -30,17 +30,17 @@ from scipy import stats as sps
 from haptify_tools.discrepancy.data import MeasuredTrial
 
 ROLES = ("train", "validation", "train", "test", "train")
-FORCE_REPEATS = 2           # force trials: ten blocks
-SWEEP_REPEATS = 6           # workspace sweeps visit regions one after the other: thirty blocks
-BIC_MIN = 10.0              # "very strong" evidence on Kass & Raftery's scale
-P_MAX = 1e-3                # nested F test
-VALIDATION_MIN = 0.10       # the held-out validation residual energy must fall by at least 10 %
-STRUCTURE_SHARE = 0.25      # generic regression removing ≥ 25 % of held-out energy → structure left
+FORCE_REPEATS = 2  # force trials: ten blocks
+SWEEP_REPEATS = 6  # workspace sweeps visit regions one after the other: thirty blocks
+BIC_MIN = 10.0  # "very strong" evidence on Kass & Raftery's scale
+P_MAX = 1e-3  # nested F test
+VALIDATION_MIN = 0.10  # the held-out validation residual energy must fall by at least 10 %
+STRUCTURE_SHARE = 0.25  # generic regression removing ≥ 25 % of held-out energy → structure left
 MAX_DECIMATION = 50
-SLOPE_STEP = 0.02           # ±2 % around an identified value: the central difference that linearises δ(p) there
+SLOPE_STEP = 0.02  # ±2 % around an identified value: the central difference that linearises δ(p) there
 BOOTSTRAP_REPLICATES = 400  # block-bootstrap replicates of a parameter's uncertainty
-BOOTSTRAP_SEED = 0          # deterministic, like the rest of the workflow
-SUBBLOCK_MIN_ROWS = 50      # bootstrap units: runs of training rows of at least this many rows and 2 correlation lags
+BOOTSTRAP_SEED = 0  # deterministic, like the rest of the workflow
+SUBBLOCK_MIN_ROWS = 50  # bootstrap units: runs of training rows of at least this many rows and 2 correlation lags
 
 
 @dataclass
@@ -124,12 +124,12 @@ class Score:
 
     def accepted(self) -> bool:
         """True when the effect clearly earns its parameter: ΔBIC, F test and validation all agree."""
-        return (self.delta_bic > BIC_MIN and self.p_value < P_MAX
-                and self.validation_improvement >= VALIDATION_MIN)
+        return self.delta_bic > BIC_MIN and self.p_value < P_MAX and self.validation_improvement >= VALIDATION_MIN
 
 
 def score(design: Design, residual: dict[str, np.ndarray], predicted: dict[str, np.ndarray], k: int = 1) -> Score:
     """Scores of the model ``residual ≈ predicted`` against ``residual ≈ 0`` (k new parameters), counting n_eff = n / D rows (discrepancy README §3)."""
+
     def rss(role):
         r = design.stack(residual, role)
         e = r - design.stack(predicted, role)
@@ -138,13 +138,22 @@ def score(design: Design, residual: dict[str, np.ndarray], predicted: dict[str, 
     r0, r1, n_rows = rss("train")
     v0, v1, _ = rss("validation")
     t0, t1, _ = rss("test")
-    n = max(n_rows // design.decimation, k + 2)        # effective (decorrelated) sample count
+    n = max(n_rows // design.decimation, k + 2)  # effective (decorrelated) sample count
     tiny = 1e-300
     dbic = n * np.log(max(r0, tiny) / max(r1, tiny)) - k * np.log(max(n, 2))
     f = ((r0 - r1) / k) / max(r1 / max(n - k, 1), tiny)
     p = float(sps.f.sf(f, k, max(n - k, 1))) if f > 0 else 1.0
-    return Score(float(dbic), float(f), p, 1.0 - v1 / v0 if v0 > 0 else 0.0, 1.0 - t1 / t0 if t0 > 0 else 0.0,
-                 (r0, r1), (v0, v1), (t0, t1), n)
+    return Score(
+        float(dbic),
+        float(f),
+        p,
+        1.0 - v1 / v0 if v0 > 0 else 0.0,
+        1.0 - t1 / t0 if t0 > 0 else 0.0,
+        (r0, r1),
+        (v0, v1),
+        (t0, t1),
+        n,
+    )
 
 
 def affine_fit(design: Design, residual: dict, a: dict, b: dict) -> tuple[float, float]:
@@ -181,15 +190,16 @@ def training_units(design: Design) -> list[tuple[str, np.ndarray]]:
         pos = np.flatnonzero(design.roles[tr.trial_id] == "train")
         if len(pos) == 0:
             continue
-        cuts = np.flatnonzero(np.diff(pos) > 1) + 1          # training blocks are separated by held-out ones
+        cuts = np.flatnonzero(np.diff(pos) > 1) + 1  # training blocks are separated by held-out ones
         for run in np.split(pos, cuts):
             n = max(len(run) // size, 1)
             units += [(tr.trial_id, part) for part in np.array_split(run, n)]
     return units
 
 
-def bootstrap_linear(design: Design, residual: dict, at: dict, slope: dict, value: float,
-                     replicates: int = BOOTSTRAP_REPLICATES) -> tuple[float, tuple[float, float]]:
+def bootstrap_linear(
+    design: Design, residual: dict, at: dict, slope: dict, value: float, replicates: int = BOOTSTRAP_REPLICATES
+) -> tuple[float, tuple[float, float]]:
     """Block-bootstrap uncertainty of a parameter identified at ``value`` (discrepancy README §3, uncertainty): the
     model linearised there, ``residual ≈ at + (p − value)·slope`` (``at`` = δ(value), ``slope`` = ∂δ/∂p), is refitted by
     least squares on resampled training units (:func:`training_units`, drawn with replacement); returns the replicates'
@@ -198,8 +208,14 @@ def bootstrap_linear(design: Design, residual: dict, at: dict, slope: dict, valu
     units = training_units(design)
     if len(units) < 2:
         return float("inf"), (-float("inf"), float("inf"))
-    rg = np.array([float(np.dot(np.ravel(slope[t][design.rows[t][u]]),
-                                np.ravel(residual[t][design.rows[t][u]] - at[t][design.rows[t][u]]))) for t, u in units])
+    rg = np.array(
+        [
+            float(
+                np.dot(np.ravel(slope[t][design.rows[t][u]]), np.ravel(residual[t][design.rows[t][u]] - at[t][design.rows[t][u]]))
+            )
+            for t, u in units
+        ]
+    )
     gg = np.array([float(np.sum(slope[t][design.rows[t][u]] ** 2)) for t, u in units])
     w = np.random.default_rng(BOOTSTRAP_SEED).multinomial(len(units), np.full(len(units), 1 / len(units)), size=replicates)
     den = w @ gg
@@ -260,11 +276,15 @@ def structure_left(design: Design, residual: dict[str, np.ndarray]) -> dict:
             den = float(np.dot(y, y))
             if m >= 1 and den > 0:
                 rho = np.array([np.dot(y[:-h], y[h:]) / den for h in range(1, m + 1)])
-                q_stats += len(y) * (len(y) + 2) * float(np.sum(rho ** 2 / (len(y) - np.arange(1, m + 1))))
+                q_stats += len(y) * (len(y) + 2) * float(np.sum(rho**2 / (len(y) - np.arange(1, m + 1))))
                 dof += m
     share = 1.0 - held1 / held0 if held0 > 0 else 0.0
     f = ((r0_tr - r1_tr) / max(k_tot, 1)) / max(r1_tr / max(n_tr - k_tot, 1), 1e-300)
     p_f = float(sps.f.sf(f, max(k_tot, 1), max(n_tr - k_tot, 1))) if f > 0 and n_tr > k_tot else 1.0
     p_lb = float(sps.chi2.sf(q_stats, dof)) if dof else 1.0
-    return {"heldout_share": float(share), "f_p_value": p_f, "ljung_box_p_value": p_lb,
-            "structured": bool(share >= STRUCTURE_SHARE)}
+    return {
+        "heldout_share": float(share),
+        "f_p_value": p_f,
+        "ljung_box_p_value": p_lb,
+        "structured": bool(share >= STRUCTURE_SHARE),
+    }

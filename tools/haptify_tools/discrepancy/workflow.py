@@ -31,18 +31,37 @@ from haptify_tools.discrepancy import hand_path as hp
 from haptify_tools.discrepancy import stats as st
 from haptify_tools.discrepancy import workspace as ws
 from haptify_tools.discrepancy.floor import (
-    FLOOR_REPLAYS, GAP_ALPHA, Floor, Parameter, gap_above_floor, heldout_gap, replay_durations, replay_floors,
+    FLOOR_REPLAYS,
+    GAP_ALPHA,
+    Floor,
+    Parameter,
+    gap_above_floor,
+    heldout_gap,
+    replay_durations,
+    replay_floors,
 )
 from haptify_tools.discrepancy.identify import Selection, accepted_parameters, pool_size, process_pool, select_effects
 from haptify_tools.discrepancy.library import NOT_OBSERVABLE
 from haptify_tools.discrepancy.model import (
-    AcceptedEffect, BenchmarkGap, BenchmarkNotComputed, CandidateFit, DiscrepancyFile, Place, ResidualCell, ResidualShape,
-    RoundResult, SignalGap, StateShape, Structure, WorkspaceGap, WorkspaceRegion,
+    AcceptedEffect,
+    BenchmarkGap,
+    BenchmarkNotComputed,
+    CandidateFit,
+    DiscrepancyFile,
+    Place,
+    ResidualCell,
+    ResidualShape,
+    RoundResult,
+    SignalGap,
+    StateShape,
+    Structure,
+    WorkspaceGap,
+    WorkspaceRegion,
 )
 from haptify_tools.twin.model import TwinFile, twin_from_dict, twin_to_dict, write_twin
 
 SPEED_BANDS_M_PER_S = (0.0, 0.02, 0.05, 0.1, 0.2, np.inf)
-MIN_PLACE_SHARE = 0.01          # regions holding fewer rows than this share are not ranked
+MIN_PLACE_SHARE = 0.01  # regions holding fewer rows than this share are not ranked
 CHANNELS = ("fx", "fy", "fz")
 
 
@@ -60,7 +79,7 @@ def localise(trials: list[dt.MeasuredTrial], before: dict, after: dict) -> list[
         rows.append((tr, v, rb, ra))
     if not rows:
         return []
-    total = sum(float(np.sum(rb ** 2)) for _, _, rb, _ in rows) or 1.0
+    total = sum(float(np.sum(rb**2)) for _, _, rb, _ in rows) or 1.0
     n_all = sum(len(rb) for _, _, rb, _ in rows)
     pos_all = np.concatenate([tr.position[v] for tr, v, _, _ in rows])
     cuts = [np.quantile(pos_all[:, k], [1 / 3, 2 / 3]) for k in range(3)]
@@ -94,9 +113,16 @@ def localise(trials: list[dt.MeasuredTrial], before: dict, after: dict) -> list[
         ra = np.concatenate([b for _, b in parts])
         if len(rb) == 0 or (kind in ("region", "speed_band") and len(rb) < MIN_PLACE_SHARE * n_all):
             continue
-        places.append(Place(kind=kind, label=label, rms_before_N=float(np.sqrt(np.mean(np.sum(rb ** 2, axis=1)))),
-                            rms_after_N=float(np.sqrt(np.mean(np.sum(ra ** 2, axis=1)))),
-                            energy_share_before=float(np.sum(rb ** 2) / total), samples=int(len(rb))))
+        places.append(
+            Place(
+                kind=kind,
+                label=label,
+                rms_before_N=float(np.sqrt(np.mean(np.sum(rb**2, axis=1)))),
+                rms_after_N=float(np.sqrt(np.mean(np.sum(ra**2, axis=1)))),
+                energy_share_before=float(np.sum(rb**2) / total),
+                samples=int(len(rb)),
+            )
+        )
     places.sort(key=lambda p: (-p.rms_before_N, p.kind, p.label))
     return places
 
@@ -110,8 +136,17 @@ def signal_gaps(design: st.Design, trials: list[dt.MeasuredTrial], before: dict,
         for k, ch in enumerate(CHANNELS):
             rb, ra = tr.force[:, k] - before[tr.trial_id][:, k], tr.force[:, k] - after[tr.trial_id][:, k]
             rms = lambda x, m: float(np.sqrt(np.mean(x[m] ** 2))) if m.any() else 0.0  # noqa: E731
-            out.append(SignalGap(trial_id=tr.trial_id, protocol=tr.protocol, channel=ch, rms_before_N=rms(rb, v),
-                                 rms_after_N=rms(ra, v), heldout_rms_before_N=rms(rb, held), heldout_rms_after_N=rms(ra, held)))
+            out.append(
+                SignalGap(
+                    trial_id=tr.trial_id,
+                    protocol=tr.protocol,
+                    channel=ch,
+                    rms_before_N=rms(rb, v),
+                    rms_after_N=rms(ra, v),
+                    heldout_rms_before_N=rms(rb, held),
+                    heldout_rms_after_N=rms(ra, held),
+                )
+            )
     return out
 
 
@@ -122,9 +157,13 @@ def _penetration(tr: dt.MeasuredTrial) -> tuple[np.ndarray, np.ndarray]:
 
 
 #: the benchmarks :func:`benchmark_values` computes per protocol (listed when its operator fails)
-BENCHMARKS_OF = {"free_space": ("free_space.force_mean",), "local_dynamic": ("force_mean",), "other": ("force_mean",),
-                 "frictionless_surface": ("surface.planar_force_mean",),
-                 "stiffness": ("stiffness.measured", "stiffness.peak_force")}
+BENCHMARKS_OF = {
+    "free_space": ("free_space.force_mean",),
+    "local_dynamic": ("force_mean",),
+    "other": ("force_mean",),
+    "frictionless_surface": ("surface.planar_force_mean",),
+    "stiffness": ("stiffness.measured", "stiffness.peak_force"),
+}
 
 
 def benchmark_values(tr: dt.MeasuredTrial, force: np.ndarray, errors: list | None = None) -> dict[str, tuple[float, str]]:
@@ -140,7 +179,10 @@ def benchmark_values(tr: dt.MeasuredTrial, force: np.ndarray, errors: list | Non
     out: dict[str, tuple[float, str]] = {}
     try:
         if tr.protocol in ("free_space", "local_dynamic", "other"):
-            out["free_space.force_mean" if tr.protocol == "free_space" else "force_mean"] = (magnitude_stats(force[v])["mean"], "N")
+            out["free_space.force_mean" if tr.protocol == "free_space" else "force_mean"] = (
+                magnitude_stats(force[v])["mean"],
+                "N",
+            )
         if tr.active:
             pen, n = _penetration(tr)
             c = v & tr.contact
@@ -157,7 +199,9 @@ def benchmark_values(tr: dt.MeasuredTrial, force: np.ndarray, errors: list | Non
     return out
 
 
-def benchmark_gaps(trials: list[dt.MeasuredTrial], before: dict, after: dict) -> tuple[list[BenchmarkGap], list[BenchmarkNotComputed]]:
+def benchmark_gaps(
+    trials: list[dt.MeasuredTrial], before: dict, after: dict
+) -> tuple[list[BenchmarkGap], list[BenchmarkNotComputed]]:
     """Benchmarks from the measured force and from the twin's force before and after, per trial, in each metric's unit,
     and those an operator could not compute, with its code (discrepancy README §4)."""
     out, missing = [], []
@@ -166,13 +210,22 @@ def benchmark_gaps(trials: list[dt.MeasuredTrial], before: dict, after: dict) ->
         for source, force in (("measured", tr.force), ("twin before", before[tr.trial_id]), ("twin after", after[tr.trial_id])):
             errors: list = []
             values[source] = benchmark_values(tr, force, errors)
-            missing += [BenchmarkNotComputed(metrics=m, trial_id=tr.trial_id, force=source, code=c, message=msg)
-                        for m, c, msg in errors]
+            missing += [
+                BenchmarkNotComputed(metrics=m, trial_id=tr.trial_id, force=source, code=c, message=msg) for m, c, msg in errors
+            ]
         m, b, a = values["measured"], values["twin before"], values["twin after"]
         for key in m:
             if key in b and key in a:
-                out.append(BenchmarkGap(metric=key, trial_id=tr.trial_id, unit=m[key][1], measured=m[key][0],
-                                        twin_before=b[key][0], twin_after=a[key][0]))
+                out.append(
+                    BenchmarkGap(
+                        metric=key,
+                        trial_id=tr.trial_id,
+                        unit=m[key][1],
+                        measured=m[key][0],
+                        twin_before=b[key][0],
+                        twin_after=a[key][0],
+                    )
+                )
     return out, missing
 
 
@@ -201,13 +254,27 @@ def workspace_gaps(sel: Selection) -> list[WorkspaceGap]:
         for lab in sorted(set(labels.tolist())):
             m = labels == lab
             if m.sum() >= MIN_PLACE_SHARE * len(labels):
-                regions.append(WorkspaceRegion(label=lab, rms_before_m=float(np.sqrt(np.mean(rb[m] ** 2))),
-                                               rms_after_m=float(np.sqrt(np.mean(ra[m] ** 2))), samples=int(m.sum())))
+                regions.append(
+                    WorkspaceRegion(
+                        label=lab,
+                        rms_before_m=float(np.sqrt(np.mean(rb[m] ** 2))),
+                        rms_after_m=float(np.sqrt(np.mean(ra[m] ** 2))),
+                        samples=int(m.sum()),
+                    )
+                )
         regions.sort(key=lambda r: -r.rms_before_m)
         vol = lambda p: float(volume_solid(p[np.all(np.isfinite(p), axis=1)]).volume)  # noqa: E731
-        out.append(WorkspaceGap(trial_id=sw.trial_id, rms_before_m=float(np.sqrt(np.mean(rb ** 2))),
-                                rms_after_m=float(np.sqrt(np.mean(ra ** 2))), measured_volume_m3=vol(sw.position),
-                                twin_before_volume_m3=vol(before), twin_after_volume_m3=vol(after), regions=regions))
+        out.append(
+            WorkspaceGap(
+                trial_id=sw.trial_id,
+                rms_before_m=float(np.sqrt(np.mean(rb**2))),
+                rms_after_m=float(np.sqrt(np.mean(ra**2))),
+                measured_volume_m3=vol(sw.position),
+                twin_before_volume_m3=vol(before),
+                twin_after_volume_m3=vol(after),
+                regions=regions,
+            )
+        )
     return out
 
 
@@ -228,55 +295,110 @@ def annotate_twin(twin: TwinFile, result: DiscrepancyFile) -> TwinFile:
         else:
             shown = f"{a.value:.6g} ± {se(a.stderr)}" + (f" (95 % {a.ci95[0]:.6g} … {a.ci95[1]:.6g})" if a.ci95 else "")
         holder[a.effect_id].setdefault("sources", {})[key] = (
-            f"identified by haptify discrepancy: {shown} {a.unit} (1 s.e.), ΔBIC {a.delta_bic:.1f}, p {a.p_value:.2g}")
+            f"identified by haptify discrepancy: {shown} {a.unit} (1 s.e.), ΔBIC {a.delta_bic:.1f}, p {a.p_value:.2g}"
+        )
     return twin_from_dict(data)
 
 
 def _per_drive(f) -> dict:
     """The interval and per-drive fields of a fit's record (discrepancy README §2, per drive; §3, uncertainty)."""
     ci = None if f.values is not None or f.interval is None or not np.all(np.isfinite(f.interval)) else list(f.interval)
-    return {"ci95": ci, "per_drive": f.values, "per_drive_stderr": [_finite(e) for e in f.stderrs] if f.stderrs else None,
-            "per_drive_delta_bic": f.per_drive_score.delta_bic if f.per_drive_score is not None else None}
+    return {
+        "ci95": ci,
+        "per_drive": f.values,
+        "per_drive_stderr": [_finite(e) for e in f.stderrs] if f.stderrs else None,
+        "per_drive_delta_bic": f.per_drive_score.delta_bic if f.per_drive_score is not None else None,
+    }
 
 
 def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial], sel: Selection) -> DiscrepancyFile:
     """Assemble :class:`DiscrepancyFile` from a finished selection, its floor not yet known (:func:`with_floor`) (discrepancy README §4)."""
     rounds = []
     for i, r in enumerate(sel.rounds):
-        cands = [CandidateFit(effect_id=f.candidate.effect_id, parameter=f.candidate.parameter, value=f.value,
-                              stderr=_finite(f.stderr), unit=f.candidate.unit, delta_bic=f.score.delta_bic,
-                              p_value=f.score.p_value, validation_improvement=f.score.validation_improvement,
-                              test_share=f.score.test_share, simulations=f.simulations,
-                              accepted=bool(r.accepted and f is r.chosen), **_per_drive(f)) for f in r.fits]
+        cands = [
+            CandidateFit(
+                effect_id=f.candidate.effect_id,
+                parameter=f.candidate.parameter,
+                value=f.value,
+                stderr=_finite(f.stderr),
+                unit=f.candidate.unit,
+                delta_bic=f.score.delta_bic,
+                p_value=f.score.p_value,
+                validation_improvement=f.score.validation_improvement,
+                test_share=f.score.test_share,
+                simulations=f.simulations,
+                accepted=bool(r.accepted and f is r.chosen),
+                **_per_drive(f),
+            )
+            for f in r.fits
+        ]
         rounds.append(RoundResult(number=i + 1, decimation=r.design.decimation, candidates=cands, near_ties=r.near_ties))
-    accepted = [AcceptedEffect(order=i + 1, effect_id=f.candidate.effect_id, parameter=f.candidate.parameter, value=f.value,
-                               stderr=_finite(f.stderr), unit=f.candidate.unit, delta_bic=f.score.delta_bic,
-                               p_value=f.score.p_value, share_explained=f.score.test_share,
-                               near_ties=sel.rounds[i].near_ties, **_per_drive(f)) for i, f in enumerate(sel.accepted)]
+    accepted = [
+        AcceptedEffect(
+            order=i + 1,
+            effect_id=f.candidate.effect_id,
+            parameter=f.candidate.parameter,
+            value=f.value,
+            stderr=_finite(f.stderr),
+            unit=f.candidate.unit,
+            delta_bic=f.score.delta_bic,
+            p_value=f.score.p_value,
+            share_explained=f.score.test_share,
+            near_ties=sel.rounds[i].near_ties,
+            **_per_drive(f),
+        )
+        for i, f in enumerate(sel.accepted)
+    ]
     s = sel.structure
     design = sel.rounds[0].design
     wgaps = workspace_gaps(sel)
     before, after = heldout_gap(trials, sel.initial_sim), heldout_gap(trials, sel.final_sim)
     bench, missing = benchmark_gaps(trials, sel.initial_sim, sel.final_sim)
     bench += [
-        BenchmarkGap(metric="workspace.measured_volume", trial_id=w.trial_id, unit="m^3", measured=w.measured_volume_m3,
-                     twin_before=w.twin_before_volume_m3, twin_after=w.twin_after_volume_m3) for w in wgaps]
+        BenchmarkGap(
+            metric="workspace.measured_volume",
+            trial_id=w.trial_id,
+            unit="m^3",
+            measured=w.measured_volume_m3,
+            twin_before=w.twin_before_volume_m3,
+            twin_after=w.twin_after_volume_m3,
+        )
+        for w in wgaps
+    ]
     return DiscrepancyFile(
-        session_id=session_id, twin_name=twin.name, verdict=verdict_of(bool(accepted), s["structured"], False),
-        accepted=accepted, rounds=rounds, residual=residual_shape(sel.shape), benchmarks_not_computed=missing,
-        structure=Structure(**s), where=localise(trials, sel.initial_sim, sel.final_sim),
+        session_id=session_id,
+        twin_name=twin.name,
+        verdict=verdict_of(bool(accepted), s["structured"], False),
+        accepted=accepted,
+        rounds=rounds,
+        residual=residual_shape(sel.shape),
+        benchmarks_not_computed=missing,
+        structure=Structure(**s),
+        where=localise(trials, sel.initial_sim, sel.final_sim),
         signal_gaps=signal_gaps(design, trials, sel.initial_sim, sel.final_sim),
-        benchmark_gaps=bench, workspace_gaps=wgaps,
-        heldout_gap_before_N=before, heldout_gap_after_N=after,
+        benchmark_gaps=bench,
+        workspace_gaps=wgaps,
+        heldout_gap_before_N=before,
+        heldout_gap_after_N=after,
         not_observable=dict(NOT_OBSERVABLE),
         hand_path={tr.trial_id: tr.path_source for tr in trials},
-        settings={"path_crossover_hz": hp.PATH_CROSSOVER_HZ, "pose_cutoff_hz": hp.POSE_CUTOFF_HZ,
-                  "free_space_pose_cutoff_hz": hp.POSE_CUTOFF_BY_PROTOCOL_HZ["free_space"],
-                  "orientation_cutoff_hz": hp.ORIENTATION_CUTOFF_HZ, "clip_margin_s": hp.CLIP_MARGIN_S,
-                  "gap_margin_s": hp.GAP_MARGIN_S, "rest_window_s": drive_rest.REST_WINDOW_S,
-                  "rest_range_rad": drive_rest.REST_RANGE_RAD, "residual_cutoff_hz": dt.RESIDUAL_CUTOFF_HZ,
-                  "sim_rate_hz": dt.SIM_RATE_HZ, "bic_min": st.BIC_MIN, "p_max": st.P_MAX,
-                  "validation_min": st.VALIDATION_MIN, "structure_share": st.STRUCTURE_SHARE})
+        settings={
+            "path_crossover_hz": hp.PATH_CROSSOVER_HZ,
+            "pose_cutoff_hz": hp.POSE_CUTOFF_HZ,
+            "free_space_pose_cutoff_hz": hp.POSE_CUTOFF_BY_PROTOCOL_HZ["free_space"],
+            "orientation_cutoff_hz": hp.ORIENTATION_CUTOFF_HZ,
+            "clip_margin_s": hp.CLIP_MARGIN_S,
+            "gap_margin_s": hp.GAP_MARGIN_S,
+            "rest_window_s": drive_rest.REST_WINDOW_S,
+            "rest_range_rad": drive_rest.REST_RANGE_RAD,
+            "residual_cutoff_hz": dt.RESIDUAL_CUTOFF_HZ,
+            "sim_rate_hz": dt.SIM_RATE_HZ,
+            "bic_min": st.BIC_MIN,
+            "p_max": st.P_MAX,
+            "validation_min": st.VALIDATION_MIN,
+            "structure_share": st.STRUCTURE_SHARE,
+        },
+    )
 
 
 def verdict_of(accepted: bool, structured: bool, gap_significant: bool) -> str:
@@ -300,9 +422,22 @@ def residual_shape(shape: dict | None) -> ResidualShape | None:
     return ResidualShape(
         where=[ResidualCell(protocol=p, channel=c, heldout_rms_N=r, share=e) for p, c, r, e in shape["where"]],
         offset_share=shape["offset_share"],
-        states=[StateShape(state=f.state, kind=f.kind, heldout_r2=f.heldout_r2, description=f.description, period=f.period,
-                           amplitude_N=f.amplitude_N, amplitude_per_axis_N=f.amplitude_per_axis_N) for f in shape["fits"]],
-        follows=best.state if best is not None else None, description=text, structured=shape["structured"])
+        states=[
+            StateShape(
+                state=f.state,
+                kind=f.kind,
+                heldout_r2=f.heldout_r2,
+                description=f.description,
+                period=f.period,
+                amplitude_N=f.amplitude_N,
+                amplitude_per_axis_N=f.amplitude_per_axis_N,
+            )
+            for f in shape["fits"]
+        ],
+        follows=best.state if best is not None else None,
+        description=text,
+        structured=shape["structured"],
+    )
 
 
 def replay_parameters(sel: Selection) -> tuple[Parameter, ...]:
@@ -336,18 +471,31 @@ def with_floor(result: DiscrepancyFile, floor: Floor | None) -> DiscrepancyFile:
     bound = floor.bound_N
     p = floor.p_value(result.heldout_gap_after_N)
     significant = p < GAP_ALPHA
-    return result.model_copy(update={
-        "accepted": _replay_uncertainty(result.accepted, floor),
-        "floor_N": bound, "floor_replays_N": list(floor.replays_N), "floor_median_N": floor.median_N,
-        "gap_p_value": p, "gap_significant": significant,
-        "verdict": verdict_of(bool(result.accepted), result.structure.structured, significant),
-        "heldout_gap_above_floor_before_N": gap_above_floor(result.heldout_gap_before_N, bound),
-        "heldout_gap_above_floor_after_N": gap_above_floor(result.heldout_gap_after_N, bound)})
+    return result.model_copy(
+        update={
+            "accepted": _replay_uncertainty(result.accepted, floor),
+            "floor_N": bound,
+            "floor_replays_N": list(floor.replays_N),
+            "floor_median_N": floor.median_N,
+            "gap_p_value": p,
+            "gap_significant": significant,
+            "verdict": verdict_of(bool(result.accepted), result.structure.structured, significant),
+            "heldout_gap_above_floor_before_N": gap_above_floor(result.heldout_gap_before_N, bound),
+            "heldout_gap_above_floor_after_N": gap_above_floor(result.heldout_gap_after_N, bound),
+        }
+    )
 
 
-def assess(twin: TwinFile, trials: list[dt.MeasuredTrial], durations: dict[str, float], session_id: str = "",
-           max_effects: int = 5, workers: int = 1, log: Callable[[str], object] | None = None,
-           sweeps: list | None = None) -> tuple[DiscrepancyFile, Selection]:
+def assess(
+    twin: TwinFile,
+    trials: list[dt.MeasuredTrial],
+    durations: dict[str, float],
+    session_id: str = "",
+    max_effects: int = 5,
+    workers: int = 1,
+    log: Callable[[str], object] | None = None,
+    sweeps: list | None = None,
+) -> tuple[DiscrepancyFile, Selection]:
     """What :func:`run_discrepancy` decides, for force trials already loaded, without outputs: selection, result, floor
     (from replays of ``durations``, :func:`.floor.replay_durations`) and verdict (discrepancy README §2–4)."""
     sel = select_effects(twin, trials, max_effects=max_effects, log=log, workers=workers, sweeps=sweeps)
@@ -355,9 +503,19 @@ def assess(twin: TwinFile, trials: list[dt.MeasuredTrial], durations: dict[str, 
     return with_floor(result, replay_floors(sel.twin, durations, params=replay_parameters(sel)) if trials else None), sel
 
 
-def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | None = None, *, max_effects: int = 5,
-                    overwrite: bool = False, log: Callable[[str], object] | None = None,
-                    report: bool = True, workers: int = 1, overlay: bool = True, client=None) -> tuple[DiscrepancyFile, Selection]:
+def run_discrepancy(
+    session_path: str | Path,
+    twin: TwinFile,
+    out: str | Path | None = None,
+    *,
+    max_effects: int = 5,
+    overwrite: bool = False,
+    log: Callable[[str], object] | None = None,
+    report: bool = True,
+    workers: int = 1,
+    overlay: bool = True,
+    client=None,
+) -> tuple[DiscrepancyFile, Selection]:
     """Run the workflow (discrepancy README §1–4); with ``out`` write ``discrepancy.json``, ``twin.json`` and ``report.html`` there.
 
     ``overlay``: also write ``overlay.rrd`` for the viewer (when ``report``). ``workers``: processes that run the
@@ -376,7 +534,7 @@ def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | 
     if target is not None:
         target.parent.mkdir(parents=True, exist_ok=True)
         build = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
-        build.chmod(0o755)          # an ordinary folder once renamed into place
+        build.chmod(0o755)  # an ordinary folder once renamed into place
     try:
         with ExitStack() as stack:
             pending = None
@@ -417,6 +575,6 @@ def run_discrepancy(session_path: str | Path, twin: TwinFile, out: str | Path | 
             replace_folder_atomically(build, target, overwrite)
     except BaseException:
         if build is not None:
-            shutil.rmtree(build, ignore_errors=True)      # nothing half-written is left beside the target
+            shutil.rmtree(build, ignore_errors=True)  # nothing half-written is left beside the target
         raise
     return result, sel

@@ -30,7 +30,7 @@ from haptify_tools.twin.model import TwinFile, twin_from_dict, twin_to_dict
 
 EFFECT_ID = "kinematics.base_collision"
 PARAMETER = "base_top_m"
-GRID_FACTORS = (0.5, 0.7, 1.0, 1.4, 2.0)     # of the stored box's height above its bottom
+GRID_FACTORS = (0.5, 0.7, 1.0, 1.4, 2.0)  # of the stored box's height above its bottom
 
 
 @dataclass
@@ -108,5 +108,3 @@ def predict(twin: TwinFile, commands: np.ndarray) -> np.ndarray:
 def sweep_predictions(twin: TwinFile, sweeps: list[MeasuredSweep], commands: dict) -> dict[str, np.ndarray]:
     """:func:`predict` for every sweep (trial id → predicted points, W, m) (discrepancy README §1)."""
     return {sw.trial_id: predict(twin, commands[sw.trial_id][0]) for sw in sweeps}
-
-

@@ -45,9 +45,15 @@ class ReadCache:
         """(submissions, withdrawals, answered challenges) now: the tables only grow, so any change a reader
         can see (a new record, a withdrawal, an implementation proven by a challenge) changes this triple."""
         with self.reg.engine.connect() as conn:
-            return tuple(conn.execute(select(select(func.count()).select_from(db.Submission).scalar_subquery(),
-                                             select(func.count()).select_from(db.Withdrawal).scalar_subquery(),
-                                             select(func.count()).select_from(db.ChallengeResult).scalar_subquery())).one())
+            return tuple(
+                conn.execute(
+                    select(
+                        select(func.count()).select_from(db.Submission).scalar_subquery(),
+                        select(func.count()).select_from(db.Withdrawal).scalar_subquery(),
+                        select(func.count()).select_from(db.ChallengeResult).scalar_subquery(),
+                    )
+                ).one()
+            )
 
     def get(self, key: Any, compute: Callable[[], Any]) -> Any:
         """The cached answer for ``key``, or ``compute()`` (run outside the lock; errors are not cached)."""
@@ -71,8 +77,9 @@ class ReadCache:
 
     def all_device_results(self, verification: str = "verified") -> list[dict]:
         """:meth:`Registry.device_results` of every device (those without current results have no metrics)."""
-        return self.get(("all-devices", verification),
-                        lambda: [self.device_results(d["slug"], verification) for d in self.devices()])
+        return self.get(
+            ("all-devices", verification), lambda: [self.device_results(d["slug"], verification) for d in self.devices()]
+        )
 
     def submissions(self) -> list[dict]:
         """Every submission summary (all states), newest first."""
@@ -125,18 +132,25 @@ def not_counted_notes(apart: dict[str, list[dict]]) -> list[str]:
     for slug, entries in apart.items():
         subs = {e["submission"]: e["verification"] for e in entries}
         if subs:
-            states = ", ".join(f"{n} {state}" for state in ("disagreeing", "unverified")
-                               if (n := sum(v == state for v in subs.values())))
-            out.append(f"{slug}: {len(subs)} current submission(s) not verified and not counted ({states}); "
-                       f"verification=all includes them")
+            states = ", ".join(
+                f"{n} {state}" for state in ("disagreeing", "unverified") if (n := sum(v == state for v in subs.values()))
+            )
+            out.append(
+                f"{slug}: {len(subs)} current submission(s) not verified and not counted ({states}); "
+                f"verification=all includes them"
+            )
     return out
 
 
 def not_ranked(metric_id: str, results: list[dict]) -> list[dict]:
     """The current results of ``metric_id`` left out of a ranking (not verified), with their device and
     state; a disagreeing one carries both the submitted and the recomputed value (spec §17.3.1)."""
-    return [{**e, "device": d["device"]["slug"], "label": f"{d['device']['manufacturer']} {d['device']['model']}"}
-            for d in results for e in d.get("not_counted", []) if e["metric"] == metric_id]
+    return [
+        {**e, "device": d["device"]["slug"], "label": f"{d['device']['manufacturer']} {d['device']['model']}"}
+        for d in results
+        for e in d.get("not_counted", [])
+        if e["metric"] == metric_id
+    ]
 
 
 @router.get("/leaderboards", name="api_leaderboards", summary="Metrics that have a leaderboard")
@@ -152,5 +166,10 @@ def api_leaderboard(metric_id: str, request: Request, verification: str = Query(
     ``not_ranked`` with their state."""
     results = reads(request).all_device_results(verification)
     rows = leaderboard(metric_id, results)
-    return {"metric": metric_id, "rule": rule_text(metric_id), "verification": verification,
-            "rows": [r.as_dict() for r in rows], "not_ranked": not_ranked(metric_id, results)}
+    return {
+        "metric": metric_id,
+        "rule": rule_text(metric_id),
+        "verification": verification,
+        "rows": [r.as_dict() for r in rows],
+        "not_ranked": not_ranked(metric_id, results),
+    }

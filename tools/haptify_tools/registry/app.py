@@ -37,8 +37,19 @@ VERIFICATION_FILTER = "^(all|verified|disagreeing|unverified)$"  # lists: one ve
 RANKED_FILTER = "^(verified|all)$"  # aggregates and rankings: verified results only (default), or all
 log = logging.getLogger("haptify.registry")
 
-STATUS = {"E960": 413, "E970": 401, "E971": 403, "E972": 429, "E973": 404, "E974": 409, "E975": 400, "E977": 403,
-          "E978": 503, "E979": 410, "E999": 500}
+STATUS = {
+    "E960": 413,
+    "E970": 401,
+    "E971": 403,
+    "E972": 429,
+    "E973": 404,
+    "E974": 409,
+    "E975": 400,
+    "E977": 403,
+    "E978": 503,
+    "E979": 410,
+    "E999": 500,
+}
 
 
 def http_status(err: HaptifyError) -> int:
@@ -53,38 +64,50 @@ def refusal(err: HaptifyError) -> JSONResponse:
     wait = getattr(err, "retry_after", None)
     if wait is not None:
         headers["Retry-After"] = str(max(1, int(wait + 0.999)))
-    return JSONResponse({"status": "refused", "findings": [f.to_dict() for f in err.findings]},
-                        status_code=http_status(err), headers=headers)
+    return JSONResponse(
+        {"status": "refused", "findings": [f.to_dict() for f in err.findings]}, status_code=http_status(err), headers=headers
+    )
 
 
 def log_refusal(request: Request, err: HaptifyError) -> None:
     """Every refusal is logged on the server with its codes, method, path and client (spec §17.5.1)."""
     client = request.client.host if request.client else "-"
-    log.warning("refused %s %s from %s: %s", request.method, request.url.path, client,
-                "; ".join(f"{f.code} {f.message}" for f in err.findings[:5]))
+    log.warning(
+        "refused %s %s from %s: %s",
+        request.method,
+        request.url.path,
+        client,
+        "; ".join(f"{f.code} {f.message}" for f in err.findings[:5]),
+    )
 
 
 class WithdrawBody(BaseModel):
     """The body of ``POST /api/v1/submissions/{id}/withdraw``: a non-empty ``reason`` (spec §17.5)."""
+
     model_config = ConfigDict(extra="forbid")
     reason: str = Field(min_length=1, max_length=2000, description="Why the submission is withdrawn (kept with the record).")
 
 
 class TokenBody(BaseModel):
     """The body of ``POST /api/v1/tokens``: lab, scope and rate limit in requests per minute (spec §17.6)."""
+
     model_config = ConfigDict(extra="forbid")
     lab: str
     scope: str = "submit"
     rate_per_minute: int | None = Field(None, ge=1, le=100_000)
 
 
-CSP_PAGES = ("default-src 'none'; img-src 'self' data:; media-src 'self'; style-src 'self' 'unsafe-inline'; "
-             "font-src 'self'; connect-src 'self'; form-action 'self'; base-uri 'none'; frame-ancestors 'none'")
+CSP_PAGES = (
+    "default-src 'none'; img-src 'self' data:; media-src 'self'; style-src 'self' 'unsafe-inline'; "
+    "font-src 'self'; connect-src 'self'; form-action 'self'; base-uri 'none'; frame-ancestors 'none'"
+)
 # Swagger UI and ReDoc (/docs, /redoc) are FastAPI's pages: their script and style come from its CDN.
-CSP_API_DOCS = ("default-src 'none'; script-src 'unsafe-inline' https://cdn.jsdelivr.net; "
-                "style-src 'unsafe-inline' https://cdn.jsdelivr.net https://fonts.googleapis.com; font-src https://fonts.gstatic.com; "
-                "img-src 'self' data: https://fastapi.tiangolo.com https://cdn.redoc.ly; connect-src 'self'; worker-src blob:; "
-                "base-uri 'none'; form-action 'none'; frame-ancestors 'none'")
+CSP_API_DOCS = (
+    "default-src 'none'; script-src 'unsafe-inline' https://cdn.jsdelivr.net; "
+    "style-src 'unsafe-inline' https://cdn.jsdelivr.net https://fonts.googleapis.com; font-src https://fonts.gstatic.com; "
+    "img-src 'self' data: https://fastapi.tiangolo.com https://cdn.redoc.ly; connect-src 'self'; worker-src blob:; "
+    "base-uri 'none'; form-action 'none'; frame-ancestors 'none'"
+)
 API_DOCS_PATHS = ("/docs", "/docs/oauth2-redirect", "/redoc")
 
 
@@ -93,8 +116,12 @@ def security_headers(path: str) -> list[tuple[bytes, bytes]]:
     registry's own pages and ``frame-ancestors 'none'`` everywhere, ``X-Content-Type-Options: nosniff``,
     ``X-Frame-Options: DENY`` and ``Referrer-Policy: no-referrer``."""
     csp = CSP_API_DOCS if path in API_DOCS_PATHS else CSP_PAGES
-    return [(b"content-security-policy", csp.encode()), (b"x-content-type-options", b"nosniff"),
-            (b"x-frame-options", b"DENY"), (b"referrer-policy", b"no-referrer")]
+    return [
+        (b"content-security-policy", csp.encode()),
+        (b"x-content-type-options", b"nosniff"),
+        (b"x-frame-options", b"DENY"),
+        (b"referrer-policy", b"no-referrer"),
+    ]
 
 
 class SecurityHeaders:
@@ -130,8 +157,12 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
         yield
         reg.close()
 
-    app = FastAPI(title="Haptify results registry", version=PACKAGE_VERSION, lifespan=lifespan,
-                  description="Labs submit verified device results; everyone compares devices (Haptify spec chapter 17).")
+    app = FastAPI(
+        title="Haptify results registry",
+        version=PACKAGE_VERSION,
+        lifespan=lifespan,
+        description="Labs submit verified device results; everyone compares devices (Haptify spec chapter 17).",
+    )
     app.state.registry = reg
     app.state.swept = swept
     build_stack = app.build_middleware_stack
@@ -144,9 +175,17 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
 
     @app.exception_handler(RequestValidationError)
     async def _invalid(request: Request, exc: RequestValidationError) -> JSONResponse:
-        findings = [Finding("E975", e.get("msg", "invalid"), file=str(e.get("loc", ["request"])[0]),
-                            pointer="/" + "/".join(str(p) for p in e.get("loc", [])[1:]),
-                            expected=e.get("type"), found=_short(e.get("input"))) for e in exc.errors()]
+        findings = [
+            Finding(
+                "E975",
+                e.get("msg", "invalid"),
+                file=str(e.get("loc", ["request"])[0]),
+                pointer="/" + "/".join(str(p) for p in e.get("loc", [])[1:]),
+                expected=e.get("type"),
+                found=_short(e.get("input")),
+            )
+            for e in exc.errors()
+        ]
         err = HaptifyError(*(findings or [Finding("E975", "invalid request")]))
         log_refusal(request, err)
         return refusal(err)
@@ -155,33 +194,66 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
     async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
         err = HaptifyError(Finding("E973" if exc.status_code == 404 else "E975", str(exc.detail)))
         log_refusal(request, err)
-        return JSONResponse({"status": "refused", "findings": [f.to_dict() for f in err.findings]},
-                            status_code=exc.status_code, headers=getattr(exc, "headers", None))
+        return JSONResponse(
+            {"status": "refused", "findings": [f.to_dict() for f in err.findings]},
+            status_code=exc.status_code,
+            headers=getattr(exc, "headers", None),
+        )
 
     @app.exception_handler(Exception)
     async def _internal(request: Request, exc: Exception) -> JSONResponse:
-        log.error("error %s %s from %s: E999 %s: %s", request.method, request.url.path,
-                  request.client.host if request.client else "-", type(exc).__name__, exc, exc_info=exc)
-        return JSONResponse({"status": "error", "findings": [Finding("E999", f"{type(exc).__name__}: {exc}").to_dict()]},
-                            status_code=500)
+        log.error(
+            "error %s %s from %s: E999 %s: %s",
+            request.method,
+            request.url.path,
+            request.client.host if request.client else "-",
+            type(exc).__name__,
+            exc,
+            exc_info=exc,
+        )
+        return JSONResponse(
+            {"status": "error", "findings": [Finding("E999", f"{type(exc).__name__}: {exc}").to_dict()]}, status_code=500
+        )
 
     @app.get(f"{API}/health", tags=["service"])
     def health() -> dict:
         """Liveness, versions and what the start-up sweep removed."""
-        return {"ok": True, "version": PACKAGE_VERSION, "spec_versions": [SPEC_VERSION],
-                "database": reg.engine.dialect.name, "swept": app.state.swept}
+        return {
+            "ok": True,
+            "version": PACKAGE_VERSION,
+            "spec_versions": [SPEC_VERSION],
+            "database": reg.engine.dialect.name,
+            "swept": app.state.swept,
+        }
 
-    @app.post(f"{API}/submissions", tags=["submissions"], status_code=201,
-              openapi_extra={"requestBody": {"required": True, "content": {"application/gzip": {"schema": {"type": "string", "format": "binary"}}}}})
-    async def submit(request: Request, response: Response, dry_run: bool = Query(False, description="check only; store nothing"),
-                     authorization: str | None = Header(None)) -> dict:
+    @app.post(
+        f"{API}/submissions",
+        tags=["submissions"],
+        status_code=201,
+        openapi_extra={
+            "requestBody": {"required": True, "content": {"application/gzip": {"schema": {"type": "string", "format": "binary"}}}}
+        },
+    )
+    async def submit(
+        request: Request,
+        response: Response,
+        dry_run: bool = Query(False, description="check only; store nothing"),
+        authorization: str | None = Header(None),
+    ) -> dict:
         """Submit a bundle (the request body is the ``.tar.gz``; spec §17.2). 201 accepted, 200 duplicate or dry run."""
         caller = await run_in_threadpool(reg.authenticate, authorization, "submit")
         declared = request.headers.get("content-length")
         limit = reg.settings.limits.max_archive_bytes
         if declared and declared.isdigit() and int(declared) > limit:
-            raise HaptifyError(Finding("E960", "the bundle archive is larger than the registry accepts", file="<upload>",
-                                       expected=f"≤ {limit} bytes", found=f"{declared} bytes"))
+            raise HaptifyError(
+                Finding(
+                    "E960",
+                    "the bundle archive is larger than the registry accepts",
+                    file="<upload>",
+                    expected=f"≤ {limit} bytes",
+                    found=f"{declared} bytes",
+                )
+            )
         upload = await reg.receive(request.stream())
         outcome = await run_in_threadpool(reg.submit, upload, caller, dry_run=dry_run)
         if outcome.status != "accepted":
@@ -198,8 +270,9 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
         return uploads.open(caller.token_id, upload_length).state()
 
     @app.patch(f"{API}/uploads/{{uid}}", tags=["submissions"])
-    async def append_upload(uid: str, request: Request, upload_offset: str | None = Header(None),
-                            authorization: str | None = Header(None)) -> dict:
+    async def append_upload(
+        uid: str, request: Request, upload_offset: str | None = Header(None), authorization: str | None = Header(None)
+    ) -> dict:
         """Append the body at ``Upload-Offset`` (the bytes received so far); a body cut short keeps what arrived."""
         caller = await run_in_threadpool(reg.authenticate, authorization, "submit")
         return (await uploads.append(uid, caller.token_id, upload_offset, request.stream())).state()
@@ -211,8 +284,12 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
         return uploads.get(uid, caller.token_id).state()
 
     @app.post(f"{API}/uploads/{{uid}}/submit", tags=["submissions"], status_code=201)
-    def submit_upload(uid: str, response: Response, dry_run: bool = Query(False, description="check only; store nothing"),
-                      authorization: str | None = Header(None)) -> dict:
+    def submit_upload(
+        uid: str,
+        response: Response,
+        dry_run: bool = Query(False, description="check only; store nothing"),
+        authorization: str | None = Header(None),
+    ) -> dict:
         """Submit a complete upload: the same checks and answers as ``POST /submissions`` (spec §17.3)."""
         caller = reg.authenticate(authorization, "submit")
         outcome = reg.submit(uploads.take(uid, caller.token_id), caller, dry_run=dry_run)
@@ -221,10 +298,14 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
         return outcome.to_dict()
 
     @app.get(f"{API}/submissions", tags=["submissions"])
-    def list_submissions(lab: str | None = None, device: str | None = None,
-                         state: str = Query("all", pattern="^(all|current|superseded|withdrawn)$"),
-                         verification: str = Query("all", pattern=VERIFICATION_FILTER),
-                         limit: int = Query(100, ge=1, le=1000), offset: int = Query(0, ge=0)) -> list[dict]:
+    def list_submissions(
+        lab: str | None = None,
+        device: str | None = None,
+        state: str = Query("all", pattern="^(all|current|superseded|withdrawn)$"),
+        verification: str = Query("all", pattern=VERIFICATION_FILTER),
+        limit: int = Query(100, ge=1, le=1000),
+        offset: int = Query(0, ge=0),
+    ) -> list[dict]:
         """Submissions, newest first; ``state`` current, superseded, withdrawn or all; ``verification``
         verified, disagreeing, unverified or all (spec §17.3.1)."""
         return reg.submissions(lab=lab, device=device, state=state, verification=verification, limit=limit, offset=offset)
@@ -254,8 +335,11 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
     @app.get(f"{API}/limits", tags=["service"])
     def limits() -> dict:
         """What this registry accepts (spec §17.4, §17.4.1): a client checks its bundle against these before sending."""
-        return {**asdict(reg.settings.limits), "challenge_ttl_s": reg.settings.challenge_ttl_s,
-                "upload_ttl_s": reg.settings.upload_ttl_s}
+        return {
+            **asdict(reg.settings.limits),
+            "challenge_ttl_s": reg.settings.challenge_ttl_s,
+            "upload_ttl_s": reg.settings.upload_ttl_s,
+        }
 
     @app.post(f"{API}/challenges", tags=["conformance"], status_code=201)
     def create_challenge(authorization: str | None = Header(None)) -> dict:
@@ -271,7 +355,9 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
     @app.get(f"{API}/challenges/{{cid}}/sessions.tar.gz", tags=["conformance"], response_class=FileResponse)
     def get_challenge_sessions(cid: str) -> FileResponse:
         """The challenge's session folders (while it is open)."""
-        return FileResponse(challenge.sessions_archive(reg, cid), media_type="application/gzip", filename=f"challenge-{cid}.tar.gz")
+        return FileResponse(
+            challenge.sessions_archive(reg, cid), media_type="application/gzip", filename=f"challenge-{cid}.tar.gz"
+        )
 
     @app.post(f"{API}/challenges/{{cid}}/answers", tags=["conformance"])
     def answer_challenge(cid: str, body: challenge.Answers, authorization: str | None = Header(None)) -> dict:
@@ -306,14 +392,20 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
         return reads(request).device_results(slug, verification)
 
     @app.get(f"{API}/compare", tags=["devices"])
-    def compare_devices(request: Request, devices: str = Query(..., description="comma-separated device slugs"),
-                        format: str = Query("json", pattern="^(json|csv|md|html)$"), paper: bool = False,
-                        verification: str = Query("verified", pattern=RANKED_FILTER)) -> Any:
+    def compare_devices(
+        request: Request,
+        devices: str = Query(..., description="comma-separated device slugs"),
+        format: str = Query("json", pattern="^(json|csv|md|html)$"),
+        paper: bool = False,
+        verification: str = Query("verified", pattern=RANKED_FILTER),
+    ) -> Any:
         """The paper's Table III for any number of devices (``haptify.compare``; spec §15.5), from their
         verified current submissions (``verification=all``: from all); a note counts those left out."""
         slugs = [s for s in devices.split(",") if s]
         if not slugs:
-            raise HaptifyError(Finding("E975", "no device given", file="query", pointer="/devices", expected="slug,slug,…", found=devices))
+            raise HaptifyError(
+                Finding("E975", "no device given", file="query", pointer="/devices", expected="slug,slug,…", found=devices)
+            )
         cache = reads(request)
         table = compare.build_table(cache.comparison(tuple(slugs), verification), with_paper=paper)
         apart = {slug: cache.device_results(slug, verification)["not_counted"] for slug in slugs}
@@ -324,23 +416,48 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
             return PlainTextResponse(compare.to_markdown(table), media_type="text/markdown")
         if format == "html":
             return Response(compare.to_html(table), media_type="text/html")
-        return {"devices": slugs, "verification": verification, "header": table.header, "rows": table.rows,
-                "notes": table.notes, "not_counted": apart}
+        return {
+            "devices": slugs,
+            "verification": verification,
+            "header": table.header,
+            "rows": table.rows,
+            "notes": table.notes,
+            "not_counted": apart,
+        }
 
     @app.get(f"{API}/export.csv", tags=["devices"], response_class=PlainTextResponse)
-    def export_csv(device: str | None = None, state: str = Query("current", pattern="^(all|current|superseded|withdrawn)$"),
-                   verification: str = Query("all", pattern=VERIFICATION_FILTER)) -> Response:
+    def export_csv(
+        device: str | None = None,
+        state: str = Query("current", pattern="^(all|current|superseded|withdrawn)$"),
+        verification: str = Query("all", pattern=VERIFICATION_FILTER),
+    ) -> Response:
         """Every metric of every submission (filtered by state and verification state), one row each, as
         CSV; the ``verification`` column carries each submission's state (spec §17.3.1)."""
-        return PlainTextResponse(to_csv(reg.export_rows(device=device, state=state, verification=verification)),
-                                 media_type="text/csv")
+        return PlainTextResponse(
+            to_csv(reg.export_rows(device=device, state=state, verification=verification)), media_type="text/csv"
+        )
 
     _add_web(app)
     return app
 
 
-EXPORT_COLUMNS = ["submission", "state", "verification", "lab", "device", "manufacturer", "model", "serial",
-                  "implementation", "metric", "value", "unit", "n", "sd", "received_at"]
+EXPORT_COLUMNS = [
+    "submission",
+    "state",
+    "verification",
+    "lab",
+    "device",
+    "manufacturer",
+    "model",
+    "serial",
+    "implementation",
+    "metric",
+    "value",
+    "unit",
+    "n",
+    "sd",
+    "received_at",
+]
 
 
 def to_csv(rows: list[dict]) -> str:
@@ -374,8 +491,7 @@ def csv_cell(value: Any) -> Any:
 
 def neutralised(table: compare.Table) -> compare.Table:
     """The comparison table with every header and body cell passed through :func:`csv_cell`."""
-    return replace(table, header=[csv_cell(h) for h in table.header],
-                   rows=[[csv_cell(c) for c in row] for row in table.rows])
+    return replace(table, header=[csv_cell(h) for h in table.header], rows=[[csv_cell(c) for c in row] for row in table.rows])
 
 
 def _short(value: Any) -> Any:

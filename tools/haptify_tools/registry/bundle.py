@@ -93,7 +93,9 @@ class Bundle(BaseModel):
     implementation: Implementation = Field(description="Name and version of the software that computed results.json.")
     session_id: str
     includes_raw: bool = Field(description="True when the session's stream files are included (then the registry re-computes).")
-    supersedes: str | None = Field(None, pattern=r"^[0-9a-f]{20}$", description="Id of the lab's earlier submission this one corrects.")
+    supersedes: str | None = Field(
+        None, pattern=r"^[0-9a-f]{20}$", description="Id of the lab's earlier submission this one corrects."
+    )
     files: list[BundleFile] = Field(min_length=2)
 
     def file(self, role: Role) -> BundleFile | None:
@@ -117,6 +119,7 @@ def submission_id(digest: str) -> str:
 
 
 # --- packing -------------------------------------------------------------------------------------
+
 
 def _session_files(session_dir: Path, manifest: dict, include_raw: bool) -> list[tuple[str, Path, Role]]:
     """``(archive path, source, role)`` of the session files a bundle carries (spec §17.2)."""
@@ -145,9 +148,14 @@ def _file_entry(path: str, source: Path, role: Role) -> BundleFile:
     return BundleFile(path=path, role=role, size=source.stat().st_size, sha256=sha256_file(source))
 
 
-def build_bundle(session_dir: str | os.PathLike, results_path: str | os.PathLike,
-                 conformance_path: str | os.PathLike | None = None, *, include_raw: bool = False,
-                 supersedes: str | None = None) -> tuple[Bundle, list[tuple[str, Path]]]:
+def build_bundle(
+    session_dir: str | os.PathLike,
+    results_path: str | os.PathLike,
+    conformance_path: str | os.PathLike | None = None,
+    *,
+    include_raw: bool = False,
+    supersedes: str | None = None,
+) -> tuple[Bundle, list[tuple[str, Path]]]:
     """The bundle manifest and the ``(archive path, source file)`` list for a session and its results.
     Spec §17.2.
 
@@ -167,11 +175,17 @@ def build_bundle(session_dir: str | os.PathLike, results_path: str | os.PathLike
             raise fail("E967", f"the conformance report {str(conformance_path)!r} does not exist", file=str(conformance_path))
         sources.append((CONFORMANCE_JSON, Path(conformance_path), "conformance"))
     sources += _session_files(session_dir, session.raw, include_raw)
-    bundle = Bundle(spec_version=results.spec_version, lab=BundleLab(id=session.manifest.lab.id),
-                    device=BundleDevice(manufacturer=device.manufacturer, model=device.model, serial=device.serial),
-                    rig=session.manifest.rig, implementation=results.implementation, session_id=session.session_id,
-                    includes_raw=include_raw, supersedes=supersedes,
-                    files=[_file_entry(p, s, r) for p, s, r in sorted(sources)])
+    bundle = Bundle(
+        spec_version=results.spec_version,
+        lab=BundleLab(id=session.manifest.lab.id),
+        device=BundleDevice(manufacturer=device.manufacturer, model=device.model, serial=device.serial),
+        rig=session.manifest.rig,
+        implementation=results.implementation,
+        session_id=session.session_id,
+        includes_raw=include_raw,
+        supersedes=supersedes,
+        files=[_file_entry(p, s, r) for p, s, r in sorted(sources)],
+    )
     return bundle, [(p, s) for p, s, _ in sorted(sources)]
 
 
@@ -191,8 +205,11 @@ def pack(bundle: Bundle, files: list[tuple[str, Path]], target: str | os.PathLik
     sha256 while it is copied, so a file changed after :func:`build_bundle` is E965, never a bad bundle.
     """
     declared = {f.path: f for f in bundle.files}
-    with open(target, "wb") as raw, gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0, compresslevel=6) as gz, \
-            tarfile.open(fileobj=gz, mode="w", format=tarfile.PAX_FORMAT) as tar:
+    with (
+        open(target, "wb") as raw,
+        gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0, compresslevel=6) as gz,
+        tarfile.open(fileobj=gz, mode="w", format=tarfile.PAX_FORMAT) as tar,
+    ):
         manifest = canonical_json(bundle.model_dump(mode="json"))
         tar.addfile(_tar_info(BUNDLE_JSON, len(manifest)), io.BytesIO(manifest))
         for path, source in sorted(files):
@@ -200,8 +217,13 @@ def pack(bundle: Bundle, files: list[tuple[str, Path]], target: str | os.PathLik
             with open(source, "rb") as fh:
                 data = fh.read()
             if len(data) != entry.size or hashlib.sha256(data).hexdigest() != entry.sha256:
-                raise fail("E965", f"{path!r} changed while the bundle was packed", file=path,
-                           expected=entry.sha256, found=hashlib.sha256(data).hexdigest())
+                raise fail(
+                    "E965",
+                    f"{path!r} changed while the bundle was packed",
+                    file=path,
+                    expected=entry.sha256,
+                    found=hashlib.sha256(data).hexdigest(),
+                )
             tar.addfile(_tar_info(path, len(data)), io.BytesIO(data))
         raw.flush()
         os.fsync(raw.fileno())
@@ -209,6 +231,7 @@ def pack(bundle: Bundle, files: list[tuple[str, Path]], target: str | os.PathLik
 
 
 # --- unpacking -------------------------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class Limits:
@@ -244,11 +267,21 @@ class _CountingReader(io.RawIOBase):
         buffer[:n] = data
         self.count += n
         if self.count > self.limits.max_unpacked_bytes:
-            raise fail("E960", "the archive decompresses to more than the registry accepts", file="<upload>",
-                       expected=f"≤ {self.limits.max_unpacked_bytes} bytes", found=f"> {self.limits.max_unpacked_bytes} bytes")
+            raise fail(
+                "E960",
+                "the archive decompresses to more than the registry accepts",
+                file="<upload>",
+                expected=f"≤ {self.limits.max_unpacked_bytes} bytes",
+                found=f"> {self.limits.max_unpacked_bytes} bytes",
+            )
         if self.count > self.limits.ratio_floor_bytes and self.count > self.limits.max_ratio * self.compressed:
-            raise fail("E963", "the archive expands more than any real bundle does (a decompression bomb)", file="<upload>",
-                       expected=f"expansion ≤ {self.limits.max_ratio:g}×", found=f"> {self.count / self.compressed:.0f}×")
+            raise fail(
+                "E963",
+                "the archive expands more than any real bundle does (a decompression bomb)",
+                file="<upload>",
+                expected=f"expansion ≤ {self.limits.max_ratio:g}×",
+                found=f"> {self.count / self.compressed:.0f}×",
+            )
         return n
 
 
@@ -279,8 +312,13 @@ def _member_name_problem(name: str) -> str | None:
 
 
 def _unsafe(name: str, why: str, found: str | None = None) -> HaptifyError:
-    return fail("E962", f"archive member {name!r} {why}", file=name,
-                expected="a regular file at a relative path inside the bundle", found=found or why)
+    return fail(
+        "E962",
+        f"archive member {name!r} {why}",
+        file=name,
+        expected="a regular file at a relative path inside the bundle",
+        found=found or why,
+    )
 
 
 def unpack(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits = Limits()) -> Unpacked:  # noqa: C901 (over ruff's limit of 15: to be split)
@@ -293,8 +331,13 @@ def unpack(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits =
     archive = Path(archive)
     size = archive.stat().st_size
     if size > limits.max_archive_bytes:
-        raise fail("E960", "the bundle archive is larger than the registry accepts", file="<upload>",
-                   expected=f"≤ {limits.max_archive_bytes} bytes", found=f"{size} bytes")
+        raise fail(
+            "E960",
+            "the bundle archive is larger than the registry accepts",
+            file="<upload>",
+            expected=f"≤ {limits.max_archive_bytes} bytes",
+            found=f"{size} bytes",
+        )
     root = Path(root)
     root.mkdir(mode=DIR_MODE, parents=True, exist_ok=False)
     out = Unpacked(root=root, archive_sha256=sha256_file(archive), archive_size=size)
@@ -305,14 +348,21 @@ def unpack(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits =
             try:
                 tar = tarfile.open(fileobj=io.BufferedReader(counter, CHUNK), mode="r|")
             except tarfile.TarError as exc:
-                raise fail("E961", f"the upload is not a tar archive: {exc}", file="<upload>", expected="gzip-compressed tar") from None
+                raise fail(
+                    "E961", f"the upload is not a tar archive: {exc}", file="<upload>", expected="gzip-compressed tar"
+                ) from None
             try:
                 count = written = 0
                 for member in tar:
                     count += 1
                     if count > limits.max_members:
-                        raise fail("E960", "the archive has too many members", file="<upload>",
-                                   expected=f"≤ {limits.max_members}", found=f"> {limits.max_members}")
+                        raise fail(
+                            "E960",
+                            "the archive has too many members",
+                            file="<upload>",
+                            expected=f"≤ {limits.max_members}",
+                            found=f"> {limits.max_members}",
+                        )
                     name = member.name
                     problem = _member_name_problem(name)
                     if problem:
@@ -320,7 +370,9 @@ def unpack(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits =
                     if member.isdir():
                         continue
                     if member.issym() or member.islnk():
-                        raise _unsafe(name, f"is a {'symbolic' if member.issym() else 'hard'} link to {member.linkname!r}", "link")
+                        raise _unsafe(
+                            name, f"is a {'symbolic' if member.issym() else 'hard'} link to {member.linkname!r}", "link"
+                        )
                     if not member.isreg():
                         raise _unsafe(name, "is not a regular file (device, FIFO or other special member)", "special file")
                     if member.issparse():  # its holes would be written as zeros the compressed stream never held
@@ -330,8 +382,13 @@ def unpack(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits =
                         raise _unsafe(name, "appears twice (names must be unique, also ignoring case)", "duplicate")
                     seen_folded.add(folded)
                     if member.size > limits.max_unpacked_bytes:
-                        raise fail("E960", f"archive member {name!r} is larger than the registry accepts", file=name,
-                                   expected=f"≤ {limits.max_unpacked_bytes} bytes", found=f"{member.size} bytes")
+                        raise fail(
+                            "E960",
+                            f"archive member {name!r} is larger than the registry accepts",
+                            file=name,
+                            expected=f"≤ {limits.max_unpacked_bytes} bytes",
+                            found=f"{member.size} bytes",
+                        )
                     target = root.joinpath(*name.split("/"))
                     _make_parents(root, name)
                     source = tar.extractfile(member)
@@ -343,16 +400,24 @@ def unpack(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits =
                             size += len(chunk)
                             written += len(chunk)
                             if written > limits.max_unpacked_bytes:
-                                raise fail("E960", "the archive unpacks to more bytes than the registry accepts", file=name,
-                                           expected=f"≤ {limits.max_unpacked_bytes} bytes written",
-                                           found=f"> {limits.max_unpacked_bytes} bytes written")
+                                raise fail(
+                                    "E960",
+                                    "the archive unpacks to more bytes than the registry accepts",
+                                    file=name,
+                                    expected=f"≤ {limits.max_unpacked_bytes} bytes written",
+                                    found=f"> {limits.max_unpacked_bytes} bytes written",
+                                )
                             digest.update(chunk)
                             fh.write(chunk)
                     out.members[name] = (size, digest.hexdigest())
             except tarfile.TarError as exc:
-                raise fail("E961", f"the tar archive is damaged: {exc}", file="<upload>", expected="a complete tar archive") from None
+                raise fail(
+                    "E961", f"the tar archive is damaged: {exc}", file="<upload>", expected="a complete tar archive"
+                ) from None
             except (EOFError, zlib.error) as exc:
-                raise fail("E961", f"the archive ends early or is corrupt: {exc}", file="<upload>", expected="gzip-compressed tar") from None
+                raise fail(
+                    "E961", f"the archive ends early or is corrupt: {exc}", file="<upload>", expected="gzip-compressed tar"
+                ) from None
     return out
 
 
@@ -377,8 +442,13 @@ def read_manifest(unpacked: Unpacked, limits: Limits = Limits()) -> Bundle:  # n
     if BUNDLE_JSON not in unpacked.members:
         raise fail("E964", "the archive has no bundle.json", file=BUNDLE_JSON, expected="bundle.json at the top", found="missing")
     if unpacked.members[BUNDLE_JSON][0] > limits.max_json_bytes:
-        raise fail("E960", "bundle.json is too large", file=BUNDLE_JSON, expected=f"≤ {limits.max_json_bytes} bytes",
-                   found=f"{unpacked.members[BUNDLE_JSON][0]} bytes")
+        raise fail(
+            "E960",
+            "bundle.json is too large",
+            file=BUNDLE_JSON,
+            expected=f"≤ {limits.max_json_bytes} bytes",
+            found=f"{unpacked.members[BUNDLE_JSON][0]} bytes",
+        )
     data = parse_json_file(unpacked.root / BUNDLE_JSON, "E964", BUNDLE_JSON)
     try:
         bundle = Bundle.model_validate(data)
@@ -388,37 +458,97 @@ def read_manifest(unpacked: Unpacked, limits: Limits = Limits()) -> Bundle:  # n
     declared: dict[str, BundleFile] = {}
     for i, f in enumerate(bundle.files):
         if f.path in declared or f.path == BUNDLE_JSON:
-            findings.append(Finding("E964", f"{f.path!r} is declared twice", file=BUNDLE_JSON, pointer=f"/files/{i}/path",
-                                    expected="each path once", found=f.path))
+            findings.append(
+                Finding(
+                    "E964",
+                    f"{f.path!r} is declared twice",
+                    file=BUNDLE_JSON,
+                    pointer=f"/files/{i}/path",
+                    expected="each path once",
+                    found=f.path,
+                )
+            )
         declared[f.path] = f
     for role in ("results", "session-manifest"):
         paths = [f.path for f in bundle.files if f.role == role]
         want = RESULTS_JSON if role == "results" else f"{SESSION_DIR}/{MANIFEST}"
         if paths != [want]:
-            findings.append(Finding("E964", f"the bundle must declare exactly one {role} file, {want!r}", file=BUNDLE_JSON,
-                                    pointer="/files", expected=[want], found=paths))
+            findings.append(
+                Finding(
+                    "E964",
+                    f"the bundle must declare exactly one {role} file, {want!r}",
+                    file=BUNDLE_JSON,
+                    pointer="/files",
+                    expected=[want],
+                    found=paths,
+                )
+            )
     conformance = [f.path for f in bundle.files if f.role == "conformance"]
     if conformance not in ([], [CONFORMANCE_JSON]):
-        findings.append(Finding("E964", f"the conformance report must be {CONFORMANCE_JSON!r}", file=BUNDLE_JSON,
-                                pointer="/files", expected=[CONFORMANCE_JSON], found=conformance))
+        findings.append(
+            Finding(
+                "E964",
+                f"the conformance report must be {CONFORMANCE_JSON!r}",
+                file=BUNDLE_JSON,
+                pointer="/files",
+                expected=[CONFORMANCE_JSON],
+                found=conformance,
+            )
+        )
     for path, entry in declared.items():
         if entry.role in ("session-file", "stream") and not path.startswith(f"{SESSION_DIR}/"):
-            findings.append(Finding("E964", f"session file {path!r} lies outside {SESSION_DIR}/", file=BUNDLE_JSON,
-                                    expected=f"{SESSION_DIR}/…", found=path))
+            findings.append(
+                Finding(
+                    "E964",
+                    f"session file {path!r} lies outside {SESSION_DIR}/",
+                    file=BUNDLE_JSON,
+                    expected=f"{SESSION_DIR}/…",
+                    found=path,
+                )
+            )
         if path not in unpacked.members:
-            findings.append(Finding("E965", f"{path!r} is declared in bundle.json but not in the archive", file=path,
-                                    expected="present", found="missing"))
+            findings.append(
+                Finding(
+                    "E965",
+                    f"{path!r} is declared in bundle.json but not in the archive",
+                    file=path,
+                    expected="present",
+                    found="missing",
+                )
+            )
             continue
         size, sha = unpacked.members[path]
         if size != entry.size or sha != entry.sha256:
-            findings.append(Finding("E965", f"{path!r} differs from its declaration in bundle.json", file=path,
-                                    expected={"size": entry.size, "sha256": entry.sha256}, found={"size": size, "sha256": sha}))
+            findings.append(
+                Finding(
+                    "E965",
+                    f"{path!r} differs from its declaration in bundle.json",
+                    file=path,
+                    expected={"size": entry.size, "sha256": entry.sha256},
+                    found={"size": size, "sha256": sha},
+                )
+            )
     for path in sorted(set(unpacked.members) - set(declared) - {BUNDLE_JSON}):
-        findings.append(Finding("E965", f"{path!r} is in the archive but not declared in bundle.json", file=path,
-                                expected="declared in bundle.json", found="undeclared"))
+        findings.append(
+            Finding(
+                "E965",
+                f"{path!r} is in the archive but not declared in bundle.json",
+                file=path,
+                expected="declared in bundle.json",
+                found="undeclared",
+            )
+        )
     if any(f.role == "stream" for f in bundle.files) != bundle.includes_raw:
-        findings.append(Finding("E964", "includes_raw does not match the files", file=BUNDLE_JSON, pointer="/includes_raw",
-                                expected=any(f.role == "stream" for f in bundle.files), found=bundle.includes_raw))
+        findings.append(
+            Finding(
+                "E964",
+                "includes_raw does not match the files",
+                file=BUNDLE_JSON,
+                pointer="/includes_raw",
+                expected=any(f.role == "stream" for f in bundle.files),
+                found=bundle.includes_raw,
+            )
+        )
     if findings:
         raise HaptifyError(*findings)
     return bundle

@@ -74,8 +74,7 @@ class ChallengeCase:
 
     def public(self) -> dict:
         """What the implementation is told: id, metric, session folder, parameters, unit; never the expected value."""
-        return {"id": self.id, "metric": self.metric, "session": self.session, "parameters": self.parameters,
-                "unit": self.unit}
+        return {"id": self.id, "metric": self.metric, "session": self.session, "parameters": self.parameters, "unit": self.unit}
 
 
 def _fmt(rng: np.random.Generator) -> str:
@@ -119,9 +118,11 @@ def workspace(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
     w = bcf.manifest(sid, example_rig(), device=device)
     bcf.pose_cloud(w, "workspace-1", bcf.sphere_cloud(6000, radius, centre, rng), _fmt(rng))
     w.write(path)
-    return [("workspace.measured_volume", 4 / 3 * math.pi * radius ** 3, "m^3", {}),
-            ("workspace.spec_box_volume", math.prod(box), "m^3", {}),
-            ("workspace.modeled_volume", bcf.pappus_volume(device), "m^3", {})]
+    return [
+        ("workspace.measured_volume", 4 / 3 * math.pi * radius**3, "m^3", {}),
+        ("workspace.spec_box_volume", math.prod(box), "m^3", {}),
+        ("workspace.modeled_volume", bcf.pappus_volume(device), "m^3", {}),
+    ]
 
 
 def free_space(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
@@ -133,18 +134,38 @@ def free_space(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
     bias = rb.plate_bias_vector(rig)
     force = np.array(_round(rng.uniform(0.2, 1.0, 3) * rng.choice([-1.0, 1.0], 3), 3))
     radius, omega = round(float(rng.uniform(0.03, 0.06)), 3), round(float(rng.uniform(0.5, 2.0)), 2)
-    spin, side, down = round(float(rng.uniform(0.05, 0.3)), 3), round(float(rng.uniform(0.1, 0.8)), 3), round(float(rng.uniform(12, 20)), 2)
+    spin, side, down = (
+        round(float(rng.uniform(0.05, 0.3)), 3),
+        round(float(rng.uniform(0.1, 0.8)), 3),
+        round(float(rng.uniform(12, 20)), 2),
+    )
     rates = ((500.0, 500.0, 100.0), (400.0, 250.0, 120.0))[int(rng.integers(0, 2))]
     w = bcf.manifest(sid, rig, truth=truth, plate_bias=bias)
-    bcf.handle_trial(w, "free_space-1", "free_space", duration_s=8.0, position=bcf.circle(radius, omega, (0.0, 0.03, 0.14)),
-                     quaternion=bcf.spin(spin), force_w=lambda t: np.tile(force, (len(t), 1)), truth=truth, rates=rates,
-                     fmt=_fmt(rng), plate_force_w=lambda t: np.tile([0.0, side, -down], (len(t), 1)), plate_bias=bias)
+    bcf.handle_trial(
+        w,
+        "free_space-1",
+        "free_space",
+        duration_s=8.0,
+        position=bcf.circle(radius, omega, (0.0, 0.03, 0.14)),
+        quaternion=bcf.spin(spin),
+        force_w=lambda t: np.tile(force, (len(t), 1)),
+        truth=truth,
+        rates=rates,
+        fmt=_fmt(rng),
+        plate_force_w=lambda t: np.tile([0.0, side, -down], (len(t), 1)),
+        plate_bias=bias,
+    )
     w.write(path)
     size = float(np.linalg.norm(force))
-    return [("free_space.force_mean", size, "N", {}), ("free_space.force_sd", 0.0, "N", {}),
-            ("free_space.force_min", size, "N", {}), ("free_space.force_max", size, "N", {}),
-            ("free_space.plate_force_mean", side, "N", {}), ("free_space.speed_mean", radius * omega, "m/s", {}),
-            ("free_space.angular_speed_mean", spin, "rad/s", {})]
+    return [
+        ("free_space.force_mean", size, "N", {}),
+        ("free_space.force_sd", 0.0, "N", {}),
+        ("free_space.force_min", size, "N", {}),
+        ("free_space.force_max", size, "N", {}),
+        ("free_space.plate_force_mean", side, "N", {}),
+        ("free_space.speed_mean", radius * omega, "m/s", {}),
+        ("free_space.angular_speed_mean", spin, "rad/s", {}),
+    ]
 
 
 def vibration(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
@@ -157,10 +178,12 @@ def vibration(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
     bcf.write_vibration_session(path, sid, fmt, rate, secs, fs_tones, base_tones, rig_kind)
     fs_all = [t for ts in fs_tones.values() for t in ts]
     base_all = [t for ts in base_tones.values() for t in ts]
-    return [("vibration.rms", bcf.tones_rms(fs_all), "m/s^2", {}),
-            ("vibration.spectral_centroid", bcf.tones_centroid(fs_all), "Hz", {}),
-            ("vibration.baseline_rms", bcf.tones_rms(base_all), "m/s^2", {}),
-            ("vibration.baseline_centroid", bcf.tones_centroid(base_all), "Hz", {})]
+    return [
+        ("vibration.rms", bcf.tones_rms(fs_all), "m/s^2", {}),
+        ("vibration.spectral_centroid", bcf.tones_centroid(fs_all), "Hz", {}),
+        ("vibration.baseline_rms", bcf.tones_rms(base_all), "m/s^2", {}),
+        ("vibration.baseline_centroid", bcf.tones_centroid(base_all), "Hz", {}),
+    ]
 
 
 def dynamics(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
@@ -172,11 +195,23 @@ def dynamics(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
     away -= (away @ v) / (v @ v) * v  # perpendicular: every test window's nearest training window is its twin
     shift = away / np.linalg.norm(away) * param("dynamics", "R_p") * float(rng.uniform(0.3, 1.0))
     q = quat_from_axis_angle(rng.normal(size=3), np.array(float(rng.uniform(0.0, 1.0))))
-    motion = bcf.LineMotion(np.array(_round(rng.uniform([-0.05, -0.03, 0.11], [0.05, 0.03, 0.16]), 3)), v, q,
-                            np.array(_round(rng.uniform(-0.3, 0.3, 3), 3)), np.array(_round(rng.uniform(-0.01, 0.01, 3), 4)))
-    pr = bcf.Prediction(sid.removeprefix("conf-"), _fmt(rng), _rig_kind(rng), motion, shift,
-                        np.array(_round(rng.uniform(-0.5, 0.5, 3), 3)), "registry challenge",
-                        models=(str(rng.choice(["a", "b", "c"])),))
+    motion = bcf.LineMotion(
+        np.array(_round(rng.uniform([-0.05, -0.03, 0.11], [0.05, 0.03, 0.16]), 3)),
+        v,
+        q,
+        np.array(_round(rng.uniform(-0.3, 0.3, 3), 3)),
+        np.array(_round(rng.uniform(-0.01, 0.01, 3), 4)),
+    )
+    pr = bcf.Prediction(
+        sid.removeprefix("conf-"),
+        _fmt(rng),
+        _rig_kind(rng),
+        motion,
+        shift,
+        np.array(_round(rng.uniform(-0.5, 0.5, 3), 3)),
+        "registry challenge",
+        models=(str(rng.choice(["a", "b", "c"])),),
+    )
     return _fixture_truths(bcf.prediction_fixture(pr), path)
 
 
@@ -187,12 +222,26 @@ def surface(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
     0.0104 N by 0.0004 N, beyond the 1 % tolerance)."""
     on = round(float(rng.uniform(0.8, 1.5)), 2)
     off = round(on + float(rng.uniform(4.0, 6.0)), 2)
-    level, swing, freq = round(float(rng.uniform(0.2, 0.6)), 3), round(float(rng.uniform(0.05, 0.15)), 3), round(float(rng.uniform(0.2, 0.5)), 2)
+    level, swing, freq = (
+        round(float(rng.uniform(0.2, 0.6)), 3),
+        round(float(rng.uniform(0.05, 0.15)), 3),
+        round(float(rng.uniform(0.2, 0.5)), 2),
+    )
     rates = ((1000.0, 500.0, 100.0), (400.0, 250.0, 150.0))[int(rng.integers(0, 2))]
-    fx = bcf.surface_fixture(sid.removeprefix("conf-"), _fmt(rng), _rig_kind(rng), _round(rng.uniform(-0.3, 0.3, 2), 2) + [1.0],
-                             (0.0, round(float(rng.uniform(0.0, 0.05)), 3), round(float(rng.uniform(0.09, 0.12)), 3)),
-                             ((on, off),), round(off + 1.0, 2), lambda t: level + swing * np.sin(2 * np.pi * freq * t), rates,
-                             "registry challenge", 0.0, outside=None)
+    fx = bcf.surface_fixture(
+        sid.removeprefix("conf-"),
+        _fmt(rng),
+        _rig_kind(rng),
+        _round(rng.uniform(-0.3, 0.3, 2), 2) + [1.0],
+        (0.0, round(float(rng.uniform(0.0, 0.05)), 3), round(float(rng.uniform(0.09, 0.12)), 3)),
+        ((on, off),),
+        round(off + 1.0, 2),
+        lambda t: level + swing * np.sin(2 * np.pi * freq * t),
+        rates,
+        "registry challenge",
+        0.0,
+        outside=None,
+    )
     return _fixture_truths(fx, path)
 
 
@@ -202,9 +251,18 @@ def stiffness(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
     k = round(float(rng.uniform(300.0, 650.0)), 1)
     peak = round(k * bcf.DEPTH * float(rng.uniform(0.6, 0.75)), 3)
     rates = ((1000.0, 500.0, 100.0), (400.0, 250.0, 150.0))[int(rng.integers(0, 2))]
-    fx = bcf.spring_fixture(sid.removeprefix("conf-"), _fmt(rng), _rig_kind(rng), _round(rng.uniform(-0.2, 0.2, 2), 2) + [1.0],
-                            (0.0, round(float(rng.uniform(0.0, 0.04)), 3), round(float(rng.uniform(0.09, 0.12)), 3)),
-                            k, peak, None, rates, "registry challenge")
+    fx = bcf.spring_fixture(
+        sid.removeprefix("conf-"),
+        _fmt(rng),
+        _rig_kind(rng),
+        _round(rng.uniform(-0.2, 0.2, 2), 2) + [1.0],
+        (0.0, round(float(rng.uniform(0.0, 0.04)), 3), round(float(rng.uniform(0.09, 0.12)), 3)),
+        k,
+        peak,
+        None,
+        rates,
+        "registry challenge",
+    )
     return _fixture_truths(fx, path)
 
 
@@ -231,15 +289,23 @@ def rig(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
     w.write(path)
     t = np.arange(3000) / 1000.0  # the impact trial of rig_builders.add_impact_trial: 3 s at 1 kHz, amplitudes 4, 3, 20 N
     ringing = np.column_stack([rb.damped(t, f, zeta, 1.0, a) for f, a in zip(modes, (4.0, 3.0, 20.0))])
-    return [("rig.plate_natural_frequency", bcf.impact_peaks(t, ringing, 1000.0), "Hz", {}),
-            ("rig.cop_error", float(np.linalg.norm(offsets, axis=1).mean()), "m", {}),
-            ("rig.sync_offset", max(abs(d) for d in delays), "s", {}),
-            ("rig.handle_calibration_rms", bcf.calibration_rms(bcf.QUIET), "[N, m/s^2, N*m]", {})]
+    return [
+        ("rig.plate_natural_frequency", bcf.impact_peaks(t, ringing, 1000.0), "Hz", {}),
+        ("rig.cop_error", float(np.linalg.norm(offsets, axis=1).mean()), "m", {}),
+        ("rig.sync_offset", max(abs(d) for d in delays), "s", {}),
+        ("rig.handle_calibration_rms", bcf.calibration_rms(bcf.QUIET), "[N, m/s^2, N*m]", {}),
+    ]
 
 
 FAMILIES: dict[str, Callable[[np.random.Generator, Path, str], list[Truth]]] = {
-    "workspace": workspace, "free_space": free_space, "vibration": vibration, "dynamics": dynamics,
-    "surface": surface, "stiffness": stiffness, "rig": rig}
+    "workspace": workspace,
+    "free_space": free_space,
+    "vibration": vibration,
+    "dynamics": dynamics,
+    "surface": surface,
+    "stiffness": stiffness,
+    "rig": rig,
+}
 
 
 def generate(seed: int, root: Path, tag: str, families: tuple[str, ...] = tuple(FAMILIES)) -> list[ChallengeCase]:
@@ -256,16 +322,19 @@ def generate(seed: int, root: Path, tag: str, families: tuple[str, ...] = tuple(
         truths = FAMILIES[family](rng, root / family, f"conf-challenge-{tag}-{family}".replace("_", "-"))
         for metric, expected, unit, parameters in truths:
             expected = [float(x) for x in expected] if isinstance(expected, (list, tuple, np.ndarray)) else float(expected)
-            cases.append(ChallengeCase(f"challenge-{tag}.{metric}", metric, family, expected, unit, dict(tol[metric]),
-                                       dict(parameters)))
+            cases.append(
+                ChallengeCase(f"challenge-{tag}.{metric}", metric, family, expected, unit, dict(tol[metric]), dict(parameters))
+            )
     return cases
 
 
 def pack_sessions(root: Path, target: Path) -> None:
     """The challenge's session folders as one ``.tar.gz`` (regular files only, sorted, mode 0600)."""
-    with open(os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600), "wb") as raw, \
-            gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as gz, \
-            tarfile.open(fileobj=gz, mode="w", format=tarfile.PAX_FORMAT) as tar:
+    with (
+        open(os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600), "wb") as raw,
+        gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as gz,
+        tarfile.open(fileobj=gz, mode="w", format=tarfile.PAX_FORMAT) as tar,
+    ):
         for path in sorted(p for p in root.rglob("*") if p.is_file()):
             data = path.read_bytes()
             info = tarfile.TarInfo(path.relative_to(root).as_posix())
@@ -279,8 +348,15 @@ def judge_answer(case: ChallengeCase, answer: Any) -> dict:
     """The verdict of one answer (a results document, or ``{"error": "…"}``) under spec §16.3: passed when
     the case's metric is there, in its unit, finite (every component of a vector) and within
     ``abs + rel·|expected|`` of the truth."""
-    out = {"case": case.id, "metric": case.metric, "expected": case.expected, "tolerance": case.tolerance,
-           "actual": None, "status": "failed", "message": ""}
+    out = {
+        "case": case.id,
+        "metric": case.metric,
+        "expected": case.expected,
+        "tolerance": case.tolerance,
+        "actual": None,
+        "status": "failed",
+        "message": "",
+    }
     if not isinstance(answer, dict) or "metrics" not in answer:
         out["message"] = str(answer.get("error", "no results")) if isinstance(answer, dict) else "no results"
         return out
@@ -298,15 +374,18 @@ def judge_answer(case: ChallengeCase, answer: Any) -> dict:
     elif agrees(value, case.expected, case.tolerance):
         out["status"] = "passed"
     else:
-        out["message"] = (f"found {value!r}; allowed |difference| ≤ {case.tolerance['abs']:g} + "
-                          f"{case.tolerance['rel']:g}·|expected|")
+        out["message"] = (
+            f"found {value!r}; allowed |difference| ≤ {case.tolerance['abs']:g} + {case.tolerance['rel']:g}·|expected|"
+        )
     return out
 
 
 def _numbers(value: Any, shape: int | None) -> bool:
     """``value`` is a finite number (``shape`` None) or a list of ``shape`` finite numbers."""
+
     def finite(x: Any) -> bool:
         return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
     if shape is None:
         return finite(value)
     return isinstance(value, list) and len(value) == shape and all(finite(x) for x in value)
@@ -327,6 +406,7 @@ def cases_from_json(text: str) -> list[ChallengeCase]:
 
 
 # --- the registry's side: issue, serve, judge, record (spec §17.8) ---------------------------------
+
 
 def _aware(t: datetime) -> datetime:
     """A stored time with its zone (SQLite returns naive UTC)."""
@@ -354,9 +434,18 @@ def issue(reg, caller) -> dict:
         partial.unlink(missing_ok=True)
     now = datetime.now(timezone.utc)
     with DBSession(reg.writer) as s, s.begin():
-        s.add(db.Challenge(id=cid, lab_id=caller.lab_id, token_id=caller.token_id, spec_version=SPEC_VERSION,
-                           seed=f"{seed:032x}", cases_json=cases_to_json(cases), created_at=now,
-                           expires_at=now + timedelta(seconds=reg.settings.challenge_ttl_s)))
+        s.add(
+            db.Challenge(
+                id=cid,
+                lab_id=caller.lab_id,
+                token_id=caller.token_id,
+                spec_version=SPEC_VERSION,
+                seed=f"{seed:032x}",
+                cases_json=cases_to_json(cases),
+                created_at=now,
+                expires_at=now + timedelta(seconds=reg.settings.challenge_ttl_s),
+            )
+        )
     return record(reg, cid)
 
 
@@ -378,18 +467,27 @@ def record(reg, cid: str) -> dict:
         row = _row(s, cid)
         result = s.get(db.ChallengeResult, cid)
         cases = cases_from_json(row.cases_json)
-        out = {"id": row.id, "lab": row.lab_id, "spec_version": row.spec_version,
-               "created_at": _aware(row.created_at).isoformat(), "expires_at": _aware(row.expires_at).isoformat(),
-               "sessions": f"/api/v1/challenges/{row.id}/sessions.tar.gz", "families": families_of(cases),
-               "cases": [c.public() for c in cases]}
+        out = {
+            "id": row.id,
+            "lab": row.lab_id,
+            "spec_version": row.spec_version,
+            "created_at": _aware(row.created_at).isoformat(),
+            "expires_at": _aware(row.expires_at).isoformat(),
+            "sessions": f"/api/v1/challenges/{row.id}/sessions.tar.gz",
+            "families": families_of(cases),
+            "cases": [c.public() for c in cases],
+        }
         if result is None:
             out["state"] = "expired" if datetime.now(timezone.utc) > _aware(row.expires_at) else "open"
             out["result"] = None
         else:
             out["state"] = "passed" if result.passed else "failed"
-            out["result"] = {"implementation": {"name": result.implementation_name, "version": result.implementation_version},
-                             "passed": result.passed, "answered_at": _aware(result.answered_at).isoformat(),
-                             "cases": json.loads(result.verdicts_json)}
+            out["result"] = {
+                "implementation": {"name": result.implementation_name, "version": result.implementation_version},
+                "passed": result.passed,
+                "answered_at": _aware(result.answered_at).isoformat(),
+                "cases": json.loads(result.verdicts_json),
+            }
         return out
 
 
@@ -405,11 +503,21 @@ def sessions_archive(reg, cid: str) -> Path:
 
 def _require_open(row, result) -> None:
     if result is not None:
-        raise fail("E979", f"challenge {row.id} has been answered already; an answer is judged once (no replay)",
-                   pointer="/challenge", expected="an open challenge", found="answered")
+        raise fail(
+            "E979",
+            f"challenge {row.id} has been answered already; an answer is judged once (no replay)",
+            pointer="/challenge",
+            expected="an open challenge",
+            found="answered",
+        )
     if datetime.now(timezone.utc) > _aware(row.expires_at):
-        raise fail("E979", f"challenge {row.id} expired at {_aware(row.expires_at).isoformat()}",
-                   pointer="/challenge", expected="an open challenge", found="expired")
+        raise fail(
+            "E979",
+            f"challenge {row.id} expired at {_aware(row.expires_at).isoformat()}",
+            pointer="/challenge",
+            expected="an open challenge",
+            found="expired",
+        )
 
 
 class Answers(BaseModel):
@@ -432,29 +540,58 @@ def answer(reg, cid: str, caller, body: Answers) -> dict:
     with DBSession(reg.engine) as s:
         row = _row(s, cid)
         if row.lab_id != caller.lab_id:
-            raise fail("E971", "a challenge is answered by the lab it was issued to", file="Authorization",
-                       expected=row.lab_id, found=caller.lab_id)
+            raise fail(
+                "E971",
+                "a challenge is answered by the lab it was issued to",
+                file="Authorization",
+                expected=row.lab_id,
+                found=caller.lab_id,
+            )
         _require_open(row, s.get(db.ChallengeResult, cid))
         cases = cases_from_json(row.cases_json)
     ids = [c.id for c in cases]
     if sorted(body.answers) != sorted(ids):
-        raise fail("E975", "the answers are not those of this challenge's cases", file="body", pointer="/answers",
-                   expected=ids, found=sorted(body.answers)[:20])
+        raise fail(
+            "E975",
+            "the answers are not those of this challenge's cases",
+            file="body",
+            pointer="/answers",
+            expected=ids,
+            found=sorted(body.answers)[:20],
+        )
     impl = body.implementation.model_dump()
     for case_id, doc in body.answers.items():
         named = doc.get("implementation") if isinstance(doc, dict) else None
         if isinstance(named, dict) and {k: named.get(k) for k in ("name", "version")} != impl:
-            raise fail("E975", f"the results for {case_id} name another implementation", file="body",
-                       pointer=f"/answers/{case_id}/implementation", expected=impl, found=named)
+            raise fail(
+                "E975",
+                f"the results for {case_id} name another implementation",
+                file="body",
+                pointer=f"/answers/{case_id}/implementation",
+                expected=impl,
+                found=named,
+            )
     verdicts = [judge_answer(c, body.answers[c.id]) for c in cases]
     passed = all(v["status"] == "passed" for v in verdicts)
     try:
         with DBSession(reg.writer) as s, s.begin():
-            s.add(db.ChallengeResult(challenge_id=cid, implementation_name=impl["name"], implementation_version=impl["version"],
-                                     passed=passed, verdicts_json=json.dumps(verdicts)))
+            s.add(
+                db.ChallengeResult(
+                    challenge_id=cid,
+                    implementation_name=impl["name"],
+                    implementation_version=impl["version"],
+                    passed=passed,
+                    verdicts_json=json.dumps(verdicts),
+                )
+            )
     except IntegrityError:
-        raise fail("E979", f"challenge {cid} has been answered already; an answer is judged once (no replay)",
-                   pointer="/challenge", expected="an open challenge", found="answered") from None
+        raise fail(
+            "E979",
+            f"challenge {cid} has been answered already; an answer is judged once (no replay)",
+            pointer="/challenge",
+            expected="an open challenge",
+            found="answered",
+        ) from None
     return record(reg, cid)
 
 
@@ -467,9 +604,17 @@ def implementations(reg) -> list[dict]:
     out: dict[tuple[str, str], dict] = {}
     with DBSession(reg.engine) as s:
         for r in s.scalars(select(db.ChallengeResult).order_by(db.ChallengeResult.answered_at)):
-            e = out.setdefault((r.implementation_name, r.implementation_version),
-                               {"name": r.implementation_name, "version": r.implementation_version, "passed": 0,
-                                "failed": 0, "latest_passed": None, "families": []})
+            e = out.setdefault(
+                (r.implementation_name, r.implementation_version),
+                {
+                    "name": r.implementation_name,
+                    "version": r.implementation_version,
+                    "passed": 0,
+                    "failed": 0,
+                    "latest_passed": None,
+                    "families": [],
+                },
+            )
             e["passed" if r.passed else "failed"] += 1
             if r.passed:
                 e["latest_passed"] = r.challenge_id

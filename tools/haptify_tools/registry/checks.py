@@ -90,8 +90,9 @@ def _doc(unpacked: Unpacked, path: str, model: type, limits: Limits):
 
 
 def _mismatch(what: str, file: str, pointer: str, expected: Any, found: Any) -> Finding:
-    return Finding("E966", f"{what} differs between bundle.json and {file}", file=file, pointer=pointer,
-                   expected=expected, found=found)
+    return Finding(
+        "E966", f"{what} differs between bundle.json and {file}", file=file, pointer=pointer, expected=expected, found=found
+    )
 
 
 def check_bundle(unpacked: Unpacked, limits: Limits = Limits()) -> Checked:
@@ -99,8 +100,14 @@ def check_bundle(unpacked: Unpacked, limits: Limits = Limits()) -> Checked:
     the findings. The re-computation (step 7) is :func:`verify_bundle`, run after the cheaper checks."""
     bundle = read_manifest(unpacked, limits)
     if bundle.spec_version not in SUPPORTED_SPEC_VERSIONS:
-        raise fail("E968", f"spec version {bundle.spec_version!r} is not accepted", file="bundle.json", pointer="/spec_version",
-                   expected=list(SUPPORTED_SPEC_VERSIONS), found=bundle.spec_version)
+        raise fail(
+            "E968",
+            f"spec version {bundle.spec_version!r} is not accepted",
+            file="bundle.json",
+            pointer="/spec_version",
+            expected=list(SUPPORTED_SPEC_VERSIONS),
+            found=bundle.spec_version,
+        )
     results = _doc(unpacked, RESULTS_JSON, ResultsFile, limits)
     conformance = _doc(unpacked, CONFORMANCE_JSON, ConformReport, limits) if bundle.file("conformance") else None
     manifest_path = f"{SESSION_DIR}/{MANIFEST}"
@@ -112,12 +119,23 @@ def check_bundle(unpacked: Unpacked, limits: Limits = Limits()) -> Checked:
     pairs = [
         ("spec version", RESULTS_JSON, "/spec_version", bundle.spec_version, results.spec_version),
         ("spec version", manifest_path, "/spec_version", bundle.spec_version, session.manifest.spec_version),
-        ("implementation", RESULTS_JSON, "/implementation", bundle.implementation.model_dump(), results.implementation.model_dump()),
+        (
+            "implementation",
+            RESULTS_JSON,
+            "/implementation",
+            bundle.implementation.model_dump(),
+            results.implementation.model_dump(),
+        ),
         ("session id", RESULTS_JSON, "/session_id", bundle.session_id, results.session_id),
         ("session id", manifest_path, "/session_id", bundle.session_id, session.session_id),
         ("lab", manifest_path, "/lab/id", bundle.lab.id, session.manifest.lab.id),
-        ("device", manifest_path, "/device", bundle.device.model_dump(),
-         {"manufacturer": device.manufacturer, "model": device.model, "serial": device.serial}),
+        (
+            "device",
+            manifest_path,
+            "/device",
+            bundle.device.model_dump(),
+            {"manufacturer": device.manufacturer, "model": device.model, "serial": device.serial},
+        ),
         ("rig", manifest_path, "/rig", bundle.rig.model_dump(), session.manifest.rig.model_dump()),
     ]
     if results.device is not None:
@@ -125,11 +143,27 @@ def check_bundle(unpacked: Unpacked, limits: Limits = Limits()) -> Checked:
     findings += [_mismatch(w, f, p, e, x) for w, f, p, e, x in pairs if e != x]
     manifest_sha = sha256_file(unpacked.root / manifest_path)
     if results.manifest_sha256 != manifest_sha:
-        findings.append(Finding("E966", "the results were not computed from the included session manifest", file=RESULTS_JSON,
-                                pointer="/manifest_sha256", expected=manifest_sha, found=results.manifest_sha256))
+        findings.append(
+            Finding(
+                "E966",
+                "the results were not computed from the included session manifest",
+                file=RESULTS_JSON,
+                pointer="/manifest_sha256",
+                expected=manifest_sha,
+                found=results.manifest_sha256,
+            )
+        )
     if not results.metrics:
-        findings.append(Finding("E966", "the results contain no metric", file=RESULTS_JSON, pointer="/metrics",
-                                expected="at least one metric", found=0))
+        findings.append(
+            Finding(
+                "E966",
+                "the results contain no metric",
+                file=RESULTS_JSON,
+                pointer="/metrics",
+                expected="at least one metric",
+                found=0,
+            )
+        )
     findings += metric_findings(results)
     if findings:
         raise HaptifyError(*findings)
@@ -168,21 +202,53 @@ def metric_findings(results: ResultsFile) -> list[Finding]:
             out.append(Finding("E966", f"metric {m.id} is reported twice", **where, expected="each metric once", found=m.id))
         seen.add(m.id)
         if m.id not in defs:
-            out.append(Finding("E966", f"{m.id!r} is not a metric of spec {SPEC_VERSION}", file=RESULTS_JSON,
-                               pointer=f"/metrics/{i}/id", expected="an id from schemas/<v>/metrics", found=m.id))
+            out.append(
+                Finding(
+                    "E966",
+                    f"{m.id!r} is not a metric of spec {SPEC_VERSION}",
+                    file=RESULTS_JSON,
+                    pointer=f"/metrics/{i}/id",
+                    expected="an id from schemas/<v>/metrics",
+                    found=m.id,
+                )
+            )
             continue
         definition, version = defs[m.id]
         if m.unit != definition.unit:
-            out.append(Finding("E966", f"{m.id} is reported in the wrong unit", file=RESULTS_JSON,
-                               pointer=f"/metrics/{i}/unit", expected=definition.unit, found=m.unit))
+            out.append(
+                Finding(
+                    "E966",
+                    f"{m.id} is reported in the wrong unit",
+                    file=RESULTS_JSON,
+                    pointer=f"/metrics/{i}/unit",
+                    expected=definition.unit,
+                    found=m.unit,
+                )
+            )
         if m.definition_version != version:
-            out.append(Finding("E966", f"{m.id} was computed with another definition version", file=RESULTS_JSON,
-                               pointer=f"/metrics/{i}/definition_version", expected=version, found=m.definition_version))
+            out.append(
+                Finding(
+                    "E966",
+                    f"{m.id} was computed with another definition version",
+                    file=RESULTS_JSON,
+                    pointer=f"/metrics/{i}/definition_version",
+                    expected=version,
+                    found=m.definition_version,
+                )
+            )
         length = SHAPE_LENGTH.get(definition.shape)
         found = len(m.value) if isinstance(m.value, list) else None
         if definition.shape == "scalar" and found is not None or length is not None and found != length:
-            out.append(Finding("E966", f"{m.id} has the wrong shape", file=RESULTS_JSON, pointer=f"/metrics/{i}/value",
-                               expected=definition.shape, found="scalar" if found is None else f"list of {found}"))
+            out.append(
+                Finding(
+                    "E966",
+                    f"{m.id} has the wrong shape",
+                    file=RESULTS_JSON,
+                    pointer=f"/metrics/{i}/value",
+                    expected=definition.shape,
+                    found="scalar" if found is None else f"list of {found}",
+                )
+            )
     return out
 
 
@@ -204,23 +270,55 @@ def check_conformance(report: ConformReport, results: ResultsFile, spec_version:
     """
     findings: list[Finding] = []
     if report.header.spec_version != spec_version:
-        findings.append(Finding("E967", "the conformance report is for another spec version", file=file,
-                                pointer="/header/spec_version", expected=spec_version, found=report.header.spec_version))
+        findings.append(
+            Finding(
+                "E967",
+                "the conformance report is for another spec version",
+                file=file,
+                pointer="/header/spec_version",
+                expected=spec_version,
+                found=report.header.spec_version,
+            )
+        )
     impl = {k: report.header.implementation.get(k) for k in ("name", "version")}
     if impl != results.implementation.model_dump():
-        findings.append(Finding("E967", "the conformance report is of another implementation", file=file,
-                                pointer="/header/implementation", expected=results.implementation.model_dump(), found=impl))
+        findings.append(
+            Finding(
+                "E967",
+                "the conformance report is of another implementation",
+                file=file,
+                pointer="/header/implementation",
+                expected=results.implementation.model_dump(),
+                found=impl,
+            )
+        )
     bad = [c.case_id for c in report.cases if c.status in ("failed", "error")]
     if bad or not report.summary.conforms:
-        findings.append(Finding("E967", "the implementation does not pass the conformance suite", file=file,
-                                pointer="/summary/conforms", expected="no failed or error case", found=bad or "conforms: false"))
+        findings.append(
+            Finding(
+                "E967",
+                "the implementation does not pass the conformance suite",
+                file=file,
+                pointer="/summary/conforms",
+                expected="no failed or error case",
+                found=bad or "conforms: false",
+            )
+        )
     passed = {c.case_id for c in report.cases if c.status == "passed"}
     must = _must_cases(spec_version)
     for metric in sorted({m.id for m in results.metrics}):
         missing = [cid for cid in must.get(metric, ()) if cid not in passed]
         if missing:
-            findings.append(Finding("E967", f"the report does not show the MUST cases of {metric} passed", file=file,
-                                    pointer="/cases", expected=list(must[metric]), found={"not passed": missing}))
+            findings.append(
+                Finding(
+                    "E967",
+                    f"the report does not show the MUST cases of {metric} passed",
+                    file=file,
+                    pointer="/cases",
+                    expected=list(must[metric]),
+                    found={"not passed": missing},
+                )
+            )
     if findings:
         raise HaptifyError(*findings)
 
@@ -262,8 +360,16 @@ def verify(session_root: Path, results: ResultsFile, spec_version: str = SPEC_VE
     report = validate_session(session_root)
     errors = [f for f in report.findings if f.is_error]
     if errors:
-        raise HaptifyError(Finding("E966", f"the included session has {len(errors)} validation error(s)", file=f"{SESSION_DIR}/",
-                                   expected="a valid session (spec chapter 4)", found=report.codes), *errors)
+        raise HaptifyError(
+            Finding(
+                "E966",
+                f"the included session has {len(errors)} validation error(s)",
+                file=f"{SESSION_DIR}/",
+                expected="a valid session (spec chapter 4)",
+                found=report.codes,
+            ),
+            *errors,
+        )
     ids = sorted({m.id for m in results.metrics})
     recomputed = compute_session(open_session(session_root), metrics=ids)
     unavailable = {u.id: u for u in recomputed.unavailable}
@@ -273,19 +379,45 @@ def verify(session_root: Path, results: ResultsFile, spec_version: str = SPEC_VE
         tol = tols.get(m.id)
         ref = recomputed.get(m.id)
         if tol is None:
-            checks.append(MetricCheck(m.id, "unverifiable", m.value, ref.value if ref else None, None,
-                                      "the conformance suite has no tolerance for this metric"))
+            checks.append(
+                MetricCheck(
+                    m.id,
+                    "unverifiable",
+                    m.value,
+                    ref.value if ref else None,
+                    None,
+                    "the conformance suite has no tolerance for this metric",
+                )
+            )
         elif ref is None:
             why = unavailable.get(m.id)
-            checks.append(MetricCheck(m.id, "disagrees", m.value, None, tol,
-                                      f"the reference cannot compute it from the included streams: "
-                                      f"{why.code + ' ' + why.reason if why else 'not computed'}", "W969"))
+            checks.append(
+                MetricCheck(
+                    m.id,
+                    "disagrees",
+                    m.value,
+                    None,
+                    tol,
+                    f"the reference cannot compute it from the included streams: "
+                    f"{why.code + ' ' + why.reason if why else 'not computed'}",
+                    "W969",
+                )
+            )
         elif agrees(m.value, ref.value, tol):
             checks.append(MetricCheck(m.id, "agrees", m.value, ref.value, tol))
         else:
-            checks.append(MetricCheck(m.id, "disagrees", m.value, ref.value, tol,
-                                      f"submitted {m.value!r}, the reference computes {ref.value!r}; "
-                                      f"allowed |difference| ≤ {tol['abs']:g} + {tol['rel']:g}·|reference|", "W969"))
+            checks.append(
+                MetricCheck(
+                    m.id,
+                    "disagrees",
+                    m.value,
+                    ref.value,
+                    tol,
+                    f"submitted {m.value!r}, the reference computes {ref.value!r}; "
+                    f"allowed |difference| ≤ {tol['abs']:g} + {tol['rel']:g}·|reference|",
+                    "W969",
+                )
+            )
     status = "verified" if all(c.status == "agrees" for c in checks) else "disagreeing"
     if status == "disagreeing" and not any(c.status == "disagrees" for c in checks):
         status = "unverified"

@@ -31,15 +31,30 @@ def register(sub) -> None:
     serve.add_argument("--port", type=int, default=8080)
     serve.add_argument("--no-verify", action="store_true", help="do not re-compute metrics of bundles with raw streams")
     limits = Limits()
-    serve.add_argument("--max-archive-mib", type=int, default=limits.max_archive_bytes >> 20, help="largest upload accepted (MiB)")
-    serve.add_argument("--max-unpacked-mib", type=int, default=limits.max_unpacked_bytes >> 20,
-                       help="most bytes a bundle may unpack to (MiB)")
-    serve.add_argument("--worker-memory-mib", type=int, default=limits.worker_memory_bytes >> 20,
-                       help="address space of the worker that unpacks and re-computes a bundle (MiB)")
-    serve.add_argument("--worker-seconds", type=float, default=limits.worker_seconds,
-                       help="time the worker may take for each step of checking a bundle (s)")
-    serve.add_argument("--upload-ttl-hours", type=float, default=Settings.upload_ttl_s / 3600,
-                       help="a resumable upload without a chunk for this long expires and is deleted (h)")
+    serve.add_argument(
+        "--max-archive-mib", type=int, default=limits.max_archive_bytes >> 20, help="largest upload accepted (MiB)"
+    )
+    serve.add_argument(
+        "--max-unpacked-mib", type=int, default=limits.max_unpacked_bytes >> 20, help="most bytes a bundle may unpack to (MiB)"
+    )
+    serve.add_argument(
+        "--worker-memory-mib",
+        type=int,
+        default=limits.worker_memory_bytes >> 20,
+        help="address space of the worker that unpacks and re-computes a bundle (MiB)",
+    )
+    serve.add_argument(
+        "--worker-seconds",
+        type=float,
+        default=limits.worker_seconds,
+        help="time the worker may take for each step of checking a bundle (s)",
+    )
+    serve.add_argument(
+        "--upload-ttl-hours",
+        type=float,
+        default=Settings.upload_ttl_s / 3600,
+        help="a resumable upload without a chunk for this long expires and is deleted (h)",
+    )
     serve.set_defaults(func=run_serve)
     token = rsub.add_parser("token", help="API tokens")
     tsub = token.add_subparsers(dest="token_command", metavar="ACTION", required=True)
@@ -49,13 +64,18 @@ def register(sub) -> None:
     create.add_argument("--scope", choices=SCOPES, default="submit")
     create.add_argument("--rate", type=int, default=DEFAULT_RATE_PER_MINUTE, help="requests per minute allowed")
     create.set_defaults(func=run_token_create)
-    reverify = rsub.add_parser("reverify", help="re-compute every stored submission with raw streams with the installed "
-                                                 "reference, on a Dask cluster; record the new values beside the old")
+    reverify = rsub.add_parser(
+        "reverify",
+        help="re-compute every stored submission with raw streams with the installed "
+        "reference, on a Dask cluster; record the new values beside the old",
+    )
     _store_options(reverify)
-    reverify.add_argument("--storage", metavar="LOCATION",
-                          help="the data folder as the workers see it (default: --data; spec §17.9)")
-    reverify.add_argument("--since-version", metavar="V",
-                          help="only submissions no reference of version V or later has re-verified yet")
+    reverify.add_argument(
+        "--storage", metavar="LOCATION", help="the data folder as the workers see it (default: --data; spec §17.9)"
+    )
+    reverify.add_argument(
+        "--since-version", metavar="V", help="only submissions no reference of version V or later has re-verified yet"
+    )
     reverify.add_argument("--resume", metavar="RUN", help="finish the run RUN (skips the submissions it has recorded)")
     add_executor_options(reverify)
     reverify.set_defaults(func=run_reverify_command)
@@ -64,8 +84,13 @@ def register(sub) -> None:
 def _settings(args) -> Settings:
     limits = Limits()
     if hasattr(args, "worker_seconds"):
-        limits = replace(limits, max_archive_bytes=args.max_archive_mib << 20, max_unpacked_bytes=args.max_unpacked_mib << 20,
-                         worker_memory_bytes=args.worker_memory_mib << 20, worker_seconds=args.worker_seconds)
+        limits = replace(
+            limits,
+            max_archive_bytes=args.max_archive_mib << 20,
+            max_unpacked_bytes=args.max_unpacked_mib << 20,
+            worker_memory_bytes=args.worker_memory_mib << 20,
+            worker_seconds=args.worker_seconds,
+        )
     ttl = {"upload_ttl_s": args.upload_ttl_hours * 3600} if hasattr(args, "upload_ttl_hours") else {}
     return Settings(data_dir=args.data, db_url=args.db, verify_raw=not getattr(args, "no_verify", False), limits=limits, **ttl)
 
@@ -78,8 +103,10 @@ def run_serve(args, ui) -> int:
 
     app = create_app(_settings(args))
     swept = app.state.swept
-    ui.say(f"registry on http://{args.host}:{args.port} (API docs /docs); database {app.state.registry.engine.dialect.name}; "
-           f"start-up sweep removed {swept['tmp']} temporary and {swept['orphans']} orphan file(s)")
+    ui.say(
+        f"registry on http://{args.host}:{args.port} (API docs /docs); database {app.state.registry.engine.dialect.name}; "
+        f"start-up sweep removed {swept['tmp']} temporary and {swept['orphans']} orphan file(s)"
+    )
     uvicorn.run(app, host=args.host, port=args.port, log_level="warning")
     return 0
 
@@ -106,8 +133,12 @@ def run_reverify_command(args, ui) -> int:
     from haptify_tools.registry.storage import open_store
 
     if args.resume and args.since_version:
-        raise fail("E903", "--since-version chooses the submissions of a new run; a resumed run keeps its own",
-                   expected="--resume RUN or --since-version V", found="both")
+        raise fail(
+            "E903",
+            "--since-version chooses the submissions of a new run; a resumed run keeps its own",
+            expected="--resume RUN or --since-version V",
+            found="both",
+        )
     settings = _settings(args)
     store = open_store(args.storage or str(settings.data_dir))
     registry = Registry(settings, lock=False)
@@ -132,9 +163,11 @@ def run_reverify_command(args, ui) -> int:
 def summary_lines(summary) -> list[str]:
     """The human summary of a run: totals, then one line per metric, verification changes and the moved."""
     s = summary.submissions
-    lines = [f"run {summary.run_id} (reference {summary.reference_version}): {summary.recorded}/{summary.planned} recorded "
-             f"({summary.computed_now} now, {summary.skipped} before) in {summary.seconds:.1f} s; "
-             f"changed {s['changed']}, unchanged {s['unchanged']}, failed {s['failed']}"]
+    lines = [
+        f"run {summary.run_id} (reference {summary.reference_version}): {summary.recorded}/{summary.planned} recorded "
+        f"({summary.computed_now} now, {summary.skipped} before) in {summary.seconds:.1f} s; "
+        f"changed {s['changed']}, unchanged {s['unchanged']}, failed {s['failed']}"
+    ]
     for metric, counts in summary.metrics.items():
         lines.append(f"  {metric:36s} " + ", ".join(f"{k} {v}" for k, v in counts.items()))
     for transition, n in summary.transitions.items():

@@ -49,17 +49,23 @@ def register(sub) -> None:
     p.add_argument("--token", help=f"API token (default: ${TOKEN_ENV})")
     p.add_argument("--dry-run", action="store_true", help="check locally (and at the registry, if given); store nothing")
     p.add_argument("--keep", type=Path, help="also write the bundle archive to this file")
-    p.add_argument("--chunk-mib", type=float, default=CHUNK_BYTES / 2**20,
-                   help="archives larger than this many MiB are sent as a resumable upload in chunks of this size")
+    p.add_argument(
+        "--chunk-mib",
+        type=float,
+        default=CHUNK_BYTES / 2**20,
+        help="archives larger than this many MiB are sent as a resumable upload in chunks of this size",
+    )
     p.set_defaults(func=run)
 
 
-def request_json(method: str, url: str, token: str, data: bytes | None = None, headers: dict | None = None,
-                 *, registry: str) -> dict:
+def request_json(
+    method: str, url: str, token: str, data: bytes | None = None, headers: dict | None = None, *, registry: str
+) -> dict:
     """One request to the registry; its JSON answer. A refusal becomes a HaptifyError with the registry's
     findings; an unreachable registry E903/E978 (:func:`unreachable`). Spec §17.5.1."""
-    request = urllib.request.Request(url, data=data, method=method,
-                                     headers={"Authorization": f"Bearer {token}", **(headers or {})})
+    request = urllib.request.Request(
+        url, data=data, method=method, headers={"Authorization": f"Bearer {token}", **(headers or {})}
+    )
     try:
         with urllib.request.urlopen(request, timeout=TIMEOUT_S) as response:
             return json.loads(response.read().decode("utf-8"))
@@ -67,8 +73,19 @@ def request_json(method: str, url: str, token: str, data: bytes | None = None, h
         body = exc.read().decode("utf-8", "replace")
         try:
             findings = json.loads(body)["findings"]
-            raise HaptifyError(*[Finding(f["code"], f["message"], file=f.get("file"), pointer=f.get("pointer"),
-                                         expected=f.get("expected"), found=f.get("found")) for f in findings]) from None
+            raise HaptifyError(
+                *[
+                    Finding(
+                        f["code"],
+                        f["message"],
+                        file=f.get("file"),
+                        pointer=f.get("pointer"),
+                        expected=f.get("expected"),
+                        found=f.get("found"),
+                    )
+                    for f in findings
+                ]
+            ) from None
         except (ValueError, KeyError, TypeError):
             raise fail("E978", f"the registry answered HTTP {exc.code}: {body[:300]}", file=url) from None
     except (urllib.error.URLError, OSError) as exc:
@@ -81,8 +98,15 @@ def post_bundle(registry: str, token: str, archive: Path, *, dry_run: bool = Fal
     return request_json("POST", url, token, archive.read_bytes(), {"Content-Type": "application/gzip"}, registry=registry)
 
 
-def upload_resumable(registry: str, token: str, archive: Path, *, chunk_bytes: int = CHUNK_BYTES, dry_run: bool = False,
-                     attempts: int = RESUME_ATTEMPTS) -> dict:
+def upload_resumable(
+    registry: str,
+    token: str,
+    archive: Path,
+    *,
+    chunk_bytes: int = CHUNK_BYTES,
+    dry_run: bool = False,
+    attempts: int = RESUME_ATTEMPTS,
+) -> dict:
     """Send the archive in chunks of ``chunk_bytes`` (spec §17.5.2) and submit it. When a chunk's connection
     drops, ask the registry how far it got and continue from there (at most ``attempts`` times in a row,
     waiting 0.2, 0.4, … s), so a broken connection costs at most one chunk; memory holds one chunk."""
@@ -95,14 +119,20 @@ def upload_resumable(registry: str, token: str, archive: Path, *, chunk_bytes: i
             fh.seek(offset)
             chunk = fh.read(chunk_bytes)
             try:
-                offset = request_json("PATCH", f"{base}/{uid}", token, chunk, {"Upload-Offset": str(offset),
-                                      "Content-Type": "application/offset+octet-stream"}, registry=registry)["offset"]
+                offset = request_json(
+                    "PATCH",
+                    f"{base}/{uid}",
+                    token,
+                    chunk,
+                    {"Upload-Offset": str(offset), "Content-Type": "application/offset+octet-stream"},
+                    registry=registry,
+                )["offset"]
                 failures = 0
             except HaptifyError as err:
                 if err.findings[0].code != "E978" or failures >= attempts:
                     raise
                 failures += 1
-                time.sleep(0.1 * 2 ** failures)
+                time.sleep(0.1 * 2**failures)
                 offset = request_json("GET", f"{base}/{uid}", token, registry=registry)["offset"]
     return request_json("POST", f"{base}/{uid}/submit" + ("?dry_run=true" if dry_run else ""), token, b"", registry=registry)
 
@@ -134,28 +164,45 @@ def check_size(archive: Path, limits: dict | None, registry: str) -> None:
         return
     size, limit = archive.stat().st_size, int(limits["max_archive_bytes"])
     if size > limit:
-        raise fail("E960", f"the bundle is {size / 2**20:.1f} MiB; the registry at {registry} accepts at most "
-                           f"{limit / 2**20:.1f} MiB, so it was not sent", file=str(archive),
-                   expected=f"≤ {limit} bytes", found=f"{size} bytes")
+        raise fail(
+            "E960",
+            f"the bundle is {size / 2**20:.1f} MiB; the registry at {registry} accepts at most "
+            f"{limit / 2**20:.1f} MiB, so it was not sent",
+            file=str(archive),
+            expected=f"≤ {limit} bytes",
+            found=f"{size} bytes",
+        )
 
 
 def unreachable(registry: str, url: str, reason: object) -> HaptifyError:
     """Why the registry could not be reached: a URL that names no host, or nothing listening there, is a
     wrong ``--registry`` (E903: check the URL); anything else may pass (E978: retry later). Spec §17.7."""
     if isinstance(reason, socket.gaierror) or not urllib.parse.urlsplit(registry).hostname:
-        return fail("E903", f"--registry {registry!r} names no host this machine can resolve ({reason}); check the URL",
-                    file=url, expected="http(s)://HOST[:PORT] of a Haptify registry", found=registry)
+        return fail(
+            "E903",
+            f"--registry {registry!r} names no host this machine can resolve ({reason}); check the URL",
+            file=url,
+            expected="http(s)://HOST[:PORT] of a Haptify registry",
+            found=registry,
+        )
     if isinstance(reason, ConnectionRefusedError):
-        return fail("E903", f"nothing answers at {registry!r} ({reason}); check the URL and port, or start the registry "
-                    "(haptify registry serve)", file=url, expected="the address of a running registry", found=registry)
+        return fail(
+            "E903",
+            f"nothing answers at {registry!r} ({reason}); check the URL and port, or start the registry (haptify registry serve)",
+            file=url,
+            expected="the address of a running registry",
+            found=registry,
+        )
     return fail("E978", f"cannot reach the registry at {registry}: {reason}", file=url)
 
 
 def describe(outcome: dict) -> list[str]:
     """Human lines for a registry answer (or a local dry run)."""
     v = outcome["verification"]
-    lines = [f"{outcome['status']}: submission {outcome['id']} (digest {outcome['digest']})",
-             f"verification: {v['status']}" + (f" — {v['note']}" if v.get("note") else "")]
+    lines = [
+        f"{outcome['status']}: submission {outcome['id']} (digest {outcome['digest']})",
+        f"verification: {v['status']}" + (f" — {v['note']}" if v.get("note") else ""),
+    ]
     for c in v.get("checks", []):
         if c["status"] != "agrees":
             lines.append(f"  {c['metric']}: {c['status']}{' (' + c['code'] + ')' if c.get('code') else ''} — {c['message']}")
@@ -186,13 +233,18 @@ def run(args, ui) -> int:
 def _run(args, ui) -> int:
     token = args.token or os.environ.get(TOKEN_ENV)
     if not args.dry_run and not (args.registry and token):
-        raise fail("E903", "uploading needs --registry and --token (or $" + TOKEN_ENV + ")",
-                   expected="--registry URL --token TOKEN", found={"registry": args.registry, "token": bool(token)})
+        raise fail(
+            "E903",
+            "uploading needs --registry and --token (or $" + TOKEN_ENV + ")",
+            expected="--registry URL --token TOKEN",
+            found={"registry": args.registry, "token": bool(token)},
+        )
     require_valid_session(args.session)  # an invalid session is never packed nor sent (spec §4.8)
     work = Path(tempfile.mkdtemp(prefix="haptify-submit-"))
     try:
-        bundle, files = build_bundle(args.session, args.results, args.conformance, include_raw=args.include_raw,
-                                     supersedes=args.supersedes)
+        bundle, files = build_bundle(
+            args.session, args.results, args.conformance, include_raw=args.include_raw, supersedes=args.supersedes
+        )
         archive = work / "bundle.tar.gz"
         digest = pack(bundle, files, archive)
         if args.keep:
@@ -201,15 +253,25 @@ def _run(args, ui) -> int:
             unpacked = unpack(archive, work / "unpacked")
             checked = check_bundle(unpacked)
             checked.verification = verify_bundle(checked, unpacked)
-            outcome = {"id": submission_id(digest), "digest": digest, "status": "would-accept",
-                       "supersedes": args.supersedes, "verification": checked.verification.to_dict(), "checked": "locally"}
+            outcome = {
+                "id": submission_id(digest),
+                "digest": digest,
+                "status": "would-accept",
+                "supersedes": args.supersedes,
+                "verification": checked.verification.to_dict(),
+                "checked": "locally",
+            }
             lines = describe(outcome)
             if checked.conformance is None:
-                lines.append("no conformance report included: the registry accepts it only with a passing report "
-                             "of this implementation on file")
+                lines.append(
+                    "no conformance report included: the registry accepts it only with a passing report "
+                    "of this implementation on file"
+                )
             if args.registry and token:
-                outcome = {**send(args.registry, token, archive, dry_run=True, chunk_bytes=max(1, int(args.chunk_mib * 2**20))),
-                           "checked": "locally and by the registry"}
+                outcome = {
+                    **send(args.registry, token, archive, dry_run=True, chunk_bytes=max(1, int(args.chunk_mib * 2**20))),
+                    "checked": "locally and by the registry",
+                }
                 lines += ["the registry says:"] + describe(outcome)
         else:
             outcome = send(args.registry, token, archive, chunk_bytes=max(1, int(args.chunk_mib * 2**20)))

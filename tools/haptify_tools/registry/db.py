@@ -217,11 +217,12 @@ def make_engine(url: str) -> Engine:
     """
     for alias in ("postgresql://", "postgres://"):
         if url.startswith(alias):
-            url = "postgresql+psycopg://" + url[len(alias):]
+            url = "postgresql+psycopg://" + url[len(alias) :]
     if not url.startswith("sqlite"):
         return create_engine(url, pool_pre_ping=True, pool_size=10, max_overflow=20)
-    engine = create_engine(url, connect_args={"check_same_thread": False, "timeout": SQLITE_BUSY_TIMEOUT_MS / 1000},
-                           pool_size=20, max_overflow=20)
+    engine = create_engine(
+        url, connect_args={"check_same_thread": False, "timeout": SQLITE_BUSY_TIMEOUT_MS / 1000}, pool_size=20, max_overflow=20
+    )
 
     @event.listens_for(engine, "connect")
     def _on_connect(dbapi_conn, _record) -> None:

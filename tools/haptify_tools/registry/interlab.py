@@ -84,16 +84,20 @@ def components(cells: Sequence[LabCell]) -> tuple[float, float, float, float]:
     within-lab variance, s_L² = max(0, (s_d² − s_r²)/n̄), s_d² the weighted variance of the lab means. E903
     with fewer than two labs or a lab with fewer than two repetitions."""
     if len(cells) < 2 or any(c.n < 2 for c in cells):
-        raise fail("E903", "s_r and s_R need at least two labs with at least two repetitions each",
-                   expected="≥ 2 labs × ≥ 2 repetitions", found=[c.n for c in cells])
+        raise fail(
+            "E903",
+            "s_r and s_R need at least two labs with at least two repetitions each",
+            expected="≥ 2 labs × ≥ 2 repetitions",
+            found=[c.n for c in cells],
+        )
     p = len(cells)
     n = np.array([c.n for c in cells], float)
     means = np.array([c.mean for c in cells])
     sds = np.array([c.sd for c in cells])
-    s_r2 = float(np.sum((n - 1) * sds ** 2) / np.sum(n - 1))
+    s_r2 = float(np.sum((n - 1) * sds**2) / np.sum(n - 1))
     grand = float(np.sum(n * means) / np.sum(n))
     s_d2 = float(np.sum(n * (means - grand) ** 2) / (p - 1))
-    n_bar = float((n.sum() - np.sum(n ** 2) / n.sum()) / (p - 1))
+    n_bar = float((n.sum() - np.sum(n**2) / n.sum()) / (p - 1))
     s_l2 = max(0.0, (s_d2 - s_r2) / n_bar)
     return grand, math.sqrt(s_r2), math.sqrt(s_l2), math.sqrt(s_l2 + s_r2)
 
@@ -102,8 +106,12 @@ def precision(cells: Sequence[LabCell]) -> Precision:
     """s_r, s_L, s_R and Mandel's h, k of ``cells`` (ISO 5725-2 §7.3–7.4). E903 with fewer than three labs or a
     lab with fewer than two repetitions (h needs p ≥ 3; s_r needs repetitions)."""
     if len(cells) < 3 or any(c.n < 2 for c in cells):
-        raise fail("E903", "ISO 5725-2 statistics need at least three labs with at least two repetitions each",
-                   expected="≥ 3 labs × ≥ 2 repetitions", found=[c.n for c in cells])
+        raise fail(
+            "E903",
+            "ISO 5725-2 statistics need at least three labs with at least two repetitions each",
+            expected="≥ 3 labs × ≥ 2 repetitions",
+            found=[c.n for c in cells],
+        )
     grand, s_r, s_L, s_R = components(cells)
     p = len(cells)
     n = np.array([c.n for c in cells], float)
@@ -111,14 +119,23 @@ def precision(cells: Sequence[LabCell]) -> Precision:
     sds = np.array([c.sd for c in cells])
     spread = float(np.std(means, ddof=1))
     h = (means - means.mean()) / spread if spread > 0 else np.zeros(p)
-    k = sds / math.sqrt(float(np.mean(sds ** 2))) if np.any(sds > 0) else np.ones(p)
+    k = sds / math.sqrt(float(np.mean(sds**2))) if np.any(sds > 0) else np.ones(p)
     n_typ = int(round(float(np.median(n))))
     h_crit = {"5%": mandel_h_critical(p, 0.05), "1%": mandel_h_critical(p, 0.01)}
     k_crit = {"5%": mandel_k_critical(p, n_typ, 0.05), "1%": mandel_k_critical(p, n_typ, 0.01)}
-    return Precision(labs=[c.lab for c in cells], grand_mean=grand, s_r=s_r, s_L=s_L, s_R=s_R,
-                     h=[float(x) for x in h], k=[float(x) for x in k],
-                     h_critical=h_crit, k_critical=k_crit, h_flags=[_flag(x, h_crit) for x in h],
-                     k_flags=[_flag(x, k_crit) for x in k])
+    return Precision(
+        labs=[c.lab for c in cells],
+        grand_mean=grand,
+        s_r=s_r,
+        s_L=s_L,
+        s_R=s_R,
+        h=[float(x) for x in h],
+        k=[float(x) for x in k],
+        h_critical=h_crit,
+        k_critical=k_crit,
+        h_flags=[_flag(x, h_crit) for x in h],
+        k_flags=[_flag(x, k_crit) for x in k],
+    )
 
 
 def table(per_lab: dict[str, list[float]]) -> dict | None:
@@ -132,17 +149,38 @@ def table(per_lab: dict[str, list[float]]) -> dict | None:
     left_out = sorted(lab for lab, v in per_lab.items() if len(v) < 2)
     if len(cells) < 3:
         grand, s_r, s_L, s_R = components(cells)
-        labs = [{"lab": c.lab, "n": c.n, "mean": c.mean, "sd": c.sd, "h": None, "k": None, "h_flag": "", "k_flag": ""}
-                for c in cells]
-        return {"labs": labs, "grand_mean": grand, "s_r": s_r, "s_L": s_L, "s_R": s_R, "h_critical": None,
-                "k_critical": None, "outlying": [], "labs_left_out": left_out,
-                "note": "Mandel's h and k need at least three labs"}
+        labs = [
+            {"lab": c.lab, "n": c.n, "mean": c.mean, "sd": c.sd, "h": None, "k": None, "h_flag": "", "k_flag": ""} for c in cells
+        ]
+        return {
+            "labs": labs,
+            "grand_mean": grand,
+            "s_r": s_r,
+            "s_L": s_L,
+            "s_R": s_R,
+            "h_critical": None,
+            "k_critical": None,
+            "outlying": [],
+            "labs_left_out": left_out,
+            "note": "Mandel's h and k need at least three labs",
+        }
     got = precision(cells)
-    labs = [{"lab": c.lab, "n": c.n, "mean": c.mean, "sd": c.sd, "h": h, "k": k, "h_flag": hf, "k_flag": kf}
-            for c, h, k, hf, kf in zip(cells, got.h, got.k, got.h_flags, got.k_flags)]
-    return {"labs": labs, "grand_mean": got.grand_mean, "s_r": got.s_r, "s_L": got.s_L, "s_R": got.s_R,
-            "h_critical": got.h_critical, "k_critical": got.k_critical,
-            "outlying": [x["lab"] for x in labs if x["h_flag"] or x["k_flag"]], "labs_left_out": left_out, "note": ""}
+    labs = [
+        {"lab": c.lab, "n": c.n, "mean": c.mean, "sd": c.sd, "h": h, "k": k, "h_flag": hf, "k_flag": kf}
+        for c, h, k, hf, kf in zip(cells, got.h, got.k, got.h_flags, got.k_flags)
+    ]
+    return {
+        "labs": labs,
+        "grand_mean": got.grand_mean,
+        "s_r": got.s_r,
+        "s_L": got.s_L,
+        "s_R": got.s_R,
+        "h_critical": got.h_critical,
+        "k_critical": got.k_critical,
+        "outlying": [x["lab"] for x in labs if x["h_flag"] or x["k_flag"]],
+        "labs_left_out": left_out,
+        "note": "",
+    }
 
 
 def pooled_uncertainty(records: Sequence[tuple[int, dict | None]]) -> dict | None:
@@ -159,5 +197,11 @@ def pooled_uncertainty(records: Sequence[tuple[int, dict | None]]) -> dict | Non
     p = min(float(r["coverage_probability"]) for _, r in records)
     u = math.sqrt(sum(c * c for c in contributions))
     k = coverage_factor(nu, p)
-    return {"u": u, "U": k * u, "k": k, "coverage_probability": p, "dof_eff": None if math.isinf(nu) else nu,
-            "submissions": len(records)}
+    return {
+        "u": u,
+        "U": k * u,
+        "k": k,
+        "coverage_probability": p,
+        "dof_eff": None if math.isinf(nu) else nu,
+        "submissions": len(records),
+    }

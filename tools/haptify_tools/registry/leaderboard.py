@@ -38,8 +38,7 @@ class Row:
         return f"{self.device['manufacturer']} {self.device['model']}"
 
     def as_dict(self) -> dict:
-        return {"rank": self.rank, "tie_group": self.tie_group, "device": self.device["slug"], "label": self.label,
-                **self.metric}
+        return {"rank": self.rank, "tie_group": self.tie_group, "device": self.device["slug"], "label": self.label, **self.metric}
 
 
 def rule_text(metric_id: str) -> str:
@@ -48,8 +47,13 @@ def rule_text(metric_id: str) -> str:
     if rule is None:
         return "Not ranked (no better direction is defined for this metric); ascending order."
     better = rule["better"]
-    how = ("Lower is better" if better == "lower" else "Higher is better" if better == "higher"
-           else f"Closest to {float(better['target']):g} is better")
+    how = (
+        "Lower is better"
+        if better == "lower"
+        else "Higher is better"
+        if better == "higher"
+        else f"Closest to {float(better['target']):g} is better"
+    )
     return f"{how}: {rule['why']}."
 
 
@@ -105,6 +109,13 @@ def indistinguishable(badness, a: Row, b: Row) -> bool:
     ua, ub = a.metric.get("uncertainty"), b.metric.get("uncertainty")
     if ua is None or ub is None:
         return False
-    diff = welch_difference(badness(a.metric["mean"]), ua["u"], ua["dof_eff"], badness(b.metric["mean"]), ub["u"],
-                            ub["dof_eff"], min(ua["coverage_probability"], ub["coverage_probability"]))
+    diff = welch_difference(
+        badness(a.metric["mean"]),
+        ua["u"],
+        ua["dof_eff"],
+        badness(b.metric["mean"]),
+        ub["u"],
+        ub["dof_eff"],
+        min(ua["coverage_probability"], ub["coverage_probability"]),
+    )
     return not diff.significant

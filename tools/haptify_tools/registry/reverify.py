@@ -112,8 +112,17 @@ def judge(out: dict, baseline: Baseline, spec_version: str) -> tuple[str, list[d
             state = "first"
         else:
             state = "unchanged" if agrees(prev, now, tol) else "changed"
-        checks.append({"metric": metric, "status": state, "previous": prev, "recomputed": now, "tolerance": tol,
-                       "submitted": check["submitted"], "code": "W982" if state == "changed" else None})
+        checks.append(
+            {
+                "metric": metric,
+                "status": state,
+                "previous": prev,
+                "recomputed": now,
+                "tolerance": tol,
+                "submitted": check["submitted"],
+                "code": "W982" if state == "changed" else None,
+            }
+        )
     moved = any(c["status"] == "changed" or c["status"] == "failed" and c["previous"] is not None for c in checks)
     return ("changed" if moved else "unchanged"), checks
 
@@ -128,10 +137,15 @@ def baselines(s: DBSession, ids: list[str], run_id: str) -> dict[str, Baseline]:
     out: dict[str, Baseline] = {}
     for sub in s.scalars(select(db.Submission).where(db.Submission.id.in_(ids))):
         out[sub.id] = Baseline(_recomputed(json.loads(sub.verification_json).get("checks", [])), sub.verification)
-    records = s.scalars(select(db.ReverifyRecord).where(db.ReverifyRecord.submission_id.in_(ids),
-                                                        db.ReverifyRecord.run_id != run_id,
-                                                        db.ReverifyRecord.verification.is_not(None))
-                        .order_by(db.ReverifyRecord.recorded_at))
+    records = s.scalars(
+        select(db.ReverifyRecord)
+        .where(
+            db.ReverifyRecord.submission_id.in_(ids),
+            db.ReverifyRecord.run_id != run_id,
+            db.ReverifyRecord.verification.is_not(None),
+        )
+        .order_by(db.ReverifyRecord.recorded_at)
+    )
     for rec in records:  # oldest first: the latest wins
         out[rec.submission_id] = Baseline(_recomputed(json.loads(rec.checks_json)), rec.verification)
     return out
@@ -151,8 +165,11 @@ def plan(s: DBSession, since_version: str | None = None) -> list[str]:
     if since_version is None:
         return ids
     floor = version_key(since_version)
-    done = {sid for sid, version in s.execute(select(db.ReverifyRecord.submission_id, db.ReverifyRecord.reference_version))
-            if re.fullmatch(r"\d+(\.\d+)*", version) and version_key(version) >= floor}
+    done = {
+        sid
+        for sid, version in s.execute(select(db.ReverifyRecord.submission_id, db.ReverifyRecord.reference_version))
+        if re.fullmatch(r"\d+(\.\d+)*", version) and version_key(version) >= floor
+    }
     return [sid for sid in ids if sid not in done]
 
 
@@ -187,8 +204,9 @@ class Summary:
 
 def summarize(s: DBSession, run: db.ReverifyRun) -> Summary:
     """The summary of every record of ``run`` (whichever invocation wrote them)."""
-    records = list(s.scalars(select(db.ReverifyRecord).where(db.ReverifyRecord.run_id == run.id)
-                             .order_by(db.ReverifyRecord.submission_id)))
+    records = list(
+        s.scalars(select(db.ReverifyRecord).where(db.ReverifyRecord.run_id == run.id).order_by(db.ReverifyRecord.submission_id))
+    )
     metrics: dict[str, Counter] = {}
     changed, failed, transitions = {}, {}, Counter()
     for rec in records:
@@ -202,10 +220,18 @@ def summarize(s: DBSession, run: db.ReverifyRun) -> Summary:
         if rec.verification is not None and rec.verification != rec.previous_verification:
             transitions[f"{rec.previous_verification} → {rec.verification}"] += 1
     by_status = Counter(rec.status for rec in records)
-    return Summary(run.id, run.reference_version, run.executor, len(json.loads(run.planned_json)), len(records),
-                   {k: by_status.get(k, 0) for k in RECORD_STATES},
-                   {m: {k: c.get(k, 0) for k in METRIC_STATES} for m, c in sorted(metrics.items())},
-                   dict(sorted(transitions.items())), changed, failed)
+    return Summary(
+        run.id,
+        run.reference_version,
+        run.executor,
+        len(json.loads(run.planned_json)),
+        len(records),
+        {k: by_status.get(k, 0) for k in RECORD_STATES},
+        {m: {k: c.get(k, 0) for k in METRIC_STATES} for m, c in sorted(metrics.items())},
+        dict(sorted(transitions.items())),
+        changed,
+        failed,
+    )
 
 
 def start_run(engine, executor: str, since_version: str | None = None) -> str:
@@ -213,8 +239,16 @@ def start_run(engine, executor: str, since_version: str | None = None) -> str:
     run_id = uuid.uuid4().hex[:20]
     with DBSession(db.writer(engine)) as s, s.begin():
         ids = plan(s, since_version)
-        s.add(db.ReverifyRun(id=run_id, reference_version=PACKAGE_VERSION, spec_version=SPEC_VERSION,
-                             since_version=since_version, executor=executor, planned_json=json.dumps(ids)))
+        s.add(
+            db.ReverifyRun(
+                id=run_id,
+                reference_version=PACKAGE_VERSION,
+                spec_version=SPEC_VERSION,
+                since_version=since_version,
+                executor=executor,
+                planned_json=json.dumps(ids),
+            )
+        )
     return run_id
 
 
@@ -223,18 +257,34 @@ def load_run(engine, run_id: str) -> db.ReverifyRun:
     with DBSession(engine) as s:
         run = s.get(db.ReverifyRun, run_id)
         if run is None:
-            raise fail("E973", f"no re-verification run {run_id!r}", expected="a run id printed by `haptify registry reverify`",
-                       found=run_id)
+            raise fail(
+                "E973",
+                f"no re-verification run {run_id!r}",
+                expected="a run id printed by `haptify registry reverify`",
+                found=run_id,
+            )
         if run.reference_version != PACKAGE_VERSION:
-            raise fail("E981", f"run {run_id} was started by reference {run.reference_version}; this is {PACKAGE_VERSION}",
-                       expected=run.reference_version, found=PACKAGE_VERSION)
+            raise fail(
+                "E981",
+                f"run {run_id} was started by reference {run.reference_version}; this is {PACKAGE_VERSION}",
+                expected=run.reference_version,
+                found=PACKAGE_VERSION,
+            )
         s.expunge(run)
         return run
 
 
-def run_reverify(engine, store: BundleStore, run_id: str, client=None, *, limits: Limits = Limits(),
-                 retries: int = RETRIES, on_record: Callable[[str, str], object] | None = None,
-                 progress: Callable[[int], object] | None = None) -> Summary:
+def run_reverify(
+    engine,
+    store: BundleStore,
+    run_id: str,
+    client=None,
+    *,
+    limits: Limits = Limits(),
+    retries: int = RETRIES,
+    on_record: Callable[[str, str], object] | None = None,
+    progress: Callable[[int], object] | None = None,
+) -> Summary:
     """Re-verify the submissions of run ``run_id`` not yet recorded for it, on ``client``'s cluster (serially
     in this process when None), writing each record as its task completes; returns the run's summary.
 
@@ -248,8 +298,13 @@ def run_reverify(engine, store: BundleStore, run_id: str, client=None, *, limits
         recorded = set(s.scalars(select(db.ReverifyRecord.submission_id).where(db.ReverifyRecord.run_id == run_id)))
         remaining = [sid for sid in planned if sid not in recorded]
         rows = {r.id: r for r in s.scalars(select(db.Submission).where(db.Submission.id.in_(remaining)))}
-        jobs = [(f"reverify-{run_id}-{sid}", (store, Job(sid, rows[sid].archive_path, rows[sid].results_json,
-                                                         rows[sid].spec_version), limits)) for sid in remaining]
+        jobs = [
+            (
+                f"reverify-{run_id}-{sid}",
+                (store, Job(sid, rows[sid].archive_path, rows[sid].results_json, rows[sid].spec_version), limits),
+            )
+            for sid in remaining
+        ]
         base = baselines(s, remaining, run_id)
     computed = refused = 0
     errors: dict[str, str] = {}
@@ -267,12 +322,20 @@ def run_reverify(engine, store: BundleStore, run_id: str, client=None, *, limits
         verification = done.value["verification"]
         try:
             with DBSession(db.writer(engine)) as s, s.begin():
-                s.add(db.ReverifyRecord(
-                    submission_id=sid, reference_version=run.reference_version, run_id=run_id, status=status,
-                    verification=verification["status"] if verification else None,
-                    previous_verification=base[sid].verification, checks_json=json.dumps(checks),
-                    findings_json=json.dumps(done.value["findings"]), worker=done.value["worker"],
-                    seconds=done.value["seconds"]))
+                s.add(
+                    db.ReverifyRecord(
+                        submission_id=sid,
+                        reference_version=run.reference_version,
+                        run_id=run_id,
+                        status=status,
+                        verification=verification["status"] if verification else None,
+                        previous_verification=base[sid].verification,
+                        checks_json=json.dumps(checks),
+                        findings_json=json.dumps(done.value["findings"]),
+                        worker=done.value["worker"],
+                        seconds=done.value["seconds"],
+                    )
+                )
         except IntegrityError:  # recorded already (a second driver on the same run): the first record stands
             refused += 1
             continue
@@ -288,10 +351,15 @@ def run_reverify(engine, store: BundleStore, run_id: str, client=None, *, limits
 def record_values(engine, run_id: str) -> dict[str, dict]:
     """Per submission of a run: status, verification and metric → recomputed value (for comparing runs)."""
     with DBSession(engine) as s:
-        return {r.submission_id: {"status": r.status, "verification": r.verification,
-                                  "values": _recomputed(json.loads(r.checks_json)),
-                                  "findings": sorted(f["code"] for f in json.loads(r.findings_json))}
-                for r in s.scalars(select(db.ReverifyRecord).where(db.ReverifyRecord.run_id == run_id))}
+        return {
+            r.submission_id: {
+                "status": r.status,
+                "verification": r.verification,
+                "values": _recomputed(json.loads(r.checks_json)),
+                "findings": sorted(f["code"] for f in json.loads(r.findings_json)),
+            }
+            for r in s.scalars(select(db.ReverifyRecord).where(db.ReverifyRecord.run_id == run_id))
+        }
 
 
 __all__ = ["Job", "recompute", "judge", "plan", "start_run", "run_reverify", "summarize", "Summary", "record_values"]

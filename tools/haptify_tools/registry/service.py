@@ -44,7 +44,16 @@ from haptify.results import DeviceSummary, Implementation, MetricResult, Results
 from haptify.versions import PACKAGE_VERSION
 from haptify_conform.report import ConformReport
 from haptify_tools.registry import db, interlab
-from haptify_tools.registry.bundle import DIR_MODE, FILE_MODE, SESSION_DIR, Limits, bundle_digest, submission_id, unpack, unpack_bundle
+from haptify_tools.registry.bundle import (
+    DIR_MODE,
+    FILE_MODE,
+    SESSION_DIR,
+    Limits,
+    bundle_digest,
+    submission_id,
+    unpack,
+    unpack_bundle,
+)
 from haptify_tools.registry.checks import Checked, check_bundle, check_conformance, verify_bundle
 from haptify_tools.registry.worker import run_contained
 
@@ -127,8 +136,14 @@ class Outcome:
     supersedes: str | None = None
 
     def to_dict(self) -> dict:
-        return {"id": self.id, "digest": self.digest, "status": self.status, "supersedes": self.supersedes,
-                "verification": self.verification, "url": f"/api/v1/submissions/{self.id}"}
+        return {
+            "id": self.id,
+            "digest": self.digest,
+            "status": self.status,
+            "supersedes": self.supersedes,
+            "verification": self.verification,
+            "url": f"/api/v1/submissions/{self.id}",
+        }
 
 
 @dataclass
@@ -168,8 +183,13 @@ class Registry:
                 fcntl.flock(self._lock_fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError:
                 self._lock_fh.close()
-                raise fail("E978", f"another registry process serves the data folder {str(self.data)!r}",
-                           file=str(self.data), expected="one process per data folder", found="locked") from None
+                raise fail(
+                    "E978",
+                    f"another registry process serves the data folder {str(self.data)!r}",
+                    file=str(self.data),
+                    expected="one process per data folder",
+                    found="locked",
+                ) from None
         if settings.db_url is None:  # SQLite creates its -wal and -shm files with the database file's mode
             os.close(os.open(self.data / db.SQLITE_FILE, os.O_RDWR | os.O_CREAT, FILE_MODE))
             os.chmod(self.data / db.SQLITE_FILE, FILE_MODE)
@@ -212,8 +232,9 @@ class Registry:
         return {"tmp": removed_tmp, "orphans": removed_orphans, "missing": missing}
 
     # --- tokens --------------------------------------------------------------------------------
-    def create_token(self, lab: str, scope: str = "submit", rate_per_minute: int | None = None,
-                     lab_name: str | None = None) -> str:
+    def create_token(
+        self, lab: str, scope: str = "submit", rate_per_minute: int | None = None, lab_name: str | None = None
+    ) -> str:
         """Create a token for ``lab`` (created if new); returns the token, which is stored only hashed."""
         if scope not in SCOPES:
             raise fail("E975", f"unknown scope {scope!r}", expected=list(SCOPES), found=scope)
@@ -222,25 +243,38 @@ class Registry:
         try:
             BundleLab(id=lab)
         except Exception:
-            raise fail("E975", f"lab id {lab!r} is not an identifier", expected="letters, digits, '.', '_', '-' (≤ 64)", found=lab) from None
+            raise fail(
+                "E975", f"lab id {lab!r} is not an identifier", expected="letters, digits, '.', '_', '-' (≤ 64)", found=lab
+            ) from None
         token = TOKEN_PREFIX + secrets.token_urlsafe(32)
         with DBSession(self.writer) as s, s.begin():
             if s.get(db.Lab, lab) is None:
                 s.add(db.Lab(id=lab, name=lab_name))
-            s.add(db.Token(lab_id=lab, scope=scope, token_sha256=hash_token(token),
-                           rate_per_minute=rate_per_minute or self.settings.default_rate_per_minute))
+            s.add(
+                db.Token(
+                    lab_id=lab,
+                    scope=scope,
+                    token_sha256=hash_token(token),
+                    rate_per_minute=rate_per_minute or self.settings.default_rate_per_minute,
+                )
+            )
         return token
 
     def authenticate(self, authorization: str | None, need: str = "submit", *, rate_limit: bool = True) -> Caller:
         """The caller of ``Authorization: Bearer <token>``: E970 unknown, E971 scope, E972 rate (spec §17.6)."""
         if not authorization or not authorization.startswith("Bearer "):
             raise fail("E970", "no API token", file="Authorization", expected="Bearer <token>", found="missing")
-        token = authorization[len("Bearer "):].strip()
+        token = authorization[len("Bearer ") :].strip()
         with DBSession(self.engine) as s:
             row = s.scalar(select(db.Token).where(db.Token.token_sha256 == hash_token(token)))
             if row is None:
-                raise fail("E970", "the API token is not known to this registry", file="Authorization",
-                           expected="a token from `haptify registry token create`", found=token[:len(TOKEN_PREFIX) + 4] + "…")
+                raise fail(
+                    "E970",
+                    "the API token is not known to this registry",
+                    file="Authorization",
+                    expected="a token from `haptify registry token create`",
+                    found=token[: len(TOKEN_PREFIX) + 4] + "…",
+                )
             caller = Caller(row.id, row.lab_id, row.scope)
             rate = row.rate_per_minute
         if need == "admin" and caller.scope != "admin":
@@ -248,8 +282,13 @@ class Registry:
         if rate_limit:
             wait = self.limiter.take(caller.token_id, rate)
             if wait > 0:
-                err = fail("E972", f"more than {rate} requests per minute with this token", file="Authorization",
-                           expected=f"≤ {rate}/min", found=f"retry after {wait:.1f} s")
+                err = fail(
+                    "E972",
+                    f"more than {rate} requests per minute with this token",
+                    file="Authorization",
+                    expected=f"≤ {rate}/min",
+                    found=f"retry after {wait:.1f} s",
+                )
                 err.retry_after = wait  # type: ignore[attr-defined]
                 raise err
         return caller
@@ -267,8 +306,13 @@ class Registry:
                 async for chunk in chunks:
                     total += len(chunk)
                     if total > limit:
-                        raise fail("E960", "the bundle archive is larger than the registry accepts", file="<upload>",
-                                   expected=f"≤ {limit} bytes", found=f"> {limit} bytes")
+                        raise fail(
+                            "E960",
+                            "the bundle archive is larger than the registry accepts",
+                            file="<upload>",
+                            expected=f"≤ {limit} bytes",
+                            found=f"> {limit} bytes",
+                        )
                     fh.write(chunk)
                 if total == 0:
                     raise fail("E961", "the request has no body", file="<upload>", expected="a .tar.gz bundle", found="0 bytes")
@@ -294,8 +338,14 @@ class Registry:
         try:
             unpacked, bundle = run_contained(unpack_bundle, upload, work, limits, limits=limits)
             if bundle.lab.id != caller.lab_id:
-                raise fail("E977", "the bundle is from another lab than the token", file="bundle.json", pointer="/lab/id",
-                           expected=caller.lab_id, found=bundle.lab.id)
+                raise fail(
+                    "E977",
+                    "the bundle is from another lab than the token",
+                    file="bundle.json",
+                    pointer="/lab/id",
+                    expected=caller.lab_id,
+                    found=bundle.lab.id,
+                )
             digest = bundle_digest(bundle)
             existing = self._existing(digest)
             if existing is not None:
@@ -304,9 +354,14 @@ class Registry:
             report = checked.conformance or self._report_on_file(checked)
             if report is None:
                 impl = checked.results.implementation
-                raise fail("E967", f"no passing conformance report of {impl.name} {impl.version} for spec "
-                                   f"{checked.bundle.spec_version} is included or on file", file="conformance.json",
-                           expected="a haptify-conform --json-report of the implementation", found="missing")
+                raise fail(
+                    "E967",
+                    f"no passing conformance report of {impl.name} {impl.version} for spec "
+                    f"{checked.bundle.spec_version} is included or on file",
+                    file="conformance.json",
+                    expected="a haptify-conform --json-report of the implementation",
+                    found="missing",
+                )
             if checked.conformance is None:
                 check_conformance(report, checked.results, checked.bundle.spec_version, file="(report on file)")
             self._check_supersede(checked, caller)
@@ -336,10 +391,15 @@ class Registry:
     def _report_on_file(self, checked: Checked) -> ConformReport | None:
         impl = checked.results.implementation
         with DBSession(self.engine) as s:
-            row = s.scalar(select(db.ConformanceReport).where(
-                db.ConformanceReport.implementation_name == impl.name,
-                db.ConformanceReport.implementation_version == impl.version,
-                db.ConformanceReport.spec_version == checked.bundle.spec_version).order_by(db.ConformanceReport.received_at))
+            row = s.scalar(
+                select(db.ConformanceReport)
+                .where(
+                    db.ConformanceReport.implementation_name == impl.name,
+                    db.ConformanceReport.implementation_version == impl.version,
+                    db.ConformanceReport.spec_version == checked.bundle.spec_version,
+                )
+                .order_by(db.ConformanceReport.received_at)
+            )
             return ConformReport.model_validate_json(row.report_json) if row else None
 
     def _check_supersede(self, checked: Checked, caller: Caller) -> None:
@@ -349,15 +409,33 @@ class Registry:
         with DBSession(self.engine) as s:
             old = s.get(db.Submission, old_id)
             if old is None:
-                raise fail("E973", f"the submission {old_id!r} to supersede does not exist", file="bundle.json",
-                           pointer="/supersedes", expected="an existing submission id", found=old_id)
+                raise fail(
+                    "E973",
+                    f"the submission {old_id!r} to supersede does not exist",
+                    file="bundle.json",
+                    pointer="/supersedes",
+                    expected="an existing submission id",
+                    found=old_id,
+                )
             state = self._state(s, old)
             if old.lab_id != caller.lab_id:
-                raise fail("E974", "a lab can supersede only its own submissions", file="bundle.json", pointer="/supersedes",
-                           expected=caller.lab_id, found=old.lab_id)
+                raise fail(
+                    "E974",
+                    "a lab can supersede only its own submissions",
+                    file="bundle.json",
+                    pointer="/supersedes",
+                    expected=caller.lab_id,
+                    found=old.lab_id,
+                )
             if state != "current":
-                raise fail("E974", f"submission {old_id} is {state}", file="bundle.json", pointer="/supersedes",
-                           expected="current", found=state)
+                raise fail(
+                    "E974",
+                    f"submission {old_id} is {state}",
+                    file="bundle.json",
+                    pointer="/supersedes",
+                    expected="current",
+                    found=state,
+                )
 
     def _device(self, s: DBSession, manufacturer: str, model: str) -> db.Device:
         row = s.scalar(select(db.Device).where(db.Device.manufacturer == manufacturer, db.Device.model == model))
@@ -388,38 +466,72 @@ class Registry:
         try:
             with DBSession(self.writer) as s, s.begin():
                 device = self._device(s, checked.bundle.device.manufacturer, checked.bundle.device.model)
-                s.add(db.Submission(
-                    id=sid, digest=digest, archive_sha256=archive_sha, archive_size=archive_size, archive_path=rel,
-                    lab_id=caller.lab_id, device_id=device.id, serial=checked.bundle.device.serial,
-                    spec_version=checked.bundle.spec_version, implementation_name=results.implementation.name,
-                    implementation_version=results.implementation.version, session_id=results.session_id,
-                    manifest_sha256=results.manifest_sha256, supersedes_id=checked.bundle.supersedes,
-                    verification=checked.verification.status,
-                    verification_json=json.dumps(checked.verification.to_dict(), default=str),
-                    bundle_json=checked.bundle.model_dump_json(), results_json=results.model_dump_json(),
-                    has_raw=checked.bundle.includes_raw, token_id=caller.token_id))
+                s.add(
+                    db.Submission(
+                        id=sid,
+                        digest=digest,
+                        archive_sha256=archive_sha,
+                        archive_size=archive_size,
+                        archive_path=rel,
+                        lab_id=caller.lab_id,
+                        device_id=device.id,
+                        serial=checked.bundle.device.serial,
+                        spec_version=checked.bundle.spec_version,
+                        implementation_name=results.implementation.name,
+                        implementation_version=results.implementation.version,
+                        session_id=results.session_id,
+                        manifest_sha256=results.manifest_sha256,
+                        supersedes_id=checked.bundle.supersedes,
+                        verification=checked.verification.status,
+                        verification_json=json.dumps(checked.verification.to_dict(), default=str),
+                        bundle_json=checked.bundle.model_dump_json(),
+                        results_json=results.model_dump_json(),
+                        has_raw=checked.bundle.includes_raw,
+                        token_id=caller.token_id,
+                    )
+                )
                 s.flush()
                 for m in results.metrics:
-                    s.add(db.MetricValue(
-                        submission_id=sid, metric_id=m.id, value=m.value if not isinstance(m.value, list) else None,
-                        value_json=json.dumps(m.value), per_repetition_json=json.dumps(m.per_repetition), unit=m.unit,
-                        n=m.n, sd_json=json.dumps(m.sd), definition_version=m.definition_version))
+                    s.add(
+                        db.MetricValue(
+                            submission_id=sid,
+                            metric_id=m.id,
+                            value=m.value if not isinstance(m.value, list) else None,
+                            value_json=json.dumps(m.value),
+                            per_repetition_json=json.dumps(m.per_repetition),
+                            unit=m.unit,
+                            n=m.n,
+                            sd_json=json.dumps(m.sd),
+                            definition_version=m.definition_version,
+                        )
+                    )
                 if checked.conformance is not None:
                     report_sha = hashlib.sha256(checked.conformance.model_dump_json().encode()).hexdigest()
                     if s.get(db.ConformanceReport, report_sha) is None:
-                        s.add(db.ConformanceReport(
-                            sha256=report_sha, implementation_name=results.implementation.name,
-                            implementation_version=results.implementation.version,
-                            spec_version=checked.bundle.spec_version, report_json=checked.conformance.model_dump_json(),
-                            submission_id=sid))
+                        s.add(
+                            db.ConformanceReport(
+                                sha256=report_sha,
+                                implementation_name=results.implementation.name,
+                                implementation_version=results.implementation.version,
+                                spec_version=checked.bundle.spec_version,
+                                report_json=checked.conformance.model_dump_json(),
+                                submission_id=sid,
+                            )
+                        )
         except IntegrityError as exc:
             existing = self._existing(digest)
             if existing is not None:
                 return existing
             self._drop_unreferenced(rel)
             if checked.bundle.supersedes:
-                raise fail("E974", f"submission {checked.bundle.supersedes} was superseded meanwhile", file="bundle.json",
-                           pointer="/supersedes", expected="current", found="superseded") from None
+                raise fail(
+                    "E974",
+                    f"submission {checked.bundle.supersedes} was superseded meanwhile",
+                    file="bundle.json",
+                    pointer="/supersedes",
+                    expected="current",
+                    found="superseded",
+                ) from None
             raise fail("E978", f"the record could not be stored: {exc.orig}") from None
         except OperationalError as exc:
             self._drop_unreferenced(rel)
@@ -437,15 +549,22 @@ class Registry:
     def withdraw(self, sid: str, reason: str, caller: Caller) -> dict:
         """Mark a submission withdrawn with ``reason``; the record stays (spec §17.5)."""
         if not reason.strip():
-            raise fail("E975", "a withdrawal needs a reason", file="body", pointer="/reason", expected="a non-empty reason", found=reason)
+            raise fail(
+                "E975", "a withdrawal needs a reason", file="body", pointer="/reason", expected="a non-empty reason", found=reason
+            )
         try:
             with DBSession(self.writer) as s, s.begin():
                 row = s.get(db.Submission, sid)
                 if row is None:
                     raise fail("E973", f"no submission {sid!r}", expected="an existing submission id", found=sid)
                 if caller.scope != "admin" and row.lab_id != caller.lab_id:
-                    raise fail("E971", "a submit token can withdraw only its own lab's submissions", file="Authorization",
-                               expected=row.lab_id, found=caller.lab_id)
+                    raise fail(
+                        "E971",
+                        "a submit token can withdraw only its own lab's submissions",
+                        file="Authorization",
+                        expected=row.lab_id,
+                        found=caller.lab_id,
+                    )
                 state = self._state(s, row)
                 if state == "withdrawn":
                     raise fail("E974", f"submission {sid} is already withdrawn", expected="current or superseded", found=state)
@@ -468,39 +587,66 @@ class Registry:
         state = "withdrawn" if w else "superseded" if row.id in ctx.superseded_by else "current"
         challenge, families = ctx.proven.get((row.implementation_name, row.implementation_version), (None, []))
         return {
-            "id": row.id, "digest": row.digest, "state": state, "lab": row.lab_id,
+            "id": row.id,
+            "digest": row.digest,
+            "state": state,
+            "lab": row.lab_id,
             "device": {"slug": row.device.slug, "manufacturer": row.device.manufacturer, "model": row.device.model},
-            "serial": row.serial, "spec_version": row.spec_version,
+            "serial": row.serial,
+            "spec_version": row.spec_version,
             "implementation": {"name": row.implementation_name, "version": row.implementation_version},
-            "conformance": {"status": "proven" if challenge else "self-asserted", "challenge": challenge,
-                            "families": families},
-            "session_id": row.session_id, "verification": row.verification, "has_raw": row.has_raw,
-            "received_at": row.received_at.isoformat(), "supersedes": row.supersedes_id,
+            "conformance": {"status": "proven" if challenge else "self-asserted", "challenge": challenge, "families": families},
+            "session_id": row.session_id,
+            "verification": row.verification,
+            "has_raw": row.has_raw,
+            "received_at": row.received_at.isoformat(),
+            "supersedes": row.supersedes_id,
             "superseded_by": ctx.superseded_by.get(row.id),
             "withdrawal": {"reason": w.reason, "at": w.at.isoformat()} if w else None,
         }
 
     def _context(self, s: DBSession) -> ReadContext:
         withdrawn = {w.submission_id: w for w in s.scalars(select(db.Withdrawal))}
-        superseded_by = {old: new for new, old in s.execute(
-            select(db.Submission.id, db.Submission.supersedes_id).where(db.Submission.supersedes_id.is_not(None)))}
+        superseded_by = {
+            old: new
+            for new, old in s.execute(
+                select(db.Submission.id, db.Submission.supersedes_id).where(db.Submission.supersedes_id.is_not(None))
+            )
+        }
         from haptify_tools.registry.challenge import cases_from_json, families_of
 
         proven: dict[tuple[str, str], tuple[str, list[str]]] = {}
         for name, version, cid, cases in s.execute(
-                select(db.ChallengeResult.implementation_name, db.ChallengeResult.implementation_version,
-                       db.ChallengeResult.challenge_id, db.Challenge.cases_json)
-                .join(db.Challenge, db.Challenge.id == db.ChallengeResult.challenge_id)
-                .where(db.ChallengeResult.passed.is_(True)).order_by(db.ChallengeResult.answered_at)):
+            select(
+                db.ChallengeResult.implementation_name,
+                db.ChallengeResult.implementation_version,
+                db.ChallengeResult.challenge_id,
+                db.Challenge.cases_json,
+            )
+            .join(db.Challenge, db.Challenge.id == db.ChallengeResult.challenge_id)
+            .where(db.ChallengeResult.passed.is_(True))
+            .order_by(db.ChallengeResult.answered_at)
+        ):
             proven[(name, version)] = (cid, families_of(cases_from_json(cases)))  # the latest passed challenge
         return ReadContext(withdrawn, superseded_by, proven)
 
-    def submissions(self, *, lab: str | None = None, device: str | None = None, state: str | None = None,
-                    verification: str | None = None, limit: int = 100, offset: int = 0) -> list[dict]:
+    def submissions(
+        self,
+        *,
+        lab: str | None = None,
+        device: str | None = None,
+        state: str | None = None,
+        verification: str | None = None,
+        limit: int = 100,
+        offset: int = 0,
+    ) -> list[dict]:
         """Submission summaries, newest first, filtered by lab, device slug, state and verification state."""
         with DBSession(self.engine) as s:
-            q = select(db.Submission).options(selectinload(db.Submission.device)).order_by(
-                db.Submission.received_at.desc(), db.Submission.id)
+            q = (
+                select(db.Submission)
+                .options(selectinload(db.Submission.device))
+                .order_by(db.Submission.received_at.desc(), db.Submission.id)
+            )
             if lab:
                 q = q.where(db.Submission.lab_id == lab)
             if device:
@@ -510,7 +656,7 @@ class Registry:
             ctx = self._context(s)
             rows = [self._summary(r, ctx) for r in s.scalars(q)]
         rows = [r for r in rows if state in (None, "all") or r["state"] == state]
-        return rows[offset: offset + limit]
+        return rows[offset : offset + limit]
 
     def submission(self, sid: str) -> dict:
         """One submission with its results, verification and bundle manifest (E973 when unknown)."""
@@ -520,9 +666,13 @@ class Registry:
                 raise fail("E973", f"no submission {sid!r}", expected="an existing submission id", found=sid)
             ctx = self._context(s)
             out = self._summary(row, ctx)
-            out.update(archive_sha256=row.archive_sha256, archive_size=row.archive_size,
-                       verification_details=json.loads(row.verification_json), results=json.loads(row.results_json),
-                       bundle=json.loads(row.bundle_json))
+            out.update(
+                archive_sha256=row.archive_sha256,
+                archive_size=row.archive_size,
+                verification_details=json.loads(row.verification_json),
+                results=json.loads(row.results_json),
+                bundle=json.loads(row.bundle_json),
+            )
             return out
 
     def archive(self, sid: str) -> Path:
@@ -551,8 +701,10 @@ class Registry:
     def labs(self) -> list[dict]:
         with DBSession(self.engine) as s:
             counts = dict(s.execute(select(db.Submission.lab_id, func.count()).group_by(db.Submission.lab_id)).all())
-            return [{"id": lab.id, "name": lab.name, "submissions": counts.get(lab.id, 0)}
-                    for lab in s.scalars(select(db.Lab).order_by(db.Lab.id))]
+            return [
+                {"id": lab.id, "name": lab.name, "submissions": counts.get(lab.id, 0)}
+                for lab in s.scalars(select(db.Lab).order_by(db.Lab.id))
+            ]
 
     def lab(self, lab_id: str) -> dict:
         for lab in self.labs():
@@ -563,8 +715,10 @@ class Registry:
     def devices(self) -> list[dict]:
         with DBSession(self.engine) as s:
             counts = dict(s.execute(select(db.Submission.device_id, func.count()).group_by(db.Submission.device_id)).all())
-            return [{"slug": d.slug, "manufacturer": d.manufacturer, "model": d.model, "submissions": counts.get(d.id, 0)}
-                    for d in s.scalars(select(db.Device).order_by(db.Device.manufacturer, db.Device.model))]
+            return [
+                {"slug": d.slug, "manufacturer": d.manufacturer, "model": d.model, "submissions": counts.get(d.id, 0)}
+                for d in s.scalars(select(db.Device).order_by(db.Device.manufacturer, db.Device.model))
+            ]
 
     def _device_row(self, s: DBSession, slug: str) -> db.Device:
         d = s.scalar(select(db.Device).where(db.Device.slug == slug))
@@ -572,21 +726,31 @@ class Registry:
             raise fail("E973", f"no device {slug!r}", expected="a device slug from /api/v1/devices", found=slug)
         return d
 
-    def current_metric_rows(self, slug: str, *, verification: str = "verified"
-                            ) -> tuple[dict, list[tuple[dict, db.MetricValue]], list[tuple[dict, db.Submission]]]:
+    def current_metric_rows(
+        self, slug: str, *, verification: str = "verified"
+    ) -> tuple[dict, list[tuple[dict, db.MetricValue]], list[tuple[dict, db.Submission]]]:
         """The device, ``(submission summary, metric row)`` of its current submissions that count under
         ``verification`` (``verified``: only verified ones; ``all``: every one), and ``(summary, row)`` of
         its current submissions that do not count (spec §17.3.1). A counted summary carries ``uncertainties``: its
         results file's uncertainty record by metric id (None when absent, spec §19.4)."""
         if verification not in RANKED:
-            raise fail("E975", f"unknown verification filter {verification!r}", pointer="/verification",
-                       expected=list(RANKED), found=verification)
+            raise fail(
+                "E975",
+                f"unknown verification filter {verification!r}",
+                pointer="/verification",
+                expected=list(RANKED),
+                found=verification,
+            )
         with DBSession(self.engine) as s:
             d = self._device_row(s, slug)
             device = {"slug": d.slug, "manufacturer": d.manufacturer, "model": d.model}
             ctx = self._context(s)
-            subs = s.scalars(select(db.Submission).options(selectinload(db.Submission.metrics), selectinload(db.Submission.device))
-                             .where(db.Submission.device_id == d.id).order_by(db.Submission.received_at)).all()
+            subs = s.scalars(
+                select(db.Submission)
+                .options(selectinload(db.Submission.metrics), selectinload(db.Submission.device))
+                .where(db.Submission.device_id == d.id)
+                .order_by(db.Submission.received_at)
+            ).all()
             counted, apart = [], []
             for sub in subs:
                 summary = self._summary(sub, ctx)
@@ -611,8 +775,13 @@ class Registry:
             by_metric.setdefault(m.metric_id, []).append((summary, m))
         metrics = [aggregate(metric, items) for metric, items in sorted(by_metric.items())]
         n_subs = len({summary["id"] for summary, _ in rows})
-        return {"device": device, "submissions": n_subs, "verification": verification, "metrics": metrics,
-                "not_counted": [entry for summary, sub in apart for entry in not_counted(summary, sub)]}
+        return {
+            "device": device,
+            "submissions": n_subs,
+            "verification": verification,
+            "metrics": metrics,
+            "not_counted": [entry for summary, sub in apart for entry in not_counted(summary, sub)],
+        }
 
     def comparison(self, slugs: list[str], *, verification: str = "verified") -> list[ResultsFile]:
         """One synthetic results file per device, holding its aggregated means (for ``haptify.compare``)."""
@@ -621,19 +790,36 @@ class Registry:
             agg = self.device_results(slug, verification=verification)
             metrics = []
             for m in agg["metrics"]:
-                metrics.append(MetricResult(id=m["metric"], value=m["mean"], unit=m["unit"], n=m["repetitions"],
-                                            sd=defined_sd(m["sd"]), definition_version=m["definition_version"]))
+                metrics.append(
+                    MetricResult(
+                        id=m["metric"],
+                        value=m["mean"],
+                        unit=m["unit"],
+                        n=m["repetitions"],
+                        sd=defined_sd(m["sd"]),
+                        definition_version=m["definition_version"],
+                    )
+                )
             dev = agg["device"]
-            out.append(ResultsFile(implementation=Implementation(name="haptify-registry", version=PACKAGE_VERSION),
-                                   session_id=slug, device=DeviceSummary(manufacturer=dev["manufacturer"], model=dev["model"]),
-                                   manifest_sha256="0" * 64, metrics=metrics))
+            out.append(
+                ResultsFile(
+                    implementation=Implementation(name="haptify-registry", version=PACKAGE_VERSION),
+                    session_id=slug,
+                    device=DeviceSummary(manufacturer=dev["manufacturer"], model=dev["model"]),
+                    manifest_sha256="0" * 64,
+                    metrics=metrics,
+                )
+            )
         return out
 
     def export_rows(self, *, device: str | None = None, state: str = "current", verification: str = "all") -> list[dict]:
         """One row per submission × metric (the CSV export), filtered by state and verification state."""
         with DBSession(self.engine) as s:
-            q = select(db.Submission).options(selectinload(db.Submission.metrics), selectinload(db.Submission.device)).order_by(
-                db.Submission.received_at, db.Submission.id)
+            q = (
+                select(db.Submission)
+                .options(selectinload(db.Submission.metrics), selectinload(db.Submission.device))
+                .order_by(db.Submission.received_at, db.Submission.id)
+            )
             if device:
                 q = q.join(db.Device).where(db.Device.slug == device)
             ctx = self._context(s)
@@ -643,12 +829,25 @@ class Registry:
                 if state != "all" and summary["state"] != state or verification not in ("all", sub.verification):
                     continue
                 for m in sub.metrics:
-                    out.append({"submission": sub.id, "state": summary["state"], "verification": sub.verification,
-                                "lab": sub.lab_id, "device": sub.device.slug, "manufacturer": sub.device.manufacturer,
-                                "model": sub.device.model, "serial": sub.serial or "", "implementation":
-                                f"{sub.implementation_name} {sub.implementation_version}", "metric": m.metric_id,
-                                "value": m.value_json, "unit": m.unit, "n": m.n, "sd": m.sd_json,
-                                "received_at": sub.received_at.isoformat()})
+                    out.append(
+                        {
+                            "submission": sub.id,
+                            "state": summary["state"],
+                            "verification": sub.verification,
+                            "lab": sub.lab_id,
+                            "device": sub.device.slug,
+                            "manufacturer": sub.device.manufacturer,
+                            "model": sub.device.model,
+                            "serial": sub.serial or "",
+                            "implementation": f"{sub.implementation_name} {sub.implementation_version}",
+                            "metric": m.metric_id,
+                            "value": m.value_json,
+                            "unit": m.unit,
+                            "n": m.n,
+                            "sd": m.sd_json,
+                            "received_at": sub.received_at.isoformat(),
+                        }
+                    )
             return out
 
 
@@ -660,11 +859,21 @@ def not_counted(summary: dict, sub: db.Submission) -> list[dict]:
     out = []
     for m in sub.metrics:
         check = checks.get(m.metric_id, {})
-        out.append({"submission": sub.id, "lab": sub.lab_id, "verification": sub.verification, "metric": m.metric_id,
-                    "submitted": json.loads(m.value_json), "unit": m.unit, "recomputed": check.get("recomputed"),
-                    "check": check.get("status"), "tolerance": check.get("tolerance"),
-                    "why": check.get("message") or json.loads(sub.verification_json).get("note", ""),
-                    "implementation": summary["implementation"]})
+        out.append(
+            {
+                "submission": sub.id,
+                "lab": sub.lab_id,
+                "verification": sub.verification,
+                "metric": m.metric_id,
+                "submitted": json.loads(m.value_json),
+                "unit": m.unit,
+                "recomputed": check.get("recomputed"),
+                "check": check.get("status"),
+                "tolerance": check.get("tolerance"),
+                "why": check.get("message") or json.loads(sub.verification_json).get("note", ""),
+                "implementation": summary["implementation"],
+            }
+        )
     return out
 
 
@@ -708,22 +917,34 @@ def aggregate(metric: str, items: list[tuple[dict, db.MetricValue]]) -> dict:
     lab_means = [[statistics.fmean([r[i] for r in rows]) for i in range(width)] for rows in per_lab.values()]
     unwrap = (lambda v: v[0]) if width == 1 else (lambda v: v)
     first = items[0][1]
-    return {"metric": metric, "unit": first.unit, "definition_version": first.definition_version,
-            "mean": unwrap(stat(statistics.fmean, reps)), "sd": unwrap(stat(sd, reps)),
-            "min": unwrap(stat(min, reps)), "max": unwrap(stat(max, reps)),
-            "repetitions": len(reps), "submissions": len(items), "labs": len(per_lab),
-            "lab_means": {lab: unwrap(mean) for lab, mean in zip(per_lab, lab_means)},
-            "between_lab_sd": unwrap(stat(sd, lab_means)), **scalar_precision(metric, items, per_lab, width)}
+    return {
+        "metric": metric,
+        "unit": first.unit,
+        "definition_version": first.definition_version,
+        "mean": unwrap(stat(statistics.fmean, reps)),
+        "sd": unwrap(stat(sd, reps)),
+        "min": unwrap(stat(min, reps)),
+        "max": unwrap(stat(max, reps)),
+        "repetitions": len(reps),
+        "submissions": len(items),
+        "labs": len(per_lab),
+        "lab_means": {lab: unwrap(mean) for lab, mean in zip(per_lab, lab_means)},
+        "between_lab_sd": unwrap(stat(sd, lab_means)),
+        **scalar_precision(metric, items, per_lab, width),
+    }
 
 
-def scalar_precision(metric: str, items: list[tuple[dict, db.MetricValue]], per_lab: dict[str, list[list[float]]],
-                     width: int) -> dict:
+def scalar_precision(
+    metric: str, items: list[tuple[dict, db.MetricValue]], per_lab: dict[str, list[list[float]]], width: int
+) -> dict:
     """``uncertainty`` and ``interlab`` of a scalar metric's aggregate (spec §17.5.3); both None for a vector."""
     if width != 1:
         return {"uncertainty": None, "interlab": None}
     records = [(m.n, summary.get("uncertainties", {}).get(metric)) for summary, m in items]
-    return {"uncertainty": interlab.pooled_uncertainty(records),
-            "interlab": interlab.table({lab: [r[0] for r in rows] for lab, rows in per_lab.items()})}
+    return {
+        "uncertainty": interlab.pooled_uncertainty(records),
+        "interlab": interlab.table({lab: [r[0] for r in rows] for lab, rows in per_lab.items()}),
+    }
 
 
 def findings_of(err: HaptifyError) -> list[dict]:

@@ -39,8 +39,13 @@ class LocalFolderStore:
     def materialize(self, key: str, work: Path) -> Path:
         path = resolve_inside(Path(self.location), key, label=key)
         if not path.is_file():
-            raise fail("E978", f"the archive {key!r} is not in the bundle store {self.location!r}", file=key,
-                       expected="the archive of an accepted submission", found="missing")
+            raise fail(
+                "E978",
+                f"the archive {key!r} is not in the bundle store {self.location!r}",
+                file=key,
+                expected="the archive of an accepted submission",
+                found="missing",
+            )
         return path
 
 
@@ -48,7 +53,7 @@ def open_store(location: str) -> BundleStore:
     """The store at ``location``: a folder path or a ``file://`` URL (spec §17.9). Other schemes (an object
     store) are E903: none is implemented yet."""
     if location.startswith("file://"):
-        location = location[len("file://"):]
+        location = location[len("file://") :]
     scheme = location.split("://", 1)[0] if "://" in location else None
     if scheme is not None:
         raise fail("E903", f"no bundle store for {scheme}:// locations", expected="a folder path or file:// URL", found=location)

@@ -54,8 +54,13 @@ class Upload:
     busy: bool = False
 
     def state(self) -> dict:
-        return {"id": self.id, "offset": self.offset, "length": self.length, "complete": self.offset == self.length,
-                "url": f"/api/v1/uploads/{self.id}"}
+        return {
+            "id": self.id,
+            "offset": self.offset,
+            "length": self.length,
+            "complete": self.offset == self.length,
+            "url": f"/api/v1/uploads/{self.id}",
+        }
 
 
 class Uploads:
@@ -119,11 +124,17 @@ class Uploads:
     def open(self, token_id: int, length: str | None) -> Upload:
         """Start an upload of ``length`` bytes (the ``Upload-Length`` header)."""
         if length is None or not length.isdigit() or int(length) == 0:
-            raise fail("E975", "an upload needs its total size", file="Upload-Length", expected="a positive byte count",
-                       found=length)
+            raise fail(
+                "E975", "an upload needs its total size", file="Upload-Length", expected="a positive byte count", found=length
+            )
         if int(length) > self.max_bytes:
-            raise fail("E960", "the bundle archive is larger than the registry accepts", file="Upload-Length",
-                       expected=f"≤ {self.max_bytes} bytes", found=f"{length} bytes")
+            raise fail(
+                "E960",
+                "the bundle archive is larger than the registry accepts",
+                file="Upload-Length",
+                expected=f"≤ {self.max_bytes} bytes",
+                found=f"{length} bytes",
+            )
         uid = secrets.token_hex(12)
         os.close(os.open(self._part(uid), os.O_WRONLY | os.O_CREAT | os.O_EXCL, FILE_MODE))
         upload = Upload(uid, token_id, int(length), touched=time.time())
@@ -139,8 +150,7 @@ class Uploads:
             self._expire()
             upload = self._open.get(uid) if UPLOAD_ID.match(uid) else None
         if upload is None:
-            raise fail("E973", f"no upload {uid[:40]!r} in progress", expected="an id from POST /api/v1/uploads",
-                       found=uid[:40])
+            raise fail("E973", f"no upload {uid[:40]!r} in progress", expected="an id from POST /api/v1/uploads", found=uid[:40])
         if token_id is not None and upload.token_id != token_id:
             raise fail("E971", "an upload is continued by the token that opened it", file="Authorization")
         return upload
@@ -151,11 +161,21 @@ class Uploads:
         upload = self.get(uid, token_id)
         with self._lock:
             if upload.busy:
-                raise fail("E975", "a chunk of this upload is being received", file="Upload-Offset",
-                           expected="one chunk at a time", found="concurrent chunk")
+                raise fail(
+                    "E975",
+                    "a chunk of this upload is being received",
+                    file="Upload-Offset",
+                    expected="one chunk at a time",
+                    found="concurrent chunk",
+                )
             if offset is None or not offset.isdigit() or int(offset) != upload.offset:
-                raise fail("E975", f"the chunk does not start where the upload stands ({upload.offset} bytes received)",
-                           file="Upload-Offset", expected=upload.offset, found=offset)
+                raise fail(
+                    "E975",
+                    f"the chunk does not start where the upload stands ({upload.offset} bytes received)",
+                    file="Upload-Offset",
+                    expected=upload.offset,
+                    found=offset,
+                )
             upload.busy = True
         received = upload.offset
         try:
@@ -164,8 +184,13 @@ class Uploads:
                 try:
                     async for chunk in chunks:
                         if received + len(chunk) > upload.length:
-                            raise fail("E960", "the chunk goes past the declared length of the upload", file="<upload>",
-                                       expected=f"≤ {upload.length} bytes", found=f"> {upload.length} bytes")
+                            raise fail(
+                                "E960",
+                                "the chunk goes past the declared length of the upload",
+                                file="<upload>",
+                                expected=f"≤ {upload.length} bytes",
+                                found=f"> {upload.length} bytes",
+                            )
                         fh.write(chunk)
                         received += len(chunk)
                 except ClientDisconnect:  # keep what arrived: the client resumes from upload.offset
@@ -184,8 +209,13 @@ class Uploads:
         upload = self.get(uid, token_id)
         with self._lock:
             if upload.busy or upload.offset != upload.length:
-                raise fail("E975", "the upload is not complete", file="<upload>", expected=f"{upload.length} bytes",
-                           found=f"{upload.offset} bytes")
+                raise fail(
+                    "E975",
+                    "the upload is not complete",
+                    file="<upload>",
+                    expected=f"{upload.length} bytes",
+                    found=f"{upload.offset} bytes",
+                )
             self._open.pop(uid)
         self.tmp.mkdir(mode=DIR_MODE, parents=True, exist_ok=True)
         final = self.tmp / f"upload-{uid}.tar.gz"

@@ -71,8 +71,14 @@ def _error_page(request: Request, err: HaptifyError) -> HTMLResponse:
     """A refusal as a page: its code and message, HTTP status by code."""
     f = err.findings[0]
     status = STATUS_OF_CODE.get(f.code, 500)
-    log.warning("refused %s %s from %s: %s %s", request.method, request.url.path,
-                request.client.host if request.client else "-", f.code, f.message)
+    log.warning(
+        "refused %s %s from %s: %s %s",
+        request.method,
+        request.url.path,
+        request.client.host if request.client else "-",
+        f.code,
+        f.message,
+    )
     title = {404: "Not found", 400: "Bad request"}.get(status, "Error")
     return _render(request, "error.html", status_code=status, code=f.code, title=title, message=f.message)
 
@@ -89,13 +95,21 @@ def page_index(request: Request) -> HTMLResponse:
     by_device: dict[str, list[dict]] = {}
     for s in current:
         by_device.setdefault(s["device"]["slug"], []).append(s)
-    devices = [{"slug": d["slug"], "label": _label(d), "labs": sorted({s["lab"] for s in by_device[d["slug"]]}),
-                "submissions": len(by_device[d["slug"]]),
-                "verified": sum(s["verification"] == "verified" for s in by_device[d["slug"]])}
-               for d in reads.devices() if d["slug"] in by_device]
+    devices = [
+        {
+            "slug": d["slug"],
+            "label": _label(d),
+            "labs": sorted({s["lab"] for s in by_device[d["slug"]]}),
+            "submissions": len(by_device[d["slug"]]),
+            "verified": sum(s["verification"] == "verified" for s in by_device[d["slug"]]),
+        }
+        for d in reads.devices()
+        if d["slug"] in by_device
+    ]
     menu = api_read.leaderboard_menu(reads.all_device_results())
-    return _render(request, "index.html", devices=devices, metrics=menu,
-                   n_labs=len({s["lab"] for s in current}), n_submissions=len(current))
+    return _render(
+        request, "index.html", devices=devices, metrics=menu, n_labs=len({s["lab"] for s in current}), n_submissions=len(current)
+    )
 
 
 @router.get("/leaderboard", name="page_leaderboard_redirect")
@@ -125,14 +139,31 @@ def page_leaderboard(metric_id: str, request: Request, verification: str = "veri
     results = api_read.reads(request).all_device_results(verification)
     defs = api_read.metric_definitions()
     if metric_id not in defs:
-        return _error_page(request, fail("E973", f"there is no metric {metric_id!r}", pointer="/metric",
-                                         expected="a metric id such as vibration.rms", found=metric_id))
+        return _error_page(
+            request,
+            fail(
+                "E973",
+                f"there is no metric {metric_id!r}",
+                pointer="/metric",
+                expected="a metric id such as vibration.rms",
+                found=metric_id,
+            ),
+        )
     rows = leaderboard(metric_id, results)
     definition = defs[metric_id]
-    return _render(request, "leaderboard.html", metric_id=metric_id, title=definition.title, description=definition.description,
-                   unit=rows[0].metric["unit"] if rows else definition.unit, rule=rule_text(metric_id), rows=rows,
-                   metrics=api_read.leaderboard_menu(results), verification=verification,
-                   not_ranked=api_read.not_ranked(metric_id, results))
+    return _render(
+        request,
+        "leaderboard.html",
+        metric_id=metric_id,
+        title=definition.title,
+        description=definition.description,
+        unit=rows[0].metric["unit"] if rows else definition.unit,
+        rule=rule_text(metric_id),
+        rows=rows,
+        metrics=api_read.leaderboard_menu(results),
+        verification=verification,
+        not_ranked=api_read.not_ranked(metric_id, results),
+    )
 
 
 @router.get("/devices/{slug}", name="page_device", response_class=HTMLResponse)
@@ -152,17 +183,27 @@ def page_device(slug: str, request: Request, verification: str = "verified") -> 
     metrics = sorted(agg["metrics"], key=lambda m: (order.get(m["metric"], len(order)), m["metric"]))
     submissions = [s for s in reads.submissions() if s["device"]["slug"] == slug]
     current = [s for s in submissions if s["state"] == "current"]
-    return _render(request, "device.html", device=agg["device"], label=_label(agg["device"]), metrics=metrics,
-                   verification=verification, not_counted=agg["not_counted"],
-                   titles={k: v.title for k, v in defs.items()}, submissions=submissions,
-                   labs=sorted({s["lab"] for s in current}), current=current,
-                   raw=[s for s in current if s["has_raw"]],
-                   figures=report_figures(reads.reg, [s for s in current if s["has_raw"]]))
+    return _render(
+        request,
+        "device.html",
+        device=agg["device"],
+        label=_label(agg["device"]),
+        metrics=metrics,
+        verification=verification,
+        not_counted=agg["not_counted"],
+        titles={k: v.title for k, v in defs.items()},
+        submissions=submissions,
+        labs=sorted({s["lab"] for s in current}),
+        current=current,
+        raw=[s for s in current if s["has_raw"]],
+        figures=report_figures(reads.reg, [s for s in current if s["has_raw"]]),
+    )
 
 
 @router.get("/compare", name="page_compare", response_class=HTMLResponse)
-def page_compare(request: Request, device: list[str] = Query(default=[]), paper: bool = False,
-                 verification: str = "verified") -> HTMLResponse:
+def page_compare(
+    request: Request, device: list[str] = Query(default=[]), paper: bool = False, verification: str = "verified"
+) -> HTMLResponse:
     """Table III (spec §15.5) for the chosen devices (``?device=a&device=b``, optionally ``&paper=true``),
     from verified results unless ``verification=all``; a note counts the results left out."""
     reads = api_read.reads(request)
@@ -170,12 +211,22 @@ def page_compare(request: Request, device: list[str] = Query(default=[]), paper:
     chosen = list(dict.fromkeys(device))
     table_html = csv_url = json_url = None
     if len(chosen) > MAX_COMPARED:
-        return _error_page(request, fail("E975", f"at most {MAX_COMPARED} devices can be compared at once", pointer="/device",
-                                         expected=f"≤ {MAX_COMPARED}", found=len(chosen)))
+        return _error_page(
+            request,
+            fail(
+                "E975",
+                f"at most {MAX_COMPARED} devices can be compared at once",
+                pointer="/device",
+                expected=f"≤ {MAX_COMPARED}",
+                found=len(chosen),
+            ),
+        )
     if chosen:
         try:
             table = build_table(reads.comparison(tuple(chosen), verification), with_paper=paper)
-            table.notes.extend(api_read.not_counted_notes({s: reads.device_results(s, verification)["not_counted"] for s in chosen}))
+            table.notes.extend(
+                api_read.not_counted_notes({s: reads.device_results(s, verification)["not_counted"] for s in chosen})
+            )
         except HaptifyError as err:
             return _error_page(request, err)
         table_html = to_html(table)
@@ -183,16 +234,29 @@ def page_compare(request: Request, device: list[str] = Query(default=[]), paper:
         csv_url = f"{api_read.API}/compare?{query}&format=csv"
         json_url = f"{api_read.API}/compare?{query}"
     devices = [{"slug": d["slug"], "label": _label(d)} for d in reads.devices()]
-    return _render(request, "compare.html", devices=devices, chosen_slugs=set(chosen), with_paper=paper, verification=verification,
-                   table_html=table_html, csv_url=csv_url, json_url=json_url)
+    return _render(
+        request,
+        "compare.html",
+        devices=devices,
+        chosen_slugs=set(chosen),
+        with_paper=paper,
+        verification=verification,
+        table_html=table_html,
+        csv_url=csv_url,
+        json_url=json_url,
+    )
 
 
 def _raw_submission(reg, sid: str) -> dict:
     """The submission ``sid`` when it includes raw streams (E973 when unknown or without them)."""
     sub = reg.submission(sid)
     if not sub["has_raw"]:
-        raise fail("E973", f"submission {sid} has no raw streams, so there is no report or recording of it",
-                   expected="a submission made with --include-raw", found="results only")
+        raise fail(
+            "E973",
+            f"submission {sid} has no raw streams, so there is no report or recording of it",
+            expected="a submission made with --include-raw",
+            found="results only",
+        )
     return sub
 
 
@@ -262,10 +326,18 @@ def page_report(sid: str, name: str, request: Request) -> Response:
     reg = api_read.reads(request).reg
     try:
         if not REPORT_FILE.match(name):
-            raise fail("E973", f"{name!r} is not a file of a report", pointer="/name", expected="index.html or a figure", found=name)
+            raise fail(
+                "E973", f"{name!r} is not a file of a report", pointer="/name", expected="index.html or a figure", found=name
+            )
         path = ensure_report(reg, sid) / name
         if not path.is_file():
-            raise fail("E973", f"the report of {sid} has no file {name!r}", pointer="/name", expected="index.html or a figure", found=name)
+            raise fail(
+                "E973",
+                f"the report of {sid} has no file {name!r}",
+                pointer="/name",
+                expected="index.html or a figure",
+                found=name,
+            )
     except HaptifyError as err:
         return _error_page(request, err)
     return FileResponse(path)

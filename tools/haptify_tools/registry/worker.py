@@ -61,8 +61,13 @@ def _child(conn, fn: Callable, args: tuple, memory_bytes: int, seconds: float) -
 
 
 def _limit_finding(what: str, found: str) -> Finding:
-    return Finding("E976", f"checking the bundle {what}; it is refused and the registry goes on serving",
-                   file="<upload>", expected="a bundle the registry can check within its worker limits", found=found)
+    return Finding(
+        "E976",
+        f"checking the bundle {what}; it is refused and the registry goes on serving",
+        file="<upload>",
+        expected="a bundle the registry can check within its worker limits",
+        found=found,
+    )
 
 
 def run_contained(fn: Callable, *args: Any, limits: Limits = Limits()) -> Any:
@@ -73,8 +78,7 @@ def run_contained(fn: Callable, *args: Any, limits: Limits = Limits()) -> Any:
     """
     ctx = _forkserver()
     receiver, sender = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_child, args=(sender, fn, args, limits.worker_memory_bytes, limits.worker_seconds),
-                       daemon=True)
+    proc = ctx.Process(target=_child, args=(sender, fn, args, limits.worker_memory_bytes, limits.worker_seconds), daemon=True)
     proc.start()
     sender.close()
     try:
@@ -103,8 +107,10 @@ def _died(exitcode: int | None, limits: Limits) -> HaptifyError:
     """E976 for a worker that ended without answering: by which signal, or with which exit status."""
     if exitcode is not None and exitcode < 0:
         sig = signal.Signals(-exitcode).name
-        what = {"SIGXCPU": f"used more than {limits.worker_seconds:g} s of CPU time",
-                "SIGKILL": "was killed (SIGKILL: the out-of-memory killer or the operator)"}.get(sig, f"was killed by {sig}")
+        what = {
+            "SIGXCPU": f"used more than {limits.worker_seconds:g} s of CPU time",
+            "SIGKILL": "was killed (SIGKILL: the out-of-memory killer or the operator)",
+        }.get(sig, f"was killed by {sig}")
         return HaptifyError(_limit_finding(what, sig))
     return HaptifyError(_limit_finding(f"ended without an answer (exit status {exitcode})", f"exit {exitcode}"))
 

@@ -122,8 +122,7 @@ def _command(th_m, dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_ma
         th = qe[i] + off
         ct, st = np.cos(th), np.sin(th)
         tx, ty = a * ct, a * st
-        px, py, pz = (px + r00 * tx + r01 * ty + r02 * d, py + r10 * tx + r11 * ty + r12 * d,
-                      pz + r20 * tx + r21 * ty + r22 * d)
+        px, py, pz = (px + r00 * tx + r01 * ty + r02 * d, py + r10 * tx + r11 * ty + r12 * d, pz + r20 * tx + r21 * ty + r22 * d)
         yx, yy = -st * ca, ct * ca
         zx, zy = st * sa, -ct * sa
         r00, r01, r02 = r00 * ct + r01 * st, r00 * yx + r01 * yy + r02 * sa, r00 * zx + r01 * zy + r02 * ca
@@ -137,7 +136,7 @@ def _command(th_m, dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_ma
     for r in range(n_j):
         dx, dy, dz = px - origins[r, 0], py - origins[r, 1], pz - origins[r, 2]
         zx, zy, zz = axes[r, 0], axes[r, 1], axes[r, 2]
-        jn = (zy * dz - zz * dy) * nx + (zz * dx - zx * dz) * ny + (zx * dy - zy * dx) * nz     # Jᵀ n, joint r
+        jn = (zy * dz - zz * dy) * nx + (zz * dx - zx * dz) * ny + (zx * dy - zy * dx) * nz  # Jᵀ n, joint r
         for cc in range(n_j):
             a_vec[cc] += c_inv[r, cc] * jn
     sat = False
@@ -155,8 +154,27 @@ def _command(th_m, dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_ma
 
 
 @njit(cache=True)
-def render_loop(th_l, thd_l, friction, dts, dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_max, trip, rearm,  # noqa: C901 (over ruff's limit of 15: to be split)
-                stiffness, damping, half_gap, rotor_inertia, exact):
+def render_loop(  # noqa: C901 (over ruff's limit of 15: to be split)
+    th_l,
+    thd_l,
+    friction,
+    dts,
+    dh,
+    base_r,
+    base_p,
+    c_inv,
+    surface_point,
+    normal,
+    k_r,
+    tau_max,
+    trip,
+    rearm,
+    stiffness,
+    damping,
+    half_gap,
+    rotor_inertia,
+    exact,
+):
     """The rendering loop with an elastic cable, one iteration per row of ``th_l (N, n)`` (link-side drive
     angles, rad; ``thd_l`` their rates, rad/s; ``friction (N, n)`` drive friction at them, N·m; ``dts`` the
     periods, s). Plane: ``surface_point``, unit ``normal`` (D), stiffness ``k_r`` (N/m); ``tau_max`` the
@@ -180,20 +198,21 @@ def render_loop(th_l, thd_l, friction, dts, dh, base_r, base_p, c_inv, surface_p
     for a in range(n_j):
         if rotor_inertia[a] <= 0.0:
             massless = True
-    th_m = th_l[0].copy()            # the motors start at rest on the links (cables relaxed)
+    th_m = th_l[0].copy()  # the motors start at rest on the links (cables relaxed)
     w_m = thd_l[0].copy()
     ta, qe, a_vec, res, tau_c = np.zeros(n_j), np.zeros(n_j), np.zeros(n_j), np.zeros(n_j), np.zeros(n_j)
     f_vec = np.zeros(3)
     origins, axes = np.zeros((n_j, 3)), np.zeros((n_j, 3))
-    margin = np.zeros(n_j)           # stay sub-stepped within a quarter gap of the gap's edge
+    margin = np.zeros(n_j)  # stay sub-stepped within a quarter gap of the gap's edge
     for a in range(n_j):
         margin[a] = 0.25 * half_gap[a]
     latched = False
     for i in range(n_s):
         if massless:
             for _ in range(6):
-                fmag, s_flag = _command(th_m, dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_max, ta, qe,
-                                        a_vec, f_vec, origins, axes)
+                fmag, s_flag = _command(
+                    th_m, dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_max, ta, qe, a_vec, f_vec, origins, axes
+                )
                 if latched or fmag > trip:
                     ta[:] = 0.0
                     a_vec[:] = 0.0
@@ -213,8 +232,9 @@ def render_loop(th_l, thd_l, friction, dts, dh, base_r, base_p, c_inv, surface_p
                     biggest = max(biggest, abs(step))
                 if biggest < 1e-12:
                     break
-        fmag, s_flag = _command(th_m, dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_max, ta, qe, a_vec,
-                                f_vec, origins, axes)
+        fmag, s_flag = _command(
+            th_m, dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_max, ta, qe, a_vec, f_vec, origins, axes
+        )
         if latched and fmag < rearm:
             latched = False
         elif not latched and fmag > trip:
@@ -223,7 +243,7 @@ def render_loop(th_l, thd_l, friction, dts, dh, base_r, base_p, c_inv, surface_p
             ta[:] = 0.0
         if massless:
             for a in range(n_j):
-                if latched:             # the motor relaxes onto the link within the period
+                if latched:  # the motor relaxes onto the link within the period
                     th_m[a] = th_l[i, a] + friction[i, a] / stiffness[a]
                     tau_c[a] = friction[i, a]
                 else:
@@ -234,9 +254,19 @@ def render_loop(th_l, thd_l, friction, dts, dh, base_r, base_p, c_inv, surface_p
             for a in range(n_j):
                 w_l = (th_l[nxt, a] - th_l[i, a]) / dt if dt > 0 else thd_l[i, a]
                 use_exact = abs(dt - exact[a, 0]) < 1e-12
-                d_new, dd_new, tau_c[a] = axis_period(th_m[a] - th_l[i, a], w_m[a] - w_l, ta[a] + friction[i, a],
-                                                      stiffness[a], damping[a], half_gap[a], rotor_inertia[a], exact[a],
-                                                      use_exact, margin[a], dt)
+                d_new, dd_new, tau_c[a] = axis_period(
+                    th_m[a] - th_l[i, a],
+                    w_m[a] - w_l,
+                    ta[a] + friction[i, a],
+                    stiffness[a],
+                    damping[a],
+                    half_gap[a],
+                    rotor_inertia[a],
+                    exact[a],
+                    use_exact,
+                    margin[a],
+                    dt,
+                )
                 th_m[a] = th_l[nxt, a] + d_new
                 w_m[a] = w_l + dd_new
         motor[i] = ta

@@ -37,16 +37,16 @@ DEG = math.pi / 180.0
 DEFAULT_RATE_HZ = 2000.0
 
 # Protocol limits and targets, paper §V-B/§VI-B (free space), §V-C (local dynamic).
-FREE_SPACE_MAX_SPEED = 0.16          # m/s, paper §V-B
-FREE_SPACE_MAX_ANGULAR = 16 * DEG    # rad/s, paper §V-B
-FREE_SPACE_MEAN_SPEED = 0.05         # m/s, paper §VI-B
-FREE_SPACE_MEAN_ANGULAR = 4 * DEG    # rad/s, paper §VI-B
-FIGURE_EIGHT_PERIODS_S = (4.0, 1.2)   # s, the first and the last loop of the figure eight
-SURFACE_PERIODS_S = (4.0, 1.0)        # s, the first and the last circle on the frictionless surface
-PRESS_SPEED = 0.04                    # m/s, the stiffness presses' descent
-OSCILLATION_BAND_HZ = (0.5, 4.0)     # paper §V-C
-LOCAL_DYNAMIC_DURATION = 140.0       # s, paper §V-C
-TREMOR_BAND_HZ = (8.0, 12.0)         # physiological tremor band
+FREE_SPACE_MAX_SPEED = 0.16  # m/s, paper §V-B
+FREE_SPACE_MAX_ANGULAR = 16 * DEG  # rad/s, paper §V-B
+FREE_SPACE_MEAN_SPEED = 0.05  # m/s, paper §VI-B
+FREE_SPACE_MEAN_ANGULAR = 4 * DEG  # rad/s, paper §VI-B
+FIGURE_EIGHT_PERIODS_S = (4.0, 1.2)  # s, the first and the last loop of the figure eight
+SURFACE_PERIODS_S = (4.0, 1.0)  # s, the first and the last circle on the frictionless surface
+PRESS_SPEED = 0.04  # m/s, the stiffness presses' descent
+OSCILLATION_BAND_HZ = (0.5, 4.0)  # paper §V-C
+LOCAL_DYNAMIC_DURATION = 140.0  # s, paper §V-C
+TREMOR_BAND_HZ = (8.0, 12.0)  # physiological tremor band
 # Tremor acceleration RMS per axis (m/s²). Kept small: the paper's rig-only vibration floor after a 10 Hz
 # high-pass is 0.0332 m/s² RMS (§VI-C) and includes the hand, so the tremor must stay below it.
 TREMOR_ACCEL_RMS = 0.01
@@ -60,6 +60,7 @@ NATURAL_GRIP = np.array([1.0, 0.0, 0.0, 0.0])
 
 
 # --- helpers -------------------------------------------------------------------------------------
+
 
 def clock(duration_s: float, rate_hz: float = DEFAULT_RATE_HZ, t0: float = 0.0) -> np.ndarray:
     """Uniform sample times ``t0 + k / rate_hz`` covering ``duration_s`` seconds (spec §2.6)."""
@@ -75,8 +76,9 @@ def minimum_jerk(s: np.ndarray) -> np.ndarray:
     return s * s * s * (10.0 - 15.0 * s + 6.0 * s * s)
 
 
-def smooth_noise(rng: np.random.Generator, t: np.ndarray, f_lo: float, f_hi: float, dims: int = 1,
-                 components: int = 7) -> np.ndarray:
+def smooth_noise(
+    rng: np.random.Generator, t: np.ndarray, f_lo: float, f_hi: float, dims: int = 1, components: int = 7
+) -> np.ndarray:
     """A smooth random signal ``(len(t), dims)``: a sum of sinusoids with random frequencies in [f_lo, f_hi] Hz.
 
     Amplitudes fall as 1/f (so motion is dominated by its slow parts, like a hand's); each column is
@@ -98,7 +100,7 @@ def band_noise(rng: np.random.Generator, n: int, rate_hz: float, f_lo: float, f_
     f = np.fft.rfftfreq(n, 1.0 / rate_hz)
     spec[(f < f_lo) | (f > f_hi)] = 0.0
     out = np.fft.irfft(spec, n=n, axis=0)
-    rms = np.sqrt(np.mean(out ** 2, axis=0))
+    rms = np.sqrt(np.mean(out**2, axis=0))
     return out / np.where(rms > 0, rms, 1.0)
 
 
@@ -123,8 +125,9 @@ def rotation_vector_to_quat(r: np.ndarray) -> np.ndarray:
     return quat_from_axis_angle(axis, ang)
 
 
-def tremor(rng: np.random.Generator, n: int, rate_hz: float, accel_rms: float = TREMOR_ACCEL_RMS,
-           angle_rms: float = TREMOR_ANGLE_RMS) -> tuple[np.ndarray, np.ndarray]:
+def tremor(
+    rng: np.random.Generator, n: int, rate_hz: float, accel_rms: float = TREMOR_ACCEL_RMS, angle_rms: float = TREMOR_ANGLE_RMS
+) -> tuple[np.ndarray, np.ndarray]:
     """Physiological tremor: displacement ``(n, 3)`` in m and small rotation vectors ``(n, 3)`` in rad.
 
     Band 8–12 Hz; the displacement is scaled so that its acceleration has ``accel_rms`` (m/s²) per axis.
@@ -133,12 +136,13 @@ def tremor(rng: np.random.Generator, n: int, rate_hz: float, accel_rms: float = 
         return np.zeros((n, 3)), np.zeros((n, 3))
     disp = band_noise(rng, n, rate_hz, *TREMOR_BAND_HZ, dims=3)
     acc = derivative(disp, rate_hz, 2)
-    disp *= accel_rms / np.sqrt(np.mean(acc ** 2, axis=0))
+    disp *= accel_rms / np.sqrt(np.mean(acc**2, axis=0))
     rot = band_noise(rng, n, rate_hz, *TREMOR_BAND_HZ, dims=3) * angle_rms
     return disp, rot
 
 
 # --- trajectories --------------------------------------------------------------------------------
+
 
 @dataclass
 class HandTrajectory:
@@ -210,8 +214,8 @@ class Reach:
         if not blocked.any():
             return p
         first = np.argmax(hit[blocked], axis=1)
-        lo = np.where(first > 0, lam[np.maximum(first - 1, 0)], 0.0)      # free
-        hi = lam[first]                                                    # colliding
+        lo = np.where(first > 0, lam[np.maximum(first - 1, 0)], 0.0)  # free
+        hi = lam[first]  # colliding
         sb = s[blocked]
         for _ in range(iterations):
             mid = 0.5 * (lo + hi)
@@ -234,8 +238,12 @@ class Reach:
         return float(d[bad[0] - 1]) if len(bad) and bad[0] > 0 else (0.0 if len(bad) else float(limit))
 
 
-def reach_from_kinematics(kin, placement_position=(0.0, 0.0, 0.0), placement_quaternion=(1.0, 0.0, 0.0, 0.0),
-                          clearance_D: Callable[[np.ndarray], np.ndarray] | None = None) -> Reach:
+def reach_from_kinematics(
+    kin,
+    placement_position=(0.0, 0.0, 0.0),
+    placement_quaternion=(1.0, 0.0, 0.0, 0.0),
+    clearance_D: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> Reach:
     """A :class:`Reach` for a DH chain ``kin`` (reference ``Kinematics``) placed at a pose in W.
 
     ``clearance_D(p_D)`` is the signed distance (m) of gimbal-centre points in the device frame from the
@@ -269,12 +277,24 @@ def reach_from_twin(twin) -> Reach:
     """The :class:`Reach` of a twin (``haptify_tools.twin.model.TwinFile``): its TRUE kinematics, placement and base collision."""
     from haptify_tools.twin.kinematics import collision_clearance, true_kinematics
 
-    return reach_from_kinematics(true_kinematics(twin), twin.placement.position, twin.placement.quaternion,
-                                 clearance_D=lambda p: collision_clearance(twin, p))
+    return reach_from_kinematics(
+        true_kinematics(twin),
+        twin.placement.position,
+        twin.placement.quaternion,
+        clearance_D=lambda p: collision_clearance(twin, p),
+    )
 
 
-def natural_orientation(rng: np.random.Generator, t: np.ndarray, rate_hz: float, *, base_quat: np.ndarray,
-                        mean_rate: float, max_rate: float, f_band: tuple[float, float] = (0.02, 0.25)) -> np.ndarray:
+def natural_orientation(
+    rng: np.random.Generator,
+    t: np.ndarray,
+    rate_hz: float,
+    *,
+    base_quat: np.ndarray,
+    mean_rate: float,
+    max_rate: float,
+    f_band: tuple[float, float] = (0.02, 0.25),
+) -> np.ndarray:
     """A natural, slowly wandering hand orientation around ``base_quat`` (wxyz).
 
     The wander is a smooth random rotation vector; its amplitude is set so that the mean angular speed
@@ -283,29 +303,53 @@ def natural_orientation(rng: np.random.Generator, t: np.ndarray, rate_hz: float,
     """
     shape = smooth_noise(rng, t, *f_band, dims=3)
     shape_q = rotation_vector_to_quat(shape * 1e-3)
-    w = angular_speed(shape_q, rate_hz) / 1e-3              # angular speed per unit amplitude (small-angle)
+    w = angular_speed(shape_q, rate_hz) / 1e-3  # angular speed per unit amplitude (small-angle)
     scale = min(mean_rate / max(np.mean(w), 1e-12), max_rate / max(np.max(w), 1e-12))
-    scale = min(scale, 35 * DEG)                            # a wrist wanders, it does not spin
+    scale = min(scale, 35 * DEG)  # a wrist wanders, it does not spin
     q = quat_multiply(base_quat[None, :], rotation_vector_to_quat(shape * scale))
     return quat_normalize(q)
 
 
-def _finish(rng: np.random.Generator, t: np.ndarray, rate_hz: float, position: np.ndarray, quaternion: np.ndarray,
-            protocol: str, label: str | None, meta: dict, *, tremor_accel_rms: float = TREMOR_ACCEL_RMS,
-            tremor_angle_rms: float = TREMOR_ANGLE_RMS) -> HandTrajectory:
+def _finish(
+    rng: np.random.Generator,
+    t: np.ndarray,
+    rate_hz: float,
+    position: np.ndarray,
+    quaternion: np.ndarray,
+    protocol: str,
+    label: str | None,
+    meta: dict,
+    *,
+    tremor_accel_rms: float = TREMOR_ACCEL_RMS,
+    tremor_angle_rms: float = TREMOR_ANGLE_RMS,
+) -> HandTrajectory:
     """Add physiological tremor and package a trajectory."""
     disp, rot = tremor(rng, len(t), rate_hz, tremor_accel_rms, tremor_angle_rms)
     q = quat_normalize(quat_multiply(quaternion, rotation_vector_to_quat(rot)))
-    meta = {**meta, "tremor_accel_rms_m_per_s2": tremor_accel_rms, "tremor_angle_rms_rad": tremor_angle_rms,
-            "tremor_band_hz": list(TREMOR_BAND_HZ)}
-    return HandTrajectory(t=t, position_W=position + disp, quaternion_W=q, rate_hz=rate_hz, protocol=protocol,
-                          label=label, meta=meta)
+    meta = {
+        **meta,
+        "tremor_accel_rms_m_per_s2": tremor_accel_rms,
+        "tremor_angle_rms_rad": tremor_angle_rms,
+        "tremor_band_hz": list(TREMOR_BAND_HZ),
+    }
+    return HandTrajectory(
+        t=t, position_W=position + disp, quaternion_W=q, rate_hz=rate_hz, protocol=protocol, label=label, meta=meta
+    )
 
 
 # --- protocol generators -------------------------------------------------------------------------
 
-def boundary_sweep(rng: np.random.Generator, reach: Reach, duration_s: float = 75.0, *, rate_hz: float = DEFAULT_RATE_HZ,
-                   line_spacing_m: float = 0.03, min_stroke_m: float = 0.03, t0: float = 0.0) -> HandTrajectory:
+
+def boundary_sweep(
+    rng: np.random.Generator,
+    reach: Reach,
+    duration_s: float = 75.0,
+    *,
+    rate_hz: float = DEFAULT_RATE_HZ,
+    line_spacing_m: float = 0.03,
+    min_stroke_m: float = 0.03,
+    t0: float = 0.0,
+) -> HandTrajectory:
     """Workspace protocol (paper §IV-A, §V-A): corners, edges and faces of the joint-limit box.
 
     Each of the six faces of the unit joint box is covered by a boustrophedon raster of
@@ -339,7 +383,7 @@ def boundary_sweep(rng: np.random.Generator, reach: Reach, duration_s: float = 7
     keep = strokes > 1e-9
     a_start, strokes = a_k[:-1][keep], strokes[keep]
     usable = max(rel[-1] - 1.0, 1e-3)
-    weight = strokes + min_stroke_m                 # short strokes still take a human-like time
+    weight = strokes + min_stroke_m  # short strokes still take a human-like time
     ends = 0.5 + np.cumsum(weight) / weight.sum() * usable
     starts = ends - weight / weight.sum() * usable
     k = np.clip(np.searchsorted(ends, rel), 0, len(strokes) - 1)
@@ -348,14 +392,19 @@ def boundary_sweep(rng: np.random.Generator, reach: Reach, duration_s: float = 7
     position = np.stack([np.interp(target, arc, pts[:, j]) for j in range(3)], axis=1)
     base = NATURAL_GRIP
     quat = natural_orientation(rng, t - t0, rate_hz, base_quat=base, mean_rate=6 * DEG, max_rate=30 * DEG)
-    meta = {"path_length_m": length, "lines_per_face": lines, "line_spacing_m": line_spacing_m,
-            "mean_speed_m_per_s": length / duration_s,
-            "strokes": int(len(strokes))}
+    meta = {
+        "path_length_m": length,
+        "lines_per_face": lines,
+        "line_spacing_m": line_spacing_m,
+        "mean_speed_m_per_s": length / duration_s,
+        "strokes": int(len(strokes)),
+    }
     return _finish(rng, t, rate_hz, position, quat, "workspace", None, meta)
 
 
-def _lift_over_jumps(reach: Reach, tau: np.ndarray, pts: np.ndarray, jump_m: float = 0.003,
-                     spacing_m: float = 0.0005) -> tuple[np.ndarray, np.ndarray]:
+def _lift_over_jumps(
+    reach: Reach, tau: np.ndarray, pts: np.ndarray, jump_m: float = 0.003, spacing_m: float = 0.0005
+) -> tuple[np.ndarray, np.ndarray]:
     """Replace jumps in a dense path (where the blocked hand would teleport) by a lift over the obstacle.
 
     Between two consecutive points more than ``jump_m`` apart the hand goes straight up to a height
@@ -374,11 +423,13 @@ def _lift_over_jumps(reach: Reach, tau: np.ndarray, pts: np.ndarray, jump_m: flo
                 break
             top += 0.005
         corners = np.array([a, [a[0], a[1], top], [b[0], b[1], top], b])
-        legs = [np.linspace(corners[j], corners[j + 1], max(2, int(np.linalg.norm(corners[j + 1] - corners[j]) / spacing_m)))[1:]
-                for j in range(3)]
+        legs = [
+            np.linspace(corners[j], corners[j + 1], max(2, int(np.linalg.norm(corners[j + 1] - corners[j]) / spacing_m)))[1:]
+            for j in range(3)
+        ]
         detour = np.concatenate(legs)[:-1]
-        taus += [tau[last:i + 1], np.linspace(tau[i], tau[i + 1], len(detour) + 2)[1:-1]]
-        segs += [pts[last:i + 1], detour]
+        taus += [tau[last : i + 1], np.linspace(tau[i], tau[i + 1], len(detour) + 2)[1:-1]]
+        segs += [pts[last : i + 1], detour]
         last = i + 1
     taus.append(tau[last:])
     segs.append(pts[last:])
@@ -409,12 +460,12 @@ def _face_raster_waypoints(reach: Reach, spacing: float, rng: np.random.Generato
         for side in (0.0, 1.0):
             a, b = [k for k in range(3) if k != axis]
             la, lb = span(axis, side, a, b), span(axis, side, b, a)
-            i, j, across = (a, b, lb) if la >= lb else (b, a, la)     # stroke along i, step along j
+            i, j, across = (a, b, lb) if la >= lb else (b, a, la)  # stroke along i, step along j
             lines = max(2, int(math.ceil(across / spacing)) + 1)
             counts.append(lines)
             pts = []
             for n, v in enumerate(np.linspace(0.0, 1.0, lines)):
-                for w in ((0.0, 1.0) if n % 2 == 0 else (1.0, 0.0)):
+                for w in (0.0, 1.0) if n % 2 == 0 else (1.0, 0.0):
                     p = np.zeros(3)
                     p[axis], p[i], p[j] = side, w, v
                     pts.append(p)
@@ -440,12 +491,24 @@ def _corner_path(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.array(pts)
 
 
-def free_space_wander(rng: np.random.Generator, reach: Reach | None, duration_s: float = 40.0, *,
-                      rate_hz: float = DEFAULT_RATE_HZ, mean_speed: float = FREE_SPACE_MEAN_SPEED,
-                      max_speed: float = 0.75 * FREE_SPACE_MAX_SPEED, mean_angular: float = FREE_SPACE_MEAN_ANGULAR,
-                      max_angular: float = 0.75 * FREE_SPACE_MAX_ANGULAR, margin: float = 0.15, t0: float = 0.0,
-                      protocol: str = "free_space", centre_W: np.ndarray | None = None,
-                      extent_m: float = 0.05, clearance_m: float = 0.01, components: int = 5) -> HandTrajectory:
+def free_space_wander(
+    rng: np.random.Generator,
+    reach: Reach | None,
+    duration_s: float = 40.0,
+    *,
+    rate_hz: float = DEFAULT_RATE_HZ,
+    mean_speed: float = FREE_SPACE_MEAN_SPEED,
+    max_speed: float = 0.75 * FREE_SPACE_MAX_SPEED,
+    mean_angular: float = FREE_SPACE_MEAN_ANGULAR,
+    max_angular: float = 0.75 * FREE_SPACE_MAX_ANGULAR,
+    margin: float = 0.15,
+    t0: float = 0.0,
+    protocol: str = "free_space",
+    centre_W: np.ndarray | None = None,
+    extent_m: float = 0.05,
+    clearance_m: float = 0.01,
+    components: int = 5,
+) -> HandTrajectory:
     """Free-space protocol (paper §V-B): slow wandering through the workspace interior, device off.
 
     The path is a smooth random curve — per joint, a sum of ``components`` slow sinusoids — in the joint
@@ -465,7 +528,7 @@ def free_space_wander(rng: np.random.Generator, reach: Reach | None, duration_s:
     weights = rng.uniform(0.5, 1.0, (3, components))
     weights /= weights.sum(axis=1, keepdims=True)
     amp = [1.0]
-    ramp = [2.0]                  # s: the wander eases in from the centre and back to it at the ends
+    ramp = [2.0]  # s: the wander eases in from the centre and back to it at the ends
 
     def ease_of(tt: np.ndarray) -> np.ndarray:
         return minimum_jerk(np.minimum(1.0, np.minimum(tt, rel[-1] - tt) / ramp[0]).clip(0.0, 1.0))
@@ -489,7 +552,7 @@ def free_space_wander(rng: np.random.Generator, reach: Reach | None, duration_s:
         def path(lam: float, sub: int = 1) -> np.ndarray:
             return c[None, :] + amp[0] * extent_m * shape(lam, rel[::sub])
 
-    sub = max(1, int(rate_hz // 200))          # speed and clearance checks on a 200 Hz grid
+    sub = max(1, int(rate_hz // 200))  # speed and clearance checks on a 200 Hz grid
 
     def speeds(lam: float) -> np.ndarray:
         return np.linalg.norm(derivative(path(lam, sub), rate_hz / sub), axis=1)
@@ -518,21 +581,43 @@ def free_space_wander(rng: np.random.Generator, reach: Reach | None, duration_s:
     position = path(lam)
     base = NATURAL_GRIP
     quat = natural_orientation(rng, rel, rate_hz, base_quat=base, mean_rate=mean_angular, max_rate=max_angular)
-    meta = {"mean_speed_m_per_s": mean_speed, "max_speed_m_per_s": max_speed, "mean_angular_rad_per_s": mean_angular,
-            "max_angular_rad_per_s": max_angular, "margin_unit": margin, "wander_scale": amp[0], "time_scale": lam}
+    meta = {
+        "mean_speed_m_per_s": mean_speed,
+        "max_speed_m_per_s": max_speed,
+        "mean_angular_rad_per_s": mean_angular,
+        "max_angular_rad_per_s": max_angular,
+        "margin_unit": margin,
+        "wander_scale": amp[0],
+        "time_scale": lam,
+    }
     return _finish(rng, t, rate_hz, position, quat, protocol, None, meta)
 
 
 OSCILLATION_DIRECTIONS = {
-    "x": (1, 0, 0), "y": (0, 1, 0), "z": (0, 0, 1),
-    "xy": (1, 1, 0), "x-y": (1, -1, 0), "xz": (1, 0, 1), "x-z": (1, 0, -1), "yz": (0, 1, 1), "y-z": (0, 1, -1),
+    "x": (1, 0, 0),
+    "y": (0, 1, 0),
+    "z": (0, 0, 1),
+    "xy": (1, 1, 0),
+    "x-y": (1, -1, 0),
+    "xz": (1, 0, 1),
+    "x-z": (1, 0, -1),
+    "yz": (0, 1, 1),
+    "y-z": (0, 1, -1),
 }
 
 
-def local_oscillations(rng: np.random.Generator, reach: Reach, duration_s: float = LOCAL_DYNAMIC_DURATION, *,
-                       rate_hz: float = DEFAULT_RATE_HZ, band_hz: tuple[float, float] = OSCILLATION_BAND_HZ,
-                       max_amplitude: float = 0.06, max_accel: float = 38.0, passes: int = 2,
-                       t0: float = 0.0) -> HandTrajectory:
+def local_oscillations(
+    rng: np.random.Generator,
+    reach: Reach,
+    duration_s: float = LOCAL_DYNAMIC_DURATION,
+    *,
+    rate_hz: float = DEFAULT_RATE_HZ,
+    band_hz: tuple[float, float] = OSCILLATION_BAND_HZ,
+    max_amplitude: float = 0.06,
+    max_accel: float = 38.0,
+    passes: int = 2,
+    t0: float = 0.0,
+) -> HandTrajectory:
     """Local dynamic protocol (paper §V-C): oscillations from 0.5 to 4 Hz in x, y, z and the diagonals.
 
     The frequency rises geometrically from ``band_hz[0]`` to ``band_hz[1]`` over the trial (slow to as
@@ -570,16 +655,28 @@ def local_oscillations(rng: np.random.Generator, reach: Reach, duration_s: float
     disp = (amp * ease * np.sin(phase))[:, None] * d
     position = centre[None, :] + disp
     base = NATURAL_GRIP
-    quat = natural_orientation(rng, rel, rate_hz, base_quat=base, mean_rate=8 * DEG, max_rate=40 * DEG,
-                               f_band=(0.05, 0.5))
-    meta = {"band_hz": list(band_hz), "directions": names, "centre_W": centre.tolist(),
-            "amplitude_by_direction_m": amp_dir.tolist(), "max_accel_m_per_s2": max_accel}
+    quat = natural_orientation(rng, rel, rate_hz, base_quat=base, mean_rate=8 * DEG, max_rate=40 * DEG, f_band=(0.05, 0.5))
+    meta = {
+        "band_hz": list(band_hz),
+        "directions": names,
+        "centre_W": centre.tolist(),
+        "amplitude_by_direction_m": amp_dir.tolist(),
+        "max_accel_m_per_s2": max_accel,
+    }
     return _finish(rng, t, rate_hz, position, quat, "local_dynamic", None, meta)
 
 
-def figure_eight(rng: np.random.Generator, reach: Reach, duration_s: float = 30.0, *, rate_hz: float = DEFAULT_RATE_HZ,
-                 width: float = 0.08, height: float = 0.04, period_range_s: tuple[float, float] = FIGURE_EIGHT_PERIODS_S,
-                 t0: float = 0.0) -> HandTrajectory:
+def figure_eight(
+    rng: np.random.Generator,
+    reach: Reach,
+    duration_s: float = 30.0,
+    *,
+    rate_hz: float = DEFAULT_RATE_HZ,
+    width: float = 0.08,
+    height: float = 0.04,
+    period_range_s: tuple[float, float] = FIGURE_EIGHT_PERIODS_S,
+    t0: float = 0.0,
+) -> HandTrajectory:
     """Figure-eight (the paper's test set 3, §VI-D): an infinity shape near the workspace centre at varied speed.
 
     A Gerono-free lemniscate ``(w/2 sin φ, h/2 sin 2φ)`` in a plane tilted randomly by up to 20° from
@@ -590,7 +687,7 @@ def figure_eight(rng: np.random.Generator, reach: Reach, duration_s: float = 30.
     rel = t - t0
     T = rel[-1]
     slow, fast = period_range_s
-    shape = 0.5 - 0.5 * np.cos(2 * np.pi * rel / T)          # 0 → 1 → 0
+    shape = 0.5 - 0.5 * np.cos(2 * np.pi * rel / T)  # 0 → 1 → 0
     freq = 1.0 / (slow + (fast - slow) * shape)
     phase = 2 * np.pi * np.cumsum(freq) / rate_hz
     ease = minimum_jerk(np.minimum(1.0, np.minimum(rel, T - rel) / 1.5).clip(0.0, 1.0))
@@ -599,21 +696,37 @@ def figure_eight(rng: np.random.Generator, reach: Reach, duration_s: float = 30.
     yaw = rng.uniform(-30, 30) * DEG
     u = np.array([math.cos(yaw), math.sin(yaw), 0.0])
     v = np.array([-math.sin(yaw) * math.cos(tilt), math.cos(yaw) * math.cos(tilt), math.sin(tilt)])
-    scale = min(1.0, 0.8 * min(reach.free_distance(centre, u), reach.free_distance(centre, -u)) / (width / 2),
-                0.8 * min(reach.free_distance(centre, v), reach.free_distance(centre, -v)) / (height / 2))
+    scale = min(
+        1.0,
+        0.8 * min(reach.free_distance(centre, u), reach.free_distance(centre, -u)) / (width / 2),
+        0.8 * min(reach.free_distance(centre, v), reach.free_distance(centre, -v)) / (height / 2),
+    )
     a = ease * scale
     position = centre + (a * width / 2 * np.sin(phase))[:, None] * u + (a * height / 2 * np.sin(2 * phase))[:, None] * v
-    quat = natural_orientation(rng, rel, rate_hz, base_quat=NATURAL_GRIP, mean_rate=6 * DEG,
-                               max_rate=30 * DEG)
-    meta = {"width_m": width * scale, "height_m": height * scale, "period_range_s": list(period_range_s),
-            "plane_tilt_rad": tilt, "plane_yaw_rad": yaw}
+    quat = natural_orientation(rng, rel, rate_hz, base_quat=NATURAL_GRIP, mean_rate=6 * DEG, max_rate=30 * DEG)
+    meta = {
+        "width_m": width * scale,
+        "height_m": height * scale,
+        "period_range_s": list(period_range_s),
+        "plane_tilt_rad": tilt,
+        "plane_yaw_rad": yaw,
+    }
     return _finish(rng, t, rate_hz, position, quat, "other", "figure_eight", meta)
 
 
-def surface_circles(rng: np.random.Generator, reach: Reach, surface_z: float, duration_s: float = 30.0, *,
-                    rate_hz: float = DEFAULT_RATE_HZ, radius: float = 0.03, depth_m: float = 0.0025,
-                    period_range_s: tuple[float, float] = SURFACE_PERIODS_S, approach_s: float = 1.5,
-                    t0: float = 0.0) -> HandTrajectory:
+def surface_circles(
+    rng: np.random.Generator,
+    reach: Reach,
+    surface_z: float,
+    duration_s: float = 30.0,
+    *,
+    rate_hz: float = DEFAULT_RATE_HZ,
+    radius: float = 0.03,
+    depth_m: float = 0.0025,
+    period_range_s: tuple[float, float] = SURFACE_PERIODS_S,
+    approach_s: float = 1.5,
+    t0: float = 0.0,
+) -> HandTrajectory:
     """Frictionless-surface protocol (paper §V-D): circles in the xy plane on the surface, pressing lightly.
 
     The hand starts 1 cm above the surface at the workspace centre, descends to ``depth_m`` below it
@@ -626,8 +739,14 @@ def surface_circles(rng: np.random.Generator, reach: Reach, surface_z: float, du
     T = rel[-1]
     centre = reach.centre().copy()
     centre[2] = surface_z
-    r = min(radius, 0.8 * min(reach.free_distance(centre - [0, 0, depth_m * 2], d) for d in
-                              (np.array([1.0, 0, 0]), np.array([-1.0, 0, 0]), np.array([0, 1.0, 0]), np.array([0, -1.0, 0]))))
+    r = min(
+        radius,
+        0.8
+        * min(
+            reach.free_distance(centre - [0, 0, depth_m * 2], d)
+            for d in (np.array([1.0, 0, 0]), np.array([-1.0, 0, 0]), np.array([0, 1.0, 0]), np.array([0, -1.0, 0]))
+        ),
+    )
     slow, fast = period_range_s
     circ = np.clip((rel - approach_s) / (T - 2 * approach_s), 0.0, 1.0)
     freq = 1.0 / (slow + (fast - slow) * circ)
@@ -639,15 +758,24 @@ def surface_circles(rng: np.random.Generator, reach: Reach, surface_z: float, du
     down = minimum_jerk(np.minimum(rel / approach_s, (T - rel) / approach_s).clip(0.0, 1.0))
     z = surface_z + 0.01 * (1 - down) - depth * down
     position = np.stack([x, y, z], axis=1)
-    quat = natural_orientation(rng, rel, rate_hz, base_quat=NATURAL_GRIP, mean_rate=4 * DEG,
-                               max_rate=16 * DEG)
+    quat = natural_orientation(rng, rel, rate_hz, base_quat=NATURAL_GRIP, mean_rate=4 * DEG, max_rate=16 * DEG)
     meta = {"radius_m": r, "depth_m": depth_m, "period_range_s": list(period_range_s), "surface_z_m": surface_z}
     return _finish(rng, t, rate_hz, position, quat, "frictionless_surface", None, meta)
 
 
-def surface_presses(rng: np.random.Generator, reach: Reach, surface_z: float, duration_s: float = 30.0, *,
-                    rate_hz: float = DEFAULT_RATE_HZ, presses: int | None = None, press_speed: float = PRESS_SPEED,
-                    above_m: float = 0.01, edge_margin: float = 0.002, t0: float = 0.0) -> HandTrajectory:
+def surface_presses(
+    rng: np.random.Generator,
+    reach: Reach,
+    surface_z: float,
+    duration_s: float = 30.0,
+    *,
+    rate_hz: float = DEFAULT_RATE_HZ,
+    presses: int | None = None,
+    press_speed: float = PRESS_SPEED,
+    above_m: float = 0.01,
+    edge_margin: float = 0.002,
+    t0: float = 0.0,
+) -> HandTrajectory:
     """Stiffness protocol (paper §V-E): repeated presses down (−z) into the surface up to the workspace edge.
 
     Each press starts ``above_m`` above the surface at the workspace centre, goes down at about
@@ -664,7 +792,7 @@ def surface_presses(rng: np.random.Generator, reach: Reach, surface_z: float, du
     edge = reach.free_distance(top, np.array([0.0, 0.0, -1.0]), limit=0.25, steps=1000)
     full = max(edge - edge_margin, above_m + 0.002)
     depth_frac = []
-    segments = []                       # (start_time, duration, z_from, z_to)
+    segments = []  # (start_time, duration, z_from, z_to)
     now = 0.5
     while True:
         frac = rng.uniform(0.85, 1.0)
@@ -683,17 +811,28 @@ def surface_presses(rng: np.random.Generator, reach: Reach, surface_z: float, du
         dz[m] = a + (b - a) * minimum_jerk((rel[m] - start) / dur)
     position = np.repeat(top[None, :], len(rel), axis=0)
     position[:, 2] += dz
-    quat = natural_orientation(rng, rel, rate_hz, base_quat=NATURAL_GRIP, mean_rate=3 * DEG,
-                               max_rate=12 * DEG)
-    meta = {"surface_z_m": surface_z, "edge_distance_m": edge, "press_depths_m": [full * f - above_m for f in depth_frac],
-            "press_count": len(depth_frac), "press_speed_m_per_s": press_speed}
+    quat = natural_orientation(rng, rel, rate_hz, base_quat=NATURAL_GRIP, mean_rate=3 * DEG, max_rate=12 * DEG)
+    meta = {
+        "surface_z_m": surface_z,
+        "edge_distance_m": edge,
+        "press_depths_m": [full * f - above_m for f in depth_frac],
+        "press_count": len(depth_frac),
+        "press_speed_m_per_s": press_speed,
+    }
     return _finish(rng, t, rate_hz, position, quat, "stiffness", None, meta)
 
 
 # --- rig calibration trials (paper §III-C, Appendix) -----------------------------------------------
 
-def handle_rotation(rng: np.random.Generator, duration_s: float = 40.0, *, rate_hz: float = DEFAULT_RATE_HZ,
-                    centre_W: tuple[float, float, float] = (0.0, 0.0, 0.35), t0: float = 0.0) -> HandTrajectory:
+
+def handle_rotation(
+    rng: np.random.Generator,
+    duration_s: float = 40.0,
+    *,
+    rate_hz: float = DEFAULT_RATE_HZ,
+    centre_W: tuple[float, float, float] = (0.0, 0.0, 0.35),
+    t0: float = 0.0,
+) -> HandTrajectory:
     """Handle calibration trial (paper §III-C, Fig. 3): the unattached end-effector slowly rotated in the air.
 
     The handle z-axis sweeps the whole sphere of directions (tilt 0 → 180° → 0 while the heading turns
@@ -728,9 +867,17 @@ class PlateLoad:
     markers_W: dict[str, np.ndarray] = field(default_factory=dict)
 
 
-def ball_impact(rng: np.random.Generator, duration_s: float = 3.0, *, rate_hz: float = 1000.0, mass_kg: float = 0.05,
-                drop_height_m: float = 0.2, restitution: float = 0.5, contact_s: float = 0.003,
-                t0: float = 0.0) -> PlateLoad:
+def ball_impact(
+    rng: np.random.Generator,
+    duration_s: float = 3.0,
+    *,
+    rate_hz: float = 1000.0,
+    mass_kg: float = 0.05,
+    drop_height_m: float = 0.2,
+    restitution: float = 0.5,
+    contact_s: float = 0.003,
+    t0: float = 0.0,
+) -> PlateLoad:
     """Plate impact trial (paper Appendix 1): a ball dropped on the plate centre, bouncing a few times.
 
     Each contact is a half-sine force pulse of length ``contact_s`` carrying the impulse
@@ -757,8 +904,14 @@ def ball_impact(rng: np.random.Generator, duration_s: float = 3.0, *, rate_hz: f
         fz += peak * contact_s / math.pi * (np.cos(np.pi * a / contact_s) - np.cos(np.pi * b / contact_s)) / dt
     force = np.stack([horiz[0] * fz, horiz[1] * fz, -fz], axis=1)
     point = np.zeros((len(rel), 3))
-    meta = {"mass_kg": mass_kg, "drop_height_m": drop_height_m, "restitution": restitution, "contact_s": contact_s,
-            "impacts": [{"t": t0 + s, "impulse_N_s": j} for s, j in impacts], "horizontal_ratio": horiz.tolist()}
+    meta = {
+        "mass_kg": mass_kg,
+        "drop_height_m": drop_height_m,
+        "restitution": restitution,
+        "contact_s": contact_s,
+        "impacts": [{"t": t0 + s, "impulse_N_s": j} for s, j in impacts],
+        "horizontal_ratio": horiz.tolist(),
+    }
     return PlateLoad(t=t, force_W=force, point_W=point, rate_hz=rate_hz, meta=meta)
 
 
@@ -770,14 +923,22 @@ def cop_grid(nx: int = 6, ny: int = 5, half_extent_m: tuple[float, float] = (0.2
 
 
 COP_MARKERS = ("cop_w1", "cop_w2", "cop_w3")
-COP_DWELL_S = 1.0      # s the weight rests at each position
-COP_MOVE_S = 0.6       # s to carry it to the next position
+COP_DWELL_S = 1.0  # s the weight rests at each position
+COP_MOVE_S = 0.6  # s to carry it to the next position
 COP_MARKER_OFFSETS = np.array([[0.02, 0.0, 0.06], [-0.01, 0.017, 0.06], [-0.01, -0.017, 0.06]])  # on the weight's top
 
 
-def weight_placements(rng: np.random.Generator, *, rate_hz: float = 1000.0, mass_kg: float = 2.0, dwell_s: float = COP_DWELL_S,
-                      move_s: float = COP_MOVE_S, positions: np.ndarray | None = None, position_jitter_m: float = 0.003,
-                      t0: float = 0.0) -> PlateLoad:
+def weight_placements(
+    rng: np.random.Generator,
+    *,
+    rate_hz: float = 1000.0,
+    mass_kg: float = 2.0,
+    dwell_s: float = COP_DWELL_S,
+    move_s: float = COP_MOVE_S,
+    positions: np.ndarray | None = None,
+    position_jitter_m: float = 0.003,
+    t0: float = 0.0,
+) -> PlateLoad:
     """COP trial (paper Appendix 2): a weight set down at 30 equally spaced positions in turn.
 
     While set down the weight loads the plate with ``m·g`` at its position (placement ramps of 0.1 s);
@@ -792,7 +953,7 @@ def weight_placements(rng: np.random.Generator, *, rate_hz: float = 1000.0, mass
     rel = t - t0
     load = np.zeros_like(rel)
     centre = np.zeros((len(rel), 3))
-    start_xy = np.array([0.35, 0.0])                       # beside the plate before the first placement
+    start_xy = np.array([0.35, 0.0])  # beside the plate before the first placement
     prev = start_xy
     now = 0.5
     ramp = 0.1
@@ -816,13 +977,25 @@ def weight_placements(rng: np.random.Generator, *, rate_hz: float = 1000.0, mass
     point = centre.copy()
     point[:, 2] = 0.0
     markers = {name: centre + off[None, :] for name, off in zip(COP_MARKERS, COP_MARKER_OFFSETS)}
-    meta = {"mass_kg": mass_kg, "positions_m": pos.tolist(), "dwell_s": dwell_s, "move_s": move_s,
-            "marker_offsets_m": COP_MARKER_OFFSETS.tolist()}
+    meta = {
+        "mass_kg": mass_kg,
+        "positions_m": pos.tolist(),
+        "dwell_s": dwell_s,
+        "move_s": move_s,
+        "marker_offsets_m": COP_MARKER_OFFSETS.tolist(),
+    }
     return PlateLoad(t=t, force_W=force, point_W=point, rate_hz=rate_hz, meta=meta, markers_W=markers)
 
 
-def baseline_wander(rng: np.random.Generator, duration_s: float = 30.0, *, rate_hz: float = DEFAULT_RATE_HZ,
-                    centre_W: tuple[float, float, float] = (0.15, 0.0, 0.25), t0: float = 0.0) -> HandTrajectory:
+def baseline_wander(
+    rng: np.random.Generator,
+    duration_s: float = 30.0,
+    *,
+    rate_hz: float = DEFAULT_RATE_HZ,
+    centre_W: tuple[float, float, float] = (0.15, 0.0, 0.25),
+    t0: float = 0.0,
+) -> HandTrajectory:
     """Baseline vibration trial (paper §VI-C): the free-space motion with the handle but no device attached."""
-    return free_space_wander(rng, None, duration_s, rate_hz=rate_hz, t0=t0, protocol="rig.baseline_vibration",
-                             centre_W=np.asarray(centre_W, float))
+    return free_space_wander(
+        rng, None, duration_s, rate_hz=rate_hz, t0=t0, protocol="rig.baseline_vibration", centre_W=np.asarray(centre_W, float)
+    )

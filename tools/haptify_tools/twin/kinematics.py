@@ -35,8 +35,7 @@ def true_kinematics(twin: TwinFile) -> Kinematics:
     eff = twin.effects.kinematics_link_length
     if not eff.enabled or (not any(eff.delta_a_m) and not any(eff.delta_d_m)):
         return kin
-    joints = [j.model_copy(update={"a": j.a + da, "d": j.d + dd})
-              for j, da, dd in zip(kin.joints, eff.delta_a_m, eff.delta_d_m)]
+    joints = [j.model_copy(update={"a": j.a + da, "d": j.d + dd}) for j, da, dd in zip(kin.joints, eff.delta_a_m, eff.delta_d_m)]
     return kin.model_copy(update={"joints": joints})
 
 
@@ -89,8 +88,16 @@ def link_transforms(kin: Kinematics, q: np.ndarray) -> list[np.ndarray]:
 def _analytic_ok(kin: Kinematics) -> bool:
     """True when the chain is the planar-elbow structure of paper eq. 4 (α1 = ±90°, α2 = α3 = 0, d2 = d3 = 0)."""
     j = kin.joints
-    return (len(j) == 3 and abs(abs(j[0].alpha) - math.pi / 2) < 1e-12 and abs(j[1].alpha) < 1e-12
-            and abs(j[2].alpha) < 1e-12 and j[1].d == 0.0 and j[2].d == 0.0 and j[1].a > 0 and j[2].a > 0)
+    return (
+        len(j) == 3
+        and abs(abs(j[0].alpha) - math.pi / 2) < 1e-12
+        and abs(j[1].alpha) < 1e-12
+        and abs(j[2].alpha) < 1e-12
+        and j[1].d == 0.0
+        and j[2].d == 0.0
+        and j[1].a > 0
+        and j[2].a > 0
+    )
 
 
 def _wrap(a: np.ndarray) -> np.ndarray:
@@ -149,8 +156,9 @@ def _limit_centre(kin: Kinematics) -> np.ndarray:
     return ref.configurations_from_unit(kin, s)[0]
 
 
-def inverse_kinematics(kin: Kinematics, p_D: np.ndarray, q_hint: np.ndarray | None = None,
-                       tol_m: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
+def inverse_kinematics(
+    kin: Kinematics, p_D: np.ndarray, q_hint: np.ndarray | None = None, tol_m: float = 1e-9
+) -> tuple[np.ndarray, np.ndarray]:
     """Joint angles ``q (N, n)`` placing the gimbal centre at ``p_D (N, 3)`` (device frame), and ``ok (N,)``.
 
     Analytic for the structure of paper eq. 4 (four candidates: shoulder and elbow up/down); among the
@@ -257,8 +265,7 @@ def _arm_end_rotation_W(twin: TwinFile, kin: Kinematics, q: np.ndarray, frames: 
     return r_wd @ r_end @ r_align
 
 
-def gimbal_angles(twin: TwinFile, q: np.ndarray, quaternion_W: np.ndarray,
-                  frames: list[np.ndarray] | None = None) -> np.ndarray:
+def gimbal_angles(twin: TwinFile, q: np.ndarray, quaternion_W: np.ndarray, frames: list[np.ndarray] | None = None) -> np.ndarray:
     """The three passive gimbal angles ``(N, 3)`` in rad that give the handle orientation ``quaternion_W``
     (wxyz, handle → W) with the arm at ``q``; sequence ``gimbal_body.axes`` (intrinsic). ``frames``
     (from :func:`link_transforms` of the true kinematics at ``q``) saves recomputing them.
@@ -266,7 +273,7 @@ def gimbal_angles(twin: TwinFile, q: np.ndarray, quaternion_W: np.ndarray,
     r_ref = _arm_end_rotation_W(twin, true_kinematics(twin), q, frames)
     r_h = quat_to_matrix(np.atleast_2d(quaternion_W))
     rel = np.swapaxes(r_ref, 1, 2) @ r_h
-    with warnings.catch_warnings():      # gimbal lock: scipy picks the third angle 0, which is a valid answer
+    with warnings.catch_warnings():  # gimbal lock: scipy picks the third angle 0, which is a valid answer
         warnings.simplefilter("ignore", UserWarning)
         return Rotation.from_matrix(rel).as_euler(twin.gimbal_body.axes.upper())
 
@@ -280,8 +287,9 @@ def handle_quaternion(twin: TwinFile, q: np.ndarray, angles: np.ndarray) -> np.n
     return np.concatenate([xyzw[:, 3:], xyzw[:, :3]], axis=1)
 
 
-def hand_to_joints(twin: TwinFile, position_W: np.ndarray, quaternion_W: np.ndarray | None = None,
-                   strict: bool = False) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+def hand_to_joints(
+    twin: TwinFile, position_W: np.ndarray, quaternion_W: np.ndarray | None = None, strict: bool = False
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
     """Arm angles ``(N, n)``, gimbal angles ``(N, 3)`` (None without orientation) and ``ok (N,)`` for a hand path.
 
     Uses the TRUE kinematics and the IK solution inside the joint limits (unique for the structure of
@@ -293,7 +301,11 @@ def hand_to_joints(twin: TwinFile, position_W: np.ndarray, quaternion_W: np.ndar
     q, ok = inverse_kinematics(kin, p_D)
     if strict and not ok.all():
         i = int(np.argmin(ok))
-        raise fail("E803", f"hand position {p_D[i].round(4).tolist()} m (device frame, sample {i}) is out of reach",
-                   expected="a point inside the joint limits", found=p_D[i].tolist())
+        raise fail(
+            "E803",
+            f"hand position {p_D[i].round(4).tolist()} m (device frame, sample {i}) is out of reach",
+            expected="a point inside the joint limits",
+            found=p_D[i].tolist(),
+        )
     g = None if quaternion_W is None else gimbal_angles(twin, q, quaternion_W)
     return q, g, ok

@@ -43,15 +43,27 @@ PRESETS: tuple[str, ...] = ("touch", "touch-x")
 
 #: Every effect id, in the order the discrepancy workflow lists them (TWIN.md, Effects).
 EFFECT_IDS: tuple[str, ...] = (
-    "gravity", "inertia", "friction.coulomb", "friction.viscous", "friction.stribeck",
-    "drive.series_elasticity", "drive.torque_saturation", "drive.force_cutoff", "drive.backlash",
-    "kinematics.base_collision", "kinematics.link_length", "sensor.bias", "handle.connector_mass",
+    "gravity",
+    "inertia",
+    "friction.coulomb",
+    "friction.viscous",
+    "friction.stribeck",
+    "drive.series_elasticity",
+    "drive.torque_saturation",
+    "drive.force_cutoff",
+    "drive.backlash",
+    "kinematics.base_collision",
+    "kinematics.link_length",
+    "sensor.bias",
+    "handle.connector_mass",
     "vibration.device",
 )
 #: Effects consumed by the virtual rig (they live in the twin file's ``rig`` section).
 RIG_EFFECT_IDS: tuple[str, ...] = ("sensor.bias", "handle.connector_mass")
 
-PerJoint = Annotated[list[float], Field(min_length=1, max_length=9, description="One value per arm joint / drive axis, in joint order.")]
+PerJoint = Annotated[
+    list[float], Field(min_length=1, max_length=9, description="One value per arm joint / drive axis, in joint order.")
+]
 
 
 class _Strict(BaseModel):
@@ -67,6 +79,7 @@ class Effect(_Strict):
 
 
 # --- dynamics effects ---------------------------------------------------------------------------
+
 
 class GravityEffect(Effect):
     """Effect ``gravity``: weight of every moving part (links and gimbal body) in the world's uniform field, −z, m/s² (TWIN.md, Effects)."""
@@ -89,16 +102,27 @@ class CoulombFriction(Effect):
 
     torque_Nm: PerJoint = Field(description="Coulomb friction torque per drive axis at the capstan output, N·m.")
     zero_crossing_velocity_rad_per_s: float = Field(gt=0, description="ω_s of the tanh zero crossing, rad/s.")
-    gimbal_torque_Nm: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0], description="Coulomb torque of the three gimbal joints, N·m.")
-    ripple_fraction: float = Field(0.0, ge=0, le=1, description="Relative variation of the drive Coulomb torque along the drive angle (cable winding on the capstan drum, motor brushes): τ_c·(1 + r·sin(2π·c·θ)).")
-    ripple_cycles_per_rad: float = Field(10.0, gt=0, description="c: ripple cycles per radian of drive angle (capstan output side).")
+    gimbal_torque_Nm: Vec3 = Field(
+        default_factory=lambda: [0.0, 0.0, 0.0], description="Coulomb torque of the three gimbal joints, N·m."
+    )
+    ripple_fraction: float = Field(
+        0.0,
+        ge=0,
+        le=1,
+        description="Relative variation of the drive Coulomb torque along the drive angle (cable winding on the capstan drum, motor brushes): τ_c·(1 + r·sin(2π·c·θ)).",
+    )
+    ripple_cycles_per_rad: float = Field(
+        10.0, gt=0, description="c: ripple cycles per radian of drive angle (capstan output side)."
+    )
 
 
 class ViscousFriction(Effect):
     """Effect ``friction.viscous``: ``τ = −b · ω`` per drive axis and gimbal joint, b in N·m·s/rad (TWIN.md, Effects)."""
 
     damping_Nms_per_rad: PerJoint = Field(description="Viscous coefficient per drive axis, N·m·s/rad.")
-    gimbal_damping_Nms_per_rad: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0], description="Viscous coefficient of the gimbal joints, N·m·s/rad.")
+    gimbal_damping_Nms_per_rad: Vec3 = Field(
+        default_factory=lambda: [0.0, 0.0, 0.0], description="Viscous coefficient of the gimbal joints, N·m·s/rad."
+    )
 
 
 class StribeckFriction(Effect):
@@ -143,6 +167,7 @@ class Backlash(Effect):
 
 
 # --- kinematic effects --------------------------------------------------------------------------
+
 
 class Box(_Strict):
     """A box primitive of ``kinematics.base_collision`` in the device frame: centre and half extents in m, orientation quaternion wxyz (TWIN.md, Effects)."""
@@ -192,7 +217,9 @@ class BaseCollision(Effect):
     """
 
     primitives: list[Primitive] = Field(default_factory=list)
-    clearance_m: float = Field(0.0, ge=0, description="Radius of the end-effector's collision sphere around the gimbal centre, m.")
+    clearance_m: float = Field(
+        0.0, ge=0, description="Radius of the end-effector's collision sphere around the gimbal centre, m."
+    )
 
 
 class LinkLength(Effect):
@@ -203,6 +230,7 @@ class LinkLength(Effect):
 
 
 # --- vibration ----------------------------------------------------------------------------------
+
 
 class BroadbandSource(_Strict):
     """A broadband source of ``vibration.device``: band-limited noise whose RMS (m/s²) grows with handle speed, ``rms(v) = rms_ref · (v / v_ref)^p``; band in Hz (TWIN.md, Effects)."""
@@ -248,13 +276,16 @@ class NoiseFloor(_Strict):
 
 # --- rig effects (behaviour implemented by the virtual rig) --------------------------------------
 
+
 class SensorBias(Effect):
     """Rig effect ``sensor.bias``: constant offsets of the raw sensors in their own frames, N, N·m, m/s² (the calibration must remove them) (TWIN.md, Effects)."""
 
     handle_force_N: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0], description="F/T force bias, sensor frame, N.")
     handle_torque_Nm: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0], description="F/T torque bias, sensor frame, N·m.")
     accel_m_per_s2: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0], description="Accelerometer bias, sensor frame, m/s².")
-    plate_corner_force_N: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0], description="Force bias added to each plate corner sensor, its frame, N.")
+    plate_corner_force_N: Vec3 = Field(
+        default_factory=lambda: [0.0, 0.0, 0.0], description="Force bias added to each plate corner sensor, its frame, N."
+    )
 
 
 class ConnectorMass(Effect):
@@ -291,13 +322,17 @@ class Effects(_Strict):
 
 # --- structure ----------------------------------------------------------------------------------
 
+
 class LinkDynamics(_Strict):
     """Rigid-body data of one arm link in its own (distal DH) frame: kg, m, kg·m² (TWIN.md, section ``links``)."""
 
     name: str
     mass_kg: float = Field(ge=0)
     com_m: Vec3 = Field(description="Centre of mass in the link's DH frame, m.")
-    inertia_kg_m2: Annotated[list[float], Field(min_length=6, max_length=6, description="[Ixx, Iyy, Izz, Ixy, Ixz, Iyz] about the COM in link axes, kg·m².")]
+    inertia_kg_m2: Annotated[
+        list[float],
+        Field(min_length=6, max_length=6, description="[Ixx, Iyy, Izz, Ixy, Ixz, Iyz] about the COM in link axes, kg·m²."),
+    ]
     source: str | None = None
 
 
@@ -307,8 +342,13 @@ class GimbalBody(_Strict):
     mass_kg: float = Field(ge=0)
     com_m: Vec3 = Field(description="Centre of mass relative to the gimbal centre, handle frame, m.")
     inertia_kg_m2: Vec3 = Field(description="Principal moments about the COM along the handle axes, kg·m².")
-    axes: Literal["zxz", "zyx", "zxy", "xyz", "yzx"] = Field("zxy", description="Intrinsic rotation sequence of the three gimbal joints relative to the last arm frame.")
-    alignment: Annotated[list[float], Field(min_length=4, max_length=4)] = Field(default_factory=lambda: [1.0, 0.0, 0.0, 0.0], description="Handle frame in the last DH frame when every gimbal angle is zero, quaternion wxyz.")
+    axes: Literal["zxz", "zyx", "zxy", "xyz", "yzx"] = Field(
+        "zxy", description="Intrinsic rotation sequence of the three gimbal joints relative to the last arm frame."
+    )
+    alignment: Annotated[list[float], Field(min_length=4, max_length=4)] = Field(
+        default_factory=lambda: [1.0, 0.0, 0.0, 0.0],
+        description="Handle frame in the last DH frame when every gimbal angle is zero, quaternion wxyz.",
+    )
     source: str | None = None
 
 
@@ -399,14 +439,22 @@ def _effect(twin: TwinFile, effect_id: str) -> Effect:
 
 # --- file I/O -----------------------------------------------------------------------------------
 
+
 def _validation_error(err: ValidationError, file: str | None) -> Exception:
     from haptify.errors import Finding, HaptifyError
 
     findings = []
     for e in err.errors():
         pointer = "/" + "/".join(str(p) for p in e["loc"])
-        findings.append(Finding("E802", f"twin file: {e['msg']}", file=file, pointer=pointer,
-                                found=e.get("input") if not isinstance(e.get("input"), dict) else None))
+        findings.append(
+            Finding(
+                "E802",
+                f"twin file: {e['msg']}",
+                file=file,
+                pointer=pointer,
+                found=e.get("input") if not isinstance(e.get("input"), dict) else None,
+            )
+        )
     return HaptifyError(*findings)
 
 
@@ -453,6 +501,7 @@ def write_twin(twin: TwinFile, path: str | Path) -> Path:
 
 # --- editing (for --disable / --set) -------------------------------------------------------------
 
+
 def disable(twin: TwinFile, effect_id: str) -> TwinFile:
     """A copy of ``twin`` with effect ``effect_id`` switched off (E801 for an unknown id)."""
     return set_param(twin, f"{effect_id}.enabled", False)
@@ -484,7 +533,7 @@ def set_param(twin: TwinFile, path: str, value: Any) -> TwinFile:
     data = twin_to_dict(twin)
     if effect_id is not None:
         holder = data["rig"] if effect_id in RIG_EFFECT_IDS else data["effects"]
-        keys = [effect_id] + path[len(effect_id) + 1:].split(".")
+        keys = [effect_id] + path[len(effect_id) + 1 :].split(".")
     else:
         holder = data
         keys = path.split(".")
@@ -503,8 +552,12 @@ def set_param(twin: TwinFile, path: str, value: Any) -> TwinFile:
         elif isinstance(node, dict) and k in node:
             node = node[k]
         else:
-            raise fail("E801", f"no parameter {path!r} in the twin", found=path,
-                       expected="<effect id>.<parameter>, effect ids: " + ", ".join(EFFECT_IDS))
+            raise fail(
+                "E801",
+                f"no parameter {path!r} in the twin",
+                found=path,
+                expected="<effect id>.<parameter>, effect ids: " + ", ".join(EFFECT_IDS),
+            )
     last = keys[-1]
     if isinstance(node, list) and last.isdigit():
         last = int(last)
@@ -520,8 +573,12 @@ def set_param(twin: TwinFile, path: str, value: Any) -> TwinFile:
         current = copy.copy(current)
         current[index] = value
         value = current
-    elif isinstance(current, list) and isinstance(value, (int, float)) and not isinstance(value, bool) \
-            and all(isinstance(v, (int, float)) for v in current):
+    elif (
+        isinstance(current, list)
+        and isinstance(value, (int, float))
+        and not isinstance(value, bool)
+        and all(isinstance(v, (int, float)) for v in current)
+    ):
         value = [float(value)] * len(current)
     node[last] = value
     return twin_from_dict(data)

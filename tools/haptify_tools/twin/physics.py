@@ -43,12 +43,19 @@ from haptify.session_format import Kinematics, Rendering
 from haptify_tools.twin import drive_loops
 from haptify_tools.twin.examiner import band_noise as _band_noise
 from haptify_tools.twin.kinematics import (
-    gimbal_angles, hand_to_joints, in_collision, link_transforms, nominal_kinematics, placement_matrix, rows_times,
-    true_kinematics, world_to_device,
+    gimbal_angles,
+    hand_to_joints,
+    in_collision,
+    link_transforms,
+    nominal_kinematics,
+    placement_matrix,
+    rows_times,
+    true_kinematics,
+    world_to_device,
 )
 from haptify_tools.twin.model import TwinFile, twin_to_dict
 
-DEFAULT_LOOP_HZ = 1000.0   # CHAI3D's haptic loop rate when the rendering does not say (paper §V-D)
+DEFAULT_LOOP_HZ = 1000.0  # CHAI3D's haptic loop rate when the rendering does not say (paper §V-D)
 
 # --- small helpers ------------------------------------------------------------------------------
 
@@ -73,18 +80,31 @@ def _check_path(t: np.ndarray, position_W: np.ndarray, quaternion_W: np.ndarray,
     p = np.atleast_2d(np.asarray(position_W, dtype=float))
     q = np.atleast_2d(np.asarray(quaternion_W, dtype=float))
     if t.ndim != 1 or len(t) < 3:
-        raise fail("E903", "the time vector must be one-dimensional with at least 3 samples", expected="(N,), N >= 3", found=list(t.shape))
+        raise fail(
+            "E903",
+            "the time vector must be one-dimensional with at least 3 samples",
+            expected="(N,), N >= 3",
+            found=list(t.shape),
+        )
     if p.shape != (len(t), 3) or q.shape != (len(t), 4):
-        raise fail("E903", "hand positions must be (N, 3) and quaternions (N, 4) for N time samples",
-                   expected=[[len(t), 3], [len(t), 4]], found=[list(p.shape), list(q.shape)])
+        raise fail(
+            "E903",
+            "hand positions must be (N, 3) and quaternions (N, 4) for N time samples",
+            expected=[[len(t), 3], [len(t), 4]],
+            found=[list(p.shape), list(q.shape)],
+        )
     if not (np.all(np.isfinite(t)) and np.all(np.isfinite(p)) and np.all(np.isfinite(q))):
         raise fail("E903", "the hand path holds NaN or infinite values", expected="finite values", found="NaN/inf")
     dt = np.diff(t)
     if np.any(dt <= 0):
         raise fail("E903", "time must increase strictly", expected="t[i+1] > t[i]", found=int(np.argmin(dt > 0)))
     if uniform and np.max(np.abs(dt - dt[0])) > 1e-6 * dt[0]:
-        raise fail("E903", "the active loop needs uniformly sampled time", expected=f"steps of {dt[0]:g} s",
-                   found=[float(dt.min()), float(dt.max())])
+        raise fail(
+            "E903",
+            "the active loop needs uniformly sampled time",
+            expected=f"steps of {dt[0]:g} s",
+            found=[float(dt.min()), float(dt.max())],
+        )
     return t, p, q
 
 
@@ -137,8 +157,11 @@ def drive_friction(twin: TwinFile, omega: np.ndarray, theta: np.ndarray | None =
         tau -= np.asarray(e.friction_viscous.damping_Nms_per_rad) * omega
     if e.friction_stribeck.enabled:
         s = e.friction_stribeck
-        tau -= (np.asarray(s.excess_torque_Nm) * np.exp(-(omega / s.stribeck_velocity_rad_per_s) ** 2)
-                * np.tanh(omega / s.zero_crossing_velocity_rad_per_s))
+        tau -= (
+            np.asarray(s.excess_torque_Nm)
+            * np.exp(-((omega / s.stribeck_velocity_rad_per_s) ** 2))
+            * np.tanh(omega / s.zero_crossing_velocity_rad_per_s)
+        )
     return tau
 
 
@@ -147,7 +170,9 @@ def gimbal_friction(twin: TwinFile, rate: np.ndarray) -> np.ndarray:
     tau = np.zeros_like(rate)
     e = twin.effects
     if e.friction_coulomb.enabled:
-        tau -= np.asarray(e.friction_coulomb.gimbal_torque_Nm) * np.tanh(rate / e.friction_coulomb.zero_crossing_velocity_rad_per_s)
+        tau -= np.asarray(e.friction_coulomb.gimbal_torque_Nm) * np.tanh(
+            rate / e.friction_coulomb.zero_crossing_velocity_rad_per_s
+        )
     if e.friction_viscous.enabled:
         tau -= np.asarray(e.friction_viscous.gimbal_damping_Nms_per_rad) * rate
     return tau
@@ -160,12 +185,12 @@ def gimbal_friction(twin: TwinFile, rate: np.ndarray) -> np.ndarray:
 class LinkState:
     """Per-sample kinematics of the arm links in the device frame (from the forward pass)."""
 
-    frames: list[np.ndarray]          # T_0..T_n, (N, 4, 4)
-    omega: list[np.ndarray]           # ω_i (N, 3), i = 1..n
-    alpha: list[np.ndarray]           # ω̇_i
-    acc_origin: list[np.ndarray]      # a_{o_i}, with −g folded in
-    com: list[np.ndarray]             # c_i positions (N, 3)
-    acc_com: list[np.ndarray]         # a_{c_i} − g
+    frames: list[np.ndarray]  # T_0..T_n, (N, 4, 4)
+    omega: list[np.ndarray]  # ω_i (N, 3), i = 1..n
+    alpha: list[np.ndarray]  # ω̇_i
+    acc_origin: list[np.ndarray]  # a_{o_i}, with −g folded in
+    com: list[np.ndarray]  # c_i positions (N, 3)
+    acc_com: list[np.ndarray]  # a_{c_i} − g
 
 
 def _forward_pass(twin: TwinFile, kin: Kinematics, q, qd, qdd, g_D, frames=None) -> LinkState:
@@ -178,8 +203,8 @@ def _forward_pass(twin: TwinFile, kin: Kinematics, q, qd, qdd, g_D, frames=None)
     for i, link in enumerate(twin.links):
         z = frames[i][:, :3, 2]
         o_prev, o = frames[i][:, :3, 3], frames[i + 1][:, :3, 3]
-        w_new = w + z * qd[:, i:i + 1]
-        dw = dw + z * qdd[:, i:i + 1] + _cross(w, z * qd[:, i:i + 1])
+        w_new = w + z * qd[:, i : i + 1]
+        dw = dw + z * qdd[:, i : i + 1] + _cross(w, z * qd[:, i : i + 1])
         w = w_new
         r = o - o_prev
         a = a + _cross(dw, r) + _cross(w, _cross(w, r))
@@ -215,8 +240,7 @@ def _backward_pass(twin: TwinFile, st: LinkState) -> tuple[np.ndarray, np.ndarra
     return tau, f_next, m_next
 
 
-def inverse_dynamics(twin: TwinFile, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
-                     kin: Kinematics | None = None) -> np.ndarray:
+def inverse_dynamics(twin: TwinFile, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, kin: Kinematics | None = None) -> np.ndarray:
     """Joint torques ``(N, n)`` in N·m that move the bare links (no rotors, no friction, no gimbal body)
     along ``q, q̇, q̈`` with the twin's gravity — recursive Newton–Euler (Luh, Walker & Paul 1980).
 
@@ -276,7 +300,7 @@ def _gimbal_com_offset_D(twin: TwinFile, quaternion_W: np.ndarray) -> np.ndarray
 def _handle_rates(t: np.ndarray, quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Angular velocity and acceleration ``(N, 3)`` of the handle in W from its quaternions (rad/s, rad/s²)."""
     quat = np.atleast_2d(quat).copy()
-    flip = np.sum(quat[1:] * quat[:-1], axis=1) < 0          # keep one hemisphere for differencing
+    flip = np.sum(quat[1:] * quat[:-1], axis=1) < 0  # keep one hemisphere for differencing
     sign = np.cumprod(np.concatenate([[1.0], np.where(flip, -1.0, 1.0)]))
     quat *= sign[:, None]
     dq = _diff(t, quat)
@@ -286,10 +310,10 @@ def _handle_rates(t: np.ndarray, quat: np.ndarray) -> tuple[np.ndarray, np.ndarr
 
 @dataclass
 class _GimbalLoad:
-    force_link: np.ndarray     # force the gimbal body applies to the last link at the gimbal centre (D)
-    moment_link: np.ndarray    # moment it applies (gimbal friction), D
-    force_hand: np.ndarray     # force the device applies to the hand (D), before adding the link's share
-    torque_hand: np.ndarray    # torque the device applies to the hand about the gimbal centre (D)
+    force_link: np.ndarray  # force the gimbal body applies to the last link at the gimbal centre (D)
+    moment_link: np.ndarray  # moment it applies (gimbal friction), D
+    force_hand: np.ndarray  # force the device applies to the hand (D), before adding the link's share
+    torque_hand: np.ndarray  # torque the device applies to the hand about the gimbal centre (D)
 
 
 def _gimbal_body_terms(twin: TwinFile, t, frames, angles, quat_W, a_tip_D, g_D) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -307,8 +331,7 @@ def _gimbal_body_terms(twin: TwinFile, t, frames, angles, quat_W, a_tip_D, g_D) 
     f_g = gb.mass_kg * (a_c - g_D)
     r_h = r_wd.T @ quat_to_matrix(np.atleast_2d(quat_W))
     inertia = r_h @ np.diag(gb.inertia_kg_m2) @ np.swapaxes(r_h, 1, 2)
-    m_g = (np.einsum("nij,nj->ni", inertia, dw) + _cross(w, np.einsum("nij,nj->ni", inertia, w))
-           + _cross(rc, f_g))
+    m_g = np.einsum("nij,nj->ni", inertia, dw) + _cross(w, np.einsum("nij,nj->ni", inertia, w)) + _cross(rc, f_g)
     # gimbal joint friction, each joint's torque along its own axis
     rates = _diff(t, _unwrap(angles))
     tau_j = gimbal_friction(twin, rates)
@@ -408,7 +431,7 @@ def _rigid_part(twin, kin, t, q, qd, qdd, quat_W, gimbal, frames=None) -> _Rigid
     frames = frames if frames is not None else link_transforms(kin, q)
     st = _forward_pass(twin, kin, q, qd if inert else np.zeros_like(qd), qdd if inert else np.zeros_like(qdd), g_D, frames)
     tau0, f1, n1 = _backward_pass(twin, st)
-    a_tip = st.acc_origin[-1] + g_D          # true acceleration of the gimbal centre
+    a_tip = st.acc_origin[-1] + g_D  # true acceleration of the gimbal centre
     f_g, m_g, fric = _gimbal_body_terms(twin, t, frames, gimbal, quat_W, a_tip, g_D)
     jac, jw = _jacobians(frames, len(twin.links))
     # Link n receives at the gimbal centre a force f_e and moment m_e = −fric from the gimbal.
@@ -423,13 +446,13 @@ def _hand_wrench_from_drive(twin, rigid: _RigidPart, tau_drive_joint):
     r = rigid
     f_e = np.linalg.solve(np.swapaxes(r.jac, 1, 2), (r.rhs0 - tau_drive_joint)[..., None])[..., 0]
     # The gimbal body: f_link_on_gimbal = −f_e; hand force on gimbal = m(a−g) + f_e
-    force_hand = -(r.f_g + f_e)                     # device → hand
-    torque_hand = -(r.m_g - r.fric)                 # device → hand about the gimbal centre
+    force_hand = -(r.f_g + f_e)  # device → hand
+    torque_hand = -(r.m_g - r.fric)  # device → hand about the gimbal centre
     # Base: link 1 gets f1,n1 from the base when no external load; with f_e, m_e on link n:
     f_base_on_link = r.f1 - f_e
     m_base_on_link = r.n1 - _cross(r.tip - r.o0, f_e) + r.fric
-    force_plate = -f_base_on_link                   # arm → base → plate (base static)
-    torque_plate = -m_base_on_link + _cross(r.o0, force_plate)   # about the device origin
+    force_plate = -f_base_on_link  # arm → base → plate (base static)
+    torque_plate = -m_base_on_link + _cross(r.o0, force_plate)  # about the device origin
     # base weight
     wb = twin.base.mass_kg * _gravity_D(twin)
     force_plate = force_plate + wb
@@ -452,9 +475,14 @@ def _to_world(twin: TwinFile, force_D, torque_D, about_origin_D: bool = True):
 _NOT_KINEMATIC = {"gravity": None, "inertia": None, "friction.": None, "drive.": None, "vibration.": None}
 #: What acts on the drive torques only, left out of the rigid part's memo key: the drive's effects and the drive
 #: side of friction and inertia (the gimbal's friction and the links' inertia stay in).
-_DRIVE_ONLY = {"friction.stribeck": None, "drive.": None, "vibration.": None, "inertia": ("rotor_inertia_kg_m2",),
-               "friction.coulomb": ("torque_Nm", "ripple_fraction", "ripple_cycles_per_rad"),
-               "friction.viscous": ("damping_Nms_per_rad",)}
+_DRIVE_ONLY = {
+    "friction.stribeck": None,
+    "drive.": None,
+    "vibration.": None,
+    "inertia": ("rotor_inertia_kg_m2",),
+    "friction.coulomb": ("torque_Nm", "ripple_fraction", "ripple_cycles_per_rad"),
+    "friction.viscous": ("damping_Nms_per_rad",),
+}
 
 
 def _twin_key(twin: TwinFile, leave_out: dict[str, tuple[str, ...] | None]) -> str:
@@ -490,7 +518,7 @@ class _Memo:
 
     def __init__(self, max_bytes: int) -> None:
         self.max_bytes, self.items, self.size = max_bytes, OrderedDict(), 0
-        self.lock = threading.Lock()          # simulations may run in threads of one process
+        self.lock = threading.Lock()  # simulations may run in threads of one process
 
     def clear(self) -> None:
         with self.lock:
@@ -521,7 +549,7 @@ class _Memo:
         return value
 
 
-MEMO_BYTES = 1 << 30        # per process
+MEMO_BYTES = 1 << 30  # per process
 _MEMO = _Memo(MEMO_BYTES)
 
 
@@ -539,7 +567,7 @@ class _JointPath:
     qdd: np.ndarray
     c: np.ndarray
     key: tuple
-    frames: list | None = None      # the DH frames when just computed (not kept in the memo)
+    frames: list | None = None  # the DH frames when just computed (not kept in the memo)
 
 
 def _joint_path(twin, t: np.ndarray, position_W: np.ndarray, quaternion_W: np.ndarray) -> _JointPath:
@@ -585,14 +613,25 @@ def simulate_passive(twin: TwinFile, t: np.ndarray, position_W: np.ndarray, quat
     j_refl = reflected_rotor_inertia(twin)
     if twin.on("drive.series_elasticity") and np.all(j_refl > 0) and len(t) > 2:
         tau_axis = _passive_drive(twin, t, rows_times(q, c.T), th_d)
-    else:   # rigid cables (or massless rotors): friction and rotor inertia reach the links directly
+    else:  # rigid cables (or massless rotors): friction and rotor inertia reach the links directly
         tau_axis = drive_friction(twin, th_d, rows_times(q, c.T)) - j_refl * th_dd
     tau_joint = rows_times(tau_axis, c)
     fh, th, fp, tp, jt = _hand_wrench_from_drive(twin, _rigid_part_of(twin, jp, t, quaternion_W), tau_joint)
     f_w, m_w = _to_world(twin, fh, th, about_origin_D=False)
     bf_w, bm_w = _to_world(twin, fp, tp)
-    return PassiveResult(t=t, q=q, gimbal=jp.gimbal, force_W=f_w, torque_W=m_w, base_force_W=bf_w, base_torque_W=bm_w,
-                         ok=jp.ok, qd=qd, qdd=qdd, joint_torque=jt)
+    return PassiveResult(
+        t=t,
+        q=q,
+        gimbal=jp.gimbal,
+        force_W=f_w,
+        torque_W=m_w,
+        base_force_W=bf_w,
+        base_torque_W=bm_w,
+        ok=jp.ok,
+        qd=qd,
+        qdd=qdd,
+        joint_torque=jt,
+    )
 
 
 # --- active -------------------------------------------------------------------------------------
@@ -617,8 +656,9 @@ class ActiveResult(HandPathResult):
     cut_off: np.ndarray
 
 
-def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, hand_quaternion_W: np.ndarray,
-                    rendering: Rendering | dict) -> ActiveResult:
+def simulate_active(
+    twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, hand_quaternion_W: np.ndarray, rendering: Rendering | dict
+) -> ActiveResult:
     """Simulate the powered device rendering a frictionless virtual plane (TWIN.md, Physics; CHAI3D plane example).
 
     The loop runs at ``rendering.loop_rate_hz`` (default 1 kHz, CHAI3D's rate) on the samples of ``t``
@@ -636,12 +676,19 @@ def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, 
         try:
             rendering = Rendering.model_validate(rendering)
         except ValidationError as err:
-            raise fail("E903", f"invalid rendering: {err.errors()[0]['msg']}", expected="a session-format Rendering",
-                       found=str(err.errors()[0]["loc"])) from None
+            raise fail(
+                "E903",
+                f"invalid rendering: {err.errors()[0]['msg']}",
+                expected="a session-format Rendering",
+                found=str(err.errors()[0]["loc"]),
+            ) from None
     if rendering.static_friction or rendering.dynamic_friction:
-        raise fail("E903", "the twin renders frictionless planes only (CHAI3D plane example with zero friction)",
-                   expected="static_friction = dynamic_friction = 0",
-                   found=[rendering.static_friction, rendering.dynamic_friction])
+        raise fail(
+            "E903",
+            "the twin renders frictionless planes only (CHAI3D plane example with zero friction)",
+            expected="static_friction = dynamic_friction = 0",
+            found=[rendering.static_friction, rendering.dynamic_friction],
+        )
     t, pos_W, quat_W = _check_path(t, hand_position_W, hand_quaternion_W, uniform=True)
     n_s = len(t)
     nom = nominal_kinematics(twin)
@@ -665,7 +712,7 @@ def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, 
     loop_hz = rendering.loop_rate_hz or DEFAULT_LOOP_HZ
     step = max(1, int(round(1.0 / (loop_hz * float(np.median(np.diff(t)))))) if n_s > 1 else 1)
     ticks = np.arange(0, n_s, step)
-    hold_idx = np.minimum(np.arange(n_s) // step, len(ticks) - 1)     # zero-order hold of loop outputs
+    hold_idx = np.minimum(np.arange(n_s) // step, len(ticks) - 1)  # zero-order hold of loop outputs
     if not e.drive_series_elasticity.enabled:
         # rigid cable: the encoders see the link-side drive angles
         enc_q = rows_times(th_l, c_inv.T)
@@ -675,7 +722,11 @@ def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, 
         tau_cmd = rows_times(np.einsum("nik,ni->nk", ref.jacobian(nom, enc_q[ticks]), f_tick), c_inv)
         motor = np.clip(tau_cmd, -tau_max, tau_max)
         sat_tick = np.any(np.abs(tau_cmd) > tau_max, axis=1)
-        cut_tick = drive_loops.cutoff_latch(k_r * depth, cut.trip_force_N, cut.rearm_force_N) if cut.enabled else np.zeros(len(ticks), bool)
+        cut_tick = (
+            drive_loops.cutoff_latch(k_r * depth, cut.trip_force_N, cut.rearm_force_N)
+            if cut.enabled
+            else np.zeros(len(ticks), bool)
+        )
         motor[cut_tick] = 0.0
         motor, f_cmd_D, saturated, cut_flags = motor[hold_idx], f_tick[hold_idx], sat_tick[hold_idx], cut_tick[hold_idx]
         cable = motor + drive_friction(twin, thd_l, th_l) - j_refl * thdd_l
@@ -685,7 +736,8 @@ def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, 
         b = np.asarray(se.damping_Nms_per_rad)
         half_gap = 0.5 * np.asarray(e.drive_backlash.width_rad) if e.drive_backlash.enabled else np.zeros(n_j)
         motor_t, cable_t, enc_t, f_t, sat_t, cut_t = _render_loop(
-            twin, t[ticks], th_l[ticks], thd_l[ticks], nom, c_inv, ps_D, n_D, k_r, tau_max, cut, j_refl, k, b, half_gap)
+            twin, t[ticks], th_l[ticks], thd_l[ticks], nom, c_inv, ps_D, n_D, k_r, tau_max, cut, j_refl, k, b, half_gap
+        )
         motor, f_cmd_D, saturated, cut_flags = motor_t[hold_idx], f_t[hold_idx], sat_t[hold_idx], cut_t[hold_idx]
         if step == 1:
             cable, enc_q = cable_t, enc_t
@@ -703,9 +755,23 @@ def simulate_active(twin: TwinFile, t: np.ndarray, hand_position_W: np.ndarray, 
     bf_w, bm_w = _to_world(twin, fp, tp)
     commanded = np.concatenate([rows_times(f_cmd_D, r_wd.T), np.zeros((n_s, 3))], axis=1)
     p_enc_W = rows_times(p_enc, r_wd.T) + t_wd
-    return ActiveResult(t=t, q=q, gimbal=jp.gimbal, force_W=f_w, torque_W=m_w, base_force_W=bf_w, base_torque_W=bm_w,
-                        ok=jp.ok, commanded_W=commanded, encoder_q=enc_q, encoder_position_W=p_enc_W, motor_torque=motor,
-                        cable_torque=cable, saturated=saturated, cut_off=cut_flags)
+    return ActiveResult(
+        t=t,
+        q=q,
+        gimbal=jp.gimbal,
+        force_W=f_w,
+        torque_W=m_w,
+        base_force_W=bf_w,
+        base_torque_W=bm_w,
+        ok=jp.ok,
+        commanded_W=commanded,
+        encoder_q=enc_q,
+        encoder_position_W=p_enc_W,
+        motor_torque=motor,
+        cable_torque=cable,
+        saturated=saturated,
+        cut_off=cut_flags,
+    )
 
 
 def _exact_step(j: float, b: float, k: float, h: float) -> tuple[float, ...]:
@@ -714,7 +780,7 @@ def _exact_step(j: float, b: float, k: float, h: float) -> tuple[float, ...]:
     from scipy.linalg import expm
 
     a = np.array([[0.0, 1.0], [-k / j, -b / j]])
-    m = np.zeros((4, 4))          # Van Loan: expm([[A, I], [0, 0]]·h) holds ∫exp(As)ds
+    m = np.zeros((4, 4))  # Van Loan: expm([[A, I], [0, 0]]·h) holds ∫exp(As)ds
     m[:2, :2] = a * h
     m[:2, 2:] = np.eye(2) * h
     big = expm(m)
@@ -744,8 +810,9 @@ def _passive_drive(twin: TwinFile, t: np.ndarray, th_l: np.ndarray, thd_l: np.nd
     # the link's velocity step at the end of each period, seen in the rotor's relative coordinate
     jumps = np.concatenate([w_per[:-1] - w_per[1:], np.zeros((1, n_j))])
     exact = _exact_steps(j_refl, b, k, float(dts[0]))
-    return drive_loops.passive_drive(np.ascontiguousarray(drive_friction(twin, thd_l, th_l)), jumps, dts, k, b, half_gap,
-                                     j_refl, exact, uniform)
+    return drive_loops.passive_drive(
+        np.ascontiguousarray(drive_friction(twin, thd_l, th_l)), jumps, dts, k, b, half_gap, j_refl, exact, uniform
+    )
 
 
 def _periods(t: np.ndarray) -> np.ndarray:
@@ -767,10 +834,26 @@ def _render_loop(twin, t, th_l, thd_l, nom, c_inv, ps_D, n_D, k_r, tau_max, cut,
     trip, rearm = (cut.trip_force_N, cut.rearm_force_N) if cut.enabled else (math.inf, -1.0)
     k, b, half_gap = (np.asarray(x, float) for x in (k, b, half_gap))
     return drive_loops.render_loop(
-        np.ascontiguousarray(th_l, float), np.ascontiguousarray(thd_l, float),
-        np.ascontiguousarray(drive_friction(twin, thd_l, th_l)), dts, dh, base_r, np.asarray(nom.base.position, float),
-        np.asarray(c_inv, float), np.asarray(ps_D, float), np.asarray(n_D, float), float(k_r),
-        np.asarray(tau_max, float), float(trip), float(rearm), k, b, half_gap, j_refl, _exact_steps(j_refl, b, k, float(dts[0])))
+        np.ascontiguousarray(th_l, float),
+        np.ascontiguousarray(thd_l, float),
+        np.ascontiguousarray(drive_friction(twin, thd_l, th_l)),
+        dts,
+        dh,
+        base_r,
+        np.asarray(nom.base.position, float),
+        np.asarray(c_inv, float),
+        np.asarray(ps_D, float),
+        np.asarray(n_D, float),
+        float(k_r),
+        np.asarray(tau_max, float),
+        float(trip),
+        float(rearm),
+        k,
+        b,
+        half_gap,
+        j_refl,
+        _exact_steps(j_refl, b, k, float(dts[0])),
+    )
 
 
 # --- vibration ----------------------------------------------------------------------------------
@@ -781,7 +864,7 @@ def _resonance_noise(rng: np.random.Generator, n: int, fs: float, f0: float, q_f
     f0 = min(f0, 0.45 * fs)
     b, a = signal.iirpeak(f0, q_factor, fs=fs)
     y = signal.lfilter(b, a, rng.standard_normal((n + 2000, 3)), axis=0)[2000:]
-    rms = np.sqrt(np.mean(y ** 2, axis=0))
+    rms = np.sqrt(np.mean(y**2, axis=0))
     return y / np.where(rms > 0, rms, 1.0)
 
 
@@ -815,5 +898,7 @@ def device_vibration(twin: TwinFile, t: np.ndarray, speed: np.ndarray, rng: np.r
     for src in eff.resonances:
         w = np.asarray(src.axis_weights, dtype=float)
         w = w / np.linalg.norm(w)
-        out += src.rms_at_ref_speed_m_per_s2 * w * _resonance_noise(rng, len(t), fs, src.frequency_hz, src.q_factor) * law[:, None]
+        out += (
+            src.rms_at_ref_speed_m_per_s2 * w * _resonance_noise(rng, len(t), fs, src.frequency_hz, src.q_factor) * law[:, None]
+        )
     return out

@@ -51,41 +51,41 @@ class RigConfig:
     """
 
     mocap_rate_hz: float = 100.0
-    mocap_noise_m: float = 0.15e-3            # per axis, per marker
-    mocap_marker_baseline_m: float = 0.03     # typical marker spread on a rigid body (sets pose angle noise)
-    occlusion_rate_per_s: float = 0.02        # gaps per second per marker
-    occlusion_mean_s: float = 0.12            # mean gap length, s
+    mocap_noise_m: float = 0.15e-3  # per axis, per marker
+    mocap_marker_baseline_m: float = 0.03  # typical marker spread on a rigid body (sets pose angle noise)
+    occlusion_rate_per_s: float = 0.02  # gaps per second per marker
+    occlusion_mean_s: float = 0.12  # mean gap length, s
     ft_rate_hz: float = 1000.0
-    ft_force_noise_N: float = 0.02            # per axis, white, 1 kHz
+    ft_force_noise_N: float = 0.02  # per axis, white, 1 kHz
     ft_torque_noise_Nm: float = 0.0005
-    ft_pose_position_m: tuple[float, float, float] = (0.0, 0.0, -0.03)   # S in the handle frame H
-    ft_pose_yaw_rad: float = 90 * DEG                                      # S rotated about H's z axis
-    ft_range_force_N: tuple[float, float, float] = (80.0, 80.0, 160.0)   # ATI Mini27 Ti SI-80-4
+    ft_pose_position_m: tuple[float, float, float] = (0.0, 0.0, -0.03)  # S in the handle frame H
+    ft_pose_yaw_rad: float = 90 * DEG  # S rotated about H's z axis
+    ft_range_force_N: tuple[float, float, float] = (80.0, 80.0, 160.0)  # ATI Mini27 Ti SI-80-4
     ft_range_torque_Nm: tuple[float, float, float] = (4.0, 4.0, 2.0)
-    ft_gain: float = 1.0                      # the F/T's calibration gain error: its whole reading × ft_gain
-    ft_gain_drift_sd: float = 0.0             # relative sd of that gain's drift from trial to trial
+    ft_gain: float = 1.0  # the F/T's calibration gain error: its whole reading × ft_gain
+    ft_gain_drift_sd: float = 0.0  # relative sd of that gain's drift from trial to trial
     accel_rate_hz: float = 2000.0
-    accel_white_noise_m_per_s2: float = 0.0   # extra white noise on top of the twin's noise floor
+    accel_white_noise_m_per_s2: float = 0.0  # extra white noise on top of the twin's noise floor
     accel_range_m_per_s2: float = 40.0
     accel_lsb_m_per_s2: float = 8 * STANDARD_GRAVITY / 65536
     accel_pose_position_m: tuple[float, float, float] = (0.0, 0.0, -0.05)
     accel_pose_yaw_rad: float = -90 * DEG
     plate_rate_hz: float = 1000.0
     plate_half_side_m: float = 0.3
-    plate_sensor_depth_m: float = 0.02        # corner sensor origins below the plate's top surface
+    plate_sensor_depth_m: float = 0.02  # corner sensor origins below the plate's top surface
     plate_weight_N: float = 160.0
     plate_modes_hz: tuple[float, float, float] = (205.0, 206.0, 182.0)
     plate_damping_ratio: float = 0.03
-    plate_gain_sd: float = 0.02               # per corner and axis: relative gain error of the corner sensors
-    plate_position_sd_m: float = 0.003        # per corner, x and y: mounting error vs the described position
+    plate_gain_sd: float = 0.02  # per corner and axis: relative gain error of the corner sensors
+    plate_position_sd_m: float = 0.003  # per corner, x and y: mounting error vs the described position
     plate_force_noise_N: float = 0.01
     plate_torque_noise_Nm: float = 0.0003
     plate_range_force_N: tuple[float, float, float] = (40.0, 40.0, 120.0)  # ATI Mini40 SI-40-2 (per corner)
     plate_range_torque_Nm: tuple[float, float, float] = (2.0, 2.0, 2.0)
     sync_rate_hz: float = 1000.0
-    sync_pulse_start_s: float = 0.3           # after the trial start
+    sync_pulse_start_s: float = 0.3  # after the trial start
     sync_pulse_length_s: float = 0.1
-    clock_offsets: bool = False               # give the accelerometer and mocap recorders their own clocks
+    clock_offsets: bool = False  # give the accelerometer and mocap recorders their own clocks
     max_clock_offset_s: float = 0.02
 
     def to_dict(self) -> dict:
@@ -93,6 +93,7 @@ class RigConfig:
 
 
 # --- geometry -------------------------------------------------------------------------------------
+
 
 def yaw_quat(yaw: float) -> np.ndarray:
     """Unit quaternion of a rotation by ``yaw`` rad about z ([w, x, y, z], spec §1.3)."""
@@ -102,8 +103,14 @@ def yaw_quat(yaw: float) -> np.ndarray:
 def corner_positions(cfg: RigConfig) -> np.ndarray:
     """Corner sensor origins ``(4, 3)`` in W: c1 (+,+), c2 (−,+), c3 (−,−), c4 (+,−) (paper Appendix numbering)."""
     h = cfg.plate_half_side_m
-    return np.array([[h, h, -cfg.plate_sensor_depth_m], [-h, h, -cfg.plate_sensor_depth_m],
-                     [-h, -h, -cfg.plate_sensor_depth_m], [h, -h, -cfg.plate_sensor_depth_m]])
+    return np.array(
+        [
+            [h, h, -cfg.plate_sensor_depth_m],
+            [-h, h, -cfg.plate_sensor_depth_m],
+            [-h, -h, -cfg.plate_sensor_depth_m],
+            [h, -h, -cfg.plate_sensor_depth_m],
+        ]
+    )
 
 
 def corner_quaternions(cfg: RigConfig) -> np.ndarray:
@@ -129,22 +136,37 @@ def marker_layout(links: list[str], link_lengths: list[float]) -> dict[str, np.n
 def rig_description(cfg: RigConfig, layout: dict[str, np.ndarray], extra_markers: tuple[str, ...] = ()) -> dict:
     """The standard rig description (spec §2.4) of the virtual rig: plate, handle sensors, motion capture."""
     cq = corner_quaternions(cfg)
-    corners = [{"id": f"c{i + 1}", "pose": {"position": p.tolist(), "quaternion": q.tolist()}}
-               for i, (p, q) in enumerate(zip(corner_positions(cfg), cq))]
+    corners = [
+        {"id": f"c{i + 1}", "pose": {"position": p.tolist(), "quaternion": q.tolist()}}
+        for i, (p, q) in enumerate(zip(corner_positions(cfg), cq))
+    ]
     bodies = [{"name": body, "markers": marker_names(body, len(pts))} for body, pts in layout.items()]
     markers = [m for b in bodies for m in b["markers"]] + list(extra_markers)
     return {
         "name": "haptify virtual rig",
-        "force_plate": {"size_m": [2 * cfg.plate_half_side_m] * 2, "corners": corners,
-                        "corner_range": {"force_N": list(cfg.plate_range_force_N), "torque_Nm": list(cfg.plate_range_torque_Nm)}},
-        "handle": {
-            "ft_sensor": {"pose": {"position": list(cfg.ft_pose_position_m), "quaternion": yaw_quat(cfg.ft_pose_yaw_rad).tolist()},
-                          "range": {"force_N": list(cfg.ft_range_force_N), "torque_Nm": list(cfg.ft_range_torque_Nm)},
-                          "model": "ATI Mini27 Ti SI-80-4 (simulated)"},
-            "accelerometer": {"pose": {"position": list(cfg.accel_pose_position_m), "quaternion": yaw_quat(cfg.accel_pose_yaw_rad).tolist()},
-                              "range": {"accel_m_per_s2": [cfg.accel_range_m_per_s2] * 3}, "model": "MPU-9250 (simulated)"},
+        "force_plate": {
+            "size_m": [2 * cfg.plate_half_side_m] * 2,
+            "corners": corners,
+            "corner_range": {"force_N": list(cfg.plate_range_force_N), "torque_Nm": list(cfg.plate_range_torque_Nm)},
         },
-        "motion_capture": {"system": "Vicon (simulated)", "rate_hz": cfg.mocap_rate_hz, "rigid_bodies": bodies, "markers": markers},
+        "handle": {
+            "ft_sensor": {
+                "pose": {"position": list(cfg.ft_pose_position_m), "quaternion": yaw_quat(cfg.ft_pose_yaw_rad).tolist()},
+                "range": {"force_N": list(cfg.ft_range_force_N), "torque_Nm": list(cfg.ft_range_torque_Nm)},
+                "model": "ATI Mini27 Ti SI-80-4 (simulated)",
+            },
+            "accelerometer": {
+                "pose": {"position": list(cfg.accel_pose_position_m), "quaternion": yaw_quat(cfg.accel_pose_yaw_rad).tolist()},
+                "range": {"accel_m_per_s2": [cfg.accel_range_m_per_s2] * 3},
+                "model": "MPU-9250 (simulated)",
+            },
+        },
+        "motion_capture": {
+            "system": "Vicon (simulated)",
+            "rate_hz": cfg.mocap_rate_hz,
+            "rigid_bodies": bodies,
+            "markers": markers,
+        },
     }
 
 
@@ -154,6 +176,7 @@ def marker_names(body: str, count: int) -> list[str]:
 
 
 # --- sampling helpers -----------------------------------------------------------------------------
+
 
 def decimation(src_rate: float, dst_rate: float) -> int:
     """The integer step that takes a ``src_rate`` clock to ``dst_rate`` (ValueError when not an integer)."""
@@ -171,13 +194,16 @@ def occlusion_mask(rng: np.random.Generator, n: int, rate_hz: float, gaps_per_s:
     starts = rng.integers(0, n, count)
     lengths = np.maximum(1, np.round(rng.exponential(mean_gap_s, count) * rate_hz).astype(int))
     for s, ln in zip(starts, lengths):
-        mask[s:s + ln] = True
+        mask[s : s + ln] = True
     return mask
 
 
 # --- motion capture (paper §III-A) ----------------------------------------------------------------
 
-def mocap_markers(rng: np.random.Generator, cfg: RigConfig, positions: dict[str, np.ndarray]) -> tuple[dict, dict[str, np.ndarray]]:
+
+def mocap_markers(
+    rng: np.random.Generator, cfg: RigConfig, positions: dict[str, np.ndarray]
+) -> tuple[dict, dict[str, np.ndarray]]:
     """Noisy, occluded marker positions (``markers`` columns without ``t``) and each marker's occlusion mask.
     Spec §2.6; NaN for occlusion as §2.7.
 
@@ -196,8 +222,9 @@ def mocap_markers(rng: np.random.Generator, cfg: RigConfig, positions: dict[str,
     return cols, masks
 
 
-def pose_noise(rng: np.random.Generator, cfg: RigConfig, position: np.ndarray, quaternion: np.ndarray,
-               markers: int = 3) -> tuple[np.ndarray, np.ndarray]:
+def pose_noise(
+    rng: np.random.Generator, cfg: RigConfig, position: np.ndarray, quaternion: np.ndarray, markers: int = 3
+) -> tuple[np.ndarray, np.ndarray]:
     """A rigid body's pose as motion capture estimates it from ``markers`` noisy markers.
 
     Position noise σ/√n per axis; orientation noise a rotation vector with σ/(baseline·√n) rad per axis.
@@ -224,6 +251,7 @@ def pose_columns(prefix: str, position: np.ndarray, quaternion: np.ndarray, occl
 
 # --- handle F/T (paper §II, §III-C) ---------------------------------------------------------------
 
+
 @dataclass
 class HandleLoads:
     """What the rig needs to model the handle sensors, on the F/T clock: the device's wrench on the hand.
@@ -236,8 +264,9 @@ class HandleLoads:
     torque_W: np.ndarray
 
 
-def connector_motion(cfg: RigConfig, *, position_W: np.ndarray, quaternion_W: np.ndarray, rate_hz: float,
-                     connector_com_S: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def connector_motion(
+    cfg: RigConfig, *, position_W: np.ndarray, quaternion_W: np.ndarray, rate_hz: float, connector_com_S: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """On the F/T clock: the sensor's orientation ``q_WS`` and origin ``p_S`` (m, W), the connector's centre of
     mass from ``p_S`` (m, W) and that centre's acceleration ``a_c`` (m/s², W; finite differences of the
     rigid-body path). ``m a_c`` is the connector's inertial force, which the reported force keeps (spec §6.1)."""
@@ -251,9 +280,20 @@ def connector_motion(cfg: RigConfig, *, position_W: np.ndarray, quaternion_W: np
     return q_ws[::step], p_s[::step], r_c_W[::step], a_c[::step]
 
 
-def handle_wrench(rng: np.random.Generator, cfg: RigConfig, *, position_W: np.ndarray, quaternion_W: np.ndarray,
-                  rate_hz: float, loads: HandleLoads | None, bias_force: np.ndarray, bias_torque: np.ndarray,
-                  connector_mass: float, connector_com_S: np.ndarray, gain: float = 1.0) -> dict:
+def handle_wrench(
+    rng: np.random.Generator,
+    cfg: RigConfig,
+    *,
+    position_W: np.ndarray,
+    quaternion_W: np.ndarray,
+    rate_hz: float,
+    loads: HandleLoads | None,
+    bias_force: np.ndarray,
+    bias_torque: np.ndarray,
+    connector_mass: float,
+    connector_com_S: np.ndarray,
+    gain: float = 1.0,
+) -> dict:
     """Raw ``handle_wrench`` columns at ``cfg.ft_rate_hz`` (spec §2.6; sign convention of spec §6.1).
 
     ``position_W``/``quaternion_W`` are the handle pose on the examiner clock (``rate_hz``, a multiple of
@@ -266,9 +306,10 @@ def handle_wrench(rng: np.random.Generator, cfg: RigConfig, *, position_W: np.nd
     ``gain`` is the sensor's calibration error: its whole reading (load, bias and noise, all of which pass
     through the sensor's calibration matrix) comes out multiplied by it (1 = a perfectly calibrated sensor).
     """
-    q_ws, p_s, r_c_W, a_c = connector_motion(cfg, position_W=position_W, quaternion_W=quaternion_W, rate_hz=rate_hz,
-                                             connector_com_S=connector_com_S)
-    p_h = position_W[::decimation(rate_hz, cfg.ft_rate_hz)]
+    q_ws, p_s, r_c_W, a_c = connector_motion(
+        cfg, position_W=position_W, quaternion_W=quaternion_W, rate_hz=rate_hz, connector_com_S=connector_com_S
+    )
+    p_h = position_W[:: decimation(rate_hz, cfg.ft_rate_hz)]
     n = len(q_ws)
     conn = connector_mass * (GRAVITY_W[None, :] - a_c)
     force = conn.copy()
@@ -288,6 +329,7 @@ def handle_wrench(rng: np.random.Generator, cfg: RigConfig, *, position_W: np.nd
 
 # --- accelerometer (paper §II, §IV-C) --------------------------------------------------------------
 
+
 def noise_floor(rng: np.random.Generator, n: int, rate_hz: float, floor) -> np.ndarray:
     """The rig's acceleration noise floor ``(n, 3)`` in m/s² on each world axis (twin ``rig.accel_floor``).
 
@@ -302,8 +344,15 @@ def noise_floor(rng: np.random.Generator, n: int, rate_hz: float, floor) -> np.n
     return out
 
 
-def specific_force(cfg: RigConfig, *, position_W: np.ndarray, quaternion_W: np.ndarray, rate_hz: float,
-                   vibration_W: np.ndarray | None, floor_W: np.ndarray | None) -> np.ndarray:
+def specific_force(
+    cfg: RigConfig,
+    *,
+    position_W: np.ndarray,
+    quaternion_W: np.ndarray,
+    rate_hz: float,
+    vibration_W: np.ndarray | None,
+    floor_W: np.ndarray | None,
+) -> np.ndarray:
     """What a perfect accelerometer reads ``(n, 3)`` at ``cfg.accel_rate_hz``: ``R_WAᵀ (a − g_W + v + f)``.
 
     ``a`` is the acceleration of the accelerometer's origin (finite differences of the rigid-body path),
@@ -339,6 +388,7 @@ def handle_accel(rng: np.random.Generator, cfg: RigConfig, *, specific_force_A: 
 
 
 # --- force plate (paper §II, §III-B, Appendix) ----------------------------------------------------
+
 
 def plate_mode_filter(f_hz: float, zeta: float, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
     """Digital 2nd-order low-pass with unit DC gain and its resonance at ``f_hz`` (prewarped bilinear)."""
@@ -390,8 +440,15 @@ class PlateErrors:
         return cls(positions=corner_positions(cfg), gains=np.ones((4, 3)))
 
 
-def plate_wrench(rng: np.random.Generator, cfg: RigConfig, *, force_W: np.ndarray, moment_W: np.ndarray,
-                 bias_force: np.ndarray, errors: PlateErrors | None = None) -> dict:
+def plate_wrench(
+    rng: np.random.Generator,
+    cfg: RigConfig,
+    *,
+    force_W: np.ndarray,
+    moment_W: np.ndarray,
+    bias_force: np.ndarray,
+    errors: PlateErrors | None = None,
+) -> dict:
     """Raw ``plate_wrench`` columns at ``cfg.plate_rate_hz`` (spec §2.6).
 
     ``force_W``/``moment_W`` ``(N, 3)``: every external load on the plate (device base reaction, weights,
@@ -425,6 +482,7 @@ def plate_wrench(rng: np.random.Generator, cfg: RigConfig, *, force_W: np.ndarra
 
 
 # --- sync and clocks ------------------------------------------------------------------------------
+
 
 def sync_trigger(cfg: RigConfig, t: np.ndarray, t0: float) -> dict:
     """The ``sync`` column: the multicontact switch closed once, ``sync_pulse_start_s`` after the trial start.

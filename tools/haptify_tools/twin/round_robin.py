@@ -44,18 +44,30 @@ class Spread:
 #: The properties that differ between labs, their default spreads and how a lab's value is drawn (z ~ N(0, 1)
 #: per lab, independent per property; ``ft_gain_drift`` is the only one that varies within a lab).
 SPREADS: dict[str, Spread] = {
-    "ft_gain": Spread(0.01, "relative sd of the handle F/T sensor's calibration gain: the lab's whole F/T "
-                            "reading × (1 + sd·z) (RigConfig.ft_gain)"),
-    "ft_gain_drift": Spread(0.0, "relative sd of that gain's drift from trial to trial within a lab: each trial's "
-                                 "reading × (1 + sd·z_trial) (RigConfig.ft_gain_drift_sd)"),
+    "ft_gain": Spread(
+        0.01,
+        "relative sd of the handle F/T sensor's calibration gain: the lab's whole F/T reading × (1 + sd·z) (RigConfig.ft_gain)",
+    ),
+    "ft_gain_drift": Spread(
+        0.0,
+        "relative sd of that gain's drift from trial to trial within a lab: each trial's "
+        "reading × (1 + sd·z_trial) (RigConfig.ft_gain_drift_sd)",
+    ),
     "mocap_noise": Spread(0.3, "log-sd of the lab's marker noise: nominal × exp(sd·z) (RigConfig.mocap_noise_m)"),
-    "plate_modes": Spread(0.05, "relative sd of the force plate's natural frequencies, one z per axis: "
-                                "nominal × (1 + sd·z) (RigConfig.plate_modes_hz); the plate's corner gain and "
-                                "mounting errors are drawn from the lab's seed as for any simulated plate"),
-    "handle_mass": Spread(0.2, "relative sd of the handle connector's mass: nominal × max(0, 1 + sd·z) "
-                               "(twin handle.connector_mass.mass_kg)"),
-    "examiner_pace": Spread(0.1, "log-sd of the examiner's pace: their speeds × exp(sd·z) in free space, on the "
-                                 "surface, in the presses and the figure eight (SimulationOptions.examiner_pace)"),
+    "plate_modes": Spread(
+        0.05,
+        "relative sd of the force plate's natural frequencies, one z per axis: "
+        "nominal × (1 + sd·z) (RigConfig.plate_modes_hz); the plate's corner gain and "
+        "mounting errors are drawn from the lab's seed as for any simulated plate",
+    ),
+    "handle_mass": Spread(
+        0.2, "relative sd of the handle connector's mass: nominal × max(0, 1 + sd·z) (twin handle.connector_mass.mass_kg)"
+    ),
+    "examiner_pace": Spread(
+        0.1,
+        "log-sd of the examiner's pace: their speeds × exp(sd·z) in free space, on the "
+        "surface, in the presses and the figure eight (SimulationOptions.examiner_pace)",
+    ),
 }
 
 
@@ -66,8 +78,12 @@ def parse_spreads(items: list[str]) -> dict[str, float]:
     for item in items:
         name, sd = name_number(item)
         if name not in SPREADS or not sd >= 0 or math.isinf(sd):
-            raise fail("E903", f"--lab-spread expects NAME=SD with a known property and SD ≥ 0, got {item!r}",
-                       expected=sorted(SPREADS), found=item)
+            raise fail(
+                "E903",
+                f"--lab-spread expects NAME=SD with a known property and SD ≥ 0, got {item!r}",
+                expected=sorted(SPREADS),
+                found=item,
+            )
         out[name] = sd
     return out
 
@@ -94,10 +110,13 @@ def draw_labs(twin: TwinFile, base: rg.RigConfig, labs: int, seed: int, spreads:
         rng = np.random.default_rng(ss)
         z = rng.standard_normal(7)
         modes = tuple(float(f * (1 + spreads["plate_modes"] * zk)) for f, zk in zip(base.plate_modes_hz, z[3:6]))
-        rig = replace(base, ft_gain=float(base.ft_gain * (1 + spreads["ft_gain"] * z[0])),
-                      ft_gain_drift_sd=float(spreads["ft_gain_drift"]),
-                      mocap_noise_m=float(base.mocap_noise_m * math.exp(spreads["mocap_noise"] * z[1])),
-                      plate_modes_hz=modes)
+        rig = replace(
+            base,
+            ft_gain=float(base.ft_gain * (1 + spreads["ft_gain"] * z[0])),
+            ft_gain_drift_sd=float(spreads["ft_gain_drift"]),
+            mocap_noise_m=float(base.mocap_noise_m * math.exp(spreads["mocap_noise"] * z[1])),
+            plate_modes_hz=modes,
+        )
         mass = nominal_mass * max(0.0, 1 + spreads["handle_mass"] * z[2])
         pace = math.exp(spreads["examiner_pace"] * z[6])
         out.append(LabDraw(f"lab-{i:02d}", int(ss.generate_state(1)[0]), rig, mass, pace))
@@ -113,9 +132,16 @@ class RoundRobinResult:
     sessions: dict[str, Path]
 
 
-def simulate_round_robin(twin: TwinFile, out_dir: str | os.PathLike, options: SimulationOptions, labs: int,
-                         spreads: dict[str, float], *, overwrite: bool = False,
-                         advance: Callable[[int], object] | None = None) -> RoundRobinResult:
+def simulate_round_robin(
+    twin: TwinFile,
+    out_dir: str | os.PathLike,
+    options: SimulationOptions,
+    labs: int,
+    spreads: dict[str, float],
+    *,
+    overwrite: bool = False,
+    advance: Callable[[int], object] | None = None,
+) -> RoundRobinResult:
     """Simulate ``labs`` labs (≥ 2, E903) measuring ``twin`` with ``options`` (protocols, reps, durations; its
     rig is every lab's nominal rig, its seed the round robin's) into ``<out>/<lab>/`` and ``<out>/labs.json``.
 
@@ -131,23 +157,49 @@ def simulate_round_robin(twin: TwinFile, out_dir: str | os.PathLike, options: Si
     with built_in_place(out) as build:
         for lab in draw_labs(twin, options.rig, labs, options.seed, spreads):
             lab_twin = set_param(twin, "handle.connector_mass.mass_kg", lab.connector_mass_kg)
-            opt = replace(options, seed=lab.seed, rig=lab.rig, lab_id=lab.lab, examiner_id=f"examiner-{lab.lab}",
-                          examiner_pace=lab.examiner_pace, session_id=f"rr-{_slug(twin.name)}-{lab.lab}")
+            opt = replace(
+                options,
+                seed=lab.seed,
+                rig=lab.rig,
+                lab_id=lab.lab,
+                examiner_id=f"examiner-{lab.lab}",
+                examiner_pace=lab.examiner_pace,
+                session_id=f"rr-{_slug(twin.name)}-{lab.lab}",
+            )
             simulate_dossier(lab_twin, build / lab.lab, opt, advance=advance)
             truth = json.loads((build / lab.lab / "truth.json").read_text())
-            records.append({"lab": lab.lab, "folder": lab.lab, "session": f"{lab.lab}/session", "seed": lab.seed,
-                            "rig": {"ft_gain": lab.rig.ft_gain, "ft_gain_drift_sd": lab.rig.ft_gain_drift_sd,
-                                    "mocap_noise_m": lab.rig.mocap_noise_m, "plate_modes_hz": list(lab.rig.plate_modes_hz),
-                                    "plate_corner_gains": truth["rig"]["plate_corner_gains"],
-                                    "plate_corner_positions_m": truth["rig"]["plate_corner_positions_m"],
-                                    "connector_mass_kg": lab.connector_mass_kg},
-                            "examiner": {"id": f"examiner-{lab.lab}", "pace": lab.examiner_pace},
-                            "trial_ft_gains": {t["id"]: t["ft_gain"] for t in truth["trials"] if "ft_gain" in t}})
-        doc = {"format": "haptify-round-robin", "version": "1.0", "twin": twin.name, "seed": options.seed,
-               "reps": options.reps, "protocols": list(options.protocols), "labs": records,
-               "spreads": spreads, "spread_meanings": {k: s.meaning for k, s in SPREADS.items()},
-               "note": "each lab folder holds session/, truth.json and truth.npz (haptify simulate); the lab's F/T "
-                       "reading is the true one × trial_ft_gains[trial]"}
+            records.append(
+                {
+                    "lab": lab.lab,
+                    "folder": lab.lab,
+                    "session": f"{lab.lab}/session",
+                    "seed": lab.seed,
+                    "rig": {
+                        "ft_gain": lab.rig.ft_gain,
+                        "ft_gain_drift_sd": lab.rig.ft_gain_drift_sd,
+                        "mocap_noise_m": lab.rig.mocap_noise_m,
+                        "plate_modes_hz": list(lab.rig.plate_modes_hz),
+                        "plate_corner_gains": truth["rig"]["plate_corner_gains"],
+                        "plate_corner_positions_m": truth["rig"]["plate_corner_positions_m"],
+                        "connector_mass_kg": lab.connector_mass_kg,
+                    },
+                    "examiner": {"id": f"examiner-{lab.lab}", "pace": lab.examiner_pace},
+                    "trial_ft_gains": {t["id"]: t["ft_gain"] for t in truth["trials"] if "ft_gain" in t},
+                }
+            )
+        doc = {
+            "format": "haptify-round-robin",
+            "version": "1.0",
+            "twin": twin.name,
+            "seed": options.seed,
+            "reps": options.reps,
+            "protocols": list(options.protocols),
+            "labs": records,
+            "spreads": spreads,
+            "spread_meanings": {k: s.meaning for k, s in SPREADS.items()},
+            "note": "each lab folder holds session/, truth.json and truth.npz (haptify simulate); the lab's F/T "
+            "reading is the true one × trial_ft_gains[trial]",
+        }
         atomic_write_json(build / "labs.json", doc)
     return RoundRobinResult(out, out / "labs.json", {r["lab"]: out / r["session"] for r in records})
 

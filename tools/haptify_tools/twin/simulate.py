@@ -46,21 +46,40 @@ from haptify_tools.twin.model import TwinFile, twin_to_dict
 from haptify_tools.twin.physics import device_vibration, simulate_active, simulate_passive
 
 #: Device protocols the examiner performs, in recording order; ``figure_eight`` is protocol ``other``.
-DEVICE_PROTOCOLS: tuple[str, ...] = ("workspace", "free_space", "local_dynamic", "figure_eight",
-                                     "frictionless_surface", "stiffness")
+DEVICE_PROTOCOLS: tuple[str, ...] = (
+    "workspace",
+    "free_space",
+    "local_dynamic",
+    "figure_eight",
+    "frictionless_surface",
+    "stiffness",
+)
 #: Rig calibration trials, recorded once before the device trials (paper §III, §V-B, Appendix).
-RIG_TRIALS: tuple[str, ...] = ("rig.plate_bias", "rig.handle_calibration", "rig.plate_impact", "rig.plate_cop",
-                               "rig.baseline_vibration")
+RIG_TRIALS: tuple[str, ...] = (
+    "rig.plate_bias",
+    "rig.handle_calibration",
+    "rig.plate_impact",
+    "rig.plate_cop",
+    "rig.baseline_vibration",
+)
 #: Default durations, s. The paper gives ≈140 s for the local dynamic protocol (§V-C); the others are
 #: chosen so that a dossier of 3 repetitions records about a quarter of an hour (≈18 min with the rig
 #: trials) and the workspace sweep is dense enough (lines ≤ 3 cm apart) for the volume operator.
 DEFAULT_DURATIONS: dict[str, float] = {
-    "workspace": 75.0, "free_space": 40.0, "local_dynamic": ex.LOCAL_DYNAMIC_DURATION, "figure_eight": 25.0,
-    "frictionless_surface": 25.0, "stiffness": 30.0, "rig.plate_bias": 5.0, "rig.handle_calibration": 30.0,
-    "rig.plate_impact": 3.0, "rig.plate_cop": 0.0, "rig.baseline_vibration": 30.0,
+    "workspace": 75.0,
+    "free_space": 40.0,
+    "local_dynamic": ex.LOCAL_DYNAMIC_DURATION,
+    "figure_eight": 25.0,
+    "frictionless_surface": 25.0,
+    "stiffness": 30.0,
+    "rig.plate_bias": 5.0,
+    "rig.handle_calibration": 30.0,
+    "rig.plate_impact": 3.0,
+    "rig.plate_cop": 0.0,
+    "rig.baseline_vibration": 30.0,
 }
-RENDER_STIFFNESS_N_PER_M = 750.0       # paper §V-D: 0.75 N/mm
-TRIAL_GAP_S = 5.0                      # idle time between trials on the session clock
+RENDER_STIFFNESS_N_PER_M = 750.0  # paper §V-D: 0.75 N/mm
+TRIAL_GAP_S = 5.0  # idle time between trials on the session clock
 SESSION_DATE = "2026-11-22"
 
 
@@ -76,12 +95,12 @@ class SimulationOptions:
     rig: rg.RigConfig = field(default_factory=rg.RigConfig)
     rate_hz: float = ex.DEFAULT_RATE_HZ
     fmt: str = "parquet"
-    compact: bool = False     # Parquet: float32 sensor columns, BYTE_STREAM_SPLIT (spec §3.2.1)
+    compact: bool = False  # Parquet: float32 sensor columns, BYTE_STREAM_SPLIT (spec §3.2.1)
     session_id: str | None = None
-    lab_id: str = "lab-virtual"            # the manifest's lab.id (a round robin gives every lab its own)
+    lab_id: str = "lab-virtual"  # the manifest's lab.id (a round robin gives every lab its own)
     examiner_id: str = "examiner-virtual"
-    examiner_pace: float = 1.0             # the examiner's speeds × pace (free space, surface, presses, figure eight)
-    workers: int = 0          # processes simulating trials in parallel; 0 = one per CPU (at most 4)
+    examiner_pace: float = 1.0  # the examiner's speeds × pace (free space, surface, presses, figure eight)
+    workers: int = 0  # processes simulating trials in parallel; 0 = one per CPU (at most 4)
 
     def duration(self, name: str) -> float:
         return float(self.durations.get(name, DEFAULT_DURATIONS[name]))
@@ -95,8 +114,7 @@ def parse_protocols(text: str) -> tuple[str, ...]:
     names = tuple(n.strip() for n in text.split(",") if n.strip())
     bad = [n for n in names if n not in DEVICE_PROTOCOLS + RIG_TRIALS]
     if bad or not names:
-        raise fail("E903", f"unknown protocol(s) {bad or text!r}", expected=["all", *DEVICE_PROTOCOLS, *RIG_TRIALS],
-                   found=text)
+        raise fail("E903", f"unknown protocol(s) {bad or text!r}", expected=["all", *DEVICE_PROTOCOLS, *RIG_TRIALS], found=text)
     return names
 
 
@@ -144,15 +162,17 @@ def trial_ft_gain(cfg: rg.RigConfig, seed: int, trial_id: str) -> float:
 
 # --- the plan ------------------------------------------------------------------------------------
 
+
 @dataclass
 class PlannedTrial:
     """A planned trial: id, trial name, standard protocol (spec §2.5), repetition, label, start ``t0`` (s)."""
+
     trial_id: str
-    name: str           # device protocol or rig trial name
-    protocol: str       # the standard protocol
+    name: str  # device protocol or rig trial name
+    protocol: str  # the standard protocol
     repetition: int
     label: str | None = None
-    t0: float = 0.0     # start on the session clock, s
+    t0: float = 0.0  # start on the session clock, s
 
 
 def planned_duration(name: str, options: SimulationOptions) -> float:
@@ -196,6 +216,7 @@ def plan(options: SimulationOptions) -> list[PlannedTrial]:
 
 # --- simulation of one trial ------------------------------------------------------------------------
 
+
 @dataclass
 class TrialOutput:
     """The raw streams of one trial (kind → columns incl. ``t``), its truth and its clock offsets.
@@ -233,10 +254,15 @@ class DossierSimulator:
         rig_rng = np.random.default_rng(np.random.SeedSequence([int(options.seed) & 0xFFFFFFFF, zlib.crc32(b"rig")]))
         self.plate_errors = rg.PlateErrors.draw(rig_rng, self.cfg)
         centre = self.reach.centre()
-        self.surface = {"surface_point_m": [float(centre[0]), float(centre[1]), float(centre[2])],
-                        "surface_normal": [0.0, 0.0, 1.0], "stiffness_N_per_m": RENDER_STIFFNESS_N_PER_M,
-                        "static_friction": 0.0, "dynamic_friction": 0.0,
-                        "software": "haptify twin rendering loop (CHAI3D plane example)", "loop_rate_hz": 1000.0}
+        self.surface = {
+            "surface_point_m": [float(centre[0]), float(centre[1]), float(centre[2])],
+            "surface_normal": [0.0, 0.0, 1.0],
+            "stiffness_N_per_m": RENDER_STIFFNESS_N_PER_M,
+            "static_friction": 0.0,
+            "dynamic_friction": 0.0,
+            "software": "haptify twin rendering loop (CHAI3D plane example)",
+            "loop_rate_hz": 1000.0,
+        }
 
     # -- descriptions -----------------------------------------------------------------------------
     def rig_description(self) -> dict:
@@ -244,20 +270,30 @@ class DossierSimulator:
 
     def manifest(self) -> dict:
         name = self.opt.session_id or f"sim-{_slug(self.twin.name)}-s{self.opt.seed}"
-        return {"session_id": name, "date": SESSION_DATE, "lab": {"id": self.opt.lab_id},
-                "examiner": {"id": self.opt.examiner_id},
-                "device": self.twin.device.model_dump(mode="json", exclude_none=True),
-                "device_placement": self.twin.placement.model_dump(mode="json"), "rig": self.rig_description(),
-                "recorder": f"haptify-twin {PACKAGE_VERSION}"}
+        return {
+            "session_id": name,
+            "date": SESSION_DATE,
+            "lab": {"id": self.opt.lab_id},
+            "examiner": {"id": self.opt.examiner_id},
+            "device": self.twin.device.model_dump(mode="json", exclude_none=True),
+            "device_placement": self.twin.placement.model_dump(mode="json"),
+            "rig": self.rig_description(),
+            "recorder": f"haptify-twin {PACKAGE_VERSION}",
+        }
 
     # -- one trial -------------------------------------------------------------------------------
     def run(self, p: PlannedTrial) -> TrialOutput:
         """Simulate one planned trial (it starts at ``p.t0`` on the session clock)."""
         t0 = p.t0
         rng_ex, rng_rig, rng_vib = trial_rng(self.opt.seed, p.trial_id)
-        method = {"workspace": self._workspace, "rig.plate_bias": self._plate_bias,
-                  "rig.handle_calibration": self._handle_calibration, "rig.plate_impact": self._plate_impact,
-                  "rig.plate_cop": self._plate_cop, "rig.baseline_vibration": self._baseline}.get(p.name, self._device_trial)
+        method = {
+            "workspace": self._workspace,
+            "rig.plate_bias": self._plate_bias,
+            "rig.handle_calibration": self._handle_calibration,
+            "rig.plate_impact": self._plate_impact,
+            "rig.plate_cop": self._plate_cop,
+            "rig.baseline_vibration": self._baseline,
+        }.get(p.name, self._device_trial)
         return method(p, t0, rng_ex, rng_rig, rng_vib)
 
     def _trajectory(self, name: str, rng: np.random.Generator, t0: float) -> ex.HandTrajectory:
@@ -266,18 +302,27 @@ class DossierSimulator:
         d, r, rate, pace = self.opt.duration(name), self.reach, self.opt.rate_hz, self.opt.examiner_pace
         z = self.surface["surface_point_m"][2]
         if name == "free_space":
-            return ex.free_space_wander(rng, r, d, rate_hz=rate, t0=t0, mean_speed=pace * ex.FREE_SPACE_MEAN_SPEED,
-                                        max_speed=pace * 0.75 * ex.FREE_SPACE_MAX_SPEED,
-                                        mean_angular=pace * ex.FREE_SPACE_MEAN_ANGULAR,
-                                        max_angular=pace * 0.75 * ex.FREE_SPACE_MAX_ANGULAR)
+            return ex.free_space_wander(
+                rng,
+                r,
+                d,
+                rate_hz=rate,
+                t0=t0,
+                mean_speed=pace * ex.FREE_SPACE_MEAN_SPEED,
+                max_speed=pace * 0.75 * ex.FREE_SPACE_MAX_SPEED,
+                mean_angular=pace * ex.FREE_SPACE_MEAN_ANGULAR,
+                max_angular=pace * 0.75 * ex.FREE_SPACE_MAX_ANGULAR,
+            )
         if name == "local_dynamic":
             return ex.local_oscillations(rng, r, d, rate_hz=rate, t0=t0)
         if name == "figure_eight":
-            return ex.figure_eight(rng, r, d, rate_hz=rate, t0=t0,
-                                   period_range_s=tuple(x / pace for x in ex.FIGURE_EIGHT_PERIODS_S))
+            return ex.figure_eight(
+                rng, r, d, rate_hz=rate, t0=t0, period_range_s=tuple(x / pace for x in ex.FIGURE_EIGHT_PERIODS_S)
+            )
         if name == "frictionless_surface":
-            return ex.surface_circles(rng, r, z, d, rate_hz=rate, t0=t0,
-                                      period_range_s=tuple(x / pace for x in ex.SURFACE_PERIODS_S))
+            return ex.surface_circles(
+                rng, r, z, d, rate_hz=rate, t0=t0, period_range_s=tuple(x / pace for x in ex.SURFACE_PERIODS_S)
+            )
         if name == "stiffness":
             return ex.surface_presses(rng, r, z, d, rate_hz=rate, t0=t0, press_speed=pace * ex.PRESS_SPEED)
         raise ValueError(f"no trajectory for {name!r}")
@@ -295,39 +340,84 @@ class DossierSimulator:
         streams, rates, entities, offsets = {}, {}, {}, {}
         loads = rg.HandleLoads(res.force_W, res.torque_W)
         gain = trial_ft_gain(cfg, self.opt.seed, p.trial_id)
-        streams["handle_wrench"] = {"t": t1k, **rg.handle_wrench(
-            rng_rig, cfg, position_W=traj.position_W, quaternion_W=traj.quaternion_W, rate_hz=traj.rate_hz,
-            loads=loads, bias_force=self.bias_f, bias_torque=self.bias_t, connector_mass=self.conn_m,
-            connector_com_S=self.conn_r, gain=gain)}
+        streams["handle_wrench"] = {
+            "t": t1k,
+            **rg.handle_wrench(
+                rng_rig,
+                cfg,
+                position_W=traj.position_W,
+                quaternion_W=traj.quaternion_W,
+                rate_hz=traj.rate_hz,
+                loads=loads,
+                bias_force=self.bias_f,
+                bias_torque=self.bias_t,
+                connector_mass=self.conn_m,
+                connector_com_S=self.conn_r,
+                gain=gain,
+            ),
+        }
         rates["handle_wrench"] = cfg.ft_rate_hz
         vib = device_vibration(self.twin, traj.t, traj.speed(), rng_vib)
         accel_truth = self._accel(streams, rates, offsets, traj, rng_rig, vib)
-        streams["plate_wrench"] = {"t": t1k, **rg.plate_wrench(rng_rig, cfg, force_W=res.base_force_W,
-                                                                moment_W=res.base_torque_W, bias_force=self.bias_p,
-                                                                errors=self.plate_errors)}
+        streams["plate_wrench"] = {
+            "t": t1k,
+            **rg.plate_wrench(
+                rng_rig,
+                cfg,
+                force_W=res.base_force_W,
+                moment_W=res.base_torque_W,
+                bias_force=self.bias_p,
+                errors=self.plate_errors,
+            ),
+        }
         rates["plate_wrench"] = cfg.plate_rate_hz
         q_step = rg.decimation(cfg.ft_rate_hz, cfg.mocap_rate_hz)
         self._mocap(streams, rates, entities, offsets, traj, res.q[::q_step], rng_rig)
         if active:
-            streams["commanded_wrench"] = {"t": t1k, **{c: res.commanded_W[:, k] for k, c in enumerate(("fx", "fy", "fz", "tx", "ty", "tz"))}}
+            streams["commanded_wrench"] = {
+                "t": t1k,
+                **{c: res.commanded_W[:, k] for k, c in enumerate(("fx", "fy", "fz", "tx", "ty", "tz"))},
+            }
             rates["commanded_wrench"] = cfg.ft_rate_hz
-            streams["device_joint_angles"] = {"t": t1k, **{f"q{k + 1}": res.encoder_q[:, k] for k in range(res.encoder_q.shape[1])}}
+            streams["device_joint_angles"] = {
+                "t": t1k,
+                **{f"q{k + 1}": res.encoder_q[:, k] for k in range(res.encoder_q.shape[1])},
+            }
             rates["device_joint_angles"] = cfg.ft_rate_hz
         self._sync(streams, rates, t1k, t0)
-        a_c = rg.connector_motion(cfg, position_W=traj.position_W, quaternion_W=traj.quaternion_W, rate_hz=traj.rate_hz,
-                                  connector_com_S=self.conn_r)[3]
-        arrays = {"t": t1k, "position_W": traj.position_W[::step], "quaternion_W": traj.quaternion_W[::step],
-                  "q": res.q, "gimbal": res.gimbal, "force_W": res.force_W, "torque_W": res.torque_W,
-                  "connector_inertia_W": self.conn_m * a_c,
-                  "base_force_W": res.base_force_W, "base_torque_W": res.base_torque_W, "reachable": res.ok,
-                  "vibration_W_2kHz": vib, **accel_truth}
+        a_c = rg.connector_motion(
+            cfg, position_W=traj.position_W, quaternion_W=traj.quaternion_W, rate_hz=traj.rate_hz, connector_com_S=self.conn_r
+        )[3]
+        arrays = {
+            "t": t1k,
+            "position_W": traj.position_W[::step],
+            "quaternion_W": traj.quaternion_W[::step],
+            "q": res.q,
+            "gimbal": res.gimbal,
+            "force_W": res.force_W,
+            "torque_W": res.torque_W,
+            "connector_inertia_W": self.conn_m * a_c,
+            "base_force_W": res.base_force_W,
+            "base_torque_W": res.base_torque_W,
+            "reachable": res.ok,
+            "vibration_W_2kHz": vib,
+            **accel_truth,
+        }
         if active:
-            arrays.update({"commanded_W": res.commanded_W, "encoder_q": res.encoder_q, "motor_torque": res.motor_torque,
-                           "cable_torque": res.cable_torque, "saturated": res.saturated, "cut_off": res.cut_off})
-        truth = {"examiner": traj.meta, "clock_offsets_s": offsets, "reachable_fraction": float(np.mean(res.ok)),
-                 "ft_gain": gain}
-        return TrialOutput(p, active, streams, rates, entities, dict(self.surface) if active else None, truth, arrays,
-                           float(traj.t[-1]))
+            arrays.update(
+                {
+                    "commanded_W": res.commanded_W,
+                    "encoder_q": res.encoder_q,
+                    "motor_torque": res.motor_torque,
+                    "cable_torque": res.cable_torque,
+                    "saturated": res.saturated,
+                    "cut_off": res.cut_off,
+                }
+            )
+        truth = {"examiner": traj.meta, "clock_offsets_s": offsets, "reachable_fraction": float(np.mean(res.ok)), "ft_gain": gain}
+        return TrialOutput(
+            p, active, streams, rates, entities, dict(self.surface) if active else None, truth, arrays, float(traj.t[-1])
+        )
 
     def _workspace(self, p, t0, rng_ex, rng_rig, rng_vib) -> TrialOutput:
         traj = ex.boundary_sweep(rng_ex, self.reach, self.opt.duration("workspace"), rate_hz=self.opt.rate_hz, t0=t0)
@@ -336,9 +426,15 @@ class DossierSimulator:
         q, gimbal, ok = hand_to_joints(self.twin, traj.position_W[::step], traj.quaternion_W[::step])
         streams, rates, entities, offsets = {}, {}, {}, {}
         self._mocap(streams, rates, entities, offsets, traj, q, rng_rig)
-        self._sync(streams, rates, traj.t[::rg.decimation(traj.rate_hz, cfg.sync_rate_hz)], t0)
-        arrays = {"t": traj.t[::step], "position_W": traj.position_W[::step], "quaternion_W": traj.quaternion_W[::step],
-                  "q": q, "gimbal": gimbal, "reachable": ok}
+        self._sync(streams, rates, traj.t[:: rg.decimation(traj.rate_hz, cfg.sync_rate_hz)], t0)
+        arrays = {
+            "t": traj.t[::step],
+            "position_W": traj.position_W[::step],
+            "quaternion_W": traj.quaternion_W[::step],
+            "q": q,
+            "gimbal": gimbal,
+            "reachable": ok,
+        }
         truth = {"examiner": traj.meta, "clock_offsets_s": offsets}
         return TrialOutput(p, False, streams, rates, entities, None, truth, arrays, float(traj.t[-1]))
 
@@ -346,12 +442,24 @@ class DossierSimulator:
         traj = ex.handle_rotation(rng_ex, self.opt.duration(p.name), rate_hz=self.opt.rate_hz, t0=t0)
         cfg = self.cfg
         streams, rates, entities, offsets = {}, {}, {}, {}
-        t1k = traj.t[::rg.decimation(traj.rate_hz, cfg.ft_rate_hz)]
+        t1k = traj.t[:: rg.decimation(traj.rate_hz, cfg.ft_rate_hz)]
         gain = trial_ft_gain(cfg, self.opt.seed, p.trial_id)
-        streams["handle_wrench"] = {"t": t1k, **rg.handle_wrench(
-            rng_rig, cfg, position_W=traj.position_W, quaternion_W=traj.quaternion_W, rate_hz=traj.rate_hz, loads=None,
-            bias_force=self.bias_f, bias_torque=self.bias_t, connector_mass=self.conn_m, connector_com_S=self.conn_r,
-            gain=gain)}
+        streams["handle_wrench"] = {
+            "t": t1k,
+            **rg.handle_wrench(
+                rng_rig,
+                cfg,
+                position_W=traj.position_W,
+                quaternion_W=traj.quaternion_W,
+                rate_hz=traj.rate_hz,
+                loads=None,
+                bias_force=self.bias_f,
+                bias_torque=self.bias_t,
+                connector_mass=self.conn_m,
+                connector_com_S=self.conn_r,
+                gain=gain,
+            ),
+        }
         rates["handle_wrench"] = cfg.ft_rate_hz
         accel_truth = self._accel(streams, rates, offsets, traj, rng_rig, None)
         self._handle_pose(streams, rates, offsets, traj, rng_rig)
@@ -365,15 +473,24 @@ class DossierSimulator:
         accelerometer's reading (:meth:`_accel`)."""
         step = rg.decimation(traj.rate_hz, self.cfg.ft_rate_hz)
         arrays = {"t": t1k, "position_W": traj.position_W[::step], "quaternion_W": traj.quaternion_W[::step], **accel_truth}
-        return TrialOutput(p, False, streams, rates, entities, None, {"examiner": traj.meta, "clock_offsets_s": offsets},
-                           arrays, float(traj.t[-1]))
+        return TrialOutput(
+            p,
+            False,
+            streams,
+            rates,
+            entities,
+            None,
+            {"examiner": traj.meta, "clock_offsets_s": offsets},
+            arrays,
+            float(traj.t[-1]),
+        )
 
     def _baseline(self, p, t0, rng_ex, rng_rig, rng_vib) -> TrialOutput:
         traj = ex.baseline_wander(rng_ex, self.opt.duration(p.name), rate_hz=self.opt.rate_hz, t0=t0)
         streams, rates, entities, offsets = {}, {}, {}, {}
         accel_truth = self._accel(streams, rates, offsets, traj, rng_rig, None)
         self._handle_pose(streams, rates, offsets, traj, rng_rig)
-        t1k = traj.t[::rg.decimation(traj.rate_hz, self.cfg.sync_rate_hz)]
+        t1k = traj.t[:: rg.decimation(traj.rate_hz, self.cfg.sync_rate_hz)]
         self._sync(streams, rates, t1k, t0)
         return self._hand_only(p, traj, streams, rates, entities, offsets, t1k, accel_truth)
 
@@ -383,8 +500,12 @@ class DossierSimulator:
         force = load.force_W if load is not None else np.zeros((len(t), 3))
         point = load.point_W if load is not None else np.zeros((len(t), 3))
         streams, rates, entities, offsets = {}, {}, {}, {}
-        streams["plate_wrench"] = {"t": t, **rg.plate_wrench(rng_rig, cfg, force_W=force, moment_W=np.cross(point, force),
-                                                              bias_force=self.bias_p, errors=self.plate_errors)}
+        streams["plate_wrench"] = {
+            "t": t,
+            **rg.plate_wrench(
+                rng_rig, cfg, force_W=force, moment_W=np.cross(point, force), bias_force=self.bias_p, errors=self.plate_errors
+            ),
+        }
         rates["plate_wrench"] = cfg.plate_rate_hz
         arrays = {"t": t, "force_W": force, "point_W": point}
         if load is not None and load.markers_W:
@@ -397,8 +518,9 @@ class DossierSimulator:
             offsets["markers"] = off
         self._sync(streams, rates, t, t0)
         meta = load.meta if load is not None else {"load": "none (plate unloaded)"}
-        return TrialOutput(p, False, streams, rates, entities, None, {"load": meta, "clock_offsets_s": offsets}, arrays,
-                           float(t[-1]))
+        return TrialOutput(
+            p, False, streams, rates, entities, None, {"load": meta, "clock_offsets_s": offsets}, arrays, float(t[-1])
+        )
 
     def _plate_bias(self, p, t0, rng_ex, rng_rig, rng_vib) -> TrialOutput:
         return self._plate_trial(p, t0, None, self.opt.duration(p.name), rng_rig)
@@ -408,19 +530,21 @@ class DossierSimulator:
         return self._plate_trial(p, t0, load, 0.0, rng_rig)
 
     def _plate_cop(self, p, t0, rng_ex, rng_rig, rng_vib) -> TrialOutput:
-        load = ex.weight_placements(rng_ex, rate_hz=self.cfg.plate_rate_hz, t0=t0, dwell_s=cop_dwell(self.opt),
-                                    move_s=ex.COP_MOVE_S)
+        load = ex.weight_placements(
+            rng_ex, rate_hz=self.cfg.plate_rate_hz, t0=t0, dwell_s=cop_dwell(self.opt), move_s=ex.COP_MOVE_S
+        )
         return self._plate_trial(p, t0, load, 0.0, rng_rig)
 
     # -- stream helpers --------------------------------------------------------------------------
     def _accel(self, streams, rates, offsets, traj, rng_rig, vib) -> dict[str, np.ndarray]:
         """The handle_accel stream; returns its truth arrays: times and a perfect accelerometer's reading."""
         cfg = self.cfg
-        t2k = traj.t[::rg.decimation(traj.rate_hz, cfg.accel_rate_hz)]
+        t2k = traj.t[:: rg.decimation(traj.rate_hz, cfg.accel_rate_hz)]
         floor = rg.noise_floor(rng_rig, len(t2k), cfg.accel_rate_hz, self.twin.rig.accel_floor)
         off = rg.clock_offset(rng_rig, cfg)
-        true_a = rg.specific_force(cfg, position_W=traj.position_W, quaternion_W=traj.quaternion_W, rate_hz=traj.rate_hz,
-                                   vibration_W=vib, floor_W=floor)
+        true_a = rg.specific_force(
+            cfg, position_W=traj.position_W, quaternion_W=traj.quaternion_W, rate_hz=traj.rate_hz, vibration_W=vib, floor_W=floor
+        )
         streams["handle_accel"] = {"t": t2k - off, **rg.handle_accel(rng_rig, cfg, specific_force_A=true_a, bias=self.bias_a)}
         rates["handle_accel"] = cfg.accel_rate_hz
         offsets["handle_accel"] = off
@@ -431,8 +555,10 @@ class DossierSimulator:
         step = rg.decimation(traj.rate_hz, cfg.mocap_rate_hz)
         if occluded is None:
             n = len(traj.t[::step])
-            masks = [rg.occlusion_mask(rng_rig, n, cfg.mocap_rate_hz, cfg.occlusion_rate_per_s, cfg.occlusion_mean_s)
-                     for _ in range(len(self.layout["handle"]))]
+            masks = [
+                rg.occlusion_mask(rng_rig, n, cfg.mocap_rate_hz, cfg.occlusion_rate_per_s, cfg.occlusion_mean_s)
+                for _ in range(len(self.layout["handle"]))
+            ]
             occluded = np.any(masks, axis=0)
         if off is None:
             off = rg.clock_offset(rng_rig, cfg)
@@ -448,7 +574,7 @@ class DossierSimulator:
         step = rg.decimation(traj.rate_hz, cfg.mocap_rate_hz)
         t = traj.t[::step]
         pos_h, quat_h = traj.position_W[::step], traj.quaternion_W[::step]
-        frames = link_transforms(self.kin, q)               # device frame, frames 0..n
+        frames = link_transforms(self.kin, q)  # device frame, frames 0..n
         r_wd = _rot(self.twin.placement.quaternion)
         bodies: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         n = len(t)
@@ -500,9 +626,11 @@ def _slug(text: str) -> str:
 
 # --- the dossier -----------------------------------------------------------------------------------
 
+
 @dataclass
 class DossierResult:
     """What :func:`simulate_dossier` wrote: folders and files, trial ids, recorded time and timings (s)."""
+
     out_dir: Path
     session: Path
     truth_json: Path
@@ -512,8 +640,14 @@ class DossierResult:
     timings_s: dict[str, float] = field(default_factory=dict)
 
 
-def simulate_dossier(twin: TwinFile, out_dir: str | os.PathLike, options: SimulationOptions | None = None, *,
-                     overwrite: bool = False, advance: Callable[[int], object] | None = None) -> DossierResult:
+def simulate_dossier(
+    twin: TwinFile,
+    out_dir: str | os.PathLike,
+    options: SimulationOptions | None = None,
+    *,
+    overwrite: bool = False,
+    advance: Callable[[int], object] | None = None,
+) -> DossierResult:
     """Simulate every planned trial and write ``<out>/session``, ``<out>/truth.json`` and ``<out>/truth.npz``.
 
     ``advance(n)`` is called after each trial (for a progress bar). The output folder is built beside
@@ -531,17 +665,35 @@ def simulate_dossier(twin: TwinFile, out_dir: str | os.PathLike, options: Simula
     planned = plan(opt)
     clock0 = time.perf_counter()
     for p, res in zip(planned, _run_all(sim, planned, opt.workers)):
-        writer.add_trial(p.trial_id, p.protocol, powered=res.powered, repetition=p.repetition, label=p.label,
-                         rendering=res.rendering, notes="simulated by the haptify device twin")
+        writer.add_trial(
+            p.trial_id,
+            p.protocol,
+            powered=res.powered,
+            repetition=p.repetition,
+            label=p.label,
+            rendering=res.rendering,
+            notes="simulated by the haptify device twin",
+        )
         for kind, cols in res.streams.items():
-            stream = writer.add_stream(p.trial_id, kind, cols, rate_hz=res.rates[kind], fmt=opt.fmt,
-                                       entities=res.entities.get(kind))
+            stream = writer.add_stream(
+                p.trial_id, kind, cols, rate_hz=res.rates[kind], fmt=opt.fmt, entities=res.entities.get(kind)
+            )
             off = res.truth.get("clock_offsets_s", {}).get(kind, 0.0)
             if off:
-                clock_records.append({"kind": "clock_offset", "id": f"clock-{p.trial_id}-{kind}",
-                                      "stream_file": stream["file"], "offset_s": off})
-        trials_truth.append({"id": p.trial_id, "protocol": p.protocol, "label": p.label, "repetition": p.repetition,
-                             "t_start_s": p.t0, "t_end_s": res.end_time, **res.truth})
+                clock_records.append(
+                    {"kind": "clock_offset", "id": f"clock-{p.trial_id}-{kind}", "stream_file": stream["file"], "offset_s": off}
+                )
+        trials_truth.append(
+            {
+                "id": p.trial_id,
+                "protocol": p.protocol,
+                "label": p.label,
+                "repetition": p.repetition,
+                "t_start_s": p.t0,
+                "t_end_s": res.end_time,
+                **res.truth,
+            }
+        )
         for key, val in res.arrays.items():
             arrays[f"{p.trial_id}/{key}"] = _truth_array(key, val)
         recorded += res.end_time - p.t0
@@ -551,21 +703,34 @@ def simulate_dossier(twin: TwinFile, out_dir: str | os.PathLike, options: Simula
     if clock_records:
         writer.manifest = {**writer.manifest, "calibration": clock_records}
     truth = {
-        "format": "haptify-twin-truth", "version": "1.0", "seed": opt.seed, "reps": opt.reps,
+        "format": "haptify-twin-truth",
+        "version": "1.0",
+        "seed": opt.seed,
+        "reps": opt.reps,
         "examiner": {"id": opt.examiner_id, "pace": opt.examiner_pace},
-        "protocols": list(opt.protocols), "session_folder": "session",
+        "protocols": list(opt.protocols),
+        "session_folder": "session",
         "twin": twin_to_dict(twin),
-        "rig": {"config": opt.rig.to_dict(), "marker_layout_m": {k: v.tolist() for k, v in sim.layout.items()},
-                "cop_marker_offsets_m": ex.COP_MARKER_OFFSETS.tolist(),
-                "plate_corner_positions_m": sim.plate_errors.positions.tolist(),
-                "plate_corner_gains": sim.plate_errors.gains.tolist()},
-        "effective": {"handle_force_bias_N": sim.bias_f.tolist(), "handle_torque_bias_Nm": sim.bias_t.tolist(),
-                      "accel_bias_m_per_s2": sim.bias_a.tolist(), "plate_corner_force_bias_N": sim.bias_p.tolist(),
-                      "connector_mass_kg": sim.conn_m, "connector_com_m": sim.conn_r.tolist(),
-                      "rendering": sim.surface},
-        "trials": trials_truth, "arrays_file": "truth.npz",
+        "rig": {
+            "config": opt.rig.to_dict(),
+            "marker_layout_m": {k: v.tolist() for k, v in sim.layout.items()},
+            "cop_marker_offsets_m": ex.COP_MARKER_OFFSETS.tolist(),
+            "plate_corner_positions_m": sim.plate_errors.positions.tolist(),
+            "plate_corner_gains": sim.plate_errors.gains.tolist(),
+        },
+        "effective": {
+            "handle_force_bias_N": sim.bias_f.tolist(),
+            "handle_torque_bias_Nm": sim.bias_t.tolist(),
+            "accel_bias_m_per_s2": sim.bias_a.tolist(),
+            "plate_corner_force_bias_N": sim.bias_p.tolist(),
+            "connector_mass_kg": sim.conn_m,
+            "connector_com_m": sim.conn_r.tolist(),
+            "rendering": sim.surface,
+        },
+        "trials": trials_truth,
+        "arrays_file": "truth.npz",
         "arrays_note": "per trial '<trial id>/<name>': true signals at 1 kHz (workspace: 100 Hz; vibration_W_2kHz: "
-                       "2 kHz), SI units, W frame; float32 except the time base 't' (float64, session clock)",
+        "2 kHz), SI units, W frame; float32 except the time base 't' (float64, session clock)",
     }
     with built_in_place(out) as build:
         from concurrent.futures import ThreadPoolExecutor
@@ -579,8 +744,9 @@ def simulate_dossier(twin: TwinFile, out_dir: str | os.PathLike, options: Simula
             npz.result()
         atomic_write_json(build / "truth.json", _jsonable(truth))
         timings["write_all"] = time.perf_counter() - clock0
-    return DossierResult(out, out / "session", out / "truth.json", out / "truth.npz", [p.trial_id for p in planned],
-                         recorded, timings)
+    return DossierResult(
+        out, out / "session", out / "truth.json", out / "truth.npz", [p.trial_id for p in planned], recorded, timings
+    )
 
 
 _WORKER: DossierSimulator | None = None
@@ -613,8 +779,7 @@ def _run_all(sim: DossierSimulator, planned: list[PlannedTrial], workers: int):
     # longest trials first keeps both workers busy; results are yielded in plan order
     order = sorted(range(len(planned)), key=lambda i: -planned_duration(planned[i].name, sim.opt))
     ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
-    with ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_init_worker,
-                             initargs=(sim.twin, sim.opt)) as pool:
+    with ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_init_worker, initargs=(sim.twin, sim.opt)) as pool:
         futures = {i: pool.submit(_run_in_worker, planned[i]) for i in order}
         for i in range(len(planned)):
             yield futures[i].result()

@@ -82,8 +82,11 @@ def series_view(plan: Plan, tp: TrialPlan, title: str, keys: list[str | tuple[st
 
 def spatial_view(tp: TrialPlan) -> rrb.Spatial3DView:
     """The world (W, z up) with the rig and this trial's entities of every role (spec §1.2)."""
-    return rrb.Spatial3DView(origin="/world", name=f"{tp.trial.id} · 3-D",
-                             contents=["+ /world", "+ /world/plate/**", "+ /world/device/**", f"+ /world/{tp.key}/**"])
+    return rrb.Spatial3DView(
+        origin="/world",
+        name=f"{tp.trial.id} · 3-D",
+        contents=["+ /world", "+ /world/plate/**", "+ /world/device/**", f"+ /world/{tp.key}/**"],
+    )
 
 
 def trial_tab(plan: Plan, tp: TrialPlan) -> rrb.Container:

@@ -39,17 +39,26 @@ STOP_TIMEOUT_S = 5.0
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``view`` sub-command (entry point ``view = "haptify_tools.viewer.cmd_view:register"``)."""
     p = subparsers.add_parser(
-        "view", help="inspect a session in 3-D and in time (rerun viewer)",
-        description="Show a session, its results and optionally a simulated counterpart in the rerun viewer.")
+        "view",
+        help="inspect a session in 3-D and in time (rerun viewer)",
+        description="Show a session, its results and optionally a simulated counterpart in the rerun viewer.",
+    )
     p.add_argument("session", metavar="SESSION", help="session folder (or a 'haptify simulate' output folder)")
     p.add_argument("--trial", metavar="ID", help="show only this trial")
     p.add_argument("--results", metavar="RESULTS", help="results.json whose metrics are shown as a table")
-    p.add_argument("--compare", metavar="OTHER", help="a second session (e.g. simulated, or a 'haptify simulate' output "
-                                                       "folder) overlaid on the first")
+    p.add_argument(
+        "--compare",
+        metavar="OTHER",
+        help="a second session (e.g. simulated, or a 'haptify simulate' output folder) overlaid on the first",
+    )
     p.add_argument("--save", metavar="OUT.rrd", help="write the recording to this .rrd file (no display needed)")
-    p.add_argument("--derived", choices=DERIVED_MODES, default=DEFAULT_DERIVED,
-                   help="derived signals (calibrated hand force, plate force/COP, DFT321, contact, force arrows, workspace "
-                        "meshes): off = raw streams only (default), compact = float32 at most 100 Hz, full = every sample")
+    p.add_argument(
+        "--derived",
+        choices=DERIVED_MODES,
+        default=DEFAULT_DERIVED,
+        help="derived signals (calibrated hand force, plate force/COP, DFT321, contact, force arrows, workspace "
+        "meshes): off = raw streams only (default), compact = float32 at most 100 Hz, full = every sample",
+    )
     p.add_argument("--web", action="store_true", help=f"serve rerun's web viewer on {LOOPBACK} only")
     p.add_argument("--port", type=int, metavar="N", help=f"HTTP port of the web viewer (with --web; default {DEFAULT_WEB_PORT})")
     p.set_defaults(func=run)
@@ -115,8 +124,12 @@ class WebViewer:
             if self.proc.poll() is not None:
                 code, tail = self.proc.returncode, self.log_tail()
                 self.stop()
-                raise fail("E904", f"the rerun web viewer exited with code {code}: {tail}",
-                           expected=f"a web viewer on {root}", found=f"exit code {code}")
+                raise fail(
+                    "E904",
+                    f"the rerun web viewer exited with code {code}: {tail}",
+                    expected=f"a web viewer on {root}",
+                    found=f"exit code {code}",
+                )
             try:
                 with urllib.request.urlopen(root, timeout=1.0) as resp:
                     if resp.status == 200:
@@ -125,8 +138,12 @@ class WebViewer:
                 pass
             time.sleep(0.1)
         self.stop()
-        raise fail("E904", f"the rerun web viewer did not answer on {root} within {timeout_s:g} s",
-                   expected=f"HTTP 200 from {root}", found="no answer")
+        raise fail(
+            "E904",
+            f"the rerun web viewer did not answer on {root} within {timeout_s:g} s",
+            expected=f"HTTP 200 from {root}",
+            found="no answer",
+        )
 
     def stop(self) -> None:
         """Stop the ``python -m rerun`` wrapper AND the rerun binary it runs.
@@ -153,9 +170,12 @@ def serve_web(rrd: str | os.PathLike, web_port: int, grpc_port: int | None = Non
     grpc_port = grpc_port or free_port()
     log = tempfile.TemporaryFile()
     proc = subprocess.Popen(
-        rerun_command(str(rrd), "--serve-web", "--bind", LOOPBACK, "--web-viewer-port", str(web_port),
-                      "--port", str(grpc_port)),
-        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=log, start_new_session=True)
+        rerun_command(str(rrd), "--serve-web", "--bind", LOOPBACK, "--web-viewer-port", str(web_port), "--port", str(grpc_port)),
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=log,
+        start_new_session=True,
+    )
     return WebViewer(proc, web_url(web_port, grpc_port), web_port, log)
 
 
@@ -177,9 +197,11 @@ def run(args: argparse.Namespace, ui) -> int:
     if args.port is not None and not 0 < args.port < 65536:
         raise fail("E903", f"--port {args.port} is not a TCP port", expected="1..65535", found=args.port)
     if not (args.save or args.web or display_available()):
-        ui.warn("No display here (neither DISPLAY nor WAYLAND_DISPLAY is set), so the native viewer cannot open.\n"
-                f"  haptify view {args.session} --save out.rrd     writes a recording to open elsewhere (rerun out.rrd)\n"
-                f"  haptify view {args.session} --web [--port N]   serves the web viewer on http://{LOOPBACK}:N")
+        ui.warn(
+            "No display here (neither DISPLAY nor WAYLAND_DISPLAY is set), so the native viewer cannot open.\n"
+            f"  haptify view {args.session} --save out.rrd     writes a recording to open elsewhere (rerun out.rrd)\n"
+            f"  haptify view {args.session} --web [--port N]   serves the web viewer on http://{LOOPBACK}:N"
+        )
         ui.emit_json({"ok": False, "reason": "no display; use --save or --web"})
         return 2
     session = open_session_or_dossier(args.session)
@@ -188,12 +210,24 @@ def run(args: argparse.Namespace, ui) -> int:
     with tempfile.TemporaryDirectory(prefix="haptify-view-") as tmp:
         out = Path(args.save) if args.save else Path(tmp) / f"{session.session_id}.rrd"
         try:
-            plan = build(session, out, trial_id=args.trial, results=results, other=other, derived=args.derived,
-                         before_commit=lambda: [s.finish() for s in (session, other) if s is not None])
+            plan = build(
+                session,
+                out,
+                trial_id=args.trial,
+                results=results,
+                other=other,
+                derived=args.derived,
+                before_commit=lambda: [s.finish() for s in (session, other) if s is not None],
+            )
         except OSError as exc:
             raise fail("E902", f"cannot write {str(out)!r}: {exc.strerror or exc}", file=str(out)) from None
-        summary = {"ok": True, "rrd": str(out) if args.save else None, "trials": [tp.trial.id for tp in plan.trials],
-                   "entities": len(plan.entries), "rows": sum(e.rows for e in plan.entries)}
+        summary = {
+            "ok": True,
+            "rrd": str(out) if args.save else None,
+            "trials": [tp.trial.id for tp in plan.trials],
+            "entities": len(plan.entries),
+            "rows": sum(e.rows for e in plan.entries),
+        }
         if args.save:
             ui.say(f"wrote {out} ({len(plan.trials)} trial(s), {summary['entities']} entities); open it with: rerun {out}")
         if args.web:

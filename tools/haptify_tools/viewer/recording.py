@@ -94,8 +94,18 @@ MODELED_COLOR = (44, 160, 44)
 MESH_ALPHA = 70  # translucency of the workspace meshes (0–255)
 FORCE_COLORS = {"measured": (214, 39, 40), "compare": (255, 152, 150)}
 PLATE_FORCE_COLOR = (148, 103, 189)
-LINK_PALETTE = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
-                (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207)]
+LINK_PALETTE = [
+    (31, 119, 180),
+    (255, 127, 14),
+    (44, 160, 44),
+    (214, 39, 40),
+    (148, 103, 189),
+    (140, 86, 75),
+    (227, 119, 194),
+    (127, 127, 127),
+    (188, 189, 34),
+    (23, 190, 207),
+]
 
 # Time series the viewer can show: relative path under /series/<trial>/<role> → (title, unit).
 SERIES = {
@@ -196,8 +206,7 @@ class Plan:
             entry = compact(entry)
         if self.writer is not None:
             self.writer.write(entry)
-            entry = Entry(entry.path, series=entry.series, stream=entry.stream, derived=entry.derived,
-                          written_rows=entry.rows)
+            entry = Entry(entry.path, series=entry.series, stream=entry.stream, derived=entry.derived, written_rows=entry.rows)
         self.entries.append(entry)
 
 
@@ -249,6 +258,7 @@ class CachedStreams(SessionFolder):
 
 # --- small numeric helpers -----------------------------------------------------------------------
 
+
 def time_ns(t: np.ndarray) -> np.ndarray:
     """Session-clock seconds → exact integer nanoseconds (int64), ``round(t · 10⁹)`` (spec §1.4)."""
     ns = np.asarray(t, dtype=np.float64) * 1e9
@@ -277,8 +287,14 @@ def raw_pose_at(t_pose: np.ndarray, p: np.ndarray, q: np.ndarray, t: np.ndarray)
 
     ok = finite_rows(p, q)
     nan3 = np.full((len(t_pose), 3), np.nan)
-    track = signals.MocapTrack(t=np.asarray(t_pose, dtype=np.float64), position=p, quaternion=q, velocity=nan3,
-                               angular_velocity=nan3, segment=np.where(ok, 0, -1))
+    track = signals.MocapTrack(
+        t=np.asarray(t_pose, dtype=np.float64),
+        position=p,
+        quaternion=q,
+        velocity=nan3,
+        angular_velocity=nan3,
+        segment=np.where(ok, 0, -1),
+    )
     return signals.resample_track(track, t)
 
 
@@ -340,8 +356,16 @@ def compact(entry: Entry) -> Entry:
     elif k > 1:
         times = times[::k]
         fields = {name: v[::k] for name, v in fields.items()}
-    return Entry(entry.path, static=entry.static, times_ns=times, archetype=entry.archetype, fields=fields,
-                 series=entry.series, stream=entry.stream, derived=True)
+    return Entry(
+        entry.path,
+        static=entry.static,
+        times_ns=times,
+        archetype=entry.archetype,
+        fields=fields,
+        series=entry.series,
+        stream=entry.stream,
+        derived=True,
+    )
 
 
 def plane_rectangle(point: np.ndarray, normal: np.ndarray, around: np.ndarray | None) -> np.ndarray:
@@ -371,8 +395,10 @@ def plane_rectangle(point: np.ndarray, normal: np.ndarray, around: np.ndarray | 
 
 # --- entries ---------------------------------------------------------------------------------------
 
-def series_entry(path: str, key: str, t: np.ndarray, values: np.ndarray, names: list[str], role: str, stream: str,
-                 derived: bool = False) -> Entry:
+
+def series_entry(
+    path: str, key: str, t: np.ndarray, values: np.ndarray, names: list[str], role: str, stream: str, derived: bool = False
+) -> Entry:
     """A time series: one row of ``len(names)`` scalars per sample, at the samples' exact times.
     ``t`` in s on the session clock, spec §1.4.
 
@@ -381,17 +407,23 @@ def series_entry(path: str, key: str, t: np.ndarray, values: np.ndarray, names: 
     values = np.asarray(values, dtype=np.float64).reshape(len(t), len(names))
     palette = SERIES_COLORS[role]
     suffix = f" [{SERIES[key][1]}]" + ("" if role == "measured" else f" ({role})")
-    lines = rr.SeriesLines(names=[f"{n}{suffix}" for n in names],
-                           colors=[palette[i % len(palette)] for i in range(len(names))])
-    return Entry(path, static=[lines], times_ns=time_ns(t), archetype=rr.Scalars, fields={"scalars": values},
-                 series=key, stream=stream, derived=derived)
+    lines = rr.SeriesLines(names=[f"{n}{suffix}" for n in names], colors=[palette[i % len(palette)] for i in range(len(names))])
+    return Entry(
+        path,
+        static=[lines],
+        times_ns=time_ns(t),
+        archetype=rr.Scalars,
+        fields={"scalars": values},
+        series=key,
+        stream=stream,
+        derived=derived,
+    )
 
 
 class TrialPlanner:
     """Turns one trial of one session (one role) into entries (spec chapter 2 streams)."""
 
-    def __init__(self, session: CachedStreams, ctx: ComputeContext | None, trial: Trial, role: str, key: str,
-                 plan: Plan) -> None:
+    def __init__(self, session: CachedStreams, ctx: ComputeContext | None, trial: Trial, role: str, key: str, plan: Plan) -> None:
         self.ctx = ctx  # shares calibration, handle and plate signals between the reference functions (None: derived off)
         self.session = session
         self.trial = trial
@@ -414,8 +446,9 @@ class TrialPlanner:
         """Whether derived signals are computed at all (``derived`` is not ``off``)."""
         return self.plan.derived != "off"
 
-    def add_series(self, key: str, t: np.ndarray, values: np.ndarray, names: list[str], stream: str,
-                   derived: bool = False) -> None:
+    def add_series(
+        self, key: str, t: np.ndarray, values: np.ndarray, names: list[str], stream: str, derived: bool = False
+    ) -> None:
         self.plan.add(series_entry(f"{self.series}/{key}", key, t, values, names, self.role, stream, derived))
 
     def run(self) -> None:
@@ -441,8 +474,9 @@ class TrialPlanner:
 
     def workspace(self, points: np.ndarray) -> None:
         """The measured cloud, and the measured and modeled workspaces as meshes (spec §8.2–8.4)."""
-        self.plan.add(Entry(f"{self.world}/workspace/points",
-                            static=[rr.Points3D(points, radii=0.0015, colors=ROLE_COLORS[self.role])]))
+        self.plan.add(
+            Entry(f"{self.world}/workspace/points", static=[rr.Points3D(points, radii=0.0015, colors=ROLE_COLORS[self.role])])
+        )
         if not self.derive:
             return
         from haptify import workspace
@@ -468,13 +502,21 @@ class TrialPlanner:
     def handle(self, t: np.ndarray, p: np.ndarray, q: np.ndarray) -> None:
         """Handle pose with axes, the gimbal-centre path and the position time series."""
         ok = finite_rows(p, q)
-        self.plan.add(Entry(f"{self.world}/handle", static=[rr.TransformAxes3D(HANDLE_AXIS_M)],
-                            times_ns=time_ns(t[ok]), archetype=rr.Transform3D,
-                            fields={"translation": p[ok], "quaternion": xyzw(q[ok])}, stream="handle_pose"))
+        self.plan.add(
+            Entry(
+                f"{self.world}/handle",
+                static=[rr.TransformAxes3D(HANDLE_AXIS_M)],
+                times_ns=time_ns(t[ok]),
+                archetype=rr.Transform3D,
+                fields={"translation": p[ok], "quaternion": xyzw(q[ok])},
+                stream="handle_pose",
+            )
+        )
         strips = nan_split(p)
         if strips:
-            self.plan.add(Entry(f"{self.world}/trajectory",
-                                static=[rr.LineStrips3D(strips, radii=0.0008, colors=ROLE_COLORS[self.role])]))
+            self.plan.add(
+                Entry(f"{self.world}/trajectory", static=[rr.LineStrips3D(strips, radii=0.0008, colors=ROLE_COLORS[self.role])])
+            )
         self.add_series("handle/position", t, p, ["px", "py", "pz"], "handle_pose")
 
     def note(self, what: str, err: HaptifyError) -> None:
@@ -506,10 +548,17 @@ class TrialPlanner:
 
     def force_arrows(self, path: str, t: np.ndarray, origins: np.ndarray, force: np.ndarray, stream: str) -> None:
         ok = finite_rows(origins, force)
-        self.plan.add(Entry(path, times_ns=time_ns(t[ok]),
-                            static=[rr.Arrows3D.from_fields(colors=FORCE_COLORS[self.role], radii=0.001)],
-                            archetype=rr.Arrows3D, fields={"origins": origins[ok], "vectors": force[ok] * HAND_FORCE_M_PER_N},
-                            stream=stream, derived=True))
+        self.plan.add(
+            Entry(
+                path,
+                times_ns=time_ns(t[ok]),
+                static=[rr.Arrows3D.from_fields(colors=FORCE_COLORS[self.role], radii=0.001)],
+                archetype=rr.Arrows3D,
+                fields={"origins": origins[ok], "vectors": force[ok] * HAND_FORCE_M_PER_N},
+                stream=stream,
+                derived=True,
+            )
+        )
 
     def wrench(self, t_pose: np.ndarray | None, p: np.ndarray | None, q: np.ndarray | None) -> None:
         """Raw F/T series (sensor frame), and the hand force in W as series, arrow and free-space field.
@@ -548,9 +597,20 @@ class TrialPlanner:
 
             field_ = free_space.force_field(origins[ok], force[ok])  # the spec's binning (§9.5)
             if len(field_.centres):
-                self.plan.add(Entry(f"{self.world}/force_field",
-                                    static=[rr.Arrows3D(origins=field_.centres, vectors=field_.mean_force * HAND_FORCE_M_PER_N,
-                                                        colors=FORCE_COLORS[self.role], radii=0.0006)], derived=True))
+                self.plan.add(
+                    Entry(
+                        f"{self.world}/force_field",
+                        static=[
+                            rr.Arrows3D(
+                                origins=field_.centres,
+                                vectors=field_.mean_force * HAND_FORCE_M_PER_N,
+                                colors=FORCE_COLORS[self.role],
+                                radii=0.0006,
+                            )
+                        ],
+                        derived=True,
+                    )
+                )
 
     def accel(self) -> None:
         a = self.read("handle_accel")
@@ -594,10 +654,17 @@ class TrialPlanner:
         ok = ps.cop_valid & finite_rows(ps.force)
         head = np.column_stack([ps.cop[ok], np.zeros(int(ok.sum()))])
         vec = ps.force[ok] * PLATE_FORCE_M_PER_N
-        self.plan.add(Entry(f"{self.world}/plate_force", times_ns=time_ns(ps.t[ok]),
-                            static=[rr.Arrows3D.from_fields(colors=PLATE_FORCE_COLOR, radii=0.002)],
-                            archetype=rr.Arrows3D, fields={"origins": head - vec, "vectors": vec}, stream="plate_signals",
-                            derived=True))
+        self.plan.add(
+            Entry(
+                f"{self.world}/plate_force",
+                times_ns=time_ns(ps.t[ok]),
+                static=[rr.Arrows3D.from_fields(colors=PLATE_FORCE_COLOR, radii=0.002)],
+                archetype=rr.Arrows3D,
+                fields={"origins": head - vec, "vectors": vec},
+                stream="plate_signals",
+                derived=True,
+            )
+        )
 
     def commanded(self) -> None:
         c = self.read("commanded_wrench")
@@ -643,10 +710,16 @@ class TrialPlanner:
         for i, (link, names) in enumerate(groups.items()):
             xyz = columns_of(frame, [f"{m}_{a}" for m in names for a in "xyz"]).reshape(len(t), len(names), 3)
             ok = np.isfinite(xyz).all(axis=2).any(axis=1)
-            self.plan.add(Entry(
-                f"{self.world}/markers/{rr.escape_entity_path_part(link)}",
-                static=[rr.Points3D.from_fields(colors=LINK_PALETTE[i % len(LINK_PALETTE)], radii=0.002, labels=names)],
-                times_ns=time_ns(t[ok]), archetype=rr.Points3D, fields={"positions": xyz[ok]}, stream="markers"))
+            self.plan.add(
+                Entry(
+                    f"{self.world}/markers/{rr.escape_entity_path_part(link)}",
+                    static=[rr.Points3D.from_fields(colors=LINK_PALETTE[i % len(LINK_PALETTE)], radii=0.002, labels=names)],
+                    times_ns=time_ns(t[ok]),
+                    archetype=rr.Points3D,
+                    fields={"positions": xyz[ok]},
+                    stream="markers",
+                )
+            )
 
     def links(self) -> None:
         """Each link's frame from link_poses, with axes."""
@@ -658,10 +731,16 @@ class TrialPlanner:
             p = columns_of(frame, [f"{link}_p{a}" for a in "xyz"])
             q = columns_of(frame, [f"{link}_q{a}" for a in "wxyz"])
             ok = finite_rows(p, q)
-            self.plan.add(Entry(f"{self.world}/links/{rr.escape_entity_path_part(link)}",
-                                static=[rr.TransformAxes3D(LINK_AXIS_M)], times_ns=time_ns(t[ok]),
-                                archetype=rr.Transform3D, fields={"translation": p[ok], "quaternion": xyzw(q[ok])},
-                                stream="link_poses"))
+            self.plan.add(
+                Entry(
+                    f"{self.world}/links/{rr.escape_entity_path_part(link)}",
+                    static=[rr.TransformAxes3D(LINK_AXIS_M)],
+                    times_ns=time_ns(t[ok]),
+                    archetype=rr.Transform3D,
+                    fields={"translation": p[ok], "quaternion": xyzw(q[ok])},
+                    stream="link_poses",
+                )
+            )
 
     def surface(self, t_pose: np.ndarray | None, p: np.ndarray | None) -> None:
         """The rendered plane as a translucent rectangle, and the handle's penetration series."""
@@ -676,9 +755,19 @@ class TrialPlanner:
         normal = normal / norm
         around = p[finite_rows(p)] if p is not None else None
         corners = plane_rectangle(point, normal, around)
-        self.plan.add(Entry(f"{self.world}/virtual_surface", static=[rr.Mesh3D(
-            vertex_positions=corners, triangle_indices=[[0, 1, 2], [0, 2, 3]], vertex_normals=np.tile(normal, (4, 1)),
-            albedo_factor=(*ROLE_COLORS[self.role], 90))]))
+        self.plan.add(
+            Entry(
+                f"{self.world}/virtual_surface",
+                static=[
+                    rr.Mesh3D(
+                        vertex_positions=corners,
+                        triangle_indices=[[0, 1, 2], [0, 2, 3]],
+                        vertex_normals=np.tile(normal, (4, 1)),
+                        albedo_factor=(*ROLE_COLORS[self.role], 90),
+                    )
+                ],
+            )
+        )
         if p is not None:
             depth = (point - p) @ normal
             self.add_series("penetration", t_pose, depth, ["depth"], "handle_pose")
@@ -690,11 +779,23 @@ class TrialPlanner:
             except HaptifyError as err:
                 self.note("contact signals (normal force, contact)", err)
                 return
-            self.add_series("contact/normal_force", cs.t, np.column_stack([cs.commanded_normal, cs.normal_force]),
-                            ["commanded Fn", "felt Fn"], "handle_signals", derived=True)
+            self.add_series(
+                "contact/normal_force",
+                cs.t,
+                np.column_stack([cs.commanded_normal, cs.normal_force]),
+                ["commanded Fn", "felt Fn"],
+                "handle_signals",
+                derived=True,
+            )
             self.add_series("contact/penetration", cs.t, cs.penetration, ["depth"], "handle_signals", derived=True)
-            self.add_series("contact/state", cs.t, np.column_stack([cs.contact, cs.used]).astype(np.float64),
-                            ["contact", "used"], "handle_signals", derived=True)
+            self.add_series(
+                "contact/state",
+                cs.t,
+                np.column_stack([cs.contact, cs.used]).astype(np.float64),
+                ["contact", "used"],
+                "handle_signals",
+                derived=True,
+            )
 
 
 @functools.lru_cache(maxsize=4)
@@ -716,12 +817,17 @@ def solid_entry(path: str, solid: Any, color: tuple[int, int, int], compact: boo
         vertices, triangles = mesh.shared(solid.pitch)
         drawn = rr.Mesh3D(vertex_positions=vertices, triangle_indices=triangles, albedo_factor=(*color, MESH_ALPHA))
     else:
-        drawn = rr.Mesh3D(vertex_positions=mesh.vertices, triangle_indices=mesh.triangles, vertex_normals=mesh.normals,
-                          albedo_factor=(*color, MESH_ALPHA))
+        drawn = rr.Mesh3D(
+            vertex_positions=mesh.vertices,
+            triangle_indices=mesh.triangles,
+            vertex_normals=mesh.normals,
+            albedo_factor=(*color, MESH_ALPHA),
+        )
     return Entry(path, static=[drawn], derived=True)
 
 
 # --- session level ---------------------------------------------------------------------------------
+
 
 def rig_entries(session: SessionFolder) -> list[Entry]:
     """World frame, force plate, corner sensors and device base (static).
@@ -733,14 +839,42 @@ def rig_entries(session: SessionFolder) -> list[Entry]:
         zs = [c.pose.position[2] for c in plate.corners]
         depth = -min(zs) if min(zs) < 0 else PLATE_THICKNESS_M
         sx, sy = plate.size_m
-        out.append(Entry("/world/plate", static=[rr.Boxes3D(centers=[[0.0, 0.0, -depth / 2]], half_sizes=[[sx / 2, sy / 2, depth / 2]],
-                                                            colors=[(160, 160, 160)], fill_mode="solid")]))
-        out.append(Entry("/world/plate/corners", static=[rr.Points3D([c.pose.position for c in plate.corners],
-                                                                     labels=[c.id for c in plate.corners],
-                                                                     radii=0.006, colors=(90, 90, 90))]))
+        out.append(
+            Entry(
+                "/world/plate",
+                static=[
+                    rr.Boxes3D(
+                        centers=[[0.0, 0.0, -depth / 2]],
+                        half_sizes=[[sx / 2, sy / 2, depth / 2]],
+                        colors=[(160, 160, 160)],
+                        fill_mode="solid",
+                    )
+                ],
+            )
+        )
+        out.append(
+            Entry(
+                "/world/plate/corners",
+                static=[
+                    rr.Points3D(
+                        [c.pose.position for c in plate.corners],
+                        labels=[c.id for c in plate.corners],
+                        radii=0.006,
+                        colors=(90, 90, 90),
+                    )
+                ],
+            )
+        )
     placement = m.device_placement
-    out.append(Entry("/world/device", static=[rr.Transform3D(translation=placement.position, quaternion=xyzw(placement.quaternion)),
-                                              rr.TransformAxes3D(0.05)]))
+    out.append(
+        Entry(
+            "/world/device",
+            static=[
+                rr.Transform3D(translation=placement.position, quaternion=xyzw(placement.quaternion)),
+                rr.TransformAxes3D(0.05),
+            ],
+        )
+    )
     return out
 
 
@@ -758,54 +892,77 @@ def _num(v: Any) -> str:
 
 def results_markdown(results: ResultsFile, session_id: str) -> str:
     """The metrics of a results file as markdown tables (spec §15.2)."""
-    lines = [f"# Results — session `{results.session_id}`",
-             f"{results.implementation.name} {results.implementation.version}, spec {results.spec_version}", ""]
+    lines = [
+        f"# Results — session `{results.session_id}`",
+        f"{results.implementation.name} {results.implementation.version}, spec {results.spec_version}",
+        "",
+    ]
     if results.session_id != session_id:
         lines += [f"**Warning:** these results are for session `{results.session_id}`, not `{session_id}`.", ""]
     lines += ["| metric | value | unit | n | sd | trials | warnings |", "|---|---:|---|---:|---:|---|---|"]
     for m in results.metrics:
-        lines.append(f"| {_cell(m.id)} | {_num(m.value)} | {_cell(m.unit)} | {m.n} | {_num(m.sd)} | "
-                     f"{_cell(', '.join(m.trials))} | {_cell(', '.join(m.warnings))} |")
+        lines.append(
+            f"| {_cell(m.id)} | {_num(m.value)} | {_cell(m.unit)} | {m.n} | {_num(m.sd)} | "
+            f"{_cell(', '.join(m.trials))} | {_cell(', '.join(m.warnings))} |"
+        )
     if results.unavailable:
         lines += ["", "## Unavailable", "", "| metric | code | reason |", "|---|---|---|"]
         lines += [f"| {_cell(u.id)} | {u.code} | {_cell(u.reason)} |" for u in results.unavailable]
     if results.warnings:
         lines += ["", "## Warnings", "", "| code | metric | trial | message |", "|---|---|---|---|"]
-        lines += [f"| {w.code} | {_cell(w.metric or '')} | {_cell(w.trial or '')} | {_cell(w.message)} |" for w in results.warnings]
+        lines += [
+            f"| {w.code} | {_cell(w.metric or '')} | {_cell(w.trial or '')} | {_cell(w.message)} |" for w in results.warnings
+        ]
     return "\n".join(lines) + "\n"
 
 
-def session_markdown(session: SessionFolder, trials: list[TrialPlan], other: SessionFolder | None,
-                     notes: list[str] = (), derived: str = "full") -> str:
+def session_markdown(
+    session: SessionFolder, trials: list[TrialPlan], other: SessionFolder | None, notes: list[str] = (), derived: str = "full"
+) -> str:
     """A summary of the session (and the compared one) and how to read the 3-D view."""
     m = session.manifest
     dev = session.device()
-    lines = [f"# Session `{m.session_id}`", "",
-             f"{dev.manufacturer} {dev.model} · {m.date} · lab `{m.lab.id}` · examiner `{m.examiner.id}`", ""]
+    lines = [
+        f"# Session `{m.session_id}`",
+        "",
+        f"{dev.manufacturer} {dev.model} · {m.date} · lab `{m.lab.id}` · examiner `{m.examiner.id}`",
+        "",
+    ]
     if other is not None:
         od = other.device()
-        lines += [f"Compared with session `{other.session_id}` ({od.manufacturer} {od.model}), drawn in lighter colours "
-                  "under the `compare` entities.", ""]
+        lines += [
+            f"Compared with session `{other.session_id}` ({od.manufacturer} {od.model}), drawn in lighter colours "
+            "under the `compare` entities.",
+            "",
+        ]
     lines += ["| trial | protocol | powered | streams | compared with |", "|---|---|---|---|---|"]
     for tp in trials:
         t = tp.trial
         kinds = ", ".join(f"{s.kind} ({s.rows} @ {s.rate_hz:g} Hz)" for s in t.streams)
-        lines.append(f"| {_cell(t.id)} | {t.protocol} | {'yes' if t.powered else 'no'} | {_cell(kinds)} | "
-                     f"{_cell(tp.counterpart.get('compare', '—' if other is not None else ''))} |")
+        lines.append(
+            f"| {_cell(t.id)} | {t.protocol} | {'yes' if t.powered else 'no'} | {_cell(kinds)} | "
+            f"{_cell(tp.counterpart.get('compare', '—' if other is not None else ''))} |"
+        )
     lines += ["", "World frame W: origin at the centre of the plate's top surface, z up, right-handed (spec §1.2)."]
     if derived == "off":
-        lines.append("Derived signals (calibrated hand force, plate force and COP, DFT321, contact signals, force arrows, "
-                     "workspace meshes) are not recorded: `haptify view --derived compact` or `--derived full` adds them.")
+        lines.append(
+            "Derived signals (calibrated hand force, plate force and COP, DFT321, contact signals, force arrows, "
+            "workspace meshes) are not recorded: `haptify view --derived compact` or `--derived full` adds them."
+        )
     else:
         from haptify.metric_definitions import param
 
-        lines += [f"Arrows: hand force {HAND_FORCE_M_PER_N * 100:g} cm per N; plate force {PLATE_FORCE_M_PER_N * 100:g} cm per N.",
-                  f"Free-space force field: mean hand force per {param('free_space', 'force_field_bin_m') * 100:g} cm bin "
-                  f"holding at least {param('free_space', 'force_field_min_samples')} samples (spec §9.5).",
-                  "The plate arrow is the force the load exerts on the plate, drawn with its head at the COP."]
+        lines += [
+            f"Arrows: hand force {HAND_FORCE_M_PER_N * 100:g} cm per N; plate force {PLATE_FORCE_M_PER_N * 100:g} cm per N.",
+            f"Free-space force field: mean hand force per {param('free_space', 'force_field_bin_m') * 100:g} cm bin "
+            f"holding at least {param('free_space', 'force_field_min_samples')} samples (spec §9.5).",
+            "The plate arrow is the force the load exerts on the plate, drawn with its head at the COP.",
+        ]
         if derived == "compact":
-            lines.append(f"Derived signals are compact: float32, at most {COMPACT_RATE_HZ:g} Hz (faster time series as a "
-                         "min/max envelope, faster arrows point-sampled); `--derived full` records every sample.")
+            lines.append(
+                f"Derived signals are compact: float32, at most {COMPACT_RATE_HZ:g} Hz (faster time series as a "
+                "min/max envelope, faster arrows point-sampled); `--derived full` records every sample."
+            )
     if notes:
         lines += ["", "## Not shown", ""] + [f"- {_cell(n)}" for n in notes]
     return "\n".join(lines) + "\n"
@@ -824,9 +981,16 @@ def counterpart(other: SessionFolder, trial: Trial) -> Trial | None:
     return next((t for t in other.trials if t.protocol == trial.protocol and t.repetition == trial.repetition), None)
 
 
-def plan_recording(session: SessionFolder, *, trial_id: str | None = None, results: ResultsFile | None = None,
-                   other: SessionFolder | None = None, trial_ids: Collection[str] | None = None,
-                   derived: str = DEFAULT_DERIVED, writer: RrdWriter | None = None) -> Plan:
+def plan_recording(
+    session: SessionFolder,
+    *,
+    trial_id: str | None = None,
+    results: ResultsFile | None = None,
+    other: SessionFolder | None = None,
+    trial_ids: Collection[str] | None = None,
+    derived: str = DEFAULT_DERIVED,
+    writer: RrdWriter | None = None,
+) -> Plan:
     """Every entity of the recording of ``session`` (one trial, the trials ``trial_ids`` in session order, or
     all), optionally compared with ``other``; written entry by entry through ``writer`` when given, else
     kept whole in the plan (for :func:`write_rrd`).
@@ -836,6 +1000,7 @@ def plan_recording(session: SessionFolder, *, trial_id: str | None = None, resul
     """
     if derived not in DERIVED_MODES:
         raise fail("E903", f"unknown derived-signal mode {derived!r}", expected=list(DERIVED_MODES), found=derived)
+
     def context(folder: SessionFolder) -> tuple[CachedStreams, ComputeContext | None]:
         cached = CachedStreams(folder)
         if derived == "off":
@@ -846,9 +1011,10 @@ def plan_recording(session: SessionFolder, *, trial_id: str | None = None, resul
 
     streams, ctx = context(session)
     other_streams, other_ctx = context(other) if other is not None else (None, None)
-    trials = [session.trial(trial_id)] if trial_id else [t for t in session.trials
-                                                          if trial_ids is None or t.id in trial_ids]
-    plan = Plan(recording_id=recording_id(session, trial_id, other), has_results=results is not None, derived=derived, writer=writer)
+    trials = [session.trial(trial_id)] if trial_id else [t for t in session.trials if trial_ids is None or t.id in trial_ids]
+    plan = Plan(
+        recording_id=recording_id(session, trial_id, other), has_results=results is not None, derived=derived, writer=writer
+    )
     for entry in rig_entries(session):
         plan.add(entry)
     for trial in trials:
@@ -871,11 +1037,23 @@ def plan_recording(session: SessionFolder, *, trial_id: str | None = None, resul
             if shift:
                 plan.notes.append(f"{match.id} (compare) shifted by {shift / 1e9:+.9g} s to start with {trial.id} (measured)")
         plan.trials.append(tp)
-    plan.add(Entry("/session", static=[rr.TextDocument(session_markdown(session, plan.trials, other, plan.notes, derived),
-                                                       media_type=rr.MediaType.MARKDOWN)]))
+    plan.add(
+        Entry(
+            "/session",
+            static=[
+                rr.TextDocument(
+                    session_markdown(session, plan.trials, other, plan.notes, derived), media_type=rr.MediaType.MARKDOWN
+                )
+            ],
+        )
+    )
     if results is not None:
-        plan.add(Entry("/results", static=[rr.TextDocument(results_markdown(results, session.session_id),
-                                                           media_type=rr.MediaType.MARKDOWN)]))
+        plan.add(
+            Entry(
+                "/results",
+                static=[rr.TextDocument(results_markdown(results, session.session_id), media_type=rr.MediaType.MARKDOWN)],
+            )
+        )
     return plan
 
 

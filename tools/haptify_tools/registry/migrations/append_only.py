@@ -12,12 +12,16 @@ def add_triggers(tables: tuple[str, ...]) -> None:
     dialect = op.get_bind().dialect.name
     for table in tables:
         if dialect == "postgresql":
-            op.execute(f"CREATE TRIGGER {table}_append_only BEFORE UPDATE OR DELETE ON {table} "
-                       "FOR EACH ROW EXECUTE FUNCTION registry_append_only()")
+            op.execute(
+                f"CREATE TRIGGER {table}_append_only BEFORE UPDATE OR DELETE ON {table} "
+                "FOR EACH ROW EXECUTE FUNCTION registry_append_only()"
+            )
         elif dialect == "sqlite":
             for action in ("UPDATE", "DELETE"):
-                op.execute(f"CREATE TRIGGER {table}_no_{action.lower()} BEFORE {action} ON {table} "
-                           f"BEGIN SELECT RAISE(ABORT, 'registry records are append-only ({table})'); END")
+                op.execute(
+                    f"CREATE TRIGGER {table}_no_{action.lower()} BEFORE {action} ON {table} "
+                    f"BEGIN SELECT RAISE(ABORT, 'registry records are append-only ({table})'); END"
+                )
 
 
 def drop_triggers(tables: tuple[str, ...]) -> None:

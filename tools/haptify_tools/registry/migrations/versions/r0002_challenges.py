@@ -21,22 +21,26 @@ APPEND_ONLY = ("challenges", "challenge_results")
 
 def upgrade() -> None:
     tz = sa.DateTime(timezone=True)
-    op.create_table("challenges",
-                    sa.Column("id", sa.String(32), primary_key=True),
-                    sa.Column("lab_id", sa.String(64), sa.ForeignKey("labs.id"), nullable=False, index=True),
-                    sa.Column("token_id", sa.Integer, sa.ForeignKey("tokens.id"), nullable=False),
-                    sa.Column("spec_version", sa.String(16), nullable=False),
-                    sa.Column("seed", sa.String(64), nullable=False),
-                    sa.Column("cases_json", sa.Text, nullable=False),
-                    sa.Column("created_at", tz, nullable=False),
-                    sa.Column("expires_at", tz, nullable=False))
-    op.create_table("challenge_results",
-                    sa.Column("challenge_id", sa.String(32), sa.ForeignKey("challenges.id"), primary_key=True),
-                    sa.Column("implementation_name", sa.String(200), nullable=False, index=True),
-                    sa.Column("implementation_version", sa.String(100), nullable=False),
-                    sa.Column("passed", sa.Boolean, nullable=False),
-                    sa.Column("verdicts_json", sa.Text, nullable=False),
-                    sa.Column("answered_at", tz, nullable=False))
+    op.create_table(
+        "challenges",
+        sa.Column("id", sa.String(32), primary_key=True),
+        sa.Column("lab_id", sa.String(64), sa.ForeignKey("labs.id"), nullable=False, index=True),
+        sa.Column("token_id", sa.Integer, sa.ForeignKey("tokens.id"), nullable=False),
+        sa.Column("spec_version", sa.String(16), nullable=False),
+        sa.Column("seed", sa.String(64), nullable=False),
+        sa.Column("cases_json", sa.Text, nullable=False),
+        sa.Column("created_at", tz, nullable=False),
+        sa.Column("expires_at", tz, nullable=False),
+    )
+    op.create_table(
+        "challenge_results",
+        sa.Column("challenge_id", sa.String(32), sa.ForeignKey("challenges.id"), primary_key=True),
+        sa.Column("implementation_name", sa.String(200), nullable=False, index=True),
+        sa.Column("implementation_version", sa.String(100), nullable=False),
+        sa.Column("passed", sa.Boolean, nullable=False),
+        sa.Column("verdicts_json", sa.Text, nullable=False),
+        sa.Column("answered_at", tz, nullable=False),
+    )
     add_triggers(APPEND_ONLY)
 
 

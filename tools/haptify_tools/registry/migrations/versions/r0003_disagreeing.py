@@ -24,18 +24,21 @@ OLD, NEW = "disagrees", "disagreeing"
 
 def rename_state(old: str, new: str) -> None:
     """Every submission whose state is ``old`` gets ``new``, in its column and its verification record."""
-    submissions = sa.table("submissions", sa.column("id", sa.String), sa.column("verification", sa.String),
-                           sa.column("verification_json", sa.Text))
+    submissions = sa.table(
+        "submissions", sa.column("id", sa.String), sa.column("verification", sa.String), sa.column("verification_json", sa.Text)
+    )
     bind = op.get_bind()
-    rows = bind.execute(sa.select(submissions.c.id, submissions.c.verification_json)
-                        .where(submissions.c.verification == old)).all()
+    rows = bind.execute(
+        sa.select(submissions.c.id, submissions.c.verification_json).where(submissions.c.verification == old)
+    ).all()
     drop_triggers(("submissions",))
     for sid, record in rows:
         details = json.loads(record)
         if details.get("status") == old:
             details["status"] = new
-        bind.execute(submissions.update().where(submissions.c.id == sid)
-                     .values(verification=new, verification_json=json.dumps(details)))
+        bind.execute(
+            submissions.update().where(submissions.c.id == sid).values(verification=new, verification_json=json.dumps(details))
+        )
     add_triggers(("submissions",))
 
 
