@@ -45,7 +45,8 @@ from haptify.compute import ComputeContext, compute_session
 from haptify.errors import HaptifyError
 from haptify.free_space import FORCE_IDS, PLATE_ID, SPEED_IDS, magnitude_stats, plate_force_about_weight, plate_force_samples
 from haptify.repetitions import definition_of
-from haptify.signals import handle_signals, lowpass_resample, mocap_track, process_mocap, resample_track, sp
+from haptify.preprocessing import lowpass_resample, mocap_track, process_mocap, resample_track, sp
+from haptify.signals import handle_signals
 from haptify.storage import open_session
 from haptify.uncertainty import method_of
 from haptify.vibration import GROUPS, combine

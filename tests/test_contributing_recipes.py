@@ -14,7 +14,7 @@ import jsonschema
 import pytest
 
 import haptify_schemas
-from haptify import compute, metric_definitions
+from haptify import families, metric_definitions
 from haptify.compute import compute_session
 from haptify.storage import open_session
 from metric_sessions import add_handle_trial, circle, spin, writer
@@ -80,11 +80,11 @@ def toy_family(tmp_path, monkeypatch):
     (code / "toy_family.py").write_text(textwrap.dedent(TOY_MODULE), encoding="utf-8")
     monkeypatch.syspath_prepend(str(code))
     monkeypatch.setattr(haptify_schemas, "_root", lambda: defs)
-    plugin = EntryPoint(name="toy", value="toy_family", group=compute.FAMILY_ENTRY_POINTS)
+    plugin = EntryPoint(name="toy", value="toy_family", group=families.FAMILY_ENTRY_POINTS)
     monkeypatch.setattr(
-        compute,
+        families,
         "entry_points",
-        lambda group: [*entry_points(group=group), *([plugin] if group == compute.FAMILY_ENTRY_POINTS else [])],
+        lambda group: [*entry_points(group=group), *([plugin] if group == families.FAMILY_ENTRY_POINTS else [])],
     )
     _clear_caches()
     yield
@@ -95,7 +95,7 @@ def toy_family(tmp_path, monkeypatch):
 def _clear_caches() -> None:
     haptify_schemas.load.cache_clear()
     metric_definitions.family.cache_clear()
-    compute.family_modules.cache_clear()
+    families.family_modules.cache_clear()
 
 
 def _session(folder: Path, durations: list[float]) -> Path:
@@ -125,9 +125,9 @@ def test_a_family_from_a_definition_a_module_and_an_entry_point_is_computed_and_
 
 
 def test_without_its_entry_point_the_family_is_defined_but_computed_by_nobody(toy_family, tmp_path, monkeypatch):
-    monkeypatch.setattr(compute, "entry_points", entry_points)
+    monkeypatch.setattr(families, "entry_points", entry_points)
     _clear_caches()
     session = open_session(_session(tmp_path / "s", [4.0]))
     res = compute_session(session, ["toy.trial_duration"])
     assert res.get("toy.trial_duration") is None
-    assert "toy" not in dict(compute.family_modules())
+    assert "toy" not in dict(families.family_modules())

@@ -60,7 +60,7 @@ def test_the_definition_files_name_no_code_and_every_family_with_metrics_has_its
     import importlib
     from importlib.metadata import entry_points
 
-    from haptify.compute import FAMILY_ENTRY_POINTS, family_module
+    from haptify.families import FAMILY_ENTRY_POINTS, family_module
 
     families = {name.removesuffix(".json"): schemas.load(f"metrics/{name}") for name in schemas.list_dir("metrics")}
     assert all("module" not in data for data in families.values())

@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from haptify_tools import rig_builders as rb
-from haptify import signals
+from haptify import preprocessing, signals
 from haptify.compute import ComputeContext
 from haptify.conventions import quat_from_axis_angle
 from haptify.errors import HaptifyError
@@ -20,7 +20,7 @@ from haptify.storage import open_session
 def _gain(rate: float, f: float, cutoff: float) -> float:
     t = np.arange(int(20 * rate)) / rate
     x = np.sin(2 * np.pi * f * t)
-    y = signals.lowpass(x, rate, cutoff)
+    y = preprocessing.lowpass(x, rate, cutoff)
     mid = slice(len(t) // 4, 3 * len(t) // 4)
     return float(np.sqrt(np.mean(y[mid] ** 2) / np.mean(x[mid] ** 2)))
 
@@ -29,7 +29,7 @@ def test_lowpass_is_zero_phase_with_the_butterworth_magnitude():
     rate, fc = 1000.0, 20.0
     t = np.arange(20000) / rate
     x = np.sin(2 * np.pi * 2.0 * t)
-    y = signals.lowpass(x, rate, fc)
+    y = preprocessing.lowpass(x, rate, fc)
     mid = slice(5000, 15000)
     assert np.max(np.abs(y[mid] - x[mid])) < 1e-4  # no delay and unity gain well inside the pass band
     order = param("signals", "filter_order")
@@ -41,17 +41,17 @@ def test_lowpass_is_zero_phase_with_the_butterworth_magnitude():
 
 def test_cutoff_is_limited_by_nyquist():
     frac = param("signals", "max_cutoff_fraction")
-    assert signals.effective_cutoff(20.0, 1000.0) == 20.0
-    assert signals.effective_cutoff(20.0, 1000.0, 30.0) == pytest.approx(frac * 15.0)
+    assert preprocessing.effective_cutoff(20.0, 1000.0) == 20.0
+    assert preprocessing.effective_cutoff(20.0, 1000.0, 30.0) == pytest.approx(frac * 15.0)
 
 
 def test_uniform_grid_and_resampling_of_a_line_are_exact():
-    g = signals.uniform_grid(0.25, 1.25, 100.0)
+    g = preprocessing.uniform_grid(0.25, 1.25, 100.0)
     assert len(g) == 101 and g[0] == 0.25 and g[-1] == pytest.approx(1.25)
     t = np.arange(2000) / 1000.0
     x = np.column_stack([3.0 * t + 1.0, -t])
     # a straight line passes the zero-phase low-pass (odd padding) and linear interpolation unchanged
-    y = signals.lowpass_resample(t, x, g[g <= t[-1]], 20.0)
+    y = preprocessing.lowpass_resample(t, x, g[g <= t[-1]], 20.0)
     gg = g[g <= t[-1]]
     assert np.allclose(y, np.column_stack([3.0 * gg + 1.0, -gg]), atol=1e-9)
 
@@ -60,7 +60,7 @@ def test_angular_velocity_is_exact_for_constant_rotation():
     t = np.arange(300) / 100.0
     axis = np.array([1.0, -2.0, 0.5]) / np.linalg.norm([1.0, -2.0, 0.5])
     q = quat_from_axis_angle(np.broadcast_to(axis, (300, 3)), 1.3 * t)
-    w = signals.angular_velocity(t, q)
+    w = preprocessing.angular_velocity(t, q)
     assert np.allclose(w, 1.3 * axis, atol=1e-9)
 
 
@@ -79,12 +79,12 @@ def test_short_gaps_are_bridged_and_long_gaps_never_interpolated():
     q[short] = np.nan
     pos[long] = np.nan
     q[long] = np.nan
-    track = signals.process_mocap(t, pos, q)
+    track = preprocessing.process_mocap(t, pos, q)
     assert track.valid[short].all() and not track.valid[long].any()
     assert np.allclose(track.position[short, 0], 0.1 * t[short], atol=1e-9)
     assert np.allclose(track.velocity[track.valid, 0], 0.1, atol=1e-9)
     grid = np.arange(0, 3.99, 0.001)
-    on = signals.resample_track(track, grid)
+    on = preprocessing.resample_track(track, grid)
     inside_long = (grid > t[249]) & (grid < t[long.stop])
     assert not on.valid[inside_long].any() and on.valid[~inside_long].all()
     assert np.isnan(on.position[inside_long]).all()
@@ -96,14 +96,14 @@ def test_short_segments_are_dropped():
     q = np.tile([1.0, 0, 0, 0], (200, 1))
     pos[:90] = np.nan
     pos[100:] = np.nan  # leaves a 0.1 s island, shorter than min_segment_s
-    track = signals.process_mocap(t, pos, q)
+    track = preprocessing.process_mocap(t, pos, q)
     assert not track.valid.any()
 
 
 def test_velocity_of_a_sinusoid():
     t = np.arange(1000) / 100.0
     pos = np.column_stack([0.05 * np.sin(2 * np.pi * 1.0 * t), 0 * t, 0 * t])
-    track = signals.process_mocap(t, pos, np.tile([1.0, 0, 0, 0], (1000, 1)))
+    track = preprocessing.process_mocap(t, pos, np.tile([1.0, 0, 0, 0], (1000, 1)))
     v_true = 0.05 * 2 * np.pi * np.cos(2 * np.pi * t)
     mid = slice(100, 900)
     assert np.max(np.abs(track.velocity[mid, 0] - v_true[mid])) < 0.01 * 0.05 * 2 * np.pi
@@ -212,5 +212,5 @@ def test_trial_without_usable_mocap_is_a_coded_error(tmp_path):
 def test_lowpass_resample_of_one_sample_holds_it():
     # one sample has no rate (nominal_rate is inf): the low-pass passes it through, interpolation holds it (spec §7.2)
     x = np.array([[1.0, -2.0, 3.0]])
-    out = signals.lowpass_resample(np.array([0.5]), x, np.array([0.0, 0.5, 1.0]), 20.0)
+    out = preprocessing.lowpass_resample(np.array([0.5]), x, np.array([0.0, 0.5, 1.0]), 20.0)
     assert np.array_equal(out, np.repeat(x, 3, axis=0))

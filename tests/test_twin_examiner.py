@@ -67,7 +67,7 @@ def test_local_oscillations_band_directions_and_centre(reach):
 def test_local_oscillations_reach_the_papers_speeds_and_accelerations(reach):
     """Paper §VI-D: its examiner's windows differ by up to R_v = 1.6 m/s and R_a = 38 m/s² — the fastest
     oscillations come near both and never exceed the acceleration."""
-    from haptify.signals import lowpass
+    from haptify.preprocessing import lowpass
 
     tr = ex.local_oscillations(np.random.default_rng(5), reach, 40.0, rate_hz=RATE)
     p = lowpass(tr.position_W, RATE, 10.0)

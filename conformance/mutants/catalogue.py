@@ -36,9 +36,9 @@ from haptify import (
     force_plate,
     free_space,
     local_dynamics,
+    preprocessing,
     repetitions,
     rig_checks,
-    signals,
     stiffness,
     storage,
     surface,
@@ -59,7 +59,7 @@ class Patch:
     while a mutant is applied.
 
     With ``everywhere`` the replacement also goes into every ``haptify`` module that bound the same object
-    by name (``from haptify.signals import lowpass_resample``), so the whole reference sees one mistake.
+    by name (``from haptify.preprocessing import lowpass_resample``), so the whole reference sees one mistake.
     """
 
     owner: Any
@@ -247,7 +247,7 @@ def _combine_then_trim(real: Callable) -> Callable:
 
     def combine(t: np.ndarray, accel: np.ndarray, trial_id: str = "") -> Any:
         out = real(t, accel, trial_id)
-        whole = vibration.dft321(vibration.highpass(accel, signals.nominal_rate(np.asarray(t, dtype=float))))
+        whole = vibration.dft321(vibration.highpass(accel, preprocessing.nominal_rate(np.asarray(t, dtype=float))))
         trim = (len(t) - len(out.t)) // 2
         return dataclasses.replace(out, signal=whole[trim : trim + len(out.t)])
 
@@ -261,7 +261,7 @@ def _trim_start_only(real: Callable) -> Callable:
         out = real(t, accel, trial_id)
         trim = (len(t) - len(out.t)) // 2
         kept = slice(trim, len(t))
-        filtered = vibration.highpass(accel, signals.nominal_rate(np.asarray(t, dtype=float)))
+        filtered = vibration.highpass(accel, preprocessing.nominal_rate(np.asarray(t, dtype=float)))
         return dataclasses.replace(out, t=np.asarray(t, dtype=float)[kept], signal=vibration.dft321(filtered[kept]))
 
     return combine
@@ -283,8 +283,8 @@ def _lowpass_ends_untreated(real: Callable) -> Callable:
         x = np.asarray(x, dtype=float)
         if len(x) < 2:
             return x.copy()
-        order = int(signals.sp("filter_order")) if order is None else order
-        sos = butter(order, signals.effective_cutoff(cutoff_hz, rate_hz), fs=rate_hz, output="sos")
+        order = int(preprocessing.sp("filter_order")) if order is None else order
+        sos = butter(order, preprocessing.effective_cutoff(cutoff_hz, rate_hz), fs=rate_hz, output="sos")
         return sosfiltfilt(sos, x, axis=0, padtype=None)
 
     return lowpass
@@ -294,8 +294,8 @@ def _resample_then_lowpass(real: Callable) -> Callable:
     """Interpolate the raw stream onto the grid first, then low-pass it there."""
 
     def lowpass_resample(t_src: np.ndarray, x_src: np.ndarray, t_dst: np.ndarray, cutoff_hz: float) -> np.ndarray:
-        on_grid = signals.interp_columns(t_src, x_src, t_dst)
-        return signals.lowpass(on_grid, signals.nominal_rate(t_dst), cutoff_hz)
+        on_grid = preprocessing.interp_columns(t_src, x_src, t_dst)
+        return preprocessing.lowpass(on_grid, preprocessing.nominal_rate(t_dst), cutoff_hz)
 
     return lowpass_resample
 
@@ -415,14 +415,14 @@ def _raw_derivative(which: str) -> Make:
         def process_mocap(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray) -> Any:
             track = real(t, position, quaternion)
             t = np.asarray(t, dtype=float)
-            raw, _, _ = signals.bridge_gaps(t, position, quaternion)
+            raw, _, _ = preprocessing.bridge_gaps(t, position, quaternion)
             out = np.array(getattr(track, which), copy=True)
             for k in range(int(track.segment.max()) + 1 if len(t) else 0):
                 m = np.flatnonzero(track.segment == k)
                 out[m] = (
                     np.gradient(raw[m], t[m], axis=0)
                     if which == "velocity"
-                    else signals.angular_velocity(t[m], track.quaternion[m])
+                    else preprocessing.angular_velocity(t[m], track.quaternion[m])
                 )
             return dataclasses.replace(track, **{which: out})
 
@@ -452,7 +452,7 @@ def _gap_limit_strict(real: Callable) -> Callable:
     """Gaps bridged only when t_j − t_i ≤ max_gap_s (the sample interval Δ of §7.4 left out)."""
 
     def bridge_gaps(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray, max_gap_s: float | None = None) -> Any:
-        limit = float(signals.sp("max_gap_s") if max_gap_s is None else max_gap_s)
+        limit = float(preprocessing.sp("max_gap_s") if max_gap_s is None else max_gap_s)
         return real(t, position, quaternion, max_gap_s=limit - float(np.median(np.diff(np.asarray(t, dtype=float)))))
 
     return bridge_gaps
@@ -758,7 +758,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R7.2-1",
         "every filter runs forward and backward (zero phase)",
         "a causal single pass (sosfilt)",
-        (Patch(vibration, "sosfiltfilt", _replace(_one_pass)), Patch(signals, "sosfiltfilt", _replace(_one_pass))),
+        (Patch(vibration, "sosfiltfilt", _replace(_one_pass)), Patch(preprocessing, "sosfiltfilt", _replace(_one_pass))),
         ("vibration.rms",),
         cheap=True,
     ),
@@ -850,7 +850,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R7.2-1",
         "low-pass cut-offs are in Hz (wrench 20 Hz, mocap 10 Hz)",
         "read as rad/s and divided by 2π",
-        (Patch(signals, "lowpass", _lowpass_rad_per_s, everywhere=True),),
+        (Patch(preprocessing, "lowpass", _lowpass_rad_per_s, everywhere=True),),
         ("surface.planar_force_sd", "free_space.speed_mean"),
         cheap=True,
     ),
@@ -860,7 +860,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R7.2-1",
         "the chord is removed and the ends odd-padded before filtering",
         "sosfiltfilt without padding, started from the first sample",
-        (Patch(signals, "lowpass", _lowpass_ends_untreated, everywhere=True),),
+        (Patch(preprocessing, "lowpass", _lowpass_ends_untreated, everywhere=True),),
         ("dynamics.error_vs_distance",),
         cheap=True,
     ),
@@ -872,9 +872,9 @@ MUTANTS: tuple[Mutant, ...] = (
         "they are interpolated onto the grid as recorded",
         (
             Patch(
-                signals,
+                preprocessing,
                 "lowpass_resample",
-                _replace(lambda t_src, x_src, t_dst, cutoff_hz: signals.interp_columns(t_src, x_src, t_dst)),
+                _replace(lambda t_src, x_src, t_dst, cutoff_hz: preprocessing.interp_columns(t_src, x_src, t_dst)),
                 everywhere=True,
             ),
         ),
@@ -887,7 +887,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R7.5-1",
         "raw streams are low-passed at their native rate, then interpolated",
         "interpolated onto the grid first, then low-passed at the grid rate",
-        (Patch(signals, "lowpass_resample", _resample_then_lowpass, everywhere=True),),
+        (Patch(preprocessing, "lowpass_resample", _resample_then_lowpass, everywhere=True),),
         ("free_space.force_max",),
         cheap=True,
     ),
@@ -897,7 +897,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R7.2-2",
         "values between samples are interpolated linearly",
         "the nearest sample is taken",
-        (Patch(signals, "interp_columns", _replace(_nearest_columns), everywhere=True),),
+        (Patch(preprocessing, "interp_columns", _replace(_nearest_columns), everywhere=True),),
         ("dynamics.error_vs_distance",),
         cheap=True,
     ),
@@ -907,7 +907,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R7.3-1",
         "the grid starts at the latest first sample of the trial's streams",
         "the grid is anchored at multiples of 1/rate on the session clock",
-        (Patch(signals, "uniform_grid", _grid_on_clock_multiples, everywhere=True),),
+        (Patch(preprocessing, "uniform_grid", _grid_on_clock_multiples, everywhere=True),),
         ("dynamics.error_vs_distance",),
         cheap=True,
     ),
@@ -1094,7 +1094,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R7.4-1",
         "occlusion gaps longer than max_gap_s are never interpolated across",
         "every gap is bridged",
-        (Patch(signals, "bridge_gaps", lambda real: lambda t, p, q, max_gap_s=None: real(t, p, q, max_gap_s=math.inf)),),
+        (Patch(preprocessing, "bridge_gaps", lambda real: lambda t, p, q, max_gap_s=None: real(t, p, q, max_gap_s=math.inf)),),
         ("free_space.speed_mean",),
         cheap=True,
     ),
@@ -1104,7 +1104,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R7.4-1",
         "a gap is bridged when t_j − t_i ≤ max_gap_s + Δ",
         "when t_j − t_i ≤ max_gap_s",
-        (Patch(signals, "bridge_gaps", _gap_limit_strict),),
+        (Patch(preprocessing, "bridge_gaps", _gap_limit_strict),),
         ("free_space.force_max",),
         cheap=True,
     ),
@@ -1114,7 +1114,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R7.4-2",
         "velocity is the derivative of the low-passed position",
         "of the raw positions",
-        (Patch(signals, "process_mocap", _raw_derivative("velocity")),),
+        (Patch(preprocessing, "process_mocap", _raw_derivative("velocity")),),
         ("free_space.speed_mean",),
         cheap=True,
     ),
@@ -1124,7 +1124,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R7.4-2",
         "the angular velocity is low-passed at mocap_cutoff_hz",
         "it is used as differentiated",
-        (Patch(signals, "process_mocap", _raw_derivative("angular_velocity")),),
+        (Patch(preprocessing, "process_mocap", _raw_derivative("angular_velocity")),),
         ("free_space.angular_speed_mean",),
         cheap=True,
     ),
@@ -1145,7 +1145,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R9.3-1",
         "the plate force is low-passed at wrench_cutoff_hz before resampling",
         "it is resampled unfiltered",
-        (Patch(free_space, "lowpass_resample", _replace(lambda t, x, grid, fc: signals.interp_columns(t, x, grid))),),
+        (Patch(free_space, "lowpass_resample", _replace(lambda t, x, grid, fc: preprocessing.interp_columns(t, x, grid))),),
         ("free_space.plate_force_mean",),
         cheap=True,
     ),

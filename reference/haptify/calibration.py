@@ -22,6 +22,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from haptify.conventions import GRAVITY_W, STANDARD_GRAVITY, quat_conjugate, quat_rotate, quat_to_matrix
+from haptify import preprocessing
 from haptify.caching import cached, session_of
 from haptify.errors import HaptifyError, fail
 from haptify.metric_definitions import param
@@ -232,21 +233,21 @@ def fit_trial(ctx_or_session: Any, trial_id: str) -> HandleCalibration:
     has a usable ``handle_pose`` the diagnostic ``orientation_error_deg`` (RMS angle between the fitted
     connector-weight direction and the direction motion capture predicts) checks the rig's sensor pose.
     """
-    from haptify import signals  # chapter 7 builds on chapter 6; imported here to avoid a cycle
-
     session = session_of(ctx_or_session)
     rate = float(param(FAMILY, "fit_rate_hz"))
     w = session.read(trial_id, "handle_wrench")
     a = session.read(trial_id, "handle_accel")
     t0 = max(w["t"].iloc[0], a["t"].iloc[0])
     t1 = min(w["t"].iloc[-1], a["t"].iloc[-1])
-    grid = signals.uniform_grid(t0, t1, rate)
+    grid = preprocessing.uniform_grid(t0, t1, rate)
     if len(grid) < 2:
         raise fail("E305", f"handle_wrench and handle_accel of trial {trial_id!r} do not overlap", expected="overlapping streams")
-    wr = signals.lowpass_resample(
-        w["t"].to_numpy(), w[["fx", "fy", "fz", "tx", "ty", "tz"]].to_numpy(), grid, signals.sp("wrench_cutoff_hz")
+    wr = preprocessing.lowpass_resample(
+        w["t"].to_numpy(), w[["fx", "fy", "fz", "tx", "ty", "tz"]].to_numpy(), grid, preprocessing.sp("wrench_cutoff_hz")
     )
-    ac = signals.lowpass_resample(a["t"].to_numpy(), a[["ax", "ay", "az"]].to_numpy(), grid, signals.sp("accel_cutoff_hz"))
+    ac = preprocessing.lowpass_resample(
+        a["t"].to_numpy(), a[["ax", "ay", "az"]].to_numpy(), grid, preprocessing.sp("accel_cutoff_hz")
+    )
     cal = fit_from_samples(wr[:, :3], wr[:, 3:], ac, source=f"trial:{trial_id}")
     if session.stream(trial_id, "handle_pose") is not None:
         try:
@@ -265,10 +266,8 @@ def orientation_error_deg(ctx_or_session: Any, trial_id: str, grid: np.ndarray, 
 
     E611 without usable motion capture, E603 without the sensor pose in the rig.
     """
-    from haptify import signals
-
     session = session_of(ctx_or_session)
-    mocap = signals.pose_on_grid(ctx_or_session, trial_id, grid)
+    mocap = preprocessing.pose_on_grid(ctx_or_session, trial_id, grid)
     g_s = gravity_in_sensor(mocap.quaternion[mocap.valid], sensor_rotation(session, "ft_sensor"))
     load = load_s[mocap.valid]
     cosang = np.sum(g_s * load, axis=1) / (np.linalg.norm(g_s, axis=1) * np.linalg.norm(load, axis=1))

@@ -11,7 +11,8 @@ import json
 from pathlib import Path
 from typing import Any
 
-from haptify.compute import ComputeContext, compute_session, family_modules
+from haptify.compute import ComputeContext, compute_session
+from haptify.families import family_modules
 from haptify.errors import Finding, HaptifyError, fail
 from haptify.gate import CheckedSession, as_result_warnings, open_checked_session
 from haptify.results import ResultsFile

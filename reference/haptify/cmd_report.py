@@ -5,7 +5,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from haptify.compute import ComputeContext, compute_session, family_modules
+from haptify.compute import ComputeContext, compute_session
+from haptify.families import family_modules
 from haptify.errors import fail
 from haptify.gate import as_result_warnings, require_valid_session
 from haptify.report import write_report

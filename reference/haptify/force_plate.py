@@ -22,7 +22,7 @@ from haptify.conventions import quat_to_matrix
 from haptify.caching import cached, session_of
 from haptify.errors import fail
 from haptify.metric_definitions import param
-from haptify.signals import nominal_rate
+from haptify.preprocessing import nominal_rate
 
 FAMILY = "rig"
 CORNERS = ("c1", "c2", "c3", "c4")

@@ -18,7 +18,8 @@ from haptify.errors import HaptifyError, fail
 from haptify.force_plate import plate_signals
 from haptify.metric_definitions import param
 from haptify.repetitions import TrialValue, aggregate, no_trials, per_trial, unavailable
-from haptify.signals import handle_signals, lowpass_resample, mocap_track, sp, uniform_grid
+from haptify.preprocessing import lowpass_resample, mocap_track, sp, uniform_grid
+from haptify.signals import handle_signals
 
 FAMILY = "free_space"
 PROTOCOL = "free_space"

@@ -20,7 +20,8 @@ from typing import Any
 import numpy as np
 
 from haptify.compare import build_table, to_html
-from haptify.compute import ComputeContext, family_modules
+from haptify.compute import ComputeContext
+from haptify.families import family_modules
 from haptify.results import ResultsFile
 from haptify.storage import atomic_write_text, replace_folder_atomically
 

@@ -12,7 +12,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from haptify import calibration, force_plate, signals
+from haptify import calibration, force_plate, preprocessing
 from haptify.conventions import quat_to_matrix
 from haptify.caching import session_of
 from haptify.errors import HaptifyError, fail
@@ -41,7 +41,7 @@ def impact_frequencies(ctx_or_session: Any, trial_id: str) -> np.ndarray:
     pos, rot = force_plate.corner_geometry(session.manifest.rig)
     force, _ = force_plate.total_wrench(df[force_plate.PLATE_COLUMNS].to_numpy(), pos, rot)
     t = df["t"].to_numpy()
-    return force_plate.natural_frequencies(t, force, signals.nominal_rate(t))
+    return force_plate.natural_frequencies(t, force, preprocessing.nominal_rate(t))
 
 
 def _row_sums(x: np.ndarray) -> np.ndarray:
@@ -104,21 +104,21 @@ def recorder_delays(ctx_or_session: Any, trial_id: str) -> dict[str, float]:
     cal = calibration.trial_fit(ctx_or_session, trial_id)
     w = session.read(trial_id, "handle_wrench")
     a = session.read(trial_id, "handle_accel")
-    track = signals.mocap_track(ctx_or_session, trial_id)
+    track = preprocessing.mocap_track(ctx_or_session, trial_id)
     if not track.valid.any():
         stream = session.stream(trial_id, "handle_pose")
         raise fail(
             "E611",
             f"trial {trial_id!r}: no usable motion-capture samples to align with the F/T recorder",
             file=stream.file if stream else None,
-            expected=f"valid runs of at least {signals.sp('min_segment_s')} s",
+            expected=f"valid runs of at least {preprocessing.sp('min_segment_s')} s",
             found="none",
         )
     rate = float(rp("sync_rate_hz"))
     max_lag = float(rp("sync_max_lag_s"))
     t0 = max(w["t"].iloc[0], a["t"].iloc[0], track.t[0]) + max_lag
     t1 = min(w["t"].iloc[-1], a["t"].iloc[-1], track.t[-1]) - max_lag
-    grid = signals.uniform_grid(float(t0), float(t1), rate)
+    grid = preprocessing.uniform_grid(float(t0), float(t1), rate)
     if len(grid) < 10:
         raise fail(
             "E624",
@@ -129,20 +129,20 @@ def recorder_delays(ctx_or_session: Any, trial_id: str) -> dict[str, float]:
     r_hs = calibration.sensor_rotation(session, "ft_sensor")
     r_ha = calibration.sensor_rotation(session, "accelerometer")
     fc = float(rp("sync_cutoff_hz"))
-    f_grid = signals.lowpass_resample(w["t"].to_numpy(), w[["fx", "fy", "fz"]].to_numpy(), grid, fc)
+    f_grid = preprocessing.lowpass_resample(w["t"].to_numpy(), w[["fx", "fy", "fz"]].to_numpy(), grid, fc)
     u_f = _gravity_dirs_h(f_grid, cal.force_bias_N, r_hs, 1.0)
     t_a = a["t"].to_numpy()
-    acc_f = signals.lowpass(a[["ax", "ay", "az"]].to_numpy(), signals.nominal_rate(t_a), fc)
+    acc_f = preprocessing.lowpass(a[["ax", "ay", "az"]].to_numpy(), preprocessing.nominal_rate(t_a), fc)
     m = track.quaternion  # NaN outside segments
     down_h = np.einsum("nji,j->ni", quat_to_matrix(np.where(np.isfinite(m), m, 1.0)), np.array([0.0, 0.0, -1.0]))
     down_h[~track.valid] = np.nan
 
     def score_accel(tau: float) -> float:
-        u = _gravity_dirs_h(signals.interp_columns(t_a, acc_f, grid + tau), cal.accel_bias_m_per_s2, r_ha, -1.0)
+        u = _gravity_dirs_h(preprocessing.interp_columns(t_a, acc_f, grid + tau), cal.accel_bias_m_per_s2, r_ha, -1.0)
         return float(np.mean(_row_sums(u_f * u)))
 
     def score_mocap(tau: float) -> float:
-        u = signals.interp_columns(track.t, down_h, grid + tau)  # NaN next to unusable samples
+        u = preprocessing.interp_columns(track.t, down_h, grid + tau)  # NaN next to unusable samples
         u /= np.sqrt(_row_sums(u * u))[:, None]
         return float(np.nanmean(_row_sums(u_f * u)))
 
@@ -405,15 +405,8 @@ def _orientation_errors(res: MetricResult) -> list[float]:
 
 
 def check_rig(ctx: Any) -> list[Check]:
-    """Every rig-check line for a session (spec §14.8): Table I ranges, plate natural frequency, COP
-    error, calibration residuals and sensor pose, recorder synchronisation.
-
-    ``ctx`` is a ComputeContext or a session (then a context is made for it).
-    """
-    if not hasattr(ctx, "warn"):
-        from haptify.compute import ComputeContext
-
-        ctx = ComputeContext(session=ctx)
+    """Every rig-check line for the session of ``ctx`` (a ComputeContext; spec §14.8): Table I ranges, plate
+    natural frequency, COP error, calibration residuals and sensor pose, recorder synchronisation."""
     results = {mid: _safe_metric(ctx, mid) for mid in METRIC_STEPS}
     fmin, cmax = float(rp("req_natural_frequency_hz")), float(rp("req_cop_error_m"))
     rmax = [float(x) for x in rp("req_calibration_rms")]

@@ -17,7 +17,8 @@ from haptify.caching import cached, session_of
 from haptify.errors import fail
 from haptify.metric_definitions import param
 from haptify.repetitions import TrialValue, aggregate, protocol_trials
-from haptify.signals import handle_signals, interp_columns
+from haptify.preprocessing import interp_columns
+from haptify.signals import handle_signals
 
 FAMILY = "surface"
 PROTOCOL = "frictionless_surface"

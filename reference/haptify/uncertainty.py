@@ -23,7 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from scipy import stats
 
 from haptify import schemas
-from haptify.compute import family_module
+from haptify.families import family_module
 from haptify.metric_definitions import Parameter
 from haptify.results import BudgetTerm, MetricResult, MetricUncertainty, ResultsFile
 

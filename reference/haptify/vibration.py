@@ -17,7 +17,7 @@ from haptify.caching import cached, session_of
 from haptify.errors import HaptifyError, fail
 from haptify.metric_definitions import param
 from haptify.repetitions import TrialValue, aggregate, protocol_trials
-from haptify.signals import nominal_rate
+from haptify.preprocessing import nominal_rate
 
 FAMILY = "vibration"
 ACCEL_COLUMNS = ["ax", "ay", "az"]

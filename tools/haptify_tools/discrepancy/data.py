@@ -21,7 +21,8 @@ from scipy.interpolate import CubicSpline
 
 from haptify.compute import ComputeContext
 from haptify.errors import fail
-from haptify.signals import handle_signals, lowpass
+from haptify.preprocessing import lowpass
+from haptify.signals import handle_signals
 from haptify.storage import SessionFolder
 from haptify.surface import contact_of, unit_normal
 

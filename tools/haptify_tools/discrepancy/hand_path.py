@@ -46,7 +46,8 @@ from scipy.signal import butter, sosfiltfilt
 from haptify import calibration as cal_mod
 from haptify.compute import ComputeContext
 from haptify.conventions import quat_normalize, quat_rotate
-from haptify.signals import ACCEL_COLUMNS, HandleSignals, effective_cutoff, interp_columns, lowpass, nominal_rate, sp
+from haptify.preprocessing import effective_cutoff, interp_columns, lowpass, nominal_rate, sp
+from haptify.signals import ACCEL_COLUMNS, HandleSignals
 from haptify.storage import SessionFolder
 
 PATH_CROSSOVER_HZ = 1.5  # motion capture below, the accelerometer above (the true twin's floor is lowest

@@ -16,7 +16,7 @@ from typing import Callable
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from haptify.signals import lowpass
+from haptify.preprocessing import lowpass
 
 from haptify_tools.discrepancy.data import RESIDUAL_CUTOFF_HZ, SIM_RATE_HZ, MeasuredTrial
 

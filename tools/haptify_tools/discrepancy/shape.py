@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from haptify.signals import lowpass
+from haptify.preprocessing import lowpass
 
 from haptify_tools.discrepancy import stats as st
 from haptify_tools.discrepancy.data import RESIDUAL_CUTOFF_HZ, MeasuredTrial

@@ -281,13 +281,13 @@ def raw_pose_at(t_pose: np.ndarray, p: np.ndarray, q: np.ndarray, t: np.ndarray)
     """The unfiltered pose stream at times ``t`` (s): linear in position, slerp in orientation (spec §7.4).
 
     Every finite sample counts as one segment, so a time is valid only between two finite samples;
-    nothing is bridged or filtered (the viewer's "raw" quantities stay raw). A ``signals.PoseOnGrid``.
+    nothing is bridged or filtered (the viewer's "raw" quantities stay raw). A ``preprocessing.PoseOnGrid``.
     """
-    from haptify import signals
+    from haptify import preprocessing
 
     ok = finite_rows(p, q)
     nan3 = np.full((len(t_pose), 3), np.nan)
-    track = signals.MocapTrack(
+    track = preprocessing.MocapTrack(
         t=np.asarray(t_pose, dtype=np.float64),
         position=p,
         quaternion=q,
@@ -295,7 +295,7 @@ def raw_pose_at(t_pose: np.ndarray, p: np.ndarray, q: np.ndarray, t: np.ndarray)
         angular_velocity=nan3,
         segment=np.where(ok, 0, -1),
     )
-    return signals.resample_track(track, t)
+    return preprocessing.resample_track(track, t)
 
 
 def columns_of(frame: pd.DataFrame, names: list[str]) -> np.ndarray:
