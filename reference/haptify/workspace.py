@@ -348,13 +348,9 @@ def longest_occlusion_gap(position: np.ndarray) -> float:
     return float(np.linalg.norm(position[idx[1:][around]] - position[idx[:-1][around]], axis=1).max())
 
 
-def compute(ctx: Any) -> list:  # noqa: C901 (over ruff's limit of 15: to be split)
-    """Every workspace metric the session allows (spec §8.7)."""
-    session = ctx.session
-    out: list = []
-    device = session.device()
-    placement = session.manifest.device_placement
-
+def _modeled(ctx: Any, device: Any, placement: Any) -> tuple[VoxelSolid | None, HaptifyError | None]:
+    """The device's modeled workspace solid (spec §8.3), or the coded error that leaves it unavailable: E311
+    without kinematics or when they reach no volume; None and None when no metric that needs it is wanted."""
     model: VoxelSolid | None = None
     model_error: HaptifyError | None = None
     if device.kinematics is None:
@@ -377,6 +373,15 @@ def compute(ctx: Any) -> list:  # noqa: C901 (over ruff's limit of 15: to be spl
                     found=0.0,
                 ),
             )
+    return model, model_error
+
+
+def compute(ctx: Any) -> list:
+    """Every workspace metric the session allows (spec §8.7)."""
+    session = ctx.session
+    out: list = []
+    device = session.device()
+    model, model_error = _modeled(ctx, device, session.manifest.device_placement)
     if model is not None:
         out.append(
             single(
