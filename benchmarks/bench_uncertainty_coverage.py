@@ -17,11 +17,13 @@ covers a metric when |value − truth| ≤ U. Target: 95 % ± 3 % for every metr
 figure).
 
 Rows are appended to ``--out`` (JSON lines) as sessions finish, so an interrupted run keeps what it did
-and ``--sessions N`` resumes it; ``--summarise`` only reads that file. Without ``--sessions`` (as
+and ``--sessions N`` resumes it; ``--summarise`` only reads that file. ``--protocols stiffness`` simulates
+sessions of those protocols only (after a change to their metrics); per metric and seed the last row that
+measured it counts, so such a run supersedes the earlier rows of its metrics and keeps the others. Without ``--sessions`` (as
 ``benchmarks/run.py`` runs it) the script summarises the rows ``--out`` holds, and simulates 200 sessions
 only when it holds none: the figures say how many sessions they rest on.
 
-    python benchmarks/bench_uncertainty_coverage.py [--sessions 200] [--reps 3] [--duration free_space=15] [--workers 2] [--out FILE] [--summarise]
+    python benchmarks/bench_uncertainty_coverage.py [--sessions 200] [--reps 3] [--duration free_space=15] [--workers 2] [--protocols P …] [--out FILE] [--summarise]
 """
 
 from __future__ import annotations
@@ -157,26 +159,29 @@ STUDIES = (
 METRICS = tuple(m for s in STUDIES for m in s.ids)
 
 
-def one_session(seed: int, reps: int, durations: dict[str, float], tmp: Path) -> dict:
-    """Simulate, compute and compare one session (module docstring)."""
+PROTOCOLS = tuple(dict.fromkeys(s.protocol for s in STUDIES))
+
+
+def one_session(seed: int, reps: int, durations: dict[str, float], tmp: Path, protocols: tuple[str, ...] = PROTOCOLS) -> dict:
+    """Simulate, compute and compare one session of ``protocols`` (module docstring)."""
     from haptify_tools.twin.model import preset
     from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
 
-    protocols = tuple(dict.fromkeys(s.protocol for s in STUDIES))
+    studies = [s for s in STUDIES if s.protocol in protocols]
     opt = SimulationOptions(protocols=RIG_TRIALS + protocols, reps=reps, seed=seed, rig_trials=False,
                             durations=durations, workers=1)
     res = simulate_dossier(preset("touch"), tmp / f"s{seed}", opt, overwrite=True)
     ctx = ComputeContext(session=open_session(res.session))
-    results = compute_session(ctx.session, list(METRICS), ctx=ctx, uncertainty=True)
+    results = compute_session(ctx.session, [m for s in studies for m in s.ids], ctx=ctx, uncertainty=True)
     truth = np.load(res.truth_npz)
     per_trial: dict[str, dict[str, float]] = {}
-    for study in STUDIES:
+    for study in studies:
         for trial in ctx.session.trials_of(study.protocol):
             try:
                 per_trial.setdefault(trial.id, {}).update(zip(study.ids, map(float, study.truth(ctx, truth, trial.id))))
             except HaptifyError as exc:  # e.g. no press qualifies on the true signals: recorded, not fatal
                 per_trial.setdefault(trial.id, {})[f"error:{study.ids[0]}"] = repr(exc)
-    row = {"seed": seed, "truth_per_trial": per_trial, "metrics": {}}
+    row = {"seed": seed, "protocols": list(protocols), "truth_per_trial": per_trial, "metrics": {}}
     for m in results.metrics:
         if m.uncertainty is not None:
             row["metrics"][m.id] = {"value": m.value, "u": m.uncertainty.u, "U": m.uncertainty.U, "k": m.uncertainty.k,
@@ -218,12 +223,19 @@ def resampled_type_a_coverage(per_trial: np.ndarray, reps: int, draws: int = 200
     return float(np.mean(np.abs(x.mean(axis=1) - per_trial.mean()) <= half))
 
 
-def summarise(rows: list[dict]) -> None:
-    print(f"{len(rows)} sessions")
+def latest_rows(rows: list[dict], metric_id: str) -> list[dict]:
+    """Per seed, the last row that measured ``metric_id``: a run of some protocols only (``--protocols``)
+    supersedes the earlier rows of those metrics and leaves the others' rows standing."""
+    return list({r["seed"]: r for r in rows if metric_id in r["metrics"]}.values())
+
+
+def summarise(all_rows: list[dict]) -> None:
+    print(f"{len({r['seed'] for r in all_rows})} seeds, {len(all_rows)} session rows")
     print("| metric | truth (mean over trials ± its SE) | sessions | inside U | coverage | mean k | mean (value − truth) / mean u "
           "| mean (trial value − its own truth) / mean u | Type A alone on resampled truths |")
     print("|---|---|---|---|---|---|---|---|---|")
     for mid in METRICS:
+        rows = latest_rows(all_rows, mid)
         per_trial = used_truths(rows, mid)
         got = [r["metrics"][mid] for r in rows if mid in r["metrics"]]
         if not got or len(per_trial) < 2:
@@ -252,16 +264,19 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path(tempfile.gettempdir()) / "haptify-uncertainty-coverage-families.jsonl")
     ap.add_argument("--workers", type=int, default=2, help="sessions simulated at once (processes)")
     ap.add_argument("--summarise", action="store_true", help="only summarise the rows already in --out")
+    ap.add_argument("--protocols", nargs="+", choices=PROTOCOLS, default=list(PROTOCOLS),
+                    help="simulate only these device protocols (and the rig trials); their rows supersede earlier ones")
     args = ap.parse_args()
     durations = DURATIONS | {k: float(v) for k, v in (d.split("=", 1) for d in args.duration)}
     rows = [json.loads(line) for line in args.out.read_text().splitlines()] if args.out.is_file() else []
     if args.sessions is None and rows:
         args.summarise = True
     if not args.summarise:
-        done = {r["seed"] for r in rows}
+        protocols = tuple(args.protocols)
+        done = {r["seed"] for r in rows if tuple(r.get("protocols", PROTOCOLS)) == protocols}
         clock = time.perf_counter()
         with tempfile.TemporaryDirectory() as tmp, multiprocessing.get_context("fork").Pool(args.workers) as pool:
-            remaining = [(seed, args.reps, durations, Path(tmp)) for seed in range(args.sessions or 200) if seed not in done]
+            remaining = [(seed, args.reps, durations, Path(tmp), protocols) for seed in range(args.sessions or 200) if seed not in done]
             for row in pool.imap_unordered(_one, remaining):
                 with args.out.open("a") as fh:
                     fh.write(json.dumps(row) + "\n")
