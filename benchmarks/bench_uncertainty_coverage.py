@@ -187,6 +187,7 @@ def one_session(seed: int, reps: int, durations: dict[str, float], tmp: Path, pr
             row["metrics"][m.id] = {"value": m.value, "u": m.uncertainty.u, "U": m.uncertainty.U, "k": m.uncertainty.k,
                                     "trials": m.trials, "per_repetition": m.per_repetition,
                                     "budget": {b.source: b.contribution for b in m.uncertainty.budget},
+                                    "bias": m.uncertainty.bias.estimate if m.uncertainty.bias else None,
                                     "missing": m.uncertainty.sources_missing}
     shutil.rmtree(tmp / f"s{seed}", ignore_errors=True)
     return row

@@ -311,3 +311,104 @@ def test_type_a_records_of_a_vector_and_of_placements():
     assert f.k == pytest.approx(12.706, abs=0.001) and f.U == pytest.approx([12.7062, 0.0, 12.7062], abs=1e-3)
     assert c.u == pytest.approx(0.002 / math.sqrt(10)) and c.dof_eff == pytest.approx(9)
     assert c.k == pytest.approx(2.262, abs=0.001)  # t_0.975(9)
+
+
+# --- the noise maximum, a one-sided bias (§19.3) ------------------------------------------------------
+
+GRID = np.arange(0.0, 2.4, 0.01)  # a press's s … m: 2.4 s on the 100 Hz grid, as the Touch's plateau
+
+
+def test_force_noise_has_unit_sd_and_the_lowpass_autocorrelation():
+    """The draws' lag-τ correlation is that of white noise through the forward–backward Butterworth of §7.2:
+    ∫|H|⁴ cos(2πfτ) df / ∫|H|⁴ df, from the filter's frequency response (not from its time-domain code)."""
+    from scipy.signal import sosfreqz
+
+    from haptify.preprocessing import butter_lowpass, effective_cutoff, sp
+
+    e = unc.force_noise(GRID, 1000.0, 2000, np.random.default_rng(3))
+    assert e.shape == (len(GRID), 2000) and e.std() == pytest.approx(1.0, abs=1e-12)
+    sos = butter_lowpass(int(sp("filter_order")), effective_cutoff(float(sp("wrench_cutoff_hz")), 1000.0, 100.0), 1000.0)
+    f, h = sosfreqz(sos, worN=20000, fs=1000.0)
+    p = np.abs(h) ** 4
+    for lag in (1, 2, 4):
+        expected = np.sum(p * np.cos(2 * np.pi * f * lag * 0.01)) / np.sum(p)
+        got = np.mean(e[:-lag] * e[lag:]) / np.mean(e * e)
+        assert got == pytest.approx(expected, abs=0.02), lag
+
+
+def test_noise_maximum_excess_of_a_flat_plateau_is_the_noise_maximum():
+    """On a flat force c + σe the maximum reads high by σ·E[max e]; added noise makes it √2·σ·E[max e], so the
+    SIMEX estimate is unbiased: its mean over 60 plateaus matches the excess of 4000 independent draws."""
+    sigma = 0.004
+    excess = sigma * unc.force_noise(GRID, 1000.0, 4000, np.random.default_rng(1)).max(axis=0).mean()
+    rng = np.random.default_rng(2)
+    est = [
+        unc.noise_maximum_excess(
+            2.7 + sigma * unc.force_noise(GRID, 1000.0, 1, rng)[:, 0], unc.force_noise(GRID, 1000.0, 48, rng), sigma
+        )
+        for _ in range(60)
+    ]
+    assert excess == pytest.approx(2.3 * sigma, rel=0.25)  # ~ E[max] of a few dozen independent normals
+    assert np.mean(est) == pytest.approx(excess, abs=4 * np.std(est) / math.sqrt(len(est)))
+
+
+def test_noise_maximum_excess_of_a_sharp_top_is_nil():
+    """A top 0.1 N above its neighbours: only the top sample can be the maximum, whose noise averages to 0."""
+    sigma = 0.004
+    f = 5.6 - 0.1 * np.abs(np.arange(len(GRID)) - 120)
+    b = unc.noise_maximum_excess(f, unc.force_noise(GRID, 1000.0, 2000, np.random.default_rng(4)), sigma)
+    assert abs(b) < 0.2 * sigma  # scatter of 2000 draws: σ/√2000/(√2 − 1) ≈ 0.05 σ
+
+
+def test_bias_estimate_is_the_mean_over_trials_and_never_negative(monkeypatch):
+    """b of a metric: per trial the mean over its maxima, then the mean over the trials its value rests on; 0
+    where a sharp top gives a negative Monte Carlo scatter."""
+    from types import SimpleNamespace
+
+    from haptify import stiffness
+    from haptify.results import MetricResult
+
+    plateau, top = np.full(len(GRID), 2.7), 5.6 - 0.1 * np.abs(np.arange(len(GRID)) - 120)
+    windows = {"a": [(GRID, plateau), (GRID, plateau)], "b": [(GRID, plateau)], "c": [(GRID, top)]}
+    monkeypatch.setattr(stiffness, "maximum_windows", lambda ctx, tid: windows[tid])
+    monkeypatch.setattr(unc, "rig_figure", lambda c, r, mid: SimpleNamespace(value=[0.004, 0.1, 0.001]))
+    ctx = SimpleNamespace(session=SimpleNamespace(stream=lambda tid, kind: SimpleNamespace(rate_hz=1000.0)))
+
+    def rec(trials):
+        return MetricResult(
+            id="stiffness.peak_force",
+            value=2.7,
+            unit="N",
+            per_repetition=[2.7] * len(trials),
+            n=len(trials),
+            sd=0.0,
+            trials=trials,
+            definition_version="1.0.0",
+        )
+
+    def estimate(trials, seed):
+        return unc.bias_estimate(ctx, None, rec(trials), np.random.default_rng(seed), 48).estimate
+
+    flat = np.mean([unc.noise_maximum_excess(plateau, unc.force_noise(GRID, 1000.0, 48, np.random.default_rng(9)), 0.004)])
+    assert estimate(["b"], 9) == pytest.approx(flat, rel=1e-12)  # the force figure is component 0
+    assert estimate(["b"], 9) > 0.002  # a noise-free plateau still gets σ·E[max] of the added noise
+    assert min(estimate(["c"], s) for s in range(8)) == 0.0  # some seeds scatter below 0: clipped
+    assert estimate(["a", "b"], 5) > estimate(["a", "b", "c"], 5) > 0
+
+
+def test_attach_adds_the_one_sided_bias_to_U(two_rep_free_space, monkeypatch):
+    from haptify.results import UncorrectedBias
+
+    ctx = ComputeContext(session=open_session(two_rep_free_space))
+    res = compute_session(ctx.session, ["free_space.force_mean"], ctx=ctx)
+    monkeypatch.setattr(
+        unc, "bias_estimate", lambda *a: UncorrectedBias(source="noise_maximum", estimate=0.01, u_input=0.004, unit="N")
+    )
+    rec = unc.attach(ctx, res).get("free_space.force_mean").uncertainty
+    assert rec.U == pytest.approx(rec.k * rec.u + 0.01, rel=1e-12) and rec.bias.estimate == 0.01
+
+
+def test_only_the_peak_force_names_the_noise_maximum():
+    d = unc.definitions()
+    assert {m for m, x in d.metrics.items() if x.bias} == {"stiffness.peak_force"}
+    assert all(x.bias in d.biases for x in d.metrics.values() if x.bias)

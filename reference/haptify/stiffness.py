@@ -249,6 +249,15 @@ def trial_fit(ctx: Any, trial_id: str) -> StiffnessFit:
     return cached(ctx, ("stiffness_fit", trial_id), build)
 
 
+def maximum_windows(ctx: Any, trial_id: str) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The grid times (s) and normal forces (N) of the samples ``s … m`` each qualifying press of a trial takes
+    its peak from (spec §13.2 step 3): where the noise's maximum biases ``stiffness.peak_force`` (§19.3)."""
+    cs = contact_signals(ctx, trial_id)
+    return [
+        (cs.t[p.settled : p.deepest + 1], cs.normal_force[p.settled : p.deepest + 1]) for p in trial_fit(ctx, trial_id).presses
+    ]
+
+
 def trial_codes(ctx: Any, trial_id: str, fit: StiffnessFit) -> list[str]:
     """W414 (too few qualifying presses) and W415 (presses with too few fit samples) for one trial, each
     also recorded on ``ctx`` (spec §13.2–13.3)."""

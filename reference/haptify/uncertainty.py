@@ -25,7 +25,8 @@ from scipy import stats
 from haptify import schemas
 from haptify.families import family_module
 from haptify.metric_definitions import Parameter
-from haptify.results import BudgetTerm, MetricResult, MetricUncertainty, ResultsFile
+from haptify.preprocessing import lowpass_resample, sp
+from haptify.results import BudgetTerm, MetricResult, MetricUncertainty, ResultsFile, UncorrectedBias
 
 
 # --- the definition file (spec §19.1) ------------------------------------------------------------
@@ -49,13 +50,26 @@ class Source(BaseModel):
     description: str
 
 
+class Bias(BaseModel):
+    """A one-sided systematic effect a metric's value keeps (spec §19.3): its estimate, from a rig figure of
+    the same session, is added to U (GUM F.2.4.5)."""
+
+    model_config = ConfigDict(extra="forbid")
+    figure: str = Field(description="The rig metric whose value is the effect's input (noise_maximum: the force noise's sd).")
+    component: int | None = Field(description="Which component of a vector figure; null for a scalar.")
+    unit: str
+    description: str
+
+
 class MetricMethod(BaseModel):
     """How one metric's uncertainty is evaluated (spec §19.1): ``type_a``, ``type_a_mc`` (Type A and the
-    Monte Carlo Type B of ``sources``) or ``none`` (with the reason)."""
+    Monte Carlo Type B of ``sources``) or ``none`` (with the reason); ``bias`` names a one-sided effect the
+    value keeps (§19.3)."""
 
     model_config = ConfigDict(extra="forbid")
     method: Literal["type_a", "type_a_mc", "none"]
     sources: list[str] = Field(default_factory=list, description="Type B sources, for type_a_mc.")
+    bias: Literal["noise_maximum"] | None = Field(None, description="A one-sided effect left in the value, added to U (§19.3).")
     reason: str | None = Field(None, description="Why Type B is not propagated (type_a) or nothing applies (none).")
 
 
@@ -67,6 +81,7 @@ class UncertaintyDefinitions(BaseModel):
     spec_section: str
     parameters: dict[str, Parameter]
     sources: dict[str, Source]
+    biases: dict[str, Bias] = Field(default_factory=dict)
     metrics: dict[str, MetricMethod]
 
 
@@ -320,6 +335,52 @@ def mc_terms(inputs: Sequence[Input], x: np.ndarray, y: np.ndarray) -> list[Budg
     ]
 
 
+# --- a one-sided effect: the noise's maximum (spec §19.3) -------------------------------------------
+
+
+def force_noise(t: np.ndarray, native_rate_hz: float, draws: int, rng: np.random.Generator) -> np.ndarray:
+    """``(len(t), draws)`` draws of the force noise on the grid times ``t`` (s), unit standard deviation:
+    white Gaussian noise at the handle wrench stream's ``native_rate_hz`` low-passed and resampled exactly as
+    the force (§7.2, :func:`lowpass_resample`), scaled by its sample standard deviation (spec §19.3)."""
+    pad = 0.5  # s either side: the filter's start-up lies outside t
+    t_src = np.arange(t[0] - pad, t[-1] + pad, 1.0 / native_rate_hz)
+    e = lowpass_resample(t_src, rng.standard_normal((len(t_src), draws)), t, float(sp("wrench_cutoff_hz")))
+    return e / e.std()
+
+
+def noise_maximum_excess(f: np.ndarray, noise: np.ndarray, sigma: float) -> float:
+    """SIMEX estimate (Cook & Stefanski 1994) of how far ``max f`` reads above the maximum of the noise-free
+    force, N (spec §19.3): with noise of sd ``sigma`` added once more (``noise``: unit-sd draws, one per
+    column), the mean maximum rises by Δ; the maximum's excess grows as the noise's sd, so the excess at
+    sd σ is Δ / (√2 − 1). Near zero where one sharp top decides the maximum, large on a noisy plateau."""
+    added = float(np.mean(np.max(f[:, None] + sigma * noise, axis=0)))
+    return (added - float(np.max(f))) / (math.sqrt(2.0) - 1.0)
+
+
+def bias_estimate(
+    ctx: Any, results: ResultsFile, result: MetricResult, rng: np.random.Generator, draws: int
+) -> UncorrectedBias | None:
+    """The ``noise_maximum`` bias of ``result`` (spec §19.3): per trial the mean over its maxima of
+    :func:`noise_maximum_excess` (the family's ``maximum_windows``), then the mean over the trials the value
+    rests on, at least 0 (a maximum never reads low on average). None when the figure is missing."""
+    name = method_of(result.id).bias
+    if name is None:
+        return None
+    spec = definitions().biases[name]
+    fig = rig_figure(ctx, results, spec.figure)
+    if fig is None:
+        return None
+    sigma = abs(float(fig.value[spec.component] if spec.component is not None else fig.value))
+    windows = importlib.import_module(family_module(result.id)).maximum_windows
+    per_trial = []
+    for trial_id in result.trials:
+        rate = float(ctx.session.stream(trial_id, "handle_wrench").rate_hz)
+        per_trial.append(
+            np.mean([noise_maximum_excess(f, force_noise(t, rate, draws, rng), sigma) for t, f in windows(ctx, trial_id)])
+        )
+    return UncorrectedBias(source=name, estimate=max(0.0, float(np.mean(per_trial))), u_input=sigma, unit=spec.unit)
+
+
 def repeatability_term(result: MetricResult) -> BudgetTerm:
     """The Type A term of a metric record with an ``sd`` (spec §19.2): s/√n of its per-repetition values,
     or for a metric whose n counts other samples (rig.cop_error: placements), sd/√n with n − 1 degrees."""
@@ -342,7 +403,8 @@ def repeatability_term(result: MetricResult) -> BudgetTerm:
 
 
 def attach(ctx: Any, results: ResultsFile, *, draws: int | None = None, seed: int | None = None) -> ResultsFile:
-    """Give every metric of ``results`` its uncertainty record where its method applies (spec §19.4).
+    """Give every metric of ``results`` its uncertainty record where its method applies (spec §19.4);
+    U = k·u, plus the estimate of the one-sided bias the method names (§19.3).
 
     A metric with fewer than two repetitions gets none (Type A cannot be evaluated, §19.2). The Type B
     inputs are drawn once for the session; the metrics with the same sources share one Monte Carlo run
@@ -369,16 +431,19 @@ def attach(ctx: Any, results: ResultsFile, *, draws: int | None = None, seed: in
         xg = x[:, np.concatenate([columns[s.source] for s in mine])]
         ys = draw_values(ctx, [r.id for r in members], mine, xg)
         samples.update({r.id: (mine, xg, ys[r.id]) for r in members})
+    noise_rng = np.random.default_rng([int(up("mc_seed") if seed is None else seed), 1])
     for r in eligible:
         method = method_of(r.id)
         terms = [repeatability_term(r)]
         if r.id in samples:
             terms += mc_terms(*samples[r.id])
         u, big_u, k, nu = combine(terms, p)
+        bias = bias_estimate(ctx, results, r, noise_rng, m)
         r.uncertainty = MetricUncertainty(
             method=method.method,
             u=u,
-            U=big_u,
+            U=big_u + bias.estimate if bias is not None else big_u,
+            bias=bias,
             k=k,
             coverage_probability=p,
             dof_eff=nu,
