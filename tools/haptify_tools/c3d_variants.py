@@ -59,7 +59,7 @@ class C3DSpec:
 
 
 def _param(c, group: str, name: str, values, kind: str = "float", dims: list[int] | None = None) -> None:
-    from ezc3d import ezc3d as E
+    from ezc3d import ezc3d as E  # type: ignore[import-untyped]  # ezc3d ships no type information
 
     p = E.Parameter(name)
     if kind == "str":
@@ -80,7 +80,7 @@ def float32(values: np.ndarray) -> np.ndarray:
 
 def write_c3d(path: Path, spec: C3DSpec) -> Path:
     """Write ``spec`` as a C3D file with ezc3d (float data, Intel byte order)."""
-    from ezc3d import ezc3d as E
+    from ezc3d import ezc3d as E  # type: ignore[import-untyped]  # ezc3d ships no type information
 
     c = E.c3d()
     n_frames = (
@@ -131,6 +131,8 @@ def write_c3d(path: Path, spec: C3DSpec) -> Path:
     points = np.zeros((4, n_markers, n_frames))
     residuals = np.zeros((1, n_markers, n_frames))
     if n_markers:
+        if spec.points is None:
+            raise ValueError(f"{n_markers} marker labels but no points")
         points[:3] = spec.points.transpose(2, 1, 0)
         points[3] = 1.0
         if spec.residuals is not None:
@@ -229,6 +231,8 @@ def known_load_channels(
     elif kind in (2, 4):
         ch = np.vstack([f.T, moment.T])
         if kind == 4:
+            if cal is None:
+                raise ValueError("a type-4 platform records CAL⁻¹ · [F, M]: give its calibration matrix")
             ch = np.rint(np.linalg.inv(cal)) @ ch
     else:
         a, b = o[0], o[1]

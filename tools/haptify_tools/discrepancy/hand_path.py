@@ -46,6 +46,7 @@ from scipy.signal import butter, sosfiltfilt
 from haptify import calibration as cal_mod
 from haptify.compute import ComputeContext
 from haptify.conventions import quat_normalize, quat_rotate
+from haptify.errors import fail
 from haptify.preprocessing import effective_cutoff, interp_columns, lowpass, nominal_rate, sp
 from haptify.signals import ACCEL_COLUMNS, HandleSignals
 from haptify.storage import SessionFolder
@@ -126,7 +127,16 @@ def accelerometer_path(
     stream = session.read(trial_id, "handle_accel")
     reading = stream[ACCEL_COLUMNS].to_numpy()
     ts = stream["t"].to_numpy()
-    sensor = session.manifest.rig.handle.accelerometer
+    handle = session.manifest.rig.handle
+    if handle is None:
+        raise fail(
+            "E603",
+            f"session {session.session_id!r} has a handle_accel stream but its rig does not describe the accelerometer",
+            file="session.json",
+            pointer="/rig/handle",
+            expected="rig.handle with the accelerometer's pose and range",
+        )
+    sensor = handle.accelerometer
     near_clip = np.zeros(len(t), bool)
     if sensor.range is not None and sensor.range.accel_m_per_s2 is not None:
         at_range = np.any(np.abs(reading) >= RANGE_FRACTION * np.asarray(sensor.range.accel_m_per_s2, float), axis=1)

@@ -27,7 +27,7 @@ from __future__ import annotations
 import copy
 import json
 from pathlib import Path
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, Final, Literal, Union
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
@@ -36,8 +36,8 @@ from haptify.conventions import STANDARD_GRAVITY
 from haptify.errors import fail
 from haptify.session_format import Device, Pose, Vec3
 
-TWIN_FORMAT = "haptify-twin"
-TWIN_VERSION = "1.0"
+TWIN_FORMAT: Final = "haptify-twin"
+TWIN_VERSION: Final = "1.0"
 PRESET_DIR = Path(__file__).resolve().parent / "presets"
 PRESETS: tuple[str, ...] = ("touch", "touch-x")
 
@@ -558,9 +558,9 @@ def set_param(twin: TwinFile, path: str, value: Any) -> TwinFile:
                 found=path,
                 expected="<effect id>.<parameter>, effect ids: " + ", ".join(EFFECT_IDS),
             )
-    last = keys[-1]
-    if isinstance(node, list) and last.isdigit():
-        last = int(last)
+    last: str | int = keys[-1]
+    if isinstance(node, list) and keys[-1].isdigit():
+        last = int(keys[-1])
         if last >= len(node):
             raise fail("E801", f"no parameter {path!r} in the twin", found=path)
     elif not isinstance(node, dict) or last not in node:
