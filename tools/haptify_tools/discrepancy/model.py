@@ -30,18 +30,18 @@ class _Estimate(_M):
     (discrepancy README §2, per drive; §3, uncertainty)."""
 
     ci95: list[float] | None = Field(
-        None,
+        default=None,
         description="95 % block-bootstrap interval of value [low, high] in unit (null "
         "when not estimable: a per-drive fit, or a search whose minimum is at the grid's end).",
     )
     per_drive: list[float] | None = Field(
-        None,
+        default=None,
         description="The values per drive axis when identified per drive "
         "(value is then their mean); null: one value shared by every drive.",
     )
     per_drive_stderr: list[float | None] | None = None
     per_drive_delta_bic: float | None = Field(
-        None,
+        default=None,
         description="ΔBIC of the per-drive values over the shared one (on "
         "the shared fit's residual, n − 1 extra parameters); null when not tried.",
     )
@@ -152,8 +152,8 @@ class StateShape(_M):
     kind: Literal["binned", "periodic"]
     heldout_r2: float = Field(description="1 − SSE/SSE of a constant per trial and axis, on the held-out rows (all axes).")
     description: str
-    period: float | None = Field(None, description="Periodic shapes: the period, in the state's unit (m or rad).")
-    amplitude_N: float | None = Field(None, description="Periodic shapes: the force amplitude, N (all axes).")
+    period: float | None = Field(default=None, description="Periodic shapes: the period, in the state's unit (m or rad).")
+    amplitude_N: float | None = Field(default=None, description="Periodic shapes: the force amplitude, N (all axes).")
     amplitude_per_axis_N: list[float] = Field(default_factory=list)
 
 
@@ -215,26 +215,26 @@ class DiscrepancyFile(_M):
     heldout_gap_before_N: float = Field(description="RMS force residual on the held-out blocks, all trials, before.")
     heldout_gap_after_N: float
     floor_N: float | None = Field(
-        None,
+        default=None,
         description="The floor: the one-sided 95 % upper prediction bound of the held-out "
         "gap the updated twin leaves against replays of the session's force protocols that it "
         "generated itself through the virtual rig (the method's resolution: path reconstruction "
         "and sensor noise), from floor_replays_N; null when no trial can be replayed.",
     )
-    heldout_gap_above_floor_before_N: float | None = Field(None, description="√max(gap² − floor², 0) before (N).")
-    heldout_gap_above_floor_after_N: float | None = Field(None, description="√max(gap² − floor², 0) after (N).")
+    heldout_gap_above_floor_before_N: float | None = Field(default=None, description="√max(gap² − floor², 0) before (N).")
+    heldout_gap_above_floor_after_N: float | None = Field(default=None, description="√max(gap² − floor², 0) after (N).")
     floor_replays_N: list[float] = Field(
         default_factory=list, description="The held-out gap of each replay the floor is made from (seeds 0, 1, …), N."
     )
     floor_median_N: float | None = None
     gap_p_value: float | None = Field(
-        None,
+        default=None,
         description="One-sided p-value of 'the held-out gap after is one more draw "
         "of the floor' (Student-t predictive test on the replays' log gaps).",
     )
-    gap_significant: bool | None = Field(None, description="gap_p_value < 0.05, i.e. the gap after is above floor_N.")
+    gap_significant: bool | None = Field(default=None, description="gap_p_value < 0.05, i.e. the gap after is above floor_N.")
     residual: ResidualShape | None = Field(
-        None,
+        default=None,
         description="The residual left, characterised (always computed; it "
         "is what an 'unexplained residual' verdict reports instead of an effect).",
     )

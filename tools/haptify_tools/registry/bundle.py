@@ -78,7 +78,7 @@ class BundleDevice(BaseModel):
     model_config = ConfigDict(extra="forbid")
     manufacturer: str = Field(min_length=1, max_length=200)
     model: str = Field(min_length=1, max_length=200)
-    serial: str | None = Field(None, max_length=200)
+    serial: str | None = Field(default=None, max_length=200)
 
 
 class Bundle(BaseModel):
@@ -94,7 +94,7 @@ class Bundle(BaseModel):
     session_id: str
     includes_raw: bool = Field(description="True when the session's stream files are included (then the registry re-computes).")
     supersedes: str | None = Field(
-        None, pattern=r"^[0-9a-f]{20}$", description="Id of the lab's earlier submission this one corrects."
+        default=None, pattern=r"^[0-9a-f]{20}$", description="Id of the lab's earlier submission this one corrects."
     )
     files: list[BundleFile] = Field(min_length=2)
 

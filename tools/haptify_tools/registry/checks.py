@@ -15,9 +15,9 @@ import math
 from dataclasses import asdict, dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
 from haptify.errors import Finding, HaptifyError, fail
 from haptify.metric_definitions import MetricDefinition, all_families
@@ -78,7 +78,10 @@ class Checked:
     verification: Verification = field(default_factory=lambda: Verification("unverified", note="not re-computed yet"))
 
 
-def _doc(unpacked: Unpacked, path: str, model: type, limits: Limits):
+_Doc = TypeVar("_Doc", bound=BaseModel)
+
+
+def _doc(unpacked: Unpacked, path: str, model: type[_Doc], limits: Limits) -> _Doc:
     size = unpacked.members[path][0]
     if size > limits.max_json_bytes:
         raise fail("E960", f"{path} is too large", file=path, expected=f"≤ {limits.max_json_bytes} bytes", found=f"{size} bytes")
@@ -197,9 +200,17 @@ def metric_findings(results: ResultsFile) -> list[Finding]:
     defs = _definitions()
     seen: set[str] = set()
     for i, m in enumerate(results.metrics):
-        where = {"file": RESULTS_JSON, "pointer": f"/metrics/{i}"}
         if m.id in seen:
-            out.append(Finding("E966", f"metric {m.id} is reported twice", **where, expected="each metric once", found=m.id))
+            out.append(
+                Finding(
+                    "E966",
+                    f"metric {m.id} is reported twice",
+                    file=RESULTS_JSON,
+                    pointer=f"/metrics/{i}",
+                    expected="each metric once",
+                    found=m.id,
+                )
+            )
         seen.add(m.id)
         if m.id not in defs:
             out.append(
