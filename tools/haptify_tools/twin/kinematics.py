@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import Literal
+from typing import Literal, overload
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -300,6 +300,18 @@ def handle_quaternion(twin: TwinFile, q: np.ndarray, angles: np.ndarray) -> np.n
     rel = Rotation.from_euler(_INTRINSIC[twin.gimbal_body.axes], np.atleast_2d(angles)).as_matrix()
     xyzw = Rotation.from_matrix(r_ref @ rel).as_quat()
     return np.concatenate([xyzw[:, 3:], xyzw[:, :3]], axis=1)
+
+
+@overload
+def hand_to_joints(
+    twin: TwinFile, position_W: np.ndarray, quaternion_W: np.ndarray, strict: bool = False
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+
+
+@overload
+def hand_to_joints(
+    twin: TwinFile, position_W: np.ndarray, quaternion_W: None = None, strict: bool = False
+) -> tuple[np.ndarray, None, np.ndarray]: ...
 
 
 def hand_to_joints(
