@@ -37,6 +37,7 @@ rest in the replay (:mod:`.drive_rest`) then brings stiffness to 0.0035–0.019 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Final
 
 import numpy as np
 from scipy.integrate import cumulative_trapezoid
@@ -50,6 +51,7 @@ from haptify.errors import fail
 from haptify.preprocessing import effective_cutoff, interp_columns, lowpass, nominal_rate, sp
 from haptify.signals import ACCEL_COLUMNS, HandleSignals
 from haptify.storage import SessionFolder
+from haptify_tools.discrepancy.model import PathSource
 
 PATH_CROSSOVER_HZ = 1.5  # motion capture below, the accelerometer above (the true twin's floor is lowest
 # for 1–1.5 Hz on figure-eight, free-space, stiffness and local-dynamic trials)
@@ -66,8 +68,8 @@ MAX_CLIPPED_SHARE = 0.5  # a trial with more rows near clipped readings falls ba
 POSE_CUTOFF_HZ = 8.0  # without an accelerometer: above the local-dynamic 4 Hz oscillations (paper §V-C)
 #: slower protocols get a lower cut-off: free-space wandering stays under 0.16 m/s (paper §V-B)
 POSE_CUTOFF_BY_PROTOCOL_HZ = {"free_space": 4.0}
-FROM_BOTH = "motion capture + accelerometer"
-FROM_MOCAP = "motion capture"
+FROM_BOTH: Final = "motion capture + accelerometer"
+FROM_MOCAP: Final = "motion capture"
 
 
 @dataclass
@@ -79,7 +81,7 @@ class HandPath:
 
     position: np.ndarray
     quaternion: np.ndarray
-    source: str
+    source: PathSource
     unreliable: np.ndarray
 
 

@@ -10,6 +10,14 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 
+#: the value sets of the file's enumerated fields, named for the code that fills them
+PlaceKind = Literal["benchmark", "trial", "contact", "speed_band", "region"]
+Channel = Literal["fx", "fy", "fz"]
+ForceSource = Literal["measured", "twin before", "twin after"]
+Verdict = Literal["explained", "unexplained residual", "no discrepancy"]
+PathSource = Literal["motion capture + accelerometer", "motion capture"]
+
+
 class _M(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
@@ -17,7 +25,7 @@ class _M(BaseModel):
 class Place(_M):
     """One place where twin and measurement disagree: force residual RMS there in N and its share (0–1) of the residual energy (discrepancy README §1, §4)."""
 
-    kind: Literal["benchmark", "trial", "contact", "speed_band", "region"]
+    kind: PlaceKind
     label: str
     rms_before_N: float = Field(description="RMS of the force residual (all three axes) before, N.")
     rms_after_N: float = Field(description="The same with the updated twin, N.")
@@ -103,7 +111,7 @@ class SignalGap(_M):
 
     trial_id: str
     protocol: str
-    channel: Literal["fx", "fy", "fz"]
+    channel: Channel
     rms_before_N: float
     rms_after_N: float
     heldout_rms_before_N: float
@@ -128,7 +136,7 @@ class BenchmarkNotComputed(_M):
         description="The benchmarks of the trial's protocol left out (one operator computes them together)."
     )
     trial_id: str
-    force: Literal["measured", "twin before", "twin after"]
+    force: ForceSource
     code: str = Field(description="The operator's error code (schemas/1.0/codes.json).")
     message: str
 
@@ -137,7 +145,7 @@ class ResidualCell(_M):
     """Where the residual left lives: one protocol × force axis, its held-out RMS about each trial's mean (N) and share of that energy."""
 
     protocol: str
-    channel: Literal["fx", "fy", "fz"]
+    channel: Channel
     heldout_rms_N: float
     share: float
 
@@ -199,7 +207,7 @@ class DiscrepancyFile(_M):
     version: Literal["1.0"] = "1.0"
     session_id: str
     twin_name: str
-    verdict: Literal["explained", "unexplained residual", "no discrepancy"] = Field(
+    verdict: Verdict = Field(
         description="explained: effects accepted, no structure left and the held-out gap not significantly above the "
         "floor; unexplained residual: structure left, or a held-out gap significantly above the floor, that "
         "no library effect explains (see `residual`); no discrepancy: nothing accepted, no structure left "
@@ -240,7 +248,7 @@ class DiscrepancyFile(_M):
     )
     benchmarks_not_computed: list[BenchmarkNotComputed] = Field(default_factory=list)
     not_observable: dict[str, str] = Field(description="Library effect ids the force residual cannot reveal, and why.")
-    hand_path: dict[str, Literal["motion capture + accelerometer", "motion capture"]] = Field(
+    hand_path: dict[str, PathSource] = Field(
         default_factory=dict,
         description="Per force trial id, what the path driving the twin came from: motion "
         "capture below the crossover and the handle accelerometer above it, or motion capture alone (no "
