@@ -603,17 +603,13 @@ CASES: list[Case] = [
         "symlinked-folder-escape",
         ["E109"],
         "The trials/ folder is a symbolic link to another fixture's trials/ folder.",
-        _in_turn(
-            lambda f: shutil.rmtree(f / "trials"), lambda f: os.symlink("../../valid/parquet-basic/trials", f / "trials")
-        ),
+        _in_turn(lambda f: shutil.rmtree(f / "trials"), lambda f: os.symlink("../../valid/parquet-basic/trials", f / "trials")),
     ),
     Case(
         "manifest-symlink-escape",
         ["E109"],
         "session.json is a symbolic link to another fixture's session.json.",
-        _in_turn(
-            lambda f: (f / MANIFEST).unlink(), lambda f: os.symlink("../../valid/parquet-basic/session.json", f / MANIFEST)
-        ),
+        _in_turn(lambda f: (f / MANIFEST).unlink(), lambda f: os.symlink("../../valid/parquet-basic/session.json", f / MANIFEST)),
     ),
     Case(
         "stream-is-folder",
@@ -911,7 +907,9 @@ VALID: list[Case] = [
         extend=_in_turn(
             lambda w: add_active_trial(w, fmt="csv"),
             lambda w: add_markers_trial(w, ["h1", "h2", "h3"], fmt="csv"),
-            lambda w: w.add_stream("workspace-1", "link_poses", _link_poses(["handle"]), rate_hz=100, fmt="csv", entities=["handle"]),
+            lambda w: w.add_stream(
+                "workspace-1", "link_poses", _link_poses(["handle"]), rate_hz=100, fmt="csv", entities=["handle"]
+            ),
         ),
     ),
 ]

@@ -326,13 +326,9 @@ class DossierSimulator:
         if name == "local_dynamic":
             return ex.local_oscillations(rng, r, d, rate_hz=rate, t0=t0)
         if name == "figure_eight":
-            return ex.figure_eight(
-                rng, r, d, rate_hz=rate, t0=t0, period_range_s=_paced(ex.FIGURE_EIGHT_PERIODS_S, pace)
-            )
+            return ex.figure_eight(rng, r, d, rate_hz=rate, t0=t0, period_range_s=_paced(ex.FIGURE_EIGHT_PERIODS_S, pace))
         if name == "frictionless_surface":
-            return ex.surface_circles(
-                rng, r, z, d, rate_hz=rate, t0=t0, period_range_s=_paced(ex.SURFACE_PERIODS_S, pace)
-            )
+            return ex.surface_circles(rng, r, z, d, rate_hz=rate, t0=t0, period_range_s=_paced(ex.SURFACE_PERIODS_S, pace))
         if name == "stiffness":
             return ex.surface_presses(rng, r, z, d, rate_hz=rate, t0=t0, press_speed=pace * ex.PRESS_SPEED)
         raise ValueError(f"no trajectory for {name!r}")

@@ -923,7 +923,11 @@ def results_markdown(results: ResultsFile, session_id: str) -> str:
 
 
 def session_markdown(
-    session: SessionFolder, trials: list[TrialPlan], other: SessionFolder | None, notes: Collection[str] = (), derived: str = "full"
+    session: SessionFolder,
+    trials: list[TrialPlan],
+    other: SessionFolder | None,
+    notes: Collection[str] = (),
+    derived: str = "full",
 ) -> str:
     """A summary of the session (and the compared one) and how to read the 3-D view."""
     m = session.manifest
