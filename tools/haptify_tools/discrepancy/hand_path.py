@@ -132,11 +132,7 @@ def accelerometer_path(
     handle = session.manifest.rig.handle
     if handle is None:
         raise fail(
-            "E603",
-            f"session {session.session_id!r} has a handle_accel stream but its rig does not describe the accelerometer",
-            file="session.json",
-            pointer="/rig/handle",
-            expected="rig.handle with the accelerometer's pose and range",
+            "E603", "a handle_accel stream needs rig.handle (the accelerometer)", file="session.json", pointer="/rig/handle"
         )
     sensor = handle.accelerometer
     near_clip = np.zeros(len(t), bool)
