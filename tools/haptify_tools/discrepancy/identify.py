@@ -181,7 +181,7 @@ def fit_candidate(  # noqa: C901 (over ruff's limit of 15: to be split)
             a = {k: da[k] - pa * b[k] for k in da}
             p, se = st.affine_fit(design, residual, a, b)
         pred = {k: a[k] + p * b[k] for k in a}
-        interval: tuple[float, float] | None  # None: the search found no bracket
+        interval: tuple[float, float] | None  # (None where the search below finds no bracket)
         se, interval = st.bootstrap_linear(design, residual, pred, b, p)
         return Fit(cand, p, se, pred, st.score(design, residual, pred), sims, interval=interval)
     # 1-D search on a logarithmic grid, then a bounded Brent refinement in log p
