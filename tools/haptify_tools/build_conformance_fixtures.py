@@ -214,8 +214,8 @@ def handle_trial(
     )
     if accel_extra is not None:
         extra = accel_extra(t_acc)
-        for k, c in enumerate(("ax", "ay", "az")):
-            accel[c] = accel[c] + extra[:, k]
+        for k, col in enumerate(("ax", "ay", "az")):
+            accel[col] = accel[col] + extra[:, k]
     add("handle_wrench", wrench, ft_rate)
     add("handle_accel", accel, acc_rate)
     p, q = position(t_m), quaternion(t_m)
@@ -1286,7 +1286,8 @@ def pushes_fixture(truth: rb.HandleTruth) -> Fixture:
     F0, push = np.array([0.3, 0.1, 0.2]), np.array([0.6, 0.0, 0.0])
 
     def pulses(t: np.ndarray) -> np.ndarray:
-        return sum(np.where(np.abs(t - c) <= width / 2, np.sin(np.pi * (t - c + width / 2) / width) ** 2, 0.0) for c in centres)
+        pulse = (np.where(np.abs(t - c) <= width / 2, np.sin(np.pi * (t - c + width / 2) / width) ** 2, 0.0) for c in centres)
+        return sum(pulse, np.zeros_like(t))
 
     def force(t: np.ndarray) -> np.ndarray:
         return F0 + np.outer(pulses(t), push)
@@ -1580,6 +1581,10 @@ def free_space_repetitions(
     trial's own clock (each trial starts 20 s after the previous one), on the fs-typical circle and spin."""
     for rep, gain in enumerate(gains, start=1):
         t0 = 20.0 * (rep - 1)
+
+        def force_w(t: np.ndarray, g: float = gain, t0: float = t0) -> np.ndarray:
+            return g * felt(t - t0)
+
         handle_trial(
             w,
             f"free_space-{rep}",
@@ -1587,7 +1592,7 @@ def free_space_repetitions(
             duration_s=duration_s,
             position=circle(0.05, 1.0),
             quaternion=spin(0.07),
-            force_w=lambda t, g=gain, t0=t0: g * felt(t - t0),
+            force_w=force_w,
             truth=truth,
             repetition=rep,
             start_s=t0,
@@ -3344,7 +3349,7 @@ def with_requirements(c: dict) -> dict:
 
 def case_documents(fixtures: dict[str, list[Fixture]], fixtures_root: Path) -> dict[str, str]:
     """File name → text of every case file."""
-    docs = {}
+    docs: dict[str, dict[str, Any]] = {}
     for fam, fxs in fixtures.items():
         docs[f"{fam}.json"] = {"description": FAMILY_TEXT[fam], "cases": [c for fx in fxs for c in fx.cases]}
     docs["validate.json"] = {

@@ -24,7 +24,7 @@ import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, TypeVar
 
 import numpy as np
 import pandas as pd
@@ -187,13 +187,26 @@ class Case:
     name: str
     codes: list[str]
     description: str
-    mutate: Callable[[Path], None] | None = None
+    mutate: Callable[[Path], object] | None = None  # what it returns is not used
     fmt: str = "parquet"
-    extend: Callable[[SessionWriter], None] | None = None
+    extend: Callable[[SessionWriter], object] | None = None
 
     @property
     def exit_code(self) -> int:
         return 1 if any(c.startswith("E") for c in self.codes) else 0
+
+
+_On = TypeVar("_On")
+
+
+def _in_turn(*steps: Callable[[_On], object]) -> Callable[[_On], None]:
+    """One mutation (or extension) made of ``steps`` applied in order to the same folder (or writer)."""
+
+    def run(target: _On) -> None:
+        for step in steps:
+            step(target)
+
+    return run
 
 
 def _truncate(folder: Path, kind: str, keep: float) -> None:
@@ -590,13 +603,13 @@ CASES: list[Case] = [
         "symlinked-folder-escape",
         ["E109"],
         "The trials/ folder is a symbolic link to another fixture's trials/ folder.",
-        lambda f: (shutil.rmtree(f / "trials"), os.symlink("../../valid/parquet-basic/trials", f / "trials")),
+        _in_turn(lambda f: shutil.rmtree(f / "trials"), lambda f: os.symlink("../../valid/parquet-basic/trials", f / "trials")),
     ),
     Case(
         "manifest-symlink-escape",
         ["E109"],
         "session.json is a symbolic link to another fixture's session.json.",
-        lambda f: ((f / MANIFEST).unlink(), os.symlink("../../valid/parquet-basic/session.json", f / MANIFEST)),
+        _in_turn(lambda f: (f / MANIFEST).unlink(), lambda f: os.symlink("../../valid/parquet-basic/session.json", f / MANIFEST)),
     ),
     Case(
         "stream-is-folder",
@@ -645,9 +658,9 @@ CASES: list[Case] = [
         "rate-below-recommended",
         ["W406"],
         "handle_accel recorded and declared at 1 kHz; 2 kHz is recommended (warning only).",
-        lambda f: (
-            rewrite_data(f, "handle_accel", lambda df: df.iloc[::2].reset_index(drop=True)),
-            edit(f, lambda m: stream_of(m, "handle_accel").update(rate_hz=1000.0)),
+        _in_turn(
+            lambda f: rewrite_data(f, "handle_accel", lambda df: df.iloc[::2].reset_index(drop=True)),
+            lambda f: edit(f, lambda m: stream_of(m, "handle_accel").update(rate_hz=1000.0)),
         ),
     ),
     Case(
@@ -684,9 +697,9 @@ CASES: list[Case] = [
         "other-without-label",
         ["E304"],
         "A trial of protocol 'other' has no label.",
-        extend=lambda w: (
-            w.add_trial("figure8-1", "other", powered=False),
-            w.add_stream("figure8-1", "handle_pose", _pose(20), rate_hz=100),
+        extend=_in_turn(
+            lambda w: w.add_trial("figure8-1", "other", powered=False),
+            lambda w: w.add_stream("figure8-1", "handle_pose", _pose(20), rate_hz=100),
         ),
     ),
     Case(
@@ -751,7 +764,7 @@ CASES: list[Case] = [
         "device-file-duplicate-key",
         ["E117"],
         "device.json names the member 'dof' twice.",
-        lambda f: (_device_file({})(f), _replace_text(f, "device.json", '"dof": 6', '"dof": 6,\n  "dof": 3')),
+        _in_turn(_device_file({}), lambda f: _replace_text(f, "device.json", '"dof": 6', '"dof": 6,\n  "dof": 3')),
     ),
     Case(
         "csv-nul-bytes",
@@ -891,10 +904,12 @@ VALID: list[Case] = [
         "CSV session: a free-space trial, an active stiffness trial with rendering, and a workspace "
         "trial with markers and link poses.",
         fmt="csv",
-        extend=lambda w: (
-            add_active_trial(w, fmt="csv"),
-            add_markers_trial(w, ["h1", "h2", "h3"], fmt="csv"),
-            w.add_stream("workspace-1", "link_poses", _link_poses(["handle"]), rate_hz=100, fmt="csv", entities=["handle"]),
+        extend=_in_turn(
+            lambda w: add_active_trial(w, fmt="csv"),
+            lambda w: add_markers_trial(w, ["h1", "h2", "h3"], fmt="csv"),
+            lambda w: w.add_stream(
+                "workspace-1", "link_poses", _link_poses(["handle"]), rate_hz=100, fmt="csv", entities=["handle"]
+            ),
         ),
     ),
 ]

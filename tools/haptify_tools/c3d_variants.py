@@ -59,7 +59,7 @@ class C3DSpec:
 
 
 def _param(c, group: str, name: str, values, kind: str = "float", dims: list[int] | None = None) -> None:
-    from ezc3d import ezc3d as E
+    from ezc3d import ezc3d as E  # type: ignore[import-untyped]  # ezc3d ships no type information
 
     p = E.Parameter(name)
     if kind == "str":
@@ -78,9 +78,24 @@ def float32(values: np.ndarray) -> np.ndarray:
     return np.asarray(values, dtype=np.float64).astype(np.float32).astype(np.float64)
 
 
+def _point_arrays(spec: C3DSpec, n_frames: int) -> tuple[np.ndarray, np.ndarray]:
+    """The marker points ``(4, markers, frames)`` (homogeneous) and residuals ``(1, markers, frames)`` as ezc3d takes them."""
+    n_markers = len(spec.labels)
+    points = np.zeros((4, n_markers, n_frames))
+    residuals = np.zeros((1, n_markers, n_frames))
+    if n_markers:
+        if spec.points is None:
+            raise ValueError(f"{n_markers} marker labels but no points")
+        points[:3] = spec.points.transpose(2, 1, 0)
+        points[3] = 1.0
+        if spec.residuals is not None:
+            residuals[0] = spec.residuals.T
+    return points, residuals
+
+
 def write_c3d(path: Path, spec: C3DSpec) -> Path:
     """Write ``spec`` as a C3D file with ezc3d (float data, Intel byte order)."""
-    from ezc3d import ezc3d as E
+    from ezc3d import ezc3d as E  # type: ignore[import-untyped]  # ezc3d ships no type information
 
     c = E.c3d()
     n_frames = (
@@ -128,13 +143,7 @@ def write_c3d(path: Path, spec: C3DSpec) -> Path:
                     cal[:k, :k, i] = p.cal_matrix  # first index = output row, as ezc3d applies it
             _param(c, "FORCE_PLATFORM", "CAL_MATRIX", cal, dims=[size, size, n])
     n_markers = len(spec.labels)
-    points = np.zeros((4, n_markers, n_frames))
-    residuals = np.zeros((1, n_markers, n_frames))
-    if n_markers:
-        points[:3] = spec.points.transpose(2, 1, 0)
-        points[3] = 1.0
-        if spec.residuals is not None:
-            residuals[0] = spec.residuals.T
+    points, residuals = _point_arrays(spec, n_frames)
     n_ch = len(spec.analog_labels)
     analogs = np.zeros((1, n_ch, 0 if spec.analogs is None else spec.analogs.shape[1]))
     if n_ch:
@@ -229,6 +238,8 @@ def known_load_channels(
     elif kind in (2, 4):
         ch = np.vstack([f.T, moment.T])
         if kind == 4:
+            if cal is None:
+                raise ValueError("a type-4 platform records CAL⁻¹ · [F, M]: give its calibration matrix")
             ch = np.rint(np.linalg.inv(cal)) @ ch
     else:
         a, b = o[0], o[1]

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -16,7 +17,7 @@ from haptify.storage import SessionWriter
 DEG = math.pi / 180.0
 
 # The Touch as in the paper's Table II; the upper limit of q3 is -10° - 0.85·q2 (see spec §8).
-TOUCH_DEVICE = {
+TOUCH_DEVICE: dict[str, Any] = {
     "manufacturer": "3D Systems",
     "model": "Touch",
     "dof": 6,

@@ -87,6 +87,8 @@ def raw_handle(
     f = truth.force_bias + truth.mass * g_s
     tau = truth.torque_bias + np.cross(truth.com, truth.mass * g_s)
     if hand_force_w is not None:
+        if hand_torque_g_w is None:
+            raise ValueError("the hand's force needs its torque about the gimbal centre (hand_torque_g_w)")
         f_s = quat_rotate(quat_conjugate(q_ws), hand_force_w)
         # torque about the sensor origin: τ_S = τ_G − p × F  (in H), then into S
         t_h = quat_rotate(quat_conjugate(q_ft), hand_torque_g_w) - np.cross(p_s, quat_rotate(quat_conjugate(q_ft), hand_force_w))

@@ -15,6 +15,7 @@ device's force minus ``m_c·a`` when the twin's ``handle.connector_mass`` is on.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any, Callable, Protocol
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -28,8 +29,9 @@ from haptify.surface import contact_of, unit_normal
 
 from haptify_tools.discrepancy.drive_rest import hold_resting_drives
 from haptify_tools.discrepancy.hand_path import FROM_MOCAP, fill_gaps, hand_path, second_derivative
+from haptify_tools.discrepancy.model import PathSource
 from haptify_tools.twin.model import TwinFile
-from haptify_tools.twin.physics import simulate_active, simulate_passive
+from haptify_tools.twin.physics import ActiveResult, PassiveResult, simulate_active, simulate_passive
 
 RESIDUAL_CUTOFF_HZ = 5.0  # both forces are compared below this frequency
 EDGE_S = 0.5  # the first and last half second of a trial are not compared: there the path's
@@ -37,6 +39,13 @@ EDGE_S = 0.5  # the first and last half second of a trial are not compared: ther
 # friction 0.9 N off) and the low-passes are held at the ends
 SIM_RATE_HZ = 1000.0  # the rendering loop's rate (paper §V-D), active and passive trials alike
 FORCE_PROTOCOLS = ("free_space", "local_dynamic", "other", "frictionless_surface", "stiffness")
+
+
+class Pool(Protocol):
+    """Workers that run ``fn(*args)`` and hand back its future: a process pool initialised by :func:`share_trials`,
+    or a Dask cluster's (:class:`.cluster_pool.ClusterPool`)."""
+
+    def submit(self, fn: Callable[..., Any], /, *args: Any) -> Any: ...
 
 
 @dataclass
@@ -64,11 +73,20 @@ class MeasuredTrial:
     contact: np.ndarray
     speed: np.ndarray
     commanded_max_N: float = 0.0
-    path_source: str = FROM_MOCAP
+    path_source: PathSource = FROM_MOCAP
 
     @property
     def active(self) -> bool:
         return self.rendering is not None
+
+    def penetration(self) -> tuple[np.ndarray, np.ndarray]:
+        """Depth of the hand below the rendered plane ``(N,)``, m, and the plane's unit normal (active trials,
+        spec §12.2); ValueError for a passive trial, which rendered no plane."""
+        if self.rendering is None:
+            raise ValueError(f"trial {self.trial_id!r} is passive: it rendered no plane")
+        n = np.asarray(self.rendering["surface_normal"], dtype=np.float64)
+        n = n / np.linalg.norm(n)
+        return (np.asarray(self.rendering["surface_point_m"], dtype=np.float64) - self.position) @ n, n
 
 
 def load_measured(session: SessionFolder, ctx: ComputeContext | None = None, required: bool = True) -> list[MeasuredTrial]:
@@ -83,6 +101,8 @@ def load_measured(session: SessionFolder, ctx: ComputeContext | None = None, req
         if trial.protocol not in FORCE_PROTOCOLS or session.stream(trial.id, "handle_wrench") is None:
             continue
         hs = handle_signals(ctx, trial.id)
+        if hs.force is None:  # (none without a handle_wrench stream, left out above)
+            continue
         ok = hs.valid & np.all(np.isfinite(hs.force), axis=1) & np.all(np.isfinite(hs.position), axis=1)
         if ok.sum() < 20:
             continue
@@ -146,7 +166,8 @@ def simulate_trial(twin: TwinFile, trial: MeasuredTrial) -> np.ndarray:
     low-passed like the measured force (N, W frame) (discrepancy README §1).
     """
     fine, pos, quat = fine_path(twin, trial)
-    if trial.active:
+    res: ActiveResult | PassiveResult
+    if trial.rendering is not None:
         res = simulate_active(twin, fine, pos, quat, trial.rendering)
     else:
         res = simulate_passive(twin, fine, pos, quat)
@@ -192,7 +213,7 @@ def simulate_many(
     trials: list[MeasuredTrial],
     only_active: bool = False,
     base: dict[str, np.ndarray] | None = None,
-    pool=None,
+    pool: Pool | None = None,
 ) -> list[dict[str, np.ndarray]]:
     """:func:`simulate_all` for several twins; with ``pool`` (workers initialised by :func:`share_trials` with
     these trials) every (twin, trial) pair is one job, the longest trials first (discrepancy README §1, §2)."""

@@ -133,8 +133,11 @@ def replay_floor(
     """One replay (``seed``) of the protocols in ``durations`` (simulator protocol → s) that ``twin`` itself generated:
     the held-out gap (N) ``twin`` leaves on it (module docstring; discrepancy README §4, the floor) and the values of
     ``params`` identified again on it (:func:`reestimate`); None when there is nothing to replay."""
-    if not durations:
-        return None
+    return _replay(twin, durations, seed, params) if durations else None
+
+
+def _replay(twin: TwinFile, durations: dict[str, float], seed: int, params: tuple[Parameter, ...]) -> tuple[float, list[float]]:
+    """:func:`replay_floor` of at least one protocol."""
     options = SimulationOptions(
         protocols=(*durations, "rig.handle_calibration"), reps=1, seed=seed, durations=durations, rig_trials=False, workers=1
     )
@@ -206,5 +209,5 @@ def replay_floors(
     """:func:`replay_floor` for seeds ``0 … replays − 1`` (discrepancy README §4, the floor); None when nothing can be replayed."""
     if not durations:
         return None
-    runs = [replay_floor(twin, durations, seed, params) for seed in range(replays)]
+    runs = [_replay(twin, durations, seed, params) for seed in range(replays)]
     return Floor(tuple(g for g, _ in runs), tuple(tuple(e) for _, e in runs), params)

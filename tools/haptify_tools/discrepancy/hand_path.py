@@ -37,6 +37,7 @@ rest in the replay (:mod:`.drive_rest`) then brings stiffness to 0.0035–0.019 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Final
 
 import numpy as np
 from scipy.integrate import cumulative_trapezoid
@@ -46,9 +47,11 @@ from scipy.signal import butter, sosfiltfilt
 from haptify import calibration as cal_mod
 from haptify.compute import ComputeContext
 from haptify.conventions import quat_normalize, quat_rotate
+from haptify.errors import fail
 from haptify.preprocessing import effective_cutoff, interp_columns, lowpass, nominal_rate, sp
 from haptify.signals import ACCEL_COLUMNS, HandleSignals
 from haptify.storage import SessionFolder
+from haptify_tools.discrepancy.model import PathSource
 
 PATH_CROSSOVER_HZ = 1.5  # motion capture below, the accelerometer above (the true twin's floor is lowest
 # for 1–1.5 Hz on figure-eight, free-space, stiffness and local-dynamic trials)
@@ -65,8 +68,8 @@ MAX_CLIPPED_SHARE = 0.5  # a trial with more rows near clipped readings falls ba
 POSE_CUTOFF_HZ = 8.0  # without an accelerometer: above the local-dynamic 4 Hz oscillations (paper §V-C)
 #: slower protocols get a lower cut-off: free-space wandering stays under 0.16 m/s (paper §V-B)
 POSE_CUTOFF_BY_PROTOCOL_HZ = {"free_space": 4.0}
-FROM_BOTH = "motion capture + accelerometer"
-FROM_MOCAP = "motion capture"
+FROM_BOTH: Final = "motion capture + accelerometer"
+FROM_MOCAP: Final = "motion capture"
 
 
 @dataclass
@@ -78,7 +81,7 @@ class HandPath:
 
     position: np.ndarray
     quaternion: np.ndarray
-    source: str
+    source: PathSource
     unreliable: np.ndarray
 
 
@@ -126,7 +129,12 @@ def accelerometer_path(
     stream = session.read(trial_id, "handle_accel")
     reading = stream[ACCEL_COLUMNS].to_numpy()
     ts = stream["t"].to_numpy()
-    sensor = session.manifest.rig.handle.accelerometer
+    handle = session.manifest.rig.handle
+    if handle is None:
+        raise fail(
+            "E603", "a handle_accel stream needs rig.handle (the accelerometer)", file="session.json", pointer="/rig/handle"
+        )
+    sensor = handle.accelerometer
     near_clip = np.zeros(len(t), bool)
     if sensor.range is not None and sensor.range.accel_m_per_s2 is not None:
         at_range = np.any(np.abs(reading) >= RANGE_FRACTION * np.asarray(sensor.range.accel_m_per_s2, float), axis=1)

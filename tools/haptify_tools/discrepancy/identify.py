@@ -20,7 +20,7 @@ from scipy.optimize import minimize_scalar
 
 from haptify_tools.discrepancy import stats as st
 from haptify_tools.discrepancy import workspace as ws
-from haptify_tools.discrepancy.data import MeasuredTrial, share_trials, simulate_many
+from haptify_tools.discrepancy.data import MeasuredTrial, Pool, share_trials, simulate_many
 from haptify_tools.discrepancy.floor import Parameter, gauss_newton_step
 from haptify_tools.discrepancy.library import LIBRARY, Candidate
 from haptify_tools.discrepancy.shape import characterise
@@ -40,7 +40,7 @@ class Dataset:
     kind: str  # "force" or "workspace"
     items: list
     commands: dict | None = None  # workspace: trial id → (face commands, ok)
-    pool: ProcessPoolExecutor | None = None  # force: workers sharing the trials (:func:`.data.share_trials`)
+    pool: Pool | None = None  # force: workers sharing the trials (:func:`.data.share_trials`)
 
     @property
     def measured(self) -> dict[str, np.ndarray]:
@@ -53,7 +53,10 @@ class Dataset:
         """The predictions of several twins (force trials: every (twin, trial) pair in parallel when there is a pool)."""
         if self.kind == "force":
             return simulate_many(twins, self.items, only_active, base, self.pool)
-        return [ws.sweep_predictions(tw, self.items, self.commands) for tw in twins]
+        if self.commands is None:
+            raise ValueError("a workspace dataset is made with its face commands (Dataset.sweeps)")
+        commands = self.commands
+        return [ws.sweep_predictions(tw, self.items, commands) for tw in twins]
 
     @staticmethod
     def sweeps(twin: TwinFile, sweeps: list) -> "Dataset":
@@ -178,6 +181,7 @@ def fit_candidate(  # noqa: C901 (over ruff's limit of 15: to be split)
             a = {k: da[k] - pa * b[k] for k in da}
             p, se = st.affine_fit(design, residual, a, b)
         pred = {k: a[k] + p * b[k] for k in a}
+        interval: tuple[float, float] | None  # (None where the search below finds no bracket)
         se, interval = st.bootstrap_linear(design, residual, pred, b, p)
         return Fit(cand, p, se, pred, st.score(design, residual, pred), sims, interval=interval)
     # 1-D search on a logarithmic grid, then a bounded Brent refinement in log p
@@ -362,6 +366,19 @@ def process_pool(n: int, initializer=None, initargs: tuple = ()) -> ProcessPoolE
     return ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=initializer, initargs=initargs)
 
 
+#: what a candidate is fitted to: the data, the design and the residual of the current twin, and its predictions
+_Problem = tuple[Dataset, st.Design, dict[str, np.ndarray], dict[str, np.ndarray]]
+
+
+def _fit(c: Candidate, twin: TwinFile, forces: _Problem, workspace: _Problem | None) -> Fit:
+    """:func:`fit_candidate` on the force trials, or for a workspace candidate on the workspace sweeps."""
+    if c.scope != "workspace":
+        return fit_candidate(c, twin, *forces)
+    if workspace is None:
+        raise ValueError(f"{c.effect_id} is fitted to workspace sweeps, and there are none")
+    return fit_candidate(c, twin, *workspace)
+
+
 def _select(twin, forces: Dataset, sweeps, max_effects, library, log) -> Selection:
     trials = forces.items
     current = twin
@@ -369,25 +386,23 @@ def _select(twin, forces: Dataset, sweeps, max_effects, library, log) -> Selecti
     sweep_data = Dataset.sweeps(current, sweeps) if sweeps else None
     base_w = sweep_data.simulate(current) if sweep_data else {}
     initial, initial_w = base, base_w
-    rounds, accepted = [], []
+    rounds: list[Round] = []
+    accepted: list[Fit] = []
     while True:
         residual = _minus(forces.measured, base)
         design = st.make_design(trials, residual)
-        residual_w = _minus(sweep_data.measured, base_w) if sweep_data else None
-        design_w = st.make_design(sweeps, residual_w, st.SWEEP_REPEATS) if sweep_data else None
+        workspace: _Problem | None = None
+        residual_w = None
+        if sweep_data is not None:
+            residual_w = _minus(sweep_data.measured, base_w)
+            workspace = (sweep_data, st.make_design(sweeps, residual_w, st.SWEEP_REPEATS), residual_w, base_w)
         cands = [
             c for c in library if c.available(current) and (sweep_data is not None if c.scope == "workspace" else bool(trials))
         ]
         if len(accepted) >= max_effects or not cands:
             rounds.append(Round(residual, design, [], None, False, workspace_residual=residual_w))
             break
-        jobs = [
-            (c, current, sweep_data, design_w, residual_w, base_w)
-            if c.scope == "workspace"
-            else (c, current, forces, design, residual, base)
-            for c in cands
-        ]
-        fits = [fit_candidate(*job) for job in jobs]
+        fits = [_fit(c, current, (forces, design, residual, base), workspace) for c in cands]
         fits.sort(key=lambda f: -f.score.delta_bic)
         if fits[0].candidate.per_drive:  # the best effect, per drive when the data support it
             fits[0] = fit_per_drive(fits[0], current, forces, design, residual, base)
@@ -406,8 +421,8 @@ def _select(twin, forces: Dataset, sweeps, max_effects, library, log) -> Selecti
             break
         accepted.append(best)
         current = best.candidate.apply(current, best.applied)
-        if best.candidate.scope == "workspace":
-            base_w = sweep_data.simulate(current)
+        if workspace is not None and best.candidate.scope == "workspace":  # (_fit fits none without sweeps)
+            base_w = workspace[0].simulate(current)
         else:
             base = forces.simulate(current)
             before = [q.value for q in accepted_parameters(accepted)]

@@ -58,15 +58,21 @@ class Candidate:
     def apply(self, twin: TwinFile, value: float | list[float]) -> TwinFile:
         """A copy of ``twin`` with this effect on and its parameter set to ``value`` (one number: every axis; a list:
         one value per drive)."""
+        v = [float(x) for x in value] if isinstance(value, (list, tuple, np.ndarray)) else float(value)
         if self.effect_id == ws.EFFECT_ID:
-            return ws.apply(twin, value)
+            return ws.apply(twin, self._one(v))
         t = twin
         if self.effect_id == "drive.force_cutoff":  # keep the re-arm level below the new trip level
-            rearm = min(t.effects.drive_force_cutoff.rearm_force_N, 0.5 * float(value))
+            rearm = min(t.effects.drive_force_cutoff.rearm_force_N, 0.5 * self._one(v))
             t = set_param(t, "drive.force_cutoff.rearm_force_N", rearm)
-        v = [float(x) for x in value] if isinstance(value, (list, tuple, np.ndarray)) else float(value)
         t = set_param(t, f"{self.effect_id}.{self.parameter}", v)
         return set_param(t, f"{self.effect_id}.enabled", True)
+
+    def _one(self, value: float | list[float]) -> float:
+        """The one value of an effect whose parameter is not per drive; ValueError for a list."""
+        if isinstance(value, list):
+            raise ValueError(f"{self.effect_id}.{self.parameter} takes one value, not one per drive")
+        return value
 
     def available(self, twin: TwinFile) -> bool:
         """True when the twin lacks this effect (the library proposes only what the twin does not have)."""

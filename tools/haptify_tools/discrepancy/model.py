@@ -10,6 +10,14 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 
+#: the value sets of the file's enumerated fields, named for the code that fills them
+PlaceKind = Literal["benchmark", "trial", "contact", "speed_band", "region"]
+Channel = Literal["fx", "fy", "fz"]
+ForceSource = Literal["measured", "twin before", "twin after"]
+Verdict = Literal["explained", "unexplained residual", "no discrepancy"]
+PathSource = Literal["motion capture + accelerometer", "motion capture"]
+
+
 class _M(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
@@ -17,7 +25,7 @@ class _M(BaseModel):
 class Place(_M):
     """One place where twin and measurement disagree: force residual RMS there in N and its share (0–1) of the residual energy (discrepancy README §1, §4)."""
 
-    kind: Literal["benchmark", "trial", "contact", "speed_band", "region"]
+    kind: PlaceKind
     label: str
     rms_before_N: float = Field(description="RMS of the force residual (all three axes) before, N.")
     rms_after_N: float = Field(description="The same with the updated twin, N.")
@@ -30,18 +38,18 @@ class _Estimate(_M):
     (discrepancy README §2, per drive; §3, uncertainty)."""
 
     ci95: list[float] | None = Field(
-        None,
+        default=None,
         description="95 % block-bootstrap interval of value [low, high] in unit (null "
         "when not estimable: a per-drive fit, or a search whose minimum is at the grid's end).",
     )
     per_drive: list[float] | None = Field(
-        None,
+        default=None,
         description="The values per drive axis when identified per drive "
         "(value is then their mean); null: one value shared by every drive.",
     )
     per_drive_stderr: list[float | None] | None = None
     per_drive_delta_bic: float | None = Field(
-        None,
+        default=None,
         description="ΔBIC of the per-drive values over the shared one (on "
         "the shared fit's residual, n − 1 extra parameters); null when not tried.",
     )
@@ -103,7 +111,7 @@ class SignalGap(_M):
 
     trial_id: str
     protocol: str
-    channel: Literal["fx", "fy", "fz"]
+    channel: Channel
     rms_before_N: float
     rms_after_N: float
     heldout_rms_before_N: float
@@ -128,7 +136,7 @@ class BenchmarkNotComputed(_M):
         description="The benchmarks of the trial's protocol left out (one operator computes them together)."
     )
     trial_id: str
-    force: Literal["measured", "twin before", "twin after"]
+    force: ForceSource
     code: str = Field(description="The operator's error code (schemas/1.0/codes.json).")
     message: str
 
@@ -137,7 +145,7 @@ class ResidualCell(_M):
     """Where the residual left lives: one protocol × force axis, its held-out RMS about each trial's mean (N) and share of that energy."""
 
     protocol: str
-    channel: Literal["fx", "fy", "fz"]
+    channel: Channel
     heldout_rms_N: float
     share: float
 
@@ -152,8 +160,8 @@ class StateShape(_M):
     kind: Literal["binned", "periodic"]
     heldout_r2: float = Field(description="1 − SSE/SSE of a constant per trial and axis, on the held-out rows (all axes).")
     description: str
-    period: float | None = Field(None, description="Periodic shapes: the period, in the state's unit (m or rad).")
-    amplitude_N: float | None = Field(None, description="Periodic shapes: the force amplitude, N (all axes).")
+    period: float | None = Field(default=None, description="Periodic shapes: the period, in the state's unit (m or rad).")
+    amplitude_N: float | None = Field(default=None, description="Periodic shapes: the force amplitude, N (all axes).")
     amplitude_per_axis_N: list[float] = Field(default_factory=list)
 
 
@@ -199,7 +207,7 @@ class DiscrepancyFile(_M):
     version: Literal["1.0"] = "1.0"
     session_id: str
     twin_name: str
-    verdict: Literal["explained", "unexplained residual", "no discrepancy"] = Field(
+    verdict: Verdict = Field(
         description="explained: effects accepted, no structure left and the held-out gap not significantly above the "
         "floor; unexplained residual: structure left, or a held-out gap significantly above the floor, that "
         "no library effect explains (see `residual`); no discrepancy: nothing accepted, no structure left "
@@ -215,32 +223,32 @@ class DiscrepancyFile(_M):
     heldout_gap_before_N: float = Field(description="RMS force residual on the held-out blocks, all trials, before.")
     heldout_gap_after_N: float
     floor_N: float | None = Field(
-        None,
+        default=None,
         description="The floor: the one-sided 95 % upper prediction bound of the held-out "
         "gap the updated twin leaves against replays of the session's force protocols that it "
         "generated itself through the virtual rig (the method's resolution: path reconstruction "
         "and sensor noise), from floor_replays_N; null when no trial can be replayed.",
     )
-    heldout_gap_above_floor_before_N: float | None = Field(None, description="√max(gap² − floor², 0) before (N).")
-    heldout_gap_above_floor_after_N: float | None = Field(None, description="√max(gap² − floor², 0) after (N).")
+    heldout_gap_above_floor_before_N: float | None = Field(default=None, description="√max(gap² − floor², 0) before (N).")
+    heldout_gap_above_floor_after_N: float | None = Field(default=None, description="√max(gap² − floor², 0) after (N).")
     floor_replays_N: list[float] = Field(
         default_factory=list, description="The held-out gap of each replay the floor is made from (seeds 0, 1, …), N."
     )
     floor_median_N: float | None = None
     gap_p_value: float | None = Field(
-        None,
+        default=None,
         description="One-sided p-value of 'the held-out gap after is one more draw "
         "of the floor' (Student-t predictive test on the replays' log gaps).",
     )
-    gap_significant: bool | None = Field(None, description="gap_p_value < 0.05, i.e. the gap after is above floor_N.")
+    gap_significant: bool | None = Field(default=None, description="gap_p_value < 0.05, i.e. the gap after is above floor_N.")
     residual: ResidualShape | None = Field(
-        None,
+        default=None,
         description="The residual left, characterised (always computed; it "
         "is what an 'unexplained residual' verdict reports instead of an effect).",
     )
     benchmarks_not_computed: list[BenchmarkNotComputed] = Field(default_factory=list)
     not_observable: dict[str, str] = Field(description="Library effect ids the force residual cannot reveal, and why.")
-    hand_path: dict[str, Literal["motion capture + accelerometer", "motion capture"]] = Field(
+    hand_path: dict[str, PathSource] = Field(
         default_factory=dict,
         description="Per force trial id, what the path driving the twin came from: motion "
         "capture below the crossover and the handle accelerometer above it, or motion capture alone (no "

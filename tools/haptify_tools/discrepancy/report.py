@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import html
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,23 +19,26 @@ from haptify_tools.discrepancy.data import MeasuredTrial
 from haptify_tools.discrepancy.identify import Selection
 from haptify_tools.discrepancy.model import DiscrepancyFile
 
+if TYPE_CHECKING:  # matplotlib is imported when figures are drawn
+    from matplotlib.figure import Figure
 
-def _figures(trials: list[MeasuredTrial], sel: Selection) -> list[tuple[str, str, object]]:
+
+def _figures(trials: list[MeasuredTrial], sel: Selection) -> list[tuple[str, str, Figure]]:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     before, after = sel.initial_sim, sel.final_sim
-    figs = []
-    res = {k: [] for k in ("speed", "z", "x", "rb", "ra")}
+    figs: list[tuple[str, str, Figure]] = []
+    pieces: dict[str, list[np.ndarray]] = {k: [] for k in ("speed", "z", "x", "rb", "ra")}
     for tr in trials:
         v = tr.valid
-        res["speed"].append(tr.speed[v])
-        res["x"].append(tr.position[v, 0])
-        res["z"].append(tr.position[v, 2])
-        res["rb"].append(np.linalg.norm(tr.force - before[tr.trial_id], axis=1)[v])
-        res["ra"].append(np.linalg.norm(tr.force - after[tr.trial_id], axis=1)[v])
+        pieces["speed"].append(tr.speed[v])
+        pieces["x"].append(tr.position[v, 0])
+        pieces["z"].append(tr.position[v, 2])
+        pieces["rb"].append(np.linalg.norm(tr.force - before[tr.trial_id], axis=1)[v])
+        pieces["ra"].append(np.linalg.norm(tr.force - after[tr.trial_id], axis=1)[v])
     if sel.sweeps is not None:
         fig, axes = plt.subplots(1, 3, figsize=(13, 4), sharex=True, sharey=True)
         for ax, (title, pts) in zip(
@@ -57,7 +61,7 @@ def _figures(trials: list[MeasuredTrial], sel: Selection) -> list[tuple[str, str
         )
     if not trials:
         return figs
-    res = {k: np.concatenate(v) for k, v in res.items()}
+    res = {k: np.concatenate(v) for k, v in pieces.items()}
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
     for ax, key, label in ((axes[0], "speed", "handle speed (m/s)"), (axes[1], "z", "height z (m)")):
         ax.plot(res[key], res["rb"], ".", ms=2, alpha=0.4, label="before")
@@ -86,9 +90,7 @@ def _figures(trials: list[MeasuredTrial], sel: Selection) -> list[tuple[str, str
     if stiff:
         fig, ax = plt.subplots(figsize=(6, 4))
         for i, tr in enumerate(stiff):
-            n = np.asarray(tr.rendering["surface_normal"], float)
-            n = n / np.linalg.norm(n)
-            pen = (np.asarray(tr.rendering["surface_point_m"], float) - tr.position) @ n
+            pen, n = tr.penetration()
             c = tr.valid & tr.contact
             lab = (lambda s: s) if i == 0 else (lambda s: None)
             ax.plot(1000 * pen[c], (tr.force @ n)[c], "k.", ms=2, label=lab("measured"))

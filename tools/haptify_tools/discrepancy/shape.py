@@ -219,11 +219,12 @@ def where_it_lives(rows: list[_Rows]) -> list[tuple[str, str, float, float]]:
     for rw in rows:
         x = rw.r[~rw.train] + 0.0
         for k, c in enumerate(CHANNELS):
-            e = cells.setdefault((rw.trial.protocol, c), [0.0, 0.0])
-            e[0] += float(np.sum(x[:, k] ** 2))
-            e[1] += len(x)
+            cell = cells.setdefault((rw.trial.protocol, c), [0.0, 0.0])
+            cell[0] += float(np.sum(x[:, k] ** 2))
+            cell[1] += len(x)
     total = sum(e for e, _ in cells.values()) or 1.0
-    out, acc = [], 0.0
+    out: list[tuple[str, str, float, float]] = []
+    acc = 0.0
     for (proto, c), (e, n) in sorted(cells.items(), key=lambda kv: -kv[1][0]):
         out.append((proto, c, float(np.sqrt(e / max(n, 1))), e / total))
         acc += e / total

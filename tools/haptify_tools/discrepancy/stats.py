@@ -235,9 +235,7 @@ def state_features(tr: MeasuredTrial) -> np.ndarray:
     p = tr.position - tr.position.mean(axis=0)
     cols = [np.ones(len(tr.t)), *p.T, *v.T, *np.tanh(v / 0.005).T, *a.T]
     if tr.active:
-        n = np.asarray(tr.rendering["surface_normal"], float)
-        n = n / np.linalg.norm(n)
-        pen = (np.asarray(tr.rendering["surface_point_m"], float) - tr.position) @ n
+        pen, _ = tr.penetration()
         cols.append(np.where(tr.contact, pen, 0.0))
         cols.append(tr.contact.astype(float))
     return np.column_stack(cols)

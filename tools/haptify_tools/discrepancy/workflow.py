@@ -47,8 +47,11 @@ from haptify_tools.discrepancy.model import (
     BenchmarkGap,
     BenchmarkNotComputed,
     CandidateFit,
+    Channel,
     DiscrepancyFile,
+    ForceSource,
     Place,
+    PlaceKind,
     ResidualCell,
     ResidualShape,
     RoundResult,
@@ -56,13 +59,14 @@ from haptify_tools.discrepancy.model import (
     StateShape,
     Structure,
     WorkspaceGap,
+    Verdict,
     WorkspaceRegion,
 )
 from haptify_tools.twin.model import TwinFile, twin_from_dict, twin_to_dict, write_twin
 
 SPEED_BANDS_M_PER_S = (0.0, 0.02, 0.05, 0.1, 0.2, np.inf)
 MIN_PLACE_SHARE = 0.01  # regions holding fewer rows than this share are not ranked
-CHANNELS = ("fx", "fy", "fz")
+CHANNELS: tuple[Channel, ...] = ("fx", "fy", "fz")
 
 
 def _finite(x: float) -> float | None:
@@ -83,9 +87,9 @@ def localise(trials: list[dt.MeasuredTrial], before: dict, after: dict) -> list[
     n_all = sum(len(rb) for _, _, rb, _ in rows)
     pos_all = np.concatenate([tr.position[v] for tr, v, _, _ in rows])
     cuts = [np.quantile(pos_all[:, k], [1 / 3, 2 / 3]) for k in range(3)]
-    groups: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]] = {}
+    groups: dict[tuple[PlaceKind, str], list[tuple[np.ndarray, np.ndarray]]] = {}
 
-    def add(kind, label, rb, ra):
+    def add(kind: PlaceKind, label: str, rb: np.ndarray, ra: np.ndarray) -> None:
         groups.setdefault((kind, label), []).append((rb, ra))
 
     for tr, v, rb, ra in rows:
@@ -150,12 +154,6 @@ def signal_gaps(design: st.Design, trials: list[dt.MeasuredTrial], before: dict,
     return out
 
 
-def _penetration(tr: dt.MeasuredTrial) -> tuple[np.ndarray, np.ndarray]:
-    n = np.asarray(tr.rendering["surface_normal"], float)
-    n = n / np.linalg.norm(n)
-    return (np.asarray(tr.rendering["surface_point_m"], float) - tr.position) @ n, n
-
-
 #: the benchmarks :func:`benchmark_values` computes per protocol (listed when its operator fails)
 BENCHMARKS_OF = {
     "free_space": ("free_space.force_mean",),
@@ -184,7 +182,7 @@ def benchmark_values(tr: dt.MeasuredTrial, force: np.ndarray, errors: list | Non
                 "N",
             )
         if tr.active:
-            pen, n = _penetration(tr)
+            pen, n = tr.penetration()
             c = v & tr.contact
             if tr.protocol == "frictionless_surface" and c.sum() >= 2:
                 out["surface.planar_force_mean"] = (planar_stats(force[c], n)["mean"], "N")
@@ -204,10 +202,16 @@ def benchmark_gaps(
 ) -> tuple[list[BenchmarkGap], list[BenchmarkNotComputed]]:
     """Benchmarks from the measured force and from the twin's force before and after, per trial, in each metric's unit,
     and those an operator could not compute, with its code (discrepancy README §4)."""
-    out, missing = [], []
+    out: list[BenchmarkGap] = []
+    missing: list[BenchmarkNotComputed] = []
     for tr in trials:
         values = {}
-        for source, force in (("measured", tr.force), ("twin before", before[tr.trial_id]), ("twin after", after[tr.trial_id])):
+        forces: tuple[tuple[ForceSource, np.ndarray], ...] = (
+            ("measured", tr.force),
+            ("twin before", before[tr.trial_id]),
+            ("twin after", after[tr.trial_id]),
+        )
+        for source, force in forces:
             errors: list = []
             values[source] = benchmark_values(tr, force, errors)
             missing += [
@@ -241,8 +245,8 @@ def workspace_gaps(sel: Selection) -> list[WorkspaceGap]:
     and the regions where the sweep and the twin disagree (the Touch's missing lower lobe, paper §VI-A)."""
     from haptify.workspace import volume_solid
 
-    out = []
-    if sel.sweeps is None:
+    out: list[WorkspaceGap] = []
+    if sel.sweeps is None or sel.initial_sweep is None or sel.final_sweep is None:
         return out
     for sw in sel.sweeps.items:
         ok = sw.valid
@@ -401,7 +405,7 @@ def build_result(session_id: str, twin: TwinFile, trials: list[dt.MeasuredTrial]
     )
 
 
-def verdict_of(accepted: bool, structured: bool, gap_significant: bool) -> str:
+def verdict_of(accepted: bool, structured: bool, gap_significant: bool) -> Verdict:
     """The verdict (discrepancy README §3): never "no discrepancy" (nor "explained") while the generic regression finds
     structure left or the held-out gap is significantly above the floor — then "unexplained residual", whatever was
     accepted. The residual's shape describes what is left; it does not decide the verdict."""
@@ -558,7 +562,7 @@ def run_discrepancy(
             else:
                 floor = replay_floors(sel.twin, durations, params=replay_parameters(sel)) if trials else None
         result = with_floor(result, floor)
-        if build is not None:
+        if build is not None and target is not None:  # (one is made with the other)
             files = {"twin": "twin.json"}
             write_twin(annotate_twin(sel.twin, result), build / "twin.json")
             if figures is not None:

@@ -20,13 +20,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from haptify.errors import fail
 from haptify.kinematics import joint_limits
 from haptify.storage import SessionFolder
 from haptify.workspace import measured_points
 
 from haptify_tools.twin.examiner import reach_from_twin
 from haptify_tools.twin.kinematics import hand_to_joints, true_kinematics
-from haptify_tools.twin.model import TwinFile, twin_from_dict, twin_to_dict
+from haptify_tools.twin.model import Box, TwinFile, twin_from_dict, twin_to_dict
 
 EFFECT_ID = "kinematics.base_collision"
 PARAMETER = "base_top_m"
@@ -59,6 +60,20 @@ def _box_index(twin: TwinFile) -> int | None:
     return next((i for i, p in enumerate(prims) if p.shape == "box"), None)
 
 
+def _the_box(twin: TwinFile) -> tuple[int, Box]:
+    """The first box primitive of the twin's collision and its index; E802 when there is none."""
+    prims = twin.effects.kinematics_base_collision.primitives
+    found = next(((i, p) for i, p in enumerate(prims) if isinstance(p, Box)), None)
+    if found is None:
+        raise fail(
+            "E802",
+            f"the twin's {EFFECT_ID} holds no box primitive",
+            pointer=f"/effects/{EFFECT_ID}/primitives",
+            expected="a primitive of shape 'box'",
+        )
+    return found
+
+
 def available(twin: TwinFile) -> bool:
     """The candidate ``kinematics.base_collision`` is offered when the twin's collision is off and its file holds a box primitive (discrepancy README §2)."""
     return not twin.on(EFFECT_ID) and _box_index(twin) is not None
@@ -66,13 +81,13 @@ def available(twin: TwinFile) -> bool:
 
 def box_top(twin: TwinFile) -> tuple[float, float]:
     """(top, bottom) heights of the collision box in the device frame, m (discrepancy README §2, ``base_top_m``)."""
-    box = twin.effects.kinematics_base_collision.primitives[_box_index(twin)]
+    _, box = _the_box(twin)
     return box.center_m[2] + box.half_extents_m[2], box.center_m[2] - box.half_extents_m[2]
 
 
 def apply(twin: TwinFile, top: float) -> TwinFile:
     """A copy of ``twin`` with the base collision on and its box's top at ``top`` m (bottom unchanged) (discrepancy README §2)."""
-    i = _box_index(twin)
+    i, _ = _the_box(twin)
     _, bottom = box_top(twin)
     data = twin_to_dict(twin)
     box = data["effects"][EFFECT_ID]["primitives"][i]

@@ -23,6 +23,7 @@ from fastapi.responses import FileResponse, JSONResponse, PlainTextResponse, Res
 from pydantic import BaseModel, ConfigDict, Field
 from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.types import ASGIApp
 
 from haptify import compare
 from haptify.errors import Finding, HaptifyError
@@ -94,7 +95,7 @@ class TokenBody(BaseModel):
     model_config = ConfigDict(extra="forbid")
     lab: str
     scope: str = "submit"
-    rate_per_minute: int | None = Field(None, ge=1, le=100_000)
+    rate_per_minute: int | None = Field(default=None, ge=1, le=100_000)
 
 
 CSP_PAGES = (
@@ -147,6 +148,14 @@ class SecurityHeaders:
         await self.app(scope, receive, send_with_headers)
 
 
+class _RegistryApp(FastAPI):
+    """The FastAPI app with :class:`SecurityHeaders` outermost, outside ``ServerErrorMiddleware``: 500s get the
+    headers too."""
+
+    def build_middleware_stack(self) -> ASGIApp:
+        return SecurityHeaders(super().build_middleware_stack())
+
+
 def create_app(settings: Settings | None = None, *, registry: Registry | None = None) -> FastAPI:  # noqa: C901 (over ruff's limit of 15: to be split)
     """The registry app for ``settings`` (spec §17.5); migrations and the orphan sweep run here, at start-up."""
     reg = registry or Registry(settings or Settings())
@@ -157,7 +166,7 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
         yield
         reg.close()
 
-    app = FastAPI(
+    app = _RegistryApp(
         title="Haptify results registry",
         version=PACKAGE_VERSION,
         lifespan=lifespan,
@@ -165,8 +174,6 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
     )
     app.state.registry = reg
     app.state.swept = swept
-    build_stack = app.build_middleware_stack
-    app.build_middleware_stack = lambda: SecurityHeaders(build_stack())  # outermost: 500s get the headers too
 
     @app.exception_handler(HaptifyError)
     async def _coded(request: Request, err: HaptifyError) -> JSONResponse:

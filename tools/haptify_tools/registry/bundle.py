@@ -33,7 +33,7 @@ import tarfile
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Final, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
@@ -43,7 +43,7 @@ from haptify.session_format import Id, Rig, is_safe_relative_path
 from haptify.storage import MANIFEST, parse_json_file, pydantic_findings, resolve_inside, sha256_file
 from haptify.versions import SPEC_VERSION
 
-BUNDLE_FORMAT = "haptify-bundle/1"
+BUNDLE_FORMAT: Final = "haptify-bundle/1"
 BUNDLE_JSON = "bundle.json"
 RESULTS_JSON = "results.json"
 CONFORMANCE_JSON = "conformance.json"
@@ -78,7 +78,7 @@ class BundleDevice(BaseModel):
     model_config = ConfigDict(extra="forbid")
     manufacturer: str = Field(min_length=1, max_length=200)
     model: str = Field(min_length=1, max_length=200)
-    serial: str | None = Field(None, max_length=200)
+    serial: str | None = Field(default=None, max_length=200)
 
 
 class Bundle(BaseModel):
@@ -94,7 +94,7 @@ class Bundle(BaseModel):
     session_id: str
     includes_raw: bool = Field(description="True when the session's stream files are included (then the registry re-computes).")
     supersedes: str | None = Field(
-        None, pattern=r"^[0-9a-f]{20}$", description="Id of the lab's earlier submission this one corrects."
+        default=None, pattern=r"^[0-9a-f]{20}$", description="Id of the lab's earlier submission this one corrects."
     )
     files: list[BundleFile] = Field(min_length=2)
 
@@ -373,7 +373,8 @@ def unpack(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits =
                         raise _unsafe(
                             name, f"is a {'symbolic' if member.issym() else 'hard'} link to {member.linkname!r}", "link"
                         )
-                    if not member.isreg():
+                    source = tar.extractfile(member) if member.isreg() else None
+                    if source is None:
                         raise _unsafe(name, "is not a regular file (device, FIFO or other special member)", "special file")
                     if member.issparse():  # its holes would be written as zeros the compressed stream never held
                         raise _unsafe(name, "is a sparse member (its declared size is not in the archive)", "sparse file")
@@ -391,7 +392,6 @@ def unpack(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits =
                         )
                     target = root.joinpath(*name.split("/"))
                     _make_parents(root, name)
-                    source = tar.extractfile(member)
                     digest = hashlib.sha256()
                     fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), FILE_MODE)
                     size = 0

@@ -618,7 +618,7 @@ def implementations(reg) -> list[dict]:
             e["passed" if r.passed else "failed"] += 1
             if r.passed:
                 e["latest_passed"] = r.challenge_id
-                e["families"] = families_of(cases_from_json(s.get(db.Challenge, r.challenge_id).cases_json))
+                e["families"] = families_of(cases_from_json(_row(s, r.challenge_id).cases_json))
     return sorted(out.values(), key=lambda e: (e["name"], e["version"]))
 
 

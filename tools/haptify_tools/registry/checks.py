@@ -15,9 +15,9 @@ import math
 from dataclasses import asdict, dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
 from haptify.errors import Finding, HaptifyError, fail
 from haptify.metric_definitions import MetricDefinition, all_families
@@ -78,7 +78,10 @@ class Checked:
     verification: Verification = field(default_factory=lambda: Verification("unverified", note="not re-computed yet"))
 
 
-def _doc(unpacked: Unpacked, path: str, model: type, limits: Limits):
+_Doc = TypeVar("_Doc", bound=BaseModel)
+
+
+def _doc(unpacked: Unpacked, path: str, model: type[_Doc], limits: Limits) -> _Doc:
     size = unpacked.members[path][0]
     if size > limits.max_json_bytes:
         raise fail("E960", f"{path} is too large", file=path, expected=f"≤ {limits.max_json_bytes} bytes", found=f"{size} bytes")
@@ -190,6 +193,11 @@ def _definitions() -> dict[str, tuple[MetricDefinition, str]]:
 SHAPE_LENGTH = {"vector3": 3, "vector6": 6}
 
 
+def _e966(i: int, member: str, message: str, expected: Any, found: Any) -> Finding:
+    """E966 at ``results.json#/metrics/<i><member>``."""
+    return Finding("E966", message, file=RESULTS_JSON, pointer=f"/metrics/{i}{member}", expected=expected, found=found)
+
+
 def metric_findings(results: ResultsFile) -> list[Finding]:
     """E966 for each metric record that is not a defined metric in its unit, shape and definition version
     (results computed with other definitions are not comparable; spec §17.3)."""
@@ -197,58 +205,25 @@ def metric_findings(results: ResultsFile) -> list[Finding]:
     defs = _definitions()
     seen: set[str] = set()
     for i, m in enumerate(results.metrics):
-        where = {"file": RESULTS_JSON, "pointer": f"/metrics/{i}"}
         if m.id in seen:
-            out.append(Finding("E966", f"metric {m.id} is reported twice", **where, expected="each metric once", found=m.id))
+            out.append(_e966(i, "", f"metric {m.id} is reported twice", "each metric once", m.id))
         seen.add(m.id)
         if m.id not in defs:
             out.append(
-                Finding(
-                    "E966",
-                    f"{m.id!r} is not a metric of spec {SPEC_VERSION}",
-                    file=RESULTS_JSON,
-                    pointer=f"/metrics/{i}/id",
-                    expected="an id from schemas/<v>/metrics",
-                    found=m.id,
-                )
+                _e966(i, "/id", f"{m.id!r} is not a metric of spec {SPEC_VERSION}", "an id from schemas/<v>/metrics", m.id)
             )
             continue
         definition, version = defs[m.id]
         if m.unit != definition.unit:
-            out.append(
-                Finding(
-                    "E966",
-                    f"{m.id} is reported in the wrong unit",
-                    file=RESULTS_JSON,
-                    pointer=f"/metrics/{i}/unit",
-                    expected=definition.unit,
-                    found=m.unit,
-                )
-            )
+            out.append(_e966(i, "/unit", f"{m.id} is reported in the wrong unit", definition.unit, m.unit))
         if m.definition_version != version:
-            out.append(
-                Finding(
-                    "E966",
-                    f"{m.id} was computed with another definition version",
-                    file=RESULTS_JSON,
-                    pointer=f"/metrics/{i}/definition_version",
-                    expected=version,
-                    found=m.definition_version,
-                )
-            )
+            what = f"{m.id} was computed with another definition version"
+            out.append(_e966(i, "/definition_version", what, version, m.definition_version))
         length = SHAPE_LENGTH.get(definition.shape)
         found = len(m.value) if isinstance(m.value, list) else None
         if definition.shape == "scalar" and found is not None or length is not None and found != length:
-            out.append(
-                Finding(
-                    "E966",
-                    f"{m.id} has the wrong shape",
-                    file=RESULTS_JSON,
-                    pointer=f"/metrics/{i}/value",
-                    expected=definition.shape,
-                    found="scalar" if found is None else f"list of {found}",
-                )
-            )
+            shape = "scalar" if found is None else f"list of {found}"
+            out.append(_e966(i, "/value", f"{m.id} has the wrong shape", definition.shape, shape))
     return out
 
 

@@ -231,7 +231,7 @@ def run(args, ui) -> int:
 
 
 def _run(args, ui) -> int:
-    token = args.token or os.environ.get(TOKEN_ENV)
+    token: str = args.token or os.environ.get(TOKEN_ENV, "")
     if not args.dry_run and not (args.registry and token):
         raise fail(
             "E903",

@@ -188,13 +188,14 @@ def pooled_uncertainty(records: Sequence[tuple[int, dict | None]]) -> dict | Non
     uncertainty record)``: the mean weights submission i by wᵢ = nᵢ/N, so u = √Σ(wᵢuᵢ)² with ν by
     Welch–Satterthwaite (GUM G.4) and U = t_{(1+p)/2}(ν)·u. None when any submission lacks a record (such a
     mean is never tied, spec §19.6). The submissions are taken as independent."""
-    if not records or any(r is None or isinstance(r.get("u"), list) for _, r in records):
+    known = [(n, r) for n, r in records if r is not None and not isinstance(r.get("u"), list)]
+    if not records or len(known) < len(records):
         return None
-    total = sum(n for n, _ in records)
-    contributions = [n / total * float(r["u"]) for n, r in records]
-    dofs = [math.inf if r.get("dof_eff") is None else float(r["dof_eff"]) for _, r in records]
+    total = sum(n for n, _ in known)
+    contributions = [n / total * float(r["u"]) for n, r in known]
+    dofs = [math.inf if r.get("dof_eff") is None else float(r["dof_eff"]) for _, r in known]
     nu = float(welch_satterthwaite(contributions, dofs))
-    p = min(float(r["coverage_probability"]) for _, r in records)
+    p = min(float(r["coverage_probability"]) for _, r in known)
     u = math.sqrt(sum(c * c for c in contributions))
     k = coverage_factor(nu, p)
     return {

@@ -72,6 +72,7 @@ def recompute(store: BundleStore, job: Job, limits: Limits) -> dict:
             archive = store.materialize(job.archive, Path(tmp))
         except HaptifyError as err:
             raise StoreUnavailable("; ".join(f.message for f in err.findings)) from None
+        out: dict[str, Any]
         try:
             unpacked, _ = unpack_bundle(archive, Path(tmp) / "bundle", limits)
             results = ResultsFile.model_validate_json(job.results_json)
@@ -147,6 +148,8 @@ def baselines(s: DBSession, ids: list[str], run_id: str) -> dict[str, Baseline]:
         .order_by(db.ReverifyRecord.recorded_at)
     )
     for rec in records:  # oldest first: the latest wins
+        if rec.verification is None:  # (left out by the query; for the type checker)
+            continue
         out[rec.submission_id] = Baseline(_recomputed(json.loads(rec.checks_json)), rec.verification)
     return out
 
@@ -208,7 +211,9 @@ def summarize(s: DBSession, run: db.ReverifyRun) -> Summary:
         s.scalars(select(db.ReverifyRecord).where(db.ReverifyRecord.run_id == run.id).order_by(db.ReverifyRecord.submission_id))
     )
     metrics: dict[str, Counter] = {}
-    changed, failed, transitions = {}, {}, Counter()
+    changed: dict[str, list[str]] = {}
+    failed: dict[str, list[str]] = {}
+    transitions: Counter[str] = Counter()
     for rec in records:
         checks = json.loads(rec.checks_json)
         for c in checks:
@@ -342,7 +347,7 @@ def run_reverify(
         if on_record:
             on_record(sid, status)
     with DBSession(engine) as s:
-        summary = summarize(s, s.get(db.ReverifyRun, run_id))
+        summary = summarize(s, run)
     summary.computed_now, summary.skipped, summary.duplicates_refused = computed, len(recorded), refused
     summary.errors, summary.seconds = errors, time.perf_counter() - t0
     return summary

@@ -452,6 +452,8 @@ class Registry:
                 s.add(row)
         except IntegrityError:  # created meanwhile by another transaction (PostgreSQL)
             row = s.scalar(select(db.Device).where(db.Device.manufacturer == manufacturer, db.Device.model == model))
+            if row is None:  # the conflict was not this device's: the database's error stands
+                raise
         return row
 
     def _store(self, upload: Path, archive_sha: str, archive_size: int, checked: Checked, caller: Caller) -> Outcome:
@@ -612,6 +614,7 @@ class Registry:
             for new, old in s.execute(
                 select(db.Submission.id, db.Submission.supersedes_id).where(db.Submission.supersedes_id.is_not(None))
             )
+            if old is not None  # (the query's own condition, for the type checker)
         }
         from haptify_tools.registry.challenge import cases_from_json, families_of
 
@@ -798,6 +801,7 @@ class Registry:
                         n=m["repetitions"],
                         sd=defined_sd(m["sd"]),
                         definition_version=m["definition_version"],
+                        uncertainty=None,
                     )
                 )
             dev = agg["device"]
@@ -880,7 +884,10 @@ def not_counted(summary: dict, sub: db.Submission) -> list[dict]:
 def defined_sd(sd: float | list[float | None] | None) -> float | list[float] | None:
     """An aggregate's sd as a results file carries it (spec §15.2): a vector metric's sd is given for
     every component or not at all (with one repetition no component has one)."""
-    return None if isinstance(sd, list) and any(v is None for v in sd) else sd
+    if not isinstance(sd, list):
+        return sd
+    components = [v for v in sd if v is not None]
+    return components if len(components) == len(sd) else None
 
 
 def _components(value: Any) -> list[float]:

@@ -23,7 +23,10 @@ from haptify.storage import resolve_inside
 class BundleStore(Protocol):
     """What a worker needs from the registry's storage: one archive as a local file (spec §17.9)."""
 
-    location: str
+    @property
+    def location(self) -> str:
+        """Where the store is, as the workers see it (a folder path today)."""
+        ...
 
     def materialize(self, key: str, work: Path) -> Path:
         """The archive ``key`` as a local file (inside ``work`` when it had to be fetched); E978 when missing."""

@@ -304,7 +304,7 @@ def natural_orientation(
     shape = smooth_noise(rng, t, *f_band, dims=3)
     shape_q = rotation_vector_to_quat(shape * 1e-3)
     w = angular_speed(shape_q, rate_hz) / 1e-3  # angular speed per unit amplitude (small-angle)
-    scale = min(mean_rate / max(np.mean(w), 1e-12), max_rate / max(np.max(w), 1e-12))
+    scale = min(mean_rate / max(float(np.mean(w)), 1e-12), max_rate / max(float(np.max(w)), 1e-12))
     scale = min(scale, 35 * DEG)  # a wrist wanders, it does not spin
     q = quat_multiply(base_quat[None, :], rotation_vector_to_quat(shape * scale))
     return quat_normalize(q)
@@ -413,8 +413,10 @@ def _lift_over_jumps(
     gaps = np.flatnonzero(np.linalg.norm(np.diff(pts, axis=0), axis=1) > jump_m)
     if not len(gaps):
         return tau, pts
-    taus, segs, last = [], [], 0
-    for i in gaps:
+    taus: list[np.ndarray] = []
+    segs: list[np.ndarray] = []
+    last = 0
+    for i in map(int, gaps):
         a, b = pts[i], pts[i + 1]
         top = max(a[2], b[2])
         for _ in range(60):
@@ -791,8 +793,8 @@ def surface_presses(
     top[2] = surface_z + above_m
     edge = reach.free_distance(top, np.array([0.0, 0.0, -1.0]), limit=0.25, steps=1000)
     full = max(edge - edge_margin, above_m + 0.002)
-    depth_frac = []
-    segments = []  # (start_time, duration, z_from, z_to)
+    depth_frac: list[float] = []
+    segments: list[tuple[float, float, float, float]] = []  # (start_time, duration, z_from, z_to)
     now = 0.5
     while True:
         frac = rng.uniform(0.85, 1.0)

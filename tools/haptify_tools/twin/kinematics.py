@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from typing import Literal, overload
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -25,13 +26,17 @@ from haptify_tools.twin.model import Box, Cylinder, HalfSpace, Sphere, TwinFile
 
 def nominal_kinematics(twin: TwinFile) -> Kinematics:
     """The nominal DH chain of the twin (what the device's software and the standard description use).
-    ``device.kinematics``, spec §2.3."""
-    return twin.device.kinematics
+    ``device.kinematics``, spec §2.3; E802 when a twin built in code (not read from a file, whose validation
+    requires it) has none."""
+    kin = twin.device.kinematics
+    if kin is None:
+        raise fail("E802", "the twin's device has no kinematics", pointer="/device/kinematics", expected="a DH chain (TWIN.md)")
+    return kin
 
 
 def true_kinematics(twin: TwinFile) -> Kinematics:
     """The chain the simulated device really has: nominal plus ``kinematics.link_length`` deltas when enabled."""
-    kin = twin.device.kinematics
+    kin = nominal_kinematics(twin)
     eff = twin.effects.kinematics_link_length
     if not eff.enabled or (not any(eff.delta_a_m) and not any(eff.delta_d_m)):
         return kin
@@ -245,7 +250,7 @@ def random_reachable_points(twin: TwinFile, n: int, rng: np.random.Generator) ->
     """``n`` gimbal-centre points ``(n, 3)`` in W, uniform in joint space within the limits, collision-free.
     Positions in m."""
     kin = true_kinematics(twin)
-    out = []
+    out: list[np.ndarray] = []
     while sum(len(o) for o in out) < n:
         q = ref.configurations_from_unit(kin, rng.random((2 * n, len(kin.joints))))
         q = q[~np.isnan(q).any(axis=1)]
@@ -265,6 +270,16 @@ def _arm_end_rotation_W(twin: TwinFile, kin: Kinematics, q: np.ndarray, frames: 
     return r_wd @ r_end @ r_align
 
 
+# scipy's upper-case sequences are intrinsic rotations (gimbal_body.axes, TWIN.md)
+_INTRINSIC: dict[str, Literal["ZXZ", "ZYX", "ZXY", "XYZ", "YZX"]] = {
+    "zxz": "ZXZ",
+    "zyx": "ZYX",
+    "zxy": "ZXY",
+    "xyz": "XYZ",
+    "yzx": "YZX",
+}
+
+
 def gimbal_angles(twin: TwinFile, q: np.ndarray, quaternion_W: np.ndarray, frames: list[np.ndarray] | None = None) -> np.ndarray:
     """The three passive gimbal angles ``(N, 3)`` in rad that give the handle orientation ``quaternion_W``
     (wxyz, handle → W) with the arm at ``q``; sequence ``gimbal_body.axes`` (intrinsic). ``frames``
@@ -275,16 +290,28 @@ def gimbal_angles(twin: TwinFile, q: np.ndarray, quaternion_W: np.ndarray, frame
     rel = np.swapaxes(r_ref, 1, 2) @ r_h
     with warnings.catch_warnings():  # gimbal lock: scipy picks the third angle 0, which is a valid answer
         warnings.simplefilter("ignore", UserWarning)
-        return Rotation.from_matrix(rel).as_euler(twin.gimbal_body.axes.upper())
+        return Rotation.from_matrix(rel).as_euler(_INTRINSIC[twin.gimbal_body.axes])
 
 
 def handle_quaternion(twin: TwinFile, q: np.ndarray, angles: np.ndarray) -> np.ndarray:
     """Handle orientation ``(N, 4)`` wxyz in W from arm angles ``q`` and gimbal angles (inverse of :func:`gimbal_angles`).
     Spec §1.3."""
     r_ref = _arm_end_rotation_W(twin, true_kinematics(twin), q)
-    rel = Rotation.from_euler(twin.gimbal_body.axes.upper(), np.atleast_2d(angles)).as_matrix()
+    rel = Rotation.from_euler(_INTRINSIC[twin.gimbal_body.axes], np.atleast_2d(angles)).as_matrix()
     xyzw = Rotation.from_matrix(r_ref @ rel).as_quat()
     return np.concatenate([xyzw[:, 3:], xyzw[:, :3]], axis=1)
+
+
+@overload
+def hand_to_joints(
+    twin: TwinFile, position_W: np.ndarray, quaternion_W: np.ndarray, strict: bool = False
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+
+
+@overload
+def hand_to_joints(
+    twin: TwinFile, position_W: np.ndarray, quaternion_W: None = None, strict: bool = False
+) -> tuple[np.ndarray, None, np.ndarray]: ...
 
 
 def hand_to_joints(

@@ -27,7 +27,7 @@ from __future__ import annotations
 import copy
 import json
 from pathlib import Path
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, Final, Literal, Union
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
@@ -36,8 +36,8 @@ from haptify.conventions import STANDARD_GRAVITY
 from haptify.errors import fail
 from haptify.session_format import Device, Pose, Vec3
 
-TWIN_FORMAT = "haptify-twin"
-TWIN_VERSION = "1.0"
+TWIN_FORMAT: Final = "haptify-twin"
+TWIN_VERSION: Final = "1.0"
 PRESET_DIR = Path(__file__).resolve().parent / "presets"
 PRESETS: tuple[str, ...] = ("touch", "touch-x")
 
@@ -73,8 +73,8 @@ class _Strict(BaseModel):
 class Effect(_Strict):
     """Common part of every twin effect: the switch and where its numbers come from (twin/TWIN.md, Effects)."""
 
-    enabled: bool = Field(True, description="False switches the effect off (as if the device did not have it).")
-    description: str | None = Field(None, description="What the effect models, in one sentence.")
+    enabled: bool = Field(default=True, description="False switches the effect off (as if the device did not have it).")
+    description: str | None = Field(default=None, description="What the effect models, in one sentence.")
     sources: dict[str, str] = Field(default_factory=dict, description="Parameter name -> where its value comes from.")
 
 
@@ -106,13 +106,13 @@ class CoulombFriction(Effect):
         default_factory=lambda: [0.0, 0.0, 0.0], description="Coulomb torque of the three gimbal joints, N·m."
     )
     ripple_fraction: float = Field(
-        0.0,
+        default=0.0,
         ge=0,
         le=1,
         description="Relative variation of the drive Coulomb torque along the drive angle (cable winding on the capstan drum, motor brushes): τ_c·(1 + r·sin(2π·c·θ)).",
     )
     ripple_cycles_per_rad: float = Field(
-        10.0, gt=0, description="c: ripple cycles per radian of drive angle (capstan output side)."
+        default=10.0, gt=0, description="c: ripple cycles per radian of drive angle (capstan output side)."
     )
 
 
@@ -218,7 +218,7 @@ class BaseCollision(Effect):
 
     primitives: list[Primitive] = Field(default_factory=list)
     clearance_m: float = Field(
-        0.0, ge=0, description="Radius of the end-effector's collision sphere around the gimbal centre, m."
+        default=0.0, ge=0, description="Radius of the end-effector's collision sphere around the gimbal centre, m."
     )
 
 
@@ -254,7 +254,7 @@ class DeviceVibration(Effect):
 
     ref_speed_m_per_s: float = Field(gt=0, description="v_ref of the speed law, m/s.")
     speed_exponent: float = Field(ge=0, description="p of the speed law.")
-    idle_fraction: float = Field(0.0, ge=0, description="RMS at rest as a fraction of the RMS at v_ref.")
+    idle_fraction: float = Field(default=0.0, ge=0, description="RMS at rest as a fraction of the RMS at v_ref.")
     broadband: list[BroadbandSource] = Field(default_factory=list)
     resonances: list[ResonantSource] = Field(default_factory=list)
 
@@ -343,7 +343,7 @@ class GimbalBody(_Strict):
     com_m: Vec3 = Field(description="Centre of mass relative to the gimbal centre, handle frame, m.")
     inertia_kg_m2: Vec3 = Field(description="Principal moments about the COM along the handle axes, kg·m².")
     axes: Literal["zxz", "zyx", "zxy", "xyz", "yzx"] = Field(
-        "zxy", description="Intrinsic rotation sequence of the three gimbal joints relative to the last arm frame."
+        default="zxy", description="Intrinsic rotation sequence of the three gimbal joints relative to the last arm frame."
     )
     alignment: Annotated[list[float], Field(min_length=4, max_length=4)] = Field(
         default_factory=lambda: [1.0, 0.0, 0.0, 0.0],
@@ -357,7 +357,7 @@ class Drive(_Strict):
 
     capstan_ratio: PerJoint = Field(description="Motor angle / drive angle per axis (dimensionless).")
     coupling: list[list[float]] = Field(description="Square matrix C: drive angles θ = C · q (rad).")
-    torque_constant_Nm_per_A: float | None = Field(None, gt=0, description="Motor torque constant, documentation only.")
+    torque_constant_Nm_per_A: float | None = Field(default=None, gt=0, description="Motor torque constant, documentation only.")
 
 
 class BaseBody(_Strict):
@@ -558,9 +558,9 @@ def set_param(twin: TwinFile, path: str, value: Any) -> TwinFile:
                 found=path,
                 expected="<effect id>.<parameter>, effect ids: " + ", ".join(EFFECT_IDS),
             )
-    last = keys[-1]
-    if isinstance(node, list) and last.isdigit():
-        last = int(last)
+    last: str | int = keys[-1]
+    if isinstance(node, list) and keys[-1].isdigit():
+        last = int(keys[-1])
         if last >= len(node):
             raise fail("E801", f"no parameter {path!r} in the twin", found=path)
     elif not isinstance(node, dict) or last not in node:

@@ -29,7 +29,9 @@ import json
 import math
 import threading
 from collections import OrderedDict
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from pydantic import ValidationError
@@ -485,7 +487,7 @@ _DRIVE_ONLY = {
 }
 
 
-def _twin_key(twin: TwinFile, leave_out: dict[str, tuple[str, ...] | None]) -> str:
+def _twin_key(twin: TwinFile, leave_out: Mapping[str, tuple[str, ...] | None]) -> str:
     """The twin as canonical JSON without what ``leave_out`` names, the drive's gearing, the rig and the prose."""
     data = twin_to_dict(twin)
     effects = {}
@@ -517,7 +519,8 @@ class _Memo:
     """
 
     def __init__(self, max_bytes: int) -> None:
-        self.max_bytes, self.items, self.size = max_bytes, OrderedDict(), 0
+        self.max_bytes, self.size = max_bytes, 0
+        self.items: OrderedDict[tuple, tuple[Any, int]] = OrderedDict()  # key → (value, bytes); values of any kind
         self.lock = threading.Lock()  # simulations may run in threads of one process
 
     def clear(self) -> None:
@@ -895,10 +898,10 @@ def device_vibration(twin: TwinFile, t: np.ndarray, speed: np.ndarray, rng: np.r
         w = w / np.linalg.norm(w)
         band = _band_noise(rng, len(t), fs, src.band_hz[0], min(src.band_hz[1], fs / 2), dims=3)
         out += src.rms_at_ref_speed_m_per_s2 * w * band * law[:, None]
-    for src in eff.resonances:
-        w = np.asarray(src.axis_weights, dtype=float)
+    for res in eff.resonances:
+        w = np.asarray(res.axis_weights, dtype=float)
         w = w / np.linalg.norm(w)
         out += (
-            src.rms_at_ref_speed_m_per_s2 * w * _resonance_noise(rng, len(t), fs, src.frequency_hz, src.q_factor) * law[:, None]
+            res.rms_at_ref_speed_m_per_s2 * w * _resonance_noise(rng, len(t), fs, res.frequency_hz, res.q_factor) * law[:, None]
         )
     return out

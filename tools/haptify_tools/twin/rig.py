@@ -474,10 +474,10 @@ def plate_wrench(
         r = quat_to_matrix(q)
         f = (loads[:, c, :] @ r) * errors.gains[c] + bias_force + rng.normal(0.0, cfg.plate_force_noise_N, (n, 3))
         tq = rng.normal(0.0, cfg.plate_torque_noise_Nm, (n, 3))
-        for k, a in enumerate("xyz"):
-            cols[f"c{c + 1}_f{a}"] = f[:, k]
-        for k, a in enumerate("xyz"):
-            cols[f"c{c + 1}_t{a}"] = tq[:, k]
+        for k, ax in enumerate("xyz"):
+            cols[f"c{c + 1}_f{ax}"] = f[:, k]
+        for k, ax in enumerate("xyz"):
+            cols[f"c{c + 1}_t{ax}"] = tq[:, k]
     return cols
 
 

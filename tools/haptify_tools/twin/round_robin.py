@@ -21,7 +21,7 @@ import math
 import os
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
@@ -109,13 +109,13 @@ def draw_labs(twin: TwinFile, base: rg.RigConfig, labs: int, seed: int, spreads:
         ss = np.random.SeedSequence([int(seed) & 0xFFFFFFFF, i, 5725])
         rng = np.random.default_rng(ss)
         z = rng.standard_normal(7)
-        modes = tuple(float(f * (1 + spreads["plate_modes"] * zk)) for f, zk in zip(base.plate_modes_hz, z[3:6]))
+        f1, f2, f3 = (float(f * (1 + spreads["plate_modes"] * zk)) for f, zk in zip(base.plate_modes_hz, z[3:6]))
         rig = replace(
             base,
             ft_gain=float(base.ft_gain * (1 + spreads["ft_gain"] * z[0])),
             ft_gain_drift_sd=float(spreads["ft_gain_drift"]),
             mocap_noise_m=float(base.mocap_noise_m * math.exp(spreads["mocap_noise"] * z[1])),
-            plate_modes_hz=modes,
+            plate_modes_hz=(f1, f2, f3),
         )
         mass = nominal_mass * max(0.0, 1 + spreads["handle_mass"] * z[2])
         pace = math.exp(spreads["examiner_pace"] * z[6])
@@ -153,7 +153,7 @@ def simulate_round_robin(
     out = Path(out_dir)
     if out.exists() and not overwrite:
         raise fail("E901", f"{str(out)!r} already exists", file=str(out))
-    records = []
+    records: list[dict[str, Any]] = []  # labs.json's entries
     with built_in_place(out) as build:
         for lab in draw_labs(twin, options.rig, labs, options.seed, spreads):
             lab_twin = set_param(twin, "handle.connector_mass.mass_kg", lab.connector_mass_kg)

@@ -30,7 +30,7 @@ import zlib
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 
@@ -43,7 +43,7 @@ from haptify_tools.twin import examiner as ex
 from haptify_tools.twin import rig as rg
 from haptify_tools.twin.kinematics import device_to_world, hand_to_joints, link_transforms, true_kinematics
 from haptify_tools.twin.model import TwinFile, twin_to_dict
-from haptify_tools.twin.physics import device_vibration, simulate_active, simulate_passive
+from haptify_tools.twin.physics import ActiveResult, PassiveResult, device_vibration, simulate_active, simulate_passive
 
 #: Device protocols the examiner performs, in recording order; ``figure_eight`` is protocol ``other``.
 DEVICE_PROTOCOLS: tuple[str, ...] = (
@@ -217,6 +217,16 @@ def plan(options: SimulationOptions) -> list[PlannedTrial]:
 # --- simulation of one trial ------------------------------------------------------------------------
 
 
+def _paced(periods_s: tuple[float, float], pace: float) -> tuple[float, float]:
+    """A protocol's first and last period (s) at the examiner's ``pace`` (periods ÷ it)."""
+    return periods_s[0] / pace, periods_s[1] / pace
+
+
+def _no_streams() -> tuple[dict[str, dict[str, np.ndarray]], dict[str, float], dict[str, list[str]], dict[str, float]]:
+    """A trial's streams (kind → columns), rates (Hz), entities and clock offsets (s), before any is made."""
+    return {}, {}, {}, {}
+
+
 @dataclass
 class TrialOutput:
     """The raw streams of one trial (kind → columns incl. ``t``), its truth and its clock offsets.
@@ -254,7 +264,7 @@ class DossierSimulator:
         rig_rng = np.random.default_rng(np.random.SeedSequence([int(options.seed) & 0xFFFFFFFF, zlib.crc32(b"rig")]))
         self.plate_errors = rg.PlateErrors.draw(rig_rng, self.cfg)
         centre = self.reach.centre()
-        self.surface = {
+        self.surface: dict[str, Any] = {  # the trial's rendering block (spec §2.6), also the twin's virtual plane
             "surface_point_m": [float(centre[0]), float(centre[1]), float(centre[2])],
             "surface_normal": [0.0, 0.0, 1.0],
             "stiffness_N_per_m": RENDER_STIFFNESS_N_PER_M,
@@ -316,13 +326,9 @@ class DossierSimulator:
         if name == "local_dynamic":
             return ex.local_oscillations(rng, r, d, rate_hz=rate, t0=t0)
         if name == "figure_eight":
-            return ex.figure_eight(
-                rng, r, d, rate_hz=rate, t0=t0, period_range_s=tuple(x / pace for x in ex.FIGURE_EIGHT_PERIODS_S)
-            )
+            return ex.figure_eight(rng, r, d, rate_hz=rate, t0=t0, period_range_s=_paced(ex.FIGURE_EIGHT_PERIODS_S, pace))
         if name == "frictionless_surface":
-            return ex.surface_circles(
-                rng, r, z, d, rate_hz=rate, t0=t0, period_range_s=tuple(x / pace for x in ex.SURFACE_PERIODS_S)
-            )
+            return ex.surface_circles(rng, r, z, d, rate_hz=rate, t0=t0, period_range_s=_paced(ex.SURFACE_PERIODS_S, pace))
         if name == "stiffness":
             return ex.surface_presses(rng, r, z, d, rate_hz=rate, t0=t0, press_speed=pace * ex.PRESS_SPEED)
         raise ValueError(f"no trajectory for {name!r}")
@@ -333,11 +339,12 @@ class DossierSimulator:
         step = rg.decimation(traj.rate_hz, cfg.ft_rate_hz)
         t1k = traj.t[::step]
         active = p.name in ("frictionless_surface", "stiffness")
+        res: ActiveResult | PassiveResult
         if active:
             res = simulate_active(self.twin, t1k, traj.position_W[::step], traj.quaternion_W[::step], self.surface)
         else:
             res = simulate_passive(self.twin, t1k, traj.position_W[::step], traj.quaternion_W[::step])
-        streams, rates, entities, offsets = {}, {}, {}, {}
+        streams, rates, entities, offsets = _no_streams()
         loads = rg.HandleLoads(res.force_W, res.torque_W)
         gain = trial_ft_gain(cfg, self.opt.seed, p.trial_id)
         streams["handle_wrench"] = {
@@ -373,7 +380,7 @@ class DossierSimulator:
         rates["plate_wrench"] = cfg.plate_rate_hz
         q_step = rg.decimation(cfg.ft_rate_hz, cfg.mocap_rate_hz)
         self._mocap(streams, rates, entities, offsets, traj, res.q[::q_step], rng_rig)
-        if active:
+        if isinstance(res, ActiveResult):
             streams["commanded_wrench"] = {
                 "t": t1k,
                 **{c: res.commanded_W[:, k] for k, c in enumerate(("fx", "fy", "fz", "tx", "ty", "tz"))},
@@ -403,7 +410,7 @@ class DossierSimulator:
             "vibration_W_2kHz": vib,
             **accel_truth,
         }
-        if active:
+        if isinstance(res, ActiveResult):
             arrays.update(
                 {
                     "commanded_W": res.commanded_W,
@@ -424,7 +431,7 @@ class DossierSimulator:
         cfg = self.cfg
         step = rg.decimation(traj.rate_hz, cfg.mocap_rate_hz)
         q, gimbal, ok = hand_to_joints(self.twin, traj.position_W[::step], traj.quaternion_W[::step])
-        streams, rates, entities, offsets = {}, {}, {}, {}
+        streams, rates, entities, offsets = _no_streams()
         self._mocap(streams, rates, entities, offsets, traj, q, rng_rig)
         self._sync(streams, rates, traj.t[:: rg.decimation(traj.rate_hz, cfg.sync_rate_hz)], t0)
         arrays = {
@@ -441,7 +448,7 @@ class DossierSimulator:
     def _handle_calibration(self, p, t0, rng_ex, rng_rig, rng_vib) -> TrialOutput:
         traj = ex.handle_rotation(rng_ex, self.opt.duration(p.name), rate_hz=self.opt.rate_hz, t0=t0)
         cfg = self.cfg
-        streams, rates, entities, offsets = {}, {}, {}, {}
+        streams, rates, entities, offsets = _no_streams()
         t1k = traj.t[:: rg.decimation(traj.rate_hz, cfg.ft_rate_hz)]
         gain = trial_ft_gain(cfg, self.opt.seed, p.trial_id)
         streams["handle_wrench"] = {
@@ -487,7 +494,7 @@ class DossierSimulator:
 
     def _baseline(self, p, t0, rng_ex, rng_rig, rng_vib) -> TrialOutput:
         traj = ex.baseline_wander(rng_ex, self.opt.duration(p.name), rate_hz=self.opt.rate_hz, t0=t0)
-        streams, rates, entities, offsets = {}, {}, {}, {}
+        streams, rates, entities, offsets = _no_streams()
         accel_truth = self._accel(streams, rates, offsets, traj, rng_rig, None)
         self._handle_pose(streams, rates, offsets, traj, rng_rig)
         t1k = traj.t[:: rg.decimation(traj.rate_hz, self.cfg.sync_rate_hz)]
@@ -499,7 +506,7 @@ class DossierSimulator:
         t = load.t if load is not None else ex.clock(duration, cfg.plate_rate_hz, t0)
         force = load.force_W if load is not None else np.zeros((len(t), 3))
         point = load.point_W if load is not None else np.zeros((len(t), 3))
-        streams, rates, entities, offsets = {}, {}, {}, {}
+        streams, rates, entities, offsets = _no_streams()
         streams["plate_wrench"] = {
             "t": t,
             **rg.plate_wrench(

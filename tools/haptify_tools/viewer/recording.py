@@ -55,6 +55,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
+from numpy.typing import ArrayLike
 import rerun as rr
 
 from haptify.conventions import quat_multiply, quat_rotate
@@ -226,6 +227,8 @@ class RrdWriter:
             raise ValueError(f"{e.path}: {e.rows} timestamps but field lengths {bad}")
         if e.static:
             self.rec.log(e.path, *e.static, static=True, strict=True)
+        if e.times_ns is None:  # static only
+            return
         for start in range(0, e.rows, self.chunk_rows):
             stop = min(start + self.chunk_rows, e.rows)
             self.rec.send_columns(e.path, [time_column(e.times_ns[start:stop])], e.columns(start, stop), strict=True)
@@ -271,7 +274,7 @@ def time_column(ns: np.ndarray) -> rr.TimeColumn:
     return rr.TimeColumn(TIMELINE, duration=np.ascontiguousarray(ns, dtype=np.int64).view("timedelta64[ns]"))
 
 
-def xyzw(q_wxyz: np.ndarray) -> np.ndarray:
+def xyzw(q_wxyz: ArrayLike) -> np.ndarray:
     """Our quaternions [w, x, y, z] (spec §1.3) → rerun's [x, y, z, w]."""
     q = np.asarray(q_wxyz, dtype=np.float64)
     return np.concatenate([q[..., 1:], q[..., :1]], axis=-1)
@@ -351,11 +354,12 @@ def compact(entry: Entry) -> Entry:
     fields = {name: np.asarray(v, dtype=np.float32) for name, v in entry.fields.items()}
     times = entry.times_ns
     k = 1 if times is None else decimation_factor(times)
-    if k > 1 and entry.archetype is rr.Scalars:
-        times, fields["scalars"] = envelope(times, fields["scalars"], k)
-    elif k > 1:
-        times = times[::k]
-        fields = {name: v[::k] for name, v in fields.items()}
+    if times is not None and k > 1:
+        if entry.archetype is rr.Scalars:
+            times, fields["scalars"] = envelope(times, fields["scalars"], k)
+        else:
+            times = times[::k]
+            fields = {name: v[::k] for name, v in fields.items()}
     return Entry(
         entry.path,
         static=entry.static,
@@ -578,7 +582,7 @@ class TrialPlanner:
             self.add_series("hand_force/calibrated", hs.t, hs.force, ["fx", "fy", "fz"], "handle_signals", derived=True)
             self.add_series("hand_torque/calibrated", hs.t, hs.torque, ["tx", "ty", "tz"], "handle_signals", derived=True)
             shown = (hs.t, hs.position, hs.force, "handle_signals", "calibrated")
-        elif self.derive and t_pose is not None and self.rig.handle is not None:
+        elif self.derive and t_pose is not None and p is not None and q is not None and self.rig.handle is not None:
             pose = raw_pose_at(t_pose, p, q, t)
             q_sensor = np.asarray(self.rig.handle.ft_sensor.pose.quaternion, dtype=np.float64)
             with np.errstate(invalid="ignore"):
@@ -699,7 +703,7 @@ class TrialPlanner:
         if found is None:
             return
         entities, frame, t = found
-        owner = {}
+        owner: dict[str, str] = {}  # marker → its rigid body
         if self.rig.motion_capture is not None:
             for body in self.rig.motion_capture.rigid_bodies:
                 for m in body.markers:
@@ -745,6 +749,8 @@ class TrialPlanner:
     def surface(self, t_pose: np.ndarray | None, p: np.ndarray | None) -> None:
         """The rendered plane as a translucent rectangle, and the handle's penetration series."""
         r = self.trial.rendering
+        if r is None:  # a trial without a rendered plane has none to draw
+            return
         point = np.asarray(r.surface_point_m, dtype=np.float64)
         normal = np.asarray(r.surface_normal, dtype=np.float64)
         norm = float(np.linalg.norm(normal))
@@ -768,7 +774,7 @@ class TrialPlanner:
                 ],
             )
         )
-        if p is not None:
+        if t_pose is not None and p is not None:
             depth = (point - p) @ normal
             self.add_series("penetration", t_pose, depth, ["depth"], "handle_pose")
         if self.derive and {"commanded_wrench", "handle_wrench", "handle_pose"} <= self.kinds:
@@ -870,7 +876,7 @@ def rig_entries(session: SessionFolder) -> list[Entry]:
         Entry(
             "/world/device",
             static=[
-                rr.Transform3D(translation=placement.position, quaternion=xyzw(placement.quaternion)),
+                rr.Transform3D(translation=placement.position, quaternion=rr.Quaternion(xyzw=xyzw(placement.quaternion))),
                 rr.TransformAxes3D(0.05),
             ],
         )
@@ -917,7 +923,11 @@ def results_markdown(results: ResultsFile, session_id: str) -> str:
 
 
 def session_markdown(
-    session: SessionFolder, trials: list[TrialPlan], other: SessionFolder | None, notes: list[str] = (), derived: str = "full"
+    session: SessionFolder,
+    trials: list[TrialPlan],
+    other: SessionFolder | None,
+    notes: Collection[str] = (),
+    derived: str = "full",
 ) -> str:
     """A summary of the session (and the compared one) and how to read the 3-D view."""
     m = session.manifest
@@ -1022,12 +1032,12 @@ def plan_recording(
         tp = TrialPlan(trial, key, {"measured": trial.id})
         match = counterpart(other, trial) if other is not None else None
         shift = 0
-        if match is not None:  # read before the measured trial's tables are dropped
+        if match is not None and other_streams is not None:  # read before the measured trial's tables are dropped
             shift = trial_start_ns(streams, trial) - trial_start_ns(other_streams, match)
         TrialPlanner(streams, ctx, trial, "measured", key, plan).run()
         if ctx is not None:
             ctx.forget_trial(trial.id)  # each trial is visited once: its derived signals can go
-        if match is not None:
+        if match is not None and other_streams is not None:  # (a match is looked for only with the other session)
             tp.counterpart["compare"] = match.id
             plan.shift_ns = shift
             TrialPlanner(other_streams, other_ctx, match, "compare", key, plan).run()
