@@ -13,12 +13,22 @@ import json
 import sys
 from contextlib import contextmanager
 from importlib.metadata import entry_points
-from typing import Any, Iterator
+from typing import TYPE_CHECKING, Any, Iterator, Protocol
 
 from haptify.errors import Finding, HaptifyError
 from haptify.versions import PACKAGE_VERSION, SCHEMA_VERSION, SPEC_VERSION
 
+if TYPE_CHECKING:
+    #: What a plugin's ``register`` receives: the sub-command parsers of ``haptify``.
+    Subcommands = argparse._SubParsersAction[argparse.ArgumentParser]
+
 EXIT_OK, EXIT_INVALID, EXIT_CANNOT_RUN = 0, 1, 2
+
+
+class Advance(Protocol):
+    """What :meth:`UI.progress` yields: ``n`` more units of work done; ``total`` sets the bar's length once known."""
+
+    def __call__(self, n: float = 1, total: float | None = None) -> None: ...
 
 
 class UI:
@@ -43,7 +53,7 @@ class UI:
             print(text, file=sys.stderr)
 
     @contextmanager
-    def progress(self, description: str, total: float | None) -> Iterator[Any]:
+    def progress(self, description: str, total: float | None) -> Iterator[Advance]:
         """A progress bar on stderr for work that can take more than ~2 s; yields ``advance(n=1, total=None)``
         (``total`` sets the bar's length once the work knows it)."""
         if self.quiet or self.json_mode or not sys.stderr.isatty():
@@ -120,10 +130,10 @@ def split_global_flags(argv: list[str]) -> tuple[list[str], dict[str, bool], str
     return rest, flags, command
 
 
-def _register_broken(sub, name: str, target: str, exc: Exception) -> None:
+def _register_broken(sub: Subcommands, name: str, target: str, exc: Exception) -> None:
     """Keep a plugin that failed to import visible: calling it reports E999 with the cause."""
 
-    def run(args, ui) -> int:
+    def run(args: argparse.Namespace, ui: UI) -> int:
         raise HaptifyError(Finding("E999", f"the '{name}' command ({target}) failed to load: {type(exc).__name__}: {exc}"))
 
     parser = sub.add_parser(name, help=f"(unavailable: {type(exc).__name__})", add_help=False)

@@ -163,14 +163,14 @@ class HWModelFile(_Strict):
         return len(self.outputs)
 
 
-def load_model(path: str | os.PathLike) -> HWModelFile:
+def load_model(path: str | os.PathLike[str]) -> HWModelFile:
     """Read and validate a parameter file (spec §11.5); E702 names the field when it is invalid."""
     from haptify.storage import read_json_model
 
     return read_json_model(path, HWModelFile, "E702")
 
 
-def save_model(model: HWModelFile, path: str | os.PathLike) -> Path:
+def save_model(model: HWModelFile, path: str | os.PathLike[str]) -> Path:
     """Write the parameter file atomically (spec §3.6, §11.5)."""
     from haptify.storage import atomic_write_text
 
@@ -227,7 +227,7 @@ def model_to_mat_dict(model: HWModelFile) -> dict:
     }
 
 
-def export_mat(model: HWModelFile, path: str | os.PathLike) -> Path:
+def export_mat(model: HWModelFile, path: str | os.PathLike[str]) -> Path:
     """Write the model as a MATLAB-loadable ``.mat`` holding the struct ``model`` (spec §11.5.2)."""
     from scipy.io import savemat
 

@@ -214,7 +214,7 @@ def pydantic_findings(exc: ValidationError, code: str, label: str) -> list[Findi
     return out
 
 
-def read_json_model(path: str | os.PathLike, model: type, code: str):
+def read_json_model(path: str | os.PathLike[str], model: type, code: str):
     """Read a JSON file into a pydantic ``model``; a missing, malformed or invalid file is ``code``.
     Spec §0.4.
 
@@ -589,7 +589,7 @@ def _short_text(text: str) -> str:
     return text if len(text) <= 80 else text[:77] + "..."
 
 
-def open_session(path: str | os.PathLike) -> SessionFolder:
+def open_session(path: str | os.PathLike[str]) -> SessionFolder:
     """Open a session folder and parse its manifest (E101–E105); streams are read lazily (spec §3.1)."""
     root = Path(path)
     if not root.is_dir():
@@ -861,7 +861,7 @@ class SessionWriter:
     def build_manifest(self) -> dict:
         return {**self.manifest, "spec_version": SPEC_VERSION, "trials": self._trials}
 
-    def write(self, target: str | os.PathLike, *, overwrite: bool = False) -> Path:
+    def write(self, target: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
         """Write the session folder atomically and return its path."""
         target = Path(target)
         if target.exists() and not overwrite:

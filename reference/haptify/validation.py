@@ -774,7 +774,7 @@ class SessionValidator:
     files are read (:meth:`chunk_rows_for`); the findings do not depend on it.
     """
 
-    def __init__(self, path: str | os.PathLike, chunk_rows: int | None = None) -> None:
+    def __init__(self, path: str | os.PathLike[str], chunk_rows: int | None = None) -> None:
         self.root = Path(path)
         self.chunk_rows = chunk_rows
         self.report = ValidationReport(session=str(path))
@@ -1554,7 +1554,7 @@ def _str_or_none(node: Any, key: str) -> str | None:
 
 
 def validate_session(
-    path: str | os.PathLike, advance: Callable[[int], Any] | None = None, chunk_rows: int | None = None
+    path: str | os.PathLike[str], advance: Callable[[int], Any] | None = None, chunk_rows: int | None = None
 ) -> ValidationReport:
     """Validate a session folder and return every finding (spec chapter 4); never raises for bad input.
 
