@@ -90,7 +90,7 @@ class HandleCalibration:
             source=f"record:{rec.id}",
         )
 
-    def to_record(self, record_id: str, source_trial: str | None = None) -> dict:
+    def to_record(self, record_id: str, source_trial: str | None = None) -> dict[str, Any]:
         """A ``handle_gravity`` record (JSON-ready dict) holding these parameters (spec §2.8)."""
         rec = {
             "kind": "handle_gravity",

@@ -16,6 +16,7 @@ import json
 import sys
 from collections import OrderedDict
 from pathlib import Path
+from typing import Any
 
 from haptify.compute import ComputeContext, compute_session
 from haptify.errors import HaptifyError
@@ -28,7 +29,7 @@ CONTEXTS_KEPT = 4
 _contexts: OrderedDict = OrderedDict()
 
 
-def _context(session: str, parameters: dict, cache: bool) -> ComputeContext:
+def _context(session: str, parameters: dict[str, Any], cache: bool) -> ComputeContext:
     folder = open_session(session)
     if not cache:
         return ComputeContext(session=folder, parameters=dict(parameters))
@@ -43,7 +44,7 @@ def _context(session: str, parameters: dict, cache: bool) -> ComputeContext:
     return ctx
 
 
-def analyse(session: str, metric: str = "", parameters: dict | None = None, *, cache: bool = True) -> dict:
+def analyse(session: str, metric: str = "", parameters: dict[str, Any] | None = None, *, cache: bool = True) -> dict[str, Any]:
     """A results document, or ``{"findings": [...]}`` when the session is rejected (or ``metric == "validate"``).
 
     ``parameters`` are the case's (spec §16.2); ``{"model": "<file in the session>"}`` makes the dynamics

@@ -336,7 +336,9 @@ class LoadedMap:
     label: str
 
 
-def load_map(path: str | Path | None, source: str, overrides: dict | None = None, session_facts: dict | None = None) -> LoadedMap:
+def load_map(
+    path: str | Path | None, source: str, overrides: dict[str, Any] | None = None, session_facts: dict[str, Any] | None = None
+) -> LoadedMap:
     """Read and validate an import map (spec §5.2); ``overrides`` is deep-merged over the file's JSON.
 
     ``session_facts`` (appending, §5.9) fill the ``session`` members the map leaves out. E502 on a
@@ -486,7 +488,7 @@ class Recording:
             return int(self.body_positions.shape[0])
         return int(self.points.shape[0])
 
-    def summary(self) -> dict:
+    def summary(self) -> dict[str, Any]:
         """A JSON-able description of the file (what ``haptify import FORMAT --list`` prints)."""
         return {
             "file": self.path.name,
@@ -969,7 +971,7 @@ def plate_frame(corners_m: np.ndarray, *, file: str, number: int) -> tuple[World
 CORNER_QUADRANTS = {"c1": (1.0, 1.0), "c2": (-1.0, 1.0), "c3": (-1.0, -1.0), "c4": (1.0, -1.0)}
 
 
-def plate_description(platform: C3DPlatform, to_m: Unit, *, file: str) -> tuple[WorldFrame, dict, list[Finding]]:
+def plate_description(platform: C3DPlatform, to_m: Unit, *, file: str) -> tuple[WorldFrame, dict[str, Any], list[Finding]]:
     """W and the rig's ``force_plate`` from a C3D platform (spec §5.6): one corner sensor at each C3D
     corner, named by its quadrant of W (``CORNER_QUADRANTS``), lowered to the depth |ORIGIN z| of the
     platform's sensing origin and oriented as the platform's frame. A W502 finding gives the corners'
@@ -1032,7 +1034,7 @@ _SI_OF_DIMENSION = {"force": "N", "torque": "N*m", "length": "m"}
 
 
 def platform_plate_wrench(
-    rec: Recording, platform: C3DPlatform, pm: PlatformWrenchMap, plate: dict, to_m: Unit, *, label: str
+    rec: Recording, platform: C3DPlatform, pm: PlatformWrenchMap, plate: dict[str, Any], to_m: Unit, *, label: str
 ) -> tuple[dict[str, np.ndarray], list[Finding]]:
     """The ``plate_wrench`` columns (``t`` excluded) of the platform that defines W (spec §5.6.1): its
     outputs (types 1–4, calibration matrix applied) in SI, the wrench moved to the top surface's
@@ -1280,7 +1282,7 @@ def _check_trial_streams(m: ImportMap, kinds: list[str], label: str) -> None:
         )
 
 
-def _resolve_device(m: ImportMap, base: Path, label: str) -> tuple[Device, dict, dict[str, str]]:
+def _resolve_device(m: ImportMap, base: Path, label: str) -> tuple[Device, dict[str, Any], dict[str, str]]:
     """The device, the manifest's device member and the extra files (device.json) to write with it."""
     dev = m.session.device
     if isinstance(dev, Device):
@@ -1304,12 +1306,12 @@ class ImportResult:
     session: Path
     session_id: str
     trial_id: str
-    streams: list[dict]
+    streams: list[dict[str, Any]]
     world_frame: str
-    source: dict
+    source: dict[str, Any]
     warnings: list[Finding] = field(default_factory=list)
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {
             "ok": True,
             "session": str(self.session),
@@ -1345,7 +1347,7 @@ class Destination:
             )
         return cls(out, overwrite=overwrite)
 
-    def session_facts(self) -> dict | None:
+    def session_facts(self) -> dict[str, Any] | None:
         """The existing session's facts, which fill what the map leaves out when appending (§5.9)."""
         if self.existing is None:
             return None
@@ -1385,14 +1387,14 @@ class Destination:
                 found=device.model,
             )
 
-    def rig(self, new_rig: dict, world_rule: str | None, label: str) -> dict:
+    def rig(self, new_rig: dict[str, Any], world_rule: str | None, label: str) -> dict[str, Any]:
         """The rig to write: a new session's own, or the existing rig with this import's parts merged."""
         if self.existing is None:
             return new_rig
         return merge_rig(self.existing, new_rig, world_rule, label)
 
     def writer(
-        self, m: ImportMap, source: Path, rig: dict, device: dict, extra: dict[str, str], recorder: str
+        self, m: ImportMap, source: Path, rig: dict[str, Any], device: dict[str, Any], extra: dict[str, str], recorder: str
     ) -> tuple[SessionWriter, str]:
         """A writer holding the session-level manifest; the trial and streams are added by the caller."""
         stem = sanitize_id(source.stem, "import")
@@ -1431,7 +1433,7 @@ def _plain(value: Any) -> Any:
     return value.model_dump() if isinstance(value, BaseModel) else value
 
 
-def merge_rig(existing: SessionFolder, new_rig: dict, world_rule: str | None, label: str) -> dict:
+def merge_rig(existing: SessionFolder, new_rig: dict[str, Any], world_rule: str | None, label: str) -> dict[str, Any]:
     """The existing session's rig with an appended import's rig parts (spec §5.9).
 
     A part the session already describes must be identical (E502), except ``motion_capture``, whose
@@ -1479,7 +1481,7 @@ def merge_rig(existing: SessionFolder, new_rig: dict, world_rule: str | None, la
     return merged
 
 
-def _merge_motion_capture(old: dict, new: dict, label: str) -> dict:
+def _merge_motion_capture(old: dict[str, Any], new: dict[str, Any], label: str) -> dict[str, Any]:
     pointer = "/session/rig/motion_capture"
     for key in ("rate_hz", "system"):
         if key in old and key in new and old[key] != new[key]:
@@ -1563,7 +1565,7 @@ def _add_trial(writer: SessionWriter, m: ImportMap, stem: str, source: Path, pro
     return trial_id
 
 
-def _stream_summary(stream: dict) -> dict:
+def _stream_summary(stream: dict[str, Any]) -> dict[str, Any]:
     return {
         "kind": stream["kind"],
         "file": stream["file"],
@@ -1644,10 +1646,10 @@ def _prepare(
     out: str | Path | Destination,
     mapping: str | Path | LoadedMap | None,
     source: str,
-    overrides: dict | None,
+    overrides: dict[str, Any] | None,
     overwrite: bool,
     append: bool,
-) -> tuple[Destination, LoadedMap, Device, dict, dict[str, str]]:
+) -> tuple[Destination, LoadedMap, Device, dict[str, Any], dict[str, str]]:
     """Destination, map and device of an import, all checked before the source is read."""
     dest = out if isinstance(out, Destination) else Destination.of(out, overwrite=overwrite, append=append)
     loaded = mapping if isinstance(mapping, LoadedMap) else load_map(mapping, source, overrides, dest.session_facts())
@@ -1758,7 +1760,7 @@ def import_c3d(
     out: str | Path | Destination,
     mapping: str | Path | LoadedMap | None = None,
     *,
-    overrides: dict | None = None,
+    overrides: dict[str, Any] | None = None,
     overwrite: bool = False,
     append: bool = False,
     stream: bool | None = None,
@@ -1778,7 +1780,7 @@ def import_recording(  # noqa: C901 (over ruff's limit of 15: to be split)
     rec: Recording,
     dest: Destination,
     loaded: LoadedMap,
-    device: dict,
+    device: dict[str, Any],
     extra: dict[str, str],
     *,
     chunk_frames: int | None = None,
@@ -1932,7 +1934,7 @@ def import_recording(  # noqa: C901 (over ruff's limit of 15: to be split)
                     found=smap.rate_hz,
                 )
 
-    def streams_of(part: Recording) -> tuple[dict, dict[str, dict[str, np.ndarray]], list[Finding]]:
+    def streams_of(part: Recording) -> tuple[dict[str, Any], dict[str, dict[str, np.ndarray]], list[Finding]]:
         """The trial's streams from the frames of ``part`` (the whole recording, or one chunk of it)."""
         mocap: dict[str, tuple[dict[str, np.ndarray], list[str] | None]] = {}
         analog: dict[str, dict[str, np.ndarray]] = {}
@@ -2094,7 +2096,7 @@ def import_csv(
     out: str | Path | Destination,
     mapping: str | Path | LoadedMap,
     *,
-    overrides: dict | None = None,
+    overrides: dict[str, Any] | None = None,
     overwrite: bool = False,
     append: bool = False,
 ) -> ImportResult:

@@ -21,7 +21,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated, Any, Literal, Sequence, Union
+from typing import TYPE_CHECKING, Annotated, Any, Literal, Sequence, Union
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -33,6 +33,10 @@ from haptify.errors import HaptifyError, fail
 from haptify.filter_bank import FilterBank, lfilter_columns
 from haptify.metric_definitions import family, param
 from haptify.versions import SPEC_VERSION
+
+if TYPE_CHECKING:
+    from haptify.report import ReportFigure
+    from haptify.results import MetricResult, Unavailable
 
 FAMILY = "dynamics"
 MODEL_FORMAT = "haptify-hw-model"
@@ -186,13 +190,13 @@ def _cell(items: list) -> np.ndarray:
     return out
 
 
-def _mat_map(m: PiecewiseLinearMap | UnitGainMap) -> dict:
+def _mat_map(m: PiecewiseLinearMap | UnitGainMap) -> dict[str, Any]:
     if isinstance(m, UnitGainMap):
         return {"Type": "unit_gain", "BreakPoints": np.zeros((2, 0))}
     return {"Type": "piecewise_linear", "BreakPoints": np.array([m.breakpoints, m.values], dtype=float)}
 
 
-def model_to_mat_dict(model: HWModelFile) -> dict:
+def model_to_mat_dict(model: HWModelFile) -> dict[str, Any]:
     """The MATLAB struct written by :func:`export_mat` (field names in spec §11.5.2)."""
     ny, nu = model.ny, model.nu
     B = np.empty((ny, nu), dtype=object)
@@ -487,7 +491,7 @@ class _Record:
     basis: np.ndarray
     segments: list
     starts: np.ndarray
-    _scratch: dict = field(default_factory=dict)
+    _scratch: dict[str, Any] = field(default_factory=dict)
 
     def scratch(self, name: str, rows: int, width: int) -> np.ndarray:
         """A (rows, width) buffer reused from call to call under ``name`` (a fresh array of megabytes per call
@@ -1237,7 +1241,7 @@ def _subset(f: WindowFeatures, mask: np.ndarray) -> WindowFeatures:
     return WindowFeatures(f.position[mask], f.velocity[mask], f.acceleration[mask], f.orientation[mask])
 
 
-def segment_table(model: HWModelFile, train: TrialData, tests: list[TrialData], labels: dict[str, str]) -> list[dict]:
+def segment_table(model: HWModelFile, train: TrialData, tests: list[TrialData], labels: dict[str, str]) -> list[dict[str, Any]]:
     """Every complete, wholly valid 5 s segment of the training and test trials with its kinematic distance to
     the training set and its force error (spec §11.6)."""
     rate = model.sample_rate_hz
@@ -1283,7 +1287,7 @@ def _unavailable_all(code: str, reason: str, ids: list[str]) -> list:
     return [Unavailable(id=i, code=code, reason=reason) for i in ids]
 
 
-def compute(ctx: Any) -> list:
+def compute(ctx: Any) -> list[MetricResult | Unavailable]:
     """The dynamics family's metrics for a session (spec §11.7): training-fit RMS errors and error vs distance."""
     from haptify.results import MetricResult
 
@@ -1304,7 +1308,7 @@ def compute(ctx: Any) -> list:
         return _unavailable_all(err.code, err.findings[0].message, ids)
 
     unit = {m.id: m.unit for m in fam.metrics}
-    out: list = []
+    out: list[MetricResult | Unavailable] = []
     predicted = predict_trial(model, data)
     ok = data.valid & np.all(np.isfinite(predicted), axis=1)  # runs of one row have no prediction
     n = int(ok.sum())
@@ -1388,7 +1392,7 @@ def compute(ctx: Any) -> list:
     return out
 
 
-def report_figures(ctx: Any, results: Any) -> list:
+def report_figures(ctx: Any, results: Any) -> list[ReportFigure]:
     """RMS force error of every 5 s segment against its kinematic distance to the training set, with
     the fitted line (paper Fig. 9; spec §11.7). Drawn from ``dynamics.error_vs_distance``'s diagnostics."""
     import matplotlib.pyplot as plt

@@ -13,7 +13,7 @@ import io
 import math
 from dataclasses import replace
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Iterator
 
 import numpy as np
 import pandas as pd
@@ -91,7 +91,7 @@ def detect_format(path: Path) -> str | None:
     return None
 
 
-def _empty(path: Path, fmt: str, manufacturer: str) -> dict:
+def _empty(path: Path, fmt: str, manufacturer: str) -> dict[str, Any]:
     return {
         "path": path,
         "manufacturer": manufacturer,
@@ -117,7 +117,7 @@ def qtm_rotation(cells: np.ndarray) -> np.ndarray:
     return np.swapaxes(cells.reshape(*cells.shape[:-1], 3, 3), -1, -2)
 
 
-def _qtm_head(lines: list[str], p: Path) -> dict:
+def _qtm_head(lines: list[str], p: Path) -> dict[str, Any]:
     """A QTM TSV's header (spec §5.10): the ``KEY<TAB>value…`` lines, the optional ``Frame`` column
     line, the line where the data start, the markers, bodies and the width of a data row."""
     meta: dict[str, list[str]] = {}
@@ -149,7 +149,7 @@ def _qtm_head(lines: list[str], p: Path) -> dict:
 QTM_PER_BODY = 16  # X, Y, Z, Roll, Pitch, Yaw, Residual, Rot[0]…Rot[8]
 
 
-def _qtm_part(p: Path, head: dict, data: np.ndarray, first_frame: int) -> Recording:
+def _qtm_part(p: Path, head: dict[str, Any], data: np.ndarray, first_frame: int) -> Recording:
     """The recording held by rows ``data`` of a QTM TSV (the whole file, or one chunk of it)."""
     markers, bodies, lead = head["markers"], head["bodies"], head["lead"]
     rec = _empty(p, "tsv", "Qualisys Track Manager")
@@ -222,7 +222,7 @@ def _head_lines(p: Path) -> list[str]:
         raise fail("E501", f"{str(p)!r} cannot be read as UTF-8 text: {exc}", file=str(p)) from None
 
 
-def _data_chunks(p: Path, sep: str, head: dict, rows: int) -> Iterator[np.ndarray]:
+def _data_chunks(p: Path, sep: str, head: dict[str, Any], rows: int) -> Iterator[np.ndarray]:
     """The numeric rows after the header, ``rows`` at a time, parsed as :func:`_table` parses them."""
     try:
         reader = pd.read_csv(
@@ -246,7 +246,7 @@ def _data_chunks(p: Path, sep: str, head: dict, rows: int) -> Iterator[np.ndarra
         raise fail("E501", f"{p.name} cannot be read after line {head['data_start']}: {exc}", file=str(p)) from None
 
 
-def _streamed(p: Path, sep: str, head: dict, part, first_frame_of) -> tuple[Recording, int]:
+def _streamed(p: Path, sep: str, head: dict[str, Any], part, first_frame_of) -> tuple[Recording, int]:
     """A text export opened for streaming: the recording with shape-only frames (NaN views) (their count from one
     pass over the lines) and its chunk reader; also the row count."""
     rows, first = 0, None
@@ -290,7 +290,7 @@ def _is_number(text: str) -> bool:
 MOTIVE_UNITS = {"Millimeters": "mm", "Centimeters": "cm", "Meters": "m"}
 
 
-def _motive_head(lines: list[str], p: Path) -> dict:
+def _motive_head(lines: list[str], p: Path) -> dict[str, Any]:
     """A Motive CSV's header (spec §5.10): the metadata line, the Type, Name, ID, quantity and axis
     lines, the markers and bodies they name, and where the data start."""
     first = [c.strip() for c in lines[0].split(",")] if lines else []
@@ -341,7 +341,7 @@ def _motive_head(lines: list[str], p: Path) -> dict:
     }
 
 
-def _motive_part(p: Path, head: dict, data: np.ndarray, first_frame: int) -> Recording:
+def _motive_part(p: Path, head: dict[str, Any], data: np.ndarray, first_frame: int) -> Recording:
     """The recording held by rows ``data`` of a Motive CSV (the whole file, or one chunk of it)."""
     col, markers, bodies = head["col"], head["markers"], head["bodies"]
     rec = _empty(p, "motive", f"OptiTrack Motive (format {head['meta']['Format Version']})")
@@ -589,7 +589,7 @@ def import_export(
     out: str | Path | Destination,
     mapping: str | Path | LoadedMap | None = None,
     *,
-    overrides: dict | None = None,
+    overrides: dict[str, Any] | None = None,
     overwrite: bool = False,
     append: bool = False,
     stream: bool | None = None,

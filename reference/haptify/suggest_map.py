@@ -11,6 +11,7 @@ from __future__ import annotations
 import csv
 import re
 from pathlib import Path
+from typing import Any
 
 from haptify.importers import UNITS, Recording, sanitize_id
 from haptify.platform_wrench import CHANNEL_DIMENSIONS, PLATFORM_CHANNELS
@@ -61,7 +62,7 @@ def guess_streams(labels: list[str], skip: set[str] = frozenset()) -> tuple[dict
     return streams, left
 
 
-def _complete(streams: dict[str, dict], unplaced: list[str]) -> dict[str, dict]:
+def _complete(streams: dict[str, dict[str, Any]], unplaced: list[str]) -> dict[str, dict[str, Any]]:
     """Keep only streams whose every column was placed; the rest go to ``unplaced``."""
     from haptify.session_format import expected_columns
 
@@ -89,10 +90,10 @@ def _wrench_units_known(rec: Recording, platform) -> bool:
     return all(u is not None and u.dimension == d for u, d in zip(units, dims))
 
 
-def suggest_recording_map(rec: Recording) -> tuple[dict, list[str]]:
+def suggest_recording_map(rec: Recording) -> tuple[dict[str, Any], list[str]]:
     """A map for a motion-capture recording (C3D, TSV, Motive, Nexus) and the notes on what it could not place."""
     unplaced: list[str] = []
-    m: dict = {"source": rec.format, "session": dict(PLACEHOLDER_SESSION), "trial": dict(PLACEHOLDER_TRIAL)}
+    m: dict[str, Any] = {"source": rec.format, "session": dict(PLACEHOLDER_SESSION), "trial": dict(PLACEHOLDER_TRIAL)}
     if rec.point_labels:
         m["markers"] = {"include": list(rec.point_labels)}
         renamed = {lab: sanitize_id(lab, f"m{i + 1}") for i, lab in enumerate(rec.point_labels)}
@@ -100,7 +101,7 @@ def suggest_recording_map(rec: Recording) -> tuple[dict, list[str]]:
             "markers: every point label is imported; which markers form a link's rigid body "
             f"(markers.rigid_bodies) is not in the file ({len(renamed)} ids, e.g. {list(renamed.values())[:3]})"
         )
-    bodies: dict = {}
+    bodies: dict[str, Any] = {}
     for label in rec.body_labels:
         link = LINK_BODY.search(label)
         if HANDLE_BODY.search(label) and "handle" not in bodies:
@@ -150,11 +151,11 @@ def suggest_recording_map(rec: Recording) -> tuple[dict, list[str]]:
     return m, unplaced
 
 
-def _channel(kind: str, column: str, label: str) -> dict | str:
+def _channel(kind: str, column: str, label: str) -> dict[str, Any] | str:
     return {"source": label, "threshold": 2.5} if kind == "sync" else label
 
 
-def suggest_csv_map(path: Path) -> tuple[dict, list[str]]:
+def suggest_csv_map(path: Path) -> tuple[dict[str, Any], list[str]]:
     """A map for a CSV log (§5.7): the header after any preamble, a time column by its name, streams by
     the column rules; every unit is a placeholder, because CSV columns state none."""
     with open(path, encoding="utf-8", newline="") as fh:
@@ -171,7 +172,7 @@ def suggest_csv_map(path: Path) -> tuple[dict, list[str]]:
     if time is None:
         unplaced.append(f"time: no column named like a time among {header}")
     unit = re.search(r"\((s|ms|us)\)|_(s|ms|us)$", time or "")
-    m: dict = {
+    m: dict[str, Any] = {
         "source": "csv",
         "session": dict(PLACEHOLDER_SESSION),
         "trial": dict(PLACEHOLDER_TRIAL),

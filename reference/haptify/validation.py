@@ -781,7 +781,7 @@ class SessionValidator:
         self.raw: Any = None
         self.manifest: Session | None = None  # the parsed session.json, when it validates whole
         self.rig: Rig | None = None
-        self.trials: list[tuple[int, dict, Trial | None]] = []
+        self.trials: list[tuple[int, dict[str, Any], Trial | None]] = []
         self.entries: list[StreamEntry] = []
         self.offsets: dict[str, float] = {}
         self._manifest_ok = False
