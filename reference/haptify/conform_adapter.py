@@ -26,7 +26,7 @@ from haptify.versions import PACKAGE_VERSION
 
 IMPLEMENTATION = {"name": "haptify-reference", "version": PACKAGE_VERSION}
 CONTEXTS_KEPT = 4
-_contexts: OrderedDict = OrderedDict()
+_contexts: OrderedDict[tuple[str, str, str], ComputeContext] = OrderedDict()
 
 
 def _context(session: str, parameters: dict[str, Any], cache: bool) -> ComputeContext:
@@ -41,7 +41,8 @@ def _context(session: str, parameters: dict[str, Any], cache: bool) -> ComputeCo
     _contexts.move_to_end(key)
     ctx = _contexts[key]
     ctx.warnings = []
-    return ctx
+    out: ComputeContext = ctx
+    return out
 
 
 def analyse(session: str, metric: str = "", parameters: dict[str, Any] | None = None, *, cache: bool = True) -> dict[str, Any]:

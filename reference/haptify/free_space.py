@@ -48,7 +48,8 @@ def magnitude_stats(force: np.ndarray) -> dict[str, float]:
 def plate_force_about_weight(force: np.ndarray) -> np.ndarray:
     """Plate force minus (0, 0, mean P_z) — the weight of the device parts resting on the plate (spec §9.3)."""
     force = np.asarray(force, dtype=float)
-    return force - np.array([0.0, 0.0, force[:, 2].mean()])
+    out: np.ndarray = force - np.array([0.0, 0.0, force[:, 2].mean()])
+    return out
 
 
 def exceedance(values: np.ndarray, limit: float) -> float:

@@ -899,7 +899,8 @@ class WorldFrame:
     description: str
 
     def apply(self, p: np.ndarray) -> np.ndarray:
-        return (p - self.centre) @ self.rotation.T
+        out: np.ndarray = (p - self.centre) @ self.rotation.T
+        return out
 
 
 def _meaningless(number: int, why: str, file: str, found: Any) -> HaptifyError:

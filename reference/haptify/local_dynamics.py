@@ -264,7 +264,8 @@ def pwl_eval(breakpoints: np.ndarray, values: np.ndarray, u: np.ndarray) -> np.n
     bp = np.asarray(breakpoints, dtype=float)
     v = np.asarray(values, dtype=float)
     k, s = _segments(bp, np.asarray(u, dtype=float))
-    return v[k] + s * (v[k + 1] - v[k])
+    out: np.ndarray = v[k] + s * (v[k + 1] - v[k])
+    return out
 
 
 def pwl_basis(breakpoints: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -291,7 +292,8 @@ def pwl_slope(breakpoints: np.ndarray, values: np.ndarray, u: np.ndarray) -> np.
     bp = np.asarray(breakpoints, dtype=float)
     v = np.asarray(values, dtype=float)
     k, _ = _segments(bp, np.asarray(u, dtype=float))
-    return (v[k + 1] - v[k]) / (bp[k + 1] - bp[k])
+    out: np.ndarray = (v[k + 1] - v[k]) / (bp[k + 1] - bp[k])
+    return out
 
 
 def apply_map(m: PiecewiseLinearMap | UnitGainMap, u: np.ndarray) -> np.ndarray:
@@ -425,10 +427,12 @@ def place_breakpoints(signal: np.ndarray, count: int, quantiles: tuple[float, fl
     centre = 0.5 * (bp[0] + bp[-1])
     scale = max(1.0, abs(centre))
     if span < 1e-12 * scale:
-        return centre + (np.arange(count) - (count - 1) / 2.0) * 1e-6 * scale
+        out: np.ndarray = centre + (np.arange(count) - (count - 1) / 2.0) * 1e-6 * scale
+        return out
     if np.min(np.diff(bp)) < 1e-9 * span:
         bp = np.linspace(bp[0], bp[-1], count)
-    return bp
+    out: np.ndarray = bp
+    return out
 
 
 @dataclass
@@ -972,7 +976,8 @@ def _assemble(
 def rmse(y: np.ndarray, yhat: np.ndarray) -> np.ndarray:
     """Per-column RMS error of ``yhat`` against ``y`` (same units; spec §11.7)."""
     d = np.asarray(y, dtype=float) - np.asarray(yhat, dtype=float)
-    return np.sqrt(np.mean(d * d, axis=0))
+    out: np.ndarray = np.sqrt(np.mean(d * d, axis=0))
+    return out
 
 
 # =============================================================================================
@@ -1020,7 +1025,8 @@ def window_features(
     m = n_win * window_samples
 
     def means(x: np.ndarray, width: int) -> np.ndarray:
-        return np.asarray(x, dtype=float)[:m].reshape(n_win, window_samples, width).mean(axis=1)
+        out: np.ndarray = np.asarray(x, dtype=float)[:m].reshape(n_win, window_samples, width).mean(axis=1)
+        return out
 
     q = np.asarray(quaternion, dtype=float)[:m].reshape(n_win, window_samples, 4)
     orient = np.array([quat_mean(block) for block in q]) if n_win else np.zeros((0, 4))
@@ -1037,7 +1043,8 @@ def pair_distance(a: WindowFeatures, b: WindowFeatures, scales: DistanceScales) 
     out += cdist(a.position, b.position) / scales.p
     out += cdist(a.velocity, b.velocity) / scales.v
     out += cdist(a.acceleration, b.acceleration) / scales.a
-    return out
+    result: np.ndarray = out
+    return result
 
 
 def nearest_distances(test: WindowFeatures, train: WindowFeatures, scales: DistanceScales, chunk: int = 512) -> np.ndarray:
@@ -1062,7 +1069,8 @@ def nearest_distances(test: WindowFeatures, train: WindowFeatures, scales: Dista
 def segment_distances(window_distances: np.ndarray, windows_per_segment: int) -> np.ndarray:
     """Mean of the window minima over each complete segment (spec §11.6.3); incomplete tail dropped."""
     n_seg = len(window_distances) // windows_per_segment
-    return window_distances[: n_seg * windows_per_segment].reshape(n_seg, windows_per_segment).mean(axis=1)
+    out: np.ndarray = window_distances[: n_seg * windows_per_segment].reshape(n_seg, windows_per_segment).mean(axis=1)
+    return out
 
 
 def segment_force_errors(force: np.ndarray, predicted: np.ndarray, segment_samples: int) -> np.ndarray:
@@ -1070,7 +1078,8 @@ def segment_force_errors(force: np.ndarray, predicted: np.ndarray, segment_sampl
     n_seg = len(force) // segment_samples
     m = n_seg * segment_samples
     d = (np.asarray(force, dtype=float)[:m] - np.asarray(predicted, dtype=float)[:m]).reshape(n_seg, segment_samples, -1)
-    return np.sqrt(np.mean(d * d, axis=1)).mean(axis=1)
+    out: np.ndarray = np.sqrt(np.mean(d * d, axis=1)).mean(axis=1)
+    return out
 
 
 def line_fit(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:

@@ -13,7 +13,7 @@ import io
 import math
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 import pandas as pd
@@ -246,7 +246,13 @@ def _data_chunks(p: Path, sep: str, head: dict[str, Any], rows: int) -> Iterator
         raise fail("E501", f"{p.name} cannot be read after line {head['data_start']}: {exc}", file=str(p)) from None
 
 
-def _streamed(p: Path, sep: str, head: dict[str, Any], part, first_frame_of) -> tuple[Recording, int]:
+def _streamed(
+    p: Path,
+    sep: str,
+    head: dict[str, Any],
+    part: Callable[[Path, dict[str, Any], np.ndarray, int], Recording],
+    first_frame_of: Callable[[np.ndarray], int],
+) -> tuple[Recording, int]:
     """A text export opened for streaming: the recording with shape-only frames (NaN views) (their count from one
     pass over the lines) and its chunk reader; also the row count."""
     rows, first = 0, None
@@ -262,11 +268,10 @@ def _streamed(p: Path, sep: str, head: dict[str, Any], part, first_frame_of) -> 
         else 0
     )
     shape = part(p, head, np.zeros((0, head["width"])), first_frame)
-    shape_only = {"points": np.broadcast_to(np.float64(np.nan), (rows, *shape.points.shape[1:]))}
-    for name in ("body_positions", "body_rotations", "body_residuals"):
-        value = getattr(shape, name)
-        if value is not None:
-            shape_only[name] = np.broadcast_to(np.float64(np.nan), (rows, *value.shape[1:]))
+
+    def shape_only(value: np.ndarray | None) -> np.ndarray | None:
+        """A NaN view with ``rows`` frames of ``value``'s shape (None stays None)."""
+        return None if value is None else np.broadcast_to(np.float64(np.nan), (rows, *value.shape[1:]))
 
     def chunked(chunk: int | None) -> Iterator[tuple[int, Recording]]:
         start = 0
@@ -274,7 +279,15 @@ def _streamed(p: Path, sep: str, head: dict[str, Any], part, first_frame_of) -> 
             yield start, part(p, head, data, first_frame + start)
             start += len(data)
 
-    return replace(shape, chunked=chunked, **shape_only), rows
+    points = np.broadcast_to(np.float64(np.nan), (rows, *shape.points.shape[1:]))
+    return replace(
+        shape,
+        chunked=chunked,
+        points=points,
+        body_positions=shape_only(shape.body_positions),
+        body_rotations=shape_only(shape.body_rotations),
+        body_residuals=shape_only(shape.body_residuals),
+    ), rows
 
 
 def _is_number(text: str) -> bool:
@@ -574,7 +587,7 @@ def read_nexus_csv(path: str | Path) -> Recording:  # noqa: C901 (over ruff's li
     return Recording(**rec)
 
 
-READERS = {"tsv": read_qualisys_tsv, "motive": read_motive_csv, "nexus": read_nexus_csv}
+READERS: dict[str, Callable[..., Recording]] = {"tsv": read_qualisys_tsv, "motive": read_motive_csv, "nexus": read_nexus_csv}
 
 
 def read_export(fmt: str, path: str | Path, *, stream: bool | None = None) -> Recording:
@@ -594,7 +607,7 @@ def import_export(
     append: bool = False,
     stream: bool | None = None,
     chunk_frames: int | None = None,
-    progress=None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> ImportResult:
     """Import a Qualisys TSV, Motive CSV or Nexus CSV export as one trial (spec §5.10), through the
     map rules of a C3D file (:func:`~haptify.importers.import_recording`); ``stream``, ``chunk_frames``

@@ -182,7 +182,8 @@ def wrench_at_origin(kind: int, out: np.ndarray, geometry: PlatformGeometry) -> 
 
 def wrench_at_surface(force: np.ndarray, moment_o: np.ndarray, geometry: PlatformGeometry) -> np.ndarray:
     """The moment about the top surface's centre C: ``M_C = M_O − ORIGIN × F`` (N·m, ``(3, N)``; spec §5.6.1)."""
-    return moment_o - cross(geometry.origin, force)
+    out: np.ndarray = moment_o - cross(geometry.origin, force)
+    return out
 
 
 def equivalent_corners(force_w: np.ndarray, moment_w: np.ndarray, positions: np.ndarray, rotations: np.ndarray) -> np.ndarray:

@@ -46,12 +46,14 @@ def impact_frequencies(ctx_or_session: Any, trial_id: str) -> np.ndarray:
 
 def _row_sums(x: np.ndarray) -> np.ndarray:
     """Sums of the rows of ``x (n, 3)``, (x₀ + x₁) + x₂ — what ``x.sum(axis=1)`` computes, one column at a time."""
-    return x[:, 0] + x[:, 1] + x[:, 2]
+    out: np.ndarray = x[:, 0] + x[:, 1] + x[:, 2]
+    return out
 
 
 def _gravity_dirs_h(raw: np.ndarray, bias: np.ndarray, r_hs: np.ndarray, sign: float) -> np.ndarray:
     v = sign * (np.asarray(raw, float) - bias) @ r_hs.T
-    return v / np.maximum(np.sqrt(_row_sums(v * v)), 1e-300)[:, None]
+    out: np.ndarray = v / np.maximum(np.sqrt(_row_sums(v * v)), 1e-300)[:, None]
+    return out
 
 
 def _best_lag(score: Callable[[float], float], max_lag: float, coarse: float, fine: float, label: str) -> float:

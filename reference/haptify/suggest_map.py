@@ -11,9 +11,9 @@ from __future__ import annotations
 import csv
 import re
 from pathlib import Path
-from typing import Any
+from typing import AbstractSet, Any
 
-from haptify.importers import UNITS, Recording, sanitize_id
+from haptify.importers import UNITS, C3DPlatform, Recording, sanitize_id
 from haptify.platform_wrench import CHANNEL_DIMENSIONS, PLATFORM_CHANNELS
 
 PLACEHOLDER_SESSION = {
@@ -45,7 +45,7 @@ def _key(label: str) -> str:
     return re.sub(r"[\s_\-:.\[\]]", "", re.sub(r"\(.*?\)", "", label)).lower()
 
 
-def guess_streams(labels: list[str], skip: set[str] = frozenset()) -> tuple[dict[str, dict[str, str]], list[str]]:
+def guess_streams(labels: list[str], skip: AbstractSet[str] = frozenset()) -> tuple[dict[str, dict[str, str]], list[str]]:
     """Stream kind → {column: label} for the labels the rules place; the labels left over."""
     streams: dict[str, dict[str, str]] = {}
     left = []
@@ -79,9 +79,11 @@ def _complete(streams: dict[str, dict[str, Any]], unplaced: list[str]) -> dict[s
     return out
 
 
-def _wrench_units_known(rec: Recording, platform) -> bool:
+def _wrench_units_known(rec: Recording, platform: C3DPlatform) -> bool:
     """Whether a platform's channels state the units its type's outputs need (§5.6.1), so that
     ``platform_wrench: {}`` imports it as written."""
+    if platform.type is None:  # no TYPE: no outputs whose units could be known
+        return False
     dims = CHANNEL_DIMENSIONS.get(platform.type)
     chans = platform.channels[: PLATFORM_CHANNELS.get(platform.type, 0)]
     if dims is None or len(chans) < len(dims) or (platform.type == 4 and platform.cal_matrix is None):

@@ -72,7 +72,8 @@ def guarded(t_cmd: np.ndarray, contact: np.ndarray, t_grid: np.ndarray, guard_s:
     lo = np.searchsorted(t_cmd, t_grid - g, side="left")
     hi = np.searchsorted(t_cmd, t_grid + g, side="right")
     inside = (t_grid - g >= t_cmd[0]) & (t_grid + g <= t_cmd[-1])
-    return inside & (hi > lo) & (out_of_contact[hi] - out_of_contact[lo] == 0)
+    out: np.ndarray = inside & (hi > lo) & (out_of_contact[hi] - out_of_contact[lo] == 0)
+    return out
 
 
 @dataclass
@@ -99,12 +100,14 @@ class ContactSignals:
     @property
     def penetration(self) -> np.ndarray:
         """(p0 − p)·n in m: positive below the rendered plane (spec §13.2)."""
-        return (self.plane_point - self.position) @ self.normal
+        out: np.ndarray = (self.plane_point - self.position) @ self.normal
+        return out
 
     @property
     def normal_force(self) -> np.ndarray:
         """F·n in N: positive when the device pushes the hand out of the surface (spec §13.2)."""
-        return self.force @ self.normal
+        out: np.ndarray = self.force @ self.normal
+        return out
 
 
 def contact_signals(ctx_or_session: Any, trial_id: str) -> ContactSignals:
