@@ -23,7 +23,7 @@ import struct
 import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Annotated, Any, Callable, Iterator, Literal, Union
+from typing import Annotated, Any, Callable, Iterator, Literal, TypedDict, Union
 
 import numpy as np
 import pandas as pd
@@ -1160,6 +1160,7 @@ def build_stream_columns(
         if ch.value is not None:
             raw, stated = np.full(n, ch.value, dtype=np.float64), None
         else:
+            assert ch.source is not None  # ChannelMap._one_origin: exactly one of source and value
             raw, stated = read(ch.source)
         unit = ch.unit if ch.unit is not None else stated
         if unit is None and (unit_required or ch.value is not None):
@@ -1668,6 +1669,8 @@ def body_poses(
     """One 6-DoF body as pose columns (spec §5.5): positions (n × 3, m, in W) and unit quaternions
     (n × 4, body → W, w ≥ 0). A sample the file marks invalid, or whose residual exceeds
     ``max_residual``, is occluded: all seven values NaN. E501 when a valid sample is not a rotation."""
+    # every reader that names 6-DoF bodies gives their positions and rotations
+    assert rec.body_positions is not None and rec.body_rotations is not None
     pos = to_m.to_si(rec.body_positions[:, index, :])
     rot = rec.body_rotations[:, index, :, :]
     valid = np.isfinite(pos).all(axis=1) & np.isfinite(rot).all(axis=(1, 2))
@@ -1717,7 +1720,7 @@ def _pose_streams(
     rec: Recording,
     m: ImportMap,
     world: WorldFrame | None,
-    to_m: Unit | None,
+    to_m: Unit,
     t: np.ndarray,
     rigid_bodies: list[RigidBody],
     label: str,
@@ -1844,6 +1847,7 @@ def import_recording(  # noqa: C901 (over ruff's limit of 15: to be split)
                 expected="one plate description",
                 found="two",
             )
+        assert point_unit is not None  # converted above when a platform defines W
         world, rig["force_plate"], plate_warnings = plate_description(rec.platforms[plate_number - 1], point_unit, file=src)
         warnings += plate_warnings
     elif m.lab_to_world is not None:
@@ -1941,6 +1945,7 @@ def import_recording(  # noqa: C901 (over ruff's limit of 15: to be split)
         analog: dict[str, dict[str, np.ndarray]] = {}
         notes: list[Finding] = []
         if chosen or wants_bodies:
+            assert point_unit is not None  # converted above whenever markers or bodies are wanted
             t = (part.point_first_frame + np.arange(part.frames)) / rec.point_rate + m.time_offset_s
             if chosen:
                 pos = point_unit.to_si(part.points[:, chosen, :])
@@ -1958,6 +1963,8 @@ def import_recording(  # noqa: C901 (over ruff's limit of 15: to be split)
             t_an = (part.analog_first_sample + np.arange(n)) / rec.analog_rate + m.time_offset_s
             mapped = _mapped_streams(m, n, _analog_reader(part, label), label=label, source_file=src, unit_required=False)
             if m.platform_wrench is not None:
+                # a platform wrench without a platform is E502 above; a platform's geometry needs the POINT unit
+                assert plate_number is not None and point_unit is not None
                 mapped["plate_wrench"], notes = platform_plate_wrench(
                     part, part.platforms[plate_number - 1], m.platform_wrench, rig["force_plate"], point_unit, label=label
                 )
@@ -1998,11 +2005,19 @@ def import_recording(  # noqa: C901 (over ruff's limit of 15: to be split)
             written.append(writer.add_stream(trial_id, kind, cols, **kw))
 
     for kind, (cols, ents) in mocap_streams.items():
-        fmt = mm.format if kind == "markers" else m.bodies.format  # type: ignore[union-attr]
+        if kind == "markers":
+            fmt = mm.format
+        else:
+            assert m.bodies is not None  # _pose_streams makes the pose streams from the map's bodies
+            fmt = m.bodies.format
         add(kind, cols, rate_hz=rec.point_rate, fmt=fmt, entities=ents)
     for kind, cols in analog_streams.items():
-        smap = m.streams.get(kind)
-        fmt, frame = (smap.format, smap.frame) if smap is not None else (m.platform_wrench.format, None)  # type: ignore[union-attr]
+        stream_map = m.streams.get(kind)
+        if stream_map is not None:
+            fmt, frame = stream_map.format, stream_map.frame
+        else:
+            assert m.platform_wrench is not None  # the one analog stream without a stream map: the platform's wrench
+            fmt, frame = m.platform_wrench.format, None
         add(kind, cols, rate_hz=rec.analog_rate, fmt=fmt, frame=frame)
     if streamed:
 
@@ -2040,6 +2055,20 @@ def _round_significant(x: float, digits: int) -> float:
     return float(f"{x:.{digits}g}")
 
 
+class _CsvReading(TypedDict, total=False):
+    """The options :func:`read_csv_columns` gives pandas' ``read_csv``."""
+
+    sep: str
+    skiprows: int
+    comment: str | None
+    skipinitialspace: bool
+    engine: Literal["c"]
+    encoding: str
+    usecols: list[str]
+    na_values: list[str]
+    keep_default_na: bool
+
+
 def read_csv_columns(path: Path, names: list[str], opts: CsvOptions, *, map_label: str) -> dict[str, np.ndarray]:
     """The named columns of a CSV log as float64 arrays (spec §5.7).
 
@@ -2049,7 +2078,7 @@ def read_csv_columns(path: Path, names: list[str], opts: CsvOptions, *, map_labe
     label = str(path)
     if not path.is_file():
         raise fail("E501", f"{label!r} does not exist or is not a file", file=label)
-    common = {
+    common: _CsvReading = {
         "sep": opts.delimiter,
         "skiprows": opts.skip_rows,
         "comment": opts.comment,
@@ -2066,7 +2095,7 @@ def read_csv_columns(path: Path, names: list[str], opts: CsvOptions, *, map_labe
         if name not in header:
             raise fail("E503", f"{path.name} has no column {name!r}", file=map_label, expected=header, found=name)
     columns = {raw_header[header.index(name)]: name for name in names}
-    numeric = {"usecols": list(columns), "na_values": ["NaN", "nan"], "keep_default_na": False, **common}
+    numeric: _CsvReading = {"usecols": list(columns), "na_values": ["NaN", "nan"], "keep_default_na": False, **common}
     try:  # the fast path: the C parser, correctly rounded (pandas ≥ 3)
         table = pd.read_csv(path, dtype={c: "float64" for c in columns}, **numeric)
     except (OSError, UnicodeDecodeError, pd.errors.ParserError) as exc:
@@ -2114,13 +2143,13 @@ def import_csv(
     if not m.streams:
         raise fail("E502", "a csv map needs at least one stream", file=label, pointer="/streams", expected="streams", found={})
     opts = m.csv or CsvOptions()
-    wanted = [m.time.source] + sorted(
-        {_as_channel(c).source for s in m.streams.values() for c in s.columns.values() if _as_channel(c).source is not None}
-        - {m.time.source}
-    )
+    time = m.time
+    assert time is not None  # load_map requires 'time' of a csv map (E502)
+    sources = {_as_channel(c).source for s in m.streams.values() for c in s.columns.values()}
+    wanted = [time.source] + sorted({named for named in sources if named is not None} - {time.source})
     data = read_csv_columns(src_path, wanted, opts, map_label=label)
-    time_unit = unit_conversion(m.time.unit, "s", file=label, pointer="/time/unit", column=m.time.source)
-    t = time_unit.to_si(data[m.time.source])
+    time_unit = unit_conversion(time.unit, "s", file=label, pointer="/time/unit", column=time.source)
+    t = time_unit.to_si(data[time.source])
     if m.time_offset_s != 0.0:
         t = t + m.time_offset_s
     if t.size < 2:
@@ -2132,11 +2161,11 @@ def import_csv(
         i = int(np.argmax(~np.isfinite(t))) if not np.isfinite(t).all() else int(np.argmax(steps <= 0)) + 1
         raise fail(
             "E203",
-            f"time column {m.time.source!r} of {src_path.name} is not finite and strictly increasing at data row {i + 1}",
+            f"time column {time.source!r} of {src_path.name} is not finite and strictly increasing at data row {i + 1}",
             file=src,
-            column=m.time.source,
+            column=time.source,
             expected="strictly increasing",
-            found=f"{data[m.time.source][i - 1] if i else ''} → {data[m.time.source][i]}",
+            found=f"{data[time.source][i - 1] if i else ''} → {data[time.source][i]}",
         )
 
     def read(name: str) -> tuple[np.ndarray, str | None]:
