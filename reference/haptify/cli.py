@@ -9,69 +9,18 @@ No traceback ever reaches the user: coded errors print as findings, anything els
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-from contextlib import contextmanager
 from importlib.metadata import entry_points
-from typing import TYPE_CHECKING, Any, Iterator, Protocol
+from typing import TYPE_CHECKING
 
 from haptify.errors import Finding, HaptifyError
+from haptify.ui import UI as UI
 from haptify.versions import PACKAGE_VERSION, SCHEMA_VERSION, SPEC_VERSION
 
 if TYPE_CHECKING:
-    #: What a plugin's ``register`` receives: the sub-command parsers of ``haptify``.
-    Subcommands = argparse._SubParsersAction[argparse.ArgumentParser]
+    from haptify.ui import Subcommands
 
 EXIT_OK, EXIT_INVALID, EXIT_CANNOT_RUN = 0, 1, 2
-
-
-class Advance(Protocol):
-    """What :meth:`UI.progress` yields: ``n`` more units of work done; ``total`` sets the bar's length once known."""
-
-    def __call__(self, n: float = 1, total: float | None = None) -> None: ...
-
-
-class UI:
-    """Output policy of one invocation: human text (rich), ``--json`` or ``--quiet`` (spec §0.5)."""
-
-    def __init__(self, json_mode: bool = False, quiet: bool = False) -> None:
-        self.json_mode = json_mode
-        self.quiet = quiet
-
-    def say(self, text: str) -> None:
-        """A human line on stdout (suppressed by --quiet and --json)."""
-        if not (self.quiet or self.json_mode):
-            print(text)
-
-    def emit_json(self, payload: Any) -> None:
-        """The machine-readable result on stdout (only with --json)."""
-        if self.json_mode:
-            print(json.dumps(payload, indent=2, default=_json_default))
-
-    def warn(self, text: str) -> None:
-        if not self.quiet:
-            print(text, file=sys.stderr)
-
-    @contextmanager
-    def progress(self, description: str, total: float | None) -> Iterator[Advance]:
-        """A progress bar on stderr for work that can take more than ~2 s; yields ``advance(n=1, total=None)``
-        (``total`` sets the bar's length once the work knows it)."""
-        if self.quiet or self.json_mode or not sys.stderr.isatty():
-            yield lambda n=1, total=None: None
-            return
-        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
-        with Progress(TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(), transient=True) as bar:
-            task = bar.add_task(description, total=total)
-            yield lambda n=1, total=None: bar.update(task, advance=n, **({} if total is None else {"total": total}))
-
-
-def _json_default(obj: Any) -> Any:
-    if hasattr(obj, "to_dict"):
-        return obj.to_dict()
-    if hasattr(obj, "tolist"):
-        return obj.tolist()
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
 
 
 GLOBAL_FLAGS = {"--json": "json", "--quiet": "quiet", "-q": "quiet"}  # accepted before or after the sub-command

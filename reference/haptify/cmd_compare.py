@@ -11,7 +11,7 @@ from haptify.results import load_results
 from haptify.storage import atomic_write_text
 
 if TYPE_CHECKING:
-    from haptify.cli import UI, Subcommands
+    from haptify.ui import UI, Subcommands
 
 RENDERERS = {"md": to_markdown, "csv": to_csv, "html": to_html_document}
 

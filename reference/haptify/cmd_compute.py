@@ -20,7 +20,7 @@ from haptify.results import ResultsFile
 from haptify.storage import atomic_write_text, parse_json_file
 
 if TYPE_CHECKING:
-    from haptify.cli import UI, Subcommands
+    from haptify.ui import UI, Subcommands
 
 
 def register(sub: Subcommands) -> None:
@@ -122,7 +122,7 @@ def compute_folder(
     """What ``haptify compute`` computes for the session folder ``path``: the session through the gate, every
     (or every ``wanted``) metric (with its uncertainty, chapter 19, when asked), then the rest of its validation
     (spec §15.4, §4.8); ``ui`` shows progress."""
-    from haptify.cli import UI
+    from haptify.ui import UI
 
     return _compute_checked(open_checked_session(path), wanted, parameters or {}, ui or UI(quiet=True), uncertainty)
 

@@ -31,7 +31,7 @@ from haptify.gate import require_valid_session
 from haptify.storage import write_atomically
 
 if TYPE_CHECKING:
-    from haptify.cli import UI, Subcommands
+    from haptify.ui import UI, Subcommands
 
 
 def register(sub: Subcommands) -> None:

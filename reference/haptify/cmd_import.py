@@ -31,7 +31,7 @@ from haptify.importers import (
 from haptify.validation import validate_session
 
 if TYPE_CHECKING:
-    from haptify.cli import UI, Advance, Subcommands
+    from haptify.ui import UI, Advance, Subcommands
 
 # option name -> the map field it fills (for the error that lists what is missing without a map)
 _OPTION_OF_FIELD = {

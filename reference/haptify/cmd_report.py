@@ -15,7 +15,7 @@ from haptify.report import write_report
 from haptify.results import load_results
 
 if TYPE_CHECKING:
-    from haptify.cli import UI, Subcommands
+    from haptify.ui import UI, Subcommands
 
 
 def register(sub: Subcommands) -> None:

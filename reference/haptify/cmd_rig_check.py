@@ -15,7 +15,7 @@ from haptify.rig_checks import check_rig
 from haptify.gate import require_valid_session
 
 if TYPE_CHECKING:
-    from haptify.cli import UI, Subcommands
+    from haptify.ui import UI, Subcommands
 
 
 def register(sub: Subcommands) -> None:

@@ -11,7 +11,7 @@ import argparse
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from haptify.cli import UI, Subcommands
+    from haptify.ui import UI, Subcommands
 
     # the validator (numpy, pandas, Arrow) is imported when the command runs, not for --help
     from haptify.validation import ValidationReport
