@@ -741,7 +741,7 @@ def replace_folder_atomically(build: Path, target: Path, overwrite: bool) -> Non
 class _PendingStream:
     trial_id: str
     stream: dict[str, Any]
-    frame: pd.DataFrame
+    frame: pd.DataFrame | None  # None: a chunked stream, written from :attr:`SessionWriter.chunks`
 
 
 @dataclass
@@ -846,7 +846,7 @@ class SessionWriter:
         stream = self.add_stream(
             trial_id, kind, {c: np.zeros(0) for c, _ in cols}, rate_hz=rate_hz, frame=frame, fmt=fmt, entities=entities
         )
-        self._streams[-1].frame = None  # type: ignore[assignment]
+        self._streams[-1].frame = None
         return stream
 
     def _write_chunks(self, build: Path) -> None:
@@ -860,7 +860,9 @@ class SessionWriter:
             path.parent.mkdir(parents=True, exist_ok=True)
             sinks[kind] = TableSink(path, p.stream["format"], self.compact)
         order = {kind: [c["name"] for c in p.stream["columns"]] for kind, p in pending.items()}
-        for piece in self.chunks():  # type: ignore[misc]
+        if self.chunks is None:
+            raise ValueError("add_chunked_stream was called, but SessionWriter.chunks is not set")
+        for piece in self.chunks():
             for kind, data in piece.items():
                 sinks[kind].write(pd.DataFrame({c: np.asarray(data[c], dtype=np.float64) for c in order[kind]}))
         for kind, p in pending.items():
@@ -879,7 +881,9 @@ class SessionWriter:
         build = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
         try:
             self._write_chunks(build)
-            for pending in (p for p in self._streams if p.frame is not None):
+            for pending in self._streams:
+                if pending.frame is None:  # a chunked stream: written above
+                    continue
                 path = resolve_inside(build, pending.stream["file"])
                 path.parent.mkdir(parents=True, exist_ok=True)
                 write_table(path, pending.frame, pending.stream["format"], compact=self.compact)

@@ -468,7 +468,7 @@ class _Tally:
 
     @property
     def span(self) -> tuple[float, float] | None:
-        return None if self.first is None else (self.first, self.last)  # type: ignore[return-value]
+        return None if self.first is None or self.last is None else (self.first, self.last)
 
 
 @dataclass
@@ -499,7 +499,8 @@ class _TimeScan:
             self.first = float(t[0])
         finite = np.isfinite(t)
         if self.gap_open and finite.any():
-            self.gap[1], self.gap_open = float(t[finite][0]), False  # type: ignore[index]
+            assert self.gap is not None  # the gap is open only once it was found
+            self.gap[1], self.gap_open = float(t[finite][0]), False
         if not finite.all():
             bad = np.flatnonzero(~finite)
             self.non_finite += int(bad.size)
@@ -542,8 +543,8 @@ class _TimeScan:
                     found="NaN or infinity",
                 )
             )
-        if self.reversals:
-            k, a, b = self.first_reversal  # type: ignore[misc]
+        if self.first_reversal is not None:  # noted with the first of the reversals
+            k, a, b = self.first_reversal
             add(
                 Finding(
                     "E203",
@@ -589,10 +590,10 @@ class _TimeScan:
 
     def _gap_span(self) -> tuple[float, float] | None:
         """The finite times around the first non-finite one (either alone when the other does not exist)."""
-        before, after = self.gap  # type: ignore[misc]
-        if before is None and after is None:
-            return None
-        return (before if before is not None else after, after if after is not None else before)  # type: ignore[return-value]
+        before, after = self.gap if self.gap is not None else (None, None)
+        if before is None:
+            return None if after is None else (after, after)
+        return (before, after if after is not None else before)
 
 
 class _ValueScan:
@@ -640,7 +641,9 @@ class _ValueScan:
                 partial.add(t, some & ~every)
                 occluded.add(t, every)
         for k, tally, seen in self.sets:
-            other, _ = values_outside_set(self.stream.kind, self.cols[k], values[:, k])  # type: ignore[misc]
+            outside = values_outside_set(self.stream.kind, self.cols[k], values[:, k])
+            assert outside is not None  # self.sets holds the columns with a closed value set only
+            other, _ = outside
             if other.any():
                 tally.add(t, other)
                 seen[:] = [np.union1d(seen[0], values[other, k]) if seen else np.unique(values[other, k])]
@@ -720,10 +723,12 @@ class _ValueScan:
         for k, tally, seen in self.sets:
             if tally.count:
                 col = cols[k]
+                outside = values_outside_set(s.kind, col, np.empty(0))
+                assert outside is not None  # self.sets holds the columns with a closed value set only
                 add(
                     Finding(
                         "E214",
-                        f"column {col!r} holds {tally.count} values other than {values_outside_set(s.kind, col, np.empty(0))[1]} "  # type: ignore[index]
+                        f"column {col!r} holds {tally.count} values other than {outside[1]} "
                         f"({seen[0].size} distinct, e.g. {float(seen[0][0])!r})",
                         file=label,
                         column=col,
