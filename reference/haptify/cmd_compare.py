@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from haptify.compare import build_table, to_csv, to_html_document, to_markdown
 from haptify.results import load_results

@@ -9,8 +9,8 @@ Outputs are written atomically (spec §3.6) and never overwrite an existing file
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd

@@ -13,8 +13,8 @@ file as one more trial of an existing session, whose facts fill what the map and
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING, Any, Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, Callable
 
 from haptify.errors import HaptifyError, fail
 from haptify.importers import (

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from haptify.compute import ComputeContext, compute_session
 from haptify.families import family_modules

@@ -7,8 +7,8 @@ session lacks the trial or description the check needs). Exit 1 when any check F
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from haptify.compute import ComputeContext
 from haptify.rig_checks import check_rig
