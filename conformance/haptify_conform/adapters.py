@@ -28,7 +28,7 @@ class Answer:
     payload: Any = None
     message: str = ""
     duration_s: float = 0.0
-    implementation: dict[str, str] = field(default_factory=dict)
+    implementation: dict[str, Any] = field(default_factory=dict)
 
 
 def note_implementation(adapter: Adapter, answer: Answer) -> Answer:
@@ -84,7 +84,7 @@ class Adapter(Protocol):
     :class:`Answer` per case, and a close."""
 
     name: str
-    implementation: dict[str, str]
+    implementation: dict[str, Any]
 
     def run(self, case: CaseRequest, session: Path) -> Answer: ...
 
@@ -101,7 +101,7 @@ class CmdAdapter:
     name = "cmd"
 
     def __init__(self, template: str, timeout_s: float) -> None:
-        self.implementation: dict[str, str] = {}
+        self.implementation: dict[str, Any] = {}
         self.argv = shlex.split(template)
         if not any("{session}" in a for a in self.argv) or not any("{out}" in a for a in self.argv):
             raise ValueError("the --cmd template must contain {session} and {out}")
@@ -166,7 +166,7 @@ class JsonlAdapter:
         self.seq = 0
         self.proc: subprocess.Popen[str] | None = None
         self.lines: queue.Queue[str | None] = queue.Queue()
-        self.implementation: dict[str, str] = {}
+        self.implementation: dict[str, Any] = {}
 
     @property
     def restarts(self) -> int:
@@ -286,7 +286,7 @@ class PythonAdapter:
         if not module or not func:
             raise ValueError("--python takes module:function")
         self.func: Callable[[str, str, dict[str, Any]], Any] = getattr(importlib.import_module(module), func)
-        self.implementation: dict[str, str] = {}
+        self.implementation: dict[str, Any] = {}
 
     def run(self, case: CaseRequest, session: Path) -> Answer:
         start = time.perf_counter()
@@ -304,7 +304,7 @@ class PythonAdapter:
 
 def serve_jsonl(
     analyse: Callable[[str, str, dict[str, Any]], dict[str, Any]],
-    implementation: dict[str, str],
+    implementation: dict[str, Any],
     stdin: IO[str] | None = None,
     stdout: IO[str] | None = None,
 ) -> int:

@@ -8,6 +8,7 @@ import xml.etree.ElementTree as ET
 from collections import Counter
 from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -24,7 +25,7 @@ class ReportHeader(BaseModel):
     spec_version: str
     protocol_version: int
     adapter: str
-    implementation: dict[str, str]
+    implementation: dict[str, Any]
     started: str
 
 
@@ -148,7 +149,7 @@ def to_junit(report: ConformReport) -> str:
     return ET.tostring(suite, encoding="unicode", xml_declaration=True) + "\n"
 
 
-def header(adapter: str, implementation: dict[str, str], started: str) -> ReportHeader:
+def header(adapter: str, implementation: dict[str, Any], started: str) -> ReportHeader:
     """The report header: suite, spec and protocol versions, adapter, implementation, start time (spec §16.6)."""
     return ReportHeader(
         suite_version=SUITE_VERSION,
