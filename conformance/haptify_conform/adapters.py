@@ -14,10 +14,9 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import IO, Any, Callable, Protocol
 
 from haptify_conform import PROTOCOL_VERSION
-from haptify_conform.cases import Case
 
 
 @dataclass
@@ -29,10 +28,10 @@ class Answer:
     payload: Any = None
     message: str = ""
     duration_s: float = 0.0
-    implementation: dict = field(default_factory=dict)
+    implementation: dict[str, Any] = field(default_factory=dict)
 
 
-def note_implementation(adapter: Any, answer: Answer) -> Answer:
+def note_implementation(adapter: Adapter, answer: Answer) -> Answer:
     """Remember the ``implementation`` a results document names, for the report header (spec §16.6)."""
     if not getattr(adapter, "implementation", None) and answer.kind == "results":
         named = answer.payload.get("implementation") if isinstance(answer.payload, dict) else None
@@ -67,6 +66,31 @@ class CannotStart(RuntimeError):
     """The implementation's program cannot be started at all (spec §16.6: exit 2, not a failed case)."""
 
 
+class CaseRequest(Protocol):
+    """What an adapter sends of a case (spec §16.4): a suite's :class:`Case` or a registry's challenge task."""
+
+    @property
+    def id(self) -> str: ...
+
+    @property
+    def metric(self) -> str: ...
+
+    @property
+    def parameters(self) -> dict[str, Any]: ...
+
+
+class Adapter(Protocol):
+    """What the runner needs of an adapter (spec §16.4): its name, the implementation it found, one
+    :class:`Answer` per case, and a close."""
+
+    name: str
+    implementation: dict[str, Any]
+
+    def run(self, case: CaseRequest, session: Path) -> Answer: ...
+
+    def close(self) -> None: ...
+
+
 EXIT_NOT_EXECUTABLE, EXIT_NOT_FOUND = 126, 127  # a shell's "cannot execute" and "command not found"
 
 
@@ -77,14 +101,14 @@ class CmdAdapter:
     name = "cmd"
 
     def __init__(self, template: str, timeout_s: float) -> None:
-        self.implementation: dict = {}
+        self.implementation: dict[str, Any] = {}
         self.argv = shlex.split(template)
         if not any("{session}" in a for a in self.argv) or not any("{out}" in a for a in self.argv):
             raise ValueError("the --cmd template must contain {session} and {out}")
         self.timeout_s = timeout_s
         self.answered = False  # has the program run once (then a later 126/127 is that case's error)
 
-    def run(self, case: Case, session: Path) -> Answer:
+    def run(self, case: CaseRequest, session: Path) -> Answer:
         with tempfile.TemporaryDirectory(prefix="haptify-conform-") as tmp:
             out = Path(tmp) / "out.json"
             params = Path(tmp) / "params.json"
@@ -140,9 +164,9 @@ class JsonlAdapter:
         self.max_restarts = max_restarts
         self.starts = 0
         self.seq = 0
-        self.proc: subprocess.Popen | None = None
-        self.lines: queue.Queue = queue.Queue()
-        self.implementation: dict = {}
+        self.proc: subprocess.Popen[str] | None = None
+        self.lines: queue.Queue[str | None] = queue.Queue()
+        self.implementation: dict[str, Any] = {}
 
     @property
     def restarts(self) -> int:
@@ -162,7 +186,8 @@ class JsonlAdapter:
         self.implementation = hello.get("implementation", {})
 
     @staticmethod
-    def _pump(proc: subprocess.Popen, lines: queue.Queue) -> None:
+    def _pump(proc: subprocess.Popen[str], lines: queue.Queue[str | None]) -> None:
+        assert proc.stdout is not None  # opened with stdout=PIPE in _start
         for line in proc.stdout:
             lines.put(line)
         lines.put(None)
@@ -173,7 +198,7 @@ class JsonlAdapter:
             self.proc.wait(timeout=5)
         self.proc = None
 
-    def request(self, message: dict) -> dict:
+    def request(self, message: dict[str, Any]) -> dict[str, Any]:
         """Send one request and wait for the reply with the same ``seq`` (raises TimeoutError / RuntimeError)."""
         self.seq += 1
         message = {"seq": self.seq, **message}
@@ -203,7 +228,7 @@ class JsonlAdapter:
             return reply
 
     # -- cases ----------------------------------------------------------------------------------
-    def run(self, case: Case, session: Path) -> Answer:
+    def run(self, case: CaseRequest, session: Path) -> Answer:
         if self.proc is None or self.proc.poll() is not None:
             if self.starts > self.max_restarts:
                 return Answer("error", message=f"implementation failed more than {self.max_restarts} restarts; not restarted")
@@ -243,6 +268,7 @@ class JsonlAdapter:
             except (TimeoutError, RuntimeError):
                 pass
             try:
+                assert self.proc.stdin is not None  # opened with stdin=PIPE in _start
                 self.proc.stdin.close()
                 self.proc.wait(timeout=5)
             except (OSError, subprocess.TimeoutExpired):
@@ -259,10 +285,10 @@ class PythonAdapter:
         module, _, func = target.partition(":")
         if not module or not func:
             raise ValueError("--python takes module:function")
-        self.func: Callable[[str, str, dict], dict] = getattr(importlib.import_module(module), func)
-        self.implementation: dict = {}
+        self.func: Callable[[str, str, dict[str, Any]], Any] = getattr(importlib.import_module(module), func)
+        self.implementation: dict[str, Any] = {}
 
-    def run(self, case: Case, session: Path) -> Answer:
+    def run(self, case: CaseRequest, session: Path) -> Answer:
         start = time.perf_counter()
         try:
             document = self.func(str(session), case.metric, dict(case.parameters))
@@ -276,7 +302,12 @@ class PythonAdapter:
         pass
 
 
-def serve_jsonl(analyse: Callable[[str, str, dict], dict], implementation: dict, stdin=None, stdout=None) -> int:
+def serve_jsonl(
+    analyse: Callable[[str, str, dict[str, Any]], dict[str, Any]],
+    implementation: dict[str, Any],
+    stdin: IO[str] | None = None,
+    stdout: IO[str] | None = None,
+) -> int:
     """Serve the JSON-lines protocol for a Python ``analyse`` function (used by the reference server).
     Protocol 1 of spec §16.4.2."""
     import sys
@@ -284,7 +315,7 @@ def serve_jsonl(analyse: Callable[[str, str, dict], dict], implementation: dict,
     stdin = stdin or sys.stdin
     stdout = stdout or sys.stdout
 
-    def reply(obj: dict) -> None:
+    def reply(obj: dict[str, Any]) -> None:
         stdout.write(json.dumps(obj, default=str) + "\n")
         stdout.flush()
 

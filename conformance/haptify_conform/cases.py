@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -24,12 +25,12 @@ class Suite:
     repo: Path
 
 
-def find_suite(option: Path | None = None, environ: dict[str, str] | None = None) -> Suite:
+def find_suite(option: Path | None = None, environ: Mapping[str, str] | None = None) -> Suite:
     """The suite named by ``--suite DIR``, else by ``$HAPTIFY_CONFORMANCE_SUITE``, else the source checkout
     this package lies in (spec §16.1). DIR is a checkout of the standard (or its suite archive, unpacked):
     it holds ``conformance/cases/`` and ``fixtures/``. Raises ValueError saying where it looked."""
-    environ = os.environ if environ is None else environ
-    named = option or (Path(environ[SUITE_ENV]) if environ.get(SUITE_ENV) else None)
+    env: Mapping[str, str] = os.environ if environ is None else environ
+    named = option or (Path(env[SUITE_ENV]) if env.get(SUITE_ENV) else None)
     candidates = [named] if named is not None else [REPO_ROOT]
     for root in candidates:
         if (root / "conformance" / "cases").is_dir() and (root / "fixtures").is_dir():

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from haptify_conform.adapters import Answer
+from haptify_conform.adapters import Adapter, Answer
 
 TIMEOUT_S = 300.0
 
@@ -35,7 +35,7 @@ class Task:
 
     id: str
     metric: str
-    parameters: dict = field(default_factory=dict)
+    parameters: dict[str, Any] = field(default_factory=dict)
 
 
 def _call(url: str, token: str, body: Any = None, *, raw: bool = False) -> Any:
@@ -62,22 +62,23 @@ def _call(url: str, token: str, body: Any = None, *, raw: bool = False) -> Any:
     return payload if raw else json.loads(payload)
 
 
-def output_of(answer: Answer) -> dict:
+def output_of(answer: Answer) -> dict[str, Any]:
     """What is sent for one case: the results document, the findings of a rejection, or ``{"error"}``."""
     if answer.kind == "results":
-        return answer.payload
+        results: dict[str, Any] = answer.payload  # classify() answers "results" for a JSON object only
+        return results
     if answer.kind == "rejected":
         return {"findings": answer.payload}
     return {"error": f"{answer.kind}: {answer.message}"}
 
 
-def run_challenge(registry: str, token: str, adapter) -> dict:
+def run_challenge(registry: str, token: str, adapter: Adapter) -> dict[str, Any]:
     """Fetch a challenge from ``registry``, run ``adapter`` on each case and return the registry's judged
     record (spec §17.8). Raises :class:`ChallengeError` when it cannot be done."""
     base = registry.rstrip("/") + "/api/v1"
     issued = _call(f"{base}/challenges", token, {})
     archive = _call(f"{base}/challenges/{issued['id']}/sessions.tar.gz", token, raw=True)
-    answers: dict[str, dict] = {}
+    answers: dict[str, dict[str, Any]] = {}
     try:
         with tempfile.TemporaryDirectory(prefix="haptify-challenge-") as tmp:
             root = Path(tmp)
@@ -96,7 +97,8 @@ def run_challenge(registry: str, token: str, adapter) -> dict:
             "results' 'implementation'), so the registry cannot record whose answer this is"
         )
     body = {"implementation": {"name": implementation["name"], "version": implementation["version"]}, "answers": answers}
-    return _call(f"{base}/challenges/{issued['id']}/answers", token, body)
+    record: dict[str, Any] = _call(f"{base}/challenges/{issued['id']}/answers", token, body)
+    return record
 
 
 def _g(value: Any) -> str:
@@ -104,7 +106,7 @@ def _g(value: Any) -> str:
     return f"[{', '.join(_g(v) for v in value)}]" if isinstance(value, list) else f"{value:.6g}"
 
 
-def summary(record: dict) -> str:
+def summary(record: dict[str, Any]) -> str:
     """One line per case and a verdict line, for people."""
     result = record["result"]
     lines = [

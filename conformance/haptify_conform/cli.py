@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 from haptify_schemas import SPEC_VERSION
-from haptify_conform.adapters import CannotStart, CmdAdapter, JsonlAdapter, PythonAdapter
+from haptify_conform.adapters import Adapter, CannotStart, CmdAdapter, JsonlAdapter, PythonAdapter
 from haptify_conform.cases import SUITE_ENV, find_suite, load_cases, select
 from haptify_conform.coverage import coverage_table, suite_coverage
 from haptify_conform.lint import lint
@@ -58,7 +58,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def make_adapter(args):
+def make_adapter(args: argparse.Namespace) -> Adapter:
     """The adapter the arguments name: ``--cmd``, ``--jsonl`` or ``--python`` (spec §16.4)."""
     if args.cmd:
         return CmdAdapter(args.cmd, args.timeout)
@@ -132,7 +132,7 @@ def main(argv: list[str] | None = None) -> int:
     return 0 if report.summary.conforms else 1
 
 
-def run_challenge_command(args) -> int:
+def run_challenge_command(args: argparse.Namespace) -> int:
     """``--challenge URL``: answer a registry's challenge with the implementation; 0 passed, 1 failed, 2 not run."""
     import os
 

@@ -14,6 +14,7 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from haptify_conform.cases import Case, case_files, load_cases
 from haptify_conform.requirements import Requirement, all_requirements
@@ -56,7 +57,7 @@ class Coverage:
         return best is not None and best[2] >= DISTINGUISHING_RATIO
 
 
-def load_mutant_results(cases_root: Path) -> tuple[dict[str, dict], str | None]:
+def load_mutant_results(cases_root: Path) -> tuple[dict[str, dict[str, Any]], str | None]:
     """The mutants of ``results.json`` (name → record) and a problem line when the file is missing or stale."""
     path = cases_root / MUTANT_RESULTS
     where = f"{cases_root.name}/{MUTANT_RESULTS.as_posix()}"
@@ -68,7 +69,7 @@ def load_mutant_results(cases_root: Path) -> tuple[dict[str, dict], str | None]:
     return data.get("mutants", {}), None
 
 
-def coverage(cases: list[Case], mutants: dict[str, dict]) -> list[Coverage]:
+def coverage(cases: list[Case], mutants: dict[str, dict[str, Any]]) -> list[Coverage]:
     """Every requirement with the cases listing it and its mutants' failures on those cases. A failure
     without a comparable value (the metric missing or unavailable, the session rejected) counts as infinitely
     far: the mistake cannot pass unnoticed."""

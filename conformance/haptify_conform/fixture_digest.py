@@ -81,7 +81,7 @@ def _csv_tokens(raw: bytes) -> Any:
     return {"csv": [[field(t) for t in line.split(",")] for line in text.split("\n")]}
 
 
-def logical_snapshot(root: Path, values: bool = False) -> dict:
+def logical_snapshot(root: Path, values: bool = False) -> dict[str, Any]:
     """The content of a fixture tree independent of timestamps and of the Parquet writer's version.
 
     JSON files are parsed (each Parquet ``sha256`` replaced by whether it matches its file), Parquet files

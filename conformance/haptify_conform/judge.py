@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypedDict
 
 from haptify_conform.cases import Case
 
@@ -24,7 +24,21 @@ class Verdict:
     duration_s: float = 0.0
     spec_section: str = ""
     level: str = "MUST"
-    extra: dict = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class CaseFields(TypedDict):
+    """What every verdict of a case repeats from the case (spec §16.6)."""
+
+    case_id: str
+    metric: str
+    spec_section: str
+    level: str
+
+
+def case_fields(case: Case) -> CaseFields:
+    """The fields a verdict of ``case`` copies from it, to be spread into :class:`Verdict`."""
+    return CaseFields(case_id=case.id, metric=case.metric, spec_section=case.spec_section, level=case.level)
 
 
 def _components(value: Any) -> list[float] | None:
@@ -37,10 +51,10 @@ def _components(value: Any) -> list[float] | None:
     return None
 
 
-def judge_metric(case: Case, results: dict) -> Verdict:
+def judge_metric(case: Case, results: dict[str, Any]) -> Verdict:
     """Compare the metric record in ``results`` (a results.json object) with the case's expectation.
     Spec §16.3."""
-    base = dict(case_id=case.id, metric=case.metric, spec_section=case.spec_section, level=case.level)
+    base = case_fields(case)
     if case.expected.codes:
         return Verdict(
             status="failed",
@@ -60,13 +74,13 @@ def judge_metric(case: Case, results: dict) -> Verdict:
     return _judge_number(case, record.get("value"), base, unit=record.get("unit"))
 
 
-def _uncertainty_of(record: dict, quantity: str) -> Any:
+def _uncertainty_of(record: dict[str, Any], quantity: str) -> Any:
     """``u``, ``U`` or ``k`` of a metric record's uncertainty (spec §19.4); None when it has none."""
     unc = record.get("uncertainty")
     return unc.get(quantity) if isinstance(unc, dict) else None
 
 
-def _judge_number(case: Case, found: Any, base: dict, unit: str | None) -> Verdict:
+def _judge_number(case: Case, found: Any, base: CaseFields, unit: str | None) -> Verdict:
     """``found`` against the case's expected value and tolerance; ``unit`` (the record's) must match the
     case's unless None (an uncertainty's unit is its metric's, a coverage factor's is 1). Spec §16.3."""
     what = "value" if case.quantity == "value" else f"uncertainty {case.quantity}"
@@ -90,6 +104,10 @@ def _judge_number(case: Case, found: Any, base: dict, unit: str | None) -> Verdi
     if any(math.isnan(a) or math.isinf(a) for a in actual):
         return Verdict(status="failed", message=f"{what} is NaN or infinite", actual=found, **base)
     tol = case.tolerance
+    if tol is None:  # the suite's lint rejects such a case (spec §16.2); a run of an unlinted suite says so
+        return Verdict(
+            status="error", message=f"case {case.id} states no tolerance: a metric case needs one (spec §16.2)", **base
+        )
     abs_err = [abs(a - e) for a, e in zip(actual, expected)]
     rel_err = [d / abs(e) if e else (0.0 if d == 0 else math.inf) for d, e in zip(abs_err, expected)]
     ok = all(d <= tol.abs + tol.rel * abs(e) for d, e in zip(abs_err, expected))
@@ -103,10 +121,10 @@ def _judge_number(case: Case, found: Any, base: dict, unit: str | None) -> Verdi
     return verdict
 
 
-def judge_rejection(case: Case, findings: list[dict]) -> Verdict:
+def judge_rejection(case: Case, findings: list[Any]) -> Verdict:
     """The implementation rejected the session with ``findings``: right when the case expects it.
     Spec §16.3."""
-    base = dict(case_id=case.id, metric=case.metric, spec_section=case.spec_section, level=case.level)
+    base = case_fields(case)
     codes = sorted({str(f.get("code")) for f in findings if isinstance(f, dict)})
     if not case.expected.codes or case.expected.valid:
         return Verdict(
@@ -126,14 +144,14 @@ def judge_rejection(case: Case, findings: list[dict]) -> Verdict:
     return Verdict(status="passed", actual=codes, **base)
 
 
-def judge_acceptance(case: Case, report: dict) -> Verdict:
+def judge_acceptance(case: Case, report: dict[str, Any]) -> Verdict:
     """A 'validate' case on a valid session: the implementation must accept it (no error findings).
     Spec §16.3.
 
     With ``valid: true`` and ``codes`` (a session that is valid but deserves warnings) the accepted
     document's findings (or results warnings) must hold at least those codes.
     """
-    base = dict(case_id=case.id, metric=case.metric, spec_section=case.spec_section, level=case.level)
+    base = case_fields(case)
     if case.expected.codes and not case.expected.valid:
         return Verdict(
             status="failed", message=f"expected rejection with {case.expected.codes}, but the session was accepted", **base

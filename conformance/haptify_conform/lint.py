@@ -10,7 +10,7 @@ from pathlib import Path
 from pydantic import ValidationError
 
 import haptify_schemas
-from haptify_conform.cases import REPO_ROOT, SUITE_ROOT, CaseFile, case_files
+from haptify_conform.cases import REPO_ROOT, SUITE_ROOT, Case, CaseFile, case_files
 from haptify_conform.coverage import requirement_problems
 from haptify_conform.fixture_digest import DIGESTS, snapshot_digest
 
@@ -66,17 +66,17 @@ def lint(root: Path = SUITE_ROOT, repo: Path = REPO_ROOT) -> list[str]:
 BUDGET_SLACK = 1.0 + 1e-9
 
 
-def _budget_problems(c) -> list[str]:
+def _budget_problems(c: Case) -> list[str]:
     """A metric case states the budget of its tolerance, and its tolerance is not looser than the budget (spec §16.7)."""
+    tol = c.tolerance
+    assert tol is not None  # lint() asks this of metric cases only, after checking they state a tolerance
     if not c.provenance.budget:
-        return [
-            f"case {c.id}: no tolerance budget in its provenance (where does ±{c.tolerance.abs} + {c.tolerance.rel}·|x| come from?)"
-        ]
+        return [f"case {c.id}: no tolerance budget in its provenance (where does ±{tol.abs} + {tol.rel}·|x| come from?)"]
     need_abs = sum(t.abs for t in c.provenance.budget)
     need_rel = sum(t.rel for t in c.provenance.budget)
-    if c.tolerance.abs > need_abs * BUDGET_SLACK or c.tolerance.rel > need_rel * BUDGET_SLACK:
+    if tol.abs > need_abs * BUDGET_SLACK or tol.rel > need_rel * BUDGET_SLACK:
         return [
-            f"case {c.id}: tolerance (abs {c.tolerance.abs:g}, rel {c.tolerance.rel:g}) is looser than its budget "
+            f"case {c.id}: tolerance (abs {tol.abs:g}, rel {tol.rel:g}) is looser than its budget "
             f"(abs {need_abs:g}, rel {need_rel:g})"
         ]
     return []

@@ -8,6 +8,7 @@ import xml.etree.ElementTree as ET
 from collections import Counter
 from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -24,7 +25,7 @@ class ReportHeader(BaseModel):
     spec_version: str
     protocol_version: int
     adapter: str
-    implementation: dict
+    implementation: dict[str, Any]
     started: str
 
 
@@ -145,10 +146,10 @@ def to_junit(report: ConformReport) -> str:
             ET.SubElement(case, "error", message=c.message).text = f"spec §{c.spec_section}"
         elif c.status == "skipped":
             ET.SubElement(case, "skipped", message=c.message)
-    return ET.tostring(ET.ElementTree(suite).getroot(), encoding="unicode", xml_declaration=True) + "\n"
+    return ET.tostring(suite, encoding="unicode", xml_declaration=True) + "\n"
 
 
-def header(adapter: str, implementation: dict, started: str) -> ReportHeader:
+def header(adapter: str, implementation: dict[str, Any], started: str) -> ReportHeader:
     """The report header: suite, spec and protocol versions, adapter, implementation, start time (spec §16.6)."""
     return ReportHeader(
         suite_version=SUITE_VERSION,

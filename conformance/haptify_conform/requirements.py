@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from fnmatch import fnmatchcase
 from functools import lru_cache
+from typing import Any
 
 import haptify_schemas as schemas
 
@@ -45,8 +46,9 @@ class Requirement:
 
 
 @lru_cache(maxsize=1)
-def _data() -> dict:
-    return schemas.load("requirements.json")
+def _data() -> dict[str, Any]:
+    data: dict[str, Any] = schemas.load("requirements.json")
+    return data
 
 
 def verdict_exemptions() -> dict[str, str]:

@@ -6,9 +6,9 @@ import json
 from pathlib import Path
 from typing import Callable, Iterable
 
-from haptify_conform.adapters import Answer
+from haptify_conform.adapters import Adapter, Answer
 from haptify_conform.cases import REPO_ROOT, Case, fixture_path
-from haptify_conform.judge import Verdict, judge_acceptance, judge_metric, judge_rejection
+from haptify_conform.judge import Verdict, case_fields, judge_acceptance, judge_metric, judge_rejection
 
 
 def load_skips(path: Path | None) -> dict[str, str]:
@@ -24,7 +24,7 @@ def load_skips(path: Path | None) -> dict[str, str]:
 
 def judge(case: Case, answer: Answer) -> Verdict:
     """Turn an implementation's answer into a verdict for ``case`` (spec §16.3)."""
-    base = dict(case_id=case.id, metric=case.metric, spec_section=case.spec_section, level=case.level)
+    base = case_fields(case)
     if answer.kind == "error":
         verdict = Verdict(status="error", message=answer.message, **base)
     elif answer.kind == "skipped":
@@ -41,7 +41,7 @@ def judge(case: Case, answer: Answer) -> Verdict:
 
 def run_cases(
     cases: Iterable[Case],
-    adapter,
+    adapter: Adapter,
     skips: dict[str, str] | None = None,
     on_verdict: Callable[[Verdict], None] | None = None,
     repo: Path = REPO_ROOT,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
-from haptify_conform.adapters import JsonlAdapter
+from haptify_conform.adapters import Adapter, JsonlAdapter
 from haptify_conform.cases import Case, Expected, Provenance
 
 PROBE = Case(
@@ -21,7 +21,7 @@ PROBE = Case(
 )
 
 
-def self_test(adapter) -> tuple[bool, list[str]]:
+def self_test(adapter: Adapter) -> tuple[bool, list[str]]:
     """Run the protocol probes; returns (all passed, readable PASS/FAIL lines).
     The ``--self-test`` of spec §16.4.3."""
     lines: list[str] = []
@@ -37,7 +37,7 @@ def self_test(adapter) -> tuple[bool, list[str]]:
         results.append(
             check(answer.kind != "error", f"answers a request ({answer.kind}{': ' + answer.message if answer.message else ''})")
         )
-        codes = {f.get("code") for f in answer.payload or [] if isinstance(f, dict)} if answer.kind == "rejected" else set()
+        codes = {str(f.get("code")) for f in answer.payload or [] if isinstance(f, dict)} if answer.kind == "rejected" else set()
         results.append(check("E101" in codes, f"rejects a missing session with E101 (found {sorted(codes)})"))
         if isinstance(adapter, JsonlAdapter) and adapter.proc is not None:
             results.append(check(adapter.implementation.get("name") is not None, "handshake names the implementation"))

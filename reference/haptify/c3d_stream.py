@@ -23,7 +23,7 @@ import struct
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, BinaryIO, Iterator
 
 import numpy as np
 
@@ -114,14 +114,15 @@ def read_head(path: Path) -> tuple[Any, int]:
 
 
 class _limited:
-    def __init__(self, fh, n: int) -> None:
+    def __init__(self, fh: BinaryIO, n: int) -> None:
         self.fh, self.left = fh, n
 
     def read(self, size: int = -1) -> bytes:
         size = self.left if size < 0 else min(size, self.left)
         out = self.fh.read(size)
         self.left -= len(out)
-        return out
+        result: bytes = out
+        return result
 
 
 def _values(params: Any, group: str, name: str, n: int, default: float) -> np.ndarray:

@@ -6,7 +6,9 @@ context they cache their result on it, so a trial is processed once per ``haptif
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from typing import Any, Callable, Hashable, TypeVar
+
+T = TypeVar("T")
 
 
 def session_of(ctx_or_session: Any) -> Any:
@@ -14,8 +16,9 @@ def session_of(ctx_or_session: Any) -> Any:
     return getattr(ctx_or_session, "session", ctx_or_session)
 
 
-def cached(ctx_or_session: Any, key: Any, build: Callable[[], Any]) -> Any:
+def cached(ctx_or_session: Any, key: Hashable, build: Callable[[], T]) -> T:
     """``build()`` memoised under ``key`` on a context; computed afresh for a bare session."""
     if hasattr(ctx_or_session, "cached"):
-        return ctx_or_session.cached(key, build)
+        memo: T = ctx_or_session.cached(key, build)
+        return memo
     return build()

@@ -16,9 +16,10 @@ so at rest it reads +g upward (paper eq. 2 writes the sphere as b_a + g; only th
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
+import numpy.typing as npt
 from scipy.optimize import least_squares
 
 from haptify.conventions import GRAVITY_W, STANDARD_GRAVITY, quat_conjugate, quat_rotate, quat_to_matrix
@@ -90,7 +91,7 @@ class HandleCalibration:
             source=f"record:{rec.id}",
         )
 
-    def to_record(self, record_id: str, source_trial: str | None = None) -> dict:
+    def to_record(self, record_id: str, source_trial: str | None = None) -> dict[str, Any]:
         """A ``handle_gravity`` record (JSON-ready dict) holding these parameters (spec §2.8)."""
         rec = {
             "kind": "handle_gravity",
@@ -131,7 +132,8 @@ def fit_sphere(
     r0 = float(np.sqrt(max(sol[3] + c0 @ c0, 1e-300)))
 
     def resid(p: np.ndarray) -> np.ndarray:
-        return np.linalg.norm(x - p[:3], axis=1) - p[3]
+        out: np.ndarray = np.linalg.norm(x - p[:3], axis=1) - p[3]
+        return out
 
     res = least_squares(resid, np.concatenate([c0, [r0]]), method="lm", x_scale="jac")
     centre, radius = res.x[:3], float(abs(res.x[3]))
@@ -164,7 +166,8 @@ def batch_means_covariance(jac: np.ndarray, resid: np.ndarray, batches: int) -> 
     dev = sums - sums.mean(axis=0)
     s = batches / (batches - 1) * dev.T @ dev
     inv = np.linalg.inv(jac.T @ jac)
-    return inv @ s @ inv
+    out: np.ndarray = inv @ s @ inv
+    return out
 
 
 def _cross_matrix(v: np.ndarray) -> np.ndarray:
@@ -176,8 +179,12 @@ def _cross_matrix(v: np.ndarray) -> np.ndarray:
     )
 
 
+#: The robust losses of scipy's least_squares a calibration parameter may name (spec §6.3).
+RobustLoss = Literal["linear", "soft_l1", "huber", "cauchy", "arctan"]
+
+
 def fit_torque(
-    torque: np.ndarray, load: np.ndarray, *, loss: str | None = None, f_scale: float | None = None
+    torque: np.ndarray, load: np.ndarray, *, loss: RobustLoss | None = None, f_scale: float | None = None
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """Robust fit of paper eq. 3, ``τ_i = b_τ + r × L_i`` (spec §6.3).
 
@@ -194,7 +201,12 @@ def fit_torque(
     A = np.concatenate([np.broadcast_to(np.eye(3), (len(L), 3, 3)), -_cross_matrix(L)], axis=2).reshape(-1, 6)
     y = tau.reshape(-1)
     p0, *_ = np.linalg.lstsq(A, y, rcond=None)
-    res = least_squares(lambda p: A @ p - y, p0, loss=loss, f_scale=f_scale, method="trf", x_scale="jac")
+
+    def residual(p: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        r: npt.NDArray[np.float64] = A @ p - y
+        return r
+
+    res = least_squares(residual, p0, loss=loss, f_scale=f_scale, method="trf", x_scale="jac")
     e = A @ res.x - y
     return res.x[:3].copy(), res.x[3:].copy(), float(np.sqrt(np.mean(e**2)))
 
@@ -326,7 +338,8 @@ def sensor_pose(session: Any, part: str) -> Pose:
             expected="rig.handle with ft_sensor and accelerometer poses",
             found=None,
         )
-    return getattr(handle, part).pose
+    out: Pose = getattr(handle, part).pose
+    return out
 
 
 def sensor_rotation(session: Any, part: str) -> np.ndarray:
@@ -342,7 +355,8 @@ def gravity_in_sensor(q_handle: np.ndarray, r_sensor: np.ndarray) -> np.ndarray:
     ``q_handle (N, 4)`` handle body → world; ``r_sensor (3, 3)`` sensor → handle body.
     """
     g_h = quat_rotate(quat_conjugate(q_handle), np.broadcast_to(GRAVITY_W, np.shape(q_handle)[:-1] + (3,)))
-    return g_h @ r_sensor  # r_sensorᵀ · g_h for each row
+    out: np.ndarray = g_h @ r_sensor  # r_sensorᵀ · g_h for each row
+    return out
 
 
 def compensate_wrench(raw: np.ndarray, q_handle: np.ndarray, cal: HandleCalibration, pose: Pose) -> tuple[np.ndarray, np.ndarray]:

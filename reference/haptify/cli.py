@@ -9,59 +9,18 @@ No traceback ever reaches the user: coded errors print as findings, anything els
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-from contextlib import contextmanager
 from importlib.metadata import entry_points
-from typing import Any, Iterator
+from typing import TYPE_CHECKING
 
 from haptify.errors import Finding, HaptifyError
+from haptify.ui import UI as UI
 from haptify.versions import PACKAGE_VERSION, SCHEMA_VERSION, SPEC_VERSION
 
+if TYPE_CHECKING:
+    from haptify.ui import Subcommands
+
 EXIT_OK, EXIT_INVALID, EXIT_CANNOT_RUN = 0, 1, 2
-
-
-class UI:
-    """Output policy of one invocation: human text (rich), ``--json`` or ``--quiet`` (spec §0.5)."""
-
-    def __init__(self, json_mode: bool = False, quiet: bool = False) -> None:
-        self.json_mode = json_mode
-        self.quiet = quiet
-
-    def say(self, text: str) -> None:
-        """A human line on stdout (suppressed by --quiet and --json)."""
-        if not (self.quiet or self.json_mode):
-            print(text)
-
-    def emit_json(self, payload: Any) -> None:
-        """The machine-readable result on stdout (only with --json)."""
-        if self.json_mode:
-            print(json.dumps(payload, indent=2, default=_json_default))
-
-    def warn(self, text: str) -> None:
-        if not self.quiet:
-            print(text, file=sys.stderr)
-
-    @contextmanager
-    def progress(self, description: str, total: float | None) -> Iterator[Any]:
-        """A progress bar on stderr for work that can take more than ~2 s; yields ``advance(n=1, total=None)``
-        (``total`` sets the bar's length once the work knows it)."""
-        if self.quiet or self.json_mode or not sys.stderr.isatty():
-            yield lambda n=1, total=None: None
-            return
-        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
-        with Progress(TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(), transient=True) as bar:
-            task = bar.add_task(description, total=total)
-            yield lambda n=1, total=None: bar.update(task, advance=n, **({} if total is None else {"total": total}))
-
-
-def _json_default(obj: Any) -> Any:
-    if hasattr(obj, "to_dict"):
-        return obj.to_dict()
-    if hasattr(obj, "tolist"):
-        return obj.tolist()
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
 
 
 GLOBAL_FLAGS = {"--json": "json", "--quiet": "quiet", "-q": "quiet"}  # accepted before or after the sub-command
@@ -120,10 +79,10 @@ def split_global_flags(argv: list[str]) -> tuple[list[str], dict[str, bool], str
     return rest, flags, command
 
 
-def _register_broken(sub, name: str, target: str, exc: Exception) -> None:
+def _register_broken(sub: Subcommands, name: str, target: str, exc: Exception) -> None:
     """Keep a plugin that failed to import visible: calling it reports E999 with the cause."""
 
-    def run(args, ui) -> int:
+    def run(args: argparse.Namespace, ui: UI) -> int:
         raise HaptifyError(Finding("E999", f"the '{name}' command ({target}) failed to load: {type(exc).__name__}: {exc}"))
 
     parser = sub.add_parser(name, help=f"(unavailable: {type(exc).__name__})", add_help=False)

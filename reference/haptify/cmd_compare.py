@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from haptify.compare import build_table, to_csv, to_html_document, to_markdown
 from haptify.results import load_results
 from haptify.storage import atomic_write_text
 
+if TYPE_CHECKING:
+    from haptify.ui import UI, Subcommands
+
 RENDERERS = {"md": to_markdown, "csv": to_csv, "html": to_html_document}
 
 
-def register(sub) -> None:
+def register(sub: Subcommands) -> None:
     """Add the ``compare`` sub-command (spec §15.5)."""
     p = sub.add_parser("compare", help="lay out results of several devices side by side (the paper's Table III)")
     p.add_argument("results", nargs="+", type=Path, help="results.json files, one per device")
@@ -21,7 +26,7 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def run(args, ui) -> int:
+def run(args: argparse.Namespace, ui: UI) -> int:
     """Print, emit as JSON or write the Table III-style comparison of the results files (spec §15.5)."""
     table = build_table([load_results(p) for p in args.results], with_paper=args.paper)
     text = RENDERERS[args.format](table)

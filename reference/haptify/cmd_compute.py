@@ -7,9 +7,10 @@ so the command is itself a conformance ``--cmd`` implementation.
 
 from __future__ import annotations
 
+import argparse
 import json
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from haptify.compute import ComputeContext, compute_session
 from haptify.families import family_modules
@@ -18,8 +19,11 @@ from haptify.gate import CheckedSession, as_result_warnings, open_checked_sessio
 from haptify.results import ResultsFile
 from haptify.storage import atomic_write_text, parse_json_file
 
+if TYPE_CHECKING:
+    from haptify.ui import UI, Subcommands
 
-def register(sub) -> None:
+
+def register(sub: Subcommands) -> None:
     """Add the ``compute`` sub-command (spec §15.4)."""
     p = sub.add_parser(
         "compute",
@@ -50,7 +54,7 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def run(args, ui) -> int:
+def run(args: argparse.Namespace, ui: UI) -> int:
     """Validate, compute and write ``results.json`` atomically (spec §15.4, §4.8, §3.6)."""
     try:
         wanted = _wanted_metrics(args.metrics)
@@ -109,18 +113,22 @@ def case_parameters(path: Path | None) -> dict[str, Any]:
 
 
 def compute_folder(
-    path: Path, wanted: list[str] | None = None, parameters: dict[str, Any] | None = None, ui=None, uncertainty: bool = False
+    path: Path,
+    wanted: list[str] | None = None,
+    parameters: dict[str, Any] | None = None,
+    ui: UI | None = None,
+    uncertainty: bool = False,
 ) -> ResultsFile:
     """What ``haptify compute`` computes for the session folder ``path``: the session through the gate, every
     (or every ``wanted``) metric (with its uncertainty, chapter 19, when asked), then the rest of its validation
     (spec §15.4, §4.8); ``ui`` shows progress."""
-    from haptify.cli import UI
+    from haptify.ui import UI
 
     return _compute_checked(open_checked_session(path), wanted, parameters or {}, ui or UI(quiet=True), uncertainty)
 
 
 def _compute_checked(
-    session: CheckedSession, wanted: list[str] | None, parameters: dict[str, Any], ui, uncertainty: bool = False
+    session: CheckedSession, wanted: list[str] | None, parameters: dict[str, Any], ui: UI, uncertainty: bool = False
 ) -> ResultsFile:
     """Compute on a gated session, then finish its validation (spec §4.8): the streams no metric read
     are checked too, so a result exists only for a session that validates whole. A coded failure of the

@@ -8,7 +8,9 @@ Outputs are written atomically (spec §3.6) and never overwrite an existing file
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -28,8 +30,11 @@ from haptify.local_dynamics import (
 from haptify.gate import require_valid_session
 from haptify.storage import write_atomically
 
+if TYPE_CHECKING:
+    from haptify.ui import UI, Subcommands
 
-def register(sub) -> None:
+
+def register(sub: Subcommands) -> None:
     """Add ``dynamics fit`` and ``dynamics predict`` (spec §11.8)."""
     p = sub.add_parser("dynamics", help="fit or run the local dynamic (Hammerstein–Wiener) model")
     verbs = p.add_subparsers(dest="verb", metavar="VERB")
@@ -50,7 +55,7 @@ def register(sub) -> None:
     p.set_defaults(func=lambda args, ui: _usage(p))
 
 
-def _usage(parser) -> int:
+def _usage(parser: argparse.ArgumentParser) -> int:
     raise fail("E903", "say 'haptify dynamics fit …' or 'haptify dynamics predict …'", expected=["fit", "predict"], found=None)
 
 
@@ -62,13 +67,15 @@ def _check_free(paths: list[Path | None], overwrite: bool) -> None:
             )
 
 
-def run_fit(args, ui) -> int:
+def run_fit(args: argparse.Namespace, ui: UI) -> int:
     """Fit and write the parameter file (and .mat); prints the training RMS errors (N and N·m; spec §11.8)."""
     _check_free([args.output, args.mat], args.overwrite)
     session, _ = require_valid_session(args.session)
     trial_id = args.trial or training_trial(session).id
     session.trial(trial_id)
     model, _ = fit_trial(session, trial_id)
+    fit = model.fit
+    assert fit is not None  # fit_trial records how its fit went
     save_model(model, args.output)
     if args.mat:
         export_mat(model, args.mat)
@@ -76,20 +83,20 @@ def run_fit(args, ui) -> int:
         "trial": trial_id,
         "model": str(args.output),
         "mat": str(args.mat) if args.mat else None,
-        "iterations": model.fit.iterations,
-        "stop_reason": model.fit.stop_reason,
-        "rmse": dict(zip(OUTPUT_NAMES, model.fit.rmse)),
-        "fit_percent": dict(zip(OUTPUT_NAMES, model.fit.fit_percent)),
+        "iterations": fit.iterations,
+        "stop_reason": fit.stop_reason,
+        "rmse": dict(zip(OUTPUT_NAMES, fit.rmse)),
+        "fit_percent": dict(zip(OUTPUT_NAMES, fit.fit_percent)),
     }
     ui.emit_json(summary)
-    ui.say(f"fitted {trial_id}: {model.fit.iterations} iterations ({model.fit.stop_reason})")
-    for name, e, pct in zip(OUTPUT_NAMES, model.fit.rmse, model.fit.fit_percent):
+    ui.say(f"fitted {trial_id}: {fit.iterations} iterations ({fit.stop_reason})")
+    for name, e, pct in zip(OUTPUT_NAMES, fit.rmse, fit.fit_percent):
         ui.say(f"  {name}: RMS error {e:.4g}  fit {pct:.1f} %")
     ui.say(f"wrote {args.output}" + (f" and {args.mat}" if args.mat else ""))
     return 0
 
 
-def run_predict(args, ui) -> int:
+def run_predict(args: argparse.Namespace, ui: UI) -> int:
     """Simulate the model on a trial; write t, the predicted and the measured wrench as Parquet.
     Units s, N, N·m; spec §11.8."""
     _check_free([args.output], args.overwrite)

@@ -12,11 +12,26 @@ file as one more trial of an existing session, whose facts fill what the map and
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, Callable
 
 from haptify.errors import HaptifyError, fail
-from haptify.importers import MOCAP_SOURCES, Destination, import_c3d, import_csv, load_map, read_c3d
+from haptify.importers import (
+    MOCAP_SOURCES,
+    Destination,
+    ImportResult,
+    LoadedMap,
+    Recording,
+    import_c3d,
+    import_csv,
+    load_map,
+    read_c3d,
+)
 from haptify.validation import validate_session
+
+if TYPE_CHECKING:
+    from haptify.ui import UI, Advance, Subcommands
 
 # option name -> the map field it fills (for the error that lists what is missing without a map)
 _OPTION_OF_FIELD = {
@@ -31,7 +46,7 @@ _OPTION_OF_FIELD = {
 }
 
 
-def register(sub) -> None:
+def register(sub: Subcommands) -> None:
     """Add ``import c3d`` and ``import csv`` with their options (spec §5.8)."""
     p = sub.add_parser("import", help="import a C3D file or a CSV log as a session", description=__doc__.splitlines()[0])
     kinds = p.add_subparsers(dest="import_kind", metavar="FORMAT", required=True)
@@ -95,10 +110,10 @@ def implicit_format(argv: list[str]) -> list[str]:
     return argv
 
 
-def _format_of(args) -> str:
+def _format_of(args: argparse.Namespace) -> str:
     """The source format: the sub-command's, or for ``auto`` the one the file's content shows (§5.8)."""
     if args.import_kind != "auto":
-        return args.import_kind
+        return str(args.import_kind)
     from haptify.mocap_exports import detect_format
 
     fmt = detect_format(args.file)
@@ -113,7 +128,7 @@ def _format_of(args) -> str:
     return fmt
 
 
-def _read(fmt: str, path: Path):
+def _read(fmt: str, path: Path) -> Recording:
     if fmt == "c3d":
         return read_c3d(path)
     from haptify.mocap_exports import read_export
@@ -121,7 +136,7 @@ def _read(fmt: str, path: Path):
     return read_export(fmt, path)
 
 
-def _placement(text: str) -> dict:
+def _placement(text: str) -> dict[str, list[float]]:
     try:
         vals = [float(v) for v in text.replace(" ", ",").split(",") if v]
     except ValueError:
@@ -131,10 +146,10 @@ def _placement(text: str) -> dict:
     return {"position": vals[:3], "quaternion": vals[3:] if len(vals) == 7 else [1.0, 0.0, 0.0, 0.0]}
 
 
-def overrides_from(args) -> dict:
+def overrides_from(args: argparse.Namespace) -> dict[str, Any]:
     """The map fields the command-line options set (spec §5.8)."""
-    session: dict = {}
-    trial: dict = {}
+    session: dict[str, Any] = {}
+    trial: dict[str, Any] = {}
     if args.device is not None:
         session["device"] = {"file": str(args.device.resolve())}
     for opt, key in (("lab", "lab"), ("examiner", "examiner")):
@@ -152,7 +167,7 @@ def overrides_from(args) -> dict:
         trial["id"] = args.trial_id
     if args.repetition is not None:
         trial["repetition"] = args.repetition
-    out: dict = {}
+    out: dict[str, Any] = {}
     if session:
         out["session"] = session
     if trial or args.map is None:
@@ -163,7 +178,7 @@ def overrides_from(args) -> dict:
     return out
 
 
-def _load(args, fmt: str, facts: dict | None):
+def _load(args: argparse.Namespace, fmt: str, facts: dict[str, Any] | None) -> LoadedMap:
     try:
         return load_map(args.map, fmt, overrides_from(args), facts)
     except HaptifyError as err:
@@ -179,7 +194,7 @@ def _load(args, fmt: str, facts: dict | None):
         raise fail("E903", "; ".join(f"{f.pointer}: {f.message}" for f in err.findings), found="invalid option") from None
 
 
-def _suggest(fmt: str, args, ui) -> int:
+def _suggest(fmt: str, args: argparse.Namespace, ui: UI) -> int:
     """``--suggest-map`` (spec §5.11): the guessed map on stdout, what it could not place on stderr."""
     import json
 
@@ -200,7 +215,7 @@ def _suggest(fmt: str, args, ui) -> int:
     return 0
 
 
-def _importer(fmt: str, advance):
+def _importer(fmt: str, advance: Advance) -> Callable[[Path, Destination, LoadedMap], ImportResult]:
     """The import function of ``fmt``, reporting a streamed file's frames to ``advance`` (§5.5.1)."""
     if fmt == "csv":
         return import_csv
@@ -217,7 +232,7 @@ def _importer(fmt: str, advance):
     return lambda path, dest, loaded: import_export(fmt, path, dest, loaded, progress=progress)
 
 
-def run(args, ui) -> int:
+def run(args: argparse.Namespace, ui: UI) -> int:
     """Import (or ``--list``) one source file; exit 0 valid, 1 imported but invalid (spec §5.8)."""
     fmt = _format_of(args)
     if args.suggest_map:

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import argparse
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from haptify.compute import ComputeContext, compute_session
 from haptify.families import family_modules
@@ -12,8 +14,11 @@ from haptify.gate import as_result_warnings, require_valid_session
 from haptify.report import write_report
 from haptify.results import load_results
 
+if TYPE_CHECKING:
+    from haptify.ui import UI, Subcommands
 
-def register(sub) -> None:
+
+def register(sub: Subcommands) -> None:
     """Add the ``report`` sub-command; ``--wav-scale`` in m/s² (spec §15.6)."""
     p = sub.add_parser("report", help="an HTML report with figures and vibration sounds")
     p.add_argument("session", type=Path)
@@ -34,7 +39,7 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def run(args, ui) -> int:
+def run(args: argparse.Namespace, ui: UI) -> int:
     """Compute (or read) the results and write the report folder (spec §15.6)."""
     if args.wav_scale is not None and not (math.isfinite(args.wav_scale) and args.wav_scale > 0):
         # 0 silently meant "the default", a negative scale inverted the audio and NaN wrote NaN samples

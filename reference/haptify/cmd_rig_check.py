@@ -6,21 +6,26 @@ session lacks the trial or description the check needs). Exit 1 when any check F
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from haptify.compute import ComputeContext
 from haptify.rig_checks import check_rig
 from haptify.gate import require_valid_session
 
+if TYPE_CHECKING:
+    from haptify.ui import UI, Subcommands
 
-def register(sub) -> None:
+
+def register(sub: Subcommands) -> None:
     """Add the ``rig-check`` sub-command (spec §14.8)."""
     p = sub.add_parser("rig-check", help="check the rig against the paper's requirements (Table I, Appendix)")
     p.add_argument("session", type=Path)
     p.set_defaults(func=run)
 
 
-def run(args, ui) -> int:
+def run(args: argparse.Namespace, ui: UI) -> int:
     """Print (or emit as JSON) one line per rig check; exit 1 when any check FAILs (spec §14.8)."""
     session, _ = require_valid_session(args.session)
     checks = check_rig(ComputeContext(session=session))

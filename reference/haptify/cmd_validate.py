@@ -8,13 +8,16 @@ the session is valid (warnings allowed), 1 when it is invalid, 2 when validation
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:  # the validator (numpy, pandas, Arrow) is imported when the command runs, not for --help
+if TYPE_CHECKING:
+    from haptify.ui import UI, Subcommands
+
+    # the validator (numpy, pandas, Arrow) is imported when the command runs, not for --help
     from haptify.validation import ValidationReport
 
 
-def register(subparsers: Any) -> None:
+def register(subparsers: Subcommands) -> None:
     """Add the ``validate`` sub-command (entry point ``validate = "haptify.cmd_validate:register"``).
     Spec §4.6."""
     parser = subparsers.add_parser(
@@ -29,7 +32,7 @@ def register(subparsers: Any) -> None:
     parser.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace, ui: Any) -> int:
+def run(args: argparse.Namespace, ui: UI) -> int:
     """Validate ``args.session``; print the report; return the exit code (spec §4.6)."""
     from haptify.validation import SessionValidator
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import importlib
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Hashable, Iterable, TypeVar
 
 from haptify.errors import Finding, HaptifyError
 from haptify.families import family_modules
@@ -16,6 +16,9 @@ from haptify.metric_definitions import all_families
 from haptify.results import DeviceSummary, Implementation, MetricResult, ResultsFile, ResultWarning
 from haptify.storage import MANIFEST, SessionFolder, sha256_file
 from haptify.versions import PACKAGE_VERSION
+
+
+T = TypeVar("T")
 
 
 @dataclass
@@ -27,13 +30,14 @@ class ComputeContext:
     wanted: set[str] | None = None  # metric ids asked for (None: all)
     parameters: dict[str, Any] = field(default_factory=dict)  # case parameters (spec §16.2), e.g. {"model": file}
     warnings: list[ResultWarning] = field(default_factory=list)
-    _cache: dict[Any, Any] = field(default_factory=dict)
+    _cache: dict[Hashable, Any] = field(default_factory=dict)
 
-    def cached(self, key: Any, build: Callable[[], Any]) -> Any:
+    def cached(self, key: Hashable, build: Callable[[], T]) -> T:
         """Memoise ``build()`` under ``key`` for this run (e.g. ``("handle_signals", trial_id)``)."""
         if key not in self._cache:
             self._cache[key] = build()
-        return self._cache[key]
+        memo: T = self._cache[key]
+        return memo
 
     def forget_trial(self, trial_id: str) -> None:
         """Drop what was memoised for one trial (the keys that name it, e.g. ``("handle_signals", id, rate)``),

@@ -16,6 +16,7 @@ import json
 import sys
 from collections import OrderedDict
 from pathlib import Path
+from typing import Any
 
 from haptify.compute import ComputeContext, compute_session
 from haptify.errors import HaptifyError
@@ -25,10 +26,10 @@ from haptify.versions import PACKAGE_VERSION
 
 IMPLEMENTATION = {"name": "haptify-reference", "version": PACKAGE_VERSION}
 CONTEXTS_KEPT = 4
-_contexts: OrderedDict = OrderedDict()
+_contexts: OrderedDict[tuple[str, str, str], ComputeContext] = OrderedDict()
 
 
-def _context(session: str, parameters: dict, cache: bool) -> ComputeContext:
+def _context(session: str, parameters: dict[str, Any], cache: bool) -> ComputeContext:
     folder = open_session(session)
     if not cache:
         return ComputeContext(session=folder, parameters=dict(parameters))
@@ -40,10 +41,11 @@ def _context(session: str, parameters: dict, cache: bool) -> ComputeContext:
     _contexts.move_to_end(key)
     ctx = _contexts[key]
     ctx.warnings = []
-    return ctx
+    out: ComputeContext = ctx
+    return out
 
 
-def analyse(session: str, metric: str = "", parameters: dict | None = None, *, cache: bool = True) -> dict:
+def analyse(session: str, metric: str = "", parameters: dict[str, Any] | None = None, *, cache: bool = True) -> dict[str, Any]:
     """A results document, or ``{"findings": [...]}`` when the session is rejected (or ``metric == "validate"``).
 
     ``parameters`` are the case's (spec §16.2); ``{"model": "<file in the session>"}`` makes the dynamics

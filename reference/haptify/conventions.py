@@ -7,25 +7,28 @@ All functions are vectorised over a leading axis: a quaternion array has shape `
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 STANDARD_GRAVITY = 9.80665  # m/s², the default g (spec §1.2)
 GRAVITY_W = np.array([0.0, 0.0, -STANDARD_GRAVITY])  # gravitational acceleration in W (z up)
 QUATERNION_NORM_TOLERANCE = 1e-3  # |‖q‖ − 1| allowed in stored quaternions (spec §1.3)
 
 
-def quat_normalize(q: np.ndarray) -> np.ndarray:
+def quat_normalize(q: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Quaternions ``(..., 4)`` [w, x, y, z] scaled to unit norm (spec §1.3: readers normalise before use)."""
     q = np.asarray(q, dtype=float)
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+    out: npt.NDArray[np.float64] = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return out
 
 
-def quat_conjugate(q: np.ndarray) -> np.ndarray:
+def quat_conjugate(q: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Conjugates ``(..., 4)`` [w, −x, −y, −z]: for unit quaternions the inverse rotation, world→body (spec §1.3)."""
     q = np.asarray(q, dtype=float)
-    return q * np.array([1.0, -1.0, -1.0, -1.0])
+    out: npt.NDArray[np.float64] = q * np.array([1.0, -1.0, -1.0, -1.0])
+    return out
 
 
-def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def quat_multiply(a: npt.ArrayLike, b: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Hamilton product ``a ⊗ b`` (apply b first, then a; quaternions [w, x, y, z], spec §1.3)."""
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
@@ -42,7 +45,7 @@ def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     )
 
 
-def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+def quat_to_matrix(q: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)`` (spec §1.3)."""
     w, x, y, z = np.moveaxis(quat_normalize(q), -1, 0)
     return np.stack(
@@ -55,7 +58,7 @@ def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     )
 
 
-def matrix_to_quat(m: np.ndarray) -> np.ndarray:
+def matrix_to_quat(m: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Unit quaternions (w ≥ 0) of rotation matrices ``(..., 3, 3)`` (Shepperd's method; spec §1.3)."""
     m = np.asarray(m, dtype=float)
     flat = m.reshape(-1, 3, 3)
@@ -79,13 +82,14 @@ def matrix_to_quat(m: np.ndarray) -> np.ndarray:
     return out.reshape(m.shape[:-2] + (4,))
 
 
-def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+def quat_rotate(q: npt.ArrayLike, v: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Rotate vectors ``v (..., 3)`` from body to parent by quaternions ``q (..., 4)``.
     ``v_parent = q ⊗ v ⊗ q*``, spec §1.3."""
-    return np.einsum("...ij,...j->...i", quat_to_matrix(q), np.asarray(v, dtype=float))
+    out: npt.NDArray[np.float64] = np.einsum("...ij,...j->...i", quat_to_matrix(q), np.asarray(v, dtype=float))
+    return out
 
 
-def quat_from_axis_angle(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
+def quat_from_axis_angle(axis: npt.ArrayLike, angle: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Quaternions of rotations by ``angle`` (rad) about unit ``axis`` (spec §1.3)."""
     axis = np.asarray(axis, dtype=float)
     axis = axis / np.linalg.norm(axis, axis=-1, keepdims=True)
@@ -93,13 +97,14 @@ def quat_from_axis_angle(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     return np.concatenate([np.cos(half), np.sin(half) * axis], axis=-1)
 
 
-def quat_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def quat_angle(a: npt.ArrayLike, b: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Angle (rad, in [0, π]) of the rotation that takes orientation ``a`` to ``b`` (θ_ab of spec §11.6.2)."""
     dot = np.abs(np.sum(quat_normalize(a) * quat_normalize(b), axis=-1))
-    return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
+    out: npt.NDArray[np.float64] = 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
+    return out
 
 
-def quat_slerp(a: np.ndarray, b: np.ndarray, s: np.ndarray) -> np.ndarray:
+def quat_slerp(a: npt.ArrayLike, b: npt.ArrayLike, s: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Spherical linear interpolation from ``a`` (s=0) to ``b`` (s=1) along the shorter arc (spec §7.2)."""
     a = quat_normalize(a)
     b = quat_normalize(b)
@@ -115,7 +120,7 @@ def quat_slerp(a: np.ndarray, b: np.ndarray, s: np.ndarray) -> np.ndarray:
     return quat_normalize(wa * a + wb * b)
 
 
-def quat_mean(q: np.ndarray) -> np.ndarray:
+def quat_mean(q: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """The average orientation of quaternions ``(N, 4)`` (Markley et al. 2007: principal eigenvector of Σ q qᵀ).
     Spec §11.6.1."""
     q = quat_normalize(np.asarray(q, dtype=float))
@@ -124,7 +129,8 @@ def quat_mean(q: np.ndarray) -> np.ndarray:
     return mean if mean[0] >= 0 else -mean
 
 
-def pose_apply(position: np.ndarray, quaternion: np.ndarray, points: np.ndarray) -> np.ndarray:
+def pose_apply(position: npt.ArrayLike, quaternion: npt.ArrayLike, points: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Map ``points (..., 3)`` from a child frame to its parent, given the child's pose in the parent.
     Positions in m; spec §1.3."""
-    return quat_rotate(quaternion, points) + np.asarray(position, dtype=float)
+    out: npt.NDArray[np.float64] = quat_rotate(quaternion, points) + np.asarray(position, dtype=float)
+    return out

@@ -16,7 +16,7 @@ from haptify import schemas
 
 
 @lru_cache(maxsize=1)
-def catalogue() -> dict[str, dict]:
+def catalogue() -> dict[str, dict[str, Any]]:
     """The code catalogue ``schemas/1.0/codes.json``, keyed by code (``"E203"``; spec §0.4)."""
     return {c["code"]: c for c in schemas.load("codes.json")["codes"]}
 
@@ -64,7 +64,7 @@ class Finding:
             parts.append(f" t={self.time_range[0]:.6g}–{self.time_range[1]:.6g} s")
         return "".join(parts).strip()
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
         if self.time_range is not None:
             d["time_range"] = list(self.time_range)

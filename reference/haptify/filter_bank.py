@@ -20,20 +20,34 @@ which adds and subtracts exact zeros (the same values, up to the sign of a zero)
 
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
+import numpy.typing as npt
 from numpy.lib.stride_tricks import as_strided
 
-_KERNEL = None
+#: The compiled loop of :func:`_kernel` (arguments as its signature string says), once compiled.
+_KERNEL: Callable[..., None] | None = None
 
 
-def _kernel():
+def _kernel() -> Callable[..., None]:
     """The compiled loop (numba is imported, and the cached machine code loaded, on the first filtering)."""
     global _KERNEL
     if _KERNEL is None:
         from numba import njit
 
         @njit("void(f8[:, ::1], f8[:, ::1], f8[::1], i8, f8[::1], u1[::1], f8[::1], i8, f8[:, ::1])", cache=True, nogil=True)
-        def run(b, a, x, x_stride, gain, rest, out, out_stride, state):
+        def run(
+            b: npt.NDArray[np.float64],
+            a: npt.NDArray[np.float64],
+            x: npt.NDArray[np.float64],
+            x_stride: int,
+            gain: npt.NDArray[np.float64],
+            rest: npt.NDArray[np.uint8],
+            out: npt.NDArray[np.float64],
+            out_stride: int,
+            state: npt.NDArray[np.float64],
+        ) -> None:
             # b, a: (order + 1, M) coefficients, order ≥ 2; row t of the M signals is x[t * x_stride:][:M];
             # gain: (N,); rest: (N,) 1 where every filter restarts from rest; row t of the result is
             # out[t * out_stride:][:M]; state: (order, M) the delays before row 0, left as they are after row N − 1

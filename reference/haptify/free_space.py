@@ -9,7 +9,7 @@ Parameters: ``schemas/<v>/metrics/free_space.json``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 
@@ -20,6 +20,10 @@ from haptify.metric_definitions import param
 from haptify.repetitions import TrialValue, aggregate, no_trials, per_trial, unavailable
 from haptify.preprocessing import lowpass_resample, mocap_track, sp, uniform_grid
 from haptify.signals import handle_signals
+
+if TYPE_CHECKING:
+    from haptify.report import ReportFigure
+    from haptify.results import MetricResult, Unavailable
 
 FAMILY = "free_space"
 PROTOCOL = "free_space"
@@ -44,7 +48,8 @@ def magnitude_stats(force: np.ndarray) -> dict[str, float]:
 def plate_force_about_weight(force: np.ndarray) -> np.ndarray:
     """Plate force minus (0, 0, mean P_z) — the weight of the device parts resting on the plate (spec §9.3)."""
     force = np.asarray(force, dtype=float)
-    return force - np.array([0.0, 0.0, force[:, 2].mean()])
+    out: np.ndarray = force - np.array([0.0, 0.0, force[:, 2].mean()])
+    return out
 
 
 def exceedance(values: np.ndarray, limit: float) -> float:
@@ -62,7 +67,7 @@ class ForceField:
     mean_force: np.ndarray
     counts: np.ndarray
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {
             "bin_m": self.bin_m,
             "bins": [
@@ -135,9 +140,19 @@ def speeds(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
     return np.linalg.norm(track.velocity[ok], axis=1), np.linalg.norm(track.angular_velocity[ok], axis=1)
 
 
-def _speed_summary(ctx: Any, trial_id: str) -> dict:
+class SpeedSummary(TypedDict):
+    """One trial's mean speeds (m/s, rad/s), the shares of samples over the limits and its warning codes (spec §9.4)."""
+
+    speed: float
+    angular: float
+    codes: list[str]
+    over_speed: float
+    over_angular: float
+
+
+def _speed_summary(ctx: Any, trial_id: str) -> SpeedSummary:
     v, w = speeds(ctx, trial_id)
-    out = {
+    out: SpeedSummary = {
         "speed": float(v.mean()),
         "angular": float(w.mean()),
         "codes": [],
@@ -165,14 +180,14 @@ def _speed_summary(ctx: Any, trial_id: str) -> dict:
     return out
 
 
-def compute(ctx: Any) -> list:
+def compute(ctx: Any) -> list[MetricResult | Unavailable]:
     """Every free-space metric the session allows (spec §9.6)."""
     trials = [t.id for t in ctx.session.trials_of(PROTOCOL)]
     ids = FORCE_IDS + (PLATE_ID,) + SPEED_IDS
     if not trials:
         err = no_trials(PROTOCOL)
         return [unavailable(m, err) for m in ids if ctx.wants(m)]
-    out: list = []
+    out: list[MetricResult | Unavailable] = []
     compliance: dict[str, list[str]] = {}
     if any(ctx.wants(m) for m in ids):  # the compliance codes concern every free-space value of a trial
         done, first = per_trial(ctx, trials, lambda tid: _speed_summary(ctx, tid), "free_space.speed_mean")
@@ -199,6 +214,7 @@ def compute(ctx: Any) -> list:
                 )
             )
         else:
+            assert first is not None  # per_trial: a trial without a result raised the error it returns
             out += [unavailable(m, first) for m in SPEED_IDS]
     if any(ctx.wants(m) for m in FORCE_IDS):
         done, first = per_trial(ctx, trials, lambda tid: hand_force_samples(ctx, tid), "free_space.force_mean")
@@ -207,16 +223,17 @@ def compute(ctx: Any) -> list:
             field = force_field(np.concatenate([p for _, p in done.values()]), np.concatenate([f for f, _ in done.values()]))
             for metric_id in FORCE_IDS:
                 key = metric_id.rsplit("_", 1)[1]
-                diag = {"force_field": field.to_dict()} if key == "mean" else {}
+                force_diag = {"force_field": field.to_dict()} if key == "mean" else {}
                 out.append(
                     aggregate(
                         FAMILY,
                         metric_id,
                         [TrialValue(t, s[key], compliance.get(t, [])) for t, s in stats.items()],
-                        diagnostics=diag,
+                        diagnostics=force_diag,
                     )
                 )
         else:
+            assert first is not None  # per_trial: a trial without a result raised the error it returns
             out += [unavailable(m, first) for m in FORCE_IDS]
     if ctx.wants(PLATE_ID):
         done, first = per_trial(ctx, trials, lambda tid: plate_force_samples(ctx, tid), PLATE_ID)
@@ -232,6 +249,7 @@ def compute(ctx: Any) -> list:
                 )
             )
         else:
+            assert first is not None  # per_trial: a trial without a result raised the error it returns
             out.append(unavailable(PLATE_ID, first))
     return out
 
@@ -239,7 +257,7 @@ def compute(ctx: Any) -> list:
 # --- report figures (spec §15.6; paper Fig. 6) ----------------------------------------------------
 
 
-def report_figures(ctx: Any, results: Any) -> list:
+def report_figures(ctx: Any, results: Any) -> list[ReportFigure]:
     """Speeds and forces over time for the first usable free-space trial, and the force field (top view).
     Spec §9.2–9.5, §15.6."""
     import matplotlib.pyplot as plt

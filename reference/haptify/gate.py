@@ -76,14 +76,14 @@ class CheckedSession(SessionFolder):
             raise refusal(self.root, self._validator.report.findings)
 
 
-def refusal(path: str | os.PathLike, found_so_far: list[Finding]) -> SessionRefused:
+def refusal(path: str | os.PathLike[str], found_so_far: list[Finding]) -> SessionRefused:
     """The refusal of a session with its complete validation report (spec §4.8): the gate stops at the
     first error, so the rest of the folder is validated now, once, to report everything."""
     report = validate_session(path)
     return SessionRefused(*(report.findings if report.errors else found_so_far))
 
 
-def open_checked_session(path: str | os.PathLike) -> CheckedSession:
+def open_checked_session(path: str | os.PathLike[str]) -> CheckedSession:
     """Open a session through the gate (spec §4.8): the manifest and every stream's declaration and file
     (present, inside the folder, within its size bound) now, each stream's contents when read.
 
@@ -103,7 +103,7 @@ def open_checked_session(path: str | os.PathLike) -> CheckedSession:
 
 
 def require_valid_session(
-    path: str | os.PathLike, advance: Callable[[int], Any] | None = None
+    path: str | os.PathLike[str], advance: Callable[[int], Any] | None = None
 ) -> tuple[CheckedSession, list[ReportItem]]:
     """Validate the whole session before anything is done with it (spec §4.8) — for commands that
     read streams through other means or must not start on a session that will be refused. Returns the

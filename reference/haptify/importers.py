@@ -23,7 +23,7 @@ import struct
 import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Annotated, Any, Callable, Iterator, Literal, Union
+from typing import Annotated, Any, Callable, Iterator, Literal, TypedDict, Union
 
 import numpy as np
 import pandas as pd
@@ -336,7 +336,9 @@ class LoadedMap:
     label: str
 
 
-def load_map(path: str | Path | None, source: str, overrides: dict | None = None, session_facts: dict | None = None) -> LoadedMap:
+def load_map(
+    path: str | Path | None, source: str, overrides: dict[str, Any] | None = None, session_facts: dict[str, Any] | None = None
+) -> LoadedMap:
     """Read and validate an import map (spec §5.2); ``overrides`` is deep-merged over the file's JSON.
 
     ``session_facts`` (appending, §5.9) fill the ``session`` members the map leaves out. E502 on a
@@ -486,7 +488,7 @@ class Recording:
             return int(self.body_positions.shape[0])
         return int(self.points.shape[0])
 
-    def summary(self) -> dict:
+    def summary(self) -> dict[str, Any]:
         """A JSON-able description of the file (what ``haptify import FORMAT --list`` prints)."""
         return {
             "file": self.path.name,
@@ -897,7 +899,8 @@ class WorldFrame:
     description: str
 
     def apply(self, p: np.ndarray) -> np.ndarray:
-        return (p - self.centre) @ self.rotation.T
+        out: np.ndarray = (p - self.centre) @ self.rotation.T
+        return out
 
 
 def _meaningless(number: int, why: str, file: str, found: Any) -> HaptifyError:
@@ -969,7 +972,7 @@ def plate_frame(corners_m: np.ndarray, *, file: str, number: int) -> tuple[World
 CORNER_QUADRANTS = {"c1": (1.0, 1.0), "c2": (-1.0, 1.0), "c3": (-1.0, -1.0), "c4": (1.0, -1.0)}
 
 
-def plate_description(platform: C3DPlatform, to_m: Unit, *, file: str) -> tuple[WorldFrame, dict, list[Finding]]:
+def plate_description(platform: C3DPlatform, to_m: Unit, *, file: str) -> tuple[WorldFrame, dict[str, Any], list[Finding]]:
     """W and the rig's ``force_plate`` from a C3D platform (spec §5.6): one corner sensor at each C3D
     corner, named by its quadrant of W (``CORNER_QUADRANTS``), lowered to the depth |ORIGIN z| of the
     platform's sensing origin and oriented as the platform's frame. A W502 finding gives the corners'
@@ -1032,7 +1035,7 @@ _SI_OF_DIMENSION = {"force": "N", "torque": "N*m", "length": "m"}
 
 
 def platform_plate_wrench(
-    rec: Recording, platform: C3DPlatform, pm: PlatformWrenchMap, plate: dict, to_m: Unit, *, label: str
+    rec: Recording, platform: C3DPlatform, pm: PlatformWrenchMap, plate: dict[str, Any], to_m: Unit, *, label: str
 ) -> tuple[dict[str, np.ndarray], list[Finding]]:
     """The ``plate_wrench`` columns (``t`` excluded) of the platform that defines W (spec §5.6.1): its
     outputs (types 1–4, calibration matrix applied) in SI, the wrench moved to the top surface's
@@ -1157,6 +1160,7 @@ def build_stream_columns(
         if ch.value is not None:
             raw, stated = np.full(n, ch.value, dtype=np.float64), None
         else:
+            assert ch.source is not None  # ChannelMap._one_origin: exactly one of source and value
             raw, stated = read(ch.source)
         unit = ch.unit if ch.unit is not None else stated
         if unit is None and (unit_required or ch.value is not None):
@@ -1280,7 +1284,7 @@ def _check_trial_streams(m: ImportMap, kinds: list[str], label: str) -> None:
         )
 
 
-def _resolve_device(m: ImportMap, base: Path, label: str) -> tuple[Device, dict, dict[str, str]]:
+def _resolve_device(m: ImportMap, base: Path, label: str) -> tuple[Device, dict[str, Any], dict[str, str]]:
     """The device, the manifest's device member and the extra files (device.json) to write with it."""
     dev = m.session.device
     if isinstance(dev, Device):
@@ -1304,12 +1308,12 @@ class ImportResult:
     session: Path
     session_id: str
     trial_id: str
-    streams: list[dict]
+    streams: list[dict[str, Any]]
     world_frame: str
-    source: dict
+    source: dict[str, Any]
     warnings: list[Finding] = field(default_factory=list)
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {
             "ok": True,
             "session": str(self.session),
@@ -1345,7 +1349,7 @@ class Destination:
             )
         return cls(out, overwrite=overwrite)
 
-    def session_facts(self) -> dict | None:
+    def session_facts(self) -> dict[str, Any] | None:
         """The existing session's facts, which fill what the map leaves out when appending (§5.9)."""
         if self.existing is None:
             return None
@@ -1385,14 +1389,14 @@ class Destination:
                 found=device.model,
             )
 
-    def rig(self, new_rig: dict, world_rule: str | None, label: str) -> dict:
+    def rig(self, new_rig: dict[str, Any], world_rule: str | None, label: str) -> dict[str, Any]:
         """The rig to write: a new session's own, or the existing rig with this import's parts merged."""
         if self.existing is None:
             return new_rig
         return merge_rig(self.existing, new_rig, world_rule, label)
 
     def writer(
-        self, m: ImportMap, source: Path, rig: dict, device: dict, extra: dict[str, str], recorder: str
+        self, m: ImportMap, source: Path, rig: dict[str, Any], device: dict[str, Any], extra: dict[str, str], recorder: str
     ) -> tuple[SessionWriter, str]:
         """A writer holding the session-level manifest; the trial and streams are added by the caller."""
         stem = sanitize_id(source.stem, "import")
@@ -1431,7 +1435,7 @@ def _plain(value: Any) -> Any:
     return value.model_dump() if isinstance(value, BaseModel) else value
 
 
-def merge_rig(existing: SessionFolder, new_rig: dict, world_rule: str | None, label: str) -> dict:
+def merge_rig(existing: SessionFolder, new_rig: dict[str, Any], world_rule: str | None, label: str) -> dict[str, Any]:
     """The existing session's rig with an appended import's rig parts (spec §5.9).
 
     A part the session already describes must be identical (E502), except ``motion_capture``, whose
@@ -1479,7 +1483,7 @@ def merge_rig(existing: SessionFolder, new_rig: dict, world_rule: str | None, la
     return merged
 
 
-def _merge_motion_capture(old: dict, new: dict, label: str) -> dict:
+def _merge_motion_capture(old: dict[str, Any], new: dict[str, Any], label: str) -> dict[str, Any]:
     pointer = "/session/rig/motion_capture"
     for key in ("rate_hz", "system"):
         if key in old and key in new and old[key] != new[key]:
@@ -1563,7 +1567,7 @@ def _add_trial(writer: SessionWriter, m: ImportMap, stem: str, source: Path, pro
     return trial_id
 
 
-def _stream_summary(stream: dict) -> dict:
+def _stream_summary(stream: dict[str, Any]) -> dict[str, Any]:
     return {
         "kind": stream["kind"],
         "file": stream["file"],
@@ -1644,10 +1648,10 @@ def _prepare(
     out: str | Path | Destination,
     mapping: str | Path | LoadedMap | None,
     source: str,
-    overrides: dict | None,
+    overrides: dict[str, Any] | None,
     overwrite: bool,
     append: bool,
-) -> tuple[Destination, LoadedMap, Device, dict, dict[str, str]]:
+) -> tuple[Destination, LoadedMap, Device, dict[str, Any], dict[str, str]]:
     """Destination, map and device of an import, all checked before the source is read."""
     dest = out if isinstance(out, Destination) else Destination.of(out, overwrite=overwrite, append=append)
     loaded = mapping if isinstance(mapping, LoadedMap) else load_map(mapping, source, overrides, dest.session_facts())
@@ -1665,6 +1669,8 @@ def body_poses(
     """One 6-DoF body as pose columns (spec §5.5): positions (n × 3, m, in W) and unit quaternions
     (n × 4, body → W, w ≥ 0). A sample the file marks invalid, or whose residual exceeds
     ``max_residual``, is occluded: all seven values NaN. E501 when a valid sample is not a rotation."""
+    # every reader that names 6-DoF bodies gives their positions and rotations
+    assert rec.body_positions is not None and rec.body_rotations is not None
     pos = to_m.to_si(rec.body_positions[:, index, :])
     rot = rec.body_rotations[:, index, :, :]
     valid = np.isfinite(pos).all(axis=1) & np.isfinite(rot).all(axis=(1, 2))
@@ -1714,7 +1720,7 @@ def _pose_streams(
     rec: Recording,
     m: ImportMap,
     world: WorldFrame | None,
-    to_m: Unit | None,
+    to_m: Unit,
     t: np.ndarray,
     rigid_bodies: list[RigidBody],
     label: str,
@@ -1758,7 +1764,7 @@ def import_c3d(
     out: str | Path | Destination,
     mapping: str | Path | LoadedMap | None = None,
     *,
-    overrides: dict | None = None,
+    overrides: dict[str, Any] | None = None,
     overwrite: bool = False,
     append: bool = False,
     stream: bool | None = None,
@@ -1778,7 +1784,7 @@ def import_recording(  # noqa: C901 (over ruff's limit of 15: to be split)
     rec: Recording,
     dest: Destination,
     loaded: LoadedMap,
-    device: dict,
+    device: dict[str, Any],
     extra: dict[str, str],
     *,
     chunk_frames: int | None = None,
@@ -1841,6 +1847,7 @@ def import_recording(  # noqa: C901 (over ruff's limit of 15: to be split)
                 expected="one plate description",
                 found="two",
             )
+        assert point_unit is not None  # converted above when a platform defines W
         world, rig["force_plate"], plate_warnings = plate_description(rec.platforms[plate_number - 1], point_unit, file=src)
         warnings += plate_warnings
     elif m.lab_to_world is not None:
@@ -1932,12 +1939,13 @@ def import_recording(  # noqa: C901 (over ruff's limit of 15: to be split)
                     found=smap.rate_hz,
                 )
 
-    def streams_of(part: Recording) -> tuple[dict, dict[str, dict[str, np.ndarray]], list[Finding]]:
+    def streams_of(part: Recording) -> tuple[dict[str, Any], dict[str, dict[str, np.ndarray]], list[Finding]]:
         """The trial's streams from the frames of ``part`` (the whole recording, or one chunk of it)."""
         mocap: dict[str, tuple[dict[str, np.ndarray], list[str] | None]] = {}
         analog: dict[str, dict[str, np.ndarray]] = {}
         notes: list[Finding] = []
         if chosen or wants_bodies:
+            assert point_unit is not None  # converted above whenever markers or bodies are wanted
             t = (part.point_first_frame + np.arange(part.frames)) / rec.point_rate + m.time_offset_s
             if chosen:
                 pos = point_unit.to_si(part.points[:, chosen, :])
@@ -1955,6 +1963,8 @@ def import_recording(  # noqa: C901 (over ruff's limit of 15: to be split)
             t_an = (part.analog_first_sample + np.arange(n)) / rec.analog_rate + m.time_offset_s
             mapped = _mapped_streams(m, n, _analog_reader(part, label), label=label, source_file=src, unit_required=False)
             if m.platform_wrench is not None:
+                # a platform wrench without a platform is E502 above; a platform's geometry needs the POINT unit
+                assert plate_number is not None and point_unit is not None
                 mapped["plate_wrench"], notes = platform_plate_wrench(
                     part, part.platforms[plate_number - 1], m.platform_wrench, rig["force_plate"], point_unit, label=label
                 )
@@ -1995,11 +2005,19 @@ def import_recording(  # noqa: C901 (over ruff's limit of 15: to be split)
             written.append(writer.add_stream(trial_id, kind, cols, **kw))
 
     for kind, (cols, ents) in mocap_streams.items():
-        fmt = mm.format if kind == "markers" else m.bodies.format  # type: ignore[union-attr]
+        if kind == "markers":
+            fmt = mm.format
+        else:
+            assert m.bodies is not None  # _pose_streams makes the pose streams from the map's bodies
+            fmt = m.bodies.format
         add(kind, cols, rate_hz=rec.point_rate, fmt=fmt, entities=ents)
     for kind, cols in analog_streams.items():
-        smap = m.streams.get(kind)
-        fmt, frame = (smap.format, smap.frame) if smap is not None else (m.platform_wrench.format, None)  # type: ignore[union-attr]
+        stream_map = m.streams.get(kind)
+        if stream_map is not None:
+            fmt, frame = stream_map.format, stream_map.frame
+        else:
+            assert m.platform_wrench is not None  # the one analog stream without a stream map: the platform's wrench
+            fmt, frame = m.platform_wrench.format, None
         add(kind, cols, rate_hz=rec.analog_rate, fmt=fmt, frame=frame)
     if streamed:
 
@@ -2037,6 +2055,20 @@ def _round_significant(x: float, digits: int) -> float:
     return float(f"{x:.{digits}g}")
 
 
+class _CsvReading(TypedDict, total=False):
+    """The options :func:`read_csv_columns` gives pandas' ``read_csv``."""
+
+    sep: str
+    skiprows: int
+    comment: str | None
+    skipinitialspace: bool
+    engine: Literal["c"]
+    encoding: str
+    usecols: list[str]
+    na_values: list[str]
+    keep_default_na: bool
+
+
 def read_csv_columns(path: Path, names: list[str], opts: CsvOptions, *, map_label: str) -> dict[str, np.ndarray]:
     """The named columns of a CSV log as float64 arrays (spec §5.7).
 
@@ -2046,7 +2078,7 @@ def read_csv_columns(path: Path, names: list[str], opts: CsvOptions, *, map_labe
     label = str(path)
     if not path.is_file():
         raise fail("E501", f"{label!r} does not exist or is not a file", file=label)
-    common = {
+    common: _CsvReading = {
         "sep": opts.delimiter,
         "skiprows": opts.skip_rows,
         "comment": opts.comment,
@@ -2063,7 +2095,7 @@ def read_csv_columns(path: Path, names: list[str], opts: CsvOptions, *, map_labe
         if name not in header:
             raise fail("E503", f"{path.name} has no column {name!r}", file=map_label, expected=header, found=name)
     columns = {raw_header[header.index(name)]: name for name in names}
-    numeric = {"usecols": list(columns), "na_values": ["NaN", "nan"], "keep_default_na": False, **common}
+    numeric: _CsvReading = {"usecols": list(columns), "na_values": ["NaN", "nan"], "keep_default_na": False, **common}
     try:  # the fast path: the C parser, correctly rounded (pandas ≥ 3)
         table = pd.read_csv(path, dtype={c: "float64" for c in columns}, **numeric)
     except (OSError, UnicodeDecodeError, pd.errors.ParserError) as exc:
@@ -2094,7 +2126,7 @@ def import_csv(
     out: str | Path | Destination,
     mapping: str | Path | LoadedMap,
     *,
-    overrides: dict | None = None,
+    overrides: dict[str, Any] | None = None,
     overwrite: bool = False,
     append: bool = False,
 ) -> ImportResult:
@@ -2111,13 +2143,13 @@ def import_csv(
     if not m.streams:
         raise fail("E502", "a csv map needs at least one stream", file=label, pointer="/streams", expected="streams", found={})
     opts = m.csv or CsvOptions()
-    wanted = [m.time.source] + sorted(
-        {_as_channel(c).source for s in m.streams.values() for c in s.columns.values() if _as_channel(c).source is not None}
-        - {m.time.source}
-    )
+    time = m.time
+    assert time is not None  # load_map requires 'time' of a csv map (E502)
+    sources = {_as_channel(c).source for s in m.streams.values() for c in s.columns.values()}
+    wanted = [time.source] + sorted({named for named in sources if named is not None} - {time.source})
     data = read_csv_columns(src_path, wanted, opts, map_label=label)
-    time_unit = unit_conversion(m.time.unit, "s", file=label, pointer="/time/unit", column=m.time.source)
-    t = time_unit.to_si(data[m.time.source])
+    time_unit = unit_conversion(time.unit, "s", file=label, pointer="/time/unit", column=time.source)
+    t = time_unit.to_si(data[time.source])
     if m.time_offset_s != 0.0:
         t = t + m.time_offset_s
     if t.size < 2:
@@ -2129,11 +2161,11 @@ def import_csv(
         i = int(np.argmax(~np.isfinite(t))) if not np.isfinite(t).all() else int(np.argmax(steps <= 0)) + 1
         raise fail(
             "E203",
-            f"time column {m.time.source!r} of {src_path.name} is not finite and strictly increasing at data row {i + 1}",
+            f"time column {time.source!r} of {src_path.name} is not finite and strictly increasing at data row {i + 1}",
             file=src,
-            column=m.time.source,
+            column=time.source,
             expected="strictly increasing",
-            found=f"{data[m.time.source][i - 1] if i else ''} → {data[m.time.source][i]}",
+            found=f"{data[time.source][i - 1] if i else ''} → {data[time.source][i]}",
         )
 
     def read(name: str) -> tuple[np.ndarray, str | None]:

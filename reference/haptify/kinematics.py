@@ -55,7 +55,8 @@ def jacobian(kin: Kinematics, q: np.ndarray) -> np.ndarray:
     from haptify.conventions import quat_to_matrix
 
     r_base = quat_to_matrix(np.asarray(kin.base.quaternion))
-    return np.einsum("ij,njk->nik", r_base, np.stack(cols, axis=-1))
+    out: np.ndarray = np.einsum("ij,njk->nik", r_base, np.stack(cols, axis=-1))
+    return out
 
 
 def _limit_value(limit: LinearLimit, q: np.ndarray, names: list[str]) -> np.ndarray:
@@ -79,7 +80,8 @@ def within_limits(kin: Kinematics, q: np.ndarray, tol: float = 1e-12) -> np.ndar
     """True where every joint lies within its (coupled) limits (``tol`` in rad; spec §8.2)."""
     lower, upper = joint_limits(kin, q)
     q = np.atleast_2d(np.asarray(q, dtype=float))
-    return np.all((q >= lower - tol) & (q <= upper + tol), axis=1)
+    out: np.ndarray = np.all((q >= lower - tol) & (q <= upper + tol), axis=1)
+    return out
 
 
 #: samples per joint of the unit lattice on which joint ranges are judged (spec §8.3 step 1; E115, E311)

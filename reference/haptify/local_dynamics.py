@@ -21,7 +21,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated, Any, Literal, Sequence, Union
+from typing import TYPE_CHECKING, Annotated, Any, Final, Literal, Sequence, Union
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -34,8 +34,14 @@ from haptify.filter_bank import FilterBank, lfilter_columns
 from haptify.metric_definitions import family, param
 from haptify.versions import SPEC_VERSION
 
+if TYPE_CHECKING:
+    from haptify.report import ReportFigure
+    from haptify.results import MetricResult, Unavailable
+
 FAMILY = "dynamics"
-MODEL_FORMAT = "haptify-hw-model"
+#: The segment index k and local coordinate s of every sample on a piecewise-linear map (:func:`_segments`).
+Segments = tuple[np.ndarray, np.ndarray]
+MODEL_FORMAT: Final = "haptify-hw-model"
 
 #: The model's 13 inputs and 6 outputs (spec §11.1), in this order.
 INPUT_NAMES = ("qw", "qx", "qy", "qz", "px", "py", "pz", "vx", "vy", "vz", "ax", "ay", "az")
@@ -163,14 +169,14 @@ class HWModelFile(_Strict):
         return len(self.outputs)
 
 
-def load_model(path: str | os.PathLike) -> HWModelFile:
+def load_model(path: str | os.PathLike[str]) -> HWModelFile:
     """Read and validate a parameter file (spec §11.5); E702 names the field when it is invalid."""
     from haptify.storage import read_json_model
 
     return read_json_model(path, HWModelFile, "E702")
 
 
-def save_model(model: HWModelFile, path: str | os.PathLike) -> Path:
+def save_model(model: HWModelFile, path: str | os.PathLike[str]) -> Path:
     """Write the parameter file atomically (spec §3.6, §11.5)."""
     from haptify.storage import atomic_write_text
 
@@ -179,20 +185,20 @@ def save_model(model: HWModelFile, path: str | os.PathLike) -> Path:
     return p
 
 
-def _cell(items: list) -> np.ndarray:
+def _cell(items: list[Any]) -> np.ndarray:
     out = np.empty((len(items),), dtype=object)
     for k, item in enumerate(items):
         out[k] = item
     return out
 
 
-def _mat_map(m: PiecewiseLinearMap | UnitGainMap) -> dict:
+def _mat_map(m: PiecewiseLinearMap | UnitGainMap) -> dict[str, Any]:
     if isinstance(m, UnitGainMap):
         return {"Type": "unit_gain", "BreakPoints": np.zeros((2, 0))}
     return {"Type": "piecewise_linear", "BreakPoints": np.array([m.breakpoints, m.values], dtype=float)}
 
 
-def model_to_mat_dict(model: HWModelFile) -> dict:
+def model_to_mat_dict(model: HWModelFile) -> dict[str, Any]:
     """The MATLAB struct written by :func:`export_mat` (field names in spec §11.5.2)."""
     ny, nu = model.ny, model.nu
     B = np.empty((ny, nu), dtype=object)
@@ -227,7 +233,7 @@ def model_to_mat_dict(model: HWModelFile) -> dict:
     }
 
 
-def export_mat(model: HWModelFile, path: str | os.PathLike) -> Path:
+def export_mat(model: HWModelFile, path: str | os.PathLike[str]) -> Path:
     """Write the model as a MATLAB-loadable ``.mat`` holding the struct ``model`` (spec §11.5.2)."""
     from scipy.io import savemat
 
@@ -260,7 +266,8 @@ def pwl_eval(breakpoints: np.ndarray, values: np.ndarray, u: np.ndarray) -> np.n
     bp = np.asarray(breakpoints, dtype=float)
     v = np.asarray(values, dtype=float)
     k, s = _segments(bp, np.asarray(u, dtype=float))
-    return v[k] + s * (v[k + 1] - v[k])
+    out: np.ndarray = v[k] + s * (v[k + 1] - v[k])
+    return out
 
 
 def pwl_basis(breakpoints: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -287,7 +294,8 @@ def pwl_slope(breakpoints: np.ndarray, values: np.ndarray, u: np.ndarray) -> np.
     bp = np.asarray(breakpoints, dtype=float)
     v = np.asarray(values, dtype=float)
     k, _ = _segments(bp, np.asarray(u, dtype=float))
-    return (v[k + 1] - v[k]) / (bp[k + 1] - bp[k])
+    out: np.ndarray = (v[k + 1] - v[k]) / (bp[k + 1] - bp[k])
+    return out
 
 
 def apply_map(m: PiecewiseLinearMap | UnitGainMap, u: np.ndarray) -> np.ndarray:
@@ -380,7 +388,7 @@ class FitOptions:
     @classmethod
     def from_definition(cls, **overrides: Any) -> "FitOptions":
         """Options from the definition file, with keyword overrides (e.g. ``output_map="unit_gain"``)."""
-        values = {}
+        values: dict[str, Any] = {}
         for name in cls.__dataclass_fields__:
             v = param(FAMILY, name)
             values[name] = tuple(v) if isinstance(v, list) else v
@@ -416,12 +424,13 @@ def place_breakpoints(signal: np.ndarray, count: int, quantiles: tuple[float, fl
     x = np.asarray(signal, dtype=float)
     lo, hi = quantiles
     levels = lo + (hi - lo) * np.arange(count) / (count - 1)
-    bp = np.quantile(x, levels)
+    bp: np.ndarray = np.quantile(x, levels)
     span = bp[-1] - bp[0]
     centre = 0.5 * (bp[0] + bp[-1])
     scale = max(1.0, abs(centre))
     if span < 1e-12 * scale:
-        return centre + (np.arange(count) - (count - 1) / 2.0) * 1e-6 * scale
+        out: np.ndarray = centre + (np.arange(count) - (count - 1) / 2.0) * 1e-6 * scale
+        return out
     if np.min(np.diff(bp)) < 1e-9 * span:
         bp = np.linspace(bp[0], bp[-1], count)
     return bp
@@ -442,8 +451,8 @@ class _Structure:
     in_bp: list[np.ndarray | None]  # input breakpoints (None: unit gain)
     out_bp: list[np.ndarray | None]  # output breakpoints (None: unit gain)
     v_idx: list[np.ndarray | None] = field(default_factory=list)  # θ indices of input map values
-    b_idx: np.ndarray = field(default=None)  # (ny, nu, nb)
-    f_idx: np.ndarray = field(default=None)  # (ny, nu, nf)
+    b_idx: np.ndarray = field(init=False)  # (ny, nu, nb)
+    f_idx: np.ndarray = field(init=False)  # (ny, nu, nf)
     c_idx: list[np.ndarray | None] = field(default_factory=list)  # θ indices of output map values
     size: int = 0
 
@@ -472,7 +481,8 @@ class _Structure:
         """θ indices that only output j depends on (its B, F and output map), in Jacobian order: one
         contiguous range of θ."""
         start = int(self.b_idx[j, 0, 0])
-        stop = start + self.nu * (self.nb + self.nf) + (0 if self.c_idx[j] is None else len(self.c_idx[j]))
+        values = self.c_idx[j]
+        stop = start + self.nu * (self.nb + self.nf) + (0 if values is None else len(values))
         return slice(start, stop)
 
 
@@ -485,9 +495,9 @@ class _Record:
     u: np.ndarray
     y: np.ndarray
     basis: np.ndarray
-    segments: list
+    segments: list[Segments | None]  # per input: its map's segments at u (None: unit gain)
     starts: np.ndarray
-    _scratch: dict = field(default_factory=dict)
+    _scratch: dict[str, Any] = field(default_factory=dict)
 
     def scratch(self, name: str, rows: int, width: int) -> np.ndarray:
         """A (rows, width) buffer reused from call to call under ``name`` (a fresh array of megabytes per call
@@ -498,9 +508,9 @@ class _Record:
         return buffer[:rows]
 
     @classmethod
-    def of(cls, st: _Structure, u: np.ndarray, y: np.ndarray, starts: Sequence[int] = (0,)) -> "_Record":
+    def of(cls, st: _Structure, u: np.ndarray, y: np.ndarray, starts: Sequence[int] | np.ndarray = (0,)) -> "_Record":
         basis = np.empty((len(u), st.n_shared))
-        segments = []
+        segments: list[Segments | None] = []
         for i, bp in enumerate(st.in_bp):
             segments.append(None if bp is None else _segments(bp, u[:, i]))
             if bp is not None:
@@ -544,7 +554,7 @@ class _Simulation:
     x: np.ndarray
     yhat: np.ndarray
     slopes: list[np.ndarray | None]
-    segments: list[tuple | None]
+    segments: list[Segments | None]
 
 
 def _simulation(st: _Structure, theta: np.ndarray, rec: _Record) -> _Simulation:
@@ -556,7 +566,9 @@ def _simulation(st: _Structure, theta: np.ndarray, rec: _Record) -> _Simulation:
     tiled.reshape(len(w), st.ny, st.nu)[:] = w[:, None, :]
     z = lfilter_columns(num, den, tiled, starts=rec.starts)
     x = z @ np.kron(np.eye(st.ny), np.ones((st.nu, 1)))  # Σ_i z_ji for every output j
-    yhat, slopes, segments = x.copy(), [None] * st.ny, [None] * st.ny
+    yhat = x.copy()
+    slopes: list[np.ndarray | None] = [None] * st.ny
+    segments: list[Segments | None] = [None] * st.ny
     for j, bp in enumerate(st.out_bp):
         if bp is not None:
             value, slopes[j], k, s = _pwl_parts(bp, theta[st.c_idx[j]], x[:, j])
@@ -569,7 +581,9 @@ def _simulate(st: _Structure, theta: np.ndarray, rec: _Record) -> np.ndarray:
     return _simulation(st, theta, rec).yhat
 
 
-def _pwl_parts(breakpoints: np.ndarray, values: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, ...]:
+def _pwl_parts(
+    breakpoints: np.ndarray, values: np.ndarray, x: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`pwl_eval` and :func:`pwl_slope` of one map at ``x``, and the segments (k, s) that
     :func:`_hat_columns` turns into :func:`pwl_basis`, from one segment search."""
     k, s = _segments(breakpoints, x)
@@ -595,7 +609,7 @@ class _JacobianPass:
     yhat: np.ndarray
     gain: np.ndarray  # weight · h_j'(x_j) per sample
     weight: float
-    segments: tuple | None  # (k, s) of the output map at x_j; None: unit gain
+    segments: Segments | None  # (k, s) of the output map at x_j; None: unit gain
     hats: int  # the output map's breakpoints (0: unit gain)
     shared: FilterBank  # the columns of the input-map values (over Φ)
     linear: FilterBank  # the B and F columns (over ``signals``)
@@ -609,8 +623,13 @@ class _JacobianPass:
     @classmethod
     def of(cls, st: _Structure, theta: np.ndarray, rec: _Record, j: int, weight: float, sim: _Simulation) -> "_JacobianPass":
         nu, nb, nf = st.nu, st.nb, st.nf
-        segments = sim.segments[j]
-        gain = np.full(len(rec.u), weight) if segments is None else weight * sim.slopes[j]
+        segments, slope, out_bp = sim.segments[j], sim.slopes[j], st.out_bp[j]
+        gain: np.ndarray
+        if segments is None:
+            gain, hats = np.full(len(rec.u), weight), 0
+        else:  # _simulation gives a mapped output its slope and segments together, from its breakpoints
+            assert slope is not None and out_bp is not None
+            gain, hats = weight * slope, len(out_bp)
         num, den = _polynomials(st, theta, j)
         taps = [(st.nk + k, 1.0) for k in range(nb)] + [(lag, -1.0) for lag in range(1, nf + 1)]
         return cls(
@@ -618,7 +637,7 @@ class _JacobianPass:
             gain=gain,
             weight=weight,
             segments=segments,
-            hats=0 if segments is None else len(st.out_bp[j]),
+            hats=hats,
             shared=FilterBank(num[st.shared_input], den[st.shared_input]),
             linear=FilterBank(*_delay_filters(den, taps)),
             signals=[sim.w] * nb + [sim.z[:, j * nu : (j + 1) * nu]] * nf,
@@ -770,7 +789,7 @@ def fit(
         )
 
 
-def _one_blas_thread():
+def _one_blas_thread() -> contextlib.AbstractContextManager[Any]:
     """BLAS limited to one thread while fitting, when ``threadpoolctl`` is installed.
 
     The fit's matrix products are tall and thin (≈ 200 × 14 000); a threaded BLAS gains little on them
@@ -781,22 +800,23 @@ def _one_blas_thread():
         from threadpoolctl import threadpool_limits
     except ImportError:  # pragma: no cover - the dependency is declared; this only guards odd installs
         return contextlib.nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
+    limits: contextlib.AbstractContextManager[Any] = threadpool_limits(limits=1, user_api="blas")
+    return limits
 
 
 def _fit(  # noqa: C901 (over ruff's limit of 15: to be split)
-    u,
-    y,
+    u: np.ndarray | Sequence[np.ndarray],
+    y: np.ndarray | Sequence[np.ndarray],
     *,
-    sample_rate_hz,
-    options,
-    input_names,
-    input_units,
-    output_names,
-    output_units,
-    quaternion_columns,
-    session_id,
-    trial_id,
+    sample_rate_hz: float,
+    options: FitOptions,
+    input_names: Sequence[str] | None,
+    input_units: Sequence[str] | None,
+    output_names: Sequence[str] | None,
+    output_units: Sequence[str] | None,
+    quaternion_columns: Sequence[int] | None,
+    session_id: str | None,
+    trial_id: str | None,
 ) -> tuple[HWModelFile, FitReport]:
     opts = options
     us = _as_records(u, "inputs")
@@ -948,7 +968,7 @@ def _assemble(
     inputs: list[Channel],
     outputs: list[Channel],
 ) -> HWModelFile:
-    def pwl(bp, idx):
+    def pwl(bp: np.ndarray | None, idx: np.ndarray | None) -> UnitGainMap | PiecewiseLinearMap:
         return UnitGainMap() if bp is None else PiecewiseLinearMap(breakpoints=bp.tolist(), values=theta[idx].tolist())
 
     return HWModelFile(
@@ -968,7 +988,8 @@ def _assemble(
 def rmse(y: np.ndarray, yhat: np.ndarray) -> np.ndarray:
     """Per-column RMS error of ``yhat`` against ``y`` (same units; spec §11.7)."""
     d = np.asarray(y, dtype=float) - np.asarray(yhat, dtype=float)
-    return np.sqrt(np.mean(d * d, axis=0))
+    out: np.ndarray = np.sqrt(np.mean(d * d, axis=0))
+    return out
 
 
 # =============================================================================================
@@ -1016,7 +1037,8 @@ def window_features(
     m = n_win * window_samples
 
     def means(x: np.ndarray, width: int) -> np.ndarray:
-        return np.asarray(x, dtype=float)[:m].reshape(n_win, window_samples, width).mean(axis=1)
+        out: np.ndarray = np.asarray(x, dtype=float)[:m].reshape(n_win, window_samples, width).mean(axis=1)
+        return out
 
     q = np.asarray(quaternion, dtype=float)[:m].reshape(n_win, window_samples, 4)
     orient = np.array([quat_mean(block) for block in q]) if n_win else np.zeros((0, 4))
@@ -1033,7 +1055,8 @@ def pair_distance(a: WindowFeatures, b: WindowFeatures, scales: DistanceScales) 
     out += cdist(a.position, b.position) / scales.p
     out += cdist(a.velocity, b.velocity) / scales.v
     out += cdist(a.acceleration, b.acceleration) / scales.a
-    return out
+    result: np.ndarray = out
+    return result
 
 
 def nearest_distances(test: WindowFeatures, train: WindowFeatures, scales: DistanceScales, chunk: int = 512) -> np.ndarray:
@@ -1058,7 +1081,8 @@ def nearest_distances(test: WindowFeatures, train: WindowFeatures, scales: Dista
 def segment_distances(window_distances: np.ndarray, windows_per_segment: int) -> np.ndarray:
     """Mean of the window minima over each complete segment (spec §11.6.3); incomplete tail dropped."""
     n_seg = len(window_distances) // windows_per_segment
-    return window_distances[: n_seg * windows_per_segment].reshape(n_seg, windows_per_segment).mean(axis=1)
+    out: np.ndarray = window_distances[: n_seg * windows_per_segment].reshape(n_seg, windows_per_segment).mean(axis=1)
+    return out
 
 
 def segment_force_errors(force: np.ndarray, predicted: np.ndarray, segment_samples: int) -> np.ndarray:
@@ -1066,7 +1090,8 @@ def segment_force_errors(force: np.ndarray, predicted: np.ndarray, segment_sampl
     n_seg = len(force) // segment_samples
     m = n_seg * segment_samples
     d = (np.asarray(force, dtype=float)[:m] - np.asarray(predicted, dtype=float)[:m]).reshape(n_seg, segment_samples, -1)
-    return np.sqrt(np.mean(d * d, axis=1)).mean(axis=1)
+    out: np.ndarray = np.sqrt(np.mean(d * d, axis=1)).mean(axis=1)
+    return out
 
 
 def line_fit(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
@@ -1138,6 +1163,7 @@ def trial_data(ctx_or_session: Any, trial_id: str, rate_hz: float | None = None)
             expected=list(REQUIRED_STREAMS),
             found=missing,
         )
+    assert sig.acceleration is not None and sig.force is not None and sig.torque is not None  # the wrench has both
     u = np.column_stack([sig.quaternion, sig.position, sig.velocity, sig.acceleration])
     y = np.column_stack([sig.force, sig.torque])
     valid = np.asarray(sig.valid, dtype=bool) & np.all(np.isfinite(u), axis=1) & np.all(np.isfinite(y), axis=1)
@@ -1223,7 +1249,7 @@ def given_model_trial(ctx_or_session: Any, trial_id: str, relative: str) -> tupl
 
 def _window_valid(valid: np.ndarray, window: int) -> np.ndarray:
     n = len(valid) // window
-    return valid[: n * window].reshape(n, window).all(axis=1)
+    return np.asarray(valid[: n * window].reshape(n, window).all(axis=1))
 
 
 def trial_features(data: TrialData, window: int) -> tuple[WindowFeatures, np.ndarray]:
@@ -1237,7 +1263,7 @@ def _subset(f: WindowFeatures, mask: np.ndarray) -> WindowFeatures:
     return WindowFeatures(f.position[mask], f.velocity[mask], f.acceleration[mask], f.orientation[mask])
 
 
-def segment_table(model: HWModelFile, train: TrialData, tests: list[TrialData], labels: dict[str, str]) -> list[dict]:
+def segment_table(model: HWModelFile, train: TrialData, tests: list[TrialData], labels: dict[str, str]) -> list[dict[str, Any]]:
     """Every complete, wholly valid 5 s segment of the training and test trials with its kinematic distance to
     the training set and its force error (spec §11.6)."""
     rate = model.sample_rate_hz
@@ -1277,13 +1303,13 @@ def segment_table(model: HWModelFile, train: TrialData, tests: list[TrialData], 
     return rows
 
 
-def _unavailable_all(code: str, reason: str, ids: list[str]) -> list:
+def _unavailable_all(code: str, reason: str, ids: list[str]) -> list[MetricResult | Unavailable]:
     from haptify.results import Unavailable
 
     return [Unavailable(id=i, code=code, reason=reason) for i in ids]
 
 
-def compute(ctx: Any) -> list:
+def compute(ctx: Any) -> list[MetricResult | Unavailable]:
     """The dynamics family's metrics for a session (spec §11.7): training-fit RMS errors and error vs distance."""
     from haptify.results import MetricResult
 
@@ -1304,7 +1330,7 @@ def compute(ctx: Any) -> list:
         return _unavailable_all(err.code, err.findings[0].message, ids)
 
     unit = {m.id: m.unit for m in fam.metrics}
-    out: list = []
+    out: list[MetricResult | Unavailable] = []
     predicted = predict_trial(model, data)
     ok = data.valid & np.all(np.isfinite(predicted), axis=1)  # runs of one row have no prediction
     n = int(ok.sum())
@@ -1388,7 +1414,7 @@ def compute(ctx: Any) -> list:
     return out
 
 
-def report_figures(ctx: Any, results: Any) -> list:
+def report_figures(ctx: Any, results: Any) -> list[ReportFigure]:
     """RMS force error of every 5 s segment against its kinematic distance to the training set, with
     the fitted line (paper Fig. 9; spec §11.7). Drawn from ``dynamics.error_vs_distance``'s diagnostics."""
     import matplotlib.pyplot as plt
@@ -1403,7 +1429,8 @@ def report_figures(ctx: Any, results: Any) -> list:
     fig, ax = plt.subplots(figsize=(8, 5))
     for name in sorted({r["set"] for r in rows}, key=lambda s: (s != "training", s)):
         pts = [(r["distance"], r["force_error"]) for r in rows if r["set"] == name]
-        ax.scatter(*zip(*pts), s=14, label=name)
+        distances, errors = zip(*pts)
+        ax.scatter(distances, errors, s=14, label=name)
     d = np.array([0.0, max((r["distance"] for r in rows), default=1.0)])
     ax.plot(d, intercept + slope * d, "k-", lw=1, label=f"fit: {slope:.3g} N per unit distance + {intercept:.3g} N")
     ax.set_xlabel("kinematic distance to the training set (paper eq. 9, dimensionless)")

@@ -13,7 +13,7 @@ import io
 import math
 from dataclasses import replace
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 import pandas as pd
@@ -91,7 +91,7 @@ def detect_format(path: Path) -> str | None:
     return None
 
 
-def _empty(path: Path, fmt: str, manufacturer: str) -> dict:
+def _empty(path: Path, fmt: str, manufacturer: str) -> dict[str, Any]:
     return {
         "path": path,
         "manufacturer": manufacturer,
@@ -117,7 +117,7 @@ def qtm_rotation(cells: np.ndarray) -> np.ndarray:
     return np.swapaxes(cells.reshape(*cells.shape[:-1], 3, 3), -1, -2)
 
 
-def _qtm_head(lines: list[str], p: Path) -> dict:
+def _qtm_head(lines: list[str], p: Path) -> dict[str, Any]:
     """A QTM TSV's header (spec §5.10): the ``KEY<TAB>value…`` lines, the optional ``Frame`` column
     line, the line where the data start, the markers, bodies and the width of a data row."""
     meta: dict[str, list[str]] = {}
@@ -149,7 +149,7 @@ def _qtm_head(lines: list[str], p: Path) -> dict:
 QTM_PER_BODY = 16  # X, Y, Z, Roll, Pitch, Yaw, Residual, Rot[0]…Rot[8]
 
 
-def _qtm_part(p: Path, head: dict, data: np.ndarray, first_frame: int) -> Recording:
+def _qtm_part(p: Path, head: dict[str, Any], data: np.ndarray, first_frame: int) -> Recording:
     """The recording held by rows ``data`` of a QTM TSV (the whole file, or one chunk of it)."""
     markers, bodies, lead = head["markers"], head["bodies"], head["lead"]
     rec = _empty(p, "tsv", "Qualisys Track Manager")
@@ -222,7 +222,7 @@ def _head_lines(p: Path) -> list[str]:
         raise fail("E501", f"{str(p)!r} cannot be read as UTF-8 text: {exc}", file=str(p)) from None
 
 
-def _data_chunks(p: Path, sep: str, head: dict, rows: int) -> Iterator[np.ndarray]:
+def _data_chunks(p: Path, sep: str, head: dict[str, Any], rows: int) -> Iterator[np.ndarray]:
     """The numeric rows after the header, ``rows`` at a time, parsed as :func:`_table` parses them."""
     try:
         reader = pd.read_csv(
@@ -246,7 +246,13 @@ def _data_chunks(p: Path, sep: str, head: dict, rows: int) -> Iterator[np.ndarra
         raise fail("E501", f"{p.name} cannot be read after line {head['data_start']}: {exc}", file=str(p)) from None
 
 
-def _streamed(p: Path, sep: str, head: dict, part, first_frame_of) -> tuple[Recording, int]:
+def _streamed(
+    p: Path,
+    sep: str,
+    head: dict[str, Any],
+    part: Callable[[Path, dict[str, Any], np.ndarray, int], Recording],
+    first_frame_of: Callable[[np.ndarray], int],
+) -> tuple[Recording, int]:
     """A text export opened for streaming: the recording with shape-only frames (NaN views) (their count from one
     pass over the lines) and its chunk reader; also the row count."""
     rows, first = 0, None
@@ -262,11 +268,10 @@ def _streamed(p: Path, sep: str, head: dict, part, first_frame_of) -> tuple[Reco
         else 0
     )
     shape = part(p, head, np.zeros((0, head["width"])), first_frame)
-    shape_only = {"points": np.broadcast_to(np.float64(np.nan), (rows, *shape.points.shape[1:]))}
-    for name in ("body_positions", "body_rotations", "body_residuals"):
-        value = getattr(shape, name)
-        if value is not None:
-            shape_only[name] = np.broadcast_to(np.float64(np.nan), (rows, *value.shape[1:]))
+
+    def shape_only(value: np.ndarray | None) -> np.ndarray | None:
+        """A NaN view with ``rows`` frames of ``value``'s shape (None stays None)."""
+        return None if value is None else np.broadcast_to(np.float64(np.nan), (rows, *value.shape[1:]))
 
     def chunked(chunk: int | None) -> Iterator[tuple[int, Recording]]:
         start = 0
@@ -274,7 +279,15 @@ def _streamed(p: Path, sep: str, head: dict, part, first_frame_of) -> tuple[Reco
             yield start, part(p, head, data, first_frame + start)
             start += len(data)
 
-    return replace(shape, chunked=chunked, **shape_only), rows
+    points = np.broadcast_to(np.float64(np.nan), (rows, *shape.points.shape[1:]))
+    return replace(
+        shape,
+        chunked=chunked,
+        points=points,
+        body_positions=shape_only(shape.body_positions),
+        body_rotations=shape_only(shape.body_rotations),
+        body_residuals=shape_only(shape.body_residuals),
+    ), rows
 
 
 def _is_number(text: str) -> bool:
@@ -290,7 +303,7 @@ def _is_number(text: str) -> bool:
 MOTIVE_UNITS = {"Millimeters": "mm", "Centimeters": "cm", "Meters": "m"}
 
 
-def _motive_head(lines: list[str], p: Path) -> dict:
+def _motive_head(lines: list[str], p: Path) -> dict[str, Any]:
     """A Motive CSV's header (spec §5.10): the metadata line, the Type, Name, ID, quantity and axis
     lines, the markers and bodies they name, and where the data start."""
     first = [c.strip() for c in lines[0].split(",")] if lines else []
@@ -341,7 +354,7 @@ def _motive_head(lines: list[str], p: Path) -> dict:
     }
 
 
-def _motive_part(p: Path, head: dict, data: np.ndarray, first_frame: int) -> Recording:
+def _motive_part(p: Path, head: dict[str, Any], data: np.ndarray, first_frame: int) -> Recording:
     """The recording held by rows ``data`` of a Motive CSV (the whole file, or one chunk of it)."""
     col, markers, bodies = head["col"], head["markers"], head["bodies"]
     rec = _empty(p, "motive", f"OptiTrack Motive (format {head['meta']['Format Version']})")
@@ -574,7 +587,7 @@ def read_nexus_csv(path: str | Path) -> Recording:  # noqa: C901 (over ruff's li
     return Recording(**rec)
 
 
-READERS = {"tsv": read_qualisys_tsv, "motive": read_motive_csv, "nexus": read_nexus_csv}
+READERS: dict[str, Callable[..., Recording]] = {"tsv": read_qualisys_tsv, "motive": read_motive_csv, "nexus": read_nexus_csv}
 
 
 def read_export(fmt: str, path: str | Path, *, stream: bool | None = None) -> Recording:
@@ -589,12 +602,12 @@ def import_export(
     out: str | Path | Destination,
     mapping: str | Path | LoadedMap | None = None,
     *,
-    overrides: dict | None = None,
+    overrides: dict[str, Any] | None = None,
     overwrite: bool = False,
     append: bool = False,
     stream: bool | None = None,
     chunk_frames: int | None = None,
-    progress=None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> ImportResult:
     """Import a Qualisys TSV, Motive CSV or Nexus CSV export as one trial (spec §5.10), through the
     map rules of a C3D file (:func:`~haptify.importers.import_recording`); ``stream``, ``chunk_frames``

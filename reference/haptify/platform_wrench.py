@@ -172,7 +172,8 @@ def wrench_at_origin(kind: int, out: np.ndarray, geometry: PlatformGeometry) -> 
         moment = cross(cop, force)
         moment[2] += out[5]
         return force, moment
-    a, b = geometry.sensor_offsets  # type 3
+    assert geometry.sensor_offsets is not None  # platform_geometry gives a type-3 platform its offsets
+    a, b = geometry.sensor_offsets
     fx12, fx34, fy14, fy23, fz1, fz2, fz3, fz4 = out
     force = np.stack([fx12 + fx34, fy14 + fy23, fz1 + fz2 + fz3 + fz4])
     moment = np.stack([b * (fz1 + fz2 - fz3 - fz4), a * (-fz1 + fz2 + fz3 - fz4), b * (-fx12 + fx34) + a * (fy14 - fy23)])
@@ -181,7 +182,8 @@ def wrench_at_origin(kind: int, out: np.ndarray, geometry: PlatformGeometry) -> 
 
 def wrench_at_surface(force: np.ndarray, moment_o: np.ndarray, geometry: PlatformGeometry) -> np.ndarray:
     """The moment about the top surface's centre C: ``M_C = M_O − ORIGIN × F`` (N·m, ``(3, N)``; spec §5.6.1)."""
-    return moment_o - cross(geometry.origin, force)
+    out: np.ndarray = moment_o - cross(geometry.origin, force)
+    return out
 
 
 def equivalent_corners(force_w: np.ndarray, moment_w: np.ndarray, positions: np.ndarray, rotations: np.ndarray) -> np.ndarray:

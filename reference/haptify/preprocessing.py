@@ -81,7 +81,8 @@ def lowpass(x: np.ndarray, rate_hz: float, cutoff_hz: float, *, order: int | Non
     padlen = min(3 * (2 * len(sos) + 1), len(x) - 1)
     ramp = np.linspace(0.0, 1.0, len(x)).reshape((-1,) + (1,) * (x.ndim - 1))
     chord = x[0] + ramp * (x[-1] - x[0])
-    return sosfiltfilt(sos, x - chord, axis=0, padtype="odd", padlen=padlen) + chord
+    out: np.ndarray = sosfiltfilt(sos, x - chord, axis=0, padtype="odd", padlen=padlen) + chord
+    return out
 
 
 def butter_lowpass(order: int, cutoff_hz: float, rate_hz: float) -> np.ndarray:
@@ -100,7 +101,8 @@ def interp_columns(t_src: np.ndarray, x_src: np.ndarray, t_dst: np.ndarray) -> n
     Spec §7.2."""
     x_src = np.asarray(x_src, float)
     if x_src.ndim == 1:
-        return np.interp(t_dst, t_src, x_src)
+        out: np.ndarray = np.interp(t_dst, t_src, x_src)
+        return out
     return np.column_stack([np.interp(t_dst, t_src, x_src[:, j]) for j in range(x_src.shape[1])])
 
 
@@ -124,7 +126,8 @@ def quat_log(q: np.ndarray) -> np.ndarray:
     s = np.linalg.norm(v, axis=-1, keepdims=True)
     angle = 2.0 * np.arctan2(s, q[..., :1])
     scale = np.where(s > 1e-12, angle / np.maximum(s, 1e-300), 2.0 / np.maximum(q[..., :1], 1e-300))
-    return v * scale
+    out: np.ndarray = v * scale
+    return out
 
 
 def angular_velocity(t: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -142,7 +145,8 @@ def angular_velocity(t: np.ndarray, q: np.ndarray) -> np.ndarray:
     lo = np.r_[0, np.arange(n - 2), n - 2]
     hi = np.r_[1, np.arange(2, n), n - 1]
     rel = quat_multiply(q[hi], conj[lo])
-    return quat_log(rel) / (t[hi] - t[lo])[:, None]
+    out: np.ndarray = quat_log(rel) / (t[hi] - t[lo])[:, None]
+    return out
 
 
 # --- motion capture (spec §7.4) --------------------------------------------------------------------

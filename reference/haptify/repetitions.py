@@ -17,7 +17,7 @@ import numpy as np
 
 from haptify.caching import session_of
 from haptify.errors import HaptifyError, fail
-from haptify.metric_definitions import family
+from haptify.metric_definitions import MetricDefinition, family
 from haptify.results import MetricResult, Unavailable
 
 
@@ -31,7 +31,7 @@ class TrialValue:
     warnings: list[str] = field(default_factory=list)
 
 
-def definition_of(family_name: str, metric_id: str):
+def definition_of(family_name: str, metric_id: str) -> MetricDefinition:
     """The metric's definition record in ``metrics/<family_name>.json`` (KeyError when absent).
     Spec §15.2."""
     for m in family(family_name).metrics:
@@ -47,7 +47,7 @@ def aggregate(
     *,
     diagnostics: dict[str, Any] | None = None,
     warnings: Sequence[str] = (),
-) -> MetricResult | Unavailable:
+) -> MetricResult:
     """Mean of the per-repetition values, sd with ddof = 1 when n ≥ 2 (spec §15.3).
 
     Per-trial values must be finite (spec §15.2): a family turns degenerate data into a coded error
@@ -129,8 +129,8 @@ def per_trial(
         except HaptifyError as exc:
             failed[tid] = exc
     if out:
-        for tid, exc in failed.items():
-            ctx.warn("W413", f"{what}: trial {tid!r} skipped ({exc.findings[0].code}: {exc.findings[0].message})", trial=tid)
+        for tid, err in failed.items():
+            ctx.warn("W413", f"{what}: trial {tid!r} skipped ({err.findings[0].code}: {err.findings[0].message})", trial=tid)
     return out, next(iter(failed.values()), None)
 
 
@@ -149,5 +149,6 @@ def protocol_trials(
         return {}, [unavailable(m, err) for m in metric_ids]
     done, first = per_trial(ctx, trials, compute_one, what)
     if not done:
+        assert first is not None  # per_trial: a trial that gave no result raised the error it returns
         return {}, [unavailable(m, first) for m in metric_ids]
     return done, []

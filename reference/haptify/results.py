@@ -164,7 +164,7 @@ class ResultsFile(BaseModel):
         return next((m for m in self.metrics if m.id == metric_id), None)
 
 
-def load_results(path: str | os.PathLike) -> ResultsFile:
+def load_results(path: str | os.PathLike[str]) -> ResultsFile:
     """Read and check a results file (spec §15.1) — the one reader of ``compare``, ``report`` and ``view``:
     E903 when the path names no file, E104 naming the file and every invalid field."""
     from haptify.errors import fail

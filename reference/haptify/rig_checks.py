@@ -46,12 +46,14 @@ def impact_frequencies(ctx_or_session: Any, trial_id: str) -> np.ndarray:
 
 def _row_sums(x: np.ndarray) -> np.ndarray:
     """Sums of the rows of ``x (n, 3)``, (x₀ + x₁) + x₂ — what ``x.sum(axis=1)`` computes, one column at a time."""
-    return x[:, 0] + x[:, 1] + x[:, 2]
+    out: np.ndarray = x[:, 0] + x[:, 1] + x[:, 2]
+    return out
 
 
 def _gravity_dirs_h(raw: np.ndarray, bias: np.ndarray, r_hs: np.ndarray, sign: float) -> np.ndarray:
     v = sign * (np.asarray(raw, float) - bias) @ r_hs.T
-    return v / np.maximum(np.sqrt(_row_sums(v * v)), 1e-300)[:, None]
+    out: np.ndarray = v / np.maximum(np.sqrt(_row_sums(v * v)), 1e-300)[:, None]
+    return out
 
 
 def _best_lag(score: Callable[[float], float], max_lag: float, coarse: float, fine: float, label: str) -> float:
@@ -183,7 +185,7 @@ def _natural_frequency(ctx: Any, mid: str, got: dict[str, np.ndarray]) -> Metric
     return _vector_result(mid, got, {"axes": ["x", "y", "z"]})
 
 
-def _cop_error(ctx: Any, mid: str, got: dict[str, list]) -> MetricResult:
+def _cop_error(ctx: Any, mid: str, got: dict[str, list[force_plate.Placement]]) -> MetricResult:
     """``rig.cop_error`` (spec §14.5): mean over all placements, sd over placements."""
     errors = np.array([p.error for ps in got.values() for p in ps])
     per_rep = [float(np.mean([p.error for p in ps])) for ps in got.values()]
@@ -219,7 +221,11 @@ def _calibration_rms(ctx: Any, mid: str, got: dict[str, calibration.HandleCalibr
 
 def _force_offset_u(ctx: Any, mid: str, got: dict[str, calibration.HandleCalibration]) -> MetricResult:
     """``rig.handle_force_offset_u`` (spec §6.2, §14.7): the force sphere's offset uncertainty, mean over repetitions."""
-    return aggregate(FAMILY, mid, [TrialValue(tid, c.force_offset_u_N) for tid, c in got.items()])
+    vals = []
+    for tid, c in got.items():
+        assert c.force_offset_u_N is not None  # calibration.trial_fit states it for every fit
+        vals.append(TrialValue(tid, c.force_offset_u_N))
+    return aggregate(FAMILY, mid, vals)
 
 
 def _sync_offset(ctx: Any, mid: str, got: dict[str, dict[str, float]]) -> MetricResult:
@@ -229,7 +235,7 @@ def _sync_offset(ctx: Any, mid: str, got: dict[str, dict[str, float]]) -> Metric
 
 
 # metric id → (what is computed per trial, how the per-trial results become the metric)
-METRIC_STEPS: dict[str, tuple[Callable[[Any, str], Any], Callable[[Any, str, dict], MetricResult]]] = {
+METRIC_STEPS: dict[str, tuple[Callable[[Any, str], Any], Callable[[Any, str, dict[str, Any]], MetricResult]]] = {
     "rig.plate_natural_frequency": (impact_frequencies, _natural_frequency),
     "rig.cop_error": (force_plate.cop_trial_placements, _cop_error),
     "rig.handle_calibration_rms": (calibration.trial_fit, _calibration_rms),
@@ -264,7 +270,7 @@ class Check:
     requirement: str
     detail: str = ""
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
 

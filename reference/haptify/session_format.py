@@ -9,7 +9,7 @@ whose unit is not obvious carries it in its name (``rate_hz``, ``mass_kg``).
 from __future__ import annotations
 
 import re
-from typing import Annotated, Literal, Union
+from typing import Annotated, Any, Literal, Union
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -302,9 +302,10 @@ class Session(_Strict):
     recorder: str | None = Field(None, description="Software that wrote the session, with version.")
 
 
-def kind_table(kind: str) -> dict:
+def kind_table(kind: str) -> dict[str, Any]:
     """The row of the stream-kind table (``stream-kinds.json``) for ``kind``."""
-    return schemas.load("stream-kinds.json")["kinds"][kind]
+    row: dict[str, Any] = schemas.load("stream-kinds.json")["kinds"][kind]
+    return row
 
 
 #: Columns whose values come from a closed set (spec §2.6 kind table): the sync trigger is 0 or 1 (E214).

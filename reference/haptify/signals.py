@@ -53,12 +53,14 @@ class HandleSignals(Kinematics):
     @property
     def speed(self) -> np.ndarray:
         """|velocity|, m/s."""
-        return np.linalg.norm(self.velocity, axis=1)
+        out: np.ndarray = np.linalg.norm(self.velocity, axis=1)
+        return out
 
     @property
     def angular_speed(self) -> np.ndarray:
         """|angular velocity|, rad/s."""
-        return np.linalg.norm(self.angular_velocity, axis=1)
+        out: np.ndarray = np.linalg.norm(self.angular_velocity, axis=1)
+        return out
 
 
 def build_handle_signals(ctx_or_session: Any, trial_id: str, rate_hz: float, calibration: Any = None) -> HandleSignals:

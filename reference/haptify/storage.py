@@ -18,13 +18,13 @@ import tempfile
 import uuid
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
-from typing import Any, Callable, Iterable, Iterator, Mapping
+from typing import Any, Callable, Iterable, Iterator, Literal, Mapping, TypedDict, TypeVar
 
 import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
 from haptify.errors import Finding, HaptifyError, fail
 from haptify.session_format import (
@@ -214,7 +214,10 @@ def pydantic_findings(exc: ValidationError, code: str, label: str) -> list[Findi
     return out
 
 
-def read_json_model(path: str | os.PathLike, model: type, code: str):
+M = TypeVar("M", bound=BaseModel)
+
+
+def read_json_model(path: str | os.PathLike[str], model: type[M], code: str) -> M:
     """Read a JSON file into a pydantic ``model``; a missing, malformed or invalid file is ``code``.
     Spec §0.4.
 
@@ -234,7 +237,7 @@ def read_json_model(path: str | os.PathLike, model: type, code: str):
 class SessionFolder:
     """A session opened for reading (spec §3.1): the manifest, and streams on demand."""
 
-    def __init__(self, root: Path, manifest: Session, raw: dict) -> None:
+    def __init__(self, root: Path, manifest: Session, raw: dict[str, Any]) -> None:
         self.root = root
         self.manifest = manifest
         self.raw = raw
@@ -589,7 +592,7 @@ def _short_text(text: str) -> str:
     return text if len(text) <= 80 else text[:77] + "..."
 
 
-def open_session(path: str | os.PathLike) -> SessionFolder:
+def open_session(path: str | os.PathLike[str]) -> SessionFolder:
     """Open a session folder and parse its manifest (E101–E105); streams are read lazily (spec §3.1)."""
     root = Path(path)
     if not root.is_dir():
@@ -627,12 +630,18 @@ def write_table(path: Path, frame: pd.DataFrame, fmt: str, *, compact: bool = Fa
     """
     if fmt == "parquet":
         table, narrow = _arrow_table(frame, compact)
-        pq.write_table(table, path, **_PARQUET_OPTIONS, use_byte_stream_split=narrow or False)
+        # pyarrow-stubs type this argument bool; pyarrow takes a list of columns too (its docstring)
+        pq.write_table(table, path, **_PARQUET_OPTIONS, use_byte_stream_split=narrow or False)  # type: ignore[arg-type]
     else:
         frame.to_csv(path, index=False, na_rep="NaN", float_format=None, lineterminator="\n")
 
 
-_PARQUET_OPTIONS = {"compression": "zstd", "use_dictionary": False}
+class _ParquetOptions(TypedDict):
+    compression: Literal["zstd"]
+    use_dictionary: bool
+
+
+_PARQUET_OPTIONS: _ParquetOptions = {"compression": "zstd", "use_dictionary": False}
 
 
 def _arrow_table(frame: pd.DataFrame, compact: bool) -> tuple[pa.Table, list[str]]:
@@ -731,8 +740,8 @@ def replace_folder_atomically(build: Path, target: Path, overwrite: bool) -> Non
 @dataclass
 class _PendingStream:
     trial_id: str
-    stream: dict
-    frame: pd.DataFrame
+    stream: dict[str, Any]
+    frame: pd.DataFrame | None  # None: a chunked stream, written from :attr:`SessionWriter.chunks`
 
 
 @dataclass
@@ -744,10 +753,10 @@ class SessionWriter:
     checksums, validates the manifest against the model, and renames the finished folder into place.
     """
 
-    manifest: dict
+    manifest: dict[str, Any]
     extra_files: dict[str, str] = field(default_factory=dict)
     compact: bool = False  # Parquet streams: float32 + BYTE_STREAM_SPLIT for every column but t (spec §3.2.1)
-    _trials: list[dict] = field(default_factory=list)
+    _trials: list[dict[str, Any]] = field(default_factory=list)
     _streams: list[_PendingStream] = field(default_factory=list)
     chunks: Callable[[], Iterable[Mapping[str, Mapping[str, Any]]]] | None = None  # rows of the chunked streams
 
@@ -759,9 +768,9 @@ class SessionWriter:
         powered: bool,
         repetition: int = 1,
         label: str | None = None,
-        rendering: Mapping | None = None,
+        rendering: Mapping[str, Any] | None = None,
         notes: str | None = None,
-    ) -> dict:
+    ) -> dict[str, Any]:
         trial = {"id": trial_id, "protocol": protocol, "repetition": repetition, "powered": powered, "streams": []}
         for key, val in (("label", label), ("rendering", rendering), ("notes", notes)):
             if val is not None:
@@ -780,7 +789,7 @@ class SessionWriter:
         fmt: str = "parquet",
         entities: list[str] | None = None,
         file: str | None = None,
-    ) -> dict:
+    ) -> dict[str, Any]:
         """Add a stream; ``data`` maps every expected column name (``t`` first) to a 1-D array."""
         trial = next(t for t in self._trials if t["id"] == trial_id)
         present = list(data.keys()) if isinstance(data, Mapping) else list(data.columns)
@@ -821,7 +830,7 @@ class SessionWriter:
         frame: str | None = None,
         fmt: str = "parquet",
         entities: list[str] | None = None,
-    ) -> dict:
+    ) -> dict[str, Any]:
         """Add a stream whose rows come from :attr:`chunks` at :meth:`write` time (spec §5.5.1): each item
         of ``chunks()`` maps stream kinds to their columns for the next rows (``t`` first)."""
         cols = expected_columns(kind, entities, columns)
@@ -837,7 +846,7 @@ class SessionWriter:
         stream = self.add_stream(
             trial_id, kind, {c: np.zeros(0) for c, _ in cols}, rate_hz=rate_hz, frame=frame, fmt=fmt, entities=entities
         )
-        self._streams[-1].frame = None  # type: ignore[assignment]
+        self._streams[-1].frame = None
         return stream
 
     def _write_chunks(self, build: Path) -> None:
@@ -851,17 +860,19 @@ class SessionWriter:
             path.parent.mkdir(parents=True, exist_ok=True)
             sinks[kind] = TableSink(path, p.stream["format"], self.compact)
         order = {kind: [c["name"] for c in p.stream["columns"]] for kind, p in pending.items()}
-        for piece in self.chunks():  # type: ignore[misc]
+        if self.chunks is None:
+            raise ValueError("add_chunked_stream was called, but SessionWriter.chunks is not set")
+        for piece in self.chunks():
             for kind, data in piece.items():
                 sinks[kind].write(pd.DataFrame({c: np.asarray(data[c], dtype=np.float64) for c in order[kind]}))
         for kind, p in pending.items():
             p.stream["rows"] = sinks[kind].close()
             p.stream["sha256"] = sha256_file(sinks[kind].path)
 
-    def build_manifest(self) -> dict:
+    def build_manifest(self) -> dict[str, Any]:
         return {**self.manifest, "spec_version": SPEC_VERSION, "trials": self._trials}
 
-    def write(self, target: str | os.PathLike, *, overwrite: bool = False) -> Path:
+    def write(self, target: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
         """Write the session folder atomically and return its path."""
         target = Path(target)
         if target.exists() and not overwrite:
@@ -870,7 +881,9 @@ class SessionWriter:
         build = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
         try:
             self._write_chunks(build)
-            for pending in (p for p in self._streams if p.frame is not None):
+            for pending in self._streams:
+                if pending.frame is None:  # a chunked stream: written above
+                    continue
                 path = resolve_inside(build, pending.stream["file"])
                 path.parent.mkdir(parents=True, exist_ok=True)
                 write_table(path, pending.frame, pending.stream["format"], compact=self.compact)

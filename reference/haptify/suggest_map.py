@@ -11,8 +11,9 @@ from __future__ import annotations
 import csv
 import re
 from pathlib import Path
+from typing import AbstractSet, Any
 
-from haptify.importers import UNITS, Recording, sanitize_id
+from haptify.importers import UNITS, C3DPlatform, Recording, sanitize_id
 from haptify.platform_wrench import CHANNEL_DIMENSIONS, PLATFORM_CHANNELS
 
 PLACEHOLDER_SESSION = {
@@ -44,7 +45,7 @@ def _key(label: str) -> str:
     return re.sub(r"[\s_\-:.\[\]]", "", re.sub(r"\(.*?\)", "", label)).lower()
 
 
-def guess_streams(labels: list[str], skip: set[str] = frozenset()) -> tuple[dict[str, dict[str, str]], list[str]]:
+def guess_streams(labels: list[str], skip: AbstractSet[str] = frozenset()) -> tuple[dict[str, dict[str, str]], list[str]]:
     """Stream kind → {column: label} for the labels the rules place; the labels left over."""
     streams: dict[str, dict[str, str]] = {}
     left = []
@@ -61,7 +62,7 @@ def guess_streams(labels: list[str], skip: set[str] = frozenset()) -> tuple[dict
     return streams, left
 
 
-def _complete(streams: dict[str, dict], unplaced: list[str]) -> dict[str, dict]:
+def _complete(streams: dict[str, dict[str, Any]], unplaced: list[str]) -> dict[str, dict[str, Any]]:
     """Keep only streams whose every column was placed; the rest go to ``unplaced``."""
     from haptify.session_format import expected_columns
 
@@ -78,9 +79,11 @@ def _complete(streams: dict[str, dict], unplaced: list[str]) -> dict[str, dict]:
     return out
 
 
-def _wrench_units_known(rec: Recording, platform) -> bool:
+def _wrench_units_known(rec: Recording, platform: C3DPlatform) -> bool:
     """Whether a platform's channels state the units its type's outputs need (§5.6.1), so that
     ``platform_wrench: {}`` imports it as written."""
+    if platform.type is None:  # no TYPE: no outputs whose units could be known
+        return False
     dims = CHANNEL_DIMENSIONS.get(platform.type)
     chans = platform.channels[: PLATFORM_CHANNELS.get(platform.type, 0)]
     if dims is None or len(chans) < len(dims) or (platform.type == 4 and platform.cal_matrix is None):
@@ -89,10 +92,10 @@ def _wrench_units_known(rec: Recording, platform) -> bool:
     return all(u is not None and u.dimension == d for u, d in zip(units, dims))
 
 
-def suggest_recording_map(rec: Recording) -> tuple[dict, list[str]]:
+def suggest_recording_map(rec: Recording) -> tuple[dict[str, Any], list[str]]:
     """A map for a motion-capture recording (C3D, TSV, Motive, Nexus) and the notes on what it could not place."""
     unplaced: list[str] = []
-    m: dict = {"source": rec.format, "session": dict(PLACEHOLDER_SESSION), "trial": dict(PLACEHOLDER_TRIAL)}
+    m: dict[str, Any] = {"source": rec.format, "session": dict(PLACEHOLDER_SESSION), "trial": dict(PLACEHOLDER_TRIAL)}
     if rec.point_labels:
         m["markers"] = {"include": list(rec.point_labels)}
         renamed = {lab: sanitize_id(lab, f"m{i + 1}") for i, lab in enumerate(rec.point_labels)}
@@ -100,7 +103,7 @@ def suggest_recording_map(rec: Recording) -> tuple[dict, list[str]]:
             "markers: every point label is imported; which markers form a link's rigid body "
             f"(markers.rigid_bodies) is not in the file ({len(renamed)} ids, e.g. {list(renamed.values())[:3]})"
         )
-    bodies: dict = {}
+    bodies: dict[str, Any] = {}
     for label in rec.body_labels:
         link = LINK_BODY.search(label)
         if HANDLE_BODY.search(label) and "handle" not in bodies:
@@ -150,11 +153,11 @@ def suggest_recording_map(rec: Recording) -> tuple[dict, list[str]]:
     return m, unplaced
 
 
-def _channel(kind: str, column: str, label: str) -> dict | str:
+def _channel(kind: str, column: str, label: str) -> dict[str, Any] | str:
     return {"source": label, "threshold": 2.5} if kind == "sync" else label
 
 
-def suggest_csv_map(path: Path) -> tuple[dict, list[str]]:
+def suggest_csv_map(path: Path) -> tuple[dict[str, Any], list[str]]:
     """A map for a CSV log (§5.7): the header after any preamble, a time column by its name, streams by
     the column rules; every unit is a placeholder, because CSV columns state none."""
     with open(path, encoding="utf-8", newline="") as fh:
@@ -171,7 +174,7 @@ def suggest_csv_map(path: Path) -> tuple[dict, list[str]]:
     if time is None:
         unplaced.append(f"time: no column named like a time among {header}")
     unit = re.search(r"\((s|ms|us)\)|_(s|ms|us)$", time or "")
-    m: dict = {
+    m: dict[str, Any] = {
         "source": "csv",
         "session": dict(PLACEHOLDER_SESSION),
         "trial": dict(PLACEHOLDER_TRIAL),

@@ -9,7 +9,7 @@ Parameters: ``schemas/<v>/metrics/surface.json``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -19,6 +19,10 @@ from haptify.metric_definitions import param
 from haptify.repetitions import TrialValue, aggregate, protocol_trials
 from haptify.preprocessing import interp_columns
 from haptify.signals import handle_signals
+
+if TYPE_CHECKING:
+    from haptify.report import ReportFigure
+    from haptify.results import MetricResult, Unavailable
 
 FAMILY = "surface"
 PROTOCOL = "frictionless_surface"
@@ -68,7 +72,8 @@ def guarded(t_cmd: np.ndarray, contact: np.ndarray, t_grid: np.ndarray, guard_s:
     lo = np.searchsorted(t_cmd, t_grid - g, side="left")
     hi = np.searchsorted(t_cmd, t_grid + g, side="right")
     inside = (t_grid - g >= t_cmd[0]) & (t_grid + g <= t_cmd[-1])
-    return inside & (hi > lo) & (out_of_contact[hi] - out_of_contact[lo] == 0)
+    out: np.ndarray = inside & (hi > lo) & (out_of_contact[hi] - out_of_contact[lo] == 0)
+    return out
 
 
 @dataclass
@@ -95,12 +100,14 @@ class ContactSignals:
     @property
     def penetration(self) -> np.ndarray:
         """(p0 − p)·n in m: positive below the rendered plane (spec §13.2)."""
-        return (self.plane_point - self.position) @ self.normal
+        out: np.ndarray = (self.plane_point - self.position) @ self.normal
+        return out
 
     @property
     def normal_force(self) -> np.ndarray:
         """F·n in N: positive when the device pushes the hand out of the surface (spec §13.2)."""
-        return self.force @ self.normal
+        out: np.ndarray = self.force @ self.normal
+        return out
 
 
 def contact_signals(ctx_or_session: Any, trial_id: str) -> ContactSignals:
@@ -163,7 +170,7 @@ def planar_stats(force: np.ndarray, normal: np.ndarray) -> dict[str, float]:
     return {"mean": float(mag.mean()), "sd": float(mag.std(ddof=1))}
 
 
-def _trial(ctx: Any, trial_id: str) -> dict:
+def _trial(ctx: Any, trial_id: str) -> dict[str, Any]:
     cs = contact_signals(ctx, trial_id)
     if cs.used.sum() < 2:
         raise fail(
@@ -179,13 +186,13 @@ def _trial(ctx: Any, trial_id: str) -> dict:
     return stats
 
 
-def compute(ctx: Any) -> list:
+def compute(ctx: Any) -> list[MetricResult | Unavailable]:
     """surface.planar_force_mean and surface.planar_force_sd (spec §12.4)."""
     if not any(ctx.wants(m) for m in IDS):
         return []
     done, missing = protocol_trials(ctx, PROTOCOL, IDS, lambda tid: _trial(ctx, tid), "surface.planar_force_mean")
     if missing:
-        return missing
+        return list(missing)
     diag = {
         "contact_share": [d["contact_share"] for d in done.values()],
         "normal_force_mean_N": [d["normal_force_mean"] for d in done.values()],
@@ -199,7 +206,7 @@ def compute(ctx: Any) -> list:
 # --- report figures (spec §15.6; paper Fig. 10) ---------------------------------------------------
 
 
-def report_figures(ctx: Any, results: Any) -> list:
+def report_figures(ctx: Any, results: Any) -> list[ReportFigure]:
     """Planar force magnitude over the contact positions of each surface trial, top view (paper Fig. 10)."""
     import matplotlib.pyplot as plt
 

@@ -226,7 +226,8 @@ def _schema_validator(name: str) -> Draft202012Validator:
     try:
         schema = schemas.schema(name)
     except FileNotFoundError:
-        schema = {"session": Session, "device": Device}[name].model_json_schema()
+        models: dict[str, type[BaseModel]] = {"session": Session, "device": Device}
+        schema = models[name].model_json_schema()
     return Draft202012Validator(schema)
 
 
@@ -238,10 +239,11 @@ def _branch_errors(err: SchemaError) -> list[SchemaError]:
     """
     if err.validator not in ("anyOf", "oneOf") or not err.context:
         return [err]
-    by_branch: dict[int, list[SchemaError]] = {}
+    by_branch: dict[str | int, list[SchemaError]] = {}
     for sub in err.context:
         by_branch.setdefault(sub.relative_schema_path[0], []).append(sub)
     options = err.validator_value
+    assert isinstance(options, list)  # the value of an anyOf / oneOf is its list of branches (JSON Schema §10.2.1)
     disc = err.schema.get("discriminator") if isinstance(err.schema, dict) else None
     if disc and isinstance(err.instance, dict):
         tag = err.instance.get(disc.get("propertyName"))
@@ -466,7 +468,7 @@ class _Tally:
 
     @property
     def span(self) -> tuple[float, float] | None:
-        return None if self.first is None else (self.first, self.last)  # type: ignore[return-value]
+        return None if self.first is None or self.last is None else (self.first, self.last)
 
 
 @dataclass
@@ -497,7 +499,8 @@ class _TimeScan:
             self.first = float(t[0])
         finite = np.isfinite(t)
         if self.gap_open and finite.any():
-            self.gap[1], self.gap_open = float(t[finite][0]), False  # type: ignore[index]
+            assert self.gap is not None  # the gap is open only once it was found
+            self.gap[1], self.gap_open = float(t[finite][0]), False
         if not finite.all():
             bad = np.flatnonzero(~finite)
             self.non_finite += int(bad.size)
@@ -540,8 +543,8 @@ class _TimeScan:
                     found="NaN or infinity",
                 )
             )
-        if self.reversals:
-            k, a, b = self.first_reversal  # type: ignore[misc]
+        if self.first_reversal is not None:  # noted with the first of the reversals
+            k, a, b = self.first_reversal
             add(
                 Finding(
                     "E203",
@@ -578,7 +581,7 @@ class _TimeScan:
                     f"(largest {self.dt_max:.6g} s, smallest {self.dt_min:.6g} s)",
                     file=label,
                     column="t",
-                    time_range=tuple(self.odd_span),
+                    time_range=(self.odd_span[0], self.odd_span[1]),
                     expected=nominal,
                     found=self.odd,
                 )
@@ -587,10 +590,10 @@ class _TimeScan:
 
     def _gap_span(self) -> tuple[float, float] | None:
         """The finite times around the first non-finite one (either alone when the other does not exist)."""
-        before, after = self.gap  # type: ignore[misc]
-        if before is None and after is None:
-            return None
-        return (before if before is not None else after, after if after is not None else before)  # type: ignore[return-value]
+        before, after = self.gap if self.gap is not None else (None, None)
+        if before is None:
+            return None if after is None else (after, after)
+        return (before, after if after is not None else before)
 
 
 class _ValueScan:
@@ -613,9 +616,11 @@ class _ValueScan:
         self.groups = [
             (name, idx, _Tally(), _Tally()) for name, idx in groups if idx and idx[-1] < len(cols)
         ]  # partial, occluded
-        self.sets = [(k, _Tally(), []) for k, c in enumerate(cols) if values_outside_set(s.kind, c, np.empty(0)) is not None]
+        self.sets: list[tuple[int, _Tally, list[np.ndarray]]] = [
+            (k, _Tally(), []) for k, c in enumerate(cols) if values_outside_set(s.kind, c, np.empty(0)) is not None
+        ]
         index = {c: k for k, c in enumerate(cols)}
-        self.quats = [
+        self.quats: list[tuple[list[str], list[int], _Tally, list[float | None]]] = [
             (list(g), [index[c] for c in g], _Tally(), [None])
             for g in quaternion_groups(s.kind, s.entities)
             if all(c in index for c in g)
@@ -626,17 +631,19 @@ class _ValueScan:
     def feed(self, t: np.ndarray, values: np.ndarray) -> None:
         if not np.isfinite(values).all():  # the column-by-column account only when something is not finite
             nan, inf = np.isnan(values), np.isinf(values)
-            for k in np.flatnonzero(inf.any(axis=0)):
-                self.inf[k].add(t, inf[:, k])
-            for k in np.flatnonzero(nan.any(axis=0)):
-                self.nan[k].add(t, nan[:, k])
+            for col in np.flatnonzero(inf.any(axis=0)):
+                self.inf[col].add(t, inf[:, col])
+            for col in np.flatnonzero(nan.any(axis=0)):
+                self.nan[col].add(t, nan[:, col])
             for _, idx, partial, occluded in self.groups:
                 g = nan[:, idx]
                 some, every = g.any(axis=1), g.all(axis=1)
                 partial.add(t, some & ~every)
                 occluded.add(t, every)
         for k, tally, seen in self.sets:
-            other, _ = values_outside_set(self.stream.kind, self.cols[k], values[:, k])  # type: ignore[misc]
+            outside = values_outside_set(self.stream.kind, self.cols[k], values[:, k])
+            assert outside is not None  # self.sets holds the columns with a closed value set only
+            other, _ = outside
             if other.any():
                 tally.add(t, other)
                 seen[:] = [np.union1d(seen[0], values[other, k]) if seen else np.unique(values[other, k])]
@@ -716,10 +723,12 @@ class _ValueScan:
         for k, tally, seen in self.sets:
             if tally.count:
                 col = cols[k]
+                outside = values_outside_set(s.kind, col, np.empty(0))
+                assert outside is not None  # self.sets holds the columns with a closed value set only
                 add(
                     Finding(
                         "E214",
-                        f"column {col!r} holds {tally.count} values other than {values_outside_set(s.kind, col, np.empty(0))[1]} "  # type: ignore[index]
+                        f"column {col!r} holds {tally.count} values other than {outside[1]} "
                         f"({seen[0].size} distinct, e.g. {float(seen[0][0])!r})",
                         file=label,
                         column=col,
@@ -774,14 +783,14 @@ class SessionValidator:
     files are read (:meth:`chunk_rows_for`); the findings do not depend on it.
     """
 
-    def __init__(self, path: str | os.PathLike, chunk_rows: int | None = None) -> None:
+    def __init__(self, path: str | os.PathLike[str], chunk_rows: int | None = None) -> None:
         self.root = Path(path)
         self.chunk_rows = chunk_rows
         self.report = ValidationReport(session=str(path))
         self.raw: Any = None
         self.manifest: Session | None = None  # the parsed session.json, when it validates whole
         self.rig: Rig | None = None
-        self.trials: list[tuple[int, dict, Trial | None]] = []
+        self.trials: list[tuple[int, dict[str, Any], Trial | None]] = []
         self.entries: list[StreamEntry] = []
         self.offsets: dict[str, float] = {}
         self._manifest_ok = False
@@ -1229,10 +1238,11 @@ class SessionValidator:
         the file could not be read; without, it is read in chunks, in bounded memory, and None is returned."""
         self.check_declaration(entry)
         kept: list[pd.DataFrame] = []
-        if entry.path is not None:
+        path = entry.path
+        if path is not None:
             found: list[Finding] = []
             raised = _collect(
-                lambda: self._check_contents(entry, entry.path, found.append, kept.append if keep else None), entry.stream.file
+                lambda: self._check_contents(entry, path, found.append, kept.append if keep else None), entry.stream.file
             )
             self.add_all(found + raised, entry.trial)
         self.report.streams_checked += 1
@@ -1466,26 +1476,26 @@ class SessionValidator:
 
     def _check_overlap(self) -> None:
         """The streams of one trial share a time interval of positive length (spec §4.3.5)."""
-        by_trial: dict[str | None, list[StreamEntry]] = {}
+        by_trial: dict[str | None, list[tuple[StreamEntry, tuple[float, float]]]] = {}
         for e in self.entries:
             if e.span is not None:
-                by_trial.setdefault(e.trial, []).append(e)
+                by_trial.setdefault(e.trial, []).append((e, e.span))
         for trial, entries in by_trial.items():
             if len(entries) < 2:
                 continue
-            late = max(entries, key=lambda e: e.span[0])
-            early = min(entries, key=lambda e: e.span[1])
-            if late.span[0] >= early.span[1]:
+            late, late_span = max(entries, key=lambda es: es[1][0])
+            early, early_span = min(entries, key=lambda es: es[1][1])
+            if late_span[0] >= early_span[1]:
                 self.add(
                     Finding(
                         "E305",
-                        f"{early.stream.kind} ends at t={early.span[1]:.6g} s before {late.stream.kind} starts at "
-                        f"t={late.span[0]:.6g} s (session clock)",
+                        f"{early.stream.kind} ends at t={early_span[1]:.6g} s before {late.stream.kind} starts at "
+                        f"t={late_span[0]:.6g} s (session clock)",
                         file=late.stream.file,
                         column="t",
-                        time_range=(early.span[1], late.span[0]),
+                        time_range=(early_span[1], late_span[0]),
                         expected="overlapping time spans",
-                        found={early.stream.kind: list(early.span), late.stream.kind: list(late.span)},
+                        found={early.stream.kind: list(early_span), late.stream.kind: list(late_span)},
                     ),
                     trial,
                 )
@@ -1554,7 +1564,7 @@ def _str_or_none(node: Any, key: str) -> str | None:
 
 
 def validate_session(
-    path: str | os.PathLike, advance: Callable[[int], Any] | None = None, chunk_rows: int | None = None
+    path: str | os.PathLike[str], advance: Callable[[int], Any] | None = None, chunk_rows: int | None = None
 ) -> ValidationReport:
     """Validate a session folder and return every finding (spec chapter 4); never raises for bad input.
 

@@ -5,7 +5,7 @@ version and the schema version belong to the normative data and are stated besid
 (the schema generator writes SCHEMA_VERSION into every ``$id`` under ``schemas/``).
 """
 
-from haptify_schemas import SCHEMA_VERSION as SCHEMA_VERSION, SPEC_VERSION
+from haptify_schemas import SCHEMA_VERSION as SCHEMA_VERSION, SPEC_VERSION as SPEC_VERSION
 
 PACKAGE_VERSION = "0.1.0"
 SCHEMA_BASE_URI = "https://haptify.org/schemas"

@@ -8,7 +8,7 @@ power-weighted spectral centroid (paper §IV-C, §VI-C). Parameters: ``schemas/<
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
@@ -18,6 +18,10 @@ from haptify.errors import HaptifyError, fail
 from haptify.metric_definitions import param
 from haptify.repetitions import TrialValue, aggregate, protocol_trials
 from haptify.preprocessing import nominal_rate
+
+if TYPE_CHECKING:
+    from haptify.report import ReportAudio, ReportFigure
+    from haptify.results import MetricResult, Unavailable
 
 FAMILY = "vibration"
 ACCEL_COLUMNS = ["ax", "ay", "az"]
@@ -147,10 +151,10 @@ def trial_vibration(ctx_or_session: Any, trial_id: str) -> CombinedVibration:
     return cached(ctx_or_session, ("vibration", trial_id), build)
 
 
-def compute(ctx: Any) -> list:
+def compute(ctx: Any) -> list[MetricResult | Unavailable]:
     """vibration.rms / spectral_centroid from free-space trials, and the baseline pair from
     rig.baseline_vibration trials (spec §10.6)."""
-    out: list = []
+    out: list[MetricResult | Unavailable] = []
     for protocol, (rms_id, centroid_id) in GROUPS.items():
         if not (ctx.wants(rms_id) or ctx.wants(centroid_id)):
             continue
@@ -168,7 +172,7 @@ def compute(ctx: Any) -> list:
     return out
 
 
-def _summary(ctx: Any, trial_id: str) -> dict:
+def _summary(ctx: Any, trial_id: str) -> dict[str, Any]:
     v = trial_vibration(ctx, trial_id)
     return {
         "rms": v.rms,
@@ -193,7 +197,7 @@ def _report_trials(ctx: Any) -> list[CombinedVibration]:
     return out
 
 
-def report_figures(ctx: Any, results: Any) -> list:
+def report_figures(ctx: Any, results: Any) -> list[ReportFigure]:
     """The combined vibration signal with ±RMS, and its power spectrum with the centroid (paper Fig. 7)."""
     import matplotlib.pyplot as plt
 
@@ -224,7 +228,7 @@ def report_figures(ctx: Any, results: Any) -> list:
     return figures
 
 
-def report_audio(ctx: Any) -> list:
+def report_audio(ctx: Any) -> list[ReportAudio]:
     """Each trial's combined vibration signal, for the report's WAV files (paper §VI-C)."""
     from haptify.report import ReportAudio
 
