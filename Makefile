@@ -21,12 +21,13 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(PY) -m haptify_tools.demo --out $(OUT)
 
-# Lint and format checks first (pyproject.toml [tool.ruff]). One BLAS thread per test worker: two workers on
+# Lint, format and type checks first (pyproject.toml [tool.ruff], [tool.mypy]). One BLAS thread per test worker: two workers on
 # two cores must not oversubscribe them. The 25 slowest tests are listed at the end, so CI's log shows where
 # the suite's time goes.
 test: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
+	$(VENV)/bin/mypy
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) -m pytest -q -n 2 --dist worksteal --durations=25 tests
 
 # Benchmark-time peers live in their own environment: sysidentpy (the local dynamic model's peer, issue 21)

@@ -12,7 +12,7 @@ settled loading force its peak. Parameters: ``schemas/<v>/metrics/stiffness.json
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -22,6 +22,10 @@ from haptify.errors import fail
 from haptify.metric_definitions import param
 from haptify.repetitions import TrialValue, aggregate, protocol_trials
 from haptify.surface import contact_signals
+
+if TYPE_CHECKING:
+    from haptify.report import ReportFigure
+    from haptify.results import MetricResult, Unavailable
 
 FAMILY = "stiffness"
 PROTOCOL = "stiffness"
@@ -283,13 +287,13 @@ def trial_codes(ctx: Any, trial_id: str, fit: StiffnessFit) -> list[str]:
     return codes
 
 
-def compute(ctx: Any) -> list:
+def compute(ctx: Any) -> list[MetricResult | Unavailable]:
     """stiffness.measured, stiffness.accuracy and stiffness.peak_force (spec §13.5)."""
     if not any(ctx.wants(m) for m in IDS):
         return []
     done, missing = protocol_trials(ctx, PROTOCOL, IDS, lambda tid: trial_fit(ctx, tid), "stiffness.measured")
     if missing:
-        return missing
+        return list(missing)
     codes = {tid: trial_codes(ctx, tid, f) for tid, f in done.items()}
     commanded = {tid: contact_signals(ctx, tid).stiffness_N_per_m for tid in done}
     fits = list(done.values())
@@ -324,7 +328,7 @@ def compute(ctx: Any) -> list:
 # --- report figures (spec §15.6; paper Fig. 11) ---------------------------------------------------
 
 
-def report_figures(ctx: Any, results: Any) -> list:
+def report_figures(ctx: Any, results: Any) -> list[ReportFigure]:
     """Normal force against penetration for every stiffness trial, fit samples marked, fitted and commanded
     lines (paper Fig. 11)."""
     import matplotlib.pyplot as plt

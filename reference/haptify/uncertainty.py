@@ -26,7 +26,7 @@ from haptify import schemas
 from haptify.families import family_module
 from haptify.metric_definitions import Parameter
 from haptify.preprocessing import lowpass_resample, sp
-from haptify.results import BudgetTerm, MetricResult, MetricUncertainty, ResultsFile, UncorrectedBias
+from haptify.results import BudgetTerm, MetricResult, MetricUncertainty, ResultsFile, UncorrectedBias, Value
 
 
 # --- the definition file (spec §19.1) ------------------------------------------------------------
@@ -113,7 +113,7 @@ def type_a(per_repetition: Sequence[Any]) -> tuple[np.ndarray, int]:
     return x.std(axis=0, ddof=1) / math.sqrt(len(x)), len(x) - 1
 
 
-def welch_satterthwaite(contributions: Sequence[Any], dofs: Sequence[float]) -> np.ndarray:
+def welch_satterthwaite(contributions: Sequence[Any] | np.ndarray, dofs: Sequence[float]) -> np.ndarray:
     """Effective degrees of freedom ν = u⁴ / Σ uᵢ⁴/νᵢ of the root-sum-square of ``contributions``
     (GUM G.4.1, eq. G.2b; spec §19.4); an infinite νᵢ adds nothing to the denominator."""
     c = np.asarray(contributions, dtype=float)
@@ -175,18 +175,26 @@ def rig_figure(ctx: Any, results: ResultsFile, metric_id: str) -> MetricResult |
     return res if isinstance(res, MetricResult) else None
 
 
+def scalar(value: Value, component: int | None) -> float:
+    """A figure's scalar: ``value`` itself, or its ``component`` of a vector (spec §19.3)."""
+    if isinstance(value, list):
+        if component is None:
+            raise ValueError("a vector figure needs a component")
+        return float(value[component])
+    return float(value)
+
+
 def session_inputs(ctx: Any, results: ResultsFile, source_ids: Sequence[str]) -> tuple[list[Input], list[str]]:
     """The Type B inputs of ``source_ids`` this session's rig figures give, and the ids it cannot give
     (spec §19.3). Normal: u = the figure; rectangular: half-width a = |figure|, u = a/√3 (GUM 4.3.7)."""
     found, missing = [], []
     for sid in source_ids:
         spec = definitions().sources[sid]
-        fig = rig_figure(ctx, results, spec.figure)
+        fig = rig_figure(ctx, results, spec.figure) if spec.figure is not None else None
         if fig is None:
             missing.append(sid)
             continue
-        value = fig.value[spec.component] if spec.component is not None else fig.value
-        value = abs(float(value))
+        value = abs(scalar(fig.value, spec.component))
         found.append(Input(sid, value, value if spec.distribution == "normal" else value / math.sqrt(3.0)))
     return found, missing
 
@@ -255,7 +263,7 @@ class PerturbedContext:
     def __init__(self, base: Any, wanted: set[str], offset_n: np.ndarray, delay_s: float):
         self.base, self.session, self.wanted, self.parameters = base, base.session, wanted, base.parameters
         self.offset_n, self.delay_s = offset_n, delay_s
-        self.warnings: list = []
+        self.warnings: list[Any] = []
         self._cache: dict[Any, Any] = {}
 
     def cached(self, key: Any, build: Any) -> Any:
@@ -293,7 +301,7 @@ def draw_values(ctx: Any, metric_ids: Sequence[str], inputs: Sequence[Input], x:
         for name in modules:
             for item in importlib.import_module(name).compute(view):
                 if isinstance(item, MetricResult) and item.id in out:
-                    out[item.id][j] = float(item.value)
+                    out[item.id][j] = scalar(item.value, None)
     return out
 
 
@@ -344,8 +352,8 @@ def force_noise(t: np.ndarray, native_rate_hz: float, draws: int, rng: np.random
     the force (§7.2, :func:`lowpass_resample`), scaled by its sample standard deviation (spec §19.3)."""
     pad = 0.5  # s either side: the filter's start-up lies outside t
     t_src = np.arange(t[0] - pad, t[-1] + pad, 1.0 / native_rate_hz)
-    e = lowpass_resample(t_src, rng.standard_normal((len(t_src), draws)), t, float(sp("wrench_cutoff_hz")))
-    return e / e.std()
+    e: np.ndarray = lowpass_resample(t_src, rng.standard_normal((len(t_src), draws)), t, float(sp("wrench_cutoff_hz")))
+    return e / float(e.std())
 
 
 def noise_maximum_excess(f: np.ndarray, noise: np.ndarray, sigma: float) -> float:
@@ -370,7 +378,7 @@ def bias_estimate(
     fig = rig_figure(ctx, results, spec.figure)
     if fig is None:
         return None
-    sigma = abs(float(fig.value[spec.component] if spec.component is not None else fig.value))
+    sigma = abs(scalar(fig.value, spec.component))
     windows = importlib.import_module(family_module(result.id)).maximum_windows
     per_trial = []
     for trial_id in result.trials:
@@ -479,7 +487,7 @@ class Difference:
 def difference(a: MetricUncertainty, x_a: float, b: MetricUncertainty, x_b: float, p: float | None = None) -> Difference:
     """The test of spec §19.6 for two scalar values with their uncertainty records (p defaults to the
     definition file's coverage probability); each record's ν_eff is its u's degrees of freedom (absent: ∞)."""
-    return welch_difference(x_a, a.u, a.dof_eff, x_b, b.u, b.dof_eff, p)
+    return welch_difference(x_a, scalar(a.u, None), a.dof_eff, x_b, scalar(b.u, None), b.dof_eff, p)
 
 
 def welch_difference(
@@ -509,7 +517,7 @@ def compared(ra: MetricResult | None, rb: MetricResult | None) -> Difference | N
 def tie_groups(records: Sequence[MetricResult]) -> list[list[int]]:
     """Indices of ``records`` grouped into ties for a ranking by ascending value (spec §19.6, :func:`ties`); a
     record without an uncertainty can never be shown indistinguishable and is a group of its own."""
-    order = sorted(range(len(records)), key=lambda i: float(records[i].value))
+    order = sorted(range(len(records)), key=lambda i: scalar(records[i].value, None))
 
     def same(i: int, j: int) -> bool:
         diff = compared(records[i], records[j])
