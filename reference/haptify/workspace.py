@@ -348,6 +348,73 @@ def longest_occlusion_gap(position: np.ndarray) -> float:
     return float(np.linalg.norm(position[idx[1:][around]] - position[idx[:-1][around]], axis=1).max())
 
 
+def occlusion_gaps(position: np.ndarray) -> list[tuple[int | None, int | None]]:
+    """The occlusion gaps of a trial's positions ``(N, 3)`` in time order (spec §8.7): per run of occluded
+    (non-finite) rows, the indices of the finite rows before and after it — None for a run at the start or
+    the end of the trial. Empty when no row is occluded or none is finite."""
+    finite = np.all(np.isfinite(position), axis=1)
+    idx = np.flatnonzero(finite)
+    if len(idx) == 0:
+        return []
+    gaps: list[tuple[int | None, int | None]] = [] if idx[0] == 0 else [(None, int(idx[0]))]
+    gaps += [(int(a), int(b)) for a, b in zip(idx[:-1], idx[1:]) if b - a > 1]
+    if idx[-1] < len(position) - 1:
+        gaps.append((int(idx[-1]), None))
+    return gaps
+
+
+def edge_speed(t: np.ndarray, position: np.ndarray, i: int, toward: int) -> float:
+    """Speed (m/s) of the hand at the finite row ``i`` on the side away from its gap: the distance to the
+    neighbouring finite row in direction ``toward`` (−1 before, +1 after) over their time apart; 0 when
+    there is none (spec §8.7)."""
+    j = i + toward
+    while 0 <= j < len(position) and not np.all(np.isfinite(position[j])):
+        j += toward
+    if not 0 <= j < len(position):
+        return 0.0
+    return float(np.linalg.norm(position[j] - position[i]) / abs(t[j] - t[i]))
+
+
+def gap_regions(t: np.ndarray, position: np.ndarray, closing_radius: float | None = None) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """The region each occlusion gap may have hidden (spec §8.7), as ``(a, b, reach)``: every point ``x`` with
+    ``|x − a| + |x − b| ≤ reach``. For a gap between finite rows a and b, lasting T = t_b − t_a, the hand's
+    path inside is at most L = max(|b − a|, v·T) long, v the larger of the speeds at the gap's two edges
+    (:func:`edge_speed`, each measured away from the gap); so every point of it, and every point within the
+    closing radius r of it, satisfies ``|x − a| + |x − b| ≤ L + 2 r``. A gap at the start or the end of the
+    trial has one edge e: ``a = b = e`` and ``reach = 2 (v·T + r)`` (the ball of radius v·T + r)."""
+    r = float(wp("closing_radius_m") if closing_radius is None else closing_radius)
+    out = []
+    for i, j in occlusion_gaps(position):
+        if i is not None and j is not None:
+            v = max(edge_speed(t, position, i, -1), edge_speed(t, position, j, +1))
+            chord = float(np.linalg.norm(position[j] - position[i]))
+            out.append((position[i], position[j], max(chord, v * float(t[j] - t[i])) + 2.0 * r))
+        else:
+            e = i if i is not None else j
+            edge_t = t[-1] if i is not None else t[0]
+            v = edge_speed(t, position, e, -1 if i is not None else +1)
+            out.append((position[e], position[e], 2.0 * (v * abs(float(edge_t - t[e])) + r)))
+    return out
+
+
+def repaired_points(t: np.ndarray, position: np.ndarray, donors: np.ndarray, closing_radius: float | None = None) -> np.ndarray:
+    """A trial's finite positions plus the ``donors`` (the finite positions of the session's other workspace
+    trials, m, W) that lie in a region one of its occlusion gaps may have hidden (:func:`gap_regions`;
+    spec §8.7)."""
+    own = position[np.all(np.isfinite(position), axis=1)]
+    regions = gap_regions(t, position, closing_radius)
+    if not regions or len(donors) == 0:
+        return own
+    tree = cKDTree(donors)
+    take = np.zeros(len(donors), dtype=bool)
+    for a, b, reach in regions:
+        near = np.asarray(tree.query_ball_point((a + b) / 2.0, reach / 2.0), dtype=np.int64)
+        if len(near):
+            d = donors[near]
+            take[near[np.linalg.norm(d - a, axis=1) + np.linalg.norm(d - b, axis=1) <= reach]] = True
+    return np.concatenate([own, donors[take]])
+
+
 def _modeled(ctx: Any, device: Any, placement: Any) -> tuple[VoxelSolid | None, HaptifyError | None]:
     """The device's modeled workspace solid (spec §8.3), or the coded error that leaves it unavailable: E311
     without kinematics or when they reach no volume; None and None when no metric that needs it is wanted."""
