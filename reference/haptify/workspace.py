@@ -9,7 +9,7 @@ Parameters: ``schemas/<v>/metrics/workspace.json``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Any
 
@@ -43,6 +43,7 @@ class VoxelSolid:
     fraction: np.ndarray
     hull_volume: float
     n_points: int
+    repair_points: int = 0
 
     @cached_property
     def volume(self) -> float:
@@ -397,14 +398,20 @@ def gap_regions(t: np.ndarray, position: np.ndarray, closing_radius: float | Non
     return out
 
 
-def repaired_points(t: np.ndarray, position: np.ndarray, donors: np.ndarray, closing_radius: float | None = None) -> np.ndarray:
-    """A trial's finite positions plus the ``donors`` (the finite positions of the session's other workspace
-    trials, m, W) that lie in a region one of its occlusion gaps may have hidden (:func:`gap_regions`;
-    spec §8.7)."""
+def repaired_points(
+    t: np.ndarray, position: np.ndarray, donors: np.ndarray, *, closing_radius: float | None = None, pitch: float | None = None
+) -> tuple[np.ndarray, int]:
+    """A trial's cloud with its occlusion gaps repaired from the session's other repetitions (spec §8.7): its
+    finite positions plus every donor (a finite position of another workspace trial, m, W) that lies in a
+    region one of its gaps may have hidden (:func:`gap_regions`) and farther than ``surface_search_voxels · h``
+    from every finite position of the trial itself — where the trial has a sample that near, the
+    sub-voxel boundary (§8.4 step 5) is placed by its own samples. Returns the cloud and how many donors
+    it took."""
+    h = float(wp("voxel_pitch_m") if pitch is None else pitch)
     own = position[np.all(np.isfinite(position), axis=1)]
     regions = gap_regions(t, position, closing_radius)
-    if not regions or len(donors) == 0:
-        return own
+    if not regions or len(donors) == 0 or len(own) == 0:
+        return own, 0
     tree = cKDTree(donors)
     take = np.zeros(len(donors), dtype=bool)
     for a, b, reach in regions:
@@ -412,7 +419,11 @@ def repaired_points(t: np.ndarray, position: np.ndarray, donors: np.ndarray, clo
         if len(near):
             d = donors[near]
             take[near[np.linalg.norm(d - a, axis=1) + np.linalg.norm(d - b, axis=1) <= reach]] = True
-    return np.concatenate([own, donors[take]])
+    candidates = donors[take]
+    if len(candidates):
+        dist, _ = cKDTree(own).query(candidates, k=1, distance_upper_bound=float(wp("surface_search_voxels")) * h)
+        candidates = candidates[~np.isfinite(dist)]
+    return np.concatenate([own, candidates]), len(candidates)
 
 
 def _modeled(ctx: Any, device: Any, placement: Any) -> tuple[VoxelSolid | None, HaptifyError | None]:
@@ -441,6 +452,34 @@ def _modeled(ctx: Any, device: Any, placement: Any) -> tuple[VoxelSolid | None, 
                 ),
             )
     return model, model_error
+
+
+def _track(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
+    """Times (s) and gimbal-centre positions (m, W; NaN where occluded) of a workspace trial, cached."""
+    return ctx.cached(
+        ("workspace_track", trial_id),
+        lambda: (ctx.session.read(trial_id, "handle_pose")["t"].to_numpy(float), trial_positions(ctx.session, trial_id)),
+    )
+
+
+def _trial_solid(ctx: Any, trials: list[str], trial_id: str) -> VoxelSolid:
+    """The volume operator on a trial's cloud repaired from the other trials (spec §8.7). The trial itself
+    must hold ``min_points`` finite positions (E313); a donor trial that cannot be read gives nothing."""
+    t, position = _track(ctx, trial_id)
+    own = int(np.all(np.isfinite(position), axis=1).sum())
+    if own < int(wp("min_points")):
+        raise fail("E313", f"a workspace cloud needs at least {wp('min_points')} finite points", expected=f">= {wp('min_points')}", found=own)
+    donors = []
+    for other in trials:
+        if other == trial_id:
+            continue
+        try:
+            q = _track(ctx, other)[1]
+        except HaptifyError:
+            continue
+        donors.append(q[np.all(np.isfinite(q), axis=1)])
+    cloud, taken = repaired_points(t, position, np.concatenate(donors) if donors else np.zeros((0, 3)))
+    return replace(volume_solid(cloud), repair_points=taken)
 
 
 def compute(ctx: Any) -> list:
@@ -481,10 +520,7 @@ def compute(ctx: Any) -> list:
         err = no_trials(PROTOCOL)
         return out + [unavailable(m, err) for m in measured_ids]
     solids, first_error = per_trial(
-        ctx,
-        trials,
-        lambda tid: ctx.cached(("workspace_solid", tid), lambda: volume_solid(measured_points(session, tid))),
-        "workspace.measured_volume",
+        ctx, trials, lambda tid: ctx.cached(("workspace_solid", tid), lambda: _trial_solid(ctx, trials, tid)), "workspace.measured_volume"
     )
     if not solids:
         return out + [unavailable(m, first_error) for m in measured_ids]
@@ -511,7 +547,8 @@ def compute(ctx: Any) -> list:
             diagnostics={
                 "hull_volume_m3": [s.hull_volume for s in solids.values()],
                 "points": [s.n_points for s in solids.values()],
-                "longest_occlusion_gap_m": [longest_occlusion_gap(trial_positions(session, tid)) for tid in solids],
+                "longest_occlusion_gap_m": [longest_occlusion_gap(_track(ctx, tid)[1]) for tid in solids],
+                "repair_points": [s.repair_points for s in solids.values()],
             },
         )
     )
