@@ -462,7 +462,7 @@ def _track(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
     )
 
 
-def _trial_solid(ctx: Any, trials: list[str], trial_id: str) -> VoxelSolid:
+def trial_solid(ctx: Any, trials: list[str], trial_id: str) -> VoxelSolid:
     """The volume operator on a trial's cloud repaired from the other trials (spec §8.7). The trial itself
     must hold ``min_points`` finite positions (E313); a donor trial that cannot be read gives nothing."""
     t, position = _track(ctx, trial_id)
@@ -520,7 +520,7 @@ def compute(ctx: Any) -> list:
         err = no_trials(PROTOCOL)
         return out + [unavailable(m, err) for m in measured_ids]
     solids, first_error = per_trial(
-        ctx, trials, lambda tid: ctx.cached(("workspace_solid", tid), lambda: _trial_solid(ctx, trials, tid)), "workspace.measured_volume"
+        ctx, trials, lambda tid: ctx.cached(("workspace_solid", tid), lambda: trial_solid(ctx, trials, tid)), "workspace.measured_volume"
     )
     if not solids:
         return out + [unavailable(m, first_error) for m in measured_ids]
