@@ -588,7 +588,16 @@ def test_a_session_repairs_each_trial_from_the_others_and_reports_the_donors(tmp
         w.add_stream(
             f"workspace-{i}",
             "handle_pose",
-            {"t": tt, "px": cloud[:, 0], "py": cloud[:, 1], "pz": cloud[:, 2], "qw": seen, "qx": 0 * seen, "qy": 0 * seen, "qz": 0 * seen},
+            {
+                "t": tt,
+                "px": cloud[:, 0],
+                "py": cloud[:, 1],
+                "pz": cloud[:, 2],
+                "qw": seen,
+                "qx": 0 * seen,
+                "qy": 0 * seen,
+                "qz": 0 * seen,
+            },
             rate_hz=100,
         )
     ctx = ComputeContext(session=open_session(w.write(tmp_path / "s")), wanted={"workspace.measured_volume"})

@@ -1268,7 +1268,13 @@ MUTANTS: tuple[Mutant, ...] = (
         "R8.7-1",
         "a trial's occlusion gaps are repaired from the other repetitions' positions in the gaps' regions",
         "the finite positions of the trial alone",
-        (Patch(workspace, "repaired_points", _replace(lambda t, position, donors, **k: (position[np.all(np.isfinite(position), axis=1)], 0))),),
+        (
+            Patch(
+                workspace,
+                "repaired_points",
+                _replace(lambda t, position, donors, **k: (position[np.all(np.isfinite(position), axis=1)], 0)),
+            ),
+        ),
         ("workspace.measured_volume",),
     ),
     # rig

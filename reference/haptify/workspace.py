@@ -376,7 +376,9 @@ def edge_speed(t: np.ndarray, position: np.ndarray, i: int, toward: int) -> floa
     return float(np.linalg.norm(position[j] - position[i]) / abs(t[j] - t[i]))
 
 
-def gap_regions(t: np.ndarray, position: np.ndarray, closing_radius: float | None = None) -> list[tuple[np.ndarray, np.ndarray, float]]:
+def gap_regions(
+    t: np.ndarray, position: np.ndarray, closing_radius: float | None = None
+) -> list[tuple[np.ndarray, np.ndarray, float]]:
     """The region each occlusion gap may have hidden (spec §8.7), as ``(a, b, reach)``: every point ``x`` with
     ``|x − a| + |x − b| ≤ reach``. For a gap between finite rows a and b, lasting T = t_b − t_a, the hand's
     path inside is at most L = max(|b − a|, v·T) long, v the larger of the speeds at the gap's two edges
@@ -468,7 +470,12 @@ def trial_solid(ctx: Any, trials: list[str], trial_id: str) -> VoxelSolid:
     t, position = _track(ctx, trial_id)
     own = int(np.all(np.isfinite(position), axis=1).sum())
     if own < int(wp("min_points")):
-        raise fail("E313", f"a workspace cloud needs at least {wp('min_points')} finite points", expected=f">= {wp('min_points')}", found=own)
+        raise fail(
+            "E313",
+            f"a workspace cloud needs at least {wp('min_points')} finite points",
+            expected=f">= {wp('min_points')}",
+            found=own,
+        )
     donors = []
     for other in trials:
         if other == trial_id:
@@ -520,7 +527,10 @@ def compute(ctx: Any) -> list:
         err = no_trials(PROTOCOL)
         return out + [unavailable(m, err) for m in measured_ids]
     solids, first_error = per_trial(
-        ctx, trials, lambda tid: ctx.cached(("workspace_solid", tid), lambda: trial_solid(ctx, trials, tid)), "workspace.measured_volume"
+        ctx,
+        trials,
+        lambda tid: ctx.cached(("workspace_solid", tid), lambda: trial_solid(ctx, trials, tid)),
+        "workspace.measured_volume",
     )
     if not solids:
         return out + [unavailable(m, first_error) for m in measured_ids]

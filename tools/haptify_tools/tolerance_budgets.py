@@ -62,7 +62,13 @@ BUDGETS: list[tuple[str, tuple[Term, ...]]] = [
     ),
     (
         "workspace.measured_volume.occlusion-repaired",
-        (OPERATOR_BIAS, Term("the strips between the donors and the trial's own samples are bridged on the coarse lattice only (≤ 0.2 %)", rel=2e-3)),
+        (
+            OPERATOR_BIAS,
+            Term(
+                "the strips between the donors and the trial's own samples are bridged on the coarse lattice only (≤ 0.2 %)",
+                rel=2e-3,
+            ),
+        ),
     ),
     ("workspace.measured_volume.*", (OPERATOR_BIAS,)),
     ("workspace.modeled_volume.*", (OPERATOR_BIAS, COARSE_MODEL)),
