@@ -36,7 +36,7 @@ from haptify.workspace import (
     report_figures,
     volume_solid,
 )
-from haptify_tools.build_conformance_fixtures import box_cloud, sphere_sweep
+from haptify_tools.build_conformance_fixtures import box_cloud, pose_cloud, sphere_sweep
 from haptify_tools.build_conformance_fixtures import sphere_cloud as sphere_surface
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
 
@@ -582,24 +582,7 @@ def test_a_session_repairs_each_trial_from_the_others_and_reports_the_donors(tmp
         }
     )
     for i, cloud in enumerate((first, other, scarce), start=1):
-        w.add_trial(f"workspace-{i}", "workspace", powered=False, repetition=i)
-        tt = np.arange(len(cloud)) / 100.0
-        seen = np.where(np.isfinite(cloud[:, 0]), 1.0, np.nan)
-        w.add_stream(
-            f"workspace-{i}",
-            "handle_pose",
-            {
-                "t": tt,
-                "px": cloud[:, 0],
-                "py": cloud[:, 1],
-                "pz": cloud[:, 2],
-                "qw": seen,
-                "qx": 0 * seen,
-                "qy": 0 * seen,
-                "qz": 0 * seen,
-            },
-            rate_hz=100,
-        )
+        pose_cloud(w, f"workspace-{i}", cloud, "parquet", repetition=i)
     ctx = ComputeContext(session=open_session(w.write(tmp_path / "s")), wanted={"workspace.measured_volume"})
     measured = by_id(compute(ctx))["workspace.measured_volume"]
     assert measured.trials == ["workspace-1", "workspace-2"]
