@@ -7,9 +7,12 @@ script separates the candidate causes on workspace-only sessions of the ``touch`
 number, ``--reps`` sweeps each, every ``--duration``): for every trial it applies the volume operator
 (§8.4) to
 
-* ``meas``  — the measured cloud, as the reference computes it (:func:`haptify.workspace.measured_points`);
+* ``meas``  — the trial's finite measured positions alone (:func:`haptify.workspace.measured_points`), as the
+  reference computed it before the repair of §8.7;
+* ``rep``   — the measured cloud with its occlusion gaps repaired from the other repetitions, as the reference
+  computes it now (:func:`haptify.workspace.trial_solid`, spec §8.7);
 * ``mask``  — the twin's true positions at the rows whose measured position is finite (the coverage study's
-  truth, ``workspace_truth``): the examiner's sweep with the occlusion gaps cut out, no noise;
+  truth until the repair): the examiner's sweep with the occlusion gaps cut out, no noise;
 * ``all``   — the twin's true positions at every row: the sweep as a perfect rig records it, the measurand of
   spec §19 (preamble) and of the paper (§IV-A, §V-A: every point the end-effector reaches is recorded);
 
@@ -42,7 +45,6 @@ from scipy.interpolate import PchipInterpolator
 from scipy.stats import skew
 from scipy.stats import t as student
 
-from bench_uncertainty_coverage import workspace_truth
 from haptify import workspace
 from haptify.compute import ComputeContext
 from haptify.storage import open_session
@@ -85,21 +87,21 @@ def one_session(seed: int, reps: int, duration: float, tmp: Path) -> list[dict]:
     model = workspace.modeled_solid(ctx.session.device().kinematics, placement.position, placement.quaternion)
     ctx.cached(("workspace_model",), lambda: model)
     rows = []
-    for trial in ctx.session.trials_of("workspace"):
-        tid = trial.id
+    trials = [t.id for t in ctx.session.trials_of("workspace")]
+    for tid in trials:
         pose = ctx.session.read(tid, "handle_pose")
         measured = pose[["px", "py", "pz"]].to_numpy(float)
         true = truth[f"{tid}/position_W"].astype(float)
+        finite = np.all(np.isfinite(measured), axis=1)
         row = {"seed": seed, "duration_s": duration, "trial": tid, "rows": len(measured),
-               "occluded_rows": int((~np.all(np.isfinite(measured), axis=1)).sum()),
+               "occluded_rows": int((~finite).sum()),
                "gaps": gaps_of(pose["t"].to_numpy(float), measured, true)}
-        for name, solid in (("meas", workspace.volume_solid(workspace.measured_points(ctx.session, tid))),
-                            ("all", workspace.volume_solid(true))):
+        repaired = workspace.trial_solid(ctx, trials, tid)
+        row["repair_points"] = repaired.repair_points
+        for name, solid in (("meas", workspace.volume_solid(measured[finite])), ("rep", repaired),
+                            ("mask", workspace.volume_solid(true[finite])), ("all", workspace.volume_solid(true))):
             row[name] = {"volume": solid.volume, "ratio": solid.volume / model.volume,
                          "coverage": workspace.overlap_volume(solid, model) / model.volume, "closed": solid.closed}
-        volume, ratio, coverage = workspace_truth(ctx, truth, tid)
-        mask_solid_closed = workspace.volume_solid(true[np.all(np.isfinite(measured), axis=1)]).closed
-        row["mask"] = {"volume": volume, "ratio": ratio, "coverage": coverage, "closed": mask_solid_closed}
         rows.append(row)
     shutil.rmtree(tmp / f"s{seed}-{duration:g}", ignore_errors=True)
     return rows
@@ -131,7 +133,7 @@ def summarise(rows: list[dict], reps: int) -> None:
               f"{np.mean([r['occluded_rows'] for r in rs]):.1f} of {np.mean([r['rows'] for r in rs]):.0f} (mean), "
               f"{np.mean([len(r['gaps']) for r in rs]):.1f} gaps")
         print("\n| per-trial volume ratio of | closed | median | IQR | 5th pct | min | sd | skew |\n|---|---|---|---|---|---|---|---|")
-        for name in ("meas", "mask", "all"):
+        for name in [n for n in ("meas", "rep", "mask", "all") if all(n in r for r in rs)]:
             x = np.array([r[name]["ratio"] for r in rs if r[name]["closed"]])
             print(f"| `{name}` | {len(x)}/{len(rs)} | {np.median(x):.4f} | {np.subtract(*np.percentile(x, [75, 25])):.4f} | "
                   f"{np.percentile(x, 5):.4f} | {x.min():.4f} | {x.std(ddof=1):.5f} | {skew(x):+.2f} |")
@@ -141,6 +143,14 @@ def summarise(rows: list[dict], reps: int) -> None:
             d = [r["all"]["ratio"] - r["mask"]["ratio"] for r in closed if lo <= longest(r, "path_m") < hi]
             if d:
                 print(f"| {lo * 100:g}–{hi * 100:g} cm | {len(d)} | {np.mean(d):.5f} | {np.max(d):.5f} |")
+        if all("rep" in r for r in rs):
+            print("\n| per-trial error against the perfect rig (`x` − `all`) | mean | sd | 5th pct | 95th pct |\n|---|---|---|---|---|")
+            for key in METRICS:
+                for name in ("meas", "rep"):
+                    d = np.array([r[name][key] - r["all"][key] for r in rs])
+                    print(f"| `{name}`, {key} | {d.mean():+.5f} | {d.std(ddof=1):.5f} | {np.percentile(d, 5):+.5f} | {np.percentile(d, 95):+.5f} |")
+            print(f"\nDonors taken per trial (§8.7): mean {np.mean([r['repair_points'] for r in rs]):.1f}, "
+                  f"max {max(r['repair_points'] for r in rs)}.")
         opened = [f"{longest(r, 'path_m') * 100:.0f} cm" for r in rs if not r["mask"]["closed"]]
         print(f"\nSweeps that do not close (W410) without the occluded rows: {len(opened)} (longest gap's path {', '.join(opened) or '—'}); "
               f"with every true row: {sum(not r['all']['closed'] for r in rs)}.")
@@ -155,7 +165,8 @@ def summarise(rows: list[dict], reps: int) -> None:
                       f"{mx('fill_linear_m'):.1f} mm | {med('fill_pchip_m'):.1f} / {mx('fill_pchip_m'):.1f} mm |")
         for key, label in METRICS.items():
             print(f"\n| `{label}`: estimator vs truth | Type A coverage, {reps} trials | mean (value − truth)/u | {reps + 2} trials | bias/u |\n|---|---|---|---|---|")
-            for est, tru in (("meas", "mask"), ("mask", "mask"), ("meas", "all"), ("all", "all")):
+            pairs = (("meas", "mask"), ("mask", "mask"), ("meas", "all"), ("rep", "all"), ("all", "all"))
+            for est, tru in [(e, t) for e, t in pairs if all(e in r for r in rs)]:
                 values = np.array([r[est][key] for r in rs if r[est]["closed"]])
                 truth = float(np.mean([r[tru][key] for r in rs if r[tru]["closed"]]))
                 c, b = interval_coverage(values, truth, reps)

@@ -1262,6 +1262,21 @@ MUTANTS: tuple[Mutant, ...] = (
         (Patch(workspace, "wp", _params(closing_radius_m=0.015)),),
         ("workspace.measured_volume",),
     ),
+    Mutant(
+        "occlusion_gaps_not_repaired",
+        "8.7",
+        "R8.7-1",
+        "a trial's occlusion gaps are repaired from the other repetitions' positions in the gaps' regions",
+        "the finite positions of the trial alone",
+        (
+            Patch(
+                workspace,
+                "repaired_points",
+                _replace(lambda t, position, donors, **k: (position[np.all(np.isfinite(position), axis=1)], 0)),
+            ),
+        ),
+        ("workspace.measured_volume",),
+    ),
     # rig
     Mutant(
         "cop_error_rms",

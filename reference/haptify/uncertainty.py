@@ -229,6 +229,7 @@ SHARED_KEYS = frozenset(
         "free_space_plate",
         "workspace_model",
         "workspace_solid",
+        "workspace_track",
         "dynamics_model",
         "dynamics_given_model",
     }

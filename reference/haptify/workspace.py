@@ -9,7 +9,7 @@ Parameters: ``schemas/<v>/metrics/workspace.json``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Any
 
@@ -43,6 +43,7 @@ class VoxelSolid:
     fraction: np.ndarray
     hull_volume: float
     n_points: int
+    repair_points: int = 0
 
     @cached_property
     def volume(self) -> float:
@@ -348,6 +349,85 @@ def longest_occlusion_gap(position: np.ndarray) -> float:
     return float(np.linalg.norm(position[idx[1:][around]] - position[idx[:-1][around]], axis=1).max())
 
 
+def occlusion_gaps(position: np.ndarray) -> list[tuple[int | None, int | None]]:
+    """The occlusion gaps of a trial's positions ``(N, 3)`` in time order (spec §8.7): per run of occluded
+    (non-finite) rows, the indices of the finite rows before and after it — None for a run at the start or
+    the end of the trial. Empty when no row is occluded or none is finite."""
+    finite = np.all(np.isfinite(position), axis=1)
+    idx = np.flatnonzero(finite)
+    if len(idx) == 0:
+        return []
+    gaps: list[tuple[int | None, int | None]] = [] if idx[0] == 0 else [(None, int(idx[0]))]
+    gaps += [(int(a), int(b)) for a, b in zip(idx[:-1], idx[1:]) if b - a > 1]
+    if idx[-1] < len(position) - 1:
+        gaps.append((int(idx[-1]), None))
+    return gaps
+
+
+def edge_speed(t: np.ndarray, position: np.ndarray, i: int, toward: int) -> float:
+    """Speed (m/s) of the hand at the finite row ``i`` on the side away from its gap: the distance to the
+    neighbouring finite row in direction ``toward`` (−1 before, +1 after) over their time apart; 0 when
+    there is none (spec §8.7)."""
+    j = i + toward
+    while 0 <= j < len(position) and not np.all(np.isfinite(position[j])):
+        j += toward
+    if not 0 <= j < len(position):
+        return 0.0
+    return float(np.linalg.norm(position[j] - position[i]) / abs(t[j] - t[i]))
+
+
+def gap_regions(
+    t: np.ndarray, position: np.ndarray, closing_radius: float | None = None
+) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """The region each occlusion gap may have hidden (spec §8.7), as ``(a, b, reach)``: every point ``x`` with
+    ``|x − a| + |x − b| ≤ reach``. For a gap between finite rows a and b, lasting T = t_b − t_a, the hand's
+    path inside is at most L = max(|b − a|, v·T) long, v the larger of the speeds at the gap's two edges
+    (:func:`edge_speed`, each measured away from the gap); so every point of it, and every point within the
+    closing radius r of it, satisfies ``|x − a| + |x − b| ≤ L + 2 r``. A gap at the start or the end of the
+    trial has one edge e: ``a = b = e`` and ``reach = 2 (v·T + r)`` (the ball of radius v·T + r)."""
+    r = float(wp("closing_radius_m") if closing_radius is None else closing_radius)
+    out = []
+    for i, j in occlusion_gaps(position):
+        if i is not None and j is not None:
+            v = max(edge_speed(t, position, i, -1), edge_speed(t, position, j, +1))
+            chord = float(np.linalg.norm(position[j] - position[i]))
+            out.append((position[i], position[j], max(chord, v * float(t[j] - t[i])) + 2.0 * r))
+        else:
+            e = i if i is not None else j
+            edge_t = t[-1] if i is not None else t[0]
+            v = edge_speed(t, position, e, -1 if i is not None else +1)
+            out.append((position[e], position[e], 2.0 * (v * abs(float(edge_t - t[e])) + r)))
+    return out
+
+
+def repaired_points(
+    t: np.ndarray, position: np.ndarray, donors: np.ndarray, *, closing_radius: float | None = None, pitch: float | None = None
+) -> tuple[np.ndarray, int]:
+    """A trial's cloud with its occlusion gaps repaired from the session's other repetitions (spec §8.7): its
+    finite positions plus every donor (a finite position of another workspace trial, m, W) that lies in a
+    region one of its gaps may have hidden (:func:`gap_regions`) and farther than ``surface_search_voxels · h``
+    from every finite position of the trial itself — where the trial has a sample that near, the
+    sub-voxel boundary (§8.4 step 5) is placed by its own samples. Returns the cloud and how many donors
+    it took."""
+    h = float(wp("voxel_pitch_m") if pitch is None else pitch)
+    own = position[np.all(np.isfinite(position), axis=1)]
+    regions = gap_regions(t, position, closing_radius)
+    if not regions or len(donors) == 0 or len(own) == 0:
+        return own, 0
+    tree = cKDTree(donors)
+    take = np.zeros(len(donors), dtype=bool)
+    for a, b, reach in regions:
+        near = np.asarray(tree.query_ball_point((a + b) / 2.0, reach / 2.0), dtype=np.int64)
+        if len(near):
+            d = donors[near]
+            take[near[np.linalg.norm(d - a, axis=1) + np.linalg.norm(d - b, axis=1) <= reach]] = True
+    candidates = donors[take]
+    if len(candidates):
+        dist, _ = cKDTree(own).query(candidates, k=1, distance_upper_bound=float(wp("surface_search_voxels")) * h)
+        candidates = candidates[~np.isfinite(dist)]
+    return np.concatenate([own, candidates]), len(candidates)
+
+
 def _modeled(ctx: Any, device: Any, placement: Any) -> tuple[VoxelSolid | None, HaptifyError | None]:
     """The device's modeled workspace solid (spec §8.3), or the coded error that leaves it unavailable: E311
     without kinematics or when they reach no volume; None and None when no metric that needs it is wanted."""
@@ -374,6 +454,39 @@ def _modeled(ctx: Any, device: Any, placement: Any) -> tuple[VoxelSolid | None, 
                 ),
             )
     return model, model_error
+
+
+def _track(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
+    """Times (s) and gimbal-centre positions (m, W; NaN where occluded) of a workspace trial, cached."""
+    return ctx.cached(
+        ("workspace_track", trial_id),
+        lambda: (ctx.session.read(trial_id, "handle_pose")["t"].to_numpy(float), trial_positions(ctx.session, trial_id)),
+    )
+
+
+def trial_solid(ctx: Any, trials: list[str], trial_id: str) -> VoxelSolid:
+    """The volume operator on a trial's cloud repaired from the other trials (spec §8.7). The trial itself
+    must hold ``min_points`` finite positions (E313); a donor trial that cannot be read gives nothing."""
+    t, position = _track(ctx, trial_id)
+    own = int(np.all(np.isfinite(position), axis=1).sum())
+    if own < int(wp("min_points")):
+        raise fail(
+            "E313",
+            f"a workspace cloud needs at least {wp('min_points')} finite points",
+            expected=f">= {wp('min_points')}",
+            found=own,
+        )
+    donors = []
+    for other in trials:
+        if other == trial_id:
+            continue
+        try:
+            q = _track(ctx, other)[1]
+        except HaptifyError:
+            continue
+        donors.append(q[np.all(np.isfinite(q), axis=1)])
+    cloud, taken = repaired_points(t, position, np.concatenate(donors) if donors else np.zeros((0, 3)))
+    return replace(volume_solid(cloud), repair_points=taken)
 
 
 def compute(ctx: Any) -> list:
@@ -416,7 +529,7 @@ def compute(ctx: Any) -> list:
     solids, first_error = per_trial(
         ctx,
         trials,
-        lambda tid: ctx.cached(("workspace_solid", tid), lambda: volume_solid(measured_points(session, tid))),
+        lambda tid: ctx.cached(("workspace_solid", tid), lambda: trial_solid(ctx, trials, tid)),
         "workspace.measured_volume",
     )
     if not solids:
@@ -444,7 +557,8 @@ def compute(ctx: Any) -> list:
             diagnostics={
                 "hull_volume_m3": [s.hull_volume for s in solids.values()],
                 "points": [s.n_points for s in solids.values()],
-                "longest_occlusion_gap_m": [longest_occlusion_gap(trial_positions(session, tid)) for tid in solids],
+                "longest_occlusion_gap_m": [longest_occlusion_gap(_track(ctx, tid)[1]) for tid in solids],
+                "repair_points": [s.repair_points for s in solids.values()],
             },
         )
     )
