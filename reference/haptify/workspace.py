@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 from functools import cached_property
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy import ndimage as ndi
@@ -23,6 +23,10 @@ from haptify.kinematics import RANGE_LATTICE_POINTS, configurations_from_unit, f
 from haptify.metric_definitions import param
 from haptify.repetitions import TrialValue, aggregate, no_trials, per_trial, single, unavailable
 from haptify.session_format import Kinematics
+
+if TYPE_CHECKING:
+    from haptify.report import ReportFigure
+    from haptify.results import MetricResult, Unavailable
 
 FAMILY = "workspace"
 PROTOCOL = "workspace"
@@ -58,7 +62,8 @@ class VoxelSolid:
     def centres(self, threshold: float = 0.5) -> np.ndarray:
         """Centres (m, W) of the voxels whose fraction is at least ``threshold`` — for figures."""
         idx = np.argwhere(self.fraction >= threshold)
-        return (idx + np.asarray(self.origin) + 0.5) * self.pitch
+        centres: np.ndarray = (idx + np.asarray(self.origin) + 0.5) * self.pitch
+        return centres
 
 
 def volume_solid(points: np.ndarray, *, pitch: float | None = None, closing_radius: float | None = None) -> VoxelSolid:
@@ -115,7 +120,7 @@ def volume_solid(points: np.ndarray, *, pitch: float | None = None, closing_radi
     fine, band_fraction = _band_fractions(coarse, c, band_c, lo, h, means[in_band])
     fraction[tuple(fine.T)] = band_fraction
     return VoxelSolid(
-        origin=tuple(int(x) for x in lo),
+        origin=(int(lo[0]), int(lo[1]), int(lo[2])),
         pitch=h,
         fraction=fraction,
         hull_volume=_hull_volume(vox, means, counts),
@@ -181,7 +186,7 @@ def _band_fractions(
     tree = cKDTree(samples)
     k = min(int(wp("normal_neighbours")), len(samples))
     dist, j = tree.query(samples, k=k, distance_upper_bound=float(wp("normal_radius_voxels")) * h)
-    dist, j = dist.reshape(len(samples), k), j.reshape(len(samples), k)
+    dist, j = np.asarray(dist).reshape(len(samples), k), np.asarray(j).reshape(len(samples), k)
     w = np.isfinite(dist).astype(float)
     count = w.sum(axis=1)
     nb = samples[np.where(w > 0, j, 0)]
@@ -263,7 +268,8 @@ def _joint_ranges(kin: Kinematics) -> np.ndarray:
             found="none",
         )
     lower, upper = joint_limits(kin, q)
-    return np.max(upper - lower, axis=0)
+    spans: np.ndarray = np.max(upper - lower, axis=0)
+    return spans
 
 
 def _counts(kin: Kinematics, step: float) -> list[int]:
@@ -328,7 +334,8 @@ def spec_box_volume(box: Any) -> float:
 def trial_positions(session: Any, trial_id: str) -> np.ndarray:
     """The gimbal-centre positions (m, W) of a workspace trial's handle_pose stream in time order, NaN where
     occluded (spec §8.7)."""
-    return session.read(trial_id, "handle_pose")[["px", "py", "pz"]].to_numpy()
+    positions: np.ndarray = session.read(trial_id, "handle_pose")[["px", "py", "pz"]].to_numpy()
+    return positions
 
 
 def measured_points(session: Any, trial_id: str) -> np.ndarray:
@@ -394,6 +401,7 @@ def gap_regions(
             out.append((position[i], position[j], max(chord, v * float(t[j] - t[i])) + 2.0 * r))
         else:
             e = i if i is not None else j
+            assert e is not None  # occlusion_gaps: a gap has at least one finite edge
             edge_t = t[-1] if i is not None else t[0]
             v = edge_speed(t, position, e, -1 if i is not None else +1)
             out.append((position[e], position[e], 2.0 * (v * abs(float(edge_t - t[e])) + r)))
@@ -458,10 +466,11 @@ def _modeled(ctx: Any, device: Any, placement: Any) -> tuple[VoxelSolid | None, 
 
 def _track(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
     """Times (s) and gimbal-centre positions (m, W; NaN where occluded) of a workspace trial, cached."""
-    return ctx.cached(
+    track: tuple[np.ndarray, np.ndarray] = ctx.cached(
         ("workspace_track", trial_id),
         lambda: (ctx.session.read(trial_id, "handle_pose")["t"].to_numpy(float), trial_positions(ctx.session, trial_id)),
     )
+    return track
 
 
 def trial_solid(ctx: Any, trials: list[str], trial_id: str) -> VoxelSolid:
@@ -489,10 +498,10 @@ def trial_solid(ctx: Any, trials: list[str], trial_id: str) -> VoxelSolid:
     return replace(volume_solid(cloud), repair_points=taken)
 
 
-def compute(ctx: Any) -> list:
+def compute(ctx: Any) -> list[MetricResult | Unavailable]:
     """Every workspace metric the session allows (spec §8.7)."""
     session = ctx.session
-    out: list = []
+    out: list[MetricResult | Unavailable] = []
     device = session.device()
     model, model_error = _modeled(ctx, device, session.manifest.device_placement)
     if model is not None:
@@ -533,6 +542,7 @@ def compute(ctx: Any) -> list:
         "workspace.measured_volume",
     )
     if not solids:
+        assert first_error is not None  # per_trial: a trial without a result raised the error it returns
         return out + [unavailable(m, first_error) for m in measured_ids]
     for tid, s in solids.items():
         if not s.closed:
@@ -584,7 +594,7 @@ def compute(ctx: Any) -> list:
 # --- report figures (spec §15.6; paper Fig. 5) ----------------------------------------------------
 
 
-def report_figures(ctx: Any, results: Any) -> list:
+def report_figures(ctx: Any, results: Any) -> list[ReportFigure]:
     """Measured gimbal-centre clouds over the modeled workspace, side (x–z) and top (x–y) views (paper Fig. 5)."""
     import matplotlib.pyplot as plt
 
