@@ -43,7 +43,7 @@ from haptify.errors import fail
 from haptify.session_format import Kinematics, Rendering
 
 from haptify_tools.twin import drive_loops
-from haptify_tools.twin.examiner import band_noise as _band_noise
+from haptify_tools.twin.hand_path import band_noise as _band_noise
 from haptify_tools.twin.kinematics import (
     gimbal_angles,
     hand_to_joints,

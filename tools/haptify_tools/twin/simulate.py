@@ -40,6 +40,8 @@ from haptify.storage import SessionWriter, atomic_write_json
 from haptify.versions import PACKAGE_VERSION
 
 from haptify_tools.twin import examiner as ex
+from haptify_tools.twin import hand_path, plate_loads
+from haptify_tools.twin.reach import reach_from_twin
 from haptify_tools.twin import rig as rg
 from haptify_tools.twin.kinematics import device_to_world, hand_to_joints, link_transforms, true_kinematics
 from haptify_tools.twin.model import TwinFile, twin_to_dict
@@ -93,7 +95,7 @@ class SimulationOptions:
     rig_trials: bool = True
     durations: dict[str, float] = field(default_factory=dict)
     rig: rg.RigConfig = field(default_factory=rg.RigConfig)
-    rate_hz: float = ex.DEFAULT_RATE_HZ
+    rate_hz: float = hand_path.DEFAULT_RATE_HZ
     fmt: str = "parquet"
     compact: bool = False  # Parquet: float32 sensor columns, BYTE_STREAM_SPLIT (spec §3.2.1)
     session_id: str | None = None
@@ -178,8 +180,8 @@ class PlannedTrial:
 def planned_duration(name: str, options: SimulationOptions) -> float:
     """Length (s) of a trial's clock: its configured duration (the COP trial: its placement schedule)."""
     if name == "rig.plate_cop":
-        n = len(ex.cop_grid())
-        dwell, move = cop_dwell(options), ex.COP_MOVE_S
+        n = len(plate_loads.cop_grid())
+        dwell, move = cop_dwell(options), plate_loads.COP_MOVE_S
         return 0.5 + n * (dwell + move) + 0.5
     return options.duration(name)
 
@@ -187,7 +189,7 @@ def planned_duration(name: str, options: SimulationOptions) -> float:
 def cop_dwell(options: SimulationOptions) -> float:
     """Dwell time (s) per weight position of the COP trial (from its configured duration when given)."""
     d = options.duration("rig.plate_cop")
-    return ex.COP_DWELL_S if d <= 0 else max(0.3, (d - 1.0) / len(ex.cop_grid()) - ex.COP_MOVE_S)
+    return plate_loads.COP_DWELL_S if d <= 0 else max(0.3, (d - 1.0) / len(plate_loads.cop_grid()) - plate_loads.COP_MOVE_S)
 
 
 def plan(options: SimulationOptions) -> list[PlannedTrial]:
@@ -250,7 +252,7 @@ class DossierSimulator:
         self.twin = twin
         self.opt = options
         self.cfg = options.rig
-        self.reach = ex.reach_from_twin(twin)
+        self.reach = reach_from_twin(twin)
         self.kin = true_kinematics(twin)
         self.link_names = [lk.name for lk in twin.links]
         self.layout = rg.marker_layout(self.link_names, [j.a for j in self.kin.joints])
@@ -276,7 +278,7 @@ class DossierSimulator:
 
     # -- descriptions -----------------------------------------------------------------------------
     def rig_description(self) -> dict:
-        return rg.rig_description(self.cfg, self.layout, extra_markers=ex.COP_MARKERS)
+        return rg.rig_description(self.cfg, self.layout, extra_markers=plate_loads.COP_MARKERS)
 
     def manifest(self) -> dict:
         name = self.opt.session_id or f"sim-{_slug(self.twin.name)}-s{self.opt.seed}"
@@ -306,7 +308,7 @@ class DossierSimulator:
         }.get(p.name, self._device_trial)
         return method(p, t0, rng_ex, rng_rig, rng_vib)
 
-    def _trajectory(self, name: str, rng: np.random.Generator, t0: float) -> ex.HandTrajectory:
+    def _trajectory(self, name: str, rng: np.random.Generator, t0: float) -> hand_path.HandTrajectory:
         """The examiner's hand path of a device protocol; speeds × ``examiner_pace`` (periods ÷ it), except the
         local dynamic protocol's oscillation band, which the protocol prescribes (paper §V-C)."""
         d, r, rate, pace = self.opt.duration(name), self.reach, self.opt.rate_hz, self.opt.examiner_pace
@@ -501,9 +503,9 @@ class DossierSimulator:
         self._sync(streams, rates, t1k, t0)
         return self._hand_only(p, traj, streams, rates, entities, offsets, t1k, accel_truth)
 
-    def _plate_trial(self, p, t0, load: ex.PlateLoad | None, duration: float, rng_rig) -> TrialOutput:
+    def _plate_trial(self, p, t0, load: plate_loads.PlateLoad | None, duration: float, rng_rig) -> TrialOutput:
         cfg = self.cfg
-        t = load.t if load is not None else ex.clock(duration, cfg.plate_rate_hz, t0)
+        t = load.t if load is not None else hand_path.clock(duration, cfg.plate_rate_hz, t0)
         force = load.force_W if load is not None else np.zeros((len(t), 3))
         point = load.point_W if load is not None else np.zeros((len(t), 3))
         streams, rates, entities, offsets = _no_streams()
@@ -533,12 +535,12 @@ class DossierSimulator:
         return self._plate_trial(p, t0, None, self.opt.duration(p.name), rng_rig)
 
     def _plate_impact(self, p, t0, rng_ex, rng_rig, rng_vib) -> TrialOutput:
-        load = ex.ball_impact(rng_ex, self.opt.duration(p.name), rate_hz=self.cfg.plate_rate_hz, t0=t0)
+        load = plate_loads.ball_impact(rng_ex, self.opt.duration(p.name), rate_hz=self.cfg.plate_rate_hz, t0=t0)
         return self._plate_trial(p, t0, load, 0.0, rng_rig)
 
     def _plate_cop(self, p, t0, rng_ex, rng_rig, rng_vib) -> TrialOutput:
-        load = ex.weight_placements(
-            rng_ex, rate_hz=self.cfg.plate_rate_hz, t0=t0, dwell_s=cop_dwell(self.opt), move_s=ex.COP_MOVE_S
+        load = plate_loads.weight_placements(
+            rng_ex, rate_hz=self.cfg.plate_rate_hz, t0=t0, dwell_s=cop_dwell(self.opt), move_s=plate_loads.COP_MOVE_S
         )
         return self._plate_trial(p, t0, load, 0.0, rng_rig)
 
@@ -721,7 +723,7 @@ def simulate_dossier(
         "rig": {
             "config": opt.rig.to_dict(),
             "marker_layout_m": {k: v.tolist() for k, v in sim.layout.items()},
-            "cop_marker_offsets_m": ex.COP_MARKER_OFFSETS.tolist(),
+            "cop_marker_offsets_m": plate_loads.COP_MARKER_OFFSETS.tolist(),
             "plate_corner_positions_m": sim.plate_errors.positions.tolist(),
             "plate_corner_gains": sim.plate_errors.gains.tolist(),
         },
