@@ -6,7 +6,6 @@ from __future__ import annotations
 from collections.abc import Collection
 from typing import TYPE_CHECKING, Any
 
-
 from haptify.storage import SessionFolder
 from haptify_tools.viewer.plan import COMPACT_RATE_HZ, HAND_FORCE_M_PER_N, PLATE_FORCE_M_PER_N, TrialPlan
 
