@@ -20,7 +20,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from haptify.cli import main
-from haptify_tools import build_invalid_fixtures as fx
+from haptify_tools.invalid_fixtures import defects, session_edits
+from haptify.storage import sha256_file
 from haptify_tools.example_session import example_writer
 
 EXAMPLES = int(os.environ.get("HAPTIFY_CORRUPTION_EXAMPLES", "40"))
@@ -34,7 +35,7 @@ def pristine(tmp_path_factory) -> dict[str, Path]:
     sessions = {}
     for fmt in ("parquet", "csv"):
         folder = example_writer(session_id=f"corrupt-{fmt}", duration_s=0.3, fmt=fmt).write(root / fmt)
-        fx._device_file({})(folder)
+        defects._device_file({})(folder)
         sessions[fmt] = folder
     with contextlib.redirect_stdout(io.StringIO()):
         assert main(["twin", "export", "--preset", "touch", "-o", str(root / "twin.json")]) == 0
@@ -88,12 +89,12 @@ def _corrupt(folder: Path, draw) -> str:
     path.write_bytes(data)
     if not rel.endswith(".json") and draw(st.booleans()):  # the damage behind an updated checksum
         with contextlib.suppress(Exception):
-            m = fx.manifest(folder)
+            m = session_edits.manifest(folder)
             for trial in m["trials"]:
                 for s in trial["streams"]:
                     if s["file"] == rel:
-                        s["sha256"] = fx.sha256_file(path)
-            fx.save_manifest(folder, m)
+                        s["sha256"] = sha256_file(path)
+            session_edits.save_manifest(folder, m)
     return f"{kind} {rel}"
 
 

@@ -20,7 +20,8 @@ from haptify_tools.discrepancy.model import DiscrepancyFile
 from haptify_tools.discrepancy.floor import gap_above_floor, heldout_gap
 from haptify_tools.discrepancy.workflow import run_discrepancy
 from haptify_tools.twin.model import disable, load_twin, preset, set_param, write_twin
-from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
+from haptify_tools.twin.dossier_plan import SimulationOptions
+from haptify_tools.twin.simulate import simulate_dossier
 
 FREE = {"free_space": 16.0, "figure_eight": 16.0, "stiffness": 8.0, "workspace": 60.0, "rig.handle_calibration": 12.0}
 

@@ -17,7 +17,8 @@ from haptify.storage import open_session
 from haptify_tools.discrepancy import hand_path as hp
 from haptify_tools.discrepancy.data import EDGE_S, load_measured
 from haptify_tools.twin.model import preset
-from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
+from haptify_tools.twin.dossier_plan import SimulationOptions
+from haptify_tools.twin.simulate import simulate_dossier
 
 RATE = 100.0
 T = np.arange(0.0, 20.0, 1 / RATE)

@@ -18,7 +18,8 @@ from haptify_tools.discrepancy.data import load_measured, simulate_all
 from haptify_tools.discrepancy.floor import heldout_gap
 from haptify_tools.discrepancy.workflow import assess
 from haptify_tools.twin.model import disable, preset, set_param
-from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
+from haptify_tools.twin.dossier_plan import SimulationOptions
+from haptify_tools.twin.simulate import simulate_dossier
 
 
 def _trials(folder, truth, durations: dict[str, float], seed: int):

@@ -20,7 +20,8 @@ from haptify_tools.discrepancy.floor import GAP_ALPHA, Floor, heldout_gap
 from haptify_tools.discrepancy.outside import Cogging, SpeedSquared, with_field
 from haptify_tools.discrepancy.workflow import assess, benchmark_gaps, verdict_of
 from haptify_tools.twin.model import preset
-from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
+from haptify_tools.twin.dossier_plan import SimulationOptions
+from haptify_tools.twin.simulate import simulate_dossier
 
 
 def _trials(folder, seconds, seed, protocol="free_space"):

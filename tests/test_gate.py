@@ -17,6 +17,7 @@ from haptify.errors import HaptifyError
 from haptify.gate import SessionRefused, open_checked_session
 from haptify.validation import validate_session
 from haptify_tools import build_invalid_fixtures as fx
+from haptify_tools.invalid_fixtures import cases
 
 REPO = Path(__file__).resolve().parents[1]
 INVALID = REPO / "fixtures" / "invalid"
@@ -38,7 +39,7 @@ REFUSED = _refused_fixtures()
 
 def _build(name: str, tmp_path: Path) -> Path:
     folder = tmp_path / name
-    fx.build_case(next(c for c in fx.CASES if c.name == name), folder)
+    fx.build_case(next(c for c in cases.CASES if c.name == name), folder)
     return folder
 
 

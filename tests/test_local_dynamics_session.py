@@ -251,7 +251,7 @@ def test_a_given_model_too_slow_for_distance_windows_leaves_the_rmse(tmp_path):
 def test_a_given_model_with_only_single_row_runs_is_e701_not_nan(tmp_path):
     # motion capture usable 0.21 s in every 0.5 s: on the 4 Hz grid of the model every valid row stands alone,
     # so no run can be predicted; the RMS of nothing was NaN (a pydantic ValueError, E999) before (spec §11.1, §15.2)
-    from haptify_tools import build_invalid_fixtures as fx
+    from haptify_tools.invalid_fixtures import session_edits
 
     folder = _given_model_copy(tmp_path, 4.0)
 
@@ -262,7 +262,7 @@ def test_a_given_model_with_only_single_row_runs_is_e701_not_nan(tmp_path):
             df[c] = np.where(keep, df[c], np.nan)
         return df
 
-    fx.rewrite_data(folder, "handle_pose", occlude, trial_id="local_dynamic-1")
+    session_edits.rewrite_data(folder, "handle_pose", occlude, trial_id="local_dynamic-1")
     ctx = ComputeContext(session=open_session(folder))
     ctx.parameters = {"model": "model-slow.json"}
     data = trial_data(ctx, "local_dynamic-1", 4.0)

@@ -16,7 +16,7 @@ from sqlalchemy import text
 from _registry_fixtures import base, bundle_for, passing_report, pg_server, variant  # noqa: F401  (base: fixture)
 from haptify_conform.cases import load_cases, select
 from haptify_tools.registry.app import create_app
-from haptify_tools.registry.service import Settings
+from haptify_tools.registry.records import Settings
 
 API = "/api/v1"
 

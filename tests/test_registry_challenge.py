@@ -19,9 +19,10 @@ from _registry_fixtures import base, browser, bundle_for  # noqa: F401  (base: f
 from haptify_conform import cli
 from haptify.conform_adapter import analyse
 from haptify_tools.registry.app import create_app
-from haptify_tools.registry.challenge import FAMILIES, generate, judge_answer
+from haptify_tools.registry.challenge_sessions import FAMILIES, generate
+from haptify_tools.registry.challenge import judge_answer
 from haptify_tools.registry.live import serve_in_thread
-from haptify_tools.registry.service import Settings
+from haptify_tools.registry.records import Settings
 
 API = "/api/v1"
 

@@ -37,11 +37,11 @@ from _registry_fixtures import (  # noqa: F401  (base: fixture)
 from haptify.compare import Table
 from haptify.errors import HaptifyError
 from haptify.storage import sha256_file
-from haptify_tools import build_invalid_fixtures as fx
+from haptify_tools.invalid_fixtures import session_edits
 from haptify_tools.example_session import example_writer
 from haptify_tools.registry.app import EXPORT_COLUMNS, FORMULA_LEAD, create_app, csv_cell, neutralised
 from haptify_tools.registry.bundle import Limits, unpack
-from haptify_tools.registry.service import Settings
+from haptify_tools.registry.records import Settings
 from haptify_tools.registry.worker import run_contained
 
 NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")  # a signed number is data, not a formula
@@ -147,16 +147,16 @@ def nul_csv_bundle(base, tmp_path: Path) -> Path:
     that the archive's expansion stays under the 100× bomb limit and the CSV reaches the re-computation."""
     root, session, results, report, impl = base
     folder = example_writer(duration_s=0.5, fmt="csv").write(tmp_path / "nul")
-    manifest = fx.manifest(folder)
+    manifest = session_edits.manifest(folder)
     manifest["lab"]["id"], manifest["session_id"] = "lab-a", "nul-csv"
-    fx.save_manifest(folder, manifest)
+    session_edits.save_manifest(folder, manifest)
     res = write_results(folder, tmp_path / "nul-results.json", metrics=["free_space.speed_mean"])
-    stream = fx.stream_of(manifest, "handle_pose")
+    stream = session_edits.stream_of(manifest, "handle_pose")
     with open(folder / stream["file"], "wb") as fh:
         for _ in range(NUL_MIB):
             fh.write(b"\0" * 2**20)
     stream.update(rows=NUL_MIB * 2**20 // (32 * len(stream["columns"])), sha256=sha256_file(folder / stream["file"]))
-    fx.save_manifest(folder, manifest)
+    session_edits.save_manifest(folder, manifest)
     (folder / "noise.bin").write_bytes(np.random.default_rng(7).bytes(1 << 20))
     data = json.loads(res.read_text())
     data["manifest_sha256"] = sha256_file(folder / "session.json")

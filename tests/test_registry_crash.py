@@ -19,7 +19,8 @@ from _registry_fixtures import SERVE, base, bundle_for, free_port, pg_server, st
 from haptify.cli import UI
 from haptify.errors import HaptifyError
 from haptify_tools.registry import cmd_registry, cmd_submit
-from haptify_tools.registry.service import Registry, Settings
+from haptify_tools.registry.service import Registry
+from haptify_tools.registry.records import Settings
 
 
 def _parse(argv: list[str]):

@@ -17,7 +17,7 @@ from scipy import stats
 from _registry_fixtures import base, bundle_for, variant  # noqa: F401  (base: fixture)
 from haptify_tools.registry.app import create_app
 from haptify_tools.registry.leaderboard import leaderboard
-from haptify_tools.registry.service import Settings
+from haptify_tools.registry.records import Settings
 
 API = "/api/v1"
 METRIC = "vibration.rms"

@@ -80,7 +80,7 @@ def test_a_vector_metric_with_one_repetition_compares_without_an_sd():
 
     from haptify.compare import build_table
     from haptify.results import DeviceSummary, Implementation, MetricResult, ResultsFile
-    from haptify_tools.registry.service import aggregate, defined_sd
+    from haptify_tools.registry.aggregates import aggregate, defined_sd
 
     row = SimpleNamespace(per_repetition_json="[]", value_json="[0.1, 0.2, 0.3]", unit="N", definition_version="1.0.0")
     agg = aggregate("dynamics.error_vs_distance", [({"lab": "lab-a"}, row)])

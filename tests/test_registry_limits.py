@@ -15,7 +15,7 @@ from haptify.cli import UI
 from haptify_tools.registry.app import create_app
 from haptify_tools.registry.bundle import Limits
 from haptify_tools.registry.live import serve_in_thread
-from haptify_tools.registry.service import Settings
+from haptify_tools.registry.records import Settings
 from test_registry_crash import _parse
 
 

@@ -27,7 +27,7 @@ from haptify.results import Implementation, MetricResult, ResultsFile
 from haptify.versions import PACKAGE_VERSION
 from haptify.storage import sha256_file
 from haptify_tools.registry.app import create_app
-from haptify_tools.registry.service import Settings
+from haptify_tools.registry.records import Settings
 
 # (lab, manufacturer, model, vibration.rms repetitions in m/s², workspace.measured_volume repetitions in m³)
 PLAN = [

@@ -23,7 +23,8 @@ from haptify_tools.cluster import dask_client
 from haptify_tools.registry import cmd_registry, db
 from haptify_tools.registry.checks import tolerances
 from haptify_tools.registry.reverify import plan, record_values, run_reverify, start_run
-from haptify_tools.registry.service import Caller, Registry, Settings
+from haptify_tools.registry.records import Caller, Settings
+from haptify_tools.registry.service import Registry
 from haptify_tools.registry.storage import LocalFolderStore, open_store
 
 N = 5

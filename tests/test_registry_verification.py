@@ -14,7 +14,7 @@ from fastapi.testclient import TestClient
 
 from _registry_fixtures import base, browser, bundle_for, variant  # noqa: F401  (base: fixture)
 from haptify_tools.registry.app import create_app
-from haptify_tools.registry.service import Settings
+from haptify_tools.registry.records import Settings
 
 API = "/api/v1"
 SCALE = 1.05  # the disagreeing submission's vibration.rms is 5 % off the re-computation (tolerance ≤ 1 %)

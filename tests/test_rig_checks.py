@@ -121,7 +121,7 @@ def test_rig_check_takes_the_global_json_flag_after_the_command(good, capsys):
 def test_sync_offset_without_usable_motion_capture_is_coded(tmp_path):
     # every handle_pose row occluded (a valid session: W405): the sync search had only NaN scores and
     # numpy's nanargmax raised ValueError (E999); now E611, and the calibration residuals still stand (spec §14.6)
-    from haptify_tools import build_invalid_fixtures as fx
+    from haptify_tools.invalid_fixtures import session_edits
     from haptify.validation import validate_session
 
     w = rb.writer()
@@ -133,7 +133,7 @@ def test_sync_offset_without_usable_motion_capture_is_coded(tmp_path):
             df[c] = np.nan
         return df
 
-    fx.rewrite_data(folder, "handle_pose", occlude, trial_id="cal-1")
+    session_edits.rewrite_data(folder, "handle_pose", occlude, trial_id="cal-1")
     assert not validate_session(folder).errors
     res = compute_session(open_session(folder), ["rig.sync_offset", "rig.handle_calibration_rms"])
     assert [(u.id, u.code) for u in res.unavailable] == [("rig.sync_offset", "E611")]

@@ -18,12 +18,12 @@ from haptify.compute import compute_session
 from haptify.storage import open_session
 from haptify_tools.registry.app import create_app
 from haptify_tools.registry.interlab import LabCell, components
-from haptify_tools.registry.service import Settings
+from haptify_tools.registry.records import Settings
 from haptify_tools.twin import cmd_simulate
 from haptify_tools.twin.model import preset
 from haptify_tools.twin.rig import RigConfig
 from haptify_tools.twin.round_robin import SPREADS, draw_labs, parse_spreads, simulate_round_robin
-from haptify_tools.twin.simulate import SimulationOptions
+from haptify_tools.twin.dossier_plan import SimulationOptions
 
 METRIC = "stiffness.measured"
 LABS, REPS = 14, 7

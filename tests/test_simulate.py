@@ -14,7 +14,8 @@ from haptify.storage import open_session
 from haptify.validation import validate_session
 from haptify_tools.twin import cmd_simulate
 from haptify_tools.twin.model import EFFECT_IDS, load_twin, preset
-from haptify_tools.twin.simulate import SimulationOptions, plan, simulate_dossier
+from haptify_tools.twin.dossier_plan import SimulationOptions, plan
+from haptify_tools.twin.simulate import simulate_dossier
 
 SHORT = {
     "free_space": 4.0,
@@ -179,7 +180,7 @@ def test_cli_twin_export_and_simulate(tmp_path):
 
 def test_rig_effects_switch_off():
     from haptify_tools.twin.model import disable
-    from haptify_tools.twin.simulate import DossierSimulator
+    from haptify_tools.twin.dossier_trials import DossierSimulator
 
     on = DossierSimulator(preset("touch"), SimulationOptions())
     assert on.conn_m > 0 and np.any(on.bias_f != 0) and np.any(on.bias_a != 0) and np.any(on.bias_p != 0)

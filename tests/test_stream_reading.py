@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from haptify.errors import HaptifyError
 from haptify.storage import parse_json_file, read_stream_file
 from haptify.validation import validate_session
-from haptify_tools import build_invalid_fixtures as fx
+from haptify_tools.invalid_fixtures import session_edits
 from haptify_tools.example_session import example_writer
 
 
@@ -33,7 +33,7 @@ def _session(tmp_path: Path, fmt: str = "parquet", name: str = "s") -> Path:
 @pytest.mark.parametrize("fmt", ["parquet", "csv"])
 def test_one_read_gives_the_table_and_the_sha256_of_the_bytes(tmp_path: Path, fmt: str):
     folder = _session(tmp_path, fmt)
-    stream = fx.stream_of(fx.manifest(folder), "handle_wrench")
+    stream = session_edits.stream_of(session_edits.manifest(folder), "handle_wrench")
     path = folder / stream["file"]
     table, digest = read_stream_file(path, fmt, [c["name"] for c in stream["columns"]], label=stream["file"])
     assert digest == hashlib.sha256(path.read_bytes()).hexdigest() == stream["sha256"]
@@ -47,11 +47,11 @@ def test_one_read_gives_the_table_and_the_sha256_of_the_bytes(tmp_path: Path, fm
 @given(group_rows=st.integers(min_value=1, max_value=600))
 def test_a_parquet_stream_in_any_number_of_row_groups_is_valid_and_reads_the_same(tmp_path_factory, group_rows: int):
     folder = _session(tmp_path_factory.mktemp("rg"))
-    stream = fx.stream_of(fx.manifest(folder), "handle_wrench")
+    stream = session_edits.stream_of(session_edits.manifest(folder), "handle_wrench")
     path = folder / stream["file"]
     before = pq.read_table(path)
     pq.write_table(before, path, row_group_size=group_rows, compression="zstd")
-    fx.rehash(folder, "handle_wrench")
+    session_edits.rehash(folder, "handle_wrench")
     assert pq.ParquetFile(path).num_row_groups == -(-before.num_rows // group_rows)
     assert validate_session(folder).findings == []
     table, _ = read_stream_file(path, "parquet", before.column_names, label=stream["file"])
@@ -110,8 +110,8 @@ _CHILD = textwrap.dedent("""
 @pytest.mark.parametrize("header", [b"", b"t,px,py,pz,qw,qx,qy,qz\n"])
 def test_a_csv_stream_of_nul_bytes_is_refused_within_a_memory_limit(tmp_path: Path, header: bytes):
     folder = _session(tmp_path, "csv")
-    m = fx.manifest(folder)
-    stream = fx.stream_of(m, "handle_pose")
+    m = session_edits.manifest(folder)
+    stream = session_edits.stream_of(m, "handle_pose")
     rows = NUL_MIB * 2**20 // (32 * len(stream["columns"]))  # the size limit of §4.2 admits the file
     path = folder / stream["file"]
     with open(path, "wb") as fh:
@@ -120,8 +120,8 @@ def test_a_csv_stream_of_nul_bytes_is_refused_within_a_memory_limit(tmp_path: Pa
         for _ in range(NUL_MIB):
             fh.write(chunk)
     stream.update(rows=rows)
-    fx.save_manifest(folder, m)
-    fx.rehash(folder, "handle_pose")
+    session_edits.save_manifest(folder, m)
+    session_edits.rehash(folder, "handle_pose")
     out = subprocess.run(
         [sys.executable, "-c", _CHILD, str(folder), str(MEMORY_BUDGET_MIB)], capture_output=True, text=True, timeout=300
     )

@@ -12,6 +12,8 @@ from hypothesis import strategies as st
 from haptify.conventions import STANDARD_GRAVITY, quat_conjugate, quat_rotate
 from haptify.kinematics import joint_limits
 from haptify_tools.twin import examiner as ex
+from haptify_tools.twin import hand_path, plate_loads
+from haptify_tools.twin.reach import reach_from_twin
 from haptify_tools.twin.kinematics import inverse_kinematics, true_kinematics, world_to_device
 from haptify_tools.twin.model import preset
 
@@ -26,7 +28,7 @@ def twin():
 
 @pytest.fixture(scope="module")
 def reach(twin):
-    return ex.reach_from_twin(twin)
+    return reach_from_twin(twin)
 
 
 @settings(max_examples=3, deadline=None)
@@ -136,8 +138,8 @@ def test_generators_are_deterministic_for_a_seed(reach):
 @given(accel=st.floats(0.002, 0.2), seed=st.integers(0, 2**31))
 def test_tremor_has_configured_level_and_band(accel, seed):
     rate = 1000.0
-    disp, rot = ex.tremor(np.random.default_rng(seed), 8000, rate, accel_rms=accel, angle_rms=1e-4)
-    acc = ex.derivative(disp, rate, 2)
+    disp, rot = hand_path.tremor(np.random.default_rng(seed), 8000, rate, accel_rms=accel, angle_rms=1e-4)
+    acc = hand_path.derivative(disp, rate, 2)
     assert np.sqrt(np.mean(acc**2, axis=0)) == pytest.approx(accel, rel=0.02)
     spec = np.abs(np.fft.rfft(disp, axis=0)) ** 2
     f = np.fft.rfftfreq(len(disp), 1 / rate)
@@ -155,7 +157,9 @@ def test_handle_rotation_shows_gravity_from_every_direction():
 
 
 def test_ball_impact_carries_the_momentum():
-    load = ex.ball_impact(np.random.default_rng(4), 3.0, rate_hz=1000.0, mass_kg=0.05, drop_height_m=0.2, restitution=0.5)
+    load = plate_loads.ball_impact(
+        np.random.default_rng(4), 3.0, rate_hz=1000.0, mass_kg=0.05, drop_height_m=0.2, restitution=0.5
+    )
     impulse = -np.sum(load.force_W[:, 2]) / 1000.0
     v, total = math.sqrt(2 * STANDARD_GRAVITY * 0.2), 0.0
     for ev in load.meta["impacts"]:
@@ -165,7 +169,7 @@ def test_ball_impact_carries_the_momentum():
 
 
 def test_weight_placements_visit_30_positions_with_markers():
-    load = ex.weight_placements(np.random.default_rng(9), rate_hz=1000.0, mass_kg=2.0)
+    load = plate_loads.weight_placements(np.random.default_rng(9), rate_hz=1000.0, mass_kg=2.0)
     pos = np.array(load.meta["positions_m"])
     assert pos.shape == (30, 2)
     full = np.isclose(load.force_W[:, 2], -2.0 * STANDARD_GRAVITY)
@@ -173,6 +177,6 @@ def test_weight_placements_visit_30_positions_with_markers():
     # while fully loaded, the load point and the marker centroid sit over one of the 30 positions
     pts = load.point_W[full, :2]
     centroid = np.mean([m for m in load.markers_W.values()], axis=0)[full]
-    assert np.allclose(pts, centroid[:, :2] - ex.COP_MARKER_OFFSETS.mean(axis=0)[:2], atol=1e-12)
+    assert np.allclose(pts, centroid[:, :2] - plate_loads.COP_MARKER_OFFSETS.mean(axis=0)[:2], atol=1e-12)
     d = np.min(np.linalg.norm(pts[:, None, :] - pos[None, :, :], axis=2), axis=1)
     assert d.max() < 1e-12

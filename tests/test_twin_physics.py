@@ -10,6 +10,7 @@ from haptify import kinematics as ref
 from haptify.conventions import quat_from_axis_angle, quat_to_matrix
 from haptify_tools.twin import kinematics as tk
 from haptify_tools.twin import physics as ph
+from haptify_tools.twin import rigid_body, vibration_model
 from haptify_tools.twin.model import EFFECT_IDS, RIG_EFFECT_IDS, disable, preset, set_param
 
 G = 9.80665
@@ -56,7 +57,7 @@ def test_one_link_under_gravity_gives_the_analytic_torque(q2):
     a2 = tw.device.kinematics.joints[1].a
     q = np.array([0.3, q2, -1.0])
     # inverse dynamics of the bare links
-    tau = ph.inverse_dynamics(tw, q[None], np.zeros((1, 3)), np.zeros((1, 3)))[0]
+    tau = rigid_body.inverse_dynamics(tw, q[None], np.zeros((1, 3)), np.zeros((1, 3)))[0]
     expected = m * G * (a2 + cx) * np.cos(q2)
     assert tau == pytest.approx([0.0, expected, 0.0], abs=1e-12)
     # the hand holding the arm still supplies exactly that torque, and the device pulls it down
@@ -207,14 +208,14 @@ def test_passive_arm_energy_balance():
     v = np.gradient(p, t, axis=0)
     w = np.outer(np.gradient(ang, t), np.array([0.3, 0.5, 0.8]) / np.linalg.norm([0.3, 0.5, 0.8]))
     power = np.sum(-res.force_W * v, axis=1) + np.sum(-res.torque_W * w, axis=1)
-    m = ph.mass_matrix(tw, res.q)
+    m = rigid_body.mass_matrix(tw, res.q)
     ke_arm = 0.5 * np.einsum("ni,nij,nj->n", res.qd, m, res.qd)
     gb = tw.gimbal_body
     # gimbal body (COM at the gimbal centre here): translational plus rotational energy in body axes
     r = quat_to_matrix(quat)
     wb = np.einsum("nji,nj->ni", r, w)
     ke_g = 0.5 * gb.mass_kg * np.sum(v * v, axis=1) + 0.5 * np.einsum("ni,i,ni->n", wb, gb.inertia_kg_m2, wb)
-    energy = ke_arm + ke_g + ph.potential_energy(tw, res.q)
+    energy = ke_arm + ke_g + rigid_body.potential_energy(tw, res.q)
     sl = slice(20, -20)
     work = np.concatenate([[0.0], np.cumsum(0.5 * (power[sl][1:] + power[sl][:-1]) / rate)])
     change = energy[sl] - energy[sl][0]
@@ -340,17 +341,17 @@ def test_device_vibration_rms_and_speed_law():
     t = np.arange(0, 20.0, 1 / fs)
     rng = np.random.default_rng(7)
     v_ref = eff.ref_speed_m_per_s
-    a = ph.device_vibration(tw, t, np.full(len(t), v_ref), rng)
+    a = vibration_model.device_vibration(tw, t, np.full(len(t), v_ref), rng)
     expected = np.sqrt(sum(s.rms_at_ref_speed_m_per_s2**2 for s in eff.broadband + eff.resonances))
     rms = np.sqrt(np.mean(np.sum(a**2, axis=1)))
     assert rms == pytest.approx(expected, rel=0.05)
-    a2 = ph.device_vibration(tw, t, np.full(len(t), 2 * v_ref), np.random.default_rng(7))
+    a2 = vibration_model.device_vibration(tw, t, np.full(len(t), 2 * v_ref), np.random.default_rng(7))
     rms2 = np.sqrt(np.mean(np.sum(a2**2, axis=1)))
     law = eff.idle_fraction + (1 - eff.idle_fraction) * 2**eff.speed_exponent
     assert rms2 == pytest.approx(expected * law, rel=0.05)
-    assert not np.any(ph.device_vibration(disable(tw, "vibration.device"), t, np.full(len(t), v_ref), rng))
+    assert not np.any(vibration_model.device_vibration(disable(tw, "vibration.device"), t, np.full(len(t), v_ref), rng))
     # deterministic for a seed
-    again = ph.device_vibration(tw, t, np.full(len(t), v_ref), np.random.default_rng(7))
+    again = vibration_model.device_vibration(tw, t, np.full(len(t), v_ref), np.random.default_rng(7))
     assert np.array_equal(a, again)
 
 
@@ -360,7 +361,7 @@ def test_resonant_vibration_peaks_at_its_frequency():
     f0 = tw.effects.vibration_device.resonances[0].frequency_hz
     fs = 2000.0
     t = np.arange(0, 10.0, 1 / fs)
-    a = ph.device_vibration(tw, t, np.full(len(t), 0.05), np.random.default_rng(1))
+    a = vibration_model.device_vibration(tw, t, np.full(len(t), 0.05), np.random.default_rng(1))
     spec = np.sum(np.abs(np.fft.rfft(a, axis=0)) ** 2, axis=1)
     f = np.fft.rfftfreq(len(t), 1 / fs)
     kernel = np.ones(41) / 41

@@ -23,6 +23,7 @@ from haptify.validation import (
     validate_session,
 )
 from haptify_tools import build_invalid_fixtures as fx
+from haptify_tools.invalid_fixtures import cases, defects, session_edits
 from haptify_tools.example_session import example_writer
 
 REPO = Path(__file__).resolve().parents[1]
@@ -85,7 +86,7 @@ def test_invalid_fixture_yields_exactly_its_expected_codes(sidecar: Path):
         assert f.file and f.message and f.hint and f.spec_section
 
 
-@pytest.mark.parametrize("name", [c.name for c in fx.VALID])
+@pytest.mark.parametrize("name", [c.name for c in cases.VALID])
 def test_valid_fixtures_have_no_findings(name: str):
     report = validate_session(VALID / name)
     assert report.findings == [], [str(f) for f in report.findings]
@@ -142,7 +143,7 @@ def _session(tmp_path: Path, name: str = "s", **kw) -> Path:
 )
 def test_rate_tolerance_is_one_percent_of_the_mean_rate(tmp_path: Path, factor: float, flagged: bool):
     folder = _session(tmp_path)
-    fx.rewrite_data(folder, "handle_wrench", fx._retime(1000.0 * factor))
+    session_edits.rewrite_data(folder, "handle_wrench", defects._retime(1000.0 * factor))
     assert ("E206" in validate_session(folder).codes) is flagged
 
 
@@ -155,7 +156,7 @@ def test_quaternion_norm_tolerance(tmp_path: Path, excess: float, flagged: bool)
         df["qz"] = df["qz"] * (1 + excess)
         return df
 
-    fx.rewrite_data(folder, "handle_pose", scale)
+    session_edits.rewrite_data(folder, "handle_pose", scale)
     report = validate_session(folder)
     assert ("E207" in report.codes) is flagged
     if flagged:
@@ -168,16 +169,16 @@ def test_occlusion_warning_above_twenty_percent(tmp_path: Path, occluded: int, f
     # 20 samples: 4 occluded = 20 % (not above the share), 5 = 25 %
     assert OCCLUSION_WARNING_SHARE == 0.2
     w = example_writer(duration_s=0.2)
-    fx.add_markers_trial(w, ["h1", "h2"])
+    session_edits.add_markers_trial(w, ["h1", "h2"])
     folder = w.write(tmp_path / "s")
-    fx._markers_nan(slice(0, occluded), ["h1_x", "h1_y", "h1_z"])(folder)
+    defects._markers_nan(slice(0, occluded), ["h1_x", "h1_y", "h1_z"])(folder)
     report = validate_session(folder)
     assert report.codes == (["W405"] if flagged else [])
 
 
 def test_interval_outliers_are_a_warning_and_name_their_time_range(tmp_path: Path):
     folder = _session(tmp_path)
-    fx.rewrite_data(folder, "handle_wrench", fx._jitter)
+    session_edits.rewrite_data(folder, "handle_wrench", defects._jitter)
     report = validate_session(folder)
     (f,) = report.findings
     assert (f.code, f.column, f.found) == ("W402", "t", 4)  # 4 intervals: both sides of the two moved samples
@@ -187,7 +188,7 @@ def test_interval_outliers_are_a_warning_and_name_their_time_range(tmp_path: Pat
 
 def test_sensor_range_counts_the_exceeding_samples(tmp_path: Path):
     folder = _session(tmp_path)
-    fx.rewrite_data(folder, "handle_wrench", fx.set_column("handle_wrench", "fz", slice(100, 110), -170.0))
+    session_edits.rewrite_data(folder, "handle_wrench", session_edits.set_column("handle_wrench", "fz", slice(100, 110), -170.0))
     (f,) = validate_session(folder).findings
     assert (f.code, f.column, f.found) == ("W401", "fz", 170.0)
     assert "10 samples" in f.message
@@ -196,10 +197,10 @@ def test_sensor_range_counts_the_exceeding_samples(tmp_path: Path):
 
 def test_clock_offset_records_put_streams_on_the_session_clock(tmp_path: Path):
     folder = _session(tmp_path)
-    fx.rewrite_data(folder, "handle_pose", fx._shift_time(10.0))
+    session_edits.rewrite_data(folder, "handle_pose", defects._shift_time(10.0))
     assert validate_session(folder).codes == ["E305"]
-    pose_file = fx.stream_of(fx.manifest(folder), "handle_pose")["file"]
-    fx.edit(
+    pose_file = session_edits.stream_of(session_edits.manifest(folder), "handle_pose")["file"]
+    session_edits.edit(
         folder,
         lambda m: m.__setitem__(
             "calibration", [{"kind": "clock_offset", "id": "sync-pose", "stream_file": pose_file, "offset_s": -10.0}]
@@ -210,8 +211,8 @@ def test_clock_offset_records_put_streams_on_the_session_clock(tmp_path: Path):
 
 def test_a_stream_without_time_column_is_a_column_finding_not_a_crash(tmp_path: Path):
     folder = _session(tmp_path)
-    fx.rewrite_data(folder, "handle_wrench", lambda df: df.drop(columns=["t"]))
-    fx.edit(folder, lambda m: fx.stream_of(m, "handle_wrench")["columns"].pop(0))
+    session_edits.rewrite_data(folder, "handle_wrench", lambda df: df.drop(columns=["t"]))
+    session_edits.edit(folder, lambda m: session_edits.stream_of(m, "handle_wrench")["columns"].pop(0))
     assert validate_session(folder).codes == ["E201"]
 
 
@@ -258,9 +259,9 @@ def test_symlink_targets_outside_the_folder_are_never_opened(tmp_path: Path, mon
     outside = tmp_path / "outside"
     outside.mkdir()
     folder = _session(tmp_path, "session")
-    m = fx.manifest(folder)
-    wrench = folder / fx.stream_of(m, "handle_wrench")["file"]
-    accel = folder / fx.stream_of(m, "handle_accel")["file"]
+    m = session_edits.manifest(folder)
+    wrench = folder / session_edits.stream_of(m, "handle_wrench")["file"]
+    accel = folder / session_edits.stream_of(m, "handle_accel")["file"]
     shutil.move(wrench, outside / "secret.parquet")
     shutil.move(accel, outside / "secret-accel.parquet")
     os.symlink(outside / "secret.parquet", wrench)  # absolute link out
@@ -288,7 +289,7 @@ def test_symlink_targets_outside_the_folder_are_never_opened(tmp_path: Path, mon
 
 def test_symlinks_that_stay_inside_the_folder_are_accepted(tmp_path: Path):
     folder = _session(tmp_path)
-    wrench = folder / fx.stream_of(fx.manifest(folder), "handle_wrench")["file"]
+    wrench = folder / session_edits.stream_of(session_edits.manifest(folder), "handle_wrench")["file"]
     (folder / "data").mkdir()
     shutil.move(wrench, folder / "data" / "w.parquet")
     os.symlink("../../data/w.parquet", wrench)
@@ -297,7 +298,7 @@ def test_symlinks_that_stay_inside_the_folder_are_accepted(tmp_path: Path):
 
 def test_a_fifo_stream_file_is_reported_without_blocking(tmp_path: Path):
     folder = _session(tmp_path)
-    wrench = folder / fx.stream_of(fx.manifest(folder), "handle_wrench")["file"]
+    wrench = folder / session_edits.stream_of(session_edits.manifest(folder), "handle_wrench")["file"]
     wrench.unlink()
     os.mkfifo(wrench)
     assert validate_session(folder).codes == ["E112"]

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from haptify import storage, validation
 from haptify.validation import SessionValidator, ValidationReport, validate_session
-from haptify_tools import build_invalid_fixtures as fx
+from haptify_tools.invalid_fixtures import defects, session_edits
 from haptify_tools.example_session import example_writer
 
 REPO = Path(__file__).resolve().parents[1]
@@ -55,7 +55,7 @@ def test_every_fixture_gives_the_whole_table_findings_in_chunks_of_1_and_7_rows(
 
 
 def _set(column: str, rows, value: float) -> Callable[[pd.DataFrame], pd.DataFrame]:
-    return fx.set_column("", column, rows, value)
+    return session_edits.set_column("", column, rows, value)
 
 
 def _swap_times(k: int) -> Callable[[pd.DataFrame], pd.DataFrame]:
@@ -152,7 +152,7 @@ BORDER_CASES = {
 def _border_session(root: Path, case: str, fmt: str) -> Path:
     kind, rewrite, _, _ = BORDER_CASES[case]
     folder = example_writer(duration_s=0.2, fmt=fmt).write(root / f"{case}-{fmt}")
-    fx.rewrite_data(folder, kind, rewrite)
+    session_edits.rewrite_data(folder, kind, rewrite)
     return folder
 
 
@@ -171,10 +171,10 @@ def test_a_finding_across_chunk_borders_is_the_known_one_for_every_chunk_size(tm
 
 def test_an_occlusion_across_chunk_borders_is_counted_once(tmp_path: Path):
     w = example_writer(duration_s=0.2)
-    fx.add_markers_trial(w, ["h1", "h2"])
+    session_edits.add_markers_trial(w, ["h1", "h2"])
     folder = w.write(tmp_path / "s")
-    fx._markers_nan(slice(5, 13), ["h1_x"])(folder)  # partial: 8 samples
-    fx._markers_nan(slice(3, 9), ["h2_x", "h2_y", "h2_z"])(folder)  # whole entity: 6 of 20 samples
+    defects._markers_nan(slice(5, 13), ["h1_x"])(folder)  # partial: 8 samples
+    defects._markers_nan(slice(3, 9), ["h2_x", "h2_y", "h2_z"])(folder)  # whole entity: 6 of 20 samples
     whole = _whole(folder)
     for rows in CHUNKS:
         report = validate_session(folder, chunk_rows=rows)
@@ -235,7 +235,7 @@ def test_any_damage_gives_the_whole_table_findings_in_any_chunking(tmp_path: Pat
             df[column] = v
         return df
 
-    fx.rewrite_data(folder, "handle_wrench", hurt)
+    session_edits.rewrite_data(folder, "handle_wrench", hurt)
     assert _dump(validate_session(folder, chunk_rows=d["chunk"])) == _whole(folder)
 
 
@@ -257,7 +257,7 @@ def test_validation_holds_one_chunk_of_a_stream_at_a_time(tmp_path: Path, monkey
     monkeypatch.setattr(validation, "read_stream_chunks", spy)
     report = validate_session(folder, chunk_rows=16)
     assert report.findings == []
-    rows = {s["file"]: s["rows"] for t in fx.manifest(folder)["trials"] for s in t["streams"]}
+    rows = {s["file"]: s["rows"] for t in session_edits.manifest(folder)["trials"] for s in t["streams"]}
     assert {label for label, _ in seen} == set(rows)
     for label, sizes in seen:
         assert max(sizes) <= 16 and sum(sizes) == rows[label], (label, sizes)
@@ -276,11 +276,14 @@ def test_an_integer_column_with_a_null_is_e212_judged_on_the_schema(tmp_path: Pa
     import pyarrow.parquet as pq
 
     folder = example_writer(duration_s=0.2).write(tmp_path / "s")
-    s = fx.stream_of(fx.manifest(folder), "handle_wrench")
+    s = session_edits.stream_of(session_edits.manifest(folder), "handle_wrench")
     table = pq.read_table(folder / s["file"])
     fx_int = pa.array([None, *range(1, table.num_rows)], type=pa.int64())
     pq.write_table(table.set_column(table.column_names.index("fx"), "fx", fx_int), folder / s["file"])
-    fx.edit(folder, lambda m: fx.stream_of(m, "handle_wrench").__setitem__("sha256", storage.sha256_file(folder / s["file"])))
+    session_edits.edit(
+        folder,
+        lambda m: session_edits.stream_of(m, "handle_wrench").__setitem__("sha256", storage.sha256_file(folder / s["file"])),
+    )
     for rows in (None, 7):
         report = validate_session(folder, chunk_rows=rows)
         assert [(f.code, f.column, f.found) for f in report.findings] == [("E212", "fx", "int64")], rows

@@ -26,7 +26,7 @@ from haptify.validation import (
     kinematics_findings,
     validate_session,
 )
-from haptify_tools import build_invalid_fixtures as fx
+from haptify_tools.invalid_fixtures import defects, session_edits
 from haptify_tools.example_session import TOUCH_DEVICE, example_writer
 
 
@@ -43,7 +43,7 @@ def _write(tmp_path: Path, extend=None, name: str = "s") -> Path:
 @pytest.mark.parametrize("k, to", [(1, "c1"), (3, "c2"), (0, "c4")])
 def test_a_repeated_corner_id_is_e107_at_the_repeat_naming_the_missing_id(tmp_path: Path, k: int, to: str):
     folder = _write(tmp_path)
-    fx.edit(folder, lambda m: m["rig"]["force_plate"]["corners"][k].update(id=to))
+    session_edits.edit(folder, lambda m: m["rig"]["force_plate"]["corners"][k].update(id=to))
     report = validate_session(folder)
     (f,) = report.findings
     ids = ["c1", "c2", "c3", "c4"]
@@ -56,7 +56,7 @@ def test_a_repeated_corner_id_is_e107_at_the_repeat_naming_the_missing_id(tmp_pa
 
 def test_corner_ids_in_any_order_are_valid(tmp_path: Path):
     folder = _write(tmp_path)
-    fx.edit(folder, lambda m: m["rig"]["force_plate"].update(corners=m["rig"]["force_plate"]["corners"][::-1]))
+    session_edits.edit(folder, lambda m: m["rig"]["force_plate"].update(corners=m["rig"]["force_plate"]["corners"][::-1]))
     assert validate_session(folder).findings == []
 
 
@@ -64,7 +64,9 @@ def test_corner_ids_in_any_order_are_valid(tmp_path: Path):
 
 
 def _with_normal(tmp_path: Path, normal: list[float]) -> Path:
-    return _write(tmp_path, lambda w: fx.add_active_trial(w, rendering={**fx.RENDERING, "surface_normal": normal}))
+    return _write(
+        tmp_path, lambda w: session_edits.add_active_trial(w, rendering={**session_edits.RENDERING, "surface_normal": normal})
+    )
 
 
 @pytest.mark.parametrize(
@@ -104,7 +106,7 @@ def test_zero_tilted_unnormalised_and_huge_normals_are_e307_never_e999(tmp_path:
 def _with_sync(tmp_path: Path, trigger: np.ndarray, name: str = "s") -> Path:
     def extend(w):
         t = np.arange(trigger.size) / 1000.0
-        w.add_stream(fx.TRIAL, "sync", {"t": t, "trigger": trigger}, rate_hz=1000)
+        w.add_stream(session_edits.TRIAL, "sync", {"t": t, "trigger": trigger}, rate_hz=1000)
 
     return _write(tmp_path, extend, name)
 
@@ -157,9 +159,9 @@ def test_e214_counts_exactly_the_values_outside_zero_and_one(tmp_path_factory, b
 @pytest.mark.parametrize("kind, entities", [("handle_wrench", ["h1"]), ("handle_pose", []), ("plate_wrench", ["c1", "c2"])])
 def test_entities_on_a_kind_without_entities_are_e215(tmp_path: Path, kind: str, entities):
     folder = _write(tmp_path)
-    fx.edit(folder, lambda m: fx.stream_of(m, kind).update(entities=entities))
+    session_edits.edit(folder, lambda m: session_edits.stream_of(m, kind).update(entities=entities))
     (f,) = validate_session(folder).findings
-    index = [s["kind"] for s in fx.trial_of(fx.manifest(folder))["streams"]].index(kind)
+    index = [s["kind"] for s in session_edits.trial_of(session_edits.manifest(folder))["streams"]].index(kind)
     assert (f.code, f.pointer, f.found) == ("E215", f"/trials/0/streams/{index}/entities", entities)
 
 
@@ -167,8 +169,8 @@ def test_entities_on_markers_and_link_poses_stay_valid(tmp_path: Path):
     folder = _write(
         tmp_path,
         lambda w: (
-            fx.add_markers_trial(w, ["h1", "h2"]),
-            w.add_stream("workspace-1", "link_poses", fx._link_poses(["handle"]), rate_hz=100, entities=["handle"]),
+            session_edits.add_markers_trial(w, ["h1", "h2"]),
+            w.add_stream("workspace-1", "link_poses", session_edits._link_poses(["handle"]), rate_hz=100, entities=["handle"]),
         ),
     )
     assert validate_session(folder).findings == []
@@ -269,7 +271,7 @@ def test_empty_limits_in_a_device_file_are_reported_in_that_file(tmp_path: Path)
     joints = [dict(j) for j in TOUCH_DEVICE["kinematics"]["joints"]]
     joints[0] = {**joints[0], "lower": {"constant": 1.0}, "upper": {"constant": -1.0}}
     folder = _write(tmp_path)
-    fx._device_file({"kinematics": {**TOUCH_DEVICE["kinematics"], "joints": joints}})(folder)
+    defects._device_file({"kinematics": {**TOUCH_DEVICE["kinematics"], "joints": joints}})(folder)
     (f,) = validate_session(folder).findings
     assert (f.code, f.file, f.pointer) == ("E115", "device.json", "/kinematics/joints/0")
     assert f.found == {"lower": {"constant": 1.0, "coefficients": {}}, "upper": {"constant": -1.0, "coefficients": {}}}
@@ -284,7 +286,7 @@ def test_empty_limits_in_a_device_file_are_reported_in_that_file(tmp_path: Path)
 )
 def test_the_date_is_a_calendar_date(tmp_path: Path, date: str, valid: bool):
     folder = _write(tmp_path)
-    fx.edit(folder, lambda m: m.update(date=date))
+    session_edits.edit(folder, lambda m: m.update(date=date))
     findings = validate_session(folder).findings
     assert [(f.code, f.pointer) for f in findings] == ([] if valid else [("E104", "/date")])
 
@@ -365,12 +367,12 @@ def test_every_shortest_round_trip_float_and_nan_passes(tmp_path: Path, monkeypa
 
 def test_every_tolerated_null_is_w407_at_its_pointer_and_the_session_stays_valid(tmp_path: Path):
     folder = _write(tmp_path)
-    fx.edit(
+    session_edits.edit(
         folder,
         lambda m: (
-            fx.trial_of(m).update(notes=None, label=None),
+            session_edits.trial_of(m).update(notes=None, label=None),
             m["rig"].update(name=None),
-            fx.stream_of(m, "handle_wrench").update(entities=None),
+            session_edits.stream_of(m, "handle_wrench").update(entities=None),
         ),
     )
     report = validate_session(folder)
@@ -386,11 +388,11 @@ def test_every_tolerated_null_is_w407_at_its_pointer_and_the_session_stays_valid
 
 def test_a_null_the_schema_refuses_is_e104_alone(tmp_path: Path):
     folder = _write(tmp_path)
-    fx.edit(folder, lambda m: m.update(calibration=None))
+    session_edits.edit(folder, lambda m: m.update(calibration=None))
     assert [(f.code, f.pointer) for f in validate_session(folder).findings] == [("E104", "/calibration")]
 
 
 def test_nulls_in_the_device_file_are_w407_in_that_file(tmp_path: Path):
     folder = _write(tmp_path)
-    fx._device_file({"serial": None})(folder)
+    defects._device_file({"serial": None})(folder)
     assert [(f.code, f.file, f.pointer) for f in validate_session(folder).findings] == [("W407", "device.json", "/serial")]

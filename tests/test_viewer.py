@@ -37,19 +37,10 @@ from haptify.storage import open_session
 from haptify_tools.example_session import TOUCH_DEVICE, example_writer
 from haptify_tools.viewer import blueprints, cmd_view
 from haptify.results import load_results
-from haptify_tools.viewer.recording import (
-    HAND_FORCE_M_PER_N,
-    PLATE_FORCE_M_PER_N,
-    decimation_factor,
-    envelope,
-    nan_split,
-    plane_rectangle,
-    plan_recording,
-    raw_pose_at,
-    results_markdown,
-    time_ns,
-    write_rrd,
-)
+from haptify_tools.viewer.plan import HAND_FORCE_M_PER_N, PLATE_FORCE_M_PER_N, decimation_factor, envelope, time_ns
+from haptify_tools.viewer.arrays import nan_split, plane_rectangle, raw_pose_at
+from haptify_tools.viewer.recording import plan_recording, write_rrd
+from haptify_tools.viewer.documents import results_markdown
 from haptify_tools.viewer.save import build
 
 CHROMIUM = Path("/usr/bin/chromium")
@@ -424,7 +415,7 @@ def view_named(container, name: str):
 def test_write_is_atomic_with_ordinary_permissions(tmp_path):
     import rerun as rr
 
-    from haptify_tools.viewer.recording import Entry, Plan
+    from haptify_tools.viewer.plan import Entry, Plan
 
     good = Plan("atomic-ok")
     good.add(Entry("/a", times_ns=np.array([0, 1, 2]), archetype=rr.Scalars, fields={"scalars": np.ones(3)}))

@@ -7,7 +7,8 @@ import tempfile
 from pathlib import Path
 
 from haptify_tools.twin.model import disable, preset, set_param
-from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
+from haptify_tools.twin.dossier_plan import SimulationOptions
+from haptify_tools.twin.simulate import simulate_dossier
 
 #: Hidden truth of the demo: the touch preset with these two values; the twin starts without both effects.
 DEMO_TRUTH = {"drive.series_elasticity.stiffness_Nm_per_rad": 9.0, "friction.coulomb.torque_Nm": 0.04}

@@ -33,7 +33,8 @@ from haptify_tools.discrepancy import data as dt
 from haptify_tools.discrepancy import stats as st
 from haptify_tools.discrepancy.library import Candidate
 from haptify_tools.twin.model import TwinFile, set_param
-from haptify_tools.twin.simulate import SimulationOptions, simulate_dossier
+from haptify_tools.twin.dossier_plan import SimulationOptions
+from haptify_tools.twin.simulate import simulate_dossier
 
 REPLAY_SEED = 0  # the replays are deterministic (seeds 0, 1, …), like the rest of the workflow
 FLOOR_REPLAYS = 6  # replays whose spread makes the floor's prediction bound

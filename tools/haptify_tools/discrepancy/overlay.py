@@ -20,7 +20,8 @@ from haptify_tools.discrepancy.model import DiscrepancyFile
 def overlay_plan(session: SessionFolder, trials: list[MeasuredTrial], twin_force: dict[str, np.ndarray]):
     """The viewer's recording plan of the compared trials with the updated twin's hand force (N) as the ``compare``
     role (discrepancy README §4); :func:`write_overlay` adds the note and writes it."""
-    from haptify_tools.viewer.recording import plan_recording, series_entry
+    from haptify_tools.viewer.recording import plan_recording
+    from haptify_tools.viewer.trial_planner import series_entry
 
     plan = plan_recording(
         session, trial_ids={tr.trial_id for tr in trials}, derived="full"
@@ -53,7 +54,8 @@ def write_overlay(plan, result: DiscrepancyFile, path: Path) -> Path:
     import rerun as rr
 
     from haptify_tools.viewer.blueprints import blueprint_for
-    from haptify_tools.viewer.recording import Entry, write_rrd
+    from haptify_tools.viewer.plan import Entry
+    from haptify_tools.viewer.recording import write_rrd
 
     named = ", ".join(f"{a.effect_id} {a.parameter} = {a.value:.4g} {a.unit}" for a in result.accepted) or "none"
     note = (

@@ -1,7 +1,7 @@
 """The workspace part of the discrepancy workflow: the base-collision candidate (discrepancy README §2; paper §VI-A, Fig. 5).
 
 The workspace protocol records only positions, so the twin is compared with it through the examiner's
-own rule (:meth:`haptify_tools.twin.examiner.Reach.radial_stop`): every measured point is mapped to its
+own rule (:meth:`haptify_tools.twin.reach.Reach.radial_stop`): every measured point is mapped to its
 unit joint coordinates ``s`` with the twin's kinematics and projected from the joint box's centre onto
 the box's face, ``s_face`` — the command the examiner was following; the twin then predicts where the
 hand stops on the way out to ``s_face`` (the face itself when nothing is in the way, the first contact
@@ -25,7 +25,7 @@ from haptify.kinematics import joint_limits
 from haptify.storage import SessionFolder
 from haptify.workspace import measured_points
 
-from haptify_tools.twin.examiner import reach_from_twin
+from haptify_tools.twin.reach import reach_from_twin
 from haptify_tools.twin.kinematics import hand_to_joints, true_kinematics
 from haptify_tools.twin.model import Box, TwinFile, twin_from_dict, twin_to_dict
 

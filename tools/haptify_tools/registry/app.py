@@ -30,7 +30,8 @@ from haptify.errors import Finding, HaptifyError
 from haptify.versions import PACKAGE_VERSION, SPEC_VERSION
 from haptify_tools.registry import challenge
 from haptify_tools.registry.api_read import not_counted_notes, reads
-from haptify_tools.registry.service import Registry, Settings
+from haptify_tools.registry.service import Registry
+from haptify_tools.registry.records import Settings
 from haptify_tools.registry.uploads import Uploads
 
 API = "/api/v1"

@@ -11,7 +11,8 @@ from pathlib import Path
 from haptify.errors import fail
 from haptify_tools.cluster import add_executor_options, dask_client, describe
 from haptify_tools.registry.bundle import Limits
-from haptify_tools.registry.service import DEFAULT_RATE_PER_MINUTE, SCOPES, Registry, Settings
+from haptify_tools.registry.records import DEFAULT_RATE_PER_MINUTE, SCOPES, Settings
+from haptify_tools.registry.service import Registry
 
 DEFAULT_DATA = Path("haptify-registry")
 

@@ -1,6 +1,6 @@
 """Leaderboards of the registry: devices ranked by one metric (spec §17.5).
 
-The per-device statistics are the registry's (:meth:`haptify_tools.registry.service.Registry.device_results`:
+The per-device statistics are the registry's (:meth:`haptify_tools.registry.queries.RegistryQueries.device_results`:
 mean and sd over every repetition of every current submission, lab means, between-lab sd, the pooled
 uncertainty of the mean). This module groups the ranking into ties (spec §19.6) and otherwise only orders devices by one scalar metric's mean, using the direction stated in ``rankings.json`` next to
 it: 'lower' or 'higher' is better, or closest to a target. Which way is better is registry presentation,

@@ -1,5 +1,8 @@
 """The registry's behaviour, independent of HTTP (spec §17.4–§17.7): settings, tokens, the write path,
-withdrawals, and the read queries the JSON API and the web pages share.
+withdrawals, and the read queries the JSON API and the web pages share. The settings, token and record
+types are in :mod:`haptify_tools.registry.records`, the read queries in
+:mod:`haptify_tools.registry.queries` (a base of :class:`Registry`), the aggregates over labs and
+repetitions in :mod:`haptify_tools.registry.aggregates`; this module keeps the write path.
 
 Write path of a submission (nothing accepted is ever lost, nothing half-stored is ever kept):
 
@@ -22,139 +25,44 @@ import hashlib
 import json
 import logging
 import os
-import re
 import secrets
 import shutil
-import statistics
 import threading
-import time
 import uuid
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, AsyncIterator
+from typing import AsyncIterator
 
-from sqlalchemy import func, select
+from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError, OperationalError
 from sqlalchemy.orm import Session as DBSession
-from sqlalchemy.orm import selectinload
 from starlette.concurrency import run_in_threadpool
 
 from haptify.errors import Finding, HaptifyError, fail
-from haptify.results import DeviceSummary, Implementation, MetricResult, ResultsFile
-from haptify.versions import PACKAGE_VERSION
 from haptify_conform.report import ConformReport
-from haptify_tools.registry import db, interlab
+from haptify_tools.registry import db
 from haptify_tools.registry.bundle import (
     DIR_MODE,
     FILE_MODE,
-    SESSION_DIR,
-    Limits,
     bundle_digest,
     submission_id,
-    unpack,
     unpack_bundle,
 )
 from haptify_tools.registry.checks import Checked, check_bundle, check_conformance, verify_bundle
+from haptify_tools.registry.queries import RegistryQueries
 from haptify_tools.registry.worker import run_contained
+from haptify_tools.registry.aggregates import aggregate
+from haptify_tools.registry.records import (
+    Caller,
+    Outcome,
+    RateLimiter,
+    SCOPES,
+    Settings,
+    TOKEN_PREFIX,
+    hash_token,
+    slugify,
+)
 
 log = logging.getLogger("haptify.registry")
-
-SCOPES = ("submit", "admin")
-TOKEN_PREFIX = "hpt_"
-DEFAULT_RATE_PER_MINUTE = 120
-STATES = ("current", "superseded", "withdrawn")
-VERIFICATIONS = ("verified", "disagreeing", "unverified")  # spec §17.3.1
-RANKED = ("verified", "all")  # which results aggregates and rankings count: verified only (default) or all
-
-
-@dataclass
-class Settings:
-    """Where the registry keeps its records and what it accepts (spec §17.7)."""
-
-    data_dir: Path = Path("haptify-registry")
-    db_url: str | None = None  # None: SQLite in data_dir (zero set-up); or a postgresql:// URL
-    limits: Limits = field(default_factory=Limits)
-    verify_raw: bool = True  # re-compute metrics when raw streams are included
-    default_rate_per_minute: int = DEFAULT_RATE_PER_MINUTE
-    challenge_ttl_s: float = 3600.0  # a challenge must be answered within this time (spec §17.8)
-    upload_ttl_s: float = 24 * 3600.0  # a resumable upload without a chunk for this long expires (spec §17.5.2)
-
-    @property
-    def url(self) -> str:
-        return self.db_url or db.default_db_url(self.data_dir)
-
-
-def hash_token(token: str) -> str:
-    """The stored form of a token: its sha256 (hex). Tokens carry 256 random bits, so no slow hash is needed.
-    Spec §17.6."""
-    return hashlib.sha256(token.encode("utf-8")).hexdigest()
-
-
-def slugify(manufacturer: str, model: str) -> str:
-    """A device's URL id, e.g. ``3d-systems-touch-x``."""
-    return re.sub(r"[^a-z0-9]+", "-", f"{manufacturer} {model}".lower()).strip("-") or "device"
-
-
-class RateLimiter:
-    """A token bucket per API token: ``rate`` requests per minute, bursts up to ``rate`` (spec §17.6)."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._buckets: dict[int, tuple[float, float]] = {}
-
-    def take(self, token_id: int, rate_per_minute: int) -> float:
-        """0 when allowed; otherwise the seconds to wait."""
-        now = time.monotonic()
-        with self._lock:
-            level, last = self._buckets.get(token_id, (float(rate_per_minute), now))
-            level = min(float(rate_per_minute), level + (now - last) * rate_per_minute / 60.0)
-            if level < 1.0:
-                self._buckets[token_id] = (level, now)
-                return (1.0 - level) * 60.0 / rate_per_minute
-            self._buckets[token_id] = (level - 1.0, now)
-            return 0.0
-
-
-@dataclass
-class Caller:
-    """The authenticated caller of a request (token scope and lab, spec §17.6)."""
-
-    token_id: int
-    lab_id: str
-    scope: str
-
-
-@dataclass
-class Outcome:
-    """What the registry says to a submission.
-    ``accepted``, ``duplicate`` or a dry run's ``would-accept``; spec §17.5."""
-
-    id: str
-    digest: str
-    status: str  # accepted | duplicate | would-accept
-    verification: dict
-    supersedes: str | None = None
-
-    def to_dict(self) -> dict:
-        return {
-            "id": self.id,
-            "digest": self.digest,
-            "status": self.status,
-            "supersedes": self.supersedes,
-            "verification": self.verification,
-            "url": f"/api/v1/submissions/{self.id}",
-        }
-
-
-@dataclass
-class ReadContext:
-    """What a submission's summary needs beyond its row: withdrawals, supersessions and, per implementation
-    name and version, its latest passed conformance challenge and the metric families that challenge
-    covered (spec §17.5, §17.8)."""
-
-    withdrawn: dict[str, db.Withdrawal]
-    superseded_by: dict[str, str]
-    proven: dict[tuple[str, str], tuple[str, list[str]]]
 
 
 def _fsync_dir(path: Path) -> None:
@@ -165,7 +73,7 @@ def _fsync_dir(path: Path) -> None:
         os.close(fd)
 
 
-class Registry:
+class Registry(RegistryQueries):
     """One registry: its database, its data folder and its in-process state (rate buckets, digest locks).
     Spec §17.3, §17.5, §17.7."""
 
@@ -576,382 +484,6 @@ class Registry:
         return self.submission(sid)
 
     # --- reading -------------------------------------------------------------------------------
-    @staticmethod
-    def _state(s: DBSession, row: db.Submission) -> str:
-        if s.get(db.Withdrawal, row.id) is not None:
-            return "withdrawn"
-        if s.scalar(select(db.Submission.id).where(db.Submission.supersedes_id == row.id)) is not None:
-            return "superseded"
-        return "current"
-
-    def _summary(self, row: db.Submission, ctx: ReadContext) -> dict:
-        w = ctx.withdrawn.get(row.id)
-        state = "withdrawn" if w else "superseded" if row.id in ctx.superseded_by else "current"
-        challenge, families = ctx.proven.get((row.implementation_name, row.implementation_version), (None, []))
-        return {
-            "id": row.id,
-            "digest": row.digest,
-            "state": state,
-            "lab": row.lab_id,
-            "device": {"slug": row.device.slug, "manufacturer": row.device.manufacturer, "model": row.device.model},
-            "serial": row.serial,
-            "spec_version": row.spec_version,
-            "implementation": {"name": row.implementation_name, "version": row.implementation_version},
-            "conformance": {"status": "proven" if challenge else "self-asserted", "challenge": challenge, "families": families},
-            "session_id": row.session_id,
-            "verification": row.verification,
-            "has_raw": row.has_raw,
-            "received_at": row.received_at.isoformat(),
-            "supersedes": row.supersedes_id,
-            "superseded_by": ctx.superseded_by.get(row.id),
-            "withdrawal": {"reason": w.reason, "at": w.at.isoformat()} if w else None,
-        }
-
-    def _context(self, s: DBSession) -> ReadContext:
-        withdrawn = {w.submission_id: w for w in s.scalars(select(db.Withdrawal))}
-        superseded_by = {
-            old: new
-            for new, old in s.execute(
-                select(db.Submission.id, db.Submission.supersedes_id).where(db.Submission.supersedes_id.is_not(None))
-            )
-            if old is not None  # (the query's own condition, for the type checker)
-        }
-        from haptify_tools.registry.challenge import cases_from_json, families_of
-
-        proven: dict[tuple[str, str], tuple[str, list[str]]] = {}
-        for name, version, cid, cases in s.execute(
-            select(
-                db.ChallengeResult.implementation_name,
-                db.ChallengeResult.implementation_version,
-                db.ChallengeResult.challenge_id,
-                db.Challenge.cases_json,
-            )
-            .join(db.Challenge, db.Challenge.id == db.ChallengeResult.challenge_id)
-            .where(db.ChallengeResult.passed.is_(True))
-            .order_by(db.ChallengeResult.answered_at)
-        ):
-            proven[(name, version)] = (cid, families_of(cases_from_json(cases)))  # the latest passed challenge
-        return ReadContext(withdrawn, superseded_by, proven)
-
-    def submissions(
-        self,
-        *,
-        lab: str | None = None,
-        device: str | None = None,
-        state: str | None = None,
-        verification: str | None = None,
-        limit: int = 100,
-        offset: int = 0,
-    ) -> list[dict]:
-        """Submission summaries, newest first, filtered by lab, device slug, state and verification state."""
-        with DBSession(self.engine) as s:
-            q = (
-                select(db.Submission)
-                .options(selectinload(db.Submission.device))
-                .order_by(db.Submission.received_at.desc(), db.Submission.id)
-            )
-            if lab:
-                q = q.where(db.Submission.lab_id == lab)
-            if device:
-                q = q.join(db.Device).where(db.Device.slug == device)
-            if verification not in (None, "all"):
-                q = q.where(db.Submission.verification == verification)
-            ctx = self._context(s)
-            rows = [self._summary(r, ctx) for r in s.scalars(q)]
-        rows = [r for r in rows if state in (None, "all") or r["state"] == state]
-        return rows[offset : offset + limit]
-
-    def submission(self, sid: str) -> dict:
-        """One submission with its results, verification and bundle manifest (E973 when unknown)."""
-        with DBSession(self.engine) as s:
-            row = s.get(db.Submission, sid)
-            if row is None:
-                raise fail("E973", f"no submission {sid!r}", expected="an existing submission id", found=sid)
-            ctx = self._context(s)
-            out = self._summary(row, ctx)
-            out.update(
-                archive_sha256=row.archive_sha256,
-                archive_size=row.archive_size,
-                verification_details=json.loads(row.verification_json),
-                results=json.loads(row.results_json),
-                bundle=json.loads(row.bundle_json),
-            )
-            return out
-
-    def archive(self, sid: str) -> Path:
-        """The stored archive of a submission."""
-        with DBSession(self.engine) as s:
-            row = s.get(db.Submission, sid)
-            if row is None:
-                raise fail("E973", f"no submission {sid!r}", expected="an existing submission id", found=sid)
-            return self.data / row.archive_path
-
-    def session_folder(self, sid: str) -> Path:
-        """The submission's ``session/`` folder (manifest, and streams when included), unpacked once under the
-        limits into ``DATA/cache/<digest>/`` — for report figures and the viewer. Derived data: safe to delete."""
-        archive = self.archive(sid)
-        target = self.data / "cache" / archive.name[: -len(".tar.gz")]
-        if not target.is_dir():
-            work = self.tmp / f"cache-{uuid.uuid4().hex}"
-            run_contained(unpack, archive, work, self.settings.limits, limits=self.settings.limits)
-            target.parent.mkdir(mode=DIR_MODE, parents=True, exist_ok=True)
-            try:
-                os.replace(work, target)
-            except OSError:  # another request unpacked it first
-                shutil.rmtree(work, ignore_errors=True)
-        return target / SESSION_DIR
-
-    def labs(self) -> list[dict]:
-        with DBSession(self.engine) as s:
-            counts = dict(s.execute(select(db.Submission.lab_id, func.count()).group_by(db.Submission.lab_id)).all())
-            return [
-                {"id": lab.id, "name": lab.name, "submissions": counts.get(lab.id, 0)}
-                for lab in s.scalars(select(db.Lab).order_by(db.Lab.id))
-            ]
-
-    def lab(self, lab_id: str) -> dict:
-        for lab in self.labs():
-            if lab["id"] == lab_id:
-                return {**lab, "recent": self.submissions(lab=lab_id, state="all", limit=50)}
-        raise fail("E973", f"no lab {lab_id!r}", expected="an existing lab id", found=lab_id)
-
-    def devices(self) -> list[dict]:
-        with DBSession(self.engine) as s:
-            counts = dict(s.execute(select(db.Submission.device_id, func.count()).group_by(db.Submission.device_id)).all())
-            return [
-                {"slug": d.slug, "manufacturer": d.manufacturer, "model": d.model, "submissions": counts.get(d.id, 0)}
-                for d in s.scalars(select(db.Device).order_by(db.Device.manufacturer, db.Device.model))
-            ]
-
-    def _device_row(self, s: DBSession, slug: str) -> db.Device:
-        d = s.scalar(select(db.Device).where(db.Device.slug == slug))
-        if d is None:
-            raise fail("E973", f"no device {slug!r}", expected="a device slug from /api/v1/devices", found=slug)
-        return d
-
-    def current_metric_rows(
-        self, slug: str, *, verification: str = "verified"
-    ) -> tuple[dict, list[tuple[dict, db.MetricValue]], list[tuple[dict, db.Submission]]]:
-        """The device, ``(submission summary, metric row)`` of its current submissions that count under
-        ``verification`` (``verified``: only verified ones; ``all``: every one), and ``(summary, row)`` of
-        its current submissions that do not count (spec §17.3.1). A counted summary carries ``uncertainties``: its
-        results file's uncertainty record by metric id (None when absent, spec §19.4)."""
-        if verification not in RANKED:
-            raise fail(
-                "E975",
-                f"unknown verification filter {verification!r}",
-                pointer="/verification",
-                expected=list(RANKED),
-                found=verification,
-            )
-        with DBSession(self.engine) as s:
-            d = self._device_row(s, slug)
-            device = {"slug": d.slug, "manufacturer": d.manufacturer, "model": d.model}
-            ctx = self._context(s)
-            subs = s.scalars(
-                select(db.Submission)
-                .options(selectinload(db.Submission.metrics), selectinload(db.Submission.device))
-                .where(db.Submission.device_id == d.id)
-                .order_by(db.Submission.received_at)
-            ).all()
-            counted, apart = [], []
-            for sub in subs:
-                summary = self._summary(sub, ctx)
-                if summary["state"] != "current":
-                    continue
-                if verification == "verified" and sub.verification != "verified":
-                    apart.append((summary, sub))
-                    continue
-                records = {m["id"]: m.get("uncertainty") for m in json.loads(sub.results_json)["metrics"]}
-                summary = {**summary, "uncertainties": records}
-                counted += [(summary, m) for m in sub.metrics]
-            return device, counted, apart
-
-    def device_results(self, slug: str, *, verification: str = "verified") -> dict:
-        """Per metric of a device: mean and spread over labs and repetitions of its current submissions that
-        count under ``verification`` (spec §17.5); the current submissions that do not count are listed
-        apart in ``not_counted``, one entry per metric, with their state (and for a disagreeing one both
-        the submitted and the recomputed value, spec §17.3.1)."""
-        device, rows, apart = self.current_metric_rows(slug, verification=verification)
-        by_metric: dict[str, list[tuple[dict, db.MetricValue]]] = {}
-        for summary, m in rows:
-            by_metric.setdefault(m.metric_id, []).append((summary, m))
-        metrics = [aggregate(metric, items) for metric, items in sorted(by_metric.items())]
-        n_subs = len({summary["id"] for summary, _ in rows})
-        return {
-            "device": device,
-            "submissions": n_subs,
-            "verification": verification,
-            "metrics": metrics,
-            "not_counted": [entry for summary, sub in apart for entry in not_counted(summary, sub)],
-        }
-
-    def comparison(self, slugs: list[str], *, verification: str = "verified") -> list[ResultsFile]:
-        """One synthetic results file per device, holding its aggregated means (for ``haptify.compare``)."""
-        out = []
-        for slug in slugs:
-            agg = self.device_results(slug, verification=verification)
-            metrics = []
-            for m in agg["metrics"]:
-                metrics.append(
-                    MetricResult(
-                        id=m["metric"],
-                        value=m["mean"],
-                        unit=m["unit"],
-                        n=m["repetitions"],
-                        sd=defined_sd(m["sd"]),
-                        definition_version=m["definition_version"],
-                        uncertainty=None,
-                    )
-                )
-            dev = agg["device"]
-            out.append(
-                ResultsFile(
-                    implementation=Implementation(name="haptify-registry", version=PACKAGE_VERSION),
-                    session_id=slug,
-                    device=DeviceSummary(manufacturer=dev["manufacturer"], model=dev["model"]),
-                    manifest_sha256="0" * 64,
-                    metrics=metrics,
-                )
-            )
-        return out
-
-    def export_rows(self, *, device: str | None = None, state: str = "current", verification: str = "all") -> list[dict]:
-        """One row per submission × metric (the CSV export), filtered by state and verification state."""
-        with DBSession(self.engine) as s:
-            q = (
-                select(db.Submission)
-                .options(selectinload(db.Submission.metrics), selectinload(db.Submission.device))
-                .order_by(db.Submission.received_at, db.Submission.id)
-            )
-            if device:
-                q = q.join(db.Device).where(db.Device.slug == device)
-            ctx = self._context(s)
-            out = []
-            for sub in s.scalars(q):
-                summary = self._summary(sub, ctx)
-                if state != "all" and summary["state"] != state or verification not in ("all", sub.verification):
-                    continue
-                for m in sub.metrics:
-                    out.append(
-                        {
-                            "submission": sub.id,
-                            "state": summary["state"],
-                            "verification": sub.verification,
-                            "lab": sub.lab_id,
-                            "device": sub.device.slug,
-                            "manufacturer": sub.device.manufacturer,
-                            "model": sub.device.model,
-                            "serial": sub.serial or "",
-                            "implementation": f"{sub.implementation_name} {sub.implementation_version}",
-                            "metric": m.metric_id,
-                            "value": m.value_json,
-                            "unit": m.unit,
-                            "n": m.n,
-                            "sd": m.sd_json,
-                            "received_at": sub.received_at.isoformat(),
-                        }
-                    )
-            return out
-
-
-def not_counted(summary: dict, sub: db.Submission) -> list[dict]:
-    """The metrics of a submission that does not count (not verified), one entry each: submission, lab,
-    state, metric, submitted value and unit, and — from its verification record — the recomputed value,
-    the tolerance and why it does not agree (spec §17.3.1)."""
-    checks = {c["metric"]: c for c in json.loads(sub.verification_json).get("checks", [])}
-    out = []
-    for m in sub.metrics:
-        check = checks.get(m.metric_id, {})
-        out.append(
-            {
-                "submission": sub.id,
-                "lab": sub.lab_id,
-                "verification": sub.verification,
-                "metric": m.metric_id,
-                "submitted": json.loads(m.value_json),
-                "unit": m.unit,
-                "recomputed": check.get("recomputed"),
-                "check": check.get("status"),
-                "tolerance": check.get("tolerance"),
-                "why": check.get("message") or json.loads(sub.verification_json).get("note", ""),
-                "implementation": summary["implementation"],
-            }
-        )
-    return out
-
-
-def defined_sd(sd: float | list[float | None] | None) -> float | list[float] | None:
-    """An aggregate's sd as a results file carries it (spec §15.2): a vector metric's sd is given for
-    every component or not at all (with one repetition no component has one)."""
-    if not isinstance(sd, list):
-        return sd
-    components = [v for v in sd if v is not None]
-    return components if len(components) == len(sd) else None
-
-
-def _components(value: Any) -> list[float]:
-    return [float(v) for v in value] if isinstance(value, list) else [float(value)]
-
-
-def aggregate(metric: str, items: list[tuple[dict, db.MetricValue]]) -> dict:
-    """Mean and spread of one metric over labs and repetitions (spec §17.5).
-
-    Repetitions: every per-repetition value of every current submission (the submitted value when a
-    submission lists none); ``mean``, ``sd`` (ddof = 1), ``min``, ``max`` over them. Labs: each lab's
-    mean of its repetitions; ``between_lab_sd`` is the sd of those means (ddof = 1, with ≥ 2 labs).
-    Vector metrics are aggregated per component. A scalar metric also has ``uncertainty``, the pooled
-    uncertainty of the mean from the submissions' records (None when one lacks it), and ``interlab``, the
-    ISO 5725-2 table of its labs (None with fewer than two labs of ≥ 2 repetitions; spec §17.5.3).
-    """
-    reps: list[list[float]] = []
-    per_lab: dict[str, list[list[float]]] = {}
-    for summary, m in items:
-        values = json.loads(m.per_repetition_json) or [json.loads(m.value_json)]
-        for v in values:
-            comp = _components(v)
-            reps.append(comp)
-            per_lab.setdefault(summary["lab"], []).append(comp)
-    width = len(reps[0])
-    reps = [r for r in reps if len(r) == width]
-
-    def stat(fn, rows: list[list[float]]) -> list[float | None]:
-        return [fn([r[i] for r in rows]) if rows else None for i in range(width)]
-
-    def sd(xs: list[float]) -> float | None:
-        return statistics.stdev(xs) if len(xs) >= 2 else None
-
-    lab_means = [[statistics.fmean([r[i] for r in rows]) for i in range(width)] for rows in per_lab.values()]
-    unwrap = (lambda v: v[0]) if width == 1 else (lambda v: v)
-    first = items[0][1]
-    return {
-        "metric": metric,
-        "unit": first.unit,
-        "definition_version": first.definition_version,
-        "mean": unwrap(stat(statistics.fmean, reps)),
-        "sd": unwrap(stat(sd, reps)),
-        "min": unwrap(stat(min, reps)),
-        "max": unwrap(stat(max, reps)),
-        "repetitions": len(reps),
-        "submissions": len(items),
-        "labs": len(per_lab),
-        "lab_means": {lab: unwrap(mean) for lab, mean in zip(per_lab, lab_means)},
-        "between_lab_sd": unwrap(stat(sd, lab_means)),
-        **scalar_precision(metric, items, per_lab, width),
-    }
-
-
-def scalar_precision(
-    metric: str, items: list[tuple[dict, db.MetricValue]], per_lab: dict[str, list[list[float]]], width: int
-) -> dict:
-    """``uncertainty`` and ``interlab`` of a scalar metric's aggregate (spec §17.5.3); both None for a vector."""
-    if width != 1:
-        return {"uncertainty": None, "interlab": None}
-    records = [(m.n, summary.get("uncertainties", {}).get(metric)) for summary, m in items]
-    return {
-        "uncertainty": interlab.pooled_uncertainty(records),
-        "interlab": interlab.table({lab: [r[0] for r in rows] for lab, rows in per_lab.items()}),
-    }
 
 
 def findings_of(err: HaptifyError) -> list[dict]:

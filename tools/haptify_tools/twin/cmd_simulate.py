@@ -14,7 +14,8 @@ from pathlib import Path
 from haptify.errors import fail
 
 from haptify_tools.twin.model import EFFECT_IDS, PRESETS, TwinFile, disable, load_twin, preset, set_param, write_twin
-from haptify_tools.twin.simulate import DEFAULT_DURATIONS, SimulationOptions, name_number, parse_protocols, plan, simulate_dossier
+from haptify_tools.twin.dossier_plan import DEFAULT_DURATIONS, SimulationOptions, name_number, parse_protocols, plan
+from haptify_tools.twin.simulate import simulate_dossier
 from haptify_tools.twin.rig import RigConfig
 from haptify_tools.twin.round_robin import SPREADS, parse_spreads, simulate_round_robin, trial_count
 

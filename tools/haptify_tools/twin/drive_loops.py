@@ -5,7 +5,7 @@ must be stepped sample by sample: the powered rendering loop (:func:`render_loop
 :func:`haptify_tools.twin.physics.simulate_active`) and the unpowered drive dragged by the hand
 (:func:`passive_drive`, used by :func:`haptify_tools.twin.physics.simulate_passive`); the cut-off latch
 (:func:`cutoff_latch`) is the rigid drive's only sequential part. Everything here works on plain arrays
-in drive-axis units (rad, rad/s, N·m) and the device frame D; :mod:`.physics` prepares the inputs. The
+in drive-axis units (rad, rad/s, N·m) and the device frame D; :mod:`.drive_steps` prepares the inputs. The
 functions are compiled on first use and cached on disk (numba ``cache=True``): the discrepancy workflow
 re-simulates every active trial dozens of times, which plain-Python loops make slow (figures in
 benchmarks/RESULTS.md).
@@ -27,7 +27,7 @@ def axis_period(d, dd, u, k, b, g, j, exact, use_exact, margin, dt):
     State: cable deflection ``d = θ_motor − θ_link`` (rad) and its rate ``ḋ`` (rad/s); the link-side angle
     moves linearly within the period. Engaged on one side of the backlash gap (``|d| > g + margin``) and
     with ``use_exact``, the exact solution of ``J·d̈ + b·ḋ + k·(d ∓ g) = u`` is used (``exact`` from
-    :func:`haptify_tools.twin.physics._exact_step`); near or inside the gap, :data:`SUBSTEPS` semi-implicit
+    :func:`haptify_tools.twin.drive_steps._exact_step`); near or inside the gap, :data:`SUBSTEPS` semi-implicit
     Euler steps. Returns ``(d, ḋ, period-average cable torque)``.
     """
     if use_exact and abs(d) > g + margin:

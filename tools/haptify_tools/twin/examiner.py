@@ -5,7 +5,7 @@ Every generator takes a :class:`numpy.random.Generator` and returns samples on a
 without interpolation). Positions are of the gimbal centre in the world frame W (m), orientations are
 unit quaternions ``[w, x, y, z]`` rotating the handle body frame H to W (spec §1.3).
 
-Where a generator needs the device's reach it asks a :class:`Reach`: joint-limit box in unit
+Where a generator needs the device's reach it asks a :class:`~haptify_tools.twin.reach.Reach`: joint-limit box in unit
 coordinates (``s ∈ [0, 1]³`` mapped through the coupled limits, reference ``configurations_from_unit``),
 forward kinematics into W, inverse kinematics and the base-collision clearance of the twin (its TRUE
 kinematics: the examiner moves the real device, link-length errors and all).
@@ -14,27 +14,37 @@ Protocol limits (paper §V): free-space wandering below 0.16 m/s and 16 °/s (av
 ≈ 4 °/s, §VI-B); local dynamic oscillations from 0.5 to 4 Hz in x, y, z and the diagonals for about
 140 s from the workspace centre (§V-C); circles on the rendered surface while pressing lightly (§V-D);
 repeated presses until the workspace edge (§V-E); physiological tremor 8–12 Hz on every hand-held path.
+
+The path primitives (clock, noise, tremor, :class:`~haptify_tools.twin.hand_path.HandTrajectory`) are in
+:mod:`haptify_tools.twin.hand_path`, the force-plate trials (ball impact, COP weights) in
+:mod:`haptify_tools.twin.plate_loads`.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
 from haptify.conventions import (
-    STANDARD_GRAVITY,
-    quat_angle,
     quat_from_axis_angle,
     quat_multiply,
     quat_normalize,
-    quat_to_matrix,
 )
-
-DEG = math.pi / 180.0
-DEFAULT_RATE_HZ = 2000.0
+from haptify_tools.twin.hand_path import (
+    DEFAULT_RATE_HZ,
+    DEG,
+    HandTrajectory,
+    NATURAL_GRIP,
+    _finish,
+    clock,
+    derivative,
+    minimum_jerk,
+    natural_orientation,
+    smooth_noise,
+)
+from haptify_tools.twin.reach import Reach
+from haptify_tools.twin.reach import reach_from_twin as reach_from_twin  # re-exported: benchmarks/bench_twin_physics.py
 
 # Protocol limits and targets, paper §V-B/§VI-B (free space), §V-C (local dynamic).
 FREE_SPACE_MAX_SPEED = 0.16  # m/s, paper §V-B
@@ -46,295 +56,6 @@ SURFACE_PERIODS_S = (4.0, 1.0)  # s, the first and the last circle on the fricti
 PRESS_SPEED = 0.04  # m/s, the stiffness presses' descent
 OSCILLATION_BAND_HZ = (0.5, 4.0)  # paper §V-C
 LOCAL_DYNAMIC_DURATION = 140.0  # s, paper §V-C
-TREMOR_BAND_HZ = (8.0, 12.0)  # physiological tremor band
-# Tremor acceleration RMS per axis (m/s²). Kept small: the paper's rig-only vibration floor after a 10 Hz
-# high-pass is 0.0332 m/s² RMS (§VI-C) and includes the hand, so the tremor must stay below it.
-TREMOR_ACCEL_RMS = 0.01
-# Tremor rotation RMS per axis (rad): the sensors sit 3–5 cm from the gimbal centre, where 0.002° at 10 Hz
-# already gives ≈ 0.007 m/s² of tangential acceleration.
-TREMOR_ANGLE_RMS = 0.002 * DEG
-# The examiner's natural grip: the handle frame parallel to W. The twins align their gimbals so that every
-# gimbal angle is zero in this grip at the centre of the joint-limit box, so a hand that keeps it stays far
-# from the gimbal's singularity; the natural orientation changes wander about it.
-NATURAL_GRIP = np.array([1.0, 0.0, 0.0, 0.0])
-
-
-# --- helpers -------------------------------------------------------------------------------------
-
-
-def clock(duration_s: float, rate_hz: float = DEFAULT_RATE_HZ, t0: float = 0.0) -> np.ndarray:
-    """Uniform sample times ``t0 + k / rate_hz`` covering ``duration_s`` seconds (spec §2.6)."""
-    n = int(round(duration_s * rate_hz))
-    if n < 2:
-        raise ValueError(f"duration {duration_s} s at {rate_hz} Hz gives fewer than two samples")
-    return t0 + np.arange(n) / rate_hz
-
-
-def minimum_jerk(s: np.ndarray) -> np.ndarray:
-    """The minimum-jerk blend ``10s³ − 15s⁴ + 6s⁵`` of ``s`` clipped to [0, 1] (Flash & Hogan 1985)."""
-    s = np.clip(s, 0.0, 1.0)
-    return s * s * s * (10.0 - 15.0 * s + 6.0 * s * s)
-
-
-def smooth_noise(
-    rng: np.random.Generator, t: np.ndarray, f_lo: float, f_hi: float, dims: int = 1, components: int = 7
-) -> np.ndarray:
-    """A smooth random signal ``(len(t), dims)``: a sum of sinusoids with random frequencies in [f_lo, f_hi] Hz.
-
-    Amplitudes fall as 1/f (so motion is dominated by its slow parts, like a hand's); each column is
-    scaled to unit RMS over ``t``. Analytic in ``t``, so it can be evaluated on any clock.
-    """
-    out = np.zeros((len(t), dims))
-    for d in range(dims):
-        f = rng.uniform(f_lo, f_hi, components)
-        ph = rng.uniform(0, 2 * np.pi, components)
-        out[:, d] = np.sum(np.sin(2 * np.pi * f[None, :] * t[:, None] + ph[None, :]) / f[None, :], axis=1)
-        out[:, d] /= np.sqrt(np.mean(out[:, d] ** 2)) or 1.0
-    return out
-
-
-def band_noise(rng: np.random.Generator, n: int, rate_hz: float, f_lo: float, f_hi: float, dims: int = 1) -> np.ndarray:
-    """Gaussian noise ``(n, dims)`` confined to [f_lo, f_hi] Hz by an FFT brick-wall filter, unit RMS per column."""
-    white = rng.standard_normal((n, dims))
-    spec = np.fft.rfft(white, axis=0)
-    f = np.fft.rfftfreq(n, 1.0 / rate_hz)
-    spec[(f < f_lo) | (f > f_hi)] = 0.0
-    out = np.fft.irfft(spec, n=n, axis=0)
-    rms = np.sqrt(np.mean(out**2, axis=0))
-    return out / np.where(rms > 0, rms, 1.0)
-
-
-def derivative(x: np.ndarray, rate_hz: float, order: int = 1) -> np.ndarray:
-    """Finite-difference time derivative (second-order accurate, ``numpy.gradient``) along axis 0.
-    Units of ``x`` per s^order."""
-    for _ in range(order):
-        x = np.gradient(x, 1.0 / rate_hz, axis=0)
-    return x
-
-
-def angular_speed(quaternion: np.ndarray, rate_hz: float) -> np.ndarray:
-    """Angular speed (rad/s) between consecutive orientations, one value per sample (last repeated)."""
-    ang = quat_angle(quaternion[:-1], quaternion[1:]) * rate_hz
-    return np.append(ang, ang[-1])
-
-
-def rotation_vector_to_quat(r: np.ndarray) -> np.ndarray:
-    """Quaternions of rotation vectors ``r (N, 3)`` (axis × angle, rad; [w, x, y, z], spec §1.3)."""
-    ang = np.linalg.norm(r, axis=-1)
-    axis = np.where(ang[:, None] > 1e-15, r / np.where(ang > 1e-15, ang, 1.0)[:, None], [1.0, 0.0, 0.0])
-    return quat_from_axis_angle(axis, ang)
-
-
-def tremor(
-    rng: np.random.Generator, n: int, rate_hz: float, accel_rms: float = TREMOR_ACCEL_RMS, angle_rms: float = TREMOR_ANGLE_RMS
-) -> tuple[np.ndarray, np.ndarray]:
-    """Physiological tremor: displacement ``(n, 3)`` in m and small rotation vectors ``(n, 3)`` in rad.
-
-    Band 8–12 Hz; the displacement is scaled so that its acceleration has ``accel_rms`` (m/s²) per axis.
-    """
-    if n < 8 or accel_rms == 0 and angle_rms == 0:
-        return np.zeros((n, 3)), np.zeros((n, 3))
-    disp = band_noise(rng, n, rate_hz, *TREMOR_BAND_HZ, dims=3)
-    acc = derivative(disp, rate_hz, 2)
-    disp *= accel_rms / np.sqrt(np.mean(acc**2, axis=0))
-    rot = band_noise(rng, n, rate_hz, *TREMOR_BAND_HZ, dims=3) * angle_rms
-    return disp, rot
-
-
-# --- trajectories --------------------------------------------------------------------------------
-
-
-@dataclass
-class HandTrajectory:
-    """A hand path: gimbal-centre position (m, W) and handle orientation (wxyz, H → W) on a uniform clock.
-    Spec §1.3."""
-
-    t: np.ndarray
-    position_W: np.ndarray
-    quaternion_W: np.ndarray
-    rate_hz: float
-    protocol: str
-    label: str | None = None
-    meta: dict = field(default_factory=dict)
-
-    @property
-    def duration(self) -> float:
-        return float(self.t[-1] - self.t[0] + 1.0 / self.rate_hz)
-
-    def velocity(self) -> np.ndarray:
-        """Velocity (m/s, W) by finite differences."""
-        return derivative(self.position_W, self.rate_hz)
-
-    def acceleration(self) -> np.ndarray:
-        """Acceleration (m/s², W) by finite differences."""
-        return derivative(self.position_W, self.rate_hz, 2)
-
-    def speed(self) -> np.ndarray:
-        return np.linalg.norm(self.velocity(), axis=1)
-
-    def angular_speed(self) -> np.ndarray:
-        return angular_speed(self.quaternion_W, self.rate_hz)
-
-
-@dataclass
-class Reach:
-    """What the examiner knows about the device's reach: all in W.
-
-    ``unit_to_W(s)`` maps unit joint coordinates ``s (N, 3) ∈ [0, 1]`` (through the coupled joint
-    limits) to gimbal positions in W (NaN where infeasible); ``reachable(p)`` says whether positions
-    ``p (N, 3)`` in W are reachable (inverse kinematics within the limits) and free of collisions;
-    ``clearance(p)`` is the signed distance (m) of the end-effector from the base (negative inside, +inf
-    without collision geometry).
-    """
-
-    unit_to_W: Callable[[np.ndarray], np.ndarray]
-    reachable: Callable[[np.ndarray], np.ndarray]
-    clearance: Callable[[np.ndarray], np.ndarray]
-
-    def collides(self, p_W: np.ndarray) -> np.ndarray:
-        """True where gimbal positions ``p_W (N, 3)`` would put the end-effector into the base (clearance < 0)."""
-        return self.clearance(p_W) < 0.0
-
-    def radial_stop(self, s: np.ndarray, coarse: int = 16, iterations: int = 14) -> np.ndarray:
-        """Gimbal positions (W) for unit joint coordinates ``s``, stopped at the first collision on the way out.
-
-        The examiner moves from the centre of the joint box (``s = ½``, assumed free) straight out (in
-        joint space) towards ``s``; where the end-effector meets the base first, the hand stops there
-        (coarse march for the first colliding step, then bisection). Points whose way is free are
-        returned unchanged. For a collision-free set that is star-shaped about the centre, this maps the
-        box's boundary continuously onto the boundary of the reachable set.
-        """
-        s = np.atleast_2d(np.asarray(s, dtype=float))
-        p = self.unit_to_W(s)
-        c = np.full(3, 0.5)
-        lam = np.linspace(0.0, 1.0, coarse + 1)[1:]
-        rays = c[None, None, :] + lam[None, :, None] * (s - c)[:, None, :]
-        hit = self.collides(self.unit_to_W(rays.reshape(-1, 3))).reshape(len(s), coarse)
-        blocked = hit.any(axis=1)
-        if not blocked.any():
-            return p
-        first = np.argmax(hit[blocked], axis=1)
-        lo = np.where(first > 0, lam[np.maximum(first - 1, 0)], 0.0)  # free
-        hi = lam[first]  # colliding
-        sb = s[blocked]
-        for _ in range(iterations):
-            mid = 0.5 * (lo + hi)
-            h = self.collides(self.unit_to_W(c + mid[:, None] * (sb - c)))
-            hi = np.where(h, mid, hi)
-            lo = np.where(h, lo, mid)
-        p[blocked] = self.unit_to_W(c + lo[:, None] * (sb - c))
-        return p
-
-    def centre(self) -> np.ndarray:
-        """The workspace centre: the gimbal position at the middle of the joint-limit box (s = ½, ½, ½)."""
-        return self.unit_to_W(np.full((1, 3), 0.5))[0]
-
-    def free_distance(self, origin: np.ndarray, direction: np.ndarray, limit: float = 0.2, steps: int = 400) -> float:
-        """Distance (m) from ``origin`` along unit ``direction`` to the first unreachable or colliding point."""
-        d = np.linspace(0.0, limit, steps + 1)[1:]
-        pts = origin[None, :] + d[:, None] * direction[None, :]
-        ok = self.reachable(pts)
-        bad = np.flatnonzero(~ok)
-        return float(d[bad[0] - 1]) if len(bad) and bad[0] > 0 else (0.0 if len(bad) else float(limit))
-
-
-def reach_from_kinematics(
-    kin,
-    placement_position=(0.0, 0.0, 0.0),
-    placement_quaternion=(1.0, 0.0, 0.0, 0.0),
-    clearance_D: Callable[[np.ndarray], np.ndarray] | None = None,
-) -> Reach:
-    """A :class:`Reach` for a DH chain ``kin`` (reference ``Kinematics``) placed at a pose in W.
-
-    ``clearance_D(p_D)`` is the signed distance (m) of gimbal-centre points in the device frame from the
-    base geometry, negative in collision (None: no collision geometry).
-    """
-    from haptify.kinematics import configurations_from_unit, forward_positions
-    from haptify_tools.twin.kinematics import inverse_kinematics
-
-    r_wd = quat_to_matrix(np.asarray(placement_quaternion, float))
-    t_wd = np.asarray(placement_position, float)
-
-    def to_D(p_W: np.ndarray) -> np.ndarray:
-        return (np.atleast_2d(p_W) - t_wd) @ r_wd
-
-    def unit_to_W(s: np.ndarray) -> np.ndarray:
-        q = configurations_from_unit(kin, s)
-        return forward_positions(kin, q) @ r_wd.T + t_wd
-
-    def clearance(p_W: np.ndarray) -> np.ndarray:
-        p = to_D(p_W)
-        return np.full(len(p), np.inf) if clearance_D is None else np.asarray(clearance_D(p), float)
-
-    def reachable(p_W: np.ndarray) -> np.ndarray:
-        _, ok = inverse_kinematics(kin, to_D(p_W))
-        return ok & ~(clearance(p_W) < 0)
-
-    return Reach(unit_to_W=unit_to_W, reachable=reachable, clearance=clearance)
-
-
-def reach_from_twin(twin) -> Reach:
-    """The :class:`Reach` of a twin (``haptify_tools.twin.model.TwinFile``): its TRUE kinematics, placement and base collision."""
-    from haptify_tools.twin.kinematics import collision_clearance, true_kinematics
-
-    return reach_from_kinematics(
-        true_kinematics(twin),
-        twin.placement.position,
-        twin.placement.quaternion,
-        clearance_D=lambda p: collision_clearance(twin, p),
-    )
-
-
-def natural_orientation(
-    rng: np.random.Generator,
-    t: np.ndarray,
-    rate_hz: float,
-    *,
-    base_quat: np.ndarray,
-    mean_rate: float,
-    max_rate: float,
-    f_band: tuple[float, float] = (0.02, 0.25),
-) -> np.ndarray:
-    """A natural, slowly wandering hand orientation around ``base_quat`` (wxyz).
-
-    The wander is a smooth random rotation vector; its amplitude is set so that the mean angular speed
-    is ``mean_rate`` (rad/s) unless that would exceed ``max_rate`` anywhere, in which case the peak is
-    held at ``max_rate``. Returns quaternions ``(len(t), 4)``.
-    """
-    shape = smooth_noise(rng, t, *f_band, dims=3)
-    shape_q = rotation_vector_to_quat(shape * 1e-3)
-    w = angular_speed(shape_q, rate_hz) / 1e-3  # angular speed per unit amplitude (small-angle)
-    scale = min(mean_rate / max(float(np.mean(w)), 1e-12), max_rate / max(float(np.max(w)), 1e-12))
-    scale = min(scale, 35 * DEG)  # a wrist wanders, it does not spin
-    q = quat_multiply(base_quat[None, :], rotation_vector_to_quat(shape * scale))
-    return quat_normalize(q)
-
-
-def _finish(
-    rng: np.random.Generator,
-    t: np.ndarray,
-    rate_hz: float,
-    position: np.ndarray,
-    quaternion: np.ndarray,
-    protocol: str,
-    label: str | None,
-    meta: dict,
-    *,
-    tremor_accel_rms: float = TREMOR_ACCEL_RMS,
-    tremor_angle_rms: float = TREMOR_ANGLE_RMS,
-) -> HandTrajectory:
-    """Add physiological tremor and package a trajectory."""
-    disp, rot = tremor(rng, len(t), rate_hz, tremor_accel_rms, tremor_angle_rms)
-    q = quat_normalize(quat_multiply(quaternion, rotation_vector_to_quat(rot)))
-    meta = {
-        **meta,
-        "tremor_accel_rms_m_per_s2": tremor_accel_rms,
-        "tremor_angle_rms_rad": tremor_angle_rms,
-        "tremor_band_hz": list(TREMOR_BAND_HZ),
-    }
-    return HandTrajectory(
-        t=t, position_W=position + disp, quaternion_W=q, rate_hz=rate_hz, protocol=protocol, label=label, meta=meta
-    )
 
 
 # --- protocol generators -------------------------------------------------------------------------
@@ -854,139 +575,6 @@ def handle_rotation(
     drift = 0.02 * smooth_noise(rng, rel, 0.02, 0.1, dims=3) * minimum_jerk(np.minimum(rel, T - rel).clip(0, 1))[:, None]
     position = np.asarray(centre_W, float)[None, :] + drift
     return _finish(rng, t, rate_hz, position, quat, "rig.handle_calibration", None, {"centre_W": list(centre_W)})
-
-
-@dataclass
-class PlateLoad:
-    """An external load on the force plate: force (N, W) applied at ``point_W`` (m) on the plate, per sample.
-    The ball and the weight of paper Appendix 1–2."""
-
-    t: np.ndarray
-    force_W: np.ndarray
-    point_W: np.ndarray
-    rate_hz: float
-    meta: dict = field(default_factory=dict)
-    markers_W: dict[str, np.ndarray] = field(default_factory=dict)
-
-
-def ball_impact(
-    rng: np.random.Generator,
-    duration_s: float = 3.0,
-    *,
-    rate_hz: float = 1000.0,
-    mass_kg: float = 0.05,
-    drop_height_m: float = 0.2,
-    restitution: float = 0.5,
-    contact_s: float = 0.003,
-    t0: float = 0.0,
-) -> PlateLoad:
-    """Plate impact trial (paper Appendix 1): a ball dropped on the plate centre, bouncing a few times.
-
-    Each contact is a half-sine force pulse of length ``contact_s`` carrying the impulse
-    ``m (1 + e) v``; the pulse is integrated over each sample (no aliasing of the short pulse); a
-    ±15 % horizontal component excites the plate's horizontal modes as well.
-    """
-    t = clock(duration_s, rate_hz, t0)
-    rel = t - t0
-    v = math.sqrt(2 * STANDARD_GRAVITY * drop_height_m)
-    impacts = []
-    now = 0.5
-    while v > 0.05 and now < rel[-1] - 0.1:
-        impacts.append((now, mass_kg * (1 + restitution) * v))
-        v *= restitution
-        now += 2 * v / STANDARD_GRAVITY
-    horiz = rng.uniform(-0.15, 0.15, 2)
-    dt = 1.0 / rate_hz
-    fz = np.zeros_like(rel)
-    for start, impulse in impacts:
-        peak = impulse * math.pi / (2 * contact_s)
-        # exact integral of the half-sine over each sample interval [t_k, t_k + dt]
-        a = np.clip(rel - start, 0, contact_s)
-        b = np.clip(rel + dt - start, 0, contact_s)
-        fz += peak * contact_s / math.pi * (np.cos(np.pi * a / contact_s) - np.cos(np.pi * b / contact_s)) / dt
-    force = np.stack([horiz[0] * fz, horiz[1] * fz, -fz], axis=1)
-    point = np.zeros((len(rel), 3))
-    meta = {
-        "mass_kg": mass_kg,
-        "drop_height_m": drop_height_m,
-        "restitution": restitution,
-        "contact_s": contact_s,
-        "impacts": [{"t": t0 + s, "impulse_N_s": j} for s, j in impacts],
-        "horizontal_ratio": horiz.tolist(),
-    }
-    return PlateLoad(t=t, force_W=force, point_W=point, rate_hz=rate_hz, meta=meta)
-
-
-def cop_grid(nx: int = 6, ny: int = 5, half_extent_m: tuple[float, float] = (0.2, 0.16)) -> np.ndarray:
-    """The 30 equally spaced weight positions (x, y) in m of the COP trial (paper Appendix 2)."""
-    xs = np.linspace(-half_extent_m[0], half_extent_m[0], nx)
-    ys = np.linspace(-half_extent_m[1], half_extent_m[1], ny)
-    return np.array([(x, y) for y in ys for x in xs])
-
-
-COP_MARKERS = ("cop_w1", "cop_w2", "cop_w3")
-COP_DWELL_S = 1.0  # s the weight rests at each position
-COP_MOVE_S = 0.6  # s to carry it to the next position
-COP_MARKER_OFFSETS = np.array([[0.02, 0.0, 0.06], [-0.01, 0.017, 0.06], [-0.01, -0.017, 0.06]])  # on the weight's top
-
-
-def weight_placements(
-    rng: np.random.Generator,
-    *,
-    rate_hz: float = 1000.0,
-    mass_kg: float = 2.0,
-    dwell_s: float = COP_DWELL_S,
-    move_s: float = COP_MOVE_S,
-    positions: np.ndarray | None = None,
-    position_jitter_m: float = 0.003,
-    t0: float = 0.0,
-) -> PlateLoad:
-    """COP trial (paper Appendix 2): a weight set down at 30 equally spaced positions in turn.
-
-    While set down the weight loads the plate with ``m·g`` at its position (placement ramps of 0.1 s);
-    between positions it is carried through the air (no load). Three markers on its top give its
-    position (``markers_W``, sampled on the same clock; the rig samples them at the mocap rate).
-    """
-    pos = cop_grid() if positions is None else np.asarray(positions, float)
-    pos = pos + rng.uniform(-position_jitter_m, position_jitter_m, pos.shape)
-    n = len(pos)
-    duration = 0.5 + n * (dwell_s + move_s) + 0.5
-    t = clock(duration, rate_hz, t0)
-    rel = t - t0
-    load = np.zeros_like(rel)
-    centre = np.zeros((len(rel), 3))
-    start_xy = np.array([0.35, 0.0])  # beside the plate before the first placement
-    prev = start_xy
-    now = 0.5
-    ramp = 0.1
-    for xy in pos:
-        m = (rel >= now) & (rel < now + move_s)
-        s = minimum_jerk((rel[m] - now) / move_s)
-        centre[m, :2] = prev + (xy - prev)[None, :] * s[:, None]
-        centre[m, 2] = 0.05 * np.sin(np.pi * s)
-        m2 = (rel >= now + move_s) & (rel < now + move_s + dwell_s)
-        centre[m2, :2] = xy
-        local = rel[m2] - (now + move_s)
-        load[m2] = minimum_jerk(np.minimum(local / ramp, (dwell_s - local) / ramp).clip(0.0, 1.0))
-        prev = xy
-        now += move_s + dwell_s
-    rest = rel >= now
-    centre[rest, :2] = prev
-    before = rel < 0.5
-    centre[before, :2] = start_xy
-    force = np.zeros((len(rel), 3))
-    force[:, 2] = -mass_kg * STANDARD_GRAVITY * load
-    point = centre.copy()
-    point[:, 2] = 0.0
-    markers = {name: centre + off[None, :] for name, off in zip(COP_MARKERS, COP_MARKER_OFFSETS)}
-    meta = {
-        "mass_kg": mass_kg,
-        "positions_m": pos.tolist(),
-        "dwell_s": dwell_s,
-        "move_s": move_s,
-        "marker_offsets_m": COP_MARKER_OFFSETS.tolist(),
-    }
-    return PlateLoad(t=t, force_W=force, point_W=point, rate_hz=rate_hz, meta=meta, markers_W=markers)
 
 
 def baseline_wander(

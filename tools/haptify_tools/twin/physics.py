@@ -20,13 +20,16 @@ and the handle orientation are given, and the simulator computes what the device
   planar forces on a frictionless plane. Nothing is painted on.
 
 Frames: W (world) for inputs and outputs, D (device) inside; SI units.
+
+The rigid-body dynamics and friction laws are in :mod:`haptify_tools.twin.rigid_body`, the drive stepped in
+time in :mod:`haptify_tools.twin.drive_steps`, the device's parasitic vibration in
+:mod:`haptify_tools.twin.vibration_model`; this module runs them along a hand path.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import math
 import threading
 from collections import OrderedDict
 from collections.abc import Mapping
@@ -35,15 +38,12 @@ from typing import Any
 
 import numpy as np
 from pydantic import ValidationError
-from scipy import signal
 
 from haptify import kinematics as ref
-from haptify.conventions import quat_conjugate, quat_multiply, quat_to_matrix
 from haptify.errors import fail
 from haptify.session_format import Kinematics, Rendering
 
 from haptify_tools.twin import drive_loops
-from haptify_tools.twin.examiner import band_noise as _band_noise
 from haptify_tools.twin.kinematics import (
     gimbal_angles,
     hand_to_joints,
@@ -56,24 +56,25 @@ from haptify_tools.twin.kinematics import (
     world_to_device,
 )
 from haptify_tools.twin.model import TwinFile, twin_to_dict
+from haptify_tools.twin.drive_steps import _passive_drive, _render_loop
+from haptify_tools.twin.rigid_body import (
+    _backward_pass,
+    _coupling,
+    _cross,
+    _diff,
+    _forward_pass,
+    _gimbal_body_terms,
+    _gravity_D,
+    _jacobians,
+    _unwrap,
+    drive_friction,
+    reflected_rotor_inertia,
+)
+
+# potential_energy is re-exported for benchmarks/bench_stiffness_spread.py
+from haptify_tools.twin.rigid_body import potential_energy as potential_energy
 
 DEFAULT_LOOP_HZ = 1000.0  # CHAI3D's haptic loop rate when the rendering does not say (paper §V-D)
-
-# --- small helpers ------------------------------------------------------------------------------
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of ``(N, 3)`` arrays (or one of them ``(3,)``); faster than ``np.cross`` here."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
-
-
-def _diff(t: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Time derivative along axis 0 (second-order central differences)."""
-    if len(t) < 3:
-        return np.zeros_like(x)
-    return np.gradient(x, t, axis=0, edge_order=2)
 
 
 def _check_path(t: np.ndarray, position_W: np.ndarray, quaternion_W: np.ndarray, uniform: bool = False):
@@ -110,261 +111,6 @@ def _check_path(t: np.ndarray, position_W: np.ndarray, quaternion_W: np.ndarray,
     return t, p, q
 
 
-def _unwrap(q: np.ndarray) -> np.ndarray:
-    return np.unwrap(q, axis=0)
-
-
-def _inertia_matrix(vals: list[float]) -> np.ndarray:
-    ixx, iyy, izz, ixy, ixz, iyz = vals
-    return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
-
-
-def _gravity_D(twin: TwinFile) -> np.ndarray:
-    """Gravitational acceleration in the device frame (zero when ``gravity`` is off), m/s²."""
-    if not twin.on("gravity"):
-        return np.zeros(3)
-    r_wd, _ = placement_matrix(twin)
-    return r_wd.T @ np.array([0.0, 0.0, -twin.effects.gravity.g_m_per_s2])
-
-
-def _coupling(twin: TwinFile) -> np.ndarray:
-    return np.asarray(twin.drive.coupling, dtype=float)
-
-
-def reflected_rotor_inertia(twin: TwinFile) -> np.ndarray:
-    """Rotor inertia per drive axis seen at the capstan output, ``n²·J_rotor`` in kg·m² (0 when ``inertia`` is off)."""
-    if not twin.on("inertia"):
-        return np.zeros(len(twin.links))
-    n = np.asarray(twin.drive.capstan_ratio)
-    return n * n * np.asarray(twin.effects.inertia.rotor_inertia_kg_m2)
-
-
-def drive_friction(twin: TwinFile, omega: np.ndarray, theta: np.ndarray | None = None) -> np.ndarray:
-    """Friction torque ``(N, n)`` on the drive axes at drive speeds ``omega`` (rad/s), N·m; opposes motion.
-
-    Sum of the enabled components ``friction.coulomb`` (τ_c·(1 + r·sin(2π·c·θ))·tanh(ω/ω_s); the ripple
-    needs the drive angles ``theta``, rad), ``friction.viscous`` (b·ω) and ``friction.stribeck``
-    (Δτ·exp(−(ω/ω_st)²)·tanh(ω/ω_s)), with a minus sign.
-    """
-    omega = np.atleast_2d(omega)
-    tau = np.zeros_like(omega)
-    e = twin.effects
-    if e.friction_coulomb.enabled:
-        c = e.friction_coulomb
-        level = np.asarray(c.torque_Nm)
-        if c.ripple_fraction > 0 and theta is not None:
-            level = level * (1.0 + c.ripple_fraction * np.sin(2 * np.pi * c.ripple_cycles_per_rad * np.atleast_2d(theta)))
-        tau -= level * np.tanh(omega / c.zero_crossing_velocity_rad_per_s)
-    if e.friction_viscous.enabled:
-        tau -= np.asarray(e.friction_viscous.damping_Nms_per_rad) * omega
-    if e.friction_stribeck.enabled:
-        s = e.friction_stribeck
-        tau -= (
-            np.asarray(s.excess_torque_Nm)
-            * np.exp(-((omega / s.stribeck_velocity_rad_per_s) ** 2))
-            * np.tanh(omega / s.zero_crossing_velocity_rad_per_s)
-        )
-    return tau
-
-
-def gimbal_friction(twin: TwinFile, rate: np.ndarray) -> np.ndarray:
-    """Friction torques ``(N, 3)`` of the gimbal joints at joint rates ``rate`` (rad/s), N·m; opposes motion."""
-    tau = np.zeros_like(rate)
-    e = twin.effects
-    if e.friction_coulomb.enabled:
-        tau -= np.asarray(e.friction_coulomb.gimbal_torque_Nm) * np.tanh(
-            rate / e.friction_coulomb.zero_crossing_velocity_rad_per_s
-        )
-    if e.friction_viscous.enabled:
-        tau -= np.asarray(e.friction_viscous.gimbal_damping_Nms_per_rad) * rate
-    return tau
-
-
-# --- rigid-body dynamics ------------------------------------------------------------------------
-
-
-@dataclass
-class LinkState:
-    """Per-sample kinematics of the arm links in the device frame (from the forward pass)."""
-
-    frames: list[np.ndarray]  # T_0..T_n, (N, 4, 4)
-    omega: list[np.ndarray]  # ω_i (N, 3), i = 1..n
-    alpha: list[np.ndarray]  # ω̇_i
-    acc_origin: list[np.ndarray]  # a_{o_i}, with −g folded in
-    com: list[np.ndarray]  # c_i positions (N, 3)
-    acc_com: list[np.ndarray]  # a_{c_i} − g
-
-
-def _forward_pass(twin: TwinFile, kin: Kinematics, q, qd, qdd, g_D, frames=None) -> LinkState:
-    frames = frames if frames is not None else link_transforms(kin, q)
-    n_s = q.shape[0]
-    w = np.zeros((n_s, 3))
-    dw = np.zeros((n_s, 3))
-    a = np.broadcast_to(-g_D, (n_s, 3)).copy()
-    st = LinkState(frames, [], [], [], [], [])
-    for i, link in enumerate(twin.links):
-        z = frames[i][:, :3, 2]
-        o_prev, o = frames[i][:, :3, 3], frames[i + 1][:, :3, 3]
-        w_new = w + z * qd[:, i : i + 1]
-        dw = dw + z * qdd[:, i : i + 1] + _cross(w, z * qd[:, i : i + 1])
-        w = w_new
-        r = o - o_prev
-        a = a + _cross(dw, r) + _cross(w, _cross(w, r))
-        rc = np.einsum("nij,j->ni", frames[i + 1][:, :3, :3], np.asarray(link.com_m))
-        ac = a + _cross(dw, rc) + _cross(w, _cross(w, rc))
-        st.omega.append(w)
-        st.alpha.append(dw)
-        st.acc_origin.append(a)
-        st.com.append(o + rc)
-        st.acc_com.append(ac)
-    return st
-
-
-def _backward_pass(twin: TwinFile, st: LinkState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Joint torques ``(N, n)`` and the force/moment ``f_1, n_1`` the base applies to link 1 (about o_0)."""
-    n_links = len(twin.links)
-    n_s = st.frames[0].shape[0]
-    f_next = np.zeros((n_s, 3))
-    m_next = np.zeros((n_s, 3))
-    tau = np.zeros((n_s, n_links))
-    for i in reversed(range(n_links)):
-        link = twin.links[i]
-        rot = st.frames[i + 1][:, :3, :3]
-        inertia = rot @ _inertia_matrix(link.inertia_kg_m2) @ np.swapaxes(rot, 1, 2)
-        w, dw = st.omega[i], st.alpha[i]
-        big_f = link.mass_kg * st.acc_com[i]
-        big_n = np.einsum("nij,nj->ni", inertia, dw) + _cross(w, np.einsum("nij,nj->ni", inertia, w))
-        o_prev, o = st.frames[i][:, :3, 3], st.frames[i + 1][:, :3, 3]
-        f = big_f + f_next
-        m = big_n + m_next + _cross(st.com[i] - o_prev, big_f) + _cross(o - o_prev, f_next)
-        tau[:, i] = np.einsum("ni,ni->n", st.frames[i][:, :3, 2], m)
-        f_next, m_next = f, m
-    return tau, f_next, m_next
-
-
-def inverse_dynamics(twin: TwinFile, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, kin: Kinematics | None = None) -> np.ndarray:
-    """Joint torques ``(N, n)`` in N·m that move the bare links (no rotors, no friction, no gimbal body)
-    along ``q, q̇, q̈`` with the twin's gravity — recursive Newton–Euler (Luh, Walker & Paul 1980).
-
-    ``inertia`` off drops the velocity and acceleration terms; ``gravity`` off drops the weights.
-    """
-    kin = kin or true_kinematics(twin)
-    q, qd, qdd = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (q, qd, qdd))
-    if not twin.on("inertia"):
-        qd, qdd = np.zeros_like(qd), np.zeros_like(qdd)
-    st = _forward_pass(twin, kin, q, qd, qdd, _gravity_D(twin))
-    return _backward_pass(twin, st)[0]
-
-
-def mass_matrix(twin: TwinFile, q: np.ndarray, with_rotors: bool = True) -> np.ndarray:
-    """Joint-space mass matrix ``(N, n, n)`` of the links (plus reflected rotors through the coupling), kg·m²."""
-    q = np.atleast_2d(np.asarray(q, dtype=float))
-    kin = true_kinematics(twin)
-    n = q.shape[1]
-    cols = []
-    zero = np.zeros_like(q)
-    for j in range(n):
-        e = np.zeros_like(q)
-        e[:, j] = 1.0
-        st = _forward_pass(twin, kin, q, zero, e, np.zeros(3))
-        cols.append(_backward_pass(twin, st)[0])
-    m = np.stack(cols, axis=2)
-    if with_rotors:
-        c = _coupling(twin)
-        m = m + c.T @ np.diag(reflected_rotor_inertia(twin) if twin.on("inertia") else np.zeros(n)) @ c
-    return m
-
-
-def potential_energy(twin: TwinFile, q: np.ndarray, quaternion_W: np.ndarray | None = None) -> np.ndarray:
-    """Gravitational potential energy ``(N,)`` of links and gimbal body relative to the device origin, J."""
-    q = np.atleast_2d(np.asarray(q, dtype=float))
-    kin = true_kinematics(twin)
-    frames = link_transforms(kin, q)
-    g = _gravity_D(twin)
-    e = np.zeros(q.shape[0])
-    for i, link in enumerate(twin.links):
-        c = frames[i + 1][:, :3, 3] + np.einsum("nij,j->ni", frames[i + 1][:, :3, :3], np.asarray(link.com_m))
-        e -= link.mass_kg * rows_times(c, g)
-    gb = twin.gimbal_body
-    if gb.mass_kg > 0:
-        tip = frames[-1][:, :3, 3]
-        offset = 0.0 if quaternion_W is None else _gimbal_com_offset_D(twin, quaternion_W)
-        e -= gb.mass_kg * rows_times(tip + offset, g)
-    return e
-
-
-def _gimbal_com_offset_D(twin: TwinFile, quaternion_W: np.ndarray) -> np.ndarray:
-    r_wd, _ = placement_matrix(twin)
-    r_h = quat_to_matrix(np.atleast_2d(quaternion_W))
-    return np.einsum("ij,njk,k->ni", r_wd.T, r_h, np.asarray(twin.gimbal_body.com_m))
-
-
-def _handle_rates(t: np.ndarray, quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Angular velocity and acceleration ``(N, 3)`` of the handle in W from its quaternions (rad/s, rad/s²)."""
-    quat = np.atleast_2d(quat).copy()
-    flip = np.sum(quat[1:] * quat[:-1], axis=1) < 0  # keep one hemisphere for differencing
-    sign = np.cumprod(np.concatenate([[1.0], np.where(flip, -1.0, 1.0)]))
-    quat *= sign[:, None]
-    dq = _diff(t, quat)
-    w = 2.0 * quat_multiply(dq, quat_conjugate(quat))[:, 1:]
-    return w, _diff(t, w)
-
-
-@dataclass
-class _GimbalLoad:
-    force_link: np.ndarray  # force the gimbal body applies to the last link at the gimbal centre (D)
-    moment_link: np.ndarray  # moment it applies (gimbal friction), D
-    force_hand: np.ndarray  # force the device applies to the hand (D), before adding the link's share
-    torque_hand: np.ndarray  # torque the device applies to the hand about the gimbal centre (D)
-
-
-def _gimbal_body_terms(twin: TwinFile, t, frames, angles, quat_W, a_tip_D, g_D) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Inertial-plus-weight wrench of the gimbal body ``m(a_c − g)`` and its moment about the gimbal centre,
-    and the gimbal friction moment (what the gimbal applies to the hand-side body from the link), all in D."""
-    gb = twin.gimbal_body
-    r_wd, _ = placement_matrix(twin)
-    n_s = len(t)
-    w_W, dw_W = _handle_rates(t, quat_W)
-    if not twin.on("inertia"):
-        w_W, dw_W, a_tip_D = np.zeros_like(w_W), np.zeros_like(dw_W), np.zeros_like(a_tip_D)
-    w, dw = rows_times(w_W, r_wd), rows_times(dw_W, r_wd)
-    rc = _gimbal_com_offset_D(twin, quat_W) if gb.mass_kg > 0 else np.zeros((n_s, 3))
-    a_c = a_tip_D + _cross(dw, rc) + _cross(w, _cross(w, rc))
-    f_g = gb.mass_kg * (a_c - g_D)
-    r_h = r_wd.T @ quat_to_matrix(np.atleast_2d(quat_W))
-    inertia = r_h @ np.diag(gb.inertia_kg_m2) @ np.swapaxes(r_h, 1, 2)
-    m_g = np.einsum("nij,nj->ni", inertia, dw) + _cross(w, np.einsum("nij,nj->ni", inertia, w)) + _cross(rc, f_g)
-    # gimbal joint friction, each joint's torque along its own axis
-    rates = _diff(t, _unwrap(angles))
-    tau_j = gimbal_friction(twin, rates)
-    if not np.any(tau_j):
-        return f_g, m_g, np.zeros((n_s, 3))
-    axes = _gimbal_axes_D(twin, frames, angles)
-    fric = np.einsum("nk,nki->ni", tau_j, axes)
-    return f_g, m_g, fric
-
-
-def _elementary(axis: str, angle: np.ndarray) -> np.ndarray:
-    """Rotation matrices ``(N, 3, 3)`` about one coordinate axis."""
-    c, s = np.cos(angle), np.sin(angle)
-    m = np.zeros(angle.shape + (3, 3))
-    i = "xyz".index(axis)
-    j, k = (i + 1) % 3, (i + 2) % 3
-    m[:, i, i] = 1.0
-    m[:, j, j], m[:, j, k], m[:, k, j], m[:, k, k] = c, -s, s, c
-    return m
-
-
-def _gimbal_axes_D(twin: TwinFile, frames: list[np.ndarray], angles: np.ndarray) -> np.ndarray:
-    """Unit axes ``(N, 3, 3)`` (joint k in row k) of the three gimbal joints in D."""
-    r = frames[-1][:, :3, :3] @ quat_to_matrix(np.asarray(twin.gimbal_body.alignment))
-    axes = []
-    for k, ch in enumerate(twin.gimbal_body.axes):
-        axes.append(r[:, :, "xyz".index(ch)])
-        r = r @ _elementary(ch, angles[:, k])
-    return np.stack(axes, axis=1)
-
-
 # --- passive ------------------------------------------------------------------------------------
 
 
@@ -399,14 +145,6 @@ class PassiveResult(HandPathResult):
     qd: np.ndarray
     qdd: np.ndarray
     joint_torque: np.ndarray = field(repr=False)
-
-
-def _jacobians(frames: list[np.ndarray], n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Position and rotation Jacobians ``(N, 3, n)`` in D from already computed DH frames (revolute joints)."""
-    tip = frames[-1][:, :3, 3]
-    jw = np.stack([frames[i][:, :3, 2] for i in range(n)], axis=2)
-    jv = np.stack([_cross(frames[i][:, :3, 2], tip - frames[i][:, :3, 3]) for i in range(n)], axis=2)
-    return jv, jw
 
 
 @dataclass
@@ -775,133 +513,3 @@ def simulate_active(
         saturated=saturated,
         cut_off=cut_flags,
     )
-
-
-def _exact_step(j: float, b: float, k: float, h: float) -> tuple[float, ...]:
-    """Exact discretisation over ``h`` of ``J·z̈ + b·ż + k·z = 0``: (h, Φ00, Φ01, Φ10, Φ11, Ψ00, Ψ01, Ψ10, Ψ11),
-    with Φ = exp(A·h) and Ψ = (1/h)∫₀ʰ exp(A·s) ds (the period average)."""
-    from scipy.linalg import expm
-
-    a = np.array([[0.0, 1.0], [-k / j, -b / j]])
-    m = np.zeros((4, 4))  # Van Loan: expm([[A, I], [0, 0]]·h) holds ∫exp(As)ds
-    m[:2, :2] = a * h
-    m[:2, 2:] = np.eye(2) * h
-    big = expm(m)
-    phi = big[:2, :2]
-    psi = big[:2, 2:] / h
-    return (h, phi[0, 0], phi[0, 1], phi[1, 0], phi[1, 1], psi[0, 0], psi[0, 1], psi[1, 0], psi[1, 1])
-
-
-def _passive_drive(twin: TwinFile, t: np.ndarray, th_l: np.ndarray, thd_l: np.ndarray) -> np.ndarray:
-    """Cable torques ``(N, n)`` on the links of an unpowered drive whose rotors hang on elastic, backlashed
-    cables (``drive.series_elasticity``, ``drive.backlash``) while the hand moves the links.
-
-    The rotors are driven by the link motion through the cables and braked by the drive friction
-    (evaluated at the link-side speed, as in the active loop); the zero motor torque makes this the
-    active loop without its rendering part (:func:`.drive_loops.passive_drive`).
-    """
-    n_s, n_j = th_l.shape
-    se = twin.effects.drive_series_elasticity
-    bl = twin.effects.drive_backlash
-    k, b = np.asarray(se.stiffness_Nm_per_rad, float), np.asarray(se.damping_Nms_per_rad, float)
-    half_gap = 0.5 * np.asarray(bl.width_rad, float) if bl.enabled else np.zeros(n_j)
-    j_refl = reflected_rotor_inertia(twin)
-    dts = _periods(t)
-    uniform = bool(np.allclose(dts, dts[0], rtol=1e-6, atol=1e-12))
-    w_per = np.diff(th_l, axis=0) / dts[:-1, None] if n_s > 1 else np.zeros((0, n_j))
-    w_per = np.concatenate([w_per, w_per[-1:] if len(w_per) else np.zeros((1, n_j))])
-    # the link's velocity step at the end of each period, seen in the rotor's relative coordinate
-    jumps = np.concatenate([w_per[:-1] - w_per[1:], np.zeros((1, n_j))])
-    exact = _exact_steps(j_refl, b, k, float(dts[0]))
-    return drive_loops.passive_drive(
-        np.ascontiguousarray(drive_friction(twin, thd_l, th_l)), jumps, dts, k, b, half_gap, j_refl, exact, uniform
-    )
-
-
-def _periods(t: np.ndarray) -> np.ndarray:
-    """Length (s) of each loop period starting at ``t``; the last repeats the one before (1 ms for a single sample)."""
-    return np.diff(t, append=t[-1] + (t[-1] - t[-2] if len(t) > 1 else 1e-3))
-
-
-def _exact_steps(j_refl: np.ndarray, b: np.ndarray, k: np.ndarray, h: float) -> np.ndarray:
-    """:func:`_exact_step` per drive axis ``(n, 9)``; zeros for a massless rotor (it has no dynamics to step)."""
-    return np.array([_exact_step(j, bb, kk, h) if j > 0 else (0.0,) * 9 for j, bb, kk in zip(j_refl, b, k)], float)
-
-
-def _render_loop(twin, t, th_l, thd_l, nom, c_inv, ps_D, n_D, k_r, tau_max, cut, j_refl, k, b, half_gap):
-    """The sequential loop with an elastic cable (:func:`.drive_loops.render_loop`): the nominal chain as DH
-    rows, the drive friction at the link-side speed and angle, the exact cable steps over the first period."""
-    dh = np.array([(jt.a, math.cos(jt.alpha), math.sin(jt.alpha), jt.d, jt.theta_offset) for jt in nom.joints], float)
-    base_r = quat_to_matrix(np.asarray(nom.base.quaternion, float))
-    dts = _periods(t)
-    trip, rearm = (cut.trip_force_N, cut.rearm_force_N) if cut.enabled else (math.inf, -1.0)
-    k, b, half_gap = (np.asarray(x, float) for x in (k, b, half_gap))
-    return drive_loops.render_loop(
-        np.ascontiguousarray(th_l, float),
-        np.ascontiguousarray(thd_l, float),
-        np.ascontiguousarray(drive_friction(twin, thd_l, th_l)),
-        dts,
-        dh,
-        base_r,
-        np.asarray(nom.base.position, float),
-        np.asarray(c_inv, float),
-        np.asarray(ps_D, float),
-        np.asarray(n_D, float),
-        float(k_r),
-        np.asarray(tau_max, float),
-        float(trip),
-        float(rearm),
-        k,
-        b,
-        half_gap,
-        j_refl,
-        _exact_steps(j_refl, b, k, float(dts[0])),
-    )
-
-
-# --- vibration ----------------------------------------------------------------------------------
-
-
-def _resonance_noise(rng: np.random.Generator, n: int, fs: float, f0: float, q_factor: float) -> np.ndarray:
-    """Unit-RMS noise ``(n, 3)`` through a second-order resonator at ``f0`` Hz with quality ``q_factor``."""
-    f0 = min(f0, 0.45 * fs)
-    b, a = signal.iirpeak(f0, q_factor, fs=fs)
-    y = signal.lfilter(b, a, rng.standard_normal((n + 2000, 3)), axis=0)[2000:]
-    rms = np.sqrt(np.mean(y**2, axis=0))
-    return y / np.where(rms > 0, rms, 1.0)
-
-
-def _sample_rate(t: np.ndarray) -> float:
-    if len(t) < 2:
-        raise ValueError("vibration needs at least two samples")
-    return 1.0 / float(np.median(np.diff(t)))
-
-
-def device_vibration(twin: TwinFile, t: np.ndarray, speed: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Parasitic acceleration ``(N, 3)`` the device adds at the handle, world axes, m/s² (effect ``vibration.device``).
-
-    ``t`` uniform (the accelerometer's 2 kHz clock), ``speed`` the handle speed at ``t`` in m/s. Each
-    broadband and resonant source is unit-RMS coloured noise scaled by its RMS at the reference speed,
-    its axis weights (normalised so the three-axis RMS equals the configured value) and the speed law
-    ``idle + (1 − idle)·(v/v_ref)^p``. Zeros when the effect is off.
-    """
-    t = np.asarray(t, dtype=float)
-    eff = twin.effects.vibration_device
-    out = np.zeros((len(t), 3))
-    if not eff.enabled or len(t) < 2:
-        return out
-    fs = _sample_rate(t)
-    v = np.maximum(np.asarray(speed, dtype=float), 0.0)
-    law = eff.idle_fraction + (1.0 - eff.idle_fraction) * (v / eff.ref_speed_m_per_s) ** eff.speed_exponent
-    for src in eff.broadband:
-        w = np.asarray(src.axis_weights, dtype=float)
-        w = w / np.linalg.norm(w)
-        band = _band_noise(rng, len(t), fs, src.band_hz[0], min(src.band_hz[1], fs / 2), dims=3)
-        out += src.rms_at_ref_speed_m_per_s2 * w * band * law[:, None]
-    for res in eff.resonances:
-        w = np.asarray(res.axis_weights, dtype=float)
-        w = w / np.linalg.norm(w)
-        out += (
-            res.rms_at_ref_speed_m_per_s2 * w * _resonance_noise(rng, len(t), fs, res.frequency_hz, res.q_factor) * law[:, None]
-        )
-    return out

@@ -32,7 +32,7 @@ from haptify.conventions import (
     quat_rotate,
     quat_to_matrix,
 )
-from haptify_tools.twin.examiner import band_noise, derivative, rotation_vector_to_quat
+from haptify_tools.twin.hand_path import band_noise, derivative, rotation_vector_to_quat
 
 DEG = math.pi / 180.0
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import rerun.blueprint as rrb
 
-from haptify_tools.viewer.recording import ROLES, SERIES, TIMELINE, Plan, TrialPlan
+from haptify_tools.viewer.plan import ROLES, SERIES, TIMELINE, Plan, TrialPlan
 
 # Time-series views: name → (title, series keys overlaid in that view).
 VIEWS: dict[str, tuple[str, list[str | tuple[str, ...]]]] = {

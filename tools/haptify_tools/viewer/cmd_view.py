@@ -27,7 +27,7 @@ from haptify.errors import fail
 from haptify.gate import CheckedSession, open_checked_session
 from haptify.results import load_results
 from haptify.storage import MANIFEST
-from haptify_tools.viewer.recording import DEFAULT_DERIVED, DERIVED_MODES
+from haptify_tools.viewer.plan import DEFAULT_DERIVED, DERIVED_MODES
 from haptify_tools.viewer.save import build
 
 LOOPBACK = "127.0.0.1"

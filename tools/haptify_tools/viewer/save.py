@@ -12,7 +12,8 @@ import rerun as rr
 from haptify.results import ResultsFile
 from haptify.storage import SessionFolder
 from haptify_tools.viewer.blueprints import blueprint_for
-from haptify_tools.viewer.recording import CHUNK_ROWS, DEFAULT_DERIVED, Plan, RrdWriter, atomic_rrd, plan_recording, recording_id
+from haptify_tools.viewer.plan import CHUNK_ROWS, DEFAULT_DERIVED, Plan, RrdWriter
+from haptify_tools.viewer.recording import atomic_rrd, plan_recording, recording_id
 
 
 def build(
