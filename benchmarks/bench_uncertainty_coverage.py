@@ -45,7 +45,8 @@ from figures import report
 from haptify import stiffness, surface, workspace
 from haptify.compute import ComputeContext, compute_session
 from haptify.errors import HaptifyError
-from haptify.free_space import FORCE_IDS, PLATE_ID, SPEED_IDS, magnitude_stats, plate_force_about_weight, plate_force_samples
+from haptify.free_space import (FORCE_IDS, PLATE_ID, SPEED_IDS, magnitude_stats, plate_force_about_weight, plate_force_samples,
+                                speed_samples)
 from haptify.repetitions import definition_of
 from haptify.preprocessing import lowpass_resample, mocap_track, process_mocap, resample_track, sp
 from haptify.signals import handle_signals
@@ -91,12 +92,14 @@ def hand_force_truth(ctx, truth, trial_id: str) -> tuple:
 
 
 def speed_truth(ctx, truth, trial_id: str) -> tuple:
-    """free_space.speed_mean and angular_speed_mean (spec §9.4) of the true pose at the usable mocap samples."""
+    """free_space.speed_mean and angular_speed_mean (spec §9.4) of the true pose at the mocap samples each
+    measured value averaged (the angular one: those settled past the segments' edges; NaN when none)."""
     track = mocap_track(ctx, trial_id)
-    used = track.valid & np.all(np.isfinite(track.velocity), axis=1) & np.all(np.isfinite(track.angular_velocity), axis=1)
+    used, settled = speed_samples(track)
     pose = true_pose(truth, trial_id, track.t[used])
-    return (float(np.nanmean(np.linalg.norm(pose.velocity, axis=1))),
-            float(np.nanmean(np.linalg.norm(pose.angular_velocity, axis=1))))
+    spin = (float(np.nanmean(np.linalg.norm(true_pose(truth, trial_id, track.t[settled]).angular_velocity, axis=1)))
+            if settled.any() else math.nan)
+    return float(np.nanmean(np.linalg.norm(pose.velocity, axis=1))), spin
 
 
 def plate_truth(ctx, truth, trial_id: str) -> tuple:

@@ -1122,7 +1122,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "angular_velocity_unfiltered",
         "7.4",
         "R7.4-2",
-        "the angular velocity is low-passed at mocap_cutoff_hz",
+        "the angular velocity is low-passed at angular_velocity_cutoff_hz",
         "it is used as differentiated",
         (Patch(preprocessing, "process_mocap", _raw_derivative("angular_velocity")),),
         ("free_space.angular_speed_mean",),

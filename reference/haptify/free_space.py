@@ -18,7 +18,7 @@ from haptify.errors import HaptifyError, fail
 from haptify.force_plate import plate_signals
 from haptify.metric_definitions import param
 from haptify.repetitions import TrialValue, aggregate, no_trials, per_trial, unavailable
-from haptify.preprocessing import lowpass_resample, mocap_track, sp, uniform_grid
+from haptify.preprocessing import MocapTrack, lowpass_resample, mocap_track, segment_interior, sp, uniform_grid
 from haptify.signals import handle_signals
 
 if TYPE_CHECKING:
@@ -129,22 +129,30 @@ def plate_force_samples(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray
     return cached(ctx, ("free_space_plate", trial_id), build)
 
 
-def speeds(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
-    """Speed (m/s) and angular speed (rad/s) at the usable motion-capture samples of a trial (chapter 7)."""
-    track = mocap_track(ctx, trial_id)
+def speed_samples(track: MocapTrack) -> tuple[np.ndarray, np.ndarray]:
+    """Masks of the samples of a processed track (spec §7.4) that ``speed_mean`` and ``angular_speed_mean``
+    average (spec §9.4): the usable ones, and of those the ones ``angular_speed_settle_s`` inside their segment."""
     ok = track.valid & np.all(np.isfinite(track.velocity), axis=1) & np.all(np.isfinite(track.angular_velocity), axis=1)
+    return ok, ok & segment_interior(track, float(fp("angular_speed_settle_s")))
+
+
+def speeds(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
+    """Speed (m/s) at the usable motion-capture samples of a trial and angular speed (rad/s) at those of them
+    settled past the segment's edges (may be empty); spec §9.4."""
+    track = mocap_track(ctx, trial_id)
+    ok, settled = speed_samples(track)
     if not ok.any():
         raise fail(
             "E611", f"trial {trial_id!r} has no usable motion-capture samples", expected="usable handle_pose samples", found=0
         )
-    return np.linalg.norm(track.velocity[ok], axis=1), np.linalg.norm(track.angular_velocity[ok], axis=1)
+    return np.linalg.norm(track.velocity[ok], axis=1), np.linalg.norm(track.angular_velocity[settled], axis=1)
 
 
 class SpeedSummary(TypedDict):
     """One trial's mean speeds (m/s, rad/s), the shares of samples over the limits and its warning codes (spec §9.4)."""
 
     speed: float
-    angular: float
+    angular: float | None
     codes: list[str]
     over_speed: float
     over_angular: float
@@ -154,7 +162,7 @@ def _speed_summary(ctx: Any, trial_id: str) -> SpeedSummary:
     v, w = speeds(ctx, trial_id)
     out: SpeedSummary = {
         "speed": float(v.mean()),
-        "angular": float(w.mean()),
+        "angular": float(w.mean()) if len(w) else None,
         "codes": [],
         "over_speed": exceedance(v, float(fp("speed_limit_m_per_s"))),
         "over_angular": exceedance(w, float(fp("angular_speed_limit_rad_per_s"))),
@@ -178,6 +186,19 @@ def _speed_summary(ctx: Any, trial_id: str) -> SpeedSummary:
             trial=trial_id,
         )
     return out
+
+
+def _angular_of(summary: SpeedSummary, trial_id: str) -> float:
+    """A trial's mean angular speed (rad/s), or E611 when no segment is long enough to settle (spec §9.4)."""
+    if summary["angular"] is None:
+        settle = fp("angular_speed_settle_s")
+        raise fail(
+            "E611",
+            f"trial {trial_id!r}: no motion-capture segment reaches {settle} s past both of its ends",
+            expected=f"a segment longer than {2 * float(settle):g} s",
+            found="none",
+        )
+    return summary["angular"]
 
 
 def compute(ctx: Any) -> list[MetricResult | Unavailable]:
@@ -205,14 +226,16 @@ def compute(ctx: Any) -> list[MetricResult | Unavailable]:
                     diagnostics=diag,
                 )
             )
-            out.append(
-                aggregate(
-                    FAMILY,
-                    "free_space.angular_speed_mean",
-                    [TrialValue(t, d["angular"], d["codes"]) for t, d in done.items()],
-                    diagnostics=diag,
+            ang, first_ang = per_trial(ctx, list(done), lambda tid: _angular_of(done[tid], tid), SPEED_IDS[1])
+            if ang:
+                out.append(
+                    aggregate(
+                        FAMILY, SPEED_IDS[1], [TrialValue(t, w, done[t]["codes"]) for t, w in ang.items()], diagnostics=diag
+                    )
                 )
-            )
+            else:
+                assert first_ang is not None  # per_trial: a trial without a result raised the error it returns
+                out.append(unavailable(SPEED_IDS[1], first_ang))
         else:
             assert first is not None  # per_trial: a trial without a result raised the error it returns
             out += [unavailable(m, first) for m in SPEED_IDS]

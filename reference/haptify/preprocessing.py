@@ -11,7 +11,7 @@ Rules (parameters in ``schemas/<v>/metrics/signals.json``):
   longer gaps split the data into segments that are processed separately and never interpolated across;
   segments shorter than ``min_segment_s`` are dropped. Position is low-passed per segment and
   differentiated by central differences; angular velocity comes from central relative rotations and is
-  low-passed; orientation itself is not filtered. Resampling: linear, quaternions by slerp.
+  low-passed at its own, lower cut-off; orientation itself is not filtered. Resampling: linear, quaternions by slerp.
 
 The calibrated handle signals built on these (§7.5) are :mod:`haptify.signals`; the handle calibration
 (chapter 6) uses these too, so this module depends on neither.
@@ -226,7 +226,7 @@ def process_mocap(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray) -
     n = len(t)
     out_p, out_q = np.full((n, 3), np.nan), np.full((n, 4), np.nan)
     out_v, out_w = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
-    fc = float(sp("mocap_cutoff_hz"))
+    fc, fc_w = float(sp("mocap_cutoff_hz")), float(sp("angular_velocity_cutoff_hz"))
     for k in range(seg.max() + 1 if n else 0):
         m = np.flatnonzero(seg == k)
         ts = t[m]
@@ -238,8 +238,19 @@ def process_mocap(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray) -
         out_p[m] = p
         out_q[m] = q
         out_v[m] = np.gradient(p, ts, axis=0)
-        out_w[m] = lowpass(angular_velocity(ts, q), rate, fc)
+        out_w[m] = lowpass(angular_velocity(ts, q), rate, fc_w)
     return MocapTrack(t=t, position=out_p, quaternion=out_q, velocity=out_v, angular_velocity=out_w, segment=seg)
+
+
+def segment_interior(track: MocapTrack, margin_s: float) -> np.ndarray:
+    """Samples of a segment at least ``margin_s`` (s) from both of its ends: past the edge transients of the
+    per-segment low-pass (spec §7.4 step 4, §9.4). False outside every segment."""
+    out = np.zeros(len(track.t), bool)
+    for k in range(int(track.segment.max()) + 1 if len(track.t) else 0):
+        m = np.flatnonzero(track.segment == k)
+        ts = track.t[m]
+        out[m] = (ts - ts[0] >= margin_s - 1e-9) & (ts[-1] - ts >= margin_s - 1e-9)
+    return out
 
 
 @dataclass

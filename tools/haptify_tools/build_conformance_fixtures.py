@@ -1462,6 +1462,7 @@ def jitter_fixture(truth: rb.HandleTruth) -> Fixture:
             ("mocap", j["position_hz"], 100.0, fc),
             ("force", j["force_hz"], 1000.0, param("signals", "wrench_cutoff_hz")),
             ("plate", j["plate_hz"], 1000.0, param("signals", "wrench_cutoff_hz")),
+            ("angle", j["angle_hz"], 100.0, param("signals", "angular_velocity_cutoff_hz")),
         )
     }
     jit = (
@@ -1497,7 +1498,8 @@ def jitter_fixture(truth: rb.HandleTruth) -> Fixture:
             0.07,
             "rad/s",
             "analytic",
-            f"constant rotation at 0.07 rad/s with {jit}; the angular velocity is low-passed (§7.4 step 4). "
+            f"constant rotation at 0.07 rad/s with {jit}; the angular velocity is low-passed at "
+            f"{param('signals', 'angular_velocity_cutoff_hz'):g} Hz (§7.4 step 4; gain {gains['angle']:.1e} at {j['angle_hz']:g} Hz). "
             "Tolerance 0.1 %: a rotation about the vertical turns the spin axis without changing |ω| to first order",
             desc,
         ),
