@@ -33,7 +33,7 @@ import tarfile
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Final, Literal
+from typing import IO, Final, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
@@ -321,7 +321,7 @@ def _unsafe(name: str, why: str, found: str | None = None) -> HaptifyError:
     )
 
 
-def unpack(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits = Limits()) -> Unpacked:  # noqa: C901 (over ruff's limit of 15: to be split)
+def unpack(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits = Limits()) -> Unpacked:
     """Unpack a bundle archive into the new folder ``root`` under ``limits`` (spec §17.4).
 
     Refuses (E960–E963) oversize archives, decompression bombs, links, devices, sparse members, absolute
@@ -363,53 +363,11 @@ def unpack(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits =
                             expected=f"≤ {limits.max_members}",
                             found=f"> {limits.max_members}",
                         )
-                    name = member.name
-                    problem = _member_name_problem(name)
-                    if problem:
-                        raise _unsafe(name, problem)
-                    if member.isdir():
-                        continue
-                    if member.issym() or member.islnk():
-                        raise _unsafe(
-                            name, f"is a {'symbolic' if member.issym() else 'hard'} link to {member.linkname!r}", "link"
-                        )
-                    source = tar.extractfile(member) if member.isreg() else None
+                    source = _member_source(tar, member, seen_folded, limits)
                     if source is None:
-                        raise _unsafe(name, "is not a regular file (device, FIFO or other special member)", "special file")
-                    if member.issparse():  # its holes would be written as zeros the compressed stream never held
-                        raise _unsafe(name, "is a sparse member (its declared size is not in the archive)", "sparse file")
-                    folded = name.casefold()
-                    if folded in seen_folded:
-                        raise _unsafe(name, "appears twice (names must be unique, also ignoring case)", "duplicate")
-                    seen_folded.add(folded)
-                    if member.size > limits.max_unpacked_bytes:
-                        raise fail(
-                            "E960",
-                            f"archive member {name!r} is larger than the registry accepts",
-                            file=name,
-                            expected=f"≤ {limits.max_unpacked_bytes} bytes",
-                            found=f"{member.size} bytes",
-                        )
-                    target = root.joinpath(*name.split("/"))
-                    _make_parents(root, name)
-                    digest = hashlib.sha256()
-                    fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), FILE_MODE)
-                    size = 0
-                    with os.fdopen(fd, "wb") as fh:
-                        for chunk in iter(lambda: source.read(CHUNK), b""):
-                            size += len(chunk)
-                            written += len(chunk)
-                            if written > limits.max_unpacked_bytes:
-                                raise fail(
-                                    "E960",
-                                    "the archive unpacks to more bytes than the registry accepts",
-                                    file=name,
-                                    expected=f"≤ {limits.max_unpacked_bytes} bytes written",
-                                    found=f"> {limits.max_unpacked_bytes} bytes written",
-                                )
-                            digest.update(chunk)
-                            fh.write(chunk)
-                    out.members[name] = (size, digest.hexdigest())
+                        continue
+                    size, digest, written = _write_member(root, member.name, source, written, limits)
+                    out.members[member.name] = (size, digest)
             except tarfile.TarError as exc:
                 raise fail(
                     "E961", f"the tar archive is damaged: {exc}", file="<upload>", expected="a complete tar archive"
@@ -419,6 +377,63 @@ def unpack(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits =
                     "E961", f"the archive ends early or is corrupt: {exc}", file="<upload>", expected="gzip-compressed tar"
                 ) from None
     return out
+
+
+def _member_source(tar: tarfile.TarFile, member: tarfile.TarInfo, seen_folded: set[str], limits: Limits) -> IO[bytes] | None:
+    """The bytes of a safe regular-file member, None for a folder; E962/E960 for a member the registry refuses
+    (spec §17.4): an unsafe name, a link, a special or sparse member, a duplicate name (ignoring case), a
+    member over ``max_unpacked_bytes``. ``seen_folded`` collects the case-folded names."""
+    name = member.name
+    problem = _member_name_problem(name)
+    if problem:
+        raise _unsafe(name, problem)
+    if member.isdir():
+        return None
+    if member.issym() or member.islnk():
+        raise _unsafe(name, f"is a {'symbolic' if member.issym() else 'hard'} link to {member.linkname!r}", "link")
+    source = tar.extractfile(member) if member.isreg() else None
+    if source is None:
+        raise _unsafe(name, "is not a regular file (device, FIFO or other special member)", "special file")
+    if member.issparse():  # its holes would be written as zeros the compressed stream never held
+        raise _unsafe(name, "is a sparse member (its declared size is not in the archive)", "sparse file")
+    folded = name.casefold()
+    if folded in seen_folded:
+        raise _unsafe(name, "appears twice (names must be unique, also ignoring case)", "duplicate")
+    seen_folded.add(folded)
+    if member.size > limits.max_unpacked_bytes:
+        raise fail(
+            "E960",
+            f"archive member {name!r} is larger than the registry accepts",
+            file=name,
+            expected=f"≤ {limits.max_unpacked_bytes} bytes",
+            found=f"{member.size} bytes",
+        )
+    return source
+
+
+def _write_member(root: Path, name: str, source: IO[bytes], written: int, limits: Limits) -> tuple[int, str, int]:
+    """Write one member's bytes to a new file under ``root``, counting and hashing them (spec §17.4): its size
+    (bytes), its SHA-256 and the archive's bytes written so far; E960 once they pass ``max_unpacked_bytes``."""
+    target = root.joinpath(*name.split("/"))
+    _make_parents(root, name)
+    digest = hashlib.sha256()
+    fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), FILE_MODE)
+    size = 0
+    with os.fdopen(fd, "wb") as fh:
+        for chunk in iter(lambda: source.read(CHUNK), b""):
+            size += len(chunk)
+            written += len(chunk)
+            if written > limits.max_unpacked_bytes:
+                raise fail(
+                    "E960",
+                    "the archive unpacks to more bytes than the registry accepts",
+                    file=name,
+                    expected=f"≤ {limits.max_unpacked_bytes} bytes written",
+                    found=f"> {limits.max_unpacked_bytes} bytes written",
+                )
+            digest.update(chunk)
+            fh.write(chunk)
+    return size, digest.hexdigest(), written
 
 
 def _make_parents(root: Path, name: str) -> None:
@@ -437,7 +452,7 @@ def unpack_bundle(archive: str | os.PathLike, root: str | os.PathLike, limits: L
     return unpacked, read_manifest(unpacked, limits)
 
 
-def read_manifest(unpacked: Unpacked, limits: Limits = Limits()) -> Bundle:  # noqa: C901 (over ruff's limit of 15: to be split)
+def read_manifest(unpacked: Unpacked, limits: Limits = Limits()) -> Bundle:
     """Parse and check ``bundle.json`` against the unpacked files (E964, E965; spec §17.2)."""
     if BUNDLE_JSON not in unpacked.members:
         raise fail("E964", "the archive has no bundle.json", file=BUNDLE_JSON, expected="bundle.json at the top", found="missing")
@@ -454,6 +469,27 @@ def read_manifest(unpacked: Unpacked, limits: Limits = Limits()) -> Bundle:  # n
         bundle = Bundle.model_validate(data)
     except ValidationError as exc:
         raise HaptifyError(*pydantic_findings(exc, "E964", BUNDLE_JSON)) from None
+    declared, findings = _declared_files(bundle)
+    findings += _file_findings(declared, unpacked)
+    if any(f.role == "stream" for f in bundle.files) != bundle.includes_raw:
+        findings.append(
+            Finding(
+                "E964",
+                "includes_raw does not match the files",
+                file=BUNDLE_JSON,
+                pointer="/includes_raw",
+                expected=any(f.role == "stream" for f in bundle.files),
+                found=bundle.includes_raw,
+            )
+        )
+    if findings:
+        raise HaptifyError(*findings)
+    return bundle
+
+
+def _declared_files(bundle: Bundle) -> tuple[dict[str, BundleFile], list[Finding]]:
+    """The files ``bundle.json`` declares by path, and E964 for what its list gets wrong (spec §17.2): a path
+    declared twice, not exactly one results file and one session manifest, a misnamed conformance report."""
     findings: list[Finding] = []
     declared: dict[str, BundleFile] = {}
     for i, f in enumerate(bundle.files):
@@ -495,6 +531,13 @@ def read_manifest(unpacked: Unpacked, limits: Limits = Limits()) -> Bundle:  # n
                 found=conformance,
             )
         )
+    return declared, findings
+
+
+def _file_findings(declared: dict[str, BundleFile], unpacked: Unpacked) -> list[Finding]:
+    """The declared files against the unpacked ones (spec §17.2): E964 for a session file outside the session
+    folder, E965 for a file missing, differing from its size or digest, or in the archive undeclared."""
+    findings: list[Finding] = []
     for path, entry in declared.items():
         if entry.role in ("session-file", "stream") and not path.startswith(f"{SESSION_DIR}/"):
             findings.append(
@@ -538,17 +581,4 @@ def read_manifest(unpacked: Unpacked, limits: Limits = Limits()) -> Bundle:  # n
                 found="undeclared",
             )
         )
-    if any(f.role == "stream" for f in bundle.files) != bundle.includes_raw:
-        findings.append(
-            Finding(
-                "E964",
-                "includes_raw does not match the files",
-                file=BUNDLE_JSON,
-                pointer="/includes_raw",
-                expected=any(f.role == "stream" for f in bundle.files),
-                found=bundle.includes_raw,
-            )
-        )
-    if findings:
-        raise HaptifyError(*findings)
-    return bundle
+    return findings
