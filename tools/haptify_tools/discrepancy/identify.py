@@ -127,7 +127,7 @@ def _sse(design: st.Design, residual: dict, predicted: dict) -> float:
     return float(np.dot(e, e))
 
 
-def fit_candidate(  # noqa: C901 (over ruff's limit of 15: to be split)
+def fit_candidate(
     cand: Candidate,
     twin: TwinFile,
     data: Dataset,
@@ -154,36 +154,54 @@ def fit_candidate(  # noqa: C901 (over ruff's limit of 15: to be split)
         sims = iter(data.simulate_many([cand.apply(twin, p) for p in below], only_active, base))
         return [_minus(next(sims), base) if p < ceiling else zero for p in ps]
 
-    def delta(p: float) -> dict:
-        return deltas([p])[0]
-
     if only_active and not any(tr.active for tr in trials):
         return Fit(cand, probe, float("inf"), zero, st.score(design, residual, zero), 0)
     if cand.kind == "affine":
-        p1, p2 = probe, 2.0 * probe
-        d1, d2 = deltas([p1, p2])
-        b = {k: (d2[k] - d1[k]) / (p2 - p1) for k in d1}
-        a = {k: d1[k] - p1 * b[k] for k in d1}
+        return _fit_affine(cand, design, residual, probe, deltas)
+    return _fit_searched(cand, design, residual, probe, ceiling, deltas)
+
+
+def _fit_affine(
+    cand: Candidate, design: st.Design, residual: dict, probe: float, deltas: Callable[[list[float]], list[dict]]
+) -> Fit:
+    """An affine candidate (discrepancy README §2): δ(p) = a + p·b from two simulations, least squares for p,
+    re-linearised by secant steps where the fit earns something; ``deltas`` simulates δ for several values."""
+    p1, p2 = probe, 2.0 * probe
+    d1, d2 = deltas([p1, p2])
+    b = {k: (d2[k] - d1[k]) / (p2 - p1) for k in d1}
+    a = {k: d1[k] - p1 * b[k] for k in d1}
+    p, se = st.affine_fit(design, residual, a, b)
+    p = max(p, cand.lower + 1e-12 * probe)
+    sims = 2
+    pts = [(p1, d1), (p2, d2)]
+    # re-linearising refines a fit that earns something; one that is worse than nothing stays rejected
+    steps = cand.relinearise if st.score(design, residual, {k: a[k] + p * b[k] for k in a}).delta_bic > 0 else 0
+    for _ in range(steps):
+        # secant (Gauss–Newton) steps for an effect that is only nearly affine: re-linearise at p̂
+        pts.append((p, deltas([p])[0]))
+        sims += 1
+        (pa, da), (pb, db) = sorted(pts, key=lambda x: abs(x[0] - p))[:2]
+        if pa == pb:
+            break
+        b = {k: (db[k] - da[k]) / (pb - pa) for k in da}
+        a = {k: da[k] - pa * b[k] for k in da}
         p, se = st.affine_fit(design, residual, a, b)
-        p = max(p, cand.lower + 1e-12 * probe)
-        sims = 2
-        pts = [(p1, d1), (p2, d2)]
-        # re-linearising refines a fit that earns something; one that is worse than nothing stays rejected
-        steps = cand.relinearise if st.score(design, residual, {k: a[k] + p * b[k] for k in a}).delta_bic > 0 else 0
-        for _ in range(steps):
-            # secant (Gauss–Newton) steps for an effect that is only nearly affine: re-linearise at p̂
-            pts.append((p, delta(p)))
-            sims += 1
-            (pa, da), (pb, db) = sorted(pts, key=lambda x: abs(x[0] - p))[:2]
-            if pa == pb:
-                break
-            b = {k: (db[k] - da[k]) / (pb - pa) for k in da}
-            a = {k: da[k] - pa * b[k] for k in da}
-            p, se = st.affine_fit(design, residual, a, b)
-        pred = {k: a[k] + p * b[k] for k in a}
-        interval: tuple[float, float] | None  # (None where the search below finds no bracket)
-        se, interval = st.bootstrap_linear(design, residual, pred, b, p)
-        return Fit(cand, p, se, pred, st.score(design, residual, pred), sims, interval=interval)
+    pred = {k: a[k] + p * b[k] for k in a}
+    interval: tuple[float, float] | None
+    se, interval = st.bootstrap_linear(design, residual, pred, b, p)
+    return Fit(cand, p, se, pred, st.score(design, residual, pred), sims, interval=interval)
+
+
+def _fit_searched(
+    cand: Candidate,
+    design: st.Design,
+    residual: dict,
+    probe: float,
+    ceiling: float,
+    deltas: Callable[[list[float]], list[dict]],
+) -> Fit:
+    """A candidate searched on a logarithmic grid around ``probe``, extended while the best lies at an end (below
+    ``ceiling``), then refined by a bounded Brent search in log p (discrepancy README §2)."""
     # 1-D search on a logarithmic grid, then a bounded Brent refinement in log p
     evals: dict[float, tuple[float, dict]] = {}
 
