@@ -483,7 +483,10 @@ def rotation_vector_matrix(v: np.ndarray) -> np.ndarray:
     )
 
 
-def read_nexus_csv(path: str | Path) -> Recording:  # noqa: C901 (over ruff's limit of 15: to be split)
+NexusSections = dict[str, tuple[float, list[str], list[str], list[str], int, list[str]]]
+
+
+def read_nexus_csv(path: str | Path) -> Recording:
     """A Vicon Nexus CSV export (spec §5.10): sections (name, rate, label, column and unit lines,
     data). ``Trajectories`` and the ``Model Outputs`` in a length unit become markers; ``Segments``
     (RX, RY, RZ a rotation vector in the unit line's angle unit; TX, TY, TZ) 6-DoF bodies; ``Devices``
@@ -492,8 +495,26 @@ def read_nexus_csv(path: str | Path) -> Recording:  # noqa: C901 (over ruff's li
     p = Path(path)
     sections = _nexus_sections(_text(p).splitlines(), p)
     rec = _empty(p, "nexus", "Vicon Nexus")
-    point_labels, point_cols, point_rate, unit = [], [], 0.0, None
-    frames = None
+    point_labels, point_cols, point_rate, unit, frames = _nexus_points(sections, p)
+    if point_labels:
+        rec.update(point_labels=point_labels, points=np.stack(point_cols, axis=1), point_units=unit)
+    if "Segments" in sections:
+        segment_rate, segment_frames = _nexus_segments(sections, p, rec, unit)
+        if segment_frames is not None:
+            point_rate, frames = segment_rate, segment_frames
+    if frames is not None and len(frames):
+        rec.update(point_rate=point_rate, point_first_frame=int(frames[0]) - 1)
+    if "Devices" in sections:
+        rec.update(_nexus_devices(sections, p, point_rate))
+    return Recording(**rec)
+
+
+def _nexus_points(sections: NexusSections, p: Path) -> tuple[list[str], list[np.ndarray], float, str | None, np.ndarray | None]:
+    """The markers of a Nexus export's ``Trajectories`` and length-unit ``Model Outputs`` (spec §5.10): labels,
+    (frames, 3) columns, the rate (Hz), their common unit (E504 when they differ) and the Frame numbers."""
+    point_labels: list[str] = []
+    point_cols: list[np.ndarray] = []
+    point_rate, unit, frames = 0.0, None, None
     for name in ("Trajectories", "Model Outputs"):
         if name not in sections:
             continue
@@ -518,73 +539,79 @@ def read_nexus_csv(path: str | Path) -> Recording:  # noqa: C901 (over ruff's li
             point_labels.append(label)
             point_cols.append(data[:, [cols[a] for a in "XYZ"]])
         point_rate, frames = rate, data[:, 0]
-    if point_labels:
-        rec.update(point_labels=point_labels, points=np.stack(point_cols, axis=1), point_units=unit)
-    if "Segments" in sections:
-        rate, labels, columns, units, first, body = sections["Segments"]
-        data = _table(body, ",", p, first, len(columns))
-        names, pos, rot = [], [], []
-        for label, cols in _groups(labels, columns):
-            if not all(c in cols for c in ("RX", "RY", "RZ", "TX", "TY", "TZ")):
-                continue
-            angle = UNITS.get(units[cols["RX"]])
-            if angle is None or angle.dimension != "angle":
-                raise fail(
-                    "E504",
-                    f"{p.name}: segment {label!r} rotation unit {units[cols['RX']]!r} is not an angle",
-                    file=str(p),
-                    expected=["deg", "rad"],
-                    found=units[cols["RX"]],
-                )
-            if unit is not None and units[cols["TX"]] != unit:
-                raise fail(
-                    "E504",
-                    f"{p.name}: segment {label!r} is in {units[cols['TX']]}, points in {unit}",
-                    file=str(p),
-                    expected=unit,
-                    found=units[cols["TX"]],
-                )
-            unit = units[cols["TX"]]
-            names.append(label)
-            pos.append(data[:, [cols[c] for c in ("TX", "TY", "TZ")]])
-            rot.append(rotation_vector_matrix(angle.to_si(data[:, [cols[c] for c in ("RX", "RY", "RZ")]])))
-        if names:
-            n_frames = len(data)
-            if point_labels and n_frames != rec["points"].shape[0]:
-                raise fail(
-                    "E501",
-                    f"{p.name}: Segments hold {n_frames} frames, Trajectories {rec['points'].shape[0]}",
-                    file=str(p),
-                    expected=rec["points"].shape[0],
-                    found=n_frames,
-                )
-            rec.update(
-                body_labels=names, body_positions=np.stack(pos, axis=1), body_rotations=np.stack(rot, axis=1), point_units=unit
+    return point_labels, point_cols, point_rate, unit, frames
+
+
+def _nexus_segments(sections: NexusSections, p: Path, rec: dict[str, Any], unit: str | None) -> tuple[float, np.ndarray | None]:
+    """The 6-DoF bodies of a Nexus export's ``Segments`` into ``rec`` (spec §5.10; E504 for a rotation unit that
+    is not an angle or a length unit other than the points', E501 for a frame count other than theirs); their
+    rate (Hz) and Frame numbers, None when no segment has all six columns."""
+    rate, labels, columns, units, first, body = sections["Segments"]
+    data = _table(body, ",", p, first, len(columns))
+    names, pos, rot = [], [], []
+    for label, cols in _groups(labels, columns):
+        if not all(c in cols for c in ("RX", "RY", "RZ", "TX", "TY", "TZ")):
+            continue
+        angle = UNITS.get(units[cols["RX"]])
+        if angle is None or angle.dimension != "angle":
+            raise fail(
+                "E504",
+                f"{p.name}: segment {label!r} rotation unit {units[cols['RX']]!r} is not an angle",
+                file=str(p),
+                expected=["deg", "rad"],
+                found=units[cols["RX"]],
             )
-            point_rate, frames = rate, data[:, 0]
-            if not point_labels:
-                rec["points"] = np.zeros((n_frames, 0, 3))
-    if frames is not None and len(frames):
-        rec.update(point_rate=point_rate, point_first_frame=int(frames[0]) - 1)
-    if "Devices" in sections:
-        rate, labels, columns, units, first, body = sections["Devices"]
-        data = _table(body, ",", p, first, len(columns))
-        an_labels, an_units, values = [], [], []
-        for label, cols in _groups(labels, columns):
-            for column, j in cols.items():
-                an_labels.append(f"{label} - {column}")
-                an_units.append(units[j] if j < len(units) else "")
-                values.append(data[:, j])
-        per_frame = int(round(rate / point_rate)) if point_rate else 1
-        first_sample = (int(data[0, 0]) - 1) * per_frame + int(data[0, 1]) if len(data) else 0
-        rec.update(
-            analog_labels=an_labels,
-            analog_units=an_units,
-            analog_rate=rate,
-            analog_first_sample=first_sample,
-            analogs=np.array(values) if values else np.zeros((0, len(data))),
+        if unit is not None and units[cols["TX"]] != unit:
+            raise fail(
+                "E504",
+                f"{p.name}: segment {label!r} is in {units[cols['TX']]}, points in {unit}",
+                file=str(p),
+                expected=unit,
+                found=units[cols["TX"]],
+            )
+        unit = units[cols["TX"]]
+        names.append(label)
+        pos.append(data[:, [cols[c] for c in ("TX", "TY", "TZ")]])
+        rot.append(rotation_vector_matrix(angle.to_si(data[:, [cols[c] for c in ("RX", "RY", "RZ")]])))
+    if not names:
+        return rate, None
+    n_frames = len(data)
+    has_points = bool(rec.get("point_labels"))
+    if has_points and n_frames != rec["points"].shape[0]:
+        raise fail(
+            "E501",
+            f"{p.name}: Segments hold {n_frames} frames, Trajectories {rec['points'].shape[0]}",
+            file=str(p),
+            expected=rec["points"].shape[0],
+            found=n_frames,
         )
-    return Recording(**rec)
+    rec.update(body_labels=names, body_positions=np.stack(pos, axis=1), body_rotations=np.stack(rot, axis=1), point_units=unit)
+    if not has_points:
+        rec["points"] = np.zeros((n_frames, 0, 3))
+    frames: np.ndarray = data[:, 0]
+    return rate, frames
+
+
+def _nexus_devices(sections: NexusSections, p: Path, point_rate: float) -> dict[str, Any]:
+    """The analog channels of a Nexus export's ``Devices`` (spec §5.10), labelled ``<device> - <column>``, with
+    their rate (Hz) and first sample on the analog clock (frames count from 1, sub-frames from 0)."""
+    rate, labels, columns, units, first, body = sections["Devices"]
+    data = _table(body, ",", p, first, len(columns))
+    an_labels, an_units, values = [], [], []
+    for label, cols in _groups(labels, columns):
+        for column, j in cols.items():
+            an_labels.append(f"{label} - {column}")
+            an_units.append(units[j] if j < len(units) else "")
+            values.append(data[:, j])
+    per_frame = int(round(rate / point_rate)) if point_rate else 1
+    first_sample = (int(data[0, 0]) - 1) * per_frame + int(data[0, 1]) if len(data) else 0
+    return {
+        "analog_labels": an_labels,
+        "analog_units": an_units,
+        "analog_rate": rate,
+        "analog_first_sample": first_sample,
+        "analogs": np.array(values) if values else np.zeros((0, len(data))),
+    }
 
 
 READERS: dict[str, Callable[..., Recording]] = {"tsv": read_qualisys_tsv, "motive": read_motive_csv, "nexus": read_nexus_csv}
