@@ -157,24 +157,7 @@ class DossierSimulator:
             res = simulate_passive(self.twin, t1k, traj.position_W[::step], traj.quaternion_W[::step])
         streams, rates, entities, offsets = _no_streams()
         loads = rg.HandleLoads(res.force_W, res.torque_W)
-        gain = trial_ft_gain(cfg, self.opt.seed, p.trial_id)
-        streams["handle_wrench"] = {
-            "t": t1k,
-            **rg.handle_wrench(
-                rng_rig,
-                cfg,
-                position_W=traj.position_W,
-                quaternion_W=traj.quaternion_W,
-                rate_hz=traj.rate_hz,
-                loads=loads,
-                bias_force=self.bias_f,
-                bias_torque=self.bias_t,
-                connector_mass=self.conn_m,
-                connector_com_S=self.conn_r,
-                gain=gain,
-            ),
-        }
-        rates["handle_wrench"] = cfg.ft_rate_hz
+        gain = self._handle_wrench(streams, rates, p, traj, t1k, rng_rig, loads)
         vib = device_vibration(self.twin, traj.t, traj.speed(), rng_vib)
         accel_truth = self._accel(streams, rates, offsets, traj, rng_rig, vib)
         streams["plate_wrench"] = {
@@ -256,11 +239,10 @@ class DossierSimulator:
         truth = {"examiner": traj.meta, "clock_offsets_s": offsets}
         return TrialOutput(p, False, streams, rates, entities, None, truth, arrays, float(traj.t[-1]))
 
-    def _handle_calibration(self, p, t0, rng_ex, rng_rig, rng_vib) -> TrialOutput:
-        traj = ex.handle_rotation(rng_ex, self.opt.duration(p.name), rate_hz=self.opt.rate_hz, t0=t0)
+    def _handle_wrench(self, streams, rates, p, traj, t1k, rng_rig, loads) -> float:
+        """The trial's handle_wrench stream at the F/T rate: the hand's ``loads`` (None: the handle alone) with the
+        session's biases, connector and the trial's F/T gain, which it returns."""
         cfg = self.cfg
-        streams, rates, entities, offsets = _no_streams()
-        t1k = traj.t[:: rg.decimation(traj.rate_hz, cfg.ft_rate_hz)]
         gain = trial_ft_gain(cfg, self.opt.seed, p.trial_id)
         streams["handle_wrench"] = {
             "t": t1k,
@@ -270,7 +252,7 @@ class DossierSimulator:
                 position_W=traj.position_W,
                 quaternion_W=traj.quaternion_W,
                 rate_hz=traj.rate_hz,
-                loads=None,
+                loads=loads,
                 bias_force=self.bias_f,
                 bias_torque=self.bias_t,
                 connector_mass=self.conn_m,
@@ -279,6 +261,14 @@ class DossierSimulator:
             ),
         }
         rates["handle_wrench"] = cfg.ft_rate_hz
+        return gain
+
+    def _handle_calibration(self, p, t0, rng_ex, rng_rig, rng_vib) -> TrialOutput:
+        traj = ex.handle_rotation(rng_ex, self.opt.duration(p.name), rate_hz=self.opt.rate_hz, t0=t0)
+        cfg = self.cfg
+        streams, rates, entities, offsets = _no_streams()
+        t1k = traj.t[:: rg.decimation(traj.rate_hz, cfg.ft_rate_hz)]
+        gain = self._handle_wrench(streams, rates, p, traj, t1k, rng_rig, None)
         accel_truth = self._accel(streams, rates, offsets, traj, rng_rig, None)
         self._handle_pose(streams, rates, offsets, traj, rng_rig)
         self._sync(streams, rates, t1k, t0)

@@ -339,6 +339,15 @@ def _rigid_part_of(twin, jp: _JointPath, t: np.ndarray, quaternion_W: np.ndarray
     return _MEMO.put(key, _rigid_part(twin, jp.kin, t, jp.q, jp.qd, jp.qdd, quaternion_W, jp.gimbal, jp.frames))
 
 
+def _world_wrenches(twin, jp: _JointPath, t: np.ndarray, quaternion_W: np.ndarray, tau_joint: np.ndarray):
+    """The hand's force and torque and the base's force and moment in W (N, N·m) when the drives apply
+    ``tau_joint`` along the joint path, and the joint torques (:func:`_hand_wrench_from_drive`)."""
+    fh, th, fp, tp, jt = _hand_wrench_from_drive(twin, _rigid_part_of(twin, jp, t, quaternion_W), tau_joint)
+    f_w, m_w = _to_world(twin, fh, th, about_origin_D=False)
+    bf_w, bm_w = _to_world(twin, fp, tp)
+    return f_w, m_w, bf_w, bm_w, jt
+
+
 def simulate_passive(twin: TwinFile, t: np.ndarray, position_W: np.ndarray, quaternion_W: np.ndarray) -> PassiveResult:
     """Simulate the powered-off device moved by the examiner's hand (design §4; TWIN.md, Physics).
 
@@ -357,9 +366,7 @@ def simulate_passive(twin: TwinFile, t: np.ndarray, position_W: np.ndarray, quat
     else:  # rigid cables (or massless rotors): friction and rotor inertia reach the links directly
         tau_axis = drive_friction(twin, th_d, rows_times(q, c.T)) - j_refl * th_dd
     tau_joint = rows_times(tau_axis, c)
-    fh, th, fp, tp, jt = _hand_wrench_from_drive(twin, _rigid_part_of(twin, jp, t, quaternion_W), tau_joint)
-    f_w, m_w = _to_world(twin, fh, th, about_origin_D=False)
-    bf_w, bm_w = _to_world(twin, fp, tp)
+    f_w, m_w, bf_w, bm_w, jt = _world_wrenches(twin, jp, t, quaternion_W, tau_joint)
     return PassiveResult(
         t=t,
         q=q,
@@ -491,9 +498,7 @@ def simulate_active(
         p_enc = ref.forward_positions(nom, enc_q)
 
     tau_joint = rows_times(cable, c)
-    fh, th, fp, tp, _ = _hand_wrench_from_drive(twin, _rigid_part_of(twin, jp, t, quat_W), tau_joint)
-    f_w, m_w = _to_world(twin, fh, th, about_origin_D=False)
-    bf_w, bm_w = _to_world(twin, fp, tp)
+    f_w, m_w, bf_w, bm_w, _ = _world_wrenches(twin, jp, t, quat_W, tau_joint)
     commanded = np.concatenate([rows_times(f_cmd_D, r_wd.T), np.zeros((n_s, 3))], axis=1)
     p_enc_W = rows_times(p_enc, r_wd.T) + t_wd
     return ActiveResult(
