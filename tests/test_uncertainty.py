@@ -387,7 +387,9 @@ def test_bias_estimate_is_the_mean_over_trials_and_never_negative(monkeypatch):
         )
 
     def estimate(trials, seed):
-        return unc.bias_estimate(ctx, None, rec(trials), np.random.default_rng(seed), 48).estimate
+        got = unc.noise_maximum_bias(ctx, None, rec(trials), np.random.default_rng(seed), 48)
+        assert got is not None
+        return got.estimate
 
     flat = np.mean([unc.noise_maximum_excess(plateau, unc.force_noise(GRID, 1000.0, 48, np.random.default_rng(9)), 0.004)])
     assert estimate(["b"], 9) == pytest.approx(flat, rel=1e-12)  # the force figure is component 0
@@ -408,7 +410,103 @@ def test_attach_adds_the_one_sided_bias_to_U(two_rep_free_space, monkeypatch):
     assert rec.U == pytest.approx(rec.k * rec.u + 0.01, rel=1e-12) and rec.bias.estimate == 0.01
 
 
-def test_only_the_peak_force_names_the_noise_maximum():
+def test_the_biases_are_named_by_the_metrics_they_affect():
     d = unc.definitions()
-    assert {m for m, x in d.metrics.items() if x.bias} == {"stiffness.peak_force"}
-    assert all(x.bias in d.biases for x in d.metrics.values() if x.bias)
+    named = {m: x.bias for m, x in d.metrics.items() if x.bias}
+    assert named == {
+        "stiffness.peak_force": "noise_maximum",
+        "workspace.measured_volume": "mocap_noise",
+        "workspace.volume_ratio": "mocap_noise",
+        "workspace.coverage": "mocap_noise",
+    }
+    assert set(named.values()) == set(d.biases)
+
+
+# --- the motion-capture noise through a cloud's metrics (§19.3) ----------------------------------------
+
+
+def smooth_track(n: int = 6000, rate_hz: float = 100.0) -> np.ndarray:
+    """A hand's path at ``rate_hz`` (m, W): slow sinusoids of a few cm, jerk ≲ 1 m/s³."""
+    t = np.arange(n) / rate_hz
+    return np.column_stack([0.05 * np.sin(0.7 * t), 0.04 * np.cos(0.5 * t + 1.0), 0.15 + 0.03 * np.sin(0.9 * t)])
+
+
+@settings(max_examples=20, deadline=None)
+@given(
+    sd=st.tuples(*[st.floats(2e-5, 5e-4)] * 3),
+    shift=st.tuples(*[st.floats(-1.0, 1.0)] * 3),
+    seed=st.integers(0, 2**31),
+)
+def test_track_noise_sd_recovers_white_noise_on_a_smooth_path(sd, shift, seed):
+    """Known noise on a smooth path: the estimate per axis is within 6 % (6000 samples: the MAD's scatter is
+    about 1.7 %; the path's jerk adds < 1e-6 m to a third difference), wherever the path lies."""
+    rng = np.random.default_rng(seed)
+    track = smooth_track() + np.asarray(shift) + rng.standard_normal((6000, 3)) * np.asarray(sd)
+    assert unc.track_noise_sd(track) == pytest.approx(np.asarray(sd), rel=0.06)
+
+
+def test_track_noise_sd_skips_occlusions_and_needs_enough_differences():
+    sd = np.array([1e-4, 2e-4, 5e-5])
+    track = smooth_track() + np.random.default_rng(3).standard_normal((6000, 3)) * sd
+    track[::7] = np.nan  # every seventh row occluded: no difference spans one
+    assert unc.track_noise_sd(track) == pytest.approx(sd, rel=0.06)
+    assert np.all(np.isnan(unc.track_noise_sd(smooth_track(int(unc.up("min_noise_differences")) + 2))))
+    assert unc.track_noise_sd(smooth_track(int(unc.up("min_noise_differences")) + 3)) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_mocap_noise_bias_is_the_mean_shift_of_the_recomputed_values(monkeypatch):
+    """b of a cloud metric: per trial the mean of its recomputations with the track's noise added once more, less
+    the trial's value; then the mean over the trials, signed (spec §19.3). The recomputations see the track's
+    own noise sd and are shared by the family's metrics."""
+    from types import SimpleNamespace
+
+    from haptify import workspace
+    from haptify.results import MetricResult
+
+    sd = {"a": np.array([1e-4, 1e-4, 1e-4]), "b": np.array([2e-4, 2e-4, 2e-4])}
+    tracks = {
+        tid: (None, smooth_track() + np.random.default_rng(i).standard_normal((6000, 3)) * s)
+        for i, (tid, s) in enumerate(sd.items())
+    }
+    seen = []
+
+    def noisy(ctx, trial_id, noise_sd, rng):
+        seen.append((trial_id, noise_sd))
+        shift = {"a": -3e-6, "b": -1e-6}[trial_id] + rng.normal(0.0, 1e-9)
+        return {"workspace.measured_volume": 0.0116 + shift, "workspace.volume_ratio": (0.0116 + shift) / 0.0134}
+
+    monkeypatch.setattr(workspace, "trial_track", lambda ctx, tid: tracks[tid])
+    monkeypatch.setattr(workspace, "noisy_trial_values", noisy)
+    ctx = ComputeContext(session=SimpleNamespace())
+
+    def rec(metric_id, values):
+        return MetricResult(
+            id=metric_id,
+            value=float(np.mean(values)),
+            unit="1",
+            per_repetition=values,
+            n=2,
+            sd=float(np.std(values, ddof=1)),
+            trials=["a", "b"],
+            definition_version="1.0.0",
+        )
+
+    volume = unc.mocap_noise_bias(ctx, rec("workspace.measured_volume", [0.0116, 0.0116]), 2, 7)
+    assert volume.estimate == pytest.approx(-2e-6, abs=1e-8) and volume.source == "mocap_noise"
+    assert volume.u_input == pytest.approx(1.5e-4, rel=0.06)
+    ratio = unc.mocap_noise_bias(ctx, rec("workspace.volume_ratio", [0.0116 / 0.0134] * 2), 2, 7)
+    assert ratio.estimate == pytest.approx(-2e-6 / 0.0134, rel=1e-3)
+    assert len(seen) == 4  # 2 trials × 2 draws, shared by both metrics
+    assert [np.mean(s) for _, s in seen[::2]] == pytest.approx([1e-4, 2e-4], rel=0.06)
+
+
+def test_attach_adds_the_magnitude_of_a_negative_bias_to_U(two_rep_free_space, monkeypatch):
+    from haptify.results import UncorrectedBias
+
+    ctx = ComputeContext(session=open_session(two_rep_free_space))
+    res = compute_session(ctx.session, ["free_space.force_mean"], ctx=ctx)
+    monkeypatch.setattr(
+        unc, "bias_estimate", lambda *a: UncorrectedBias(source="mocap_noise", estimate=-0.01, u_input=1e-4, unit="m")
+    )
+    rec = unc.attach(ctx, res).get("free_space.force_mean").uncertainty
+    assert rec.U == pytest.approx(rec.k * rec.u + 0.01, rel=1e-12) and rec.bias.estimate == -0.01

@@ -590,10 +590,28 @@ def test_a_session_repairs_each_trial_from_the_others_and_reports_the_donors(tmp
     repair = measured.diagnostics["repair_points"]
     assert repair[0] > 0 and repair[1] == 0
     assert any(w.code == "W413" and w.trial == "workspace-3" and "E313" in w.message for w in ctx.warnings)
-    # spec §19.1: the coverage of the repaired trials carries a Type A record (its arithmetic: tests/test_uncertainty.py);
-    # the measured volume reports none (it under-covers in the coverage study)
+    # spec §19.1, §19.3: the repaired trials' metrics carry a Type A record and the mocap_noise bias (its arithmetic:
+    # tests/test_uncertainty.py); these noise-free sweeps have no track noise, so the bias is nil
     res = compute_session(ctx.session, ["workspace.measured_volume", "workspace.coverage"], uncertainty=True)
-    rec = res.get("workspace.coverage")
-    assert rec.trials == ["workspace-1", "workspace-2"]
-    assert rec.uncertainty.method == "type_a" and [t.source for t in rec.uncertainty.budget] == ["repeatability"]
-    assert res.get("workspace.measured_volume").uncertainty is None
+    for metric_id in ("workspace.measured_volume", "workspace.coverage"):
+        rec = res.get(metric_id)
+        assert rec.trials == ["workspace-1", "workspace-2"]
+        assert rec.uncertainty.method == "type_a" and [t.source for t in rec.uncertainty.budget] == ["repeatability"]
+        bias = rec.uncertainty.bias
+        assert bias.source == "mocap_noise" and bias.u_input < 1e-6
+        assert abs(bias.estimate) <= 1e-4 * rec.value
+        assert rec.uncertainty.U == pytest.approx(rec.uncertainty.k * rec.uncertainty.u + abs(bias.estimate), rel=1e-12)
+
+
+def test_strokes_farther_apart_than_the_normal_radius_take_the_indicator_normal():
+    """A sphere swept by a spiral whose turns lie farther apart than the normal radius: each boundary sample's
+    neighbours lie along one stroke, whose plane fit says nothing of the surface (spec §8.4 step 5,
+    ``min_normal_planarity``). With the smoothed-indicator normal the volume is within 0.6 % of 4/3 π r³ (1 %
+    over it when the line's curvature sets the normal), and white noise of 0.1 mm moves it by under 0.1 %."""
+    radius, centre = 0.1, np.array([0.0, 0.0, 0.15])
+    sweep = sphere_sweep(20000, 20, radius, centre, 0.3)  # turns 1.6 cm apart: 6 voxels, > normal_radius_voxels
+    exact = 4 / 3 * math.pi * radius**3
+    clean = volume_solid(sweep).volume
+    assert clean == pytest.approx(exact, rel=6e-3)
+    noisy = volume_solid(sweep + np.random.default_rng(2).normal(0.0, 1e-4, sweep.shape)).volume
+    assert noisy == pytest.approx(clean, rel=1e-3)

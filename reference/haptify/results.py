@@ -37,13 +37,18 @@ class BudgetTerm(BaseModel):
 
 
 class UncorrectedBias(BaseModel):
-    """A one-sided systematic effect the value keeps (spec §19.3): the value reads high by about ``estimate``,
-    which U includes (GUM F.2.4.5)."""
+    """A systematic effect the value keeps (spec §19.3): the value reads off the measurand by about
+    ``estimate``, whose magnitude U includes (GUM F.2.4.5)."""
 
     model_config = ConfigDict(extra="forbid")
-    source: str = Field(description="A bias id of uncertainty.json (noise_maximum).")
-    estimate: float = Field(ge=0, description="How far the value reads above the measurand, in the metric's unit.")
-    u_input: float = Field(ge=0, description="The input the estimate rests on (noise_maximum: the force noise's sd), in 'unit'.")
+    source: str = Field(description="A bias id of uncertainty.json (noise_maximum, mocap_noise).")
+    estimate: float = Field(
+        description="How far the value reads above (positive) or below (negative) the measurand, in the metric's unit."
+    )
+    u_input: float = Field(
+        ge=0,
+        description="The input the estimate rests on (noise_maximum: the force noise's sd; mocap_noise: the track's noise sd), in 'unit'.",
+    )
     unit: str = Field(description="Unit of u_input.")
 
 
@@ -56,13 +61,15 @@ class MetricUncertainty(BaseModel):
         description="type_a: repetitions only; type_a_mc: plus Monte Carlo Type B (§19.3)."
     )
     u: Value = Field(description="Combined standard uncertainty, in the metric's unit (per component for a vector).")
-    U: Value = Field(description="Expanded uncertainty k·u, plus bias.estimate when a one-sided bias is named.")
+    U: Value = Field(description="Expanded uncertainty k·u, plus |bias.estimate| when a bias is named.")
     k: float = Field(gt=0, description="Coverage factor: Student's t at dof_eff for the coverage probability.")
     coverage_probability: float = Field(gt=0, lt=1)
     dof_eff: float | None = Field(None, gt=0, description="Effective degrees of freedom (GUM G.4); absent: infinite.")
     budget: list[BudgetTerm]
     mc_draws: int | None = Field(None, ge=2, description="Monte Carlo draws behind the Type B terms.")
-    bias: UncorrectedBias | None = Field(None, description="A one-sided effect the value keeps, included in U (§19.3).")
+    bias: UncorrectedBias | None = Field(
+        None, description="A systematic effect the value keeps, its magnitude included in U (§19.3)."
+    )
     sources_missing: list[str] = Field(
         default_factory=list,
         description="Type B sources of the method this session's rig figures could not give (left out of u).",

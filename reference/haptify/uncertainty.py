@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import importlib
 import math
+import zlib
 from dataclasses import dataclass, replace
 from functools import lru_cache
 from typing import Any, Callable, Literal, Sequence
@@ -51,11 +52,14 @@ class Source(BaseModel):
 
 
 class Bias(BaseModel):
-    """A one-sided systematic effect a metric's value keeps (spec §19.3): its estimate, from a rig figure of
-    the same session, is added to U (GUM F.2.4.5)."""
+    """A systematic effect a metric's value keeps (spec §19.3): its estimate, from a rig figure of the same
+    session or from the trial's own recording, is added to U (GUM F.2.4.5)."""
 
     model_config = ConfigDict(extra="forbid")
-    figure: str = Field(description="The rig metric whose value is the effect's input (noise_maximum: the force noise's sd).")
+    figure: str | None = Field(
+        description="The rig metric whose value is the effect's input (noise_maximum: the force noise's sd); null "
+        "when the input is measured from the trial's own recording (mocap_noise: the track's noise, §19.3)."
+    )
     component: int | None = Field(description="Which component of a vector figure; null for a scalar.")
     unit: str
     description: str
@@ -69,7 +73,9 @@ class MetricMethod(BaseModel):
     model_config = ConfigDict(extra="forbid")
     method: Literal["type_a", "type_a_mc", "none"]
     sources: list[str] = Field(default_factory=list, description="Type B sources, for type_a_mc.")
-    bias: Literal["noise_maximum"] | None = Field(None, description="A one-sided effect left in the value, added to U (§19.3).")
+    bias: Literal["noise_maximum", "mocap_noise"] | None = Field(
+        None, description="A systematic effect left in the value, its estimate added to U (§19.3)."
+    )
     reason: str | None = Field(None, description="Why Type B is not propagated (type_a) or nothing applies (none).")
 
 
@@ -228,6 +234,7 @@ SHARED_KEYS = frozenset(
         "vibration",
         "free_space_plate",
         "workspace_model",
+        "workspace_cloud",
         "workspace_solid",
         "workspace_track",
         "dynamics_model",
@@ -366,16 +373,14 @@ def noise_maximum_excess(f: np.ndarray, noise: np.ndarray, sigma: float) -> floa
     return (added - float(np.max(f))) / (math.sqrt(2.0) - 1.0)
 
 
-def bias_estimate(
+def noise_maximum_bias(
     ctx: Any, results: ResultsFile, result: MetricResult, rng: np.random.Generator, draws: int
 ) -> UncorrectedBias | None:
     """The ``noise_maximum`` bias of ``result`` (spec §19.3): per trial the mean over its maxima of
     :func:`noise_maximum_excess` (the family's ``maximum_windows``), then the mean over the trials the value
     rests on, at least 0 (a maximum never reads low on average). None when the figure is missing."""
-    name = method_of(result.id).bias
-    if name is None:
-        return None
-    spec = definitions().biases[name]
+    spec = definitions().biases["noise_maximum"]
+    assert spec.figure is not None  # noise_maximum rests on a rig figure (uncertainty.json)
     fig = rig_figure(ctx, results, spec.figure)
     if fig is None:
         return None
@@ -387,7 +392,72 @@ def bias_estimate(
         per_trial.append(
             np.mean([noise_maximum_excess(f, force_noise(t, rate, draws, rng), sigma) for t, f in windows(ctx, trial_id)])
         )
-    return UncorrectedBias(source=name, estimate=max(0.0, float(np.mean(per_trial))), u_input=sigma, unit=spec.unit)
+    return UncorrectedBias(source="noise_maximum", estimate=max(0.0, float(np.mean(per_trial))), u_input=sigma, unit=spec.unit)
+
+
+# --- a systematic effect of the motion-capture noise on a cloud's metrics (spec §19.3) ---------------
+
+
+def track_noise_sd(position: np.ndarray) -> np.ndarray:
+    """Per-axis standard deviation (m) of the white noise on a motion-capture track ``(N, 3)`` in time order,
+    NaN rows occluded (spec §19.3): the median absolute deviation (× 1.4826) of its third differences over
+    √20 (white noise of sd σ gives third differences of variance 20σ²; a smooth path adds only its jerk
+    times the sample interval cubed). NaN per axis with fewer than ``min_noise_differences`` differences."""
+    d3 = np.diff(np.asarray(position, dtype=float), n=3, axis=0)
+    d3 = d3[np.all(np.isfinite(d3), axis=1)]
+    if len(d3) < int(up("min_noise_differences")):
+        return np.full(3, math.nan)
+    mad = np.median(np.abs(d3 - np.median(d3, axis=0)), axis=0)
+    sd: np.ndarray = 1.4826 * mad / math.sqrt(20.0)
+    return sd
+
+
+def mocap_noise_draws(ctx: Any, family: Any, trial_id: str, draws: int, seed: int) -> tuple[np.ndarray, list[dict[str, float]]]:
+    """The trial's track noise sd (m, per axis; :func:`track_noise_sd`) and ``draws`` recomputations of the
+    family's per-trial values with noise of that sd added once more to its cloud (spec §19.3), cached per
+    trial so that every metric of the family shares them. The noise of a trial is drawn from numpy's
+    ``default_rng([seed, 2, crc32(trial id)])``."""
+
+    def build() -> tuple[np.ndarray, list[dict[str, float]]]:
+        sigma = track_noise_sd(family.trial_track(ctx, trial_id)[1])
+        if not np.all(np.isfinite(sigma)):
+            return sigma, []
+        rng = np.random.default_rng([seed, 2, zlib.crc32(trial_id.encode())])
+        return sigma, [family.noisy_trial_values(ctx, trial_id, sigma, rng) for _ in range(draws)]
+
+    cached: tuple[np.ndarray, list[dict[str, float]]] = ctx.cached(("mocap_noise_draws", trial_id, draws, seed), build)
+    return cached
+
+
+def mocap_noise_bias(ctx: Any, result: MetricResult, draws: int, seed: int) -> UncorrectedBias | None:
+    """The ``mocap_noise`` bias of ``result`` (spec §19.3) by SIMEX: per trial, Δ = the mean of the value
+    recomputed with the track's own noise added once more (:func:`mocap_noise_draws`) less the trial's value;
+    the effect grows as the noise's variance, so Δ estimates it at the recorded noise. The mean Δ over the
+    trials the value rests on, signed; None when a track's noise cannot be estimated."""
+    family = importlib.import_module(family_module(result.id))
+    shifts, sigmas = [], []
+    for trial_id, value in zip(result.trials, result.per_repetition):
+        sigma, values = mocap_noise_draws(ctx, family, trial_id, draws, seed)
+        if not values:
+            return None
+        shifts.append(float(np.mean([v[result.id] for v in values])) - scalar(value, None))
+        sigmas.append(float(np.sqrt(np.mean(sigma**2))))
+    unit = definitions().biases["mocap_noise"].unit
+    return UncorrectedBias(source="mocap_noise", estimate=float(np.mean(shifts)), u_input=float(np.mean(sigmas)), unit=unit)
+
+
+def bias_estimate(
+    ctx: Any, results: ResultsFile, result: MetricResult, rng: np.random.Generator, draws: int, seed: int
+) -> UncorrectedBias | None:
+    """The estimate of the bias ``result``'s method names (spec §19.3), or None when it names none or its
+    input is missing: ``noise_maximum`` with the force-noise generator ``rng`` and ``draws`` draws,
+    ``mocap_noise`` with ``noise_bias_draws`` recomputations per trial."""
+    name = method_of(result.id).bias
+    if name == "noise_maximum":
+        return noise_maximum_bias(ctx, results, result, rng, draws)
+    if name == "mocap_noise":
+        return mocap_noise_bias(ctx, result, int(up("noise_bias_draws")), seed)
+    return None
 
 
 def repeatability_term(result: MetricResult) -> BudgetTerm:
@@ -413,7 +483,7 @@ def repeatability_term(result: MetricResult) -> BudgetTerm:
 
 def attach(ctx: Any, results: ResultsFile, *, draws: int | None = None, seed: int | None = None) -> ResultsFile:
     """Give every metric of ``results`` its uncertainty record where its method applies (spec §19.4);
-    U = k·u, plus the estimate of the one-sided bias the method names (§19.3).
+    U = k·u, plus the magnitude of the estimate of the bias the method names (§19.3).
 
     A metric with fewer than two repetitions gets none (Type A cannot be evaluated, §19.2). The Type B
     inputs are drawn once for the session; the metrics with the same sources share one Monte Carlo run
@@ -421,10 +491,11 @@ def attach(ctx: Any, results: ResultsFile, *, draws: int | None = None, seed: in
     """
     p = float(up("coverage_probability"))
     m = int(up("mc_draws") if draws is None else draws)
+    seed = int(up("mc_seed") if seed is None else seed)
     eligible = [r for r in results.metrics if method_of(r.id).method != "none" and r.sd is not None]
     mc = [r for r in eligible if method_of(r.id).method == "type_a_mc"]
     inputs, missing = session_inputs(ctx, results, sorted({s for r in mc for s in method_of(r.id).sources}))
-    x = draw_inputs(inputs, m, np.random.default_rng(int(up("mc_seed") if seed is None else seed)))
+    x = draw_inputs(inputs, m, np.random.default_rng(seed))
     columns, col = {}, 0
     for inp in inputs:
         columns[inp.source] = np.arange(col, col + inp.dimension)
@@ -440,18 +511,18 @@ def attach(ctx: Any, results: ResultsFile, *, draws: int | None = None, seed: in
         xg = x[:, np.concatenate([columns[s.source] for s in mine])]
         ys = draw_values(ctx, [r.id for r in members], mine, xg)
         samples.update({r.id: (mine, xg, ys[r.id]) for r in members})
-    noise_rng = np.random.default_rng([int(up("mc_seed") if seed is None else seed), 1])
+    noise_rng = np.random.default_rng([seed, 1])
     for r in eligible:
         method = method_of(r.id)
         terms = [repeatability_term(r)]
         if r.id in samples:
             terms += mc_terms(*samples[r.id])
         u, big_u, k, nu = combine(terms, p)
-        bias = bias_estimate(ctx, results, r, noise_rng, m)
+        bias = bias_estimate(ctx, results, r, noise_rng, m, seed)
         r.uncertainty = MetricUncertainty(
             method=method.method,
             u=u,
-            U=big_u + bias.estimate if bias is not None else big_u,
+            U=big_u + abs(bias.estimate) if bias is not None else big_u,
             bias=bias,
             k=k,
             coverage_probability=p,

@@ -162,7 +162,8 @@ def _band_fractions(
     of the smallest eigenvalue of the covariance of its ``normal_neighbours`` nearest samples within
     ``normal_radius_voxels`` (a local plane fit), oriented along the outward direction −∇ of the coarse
     solid's indicator smoothed by a Gaussian (central differences at the sample's coarse voxel); with
-    fewer than ``min_normal_neighbours`` neighbours, −∇ itself.
+    fewer than ``min_normal_neighbours`` neighbours, or neighbours along a line (second-largest eigenvalue
+    below ``min_normal_planarity`` times the largest), −∇ itself.
     A band voxel with centre c takes the nearest sample p within ``surface_search_voxels`` and its normal
     n: signed depth s = (p − c)·n, fraction clip(1/2 + s / (h‖n‖₁), 0, 1). Without a sample in reach
     the voxel keeps its solid indicator (0 or 1); the nearest sample is searched only for the voxels of
@@ -192,10 +193,11 @@ def _band_fractions(
     nb = samples[np.where(w > 0, j, 0)]
     mean = (nb * w[..., None]).sum(axis=1) / count[:, None]
     dev = (nb - mean[:, None, :]) * w[..., None]
-    _, vecs = np.linalg.eigh(np.einsum("nki,nkj->nij", dev, dev))
+    spread, vecs = np.linalg.eigh(np.einsum("nki,nkj->nij", dev, dev))
     normal = vecs[:, :, 0]
     normal = np.where((np.sum(normal * outward, axis=1) < 0)[:, None], -normal, normal)
-    normal = np.where((count < int(wp("min_normal_neighbours")))[:, None], outward, normal)
+    untrusted = (count < int(wp("min_normal_neighbours"))) | (spread[:, 1] < float(wp("min_normal_planarity")) * spread[:, 2])
+    normal = np.where(untrusted[:, None], outward, normal)
 
     reach = float(wp("surface_search_voxels"))
     searched = np.repeat(_blocks_near(band_c.shape, ijk, c, reach)[band_c], c**3)
@@ -464,7 +466,7 @@ def _modeled(ctx: Any, device: Any, placement: Any) -> tuple[VoxelSolid | None, 
     return model, model_error
 
 
-def _track(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
+def trial_track(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
     """Times (s) and gimbal-centre positions (m, W; NaN where occluded) of a workspace trial, cached."""
     track: tuple[np.ndarray, np.ndarray] = ctx.cached(
         ("workspace_track", trial_id),
@@ -473,29 +475,58 @@ def _track(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
     return track
 
 
+def trial_cloud(ctx: Any, trials: list[str], trial_id: str) -> tuple[np.ndarray, int]:
+    """A trial's cloud (m, W) repaired from the other trials ``trials`` and how many donors it took (spec §8.7),
+    cached. The trial itself must hold ``min_points`` finite positions (E313); a donor trial that cannot be
+    read gives nothing."""
+
+    def build() -> tuple[np.ndarray, int]:
+        t, position = trial_track(ctx, trial_id)
+        own = int(np.all(np.isfinite(position), axis=1).sum())
+        if own < int(wp("min_points")):
+            raise fail(
+                "E313",
+                f"a workspace cloud needs at least {wp('min_points')} finite points",
+                expected=f">= {wp('min_points')}",
+                found=own,
+            )
+        donors = []
+        for other in trials:
+            if other == trial_id:
+                continue
+            try:
+                q = trial_track(ctx, other)[1]
+            except HaptifyError:
+                continue
+            donors.append(q[np.all(np.isfinite(q), axis=1)])
+        return repaired_points(t, position, np.concatenate(donors) if donors else np.zeros((0, 3)))
+
+    cloud: tuple[np.ndarray, int] = ctx.cached(("workspace_cloud", trial_id), build)
+    return cloud
+
+
 def trial_solid(ctx: Any, trials: list[str], trial_id: str) -> VoxelSolid:
-    """The volume operator on a trial's cloud repaired from the other trials (spec §8.7). The trial itself
-    must hold ``min_points`` finite positions (E313); a donor trial that cannot be read gives nothing."""
-    t, position = _track(ctx, trial_id)
-    own = int(np.all(np.isfinite(position), axis=1).sum())
-    if own < int(wp("min_points")):
-        raise fail(
-            "E313",
-            f"a workspace cloud needs at least {wp('min_points')} finite points",
-            expected=f">= {wp('min_points')}",
-            found=own,
-        )
-    donors = []
-    for other in trials:
-        if other == trial_id:
-            continue
-        try:
-            q = _track(ctx, other)[1]
-        except HaptifyError:
-            continue
-        donors.append(q[np.all(np.isfinite(q), axis=1)])
-    cloud, taken = repaired_points(t, position, np.concatenate(donors) if donors else np.zeros((0, 3)))
+    """The volume operator on a trial's repaired cloud (:func:`trial_cloud`, spec §8.7)."""
+    cloud, taken = trial_cloud(ctx, trials, trial_id)
     return replace(volume_solid(cloud), repair_points=taken)
+
+
+def trial_values(solid: VoxelSolid, model: VoxelSolid | None) -> dict[str, float]:
+    """One trial's measured_volume (m³) and, with the modeled solid, its volume_ratio and coverage (spec §8.7)."""
+    values = {"workspace.measured_volume": solid.volume}
+    if model is not None:
+        values["workspace.volume_ratio"] = solid.volume / model.volume
+        values["workspace.coverage"] = overlap_volume(solid, model) / model.volume
+    return values
+
+
+def noisy_trial_values(ctx: Any, trial_id: str, noise_sd: np.ndarray, rng: np.random.Generator) -> dict[str, float]:
+    """:func:`trial_values` of a trial's repaired cloud with white Gaussian noise of sd ``noise_sd`` (m, per
+    axis of W) added to every point: one draw of the motion-capture noise's SIMEX bias (spec §19.3)."""
+    trials = [t.id for t in ctx.session.trials_of(PROTOCOL)]
+    cloud, _ = trial_cloud(ctx, trials, trial_id)
+    model, _ = _modeled(ctx, ctx.session.device(), ctx.session.manifest.device_placement)
+    return trial_values(volume_solid(cloud + rng.standard_normal(cloud.shape) * noise_sd), model)
 
 
 def compute(ctx: Any) -> list[MetricResult | Unavailable]:
@@ -567,7 +598,7 @@ def compute(ctx: Any) -> list[MetricResult | Unavailable]:
             diagnostics={
                 "hull_volume_m3": [s.hull_volume for s in solids.values()],
                 "points": [s.n_points for s in solids.values()],
-                "longest_occlusion_gap_m": [longest_occlusion_gap(_track(ctx, tid)[1]) for tid in solids],
+                "longest_occlusion_gap_m": [longest_occlusion_gap(trial_track(ctx, tid)[1]) for tid in solids],
                 "repair_points": [s.repair_points for s in solids.values()],
             },
         )
@@ -576,18 +607,9 @@ def compute(ctx: Any) -> list[MetricResult | Unavailable]:
         if model_error is None:  # neither ratio nor coverage was asked for
             return out
         return out + [unavailable(m, model_error) for m in ("workspace.volume_ratio", "workspace.coverage")]
-    out.append(
-        aggregate(
-            FAMILY, "workspace.volume_ratio", [TrialValue(tid, s.volume / model.volume, codes[tid]) for tid, s in solids.items()]
-        )
-    )
-    out.append(
-        aggregate(
-            FAMILY,
-            "workspace.coverage",
-            [TrialValue(tid, overlap_volume(s, model) / model.volume, codes[tid]) for tid, s in solids.items()],
-        )
-    )
+    values = {tid: trial_values(s, model) for tid, s in solids.items()}
+    for metric_id in ("workspace.volume_ratio", "workspace.coverage"):
+        out.append(aggregate(FAMILY, metric_id, [TrialValue(tid, v[metric_id], codes[tid]) for tid, v in values.items()]))
     return out
 
 

@@ -133,14 +133,19 @@ def uncertainty_table() -> str:
         ],
     )
     out += "\n" + _table(
-        ["one-sided bias", "figure (component)", "unit", "meaning"],
+        ["bias", "figure (component)", "unit", "meaning"],
         [
-            [f"`{k}`", f"`{b.figure}`" + ("" if b.component is None else f" ({b.component})"), b.unit, b.description]
+            [
+                f"`{k}`",
+                ("the trial's own track" if b.figure is None else f"`{b.figure}`") + ("" if b.component is None else f" ({b.component})"),
+                b.unit,
+                b.description,
+            ]
             for k, b in d.biases.items()
         ],
     )
     out += "\n" + _table(
-        ["metric id", "method", "Type B sources", "one-sided bias", "why not (more)"],
+        ["metric id", "method", "Type B sources", "bias", "why not (more)"],
         [
             [f"`{k}`", m.method, ", ".join(f"`{s}`" for s in m.sources) or "—", f"`{m.bias}`" if m.bias else "—", m.reason or "—"]
             for k, m in d.metrics.items()
