@@ -137,7 +137,8 @@ def uncertainty_table() -> str:
         [
             [
                 f"`{k}`",
-                ("the trial's own track" if b.figure is None else f"`{b.figure}`") + ("" if b.component is None else f" ({b.component})"),
+                ("the trial's own track" if b.figure is None else f"`{b.figure}`")
+                + ("" if b.component is None else f" ({b.component})"),
                 b.unit,
                 b.description,
             ]
