@@ -4,6 +4,7 @@ markers, 6-DoF bodies and analog channels, in W (§5.6)."""
 from __future__ import annotations
 
 import fnmatch
+from dataclasses import dataclass
 from typing import Any, Callable, Iterator
 
 import numpy as np
@@ -16,12 +17,9 @@ from haptify.importers.recording import Recording, recording_chunks
 from haptify.importers.streams import SourceReader, check_trial_streams, mapped_streams
 from haptify.importers.units import Unit, unit_conversion
 from haptify.importers.world_frame import WorldFrame, plate_description, platform_plate_wrench, pose_frame
-from haptify.session_format import (
-    RigidBody,
-)
+from haptify.session_format import RigidBody
+from haptify.storage import SessionWriter
 from haptify.versions import PACKAGE_VERSION
-
-# --- C3D import (spec §5.5) -----------------------------------------------------------------------
 
 
 def _select_markers(c3d: Recording, mm: MarkerMap, label: str) -> tuple[list[int], list[str]]:
@@ -187,33 +185,13 @@ def _pose_streams(
     return out
 
 
-def import_recording(  # noqa: C901 (over ruff's limit of 15: to be split)
-    rec: Recording,
-    dest: Destination,
-    loaded: LoadedMap,
-    device: dict[str, Any],
-    extra: dict[str, str],
-    *,
-    chunk_frames: int | None = None,
-    progress: Callable[[int, int], None] | None = None,
-) -> ImportResult:
-    """One motion-capture recording (C3D, Qualisys TSV, Motive or Nexus CSV) as one trial (spec §5.5, §5.10).
+MocapStreams = dict[str, tuple[dict[str, np.ndarray], list[str] | None]]  # kind → (columns, entities or None)
+StreamColumns = dict[str, dict[str, np.ndarray]]  # kind → columns (``t`` first)
 
-    Markers become a ``markers`` stream (point units → m, invalid → NaN), the map's 6-DoF bodies
-    ``handle_pose`` and ``link_poses``, all in W (§5.6); analog channels become the streams the map
-    names (§5.3); a chosen force platform becomes the rig's plate. The reader's warnings (W501) and
-    the plate's (W502) are returned and written into the trial's notes. Nothing is written when any
-    check fails.
 
-    A recording opened for streaming (``rec.streamed``, §5.5.1) is read ``chunk_frames`` frames at a time
-    and its streams are written row group by row group; ``progress(frames done, frames)`` follows it.
-    """
-    m, label = loaded.map, loaded.label
-    src = str(rec.path)
-    mm = m.markers or MarkerMap()
-    warnings = list(rec.warnings)
-
-    # world frame
+def _plate_number(rec: Recording, m: ImportMap, label: str) -> int | None:
+    """The force platform that defines W (spec §5.6): the map's number, or 1 for ``auto`` when the file
+    has platforms and the map gives no ``lab_to_world``; E503 for a number the file lacks, E502 for both."""
     plate_number = None
     if isinstance(m.force_plate, int):
         if m.force_plate > len(rec.platforms):
@@ -237,13 +215,14 @@ def import_recording(  # noqa: C901 (over ruff's limit of 15: to be split)
             expected="one of them",
             found="both",
         )
-    rig = m.session.rig.model_dump(mode="json", exclude_none=True)
-    point_unit = None
-    chosen, entities = _select_markers(rec, mm, label)
-    wants_bodies = m.bodies is not None and (m.bodies.handle is not None or bool(m.bodies.links))
-    if chosen or wants_bodies or plate_number is not None:
-        point_unit = unit_conversion(rec.point_units, "m", file=src, pointer="/POINT/UNITS")
-    world: WorldFrame | None = None
+    return plate_number
+
+
+def _world_frame(
+    rec: Recording, m: ImportMap, rig: dict[str, Any], plate_number: int | None, point_unit: Unit | None, label: str
+) -> tuple[WorldFrame | None, list[Finding]]:
+    """W (spec §5.6): from the chosen platform, whose description becomes ``rig["force_plate"]`` (W502
+    findings returned), or from ``lab_to_world``; None when W is the file's lab frame."""
     if plate_number is not None:
         if "force_plate" in rig:
             raise fail(
@@ -254,58 +233,64 @@ def import_recording(  # noqa: C901 (over ruff's limit of 15: to be split)
                 expected="one plate description",
                 found="two",
             )
-        assert point_unit is not None  # converted above when a platform defines W
-        world, rig["force_plate"], plate_warnings = plate_description(rec.platforms[plate_number - 1], point_unit, file=src)
-        warnings += plate_warnings
-    elif m.lab_to_world is not None:
-        world = pose_frame(m.lab_to_world)
-    frame_note = (
-        world.description if world else f"W: the {rec.format.upper()} lab frame as recorded (no force platform, no lab_to_world)"
-    )
+        assert point_unit is not None  # converted whenever a platform defines W
+        world, rig["force_plate"], plate_warnings = plate_description(
+            rec.platforms[plate_number - 1], point_unit, file=str(rec.path)
+        )
+        return world, plate_warnings
+    if m.lab_to_world is not None:
+        return pose_frame(m.lab_to_world), []
+    return None, []
 
-    # markers and 6-DoF bodies, on the point clock
-    mocap_streams: dict[str, tuple[dict[str, np.ndarray], list[str] | None]] = {}
-    if chosen or wants_bodies:
-        if rec.frames < 2:
-            raise fail(
-                "E205",
-                f"{rec.path.name} holds {rec.frames} frame(s); a stream needs two",
-                file=src,
-                expected="≥ 2 frames",
-                found=rec.frames,
-            )
-        if "motion_capture" in rig:
-            raise fail(
-                "E502",
-                "the importer writes rig.motion_capture from the source; give rigid bodies and the system under 'markers'",
-                file=label,
-                pointer="/session/rig/motion_capture",
-                expected=None,
-                found="motion_capture",
-            )
-        if chosen:
-            for j, body in enumerate(mm.rigid_bodies):
-                unknown = [e for e in body.markers if e not in entities]
-                if unknown:
-                    raise fail(
-                        "E503",
-                        f"rigid body {body.name!r} names markers that are not imported: {unknown}",
-                        file=label,
-                        pointer=f"/markers/rigid_bodies/{j}/markers",
-                        expected=entities,
-                        found=unknown,
-                    )
-        rig["motion_capture"] = {
-            "system": mm.system or rec.manufacturer or None,
-            "rate_hz": rec.point_rate,
-            "rigid_bodies": [b.model_dump() for b in mm.rigid_bodies],
-            "markers": entities,
-        }
-        if rig["motion_capture"]["system"] is None:
-            del rig["motion_capture"]["system"]
 
-    # analog streams, and the platform's wrench (§5.6.1)
-    analog_wanted = bool(m.streams) or m.platform_wrench is not None
+def _motion_capture_rig(
+    rec: Recording, mm: MarkerMap, chosen: list[int], entities: list[str], rig: dict[str, Any], label: str
+) -> dict[str, Any]:
+    """The rig's ``motion_capture`` of a recording whose markers or bodies are imported (spec §5.5): its
+    system, rate, rigid bodies and marker entities. E205 for fewer than two frames, E502 when the map's rig
+    already has one, E503 for a rigid body naming a marker that is not imported."""
+    if rec.frames < 2:
+        raise fail(
+            "E205",
+            f"{rec.path.name} holds {rec.frames} frame(s); a stream needs two",
+            file=str(rec.path),
+            expected="≥ 2 frames",
+            found=rec.frames,
+        )
+    if "motion_capture" in rig:
+        raise fail(
+            "E502",
+            "the importer writes rig.motion_capture from the source; give rigid bodies and the system under 'markers'",
+            file=label,
+            pointer="/session/rig/motion_capture",
+            expected=None,
+            found="motion_capture",
+        )
+    if chosen:
+        for j, body in enumerate(mm.rigid_bodies):
+            unknown = [e for e in body.markers if e not in entities]
+            if unknown:
+                raise fail(
+                    "E503",
+                    f"rigid body {body.name!r} names markers that are not imported: {unknown}",
+                    file=label,
+                    pointer=f"/markers/rigid_bodies/{j}/markers",
+                    expected=entities,
+                    found=unknown,
+                )
+    system = mm.system or rec.manufacturer or None
+    return {
+        **({"system": system} if system is not None else {}),
+        "rate_hz": rec.point_rate,
+        "rigid_bodies": [b.model_dump() for b in mm.rigid_bodies],
+        "markers": entities,
+    }
+
+
+def _analog_wanted(rec: Recording, m: ImportMap, plate_number: int | None, label: str) -> bool:
+    """Whether analog channels are imported (mapped streams or the platform's wrench, spec §5.3, §5.6.1),
+    checked: E502 for a platform wrench without the platform that defines W or mapped twice, or a stream
+    rate other than the file's analog rate; E205 for fewer than two analog samples."""
     if m.platform_wrench is not None:
         if plate_number is None:
             raise fail(
@@ -325,100 +310,189 @@ def import_recording(  # noqa: C901 (over ruff's limit of 15: to be split)
                 expected="one source",
                 found="two",
             )
-    if analog_wanted:
-        n = rec.analogs.shape[1]
-        if n < 2:
+    if not m.streams and m.platform_wrench is None:
+        return False
+    n = rec.analogs.shape[1]
+    if n < 2:
+        raise fail(
+            "E205",
+            f"{rec.path.name} holds {n} analog sample(s); a stream needs two",
+            file=str(rec.path),
+            expected="≥ 2 analog samples",
+            found=n,
+        )
+    for kind, smap in m.streams.items():
+        if smap.rate_hz is not None and smap.rate_hz != rec.analog_rate:
             raise fail(
-                "E205",
-                f"{rec.path.name} holds {n} analog sample(s); a stream needs two",
-                file=src,
-                expected="≥ 2 analog samples",
-                found=n,
+                "E502",
+                f"{kind} rate_hz {smap.rate_hz} differs from the file's analog rate {rec.analog_rate}",
+                file=label,
+                pointer=f"/streams/{kind}/rate_hz",
+                expected=rec.analog_rate,
+                found=smap.rate_hz,
             )
-        for kind, smap in m.streams.items():
-            if smap.rate_hz is not None and smap.rate_hz != rec.analog_rate:
-                raise fail(
-                    "E502",
-                    f"{kind} rate_hz {smap.rate_hz} differs from the file's analog rate {rec.analog_rate}",
-                    file=label,
-                    pointer=f"/streams/{kind}/rate_hz",
-                    expected=rec.analog_rate,
-                    found=smap.rate_hz,
-                )
+    return True
 
-    def streams_of(part: Recording) -> tuple[dict[str, Any], dict[str, dict[str, np.ndarray]], list[Finding]]:
-        """The trial's streams from the frames of ``part`` (the whole recording, or one chunk of it)."""
-        mocap: dict[str, tuple[dict[str, np.ndarray], list[str] | None]] = {}
-        analog: dict[str, dict[str, np.ndarray]] = {}
-        notes: list[Finding] = []
-        if chosen or wants_bodies:
-            assert point_unit is not None  # converted above whenever markers or bodies are wanted
-            t = (part.point_first_frame + np.arange(part.frames)) / rec.point_rate + m.time_offset_s
-            if chosen:
-                pos = point_unit.to_si(part.points[:, chosen, :])
-                pos[~np.isfinite(pos).all(axis=2)] = np.nan  # a marker is seen or occluded as a whole (§2.7)
-                if world is not None:
-                    pos = world.apply(pos)
-                marker_data = {"t": t}
-                for j, ent in enumerate(entities):
-                    for k, axis in enumerate("xyz"):
-                        marker_data[f"{ent}_{axis}"] = pos[:, j, k]
-                mocap["markers"] = (marker_data, entities)
-            mocap.update(_pose_streams(part, m, world, point_unit, t, mm.rigid_bodies, label))
-        if analog_wanted:
-            n = part.analogs.shape[1]
-            t_an = (part.analog_first_sample + np.arange(n)) / rec.analog_rate + m.time_offset_s
-            mapped = mapped_streams(m, n, _analog_reader(part, label), label=label, source_file=src, unit_required=False)
-            if m.platform_wrench is not None:
-                # a platform wrench without a platform is E502 above; a platform's geometry needs the POINT unit
-                assert plate_number is not None and point_unit is not None
-                mapped["plate_wrench"], notes = platform_plate_wrench(
-                    part, part.platforms[plate_number - 1], m.platform_wrench, rig["force_plate"], point_unit, label=label
-                )
-            analog = {kind: {"t": t_an, **cols} for kind, cols in mapped.items()}
+
+@dataclass
+class _Plan:
+    """A recording's import, checked before its frames are read (spec §5.5): the map, the rig so far, the
+    platform and point unit, W, the imported markers (indices and entity ids), whether bodies and analog
+    channels are wanted, and the warnings found."""
+
+    rec: Recording
+    m: ImportMap
+    label: str
+    markers: MarkerMap
+    rig: dict[str, Any]
+    plate_number: int | None
+    point_unit: Unit | None
+    world: WorldFrame | None
+    chosen: list[int]
+    entities: list[str]
+    wants_points: bool
+    analog_wanted: bool
+    warnings: list[Finding]
+
+    @property
+    def frame_note(self) -> str:
+        """How W was chosen, as the trial's notes and the result say it (§5.6)."""
+        if self.world:
+            return self.world.description
+        return f"W: the {self.rec.format.upper()} lab frame as recorded (no force platform, no lab_to_world)"
+
+    @property
+    def world_rule(self) -> str | None:
+        """What defines W of the point streams (``plate``, ``pose`` or ``lab``; None without them), for §5.9's merge."""
+        if not self.wants_points:
+            return None
+        return "plate" if self.plate_number is not None else "pose" if self.world is not None else "lab"
+
+    def streams_of(self, part: Recording) -> tuple[MocapStreams, StreamColumns, list[Finding]]:
+        """The trial's streams from the frames of ``part`` (the whole recording, or one chunk of it), and the
+        platform wrench's W503 findings."""
+        mocap = self._point_streams(part) if self.wants_points else {}
+        analog, notes = self._analog_streams(part) if self.analog_wanted else ({}, [])
         return mocap, analog, notes
 
-    pieces = recording_chunks(rec, chunk_frames)
-    first = next(pieces)[1] if rec.frames or rec.analogs.shape[1] else rec
-    mocap_streams, analog_streams, origin_notes = streams_of(first)
-    warnings += origin_notes
+    def _point_streams(self, part: Recording) -> MocapStreams:
+        """markers, handle_pose and link_poses on the point clock, in W (spec §5.5, §2.7)."""
+        m, point_unit = self.m, self.point_unit
+        assert point_unit is not None  # converted whenever markers or bodies are wanted
+        t = (part.point_first_frame + np.arange(part.frames)) / self.rec.point_rate + m.time_offset_s
+        out: MocapStreams = {}
+        if self.chosen:
+            pos = point_unit.to_si(part.points[:, self.chosen, :])
+            pos[~np.isfinite(pos).all(axis=2)] = np.nan  # a marker is seen or occluded as a whole (§2.7)
+            if self.world is not None:
+                pos = self.world.apply(pos)
+            marker_data = {"t": t}
+            for j, ent in enumerate(self.entities):
+                for k, axis in enumerate("xyz"):
+                    marker_data[f"{ent}_{axis}"] = pos[:, j, k]
+            out["markers"] = (marker_data, self.entities)
+        out.update(_pose_streams(part, m, self.world, point_unit, t, self.markers.rigid_bodies, self.label))
+        return out
 
-    kinds = list(mocap_streams) + list(analog_streams)
+    def _analog_streams(self, part: Recording) -> tuple[StreamColumns, list[Finding]]:
+        """The mapped analog streams and the platform's wrench on the analog clock (spec §5.3, §5.6.1)."""
+        m, label = self.m, self.label
+        n = part.analogs.shape[1]
+        t_an = (part.analog_first_sample + np.arange(n)) / self.rec.analog_rate + m.time_offset_s
+        read = _analog_reader(part, label)
+        mapped = mapped_streams(m, n, read, label=label, source_file=str(self.rec.path), unit_required=False)
+        notes: list[Finding] = []
+        if m.platform_wrench is not None:
+            # a platform wrench without a platform is E502 (_analog_wanted); a platform's geometry needs the POINT unit
+            assert self.plate_number is not None and self.point_unit is not None
+            mapped["plate_wrench"], notes = platform_plate_wrench(
+                part,
+                part.platforms[self.plate_number - 1],
+                m.platform_wrench,
+                self.rig["force_plate"],
+                self.point_unit,
+                label=label,
+            )
+        return {kind: {"t": t_an, **cols} for kind, cols in mapped.items()}, notes
+
+
+def _plan(rec: Recording, loaded: LoadedMap) -> _Plan:
+    """Every check of a recording's import that needs no frames, in the order of spec §5.5–5.6."""
+    m, label = loaded.map, loaded.label
+    mm = m.markers or MarkerMap()
+    plate_number = _plate_number(rec, m, label)
+    rig = m.session.rig.model_dump(mode="json", exclude_none=True)
+    chosen, entities = _select_markers(rec, mm, label)
+    wants_bodies = m.bodies is not None and (m.bodies.handle is not None or bool(m.bodies.links))
+    point_unit = None
+    if chosen or wants_bodies or plate_number is not None:
+        point_unit = unit_conversion(rec.point_units, "m", file=str(rec.path), pointer="/POINT/UNITS")
+    world, plate_warnings = _world_frame(rec, m, rig, plate_number, point_unit, label)
+    wants_points = bool(chosen) or wants_bodies
+    if wants_points:
+        rig["motion_capture"] = _motion_capture_rig(rec, mm, chosen, entities, rig, label)
+    analog_wanted = _analog_wanted(rec, m, plate_number, label)
+    return _Plan(
+        rec=rec,
+        m=m,
+        label=label,
+        markers=mm,
+        rig=rig,
+        plate_number=plate_number,
+        point_unit=point_unit,
+        world=world,
+        chosen=chosen,
+        entities=entities,
+        wants_points=wants_points,
+        analog_wanted=analog_wanted,
+        warnings=[*rec.warnings, *plate_warnings],
+    )
+
+
+def _check_kinds(plan: _Plan, kinds: list[str]) -> None:
+    """Something to import, and the protocol's required streams (spec §2.5): E502 otherwise."""
     if not kinds:
         raise fail(
             "E502",
-            f"nothing to import from {rec.path.name}: no markers selected, no bodies and no streams mapped",
-            file=label,
+            f"nothing to import from {plan.rec.path.name}: no markers selected, no bodies and no streams mapped",
+            file=plan.label,
             pointer="/streams",
             expected="markers, bodies or mapped analog streams",
             found=None,
         )
-    check_trial_streams(m, kinds, label)
-    world_rule = ("plate" if plate_number is not None else "pose" if world is not None else "lab") if mocap_streams else None
-    rig = dest.rig(rig, world_rule, label)
-    recorder = f"haptify {PACKAGE_VERSION} import {rec.format}" + (f" ({rec.manufacturer})" if rec.manufacturer else "")
-    writer, stem = dest.writer(m, rec.path, rig, device, extra, recorder)
-    provenance = f"Imported from {rec.path.name} by haptify {PACKAGE_VERSION}. {frame_note}."
-    if warnings:
-        provenance += " Import warnings: " + " ".join(f"{w.code} {w.message}." for w in warnings)
-    trial_id = add_trial(writer, m, stem, rec.path, provenance)
+    check_trial_streams(plan.m, kinds, plan.label)
+
+
+def _provenance(plan: _Plan) -> str:
+    """The trial's notes: the source, the version, how W was chosen and the import's warnings."""
+    provenance = f"Imported from {plan.rec.path.name} by haptify {PACKAGE_VERSION}. {plan.frame_note}."
+    if plan.warnings:
+        provenance += " Import warnings: " + " ".join(f"{w.code} {w.message}." for w in plan.warnings)
+    return provenance
+
+
+def _add_streams(
+    writer: SessionWriter, trial_id: str, plan: _Plan, mocap: MocapStreams, analog: StreamColumns
+) -> list[dict[str, Any]]:
+    """Declare the trial's streams in ``writer`` (whole, or chunked for a streamed recording, §5.5.1),
+    each in the format and frame its map asks for; returns their manifest entries."""
+    m, rec = plan.m, plan.rec
     written = []
-    streamed = rec.streamed
 
     def add(kind: str, cols: dict[str, np.ndarray], **kw: Any) -> None:
-        if streamed:
+        if rec.streamed:
             written.append(writer.add_chunked_stream(trial_id, kind, list(cols), **kw))
         else:
             written.append(writer.add_stream(trial_id, kind, cols, **kw))
 
-    for kind, (cols, ents) in mocap_streams.items():
+    for kind, (cols, ents) in mocap.items():
         if kind == "markers":
-            fmt = mm.format
+            fmt = plan.markers.format
         else:
             assert m.bodies is not None  # _pose_streams makes the pose streams from the map's bodies
             fmt = m.bodies.format
         add(kind, cols, rate_hz=rec.point_rate, fmt=fmt, entities=ents)
-    for kind, cols in analog_streams.items():
+    for kind, cols in analog.items():
         stream_map = m.streams.get(kind)
         if stream_map is not None:
             fmt, frame = stream_map.format, stream_map.frame
@@ -426,28 +500,77 @@ def import_recording(  # noqa: C901 (over ruff's limit of 15: to be split)
             assert m.platform_wrench is not None  # the one analog stream without a stream map: the platform's wrench
             fmt, frame = m.platform_wrench.format, None
         add(kind, cols, rate_hz=rec.analog_rate, fmt=fmt, frame=frame)
-    if streamed:
+    return written
 
-        def chunks() -> Iterator[dict[str, dict[str, np.ndarray]]]:
-            done = first.frames
-            yield {**{k: c for k, (c, _) in mocap_streams.items()}, **analog_streams}
+
+def _chunk_source(
+    plan: _Plan,
+    first: Recording,
+    pieces: Iterator[tuple[int, Recording]],
+    mocap: MocapStreams,
+    analog: StreamColumns,
+    progress: Callable[[int, int], None] | None,
+) -> Callable[[], Iterator[StreamColumns]]:
+    """The chunks of a streamed recording's streams (spec §5.5.1): the first chunk's, already built, then
+    one per remaining piece; ``progress(frames done, frames)`` after each."""
+    rec = plan.rec
+
+    def chunks() -> Iterator[StreamColumns]:
+        done = first.frames
+        yield {**{k: c for k, (c, _) in mocap.items()}, **analog}
+        if progress:
+            progress(done, rec.frames)
+        for _, part in pieces:
+            part_mocap, part_analog, _ = plan.streams_of(part)
+            yield {**{k: c for k, (c, _) in part_mocap.items()}, **part_analog}
+            done += part.frames
             if progress:
                 progress(done, rec.frames)
-            for _, part in pieces:
-                mocap, analog, _ = streams_of(part)
-                yield {**{k: c for k, (c, _) in mocap.items()}, **analog}
-                done += part.frames
-                if progress:
-                    progress(done, rec.frames)
 
-        writer.chunks = chunks
+    return chunks
+
+
+def import_recording(
+    rec: Recording,
+    dest: Destination,
+    loaded: LoadedMap,
+    device: dict[str, Any],
+    extra: dict[str, str],
+    *,
+    chunk_frames: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> ImportResult:
+    """One motion-capture recording (C3D, Qualisys TSV, Motive or Nexus CSV) as one trial (spec §5.5, §5.10).
+
+    Markers become a ``markers`` stream (point units → m, invalid → NaN), the map's 6-DoF bodies
+    ``handle_pose`` and ``link_poses``, all in W (§5.6); analog channels become the streams the map
+    names (§5.3); a chosen force platform becomes the rig's plate. The reader's warnings (W501) and
+    the plate's (W502) are returned and written into the trial's notes. Nothing is written when any
+    check fails.
+
+    A recording opened for streaming (``rec.streamed``, §5.5.1) is read ``chunk_frames`` frames at a time
+    and its streams are written row group by row group; ``progress(frames done, frames)`` follows it.
+    """
+    plan = _plan(rec, loaded)
+    pieces = recording_chunks(rec, chunk_frames)
+    first = next(pieces)[1] if rec.frames or rec.analogs.shape[1] else rec
+    mocap_streams, analog_streams, origin_notes = plan.streams_of(first)
+    plan.warnings += origin_notes
+    _check_kinds(plan, list(mocap_streams) + list(analog_streams))
+    rig = dest.rig(plan.rig, plan.world_rule, loaded.label)
+    recorder = f"haptify {PACKAGE_VERSION} import {rec.format}" + (f" ({rec.manufacturer})" if rec.manufacturer else "")
+    writer, stem = dest.writer(loaded.map, rec.path, rig, device, extra, recorder)
+    trial_id = add_trial(writer, loaded.map, stem, rec.path, _provenance(plan))
+    written = _add_streams(writer, trial_id, plan, mocap_streams, analog_streams)
+    if rec.streamed:
+        writer.chunks = _chunk_source(plan, first, pieces, mocap_streams, analog_streams, progress)
     dest.write(writer, trial_id)
     return ImportResult(
         dest.out,
         writer.manifest["session_id"],
         trial_id,
         [stream_summary(s) for s in written],
-        frame_note,
+        plan.frame_note,
         rec.summary(),
-        warnings,
+        plan.warnings,
     )
