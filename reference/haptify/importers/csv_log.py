@@ -16,7 +16,6 @@ from haptify.importers.streams import as_channel, check_trial_streams, mapped_st
 from haptify.importers.units import unit_conversion
 from haptify.versions import PACKAGE_VERSION
 
-# --- CSV import (spec §5.7) -----------------------------------------------------------------------
 
 RATE_SIGNIFICANT_DIGITS = 6  # a CSV stream's default nominal rate: 1/median(Δt) to 6 significant digits
 

@@ -15,7 +15,6 @@ from haptify.errors import fail
 from haptify.importers.recording import Recording
 from haptify.importers.text_export import empty_recording, head_lines, number_table, open_streamed, read_text, stream_wanted
 
-# --- OptiTrack Motive CSV ------------------------------------------------------------------------
 
 MOTIVE_UNITS = {"Millimeters": "mm", "Centimeters": "cm", "Meters": "m"}
 

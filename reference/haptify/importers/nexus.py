@@ -14,7 +14,6 @@ from haptify.importers.recording import Recording
 from haptify.importers.text_export import empty_recording, number_table, read_text
 from haptify.importers.units import UNITS
 
-# --- Vicon Nexus CSV -----------------------------------------------------------------------------
 
 NEXUS_SECTIONS = ("Devices", "Joints", "Model Outputs", "Segments", "Trajectories")
 

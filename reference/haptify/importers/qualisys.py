@@ -22,8 +22,6 @@ from haptify.importers.text_export import (
     stream_wanted,
 )
 
-# --- Qualisys TSV (QTM "Export to TSV": 3D and 6D files) -----------------------------------------
-
 
 def qtm_rotation(cells: np.ndarray) -> np.ndarray:
     """QTM's Rot[0]…Rot[8] (column by column: r11, r21, r31, r12, …) as (…, 3, 3) matrices."""

@@ -20,7 +20,6 @@ from haptify.session_format import (
     values_outside_set,
 )
 
-# --- building streams from channels (spec §5.3) ---------------------------------------------------
 
 SourceReader = Callable[[str], tuple[np.ndarray, str | None]]
 

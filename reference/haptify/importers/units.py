@@ -10,8 +10,6 @@ import numpy as np
 from haptify import schemas
 from haptify.errors import fail
 
-# --- units (spec §5.3) ---------------------------------------------------------------------------
-
 
 @dataclass(frozen=True)
 class Unit:
