@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 
 from haptify.errors import fail
-from haptify.importers.destination import Destination, ImportResult, add_trial, prepare, stream_summary
+from haptify.importers.destination import Destination, ImportResult, add_trial, prepare
 from haptify.importers.import_map import CsvOptions, LoadedMap
 from haptify.importers.streams import as_channel, check_trial_streams, mapped_streams
 from haptify.importers.units import unit_conversion
@@ -154,12 +154,10 @@ def import_csv(
                 trial_id, kind, {"t": t, **cols}, rate_hz=smap.rate_hz or default_rate, fmt=smap.format, frame=smap.frame
             )
         )
-    dest.write(writer, trial_id)
-    return ImportResult(
-        dest.out,
-        writer.manifest["session_id"],
+    return dest.finish(
+        writer,
         trial_id,
-        [stream_summary(s) for s in written],
+        written,
         "CSV values are stored as logged (rotated into W only where from_frame says so)",
         {"file": src_path.name, "rows": int(t.size), "columns": wanted},
     )

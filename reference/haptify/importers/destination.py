@@ -177,6 +177,28 @@ class Destination:
             )
         return append_trial(writer, self.existing)
 
+    def finish(
+        self,
+        writer: SessionWriter,
+        trial_id: str,
+        written: list[dict[str, Any]],
+        world_frame: str,
+        source: dict[str, Any],
+        warnings: list[Finding] | None = None,
+    ) -> ImportResult:
+        """Write (:meth:`write`) and say what was written: the streams' manifest entries ``written``, how W
+        was chosen and the source's description (spec §5.8)."""
+        self.write(writer, trial_id)
+        return ImportResult(
+            self.out,
+            writer.manifest["session_id"],
+            trial_id,
+            [_stream_summary(s) for s in written],
+            world_frame,
+            source,
+            warnings if warnings is not None else [],
+        )
+
 
 def _plain(value: Any) -> Any:
     return value.model_dump() if isinstance(value, BaseModel) else value
@@ -314,7 +336,7 @@ def add_trial(writer: SessionWriter, m: ImportMap, stem: str, source: Path, prov
     return trial_id
 
 
-def stream_summary(stream: dict[str, Any]) -> dict[str, Any]:
+def _stream_summary(stream: dict[str, Any]) -> dict[str, Any]:
     return {
         "kind": stream["kind"],
         "file": stream["file"],

@@ -11,7 +11,7 @@ import numpy as np
 
 from haptify.conventions import matrix_to_quat
 from haptify.errors import Finding, fail
-from haptify.importers.destination import Destination, ImportResult, add_trial, stream_summary
+from haptify.importers.destination import Destination, ImportResult, add_trial
 from haptify.importers.import_map import ImportMap, LoadedMap, MarkerMap, sanitize_id
 from haptify.importers.recording import Recording, recording_chunks
 from haptify.importers.streams import SourceReader, check_trial_streams, mapped_streams
@@ -564,13 +564,4 @@ def import_recording(
     written = _add_streams(writer, trial_id, plan, mocap_streams, analog_streams)
     if rec.streamed:
         writer.chunks = _chunk_source(plan, first, pieces, mocap_streams, analog_streams, progress)
-    dest.write(writer, trial_id)
-    return ImportResult(
-        dest.out,
-        writer.manifest["session_id"],
-        trial_id,
-        [stream_summary(s) for s in written],
-        plan.frame_note,
-        rec.summary(),
-        plan.warnings,
-    )
+    return dest.finish(writer, trial_id, written, plan.frame_note, rec.summary(), plan.warnings)
