@@ -86,6 +86,8 @@ def _analog_reader(c3d: Recording, label: str) -> SourceReader:
     return read
 
 
+MocapStreams = dict[str, tuple[dict[str, np.ndarray], list[str] | None]]  # kind → (columns, entities or None)
+StreamColumns = dict[str, dict[str, np.ndarray]]  # kind → columns (``t`` first)
 ROTATION_TOLERANCE = 1e-3  # |RᵀR − I| and |det R − 1| allowed in a stored rotation (float32 storage)
 
 
@@ -150,12 +152,12 @@ def _pose_streams(
     t: np.ndarray,
     rigid_bodies: list[RigidBody],
     label: str,
-) -> dict[str, tuple[dict[str, np.ndarray], list[str] | None]]:
+) -> MocapStreams:
     """handle_pose and link_poses from the map's ``bodies`` (spec §5.5): kind → (columns, entities)."""
     bm = m.bodies
     if bm is None or (bm.handle is None and not bm.links):
         return {}
-    out: dict[str, tuple[dict[str, np.ndarray], list[str] | None]] = {}
+    out: MocapStreams = {}
     names = {b.name for b in rigid_bodies}
     if bm.handle is not None:
         pos, quat = body_poses(
@@ -183,10 +185,6 @@ def _pose_streams(
             cols.update({f"{link}_{c}": quat[:, k] for k, c in enumerate(("qw", "qx", "qy", "qz"))})
         out["link_poses"] = (cols, list(bm.links))
     return out
-
-
-MocapStreams = dict[str, tuple[dict[str, np.ndarray], list[str] | None]]  # kind → (columns, entities or None)
-StreamColumns = dict[str, dict[str, np.ndarray]]  # kind → columns (``t`` first)
 
 
 def _plate_number(rec: Recording, m: ImportMap, label: str) -> int | None:
