@@ -15,7 +15,7 @@ import pytest
 from haptify.cli import main
 from haptify.conventions import matrix_to_quat
 from haptify.errors import HaptifyError
-from haptify.mocap_exports import detect_format, import_export, read_export
+from haptify.importers.exports import detect_format, import_export, read_export
 from haptify.storage import open_session
 from haptify_tools.example_session import TOUCH_DEVICE
 from test_import_c3d_variants import rot_z, sweep

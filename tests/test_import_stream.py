@@ -166,7 +166,7 @@ def test_an_import_in_small_chunks_writes_what_the_whole_file_import_writes(tmp_
 def test_a_text_export_in_small_chunks_imports_as_the_whole_file(tmp_path, fmt):
     """Qualisys TSV (6DOF and 3-D with QTM's zero gaps) and Motive CSV stream too (§5.5.1): the same
     streams, row for row, as the whole-file import."""
-    from haptify.mocap_exports import import_export, read_export
+    from haptify.importers.exports import import_export, read_export
     from test_import_exports import write_motive, write_qtm_6d, workspace_map
 
     path = tmp_path / ("t.csv" if fmt == "motive" else "t.tsv")

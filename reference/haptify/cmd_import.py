@@ -23,10 +23,13 @@ from haptify.importers import (
     ImportResult,
     LoadedMap,
     Recording,
+    detect_format,
     import_c3d,
     import_csv,
+    import_export,
     load_map,
     read_c3d,
+    read_export,
 )
 from haptify.validation import validate_session
 
@@ -114,8 +117,6 @@ def _format_of(args: argparse.Namespace) -> str:
     """The source format: the sub-command's, or for ``auto`` the one the file's content shows (§5.8)."""
     if args.import_kind != "auto":
         return str(args.import_kind)
-    from haptify.mocap_exports import detect_format
-
     fmt = detect_format(args.file)
     if fmt is None:
         raise fail(
@@ -131,8 +132,6 @@ def _format_of(args: argparse.Namespace) -> str:
 def _read(fmt: str, path: Path) -> Recording:
     if fmt == "c3d":
         return read_c3d(path)
-    from haptify.mocap_exports import read_export
-
     return read_export(fmt, path)
 
 
@@ -227,8 +226,6 @@ def _importer(fmt: str, advance: Advance) -> Callable[[Path, Destination, Loaded
 
     if fmt == "c3d":
         return lambda path, dest, loaded: import_c3d(path, dest, loaded, progress=progress)
-    from haptify.mocap_exports import import_export
-
     return lambda path, dest, loaded: import_export(fmt, path, dest, loaded, progress=progress)
 
 
