@@ -44,7 +44,7 @@ $(PEER_STAMP): benchmarks/peers/requirements.txt
 bench: $(STAMP) $(PEER_STAMP)
 	$(PY) benchmarks/run.py
 
-# The whole conformance suite against every mutant of conformance/mutants/catalogue.py (spec §16.8.3):
+# The whole conformance suite against every mutant of conformance/mutants/catalogue/ (spec §16.8.3):
 # prints caught/total, writes conformance/mutants/results.json, exits 1 when a mutant escapes.
 mutants: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) -m haptify_mutants.run --workers 2

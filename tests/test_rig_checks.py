@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from haptify_tools import rig_builders as rb
-from haptify_tools.build_conformance_fixtures import calibration_offset_u
+from haptify_tools.conformance_fixtures.rig import calibration_offset_u
 from haptify import cmd_rig_check, rig_checks
 from haptify.cli import UI
 from haptify.compute import compute_session

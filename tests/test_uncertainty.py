@@ -117,9 +117,9 @@ def two_rep_free_space():
 
 def mean_direction(gain: float = 1.0) -> np.ndarray:
     """Mean unit vector of the fs-typical force over its 100 Hz grid (∂ mean|F+δ| / ∂δ at δ = 0)."""
-    from haptify_tools import build_conformance_fixtures as bcf
+    from haptify_tools.conformance_fixtures.free_space import felt
 
-    f = gain * bcf.felt(np.arange(0.0, 12.0, 0.01))
+    f = gain * felt(np.arange(0.0, 12.0, 0.01))
     return (f / np.linalg.norm(f, axis=1, keepdims=True)).mean(axis=0)
 
 

@@ -36,8 +36,8 @@ from haptify.workspace import (
     report_figures,
     volume_solid,
 )
-from haptify_tools.build_conformance_fixtures import box_cloud, pose_cloud, sphere_sweep
-from haptify_tools.build_conformance_fixtures import sphere_cloud as sphere_surface
+from haptify_tools.conformance_fixtures.workspace_shapes import box_cloud, pose_cloud, sphere_sweep
+from haptify_tools.conformance_fixtures.workspace_shapes import sphere_cloud as sphere_surface
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
 
 DEG = math.pi / 180

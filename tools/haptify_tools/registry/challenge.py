@@ -3,7 +3,7 @@ secret seed, with the conformance suite's fixture generators; the answers never 
 
 A challenge holds one session per metric family the reference computes — workspace (chapter 8), free
 space (9), vibration (10), local dynamics (11), frictionless surface (12), stiffness (13) and the rig
-(14) — each written by the generators of :mod:`haptify_tools.build_conformance_fixtures` with its
+(14) — each written by the generators of :mod:`haptify_tools.conformance_fixtures` with its
 shape, forces, motions, tones, springs, delays, plate modes, recorder rates, stream format and rig
 drawn from the seed. Their answers are known by construction (closed forms of the drawn truth, or the
 spec's formula applied to exactly known inputs, as the suite's own cases), so no implementation, the

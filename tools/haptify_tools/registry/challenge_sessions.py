@@ -1,7 +1,7 @@
 """The sessions of a conformance challenge and their known answers (spec §17.8): one generator per metric
 family the reference computes — workspace (chapter 8), free space (9), vibration (10), local dynamics (11),
 frictionless surface (12), stiffness (13) and the rig (14) — each writing a session with the conformance
-suite's fixture generators (:mod:`haptify_tools.build_conformance_fixtures`) from values drawn from the
+suite's fixture generators (:mod:`haptify_tools.conformance_fixtures`) from values drawn from the
 challenge's secret seed, and returning its cases' answers, known by construction."""
 
 from __future__ import annotations
@@ -16,8 +16,16 @@ import numpy as np
 from haptify.conventions import quat_from_axis_angle
 from haptify.metric_definitions import param
 from haptify.versions import SPEC_VERSION
-from haptify_tools import build_conformance_fixtures as bcf
 from haptify_tools import rig_builders as rb
+from haptify_tools.conformance_fixtures.dynamics import LineMotion, Prediction, prediction_fixture
+from haptify_tools.conformance_fixtures.records import Fixture
+from haptify_tools.conformance_fixtures.rig import calibration_rms, impact_peaks
+from haptify_tools.conformance_fixtures.stiffness import DEPTH, spring_fixture
+from haptify_tools.conformance_fixtures.surface import surface_fixture
+from haptify_tools.conformance_fixtures.truth import QUIET, circle, handle_trial, manifest, rotated_rig_full
+from haptify_tools.conformance_fixtures.truth import spin as spin_motion
+from haptify_tools.conformance_fixtures.vibration import tones_centroid, tones_rms, write_vibration_session
+from haptify_tools.conformance_fixtures.workspace_shapes import pappus_volume, pose_cloud, scaled_device, sphere_cloud
 from haptify_tools.example_session import example_rig
 from haptify_tools.registry.checks import tolerances
 
@@ -62,7 +70,7 @@ def _round(x, digits: int) -> Any:
     return np.round(np.asarray(x, float), digits).tolist()
 
 
-def _fixture_truths(fx: bcf.Fixture, path: Path) -> list[Truth]:
+def _fixture_truths(fx: Fixture, path: Path) -> list[Truth]:
     """Write a fixture of the suite's generators and return its cases' known answers."""
     fx.build(path)
     return [(c["metric"], c["expected"]["value"], c["expected"]["unit"], c["parameters"]) for c in fx.cases]
@@ -87,14 +95,14 @@ def workspace(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
     datasheet box (the product of its edges)."""
     radius, centre = round(float(rng.uniform(0.05, 0.08)), 4), _round(rng.uniform([-0.02, -0.02, 0.13], [0.02, 0.02, 0.17]), 3)
     box = _round(rng.uniform(0.06, 0.2, 3), 3)
-    device = bcf.scaled_device(round(float(rng.uniform(0.45, 0.55)), 3), box=box)
-    w = bcf.manifest(sid, example_rig(), device=device)
-    bcf.pose_cloud(w, "workspace-1", bcf.sphere_cloud(6000, radius, centre, rng), _fmt(rng))
+    device = scaled_device(round(float(rng.uniform(0.45, 0.55)), 3), box=box)
+    w = manifest(sid, example_rig(), device=device)
+    pose_cloud(w, "workspace-1", sphere_cloud(6000, radius, centre, rng), _fmt(rng))
     w.write(path)
     return [
         ("workspace.measured_volume", 4 / 3 * math.pi * radius**3, "m^3", {}),
         ("workspace.spec_box_volume", math.prod(box), "m^3", {}),
-        ("workspace.modeled_volume", bcf.pappus_volume(device), "m^3", {}),
+        ("workspace.modeled_volume", pappus_volume(device), "m^3", {}),
     ]
 
 
@@ -103,7 +111,7 @@ def free_space(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
     weight and bias, the gimbal centre on a drawn circle (speed r·ω), a drawn spin rate, and a drawn
     constant horizontal plate force on top of the plate bias."""
     truth = rb.HandleTruth(force_noise=0.0, torque_noise=0.0, accel_noise=0.0, mass=0.06)
-    rig = example_rig() if _rig_kind(rng) == "example" else bcf.rotated_rig_full()
+    rig = example_rig() if _rig_kind(rng) == "example" else rotated_rig_full()
     bias = rb.plate_bias_vector(rig)
     force = np.array(_round(rng.uniform(0.2, 1.0, 3) * rng.choice([-1.0, 1.0], 3), 3))
     radius, omega = round(float(rng.uniform(0.03, 0.06)), 3), round(float(rng.uniform(0.5, 2.0)), 2)
@@ -113,14 +121,14 @@ def free_space(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
         round(float(rng.uniform(12, 20)), 2),
     )
     rates = ((500.0, 500.0, 100.0), (400.0, 250.0, 120.0))[int(rng.integers(0, 2))]
-    w = bcf.manifest(sid, rig, truth=truth, plate_bias=bias)
-    bcf.handle_trial(
+    w = manifest(sid, rig, truth=truth, plate_bias=bias)
+    handle_trial(
         w,
         "free_space-1",
         "free_space",
         duration_s=8.0,
-        position=bcf.circle(radius, omega, (0.0, 0.03, 0.14)),
-        quaternion=bcf.spin(spin),
+        position=circle(radius, omega, (0.0, 0.03, 0.14)),
+        quaternion=spin_motion(spin),
         force_w=lambda t: np.tile(force, (len(t), 1)),
         truth=truth,
         rates=rates,
@@ -143,19 +151,19 @@ def free_space(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
 
 def vibration(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
     """Chapter 10: drawn tones (frequencies, amplitudes, axes) in a free-space and a baseline trial at a drawn
-    accelerometer rate and length; answers :func:`~haptify_tools.build_conformance_fixtures.tones_rms` and
-    :func:`~haptify_tools.build_conformance_fixtures.tones_centroid` of the tones."""
+    accelerometer rate and length; answers :func:`~haptify_tools.conformance_fixtures.vibration.tones_rms` and
+    :func:`~haptify_tools.conformance_fixtures.vibration.tones_centroid` of the tones."""
     rate, secs = float(rng.choice(RATES_HZ)), float(rng.choice(SECONDS))
     fmt, rig_kind = _fmt(rng), _rig_kind(rng)
     fs_tones, base_tones = _tones(rng, rate), _tones(rng, rate)
-    bcf.write_vibration_session(path, sid, fmt, rate, secs, fs_tones, base_tones, rig_kind)
+    write_vibration_session(path, sid, fmt, rate, secs, fs_tones, base_tones, rig_kind)
     fs_all = [t for ts in fs_tones.values() for t in ts]
     base_all = [t for ts in base_tones.values() for t in ts]
     return [
-        ("vibration.rms", bcf.tones_rms(fs_all), "m/s^2", {}),
-        ("vibration.spectral_centroid", bcf.tones_centroid(fs_all), "Hz", {}),
-        ("vibration.baseline_rms", bcf.tones_rms(base_all), "m/s^2", {}),
-        ("vibration.baseline_centroid", bcf.tones_centroid(base_all), "Hz", {}),
+        ("vibration.rms", tones_rms(fs_all), "m/s^2", {}),
+        ("vibration.spectral_centroid", tones_centroid(fs_all), "Hz", {}),
+        ("vibration.baseline_rms", tones_rms(base_all), "m/s^2", {}),
+        ("vibration.baseline_centroid", tones_centroid(base_all), "Hz", {}),
     ]
 
 
@@ -168,14 +176,14 @@ def dynamics(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
     away -= (away @ v) / (v @ v) * v  # perpendicular: every test window's nearest training window is its twin
     shift = away / np.linalg.norm(away) * param("dynamics", "R_p") * float(rng.uniform(0.3, 1.0))
     q = quat_from_axis_angle(rng.normal(size=3), np.array(float(rng.uniform(0.0, 1.0))))
-    motion = bcf.LineMotion(
+    motion = LineMotion(
         np.array(_round(rng.uniform([-0.05, -0.03, 0.11], [0.05, 0.03, 0.16]), 3)),
         v,
         q,
         np.array(_round(rng.uniform(-0.3, 0.3, 3), 3)),
         np.array(_round(rng.uniform(-0.01, 0.01, 3), 4)),
     )
-    pr = bcf.Prediction(
+    pr = Prediction(
         sid.removeprefix("conf-"),
         _fmt(rng),
         _rig_kind(rng),
@@ -185,7 +193,7 @@ def dynamics(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
         "registry challenge",
         models=(str(rng.choice(["a", "b", "c"])),),
     )
-    return _fixture_truths(bcf.prediction_fixture(pr), path)
+    return _fixture_truths(prediction_fixture(pr), path)
 
 
 def surface(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
@@ -201,7 +209,7 @@ def surface(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
         round(float(rng.uniform(0.2, 0.5)), 2),
     )
     rates = ((1000.0, 500.0, 100.0), (400.0, 250.0, 150.0))[int(rng.integers(0, 2))]
-    fx = bcf.surface_fixture(
+    fx = surface_fixture(
         sid.removeprefix("conf-"),
         _fmt(rng),
         _rig_kind(rng),
@@ -222,9 +230,9 @@ def stiffness(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
     """Chapter 13: five presses into a plane of drawn tilt of a spring of drawn stiffness that saturates at a
     drawn force (measured stiffness, accuracy against the rendered 750 N/m, peak force)."""
     k = round(float(rng.uniform(300.0, 650.0)), 1)
-    peak = round(k * bcf.DEPTH * float(rng.uniform(0.6, 0.75)), 3)
+    peak = round(k * DEPTH * float(rng.uniform(0.6, 0.75)), 3)
     rates = ((1000.0, 500.0, 100.0), (400.0, 250.0, 150.0))[int(rng.integers(0, 2))]
-    fx = bcf.spring_fixture(
+    fx = spring_fixture(
         sid.removeprefix("conf-"),
         _fmt(rng),
         _rig_kind(rng),
@@ -249,13 +257,13 @@ def rig(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
     delay on some draws (24 s trials), beyond the suite's 0.3 ms budget, so noisy sensors would fail the
     reference itself."""
     kind = ("rotated", "example", "rotated-plate")[int(rng.integers(0, 3))]
-    setup = {"rotated": rb.rotated_rig, "example": example_rig, "rotated-plate": bcf.rotated_rig_full}[kind]()
+    setup = {"rotated": rb.rotated_rig, "example": example_rig, "rotated-plate": rotated_rig_full}[kind]()
     setup["motion_capture"]["markers"] = sorted(set(setup["motion_capture"]["markers"]) | {"w1"})
     delays = [int(d) / 1000 for d in rng.integers(-4, 5, 2)]
     modes, zeta = _round(rng.uniform(140.0, 260.0, 3), 1), round(float(rng.uniform(0.02, 0.05)), 3)
     offsets = rng.uniform(0.0, 0.015, 3)[:, None] * np.column_stack([np.cos(a := rng.uniform(0, 2 * np.pi, 3)), np.sin(a)])
     w = rb.writer(rig=setup, sid=sid)
-    rb.add_calibration_trial(w, bcf.QUIET, rng, duration_s=12.0, accel_delay_s=delays[0], mocap_delay_s=delays[1])
+    rb.add_calibration_trial(w, QUIET, rng, duration_s=12.0, accel_delay_s=delays[0], mocap_delay_s=delays[1])
     rb.add_plate_bias_trial(w, rng)
     rb.add_impact_trial(w, rng, modes=modes, zeta=zeta, noise=0.0)
     rb.add_cop_trial(w, rng, np.array([[0.0, 0.0], [0.2, 0.1], [-0.2, -0.2]]), offsets)
@@ -263,10 +271,10 @@ def rig(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
     t = np.arange(3000) / 1000.0  # the impact trial of rig_builders.add_impact_trial: 3 s at 1 kHz, amplitudes 4, 3, 20 N
     ringing = np.column_stack([rb.damped(t, f, zeta, 1.0, a) for f, a in zip(modes, (4.0, 3.0, 20.0))])
     return [
-        ("rig.plate_natural_frequency", bcf.impact_peaks(t, ringing, 1000.0), "Hz", {}),
+        ("rig.plate_natural_frequency", impact_peaks(t, ringing, 1000.0), "Hz", {}),
         ("rig.cop_error", float(np.linalg.norm(offsets, axis=1).mean()), "m", {}),
         ("rig.sync_offset", max(abs(d) for d in delays), "s", {}),
-        ("rig.handle_calibration_rms", bcf.calibration_rms(bcf.QUIET), "[N, m/s^2, N*m]", {}),
+        ("rig.handle_calibration_rms", calibration_rms(QUIET), "[N, m/s^2, N*m]", {}),
     ]
 
 
