@@ -86,6 +86,15 @@ MUTANTS: tuple[Mutant, ...] = (
         ("workspace.measured_volume",),
     ),
     Mutant(
+        "one_stroke_plane_normals",
+        "8.4",
+        "R8.4-1",
+        "a boundary sample whose neighbours lie along a line takes the smoothed-indicator normal (min_normal_planarity)",
+        "every sample keeps its plane fit's normal",
+        (Patch(workspace, "wp", _params(min_normal_planarity=0.0)),),
+        ("workspace.measured_volume",),
+    ),
+    Mutant(
         "closing_diameter_for_radius",
         "8.4",
         "R8.4-1",

@@ -228,6 +228,35 @@ def workspace_fixtures() -> list[Fixture]:
     ]
     out.append(fx)
 
+    # A sweep whose turns lie farther apart than the normal radius: every boundary sample's neighbours lie along one
+    # stroke, so the plane fit says nothing of the surface and the sample takes the indicator normal (spec §8.4 step 5).
+    RS, CS, turns, noise = 0.1, (0.0, 0.0, 0.15), 20, 1e-4
+
+    def strokes(path: Path) -> None:
+        w = manifest("conf-ws-strokes", example_rig(), device=tiny)
+        sweep = sphere_sweep(20000, turns, RS, CS, 0.3)
+        pose_cloud(w, "workspace-1", sweep + np.random.default_rng(SEED + 9).normal(0.0, noise, sweep.shape), "parquet")
+        w.write(path)
+
+    fx = Fixture("ws-sphere-strokes", strokes)
+    fx.cases += [
+        case(
+            "workspace.measured_volume.one-stroke-neighbourhoods",
+            "workspace.measured_volume",
+            "8.4",
+            fx.name,
+            4 / 3 * math.pi * RS**3,
+            "m^3",
+            "analytic",
+            f"sphere R = {RS} m swept along a spiral of {turns} turns (1.6 cm apart, more than the normal radius of 4 voxels) "
+            f"with white noise of {noise * 1e3:g} mm per axis: each boundary sample's neighbours lie along one stroke and "
+            "take the smoothed-indicator normal (min_normal_planarity); their own plane fits, which the stroke's curvature "
+            "and the noise turn, would read about 1 % high. " + bias,
+            "Tricky: a sparse sweep whose neighbourhoods are lines, not planes.",
+        ),
+    ]
+    out.append(fx)
+
     # A sweep that missed a cap of the workspace: its 4 cm hole is narrower than 2r, so the closing bridges it.
     RC, CC, rim = 0.07, (0.0, -0.02, 0.15), 0.02
 
