@@ -24,6 +24,22 @@ from haptify.storage.stream_files import TableSink, write_table
 from haptify.versions import SPEC_VERSION
 
 
+def _stream_columns(trial_id: str, kind: str, entities: list[str] | None, present: list[str]) -> list[tuple[str, str]]:
+    """The columns (name, unit) a ``kind`` stream must have (:func:`haptify.session_format.expected_columns`);
+    E201 when ``present`` lacks one (spec §2.6)."""
+    cols = expected_columns(kind, entities, present)
+    missing = [c for c, _ in cols if c not in present]
+    if missing:
+        raise fail(
+            "E201",
+            f"{kind} stream of trial {trial_id!r} lacks columns {missing}",
+            column=missing[0],
+            expected=[c for c, _ in cols],
+            found=present,
+        )
+    return cols
+
+
 @dataclass
 class _PendingStream:
     trial_id: str
@@ -80,16 +96,7 @@ class SessionWriter:
         """Add a stream; ``data`` maps every expected column name (``t`` first) to a 1-D array."""
         trial = next(t for t in self._trials if t["id"] == trial_id)
         present = list(data.keys()) if isinstance(data, Mapping) else list(data.columns)
-        cols = expected_columns(kind, entities, present)
-        missing = [c for c, _ in cols if c not in present]
-        if missing:
-            raise fail(
-                "E201",
-                f"{kind} stream of trial {trial_id!r} lacks columns {missing}",
-                column=missing[0],
-                expected=[c for c, _ in cols],
-                found=present,
-            )
+        cols = _stream_columns(trial_id, kind, entities, present)
         table = pd.DataFrame({c: np.asarray(data[c], dtype=np.float64) for c, _ in cols})
         stream = {
             "kind": kind,
@@ -120,16 +127,7 @@ class SessionWriter:
     ) -> dict[str, Any]:
         """Add a stream whose rows come from :attr:`chunks` at :meth:`write` time (spec §5.5.1): each item
         of ``chunks()`` maps stream kinds to their columns for the next rows (``t`` first)."""
-        cols = expected_columns(kind, entities, columns)
-        missing = [c for c, _ in cols if c not in columns]
-        if missing:
-            raise fail(
-                "E201",
-                f"{kind} stream of trial {trial_id!r} lacks columns {missing}",
-                column=missing[0],
-                expected=[c for c, _ in cols],
-                found=columns,
-            )
+        cols = _stream_columns(trial_id, kind, entities, columns)
         stream = self.add_stream(
             trial_id, kind, {c: np.zeros(0) for c, _ in cols}, rate_hz=rate_hz, frame=frame, fmt=fmt, entities=entities
         )
