@@ -12,6 +12,7 @@ from scipy.io import loadmat
 from scipy.signal import lfilter
 
 from haptify.errors import HaptifyError
+from haptify.local_dynamics import fitting, jacobian
 from haptify.local_dynamics import (
     Channel,
     FitOptions,
@@ -327,25 +328,23 @@ def test_unit_gain_model_is_linear_and_time_invariant(b, p, nk, shift, gain):
 
 
 def _random_structure(rng: np.random.Generator, nk: int):
-    from haptify import local_dynamics as ld
-
     u = smooth_inputs(rng, 400, 3)
     in_bp = [np.sort(rng.uniform(-1.0, 1.0, 5)), None, np.linspace(-0.8, 0.8, 4)]  # a unit-gain input among maps
     out_bp = [np.linspace(-1.5, 1.5, 6), None]
-    st_ = ld._Structure(nu=3, ny=2, nb=2, nf=2, nk=nk, in_bp=in_bp, out_bp=out_bp)
+    st_ = jacobian._Structure(nu=3, ny=2, nb=2, nf=2, nk=nk, in_bp=in_bp, out_bp=out_bp)
     theta = rng.normal(0.0, 0.5, st_.size)
     for j in range(2):
         for i in range(3):
             theta[st_.f_idx[j, i]] = np.poly(rng.uniform(-0.8, 0.8, 2))[1:]  # stable real poles
         if out_bp[j] is not None:
             theta[st_.c_idx[j]] = np.sort(rng.normal(0.0, 1.0, 6))
-    return ld, st_, theta, ld._Record.of(st_, u, np.zeros((len(u), 2)))
+    return st_, theta, jacobian._Record.of(st_, u, np.zeros((len(u), 2)))
 
 
 @pytest.mark.parametrize("nk", [0, 2])
 def test_batched_simulation_is_the_prediction_of_the_same_parameters(nk):
-    ld, st_, theta, rec = _random_structure(np.random.default_rng(10 + nk), nk)
-    model = ld._assemble(
+    st_, theta, rec = _random_structure(np.random.default_rng(10 + nk), nk)
+    model = fitting._assemble(
         st_,
         theta,
         100.0,
@@ -353,23 +352,24 @@ def test_batched_simulation_is_the_prediction_of_the_same_parameters(nk):
         [Channel(name=f"u{i}", unit="1") for i in range(3)],
         [Channel(name=f"y{j}", unit="1") for j in range(2)],
     )
-    np.testing.assert_allclose(ld._simulate(st_, theta, rec), predict(model, rec.u), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(jacobian._simulate(st_, theta, rec), predict(model, rec.u), rtol=1e-12, atol=1e-12)
 
 
 @pytest.mark.parametrize("nk", [0, 1])
 def test_analytic_jacobian_matches_central_differences(nk):
-    ld, st_, theta, rec = _random_structure(np.random.default_rng(20 + nk), nk)
+    st_, theta, rec = _random_structure(np.random.default_rng(20 + nk), nk)
     h = 1e-6
     for j in range(2):
-        yhat, jac = ld._output_jacobian(st_, theta, rec, j, weight=0.5)
-        np.testing.assert_allclose(yhat, ld._simulate(st_, theta, rec)[:, j], rtol=1e-12, atol=1e-12)
+        yhat, jac = jacobian._output_jacobian(st_, theta, rec, j, weight=0.5)
+        np.testing.assert_allclose(yhat, jacobian._simulate(st_, theta, rec)[:, j], rtol=1e-12, atol=1e-12)
         own = st_.own(j)
         columns = list(range(st_.n_shared)) + list(range(own.start, own.stop))
         assert jac.shape == (len(rec.u), len(columns))
         for col, p in enumerate(columns):
             step = np.zeros(st_.size)
             step[p] = h
-            numeric = (ld._simulate(st_, theta + step, rec)[:, j] - ld._simulate(st_, theta - step, rec)[:, j]) / (2 * h)
+            plus, minus = jacobian._simulate(st_, theta + step, rec), jacobian._simulate(st_, theta - step, rec)
+            numeric = (plus[:, j] - minus[:, j]) / (2 * h)
             np.testing.assert_allclose(jac[:, col], 0.5 * numeric, rtol=0, atol=2e-6 * max(1.0, np.abs(numeric).max()))
 
 
@@ -377,21 +377,21 @@ def test_analytic_jacobian_matches_central_differences(nk):
 def test_normal_equations_by_blocks_of_rows_are_those_of_the_whole_jacobian(monkeypatch, block_rows):
     # Blocks of 37 rows cut the stacked records (starting at rows 0, 150 and 151) mid-block, and a record of one
     # row lies inside a block: the filters' delays carry across blocks and restart at every record's first row.
-    ld, st_, theta, rec = _random_structure(np.random.default_rng(30), 1)
-    rec = ld._Record.of(st_, rec.u, np.random.default_rng(31).normal(size=(len(rec.u), 2)), starts=[0, 150, 151])
-    monkeypatch.setattr(ld, "BLOCK_ROWS", block_rows)
-    sim = ld._simulation(st_, theta, rec)
+    st_, theta, rec = _random_structure(np.random.default_rng(30), 1)
+    rec = jacobian._Record.of(st_, rec.u, np.random.default_rng(31).normal(size=(len(rec.u), 2)), starts=[0, 150, 151])
+    monkeypatch.setattr(jacobian, "BLOCK_ROWS", block_rows)
+    sim = jacobian._simulation(st_, theta, rec)
     weights = np.array([0.7, 1.3])
     buffer = np.full((block_rows, st_.n_shared + max(st_.own(j).stop - st_.own(j).start for j in range(2)) + 3), np.nan)
-    for j, (gram, jac_e) in enumerate(ld._normal_equations(st_, theta, rec, weights, sim, buffer)):
-        yhat, jac = ld._output_jacobian(st_, theta, rec, j, weight=weights[j], sim=sim)
+    for j, (gram, jac_e) in enumerate(jacobian._normal_equations(st_, theta, rec, weights, sim, buffer)):
+        yhat, jac = jacobian._output_jacobian(st_, theta, rec, j, weight=weights[j], sim=sim)
         e = (rec.y[:, j] - yhat) * weights[j]
         np.testing.assert_allclose(gram, jac.T @ jac, rtol=1e-12, atol=1e-12 * np.abs(jac.T @ jac).max())
         np.testing.assert_allclose(jac_e, e @ jac, rtol=1e-12, atol=1e-12 * np.abs(e @ jac).max())
 
 
 def test_parameter_layout_puts_each_outputs_own_parameters_in_jacobian_order():
-    ld, st_, _, _ = _random_structure(np.random.default_rng(40), 0)
+    st_, _, _ = _random_structure(np.random.default_rng(40), 0)
     nu, nb, nf = 3, 2, 2
     for j in range(2):
         own = st_.own(j)

@@ -51,12 +51,12 @@ def test_existing_output_is_refused_and_kept(tmp_path):
 
 
 def test_interrupted_write_leaves_nothing(tmp_path, monkeypatch):
-    import haptify.storage as storage
+    from haptify.storage import writer
 
     def boom(*a, **k):
         raise OSError("disk full")
 
-    monkeypatch.setattr(storage, "atomic_write_json", boom)
+    monkeypatch.setattr(writer, "atomic_write_json", boom)
     with pytest.raises(OSError):
         example_writer().write(tmp_path / "s")
     assert list(tmp_path.iterdir()) == []

@@ -14,7 +14,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from haptify import storage
+from haptify.storage import csv_grammar
 from haptify.errors import HaptifyError
 from haptify.kinematics import RANGE_LATTICE_POINTS as LIMIT_LATTICE_POINTS
 from haptify.kinematics import configurations_from_unit
@@ -310,7 +310,7 @@ def _grammar(tmp_path: Path, text: str, columns=("t", "x")):
     "text", ["t,x\n0,1\n1,NaN\n", "t,x\n0,1\n1,2", "t,x\r\n0,1\r\n1,-2.5e-3\r\n", "t,x\n0,1.\n1,1E+5\n", "t,x\n-0,-1.e-300\n"]
 )
 def test_csv_lines_of_the_grammar_pass(tmp_path: Path, monkeypatch, text: str, chunk: int):
-    monkeypatch.setattr(storage, "CSV_CHUNK_BYTES", chunk)
+    monkeypatch.setattr(csv_grammar, "CSV_CHUNK_BYTES", chunk)
     assert _grammar(tmp_path, text) is None
 
 
@@ -336,7 +336,7 @@ def test_csv_lines_of_the_grammar_pass(tmp_path: Path, monkeypatch, text: str, c
 def test_csv_lines_outside_the_grammar_are_e112_naming_line_and_column(
     tmp_path: Path, monkeypatch, text, line, column, found, chunk
 ):
-    monkeypatch.setattr(storage, "CSV_CHUNK_BYTES", chunk)
+    monkeypatch.setattr(csv_grammar, "CSV_CHUNK_BYTES", chunk)
     f = _grammar(tmp_path, text)
     assert (f.code, f.column, f.found) == ("E112", column, found)
     assert f"line {line} " in f.message
@@ -355,7 +355,7 @@ def test_a_lone_carriage_return_line_end_is_e112(tmp_path: Path):
 )
 def test_every_shortest_round_trip_float_and_nan_passes(tmp_path: Path, monkeypatch, values, crlf, last_eol, chunk):
     """What spec §3.2 tells writers to print (Python's repr, NaN as 'NaN') always satisfies the grammar."""
-    monkeypatch.setattr(storage, "CSV_CHUNK_BYTES", chunk)
+    monkeypatch.setattr(csv_grammar, "CSV_CHUNK_BYTES", chunk)
     eol = "\r\n" if crlf else "\n"
     rows = [",".join("NaN" if math.isnan(v) else repr(v) for v in row) for row in values]
     text = "a,b,c" + eol + eol.join(rows) + (eol if last_eol else "")

@@ -9,7 +9,11 @@ from typing import Any, Callable
 
 import numpy as np
 
-from haptify import local_dynamics
+from haptify.local_dynamics import distance as ld_distance
+from haptify.local_dynamics import fitting as ld_fitting
+from haptify.local_dynamics import metrics as ld_metrics
+from haptify.local_dynamics import prediction as ld_prediction
+from haptify.local_dynamics import trials as ld_trials
 from haptify_mutants.catalogue.model import Make, Mutant, Patch, _post, _replace
 
 
@@ -53,7 +57,7 @@ def _euclidean_terms(real: Callable) -> Callable:
 
 def _mean_to_training(test: Any, train: Any, scales: Any, chunk: int = 512) -> np.ndarray:
     """A test window's distance to the training set as the mean over training windows, not the minimum."""
-    return local_dynamics.pair_distance(test, train, scales).mean(axis=1)
+    return ld_distance.pair_distance(test, train, scales).mean(axis=1)
 
 
 def _vector_rms_errors(force: np.ndarray, predicted: np.ndarray, segment_samples: int) -> np.ndarray:
@@ -103,7 +107,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "the first local_dynamic trial in manifest order",
         (
             Patch(
-                local_dynamics,
+                ld_metrics,
                 "training_trial",
                 _replace(lambda session: next(t for t in session.trials if t.protocol == "local_dynamic")),
             ),
@@ -117,7 +121,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R11.3-1",
         "quaternions are flipped to the hemisphere of the file's reference",
         "the hemisphere rule is left out",
-        (Patch(local_dynamics, "hemisphere_align", _replace(lambda u, hemi: np.array(u, dtype=float))),),
+        (Patch(ld_prediction, "hemisphere_align", _replace(lambda u, hemi: np.array(u, dtype=float)), everywhere=True),),
         ("dynamics.error_vs_distance",),
         cheap=True,
     ),
@@ -127,7 +131,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R11.3-1",
         "piecewise-linear maps extend their end segments linearly",
         "values beyond the end breakpoints are clamped (numpy.interp)",
-        (Patch(local_dynamics, "pwl_eval", _replace(_clamped_map)),),
+        (Patch(ld_prediction, "pwl_eval", _replace(_clamped_map)),),
         ("dynamics.error_vs_distance",),
         cheap=True,
     ),
@@ -137,7 +141,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R11.3-1",
         "F(q) = 1 + f_1 q⁻¹ + … + f_nf q^−nf",
         "1 − f_1 q⁻¹ − … (autoregressive sign)",
-        (Patch(local_dynamics, "lfilter", _denominator_sign),),
+        (Patch(ld_prediction, "lfilter", _denominator_sign), Patch(ld_fitting, "lfilter", _denominator_sign)),
         ("dynamics.error_vs_distance",),
         cheap=True,
     ),
@@ -147,7 +151,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R11.3-1",
         "each block delays its input by nk samples",
         "nk is ignored",
-        (Patch(local_dynamics, "predict", _delays_ignored),),
+        (Patch(ld_trials, "predict", _delays_ignored),),
         ("dynamics.error_vs_distance",),
         cheap=True,
     ),
@@ -157,7 +161,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R11.6-1",
         "R_θ = 86° is converted to radians; θ is in radians",
         "θ in radians divided by 86",
-        (Patch(local_dynamics.DistanceScales, "from_definition", _scales(lambda th: 86.0)),),
+        (Patch(ld_distance.DistanceScales, "from_definition", _scales(lambda th: 86.0)),),
         ("dynamics.error_vs_distance",),
         cheap=True,
     ),
@@ -167,7 +171,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R11.6-1",
         "R_θ = 86° is converted to radians; θ is in radians",
         "θ in degrees divided by R_θ in radians",
-        (Patch(local_dynamics.DistanceScales, "from_definition", _scales(lambda th: th * math.pi / 180.0)),),
+        (Patch(ld_distance.DistanceScales, "from_definition", _scales(lambda th: th * math.pi / 180.0)),),
         ("dynamics.error_vs_distance",),
         cheap=True,
     ),
@@ -177,7 +181,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R11.6-1",
         "θ_ab = 2 arccos|q̄_a·q̄_b|",
         "arccos|q̄_a·q̄_b| (the half angle)",
-        (Patch(local_dynamics, "pair_distance", _angle_not_doubled),),
+        (Patch(ld_distance, "pair_distance", _angle_not_doubled),),
         ("dynamics.error_vs_distance",),
         cheap=True,
     ),
@@ -187,7 +191,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R11.6-1",
         "Δ is the SUM of the four normalised differences",
         "their Euclidean norm",
-        (Patch(local_dynamics, "pair_distance", _euclidean_terms),),
+        (Patch(ld_distance, "pair_distance", _euclidean_terms),),
         ("dynamics.error_vs_distance",),
         cheap=True,
     ),
@@ -197,7 +201,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R11.6-1",
         "a window's distance to the training set is the minimum over training windows",
         "the mean over training windows",
-        (Patch(local_dynamics, "nearest_distances", _replace(_mean_to_training)),),
+        (Patch(ld_trials, "nearest_distances", _replace(_mean_to_training)),),
         ("dynamics.error_vs_distance",),
         cheap=True,
     ),
@@ -207,7 +211,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R11.6-2",
         "a segment's force error is the mean over x, y, z of per-axis RMS errors",
         "the RMS of the error vector's norm",
-        (Patch(local_dynamics, "segment_force_errors", _replace(_vector_rms_errors)),),
+        (Patch(ld_trials, "segment_force_errors", _replace(_vector_rms_errors)),),
         ("dynamics.error_vs_distance",),
         cheap=True,
     ),
@@ -217,7 +221,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R11.6-2",
         "the line is fitted through the training AND test segments",
         "through the test segments only",
-        (Patch(local_dynamics, "segment_table", _post(_test_segments_only)),),
+        (Patch(ld_metrics, "segment_table", _post(_test_segments_only)),),
         ("dynamics.error_vs_distance",),
         cheap=True,
     ),
@@ -227,7 +231,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R11.7-1",
         "force (torque) RMSE is the per-axis RMS of the prediction error",
         "the RMS of the error vector's magnitude for every axis",
-        (Patch(local_dynamics, "rmse", _replace(_rmse_of_magnitude)),),
+        (Patch(ld_prediction, "rmse", _replace(_rmse_of_magnitude), everywhere=True),),
         ("dynamics.force_rmse", "dynamics.force_rmse_mean"),
     ),
 )
