@@ -12,6 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from haptify import significance
 from haptify import uncertainty as unc
 from haptify.compute import ComputeContext, compute_session
 from haptify.metric_definitions import all_families
@@ -217,21 +218,21 @@ def _record(value: float, u: float, dof: float | None):
 
 def test_difference_test_welch():
     """u₁ = 0.3, u₂ = 0.4 with 4 and 9 dof: u_d = 0.5, ν = 0.0625 / (0.0081/4 + 0.0256/9) = 12.82, k = t_0.975(12.82)."""
-    d = unc.compared(_record(10.0, 0.3, 4), _record(11.0, 0.4, 9))
+    d = significance.compared(_record(10.0, 0.3, 4), _record(11.0, 0.4, 9))
     assert d.u == pytest.approx(0.5)
     assert d.dof == pytest.approx(0.0625 / (0.0081 / 4 + 0.0256 / 9))
     assert d.k == pytest.approx(2.165, abs=0.002)
     assert not d.significant  # |−1| < 2.165 × 0.5 = 1.08
-    assert unc.compared(_record(10.0, 0.3, 4), _record(11.2, 0.4, 9)).significant
-    assert unc.compared(_record(10.0, 0.3, 4), None) is None
+    assert significance.compared(_record(10.0, 0.3, 4), _record(11.2, 0.4, 9)).significant
+    assert significance.compared(_record(10.0, 0.3, 4), None) is None
 
 
 @settings(max_examples=40, deadline=None)
 @given(x=st.floats(-1e3, 1e3), u=st.floats(1e-3, 10.0), nu=st.floats(1.0, 100.0))
 def test_a_value_never_differs_from_itself_and_the_test_is_symmetric(x, u, nu):
     a, b = _record(x, u, nu), _record(x + 3 * u, u, nu)
-    assert not unc.compared(a, a).significant
-    assert unc.compared(a, b).significant == unc.compared(b, a).significant
+    assert not significance.compared(a, a).significant
+    assert significance.compared(a, b).significant == significance.compared(b, a).significant
 
 
 def test_compare_shows_u_and_marks_significant_pairs():
@@ -265,9 +266,9 @@ def test_ties_group_indistinguishable_devices():
         _record(1.04, 0.01, None),
         _record(1.51, 0.01, None),
     ]
-    assert unc.tie_groups(recs) == [[0, 2], [3], [1, 4]]  # 1.04 − 1.00 = 0.04 > 0.0277: a new group
+    assert significance.tie_groups(recs) == [[0, 2], [3], [1, 4]]  # 1.04 − 1.00 = 0.04 > 0.0277: a new group
     plain = recs[0].model_copy(update={"uncertainty": None})
-    assert unc.tie_groups([plain, recs[2]]) == [[0], [1]]
+    assert significance.tie_groups([plain, recs[2]]) == [[0], [1]]
 
 
 def test_compute_command_writes_the_records_only_when_asked(two_rep_free_space, tmp_path):

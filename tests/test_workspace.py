@@ -24,8 +24,8 @@ from haptify.metric_definitions import param
 from haptify.results import MetricResult, Unavailable
 from haptify.session_format import Device
 from haptify.storage import SessionWriter, open_session
+from haptify.volume_operator import _blocks_near
 from haptify.workspace import (
-    _blocks_near,
     compute,
     gap_regions,
     longest_occlusion_gap,

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 from haptify import schemas
 from haptify.results import MetricResult, ResultsFile
-from haptify.uncertainty import compared
+from haptify.significance import compared
 
 
 @dataclass
