@@ -16,8 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from haptify import storage
-from haptify.validation import streams
-from haptify.validation import SessionValidator, ValidationReport, validate_session
+from haptify.validation import SessionValidator, ValidationReport, streams, validate_session
 from haptify_tools.invalid_fixtures import defects, session_edits
 from haptify_tools.example_session import example_writer
 
