@@ -15,8 +15,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from haptify import storage, validation
-from haptify.validation import SessionValidator, ValidationReport, validate_session
+from haptify import storage
+from haptify.validation import SessionValidator, ValidationReport, streams, validate_session
 from haptify_tools.invalid_fixtures import defects, session_edits
 from haptify_tools.example_session import example_writer
 
@@ -254,7 +254,7 @@ def test_validation_holds_one_chunk_of_a_stream_at_a_time(tmp_path: Path, monkey
         seen.append((label, sizes))
         return digest, (sizes.append(len(c)) or c for c in chunks)
 
-    monkeypatch.setattr(validation, "read_stream_chunks", spy)
+    monkeypatch.setattr(streams, "read_stream_chunks", spy)  # the global the stream checks read
     report = validate_session(folder, chunk_rows=16)
     assert report.findings == []
     rows = {s["file"]: s["rows"] for t in session_edits.manifest(folder)["trials"] for s in t["streams"]}
@@ -265,7 +265,7 @@ def test_validation_holds_one_chunk_of_a_stream_at_a_time(tmp_path: Path, monkey
 
 def test_the_default_chunk_is_about_32_mib_of_float64_rows():
     v = SessionValidator(".")
-    assert v.chunk_rows_for(7) == validation.STREAM_CHUNK_BYTES // 56
+    assert v.chunk_rows_for(7) == streams.STREAM_CHUNK_BYTES // 56
     assert v.chunk_rows_for(7) * 7 * 8 <= 32 * 2**20
     assert SessionValidator(".", chunk_rows=5).chunk_rows_for(7) == 5
 

@@ -18,10 +18,9 @@ from haptify.storage import csv_grammar
 from haptify.errors import HaptifyError
 from haptify.kinematics import RANGE_LATTICE_POINTS as LIMIT_LATTICE_POINTS
 from haptify.kinematics import configurations_from_unit
-from haptify.session_format import Kinematics
+from haptify.session_format import ALLOWED_VALUES, Kinematics
 from haptify.storage import CSV_CHUNK_BYTES, check_csv_grammar
 from haptify.validation import (
-    ALLOWED_VALUES,
     NORMAL_NORM_TOLERANCE,
     kinematics_findings,
     validate_session,

@@ -4,7 +4,7 @@ Every case file runs in-process (the reference's ``analyse`` with the mutant's p
 run, one compute context per session as the JSON-lines reference keeps them) in ``--workers`` processes. A
 control run of the unpatched reference comes first: it must pass every case, or no verdict on a mutant means
 anything (exit 2). The validation of a fixture (spec chapter 4: more than half of a run's time) is done once per
-worker process and reused by every mutant that patches nothing in ``haptify.validation``: the fixtures do not
+worker process and reused by every mutant that patches nothing in the ``haptify.validation`` package: the fixtures do not
 change between mutants, and no other mutant can change a validation report. A mutant is **caught** when at least one case fails. Per mutant the failing cases are
 listed with their deviation in tolerances, ``max_i |value_i − expected_i| / (abs + rel·|expected_i|)``
 (none when the value is missing, of the wrong shape or unit, or the session was rejected).
@@ -76,6 +76,11 @@ def _validate_once(real: Callable) -> Callable:
     return validate_session
 
 
+def _in_validation(module: str) -> bool:
+    """True for ``haptify.validation`` and its modules (``haptify.validation.streams`` ...)."""
+    return module == "haptify.validation" or module.startswith("haptify.validation.")
+
+
 def run_one(name: str) -> dict[str, Any]:
     """Run every case against the mutant ``name`` (or the unpatched reference for :data:`CONTROL`)."""
     cases = {c.id: c for c in load_cases()}
@@ -84,7 +89,7 @@ def run_one(name: str) -> dict[str, Any]:
     adapter = PythonAdapter("haptify.conform_adapter:analyse")
     with ExitStack() as stack:
         mutant = BY_NAME.get(name)
-        if mutant is None or not any(getattr(p.owner, "__name__", "") == "haptify.validation" for p in mutant.patches):
+        if mutant is None or not any(_in_validation(getattr(p.owner, "__name__", "")) for p in mutant.patches):
             stack.enter_context(mock.patch.object(reference, "validate_session", _validate_once(validation.validate_session)))
         if mutant is not None:
             stack.enter_context(mutant.applied())

@@ -1,7 +1,7 @@
 """``haptify validate SESSION [--json]`` (spec §4.6): check a session folder and report every finding.
 
 Human output groups the findings by trial and file; ``--json`` prints a
-:class:`~haptify.validation.ValidationReportModel` (``validation-report.schema.json``). Exit code 0 when
+:class:`~haptify.validation.report.ValidationReportModel` (``validation-report.schema.json``). Exit code 0 when
 the session is valid (warnings allowed), 1 when it is invalid, 2 when validation could not run.
 """
 

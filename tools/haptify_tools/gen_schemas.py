@@ -26,7 +26,7 @@ MODELS: dict[str, str] = {
     "uncertainty-definitions": "haptify.uncertainty:UncertaintyDefinitions",
     "import-map": "haptify.importers:ImportMap",
     "hw-model": "haptify.local_dynamics:HWModelFile",
-    "validation-report": "haptify.validation:ValidationReportModel",
+    "validation-report": "haptify.validation.report:ValidationReportModel",
     "bundle": "haptify_tools.registry.bundle:Bundle",
     "conformance-cases": "haptify_conform.cases:CaseFile",
     "conform-report": "haptify_conform.report:ConformReport",
