@@ -164,35 +164,26 @@ def _any_massless(rotor_inertia):
 
 
 @njit(cache=True)
-def _balance_motors(
-    i,
-    th_m,
-    th_l,
-    friction,
-    latched,
-    trip,
-    dh,
-    base_r,
-    base_p,
-    c_inv,
-    surface_point,
-    normal,
-    k_r,
-    tau_max,
-    stiffness,
-    half_gap,
-    ws,
-):
+def _render(th_m, scene, ws):
+    """:func:`_command` at motor angles ``th_m`` (rad) for the rendering software's ``scene`` ``(dh, base_r,
+    base_p, c_inv, surface_point, normal, k_r, tau_max)`` into the work arrays ``ws`` ``(ta, qe, a_vec, res,
+    f_vec, origins, axes)`` of :func:`render_loop`. Returns (force magnitude, saturated?)."""
+    dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_max = scene
+    ta, qe, a_vec, _, f_vec, origins, axes = ws
+    return _command(th_m, dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_max, ta, qe, a_vec, f_vec, origins, axes)
+
+
+@njit(cache=True)
+def _balance_motors(i, th_m, th_l, friction, stiffness, half_gap, latched, trip, scene, ws):
     """Massless rotors: solve the quasi-static balance ``k·dz(θ_m − θ_l) = τ(θ_m) + friction`` of period
     ``i`` for the motor angles ``th_m`` (rad, updated in place) by at most 6 Newton steps with the Jacobian
-    ``K + k_r·A·Aᵀ`` (Sherman–Morrison), the command cut while ``latched`` or above ``trip`` (N).
-    ``ws`` is :func:`render_loop`'s work arrays ``(ta, qe, a_vec, res, f_vec, origins, axes)``."""
-    ta, qe, a_vec, res, f_vec, origins, axes = ws
+    ``K + k_r·A·Aᵀ`` (Sherman–Morrison), the command cut while ``latched`` or above ``trip`` (N); ``scene``
+    and ``ws`` as in :func:`_render`."""
+    k_r = scene[6]
+    ta, a_vec, res = ws[0], ws[2], ws[3]
     n_j = th_m.shape[0]
     for _ in range(6):
-        fmag, s_flag = _command(
-            th_m, dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_max, ta, qe, a_vec, f_vec, origins, axes
-        )
+        fmag, s_flag = _render(th_m, scene, ws)
         if latched or fmag > trip:
             ta[:] = 0.0
             a_vec[:] = 0.0
@@ -314,32 +305,13 @@ def render_loop(
     f_vec = np.zeros(3)
     origins, axes = np.zeros((n_j, 3)), np.zeros((n_j, 3))
     ws = (ta, qe, a_vec, res, f_vec, origins, axes)
+    scene = (dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_max)
     margin = 0.25 * half_gap  # stay sub-stepped within a quarter gap of the gap's edge
     latched = False
     for i in range(n_s):
         if massless:
-            _balance_motors(
-                i,
-                th_m,
-                th_l,
-                friction,
-                latched,
-                trip,
-                dh,
-                base_r,
-                base_p,
-                c_inv,
-                surface_point,
-                normal,
-                k_r,
-                tau_max,
-                stiffness,
-                half_gap,
-                ws,
-            )
-        fmag, s_flag = _command(
-            th_m, dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_max, ta, qe, a_vec, f_vec, origins, axes
-        )
+            _balance_motors(i, th_m, th_l, friction, stiffness, half_gap, latched, trip, scene, ws)
+        fmag, s_flag = _render(th_m, scene, ws)
         latched = _latch(latched, fmag, trip, rearm)
         if latched:
             ta[:] = 0.0
