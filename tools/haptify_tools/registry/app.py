@@ -157,8 +157,10 @@ class _RegistryApp(FastAPI):
         return SecurityHeaders(super().build_middleware_stack())
 
 
-def create_app(settings: Settings | None = None, *, registry: Registry | None = None) -> FastAPI:  # noqa: C901 (over ruff's limit of 15: to be split)
-    """The registry app for ``settings`` (spec §17.5); migrations and the orphan sweep run here, at start-up."""
+def create_app(settings: Settings | None = None, *, registry: Registry | None = None) -> FastAPI:
+    """The registry app for ``settings`` (spec §17.5); migrations and the orphan sweep run here, at start-up.
+    The routes are registered by concern, in this order: errors, service, submission intake, submission
+    records, admin and limits, conformance challenges, labs and devices, then the web pages."""
     reg = registry or Registry(settings or Settings())
     swept = reg.sweep()
 
@@ -175,6 +177,20 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
     )
     app.state.registry = reg
     app.state.swept = swept
+    _register_error_handlers(app)
+    _register_health(app, reg)
+    _register_intake(app, reg)
+    _register_submission_records(app, reg)
+    _register_admin(app, reg)
+    _register_conformance(app, reg)
+    _register_devices(app, reg)
+    _add_web(app)
+    return app
+
+
+def _register_error_handlers(app: FastAPI) -> None:
+    """Coded refusals (``HaptifyError``, invalid requests E975, HTTP errors E973/E975) and the E999 of an
+    unhandled exception, each a JSON body with findings (spec §17.5.1)."""
 
     @app.exception_handler(HaptifyError)
     async def _coded(request: Request, err: HaptifyError) -> JSONResponse:
@@ -223,6 +239,10 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
             {"status": "error", "findings": [Finding("E999", f"{type(exc).__name__}: {exc}").to_dict()]}, status_code=500
         )
 
+
+def _register_health(app: FastAPI, reg: Registry) -> None:
+    """``GET /health``: liveness, versions and the start-up sweep (spec §17.5)."""
+
     @app.get(f"{API}/health", tags=["service"])
     def health() -> dict:
         """Liveness, versions and what the start-up sweep removed."""
@@ -233,6 +253,11 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
             "database": reg.engine.dialect.name,
             "swept": app.state.swept,
         }
+
+
+def _register_intake(app: FastAPI, reg: Registry) -> None:
+    """Submission intake (spec §17.2, §17.5.2): ``POST /submissions`` with the bundle as the body, and the
+    resumable uploads (open, append, state, submit); the uploads left by a restart are resumed or expired here."""
 
     @app.post(
         f"{API}/submissions",
@@ -305,6 +330,10 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
             response.status_code = 200
         return outcome.to_dict()
 
+
+def _register_submission_records(app: FastAPI, reg: Registry) -> None:
+    """Submission records (spec §17.3, §17.5): list, one submission, its archive, withdrawal."""
+
     @app.get(f"{API}/submissions", tags=["submissions"])
     def list_submissions(
         lab: str | None = None,
@@ -334,6 +363,10 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
         caller = reg.authenticate(authorization, "submit")
         return reg.withdraw(sid, body.reason, caller)
 
+
+def _register_admin(app: FastAPI, reg: Registry) -> None:
+    """Lab tokens (admin only; spec §17.6) and the registry's published limits (spec §17.4)."""
+
     @app.post(f"{API}/tokens", tags=["service"], status_code=201)
     def create_token(body: TokenBody, authorization: str | None = Header(None)) -> dict:
         """Create a lab token (admin only). The token is shown once; the registry keeps only its sha256."""
@@ -348,6 +381,10 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
             "challenge_ttl_s": reg.settings.challenge_ttl_s,
             "upload_ttl_s": reg.settings.upload_ttl_s,
         }
+
+
+def _register_conformance(app: FastAPI, reg: Registry) -> None:
+    """Conformance challenges (spec §17.8): issue, read, sessions archive, answer; the implementations list."""
 
     @app.post(f"{API}/challenges", tags=["conformance"], status_code=201)
     def create_challenge(authorization: str | None = Header(None)) -> dict:
@@ -377,6 +414,10 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
     def implementations() -> list[dict]:
         """Implementations and versions with answered challenges: passed, failed, latest passed challenge."""
         return challenge.implementations(reg)
+
+
+def _register_devices(app: FastAPI, reg: Registry) -> None:
+    """Labs and devices (spec §17.5, §15.5): lab records, device aggregates, comparison table, CSV export."""
 
     @app.get(f"{API}/labs", tags=["labs"])
     def labs() -> list[dict]:
@@ -444,9 +485,6 @@ def create_app(settings: Settings | None = None, *, registry: Registry | None = 
         return PlainTextResponse(
             to_csv(reg.export_rows(device=device, state=state, verification=verification)), media_type="text/csv"
         )
-
-    _add_web(app)
-    return app
 
 
 EXPORT_COLUMNS = [

@@ -154,7 +154,111 @@ def _command(th_m, dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_ma
 
 
 @njit(cache=True)
-def render_loop(  # noqa: C901 (over ruff's limit of 15: to be split)
+def _any_massless(rotor_inertia):
+    """Whether any drive axis has a massless rotor (``rotor_inertia`` ≤ 0, kg·m²): :func:`render_loop`
+    then balances the motors quasi-statically instead of integrating them."""
+    for a in range(rotor_inertia.shape[0]):
+        if rotor_inertia[a] <= 0.0:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _render(th_m, scene, ws):
+    """:func:`_command` at motor angles ``th_m`` (rad) for the rendering software's ``scene`` ``(dh, base_r,
+    base_p, c_inv, surface_point, normal, k_r, tau_max)`` into the work arrays ``ws`` ``(ta, qe, a_vec, res,
+    f_vec, origins, axes)`` of :func:`render_loop`. Returns (force magnitude, saturated?)."""
+    dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_max = scene
+    ta, qe, a_vec, _, f_vec, origins, axes = ws
+    return _command(th_m, dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_max, ta, qe, a_vec, f_vec, origins, axes)
+
+
+@njit(cache=True)
+def _balance_motors(i, th_m, th_l, friction, stiffness, half_gap, latched, trip, scene, ws):
+    """Massless rotors: solve the quasi-static balance ``k·dz(θ_m − θ_l) = τ(θ_m) + friction`` of period
+    ``i`` for the motor angles ``th_m`` (rad, updated in place) by at most 6 Newton steps with the Jacobian
+    ``K + k_r·A·Aᵀ`` (Sherman–Morrison), the command cut while ``latched`` or above ``trip`` (N); ``scene``
+    and ``ws`` as in :func:`_render`."""
+    k_r = scene[6]
+    ta, a_vec, res = ws[0], ws[2], ws[3]
+    n_j = th_m.shape[0]
+    for _ in range(6):
+        fmag, s_flag = _render(th_m, scene, ws)
+        if latched or fmag > trip:
+            ta[:] = 0.0
+            a_vec[:] = 0.0
+        for a in range(n_j):
+            res[a] = stiffness[a] * dead_zone(th_m[a] - th_l[i, a], half_gap[a]) - ta[a] - friction[i, a]
+        if s_flag:
+            a_vec[:] = 0.0
+        s_aa, s_ar = 0.0, 0.0
+        for a in range(n_j):
+            s_aa += a_vec[a] * (a_vec[a] / stiffness[a])
+            s_ar += a_vec[a] * (res[a] / stiffness[a])
+        proj = k_r * s_ar / (1.0 + k_r * s_aa)
+        biggest = 0.0
+        for a in range(n_j):
+            step = res[a] / stiffness[a] - a_vec[a] / stiffness[a] * proj
+            th_m[a] -= step
+            biggest = max(biggest, abs(step))
+        if biggest < 1e-12:
+            break
+
+
+@njit(cache=True)
+def _latch(latched, fmag, trip, rearm):
+    """The cut-off latch after a command of ``fmag`` (N): on above ``trip``, off below ``rearm``."""
+    if latched and fmag < rearm:
+        return False
+    if not latched and fmag > trip:
+        return True
+    return latched
+
+
+@njit(cache=True)
+def _massless_cable(i, latched, th_m, th_l, friction, stiffness, half_gap, tau_c):
+    """Massless rotors: the cable torques ``tau_c`` (N·m) of period ``i``; while cut off (``latched``) the
+    motor relaxes onto the link within the period (``th_m`` updated in place)."""
+    for a in range(th_m.shape[0]):
+        if latched:
+            th_m[a] = th_l[i, a] + friction[i, a] / stiffness[a]
+            tau_c[a] = friction[i, a]
+        else:
+            tau_c[a] = stiffness[a] * dead_zone(th_m[a] - th_l[i, a], half_gap[a])
+
+
+@njit(cache=True)
+def _advance_rotors(
+    i, th_m, w_m, th_l, thd_l, ta, friction, dts, stiffness, damping, half_gap, rotor_inertia, exact, margin, tau_c
+):
+    """Rotors with inertia: advance every axis over period ``i`` by :func:`axis_period` with the command
+    ``ta`` (N·m) held, the link moving linearly to its next sample; updates the motor angles ``th_m`` (rad)
+    and rates ``w_m`` (rad/s) and writes the period-average cable torques ``tau_c`` (N·m)."""
+    n_s = th_l.shape[0]
+    nxt = i + 1 if i + 1 < n_s else i
+    dt = dts[i]
+    for a in range(th_m.shape[0]):
+        w_l = (th_l[nxt, a] - th_l[i, a]) / dt if dt > 0 else thd_l[i, a]
+        use_exact = abs(dt - exact[a, 0]) < 1e-12
+        d_new, dd_new, tau_c[a] = axis_period(
+            th_m[a] - th_l[i, a],
+            w_m[a] - w_l,
+            ta[a] + friction[i, a],
+            stiffness[a],
+            damping[a],
+            half_gap[a],
+            rotor_inertia[a],
+            exact[a],
+            use_exact,
+            margin[a],
+            dt,
+        )
+        th_m[a] = th_l[nxt, a] + d_new
+        w_m[a] = w_l + dd_new
+
+
+@njit(cache=True)
+def render_loop(
     th_l,
     thd_l,
     friction,
@@ -182,10 +286,10 @@ def render_loop(  # noqa: C901 (over ruff's limit of 15: to be split)
     :func:`passive_drive` (``exact`` rows valid where the rotor has inertia).
 
     Rotors with inertia: the command is held over the period and each axis is advanced by
-    :func:`axis_period`. Massless rotors (any ``rotor_inertia`` ≤ 0): the motor is in quasi-static
-    balance with the cable, ``k·dz(θ_m − θ_l) = τ(θ_m) + friction``, solved by Newton's method with the
-    Jacobian ``K + k_r·A·Aᵀ`` (Sherman–Morrison). Returns motor torque, period-average cable torque,
-    encoder joint angles (each ``(N, n)``), commanded force ``(N, 3)`` (D), saturated and cut-off flags.
+    :func:`axis_period` (:func:`_advance_rotors`). Massless rotors (any ``rotor_inertia`` ≤ 0): the motor is
+    in quasi-static balance with the cable (:func:`_balance_motors`, :func:`_massless_cable`). Returns motor
+    torque, period-average cable torque, encoder joint angles (each ``(N, n)``), commanded force ``(N, 3)``
+    (D), saturated and cut-off flags.
     """
     n_s, n_j = th_l.shape
     motor = np.zeros((n_s, n_j))
@@ -194,81 +298,29 @@ def render_loop(  # noqa: C901 (over ruff's limit of 15: to be split)
     fcmd = np.zeros((n_s, 3))
     sat = np.zeros(n_s, np.bool_)
     cutf = np.zeros(n_s, np.bool_)
-    massless = False
-    for a in range(n_j):
-        if rotor_inertia[a] <= 0.0:
-            massless = True
+    massless = _any_massless(rotor_inertia)
     th_m = th_l[0].copy()  # the motors start at rest on the links (cables relaxed)
     w_m = thd_l[0].copy()
     ta, qe, a_vec, res, tau_c = np.zeros(n_j), np.zeros(n_j), np.zeros(n_j), np.zeros(n_j), np.zeros(n_j)
     f_vec = np.zeros(3)
     origins, axes = np.zeros((n_j, 3)), np.zeros((n_j, 3))
-    margin = np.zeros(n_j)  # stay sub-stepped within a quarter gap of the gap's edge
-    for a in range(n_j):
-        margin[a] = 0.25 * half_gap[a]
+    ws = (ta, qe, a_vec, res, f_vec, origins, axes)
+    scene = (dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_max)
+    margin = 0.25 * half_gap  # stay sub-stepped within a quarter gap of the gap's edge
     latched = False
     for i in range(n_s):
         if massless:
-            for _ in range(6):
-                fmag, s_flag = _command(
-                    th_m, dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_max, ta, qe, a_vec, f_vec, origins, axes
-                )
-                if latched or fmag > trip:
-                    ta[:] = 0.0
-                    a_vec[:] = 0.0
-                for a in range(n_j):
-                    res[a] = stiffness[a] * dead_zone(th_m[a] - th_l[i, a], half_gap[a]) - ta[a] - friction[i, a]
-                if s_flag:
-                    a_vec[:] = 0.0
-                s_aa, s_ar = 0.0, 0.0
-                for a in range(n_j):
-                    s_aa += a_vec[a] * (a_vec[a] / stiffness[a])
-                    s_ar += a_vec[a] * (res[a] / stiffness[a])
-                proj = k_r * s_ar / (1.0 + k_r * s_aa)
-                biggest = 0.0
-                for a in range(n_j):
-                    step = res[a] / stiffness[a] - a_vec[a] / stiffness[a] * proj
-                    th_m[a] -= step
-                    biggest = max(biggest, abs(step))
-                if biggest < 1e-12:
-                    break
-        fmag, s_flag = _command(
-            th_m, dh, base_r, base_p, c_inv, surface_point, normal, k_r, tau_max, ta, qe, a_vec, f_vec, origins, axes
-        )
-        if latched and fmag < rearm:
-            latched = False
-        elif not latched and fmag > trip:
-            latched = True
+            _balance_motors(i, th_m, th_l, friction, stiffness, half_gap, latched, trip, scene, ws)
+        fmag, s_flag = _render(th_m, scene, ws)
+        latched = _latch(latched, fmag, trip, rearm)
         if latched:
             ta[:] = 0.0
         if massless:
-            for a in range(n_j):
-                if latched:  # the motor relaxes onto the link within the period
-                    th_m[a] = th_l[i, a] + friction[i, a] / stiffness[a]
-                    tau_c[a] = friction[i, a]
-                else:
-                    tau_c[a] = stiffness[a] * dead_zone(th_m[a] - th_l[i, a], half_gap[a])
+            _massless_cable(i, latched, th_m, th_l, friction, stiffness, half_gap, tau_c)
         else:
-            nxt = i + 1 if i + 1 < n_s else i
-            dt = dts[i]
-            for a in range(n_j):
-                w_l = (th_l[nxt, a] - th_l[i, a]) / dt if dt > 0 else thd_l[i, a]
-                use_exact = abs(dt - exact[a, 0]) < 1e-12
-                d_new, dd_new, tau_c[a] = axis_period(
-                    th_m[a] - th_l[i, a],
-                    w_m[a] - w_l,
-                    ta[a] + friction[i, a],
-                    stiffness[a],
-                    damping[a],
-                    half_gap[a],
-                    rotor_inertia[a],
-                    exact[a],
-                    use_exact,
-                    margin[a],
-                    dt,
-                )
-                th_m[a] = th_l[nxt, a] + d_new
-                w_m[a] = w_l + dd_new
+            _advance_rotors(
+                i, th_m, w_m, th_l, thd_l, ta, friction, dts, stiffness, damping, half_gap, rotor_inertia, exact, margin, tau_c
+            )
         motor[i] = ta
         cable[i] = tau_c
         enc[i] = qe
