@@ -22,6 +22,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import least_squares
 
+from haptify.codes import Code
 from haptify.conventions import GRAVITY_W, STANDARD_GRAVITY, quat_conjugate, quat_rotate, quat_to_matrix
 from haptify import preprocessing
 from haptify.caching import cached, session_of
@@ -125,7 +126,12 @@ def fit_sphere(
     min_samples = int(param(FAMILY, "min_samples")) if min_samples is None else min_samples
     min_coverage = float(param(FAMILY, "min_coverage")) if min_coverage is None else min_coverage
     if len(x) < max(min_samples, 4):
-        raise fail("E602", f"{label}: {len(x)} samples, too few for a sphere fit", expected=f">= {min_samples}", found=len(x))
+        raise fail(
+            Code.HANDLE_CALIBRATION_DEGENERATE,
+            f"{label}: {len(x)} samples, too few for a sphere fit",
+            expected=f">= {min_samples}",
+            found=len(x),
+        )
     design = np.column_stack([2.0 * x, np.ones(len(x))])
     sol, *_ = np.linalg.lstsq(design, np.sum(x * x, axis=1), rcond=None)
     c0 = sol[:3]
@@ -142,7 +148,7 @@ def fit_sphere(
     coverage = float(np.linalg.eigvalsh(u.T @ u / len(u))[0])
     if not np.isfinite(radius) or coverage < min_coverage:
         raise fail(
-            "E602",
+            Code.HANDLE_CALIBRATION_DEGENERATE,
             f"{label}: orientations cover too little of the sphere (coverage {coverage:.3f})",
             expected=f"coverage >= {min_coverage}",
             found=round(coverage, 4),
@@ -253,7 +259,11 @@ def fit_trial(ctx_or_session: Any, trial_id: str) -> HandleCalibration:
     t1 = min(w["t"].iloc[-1], a["t"].iloc[-1])
     grid = preprocessing.uniform_grid(t0, t1, rate)
     if len(grid) < 2:
-        raise fail("E305", f"handle_wrench and handle_accel of trial {trial_id!r} do not overlap", expected="overlapping streams")
+        raise fail(
+            Code.STREAMS_DO_NOT_OVERLAP,
+            f"handle_wrench and handle_accel of trial {trial_id!r} do not overlap",
+            expected="overlapping streams",
+        )
     wr = preprocessing.lowpass_resample(
         w["t"].to_numpy(), w[["fx", "fy", "fz", "tx", "ty", "tz"]].to_numpy(), grid, preprocessing.sp("wrench_cutoff_hz")
     )
@@ -265,7 +275,8 @@ def fit_trial(ctx_or_session: Any, trial_id: str) -> HandleCalibration:
         try:
             err = orientation_error_deg(ctx_or_session, trial_id, grid, wr[:, :3] - cal.force_bias_N)
         except HaptifyError as exc:  # the diagnostic is optional; the fit stands without it
-            if exc.code not in ("E611", "E603"):  # no usable motion capture, or no sensor pose in the rig
+            # no usable motion capture, or no sensor pose in the rig
+            if exc.code not in (Code.MOTION_CAPTURE_UNUSABLE, Code.RIG_PART_MISSING):
                 raise
         else:
             cal.diagnostics["orientation_error_deg"] = err
@@ -304,7 +315,7 @@ def handle_calibration(ctx_or_session: Any) -> HandleCalibration:
         trials = session.trials_of("rig.handle_calibration")
         if not trials:
             raise fail(
-                "E601",
+                Code.HANDLE_CALIBRATION_MISSING,
                 f"session {session.session_id!r} has no handle_gravity record and no rig.handle_calibration trial",
                 file="session.json",
                 pointer="/calibration",
@@ -331,7 +342,7 @@ def sensor_pose(session: Any, part: str) -> Pose:
     handle = session.manifest.rig.handle
     if handle is None:
         raise fail(
-            "E603",
+            Code.RIG_PART_MISSING,
             f"the rig of session {session.session_id!r} does not describe the handle sensors",
             file="session.json",
             pointer="/rig/handle",

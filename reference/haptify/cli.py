@@ -13,6 +13,7 @@ import sys
 from importlib.metadata import entry_points
 from typing import TYPE_CHECKING
 
+from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError
 from haptify.ui import UI as UI
 from haptify.versions import PACKAGE_VERSION, SCHEMA_VERSION, SPEC_VERSION
@@ -83,7 +84,9 @@ def _register_broken(sub: Subcommands, name: str, target: str, exc: Exception) -
     """Keep a plugin that failed to import visible: calling it reports E999 with the cause."""
 
     def run(args: argparse.Namespace, ui: UI) -> int:
-        raise HaptifyError(Finding("E999", f"the '{name}' command ({target}) failed to load: {type(exc).__name__}: {exc}"))
+        raise HaptifyError(
+            Finding(Code.INTERNAL_ERROR, f"the '{name}' command ({target}) failed to load: {type(exc).__name__}: {exc}")
+        )
 
     parser = sub.add_parser(name, help=f"(unavailable: {type(exc).__name__})", add_help=False)
     parser.add_argument("rest", nargs="*")
@@ -134,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
         ui.warn("interrupted; nothing half-written was left behind")
         return EXIT_CANNOT_RUN
     except Exception as exc:  # the last guard: report, never a traceback
-        _print_findings(ui, [Finding("E999", f"{type(exc).__name__}: {exc}")])
+        _print_findings(ui, [Finding(Code.INTERNAL_ERROR, f"{type(exc).__name__}: {exc}")])
         return EXIT_CANNOT_RUN
 
 

@@ -12,6 +12,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from haptify.codes import Code
 from haptify.compute import ComputeContext, compute_session
 from haptify.families import family_modules
 from haptify.errors import Finding, HaptifyError, fail
@@ -90,7 +91,7 @@ def _wanted_metrics(text: str | None) -> list[str] | None:
         return None
     wanted = [m.strip() for m in text.split(",") if m.strip()]
     if not wanted:
-        raise fail("E903", "--metrics names no metric id", expected="ID[,ID…]", found=text)
+        raise fail(Code.USAGE, "--metrics names no metric id", expected="ID[,ID…]", found=text)
     return wanted
 
 
@@ -99,11 +100,11 @@ def case_parameters(path: Path | None) -> dict[str, Any]:
     if path is None:
         return {}
     if not path.is_file():
-        raise fail("E903", f"--params file {str(path)!r} does not exist", file=str(path), expected="a JSON file", found=None)
-    params = parse_json_file(path, "E903", str(path))
+        raise fail(Code.USAGE, f"--params file {str(path)!r} does not exist", file=str(path), expected="a JSON file", found=None)
+    params = parse_json_file(path, Code.USAGE, str(path))
     if not isinstance(params, dict):
         raise fail(
-            "E903",
+            Code.USAGE,
             f"--params file {str(path)!r} is not a JSON object",
             file=str(path),
             expected="a JSON object",

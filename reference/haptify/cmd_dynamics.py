@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.local_dynamics import (
     OUTPUT_NAMES,
@@ -56,14 +57,20 @@ def register(sub: Subcommands) -> None:
 
 
 def _usage(parser: argparse.ArgumentParser) -> int:
-    raise fail("E903", "say 'haptify dynamics fit …' or 'haptify dynamics predict …'", expected=["fit", "predict"], found=None)
+    raise fail(
+        Code.USAGE, "say 'haptify dynamics fit …' or 'haptify dynamics predict …'", expected=["fit", "predict"], found=None
+    )
 
 
 def _check_free(paths: list[Path | None], overwrite: bool) -> None:
     for path in paths:
         if path is not None and path.exists() and not overwrite:
             raise fail(
-                "E901", f"{str(path)!r} already exists", file=str(path), expected="a new path or --overwrite", found=str(path)
+                Code.OUTPUT_EXISTS,
+                f"{str(path)!r} already exists",
+                file=str(path),
+                expected="a new path or --overwrite",
+                found=str(path),
             )
 
 

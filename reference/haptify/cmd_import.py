@@ -16,6 +16,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
+from haptify.codes import Code
 from haptify.errors import HaptifyError, fail
 from haptify.importers import (
     MOCAP_SOURCES,
@@ -120,7 +121,7 @@ def _format_of(args: argparse.Namespace) -> str:
     fmt = detect_format(args.file)
     if fmt is None:
         raise fail(
-            "E501",
+            Code.IMPORT_SOURCE_UNREADABLE,
             f"{str(args.file)!r} is none of the motion-capture formats {list(MOCAP_SOURCES)}",
             file=str(args.file),
             expected=list(MOCAP_SOURCES),
@@ -141,7 +142,7 @@ def _placement(text: str) -> dict[str, list[float]]:
     except ValueError:
         vals = []
     if len(vals) not in (3, 7):
-        raise fail("E903", "--placement takes 'x,y,z' or 'x,y,z,qw,qx,qy,qz'", expected="3 or 7 numbers", found=text)
+        raise fail(Code.USAGE, "--placement takes 'x,y,z' or 'x,y,z,qw,qx,qy,qz'", expected="3 or 7 numbers", found=text)
     return {"position": vals[:3], "quaternion": vals[3:] if len(vals) == 7 else [1.0, 0.0, 0.0, 0.0]}
 
 
@@ -188,9 +189,9 @@ def _load(args: argparse.Namespace, fmt: str, facts: dict[str, Any] | None) -> L
         )
         if missing:
             raise fail(
-                "E903", "without --map, give the session facts on the command line", expected=missing, found="missing"
+                Code.USAGE, "without --map, give the session facts on the command line", expected=missing, found="missing"
             ) from None
-        raise fail("E903", "; ".join(f"{f.pointer}: {f.message}" for f in err.findings), found="invalid option") from None
+        raise fail(Code.USAGE, "; ".join(f"{f.pointer}: {f.message}" for f in err.findings), found="invalid option") from None
 
 
 def _suggest(fmt: str, args: argparse.Namespace, ui: UI) -> int:
@@ -201,7 +202,7 @@ def _suggest(fmt: str, args: argparse.Namespace, ui: UI) -> int:
 
     if fmt == "csv":
         if not args.file.is_file():
-            raise fail("E501", f"{str(args.file)!r} does not exist or is not a file", file=str(args.file))
+            raise fail(Code.IMPORT_SOURCE_UNREADABLE, f"{str(args.file)!r} does not exist or is not a file", file=str(args.file))
         m, unplaced = suggest_csv_map(args.file)
     else:
         m, unplaced = suggest_recording_map(_read(fmt, args.file))
@@ -236,7 +237,7 @@ def run(args: argparse.Namespace, ui: UI) -> int:
         return _suggest(fmt, args, ui)
     if fmt == "csv" and args.map is None:
         raise fail(
-            "E903",
+            Code.USAGE,
             "haptify import csv needs --map MAP.json (--suggest-map prints one to start from)",
             expected="--map MAP.json",
             found=None,
@@ -265,7 +266,7 @@ def run(args: argparse.Namespace, ui: UI) -> int:
                 ui.warn(f"{w['code']} warning: {w['message']}")
         return 0
     if args.output is None:
-        raise fail("E903", f"haptify import {fmt} needs -o SESSION", expected="-o SESSION", found=None)
+        raise fail(Code.USAGE, f"haptify import {fmt} needs -o SESSION", expected="-o SESSION", found=None)
     dest = Destination.of(args.output, overwrite=args.overwrite, append=args.append)
     loaded = _load(args, fmt, dest.session_facts())
     with ui.progress(f"importing {args.file.name}", total=None) as advance:

@@ -7,6 +7,7 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from haptify.codes import Code
 from haptify.compute import ComputeContext, compute_session
 from haptify.families import family_modules
 from haptify.errors import fail
@@ -43,14 +44,14 @@ def run(args: argparse.Namespace, ui: UI) -> int:
     """Compute (or read) the results and write the report folder (spec §15.6)."""
     if args.wav_scale is not None and not (math.isfinite(args.wav_scale) and args.wav_scale > 0):
         # 0 silently meant "the default", a negative scale inverted the audio and NaN wrote NaN samples
-        raise fail("E903", "--wav-scale must be a positive amplitude in m/s^2", expected="> 0", found=args.wav_scale)
+        raise fail(Code.USAGE, "--wav-scale must be a positive amplitude in m/s^2", expected="> 0", found=args.wav_scale)
     session, validation_warnings = require_valid_session(args.session)
     ctx = ComputeContext(session=session)
     if args.results:
         results = load_results(args.results)
         if results.session_id != session.session_id:
             raise fail(
-                "E903",
+                Code.USAGE,
                 "the results belong to another session",
                 file=str(args.results),
                 expected=session.session_id,

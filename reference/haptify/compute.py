@@ -10,6 +10,7 @@ import importlib
 from dataclasses import dataclass, field
 from typing import Any, Callable, Hashable, Iterable, TypeVar
 
+from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError
 from haptify.families import family_modules
 from haptify.metric_definitions import all_families
@@ -48,7 +49,7 @@ class ComputeContext:
     def wants(self, metric_id: str) -> bool:
         return self.wanted is None or metric_id in self.wanted
 
-    def warn(self, code: str, message: str, metric: str | None = None, trial: str | None = None) -> None:
+    def warn(self, code: Code, message: str, metric: str | None = None, trial: str | None = None) -> None:
         Finding(code, message)  # checks the code is catalogued
         self.warnings.append(ResultWarning(code=code, message=message, metric=metric, trial=trial))
 
@@ -70,7 +71,7 @@ def compute_session(
     known = {m.id for f in all_families() for m in f.metrics}
     if wanted and not wanted <= known:
         unknown = sorted(wanted - known)
-        raise HaptifyError(Finding("E903", f"unknown metric id(s) {unknown}", expected=sorted(known), found=unknown))
+        raise HaptifyError(Finding(Code.USAGE, f"unknown metric id(s) {unknown}", expected=sorted(known), found=unknown))
     ctx = ctx or ComputeContext(session=session)
     ctx.wanted = wanted
     device = session.device()

@@ -1,6 +1,7 @@
 """Coded findings and errors (spec chapter 4 and §0.4).
 
-Every problem the reference reports carries a stable code from ``schemas/<v>/codes.json``. A
+Every problem the reference reports carries a stable code from ``schemas/<v>/codes.json``, named in the
+code by its :class:`~haptify.codes.Code` member (``Code.TIME_NOT_INCREASING``, never the bare ``"E203"``). A
 :class:`Finding` is one problem in a report (validation collects many); :class:`HaptifyError` is
 raised when a command cannot go on, and carries one or more findings. The CLI turns both into
 readable lines or JSON and never shows a traceback.
@@ -13,6 +14,7 @@ from functools import lru_cache
 from typing import Any
 
 from haptify import schemas
+from haptify.codes import Code
 
 
 @lru_cache(maxsize=1)
@@ -40,6 +42,7 @@ class Finding:
     spec_section: str = field(init=False)
 
     def __post_init__(self) -> None:
+        self.code = str(self.code)  # a Code member is kept as its plain code, so reprs and pickles stay as before
         try:
             entry = catalogue()[self.code]
         except KeyError:  # a programming error: every code must be catalogued
@@ -98,7 +101,7 @@ class HaptifyError(Exception):
         return self.findings[0].code
 
 
-def fail(code: str, message: str, **where: Any) -> HaptifyError:
-    """Build (not raise) a :class:`HaptifyError` with a single finding: ``raise fail("E110", ...)``.
+def fail(code: Code, message: str, **where: Any) -> HaptifyError:
+    """Build (not raise) a :class:`HaptifyError` with a single finding: ``raise fail(Code.STREAM_FILE_MISSING, ...)``.
     Spec §0.4."""
     return HaptifyError(Finding(code, message, **where))

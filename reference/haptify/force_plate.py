@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from haptify.codes import Code
 from haptify.conventions import quat_to_matrix
 from haptify.caching import cached, session_of
 from haptify.errors import fail
@@ -39,7 +40,7 @@ def corner_geometry(rig: Any) -> tuple[np.ndarray, np.ndarray]:
     plate = getattr(rig, "force_plate", None)
     if plate is None:
         raise fail(
-            "E603",
+            Code.RIG_PART_MISSING,
             "the rig does not describe the force plate",
             file="session.json",
             pointer="/rig/force_plate",
@@ -101,7 +102,7 @@ def plate_bias(ctx_or_session: Any) -> tuple[np.ndarray, str]:
         trials = session.trials_of("rig.plate_bias")
         if not trials:
             raise fail(
-                "E621",
+                Code.PLATE_BIAS_MISSING,
                 f"session {session.session_id!r} has no plate_bias record and no rig.plate_bias trial",
                 file="session.json",
                 pointer="/calibration",
@@ -185,7 +186,7 @@ def dominant_frequency(x: np.ndarray, rate_hz: float, band_hz: tuple[float, floa
     band = np.flatnonzero((freqs >= band_hz[0]) & (freqs <= band_hz[1]))
     if len(band) < 3 or not np.any(mag[band] > 0):
         raise fail(
-            "E622",
+            Code.PLATE_IMPACT_NOT_FOUND,
             f"no spectral peak between {band_hz[0]:.1f} and {band_hz[1]:.1f} Hz",
             expected="an impact response inside the band",
             found="flat spectrum" if len(band) >= 3 else "band empty",
@@ -262,7 +263,7 @@ def cop_trial_placements(ctx_or_session: Any, trial_id: str) -> list[Placement]:
     found = placements(ps.t, ps.force, ps.cop, ps.cop_valid, mk["t"].to_numpy(), xy)
     if not found:
         raise fail(
-            "E623",
+            Code.COP_PLACEMENTS_NOT_FOUND,
             f"trial {trial_id!r}: no static placement of the weight found",
             expected=f"loads of |Fz| >= {param(FAMILY, 'cop_min_force_N')} N held >= {param(FAMILY, 'cop_min_hold_s')} s with visible markers",
             found="none",

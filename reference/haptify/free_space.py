@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any, TypedDict
 import numpy as np
 
 from haptify.caching import cached
+from haptify.codes import Code
 from haptify.errors import HaptifyError, fail
 from haptify.force_plate import plate_signals
 from haptify.metric_definitions import param
@@ -41,7 +42,7 @@ def magnitude_stats(force: np.ndarray) -> dict[str, float]:
     """Mean, sample sd (ddof = 1), min and max of |F| over the rows of ``force (N, 3)`` in N (spec §9.2)."""
     mag = np.linalg.norm(np.asarray(force, dtype=float), axis=1)
     if len(mag) < 2:
-        raise fail("E611", "fewer than two usable force samples", expected=">= 2", found=len(mag))
+        raise fail(Code.MOTION_CAPTURE_UNUSABLE, "fewer than two usable force samples", expected=">= 2", found=len(mag))
     return {"mean": float(mag.mean()), "sd": float(mag.std(ddof=1)), "min": float(mag.min()), "max": float(mag.max())}
 
 
@@ -104,12 +105,16 @@ def hand_force_samples(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]
     hs = handle_signals(ctx, trial_id)
     if hs.force is None:
         raise fail(
-            "E302", f"trial {trial_id!r} has no handle_wrench stream", file="session.json", expected="handle_wrench", found=None
+            Code.REQUIRED_STREAM_MISSING,
+            f"trial {trial_id!r} has no handle_wrench stream",
+            file="session.json",
+            expected="handle_wrench",
+            found=None,
         )
     ok = hs.valid & np.all(np.isfinite(hs.force), axis=1)
     if ok.sum() < 2:
         raise fail(
-            "E611",
+            Code.MOTION_CAPTURE_UNUSABLE,
             f"trial {trial_id!r} has no usable samples with motion capture and force",
             expected=">= 2 samples",
             found=int(ok.sum()),
@@ -143,7 +148,10 @@ def speeds(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
     ok, settled = speed_samples(track)
     if not ok.any():
         raise fail(
-            "E611", f"trial {trial_id!r} has no usable motion-capture samples", expected="usable handle_pose samples", found=0
+            Code.MOTION_CAPTURE_UNUSABLE,
+            f"trial {trial_id!r} has no usable motion-capture samples",
+            expected="usable handle_pose samples",
+            found=0,
         )
     return np.linalg.norm(track.velocity[ok], axis=1), np.linalg.norm(track.angular_velocity[settled], axis=1)
 
@@ -169,17 +177,17 @@ def _speed_summary(ctx: Any, trial_id: str) -> SpeedSummary:
     }
     limit = float(fp("max_fraction_over_limit"))
     if out["over_speed"] > limit:
-        out["codes"].append("W411")
+        out["codes"].append(Code.SPEED_ABOVE_PROTOCOL)
         ctx.warn(
-            "W411",
+            Code.SPEED_ABOVE_PROTOCOL,
             f"trial {trial_id!r}: {out['over_speed']:.0%} of the samples exceed {fp('speed_limit_m_per_s')} m/s",
             metric="free_space.speed_mean",
             trial=trial_id,
         )
     if out["over_angular"] > limit:
-        out["codes"].append("W412")
+        out["codes"].append(Code.ANGULAR_SPEED_ABOVE_PROTOCOL)
         ctx.warn(
-            "W412",
+            Code.ANGULAR_SPEED_ABOVE_PROTOCOL,
             f"trial {trial_id!r}: {out['over_angular']:.0%} of the samples exceed "
             f"{np.degrees(float(fp('angular_speed_limit_rad_per_s'))):.3g} deg/s",
             metric="free_space.angular_speed_mean",
@@ -193,7 +201,7 @@ def _angular_of(summary: SpeedSummary, trial_id: str) -> float:
     if summary["angular"] is None:
         settle = fp("angular_speed_settle_s")
         raise fail(
-            "E611",
+            Code.MOTION_CAPTURE_UNUSABLE,
             f"trial {trial_id!r}: no motion-capture segment reaches {settle} s past both of its ends",
             expected=f"a segment longer than {2 * float(settle):g} s",
             found="none",

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import pandas as pd
 
+from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError
 from haptify.session_format import Stream
 from haptify.storage import SessionFolder
@@ -95,7 +96,8 @@ def open_checked_session(path: str | os.PathLike[str]) -> CheckedSession:
     for entry in validator.entries:  # what the manifest declares of each stream, and that its file is there
         validator.check_declaration(entry)
     if validator.report.errors:
-        if any(f.code in ("E101", "E999") for f in validator.report.errors):  # could not run (spec §4.1)
+        could_not_run = (Code.SESSION_NOT_FOUND, Code.INTERNAL_ERROR)  # spec §4.1
+        if any(f.code in could_not_run for f in validator.report.errors):
             raise HaptifyError(*validator.report.errors)
         raise refusal(path, validator.report.findings)
     assert validator.manifest is not None  # a manifest without errors was parsed whole

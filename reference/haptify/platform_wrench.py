@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from haptify.codes import Code
 from haptify.errors import Finding, fail
 
 # channels each platform type records (spec §5.6.1); other types (5, 6, 7, 11, 12, 21) are not imported
@@ -67,7 +68,7 @@ def origin_by_rule(kind: int, origin_m: np.ndarray, *, number: int, file: str) -
     o = np.asarray(origin_m, dtype=np.float64)
     if o.shape != (3,) or not np.isfinite(o).all():
         raise fail(
-            "E506",
+            Code.IMPORT_PLATFORM_WRENCH_UNREADABLE,
             f"force platform {number}: FORCE_PLATFORM:ORIGIN is not three finite numbers",
             file=file,
             pointer="/FORCE_PLATFORM/ORIGIN",
@@ -79,7 +80,7 @@ def origin_by_rule(kind: int, origin_m: np.ndarray, *, number: int, file: str) -
         a, b = abs(float(o[0])), abs(float(o[1]))
         if min(a, b) == 0.0:
             raise fail(
-                "E506",
+                Code.IMPORT_PLATFORM_WRENCH_UNREADABLE,
                 f"force platform {number} (type 3): the sensor offsets a, b in FORCE_PLATFORM:ORIGIN "
                 "must be non-zero to form a moment",
                 file=file,
@@ -116,7 +117,7 @@ def origin_by_rule(kind: int, origin_m: np.ndarray, *, number: int, file: str) -
 
 def _sign_note(number: int, file: str, written: np.ndarray, used: np.ndarray, why: str) -> Finding:
     return Finding(
-        "W503",
+        Code.IMPORT_PLATE_ORIGIN_SIGN,
         f"force platform {number}: FORCE_PLATFORM:ORIGIN {np.round(written * 1000, 6).tolist()} mm "
         f"follows the other sign convention ({why})",
         file=file,
@@ -132,7 +133,7 @@ def calibrated(kind: int, channels: np.ndarray, cal: np.ndarray | None, *, numbe
     x = np.asarray(channels, dtype=np.float64)
     if kind == 4 and cal is None:
         raise fail(
-            "E506",
+            Code.IMPORT_PLATFORM_WRENCH_UNREADABLE,
             f"force platform {number} is type 4 but the file has no FORCE_PLATFORM:CAL_MATRIX for it",
             file=file,
             pointer="/FORCE_PLATFORM/CAL_MATRIX",
@@ -143,7 +144,7 @@ def calibrated(kind: int, channels: np.ndarray, cal: np.ndarray | None, *, numbe
         return x
     if cal.shape != (x.shape[0], x.shape[0]):
         raise fail(
-            "E506",
+            Code.IMPORT_PLATFORM_WRENCH_UNREADABLE,
             f"force platform {number}: its CAL_MATRIX is {cal.shape[0]} × {cal.shape[1]}, its type records {x.shape[0]} channels",
             file=file,
             pointer="/FORCE_PLATFORM/CAL_MATRIX",

@@ -27,6 +27,7 @@ import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
 from haptify.caching import cached, session_of
+from haptify.codes import Code
 from haptify.conventions import quat_conjugate, quat_multiply, quat_normalize, quat_slerp
 from haptify.errors import fail
 from haptify.metric_definitions import param
@@ -328,7 +329,7 @@ def pose_on_grid(ctx_or_session: Any, trial_id: str, grid: np.ndarray) -> PoseOn
         session = session_of(ctx_or_session)
         stream = session.stream(trial_id, "handle_pose")
         raise fail(
-            "E611",
+            Code.MOTION_CAPTURE_UNUSABLE,
             f"trial {trial_id!r}: no usable motion-capture samples in the analysed time span",
             file=stream.file if stream else None,
             expected=f"valid runs of at least {sp('min_segment_s')} s",

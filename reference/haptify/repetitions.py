@@ -16,6 +16,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from haptify.caching import session_of
+from haptify.codes import Code
 from haptify.errors import HaptifyError, fail
 from haptify.metric_definitions import MetricDefinition, family
 from haptify.results import MetricResult, Unavailable
@@ -109,7 +110,12 @@ def unavailable(metric_id: str, error: HaptifyError) -> Unavailable:
 
 def no_trials(protocol: str) -> HaptifyError:
     """The E310 error of a metric whose protocol has no trial in the session (spec §15.2)."""
-    return fail("E310", f"the session has no {protocol} trial", expected=f"a trial of protocol {protocol!r}", found=None)
+    return fail(
+        Code.PROTOCOL_TRIALS_MISSING,
+        f"the session has no {protocol} trial",
+        expected=f"a trial of protocol {protocol!r}",
+        found=None,
+    )
 
 
 def per_trial(
@@ -130,7 +136,11 @@ def per_trial(
             failed[tid] = exc
     if out:
         for tid, err in failed.items():
-            ctx.warn("W413", f"{what}: trial {tid!r} skipped ({err.findings[0].code}: {err.findings[0].message})", trial=tid)
+            ctx.warn(
+                Code.TRIAL_SKIPPED,
+                f"{what}: trial {tid!r} skipped ({err.findings[0].code}: {err.findings[0].message})",
+                trial=tid,
+            )
     return out, next(iter(failed.values()), None)
 
 

@@ -15,6 +15,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from haptify.codes import Code
 from haptify.versions import SPEC_VERSION
 
 Number = float
@@ -179,5 +180,5 @@ def load_results(path: str | os.PathLike[str]) -> ResultsFile:
 
     path = Path(path)
     if not path.is_file():
-        raise fail("E903", f"results file {str(path)!r} does not exist", file=str(path))
-    return read_json_model(path, ResultsFile, "E104")
+        raise fail(Code.USAGE, f"results file {str(path)!r} does not exist", file=str(path))
+    return read_json_model(path, ResultsFile, Code.SCHEMA_VIOLATION)

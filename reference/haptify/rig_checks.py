@@ -13,6 +13,7 @@ from typing import Any, Callable
 import numpy as np
 
 from haptify import calibration, force_plate, preprocessing
+from haptify.codes import Code
 from haptify.conventions import quat_to_matrix
 from haptify.caching import session_of
 from haptify.errors import HaptifyError, fail
@@ -66,7 +67,7 @@ def _best_lag(score: Callable[[float], float], max_lag: float, coarse: float, fi
     lags, c = search(0.0, max_lag, coarse)
     if not np.isfinite(c).any():  # no lag pairs a usable sample with the F/T grid
         raise fail(
-            "E624",
+            Code.SYNC_UNDETERMINED,
             f"{label}: no lag within ±{max_lag} s finds usable samples to align",
             expected="usable samples overlapping the F/T grid",
             found="none",
@@ -74,7 +75,7 @@ def _best_lag(score: Callable[[float], float], max_lag: float, coarse: float, fi
     k = int(np.nanargmax(c))
     if k == 0 or k == len(c) - 1:
         raise fail(
-            "E624",
+            Code.SYNC_UNDETERMINED,
             f"{label}: the best alignment lies at the edge of the ±{max_lag} s search",
             expected=f"a delay within ±{max_lag} s",
             found=float(lags[k]),
@@ -85,7 +86,10 @@ def _best_lag(score: Callable[[float], float], max_lag: float, coarse: float, fi
     denom = a - 2 * b + d
     if not denom < 0:
         raise fail(
-            "E624", f"{label}: the alignment score has no peak (did the handle rotate?)", expected="a peaked score", found="flat"
+            Code.SYNC_UNDETERMINED,
+            f"{label}: the alignment score has no peak (did the handle rotate?)",
+            expected="a peaked score",
+            found="flat",
         )
     return float(lags[k] + 0.5 * (a - d) / denom * fine)
 
@@ -110,7 +114,7 @@ def recorder_delays(ctx_or_session: Any, trial_id: str) -> dict[str, float]:
     if not track.valid.any():
         stream = session.stream(trial_id, "handle_pose")
         raise fail(
-            "E611",
+            Code.MOTION_CAPTURE_UNUSABLE,
             f"trial {trial_id!r}: no usable motion-capture samples to align with the F/T recorder",
             file=stream.file if stream else None,
             expected=f"valid runs of at least {preprocessing.sp('min_segment_s')} s",
@@ -123,7 +127,7 @@ def recorder_delays(ctx_or_session: Any, trial_id: str) -> dict[str, float]:
     grid = preprocessing.uniform_grid(float(t0), float(t1), rate)
     if len(grid) < 10:
         raise fail(
-            "E624",
+            Code.SYNC_UNDETERMINED,
             f"trial {trial_id!r} is too short for the sync check",
             expected=f"> {2 * max_lag} s of overlap",
             found=len(grid),

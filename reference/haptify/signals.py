@@ -14,6 +14,7 @@ import numpy as np
 
 from haptify import calibration as cal_mod
 from haptify.caching import cached, session_of
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.preprocessing import (
     Kinematics,
@@ -78,7 +79,7 @@ def build_handle_signals(ctx_or_session: Any, trial_id: str, rate_hz: float, cal
     grid = uniform_grid(float(t0), float(t1), rate_hz)
     if len(grid) < 2:
         raise fail(
-            "E305",
+            Code.STREAMS_DO_NOT_OVERLAP,
             f"the handle streams of trial {trial_id!r} do not overlap in time",
             file="session.json",
             expected="overlapping handle_pose, handle_wrench and handle_accel",

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from haptify.caching import cached
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.metric_definitions import param
 from haptify.repetitions import TrialValue, aggregate, protocol_trials
@@ -223,7 +224,7 @@ def fit_stiffness(
     thin = [p for p in found if not p.qualifies(rule)]
     if not presses:
         raise fail(
-            "E315",
+            Code.NO_PRESSES,
             f"trial {trial_id!r}: no press qualifies (>= {rule.min_press_s} s of contact, >= {rule.min_press_depth_m} m "
             f"deep, >= {rule.min_samples} fit samples on the rise); {len(thin)} press(es) had too few fit samples",
             expected="at least one press",
@@ -233,7 +234,7 @@ def fit_stiffness(
     x, y = penetration[idx], normal_force[idx]
     if float(np.ptp(x)) <= 0:
         raise fail(
-            "E315",
+            Code.NO_PRESSES,
             f"trial {trial_id!r}: the fit samples do not span any penetration",
             expected="varying penetration",
             found=float(x[0]),
@@ -265,20 +266,20 @@ def maximum_windows(ctx: Any, trial_id: str) -> list[tuple[np.ndarray, np.ndarra
 def trial_codes(ctx: Any, trial_id: str, fit: StiffnessFit) -> list[str]:
     """W414 (too few qualifying presses) and W415 (presses with too few fit samples) for one trial, each
     also recorded on ``ctx`` (spec §13.2–13.3)."""
-    codes = []
+    codes: list[str] = []
     if len(fit.presses) < int(stp("recommended_presses")):
-        codes.append("W414")
+        codes.append(Code.FEW_PRESSES)
         ctx.warn(
-            "W414",
+            Code.FEW_PRESSES,
             f"trial {trial_id!r}: {len(fit.presses)} press(es) qualified, {stp('recommended_presses')} recommended",
             metric="stiffness.measured",
             trial=trial_id,
         )
     if fit.thin:
-        codes.append("W415")
+        codes.append(Code.PRESS_TOO_FAST)
         where = ", ".join(f"sample {p.start} ({len(p.fit)} fit samples)" for p in fit.thin)
         ctx.warn(
-            "W415",
+            Code.PRESS_TOO_FAST,
             f"trial {trial_id!r}: {len(fit.thin)} press(es) left out with fewer than {stp('min_fit_samples')} "
             f"fit samples: {where}",
             metric="stiffness.measured",

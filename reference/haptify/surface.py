@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from haptify.caching import cached, session_of
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.metric_definitions import param
 from haptify.repetitions import TrialValue, aggregate, protocol_trials
@@ -42,7 +43,7 @@ def unit_normal(normal: Any, trial_id: str = "") -> np.ndarray:
     norm = float(np.linalg.norm(n))
     if not np.isfinite(norm) or norm < 1e-9:
         raise fail(
-            "E303",
+            Code.RENDERING_MISSING,
             f"trial {trial_id!r}: the rendering's surface_normal {list(n)} has no direction",
             file="session.json",
             pointer="/trials/*/rendering/surface_normal",
@@ -121,7 +122,7 @@ def contact_signals(ctx_or_session: Any, trial_id: str) -> ContactSignals:
         trial = session.trial(trial_id)
         if trial.rendering is None:
             raise fail(
-                "E303",
+                Code.RENDERING_MISSING,
                 f"active trial {trial_id!r} has no rendering parameters",
                 file="session.json",
                 pointer="/trials/*/rendering",
@@ -133,7 +134,7 @@ def contact_signals(ctx_or_session: Any, trial_id: str) -> ContactSignals:
         hs = handle_signals(ctx_or_session, trial_id)
         if hs.force is None:
             raise fail(
-                "E302",
+                Code.REQUIRED_STREAM_MISSING,
                 f"trial {trial_id!r} has no handle_wrench stream",
                 file="session.json",
                 expected="handle_wrench",
@@ -166,7 +167,7 @@ def planar_stats(force: np.ndarray, normal: np.ndarray) -> dict[str, float]:
     """Mean and sample sd (ddof = 1) of |F − (F·n)n| over the rows of ``force`` (spec §12.3), N."""
     mag = np.linalg.norm(planar_force(force, normal), axis=1)
     if len(mag) < 2:
-        raise fail("E314", "fewer than two contact samples", expected=">= 2", found=len(mag))
+        raise fail(Code.NO_CONTACT, "fewer than two contact samples", expected=">= 2", found=len(mag))
     return {"mean": float(mag.mean()), "sd": float(mag.std(ddof=1))}
 
 
@@ -174,7 +175,7 @@ def _trial(ctx: Any, trial_id: str) -> dict[str, Any]:
     cs = contact_signals(ctx, trial_id)
     if cs.used.sum() < 2:
         raise fail(
-            "E314",
+            Code.NO_CONTACT,
             f"trial {trial_id!r}: no sample is in contact with the rendered surface "
             f"(commanded normal force above {sfp('contact_force_threshold_N')} N for ± {sfp('contact_guard_s')} s)",
             expected=">= 2 contact samples",

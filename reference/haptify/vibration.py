@@ -14,6 +14,7 @@ import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
 from haptify.caching import cached, session_of
+from haptify.codes import Code
 from haptify.errors import HaptifyError, fail
 from haptify.metric_definitions import param
 from haptify.repetitions import TrialValue, aggregate, protocol_trials
@@ -46,7 +47,10 @@ def highpass(x: np.ndarray, rate_hz: float) -> np.ndarray:
     fc = float(vp("highpass_cutoff_hz"))
     if not rate_hz > 2.0 * fc:
         raise fail(
-            "E316", f"a {rate_hz:g} Hz signal cannot be high-passed at {fc:g} Hz", expected=f"rate > {2 * fc:g} Hz", found=rate_hz
+            Code.SIGNAL_TOO_SHORT,
+            f"a {rate_hz:g} Hz signal cannot be high-passed at {fc:g} Hz",
+            expected=f"rate > {2 * fc:g} Hz",
+            found=rate_hz,
         )
     sos = butter(int(vp("highpass_order")), fc, btype="highpass", fs=rate_hz, output="sos")
     x = np.asarray(x, dtype=float)
@@ -94,7 +98,7 @@ def spectral_centroid(a: np.ndarray, rate_hz: float) -> float:
     total = float(p.sum())
     if not total > 0:
         raise fail(
-            "E316",
+            Code.SIGNAL_TOO_SHORT,
             "the vibration signal is identically zero: its spectral centroid is undefined",
             expected="a non-zero signal",
             found=0.0,
@@ -130,7 +134,7 @@ def combine(t: np.ndarray, accel: np.ndarray, trial_id: str = "") -> CombinedVib
     if len(t) - 2 * trim < 1 or (len(t) - 2 * trim) / rate < float(vp("min_duration_s")):
         duration = float(t[-1] - t[0]) if len(t) else 0.0
         raise fail(
-            "E316",
+            Code.SIGNAL_TOO_SHORT,
             f"trial {trial_id!r}: {duration:.3g} s of acceleration leave less than "
             f"{vp('min_duration_s')} s after trimming {vp('edge_trim_s')} s at each end",
             expected=f">= {2 * float(vp('edge_trim_s')) + float(vp('min_duration_s'))} s",

@@ -14,6 +14,7 @@ import numpy as np
 from scipy import ndimage as ndi
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.metric_definitions import param
 
@@ -70,7 +71,7 @@ def volume_solid(points: np.ndarray, *, pitch: float | None = None, closing_radi
         raise ValueError("volume_solid needs finite points of shape (N, 3)")
     if len(pts) < int(wp("min_points")):
         raise fail(
-            "E313",
+            Code.WORKSPACE_CLOUD_UNUSABLE,
             f"a workspace cloud needs at least {wp('min_points')} finite points",
             expected=f">= {wp('min_points')}",
             found=len(pts),
@@ -86,7 +87,7 @@ def volume_solid(points: np.ndarray, *, pitch: float | None = None, closing_radi
     if n_vox > int(wp("max_grid_voxels")):
         extent = (pts.max(axis=0) - pts.min(axis=0)).round(3).tolist()
         raise fail(
-            "E313",
+            Code.WORKSPACE_CLOUD_UNUSABLE,
             f"the cloud spans {extent} m: its {n_vox} voxels exceed the grid limit",
             expected=f"<= {wp('max_grid_voxels')} voxels",
             found=n_vox,

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from scipy.spatial import cKDTree
 
+from haptify.codes import Code
 from haptify.conventions import pose_apply
 from haptify.errors import HaptifyError, fail
 from haptify.kinematics import RANGE_LATTICE_POINTS, configurations_from_unit, forward_positions, joint_limits, unit_lattice
@@ -49,7 +50,7 @@ def _joint_ranges(kin: Kinematics) -> np.ndarray:
     q = q[~np.isnan(q).any(axis=1)]
     if len(q) == 0:  # every coupled range of the lattice is empty (e.g. an upper limit below the lower one)
         raise fail(
-            "E311",
+            Code.DEVICE_KINEMATICS_MISSING,
             "the device's joint limits admit no configuration (every sampled coupled range is empty)",
             file="session.json",
             pointer="/device/kinematics/joints",
@@ -231,7 +232,11 @@ def _modeled(ctx: Any, device: Any, placement: Any) -> tuple[VoxelSolid | None, 
     model: VoxelSolid | None = None
     model_error: HaptifyError | None = None
     if device.kinematics is None:
-        model_error = fail("E311", f"device {device.manufacturer} {device.model} has no kinematics", pointer="/device/kinematics")
+        model_error = fail(
+            Code.DEVICE_KINEMATICS_MISSING,
+            f"device {device.manufacturer} {device.model} has no kinematics",
+            pointer="/device/kinematics",
+        )
     elif any(ctx.wants(m) for m in ("workspace.modeled_volume", "workspace.volume_ratio", "workspace.coverage")):
         try:
             model = ctx.cached(
@@ -243,7 +248,7 @@ def _modeled(ctx: Any, device: Any, placement: Any) -> tuple[VoxelSolid | None, 
             model, model_error = (
                 None,
                 fail(
-                    "E311",
+                    Code.DEVICE_KINEMATICS_MISSING,
                     "the device's kinematics reach no volume (empty or degenerate joint ranges)",
                     pointer="/device/kinematics",
                     expected="a modeled volume > 0",
@@ -272,7 +277,7 @@ def trial_cloud(ctx: Any, trials: list[str], trial_id: str) -> tuple[np.ndarray,
         own = int(np.all(np.isfinite(position), axis=1).sum())
         if own < int(wp("min_points")):
             raise fail(
-                "E313",
+                Code.WORKSPACE_CLOUD_UNUSABLE,
                 f"a workspace cloud needs at least {wp('min_points')} finite points",
                 expected=f">= {wp('min_points')}",
                 found=own,
@@ -329,7 +334,7 @@ def compute(ctx: Any) -> list[MetricResult | Unavailable]:
                 "workspace.modeled_volume",
                 model.volume,
                 diagnostics={"voxels": int(model.fraction.size), "samples": model.n_points, "hull_volume_m3": model.hull_volume},
-                warnings=[] if model.closed else ["W410"],
+                warnings=[] if model.closed else [Code.WORKSPACE_SHELL_OPEN],
             )
         )
     elif model_error is not None:
@@ -342,7 +347,11 @@ def compute(ctx: Any) -> list[MetricResult | Unavailable]:
         out.append(
             unavailable(
                 "workspace.spec_box_volume",
-                fail("E312", "the device datasheet has no workspace_box_m", pointer="/device/datasheet/workspace_box_m"),
+                fail(
+                    Code.DATASHEET_VALUE_MISSING,
+                    "the device datasheet has no workspace_box_m",
+                    pointer="/device/datasheet/workspace_box_m",
+                ),
             )
         )
 
@@ -365,7 +374,7 @@ def compute(ctx: Any) -> list[MetricResult | Unavailable]:
     for tid, s in solids.items():
         if not s.closed:
             ctx.warn(
-                "W410",
+                Code.WORKSPACE_SHELL_OPEN,
                 f"the boundary sweep of trial {tid!r} did not close: volume {s.volume * 1e6:.0f} cm³ is "
                 f"{s.volume / s.hull_volume if s.hull_volume else 0:.0%} of its convex hull",
                 metric="workspace.measured_volume",
@@ -374,9 +383,11 @@ def compute(ctx: Any) -> list[MetricResult | Unavailable]:
     closed = {tid: s for tid, s in solids.items() if s.closed}
     if closed:  # open sweeps are left out when a closed one exists (spec §8.7)
         for tid in solids.keys() - closed.keys():
-            ctx.warn("W413", f"workspace.measured_volume: trial {tid!r} skipped (W410: its sweep did not close)", trial=tid)
+            ctx.warn(
+                Code.TRIAL_SKIPPED, f"workspace.measured_volume: trial {tid!r} skipped (W410: its sweep did not close)", trial=tid
+            )
         solids = closed
-    codes = {tid: [] if s.closed else ["W410"] for tid, s in solids.items()}
+    codes: dict[str, list[str]] = {tid: [] if s.closed else [Code.WORKSPACE_SHELL_OPEN] for tid, s in solids.items()}
     out.append(
         aggregate(
             FAMILY,

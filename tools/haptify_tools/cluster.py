@@ -21,6 +21,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Iterator
 
+from haptify.codes import Code
 from haptify.errors import fail
 
 RETRIES = 3  # re-runs of a task that raised (a dead worker's tasks are re-run by the scheduler)
@@ -57,7 +58,7 @@ def dask_client(scheduler: str | None = None, workers: int = 2) -> Iterator[Any]
         yield None
         return
     if workers < 0:
-        raise fail("E903", "--workers must be 0 or more", expected=">= 0", found=workers)
+        raise fail(Code.USAGE, "--workers must be 0 or more", expected=">= 0", found=workers)
     from distributed import Client, LocalCluster
 
     if scheduler is not None:
@@ -65,7 +66,7 @@ def dask_client(scheduler: str | None = None, workers: int = 2) -> Iterator[Any]
             client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
         except (OSError, TimeoutError, ValueError) as exc:
             raise fail(
-                "E980",
+                Code.CLUSTER_UNAVAILABLE,
                 f"the Dask scheduler at {scheduler!r} does not answer: {exc}",
                 expected="a running `dask scheduler`",
                 found=scheduler,

@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from haptify.codes import Code
 from haptify.errors import HaptifyError, fail
 from haptify_tools.cluster import add_executor_options, dask_client, describe, each_completed, worker_name
 
@@ -50,7 +51,7 @@ def output_folders(sessions: list[Path], out: Path) -> dict[Path, Path]:
         name = session.resolve().name
         if name in seen:
             raise fail(
-                "E903",
+                Code.USAGE,
                 f"two sessions are named {name!r}; their outputs would share OUT/{name}",
                 expected="session folders with different names",
                 found=[str(seen[name]), str(session)],

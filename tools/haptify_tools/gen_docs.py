@@ -5,8 +5,9 @@ A spec chapter marks a generated block with ``<!-- BEGIN GENERATED: <what> [arg]
 metrics), ``stream-kinds``, ``protocols``, ``codes``, ``import-units``, ``uncertainty`` (the method per metric and the sources of
 ``uncertainty.json``), ``requirements <chapter>`` (a chapter's
 requirement ids) or ``coverage`` (requirement → cases and distinguishing mutants, from the case files and
-``conformance/mutants/results.json``). ``--check`` exits 1 when a chapter's tables
-differ from the data, so prose tables cannot drift from the definition files.
+``conformance/mutants/results.json``). It also writes ``reference/haptify/codes.py``, the :class:`Code` names of
+``codes.json`` (:func:`codes_module`). ``--check`` exits 1 when a chapter's tables or the codes module
+differ from the data, so neither prose tables nor code names can drift from the definition files.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from haptify_tools.generated_files import generator_main
 
 REPO = Path(__file__).resolve().parents[2]
 SPEC_DIR = REPO / "spec"
+CODES_MODULE = REPO / "reference" / "haptify" / "codes.py"
 BLOCK = re.compile(
     r"(<!-- BEGIN GENERATED: (?P<what>[a-z-]+)(?: (?P<arg>[a-z_0-9]+))? -->\n)(?P<body>.*?)(<!-- END GENERATED -->)", re.S
 )
@@ -99,6 +101,35 @@ def codes_table() -> str:
         for c in schemas.load("codes.json")["codes"]
     ]
     return _table(["code", "name", "severity", "spec", "meaning", "hint"], rows)
+
+
+def code_member(name: str) -> str:
+    """The :class:`~haptify.codes.Code` member name of a catalogue name: ``session-not-found`` →
+    ``SESSION_NOT_FOUND`` (spec §0.4)."""
+    return name.upper().replace("-", "_")
+
+
+def codes_module() -> str:
+    """The text of ``reference/haptify/codes.py``: one ``Code`` member per entry of ``codes.json``, in the
+    catalogue's order, its value the code and its comment the title and spec section (spec §0.4)."""
+    lines = [
+        "# Generated from schemas/1.0/codes.json by `python -m haptify_tools.gen_docs`; do not edit by hand.",
+        '"""The codes of ``schemas/1.0/codes.json`` as names (spec §0.4): ``Code.SESSION_NOT_FOUND == "E101"``.',
+        "",
+        "A member is a ``str`` (``StrEnum``), so it formats, compares, hashes and serialises as its code; the",
+        "catalogue stays the source of severity, title and hint (:func:`haptify.errors.catalogue`).",
+        '"""',
+        "",
+        "from enum import StrEnum",
+        "",
+        "",
+        "class Code(StrEnum):",
+        '    """Every coded finding and error; the member name is the catalogue\'s ``name`` in upper case."""',
+        "",
+    ]
+    for c in schemas.load("codes.json")["codes"]:
+        lines += [f"    #: {c['title']} (§{c['spec_section']})", f'    {code_member(c["name"])} = "{c["code"]}"']
+    return "\n".join(lines) + "\n"
 
 
 def import_units_table() -> str:
@@ -186,11 +217,13 @@ def regenerate(text: str) -> str:
 
 
 def targets() -> dict[Path, str]:
-    return {path: regenerate(path.read_text(encoding="utf-8")) for path in sorted(SPEC_DIR.glob("*.md"))}
+    out = {path: regenerate(path.read_text(encoding="utf-8")) for path in sorted(SPEC_DIR.glob("*.md"))}
+    out[CODES_MODULE] = codes_module()
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
-    return generator_main(argv, __doc__.splitlines()[0], "haptify_tools.gen_docs", "spec chapter(s)", targets)
+    return generator_main(argv, __doc__.splitlines()[0], "haptify_tools.gen_docs", "spec chapter(s) or codes module", targets)
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ from typing import Any, Callable
 import numpy as np
 
 from haptify.c3d_stream import STREAM_ABOVE_BYTES, c3d_layout, read_head
+from haptify.codes import Code
 from haptify.errors import Finding, fail
 from haptify.importers.destination import Destination, ImportResult, prepare
 from haptify.importers.import_map import LoadedMap
@@ -65,7 +66,7 @@ def read_c3d_header(path: Path) -> C3DHeader:
         head = fh.read(C3D_BLOCK)
         if len(head) < 24 or head[0] == 0:
             raise fail(
-                "E501",
+                Code.IMPORT_SOURCE_UNREADABLE,
                 f"{str(path)!r} is too short for a C3D header",
                 file=str(path),
                 expected=f"≥ {C3D_BLOCK} bytes",
@@ -80,7 +81,14 @@ def read_c3d_header(path: Path) -> C3DHeader:
 
 
 def _disagreement(path: Path, what: str, header: Any, other: Any, followed: str, pointer: str) -> Finding:
-    return Finding("W501", f"{path.name}: {what}; {followed}", file=str(path), pointer=pointer, expected=header, found=other)
+    return Finding(
+        Code.IMPORT_SOURCE_DISAGREES,
+        f"{path.name}: {what}; {followed}",
+        file=str(path),
+        pointer=pointer,
+        expected=header,
+        found=other,
+    )
 
 
 def c3d_disagreements(
@@ -191,7 +199,7 @@ def _platforms(params: Any, n_analogs: int, path: Path) -> tuple[list[C3DPlatfor
         if any(c >= n_analogs for c in chans):
             notes.append(
                 Finding(
-                    "W501",
+                    Code.IMPORT_SOURCE_DISAGREES,
                     f"{path.name}: FORCE_PLATFORM:CHANNEL of platform {i + 1} names analog "
                     f"channels beyond the {n_analogs} the file holds; its channels are not used",
                     file=str(path),
@@ -221,7 +229,7 @@ def _rotations(
     if ratio > 1:  # several rotation samples per point frame: the point clock keeps the first of each
         notes.append(
             Finding(
-                "W501",
+                Code.IMPORT_SOURCE_DISAGREES,
                 f"{path.name}: ROTATION:RATIO is {ratio}; one rotation sample per point frame (the first) is imported",
                 file=str(path),
                 pointer="/ROTATION/RATIO",
@@ -248,12 +256,12 @@ def read_c3d(path: str | Path, *, stream: bool | None = None) -> Recording:
     p = Path(path)
     label = str(p)
     if not p.is_file():
-        raise fail("E501", f"{label!r} does not exist or is not a file", file=label)
+        raise fail(Code.IMPORT_SOURCE_UNREADABLE, f"{label!r} does not exist or is not a file", file=label)
     with open(p, "rb") as fh:
         head = fh.read(2)
     if len(head) < 2 or head[1] != 0x50:
         raise fail(
-            "E501",
+            Code.IMPORT_SOURCE_UNREADABLE,
             f"{label!r} is not a C3D file (its second byte is not 0x50)",
             file=label,
             expected="0x50",
@@ -270,7 +278,7 @@ def read_c3d(path: str | Path, *, stream: bool | None = None) -> Recording:
         if layout is None:
             c = ezc3d.c3d(str(p), extract_forceplat_data=False)
     except (OSError, RuntimeError, ValueError, IndexError) as exc:
-        raise fail("E501", f"{label!r} cannot be read as C3D: {exc}", file=label) from None
+        raise fail(Code.IMPORT_SOURCE_UNREADABLE, f"{label!r} cannot be read as C3D: {exc}", file=label) from None
     params, head_info, data = c["parameters"], c["header"], c["data"]
     if layout is not None:  # the frames stay in the file; broadcast NaN views carry only the shapes (§5.5.1)
         xyz = np.broadcast_to(np.float64(np.nan), (layout.frames, layout.points, 3))
@@ -295,7 +303,7 @@ def read_c3d(path: str | Path, *, stream: bool | None = None) -> Recording:
     warnings = c3d_disagreements(p, header, params, n_frames, per_frame, point_rate, analog_rate, header_analog_rate)
     if n_ch and analog_rate <= 0:
         raise fail(
-            "E501",
+            Code.IMPORT_SOURCE_UNREADABLE,
             f"{label!r} holds {n_ch} analog channels but states no analog rate",
             file=label,
             pointer="/ANALOG/RATE",
@@ -311,7 +319,7 @@ def read_c3d(path: str | Path, *, stream: bool | None = None) -> Recording:
     body_labels, body_pos, body_rot, rot_notes = _rotations(c, params, n_frames, p)
     if body_labels and point_rate <= 0:
         raise fail(
-            "E501",
+            Code.IMPORT_SOURCE_UNREADABLE,
             f"{label!r} holds 6-DoF bodies but states no frame rate",
             file=label,
             pointer="/POINT/RATE",
@@ -320,7 +328,7 @@ def read_c3d(path: str | Path, *, stream: bool | None = None) -> Recording:
         )
     if n_markers and point_rate <= 0:
         raise fail(
-            "E501",
+            Code.IMPORT_SOURCE_UNREADABLE,
             f"{label!r} holds {n_markers} points but states no point rate",
             file=label,
             pointer="/POINT/RATE",

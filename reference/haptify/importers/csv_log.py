@@ -9,6 +9,7 @@ from typing import Any, Literal, TypedDict
 import numpy as np
 import pandas as pd
 
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.importers.destination import Destination, ImportResult, add_trial, prepare
 from haptify.importers.import_map import CsvOptions, LoadedMap
@@ -46,7 +47,7 @@ def read_csv_columns(path: Path, names: list[str], opts: CsvOptions, *, map_labe
     """
     label = str(path)
     if not path.is_file():
-        raise fail("E501", f"{label!r} does not exist or is not a file", file=label)
+        raise fail(Code.IMPORT_SOURCE_UNREADABLE, f"{label!r} does not exist or is not a file", file=label)
     common: _CsvReading = {
         "sep": opts.delimiter,
         "skiprows": opts.skip_rows,
@@ -58,17 +59,19 @@ def read_csv_columns(path: Path, names: list[str], opts: CsvOptions, *, map_labe
     try:
         raw_header = [str(h) for h in pd.read_csv(path, nrows=0, **common).columns]
     except (OSError, UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError, ValueError) as exc:
-        raise fail("E501", f"{label!r} cannot be read as CSV: {exc}", file=label) from None
+        raise fail(Code.IMPORT_SOURCE_UNREADABLE, f"{label!r} cannot be read as CSV: {exc}", file=label) from None
     header = [h.strip() for h in raw_header]
     for name in names:
         if name not in header:
-            raise fail("E503", f"{path.name} has no column {name!r}", file=map_label, expected=header, found=name)
+            raise fail(
+                Code.IMPORT_CHANNEL_UNKNOWN, f"{path.name} has no column {name!r}", file=map_label, expected=header, found=name
+            )
     columns = {raw_header[header.index(name)]: name for name in names}
     numeric: _CsvReading = {"usecols": list(columns), "na_values": ["NaN", "nan"], "keep_default_na": False, **common}
     try:  # the fast path: the C parser, correctly rounded (pandas ≥ 3)
         table = pd.read_csv(path, dtype={c: "float64" for c in columns}, **numeric)
     except (OSError, UnicodeDecodeError, pd.errors.ParserError) as exc:
-        raise fail("E501", f"{label!r} cannot be read as CSV: {exc}", file=label) from None
+        raise fail(Code.IMPORT_SOURCE_UNREADABLE, f"{label!r} cannot be read as CSV: {exc}", file=label) from None
     except ValueError:  # some cell is not a number: find it for the message
         text = pd.read_csv(path, dtype=str, **numeric)
         first_data_line = opts.skip_rows + 2  # 1-based line of the first data row (comment lines aside)
@@ -79,14 +82,14 @@ def read_csv_columns(path: Path, names: list[str], opts: CsvOptions, *, map_labe
             if bad.size:
                 i = int(bad[0])
                 raise fail(
-                    "E501",
+                    Code.IMPORT_SOURCE_UNREADABLE,
                     f"{path.name} column {name!r}, data row {i + 1} (line ≈{first_data_line + i}) is not a number",
                     file=label,
                     column=name,
                     expected="a number",
                     found=cells.iloc[i],
                 ) from None
-        raise fail("E501", f"{label!r} cannot be read as numbers", file=label) from None
+        raise fail(Code.IMPORT_SOURCE_UNREADABLE, f"{label!r} cannot be read as numbers", file=label) from None
     return {name: table[raw].to_numpy(dtype=np.float64) for raw, name in columns.items()}
 
 
@@ -110,7 +113,14 @@ def import_csv(
     src_path = Path(path)
     src = str(src_path)
     if not m.streams:
-        raise fail("E502", "a csv map needs at least one stream", file=label, pointer="/streams", expected="streams", found={})
+        raise fail(
+            Code.IMPORT_MAP_INVALID,
+            "a csv map needs at least one stream",
+            file=label,
+            pointer="/streams",
+            expected="streams",
+            found={},
+        )
     opts = m.csv or CsvOptions()
     time = m.time
     assert time is not None  # load_map requires 'time' of a csv map (E502)
@@ -123,13 +133,17 @@ def import_csv(
         t = t + m.time_offset_s
     if t.size < 2:
         raise fail(
-            "E205", f"{src_path.name} holds {t.size} row(s); a stream needs two", file=src, expected="≥ 2 rows", found=int(t.size)
+            Code.STREAM_EMPTY,
+            f"{src_path.name} holds {t.size} row(s); a stream needs two",
+            file=src,
+            expected="≥ 2 rows",
+            found=int(t.size),
         )
     steps = np.diff(t)
     if not np.isfinite(t).all() or (steps <= 0).any():
         i = int(np.argmax(~np.isfinite(t))) if not np.isfinite(t).all() else int(np.argmax(steps <= 0)) + 1
         raise fail(
-            "E203",
+            Code.TIME_NOT_INCREASING,
             f"time column {time.source!r} of {src_path.name} is not finite and strictly increasing at data row {i + 1}",
             file=src,
             column=time.source,

@@ -12,6 +12,7 @@ from typing import Any
 
 from pydantic import BaseModel, ValidationError
 
+from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError, fail
 from haptify.importers.import_map import ImportMap, LoadedMap, load_map, sanitize_id
 from haptify.session_format import (
@@ -39,12 +40,18 @@ def _resolve_device(m: ImportMap, base: Path, label: str) -> tuple[Device, dict[
     path = (base / dev.file) if not Path(dev.file).is_absolute() else Path(dev.file)
     where = {"file": label, "pointer": "/session/device/file"}
     if not path.is_file():
-        raise fail("E502", f"device file {str(path)!r} does not exist", expected="a device.json", found=dev.file, **where)
-    data = parse_json_file(path, "E502", str(path))
+        raise fail(
+            Code.IMPORT_MAP_INVALID,
+            f"device file {str(path)!r} does not exist",
+            expected="a device.json",
+            found=dev.file,
+            **where,
+        )
+    data = parse_json_file(path, Code.IMPORT_MAP_INVALID, str(path))
     try:
         model = Device.model_validate(data)
     except ValidationError as exc:
-        raise HaptifyError(*pydantic_findings(exc, "E502", str(path))) from None
+        raise HaptifyError(*pydantic_findings(exc, Code.IMPORT_MAP_INVALID, str(path))) from None
     return model, {"file": "device.json"}, {"device.json": path.read_text(encoding="utf-8")}
 
 
@@ -88,11 +95,15 @@ class Destination:
         out = Path(out)
         if append:
             if overwrite:
-                raise fail("E903", "append and overwrite exclude each other", expected="one of them", found="both")
+                raise fail(Code.USAGE, "append and overwrite exclude each other", expected="one of them", found="both")
             return cls(out, existing=open_session(out))
         if out.exists() and not overwrite:
             raise fail(
-                "E901", f"{str(out)!r} already exists", file=str(out), expected="a new path or --overwrite", found="exists"
+                Code.OUTPUT_EXISTS,
+                f"{str(out)!r} already exists",
+                file=str(out),
+                expected="a new path or --overwrite",
+                found="exists",
             )
         return cls(out, overwrite=overwrite)
 
@@ -119,7 +130,7 @@ class Destination:
             mine, theirs = getattr(m.session, key), getattr(man, key)
             if mine != theirs:
                 raise fail(
-                    "E502",
+                    Code.IMPORT_MAP_INVALID,
                     f"the map's session.{key} differs from the session it appends to",
                     file=label,
                     pointer=f"/session/{key}",
@@ -128,7 +139,7 @@ class Destination:
                 )
         if device != self.existing.device():
             raise fail(
-                "E502",
+                Code.IMPORT_MAP_INVALID,
                 "the map's device differs from the session's device",
                 file=label,
                 pointer="/session/device",
@@ -168,7 +179,7 @@ class Destination:
             return writer.write(self.out, overwrite=self.overwrite)
         if any(t.id == trial_id for t in self.existing.trials):
             raise fail(
-                "E107",
+                Code.DUPLICATE_ID,
                 f"the session already has a trial {trial_id!r}",
                 file=MANIFEST,
                 pointer="/trials",
@@ -215,7 +226,7 @@ def merge_rig(existing: SessionFolder, new_rig: dict[str, Any], world_rule: str 
     old = existing.manifest.rig.model_dump(mode="json", exclude_none=True)
     if "force_plate" in old and world_rule == "lab":
         raise fail(
-            "E502",
+            Code.IMPORT_MAP_INVALID,
             "the session's W is the centre of its force plate; this file would be imported in its lab "
             "frame: choose its force platform or give lab_to_world",
             file=label,
@@ -231,7 +242,7 @@ def merge_rig(existing: SessionFolder, new_rig: dict[str, Any], world_rule: str 
             merged[key] = _merge_motion_capture(old[key], part, label)
         elif key in old and old[key] != part:
             raise fail(
-                "E502",
+                Code.IMPORT_MAP_INVALID,
                 f"rig.{key} of this import differs from the session's",
                 file=label,
                 pointer=pointer,
@@ -240,7 +251,7 @@ def merge_rig(existing: SessionFolder, new_rig: dict[str, Any], world_rule: str 
             )
         elif key == "force_plate" and key not in old and world_streams:
             raise fail(
-                "E502",
+                Code.IMPORT_MAP_INVALID,
                 "this import's force platform would define W, but the session's world-frame streams use a W without a plate",
                 file=label,
                 pointer=pointer,
@@ -257,7 +268,7 @@ def _merge_motion_capture(old: dict[str, Any], new: dict[str, Any], label: str) 
     for key in ("rate_hz", "system"):
         if key in old and key in new and old[key] != new[key]:
             raise fail(
-                "E502",
+                Code.IMPORT_MAP_INVALID,
                 f"motion-capture {key} differs from the session's",
                 file=label,
                 pointer=f"{pointer}/{key}",
@@ -268,7 +279,7 @@ def _merge_motion_capture(old: dict[str, Any], new: dict[str, Any], label: str) 
     for body in new.get("rigid_bodies", []):
         if body["name"] in bodies and bodies[body["name"]] != body:
             raise fail(
-                "E502",
+                Code.IMPORT_MAP_INVALID,
                 f"rigid body {body['name']!r} differs from the session's",
                 file=label,
                 pointer="/markers/rigid_bodies",
@@ -296,7 +307,7 @@ def append_trial(writer: SessionWriter, existing: SessionFolder) -> Path:
             dst = resolve_inside(build, stream["file"])
             if dst.exists():
                 raise fail(
-                    "E107",
+                    Code.DUPLICATE_ID,
                     f"the session already holds a file {stream['file']!r}",
                     file=stream["file"],
                     expected="a new stream file",
@@ -308,7 +319,7 @@ def append_trial(writer: SessionWriter, existing: SessionFolder) -> Path:
         try:
             Session.model_validate(manifest)
         except ValidationError as exc:
-            raise HaptifyError(*pydantic_findings(exc, "E104", MANIFEST)) from None
+            raise HaptifyError(*pydantic_findings(exc, Code.SCHEMA_VIOLATION, MANIFEST)) from None
         atomic_write_json(build / MANIFEST, manifest)
         replace_folder_atomically(build, target, overwrite=True)
     except BaseException:

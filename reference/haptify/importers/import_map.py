@@ -11,6 +11,7 @@ from typing import Annotated, Any, Literal, Union
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from haptify import schemas
+from haptify.codes import Code
 from haptify.errors import HaptifyError, fail
 from haptify.session_format import (
     PROTOCOLS,
@@ -248,11 +249,13 @@ def load_map(
         p = Path(path)
         label = str(p)
         if not p.is_file():
-            raise fail("E502", f"import map {label!r} does not exist", file=label)
-        raw = parse_json_file(p, "E502", label)
+            raise fail(Code.IMPORT_MAP_INVALID, f"import map {label!r} does not exist", file=label)
+        raw = parse_json_file(p, Code.IMPORT_MAP_INVALID, label)
         base = p.resolve().parent
     if not isinstance(raw, dict):
-        raise fail("E502", "an import map is a JSON object", file=label, expected="object", found=type(raw).__name__)
+        raise fail(
+            Code.IMPORT_MAP_INVALID, "an import map is a JSON object", file=label, expected="object", found=type(raw).__name__
+        )
     raw = _deep_merge(raw, overrides or {})
     if session_facts is not None:
         given = raw.get("session") if isinstance(raw.get("session"), dict) else {}
@@ -261,7 +264,7 @@ def load_map(
     no_date = None
     if not isinstance(session, dict) or session.get("date") is None:
         no_date = fail(
-            "E502",
+            Code.IMPORT_MAP_INVALID,
             "the recording date is missing: give session.date in the map or --date",
             file=label,
             pointer="/session/date",
@@ -271,7 +274,7 @@ def load_map(
     try:
         m = ImportMap.model_validate(raw)
     except ValidationError as exc:
-        findings = pydantic_findings(exc, "E502", label)
+        findings = pydantic_findings(exc, Code.IMPORT_MAP_INVALID, label)
         if no_date is not None and not any(f.pointer == "/session" for f in findings):
             findings += no_date.findings
         raise HaptifyError(*findings) from None
@@ -279,7 +282,7 @@ def load_map(
         raise no_date
     if m.source != source:
         raise fail(
-            "E502",
+            Code.IMPORT_MAP_INVALID,
             f"the map is for the {m.source} importer, not {source}",
             file=label,
             pointer="/source",
@@ -290,14 +293,19 @@ def load_map(
     for key in wrong:
         if getattr(m, key) is not None:
             raise fail(
-                "E502", f"{key!r} does not apply to {source} imports", file=label, pointer=f"/{key}", expected=None, found=key
+                Code.IMPORT_MAP_INVALID,
+                f"{key!r} does not apply to {source} imports",
+                file=label,
+                pointer=f"/{key}",
+                expected=None,
+                found=key,
             )
     if source == "csv":
         if m.force_plate != "auto":
-            raise fail("E502", "'force_plate' does not apply to csv imports", file=label, pointer="/force_plate")
+            raise fail(Code.IMPORT_MAP_INVALID, "'force_plate' does not apply to csv imports", file=label, pointer="/force_plate")
         if m.time is None:
             raise fail(
-                "E502",
+                Code.IMPORT_MAP_INVALID,
                 "a csv map needs 'time' (the time column and its unit)",
                 file=label,
                 pointer="/time",

@@ -9,6 +9,7 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
+from haptify.codes import Code
 from haptify.conventions import matrix_to_quat
 from haptify.errors import Finding, fail
 from haptify.importers.destination import Destination, ImportResult, add_trial
@@ -34,7 +35,7 @@ def _select_markers(c3d: Recording, mm: MarkerMap, label: str) -> tuple[list[int
         for j, pat in enumerate(patterns):
             if not matches(pat):
                 raise fail(
-                    "E503",
+                    Code.IMPORT_CHANNEL_UNKNOWN,
                     f"marker {key} {pat!r} matches no point label of {c3d.path.name}",
                     pointer=f"/markers/{key}/{j}",
                     expected=labels,
@@ -47,7 +48,7 @@ def _select_markers(c3d: Recording, mm: MarkerMap, label: str) -> tuple[list[int
     for old in mm.rename:
         if old not in [labels[i] for i in chosen]:
             raise fail(
-                "E503",
+                Code.IMPORT_CHANNEL_UNKNOWN,
                 f"rename names {old!r}, which is not an imported point label",
                 pointer=f"/markers/rename/{old}",
                 expected=[labels[i] for i in chosen],
@@ -60,7 +61,7 @@ def _select_markers(c3d: Recording, mm: MarkerMap, label: str) -> tuple[list[int
         ent = mm.rename.get(labels[i]) or sanitize_id(labels[i], f"m{i + 1}")
         if ent in seen:
             raise fail(
-                "E503",
+                Code.IMPORT_CHANNEL_UNKNOWN,
                 f"point labels {seen[ent]!r} and {labels[i]!r} both become entity {ent!r}; rename one",
                 pointer="/markers/rename",
                 expected="distinct entity ids",
@@ -78,7 +79,11 @@ def _analog_reader(c3d: Recording, label: str) -> SourceReader:
         if len(hits) != 1:
             why = "no" if not hits else f"{len(hits)} channels labelled"
             raise fail(
-                "E503", f"{c3d.path.name} has {why} analog channel {name!r}", file=label, expected=c3d.analog_labels, found=name
+                Code.IMPORT_CHANNEL_UNKNOWN,
+                f"{c3d.path.name} has {why} analog channel {name!r}",
+                file=label,
+                expected=c3d.analog_labels,
+                found=name,
             )
         i = hits[0]
         return c3d.analogs[i], c3d.analog_units[i] or None
@@ -113,7 +118,7 @@ def body_poses(
     if (err > ROTATION_TOLERANCE).any():
         k = int(np.argmax(err > ROTATION_TOLERANCE))
         raise fail(
-            "E501",
+            Code.IMPORT_SOURCE_UNREADABLE,
             f"6-DoF body {rec.body_labels[index]!r} of {rec.path.name} holds no rotation at frame {k}",
             file=str(rec.path),
             column=rec.body_labels[index],
@@ -134,7 +139,7 @@ def _body_index(rec: Recording, body: str, pointer: str, label: str) -> int:
     if len(hits) != 1:
         why = "no" if not hits else f"{len(hits)} bodies labelled"
         raise fail(
-            "E503",
+            Code.IMPORT_CHANNEL_UNKNOWN,
             f"{rec.path.name} has {why} 6-DoF body {body!r}",
             file=label,
             pointer=pointer,
@@ -171,7 +176,7 @@ def _pose_streams(
         for link, body in bm.links.items():
             if link not in names:
                 raise fail(
-                    "E502",
+                    Code.IMPORT_MAP_INVALID,
                     f"link {link!r} of bodies.links is not a rigid body of markers.rigid_bodies",
                     file=label,
                     pointer=f"/bodies/links/{link}",
@@ -194,7 +199,7 @@ def _plate_number(rec: Recording, m: ImportMap, label: str) -> int | None:
     if isinstance(m.force_plate, int):
         if m.force_plate > len(rec.platforms):
             raise fail(
-                "E503",
+                Code.IMPORT_CHANNEL_UNKNOWN,
                 f"{rec.path.name} has no force platform {m.force_plate}",
                 file=label,
                 pointer="/force_plate",
@@ -206,7 +211,7 @@ def _plate_number(rec: Recording, m: ImportMap, label: str) -> int | None:
         plate_number = 1
     if plate_number is not None and m.lab_to_world is not None:
         raise fail(
-            "E502",
+            Code.IMPORT_MAP_INVALID,
             "give either a force platform or lab_to_world: the platform defines W",
             file=label,
             pointer="/lab_to_world",
@@ -224,7 +229,7 @@ def _world_frame(
     if plate_number is not None:
         if "force_plate" in rig:
             raise fail(
-                "E502",
+                Code.IMPORT_MAP_INVALID,
                 "the map's rig has a force_plate and the C3D platform would replace it; set force_plate to 'none' or remove one",
                 file=label,
                 pointer="/session/rig/force_plate",
@@ -249,7 +254,7 @@ def _motion_capture_rig(
     already has one, E503 for a rigid body naming a marker that is not imported."""
     if rec.frames < 2:
         raise fail(
-            "E205",
+            Code.STREAM_EMPTY,
             f"{rec.path.name} holds {rec.frames} frame(s); a stream needs two",
             file=str(rec.path),
             expected="≥ 2 frames",
@@ -257,7 +262,7 @@ def _motion_capture_rig(
         )
     if "motion_capture" in rig:
         raise fail(
-            "E502",
+            Code.IMPORT_MAP_INVALID,
             "the importer writes rig.motion_capture from the source; give rigid bodies and the system under 'markers'",
             file=label,
             pointer="/session/rig/motion_capture",
@@ -269,7 +274,7 @@ def _motion_capture_rig(
             unknown = [e for e in body.markers if e not in entities]
             if unknown:
                 raise fail(
-                    "E503",
+                    Code.IMPORT_CHANNEL_UNKNOWN,
                     f"rigid body {body.name!r} names markers that are not imported: {unknown}",
                     file=label,
                     pointer=f"/markers/rigid_bodies/{j}/markers",
@@ -292,7 +297,7 @@ def _analog_wanted(rec: Recording, m: ImportMap, plate_number: int | None, label
     if m.platform_wrench is not None:
         if plate_number is None:
             raise fail(
-                "E502",
+                Code.IMPORT_MAP_INVALID,
                 "platform_wrench needs the force platform that defines W (force_plate)",
                 file=label,
                 pointer="/platform_wrench",
@@ -301,7 +306,7 @@ def _analog_wanted(rec: Recording, m: ImportMap, plate_number: int | None, label
             )
         if "plate_wrench" in m.streams:
             raise fail(
-                "E502",
+                Code.IMPORT_MAP_INVALID,
                 "plate_wrench is both mapped from channels and taken from the platform; keep one",
                 file=label,
                 pointer="/streams/plate_wrench",
@@ -313,7 +318,7 @@ def _analog_wanted(rec: Recording, m: ImportMap, plate_number: int | None, label
     n = rec.analogs.shape[1]
     if n < 2:
         raise fail(
-            "E205",
+            Code.STREAM_EMPTY,
             f"{rec.path.name} holds {n} analog sample(s); a stream needs two",
             file=str(rec.path),
             expected="≥ 2 analog samples",
@@ -322,7 +327,7 @@ def _analog_wanted(rec: Recording, m: ImportMap, plate_number: int | None, label
     for kind, smap in m.streams.items():
         if smap.rate_hz is not None and smap.rate_hz != rec.analog_rate:
             raise fail(
-                "E502",
+                Code.IMPORT_MAP_INVALID,
                 f"{kind} rate_hz {smap.rate_hz} differs from the file's analog rate {rec.analog_rate}",
                 file=label,
                 pointer=f"/streams/{kind}/rate_hz",
@@ -451,7 +456,7 @@ def _check_kinds(plan: _Plan, kinds: list[str]) -> None:
     """Something to import, and the protocol's required streams (spec §2.5): E502 otherwise."""
     if not kinds:
         raise fail(
-            "E502",
+            Code.IMPORT_MAP_INVALID,
             f"nothing to import from {plan.rec.path.name}: no markers selected, no bodies and no streams mapped",
             file=plan.label,
             pointer="/streams",

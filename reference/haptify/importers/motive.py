@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from haptify.codes import Code
 from haptify.conventions import quat_to_matrix
 from haptify.errors import fail
 from haptify.importers.recording import Recording
@@ -25,10 +26,10 @@ def _motive_head(lines: list[str], p: Path) -> dict[str, Any]:
     first = [c.strip() for c in lines[0].split(",")] if lines else []
     meta = dict(zip(first[0::2], first[1::2]))
     if "Format Version" not in meta:
-        raise fail("E501", f"{p.name} is not a Motive CSV export: no 'Format Version'", file=str(p))
+        raise fail(Code.IMPORT_SOURCE_UNREADABLE, f"{p.name} is not a Motive CSV export: no 'Format Version'", file=str(p))
     if meta.get("Rotation Type", "Quaternion") != "Quaternion":
         raise fail(
-            "E501",
+            Code.IMPORT_SOURCE_UNREADABLE,
             f"{p.name} holds rotations as {meta['Rotation Type']}: export with Rotation Type Quaternion",
             file=str(p),
             pointer="/Rotation Type",
@@ -38,7 +39,7 @@ def _motive_head(lines: list[str], p: Path) -> dict[str, Any]:
     units = MOTIVE_UNITS.get(meta.get("Length Units", "Meters"))
     if units is None:
         raise fail(
-            "E504",
+            Code.IMPORT_UNIT_UNKNOWN,
             f"{p.name}: Length Units {meta['Length Units']!r} is not known",
             file=str(p),
             expected=sorted(MOTIVE_UNITS),
@@ -50,7 +51,7 @@ def _motive_head(lines: list[str], p: Path) -> dict[str, Any]:
     rows = [[c.strip() for c in lines[k + j].split(",")] for j in range(5)] if len(lines) >= k + 5 else []
     if len(rows) < 5 or rows[4][:1] != ["Frame"]:
         raise fail(
-            "E501",
+            Code.IMPORT_SOURCE_UNREADABLE,
             f"{p.name}: the Type, Name, ID, quantity and axis lines are missing",
             file=str(p),
             expected="Frame, Time, …",
@@ -94,7 +95,7 @@ def _motive_part(p: Path, head: dict[str, Any], data: np.ndarray, first_frame: i
                     quat[:, i, a] = data[:, col[("Rigid Body", name, "Rotation", axis)]]
             except KeyError as exc:
                 raise fail(
-                    "E501",
+                    Code.IMPORT_SOURCE_UNREADABLE,
                     f"{p.name}: rigid body {name!r} lacks column {exc.args[0][2:]}",
                     file=str(p),
                     expected="Rotation X, Y, Z, W and Position X, Y, Z",
@@ -110,7 +111,7 @@ def _motive_part(p: Path, head: dict[str, Any], data: np.ndarray, first_frame: i
         if (norm_err > 1e-3).any():
             f, b = np.argwhere(norm_err > 1e-3)[0]
             raise fail(
-                "E501",
+                Code.IMPORT_SOURCE_UNREADABLE,
                 f"{p.name}: rigid body {bodies[b]!r} holds no unit quaternion at frame {first_frame + f}",
                 file=str(p),
                 expected="|q| = 1",

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.importers.recording import Recording
 from haptify.importers.text_export import empty_recording, number_table, read_text
@@ -28,7 +29,7 @@ def _nexus_sections(lines: list[str], path: Path) -> dict[str, tuple[float, list
             i += 1
             continue
         if i + 4 >= len(lines):
-            raise fail("E501", f"{path.name}: section {name!r} ends before its data", file=str(path))
+            raise fail(Code.IMPORT_SOURCE_UNREADABLE, f"{path.name}: section {name!r} ends before its data", file=str(path))
         rate = float(lines[i + 1].split(",")[0])
         labels, columns, units = ([c.strip() for c in lines[i + k].split(",")] for k in (2, 3, 4))
         j = i + 5
@@ -37,7 +38,11 @@ def _nexus_sections(lines: list[str], path: Path) -> dict[str, tuple[float, list
         out[name] = (rate, labels, columns, units, i + 6, lines[i + 5 : j])
         i = j
     if not out:
-        raise fail("E501", f"{path.name} is not a Nexus CSV export: no section ({', '.join(NEXUS_SECTIONS)})", file=str(path))
+        raise fail(
+            Code.IMPORT_SOURCE_UNREADABLE,
+            f"{path.name} is not a Nexus CSV export: no section ({', '.join(NEXUS_SECTIONS)})",
+            file=str(path),
+        )
     return out
 
 
@@ -115,7 +120,7 @@ def _nexus_points(sections: NexusSections, p: Path) -> tuple[list[str], list[np.
                 continue
             if unit is not None and units[cols["X"]] != unit:
                 raise fail(
-                    "E504",
+                    Code.IMPORT_UNIT_UNKNOWN,
                     f"{p.name}: {label!r} is in {units[cols['X']]}, other points in {unit}",
                     file=str(p),
                     expected=unit,
@@ -141,7 +146,7 @@ def _nexus_segments(sections: NexusSections, p: Path, rec: dict[str, Any], unit:
         angle = UNITS.get(units[cols["RX"]])
         if angle is None or angle.dimension != "angle":
             raise fail(
-                "E504",
+                Code.IMPORT_UNIT_UNKNOWN,
                 f"{p.name}: segment {label!r} rotation unit {units[cols['RX']]!r} is not an angle",
                 file=str(p),
                 expected=["deg", "rad"],
@@ -149,7 +154,7 @@ def _nexus_segments(sections: NexusSections, p: Path, rec: dict[str, Any], unit:
             )
         if unit is not None and units[cols["TX"]] != unit:
             raise fail(
-                "E504",
+                Code.IMPORT_UNIT_UNKNOWN,
                 f"{p.name}: segment {label!r} is in {units[cols['TX']]}, points in {unit}",
                 file=str(p),
                 expected=unit,
@@ -165,7 +170,7 @@ def _nexus_segments(sections: NexusSections, p: Path, rec: dict[str, Any], unit:
     has_points = bool(rec.get("point_labels"))
     if has_points and n_frames != rec["points"].shape[0]:
         raise fail(
-            "E501",
+            Code.IMPORT_SOURCE_UNREADABLE,
             f"{p.name}: Segments hold {n_frames} frames, Trajectories {rec['points'].shape[0]}",
             file=str(p),
             expected=rec["points"].shape[0],

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from haptify.codes import Code
 from haptify.errors import Finding, fail
 from haptify.importers.recording import Recording
 from haptify.importers.text_export import (
@@ -40,7 +41,11 @@ def _qtm_head(lines: list[str], p: Path) -> dict[str, Any]:
     has_columns = i < len(lines) and lines[i].split("\t")[0] == "Frame"
     if "FREQUENCY" not in meta:
         raise fail(
-            "E501", f"{p.name} is not a QTM TSV export: no FREQUENCY line", file=str(p), expected="FREQUENCY", found=sorted(meta)
+            Code.IMPORT_SOURCE_UNREADABLE,
+            f"{p.name} is not a QTM TSV export: no FREQUENCY line",
+            file=str(p),
+            expected="FREQUENCY",
+            found=sorted(meta),
         )
     markers = [m for m in meta.get("MARKER_NAMES", []) if m]
     bodies = [b for b in meta.get("BODY_NAMES", []) if b]
@@ -105,7 +110,7 @@ def read_qualisys_tsv(path: str | Path, *, stream: bool | None = None) -> Record
     if expected != rows:
         rec.warnings.append(
             Finding(
-                "W501",
+                Code.IMPORT_SOURCE_DISAGREES,
                 f"{p.name}: NO_OF_FRAMES is {expected}, the file holds {rows} frames; the {rows} frames read are imported",
                 file=str(p),
                 pointer="/NO_OF_FRAMES",

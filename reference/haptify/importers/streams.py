@@ -8,6 +8,7 @@ from typing import Callable
 import numpy as np
 
 from haptify import schemas
+from haptify.codes import Code
 from haptify.conventions import quat_to_matrix
 from haptify.errors import fail
 from haptify.importers.import_map import ChannelMap, ImportMap, StreamMap
@@ -41,7 +42,7 @@ def build_stream_columns(
     unknown = [c for c in smap.columns if c not in allowed]
     if unknown:
         raise fail(
-            "E502",
+            Code.IMPORT_MAP_INVALID,
             f"{kind} has no column {unknown[0]!r}",
             file=label,
             pointer=f"{pointer}/{unknown[0]}",
@@ -51,7 +52,7 @@ def build_stream_columns(
     missing = [c for c in allowed if c not in smap.columns]
     if missing:
         raise fail(
-            "E502",
+            Code.IMPORT_MAP_INVALID,
             f"the {kind} map lacks columns {missing}",
             file=label,
             pointer=pointer,
@@ -72,7 +73,7 @@ def build_stream_columns(
         unit = ch.unit if ch.unit is not None else stated
         if unit is None and (unit_required or ch.value is not None):
             raise fail(
-                "E502",
+                Code.IMPORT_MAP_INVALID,
                 f"column {col!r} of {kind} needs a 'unit' (this source states none)",
                 expected="a unit of spec §5.3",
                 found=None,
@@ -83,7 +84,7 @@ def build_stream_columns(
         if ch.threshold is not None:
             if target != "1":
                 raise fail(
-                    "E502",
+                    Code.IMPORT_MAP_INVALID,
                     f"'threshold' applies only to dimensionless columns; {col!r} is in {target}",
                     expected="1",
                     found=target,
@@ -91,7 +92,7 @@ def build_stream_columns(
                 )
             if (unit or "").strip() not in UNITS:
                 raise fail(
-                    "E504",
+                    Code.IMPORT_UNIT_UNKNOWN,
                     f"unit {unit!r} is not in the conversion table (spec §5.3)",
                     expected=sorted(UNITS),
                     found=unit,
@@ -104,7 +105,7 @@ def build_stream_columns(
             bad = ~np.isfinite(values)
             if bad.any():
                 i = int(np.argmax(bad))
-                code = "E204" if np.isnan(values[i]) else "E210"
+                code = Code.NAN_NOT_ALLOWED if np.isnan(values[i]) else Code.NON_FINITE_VALUE
                 raise fail(
                     code,
                     f"{kind} column {col!r} (from {ch.source!r}) holds a non-finite value at sample {i}",
@@ -118,7 +119,7 @@ def build_stream_columns(
             other, words = outside
             i = int(np.argmax(other))
             raise fail(
-                "E214",
+                Code.VALUE_NOT_ALLOWED,
                 f"{kind} column {col!r} (from {ch.source!r}) holds {int(other.sum())} values other than "
                 f"{words}, first at sample {i}; map it with a 'threshold'",
                 file=source_file,
@@ -139,7 +140,7 @@ def rotate_into_world(kind: str, columns: dict[str, np.ndarray], placement: Pose
     reference point does not move, so its torque rotates like its force."""
     if kind not in VECTOR_TRIPLETS:
         raise fail(
-            "E502",
+            Code.IMPORT_MAP_INVALID,
             f"from_frame applies to {sorted(VECTOR_TRIPLETS)}, not {kind}",
             file=label,
             pointer=f"/streams/{kind}/from_frame",
@@ -173,7 +174,7 @@ def check_trial_streams(m: ImportMap, kinds: list[str], label: str) -> None:
     missing = [k for k in proto["required"] if k not in kinds]
     if missing:
         raise fail(
-            "E502",
+            Code.IMPORT_MAP_INVALID,
             f"protocol {m.trial.protocol!r} requires streams {missing} the map does not produce",
             file=label,
             pointer="/streams",
@@ -182,7 +183,7 @@ def check_trial_streams(m: ImportMap, kinds: list[str], label: str) -> None:
         )
     if proto["passive"] is False and m.trial.rendering is None:
         raise fail(
-            "E502",
+            Code.IMPORT_MAP_INVALID,
             f"protocol {m.trial.protocol!r} is active: the trial needs 'rendering'",
             file=label,
             pointer="/trial/rendering",

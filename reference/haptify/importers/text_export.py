@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 
 from haptify.c3d_stream import STREAM_ABOVE_BYTES
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.importers.recording import Recording
 
@@ -23,11 +24,11 @@ from haptify.importers.recording import Recording
 def read_text(path: Path) -> str:
     label = str(path)
     if not path.is_file():
-        raise fail("E501", f"{label!r} does not exist or is not a file", file=label)
+        raise fail(Code.IMPORT_SOURCE_UNREADABLE, f"{label!r} does not exist or is not a file", file=label)
     try:
         return path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
-        raise fail("E501", f"{label!r} cannot be read as UTF-8 text: {exc}", file=label) from None
+        raise fail(Code.IMPORT_SOURCE_UNREADABLE, f"{label!r} cannot be read as UTF-8 text: {exc}", file=label) from None
 
 
 def number_table(lines: list[str], sep: str, path: Path, first_line: int, width: int | None = None) -> np.ndarray:
@@ -55,13 +56,13 @@ def number_table(lines: list[str], sep: str, path: Path, first_line: int, width:
                         float(cell)
                     except ValueError:
                         raise fail(
-                            "E501",
+                            Code.IMPORT_SOURCE_UNREADABLE,
                             f"{path.name} line {first_line + i}: {cell!r} is not a number",
                             file=str(path),
                             expected="a number",
                             found=cell,
                         ) from None
-        raise fail("E501", f"{path.name} cannot be read: {exc}", file=str(path)) from None
+        raise fail(Code.IMPORT_SOURCE_UNREADABLE, f"{path.name} cannot be read: {exc}", file=str(path)) from None
     return frame.to_numpy(dtype=np.float64)
 
 
@@ -99,7 +100,7 @@ def head_lines(p: Path) -> list[str]:
         with open(p, encoding="utf-8-sig") as fh:
             return [line.rstrip("\r\n") for line, _ in zip(fh, range(HEAD_LINES))]
     except (OSError, UnicodeDecodeError) as exc:
-        raise fail("E501", f"{str(p)!r} cannot be read as UTF-8 text: {exc}", file=str(p)) from None
+        raise fail(Code.IMPORT_SOURCE_UNREADABLE, f"{str(p)!r} cannot be read as UTF-8 text: {exc}", file=str(p)) from None
 
 
 def _data_chunks(p: Path, sep: str, head: dict[str, Any], rows: int) -> Iterator[np.ndarray]:
@@ -123,7 +124,9 @@ def _data_chunks(p: Path, sep: str, head: dict[str, Any], rows: int) -> Iterator
         for frame in reader:
             yield frame.to_numpy(dtype=np.float64)
     except ValueError as exc:
-        raise fail("E501", f"{p.name} cannot be read after line {head['data_start']}: {exc}", file=str(p)) from None
+        raise fail(
+            Code.IMPORT_SOURCE_UNREADABLE, f"{p.name} cannot be read after line {head['data_start']}: {exc}", file=str(p)
+        ) from None
 
 
 def open_streamed(

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from haptify import schemas
+from haptify.codes import Code
 from haptify.errors import fail
 
 
@@ -55,11 +56,15 @@ def unit_conversion(unit: str | None, target: str, **where: Any) -> Unit:
     accepted = sorted(n for n, u in UNITS.items() if u.dimension == dim)
     if known is None:
         raise fail(
-            "E504", f"unit {spelled!r} is not in the conversion table (spec §5.3)", expected=accepted, found=spelled, **where
+            Code.IMPORT_UNIT_UNKNOWN,
+            f"unit {spelled!r} is not in the conversion table (spec §5.3)",
+            expected=accepted,
+            found=spelled,
+            **where,
         )
     if known.dimension != dim:
         raise fail(
-            "E504",
+            Code.IMPORT_UNIT_UNKNOWN,
             f"unit {spelled!r} is a {known.dimension}, the column needs a {dim} ({target})",
             expected=accepted,
             found=spelled,

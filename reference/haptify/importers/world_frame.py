@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from haptify.codes import Code
 from haptify.conventions import matrix_to_quat, quat_to_matrix
 from haptify.errors import Finding, HaptifyError, fail
 from haptify.force_plate import CORNERS, PLATE_COLUMNS
@@ -50,7 +51,7 @@ class WorldFrame:
 
 def _meaningless(number: int, why: str, file: str, found: Any) -> HaptifyError:
     return fail(
-        "E505",
+        Code.IMPORT_PLATE_GEOMETRY_MEANINGLESS,
         f"force platform {number}: {why}",
         file=file,
         pointer="/FORCE_PLATFORM/CORNERS",
@@ -124,7 +125,7 @@ def plate_description(platform: C3DPlatform, to_m: Unit, *, file: str) -> tuple[
     deviation from a flat rectangle when it exceeds 1 mm."""
     if platform.corners is None:
         raise fail(
-            "E503",
+            Code.IMPORT_CHANNEL_UNKNOWN,
             f"force platform {platform.number} has no FORCE_PLATFORM:CORNERS",
             file=file,
             pointer="/FORCE_PLATFORM/CORNERS",
@@ -137,7 +138,7 @@ def plate_description(platform: C3DPlatform, to_m: Unit, *, file: str) -> tuple[
     if deviation > PLATE_RECTANGLE_TOLERANCE_M:
         warnings.append(
             Finding(
-                "W502",
+                Code.IMPORT_PLATE_NOT_RECTANGULAR,
                 f"the corners of force platform {platform.number} are {deviation * 1000:.3g} mm "
                 "from a flat rectangle; W and the plate size come from the best-fitting rectangle",
                 file=file,
@@ -149,7 +150,7 @@ def plate_description(platform: C3DPlatform, to_m: Unit, *, file: str) -> tuple[
     origin = to_m.to_si(platform.origin) if platform.origin is not None else np.zeros(3)
     if not np.isfinite(origin).all():
         raise fail(
-            "E505",
+            Code.IMPORT_PLATE_GEOMETRY_MEANINGLESS,
             f"force platform {platform.number}: its origin is not finite",
             file=file,
             pointer="/FORCE_PLATFORM/ORIGIN",
@@ -194,7 +195,7 @@ def platform_plate_wrench(
     kind = platform.type
     if kind not in PLATFORM_CHANNELS:
         raise fail(
-            "E506",
+            Code.IMPORT_PLATFORM_WRENCH_UNREADABLE,
             f"force platform {number} is of type {kind}; its wrench is imported for types {sorted(PLATFORM_CHANNELS)}",
             file=src,
             pointer="/FORCE_PLATFORM/TYPE",
@@ -204,7 +205,7 @@ def platform_plate_wrench(
     need = PLATFORM_CHANNELS[kind]
     if len(platform.channels) < need:
         raise fail(
-            "E506",
+            Code.IMPORT_PLATFORM_WRENCH_UNREADABLE,
             f"force platform {number} (type {kind}) names {len(platform.channels)} of the {need} analog "
             "channels its type records in FORCE_PLATFORM:CHANNEL",
             file=src,
@@ -214,7 +215,7 @@ def platform_plate_wrench(
         )
     if platform.origin is None:
         raise fail(
-            "E506",
+            Code.IMPORT_PLATFORM_WRENCH_UNREADABLE,
             f"force platform {number} has no FORCE_PLATFORM:ORIGIN",
             file=src,
             pointer="/FORCE_PLATFORM/ORIGIN",
@@ -238,7 +239,7 @@ def platform_plate_wrench(
     if bad.any():
         row, i = (int(v[0]) for v in np.nonzero(bad))
         raise fail(
-            "E204",
+            Code.NAN_NOT_ALLOWED,
             f"force platform {number}: channel {rec.analog_labels[chans[row]]!r} is not finite at sample {i}",
             file=src,
             column=rec.analog_labels[chans[row]],

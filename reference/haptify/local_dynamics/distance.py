@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from haptify.codes import Code
 from haptify.conventions import quat_mean
 from haptify.errors import fail
 from haptify.local_dynamics.fitting import one_blas_thread
@@ -85,7 +86,9 @@ def nearest_distances(test: WindowFeatures, train: WindowFeatures, scales: Dista
     windows × 8 bytes × a few arrays).
     """
     if len(train) == 0:
-        raise fail("E701", "the training set has no complete distance window", expected="≥ 1 window", found=0)
+        raise fail(
+            Code.DYNAMICS_DATA_INSUFFICIENT, "the training set has no complete distance window", expected="≥ 1 window", found=0
+        )
     out = np.empty(len(test))
     with one_blas_thread():
         for start in range(0, len(test), chunk):
@@ -122,7 +125,7 @@ def line_fit(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     y = np.asarray(y, dtype=float)
     if len(x) < 2 or np.ptp(x) <= 1e-6:
         raise fail(
-            "E701",
+            Code.DYNAMICS_DATA_INSUFFICIENT,
             "a line needs at least two segments at different distances",
             expected="≥ 2 distinct distances",
             found=len(np.unique(x)),

@@ -14,6 +14,7 @@ import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 from scipy.signal import lfilter
 
+from haptify.codes import Code
 from haptify.conventions import quat_mean
 from haptify.errors import fail
 from haptify.local_dynamics.jacobian import (
@@ -68,10 +69,10 @@ class FitOptions:
         opts = cls(**values)
         for m in (opts.input_map, opts.output_map):
             if m not in ("piecewise_linear", "unit_gain"):
-                raise fail("E903", f"unknown map type {m!r}", expected=["piecewise_linear", "unit_gain"], found=m)
+                raise fail(Code.USAGE, f"unknown map type {m!r}", expected=["piecewise_linear", "unit_gain"], found=m)
         if opts.nb < 1 or opts.nf < 0 or opts.nk < 0 or opts.breakpoints < 2 or not abs(opts.initial_pole) < 1:
             raise fail(
-                "E903",
+                Code.USAGE,
                 "invalid model orders or initialisation",
                 expected="nb ≥ 1, nf ≥ 0, nk ≥ 0, breakpoints ≥ 2, |initial_pole| < 1",
                 found={
@@ -132,7 +133,12 @@ def _as_channels(names: Sequence[str] | None, units: Sequence[str] | None, n: in
     names = list(names) if names is not None else [f"{prefix}{k + 1}" for k in range(n)]
     units = list(units) if units is not None else ["1"] * n
     if len(names) != n or len(units) != n:
-        raise fail("E703", f"{n} {prefix} channels but {len(names)} names and {len(units)} units", expected=n, found=len(names))
+        raise fail(
+            Code.HW_MODEL_DATA_MISMATCH,
+            f"{n} {prefix} channels but {len(names)} names and {len(units)} units",
+            expected=n,
+            found=len(names),
+        )
     return [Channel(name=a, unit=b) for a, b in zip(names, units)]
 
 
@@ -140,7 +146,7 @@ def _as_records(data: np.ndarray | Sequence[np.ndarray], what: str) -> list[np.n
     records = [np.asarray(data, dtype=float)] if isinstance(data, np.ndarray) else [np.asarray(r, dtype=float) for r in data]
     if not records or any(r.ndim != 2 for r in records):
         raise fail(
-            "E703",
+            Code.HW_MODEL_DATA_MISMATCH,
             f"{what} must be a 2-D array (N, channels) or a list of them",
             expected="(N, channels)",
             found=[list(r.shape) for r in records],
@@ -265,13 +271,13 @@ def _training_records(
         or len({b.shape[1] for b in ys}) != 1
     ):
         raise fail(
-            "E703",
+            Code.HW_MODEL_DATA_MISMATCH,
             "input and output records must pair up with equal lengths and channel counts",
             expected="matching records",
             found=[[list(a.shape), list(b.shape)] for a, b in zip(us, ys)],
         )
     if not all(np.all(np.isfinite(a)) for a in us + ys):
-        raise fail("E703", "training data hold non-finite values", expected="finite", found="NaN or inf")
+        raise fail(Code.HW_MODEL_DATA_MISMATCH, "training data hold non-finite values", expected="finite", found="NaN or inf")
     hemi = None
     if quaternion_columns is not None:
         cols = [int(c) for c in quaternion_columns]

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from haptify.codes import Code
 from haptify.errors import HaptifyError, fail
 from haptify.local_dynamics.distance import line_fit
 from haptify.local_dynamics.parameter_file import FAMILY
@@ -45,7 +46,12 @@ def compute(ctx: Any) -> list[MetricResult | Unavailable]:
         train = training_trial(session)
         missing = [k for k in REQUIRED_STREAMS if session.stream(train.id, k) is None]
         if missing:
-            raise fail("E302", f"training trial {train.id!r} lacks {missing}", expected=list(REQUIRED_STREAMS), found=missing)
+            raise fail(
+                Code.REQUIRED_STREAM_MISSING,
+                f"training trial {train.id!r} lacks {missing}",
+                expected=list(REQUIRED_STREAMS),
+                found=missing,
+            )
         given = (getattr(ctx, "parameters", None) or {}).get("model")
         if given:
             model, data = ctx.cached(("dynamics_given_model", train.id, given), lambda: given_model_trial(ctx, train.id, given))
@@ -61,7 +67,7 @@ def compute(ctx: Any) -> list[MetricResult | Unavailable]:
     n = int(ok.sum())
     if n == 0:  # e.g. a given parameter file whose rate leaves single-row runs: no RMS, not NaN (spec §15.2)
         return _unavailable_all(
-            "E701",
+            Code.DYNAMICS_DATA_INSUFFICIENT,
             f"training trial {train.id!r} has no valid run of at least 2 samples at {model.sample_rate_hz:g} Hz to predict",
             ids,
         )
@@ -109,7 +115,7 @@ def compute(ctx: Any) -> list[MetricResult | Unavailable]:
     tests = held_out_trials(session, train.id)
     if not tests:
         return out + _unavailable_all(
-            "E701",
+            Code.DYNAMICS_DATA_INSUFFICIENT,
             "no test trial (another local_dynamic repetition, free_space or an unpowered "
             "'other' trial) with handle pose, wrench and acceleration",
             [eid],

@@ -13,6 +13,7 @@ from typing import Annotated, Any, Final, Literal, Sequence, Union
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from haptify.codes import Code
 from haptify.versions import SPEC_VERSION
 
 #: The metric family (``schemas/<v>/metrics/dynamics.json``) every parameter of the model comes from.
@@ -145,7 +146,7 @@ def load_model(path: str | os.PathLike[str]) -> HWModelFile:
     """Read and validate a parameter file (spec §11.5); E702 names the field when it is invalid."""
     from haptify.storage import read_json_model
 
-    return read_json_model(path, HWModelFile, "E702")
+    return read_json_model(path, HWModelFile, Code.HW_MODEL_INVALID)
 
 
 def save_model(model: HWModelFile, path: str | os.PathLike[str]) -> Path:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import lfilter
 
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.local_dynamics.parameter_file import HWModelFile, PiecewiseLinearMap, QuaternionHemisphere, UnitGainMap
 
@@ -95,7 +96,7 @@ def _check_inputs(model: HWModelFile, u: np.ndarray) -> np.ndarray:
     u = np.asarray(u, dtype=float)
     if u.ndim != 2 or u.shape[1] != model.nu:
         raise fail(
-            "E703",
+            Code.HW_MODEL_DATA_MISMATCH,
             f"the model has {model.nu} inputs but the data have shape {u.shape}",
             expected=f"(N, {model.nu})",
             found=list(u.shape),
@@ -103,7 +104,10 @@ def _check_inputs(model: HWModelFile, u: np.ndarray) -> np.ndarray:
     if not np.all(np.isfinite(u)):
         bad = int(np.argmax(~np.all(np.isfinite(u), axis=1)))
         raise fail(
-            "E703", f"model inputs hold a non-finite value (first at sample {bad})", expected="finite inputs", found="NaN or inf"
+            Code.HW_MODEL_DATA_MISMATCH,
+            f"model inputs hold a non-finite value (first at sample {bad})",
+            expected="finite inputs",
+            found="NaN or inf",
         )
     return u
 

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.local_dynamics.distance import (
     DistanceScales,
@@ -73,7 +74,7 @@ def trial_data(ctx_or_session: Any, trial_id: str, rate_hz: float | None = None)
     missing = [name for name, arr in (("handle_accel", sig.acceleration), ("handle_wrench", sig.force)) if arr is None]
     if missing:
         raise fail(
-            "E302",
+            Code.REQUIRED_STREAM_MISSING,
             f"trial {trial_id!r} has no {' or '.join(missing)} stream; the dynamic model needs it",
             file="session.json",
             expected=list(REQUIRED_STREAMS),
@@ -99,7 +100,7 @@ def training_trial(session: Any) -> Any:
     trials = session.trials_of("local_dynamic")
     if not trials:
         raise fail(
-            "E302",
+            Code.REQUIRED_STREAM_MISSING,
             "the session has no local_dynamic trial to fit the dynamic model to",
             file="session.json",
             expected="a local_dynamic trial",
@@ -128,7 +129,7 @@ def fit_trial(ctx_or_session: Any, trial_id: str, options: FitOptions | None = N
     seconds = sum(r.stop - r.start for r in runs) / rate
     if seconds < param(FAMILY, "min_training_s"):
         raise fail(
-            "E701",
+            Code.DYNAMICS_DATA_INSUFFICIENT,
             f"trial {trial_id!r} has {seconds:.1f} s of valid data; the dynamic model needs at least "
             f"{param(FAMILY, 'min_training_s')} s",
             expected=f">= {param(FAMILY, 'min_training_s')} s",
@@ -158,7 +159,9 @@ def given_model_trial(ctx_or_session: Any, trial_id: str, relative: str) -> tupl
 
     session = getattr(ctx_or_session, "session", ctx_or_session)
     if not isinstance(relative, str) or not is_safe_relative_path(relative):
-        raise fail("E702", f"model file {relative!r} is not a relative path inside the session folder", file=str(relative))
+        raise fail(
+            Code.HW_MODEL_INVALID, f"model file {relative!r} is not a relative path inside the session folder", file=str(relative)
+        )
     model = load_model(session.root / relative)
     return model, trial_data(ctx_or_session, trial_id, model.sample_rate_hz)
 
@@ -186,7 +189,7 @@ def segment_table(model: HWModelFile, train: TrialData, tests: list[TrialData], 
     window = int(round(param(FAMILY, "window_s") * rate))
     if window < 1:  # a parameter file at a few Hz: windows of round(window_s · rate) = 0 samples
         raise fail(
-            "E701",
+            Code.DYNAMICS_DATA_INSUFFICIENT,
             f"at the model's {rate:g} Hz a {param(FAMILY, 'window_s')} s distance window holds no sample",
             expected="round(window_s · sample_rate_hz) >= 1",
             found=rate,

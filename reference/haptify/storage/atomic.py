@@ -10,6 +10,7 @@ import uuid
 from pathlib import Path
 from typing import Any, Callable
 
+from haptify.codes import Code
 from haptify.errors import fail
 
 
@@ -53,7 +54,7 @@ def replace_folder_atomically(build: Path, target: Path, overwrite: bool) -> Non
     if target.exists():
         if not overwrite:
             shutil.rmtree(build, ignore_errors=True)
-            raise fail("E901", f"{str(target)!r} already exists", file=str(target))
+            raise fail(Code.OUTPUT_EXISTS, f"{str(target)!r} already exists", file=str(target))
         old = target.parent / f".{target.name}.old-{uuid.uuid4().hex[:8]}"
         os.replace(target, old)
         os.replace(build, target)

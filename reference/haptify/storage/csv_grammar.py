@@ -6,6 +6,7 @@ import hashlib
 import re
 from pathlib import Path
 
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.storage.json_documents import short_text
 
@@ -54,7 +55,7 @@ def check_csv_grammar(path: Path, columns: list[str], label: str) -> str:
                 if len(rest) > limit:
                     long_line = line_no + data.count(b"\n") + 1
                     raise fail(
-                        "E112",
+                        Code.STREAM_UNREADABLE,
                         f"line {long_line} of {label!r} is longer than the {limit} bytes "
                         f"a line of {len(columns)} numbers can take",
                         file=label,
@@ -79,7 +80,7 @@ def _check_csv_header(header: bytes, columns: list[str], label: str, limit: int)
     r"""The header line names exactly ``columns`` and ends in ``\n`` or ``\r\n`` (E211, E112; spec §3.2)."""
     if len(header) > limit:
         raise fail(
-            "E211",
+            Code.CSV_HEADER_MALFORMED,
             f"the header line of {label!r} is longer than the {limit} bytes its columns take",
             file=label,
             expected=columns,
@@ -88,7 +89,7 @@ def _check_csv_header(header: bytes, columns: list[str], label: str, limit: int)
     body = header.removesuffix(b"\n").removesuffix(b"\r")
     if b"\r" in body:
         raise fail(
-            "E112",
+            Code.STREAM_UNREADABLE,
             f"{label!r} ends a line with a lone carriage return",
             file=label,
             expected="lines ending in \\n or \\r\\n",
@@ -97,7 +98,7 @@ def _check_csv_header(header: bytes, columns: list[str], label: str, limit: int)
     found = body.decode("utf-8", errors="replace").split(",")
     if found != columns:
         raise fail(
-            "E211",
+            Code.CSV_HEADER_MALFORMED,
             f"CSV header of {label!r} differs from the declared columns",
             file=label,
             expected=columns,
@@ -111,7 +112,7 @@ def _csv_line_error(raw: bytes, line_no: int, columns: list[str], label: str) ->
     fields = text.split(",")
     if text == "":
         raise fail(
-            "E112",
+            Code.STREAM_UNREADABLE,
             f"line {line_no} of {label!r} is blank",
             file=label,
             expected="one sample per line, no blank lines",
@@ -119,7 +120,7 @@ def _csv_line_error(raw: bytes, line_no: int, columns: list[str], label: str) ->
         )
     if len(fields) != len(columns):
         raise fail(
-            "E112",
+            Code.STREAM_UNREADABLE,
             f"line {line_no} of {label!r} has {len(fields)} fields, not {len(columns)}",
             file=label,
             expected=len(columns),
@@ -127,7 +128,7 @@ def _csv_line_error(raw: bytes, line_no: int, columns: list[str], label: str) ->
         )
     k = next((i for i, f in enumerate(fields) if not CSV_FIELD_TEXT.fullmatch(f)), 0)
     raise fail(
-        "E112",
+        Code.STREAM_UNREADABLE,
         f"line {line_no} of {label!r}: field {short_text(fields[k])!r} is not a number as spec §3.2 writes it",
         file=label,
         column=columns[k],

@@ -12,6 +12,7 @@ from typing import Any, Iterable, TypeVar
 
 from pydantic import BaseModel, ValidationError
 
+from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError, fail
 
 
@@ -52,7 +53,7 @@ def _finite_float(text: str) -> float:
     return value
 
 
-def parse_json_file(path: Path, code: str, label: str) -> Any:
+def parse_json_file(path: Path, code: Code, label: str) -> Any:
     """Parse a JSON file strictly: UTF-8, no NaN/Infinity literals, no numbers that overflow, no member
     name twice in one object (E117) (spec §3.1, §4.3)."""
     try:
@@ -84,7 +85,7 @@ def parse_json_file(path: Path, code: str, label: str) -> Any:
     except _DuplicateKey as exc:
         raise HaptifyError(
             Finding(
-                "E117",
+                Code.JSON_DUPLICATE_KEY,
                 f"{label} names the member {short_text(exc.key)!r} twice in one object",
                 file=label,
                 expected="unique member names",
@@ -99,7 +100,7 @@ def parse_json_file(path: Path, code: str, label: str) -> Any:
         raise HaptifyError(Finding(code, f"{label} nests too deeply to be a Haptify document", file=label)) from None
 
 
-def pydantic_findings(exc: ValidationError, code: str, label: str) -> list[Finding]:
+def pydantic_findings(exc: ValidationError, code: Code, label: str) -> list[Finding]:
     """One finding per pydantic error, with JSON pointer and expected/found (spec §4.6)."""
     out = []
     for err in exc.errors(include_url=False):
@@ -122,7 +123,7 @@ def pydantic_findings(exc: ValidationError, code: str, label: str) -> list[Findi
 M = TypeVar("M", bound=BaseModel)
 
 
-def read_json_model(path: str | os.PathLike[str], model: type[M], code: str) -> M:
+def read_json_model(path: str | os.PathLike[str], model: type[M], code: Code) -> M:
     """Read a JSON file into a pydantic ``model``; a missing, malformed or invalid file is ``code``.
     Spec §0.4.
 

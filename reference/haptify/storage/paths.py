@@ -8,6 +8,7 @@ import hashlib
 import os
 from pathlib import Path, PurePosixPath
 
+from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError
 from haptify.session_format import is_safe_relative_path
 
@@ -37,7 +38,7 @@ def resolve_inside(root: Path, relative: str, *, label: str | None = None) -> Pa
     if not is_safe_relative_path(relative):
         raise HaptifyError(
             Finding(
-                "E108",
+                Code.UNSAFE_PATH,
                 f"path {relative!r} is absolute or leaves the session folder",
                 file=label,
                 expected="a relative POSIX path inside the session folder",
@@ -52,7 +53,7 @@ def resolve_inside(root: Path, relative: str, *, label: str | None = None) -> Pa
     def escape(target: str) -> HaptifyError:
         return HaptifyError(
             Finding(
-                "E109",
+                Code.SYMLINK_ESCAPE,
                 f"{relative!r} passes through the symbolic link {link!r} → {target!r}, which leads outside the session folder",
                 file=label,
                 expected="a link target inside the session folder",

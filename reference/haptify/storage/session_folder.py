@@ -9,6 +9,7 @@ from typing import Any
 import pandas as pd
 from pydantic import ValidationError
 
+from haptify.codes import Code
 from haptify.errors import HaptifyError, fail
 from haptify.session_format import Device, DeviceRef, Session, Stream, Trial
 from haptify.storage.json_documents import parse_json_file, pydantic_findings
@@ -39,7 +40,7 @@ class SessionFolder:
             if t.id == trial_id:
                 return t
         raise fail(
-            "E903",
+            Code.USAGE,
             f"no trial {trial_id!r} in session {self.session_id}",
             file=MANIFEST,
             expected=[t.id for t in self.manifest.trials],
@@ -60,12 +61,12 @@ class SessionFolder:
         if isinstance(dev, DeviceRef):
             path = resolve_inside(self.root, dev.file)
             if not path.is_file():
-                raise fail("E106", f"device file {dev.file!r} does not exist", file=dev.file)
-            data = parse_json_file(path, "E106", dev.file)
+                raise fail(Code.DEVICE_FILE_INVALID, f"device file {dev.file!r} does not exist", file=dev.file)
+            data = parse_json_file(path, Code.DEVICE_FILE_INVALID, dev.file)
             try:
                 return Device.model_validate(data)
             except ValidationError as exc:
-                raise HaptifyError(*pydantic_findings(exc, "E106", dev.file)) from None
+                raise HaptifyError(*pydantic_findings(exc, Code.DEVICE_FILE_INVALID, dev.file)) from None
         return dev
 
     # -- stream data ----------------------------------------------------------------------------
@@ -83,12 +84,12 @@ class SessionFolder:
         """
         path = self.stream_path(stream)
         if not path.is_file():
-            raise fail("E110", f"stream file {stream.file!r} does not exist", file=stream.file)
+            raise fail(Code.STREAM_FILE_MISSING, f"stream file {stream.file!r} does not exist", file=stream.file)
         if verify:
             digest = sha256_file(path)
             if digest != stream.sha256:
                 raise fail(
-                    "E111",
+                    Code.CHECKSUM_MISMATCH,
                     f"checksum of {stream.file!r} does not match the manifest",
                     file=stream.file,
                     expected=stream.sha256,
@@ -105,7 +106,9 @@ class SessionFolder:
         """Shortcut: the table of the trial's stream of ``kind`` (E302 when the trial has none)."""
         s = self.stream(trial_id, kind)
         if s is None:
-            raise fail("E302", f"trial {trial_id!r} has no {kind} stream", file=MANIFEST, expected=kind, found=None)
+            raise fail(
+                Code.REQUIRED_STREAM_MISSING, f"trial {trial_id!r} has no {kind} stream", file=MANIFEST, expected=kind, found=None
+            )
         return self.read_stream(s, **kw)
 
 
@@ -113,14 +116,14 @@ def open_session(path: str | os.PathLike[str]) -> SessionFolder:
     """Open a session folder and parse its manifest (E101–E105); streams are read lazily (spec §3.1)."""
     root = Path(path)
     if not root.is_dir():
-        raise fail("E101", f"{str(root)!r} is not a session folder", file=str(root))
+        raise fail(Code.SESSION_NOT_FOUND, f"{str(root)!r} is not a session folder", file=str(root))
     manifest_path = root / MANIFEST
     if not manifest_path.is_file():
-        raise fail("E102", f"no {MANIFEST} in {str(root)!r}", file=MANIFEST)
-    raw = parse_json_file(manifest_path, "E103", MANIFEST)
+        raise fail(Code.MANIFEST_MISSING, f"no {MANIFEST} in {str(root)!r}", file=MANIFEST)
+    raw = parse_json_file(manifest_path, Code.MANIFEST_MALFORMED_JSON, MANIFEST)
     if isinstance(raw, dict) and raw.get("spec_version") not in (None, SPEC_VERSION):
         raise fail(
-            "E105",
+            Code.SPEC_VERSION_UNSUPPORTED,
             f"spec version {raw.get('spec_version')!r} is not supported",
             file=MANIFEST,
             pointer="/spec_version",
@@ -130,5 +133,5 @@ def open_session(path: str | os.PathLike[str]) -> SessionFolder:
     try:
         manifest = Session.model_validate(raw)
     except ValidationError as exc:
-        raise HaptifyError(*pydantic_findings(exc, "E104", MANIFEST)) from None
+        raise HaptifyError(*pydantic_findings(exc, Code.SCHEMA_VIOLATION, MANIFEST)) from None
     return SessionFolder(root, manifest, raw)

@@ -13,6 +13,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from haptify.codes import Code
 from haptify.errors import HaptifyError, fail
 from haptify.storage.csv_grammar import check_csv_grammar
 from haptify.storage.paths import sha256_file
@@ -28,7 +29,7 @@ def read_table(path: Path, fmt: str, columns: list[str], *, label: str) -> pd.Da
     except MemoryError:  # Arrow's allocation failure is the reader's, not the file's (never E112)
         raise
     except (OSError, pa.ArrowException, ValueError) as exc:
-        raise fail("E112", f"{label!r} cannot be read as {fmt}: {exc}", file=label) from None
+        raise fail(Code.STREAM_UNREADABLE, f"{label!r} cannot be read as {fmt}: {exc}", file=label) from None
     return as_float64(frame, label)
 
 
@@ -76,7 +77,7 @@ def read_stream_chunks(
     except (HaptifyError, MemoryError):  # out of memory is the reader's failure, not the file's (never E112)
         raise
     except _READ_ERRORS as exc:
-        raise fail("E112", f"{label!r} cannot be read as {fmt}: {exc}", file=label) from None
+        raise fail(Code.STREAM_UNREADABLE, f"{label!r} cannot be read as {fmt}: {exc}", file=label) from None
     return digest, _checked_chunks(_csv_chunks(path, chunk_rows), fmt, label)
 
 
@@ -128,7 +129,7 @@ def _checked_chunks(chunks: Iterator[pd.DataFrame], fmt: str, label: str) -> Ite
     except (HaptifyError, MemoryError):
         raise
     except _READ_ERRORS as exc:
-        raise fail("E112", f"{label!r} cannot be read as {fmt}: {exc}", file=label) from None
+        raise fail(Code.STREAM_UNREADABLE, f"{label!r} cannot be read as {fmt}: {exc}", file=label) from None
 
 
 def as_float64(frame: pd.DataFrame, label: str) -> pd.DataFrame:
@@ -140,7 +141,7 @@ def as_float64(frame: pd.DataFrame, label: str) -> pd.DataFrame:
             continue
         expected = "float64" if name == "t" else "float64 or float32"
         raise fail(
-            "E212",
+            Code.COLUMN_NOT_NUMERIC,
             f"column {name!r} of {label!r} is {dtype}, not {expected}",
             file=label,
             column=str(name),

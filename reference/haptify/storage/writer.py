@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 from pydantic import ValidationError
 
+from haptify.codes import Code
 from haptify.errors import HaptifyError, fail
 from haptify.session_format import Session, default_stream_file, expected_columns, kind_table
 from haptify.storage.atomic import atomic_write_json, atomic_write_text, replace_folder_atomically
@@ -31,7 +32,7 @@ def _stream_columns(trial_id: str, kind: str, entities: list[str] | None, presen
     missing = [c for c, _ in cols if c not in present]
     if missing:
         raise fail(
-            "E201",
+            Code.COLUMN_MISMATCH,
             f"{kind} stream of trial {trial_id!r} lacks columns {missing}",
             column=missing[0],
             expected=[c for c, _ in cols],
@@ -161,7 +162,7 @@ class SessionWriter:
         """Write the session folder atomically and return its path."""
         target = Path(target)
         if target.exists() and not overwrite:
-            raise fail("E901", f"{str(target)!r} already exists", file=str(target))
+            raise fail(Code.OUTPUT_EXISTS, f"{str(target)!r} already exists", file=str(target))
         target.parent.mkdir(parents=True, exist_ok=True)
         build = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
         try:
@@ -179,7 +180,7 @@ class SessionWriter:
             try:
                 Session.model_validate(manifest)
             except ValidationError as exc:
-                raise HaptifyError(*pydantic_findings(exc, "E104", MANIFEST)) from None
+                raise HaptifyError(*pydantic_findings(exc, Code.SCHEMA_VIOLATION, MANIFEST)) from None
             atomic_write_json(build / MANIFEST, manifest)
             replace_folder_atomically(build, target, overwrite)
         except BaseException:

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable
 
 
+from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError
 from haptify.session_format import Rig, Session, Stream, Trial
 from haptify.validation.report import ReportItem, ValidationReport
@@ -36,10 +37,14 @@ def collect(step: Callable[[], None], file: str | None) -> list[Finding]:
         return list(err.findings)
     except (MemoryError, RecursionError) as exc:
         return [
-            Finding("E112", f"{file or 'the input'} is too large or too deeply nested to check: {type(exc).__name__}", file=file)
+            Finding(
+                Code.STREAM_UNREADABLE,
+                f"{file or 'the input'} is too large or too deeply nested to check: {type(exc).__name__}",
+                file=file,
+            )
         ]
     except Exception as exc:  # a bug in the validator: report it, coded, and go on
-        return [Finding("E999", f"{type(exc).__name__}: {exc}", file=file)]
+        return [Finding(Code.INTERNAL_ERROR, f"{type(exc).__name__}: {exc}", file=file)]
     return []
 
 

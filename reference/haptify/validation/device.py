@@ -4,6 +4,7 @@ device.json or inline in session.json (spec §4.3.2)."""
 from __future__ import annotations
 
 
+from haptify.codes import Code
 from haptify.errors import Finding
 from haptify.kinematics import empty_joint_range, limit_order_violations
 from haptify.session_format import Kinematics
@@ -21,7 +22,7 @@ def kinematics_findings(kin: Kinematics, file: str, base: str) -> list[Finding]:
     """
     out = [
         Finding(
-            "E116",
+            Code.KINEMATIC_CHAIN_INVALID,
             f"joint {i + 1} of the chain is named {joint.name!r}",
             file=file,
             pointer=f"{base}/joints/{i}/name",
@@ -36,7 +37,7 @@ def kinematics_findings(kin: Kinematics, file: str, base: str) -> list[Finding]:
     names = [j.name for j in kin.joints]
     out = [
         Finding(
-            "E116",
+            Code.KINEMATIC_CHAIN_INVALID,
             f"the {side} limit of {names[i]} depends on {other}, which is not an earlier joint",
             file=file,
             pointer=f"{base}/joints/{i}/{side}/coefficients/{other}",
@@ -52,7 +53,7 @@ def kinematics_findings(kin: Kinematics, file: str, base: str) -> list[Finding]:
         joint = kin.joints[empty.joint]
         out.append(
             Finding(
-                "E115",
+                Code.JOINT_LIMITS_EMPTY,
                 f"the upper limit of {joint.name} lies below its lower limit (by at least "
                 f"{-empty.widest_rad:.6g} rad) for every configuration of the earlier joints",
                 file=file,

@@ -11,6 +11,7 @@ from pathlib import Path
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError
 
 # --- size limits of spec §4.2 and §3.5 (E113) ----------------------------------------------------
@@ -22,18 +23,18 @@ STREAM_BYTES_PER_COLUMN = 2**10  # rows and columns: base + per column + per val
 STREAM_BYTES_PER_VALUE = 32  # tiny declared stream never makes the validator read gigabytes
 
 
-def regular_file(path: Path, label: str, missing_code: str, missing_text: str, limit: int) -> int:
+def regular_file(path: Path, label: str, missing_code: Code, missing_text: str, limit: int) -> int:
     """``lstat`` a resolved path: its size when it is a regular file within ``limit``; coded errors otherwise."""
     try:
         st = os.lstat(path)
     except (FileNotFoundError, NotADirectoryError):
         raise HaptifyError(Finding(missing_code, missing_text, file=label)) from None
     except OSError as exc:
-        raise HaptifyError(Finding("E112", f"{label!r} cannot be examined: {exc.strerror}", file=label)) from None
+        raise HaptifyError(Finding(Code.STREAM_UNREADABLE, f"{label!r} cannot be examined: {exc.strerror}", file=label)) from None
     if not stat.S_ISREG(st.st_mode):
         raise HaptifyError(
             Finding(
-                "E112",
+                Code.STREAM_UNREADABLE,
                 f"{label!r} is not a regular file",
                 file=label,
                 expected="a regular file",
@@ -43,7 +44,7 @@ def regular_file(path: Path, label: str, missing_code: str, missing_text: str, l
     if st.st_size > limit:
         raise HaptifyError(
             Finding(
-                "E113",
+                Code.DECLARED_SIZE_ABSURD,
                 f"{label!r} is {st.st_size} bytes, more than the {limit} bytes allowed",
                 file=label,
                 expected=f"at most {limit} bytes",
@@ -70,11 +71,11 @@ def parquet_row_groups(path: Path, label: str, rows: int) -> int:
     except MemoryError:
         raise
     except (OSError, pa.ArrowException, ValueError) as exc:
-        raise HaptifyError(Finding("E112", f"{label!r} cannot be read as parquet: {exc}", file=label)) from None
+        raise HaptifyError(Finding(Code.STREAM_UNREADABLE, f"{label!r} cannot be read as parquet: {exc}", file=label)) from None
     if groups > max(1, rows):
         raise HaptifyError(
             Finding(
-                "E113",
+                Code.DECLARED_SIZE_ABSURD,
                 f"{label!r} declares {groups} row groups for {rows} rows",
                 file=label,
                 expected=f"at most {max(1, rows)} row groups",

@@ -11,6 +11,7 @@ from typing import Any, Iterable
 
 from pydantic import BaseModel, ValidationError
 
+from haptify.codes import Code
 from haptify.conventions import QUATERNION_NORM_TOLERANCE
 from haptify.errors import Finding, HaptifyError
 from haptify.session_format import ClockOffset, Device, Rig, Session, Stream, Trial
@@ -34,7 +35,7 @@ class ManifestChecks(ValidatorBase):
         if not self.root.is_dir():
             self.add(
                 Finding(
-                    "E101",
+                    Code.SESSION_NOT_FOUND,
                     f"{str(self.root)!r} is not a session folder",
                     file=str(self.root),
                     expected="a folder holding session.json",
@@ -61,12 +62,12 @@ class ManifestChecks(ValidatorBase):
 
     def _load_manifest(self) -> None:
         path = resolve_inside(self.root, MANIFEST)
-        regular_file(path, MANIFEST, "E102", f"no {MANIFEST} in {str(self.root)!r}", MANIFEST_MAX_BYTES)
-        raw = parse_json_file(path, "E103", MANIFEST)
+        regular_file(path, MANIFEST, Code.MANIFEST_MISSING, f"no {MANIFEST} in {str(self.root)!r}", MANIFEST_MAX_BYTES)
+        raw = parse_json_file(path, Code.MANIFEST_MALFORMED_JSON, MANIFEST)
         if isinstance(raw, dict) and "spec_version" in raw and raw["spec_version"] != SPEC_VERSION:
             raise HaptifyError(
                 Finding(
-                    "E105",
+                    Code.SPEC_VERSION_UNSUPPORTED,
                     f"spec version {raw['spec_version']!r} is not supported",
                     file=MANIFEST,
                     pointer="/spec_version",
@@ -77,7 +78,7 @@ class ManifestChecks(ValidatorBase):
         self.raw = raw
 
     def _check_schema(self) -> None:
-        findings = schema_findings(self.raw, "session", "E104", MANIFEST)
+        findings = schema_findings(self.raw, "session", Code.SCHEMA_VIOLATION, MANIFEST)
         raw = self.raw
         for f in findings:
             self.add(f, _trial_of_pointer(raw, f.pointer))
@@ -88,7 +89,7 @@ class ManifestChecks(ValidatorBase):
             try:
                 manifest = Session.model_validate(raw)
             except ValidationError as exc:  # the model is stricter than its schema somewhere
-                self.add_all(pydantic_findings(exc, "E104", MANIFEST))
+                self.add_all(pydantic_findings(exc, Code.SCHEMA_VIOLATION, MANIFEST))
                 manifest = None
             if manifest is not None:
                 self.manifest = manifest
@@ -144,15 +145,15 @@ class ManifestChecks(ValidatorBase):
         label = dev["file"]
         try:
             path = resolve_inside(self.root, label)
-            regular_file(path, label, "E106", f"device file {label!r} does not exist", DEVICE_MAX_BYTES)
-            data = parse_json_file(path, "E106", label)
+            regular_file(path, label, Code.DEVICE_FILE_INVALID, f"device file {label!r} does not exist", DEVICE_MAX_BYTES)
+            data = parse_json_file(path, Code.DEVICE_FILE_INVALID, label)
         except HaptifyError as err:
             for f in err.findings:
-                if f.file == label and f.pointer is None and f.code in ("E108", "E109"):
+                if f.file == label and f.pointer is None and f.code in (Code.UNSAFE_PATH, Code.SYMLINK_ESCAPE):
                     f.pointer = "/device/file"
             self.add_all(err.findings)
             return
-        findings = schema_findings(data, "device", "E106", label)
+        findings = schema_findings(data, "device", Code.DEVICE_FILE_INVALID, label)
         self.add_all(findings)
         self._check_static_quaternions(data, label)
         self._check_nulls(data, label)
@@ -169,12 +170,17 @@ class ManifestChecks(ValidatorBase):
 
     def _check_nulls(self, document: Any = None, label: str = MANIFEST) -> None:
         """W407 at every ``null`` the schema tolerated: writers omit members without a value (spec §2.1)."""
-        judged = {f.pointer for f in self.report.findings if f.file == label and f.code in ("E104", "E106", "E113", "E301")}
+        judged = {
+            f.pointer
+            for f in self.report.findings
+            if f.file == label
+            and f.code in (Code.SCHEMA_VIOLATION, Code.DEVICE_FILE_INVALID, Code.DECLARED_SIZE_ABSURD, Code.PROTOCOL_UNKNOWN)
+        }
         for pointer, _, value in _json_members(self.raw if document is None else document):
             if value is None and pointer not in judged:
                 self.add(
                     Finding(
-                        "W407",
+                        Code.NULL_MEMBER,
                         "a member is written as null; omit it instead",
                         file=label,
                         pointer=pointer,
@@ -194,7 +200,7 @@ class ManifestChecks(ValidatorBase):
         except ValueError:
             self.add(
                 Finding(
-                    "E104",
+                    Code.SCHEMA_VIOLATION,
                     f"date {date!r} is not a calendar date",
                     file=MANIFEST,
                     pointer="/date",
@@ -214,7 +220,7 @@ class ManifestChecks(ValidatorBase):
                 missing = sorted({"c1", "c2", "c3", "c4"} - set(ids))
                 self.add(
                     Finding(
-                        "E107",
+                        Code.DUPLICATE_ID,
                         f"force-plate corner sensor id {cid!r} is used twice (missing: {', '.join(missing)})",
                         file=MANIFEST,
                         pointer=f"/rig/force_plate/corners/{k}/id",
@@ -233,7 +239,7 @@ class ManifestChecks(ValidatorBase):
             if tid in seen:
                 self.add(
                     Finding(
-                        "E107",
+                        Code.DUPLICATE_ID,
                         f"trial id {tid!r} is used twice",
                         file=MANIFEST,
                         pointer=f"/trials/{index}/id",
@@ -250,7 +256,7 @@ class ManifestChecks(ValidatorBase):
             if cid is not None and cid in cids:
                 self.add(
                     Finding(
-                        "E107",
+                        Code.DUPLICATE_ID,
                         f"calibration id {cid!r} is used twice",
                         file=MANIFEST,
                         pointer=f"/calibration/{i}/id",
@@ -266,7 +272,7 @@ class ManifestChecks(ValidatorBase):
             if key in files:
                 self.add(
                     Finding(
-                        "E107",
+                        Code.DUPLICATE_ID,
                         f"stream file {e.stream.file!r} is named twice (also at {files[key]})",
                         file=MANIFEST,
                         pointer=f"{e.pointer}/file",
@@ -284,7 +290,7 @@ class ManifestChecks(ValidatorBase):
             if isinstance(src, str) and src not in seen:
                 self.add(
                     Finding(
-                        "E114",
+                        Code.REFERENCE_UNKNOWN,
                         f"calibration {rec.get('id')!r} names trial {src!r}, which the session does not hold",
                         file=MANIFEST,
                         pointer=f"/calibration/{i}/source_trial",
@@ -296,7 +302,7 @@ class ManifestChecks(ValidatorBase):
             if rec.get("kind") == "clock_offset" and isinstance(sf, str) and sf not in stream_files:
                 self.add(
                     Finding(
-                        "E114",
+                        Code.REFERENCE_UNKNOWN,
                         f"clock offset {rec.get('id')!r} names stream file {sf!r}, which no stream uses",
                         file=MANIFEST,
                         pointer=f"/calibration/{i}/stream_file",
@@ -319,7 +325,7 @@ class ManifestChecks(ValidatorBase):
             if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
                 self.add(
                     Finding(
-                        "E207",
+                        Code.QUATERNION_NOT_UNIT,
                         f"quaternion has norm {norm:.6g}",
                         file=label,
                         pointer=pointer,

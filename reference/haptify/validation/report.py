@@ -10,6 +10,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from haptify.codes import Code
 from haptify.errors import Finding
 from haptify.storage import MANIFEST
 from haptify.versions import PACKAGE_VERSION, SPEC_VERSION
@@ -58,7 +59,7 @@ class ValidationReport:
     @property
     def exit_code(self) -> int:
         """0 valid, 1 invalid, 2 validation could not run (no session folder, internal error) — spec §4.6."""
-        if any(f.code in ("E101", "E999") for f in self.findings):
+        if any(f.code in (Code.SESSION_NOT_FOUND, Code.INTERNAL_ERROR) for f in self.findings):
             return EXIT_CANNOT_RUN
         return EXIT_VALID if self.valid else EXIT_INVALID
 

@@ -12,6 +12,7 @@ from jsonschema.exceptions import ValidationError as SchemaError
 from pydantic import BaseModel
 
 from haptify import schemas
+from haptify.codes import Code
 from haptify.errors import Finding
 from haptify.session_format import Device, Session
 from haptify.storage import pointer_of
@@ -71,12 +72,12 @@ _SIZE_FIELDS = {"rows", "rate_hz", "loop_rate_hz"}
 def _code_for(err: SchemaError, default: str) -> str:
     """Map a schema error to its catalogue code: E301 unknown protocol, E113 absurd size, else ``default``."""
     path = list(err.absolute_path)
-    if default != "E104":
+    if default != Code.SCHEMA_VIOLATION:
         return default
     if len(path) == 3 and path[0] == "trials" and path[2] == "protocol" and err.validator == "enum":
-        return "E301"
+        return Code.PROTOCOL_UNKNOWN
     if path and path[-1] in _SIZE_FIELDS and err.validator in ("maximum", "exclusiveMaximum"):
-        return "E113"
+        return Code.DECLARED_SIZE_ABSURD
     return default
 
 

@@ -12,6 +12,7 @@ from typing import Any, Callable
 import numpy as np
 import pandas as pd
 
+from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError
 from haptify.session_format import SensorRange, Stream, expected_columns, kind_table
 from haptify.storage import MANIFEST, read_stream_chunks, resolve_inside, sha256_file
@@ -76,7 +77,7 @@ class StreamChecks(ValidatorBase):
             if not entities:
                 add(
                     Finding(
-                        "E201",
+                        Code.COLUMN_MISMATCH,
                         f"{s.kind} stream names no entities",
                         file=MANIFEST,
                         pointer=f"{entry.pointer}/entities",
@@ -88,7 +89,7 @@ class StreamChecks(ValidatorBase):
             if dups:
                 add(
                     Finding(
-                        "E107",
+                        Code.DUPLICATE_ID,
                         f"{s.kind} stream lists entities {dups} more than once",
                         file=MANIFEST,
                         pointer=f"{entry.pointer}/entities",
@@ -102,7 +103,7 @@ class StreamChecks(ValidatorBase):
                     if ent not in known:
                         add(
                             Finding(
-                                "E213",
+                                Code.ENTITY_UNKNOWN,
                                 f"{s.kind} stream names {ent!r}, which the rig does not describe",
                                 file=MANIFEST,
                                 pointer=f"{entry.pointer}/entities/{k}",
@@ -113,7 +114,7 @@ class StreamChecks(ValidatorBase):
         elif s.entities is not None:
             add(
                 Finding(
-                    "E215",
+                    Code.ENTITIES_NOT_ALLOWED,
                     f"{s.kind} stream declares entities, which only markers and link_poses have",
                     file=MANIFEST,
                     pointer=f"{entry.pointer}/entities",
@@ -126,7 +127,7 @@ class StreamChecks(ValidatorBase):
         if [n for n, _ in expected] != declared:
             add(
                 Finding(
-                    "E201",
+                    Code.COLUMN_MISMATCH,
                     f"{s.kind} stream declares columns that differ from its kind's",
                     file=MANIFEST,
                     pointer=f"{entry.pointer}/columns",
@@ -139,7 +140,7 @@ class StreamChecks(ValidatorBase):
                 if col.unit != unit:
                     add(
                         Finding(
-                            "E202",
+                            Code.WRONG_UNIT,
                             f"column {name!r} is declared in {col.unit!r}",
                             file=MANIFEST,
                             pointer=f"{entry.pointer}/columns/{k}/unit",
@@ -151,7 +152,7 @@ class StreamChecks(ValidatorBase):
         if s.frame not in spec["frames"]:
             add(
                 Finding(
-                    "E209",
+                    Code.WRONG_FRAME,
                     f"{s.kind} stream is declared in frame {s.frame!r}",
                     file=MANIFEST,
                     pointer=f"{entry.pointer}/frame",
@@ -162,7 +163,7 @@ class StreamChecks(ValidatorBase):
         if s.rate_hz < spec["recommended_rate_hz"]:
             add(
                 Finding(
-                    "W406",
+                    Code.RATE_BELOW_RECOMMENDED,
                     f"{s.kind} stream at {s.rate_hz:g} Hz is below the recommended {spec['recommended_rate_hz']} Hz",
                     file=MANIFEST,
                     pointer=f"{entry.pointer}/rate_hz",
@@ -174,11 +175,11 @@ class StreamChecks(ValidatorBase):
         path = resolve_inside(self.root, s.file)
         missing = f"stream file {label!r} does not exist"
         if s.format == "parquet":  # the footer says how many row groups the file may spend metadata on
-            regular_file(path, label, "E110", missing, stream_size_limit(len(declared), s.rows, max(1, s.rows)))
+            regular_file(path, label, Code.STREAM_FILE_MISSING, missing, stream_size_limit(len(declared), s.rows, max(1, s.rows)))
             groups = parquet_row_groups(path, label, s.rows)
-            regular_file(path, label, "E110", missing, stream_size_limit(len(declared), s.rows, groups))
+            regular_file(path, label, Code.STREAM_FILE_MISSING, missing, stream_size_limit(len(declared), s.rows, groups))
         else:
-            regular_file(path, label, "E110", missing, stream_size_limit(len(declared), s.rows))
+            regular_file(path, label, Code.STREAM_FILE_MISSING, missing, stream_size_limit(len(declared), s.rows))
         entry.path = path
 
     def _check_contents(
@@ -221,7 +222,7 @@ class StreamChecks(ValidatorBase):
         if not same:
             add(
                 Finding(
-                    "E201",
+                    Code.COLUMN_MISMATCH,
                     "the file's columns differ from the columns declared in session.json",
                     file=label,
                     expected=declared,
@@ -232,12 +233,18 @@ class StreamChecks(ValidatorBase):
         n = times.rows
         if n != s.rows:
             add(
-                Finding("E208", f"{label!r} holds {n} rows, session.json declares {s.rows}", file=label, expected=s.rows, found=n)
+                Finding(
+                    Code.ROW_COUNT_MISMATCH,
+                    f"{label!r} holds {n} rows, session.json declares {s.rows}",
+                    file=label,
+                    expected=s.rows,
+                    found=n,
+                )
             )
         if n < 2:
             add(
                 Finding(
-                    "E205",
+                    Code.STREAM_EMPTY,
                     f"{s.kind} stream holds {n} sample{'s' if n != 1 else ''}",
                     file=label,
                     expected="at least 2 samples",
@@ -263,7 +270,11 @@ class StreamChecks(ValidatorBase):
         if digest != s.sha256:
             add(
                 Finding(
-                    "E111", f"checksum of {s.file!r} does not match session.json", file=s.file, expected=s.sha256, found=digest
+                    Code.CHECKSUM_MISMATCH,
+                    f"checksum of {s.file!r} does not match session.json",
+                    file=s.file,
+                    expected=s.sha256,
+                    found=digest,
                 )
             )
 
@@ -302,7 +313,7 @@ class StreamChecks(ValidatorBase):
             if late_span[0] >= early_span[1]:
                 self.add(
                     Finding(
-                        "E305",
+                        Code.STREAMS_DO_NOT_OVERLAP,
                         f"{early.stream.kind} ends at t={early_span[1]:.6g} s before {late.stream.kind} starts at "
                         f"t={late_span[0]:.6g} s (session clock)",
                         file=late.stream.file,

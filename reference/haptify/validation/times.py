@@ -9,6 +9,7 @@ from typing import Callable
 
 import numpy as np
 
+from haptify.codes import Code
 from haptify.errors import Finding
 
 # --- tolerances of spec §4.4 ---------------------------------------------------------------------
@@ -79,7 +80,7 @@ class TimeScan:
         if self.non_finite:
             add(
                 Finding(
-                    "E203",
+                    Code.TIME_NOT_INCREASING,
                     f"time column holds {self.non_finite} non-finite values",
                     file=label,
                     column="t",
@@ -92,7 +93,7 @@ class TimeScan:
             k, a, b = self.first_reversal
             add(
                 Finding(
-                    "E203",
+                    Code.TIME_NOT_INCREASING,
                     f"time does not strictly increase at {self.reversals} intervals (first at row {k + 1})",
                     file=label,
                     column="t",
@@ -107,7 +108,7 @@ class TimeScan:
         if abs(actual / self.rate_hz - 1.0) > RATE_TOLERANCE:
             add(
                 Finding(
-                    "E206",
+                    Code.RATE_MISMATCH,
                     f"actual mean rate {actual:.6g} Hz differs from the declared {self.rate_hz:g} Hz by more than "
                     f"{RATE_TOLERANCE:.0%}",
                     file=label,
@@ -121,7 +122,7 @@ class TimeScan:
             nominal = 1.0 / self.rate_hz
             add(
                 Finding(
-                    "W402",
+                    Code.SAMPLE_INTERVAL_IRREGULAR,
                     f"{self.odd} sample intervals lie outside [{INTERVAL_LOW}, {INTERVAL_HIGH}] × {nominal:.6g} s "
                     f"(largest {self.dt_max:.6g} s, smallest {self.dt_min:.6g} s)",
                     file=label,

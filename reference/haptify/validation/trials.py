@@ -9,6 +9,7 @@ from typing import Callable
 
 
 from haptify import schemas
+from haptify.codes import Code
 from haptify.conventions import QUATERNION_NORM_TOLERANCE
 from haptify.errors import Finding
 from haptify.session_format import Trial
@@ -28,7 +29,7 @@ def check_trial(index: int, trial: Trial, add: Callable[[Finding], None]) -> Non
         if kind in kinds[:j]:
             add(
                 Finding(
-                    "E306",
+                    Code.DUPLICATE_STREAM_KIND,
                     f"trial {trial.id!r} has two {kind} streams",
                     file=MANIFEST,
                     pointer=f"{where}/streams/{j}/kind",
@@ -40,7 +41,7 @@ def check_trial(index: int, trial: Trial, add: Callable[[Finding], None]) -> Non
         if kind not in kinds:
             add(
                 Finding(
-                    "E302",
+                    Code.REQUIRED_STREAM_MISSING,
                     f"{trial.protocol} trial {trial.id!r} has no {kind} stream",
                     file=MANIFEST,
                     pointer=f"{where}/streams",
@@ -52,7 +53,7 @@ def check_trial(index: int, trial: Trial, add: Callable[[Finding], None]) -> Non
         if kind not in kinds:
             add(
                 Finding(
-                    "W404",
+                    Code.RECOMMENDED_STREAM_MISSING,
                     f"{trial.protocol} trial {trial.id!r} has no {kind} stream",
                     file=MANIFEST,
                     pointer=f"{where}/streams",
@@ -64,7 +65,7 @@ def check_trial(index: int, trial: Trial, add: Callable[[Finding], None]) -> Non
     if passive is False and trial.rendering is None:
         add(
             Finding(
-                "E303",
+                Code.RENDERING_MISSING,
                 f"active {trial.protocol} trial {trial.id!r} has no rendering parameters",
                 file=MANIFEST,
                 pointer=f"{where}/rendering",
@@ -81,7 +82,7 @@ def check_trial(index: int, trial: Trial, add: Callable[[Finding], None]) -> Non
         if not abs(norm - 1.0) <= NORMAL_NORM_TOLERANCE:
             add(
                 Finding(
-                    "E307",
+                    Code.SURFACE_NORMAL_NOT_UNIT,
                     f"trial {trial.id!r}: the rendering's surface_normal has norm {norm:.6g}",
                     file=MANIFEST,
                     pointer=f"{where}/rendering/surface_normal",
@@ -92,7 +93,7 @@ def check_trial(index: int, trial: Trial, add: Callable[[Finding], None]) -> Non
     if trial.protocol == "other" and not (trial.label or "").strip():
         add(
             Finding(
-                "E304",
+                Code.LABEL_MISSING,
                 f"trial {trial.id!r} of protocol 'other' has no label",
                 file=MANIFEST,
                 pointer=f"{where}/label",
@@ -103,7 +104,7 @@ def check_trial(index: int, trial: Trial, add: Callable[[Finding], None]) -> Non
     if passive is not None and trial.powered == passive:
         add(
             Finding(
-                "W403",
+                Code.POWERED_FLAG_UNUSUAL,
                 f"{'passive' if passive else 'active'} protocol {trial.protocol!r} recorded with powered={str(trial.powered).lower()}",
                 file=MANIFEST,
                 pointer=f"{where}/powered",

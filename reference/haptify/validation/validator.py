@@ -7,6 +7,7 @@ import os
 from typing import Any, Callable
 
 
+from haptify.codes import Code
 from haptify.errors import Finding
 from haptify.validation.manifest import ManifestChecks
 from haptify.validation.report import ValidationReport
@@ -36,5 +37,5 @@ def validate_session(
         v.check_manifest()
         v.check_streams(advance)
     except Exception as exc:  # the last guard: a validator bug is a coded finding, never a traceback
-        v.add(Finding("E999", f"{type(exc).__name__}: {exc}"))
+        v.add(Finding(Code.INTERNAL_ERROR, f"{type(exc).__name__}: {exc}"))
     return v.finish()

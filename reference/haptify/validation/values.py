@@ -10,6 +10,7 @@ from typing import Callable
 import numpy as np
 
 from haptify import schemas
+from haptify.codes import Code
 from haptify.conventions import QUATERNION_NORM_TOLERANCE
 from haptify.errors import Finding
 from haptify.session_format import ALLOWED_VALUES, SensorRange, Stream, kind_table, quaternion_groups, values_outside_set
@@ -120,7 +121,7 @@ class ValueScan:
             if tally.count:
                 add(
                     Finding(
-                        "E210",
+                        Code.NON_FINITE_VALUE,
                         f"column {cols[k]!r} holds {tally.count} infinite values",
                         file=label,
                         column=cols[k],
@@ -134,7 +135,7 @@ class ValueScan:
                 if partial.count:
                     add(
                         Finding(
-                            "E204",
+                            Code.NAN_NOT_ALLOWED,
                             f"{name}: {partial.count} samples have some but not all of {[cols[i] for i in idx]} NaN",
                             file=label,
                             column=cols[idx[0]],
@@ -147,7 +148,7 @@ class ValueScan:
                 if share > OCCLUSION_WARNING_SHARE:
                     add(
                         Finding(
-                            "W405",
+                            Code.OCCLUSION_HIGH,
                             f"{name} is occluded in {share:.0%} of the samples",
                             file=label,
                             column=cols[idx[0]],
@@ -161,7 +162,7 @@ class ValueScan:
                 if tally.count:
                     add(
                         Finding(
-                            "E204",
+                            Code.NAN_NOT_ALLOWED,
                             f"column {cols[k]!r} holds {tally.count} NaN values; {s.kind} allows none",
                             file=label,
                             column=cols[k],
@@ -177,7 +178,7 @@ class ValueScan:
                 assert outside is not None  # self.sets holds the columns with a closed value set only
                 add(
                     Finding(
-                        "E214",
+                        Code.VALUE_NOT_ALLOWED,
                         f"column {col!r} holds {tally.count} values other than {outside[1]} "
                         f"({seen[0].size} distinct, e.g. {float(seen[0][0])!r})",
                         file=label,
@@ -191,7 +192,7 @@ class ValueScan:
             if tally.count:
                 add(
                     Finding(
-                        "E207",
+                        Code.QUATERNION_NOT_UNIT,
                         f"{tally.count} quaternions ({', '.join(group)}) are not unit; worst norm {worst[0]:.6g}",
                         file=label,
                         column=group[0],
@@ -204,7 +205,7 @@ class ValueScan:
             if tally.count:
                 add(
                     Finding(
-                        "W401",
+                        Code.SENSOR_RANGE_EXCEEDED,
                         f"column {cols[k]!r} exceeds the declared ±{limit:g} range at {tally.count} samples (peak {peak[0]:.6g})",
                         file=label,
                         column=cols[k],

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from haptify.codes import Code
 from haptify.errors import fail
 
 from haptify_tools.cluster import dask_client
@@ -46,10 +47,10 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace, ui) -> int:
     """Run ``haptify discrepancy`` (discrepancy README, command line); exit 0 when the outputs were written (whatever the verdict)."""
     if args.max_effects < 0:
-        raise fail("E903", "--max-effects must be at least 0", expected=">= 0", found=args.max_effects)
+        raise fail(Code.USAGE, "--max-effects must be at least 0", expected=">= 0", found=args.max_effects)
     out = Path(args.out)
     if out.exists() and not args.overwrite:
-        raise fail("E901", f"{str(out)!r} already exists", file=str(out))
+        raise fail(Code.OUTPUT_EXISTS, f"{str(out)!r} already exists", file=str(out))
     twin = load_twin(args.twin)
     with dask_client(getattr(args, "scheduler", None), 0) as client:
         result, _ = run_discrepancy(

@@ -20,6 +20,7 @@ from typing import Any, Callable, Protocol
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from haptify.codes import Code
 from haptify.compute import ComputeContext
 from haptify.errors import fail
 from haptify.preprocessing import lowpass
@@ -141,7 +142,7 @@ def load_measured(session: SessionFolder, ctx: ComputeContext | None = None, req
         )
     if not out and required:
         raise fail(
-            "E302",
+            Code.REQUIRED_STREAM_MISSING,
             "the measured session has no trial with a handle_wrench stream to compare with the twin",
             file="session.json",
             expected="a free-space, local-dynamic, figure-eight, surface or stiffness trial",

@@ -45,6 +45,7 @@ from scipy.interpolate import make_lsq_spline
 from scipy.signal import butter, sosfiltfilt
 
 from haptify import calibration as cal_mod
+from haptify.codes import Code
 from haptify.compute import ComputeContext
 from haptify.conventions import quat_normalize, quat_rotate
 from haptify.errors import fail
@@ -132,7 +133,10 @@ def accelerometer_path(
     handle = session.manifest.rig.handle
     if handle is None:
         raise fail(
-            "E603", "a handle_accel stream needs rig.handle (the accelerometer)", file="session.json", pointer="/rig/handle"
+            Code.RIG_PART_MISSING,
+            "a handle_accel stream needs rig.handle (the accelerometer)",
+            file="session.json",
+            pointer="/rig/handle",
         )
     sensor = handle.accelerometer
     near_clip = np.zeros(len(t), bool)

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.kinematics import joint_limits
 from haptify.storage import SessionFolder
@@ -66,7 +67,7 @@ def _the_box(twin: TwinFile) -> tuple[int, Box]:
     found = next(((i, p) for i, p in enumerate(prims) if isinstance(p, Box)), None)
     if found is None:
         raise fail(
-            "E802",
+            Code.TWIN_FILE_INVALID,
             f"the twin's {EFFECT_ID} holds no box primitive",
             pointer=f"/effects/{EFFECT_ID}/primitives",
             expected="a primitive of shape 'box'",

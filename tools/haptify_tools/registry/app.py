@@ -26,6 +26,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.types import ASGIApp
 
 from haptify import compare
+from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError
 from haptify.versions import PACKAGE_VERSION, SPEC_VERSION
 from haptify_tools.registry import challenge
@@ -39,18 +40,18 @@ VERIFICATION_FILTER = "^(all|verified|disagreeing|unverified)$"  # lists: one ve
 RANKED_FILTER = "^(verified|all)$"  # aggregates and rankings: verified results only (default), or all
 log = logging.getLogger("haptify.registry")
 
-STATUS = {
-    "E960": 413,
-    "E970": 401,
-    "E971": 403,
-    "E972": 429,
-    "E973": 404,
-    "E974": 409,
-    "E975": 400,
-    "E977": 403,
-    "E978": 503,
-    "E979": 410,
-    "E999": 500,
+STATUS: dict[str, int] = {
+    Code.BUNDLE_TOO_LARGE: 413,
+    Code.TOKEN_INVALID: 401,
+    Code.TOKEN_SCOPE: 403,
+    Code.RATE_LIMITED: 429,
+    Code.NOT_FOUND: 404,
+    Code.SUPERSEDE_CONFLICT: 409,
+    Code.REQUEST_INVALID: 400,
+    Code.LAB_MISMATCH: 403,
+    Code.REGISTRY_UNAVAILABLE: 503,
+    Code.CHALLENGE_CLOSED: 410,
+    Code.INTERNAL_ERROR: 500,
 }
 
 
@@ -201,7 +202,7 @@ def _register_error_handlers(app: FastAPI) -> None:
     async def _invalid(request: Request, exc: RequestValidationError) -> JSONResponse:
         findings = [
             Finding(
-                "E975",
+                Code.REQUEST_INVALID,
                 e.get("msg", "invalid"),
                 file=str(e.get("loc", ["request"])[0]),
                 pointer="/" + "/".join(str(p) for p in e.get("loc", [])[1:]),
@@ -210,13 +211,13 @@ def _register_error_handlers(app: FastAPI) -> None:
             )
             for e in exc.errors()
         ]
-        err = HaptifyError(*(findings or [Finding("E975", "invalid request")]))
+        err = HaptifyError(*(findings or [Finding(Code.REQUEST_INVALID, "invalid request")]))
         log_refusal(request, err)
         return refusal(err)
 
     @app.exception_handler(StarletteHTTPException)
     async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
-        err = HaptifyError(Finding("E973" if exc.status_code == 404 else "E975", str(exc.detail)))
+        err = HaptifyError(Finding(Code.NOT_FOUND if exc.status_code == 404 else Code.REQUEST_INVALID, str(exc.detail)))
         log_refusal(request, err)
         return JSONResponse(
             {"status": "refused", "findings": [f.to_dict() for f in err.findings]},
@@ -236,7 +237,8 @@ def _register_error_handlers(app: FastAPI) -> None:
             exc_info=exc,
         )
         return JSONResponse(
-            {"status": "error", "findings": [Finding("E999", f"{type(exc).__name__}: {exc}").to_dict()]}, status_code=500
+            {"status": "error", "findings": [Finding(Code.INTERNAL_ERROR, f"{type(exc).__name__}: {exc}").to_dict()]},
+            status_code=500,
         )
 
 
@@ -280,7 +282,7 @@ def _register_intake(app: FastAPI, reg: Registry) -> None:
         if declared and declared.isdigit() and int(declared) > limit:
             raise HaptifyError(
                 Finding(
-                    "E960",
+                    Code.BUNDLE_TOO_LARGE,
                     "the bundle archive is larger than the registry accepts",
                     file="<upload>",
                     expected=f"≤ {limit} bytes",
@@ -453,7 +455,14 @@ def _register_devices(app: FastAPI, reg: Registry) -> None:
         slugs = [s for s in devices.split(",") if s]
         if not slugs:
             raise HaptifyError(
-                Finding("E975", "no device given", file="query", pointer="/devices", expected="slug,slug,…", found=devices)
+                Finding(
+                    Code.REQUEST_INVALID,
+                    "no device given",
+                    file="query",
+                    pointer="/devices",
+                    expected="slug,slug,…",
+                    found=devices,
+                )
             )
         cache = reads(request)
         table = compare.build_table(cache.comparison(tuple(slugs), verification), with_paper=paper)

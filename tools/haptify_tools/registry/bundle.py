@@ -37,6 +37,7 @@ from typing import IO, Final, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError, fail
 from haptify.results import Implementation
 from haptify.session_format import Id, Rig, is_safe_relative_path
@@ -139,7 +140,13 @@ def _session_files(session_dir: Path, manifest: dict, include_raw: bool) -> list
     for rel in sorted(referenced):
         source = resolve_inside(session_dir, rel, label=rel)
         if not source.is_file():
-            raise fail("E965", f"the session file {rel!r} does not exist", file=rel, expected="a regular file", found="missing")
+            raise fail(
+                Code.BUNDLE_FILE_MISMATCH,
+                f"the session file {rel!r} does not exist",
+                file=rel,
+                expected="a regular file",
+                found="missing",
+            )
         out.append((f"{SESSION_DIR}/{rel}", source, "stream" if rel in streams else "session-file"))
     return out
 
@@ -167,12 +174,16 @@ def build_bundle(
 
     session_dir = Path(session_dir)
     session = open_session(session_dir)
-    results = read_json_model(results_path, ResultsFile, "E966")
+    results = read_json_model(results_path, ResultsFile, Code.BUNDLE_CONTENT_INVALID)
     device = session.device()
     sources: list[tuple[str, Path, Role]] = [(RESULTS_JSON, Path(results_path), "results")]
     if conformance_path is not None:
         if not Path(conformance_path).is_file():
-            raise fail("E967", f"the conformance report {str(conformance_path)!r} does not exist", file=str(conformance_path))
+            raise fail(
+                Code.CONFORMANCE_NOT_PASSING,
+                f"the conformance report {str(conformance_path)!r} does not exist",
+                file=str(conformance_path),
+            )
         sources.append((CONFORMANCE_JSON, Path(conformance_path), "conformance"))
     sources += _session_files(session_dir, session.raw, include_raw)
     bundle = Bundle(
@@ -218,7 +229,7 @@ def pack(bundle: Bundle, files: list[tuple[str, Path]], target: str | os.PathLik
                 data = fh.read()
             if len(data) != entry.size or hashlib.sha256(data).hexdigest() != entry.sha256:
                 raise fail(
-                    "E965",
+                    Code.BUNDLE_FILE_MISMATCH,
                     f"{path!r} changed while the bundle was packed",
                     file=path,
                     expected=entry.sha256,
@@ -262,13 +273,18 @@ class _CountingReader(io.RawIOBase):
         try:
             data = self.gz.read(min(len(buffer), CHUNK))
         except (OSError, EOFError, zlib.error) as exc:
-            raise fail("E961", f"the archive is not valid gzip: {exc}", file="<upload>", expected="gzip-compressed tar") from None
+            raise fail(
+                Code.BUNDLE_ARCHIVE_INVALID,
+                f"the archive is not valid gzip: {exc}",
+                file="<upload>",
+                expected="gzip-compressed tar",
+            ) from None
         n = len(data)
         buffer[:n] = data
         self.count += n
         if self.count > self.limits.max_unpacked_bytes:
             raise fail(
-                "E960",
+                Code.BUNDLE_TOO_LARGE,
                 "the archive decompresses to more than the registry accepts",
                 file="<upload>",
                 expected=f"≤ {self.limits.max_unpacked_bytes} bytes",
@@ -276,7 +292,7 @@ class _CountingReader(io.RawIOBase):
             )
         if self.count > self.limits.ratio_floor_bytes and self.count > self.limits.max_ratio * self.compressed:
             raise fail(
-                "E963",
+                Code.BUNDLE_DECOMPRESSION_BOMB,
                 "the archive expands more than any real bundle does (a decompression bomb)",
                 file="<upload>",
                 expected=f"expansion ≤ {self.limits.max_ratio:g}×",
@@ -313,7 +329,7 @@ def _member_name_problem(name: str) -> str | None:
 
 def _unsafe(name: str, why: str, found: str | None = None) -> HaptifyError:
     return fail(
-        "E962",
+        Code.BUNDLE_UNSAFE_MEMBER,
         f"archive member {name!r} {why}",
         file=name,
         expected="a regular file at a relative path inside the bundle",
@@ -332,7 +348,7 @@ def unpack(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits =
     size = archive.stat().st_size
     if size > limits.max_archive_bytes:
         raise fail(
-            "E960",
+            Code.BUNDLE_TOO_LARGE,
             "the bundle archive is larger than the registry accepts",
             file="<upload>",
             expected=f"≤ {limits.max_archive_bytes} bytes",
@@ -349,7 +365,10 @@ def unpack(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits =
                 tar = tarfile.open(fileobj=io.BufferedReader(counter, CHUNK), mode="r|")
             except tarfile.TarError as exc:
                 raise fail(
-                    "E961", f"the upload is not a tar archive: {exc}", file="<upload>", expected="gzip-compressed tar"
+                    Code.BUNDLE_ARCHIVE_INVALID,
+                    f"the upload is not a tar archive: {exc}",
+                    file="<upload>",
+                    expected="gzip-compressed tar",
                 ) from None
             try:
                 count = written = 0
@@ -357,7 +376,7 @@ def unpack(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits =
                     count += 1
                     if count > limits.max_members:
                         raise fail(
-                            "E960",
+                            Code.BUNDLE_TOO_LARGE,
                             "the archive has too many members",
                             file="<upload>",
                             expected=f"≤ {limits.max_members}",
@@ -370,11 +389,17 @@ def unpack(archive: str | os.PathLike, root: str | os.PathLike, limits: Limits =
                     out.members[member.name] = (size, digest)
             except tarfile.TarError as exc:
                 raise fail(
-                    "E961", f"the tar archive is damaged: {exc}", file="<upload>", expected="a complete tar archive"
+                    Code.BUNDLE_ARCHIVE_INVALID,
+                    f"the tar archive is damaged: {exc}",
+                    file="<upload>",
+                    expected="a complete tar archive",
                 ) from None
             except (EOFError, zlib.error) as exc:
                 raise fail(
-                    "E961", f"the archive ends early or is corrupt: {exc}", file="<upload>", expected="gzip-compressed tar"
+                    Code.BUNDLE_ARCHIVE_INVALID,
+                    f"the archive ends early or is corrupt: {exc}",
+                    file="<upload>",
+                    expected="gzip-compressed tar",
                 ) from None
     return out
 
@@ -402,7 +427,7 @@ def _member_source(tar: tarfile.TarFile, member: tarfile.TarInfo, seen_folded: s
     seen_folded.add(folded)
     if member.size > limits.max_unpacked_bytes:
         raise fail(
-            "E960",
+            Code.BUNDLE_TOO_LARGE,
             f"archive member {name!r} is larger than the registry accepts",
             file=name,
             expected=f"≤ {limits.max_unpacked_bytes} bytes",
@@ -425,7 +450,7 @@ def _write_member(root: Path, name: str, source: IO[bytes], written: int, limits
             written += len(chunk)
             if written > limits.max_unpacked_bytes:
                 raise fail(
-                    "E960",
+                    Code.BUNDLE_TOO_LARGE,
                     "the archive unpacks to more bytes than the registry accepts",
                     file=name,
                     expected=f"≤ {limits.max_unpacked_bytes} bytes written",
@@ -455,26 +480,32 @@ def unpack_bundle(archive: str | os.PathLike, root: str | os.PathLike, limits: L
 def read_manifest(unpacked: Unpacked, limits: Limits = Limits()) -> Bundle:
     """Parse and check ``bundle.json`` against the unpacked files (E964, E965; spec §17.2)."""
     if BUNDLE_JSON not in unpacked.members:
-        raise fail("E964", "the archive has no bundle.json", file=BUNDLE_JSON, expected="bundle.json at the top", found="missing")
+        raise fail(
+            Code.BUNDLE_MANIFEST_INVALID,
+            "the archive has no bundle.json",
+            file=BUNDLE_JSON,
+            expected="bundle.json at the top",
+            found="missing",
+        )
     if unpacked.members[BUNDLE_JSON][0] > limits.max_json_bytes:
         raise fail(
-            "E960",
+            Code.BUNDLE_TOO_LARGE,
             "bundle.json is too large",
             file=BUNDLE_JSON,
             expected=f"≤ {limits.max_json_bytes} bytes",
             found=f"{unpacked.members[BUNDLE_JSON][0]} bytes",
         )
-    data = parse_json_file(unpacked.root / BUNDLE_JSON, "E964", BUNDLE_JSON)
+    data = parse_json_file(unpacked.root / BUNDLE_JSON, Code.BUNDLE_MANIFEST_INVALID, BUNDLE_JSON)
     try:
         bundle = Bundle.model_validate(data)
     except ValidationError as exc:
-        raise HaptifyError(*pydantic_findings(exc, "E964", BUNDLE_JSON)) from None
+        raise HaptifyError(*pydantic_findings(exc, Code.BUNDLE_MANIFEST_INVALID, BUNDLE_JSON)) from None
     declared, findings = _declared_files(bundle)
     findings += _file_findings(declared, unpacked)
     if any(f.role == "stream" for f in bundle.files) != bundle.includes_raw:
         findings.append(
             Finding(
-                "E964",
+                Code.BUNDLE_MANIFEST_INVALID,
                 "includes_raw does not match the files",
                 file=BUNDLE_JSON,
                 pointer="/includes_raw",
@@ -496,7 +527,7 @@ def _declared_files(bundle: Bundle) -> tuple[dict[str, BundleFile], list[Finding
         if f.path in declared or f.path == BUNDLE_JSON:
             findings.append(
                 Finding(
-                    "E964",
+                    Code.BUNDLE_MANIFEST_INVALID,
                     f"{f.path!r} is declared twice",
                     file=BUNDLE_JSON,
                     pointer=f"/files/{i}/path",
@@ -511,7 +542,7 @@ def _declared_files(bundle: Bundle) -> tuple[dict[str, BundleFile], list[Finding
         if paths != [want]:
             findings.append(
                 Finding(
-                    "E964",
+                    Code.BUNDLE_MANIFEST_INVALID,
                     f"the bundle must declare exactly one {role} file, {want!r}",
                     file=BUNDLE_JSON,
                     pointer="/files",
@@ -523,7 +554,7 @@ def _declared_files(bundle: Bundle) -> tuple[dict[str, BundleFile], list[Finding
     if conformance not in ([], [CONFORMANCE_JSON]):
         findings.append(
             Finding(
-                "E964",
+                Code.BUNDLE_MANIFEST_INVALID,
                 f"the conformance report must be {CONFORMANCE_JSON!r}",
                 file=BUNDLE_JSON,
                 pointer="/files",
@@ -542,7 +573,7 @@ def _file_findings(declared: dict[str, BundleFile], unpacked: Unpacked) -> list[
         if entry.role in ("session-file", "stream") and not path.startswith(f"{SESSION_DIR}/"):
             findings.append(
                 Finding(
-                    "E964",
+                    Code.BUNDLE_MANIFEST_INVALID,
                     f"session file {path!r} lies outside {SESSION_DIR}/",
                     file=BUNDLE_JSON,
                     expected=f"{SESSION_DIR}/…",
@@ -552,7 +583,7 @@ def _file_findings(declared: dict[str, BundleFile], unpacked: Unpacked) -> list[
         if path not in unpacked.members:
             findings.append(
                 Finding(
-                    "E965",
+                    Code.BUNDLE_FILE_MISMATCH,
                     f"{path!r} is declared in bundle.json but not in the archive",
                     file=path,
                     expected="present",
@@ -564,7 +595,7 @@ def _file_findings(declared: dict[str, BundleFile], unpacked: Unpacked) -> list[
         if size != entry.size or sha != entry.sha256:
             findings.append(
                 Finding(
-                    "E965",
+                    Code.BUNDLE_FILE_MISMATCH,
                     f"{path!r} differs from its declaration in bundle.json",
                     file=path,
                     expected={"size": entry.size, "sha256": entry.sha256},
@@ -574,7 +605,7 @@ def _file_findings(declared: dict[str, BundleFile], unpacked: Unpacked) -> list[
     for path in sorted(set(unpacked.members) - set(declared) - {BUNDLE_JSON}):
         findings.append(
             Finding(
-                "E965",
+                Code.BUNDLE_FILE_MISMATCH,
                 f"{path!r} is in the archive but not declared in bundle.json",
                 file=path,
                 expected="declared in bundle.json",

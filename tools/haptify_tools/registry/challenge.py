@@ -40,6 +40,7 @@ from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.results import Implementation
 from haptify.versions import SPEC_VERSION
@@ -173,7 +174,7 @@ def _row(s, cid: str):
 
     row = s.get(db.Challenge, cid)
     if row is None:
-        raise fail("E973", f"no challenge {cid!r}", expected="an id from POST /api/v1/challenges", found=cid)
+        raise fail(Code.NOT_FOUND, f"no challenge {cid!r}", expected="an id from POST /api/v1/challenges", found=cid)
     return row
 
 
@@ -223,7 +224,7 @@ def sessions_archive(reg, cid: str) -> Path:
 def _require_open(row, result) -> None:
     if result is not None:
         raise fail(
-            "E979",
+            Code.CHALLENGE_CLOSED,
             f"challenge {row.id} has been answered already; an answer is judged once (no replay)",
             pointer="/challenge",
             expected="an open challenge",
@@ -231,7 +232,7 @@ def _require_open(row, result) -> None:
         )
     if datetime.now(timezone.utc) > _aware(row.expires_at):
         raise fail(
-            "E979",
+            Code.CHALLENGE_CLOSED,
             f"challenge {row.id} expired at {_aware(row.expires_at).isoformat()}",
             pointer="/challenge",
             expected="an open challenge",
@@ -260,7 +261,7 @@ def answer(reg, cid: str, caller, body: Answers) -> dict:
         row = _row(s, cid)
         if row.lab_id != caller.lab_id:
             raise fail(
-                "E971",
+                Code.TOKEN_SCOPE,
                 "a challenge is answered by the lab it was issued to",
                 file="Authorization",
                 expected=row.lab_id,
@@ -271,7 +272,7 @@ def answer(reg, cid: str, caller, body: Answers) -> dict:
     ids = [c.id for c in cases]
     if sorted(body.answers) != sorted(ids):
         raise fail(
-            "E975",
+            Code.REQUEST_INVALID,
             "the answers are not those of this challenge's cases",
             file="body",
             pointer="/answers",
@@ -283,7 +284,7 @@ def answer(reg, cid: str, caller, body: Answers) -> dict:
         named = doc.get("implementation") if isinstance(doc, dict) else None
         if isinstance(named, dict) and {k: named.get(k) for k in ("name", "version")} != impl:
             raise fail(
-                "E975",
+                Code.REQUEST_INVALID,
                 f"the results for {case_id} name another implementation",
                 file="body",
                 pointer=f"/answers/{case_id}/implementation",
@@ -305,7 +306,7 @@ def answer(reg, cid: str, caller, body: Answers) -> dict:
             )
     except IntegrityError:
         raise fail(
-            "E979",
+            Code.CHALLENGE_CLOSED,
             f"challenge {cid} has been answered already; an answer is judged once (no replay)",
             pointer="/challenge",
             expected="an open challenge",

@@ -19,6 +19,7 @@ from typing import Any, TypeVar
 
 from pydantic import BaseModel, ValidationError
 
+from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError, fail
 from haptify.metric_definitions import MetricDefinition, all_families
 from haptify.results import ResultsFile
@@ -84,17 +85,28 @@ _Doc = TypeVar("_Doc", bound=BaseModel)
 def _doc(unpacked: Unpacked, path: str, model: type[_Doc], limits: Limits) -> _Doc:
     size = unpacked.members[path][0]
     if size > limits.max_json_bytes:
-        raise fail("E960", f"{path} is too large", file=path, expected=f"≤ {limits.max_json_bytes} bytes", found=f"{size} bytes")
-    data = parse_json_file(unpacked.root / path, "E966", path)
+        raise fail(
+            Code.BUNDLE_TOO_LARGE,
+            f"{path} is too large",
+            file=path,
+            expected=f"≤ {limits.max_json_bytes} bytes",
+            found=f"{size} bytes",
+        )
+    data = parse_json_file(unpacked.root / path, Code.BUNDLE_CONTENT_INVALID, path)
     try:
         return model.model_validate(data)
     except ValidationError as exc:
-        raise HaptifyError(*pydantic_findings(exc, "E966", path)) from None
+        raise HaptifyError(*pydantic_findings(exc, Code.BUNDLE_CONTENT_INVALID, path)) from None
 
 
 def _mismatch(what: str, file: str, pointer: str, expected: Any, found: Any) -> Finding:
     return Finding(
-        "E966", f"{what} differs between bundle.json and {file}", file=file, pointer=pointer, expected=expected, found=found
+        Code.BUNDLE_CONTENT_INVALID,
+        f"{what} differs between bundle.json and {file}",
+        file=file,
+        pointer=pointer,
+        expected=expected,
+        found=found,
     )
 
 
@@ -104,7 +116,7 @@ def check_bundle(unpacked: Unpacked, limits: Limits = Limits()) -> Checked:
     bundle = read_manifest(unpacked, limits)
     if bundle.spec_version not in SUPPORTED_SPEC_VERSIONS:
         raise fail(
-            "E968",
+            Code.BUNDLE_SPEC_VERSION_UNSUPPORTED,
             f"spec version {bundle.spec_version!r} is not accepted",
             file="bundle.json",
             pointer="/spec_version",
@@ -115,7 +127,12 @@ def check_bundle(unpacked: Unpacked, limits: Limits = Limits()) -> Checked:
     conformance = _doc(unpacked, CONFORMANCE_JSON, ConformReport, limits) if bundle.file("conformance") else None
     manifest_path = f"{SESSION_DIR}/{MANIFEST}"
     if unpacked.members[manifest_path][0] > limits.max_json_bytes:
-        raise fail("E960", f"{manifest_path} is too large", file=manifest_path, expected=f"≤ {limits.max_json_bytes} bytes")
+        raise fail(
+            Code.BUNDLE_TOO_LARGE,
+            f"{manifest_path} is too large",
+            file=manifest_path,
+            expected=f"≤ {limits.max_json_bytes} bytes",
+        )
     session = open_session(unpacked.root / SESSION_DIR)
     device = session.device()
     findings: list[Finding] = []
@@ -148,7 +165,7 @@ def check_bundle(unpacked: Unpacked, limits: Limits = Limits()) -> Checked:
     if results.manifest_sha256 != manifest_sha:
         findings.append(
             Finding(
-                "E966",
+                Code.BUNDLE_CONTENT_INVALID,
                 "the results were not computed from the included session manifest",
                 file=RESULTS_JSON,
                 pointer="/manifest_sha256",
@@ -159,7 +176,7 @@ def check_bundle(unpacked: Unpacked, limits: Limits = Limits()) -> Checked:
     if not results.metrics:
         findings.append(
             Finding(
-                "E966",
+                Code.BUNDLE_CONTENT_INVALID,
                 "the results contain no metric",
                 file=RESULTS_JSON,
                 pointer="/metrics",
@@ -195,7 +212,9 @@ SHAPE_LENGTH = {"vector3": 3, "vector6": 6}
 
 def _e966(i: int, member: str, message: str, expected: Any, found: Any) -> Finding:
     """E966 at ``results.json#/metrics/<i><member>``."""
-    return Finding("E966", message, file=RESULTS_JSON, pointer=f"/metrics/{i}{member}", expected=expected, found=found)
+    return Finding(
+        Code.BUNDLE_CONTENT_INVALID, message, file=RESULTS_JSON, pointer=f"/metrics/{i}{member}", expected=expected, found=found
+    )
 
 
 def metric_findings(results: ResultsFile) -> list[Finding]:
@@ -247,7 +266,7 @@ def check_conformance(report: ConformReport, results: ResultsFile, spec_version:
     if report.header.spec_version != spec_version:
         findings.append(
             Finding(
-                "E967",
+                Code.CONFORMANCE_NOT_PASSING,
                 "the conformance report is for another spec version",
                 file=file,
                 pointer="/header/spec_version",
@@ -259,7 +278,7 @@ def check_conformance(report: ConformReport, results: ResultsFile, spec_version:
     if impl != results.implementation.model_dump():
         findings.append(
             Finding(
-                "E967",
+                Code.CONFORMANCE_NOT_PASSING,
                 "the conformance report is of another implementation",
                 file=file,
                 pointer="/header/implementation",
@@ -271,7 +290,7 @@ def check_conformance(report: ConformReport, results: ResultsFile, spec_version:
     if bad or not report.summary.conforms:
         findings.append(
             Finding(
-                "E967",
+                Code.CONFORMANCE_NOT_PASSING,
                 "the implementation does not pass the conformance suite",
                 file=file,
                 pointer="/summary/conforms",
@@ -286,7 +305,7 @@ def check_conformance(report: ConformReport, results: ResultsFile, spec_version:
         if missing:
             findings.append(
                 Finding(
-                    "E967",
+                    Code.CONFORMANCE_NOT_PASSING,
                     f"the report does not show the MUST cases of {metric} passed",
                     file=file,
                     pointer="/cases",
@@ -337,7 +356,7 @@ def verify(session_root: Path, results: ResultsFile, spec_version: str = SPEC_VE
     if errors:
         raise HaptifyError(
             Finding(
-                "E966",
+                Code.BUNDLE_CONTENT_INVALID,
                 f"the included session has {len(errors)} validation error(s)",
                 file=f"{SESSION_DIR}/",
                 expected="a valid session (spec chapter 4)",
@@ -375,7 +394,7 @@ def verify(session_root: Path, results: ResultsFile, spec_version: str = SPEC_VE
                     tol,
                     f"the reference cannot compute it from the included streams: "
                     f"{why.code + ' ' + why.reason if why else 'not computed'}",
-                    "W969",
+                    Code.METRIC_DISAGREES,
                 )
             )
         elif agrees(m.value, ref.value, tol):
@@ -390,7 +409,7 @@ def verify(session_root: Path, results: ResultsFile, spec_version: str = SPEC_VE
                     tol,
                     f"submitted {m.value!r}, the reference computes {ref.value!r}; "
                     f"allowed |difference| ≤ {tol['abs']:g} + {tol['rel']:g}·|reference|",
-                    "W969",
+                    Code.METRIC_DISAGREES,
                 )
             )
     status = "verified" if all(c.status == "agrees" for c in checks) else "disagreeing"

@@ -8,6 +8,7 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify_tools.cluster import add_executor_options, dask_client, describe
 from haptify_tools.registry.bundle import Limits
@@ -135,7 +136,7 @@ def run_reverify_command(args, ui) -> int:
 
     if args.resume and args.since_version:
         raise fail(
-            "E903",
+            Code.USAGE,
             "--since-version chooses the submissions of a new run; a resumed run keeps its own",
             expected="--resume RUN or --since-version V",
             found="both",

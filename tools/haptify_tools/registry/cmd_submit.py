@@ -26,6 +26,7 @@ import urllib.parse
 import urllib.request
 from pathlib import Path
 
+from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError, fail
 from haptify.gate import require_valid_session
 from haptify_tools.registry.bundle import build_bundle, pack, submission_id, unpack
@@ -87,7 +88,7 @@ def request_json(
                 ]
             ) from None
         except (ValueError, KeyError, TypeError):
-            raise fail("E978", f"the registry answered HTTP {exc.code}: {body[:300]}", file=url) from None
+            raise fail(Code.REGISTRY_UNAVAILABLE, f"the registry answered HTTP {exc.code}: {body[:300]}", file=url) from None
     except (urllib.error.URLError, OSError) as exc:
         raise unreachable(registry, url, getattr(exc, "reason", exc)) from None
 
@@ -129,7 +130,7 @@ def upload_resumable(
                 )["offset"]
                 failures = 0
             except HaptifyError as err:
-                if err.findings[0].code != "E978" or failures >= attempts:
+                if err.findings[0].code != Code.REGISTRY_UNAVAILABLE or failures >= attempts:
                     raise
                 failures += 1
                 time.sleep(0.1 * 2**failures)
@@ -165,7 +166,7 @@ def check_size(archive: Path, limits: dict | None, registry: str) -> None:
     size, limit = archive.stat().st_size, int(limits["max_archive_bytes"])
     if size > limit:
         raise fail(
-            "E960",
+            Code.BUNDLE_TOO_LARGE,
             f"the bundle is {size / 2**20:.1f} MiB; the registry at {registry} accepts at most "
             f"{limit / 2**20:.1f} MiB, so it was not sent",
             file=str(archive),
@@ -179,7 +180,7 @@ def unreachable(registry: str, url: str, reason: object) -> HaptifyError:
     wrong ``--registry`` (E903: check the URL); anything else may pass (E978: retry later). Spec §17.7."""
     if isinstance(reason, socket.gaierror) or not urllib.parse.urlsplit(registry).hostname:
         return fail(
-            "E903",
+            Code.USAGE,
             f"--registry {registry!r} names no host this machine can resolve ({reason}); check the URL",
             file=url,
             expected="http(s)://HOST[:PORT] of a Haptify registry",
@@ -187,13 +188,13 @@ def unreachable(registry: str, url: str, reason: object) -> HaptifyError:
         )
     if isinstance(reason, ConnectionRefusedError):
         return fail(
-            "E903",
+            Code.USAGE,
             f"nothing answers at {registry!r} ({reason}); check the URL and port, or start the registry (haptify registry serve)",
             file=url,
             expected="the address of a running registry",
             found=registry,
         )
-    return fail("E978", f"cannot reach the registry at {registry}: {reason}", file=url)
+    return fail(Code.REGISTRY_UNAVAILABLE, f"cannot reach the registry at {registry}: {reason}", file=url)
 
 
 def describe(outcome: dict) -> list[str]:
@@ -211,7 +212,7 @@ def describe(outcome: dict) -> list[str]:
     return lines
 
 
-CANNOT_RUN = ("E903", "E978", "E999")
+CANNOT_RUN = (Code.USAGE, Code.REGISTRY_UNAVAILABLE, Code.INTERNAL_ERROR)
 
 
 def run(args, ui) -> int:
@@ -234,7 +235,7 @@ def _run(args, ui) -> int:
     token: str = args.token or os.environ.get(TOKEN_ENV, "")
     if not args.dry_run and not (args.registry and token):
         raise fail(
-            "E903",
+            Code.USAGE,
             "uploading needs --registry and --token (or $" + TOKEN_ENV + ")",
             expected="--registry URL --token TOKEN",
             found={"registry": args.registry, "token": bool(token)},

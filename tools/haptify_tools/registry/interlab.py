@@ -17,6 +17,7 @@ from typing import Sequence
 import numpy as np
 from scipy import stats
 
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.uncertainty import coverage_factor, welch_satterthwaite
 
@@ -85,7 +86,7 @@ def components(cells: Sequence[LabCell]) -> tuple[float, float, float, float]:
     with fewer than two labs or a lab with fewer than two repetitions."""
     if len(cells) < 2 or any(c.n < 2 for c in cells):
         raise fail(
-            "E903",
+            Code.USAGE,
             "s_r and s_R need at least two labs with at least two repetitions each",
             expected="≥ 2 labs × ≥ 2 repetitions",
             found=[c.n for c in cells],
@@ -107,7 +108,7 @@ def precision(cells: Sequence[LabCell]) -> Precision:
     lab with fewer than two repetitions (h needs p ≥ 3; s_r needs repetitions)."""
     if len(cells) < 3 or any(c.n < 2 for c in cells):
         raise fail(
-            "E903",
+            Code.USAGE,
             "ISO 5725-2 statistics need at least three labs with at least two repetitions each",
             expected="≥ 3 labs × ≥ 2 repetitions",
             found=[c.n for c in cells],

@@ -17,6 +17,7 @@ from sqlalchemy import Engine, func, select
 from sqlalchemy.orm import Session as DBSession
 from sqlalchemy.orm import selectinload
 
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.results import DeviceSummary, Implementation, MetricResult, ResultsFile
 from haptify.versions import PACKAGE_VERSION
@@ -126,7 +127,7 @@ class RegistryQueries:
         with DBSession(self.engine) as s:
             row = s.get(db.Submission, sid)
             if row is None:
-                raise fail("E973", f"no submission {sid!r}", expected="an existing submission id", found=sid)
+                raise fail(Code.NOT_FOUND, f"no submission {sid!r}", expected="an existing submission id", found=sid)
             ctx = self._context(s)
             out = self._summary(row, ctx)
             out.update(
@@ -143,7 +144,7 @@ class RegistryQueries:
         with DBSession(self.engine) as s:
             row = s.get(db.Submission, sid)
             if row is None:
-                raise fail("E973", f"no submission {sid!r}", expected="an existing submission id", found=sid)
+                raise fail(Code.NOT_FOUND, f"no submission {sid!r}", expected="an existing submission id", found=sid)
             return self.data / row.archive_path
 
     def session_folder(self, sid: str) -> Path:
@@ -173,7 +174,7 @@ class RegistryQueries:
         for lab in self.labs():
             if lab["id"] == lab_id:
                 return {**lab, "recent": self.submissions(lab=lab_id, state="all", limit=50)}
-        raise fail("E973", f"no lab {lab_id!r}", expected="an existing lab id", found=lab_id)
+        raise fail(Code.NOT_FOUND, f"no lab {lab_id!r}", expected="an existing lab id", found=lab_id)
 
     def devices(self) -> list[dict]:
         with DBSession(self.engine) as s:
@@ -186,7 +187,7 @@ class RegistryQueries:
     def _device_row(self, s: DBSession, slug: str) -> db.Device:
         d = s.scalar(select(db.Device).where(db.Device.slug == slug))
         if d is None:
-            raise fail("E973", f"no device {slug!r}", expected="a device slug from /api/v1/devices", found=slug)
+            raise fail(Code.NOT_FOUND, f"no device {slug!r}", expected="a device slug from /api/v1/devices", found=slug)
         return d
 
     def current_metric_rows(
@@ -198,7 +199,7 @@ class RegistryQueries:
         results file's uncertainty record by metric id (None when absent, spec §19.4)."""
         if verification not in RANKED:
             raise fail(
-                "E975",
+                Code.REQUEST_INVALID,
                 f"unknown verification filter {verification!r}",
                 pointer="/verification",
                 expected=list(RANKED),

@@ -31,6 +31,7 @@ from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
+from haptify.codes import Code
 from haptify.errors import HaptifyError, fail
 from haptify.results import ResultsFile
 from haptify.versions import PACKAGE_VERSION, SPEC_VERSION
@@ -121,7 +122,7 @@ def judge(out: dict, baseline: Baseline, spec_version: str) -> tuple[str, list[d
                 "recomputed": now,
                 "tolerance": tol,
                 "submitted": check["submitted"],
-                "code": "W982" if state == "changed" else None,
+                "code": Code.REVERIFIED_VALUE_MOVED if state == "changed" else None,
             }
         )
     moved = any(c["status"] == "changed" or c["status"] == "failed" and c["previous"] is not None for c in checks)
@@ -157,7 +158,9 @@ def baselines(s: DBSession, ids: list[str], run_id: str) -> dict[str, Baseline]:
 def version_key(version: str) -> tuple[int, ...]:
     """``"1.2.10"`` → ``(1, 2, 10)`` for ordering reference versions (E903 for anything else)."""
     if not re.fullmatch(r"\d+(\.\d+)*", version):
-        raise fail("E903", f"{version!r} is not a version number", expected="digits separated by dots, e.g. 0.2.0", found=version)
+        raise fail(
+            Code.USAGE, f"{version!r} is not a version number", expected="digits separated by dots, e.g. 0.2.0", found=version
+        )
     return tuple(int(p) for p in version.split("."))
 
 
@@ -263,14 +266,14 @@ def load_run(engine, run_id: str) -> db.ReverifyRun:
         run = s.get(db.ReverifyRun, run_id)
         if run is None:
             raise fail(
-                "E973",
+                Code.NOT_FOUND,
                 f"no re-verification run {run_id!r}",
                 expected="a run id printed by `haptify registry reverify`",
                 found=run_id,
             )
         if run.reference_version != PACKAGE_VERSION:
             raise fail(
-                "E981",
+                Code.REVERIFY_RUN_OF_ANOTHER_REFERENCE,
                 f"run {run_id} was started by reference {run.reference_version}; this is {PACKAGE_VERSION}",
                 expected=run.reference_version,
                 found=PACKAGE_VERSION,

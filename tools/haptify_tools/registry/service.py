@@ -37,6 +37,7 @@ from sqlalchemy.exc import IntegrityError, OperationalError
 from sqlalchemy.orm import Session as DBSession
 from starlette.concurrency import run_in_threadpool
 
+from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError, fail
 from haptify_conform.report import ConformReport
 from haptify_tools.registry import db
@@ -92,7 +93,7 @@ class Registry(RegistryQueries):
             except OSError:
                 self._lock_fh.close()
                 raise fail(
-                    "E978",
+                    Code.REGISTRY_UNAVAILABLE,
                     f"another registry process serves the data folder {str(self.data)!r}",
                     file=str(self.data),
                     expected="one process per data folder",
@@ -145,14 +146,17 @@ class Registry(RegistryQueries):
     ) -> str:
         """Create a token for ``lab`` (created if new); returns the token, which is stored only hashed."""
         if scope not in SCOPES:
-            raise fail("E975", f"unknown scope {scope!r}", expected=list(SCOPES), found=scope)
+            raise fail(Code.REQUEST_INVALID, f"unknown scope {scope!r}", expected=list(SCOPES), found=scope)
         from haptify_tools.registry.bundle import BundleLab
 
         try:
             BundleLab(id=lab)
         except Exception:
             raise fail(
-                "E975", f"lab id {lab!r} is not an identifier", expected="letters, digits, '.', '_', '-' (≤ 64)", found=lab
+                Code.REQUEST_INVALID,
+                f"lab id {lab!r} is not an identifier",
+                expected="letters, digits, '.', '_', '-' (≤ 64)",
+                found=lab,
             ) from None
         token = TOKEN_PREFIX + secrets.token_urlsafe(32)
         with DBSession(self.writer) as s, s.begin():
@@ -171,13 +175,13 @@ class Registry(RegistryQueries):
     def authenticate(self, authorization: str | None, need: str = "submit", *, rate_limit: bool = True) -> Caller:
         """The caller of ``Authorization: Bearer <token>``: E970 unknown, E971 scope, E972 rate (spec §17.6)."""
         if not authorization or not authorization.startswith("Bearer "):
-            raise fail("E970", "no API token", file="Authorization", expected="Bearer <token>", found="missing")
+            raise fail(Code.TOKEN_INVALID, "no API token", file="Authorization", expected="Bearer <token>", found="missing")
         token = authorization[len("Bearer ") :].strip()
         with DBSession(self.engine) as s:
             row = s.scalar(select(db.Token).where(db.Token.token_sha256 == hash_token(token)))
             if row is None:
                 raise fail(
-                    "E970",
+                    Code.TOKEN_INVALID,
                     "the API token is not known to this registry",
                     file="Authorization",
                     expected="a token from `haptify registry token create`",
@@ -186,12 +190,14 @@ class Registry(RegistryQueries):
             caller = Caller(row.id, row.lab_id, row.scope)
             rate = row.rate_per_minute
         if need == "admin" and caller.scope != "admin":
-            raise fail("E971", "this request needs an admin token", file="Authorization", expected="admin", found=caller.scope)
+            raise fail(
+                Code.TOKEN_SCOPE, "this request needs an admin token", file="Authorization", expected="admin", found=caller.scope
+            )
         if rate_limit:
             wait = self.limiter.take(caller.token_id, rate)
             if wait > 0:
                 err = fail(
-                    "E972",
+                    Code.RATE_LIMITED,
                     f"more than {rate} requests per minute with this token",
                     file="Authorization",
                     expected=f"≤ {rate}/min",
@@ -215,7 +221,7 @@ class Registry(RegistryQueries):
                     total += len(chunk)
                     if total > limit:
                         raise fail(
-                            "E960",
+                            Code.BUNDLE_TOO_LARGE,
                             "the bundle archive is larger than the registry accepts",
                             file="<upload>",
                             expected=f"≤ {limit} bytes",
@@ -223,7 +229,13 @@ class Registry(RegistryQueries):
                         )
                     fh.write(chunk)
                 if total == 0:
-                    raise fail("E961", "the request has no body", file="<upload>", expected="a .tar.gz bundle", found="0 bytes")
+                    raise fail(
+                        Code.BUNDLE_ARCHIVE_INVALID,
+                        "the request has no body",
+                        file="<upload>",
+                        expected="a .tar.gz bundle",
+                        found="0 bytes",
+                    )
                 fh.flush()
                 await run_in_threadpool(os.fsync, fh.fileno())
         except BaseException:
@@ -247,7 +259,7 @@ class Registry(RegistryQueries):
             unpacked, bundle = run_contained(unpack_bundle, upload, work, limits, limits=limits)
             if bundle.lab.id != caller.lab_id:
                 raise fail(
-                    "E977",
+                    Code.LAB_MISMATCH,
                     "the bundle is from another lab than the token",
                     file="bundle.json",
                     pointer="/lab/id",
@@ -263,7 +275,7 @@ class Registry(RegistryQueries):
             if report is None:
                 impl = checked.results.implementation
                 raise fail(
-                    "E967",
+                    Code.CONFORMANCE_NOT_PASSING,
                     f"no passing conformance report of {impl.name} {impl.version} for spec "
                     f"{checked.bundle.spec_version} is included or on file",
                     file="conformance.json",
@@ -318,7 +330,7 @@ class Registry(RegistryQueries):
             old = s.get(db.Submission, old_id)
             if old is None:
                 raise fail(
-                    "E973",
+                    Code.NOT_FOUND,
                     f"the submission {old_id!r} to supersede does not exist",
                     file="bundle.json",
                     pointer="/supersedes",
@@ -328,7 +340,7 @@ class Registry(RegistryQueries):
             state = self._state(s, old)
             if old.lab_id != caller.lab_id:
                 raise fail(
-                    "E974",
+                    Code.SUPERSEDE_CONFLICT,
                     "a lab can supersede only its own submissions",
                     file="bundle.json",
                     pointer="/supersedes",
@@ -337,7 +349,7 @@ class Registry(RegistryQueries):
                 )
             if state != "current":
                 raise fail(
-                    "E974",
+                    Code.SUPERSEDE_CONFLICT,
                     f"submission {old_id} is {state}",
                     file="bundle.json",
                     pointer="/supersedes",
@@ -435,17 +447,17 @@ class Registry(RegistryQueries):
             self._drop_unreferenced(rel)
             if checked.bundle.supersedes:
                 raise fail(
-                    "E974",
+                    Code.SUPERSEDE_CONFLICT,
                     f"submission {checked.bundle.supersedes} was superseded meanwhile",
                     file="bundle.json",
                     pointer="/supersedes",
                     expected="current",
                     found="superseded",
                 ) from None
-            raise fail("E978", f"the record could not be stored: {exc.orig}") from None
+            raise fail(Code.REGISTRY_UNAVAILABLE, f"the record could not be stored: {exc.orig}") from None
         except OperationalError as exc:
             self._drop_unreferenced(rel)
-            raise fail("E978", f"the database is unavailable: {exc.orig}") from None
+            raise fail(Code.REGISTRY_UNAVAILABLE, f"the database is unavailable: {exc.orig}") from None
         except BaseException:
             self._drop_unreferenced(rel)
             raise
@@ -460,16 +472,21 @@ class Registry(RegistryQueries):
         """Mark a submission withdrawn with ``reason``; the record stays (spec §17.5)."""
         if not reason.strip():
             raise fail(
-                "E975", "a withdrawal needs a reason", file="body", pointer="/reason", expected="a non-empty reason", found=reason
+                Code.REQUEST_INVALID,
+                "a withdrawal needs a reason",
+                file="body",
+                pointer="/reason",
+                expected="a non-empty reason",
+                found=reason,
             )
         try:
             with DBSession(self.writer) as s, s.begin():
                 row = s.get(db.Submission, sid)
                 if row is None:
-                    raise fail("E973", f"no submission {sid!r}", expected="an existing submission id", found=sid)
+                    raise fail(Code.NOT_FOUND, f"no submission {sid!r}", expected="an existing submission id", found=sid)
                 if caller.scope != "admin" and row.lab_id != caller.lab_id:
                     raise fail(
-                        "E971",
+                        Code.TOKEN_SCOPE,
                         "a submit token can withdraw only its own lab's submissions",
                         file="Authorization",
                         expected=row.lab_id,
@@ -477,10 +494,17 @@ class Registry(RegistryQueries):
                     )
                 state = self._state(s, row)
                 if state == "withdrawn":
-                    raise fail("E974", f"submission {sid} is already withdrawn", expected="current or superseded", found=state)
+                    raise fail(
+                        Code.SUPERSEDE_CONFLICT,
+                        f"submission {sid} is already withdrawn",
+                        expected="current or superseded",
+                        found=state,
+                    )
                 s.add(db.Withdrawal(submission_id=sid, reason=reason.strip(), token_id=caller.token_id))
         except IntegrityError:
-            raise fail("E974", f"submission {sid} is already withdrawn", expected="not withdrawn", found="withdrawn") from None
+            raise fail(
+                Code.SUPERSEDE_CONFLICT, f"submission {sid} is already withdrawn", expected="not withdrawn", found="withdrawn"
+            ) from None
         return self.submission(sid)
 
     # --- reading -------------------------------------------------------------------------------

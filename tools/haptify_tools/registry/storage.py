@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.storage import resolve_inside
 
@@ -43,7 +44,7 @@ class LocalFolderStore:
         path = resolve_inside(Path(self.location), key, label=key)
         if not path.is_file():
             raise fail(
-                "E978",
+                Code.REGISTRY_UNAVAILABLE,
                 f"the archive {key!r} is not in the bundle store {self.location!r}",
                 file=key,
                 expected="the archive of an accepted submission",
@@ -59,5 +60,7 @@ def open_store(location: str) -> BundleStore:
         location = location[len("file://") :]
     scheme = location.split("://", 1)[0] if "://" in location else None
     if scheme is not None:
-        raise fail("E903", f"no bundle store for {scheme}:// locations", expected="a folder path or file:// URL", found=location)
+        raise fail(
+            Code.USAGE, f"no bundle store for {scheme}:// locations", expected="a folder path or file:// URL", found=location
+        )
     return LocalFolderStore(str(Path(location).resolve()))

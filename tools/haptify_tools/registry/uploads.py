@@ -33,6 +33,7 @@ from typing import AsyncIterator
 from starlette.concurrency import run_in_threadpool
 from starlette.requests import ClientDisconnect
 
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.storage import atomic_write_text
 from haptify_tools.registry.bundle import DIR_MODE, FILE_MODE
@@ -125,11 +126,15 @@ class Uploads:
         """Start an upload of ``length`` bytes (the ``Upload-Length`` header)."""
         if length is None or not length.isdigit() or int(length) == 0:
             raise fail(
-                "E975", "an upload needs its total size", file="Upload-Length", expected="a positive byte count", found=length
+                Code.REQUEST_INVALID,
+                "an upload needs its total size",
+                file="Upload-Length",
+                expected="a positive byte count",
+                found=length,
             )
         if int(length) > self.max_bytes:
             raise fail(
-                "E960",
+                Code.BUNDLE_TOO_LARGE,
                 "the bundle archive is larger than the registry accepts",
                 file="Upload-Length",
                 expected=f"≤ {self.max_bytes} bytes",
@@ -150,9 +155,11 @@ class Uploads:
             self._expire()
             upload = self._open.get(uid) if UPLOAD_ID.match(uid) else None
         if upload is None:
-            raise fail("E973", f"no upload {uid[:40]!r} in progress", expected="an id from POST /api/v1/uploads", found=uid[:40])
+            raise fail(
+                Code.NOT_FOUND, f"no upload {uid[:40]!r} in progress", expected="an id from POST /api/v1/uploads", found=uid[:40]
+            )
         if token_id is not None and upload.token_id != token_id:
-            raise fail("E971", "an upload is continued by the token that opened it", file="Authorization")
+            raise fail(Code.TOKEN_SCOPE, "an upload is continued by the token that opened it", file="Authorization")
         return upload
 
     async def append(self, uid: str, token_id: int, offset: str | None, chunks: AsyncIterator[bytes]) -> Upload:
@@ -162,7 +169,7 @@ class Uploads:
         with self._lock:
             if upload.busy:
                 raise fail(
-                    "E975",
+                    Code.REQUEST_INVALID,
                     "a chunk of this upload is being received",
                     file="Upload-Offset",
                     expected="one chunk at a time",
@@ -170,7 +177,7 @@ class Uploads:
                 )
             if offset is None or not offset.isdigit() or int(offset) != upload.offset:
                 raise fail(
-                    "E975",
+                    Code.REQUEST_INVALID,
                     f"the chunk does not start where the upload stands ({upload.offset} bytes received)",
                     file="Upload-Offset",
                     expected=upload.offset,
@@ -185,7 +192,7 @@ class Uploads:
                     async for chunk in chunks:
                         if received + len(chunk) > upload.length:
                             raise fail(
-                                "E960",
+                                Code.BUNDLE_TOO_LARGE,
                                 "the chunk goes past the declared length of the upload",
                                 file="<upload>",
                                 expected=f"≤ {upload.length} bytes",
@@ -210,7 +217,7 @@ class Uploads:
         with self._lock:
             if upload.busy or upload.offset != upload.length:
                 raise fail(
-                    "E975",
+                    Code.REQUEST_INVALID,
                     "the upload is not complete",
                     file="<upload>",
                     expected=f"{upload.length} bytes",

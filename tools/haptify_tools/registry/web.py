@@ -34,6 +34,7 @@ from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Resp
 from fastapi.staticfiles import StaticFiles
 from fastapi.templating import Jinja2Templates
 
+from haptify.codes import Code
 from haptify.compare import _fmt, build_table, to_html
 from haptify.errors import HaptifyError, fail
 from haptify.versions import SPEC_VERSION
@@ -56,7 +57,7 @@ def num(value) -> str:
 
 templates.env.filters["num"] = num
 
-STATUS_OF_CODE = {"E973": 404, "E975": 400}
+STATUS_OF_CODE: dict[str, int] = {Code.NOT_FOUND: 404, Code.REQUEST_INVALID: 400}
 REPORT_FILE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,200}$")  # a file of a report folder (no '/', no '..')
 _derive_lock = threading.Lock()  # one report or recording built at a time (matplotlib's pyplot is not thread-safe)
 
@@ -142,7 +143,7 @@ def page_leaderboard(metric_id: str, request: Request, verification: str = "veri
         return _error_page(
             request,
             fail(
-                "E973",
+                Code.NOT_FOUND,
                 f"there is no metric {metric_id!r}",
                 pointer="/metric",
                 expected="a metric id such as vibration.rms",
@@ -214,7 +215,7 @@ def page_compare(
         return _error_page(
             request,
             fail(
-                "E975",
+                Code.REQUEST_INVALID,
                 f"at most {MAX_COMPARED} devices can be compared at once",
                 pointer="/device",
                 expected=f"≤ {MAX_COMPARED}",
@@ -252,7 +253,7 @@ def _raw_submission(reg, sid: str) -> dict:
     sub = reg.submission(sid)
     if not sub["has_raw"]:
         raise fail(
-            "E973",
+            Code.NOT_FOUND,
             f"submission {sid} has no raw streams, so there is no report or recording of it",
             expected="a submission made with --include-raw",
             found="results only",
@@ -327,12 +328,16 @@ def page_report(sid: str, name: str, request: Request) -> Response:
     try:
         if not REPORT_FILE.match(name):
             raise fail(
-                "E973", f"{name!r} is not a file of a report", pointer="/name", expected="index.html or a figure", found=name
+                Code.NOT_FOUND,
+                f"{name!r} is not a file of a report",
+                pointer="/name",
+                expected="index.html or a figure",
+                found=name,
             )
         path = ensure_report(reg, sid) / name
         if not path.is_file():
             raise fail(
-                "E973",
+                Code.NOT_FOUND,
                 f"the report of {sid} has no file {name!r}",
                 pointer="/name",
                 expected="index.html or a figure",

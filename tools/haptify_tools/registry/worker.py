@@ -22,6 +22,7 @@ import threading
 import traceback
 from typing import Any, Callable
 
+from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError, fail
 from haptify_tools.registry.bundle import Limits
 
@@ -62,7 +63,7 @@ def _child(conn, fn: Callable, args: tuple, memory_bytes: int, seconds: float) -
 
 def _limit_finding(what: str, found: str) -> Finding:
     return Finding(
-        "E976",
+        Code.BUNDLE_WORKER_LIMIT,
         f"checking the bundle {what}; it is refused and the registry goes on serving",
         file="<upload>",
         expected="a bundle the registry can check within its worker limits",
@@ -100,7 +101,7 @@ def run_contained(fn: Callable, *args: Any, limits: Limits = Limits()) -> Any:
         return payload
     if kind == "refused":
         raise HaptifyError(*payload)
-    raise fail("E999", f"the bundle worker failed: {payload}")
+    raise fail(Code.INTERNAL_ERROR, f"the bundle worker failed: {payload}")
 
 
 def _died(exitcode: int | None, limits: Limits) -> HaptifyError:

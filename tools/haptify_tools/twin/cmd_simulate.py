@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from haptify.codes import Code
 from haptify.errors import fail
 
 from haptify_tools.twin.model import EFFECT_IDS, PRESETS, TwinFile, disable, load_twin, preset, set_param, write_twin
@@ -50,7 +51,7 @@ def twin_from_args(args: argparse.Namespace) -> TwinFile:
     for item in args.set_params:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
-            raise fail("E903", f"--set expects EFFECT.PARAM=VALUE, got {item!r}", expected="EFFECT.PARAM=VALUE", found=item)
+            raise fail(Code.USAGE, f"--set expects EFFECT.PARAM=VALUE, got {item!r}", expected="EFFECT.PARAM=VALUE", found=item)
         twin = set_param(twin, key.strip(), value)
     return twin
 
@@ -61,7 +62,7 @@ def _durations(items: list[str]) -> dict[str, float]:
         name, seconds = name_number(item)
         if name not in DEFAULT_DURATIONS or not seconds > 0:
             raise fail(
-                "E903",
+                Code.USAGE,
                 f"--duration expects NAME=SECONDS with a known protocol and a positive time, got {item!r}",
                 expected=sorted(DEFAULT_DURATIONS),
                 found=item,
@@ -130,10 +131,10 @@ def register_simulate(subparsers) -> None:
 def run_simulate(args: argparse.Namespace, ui) -> int:
     """Run ``haptify simulate``; exit 0 when the dossier was written."""
     if args.reps < 1:
-        raise fail("E903", "--reps must be at least 1", expected=">= 1", found=args.reps)
+        raise fail(Code.USAGE, "--reps must be at least 1", expected=">= 1", found=args.reps)
     if args.lab_variation < 0 or args.lab_variation == 1 or (args.lab_spread and not args.lab_variation):
         raise fail(
-            "E903",
+            Code.USAGE,
             "--lab-variation needs at least two labs (and --lab-spread needs --lab-variation)",
             expected="--lab-variation N, N ≥ 2",
             found=args.lab_variation,
@@ -212,7 +213,7 @@ def run_twin_export(args: argparse.Namespace, ui) -> int:
     """Run ``haptify twin export``: the twin with its edits, written atomically."""
     out = Path(args.out)
     if out.exists() and not args.overwrite:
-        raise fail("E901", f"{str(out)!r} already exists", file=str(out))
+        raise fail(Code.OUTPUT_EXISTS, f"{str(out)!r} already exists", file=str(out))
     twin = twin_from_args(args)
     write_twin(twin, out)
     off = [e for e in EFFECT_IDS if not twin.on(e)]

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from haptify.codes import Code
 from haptify.errors import fail
 
 from haptify_tools.twin import examiner as ex
@@ -87,7 +88,9 @@ def parse_protocols(text: str) -> tuple[str, ...]:
     names = tuple(n.strip() for n in text.split(",") if n.strip())
     bad = [n for n in names if n not in DEVICE_PROTOCOLS + RIG_TRIALS]
     if bad or not names:
-        raise fail("E903", f"unknown protocol(s) {bad or text!r}", expected=["all", *DEVICE_PROTOCOLS, *RIG_TRIALS], found=text)
+        raise fail(
+            Code.USAGE, f"unknown protocol(s) {bad or text!r}", expected=["all", *DEVICE_PROTOCOLS, *RIG_TRIALS], found=text
+        )
     return names
 
 

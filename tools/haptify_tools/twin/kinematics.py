@@ -15,6 +15,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from haptify import kinematics as ref
+from haptify.codes import Code
 from haptify.conventions import quat_to_matrix
 from haptify.errors import fail
 from haptify.session_format import Kinematics
@@ -30,7 +31,12 @@ def nominal_kinematics(twin: TwinFile) -> Kinematics:
     requires it) has none."""
     kin = twin.device.kinematics
     if kin is None:
-        raise fail("E802", "the twin's device has no kinematics", pointer="/device/kinematics", expected="a DH chain (TWIN.md)")
+        raise fail(
+            Code.TWIN_FILE_INVALID,
+            "the twin's device has no kinematics",
+            pointer="/device/kinematics",
+            expected="a DH chain (TWIN.md)",
+        )
     return kin
 
 
@@ -329,7 +335,7 @@ def hand_to_joints(
     if strict and not ok.all():
         i = int(np.argmin(ok))
         raise fail(
-            "E803",
+            Code.TWIN_POSE_UNREACHABLE,
             f"hand position {p_D[i].round(4).tolist()} m (device frame, sample {i}) is out of reach",
             expected="a point inside the joint limits",
             found=p_D[i].tolist(),

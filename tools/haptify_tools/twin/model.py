@@ -32,6 +32,7 @@ from typing import Annotated, Any, Final, Literal, Union
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from haptify.codes import Code
 from haptify.conventions import STANDARD_GRAVITY
 from haptify.errors import fail
 from haptify.session_format import Device, Pose, Vec3
@@ -431,7 +432,7 @@ def _attr(effect_id: str) -> str:
 
 def _effect(twin: TwinFile, effect_id: str) -> Effect:
     if effect_id not in EFFECT_IDS:
-        raise fail("E801", f"unknown effect id {effect_id!r}", expected=list(EFFECT_IDS), found=effect_id)
+        raise fail(Code.TWIN_UNKNOWN_EFFECT, f"unknown effect id {effect_id!r}", expected=list(EFFECT_IDS), found=effect_id)
     holder = twin.rig if effect_id in RIG_EFFECT_IDS else twin.effects
     name = {"sensor.bias": "sensor_bias", "handle.connector_mass": "connector_mass"}.get(effect_id, _attr(effect_id))
     return getattr(holder, name)
@@ -448,7 +449,7 @@ def _validation_error(err: ValidationError, file: str | None) -> Exception:
         pointer = "/" + "/".join(str(p) for p in e["loc"])
         findings.append(
             Finding(
-                "E802",
+                Code.TWIN_FILE_INVALID,
                 f"twin file: {e['msg']}",
                 file=file,
                 pointer=pointer,
@@ -472,16 +473,16 @@ def load_twin(path: str | Path) -> TwinFile:
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise fail("E802", f"cannot read twin file: {exc}", file=str(path)) from None
+        raise fail(Code.TWIN_FILE_INVALID, f"cannot read twin file: {exc}", file=str(path)) from None
     if not isinstance(data, dict):
-        raise fail("E802", "a twin file must hold a JSON object", file=str(path), found=type(data).__name__)
+        raise fail(Code.TWIN_FILE_INVALID, "a twin file must hold a JSON object", file=str(path), found=type(data).__name__)
     return twin_from_dict(data, file=str(path))
 
 
 def preset(name: str) -> TwinFile:
     """The preset twin ``touch`` or ``touch-x`` (files in ``presets/``)."""
     if name not in PRESETS:
-        raise fail("E801", f"unknown preset {name!r}", expected=list(PRESETS), found=name)
+        raise fail(Code.TWIN_UNKNOWN_EFFECT, f"unknown preset {name!r}", expected=list(PRESETS), found=name)
     return load_twin(PRESET_DIR / f"{name}.json")
 
 
@@ -544,7 +545,7 @@ def set_param(twin: TwinFile, path: str, value: Any) -> TwinFile:
         try:
             index = int(idx)
         except ValueError:
-            raise fail("E801", f"bad index in {path!r}", found=path) from None
+            raise fail(Code.TWIN_UNKNOWN_EFFECT, f"bad index in {path!r}", found=path) from None
     node = holder
     for k in keys[:-1]:
         if isinstance(node, list) and k.isdigit() and int(k) < len(node):
@@ -553,7 +554,7 @@ def set_param(twin: TwinFile, path: str, value: Any) -> TwinFile:
             node = node[k]
         else:
             raise fail(
-                "E801",
+                Code.TWIN_UNKNOWN_EFFECT,
                 f"no parameter {path!r} in the twin",
                 found=path,
                 expected="<effect id>.<parameter>, effect ids: " + ", ".join(EFFECT_IDS),
@@ -562,14 +563,14 @@ def set_param(twin: TwinFile, path: str, value: Any) -> TwinFile:
     if isinstance(node, list) and keys[-1].isdigit():
         last = int(keys[-1])
         if last >= len(node):
-            raise fail("E801", f"no parameter {path!r} in the twin", found=path)
+            raise fail(Code.TWIN_UNKNOWN_EFFECT, f"no parameter {path!r} in the twin", found=path)
     elif not isinstance(node, dict) or last not in node:
         expected = sorted(node) if isinstance(node, dict) else None
-        raise fail("E801", f"no parameter {path!r} in the twin", found=path, expected=expected)
+        raise fail(Code.TWIN_UNKNOWN_EFFECT, f"no parameter {path!r} in the twin", found=path, expected=expected)
     current = node[last]
     if index is not None:
         if not isinstance(current, list) or not 0 <= index < len(current):
-            raise fail("E801", f"{path!r}: index out of range", found=path)
+            raise fail(Code.TWIN_UNKNOWN_EFFECT, f"{path!r}: index out of range", found=path)
         current = copy.copy(current)
         current[index] = value
         value = current

@@ -40,6 +40,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from haptify import kinematics as ref
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.session_format import Kinematics, Rendering
 
@@ -84,26 +85,26 @@ def _check_path(t: np.ndarray, position_W: np.ndarray, quaternion_W: np.ndarray,
     q = np.atleast_2d(np.asarray(quaternion_W, dtype=float))
     if t.ndim != 1 or len(t) < 3:
         raise fail(
-            "E903",
+            Code.USAGE,
             "the time vector must be one-dimensional with at least 3 samples",
             expected="(N,), N >= 3",
             found=list(t.shape),
         )
     if p.shape != (len(t), 3) or q.shape != (len(t), 4):
         raise fail(
-            "E903",
+            Code.USAGE,
             "hand positions must be (N, 3) and quaternions (N, 4) for N time samples",
             expected=[[len(t), 3], [len(t), 4]],
             found=[list(p.shape), list(q.shape)],
         )
     if not (np.all(np.isfinite(t)) and np.all(np.isfinite(p)) and np.all(np.isfinite(q))):
-        raise fail("E903", "the hand path holds NaN or infinite values", expected="finite values", found="NaN/inf")
+        raise fail(Code.USAGE, "the hand path holds NaN or infinite values", expected="finite values", found="NaN/inf")
     dt = np.diff(t)
     if np.any(dt <= 0):
-        raise fail("E903", "time must increase strictly", expected="t[i+1] > t[i]", found=int(np.argmin(dt > 0)))
+        raise fail(Code.USAGE, "time must increase strictly", expected="t[i+1] > t[i]", found=int(np.argmin(dt > 0)))
     if uniform and np.max(np.abs(dt - dt[0])) > 1e-6 * dt[0]:
         raise fail(
-            "E903",
+            Code.USAGE,
             "the active loop needs uniformly sampled time",
             expected=f"steps of {dt[0]:g} s",
             found=[float(dt.min()), float(dt.max())],
@@ -425,14 +426,14 @@ def simulate_active(
             rendering = Rendering.model_validate(rendering)
         except ValidationError as err:
             raise fail(
-                "E903",
+                Code.USAGE,
                 f"invalid rendering: {err.errors()[0]['msg']}",
                 expected="a session-format Rendering",
                 found=str(err.errors()[0]["loc"]),
             ) from None
     if rendering.static_friction or rendering.dynamic_friction:
         raise fail(
-            "E903",
+            Code.USAGE,
             "the twin renders frictionless planes only (CHAI3D plane example with zero friction)",
             expected="static_friction = dynamic_friction = 0",
             found=[rendering.static_friction, rendering.dynamic_friction],

@@ -25,6 +25,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.storage import atomic_write_json
 
@@ -82,7 +83,7 @@ def parse_spreads(items: list[str]) -> dict[str, float]:
         name, sd = name_number(item)
         if name not in SPREADS or not sd >= 0 or math.isinf(sd):
             raise fail(
-                "E903",
+                Code.USAGE,
                 f"--lab-spread expects NAME=SD with a known property and SD ≥ 0, got {item!r}",
                 expected=sorted(SPREADS),
                 found=item,
@@ -152,10 +153,10 @@ def simulate_round_robin(
     ``overwrite``. ``advance(n)`` is called after each simulated trial.
     """
     if labs < 2:
-        raise fail("E903", "a round robin needs at least two labs", expected=">= 2", found=labs)
+        raise fail(Code.USAGE, "a round robin needs at least two labs", expected=">= 2", found=labs)
     out = Path(out_dir)
     if out.exists() and not overwrite:
-        raise fail("E901", f"{str(out)!r} already exists", file=str(out))
+        raise fail(Code.OUTPUT_EXISTS, f"{str(out)!r} already exists", file=str(out))
     records: list[dict[str, Any]] = []  # labs.json's entries
     with built_in_place(out) as build:
         for lab in draw_labs(twin, options.rig, labs, options.seed, spreads):

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.storage import SessionWriter, atomic_write_json
 
@@ -79,7 +80,7 @@ def simulate_dossier(
     opt = options or SimulationOptions()
     out = Path(out_dir)
     if out.exists() and not overwrite:
-        raise fail("E901", f"{str(out)!r} already exists", file=str(out))
+        raise fail(Code.OUTPUT_EXISTS, f"{str(out)!r} already exists", file=str(out))
     sim = DossierSimulator(twin, opt)
     writer = SessionWriter(manifest=sim.manifest(), compact=opt.compact)
     trials_truth, arrays, clock_records = [], {}, []

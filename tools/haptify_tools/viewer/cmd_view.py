@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.gate import CheckedSession, open_checked_session
 from haptify.results import load_results
@@ -125,7 +126,7 @@ class WebViewer:
                 code, tail = self.proc.returncode, self.log_tail()
                 self.stop()
                 raise fail(
-                    "E904",
+                    Code.VIEWER_UNAVAILABLE,
                     f"the rerun web viewer exited with code {code}: {tail}",
                     expected=f"a web viewer on {root}",
                     found=f"exit code {code}",
@@ -139,7 +140,7 @@ class WebViewer:
             time.sleep(0.1)
         self.stop()
         raise fail(
-            "E904",
+            Code.VIEWER_UNAVAILABLE,
             f"the rerun web viewer did not answer on {root} within {timeout_s:g} s",
             expected=f"HTTP 200 from {root}",
             found="no answer",
@@ -193,9 +194,9 @@ def open_session_or_dossier(path: str) -> CheckedSession:
 def run(args: argparse.Namespace, ui) -> int:
     """Build the recording, then save, serve or show it."""
     if args.port is not None and not args.web:
-        raise fail("E903", "--port is only meaningful with --web", expected="--web --port N", found=f"--port {args.port}")
+        raise fail(Code.USAGE, "--port is only meaningful with --web", expected="--web --port N", found=f"--port {args.port}")
     if args.port is not None and not 0 < args.port < 65536:
-        raise fail("E903", f"--port {args.port} is not a TCP port", expected="1..65535", found=args.port)
+        raise fail(Code.USAGE, f"--port {args.port} is not a TCP port", expected="1..65535", found=args.port)
     if not (args.save or args.web or display_available()):
         ui.warn(
             "No display here (neither DISPLAY nor WAYLAND_DISPLAY is set), so the native viewer cannot open.\n"
@@ -220,7 +221,7 @@ def run(args: argparse.Namespace, ui) -> int:
                 before_commit=lambda: [s.finish() for s in (session, other) if s is not None],
             )
         except OSError as exc:
-            raise fail("E902", f"cannot write {str(out)!r}: {exc.strerror or exc}", file=str(out)) from None
+            raise fail(Code.OUTPUT_NOT_WRITABLE, f"cannot write {str(out)!r}: {exc.strerror or exc}", file=str(out)) from None
         summary = {
             "ok": True,
             "rrd": str(out) if args.save else None,

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.session_format import Trial
 
@@ -165,7 +166,7 @@ class RrdWriter:
 
     def __init__(self, rec: rr.RecordingStream, chunk_rows: int = CHUNK_ROWS) -> None:
         if chunk_rows < 1:
-            raise fail("E903", f"chunk_rows must be at least 1, not {chunk_rows}", expected=">= 1", found=chunk_rows)
+            raise fail(Code.USAGE, f"chunk_rows must be at least 1, not {chunk_rows}", expected=">= 1", found=chunk_rows)
         self.rec = rec
         self.chunk_rows = chunk_rows
 

@@ -55,6 +55,7 @@ from typing import TYPE_CHECKING, Any
 
 import rerun as rr
 
+from haptify.codes import Code
 from haptify.errors import fail
 from haptify.session_format import Trial
 from haptify.storage import SessionFolder
@@ -162,7 +163,7 @@ def plan_recording(
     measured trial (their first samples coincide); the shift is listed in the session document.
     """
     if derived not in DERIVED_MODES:
-        raise fail("E903", f"unknown derived-signal mode {derived!r}", expected=list(DERIVED_MODES), found=derived)
+        raise fail(Code.USAGE, f"unknown derived-signal mode {derived!r}", expected=list(DERIVED_MODES), found=derived)
 
     def context(folder: SessionFolder) -> tuple[CachedStreams, ComputeContext | None]:
         cached = CachedStreams(folder)

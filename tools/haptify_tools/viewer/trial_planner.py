@@ -12,6 +12,7 @@ import numpy as np
 import pandas as pd
 import rerun as rr
 
+from haptify.codes import Code
 from haptify.conventions import quat_multiply, quat_rotate
 from haptify.errors import HaptifyError, fail
 from haptify.session_format import Kinematics, Stream, Trial
@@ -158,7 +159,10 @@ class TrialPlanner:
             self.add_solid("measured workspace mesh", f"{self.world}/workspace/measured", solid, ROLE_COLORS[self.role])
         kin = self.session.device().kinematics
         if kin is None:
-            self.note("modeled workspace mesh", fail("E311", "the device has no kinematics", pointer="/device/kinematics"))
+            self.note(
+                "modeled workspace mesh",
+                fail(Code.DEVICE_KINEMATICS_MISSING, "the device has no kinematics", pointer="/device/kinematics"),
+            )
             return
         place = self.session.manifest.device_placement
         try:
