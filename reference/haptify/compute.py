@@ -1,57 +1,22 @@
 """Computing every metric a session allows (spec §15.4).
 
-Each family's module (:mod:`haptify.families`) receives a :class:`ComputeContext`. Work shared between
+Each family's module (:mod:`haptify.families`) receives a :class:`~haptify.context.ComputeContext`. Work shared between
 families (calibrated handle signals, plate wrenches) is cached on the context, so it is done once per trial.
 """
 
 from __future__ import annotations
 
 import importlib
-from dataclasses import dataclass, field
-from typing import Any, Callable, Hashable, Iterable, TypeVar
+from typing import Callable, Iterable
 
 from haptify.codes import Code
+from haptify.context import ComputeContext as ComputeContext
 from haptify.errors import Finding, HaptifyError
 from haptify.families import family_modules
 from haptify.metric_definitions import all_families
-from haptify.results import DeviceSummary, Implementation, MetricResult, ResultsFile, ResultWarning
+from haptify.results import DeviceSummary, Implementation, MetricResult, ResultsFile
 from haptify.storage import MANIFEST, SessionFolder, sha256_file
 from haptify.versions import PACKAGE_VERSION
-
-
-T = TypeVar("T")
-
-
-@dataclass
-class ComputeContext:
-    """What a family's ``compute`` receives: the session, a per-run cache and a warning sink.
-    Spec §15.4; ``parameters`` as §16.8.2."""
-
-    session: SessionFolder
-    wanted: set[str] | None = None  # metric ids asked for (None: all)
-    parameters: dict[str, Any] = field(default_factory=dict)  # case parameters (spec §16.2), e.g. {"model": file}
-    warnings: list[ResultWarning] = field(default_factory=list)
-    _cache: dict[Hashable, Any] = field(default_factory=dict)
-
-    def cached(self, key: Hashable, build: Callable[[], T]) -> T:
-        """Memoise ``build()`` under ``key`` for this run (e.g. ``("handle_signals", trial_id)``)."""
-        if key not in self._cache:
-            self._cache[key] = build()
-        memo: T = self._cache[key]
-        return memo
-
-    def forget_trial(self, trial_id: str) -> None:
-        """Drop what was memoised for one trial (the keys that name it, e.g. ``("handle_signals", id, rate)``),
-        keeping session-wide entries such as the calibration; for work that visits each trial once."""
-        for key in [k for k in self._cache if isinstance(k, tuple) and trial_id in k[1:]]:
-            del self._cache[key]
-
-    def wants(self, metric_id: str) -> bool:
-        return self.wanted is None or metric_id in self.wanted
-
-    def warn(self, code: Code, message: str, metric: str | None = None, trial: str | None = None) -> None:
-        Finding(code, message)  # checks the code is catalogued
-        self.warnings.append(ResultWarning(code=code, message=message, metric=metric, trial=trial))
 
 
 def compute_session(

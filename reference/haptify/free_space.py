@@ -23,6 +23,7 @@ from haptify.preprocessing import MocapTrack, lowpass_resample, mocap_track, seg
 from haptify.signals import handle_signals
 
 if TYPE_CHECKING:
+    from haptify.context import ComputeContext
     from haptify.report import ReportFigure
     from haptify.results import MetricResult, Unavailable
 
@@ -100,7 +101,7 @@ def force_field(
 # --- session level (spec §9.6) -------------------------------------------------------------------
 
 
-def hand_force_samples(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
+def hand_force_samples(ctx: ComputeContext, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
     """Calibrated hand force (N) and gimbal position (m), W, at a trial's usable samples (chapter 7)."""
     hs = handle_signals(ctx, trial_id)
     if hs.force is None:
@@ -122,7 +123,7 @@ def hand_force_samples(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]
     return hs.force[ok], hs.position[ok]
 
 
-def plate_force_samples(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
+def plate_force_samples(ctx: ComputeContext, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
     """Times (s) and bias-removed total plate force (N, W), low-passed at the handle-force cut-off and
     resampled onto the uniform grid of the plate stream's span at the common rate (spec §9.3; chapter 7)."""
 
@@ -141,7 +142,7 @@ def speed_samples(track: MocapTrack) -> tuple[np.ndarray, np.ndarray]:
     return ok, ok & segment_interior(track, float(fp("angular_speed_settle_s")))
 
 
-def speeds(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
+def speeds(ctx: ComputeContext, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
     """Speed (m/s) at the usable motion-capture samples of a trial and angular speed (rad/s) at those of them
     settled past the segment's edges (may be empty); spec §9.4."""
     track = mocap_track(ctx, trial_id)
@@ -166,7 +167,7 @@ class SpeedSummary(TypedDict):
     over_angular: float
 
 
-def _speed_summary(ctx: Any, trial_id: str) -> SpeedSummary:
+def _speed_summary(ctx: ComputeContext, trial_id: str) -> SpeedSummary:
     v, w = speeds(ctx, trial_id)
     out: SpeedSummary = {
         "speed": float(v.mean()),
@@ -209,7 +210,7 @@ def _angular_of(summary: SpeedSummary, trial_id: str) -> float:
     return summary["angular"]
 
 
-def compute(ctx: Any) -> list[MetricResult | Unavailable]:
+def compute(ctx: ComputeContext) -> list[MetricResult | Unavailable]:
     """Every free-space metric the session allows (spec §9.6)."""
     trials = [t.id for t in ctx.session.trials_of(PROTOCOL)]
     ids = FORCE_IDS + (PLATE_ID,) + SPEED_IDS
@@ -288,7 +289,7 @@ def compute(ctx: Any) -> list[MetricResult | Unavailable]:
 # --- report figures (spec §15.6; paper Fig. 6) ----------------------------------------------------
 
 
-def report_figures(ctx: Any, results: Any) -> list[ReportFigure]:
+def report_figures(ctx: ComputeContext, results: Any) -> list[ReportFigure]:
     """Speeds and forces over time for the first usable free-space trial, and the force field (top view).
     Spec §9.2–9.5, §15.6."""
     import matplotlib.pyplot as plt

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
@@ -20,6 +20,9 @@ from haptify.codes import Code
 from haptify.errors import HaptifyError, fail
 from haptify.metric_definitions import MetricDefinition, family
 from haptify.results import MetricResult, Unavailable
+
+if TYPE_CHECKING:
+    from haptify.context import ComputeContext
 
 
 @dataclass
@@ -119,7 +122,7 @@ def no_trials(protocol: str) -> HaptifyError:
 
 
 def per_trial(
-    ctx: Any, trial_ids: Sequence[str], compute_one: Callable[[str], Any], what: str
+    ctx: ComputeContext, trial_ids: Sequence[str], compute_one: Callable[[str], Any], what: str
 ) -> tuple[dict[str, Any], HaptifyError | None]:
     """Run ``compute_one`` on every trial; return the results of those that worked and the first coded error.
 
@@ -145,7 +148,7 @@ def per_trial(
 
 
 def protocol_trials(
-    ctx: Any, protocol: str, metric_ids: Sequence[str], compute_one: Callable[[str], Any], what: str
+    ctx: ComputeContext, protocol: str, metric_ids: Sequence[str], compute_one: Callable[[str], Any], what: str
 ) -> tuple[dict[str, Any], list[Unavailable]]:
     """:func:`per_trial` over every trial of ``protocol`` (spec §15.2).
 

@@ -8,7 +8,7 @@ description into PASS / FAIL / WARN / SKIP lines for ``haptify rig-check``.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -20,6 +20,9 @@ from haptify.errors import HaptifyError, fail
 from haptify.metric_definitions import family, param
 from haptify.repetitions import TrialValue, aggregate, definition_of, protocol_trials, unavailable
 from haptify.results import MetricResult, Unavailable
+
+if TYPE_CHECKING:
+    from haptify.context import ComputeContext
 
 FAMILY = "rig"
 
@@ -177,19 +180,19 @@ def _vector_result(metric_id: str, per_trial_values: dict[str, np.ndarray], diag
     )
 
 
-def _trial_results(ctx: Any, metric_id: str, compute_one: Callable[[str], Any]) -> dict[str, Any] | Unavailable:
+def _trial_results(ctx: ComputeContext, metric_id: str, compute_one: Callable[[str], Any]) -> dict[str, Any] | Unavailable:
     """``compute_one`` on every trial of the metric's protocol (its definition's first); Unavailable
     (E310) without such trials, or with the first trial's error when none worked (each failure is W413)."""
     got, missing = protocol_trials(ctx, definition_of(FAMILY, metric_id).protocols[0], (metric_id,), compute_one, metric_id)
     return missing[0] if missing else got
 
 
-def _natural_frequency(ctx: Any, mid: str, got: dict[str, np.ndarray]) -> MetricResult:
+def _natural_frequency(ctx: ComputeContext, mid: str, got: dict[str, np.ndarray]) -> MetricResult:
     """``rig.plate_natural_frequency`` (spec §14.4): per axis, mean over repetitions."""
     return _vector_result(mid, got, {"axes": ["x", "y", "z"]})
 
 
-def _cop_error(ctx: Any, mid: str, got: dict[str, list[force_plate.Placement]]) -> MetricResult:
+def _cop_error(ctx: ComputeContext, mid: str, got: dict[str, list[force_plate.Placement]]) -> MetricResult:
     """``rig.cop_error`` (spec §14.5): mean over all placements, sd over placements."""
     errors = np.array([p.error for ps in got.values() for p in ps])
     per_rep = [float(np.mean([p.error for p in ps])) for ps in got.values()]
@@ -213,7 +216,7 @@ def _cop_error(ctx: Any, mid: str, got: dict[str, list[force_plate.Placement]]) 
     )
 
 
-def _calibration_rms(ctx: Any, mid: str, got: dict[str, calibration.HandleCalibration]) -> MetricResult:
+def _calibration_rms(ctx: ComputeContext, mid: str, got: dict[str, calibration.HandleCalibration]) -> MetricResult:
     """``rig.handle_calibration_rms`` (spec §6.2–6.3, §14.7): force, acceleration, torque fit RMS."""
     rms = {tid: np.array([c.rms_force_N, c.rms_accel_m_per_s2, c.rms_torque_Nm]) for tid, c in got.items()}
     diag = {
@@ -223,7 +226,7 @@ def _calibration_rms(ctx: Any, mid: str, got: dict[str, calibration.HandleCalibr
     return _vector_result(mid, rms, diag)
 
 
-def _force_offset_u(ctx: Any, mid: str, got: dict[str, calibration.HandleCalibration]) -> MetricResult:
+def _force_offset_u(ctx: ComputeContext, mid: str, got: dict[str, calibration.HandleCalibration]) -> MetricResult:
     """``rig.handle_force_offset_u`` (spec §6.2, §14.7): the force sphere's offset uncertainty, mean over repetitions."""
     vals = []
     for tid, c in got.items():
@@ -232,7 +235,7 @@ def _force_offset_u(ctx: Any, mid: str, got: dict[str, calibration.HandleCalibra
     return aggregate(FAMILY, mid, vals)
 
 
-def _sync_offset(ctx: Any, mid: str, got: dict[str, dict[str, float]]) -> MetricResult:
+def _sync_offset(ctx: ComputeContext, mid: str, got: dict[str, dict[str, float]]) -> MetricResult:
     """``rig.sync_offset`` (spec §14.6): largest |delay| over recorder pairs, mean over repetitions."""
     vals = [TrialValue(tid, max(abs(v) for v in d.values())) for tid, d in got.items()]
     return aggregate(FAMILY, mid, vals, diagnostics={"delays_s": got})
@@ -248,14 +251,14 @@ METRIC_STEPS: dict[str, tuple[Callable[[Any, str], Any], Callable[[Any, str, dic
 }
 
 
-def metric(ctx: Any, metric_id: str) -> MetricResult | Unavailable:
+def metric(ctx: ComputeContext, metric_id: str) -> MetricResult | Unavailable:
     """One rig metric for the session behind ``ctx`` (spec §14.4–14.7)."""
     per_trial_step, summarise = METRIC_STEPS[metric_id]
     got = _trial_results(ctx, metric_id, lambda tid: per_trial_step(ctx, tid))
     return got if isinstance(got, Unavailable) else summarise(ctx, metric_id, got)
 
 
-def compute(ctx: Any) -> list[MetricResult | Unavailable]:
+def compute(ctx: ComputeContext) -> list[MetricResult | Unavailable]:
     """Every rig metric the session allows (spec §14; called by ``haptify compute``)."""
     return [_safe_metric(ctx, mid) for mid in METRIC_STEPS if ctx.wants(mid)]
 
@@ -323,7 +326,7 @@ def _status(ok: bool) -> str:
     return "PASS" if ok else "FAIL"
 
 
-def _range_checks(session: Any, ctx: Any) -> list[Check]:
+def _range_checks(session: Any, ctx: ComputeContext) -> list[Check]:
     rig = session.manifest.rig
     out: list[Check] = []
     cap = plate_capacity(rig)
@@ -402,7 +405,7 @@ def _range_checks(session: Any, ctx: Any) -> list[Check]:
     return out
 
 
-def _safe_metric(ctx: Any, mid: str) -> MetricResult | Unavailable:
+def _safe_metric(ctx: ComputeContext, mid: str) -> MetricResult | Unavailable:
     """:func:`metric`, or its Unavailable record when a problem shared by every trial stops it (spec §15.2)."""
     try:
         return metric(ctx, mid)
@@ -414,7 +417,7 @@ def _orientation_errors(res: MetricResult) -> list[float]:
     return [f["orientation_error_deg"] for f in res.diagnostics["fits"].values() if f.get("orientation_error_deg") is not None]
 
 
-def check_rig(ctx: Any) -> list[Check]:
+def check_rig(ctx: ComputeContext) -> list[Check]:
     """Every rig-check line for the session of ``ctx`` (a ComputeContext; spec §14.8): Table I ranges, plate
     natural frequency, COP error, calibration residuals and sensor pose, recorder synchronisation."""
     results = {mid: _safe_metric(ctx, mid) for mid in METRIC_STEPS}

@@ -25,6 +25,7 @@ from haptify.repetitions import TrialValue, aggregate, protocol_trials
 from haptify.surface import contact_signals
 
 if TYPE_CHECKING:
+    from haptify.context import ComputeContext
     from haptify.report import ReportFigure
     from haptify.results import MetricResult, Unavailable
 
@@ -244,7 +245,7 @@ def fit_stiffness(
     return StiffnessFit(k, c, r2, presses, thin, x, y)
 
 
-def trial_fit(ctx: Any, trial_id: str) -> StiffnessFit:
+def trial_fit(ctx: ComputeContext, trial_id: str) -> StiffnessFit:
     """:func:`fit_stiffness` on a stiffness trial's contact signals (spec §13.5); cached on a ComputeContext."""
 
     def build() -> StiffnessFit:
@@ -254,7 +255,7 @@ def trial_fit(ctx: Any, trial_id: str) -> StiffnessFit:
     return cached(ctx, ("stiffness_fit", trial_id), build)
 
 
-def maximum_windows(ctx: Any, trial_id: str) -> list[tuple[np.ndarray, np.ndarray]]:
+def maximum_windows(ctx: ComputeContext, trial_id: str) -> list[tuple[np.ndarray, np.ndarray]]:
     """The grid times (s) and normal forces (N) of the samples ``s … m`` each qualifying press of a trial takes
     its peak from (spec §13.2 step 3): where the noise's maximum biases ``stiffness.peak_force`` (§19.3)."""
     cs = contact_signals(ctx, trial_id)
@@ -263,7 +264,7 @@ def maximum_windows(ctx: Any, trial_id: str) -> list[tuple[np.ndarray, np.ndarra
     ]
 
 
-def trial_codes(ctx: Any, trial_id: str, fit: StiffnessFit) -> list[str]:
+def trial_codes(ctx: ComputeContext, trial_id: str, fit: StiffnessFit) -> list[str]:
     """W414 (too few qualifying presses) and W415 (presses with too few fit samples) for one trial, each
     also recorded on ``ctx`` (spec §13.2–13.3)."""
     codes: list[str] = []
@@ -288,7 +289,7 @@ def trial_codes(ctx: Any, trial_id: str, fit: StiffnessFit) -> list[str]:
     return codes
 
 
-def compute(ctx: Any) -> list[MetricResult | Unavailable]:
+def compute(ctx: ComputeContext) -> list[MetricResult | Unavailable]:
     """stiffness.measured, stiffness.accuracy and stiffness.peak_force (spec §13.5)."""
     if not any(ctx.wants(m) for m in IDS):
         return []
@@ -329,7 +330,7 @@ def compute(ctx: Any) -> list[MetricResult | Unavailable]:
 # --- report figures (spec §15.6; paper Fig. 11) ---------------------------------------------------
 
 
-def report_figures(ctx: Any, results: Any) -> list[ReportFigure]:
+def report_figures(ctx: ComputeContext, results: Any) -> list[ReportFigure]:
     """Normal force against penetration for every stiffness trial, fit samples marked, fitted and commanded
     lines (paper Fig. 11)."""
     import matplotlib.pyplot as plt

@@ -22,6 +22,7 @@ from haptify.preprocessing import interp_columns
 from haptify.signals import handle_signals
 
 if TYPE_CHECKING:
+    from haptify.context import ComputeContext
     from haptify.report import ReportFigure
     from haptify.results import MetricResult, Unavailable
 
@@ -171,7 +172,7 @@ def planar_stats(force: np.ndarray, normal: np.ndarray) -> dict[str, float]:
     return {"mean": float(mag.mean()), "sd": float(mag.std(ddof=1))}
 
 
-def _trial(ctx: Any, trial_id: str) -> dict[str, Any]:
+def _trial(ctx: ComputeContext, trial_id: str) -> dict[str, Any]:
     cs = contact_signals(ctx, trial_id)
     if cs.used.sum() < 2:
         raise fail(
@@ -187,7 +188,7 @@ def _trial(ctx: Any, trial_id: str) -> dict[str, Any]:
     return stats
 
 
-def compute(ctx: Any) -> list[MetricResult | Unavailable]:
+def compute(ctx: ComputeContext) -> list[MetricResult | Unavailable]:
     """surface.planar_force_mean and surface.planar_force_sd (spec §12.4)."""
     if not any(ctx.wants(m) for m in IDS):
         return []
@@ -207,7 +208,7 @@ def compute(ctx: Any) -> list[MetricResult | Unavailable]:
 # --- report figures (spec §15.6; paper Fig. 10) ---------------------------------------------------
 
 
-def report_figures(ctx: Any, results: Any) -> list[ReportFigure]:
+def report_figures(ctx: ComputeContext, results: Any) -> list[ReportFigure]:
     """Planar force magnitude over the contact positions of each surface trial, top view (paper Fig. 10)."""
     import matplotlib.pyplot as plt
 

@@ -21,6 +21,7 @@ from haptify.repetitions import TrialValue, aggregate, protocol_trials
 from haptify.preprocessing import nominal_rate
 
 if TYPE_CHECKING:
+    from haptify.context import ComputeContext
     from haptify.report import ReportAudio, ReportFigure
     from haptify.results import MetricResult, Unavailable
 
@@ -155,7 +156,7 @@ def trial_vibration(ctx_or_session: Any, trial_id: str) -> CombinedVibration:
     return cached(ctx_or_session, ("vibration", trial_id), build)
 
 
-def compute(ctx: Any) -> list[MetricResult | Unavailable]:
+def compute(ctx: ComputeContext) -> list[MetricResult | Unavailable]:
     """vibration.rms / spectral_centroid from free-space trials, and the baseline pair from
     rig.baseline_vibration trials (spec §10.6)."""
     out: list[MetricResult | Unavailable] = []
@@ -176,7 +177,7 @@ def compute(ctx: Any) -> list[MetricResult | Unavailable]:
     return out
 
 
-def _summary(ctx: Any, trial_id: str) -> dict[str, Any]:
+def _summary(ctx: ComputeContext, trial_id: str) -> dict[str, Any]:
     v = trial_vibration(ctx, trial_id)
     return {
         "rms": v.rms,
@@ -190,7 +191,7 @@ def _summary(ctx: Any, trial_id: str) -> dict[str, Any]:
 # --- report figures and audio (spec §15.6; paper Fig. 7) ------------------------------------------
 
 
-def _report_trials(ctx: Any) -> list[CombinedVibration]:
+def _report_trials(ctx: ComputeContext) -> list[CombinedVibration]:
     out = []
     for protocol in GROUPS:
         for trial in ctx.session.trials_of(protocol):
@@ -201,7 +202,7 @@ def _report_trials(ctx: Any) -> list[CombinedVibration]:
     return out
 
 
-def report_figures(ctx: Any, results: Any) -> list[ReportFigure]:
+def report_figures(ctx: ComputeContext, results: Any) -> list[ReportFigure]:
     """The combined vibration signal with ±RMS, and its power spectrum with the centroid (paper Fig. 7)."""
     import matplotlib.pyplot as plt
 
@@ -232,7 +233,7 @@ def report_figures(ctx: Any, results: Any) -> list[ReportFigure]:
     return figures
 
 
-def report_audio(ctx: Any) -> list[ReportAudio]:
+def report_audio(ctx: ComputeContext) -> list[ReportAudio]:
     """Each trial's combined vibration signal, for the report's WAV files (paper §VI-C)."""
     from haptify.report import ReportAudio
 

@@ -27,6 +27,7 @@ from haptify.repetitions import TrialValue, aggregate, no_trials, per_trial, sin
 from haptify.session_format import Kinematics
 
 if TYPE_CHECKING:
+    from haptify.context import ComputeContext
     from haptify.report import ReportFigure
     from haptify.results import MetricResult, Unavailable
 
@@ -226,7 +227,7 @@ def repaired_points(
     return np.concatenate([own, candidates]), len(candidates)
 
 
-def _modeled(ctx: Any, device: Any, placement: Any) -> tuple[VoxelSolid | None, HaptifyError | None]:
+def _modeled(ctx: ComputeContext, device: Any, placement: Any) -> tuple[VoxelSolid | None, HaptifyError | None]:
     """The device's modeled workspace solid (spec §8.3), or the coded error that leaves it unavailable: E311
     without kinematics or when they reach no volume; None and None when no metric that needs it is wanted."""
     model: VoxelSolid | None = None
@@ -258,7 +259,7 @@ def _modeled(ctx: Any, device: Any, placement: Any) -> tuple[VoxelSolid | None, 
     return model, model_error
 
 
-def trial_track(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
+def trial_track(ctx: ComputeContext, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
     """Times (s) and gimbal-centre positions (m, W; NaN where occluded) of a workspace trial, cached."""
     track: tuple[np.ndarray, np.ndarray] = ctx.cached(
         ("workspace_track", trial_id),
@@ -267,7 +268,7 @@ def trial_track(ctx: Any, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
     return track
 
 
-def trial_cloud(ctx: Any, trials: list[str], trial_id: str) -> tuple[np.ndarray, int]:
+def trial_cloud(ctx: ComputeContext, trials: list[str], trial_id: str) -> tuple[np.ndarray, int]:
     """A trial's cloud (m, W) repaired from the other trials ``trials`` and how many donors it took (spec §8.7),
     cached. The trial itself must hold ``min_points`` finite positions (E313); a donor trial that cannot be
     read gives nothing."""
@@ -297,7 +298,7 @@ def trial_cloud(ctx: Any, trials: list[str], trial_id: str) -> tuple[np.ndarray,
     return cloud
 
 
-def trial_solid(ctx: Any, trials: list[str], trial_id: str) -> VoxelSolid:
+def trial_solid(ctx: ComputeContext, trials: list[str], trial_id: str) -> VoxelSolid:
     """The volume operator on a trial's repaired cloud (:func:`trial_cloud`, spec §8.7)."""
     cloud, taken = trial_cloud(ctx, trials, trial_id)
     return replace(volume_solid(cloud), repair_points=taken)
@@ -312,7 +313,7 @@ def trial_values(solid: VoxelSolid, model: VoxelSolid | None) -> dict[str, float
     return values
 
 
-def noisy_trial_values(ctx: Any, trial_id: str, noise_sd: np.ndarray, rng: np.random.Generator) -> dict[str, float]:
+def noisy_trial_values(ctx: ComputeContext, trial_id: str, noise_sd: np.ndarray, rng: np.random.Generator) -> dict[str, float]:
     """:func:`trial_values` of a trial's repaired cloud with white Gaussian noise of sd ``noise_sd`` (m, per
     axis of W) added to every point: one draw of the motion-capture noise's SIMEX bias (spec §19.3)."""
     trials = [t.id for t in ctx.session.trials_of(PROTOCOL)]
@@ -321,7 +322,7 @@ def noisy_trial_values(ctx: Any, trial_id: str, noise_sd: np.ndarray, rng: np.ra
     return trial_values(volume_solid(cloud + rng.standard_normal(cloud.shape) * noise_sd), model)
 
 
-def compute(ctx: Any) -> list[MetricResult | Unavailable]:
+def compute(ctx: ComputeContext) -> list[MetricResult | Unavailable]:
     """Every workspace metric the session allows (spec §8.7)."""
     session = ctx.session
     out: list[MetricResult | Unavailable] = []
@@ -414,7 +415,7 @@ def compute(ctx: Any) -> list[MetricResult | Unavailable]:
 # --- report figures (spec §15.6; paper Fig. 5) ----------------------------------------------------
 
 
-def report_figures(ctx: Any, results: Any) -> list[ReportFigure]:
+def report_figures(ctx: ComputeContext, results: Any) -> list[ReportFigure]:
     """Measured gimbal-centre clouds over the modeled workspace, side (x–z) and top (x–y) views (paper Fig. 5)."""
     import matplotlib.pyplot as plt
 
@@ -429,12 +430,11 @@ def report_figures(ctx: Any, results: Any) -> list[ReportFigure]:
         except HaptifyError:
             continue
     model = None
-    if device.kinematics is not None:
+    kinematics = device.kinematics
+    if kinematics is not None:
         placement = session.manifest.device_placement
         try:
-            model = ctx.cached(
-                ("workspace_model",), lambda: modeled_solid(device.kinematics, placement.position, placement.quaternion)
-            )
+            model = ctx.cached(("workspace_model",), lambda: modeled_solid(kinematics, placement.position, placement.quaternion))
         except HaptifyError:
             model = None
     if not clouds and model is None:

@@ -7,10 +7,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
+    from haptify.context import ComputeContext
     from haptify.report import ReportFigure
 
 
-def report_figures(ctx: Any, results: Any) -> list[ReportFigure]:
+def report_figures(ctx: ComputeContext, results: Any) -> list[ReportFigure]:
     """RMS force error of every 5 s segment against its kinematic distance to the training set, with
     the fitted line (paper Fig. 9; spec §11.7). Drawn from ``dynamics.error_vs_distance``'s diagnostics."""
     import matplotlib.pyplot as plt

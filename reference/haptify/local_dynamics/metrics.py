@@ -4,7 +4,7 @@ intercept of the force error against the kinematic distance to the training set.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -26,6 +26,7 @@ from haptify.local_dynamics.trials import (
 from haptify.metric_definitions import family
 
 if TYPE_CHECKING:
+    from haptify.context import ComputeContext
     from haptify.results import MetricResult, Unavailable
 
 
@@ -35,7 +36,7 @@ def _unavailable_all(code: str, reason: str, ids: list[str]) -> list[MetricResul
     return [Unavailable(id=i, code=code, reason=reason) for i in ids]
 
 
-def compute(ctx: Any) -> list[MetricResult | Unavailable]:
+def compute(ctx: ComputeContext) -> list[MetricResult | Unavailable]:
     """The dynamics family's metrics for a session (spec §11.7): training-fit RMS errors and error vs distance."""
     from haptify.results import MetricResult
 
