@@ -25,9 +25,9 @@ from haptify.free_space import (
     force_field,
     magnitude_stats,
     plate_force_about_weight,
-    report_figures,
     speed_samples,
 )
+from haptify.figures.free_space import report_figures
 from haptify.metric_definitions import param
 from haptify.results import MetricResult, Unavailable
 from haptify.storage import open_session

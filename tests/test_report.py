@@ -6,7 +6,7 @@ import numpy as np
 from scipy.io import wavfile
 
 from haptify.cli import main
-from haptify.local_dynamics import report_figures as dynamics_figures
+from haptify.figures.dynamics import report_figures as dynamics_figures
 from haptify.report import WAV_RATE_HZ, to_wav_samples
 from haptify.results import Implementation, MetricResult, ResultsFile
 

@@ -21,7 +21,8 @@ from haptify.compute import ComputeContext
 from haptify.conventions import quat_from_axis_angle, quat_to_matrix
 from haptify.errors import HaptifyError
 from haptify.results import MetricResult, Unavailable
-from haptify.stiffness import FitRule, compute, end_of_rise, find_presses, fit_stiffness, grid_rate, report_figures, runs
+from haptify.figures.stiffness import report_figures
+from haptify.stiffness import FitRule, compute, end_of_rise, find_presses, fit_stiffness, grid_rate, runs
 from haptify.storage import open_session
 from haptify.surface import contact_of, contact_signals, unit_normal
 from haptify_conform.cases import REPO_ROOT

@@ -19,7 +19,8 @@ from haptify.errors import HaptifyError
 from haptify.metric_definitions import param
 from haptify.results import MetricResult, Unavailable
 from haptify.storage import open_session
-from haptify.surface import compute, contact_of, guarded, planar_force, planar_stats, report_figures, unit_normal
+from haptify.figures.surface import report_figures
+from haptify.surface import compute, contact_of, guarded, planar_force, planar_stats, unit_normal
 from metric_sessions import add_handle_trial, spin, writer
 
 NORMAL = unit_normal([0.0, 0.2, 1.0])

@@ -25,11 +25,10 @@ from haptify.vibration import (
     dft321,
     highpass,
     power_spectrum,
-    report_audio,
-    report_figures,
     rms,
     spectral_centroid,
 )
+from haptify.figures.vibration import report_audio, report_figures
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
 
 RATE = 2000.0

@@ -33,9 +33,9 @@ from haptify.workspace import (
     repaired_points,
     modeled_solid,
     overlap_volume,
-    report_figures,
     volume_solid,
 )
+from haptify.figures.workspace import report_figures
 from haptify_tools.conformance_fixtures.workspace_shapes import box_cloud, pose_cloud, sphere_sweep
 from haptify_tools.conformance_fixtures.workspace_shapes import sphere_cloud as sphere_surface
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig

@@ -1,9 +1,9 @@
 """The human report: an HTML page with figures, the results table and audio (spec §15.6).
 
-Figures live next to their metrics: a family module may define
-``report_figures(ctx, results) -> list[ReportFigure]`` (matplotlib figures in the spirit of the
-paper's Figs. 5–11) and ``report_audio(ctx) -> list[ReportAudio]`` (signals to render as WAV). This
-module gathers them, writes PNGs, WAVs and ``index.html`` into a temporary folder and renames it into
+Figures live apart from the metrics, in :mod:`haptify.figures` (one module per family; a plugin family
+may draw in its own module): ``report_figures(ctx, results) -> list[ReportFigure]`` (matplotlib figures in
+the spirit of the paper's Figs. 5–11) and ``report_audio(ctx) -> list[ReportAudio]`` (signals to render as
+WAV). This module gathers them, writes PNGs, WAVs and ``index.html`` into a temporary folder and renames it into
 place, so an interrupted report never leaves half a folder.
 """
 
@@ -104,6 +104,20 @@ def _value(v: Any) -> str:
     return f"{v:.6g}"
 
 
+def figure_modules() -> list[Any]:
+    """Per family, in the families' order, the module that draws its report: ``haptify.figures.<family>`` for the
+    reference's families; a family without one there (a plugin's) draws in its own module."""
+    out = []
+    for family, module_name in family_modules():
+        try:
+            out.append(importlib.import_module(f"haptify.figures.{family}"))
+        except ModuleNotFoundError as exc:
+            if exc.name != f"haptify.figures.{family}":
+                raise
+            out.append(importlib.import_module(module_name))
+    return out
+
+
 def write_report(
     ctx: ComputeContext, results: ResultsFile, out_dir: Path, *, wav_scale: float | None = None, overwrite: bool = False
 ) -> Path:
@@ -120,8 +134,7 @@ def write_report(
     try:
         figures: list[ReportFigure] = []
         audio: list[ReportAudio] = []
-        for _, module_name in family_modules():
-            module = importlib.import_module(module_name)
+        for module in figure_modules():
             if hasattr(module, "report_figures"):
                 figures += module.report_figures(ctx, results)
             if hasattr(module, "report_audio"):

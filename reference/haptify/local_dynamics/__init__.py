@@ -11,7 +11,7 @@ stage by stage: the parameter file (:mod:`.parameter_file`, §11.5), determinist
 (:mod:`.prediction`, §11.3), fitting by Levenberg–Marquardt on the simulation error (:mod:`.fitting`, §11.4)
 with its analytic Jacobian (:mod:`.jacobian`, §11.4.3), the kinematic distance of paper eq. 9 and the segment
 errors (:mod:`.distance`, §11.6), the model on a session's trials (:mod:`.trials`, §11.1, §11.7), the family's
-``compute(ctx)`` (:mod:`.metrics`, §11.7) and its report figure (:mod:`.figures`). Every parameter comes from
+``compute(ctx)`` (:mod:`.metrics`, §11.7); its report figure is :mod:`haptify.figures.dynamics`. Every parameter comes from
 ``schemas/<v>/metrics/dynamics.json``. This module re-exports the public names; the entry point of the family
 ``dynamics`` (pyproject.toml) names it.
 """
@@ -28,7 +28,6 @@ from haptify.local_dynamics.distance import (
     segment_force_errors,
     window_features,
 )
-from haptify.local_dynamics.figures import report_figures
 from haptify.local_dynamics.fitting import FitOptions, FitReport, fit, place_breakpoints
 from haptify.local_dynamics.metrics import compute
 from haptify.local_dynamics.parameter_file import (
@@ -108,7 +107,6 @@ __all__ = [
     "pwl_basis",
     "pwl_eval",
     "pwl_slope",
-    "report_figures",
     "rmse",
     "save_model",
     "segment_distances",
