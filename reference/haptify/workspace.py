@@ -388,11 +388,12 @@ def compute(ctx: ComputeContext) -> list[MetricResult | Unavailable]:
             )
         solids = closed
     codes: dict[str, list[str]] = {tid: [] if s.closed else [Code.WORKSPACE_SHELL_OPEN] for tid, s in solids.items()}
+    values = {tid: trial_values(s, model) for tid, s in solids.items()}
     out.append(
         aggregate(
             FAMILY,
             "workspace.measured_volume",
-            [TrialValue(tid, s.volume, codes[tid]) for tid, s in solids.items()],
+            [TrialValue(tid, v["workspace.measured_volume"], codes[tid]) for tid, v in values.items()],
             diagnostics={
                 "hull_volume_m3": [s.hull_volume for s in solids.values()],
                 "points": [s.n_points for s in solids.values()],
@@ -405,7 +406,6 @@ def compute(ctx: ComputeContext) -> list[MetricResult | Unavailable]:
         if model_error is None:  # neither ratio nor coverage was asked for
             return out
         return out + [unavailable(m, model_error) for m in ("workspace.volume_ratio", "workspace.coverage")]
-    values = {tid: trial_values(s, model) for tid, s in solids.items()}
     for metric_id in ("workspace.volume_ratio", "workspace.coverage"):
         out.append(aggregate(FAMILY, metric_id, [TrialValue(tid, v[metric_id], codes[tid]) for tid, v in values.items()]))
     return out
