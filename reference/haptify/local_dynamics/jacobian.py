@@ -258,9 +258,9 @@ BLOCK_ROWS = 2048
 
 
 def normal_equations_buffer(st: _Structure, rows: int) -> np.ndarray:
-    """The buffer :func:`_normal_equations` forms its blocks of ``[J | e]`` in, for ``rows`` stacked samples:
-    up to :data:`BLOCK_ROWS` rows, as wide as the widest output's Jacobian plus the residual column."""
-    return np.empty((min(rows, BLOCK_ROWS), st.n_shared + max(st.own(j).stop - st.own(j).start for j in range(st.ny)) + 1))
+    """The buffer :func:`_normal_equations` forms its blocks of J in, for ``rows`` stacked samples: up to
+    :data:`BLOCK_ROWS` rows, as wide as the widest output's Jacobian."""
+    return np.empty((min(rows, BLOCK_ROWS), st.n_shared + max(st.own(j).stop - st.own(j).start for j in range(st.ny))))
 
 
 def _normal_equations(
@@ -268,20 +268,26 @@ def _normal_equations(
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """JᵀJ and Jᵀe of every output j (spec §11.4.3; J of :func:`_output_jacobian` with weight ``weights[j]``,
     e the weighted residuals), accumulated over blocks of :data:`BLOCK_ROWS` rows formed in ``buffer``
-    (≥ BLOCK_ROWS × columns + 1): one symmetric product per block of ``[J | e]``, the outputs' blocks of the
-    same rows one after the other (so a block of the input basis Φ is read once for all outputs)."""
+    (≥ BLOCK_ROWS × columns), the outputs' blocks of the same rows one after the other (so a block of the
+    input basis Φ is read once for all outputs). Jᵀe is summed in double precision; JᵀJ from the block
+    rounded to single precision (spec §11.4.3: it only shapes the step, the gradient fixes where the
+    descent stops), summed in double."""
     passes = [_JacobianPass.of(st, theta, rec, j, weights[j], sim) for j in range(st.ny)]
     residuals = [(rec.y[:, j] - p.yhat) * weights[j] for j, p in enumerate(passes)]
-    grams = [np.zeros((p.columns + 1, p.columns + 1)) for p in passes]
+    grams = [np.zeros((p.columns, p.columns)) for p in passes]
+    gradients = [np.zeros(p.columns) for p in passes]
+    single = np.empty(buffer.shape, dtype=np.float32)
     n = len(rec.u)
     for start in range(0, n, BLOCK_ROWS):
         rows = slice(start, min(start + BLOCK_ROWS, n))
-        for jacobian, e, gram in zip(passes, residuals, grams):
-            block = buffer[: rows.stop - rows.start, : jacobian.columns + 1]
-            jacobian.rows(rec, rows, block[:, :-1])
-            block[:, -1] = e[rows]
-            gram += block.T @ block
-    return [(gram[:-1, :-1], gram[:-1, -1]) for gram in grams]
+        for jacobian, e, gram, jac_e in zip(passes, residuals, grams, gradients):
+            block = buffer[: rows.stop - rows.start, : jacobian.columns]
+            jacobian.rows(rec, rows, block)
+            jac_e += e[rows] @ block
+            low = single[: rows.stop - rows.start, : jacobian.columns]
+            low[:] = block
+            gram += low.T @ low
+    return list(zip(grams, gradients))
 
 
 def _add_normal_equations(hess: np.ndarray, grad: np.ndarray, ns: int, own: slice, gram: np.ndarray, jac_e: np.ndarray) -> None:
