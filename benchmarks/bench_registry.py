@@ -41,7 +41,8 @@ from haptify.metric_definitions import family  # noqa: E402
 from haptify.results import DeviceSummary, Implementation, MetricResult, ResultsFile  # noqa: E402
 from haptify.storage import sha256_file  # noqa: E402
 from haptify.versions import PACKAGE_VERSION  # noqa: E402
-from haptify_tools.registry.bundle import build_bundle, pack, submission_id  # noqa: E402
+from haptify.bundle_format import submission_id  # noqa: E402
+from haptify_tools.registry.bundle import build_bundle, pack  # noqa: E402
 from haptify_tools.registry.cmd_submit import post_bundle  # noqa: E402
 
 LOOPBACK = "127.0.0.1"
@@ -51,8 +52,13 @@ N_READS = 10_000
 READ_THREADS = 4
 TARGET_P99_MS = 50.0
 LABS = ["lab-a", "lab-b", "lab-c", "lab-d"]
-MODELS = [("3D Systems", "Touch"), ("3D Systems", "Touch X"), ("Novint", "Falcon"), ("Force Dimension", "omega.6"),
-          ("Haption", "Virtuose 6D")]
+MODELS = [
+    ("3D Systems", "Touch"),
+    ("3D Systems", "Touch X"),
+    ("Novint", "Falcon"),
+    ("Force Dimension", "omega.6"),
+    ("Haption", "Virtuose 6D"),
+]
 SERVER = """
 import sys, uvicorn
 from pathlib import Path
@@ -81,17 +87,37 @@ def make_bundles(root: Path, n: int) -> list[tuple[str, Path, str]]:
     for i in range(n):
         lab = LABS[i % len(LABS)]
         manufacturer, model = MODELS[i % len(MODELS)]
-        session = example_session(root / f"s{i:03d}", lab=lab, session_id=f"bench-{i:03d}", manufacturer=manufacturer, model=model)
+        session = example_session(
+            root / f"s{i:03d}", lab=lab, session_id=f"bench-{i:03d}", manufacturer=manufacturer, model=model
+        )
         reps = [0.03 + 0.01 * (i % len(MODELS)) + 1e-5 * i, 0.031 + 0.01 * (i % len(MODELS)) + 1e-5 * i]
-        results = ResultsFile(implementation=impl, session_id=f"bench-{i:03d}",
-                              device=DeviceSummary(manufacturer=manufacturer, model=model),
-                              manifest_sha256=sha256_file(session / "session.json"), metrics=[
-                                  MetricResult(id="vibration.rms", value=statistics.fmean(reps), per_repetition=reps, n=2,
-                                               sd=statistics.stdev(reps), unit="m/s^2", definition_version=versions["vibration"]),
-                                  MetricResult(id="workspace.measured_volume", value=0.01 + 1e-6 * i, unit="m^3", n=1,
-                                               definition_version=versions["workspace"]),
-                                  MetricResult(id="free_space.force_mean", value=0.5 + 0.001 * i, unit="N", n=1,
-                                               definition_version=versions["free_space"])])
+        results = ResultsFile(
+            implementation=impl,
+            session_id=f"bench-{i:03d}",
+            device=DeviceSummary(manufacturer=manufacturer, model=model),
+            manifest_sha256=sha256_file(session / "session.json"),
+            metrics=[
+                MetricResult(
+                    id="vibration.rms",
+                    value=statistics.fmean(reps),
+                    per_repetition=reps,
+                    n=2,
+                    sd=statistics.stdev(reps),
+                    unit="m/s^2",
+                    definition_version=versions["vibration"],
+                ),
+                MetricResult(
+                    id="workspace.measured_volume",
+                    value=0.01 + 1e-6 * i,
+                    unit="m^3",
+                    n=1,
+                    definition_version=versions["workspace"],
+                ),
+                MetricResult(
+                    id="free_space.force_mean", value=0.5 + 0.001 * i, unit="N", n=1, definition_version=versions["free_space"]
+                ),
+            ],
+        )
         (root / f"r{i:03d}.json").write_text(results.model_dump_json())
         bundle, files = build_bundle(session, root / f"r{i:03d}.json", report)
         digest = pack(bundle, files, root / f"b{i:03d}.tar.gz")
@@ -100,8 +126,9 @@ def make_bundles(root: Path, n: int) -> list[tuple[str, Path, str]]:
 
 
 def start_server(data: Path) -> tuple[subprocess.Popen, str]:
-    proc = subprocess.Popen([sys.executable, "-c", SERVER, str(data)], stdout=subprocess.PIPE, text=True, cwd=REPO,
-                            start_new_session=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", SERVER, str(data)], stdout=subprocess.PIPE, text=True, cwd=REPO, start_new_session=True
+    )
     port_line: list[str] = []
     reader = threading.Thread(target=lambda: port_line.append(proc.stdout.readline()), daemon=True)
     reader.start()
@@ -122,7 +149,9 @@ def stop_server(proc: subprocess.Popen) -> None:
             proc.wait(10)
 
 
-def submit_all(base: str, tokens: dict[str, str], bundles: list[tuple[str, Path, str]], deadline_s: float) -> tuple[list[dict], float]:
+def submit_all(
+    base: str, tokens: dict[str, str], bundles: list[tuple[str, Path, str]], deadline_s: float
+) -> tuple[list[dict], float]:
     """Upload every bundle at once (one thread each, released together); returns outcomes and wall time."""
     barrier = threading.Barrier(len(bundles))
 
@@ -137,9 +166,16 @@ def submit_all(base: str, tokens: dict[str, str], bundles: list[tuple[str, Path,
     return outcomes, time.perf_counter() - t0
 
 
-READ_KINDS = ["GET /api/v1/devices/{slug}", "GET /api/v1/submissions/{id}", "GET /api/v1/leaderboard/{metric}",
-              "page /devices/{slug}", "page /leaderboard/{metric}", "page /compare (2 devices)", "GET /api/v1/devices",
-              "page / (index)"]
+READ_KINDS = [
+    "GET /api/v1/devices/{slug}",
+    "GET /api/v1/submissions/{id}",
+    "GET /api/v1/leaderboard/{metric}",
+    "page /devices/{slug}",
+    "page /leaderboard/{metric}",
+    "page /compare (2 devices)",
+    "GET /api/v1/devices",
+    "page / (index)",
+]
 
 
 def read_paths(ids: list[str], n: int) -> list[tuple[str, str]]:
@@ -148,9 +184,21 @@ def read_paths(ids: list[str], n: int) -> list[tuple[str, str]]:
     paths = []
     for i in range(n):
         slug, sid = slugs[i % len(slugs)], ids[i % len(ids)]
-        paths.append((READ_KINDS[i % 8], [f"/api/v1/devices/{slug}", f"/api/v1/submissions/{sid}", "/api/v1/leaderboard/vibration.rms",
-                                          f"/devices/{slug}", "/leaderboard/vibration.rms",
-                                          f"/compare?device={slug}&device=3d-systems-touch", "/api/v1/devices", "/"][i % 8]))
+        paths.append(
+            (
+                READ_KINDS[i % 8],
+                [
+                    f"/api/v1/devices/{slug}",
+                    f"/api/v1/submissions/{sid}",
+                    "/api/v1/leaderboard/vibration.rms",
+                    f"/devices/{slug}",
+                    "/leaderboard/vibration.rms",
+                    f"/compare?device={slug}&device=3d-systems-touch",
+                    "/api/v1/devices",
+                    "/",
+                ][i % 8],
+            )
+        )
     return paths
 
 
@@ -244,8 +292,11 @@ def main() -> int:
         root = Path(tmp)
         t0 = time.perf_counter()
         bundles = make_bundles(root / "bundles", args.submissions)
-        print(f"packed {len(bundles)} distinct bundles in {time.perf_counter() - t0:.1f} s "
-              f"({statistics.fmean(b.stat().st_size for _, b, _ in bundles) / 1024:.1f} KiB each)", flush=True)
+        print(
+            f"packed {len(bundles)} distinct bundles in {time.perf_counter() - t0:.1f} s "
+            f"({statistics.fmean(b.stat().st_size for _, b, _ in bundles) / 1024:.1f} KiB each)",
+            flush=True,
+        )
         data = root / "registry"
         reg = Registry(Settings(data_dir=data), lock=False)
         tokens = {lab: reg.create_token(lab, rate_per_minute=1_000_000) for lab in LABS}
@@ -256,10 +307,15 @@ def main() -> int:
             statuses = [o["status"] for o in outcomes]
             expected = {sid for _, _, sid in bundles}
             got = [o["id"] for o in outcomes]
-            print(f"submissions: {len(bundles)} concurrent in {wall:.1f} s = {len(bundles) / wall:.1f} submissions/s; "
-                  f"statuses {dict((s, statuses.count(s)) for s in set(statuses))}", flush=True)
+            print(
+                f"submissions: {len(bundles)} concurrent in {wall:.1f} s = {len(bundles) / wall:.1f} submissions/s; "
+                f"statuses {dict((s, statuses.count(s)) for s in set(statuses))}",
+                flush=True,
+            )
             dup_outcomes, _ = submit_all(base, tokens, bundles[:N_DUPLICATES], deadline_s=120)
-            dup_ok = all(o["status"] == "duplicate" for o in dup_outcomes) and [o["id"] for o in dup_outcomes] == got[:N_DUPLICATES]
+            dup_ok = (
+                all(o["status"] == "duplicate" for o in dup_outcomes) and [o["id"] for o in dup_outcomes] == got[:N_DUPLICATES]
+            )
             print(f"re-sent {N_DUPLICATES} bundles at once: all duplicates with their first id: {dup_ok}")
             import httpx
 
@@ -278,9 +334,13 @@ def main() -> int:
             latencies, by_kind, rwall = read_all(base, paths, deadline_s=600, n_threads=args.threads)
             server_cpu = cpu_seconds(proc.pid) - cpu0
             p50, p99 = pct(latencies, 50), pct(latencies, 99)
-            print(f"reads: {len(latencies)} from {args.threads} threads in {rwall:.1f} s ({len(latencies) / rwall:.0f}/s); "
-                  f"p50 {p50:.1f} ms, p99 {p99:.1f} ms (target p99 < {TARGET_P99_MS:g} ms: {'met' if p99 < TARGET_P99_MS else 'NOT met'})")
-            print(f"server CPU time per read: {server_cpu / len(latencies) * 1000:.2f} ms (all kinds; the service time without queueing)")
+            print(
+                f"reads: {len(latencies)} from {args.threads} threads in {rwall:.1f} s ({len(latencies) / rwall:.0f}/s); "
+                f"p50 {p50:.1f} ms, p99 {p99:.1f} ms (target p99 < {TARGET_P99_MS:g} ms: {'met' if p99 < TARGET_P99_MS else 'NOT met'})"
+            )
+            print(
+                f"server CPU time per read: {server_cpu / len(latencies) * 1000:.2f} ms (all kinds; the service time without queueing)"
+            )
             for kind, lats in sorted(by_kind.items()):
                 print(f"  {kind:34} n={len(lats):5d}  p50 {pct(lats, 50):6.1f} ms  p99 {pct(lats, 99):6.1f} ms")
             print(f"load average after the run: {os.getloadavg()[0]:.1f}")

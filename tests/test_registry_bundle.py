@@ -14,15 +14,8 @@ from hypothesis import strategies as st
 
 from _registry_fixtures import base, bundle_for, member, tar_gz  # noqa: F401  (base: fixture)
 from haptify.errors import HaptifyError
-from haptify_tools.registry.bundle import (
-    Bundle,
-    Limits,
-    _member_name_problem,
-    bundle_digest,
-    canonical_json,
-    read_manifest,
-    unpack,
-)
+from haptify.bundle_format import Bundle, bundle_digest, canonical_json
+from haptify_tools.registry.bundle import Limits, _member_name_problem, read_manifest, unpack
 from haptify_tools.registry.checks import agrees, check_bundle, tolerances
 
 

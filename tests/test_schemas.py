@@ -21,6 +21,17 @@ def test_committed_schemas_are_current():
     assert gen_schemas.main(["--check"]) == 0
 
 
+def test_normative_schemas_come_from_the_reference_or_the_judge_never_from_the_tools():
+    # spec §0.3: a schema of the standard (schemas/<v>/) is generated from a model of the reference, or of the
+    # conformance package for the judge's own files; the tools' schemas live beside the tools
+    for name, target in gen_schemas.MODELS.items():
+        package = target.split(".")[0]
+        if name in gen_schemas.OUTSIDE_THE_STANDARD:
+            assert package == "haptify_tools", name
+        else:
+            assert package in ("haptify", "haptify_conform"), f"{name} is generated from {target}"
+
+
 def test_spec_generated_tables_are_current():
     assert gen_docs.main(["--check"]) == 0
 

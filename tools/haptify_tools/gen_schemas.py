@@ -27,7 +27,7 @@ MODELS: dict[str, str] = {
     "import-map": "haptify.importers:ImportMap",
     "hw-model": "haptify.local_dynamics:HWModelFile",
     "validation-report": "haptify.validation.report:ValidationReportModel",
-    "bundle": "haptify_tools.registry.bundle:Bundle",
+    "bundle": "haptify.bundle_format:Bundle",
     "conformance-cases": "haptify_conform.cases:CaseFile",
     "conform-report": "haptify_conform.report:ConformReport",
     "twin": "haptify_tools.twin.model:TwinFile",

@@ -27,16 +27,8 @@ from haptify.storage import MANIFEST, open_session, parse_json_file, pydantic_fi
 from haptify.versions import SPEC_VERSION
 from haptify_conform.cases import load_cases, select
 from haptify_conform.report import ConformReport
-from haptify_tools.registry.bundle import (
-    CONFORMANCE_JSON,
-    RESULTS_JSON,
-    SESSION_DIR,
-    Bundle,
-    Limits,
-    Unpacked,
-    bundle_digest,
-    read_manifest,
-)
+from haptify.bundle_format import CONFORMANCE_JSON, RESULTS_JSON, SESSION_DIR, Bundle, bundle_digest
+from haptify_tools.registry.bundle import Limits, Unpacked, read_manifest
 
 SUPPORTED_SPEC_VERSIONS = (SPEC_VERSION,)
 

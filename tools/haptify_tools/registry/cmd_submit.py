@@ -29,7 +29,8 @@ from pathlib import Path
 from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError, fail
 from haptify.gate import require_valid_session
-from haptify_tools.registry.bundle import build_bundle, pack, submission_id, unpack
+from haptify.bundle_format import submission_id
+from haptify_tools.registry.bundle import build_bundle, pack, unpack
 from haptify_tools.registry.checks import check_bundle, verify_bundle
 
 TOKEN_ENV = "HAPTIFY_REGISTRY_TOKEN"

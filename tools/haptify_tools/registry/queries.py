@@ -23,7 +23,8 @@ from haptify.results import DeviceSummary, Implementation, MetricResult, Results
 from haptify.versions import PACKAGE_VERSION
 from haptify_tools.registry import db
 from haptify_tools.registry.aggregates import aggregate, defined_sd, not_counted
-from haptify_tools.registry.bundle import DIR_MODE, SESSION_DIR, unpack
+from haptify.bundle_format import SESSION_DIR
+from haptify_tools.registry.bundle import DIR_MODE, unpack
 from haptify_tools.registry.records import RANKED, ReadContext, Settings
 from haptify_tools.registry.worker import run_contained
 

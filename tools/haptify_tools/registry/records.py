@@ -13,9 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from haptify_tools.registry import db
-from haptify_tools.registry.bundle import (
-    Limits,
-)
+from haptify_tools.registry.bundle import Limits
 
 
 SCOPES = ("submit", "admin")

@@ -41,13 +41,8 @@ from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError, fail
 from haptify_conform.report import ConformReport
 from haptify_tools.registry import db
-from haptify_tools.registry.bundle import (
-    DIR_MODE,
-    FILE_MODE,
-    bundle_digest,
-    submission_id,
-    unpack_bundle,
-)
+from haptify.bundle_format import bundle_digest, submission_id
+from haptify_tools.registry.bundle import DIR_MODE, FILE_MODE, unpack_bundle
 from haptify_tools.registry.checks import Checked, check_bundle, check_conformance, verify_bundle
 from haptify_tools.registry.queries import RegistryQueries
 from haptify_tools.registry.worker import run_contained
@@ -147,7 +142,7 @@ class Registry(RegistryQueries):
         """Create a token for ``lab`` (created if new); returns the token, which is stored only hashed."""
         if scope not in SCOPES:
             raise fail(Code.REQUEST_INVALID, f"unknown scope {scope!r}", expected=list(SCOPES), found=scope)
-        from haptify_tools.registry.bundle import BundleLab
+        from haptify.bundle_format import BundleLab
 
         try:
             BundleLab(id=lab)
