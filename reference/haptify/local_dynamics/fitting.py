@@ -26,6 +26,7 @@ from haptify.local_dynamics.jacobian import (
     _Structure,
     normal_equations_buffer,
 )
+from haptify.local_dynamics import parameter_file
 from haptify.local_dynamics.parameter_file import (
     FAMILY,
     Channel,
@@ -37,7 +38,7 @@ from haptify.local_dynamics.parameter_file import (
     UnitGainMap,
 )
 from haptify.local_dynamics.prediction import _delayed, hemisphere_align, rmse
-from haptify.metric_definitions import family, param
+from haptify.metric_definitions import family
 
 
 @dataclass(frozen=True)
@@ -61,10 +62,7 @@ class FitOptions:
     @classmethod
     def from_definition(cls, **overrides: Any) -> "FitOptions":
         """Options from the definition file, with keyword overrides (e.g. ``output_map="unit_gain"``)."""
-        values: dict[str, Any] = {}
-        for name in cls.__dataclass_fields__:
-            v = param(FAMILY, name)
-            values[name] = tuple(v) if isinstance(v, list) else v
+        values: dict[str, Any] = parameter_file.PARAMETERS.model_dump(include=set(cls.__dataclass_fields__))
         values.update(overrides)
         opts = cls(**values)
         for m in (opts.input_map, opts.output_map):
