@@ -21,10 +21,10 @@ from haptify.versions import SPEC_VERSION
 FAMILY = "dynamics"
 
 
-class DynamicsParameters(FamilyParameters):
-    """The parameters of ``metrics/dynamics.json`` (spec chapter 11), in the units its definition file states."""
+class FitParameters(FamilyParameters):
+    """The fitting rules of ``metrics/dynamics.json`` (spec §11.4): model orders and delay, the static maps
+    and their breakpoints, the initialisation and the Levenberg–Marquardt schedule."""
 
-    sample_rate_hz: float
     nb: int
     nf: int
     nk: int
@@ -38,6 +38,13 @@ class DynamicsParameters(FamilyParameters):
     tolerance: float
     lm_damping: tuple[float, float, float, float]
     stability_radius: float
+
+
+class DynamicsParameters(FitParameters):
+    """The parameters of ``metrics/dynamics.json`` (spec chapter 11): the fitting rules, the trials' sample rate
+    and length, and the distance's windows and scales, in the units its definition file states."""
+
+    sample_rate_hz: float
     min_training_s: float
     window_s: float
     segment_s: float
