@@ -1,11 +1,15 @@
-"""CONTRIBUTING.md's recipe "add a metric family", walked through: a definition file, a module with
-``compute(ctx)`` and an entry point are all the reference needs to compute, aggregate and report a new metric
-(spec §0.3, §15.2–15.4). The toy family's files are written by this test; nothing of the repository changes."""
+"""CONTRIBUTING.md's recipe "add a metric family", walked through: a definition file, a module with its typed
+parameters and ``compute(ctx)``, and an entry point are all the reference needs to compute, aggregate and
+report a new metric (spec §0.3, §15.2–15.4); a module whose parameters disagree with the definition file
+stops at import with E905. The toy family's files are written by this test; nothing of the repository
+changes."""
 
 from __future__ import annotations
 
+import importlib
 import json
 import shutil
+import sys
 import textwrap
 from importlib.metadata import EntryPoint, entry_points
 from pathlib import Path
@@ -15,6 +19,7 @@ import pytest
 
 import haptify_schemas
 from haptify import families, metric_definitions
+from haptify.errors import HaptifyError
 from haptify.compute import compute_session
 from haptify.storage import open_session
 from metric_sessions import add_handle_trial, circle, spin, writer
@@ -43,11 +48,20 @@ TOY_MODULE = '''
 """The toy family: the recorded length of each free-space trial (a recipe's example)."""
 
 from haptify.caching import session_of
-from haptify.metric_definitions import param
+from haptify.metric_definitions import FamilyParameters, load_parameters
 from haptify.repetitions import TrialValue, aggregate, protocol_trials
 
 FAMILY = "toy"
 METRIC = "toy.trial_duration"
+
+
+class ToyParameters(FamilyParameters):
+    """The parameters of ``metrics/toy.json``, in its units."""
+
+    min_duration_s: float
+
+
+PARAMETERS = load_parameters(FAMILY, ToyParameters)
 
 
 def duration_s(ctx, trial_id):
@@ -63,7 +77,7 @@ def compute(ctx):
     got, missing = protocol_trials(ctx, "free_space", (METRIC,), lambda tid: duration_s(ctx, tid), METRIC)
     if missing:
         return missing
-    floor = param(FAMILY, "min_duration_s")
+    floor = PARAMETERS.min_duration_s
     return [aggregate(FAMILY, METRIC, [TrialValue(tid, v) for tid, v in got.items() if v >= floor])]
 '''
 
@@ -71,14 +85,17 @@ def compute(ctx):
 @pytest.fixture
 def toy_family(tmp_path, monkeypatch):
     """The recipe's three files: ``schemas/<v>/metrics/toy.json`` (a copy of the definitions with it added), the
-    module ``toy_family.py`` and its entry point in the group ``haptify.metric_families``."""
+    module ``toy_family.py`` and its entry point in the group ``haptify.metric_families``. Yields the path of
+    toy.json."""
     defs = tmp_path / "schemas"
     shutil.copytree(REPO / "schemas" / haptify_schemas.SPEC_VERSION, defs)
-    (defs / "metrics" / "toy.json").write_text(json.dumps(TOY_DEFINITION), encoding="utf-8")
+    toy_json = defs / "metrics" / "toy.json"
+    toy_json.write_text(json.dumps(TOY_DEFINITION), encoding="utf-8")
     code = tmp_path / "code"
     code.mkdir()
     (code / "toy_family.py").write_text(textwrap.dedent(TOY_MODULE), encoding="utf-8")
     monkeypatch.syspath_prepend(str(code))
+    monkeypatch.delitem(sys.modules, "toy_family", raising=False)  # imported afresh, against this toy.json
     monkeypatch.setattr(haptify_schemas, "_root", lambda: defs)
     plugin = EntryPoint(name="toy", value="toy_family", group=families.FAMILY_ENTRY_POINTS)
     monkeypatch.setattr(
@@ -87,7 +104,7 @@ def toy_family(tmp_path, monkeypatch):
         lambda group: [*entry_points(group=group), *([plugin] if group == families.FAMILY_ENTRY_POINTS else [])],
     )
     _clear_caches()
-    yield
+    yield toy_json
     monkeypatch.undo()
     _clear_caches()
 
@@ -131,3 +148,22 @@ def test_without_its_entry_point_the_family_is_defined_but_computed_by_nobody(to
     res = compute_session(session, ["toy.trial_duration"])
     assert res.get("toy.trial_duration") is None
     assert "toy" not in dict(families.family_modules())
+
+
+@pytest.mark.parametrize(
+    ("parameters", "key", "expected", "found"),
+    [
+        ({"min_duration_s": 1.0, "max_duration_s": 9.0}, "max_duration_s", "no parameter", 9.0),
+        ({}, "min_duration_s", "float", "no such parameter"),
+        ({"min_duration_s": "1 s"}, "min_duration_s", "float", "1 s"),
+    ],
+)
+def test_a_family_whose_parameters_disagree_with_its_module_stops_at_import(toy_family, parameters, key, expected, found):
+    doc = dict(TOY_DEFINITION, parameters={k: {"value": v, "unit": "s", "description": "-"} for k, v in parameters.items()})
+    toy_family.write_text(json.dumps(doc), encoding="utf-8")
+    _clear_caches()
+    with pytest.raises(HaptifyError) as exc:
+        importlib.import_module("toy_family")
+    (finding,) = exc.value.findings
+    assert finding.code == "E905" and finding.file == "metrics/toy.json" and key in finding.message
+    assert str(finding.expected).startswith(expected) and finding.found == found

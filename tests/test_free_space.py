@@ -14,6 +14,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from haptify import free_space
 from haptify.compute import ComputeContext
 from haptify import preprocessing
 from haptify.conventions import quat_from_axis_angle, quat_multiply, quat_to_matrix
@@ -28,7 +29,6 @@ from haptify.free_space import (
     speed_samples,
 )
 from haptify.figures.free_space import report_figures
-from haptify.metric_definitions import param
 from haptify.results import MetricResult, Unavailable
 from haptify.storage import open_session
 from metric_sessions import add_handle_trial, circle, spin, writer
@@ -206,7 +206,7 @@ def test_settled_samples_leave_angular_speed_settle_s_at_each_segment_end():
     pos, q = _occluded(t, spin(0.3)(t), [(5.0, 6.0), (12.0, 12.5)])
     track = preprocessing.process_mocap(t, pos, q)
     used, settled = speed_samples(track)
-    settle = param("free_space", "angular_speed_settle_s")
+    settle = free_space.PARAMETERS.angular_speed_settle_s
     ends = [(0.0, 5.0), (6.0, 12.0), (12.5, 20.0)]  # the segments: the samples strictly inside the gaps are NaN
     inside = np.zeros(len(t), bool)
     for a, b in ends:
@@ -238,7 +238,7 @@ def _omega_noise_sd(sd_angle: float, rate: float) -> float:
     the central relative rotation then the low-pass of §7.4 step 4, away from the segment's ends."""
     impulse = np.zeros(4001)
     impulse[2000] = 1.0
-    g = preprocessing.lowpass(np.gradient(impulse) * rate, rate, param("signals", "angular_velocity_cutoff_hz"))
+    g = preprocessing.lowpass(np.gradient(impulse) * rate, rate, preprocessing.PARAMETERS.angular_velocity_cutoff_hz)
     return sd_angle * float(np.sqrt(np.sum(g**2)))
 
 

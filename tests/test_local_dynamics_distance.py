@@ -9,6 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from haptify.local_dynamics import parameter_file
 from haptify.conventions import quat_from_axis_angle
 from haptify.errors import HaptifyError
 from haptify.local_dynamics import (
@@ -21,7 +22,6 @@ from haptify.local_dynamics import (
     segment_force_errors,
     window_features,
 )
-from haptify.metric_definitions import param
 
 R = DistanceScales.from_definition()
 WIN = 20  # 0.2 s at 100 Hz
@@ -30,7 +30,7 @@ WIN = 20  # 0.2 s at 100 Hz
 def test_scales_are_the_papers():
     assert (R.p, R.v, R.a) == (0.12, 1.6, 38.0)
     assert R.theta == pytest.approx(math.radians(86.0))
-    assert round(param("dynamics", "window_s") * 100) == WIN and param("dynamics", "segment_s") == 5.0
+    assert round(parameter_file.PARAMETERS.window_s * 100) == WIN and parameter_file.PARAMETERS.segment_s == 5.0
 
 
 def motion(rng: np.random.Generator, n: int) -> dict[str, np.ndarray]:

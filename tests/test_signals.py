@@ -13,7 +13,6 @@ from haptify import preprocessing, signals
 from haptify.compute import ComputeContext
 from haptify.conventions import quat_from_axis_angle
 from haptify.errors import HaptifyError
-from haptify.metric_definitions import param
 from haptify.storage import open_session
 
 
@@ -32,7 +31,7 @@ def test_lowpass_is_zero_phase_with_the_butterworth_magnitude():
     y = preprocessing.lowpass(x, rate, fc)
     mid = slice(5000, 15000)
     assert np.max(np.abs(y[mid] - x[mid])) < 1e-4  # no delay and unity gain well inside the pass band
-    order = param("signals", "filter_order")
+    order = preprocessing.PARAMETERS.filter_order
     for f in (10.0, 20.0, 40.0):
         # forward-backward gives |H|² of one digital (bilinear, pre-warped) Butterworth pass: 1 / (1 + Ω^(2n))
         omega = np.tan(np.pi * f / rate) / np.tan(np.pi * fc / rate)
@@ -40,7 +39,7 @@ def test_lowpass_is_zero_phase_with_the_butterworth_magnitude():
 
 
 def test_cutoff_is_limited_by_nyquist():
-    frac = param("signals", "max_cutoff_fraction")
+    frac = preprocessing.PARAMETERS.max_cutoff_fraction
     assert preprocessing.effective_cutoff(20.0, 1000.0) == 20.0
     assert preprocessing.effective_cutoff(20.0, 1000.0, 30.0) == pytest.approx(frac * 15.0)
 
@@ -72,7 +71,7 @@ def test_short_gaps_are_bridged_and_long_gaps_never_interpolated():
     t = np.arange(400) / 100.0
     pos = np.column_stack([0.1 * t, 0 * t, 0 * t])
     q = np.tile([1.0, 0, 0, 0], (400, 1))
-    max_gap = param("signals", "max_gap_s")
+    max_gap = preprocessing.PARAMETERS.max_gap_s
     short = slice(100, 100 + int(round(max_gap * 100)))  # exactly the longest gap that is bridged
     long = slice(250, 250 + int(round(max_gap * 100)) + 1)
     pos[short] = np.nan
@@ -155,7 +154,7 @@ def handle_session(tmp_path_factory):
 
 def test_handle_signals_report_the_hand_wrench_in_world(handle_session):
     hs = signals.handle_signals(handle_session, "fs-1")
-    assert hs.rate_hz == param("signals", "rate_hz")
+    assert hs.rate_hz == preprocessing.PARAMETERS.rate_hz
     assert np.allclose(np.diff(hs.t), 1 / hs.rate_hz)
     v = hs.valid
     assert v.all()

@@ -13,10 +13,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from haptify import surface
 from haptify.compute import ComputeContext
 from haptify.conventions import quat_from_axis_angle, quat_to_matrix
 from haptify.errors import HaptifyError
-from haptify.metric_definitions import param
 from haptify.results import MetricResult, Unavailable
 from haptify.storage import open_session
 from haptify.figures.surface import report_figures
@@ -56,7 +56,7 @@ def test_planar_stats_ignore_the_world_frame_and_scale_with_units(seed, ax, ay, 
 
 
 def test_contact_threshold_and_guard():
-    thr = param("surface", "contact_force_threshold_N")
+    thr = surface.PARAMETERS.contact_force_threshold_N
     assert list(contact_of(np.array([0.0, thr, thr * 1.01]))) == [False, False, True]
     t_cmd = np.arange(0, 2.0001, 0.001)
     contact = (t_cmd >= 0.5) & (t_cmd <= 1.5)
@@ -141,7 +141,7 @@ def test_planar_force_over_the_contact_samples_only(session):
     res = {m.id: m for m in compute(ctx)}
     mean, sd = res["surface.planar_force_mean"], res["surface.planar_force_sd"]
     assert isinstance(mean, MetricResult) and mean.trials == ["surf-1", "surf-2"]
-    g = param("surface", "contact_guard_s")
+    g = surface.PARAMETERS.contact_guard_s
     t = np.arange(0, 10.0 + 1e-9, 0.01)
     used = (t >= T_ON + g - 1e-9) & (t <= T_OFF - g + 1e-9)
     truth = planar_magnitude(t[used])

@@ -12,6 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from haptify import preprocessing
 from haptify import significance
 from haptify import uncertainty as unc
 from haptify.compute import ComputeContext, compute_session
@@ -324,11 +325,13 @@ def test_force_noise_has_unit_sd_and_the_lowpass_autocorrelation():
     ∫|H|⁴ cos(2πfτ) df / ∫|H|⁴ df, from the filter's frequency response (not from its time-domain code)."""
     from scipy.signal import sosfreqz
 
-    from haptify.preprocessing import butter_lowpass, effective_cutoff, sp
+    from haptify.preprocessing import butter_lowpass, effective_cutoff
 
     e = unc.force_noise(GRID, 1000.0, 2000, np.random.default_rng(3))
     assert e.shape == (len(GRID), 2000) and e.std() == pytest.approx(1.0, abs=1e-12)
-    sos = butter_lowpass(int(sp("filter_order")), effective_cutoff(float(sp("wrench_cutoff_hz")), 1000.0, 100.0), 1000.0)
+    sos = butter_lowpass(
+        preprocessing.PARAMETERS.filter_order, effective_cutoff(preprocessing.PARAMETERS.wrench_cutoff_hz, 1000.0, 100.0), 1000.0
+    )
     f, h = sosfreqz(sos, worN=20000, fs=1000.0)
     p = np.abs(h) ** 4
     for lag in (1, 2, 4):
@@ -451,8 +454,8 @@ def test_track_noise_sd_skips_occlusions_and_needs_enough_differences():
     track = smooth_track() + np.random.default_rng(3).standard_normal((6000, 3)) * sd
     track[::7] = np.nan  # every seventh row occluded: no difference spans one
     assert unc.track_noise_sd(track) == pytest.approx(sd, rel=0.06)
-    assert np.all(np.isnan(unc.track_noise_sd(smooth_track(int(unc.up("min_noise_differences")) + 2))))
-    assert unc.track_noise_sd(smooth_track(int(unc.up("min_noise_differences")) + 3)) == pytest.approx(0.0, abs=1e-6)
+    assert np.all(np.isnan(unc.track_noise_sd(smooth_track(unc.PARAMETERS.min_noise_differences + 2))))
+    assert unc.track_noise_sd(smooth_track(unc.PARAMETERS.min_noise_differences + 3)) == pytest.approx(0.0, abs=1e-6)
 
 
 def test_mocap_noise_bias_is_the_mean_shift_of_the_recomputed_values(monkeypatch):

@@ -13,10 +13,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from haptify import vibration
 from haptify.compute import ComputeContext
 from haptify.conventions import quat_from_axis_angle, quat_to_matrix
 from haptify.errors import HaptifyError
-from haptify.metric_definitions import param
 from haptify.results import MetricResult, Unavailable
 from haptify.storage import SessionWriter, open_session
 from haptify.vibration import (
@@ -32,12 +32,12 @@ from haptify.figures.vibration import report_audio, report_figures
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
 
 RATE = 2000.0
-TRIM = param("vibration", "edge_trim_s")
+TRIM = vibration.PARAMETERS.edge_trim_s
 
 
 def gain(f: float) -> float:
     """Net amplitude gain of the zero-phase high-pass at f (Hz): |H|² of the Butterworth design."""
-    fc, order = param("vibration", "highpass_cutoff_hz"), param("vibration", "highpass_order")
+    fc, order = vibration.PARAMETERS.highpass_cutoff_hz, vibration.PARAMETERS.highpass_order
     return 1.0 / (1.0 + (fc / f) ** (2 * order))
 
 

@@ -17,10 +17,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import ConvexHull
 
+from haptify import volume_operator
 from haptify.compute import ComputeContext, compute_session
 from haptify.conventions import pose_apply, quat_from_axis_angle, quat_rotate
 from haptify.kinematics import configurations_from_unit, forward_positions
-from haptify.metric_definitions import param
 from haptify.results import MetricResult, Unavailable
 from haptify.session_format import Device
 from haptify.storage import SessionWriter, open_session
@@ -144,7 +144,7 @@ def test_the_lattice_is_anchored_at_the_world_origin():
     rng = np.random.default_rng(RNG_SEED)
     pts = sphere_surface(5_000, 0.05, [0.3, 0.2, 0.1], rng)
     a = volume_solid(pts)
-    k = 3 * param("workspace", "closing_coarsening")  # a whole number of coarse voxels: the same voxelisation
+    k = 3 * volume_operator.PARAMETERS.closing_coarsening  # a whole number of coarse voxels: the same voxelisation
     b = volume_solid(pts + k * a.pitch)
     np.testing.assert_array_equal(np.add(a.origin, k), b.origin)
     np.testing.assert_allclose(a.fraction, b.fraction, atol=1e-5)
@@ -468,8 +468,8 @@ def test_longest_occlusion_gap_is_the_chord_across_the_longest_gap(start, long_g
 
 # --- occlusion gaps repaired from the other repetitions (spec §8.7) --------------------------------------
 
-R_CLOSE = param("workspace", "closing_radius_m")
-SEARCH = param("workspace", "surface_search_voxels") * param("workspace", "voxel_pitch_m")
+R_CLOSE = volume_operator.PARAMETERS.closing_radius_m
+SEARCH = volume_operator.PARAMETERS.surface_search_voxels * volume_operator.PARAMETERS.voxel_pitch_m
 
 
 def test_occlusion_gaps_are_the_runs_of_occluded_rows_with_their_finite_edges():

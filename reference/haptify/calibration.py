@@ -27,10 +27,25 @@ from haptify.conventions import GRAVITY_W, STANDARD_GRAVITY, quat_conjugate, qua
 from haptify import preprocessing
 from haptify.caching import cached, session_of
 from haptify.errors import HaptifyError, fail
-from haptify.metric_definitions import param
+from haptify.metric_definitions import FamilyParameters, load_parameters
 from haptify.session_format import HandleGravityCalibration, Pose
 
 FAMILY = "calibration"
+
+
+class CalibrationParameters(FamilyParameters):
+    """The parameters of ``metrics/calibration.json`` (spec chapter 6), in the units its definition file states."""
+
+    fit_rate_hz: float
+    torque_loss: Literal["linear", "soft_l1", "huber", "cauchy", "arctan"]
+    torque_f_scale_Nm: float
+    min_coverage: float
+    offset_batches: int
+    min_samples: int
+
+
+#: The calibration family's parameters, loaded and checked once at import (spec §0.3).
+PARAMETERS = load_parameters(FAMILY, CalibrationParameters)
 
 
 @dataclass(frozen=True)
@@ -123,8 +138,8 @@ def fit_sphere(
     """
     x = np.asarray(points, dtype=float)
     x = x[np.all(np.isfinite(x), axis=1)]
-    min_samples = int(param(FAMILY, "min_samples")) if min_samples is None else min_samples
-    min_coverage = float(param(FAMILY, "min_coverage")) if min_coverage is None else min_coverage
+    min_samples = PARAMETERS.min_samples if min_samples is None else min_samples
+    min_coverage = PARAMETERS.min_coverage if min_coverage is None else min_coverage
     if len(x) < max(min_samples, 4):
         raise fail(
             Code.HANDLE_CALIBRATION_DEGENERATE,
@@ -155,7 +170,7 @@ def fit_sphere(
         )
     r = resid(np.concatenate([centre, [radius]]))
     jac = -np.column_stack([u, np.ones(len(u))])
-    cov = batch_means_covariance(jac, r, int(param(FAMILY, "offset_batches")))
+    cov = batch_means_covariance(jac, r, PARAMETERS.offset_batches)
     return SphereFit(centre=centre, radius=radius, rms=float(np.sqrt(np.mean(r**2))), coverage=coverage, covariance=cov)
 
 
@@ -201,8 +216,8 @@ def fit_torque(
     """
     tau = np.asarray(torque, float)
     L = np.asarray(load, float)
-    loss = param(FAMILY, "torque_loss") if loss is None else loss
-    f_scale = float(param(FAMILY, "torque_f_scale_Nm")) if f_scale is None else f_scale
+    loss = PARAMETERS.torque_loss if loss is None else loss
+    f_scale = PARAMETERS.torque_f_scale_Nm if f_scale is None else f_scale
     # τ = b − [L]× r  (since r × L = −L × r)
     A = np.concatenate([np.broadcast_to(np.eye(3), (len(L), 3, 3)), -_cross_matrix(L)], axis=2).reshape(-1, 6)
     y = tau.reshape(-1)
@@ -252,7 +267,7 @@ def fit_trial(ctx_or_session: Any, trial_id: str) -> HandleCalibration:
     connector-weight direction and the direction motion capture predicts) checks the rig's sensor pose.
     """
     session = session_of(ctx_or_session)
-    rate = float(param(FAMILY, "fit_rate_hz"))
+    rate = PARAMETERS.fit_rate_hz
     w = session.read(trial_id, "handle_wrench")
     a = session.read(trial_id, "handle_accel")
     t0 = max(w["t"].iloc[0], a["t"].iloc[0])
@@ -265,10 +280,10 @@ def fit_trial(ctx_or_session: Any, trial_id: str) -> HandleCalibration:
             expected="overlapping streams",
         )
     wr = preprocessing.lowpass_resample(
-        w["t"].to_numpy(), w[["fx", "fy", "fz", "tx", "ty", "tz"]].to_numpy(), grid, preprocessing.sp("wrench_cutoff_hz")
+        w["t"].to_numpy(), w[["fx", "fy", "fz", "tx", "ty", "tz"]].to_numpy(), grid, preprocessing.PARAMETERS.wrench_cutoff_hz
     )
     ac = preprocessing.lowpass_resample(
-        a["t"].to_numpy(), a[["ax", "ay", "az"]].to_numpy(), grid, preprocessing.sp("accel_cutoff_hz")
+        a["t"].to_numpy(), a[["ax", "ay", "az"]].to_numpy(), grid, preprocessing.PARAMETERS.accel_cutoff_hz
     )
     cal = fit_from_samples(wr[:, :3], wr[:, 3:], ac, source=f"trial:{trial_id}")
     if session.stream(trial_id, "handle_pose") is not None:

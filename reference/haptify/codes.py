@@ -129,6 +129,8 @@ class Code(StrEnum):
     USAGE = "E903"
     #: The viewer could not be started or did not answer (§0)
     VIEWER_UNAVAILABLE = "E904"
+    #: A definition file's parameters do not match what the implementation declares for them (a key extra or missing, or a value of the wrong type) (§0.3)
+    DEFINITION_PARAMETERS_INVALID = "E905"
     #: An unexpected internal error (§0)
     INTERNAL_ERROR = "E999"
     #: Neither a handle_gravity calibration record nor a rig.handle_calibration trial is available (§6.4)

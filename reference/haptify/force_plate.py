@@ -22,10 +22,42 @@ from haptify.codes import Code
 from haptify.conventions import quat_to_matrix
 from haptify.caching import cached, session_of
 from haptify.errors import fail
-from haptify.metric_definitions import param
+from haptify.metric_definitions import FamilyParameters, load_parameters
 from haptify.preprocessing import nominal_rate
 
 FAMILY = "rig"
+
+
+class RigParameters(FamilyParameters):
+    """The parameters of ``metrics/rig.json`` (spec chapter 14), in the units its definition file states."""
+
+    cop_min_force_N: float
+    cop_min_hold_s: float
+    cop_trim_s: float
+    impact_pre_s: float
+    impact_window_s: float
+    impact_band_low_hz: float
+    impact_band_high_fraction: float
+    zero_pad_factor: int
+    sync_max_lag_s: float
+    sync_rate_hz: float
+    sync_coarse_step_s: float
+    sync_cutoff_hz: float
+    req_plate_force_N: tuple[float, float, float]
+    req_plate_moment_Nm: tuple[float, float, float]
+    req_handle_force_N: tuple[float, float, float]
+    req_handle_torque_Nm: tuple[float, float, float]
+    req_accel_m_per_s2: tuple[float, float, float]
+    req_natural_frequency_hz: float
+    req_cop_error_m: float
+    req_calibration_rms: tuple[float, float, float]
+    req_orientation_error_deg: float
+    req_sync_offset_s: float
+
+
+#: The rig family's parameters, loaded and checked once at import (spec §0.3).
+PARAMETERS = load_parameters(FAMILY, RigParameters)
+
 CORNERS = ("c1", "c2", "c3", "c4")
 AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
 PLATE_COLUMNS = [f"{c}_{a}" for c in CORNERS for a in AXES]
@@ -78,7 +110,7 @@ def center_of_pressure(force: np.ndarray, moment: np.ndarray, min_force_N: float
     horizontal force component, because the load acts in the plane z = 0). Valid where
     ``|F_z| ≥ cop_min_force_N``; NaN elsewhere.
     """
-    min_force_N = float(param(FAMILY, "cop_min_force_N")) if min_force_N is None else min_force_N
+    min_force_N = PARAMETERS.cop_min_force_N if min_force_N is None else min_force_N
     fz = np.asarray(force, float)[:, 2]
     valid = np.abs(fz) >= min_force_N
     cop = np.full((len(fz), 2), np.nan)
@@ -163,8 +195,8 @@ def impact_window(t: np.ndarray, force: np.ndarray) -> np.ndarray:
     dev = np.linalg.norm(f - np.median(f, axis=0), axis=1)
     k = int(np.argmax(dev))
     t = np.asarray(t, float)
-    lo = t[k] - float(param(FAMILY, "impact_pre_s"))
-    hi = t[k] + float(param(FAMILY, "impact_window_s"))
+    lo = t[k] - PARAMETERS.impact_pre_s
+    hi = t[k] + PARAMETERS.impact_window_s
     return np.flatnonzero((t >= lo) & (t <= hi))
 
 
@@ -179,8 +211,8 @@ def dominant_frequency(x: np.ndarray, rate_hz: float, band_hz: tuple[float, floa
     """
     x = np.asarray(x, float) - np.mean(x)
     if band_hz is None:
-        band_hz = (float(param(FAMILY, "impact_band_low_hz")), float(param(FAMILY, "impact_band_high_fraction")) * rate_hz / 2.0)
-    nfft = int(2 ** np.ceil(np.log2(max(len(x), 2) * int(param(FAMILY, "zero_pad_factor")))))
+        band_hz = (PARAMETERS.impact_band_low_hz, PARAMETERS.impact_band_high_fraction * rate_hz / 2.0)
+    nfft = int(2 ** np.ceil(np.log2(max(len(x), 2) * PARAMETERS.zero_pad_factor)))
     mag = np.abs(np.fft.rfft(x, nfft))
     freqs = np.fft.rfftfreq(nfft, 1.0 / rate_hz)
     band = np.flatnonzero((freqs >= band_hz[0]) & (freqs <= band_hz[1]))
@@ -231,8 +263,8 @@ def placements(
     the trimmed span; its mocap position the mean of ``marker_xy`` (the centroid of the weight's
     markers, x and y) over the samples in the same span that are not NaN. Error = Euclidean distance.
     """
-    hold = float(param(FAMILY, "cop_min_hold_s"))
-    trim = float(param(FAMILY, "cop_trim_s"))
+    hold = PARAMETERS.cop_min_hold_s
+    trim = PARAMETERS.cop_trim_s
     t = np.asarray(t, float)
     edges = np.flatnonzero(np.diff(np.r_[0, np.asarray(cop_valid).astype(int), 0]))
     out = []
@@ -265,7 +297,7 @@ def cop_trial_placements(ctx_or_session: Any, trial_id: str) -> list[Placement]:
         raise fail(
             Code.COP_PLACEMENTS_NOT_FOUND,
             f"trial {trial_id!r}: no static placement of the weight found",
-            expected=f"loads of |Fz| >= {param(FAMILY, 'cop_min_force_N')} N held >= {param(FAMILY, 'cop_min_hold_s')} s with visible markers",
+            expected=f"loads of |Fz| >= {PARAMETERS.cop_min_force_N} N held >= {PARAMETERS.cop_min_hold_s} s with visible markers",
             found="none",
         )
     return found

@@ -13,13 +13,14 @@ from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 
+from haptify import preprocessing
 from haptify.caching import cached
 from haptify.codes import Code
 from haptify.errors import fail
 from haptify.force_plate import plate_signals
-from haptify.metric_definitions import param
+from haptify.metric_definitions import FamilyParameters, load_parameters
 from haptify.repetitions import TrialValue, aggregate, no_trials, per_trial, unavailable
-from haptify.preprocessing import MocapTrack, lowpass_resample, mocap_track, segment_interior, sp, uniform_grid
+from haptify.preprocessing import MocapTrack, lowpass_resample, mocap_track, segment_interior, uniform_grid
 from haptify.signals import handle_signals
 
 if TYPE_CHECKING:
@@ -33,9 +34,19 @@ SPEED_IDS = ("free_space.speed_mean", "free_space.angular_speed_mean")
 PLATE_ID = "free_space.plate_force_mean"
 
 
-def fp(key: str) -> Any:
-    """A parameter of the free-space family (spec §9.1)."""
-    return param(FAMILY, key)
+class FreeSpaceParameters(FamilyParameters):
+    """The parameters of ``metrics/free_space.json`` (spec chapter 9), in the units its definition file states."""
+
+    speed_limit_m_per_s: float
+    angular_speed_limit_rad_per_s: float
+    angular_speed_settle_s: float
+    max_fraction_over_limit: float
+    force_field_bin_m: float
+    force_field_min_samples: int
+
+
+#: The free_space family's parameters, loaded and checked once at import (spec §0.3).
+PARAMETERS = load_parameters(FAMILY, FreeSpaceParameters)
 
 
 def magnitude_stats(force: np.ndarray) -> dict[str, float]:
@@ -83,8 +94,8 @@ def force_field(
 ) -> ForceField:
     """Bin ``force (N, 3)`` by ``position (N, 3)`` on the W-anchored lattice of edge ``force_field_bin_m`` and
     average each bin holding at least ``force_field_min_samples`` samples (spec §9.5); bins sorted by index."""
-    b = float(fp("force_field_bin_m") if bin_m is None else bin_m)
-    k_min = int(fp("force_field_min_samples") if min_samples is None else min_samples)
+    b = float(PARAMETERS.force_field_bin_m if bin_m is None else bin_m)
+    k_min = int(PARAMETERS.force_field_min_samples if min_samples is None else min_samples)
     position = np.asarray(position, dtype=float)
     force = np.asarray(force, dtype=float)
     if len(position) == 0:
@@ -128,8 +139,8 @@ def plate_force_samples(ctx: ComputeContext, trial_id: str) -> tuple[np.ndarray,
 
     def build() -> tuple[np.ndarray, np.ndarray]:
         plate = plate_signals(ctx, trial_id)
-        grid = uniform_grid(float(plate.t[0]), float(plate.t[-1]), float(sp("rate_hz")))
-        return grid, lowpass_resample(plate.t, plate.force, grid, float(sp("wrench_cutoff_hz")))
+        grid = uniform_grid(float(plate.t[0]), float(plate.t[-1]), preprocessing.PARAMETERS.rate_hz)
+        return grid, lowpass_resample(plate.t, plate.force, grid, preprocessing.PARAMETERS.wrench_cutoff_hz)
 
     return cached(ctx, ("free_space_plate", trial_id), build)
 
@@ -138,7 +149,7 @@ def speed_samples(track: MocapTrack) -> tuple[np.ndarray, np.ndarray]:
     """Masks of the samples of a processed track (spec §7.4) that ``speed_mean`` and ``angular_speed_mean``
     average (spec §9.4): the usable ones, and of those the ones ``angular_speed_settle_s`` inside their segment."""
     ok = track.valid & np.all(np.isfinite(track.velocity), axis=1) & np.all(np.isfinite(track.angular_velocity), axis=1)
-    return ok, ok & segment_interior(track, float(fp("angular_speed_settle_s")))
+    return ok, ok & segment_interior(track, PARAMETERS.angular_speed_settle_s)
 
 
 def speeds(ctx: ComputeContext, trial_id: str) -> tuple[np.ndarray, np.ndarray]:
@@ -172,15 +183,15 @@ def _speed_summary(ctx: ComputeContext, trial_id: str) -> SpeedSummary:
         "speed": float(v.mean()),
         "angular": float(w.mean()) if len(w) else None,
         "codes": [],
-        "over_speed": exceedance(v, float(fp("speed_limit_m_per_s"))),
-        "over_angular": exceedance(w, float(fp("angular_speed_limit_rad_per_s"))),
+        "over_speed": exceedance(v, PARAMETERS.speed_limit_m_per_s),
+        "over_angular": exceedance(w, PARAMETERS.angular_speed_limit_rad_per_s),
     }
-    limit = float(fp("max_fraction_over_limit"))
+    limit = PARAMETERS.max_fraction_over_limit
     if out["over_speed"] > limit:
         out["codes"].append(Code.SPEED_ABOVE_PROTOCOL)
         ctx.warn(
             Code.SPEED_ABOVE_PROTOCOL,
-            f"trial {trial_id!r}: {out['over_speed']:.0%} of the samples exceed {fp('speed_limit_m_per_s')} m/s",
+            f"trial {trial_id!r}: {out['over_speed']:.0%} of the samples exceed {PARAMETERS.speed_limit_m_per_s} m/s",
             metric="free_space.speed_mean",
             trial=trial_id,
         )
@@ -189,7 +200,7 @@ def _speed_summary(ctx: ComputeContext, trial_id: str) -> SpeedSummary:
         ctx.warn(
             Code.ANGULAR_SPEED_ABOVE_PROTOCOL,
             f"trial {trial_id!r}: {out['over_angular']:.0%} of the samples exceed "
-            f"{np.degrees(float(fp('angular_speed_limit_rad_per_s'))):.3g} deg/s",
+            f"{np.degrees(PARAMETERS.angular_speed_limit_rad_per_s):.3g} deg/s",
             metric="free_space.angular_speed_mean",
             trial=trial_id,
         )
@@ -199,7 +210,7 @@ def _speed_summary(ctx: ComputeContext, trial_id: str) -> SpeedSummary:
 def _angular_of(summary: SpeedSummary, trial_id: str) -> float:
     """A trial's mean angular speed (rad/s), or E611 when no segment is long enough to settle (spec §9.4)."""
     if summary["angular"] is None:
-        settle = fp("angular_speed_settle_s")
+        settle = PARAMETERS.angular_speed_settle_s
         raise fail(
             Code.MOTION_CAPTURE_UNUSABLE,
             f"trial {trial_id!r}: no motion-capture segment reaches {settle} s past both of its ends",

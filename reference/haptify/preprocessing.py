@@ -30,15 +30,28 @@ from haptify.caching import cached, session_of
 from haptify.codes import Code
 from haptify.conventions import quat_conjugate, quat_multiply, quat_normalize, quat_slerp
 from haptify.errors import fail
-from haptify.metric_definitions import param
+from haptify.metric_definitions import FamilyParameters, load_parameters
 
 FAMILY = "signals"
 POSE_COLUMNS = ["px", "py", "pz", "qw", "qx", "qy", "qz"]
 
 
-def sp(key: str) -> Any:
-    """A parameter of the signals family (spec §7.1)."""
-    return param(FAMILY, key)
+class SignalsParameters(FamilyParameters):
+    """The parameters of ``metrics/signals.json`` (spec chapter 7), in the units its definition file states."""
+
+    rate_hz: float
+    filter_order: int
+    wrench_cutoff_hz: float
+    accel_cutoff_hz: float
+    mocap_cutoff_hz: float
+    angular_velocity_cutoff_hz: float
+    max_cutoff_fraction: float
+    max_gap_s: float
+    min_segment_s: float
+
+
+#: The signals family's parameters, loaded and checked once at import (spec §0.3).
+PARAMETERS = load_parameters(FAMILY, SignalsParameters)
 
 
 # --- primitives (spec §7.2) ----------------------------------------------------------------------
@@ -61,7 +74,7 @@ def uniform_grid(t0: float, t1: float, rate_hz: float) -> np.ndarray:
 def effective_cutoff(cutoff_hz: float, *rates_hz: float) -> float:
     """``cutoff_hz`` lowered to ``max_cutoff_fraction`` of the lowest Nyquist frequency among ``rates_hz`` (Hz).
     Spec §7.2."""
-    frac = float(sp("max_cutoff_fraction"))
+    frac = PARAMETERS.max_cutoff_fraction
     return float(min([cutoff_hz] + [frac * r / 2.0 for r in rates_hz if np.isfinite(r)]))
 
 
@@ -77,7 +90,7 @@ def lowpass(x: np.ndarray, rate_hz: float, cutoff_hz: float, *, order: int | Non
     x = np.asarray(x, float)
     if len(x) < 2:  # nothing to filter; also no rate (nominal_rate of one sample is inf)
         return x.copy()
-    order = int(sp("filter_order")) if order is None else order
+    order = PARAMETERS.filter_order if order is None else order
     sos = butter_lowpass(order, effective_cutoff(cutoff_hz, rate_hz), rate_hz)
     padlen = min(3 * (2 * len(sos) + 1), len(x) - 1)
     ramp = np.linspace(0.0, 1.0, len(x)).reshape((-1,) + (1,) * (x.ndim - 1))
@@ -186,7 +199,7 @@ def bridge_gaps(
     ``t_j − t_i ≤ max_gap_s + Δ`` (Δ the median sample interval): position linearly, orientation by
     slerp. Returns the filled position, quaternion and the validity mask after bridging.
     """
-    max_gap_s = float(sp("max_gap_s")) if max_gap_s is None else max_gap_s
+    max_gap_s = PARAMETERS.max_gap_s if max_gap_s is None else max_gap_s
     t = np.asarray(t, float)
     pos = np.array(position, float)
     quat = np.array(quaternion, float)
@@ -208,7 +221,7 @@ def bridge_gaps(
 def segments_of(t: np.ndarray, ok: np.ndarray, min_segment_s: float | None = None) -> np.ndarray:
     """Segment index per sample: maximal runs of ``ok`` lasting at least ``min_segment_s``, else −1.
     ``min_segment_s`` in s; spec §7.4 step 3."""
-    min_segment_s = float(sp("min_segment_s")) if min_segment_s is None else min_segment_s
+    min_segment_s = PARAMETERS.min_segment_s if min_segment_s is None else min_segment_s
     seg = np.full(len(ok), -1)
     edges = np.flatnonzero(np.diff(np.r_[0, ok.astype(int), 0]))
     k = 0
@@ -227,7 +240,7 @@ def process_mocap(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray) -
     n = len(t)
     out_p, out_q = np.full((n, 3), np.nan), np.full((n, 4), np.nan)
     out_v, out_w = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
-    fc, fc_w = float(sp("mocap_cutoff_hz")), float(sp("angular_velocity_cutoff_hz"))
+    fc, fc_w = PARAMETERS.mocap_cutoff_hz, PARAMETERS.angular_velocity_cutoff_hz
     for k in range(seg.max() + 1 if n else 0):
         m = np.flatnonzero(seg == k)
         ts = t[m]
@@ -332,7 +345,7 @@ def pose_on_grid(ctx_or_session: Any, trial_id: str, grid: np.ndarray) -> PoseOn
             Code.MOTION_CAPTURE_UNUSABLE,
             f"trial {trial_id!r}: no usable motion-capture samples in the analysed time span",
             file=stream.file if stream else None,
-            expected=f"valid runs of at least {sp('min_segment_s')} s",
+            expected=f"valid runs of at least {PARAMETERS.min_segment_s} s",
             found="none",
         )
     return out

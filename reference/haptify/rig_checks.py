@@ -17,7 +17,7 @@ from haptify.codes import Code
 from haptify.conventions import quat_to_matrix
 from haptify.caching import session_of
 from haptify.errors import HaptifyError, fail
-from haptify.metric_definitions import family, param
+from haptify.metric_definitions import family
 from haptify.repetitions import TrialValue, aggregate, definition_of, protocol_trials, unavailable
 from haptify.results import MetricResult, Unavailable
 
@@ -25,11 +25,6 @@ if TYPE_CHECKING:
     from haptify.context import ComputeContext
 
 FAMILY = "rig"
-
-
-def rp(key: str) -> Any:
-    """A parameter of the rig family (units as its definition says; spec §14.7)."""
-    return param(FAMILY, key)
 
 
 # --- per-trial computations --------------------------------------------------------------------
@@ -120,11 +115,11 @@ def recorder_delays(ctx_or_session: Any, trial_id: str) -> dict[str, float]:
             Code.MOTION_CAPTURE_UNUSABLE,
             f"trial {trial_id!r}: no usable motion-capture samples to align with the F/T recorder",
             file=stream.file if stream else None,
-            expected=f"valid runs of at least {preprocessing.sp('min_segment_s')} s",
+            expected=f"valid runs of at least {preprocessing.PARAMETERS.min_segment_s} s",
             found="none",
         )
-    rate = float(rp("sync_rate_hz"))
-    max_lag = float(rp("sync_max_lag_s"))
+    rate = force_plate.PARAMETERS.sync_rate_hz
+    max_lag = force_plate.PARAMETERS.sync_max_lag_s
     t0 = max(w["t"].iloc[0], a["t"].iloc[0], track.t[0]) + max_lag
     t1 = min(w["t"].iloc[-1], a["t"].iloc[-1], track.t[-1]) - max_lag
     grid = preprocessing.uniform_grid(float(t0), float(t1), rate)
@@ -137,7 +132,7 @@ def recorder_delays(ctx_or_session: Any, trial_id: str) -> dict[str, float]:
         )
     r_hs = calibration.sensor_rotation(session, "ft_sensor")
     r_ha = calibration.sensor_rotation(session, "accelerometer")
-    fc = float(rp("sync_cutoff_hz"))
+    fc = force_plate.PARAMETERS.sync_cutoff_hz
     f_grid = preprocessing.lowpass_resample(w["t"].to_numpy(), w[["fx", "fy", "fz"]].to_numpy(), grid, fc)
     u_f = _gravity_dirs_h(f_grid, cal.force_bias_N, r_hs, 1.0)
     t_a = a["t"].to_numpy()
@@ -155,7 +150,7 @@ def recorder_delays(ctx_or_session: Any, trial_id: str) -> dict[str, float]:
         u /= np.sqrt(_row_sums(u * u))[:, None]
         return float(np.nanmean(_row_sums(u_f * u)))
 
-    coarse, fine = float(rp("sync_coarse_step_s")), 1.0 / rate
+    coarse, fine = force_plate.PARAMETERS.sync_coarse_step_s, 1.0 / rate
     return {
         "accel_minus_ft_s": _best_lag(score_accel, max_lag, coarse, fine, f"trial {trial_id!r} accelerometer"),
         "mocap_minus_ft_s": _best_lag(score_mocap, max_lag, coarse, fine, f"trial {trial_id!r} motion capture"),
@@ -351,8 +346,8 @@ def _range_checks(session: Any, ctx: ComputeContext) -> list[Check]:
             note = f"vertical range reduced by the plate's own weight {abs(float(f[0, 2])):.1f} N"
         except HaptifyError:
             note = "plate weight unknown (no bias); vertical range not reduced by it"
-        req_f = np.asarray(rp("req_plate_force_N"), float)
-        req_m = np.asarray(rp("req_plate_moment_Nm"), float)
+        req_f = np.asarray(force_plate.PARAMETERS.req_plate_force_N, float)
+        req_m = np.asarray(force_plate.PARAMETERS.req_plate_moment_Nm, float)
         out.append(
             Check(
                 "plate force range (Table I)",
@@ -375,27 +370,27 @@ def _range_checks(session: Any, ctx: ComputeContext) -> list[Check]:
         (
             "handle F/T force range (Table I)",
             handle and handle.ft_sensor.range and handle.ft_sensor.range.force_N,
-            "req_handle_force_N",
+            force_plate.PARAMETERS.req_handle_force_N,
             "N",
             "FAIL",
         ),
         (
             "handle F/T torque range (Table I)",
             handle and handle.ft_sensor.range and handle.ft_sensor.range.torque_Nm,
-            "req_handle_torque_Nm",
+            force_plate.PARAMETERS.req_handle_torque_Nm,
             "N*m",
             "WARN",
         ),
         (
             "accelerometer range (Table I)",
             handle and handle.accelerometer.range and handle.accelerometer.range.accel_m_per_s2,
-            "req_accel_m_per_s2",
+            force_plate.PARAMETERS.req_accel_m_per_s2,
             "m/s^2",
             "FAIL",
         ),
     ]
-    for name, rng, key, unit, shortfall in items:
-        req = float(np.max(rp(key)))
+    for name, rng, requirement, unit, shortfall in items:
+        req = float(np.max(requirement))
         if not rng:
             out.append(Check(name, "SKIP", None, f">= {req} {unit} on every axis", "the rig does not describe this range"))
             continue
@@ -421,9 +416,9 @@ def check_rig(ctx: ComputeContext) -> list[Check]:
     """Every rig-check line for the session of ``ctx`` (a ComputeContext; spec §14.8): Table I ranges, plate
     natural frequency, COP error, calibration residuals and sensor pose, recorder synchronisation."""
     results = {mid: _safe_metric(ctx, mid) for mid in METRIC_STEPS}
-    fmin, cmax = float(rp("req_natural_frequency_hz")), float(rp("req_cop_error_m"))
-    rmax = [float(x) for x in rp("req_calibration_rms")]
-    omax, smax = float(rp("req_orientation_error_deg")), float(rp("req_sync_offset_s"))
+    fmin, cmax = force_plate.PARAMETERS.req_natural_frequency_hz, force_plate.PARAMETERS.req_cop_error_m
+    rmax = [float(x) for x in force_plate.PARAMETERS.req_calibration_rms]
+    omax, smax = force_plate.PARAMETERS.req_orientation_error_deg, force_plate.PARAMETERS.req_sync_offset_s
     # (metric, line name, requirement, pass?, shown value, why the line is skipped although the metric exists)
     lines: list[tuple[str, str, str, Callable[[Any], bool], Callable[[Any], Any], Callable[[Any], str | None]]] = [
         (

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from haptify import preprocessing
 from haptify import calibration as cal_mod
 from haptify.caching import cached, session_of
 from haptify.codes import Code
@@ -23,7 +24,6 @@ from haptify.preprocessing import (
     nominal_rate,
     orientation_at,
     pose_on_grid,
-    sp,
     uniform_grid,
 )
 
@@ -92,14 +92,14 @@ def build_handle_signals(ctx_or_session: Any, trial_id: str, rate_hz: float, cal
         cal = calibration if calibration is not None else cal_mod.handle_calibration(session)
     if "handle_wrench" in streams:
         w = streams["handle_wrench"]
-        raw = lowpass_resample(w["t"].to_numpy(), w[WRENCH_COLUMNS].to_numpy(), grid, float(sp("wrench_cutoff_hz")))
+        raw = lowpass_resample(w["t"].to_numpy(), w[WRENCH_COLUMNS].to_numpy(), grid, preprocessing.PARAMETERS.wrench_cutoff_hz)
         force, torque = np.full((len(grid), 3), np.nan), np.full((len(grid), 3), np.nan)
         force[v], torque[v] = cal_mod.compensate_wrench(
             raw[v], pose.quaternion[v], cal, cal_mod.sensor_pose(session, "ft_sensor")
         )
     if "handle_accel" in streams:
         a = streams["handle_accel"]
-        raw = lowpass_resample(a["t"].to_numpy(), a[ACCEL_COLUMNS].to_numpy(), grid, float(sp("accel_cutoff_hz")))
+        raw = lowpass_resample(a["t"].to_numpy(), a[ACCEL_COLUMNS].to_numpy(), grid, preprocessing.PARAMETERS.accel_cutoff_hz)
         accel = np.full((len(grid), 3), np.nan)
         accel[v] = cal_mod.compensate_accel(raw[v], pose.quaternion[v], cal, cal_mod.sensor_pose(session, "accelerometer"))
     return HandleSignals(
@@ -125,7 +125,7 @@ def handle_signals(ctx_or_session: Any, trial_id: str, rate_hz: float | None = N
     and calibrated with the session's handle calibration (§6.4–6.6); motion capture as in §7.4.
     Cached on a ComputeContext under ``("handle_signals", trial_id, rate_hz)``.
     """
-    rate = float(sp("rate_hz")) if rate_hz is None else float(rate_hz)
+    rate = preprocessing.PARAMETERS.rate_hz if rate_hz is None else float(rate_hz)
     session = session_of(ctx_or_session)
 
     def build() -> HandleSignals:

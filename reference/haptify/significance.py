@@ -7,8 +7,9 @@ import math
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
+from haptify import uncertainty
 from haptify.results import MetricResult, MetricUncertainty
-from haptify.uncertainty import coverage_factor, scalar, up, welch_satterthwaite
+from haptify.uncertainty import coverage_factor, scalar, welch_satterthwaite
 
 
 @dataclass
@@ -40,7 +41,7 @@ def welch_difference(
     x_a: float, u_a: float, dof_a: float | None, x_b: float, u_b: float, dof_b: float | None, p: float | None = None
 ) -> Difference:
     """The test of spec §19.6 on two values with their standard uncertainties and degrees of freedom (None: ∞)."""
-    p = float(up("coverage_probability")) if p is None else p
+    p = uncertainty.PARAMETERS.coverage_probability if p is None else p
     dofs = [math.inf if d is None else d for d in (dof_a, dof_b)]
     nu = float(welch_satterthwaite([u_a, u_b], dofs))
     return Difference(d=x_a - x_b, u=math.hypot(u_a, u_b), dof=None if math.isinf(nu) else nu, k=coverage_factor(nu, p))

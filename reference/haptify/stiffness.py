@@ -12,7 +12,7 @@ settled loading force its peak. Parameters: ``schemas/<v>/metrics/stiffness.json
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -20,7 +20,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from haptify.caching import cached
 from haptify.codes import Code
 from haptify.errors import fail
-from haptify.metric_definitions import param
+from haptify.metric_definitions import FamilyParameters, load_parameters
 from haptify.repetitions import TrialValue, aggregate, protocol_trials
 from haptify.surface import contact_signals
 
@@ -33,9 +33,20 @@ PROTOCOL = "stiffness"
 IDS = ("stiffness.measured", "stiffness.accuracy", "stiffness.peak_force")
 
 
-def stp(key: str) -> Any:
-    """A parameter of the stiffness family (spec §13.1)."""
-    return param(FAMILY, key)
+class StiffnessParameters(FamilyParameters):
+    """The parameters of ``metrics/stiffness.json`` (spec chapter 13), in the units its definition file states."""
+
+    min_press_s: float
+    min_press_depth_m: float
+    contact_settle_s: float
+    rise_hold_s: float
+    fit_high_fraction: float
+    min_fit_samples: int
+    recommended_presses: int
+
+
+#: The stiffness family's parameters, loaded and checked once at import (spec §0.3).
+PARAMETERS = load_parameters(FAMILY, StiffnessParameters)
 
 
 @dataclass(frozen=True)
@@ -58,12 +69,12 @@ class FitRule:
     def at_rate(cls, rate_hz: float) -> "FitRule":
         """The rule of the definition file on a grid of ``rate_hz`` (Hz)."""
         return cls(
-            min_press_s=float(stp("min_press_s")),
-            min_press_depth_m=float(stp("min_press_depth_m")),
-            settle=round(float(stp("contact_settle_s")) * rate_hz),
-            hold=round(float(stp("rise_hold_s")) * rate_hz),
-            high=float(stp("fit_high_fraction")),
-            min_samples=int(stp("min_fit_samples")),
+            min_press_s=PARAMETERS.min_press_s,
+            min_press_depth_m=PARAMETERS.min_press_depth_m,
+            settle=round(PARAMETERS.contact_settle_s * rate_hz),
+            hold=round(PARAMETERS.rise_hold_s * rate_hz),
+            high=PARAMETERS.fit_high_fraction,
+            min_samples=PARAMETERS.min_fit_samples,
         )
 
 
@@ -267,11 +278,11 @@ def trial_codes(ctx: ComputeContext, trial_id: str, fit: StiffnessFit) -> list[s
     """W414 (too few qualifying presses) and W415 (presses with too few fit samples) for one trial, each
     also recorded on ``ctx`` (spec §13.2–13.3)."""
     codes: list[str] = []
-    if len(fit.presses) < int(stp("recommended_presses")):
+    if len(fit.presses) < PARAMETERS.recommended_presses:
         codes.append(Code.FEW_PRESSES)
         ctx.warn(
             Code.FEW_PRESSES,
-            f"trial {trial_id!r}: {len(fit.presses)} press(es) qualified, {stp('recommended_presses')} recommended",
+            f"trial {trial_id!r}: {len(fit.presses)} press(es) qualified, {PARAMETERS.recommended_presses} recommended",
             metric="stiffness.measured",
             trial=trial_id,
         )
@@ -280,7 +291,7 @@ def trial_codes(ctx: ComputeContext, trial_id: str, fit: StiffnessFit) -> list[s
         where = ", ".join(f"sample {p.start} ({len(p.fit)} fit samples)" for p in fit.thin)
         ctx.warn(
             Code.PRESS_TOO_FAST,
-            f"trial {trial_id!r}: {len(fit.thin)} press(es) left out with fewer than {stp('min_fit_samples')} "
+            f"trial {trial_id!r}: {len(fit.thin)} press(es) left out with fewer than {PARAMETERS.min_fit_samples} "
             f"fit samples: {where}",
             metric="stiffness.measured",
             trial=trial_id,

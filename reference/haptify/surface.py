@@ -16,7 +16,7 @@ import numpy as np
 from haptify.caching import cached, session_of
 from haptify.codes import Code
 from haptify.errors import fail
-from haptify.metric_definitions import param
+from haptify.metric_definitions import FamilyParameters, load_parameters
 from haptify.repetitions import TrialValue, aggregate, protocol_trials
 from haptify.preprocessing import interp_columns
 from haptify.signals import handle_signals
@@ -31,9 +31,15 @@ IDS = ("surface.planar_force_mean", "surface.planar_force_sd")
 FORCE_COLUMNS = ["fx", "fy", "fz"]
 
 
-def sfp(key: str) -> Any:
-    """A parameter of the surface family (spec §12.1)."""
-    return param(FAMILY, key)
+class SurfaceParameters(FamilyParameters):
+    """The parameters of ``metrics/surface.json`` (spec chapter 12), in the units its definition file states."""
+
+    contact_force_threshold_N: float
+    contact_guard_s: float
+
+
+#: The surface family's parameters, loaded and checked once at import (spec §0.3).
+PARAMETERS = load_parameters(FAMILY, SurfaceParameters)
 
 
 def unit_normal(normal: Any, trial_id: str = "") -> np.ndarray:
@@ -61,12 +67,12 @@ def planar_force(force: np.ndarray, normal: np.ndarray) -> np.ndarray:
 
 def contact_of(commanded_normal_force: np.ndarray) -> np.ndarray:
     """Contact where the commanded force along the outward normal exceeds ``contact_force_threshold_N`` (spec §12.2)."""
-    return np.asarray(commanded_normal_force, dtype=float) > float(sfp("contact_force_threshold_N"))
+    return np.asarray(commanded_normal_force, dtype=float) > PARAMETERS.contact_force_threshold_N
 
 
 def guarded(t_cmd: np.ndarray, contact: np.ndarray, t_grid: np.ndarray, guard_s: float | None = None) -> np.ndarray:
     """True at grid times t whose window [t − g, t + g] holds commanded samples, all in contact (spec §12.2)."""
-    g = float(sfp("contact_guard_s") if guard_s is None else guard_s)
+    g = float(PARAMETERS.contact_guard_s if guard_s is None else guard_s)
     t_cmd = np.asarray(t_cmd, dtype=float)
     t_grid = np.asarray(t_grid, dtype=float)
     out_of_contact = np.r_[0, np.cumsum(~np.asarray(contact, dtype=bool))]
@@ -177,7 +183,7 @@ def _trial(ctx: ComputeContext, trial_id: str) -> dict[str, Any]:
         raise fail(
             Code.NO_CONTACT,
             f"trial {trial_id!r}: no sample is in contact with the rendered surface "
-            f"(commanded normal force above {sfp('contact_force_threshold_N')} N for ± {sfp('contact_guard_s')} s)",
+            f"(commanded normal force above {PARAMETERS.contact_force_threshold_N} N for ± {PARAMETERS.contact_guard_s} s)",
             expected=">= 2 contact samples",
             found=int(cs.used.sum()),
         )

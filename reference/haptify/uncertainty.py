@@ -23,10 +23,11 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 from scipy import stats
 
+from haptify import preprocessing
 from haptify import schemas
 from haptify.families import family_module
-from haptify.metric_definitions import Parameter
-from haptify.preprocessing import lowpass_resample, sp
+from haptify.metric_definitions import FamilyParameters, Parameter, validate_parameters
+from haptify.preprocessing import lowpass_resample
 from haptify.results import BudgetTerm, MetricResult, MetricUncertainty, ResultsFile, UncorrectedBias, Value
 
 
@@ -97,9 +98,18 @@ def definitions() -> UncertaintyDefinitions:
     return UncertaintyDefinitions.model_validate(schemas.load("uncertainty.json"))
 
 
-def up(key: str) -> Any:
-    """A parameter of ``uncertainty.json`` (spec §19.1)."""
-    return definitions().parameters[key].value
+class UncertaintyParameters(FamilyParameters):
+    """The parameters of ``uncertainty.json`` (spec §19.1), in the units its definition file states."""
+
+    coverage_probability: float
+    mc_draws: int
+    mc_seed: int
+    noise_bias_draws: int
+    min_noise_differences: int
+
+
+#: The uncertainty family's parameters, loaded and checked once at import (spec §0.3).
+PARAMETERS = validate_parameters(definitions().parameters, UncertaintyParameters, "uncertainty.json")
 
 
 def method_of(metric_id: str) -> MetricMethod:
@@ -360,7 +370,9 @@ def force_noise(t: np.ndarray, native_rate_hz: float, draws: int, rng: np.random
     the force (§7.2, :func:`lowpass_resample`), scaled by its sample standard deviation (spec §19.3)."""
     pad = 0.5  # s either side: the filter's start-up lies outside t
     t_src = np.arange(t[0] - pad, t[-1] + pad, 1.0 / native_rate_hz)
-    e: np.ndarray = lowpass_resample(t_src, rng.standard_normal((len(t_src), draws)), t, float(sp("wrench_cutoff_hz")))
+    e: np.ndarray = lowpass_resample(
+        t_src, rng.standard_normal((len(t_src), draws)), t, preprocessing.PARAMETERS.wrench_cutoff_hz
+    )
     return e / float(e.std())
 
 
@@ -405,7 +417,7 @@ def track_noise_sd(position: np.ndarray) -> np.ndarray:
     times the sample interval cubed). NaN per axis with fewer than ``min_noise_differences`` differences."""
     d3 = np.diff(np.asarray(position, dtype=float), n=3, axis=0)
     d3 = d3[np.all(np.isfinite(d3), axis=1)]
-    if len(d3) < int(up("min_noise_differences")):
+    if len(d3) < PARAMETERS.min_noise_differences:
         return np.full(3, math.nan)
     mad = np.median(np.abs(d3 - np.median(d3, axis=0)), axis=0)
     sd: np.ndarray = 1.4826 * mad / math.sqrt(20.0)
@@ -456,7 +468,7 @@ def bias_estimate(
     if name == "noise_maximum":
         return noise_maximum_bias(ctx, results, result, rng, draws)
     if name == "mocap_noise":
-        return mocap_noise_bias(ctx, result, int(up("noise_bias_draws")), seed)
+        return mocap_noise_bias(ctx, result, PARAMETERS.noise_bias_draws, seed)
     return None
 
 
@@ -489,9 +501,9 @@ def attach(ctx: Any, results: ResultsFile, *, draws: int | None = None, seed: in
     inputs are drawn once for the session; the metrics with the same sources share one Monte Carlo run
     (their families recomputed once per draw). A metric that a draw leaves unavailable uses the others.
     """
-    p = float(up("coverage_probability"))
-    m = int(up("mc_draws") if draws is None else draws)
-    seed = int(up("mc_seed") if seed is None else seed)
+    p = PARAMETERS.coverage_probability
+    m = int(PARAMETERS.mc_draws if draws is None else draws)
+    seed = int(PARAMETERS.mc_seed if seed is None else seed)
     eligible = [r for r in results.metrics if method_of(r.id).method != "none" and r.sd is not None]
     mc = [r for r in eligible if method_of(r.id).method == "type_a_mc"]
     inputs, missing = session_inputs(ctx, results, sorted({s for r in mc for s in method_of(r.id).sources}))

@@ -16,7 +16,7 @@ from scipy.signal import butter, sosfiltfilt
 from haptify.caching import cached, session_of
 from haptify.codes import Code
 from haptify.errors import fail
-from haptify.metric_definitions import param
+from haptify.metric_definitions import FamilyParameters, load_parameters
 from haptify.repetitions import TrialValue, aggregate, protocol_trials
 from haptify.preprocessing import nominal_rate
 
@@ -32,9 +32,17 @@ GROUPS = {  # protocol → (rms id, centroid id)
 }
 
 
-def vp(key: str) -> Any:
-    """A parameter of the vibration family (spec §10.1)."""
-    return param(FAMILY, key)
+class VibrationParameters(FamilyParameters):
+    """The parameters of ``metrics/vibration.json`` (spec §10.1), in the units its definition file states."""
+
+    highpass_cutoff_hz: float
+    highpass_order: int
+    edge_trim_s: float
+    min_duration_s: float
+
+
+#: The vibration family's parameters, loaded and checked once at import (spec §0.3).
+PARAMETERS = load_parameters(FAMILY, VibrationParameters)
 
 
 def highpass(x: np.ndarray, rate_hz: float) -> np.ndarray:
@@ -44,7 +52,7 @@ def highpass(x: np.ndarray, rate_hz: float) -> np.ndarray:
     near zero); then a Butterworth design of ``highpass_order`` with cut-off ``highpass_cutoff_hz`` runs
     forward and backward (``scipy.signal.sosfiltfilt``, default odd padding). Units are kept.
     """
-    fc = float(vp("highpass_cutoff_hz"))
+    fc = PARAMETERS.highpass_cutoff_hz
     if not rate_hz > 2.0 * fc:
         raise fail(
             Code.SIGNAL_TOO_SHORT,
@@ -52,7 +60,7 @@ def highpass(x: np.ndarray, rate_hz: float) -> np.ndarray:
             expected=f"rate > {2 * fc:g} Hz",
             found=rate_hz,
         )
-    sos = butter(int(vp("highpass_order")), fc, btype="highpass", fs=rate_hz, output="sos")
+    sos = butter(PARAMETERS.highpass_order, fc, btype="highpass", fs=rate_hz, output="sos")
     x = np.asarray(x, dtype=float)
     return sosfiltfilt(sos, x - x.mean(axis=0), axis=0)
 
@@ -130,14 +138,14 @@ def combine(t: np.ndarray, accel: np.ndarray, trial_id: str = "") -> CombinedVib
     t = np.asarray(t, dtype=float)
     rate = nominal_rate(t)
     # the length is checked before filtering: a short signal is E316, not the filter's padding error
-    trim = int(round(float(vp("edge_trim_s")) * rate)) if np.isfinite(rate) else len(t)
-    if len(t) - 2 * trim < 1 or (len(t) - 2 * trim) / rate < float(vp("min_duration_s")):
+    trim = int(round(PARAMETERS.edge_trim_s * rate)) if np.isfinite(rate) else len(t)
+    if len(t) - 2 * trim < 1 or (len(t) - 2 * trim) / rate < PARAMETERS.min_duration_s:
         duration = float(t[-1] - t[0]) if len(t) else 0.0
         raise fail(
             Code.SIGNAL_TOO_SHORT,
             f"trial {trial_id!r}: {duration:.3g} s of acceleration leave less than "
-            f"{vp('min_duration_s')} s after trimming {vp('edge_trim_s')} s at each end",
-            expected=f">= {2 * float(vp('edge_trim_s')) + float(vp('min_duration_s'))} s",
+            f"{PARAMETERS.min_duration_s} s after trimming {PARAMETERS.edge_trim_s} s at each end",
+            expected=f">= {2 * PARAMETERS.edge_trim_s + PARAMETERS.min_duration_s} s",
             found=duration,
         )
     filtered = highpass(accel, rate)

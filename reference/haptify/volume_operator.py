@@ -8,7 +8,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any
 
 import numpy as np
 from scipy import ndimage as ndi
@@ -16,14 +15,36 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from haptify.codes import Code
 from haptify.errors import fail
-from haptify.metric_definitions import param
+from haptify.metric_definitions import FamilyParameters, load_parameters
 
 FAMILY = "workspace"
 
 
-def wp(key: str) -> Any:
-    """A parameter of the workspace family (spec §8.1)."""
-    return param(FAMILY, key)
+class WorkspaceParameters(FamilyParameters):
+    """The parameters of ``metrics/workspace.json`` (spec chapter 8), in the units its definition file states."""
+
+    voxel_pitch_m: float
+    closing_radius_m: float
+    closing_coarsening: int
+    erosion_offset_voxels: float
+    band_voxels: int
+    normal_neighbours: int
+    normal_radius_voxels: float
+    min_normal_neighbours: int
+    min_normal_planarity: float
+    surface_search_voxels: float
+    normal_smoothing_voxels: float
+    min_hull_fraction: float
+    hull_block_voxels: int
+    max_grid_voxels: int
+    min_points: int
+    model_max_step_m: float
+    model_interior_step_m: float
+    model_interior_clearance_m: float
+
+
+#: The workspace family's parameters, loaded and checked once at import (spec §0.3).
+PARAMETERS = load_parameters(FAMILY, WorkspaceParameters)
 
 
 @dataclass(frozen=True)
@@ -46,7 +67,7 @@ class VoxelSolid:
     @property
     def closed(self) -> bool:
         """True when the shell closed: volume ≥ ``min_hull_fraction`` × convex-hull volume (spec §8.4 step 7)."""
-        return self.hull_volume > 0 and self.volume >= float(wp("min_hull_fraction")) * self.hull_volume
+        return self.hull_volume > 0 and self.volume >= PARAMETERS.min_hull_fraction * self.hull_volume
 
     def centres(self, threshold: float = 0.5) -> np.ndarray:
         """Centres (m, W) of the voxels whose fraction is at least ``threshold`` — for figures."""
@@ -63,20 +84,20 @@ def volume_solid(points: np.ndarray, *, pitch: float | None = None, closing_radi
     the fine lattice in a band around the boundary, from the boundary samples' signed depth along their
     normals; (6) volume = h³ Σ fraction; (7) closure check against the convex hull.
     """
-    h = float(wp("voxel_pitch_m") if pitch is None else pitch)
-    r = float(wp("closing_radius_m") if closing_radius is None else closing_radius)
-    c = int(wp("closing_coarsening"))
+    h = float(PARAMETERS.voxel_pitch_m if pitch is None else pitch)
+    r = float(PARAMETERS.closing_radius_m if closing_radius is None else closing_radius)
+    c = PARAMETERS.closing_coarsening
     pts = np.asarray(points, dtype=float)
     if pts.ndim != 2 or pts.shape[1] != 3 or not np.all(np.isfinite(pts)):
         raise ValueError("volume_solid needs finite points of shape (N, 3)")
-    if len(pts) < int(wp("min_points")):
+    if len(pts) < PARAMETERS.min_points:
         raise fail(
             Code.WORKSPACE_CLOUD_UNUSABLE,
-            f"a workspace cloud needs at least {wp('min_points')} finite points",
-            expected=f">= {wp('min_points')}",
+            f"a workspace cloud needs at least {PARAMETERS.min_points} finite points",
+            expected=f">= {PARAMETERS.min_points}",
             found=len(pts),
         )
-    band = int(wp("band_voxels"))
+    band = PARAMETERS.band_voxels
     rc = r / (c * h)  # closing radius in coarse voxels
     idx = np.floor(pts / h).astype(np.int64)
     pad = int(math.ceil(rc)) + band + 3  # coarse voxels
@@ -84,12 +105,12 @@ def volume_solid(points: np.ndarray, *, pitch: float | None = None, closing_radi
     shape_c = tuple(int(x) for x in np.floor_divide(idx.max(axis=0), c) - lo_c + pad + 1)
     lo, shape = lo_c * c, tuple(c * x for x in shape_c)
     n_vox = math.prod(shape)
-    if n_vox > int(wp("max_grid_voxels")):
+    if n_vox > PARAMETERS.max_grid_voxels:
         extent = (pts.max(axis=0) - pts.min(axis=0)).round(3).tolist()
         raise fail(
             Code.WORKSPACE_CLOUD_UNUSABLE,
             f"the cloud spans {extent} m: its {n_vox} voxels exceed the grid limit",
-            expected=f"<= {wp('max_grid_voxels')} voxels",
+            expected=f"<= {PARAMETERS.max_grid_voxels} voxels",
             found=n_vox,
         )
     flat = np.ravel_multi_index((idx - lo).T, shape)
@@ -101,7 +122,7 @@ def volume_solid(points: np.ndarray, *, pitch: float | None = None, closing_radi
     occupied[tuple((vox // c).T)] = True
     dilated = ndi.distance_transform_edt(~occupied) <= rc
     filled = ndi.binary_fill_holes(dilated)
-    coarse = ndi.distance_transform_edt(filled) > rc + float(wp("erosion_offset_voxels"))
+    coarse = ndi.distance_transform_edt(filled) > rc + PARAMETERS.erosion_offset_voxels
     band_c = ndi.binary_dilation(coarse, iterations=band) & ~ndi.binary_erosion(coarse, iterations=band)
 
     fraction = _refine(coarse, c).astype(np.float32)
@@ -163,7 +184,7 @@ def _band_fractions(
     inside = np.repeat(coarse[band_c].astype(np.float32), c**3)
     if len(samples) < 3:
         return fine, inside
-    smooth = ndi.gaussian_filter(coarse.astype(np.float32), float(wp("normal_smoothing_voxels")))
+    smooth = ndi.gaussian_filter(coarse.astype(np.float32), PARAMETERS.normal_smoothing_voxels)
     ijk = (np.floor(samples / h).astype(np.int64) - lo) // c
     outward = np.empty((len(samples), 3))
     for axis in range(3):
@@ -174,8 +195,8 @@ def _band_fractions(
     outward /= np.maximum(np.linalg.norm(outward, axis=1, keepdims=True), 1e-12)
 
     tree = cKDTree(samples)
-    k = min(int(wp("normal_neighbours")), len(samples))
-    dist, j = tree.query(samples, k=k, distance_upper_bound=float(wp("normal_radius_voxels")) * h)
+    k = min(PARAMETERS.normal_neighbours, len(samples))
+    dist, j = tree.query(samples, k=k, distance_upper_bound=PARAMETERS.normal_radius_voxels * h)
     dist, j = np.asarray(dist).reshape(len(samples), k), np.asarray(j).reshape(len(samples), k)
     w = np.isfinite(dist).astype(float)
     count = w.sum(axis=1)
@@ -185,10 +206,10 @@ def _band_fractions(
     spread, vecs = np.linalg.eigh(np.einsum("nki,nkj->nij", dev, dev))
     normal = vecs[:, :, 0]
     normal = np.where((np.sum(normal * outward, axis=1) < 0)[:, None], -normal, normal)
-    untrusted = (count < int(wp("min_normal_neighbours"))) | (spread[:, 1] < float(wp("min_normal_planarity")) * spread[:, 2])
+    untrusted = (count < PARAMETERS.min_normal_neighbours) | (spread[:, 1] < PARAMETERS.min_normal_planarity * spread[:, 2])
     normal = np.where(untrusted[:, None], outward, normal)
 
-    reach = float(wp("surface_search_voxels"))
+    reach = PARAMETERS.surface_search_voxels
     searched = np.repeat(_blocks_near(band_c.shape, ijk, c, reach)[band_c], c**3)
     centres = (fine[searched] + lo + 0.5) * h
     dist, near = tree.query(centres, k=1, distance_upper_bound=reach * h)
@@ -206,7 +227,7 @@ def _band_fractions(
 def _hull_volume(vox: np.ndarray, means: np.ndarray, counts: np.ndarray) -> float:
     """Convex-hull volume (m³) of the sample means of the occupied blocks of ``hull_block_voxels``³ voxels
     (spec §8.4 step 7), from the occupied voxels' indices, sample means and counts; 0 for flat clouds."""
-    block = vox // int(wp("hull_block_voxels"))
+    block = vox // PARAMETERS.hull_block_voxels
     flat = np.ravel_multi_index(block.T, tuple(int(x) + 1 for x in block.max(axis=0)))
     (
         _,

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from scipy.spatial import cKDTree
 
+from haptify import volume_operator
 from haptify.codes import Code
 from haptify.conventions import pose_apply
 from haptify.errors import HaptifyError, fail
@@ -22,7 +23,6 @@ from haptify.kinematics import RANGE_LATTICE_POINTS, configurations_from_unit, f
 from haptify.volume_operator import VoxelSolid as VoxelSolid
 from haptify.volume_operator import overlap_volume as overlap_volume
 from haptify.volume_operator import volume_solid as volume_solid
-from haptify.volume_operator import wp as wp
 from haptify.repetitions import TrialValue, aggregate, no_trials, per_trial, single, unavailable
 from haptify.session_format import Kinematics
 
@@ -89,14 +89,14 @@ def modeled_points(kin: Kinematics, *, step: float | None = None, interior_step:
     ``model_max_step_m``, plus the whole box at ``model_interior_step_m`` without the interior samples that
     lie within ``model_interior_clearance_m`` of a face sample, through the DH forward kinematics.
     """
-    step = float(wp("model_max_step_m") if step is None else step)
-    interior_step = float(wp("model_interior_step_m") if interior_step is None else interior_step)
+    step = float(volume_operator.PARAMETERS.model_max_step_m if step is None else step)
+    interior_step = float(volume_operator.PARAMETERS.model_interior_step_m if interior_step is None else interior_step)
     faces = _positions(kin, _boundary_lattice(_counts(kin, step)))
     interior = _positions(kin, unit_lattice(_counts(kin, interior_step)))
     # only whether a face sample lies within the clearance matters: any tree answers alike, and the
     # sliding-midpoint one without median balancing suits samples on a lattice
     tree = cKDTree(faces, balanced_tree=False, compact_nodes=False)
-    dist, _ = tree.query(interior, k=1, distance_upper_bound=float(wp("model_interior_clearance_m")))
+    dist, _ = tree.query(interior, k=1, distance_upper_bound=volume_operator.PARAMETERS.model_interior_clearance_m)
     return np.concatenate([faces, interior[~np.isfinite(dist)]])
 
 
@@ -182,7 +182,7 @@ def gap_regions(
     (:func:`edge_speed`, each measured away from the gap); so every point of it, and every point within the
     closing radius r of it, satisfies ``|x − a| + |x − b| ≤ L + 2 r``. A gap at the start or the end of the
     trial has one edge e: ``a = b = e`` and ``reach = 2 (v·T + r)`` (the ball of radius v·T + r)."""
-    r = float(wp("closing_radius_m") if closing_radius is None else closing_radius)
+    r = float(volume_operator.PARAMETERS.closing_radius_m if closing_radius is None else closing_radius)
     out = []
     for i, j in occlusion_gaps(position):
         if i is not None and j is not None:
@@ -207,7 +207,7 @@ def repaired_points(
     from every finite position of the trial itself — where the trial has a sample that near, the
     sub-voxel boundary (§8.4 step 5) is placed by its own samples. Returns the cloud and how many donors
     it took."""
-    h = float(wp("voxel_pitch_m") if pitch is None else pitch)
+    h = float(volume_operator.PARAMETERS.voxel_pitch_m if pitch is None else pitch)
     own = position[np.all(np.isfinite(position), axis=1)]
     regions = gap_regions(t, position, closing_radius)
     if not regions or len(donors) == 0 or len(own) == 0:
@@ -221,7 +221,7 @@ def repaired_points(
             take[near[np.linalg.norm(d - a, axis=1) + np.linalg.norm(d - b, axis=1) <= reach]] = True
     candidates = donors[take]
     if len(candidates):
-        dist, _ = cKDTree(own).query(candidates, k=1, distance_upper_bound=float(wp("surface_search_voxels")) * h)
+        dist, _ = cKDTree(own).query(candidates, k=1, distance_upper_bound=volume_operator.PARAMETERS.surface_search_voxels * h)
         candidates = candidates[~np.isfinite(dist)]
     return np.concatenate([own, candidates]), len(candidates)
 
@@ -275,11 +275,11 @@ def trial_cloud(ctx: ComputeContext, trials: list[str], trial_id: str) -> tuple[
     def build() -> tuple[np.ndarray, int]:
         t, position = trial_track(ctx, trial_id)
         own = int(np.all(np.isfinite(position), axis=1).sum())
-        if own < int(wp("min_points")):
+        if own < volume_operator.PARAMETERS.min_points:
             raise fail(
                 Code.WORKSPACE_CLOUD_UNUSABLE,
-                f"a workspace cloud needs at least {wp('min_points')} finite points",
-                expected=f">= {wp('min_points')}",
+                f"a workspace cloud needs at least {volume_operator.PARAMETERS.min_points} finite points",
+                expected=f">= {volume_operator.PARAMETERS.min_points}",
                 found=own,
             )
         donors = []

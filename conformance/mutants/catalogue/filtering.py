@@ -26,7 +26,7 @@ def _lowpass_ends_untreated(real: Callable) -> Callable:
         x = np.asarray(x, dtype=float)
         if len(x) < 2:
             return x.copy()
-        order = int(preprocessing.sp("filter_order")) if order is None else order
+        order = preprocessing.PARAMETERS.filter_order if order is None else order
         sos = butter(order, preprocessing.effective_cutoff(cutoff_hz, rate_hz), fs=rate_hz, output="sos")
         return sosfiltfilt(sos, x, axis=0, padtype=None)
 

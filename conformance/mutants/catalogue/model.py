@@ -1,7 +1,7 @@
 """What a mutant is (spec §16.8.3): a :class:`Patch` replaces one object of the reference (``haptify.*``) for
 the duration of a run, a :class:`Mutant` is one wrong reading of the spec made of patches and is an
 implementation in the sense of spec §16.4.3; and the building blocks of replacements (``_replace``,
-``_params``, ``_post``)."""
+``_parameters``, ``_post``)."""
 
 from __future__ import annotations
 
@@ -88,16 +88,10 @@ def _replace(fn: Callable) -> Make:
     return lambda real: fn
 
 
-def _params(**values: Any) -> Make:
-    """A family's parameter accessor (``vp(key)``, ``param(family, key)``) with some keys answered otherwise."""
-
-    def make(real: Callable) -> Callable:
-        def accessor(*args: Any) -> Any:
-            return values[args[-1]] if args[-1] in values else real(*args)
-
-        return accessor
-
-    return make
+def _parameters(**values: Any) -> Make:
+    """A family's typed parameters (the owning module's ``PARAMETERS``, e.g. ``vibration.PARAMETERS``) with
+    some values changed: ``Patch(vibration, "PARAMETERS", _parameters(edge_trim_s=0.0))``."""
+    return lambda real: real.model_copy(update=values)
 
 
 def _post(fn: Callable) -> Make:

@@ -40,7 +40,7 @@ def _gap_limit_strict(real: Callable) -> Callable:
     """Gaps bridged only when t_j − t_i ≤ max_gap_s (the sample interval Δ of §7.4 left out)."""
 
     def bridge_gaps(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray, max_gap_s: float | None = None) -> Any:
-        limit = float(preprocessing.sp("max_gap_s") if max_gap_s is None else max_gap_s)
+        limit = float(preprocessing.PARAMETERS.max_gap_s if max_gap_s is None else max_gap_s)
         return real(t, position, quaternion, max_gap_s=limit - float(np.median(np.diff(np.asarray(t, dtype=float)))))
 
     return bridge_gaps

@@ -11,7 +11,7 @@ import numpy as np
 
 from haptify import calibration, force_plate, rig_checks
 from haptify.caching import session_of
-from haptify_mutants.catalogue.model import Mutant, Patch, _params, _post
+from haptify_mutants.catalogue.model import Mutant, Patch, _parameters, _post
 
 
 def _cop_kistler_sign(result: tuple, *_: Any) -> tuple:
@@ -141,7 +141,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R14.4-1",
         "the window is zero-padded to ≥ 8× its length",
         "only to the next power of two",
-        (Patch(force_plate, "param", _params(zero_pad_factor=1)),),
+        (Patch(force_plate, "PARAMETERS", _parameters(zero_pad_factor=1)),),
         ("rig.plate_natural_frequency",),
     ),
 )

@@ -7,7 +7,7 @@ import dataclasses
 from typing import Any
 
 from haptify import stiffness
-from haptify_mutants.catalogue.model import Mutant, Patch, _params, _post, _replace
+from haptify_mutants.catalogue.model import Mutant, Patch, _parameters, _post, _replace
 
 
 def _through_origin(fit: Any, *_: Any) -> Any:
@@ -24,7 +24,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R13.2-1",
         "the first contact_settle_s of a press (the contact transient) enter neither the fit nor the peak",
         "the fit and the peak start at the first contact sample",
-        (Patch(stiffness, "stp", _params(contact_settle_s=0.0)),),
+        (Patch(stiffness, "PARAMETERS", _parameters(contact_settle_s=0.0)),),
         ("stiffness.measured", "stiffness.peak_force"),
     ),
     Mutant(
@@ -33,7 +33,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R13.2-1",
         "the fit ends at fit_high_fraction of the rise, where the force stops rising",
         "every loading-stroke sample up to the largest force",
-        (Patch(stiffness, "stp", _params(fit_high_fraction=1.0, rise_hold_s=1e9)),),
+        (Patch(stiffness, "PARAMETERS", _parameters(fit_high_fraction=1.0, rise_hold_s=1e9)),),
         ("stiffness.measured",),
     ),
     Mutant(

@@ -11,7 +11,7 @@ import numpy as np
 from scipy.signal import cheby1, sosfilt
 
 from haptify import preprocessing, vibration
-from haptify_mutants.catalogue.model import Mutant, Patch, _params, _replace
+from haptify_mutants.catalogue.model import Mutant, Patch, _parameters, _replace
 
 
 def _summed_axes(x: np.ndarray) -> np.ndarray:
@@ -189,7 +189,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R10.2-2",
         "edge_trim_s = 0.5 s is cut from each end after filtering",
         "the whole filtered signal is analysed",
-        (Patch(vibration, "vp", _params(edge_trim_s=0.0)),),
+        (Patch(vibration, "PARAMETERS", _parameters(edge_trim_s=0.0)),),
         ("vibration.rms", "vibration.spectral_centroid"),
         cheap=True,
     ),

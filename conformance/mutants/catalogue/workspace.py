@@ -12,7 +12,7 @@ from scipy.spatial import ConvexHull
 
 from haptify import volume_operator, workspace
 from haptify.conventions import quat_conjugate, quat_rotate
-from haptify_mutants.catalogue.model import Mutant, Patch, _params, _post, _replace
+from haptify_mutants.catalogue.model import Mutant, Patch, _parameters, _post, _replace
 
 
 def _hull_solid(real: Callable) -> Callable:
@@ -82,7 +82,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R8.4-1",
         "voxel_pitch_m = 2.5 mm",
         "5 mm voxels",
-        (Patch(volume_operator, "wp", _params(voxel_pitch_m=0.005), everywhere=True),),
+        (Patch(volume_operator, "PARAMETERS", _parameters(voxel_pitch_m=0.005), everywhere=True),),
         ("workspace.measured_volume",),
     ),
     Mutant(
@@ -91,7 +91,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R8.4-1",
         "a boundary sample whose neighbours lie along a line takes the smoothed-indicator normal (min_normal_planarity)",
         "every sample keeps its plane fit's normal",
-        (Patch(volume_operator, "wp", _params(min_normal_planarity=0.0), everywhere=True),),
+        (Patch(volume_operator, "PARAMETERS", _parameters(min_normal_planarity=0.0), everywhere=True),),
         ("workspace.measured_volume",),
     ),
     Mutant(
@@ -100,7 +100,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "R8.4-1",
         "the closing ball has radius r = closing_radius_m = 3 cm",
         "3 cm taken for the ball's diameter (radius 1.5 cm)",
-        (Patch(volume_operator, "wp", _params(closing_radius_m=0.015), everywhere=True),),
+        (Patch(volume_operator, "PARAMETERS", _parameters(closing_radius_m=0.015), everywhere=True),),
         ("workspace.measured_volume",),
     ),
     Mutant(

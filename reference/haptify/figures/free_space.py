@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 import numpy as np
+from haptify import free_space
 from haptify.errors import HaptifyError
 from haptify.preprocessing import mocap_track
 from haptify.signals import handle_signals
@@ -11,7 +12,7 @@ from haptify.signals import handle_signals
 if TYPE_CHECKING:
     from haptify.context import ComputeContext
     from haptify.report import ReportFigure
-from haptify.free_space import PROTOCOL, fp, plate_force_about_weight, plate_force_samples
+from haptify.free_space import PROTOCOL, plate_force_about_weight, plate_force_samples
 
 
 # --- report figures (spec §15.6; paper Fig. 6) ----------------------------------------------------
@@ -33,10 +34,10 @@ def report_figures(ctx: ComputeContext, results: Any) -> list[ReportFigure]:
             continue
         fig, axes = plt.subplots(3, 1, figsize=(10, 8), sharex=True)
         axes[0].plot(track.t, np.linalg.norm(track.velocity, axis=1))
-        axes[0].axhline(float(fp("speed_limit_m_per_s")), color="r", ls="--", lw=0.8)
+        axes[0].axhline(free_space.PARAMETERS.speed_limit_m_per_s, color="r", ls="--", lw=0.8)
         axes[0].set_ylabel("speed (m/s)")
         axes[1].plot(track.t, np.degrees(np.linalg.norm(track.angular_velocity, axis=1)))
-        axes[1].axhline(np.degrees(float(fp("angular_speed_limit_rad_per_s"))), color="r", ls="--", lw=0.8)
+        axes[1].axhline(np.degrees(free_space.PARAMETERS.angular_speed_limit_rad_per_s), color="r", ls="--", lw=0.8)
         axes[1].set_ylabel("angular speed (°/s)")
         if hs.force is not None:
             axes[2].plot(hs.t, np.linalg.norm(hs.force, axis=1), label="hand |F|")
@@ -69,7 +70,7 @@ def report_figures(ctx: ComputeContext, results: Any) -> list[ReportFigure]:
             ReportFigure(
                 "free_space_force_field",
                 "Free-space force field: mean force on the hand per "
-                f"{fp('force_field_bin_m') * 100:g} cm bin, top view (spec §9.5).",
+                f"{free_space.PARAMETERS.force_field_bin_m * 100:g} cm bin, top view (spec §9.5).",
                 fig,
             )
         )

@@ -7,7 +7,6 @@ from haptify.errors import HaptifyError
 from haptify.volume_operator import VoxelSolid as VoxelSolid
 from haptify.volume_operator import overlap_volume as overlap_volume
 from haptify.volume_operator import volume_solid as volume_solid
-from haptify.volume_operator import wp as wp
 
 if TYPE_CHECKING:
     from haptify.context import ComputeContext

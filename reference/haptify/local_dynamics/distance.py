@@ -9,12 +9,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from haptify.local_dynamics import parameter_file
 from haptify.codes import Code
 from haptify.conventions import quat_mean
 from haptify.errors import fail
 from haptify.local_dynamics.fitting import one_blas_thread
-from haptify.local_dynamics.parameter_file import FAMILY
-from haptify.metric_definitions import param
 
 
 @dataclass(frozen=True)
@@ -30,7 +29,10 @@ class DistanceScales:
     def from_definition(cls) -> "DistanceScales":
         """R_p, R_v, R_a, R_θ from the definition file (R_θ converted from degrees; spec §11.6.2)."""
         return cls(
-            p=param(FAMILY, "R_p"), v=param(FAMILY, "R_v"), a=param(FAMILY, "R_a"), theta=math.radians(param(FAMILY, "R_theta"))
+            p=parameter_file.PARAMETERS.R_p,
+            v=parameter_file.PARAMETERS.R_v,
+            a=parameter_file.PARAMETERS.R_a,
+            theta=math.radians(parameter_file.PARAMETERS.R_theta),
         )
 
 

@@ -26,9 +26,11 @@ from haptify.local_dynamics.jacobian import (
     _Structure,
     normal_equations_buffer,
 )
+from haptify.local_dynamics import parameter_file
 from haptify.local_dynamics.parameter_file import (
     FAMILY,
     Channel,
+    FitParameters,
     FitSummary,
     HWModelFile,
     PiecewiseLinearMap,
@@ -37,36 +39,19 @@ from haptify.local_dynamics.parameter_file import (
     UnitGainMap,
 )
 from haptify.local_dynamics.prediction import _delayed, hemisphere_align, rmse
-from haptify.metric_definitions import family, param
+from haptify.metric_definitions import family
 
 
-@dataclass(frozen=True)
-class FitOptions:
-    """The fitting rules of spec §11.4 (defaults: the definition file ``metrics/dynamics.json``)."""
-
-    nb: int
-    nf: int
-    nk: int
-    input_map: str
-    output_map: str
-    breakpoints: int
-    breakpoint_quantiles: tuple[float, float]
-    initial_pole: float
-    ridge: float
-    max_iterations: int
-    tolerance: float
-    lm_damping: tuple[float, float, float, float]
-    stability_radius: float
+class FitOptions(FitParameters):
+    """The fitting rules of spec §11.4 as one fit uses them (defaults: the definition file
+    ``metrics/dynamics.json``)."""
 
     @classmethod
     def from_definition(cls, **overrides: Any) -> "FitOptions":
         """Options from the definition file, with keyword overrides (e.g. ``output_map="unit_gain"``)."""
-        values: dict[str, Any] = {}
-        for name in cls.__dataclass_fields__:
-            v = param(FAMILY, name)
-            values[name] = tuple(v) if isinstance(v, list) else v
+        values: dict[str, Any] = parameter_file.PARAMETERS.model_dump(include=set(cls.model_fields))
         values.update(overrides)
-        opts = cls(**values)
+        opts = cls.model_construct(**values)  # checked below, as the overrides need no type of their own
         for m in (opts.input_map, opts.output_map):
             if m not in ("piecewise_linear", "unit_gain"):
                 raise fail(Code.USAGE, f"unknown map type {m!r}", expected=["piecewise_linear", "unit_gain"], found=m)

@@ -14,10 +14,49 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from haptify.codes import Code
+from haptify.metric_definitions import FamilyParameters, load_parameters
 from haptify.versions import SPEC_VERSION
 
 #: The metric family (``schemas/<v>/metrics/dynamics.json``) every parameter of the model comes from.
 FAMILY = "dynamics"
+
+
+class FitParameters(FamilyParameters):
+    """The fitting rules of ``metrics/dynamics.json`` (spec §11.4): model orders and delay, the static maps
+    and their breakpoints, the initialisation and the Levenberg–Marquardt schedule."""
+
+    nb: int
+    nf: int
+    nk: int
+    input_map: Literal["piecewise_linear", "unit_gain"]
+    output_map: Literal["piecewise_linear", "unit_gain"]
+    breakpoints: int
+    breakpoint_quantiles: tuple[float, float]
+    initial_pole: float
+    ridge: float
+    max_iterations: int
+    tolerance: float
+    lm_damping: tuple[float, float, float, float]
+    stability_radius: float
+
+
+class DynamicsParameters(FitParameters):
+    """The parameters of ``metrics/dynamics.json`` (spec chapter 11): the fitting rules, the trials' sample rate
+    and length, and the distance's windows and scales, in the units its definition file states."""
+
+    sample_rate_hz: float
+    min_training_s: float
+    window_s: float
+    segment_s: float
+    R_p: float
+    R_v: float
+    R_a: float
+    R_theta: float
+
+
+#: The dynamics family's parameters, loaded and checked once at import (spec §0.3).
+PARAMETERS = load_parameters(FAMILY, DynamicsParameters)
+
 
 MODEL_FORMAT: Final = "haptify-hw-model"
 

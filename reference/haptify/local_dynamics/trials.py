@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from haptify.local_dynamics import parameter_file
 from haptify.codes import Code
 from haptify.errors import fail
 from haptify.local_dynamics.distance import (
@@ -22,7 +23,6 @@ from haptify.local_dynamics.distance import (
 )
 from haptify.local_dynamics.fitting import FitOptions, fit
 from haptify.local_dynamics.parameter_file import (
-    FAMILY,
     INPUT_NAMES,
     INPUT_UNITS,
     OUTPUT_NAMES,
@@ -31,7 +31,6 @@ from haptify.local_dynamics.parameter_file import (
     load_model,
 )
 from haptify.local_dynamics.prediction import predict
-from haptify.metric_definitions import param
 
 
 #: Protocols whose passive trials serve as test sets (spec §11.7).
@@ -69,7 +68,7 @@ def trial_data(ctx_or_session: Any, trial_id: str, rate_hz: float | None = None)
     """The 13 inputs and 6 outputs of a trial from :func:`haptify.signals.handle_signals` (spec §7.5, §11.1)."""
     from haptify.signals import handle_signals
 
-    rate = float(param(FAMILY, "sample_rate_hz")) if rate_hz is None else float(rate_hz)
+    rate = parameter_file.PARAMETERS.sample_rate_hz if rate_hz is None else float(rate_hz)
     sig = handle_signals(ctx_or_session, trial_id, rate_hz=rate)
     missing = [name for name, arr in (("handle_accel", sig.acceleration), ("handle_wrench", sig.force)) if arr is None]
     if missing:
@@ -124,15 +123,15 @@ def held_out_trials(session: Any, train_id: str) -> list[Any]:
 def fit_trial(ctx_or_session: Any, trial_id: str, options: FitOptions | None = None) -> tuple[HWModelFile, TrialData]:
     """Fit the model to one trial (spec §11.4, §11.7); E701 when its valid data are shorter than ``min_training_s``."""
     data = trial_data(ctx_or_session, trial_id)
-    rate = float(param(FAMILY, "sample_rate_hz"))
+    rate = parameter_file.PARAMETERS.sample_rate_hz
     runs = data.runs()
     seconds = sum(r.stop - r.start for r in runs) / rate
-    if seconds < param(FAMILY, "min_training_s"):
+    if seconds < parameter_file.PARAMETERS.min_training_s:
         raise fail(
             Code.DYNAMICS_DATA_INSUFFICIENT,
             f"trial {trial_id!r} has {seconds:.1f} s of valid data; the dynamic model needs at least "
-            f"{param(FAMILY, 'min_training_s')} s",
-            expected=f">= {param(FAMILY, 'min_training_s')} s",
+            f"{parameter_file.PARAMETERS.min_training_s} s",
+            expected=f">= {parameter_file.PARAMETERS.min_training_s} s",
             found=round(seconds, 2),
         )
     session = getattr(ctx_or_session, "session", ctx_or_session)
@@ -186,15 +185,15 @@ def segment_table(model: HWModelFile, train: TrialData, tests: list[TrialData], 
     """Every complete, wholly valid 5 s segment of the training and test trials with its kinematic distance to
     the training set and its force error (spec §11.6)."""
     rate = model.sample_rate_hz
-    window = int(round(param(FAMILY, "window_s") * rate))
+    window = int(round(parameter_file.PARAMETERS.window_s * rate))
     if window < 1:  # a parameter file at a few Hz: windows of round(window_s · rate) = 0 samples
         raise fail(
             Code.DYNAMICS_DATA_INSUFFICIENT,
-            f"at the model's {rate:g} Hz a {param(FAMILY, 'window_s')} s distance window holds no sample",
+            f"at the model's {rate:g} Hz a {parameter_file.PARAMETERS.window_s} s distance window holds no sample",
             expected="round(window_s · sample_rate_hz) >= 1",
             found=rate,
         )
-    per_segment = int(round(param(FAMILY, "segment_s") / param(FAMILY, "window_s")))
+    per_segment = int(round(parameter_file.PARAMETERS.segment_s / parameter_file.PARAMETERS.window_s))
     scales = DistanceScales.from_definition()
     train_feats, train_ok = trial_features(train, window)
     reference = _subset(train_feats, train_ok)

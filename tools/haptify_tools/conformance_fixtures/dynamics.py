@@ -11,8 +11,9 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import lfilter
 
+from haptify.local_dynamics import parameter_file
+from haptify import preprocessing
 from haptify.conventions import quat_from_axis_angle, quat_multiply
-from haptify.metric_definitions import param
 from haptify.versions import SPEC_VERSION
 from haptify_tools import rig_builders as rb
 from haptify_tools.conformance_fixtures.records import Fixture, case
@@ -162,7 +163,7 @@ def prediction_expectations(model: dict, pr: Prediction) -> dict:
     """The known answers of a prediction fixture for the parameter file ``model``: spec §11.3 on both trials' inputs
     on the grid of §7.3 (from the streams' common start), §11.6 for the line: every test window's nearest training
     window is its twin, |Δp|/R_p + turn/R_θ away."""
-    seg = int(round(param("dynamics", "segment_s") * 100))
+    seg = int(round(parameter_file.PARAMETERS.segment_s * 100))
     tg = pr.start_s + grid(PREDICT_S)
     train, test = pr.train, pr.test
     y_hat = hw_predict(model, train.inputs(tg))
@@ -177,7 +178,9 @@ def prediction_expectations(model: dict, pr: Prediction) -> dict:
         return [float(np.mean(np.sqrt(np.mean(e[s * seg : (s + 1) * seg, :3] ** 2, axis=0)))) for s in range(nseg)]
 
     tr, te = seg_errors(err), seg_errors(err_test)
-    d_test = float(np.linalg.norm(pr.shift) / param("dynamics", "R_p") + pr.turn[1] / math.radians(param("dynamics", "R_theta")))
+    d_test = float(
+        np.linalg.norm(pr.shift) / parameter_file.PARAMETERS.R_p + pr.turn[1] / math.radians(parameter_file.PARAMETERS.R_theta)
+    )
     x = np.array([0.0] * len(tr) + [d_test] * len(te))
     yv = np.array(tr + te)
     slope, intercept = np.polyfit(x, yv, 1)
@@ -186,8 +189,8 @@ def prediction_expectations(model: dict, pr: Prediction) -> dict:
 
 def prediction_fixture(pr: Prediction) -> Fixture:
     """A prediction fixture (spec §16.8.2) with, per given parameter file, the cases of §11.3, §11.6 and §11.7."""
-    R_p = param("dynamics", "R_p")
-    R_theta = math.radians(param("dynamics", "R_theta"))
+    R_p = parameter_file.PARAMETERS.R_p
+    R_theta = math.radians(parameter_file.PARAMETERS.R_theta)
 
     def build(path: Path) -> None:
         rig = example_rig() if pr.rig_kind == "example" else rb.rotated_rig()
@@ -297,7 +300,7 @@ def prediction_fixture(pr: Prediction) -> Fixture:
 
 
 def dynamics_fixtures() -> list[Fixture]:
-    R_p = param("dynamics", "R_p")
+    R_p = parameter_file.PARAMETERS.R_p
 
     q_tilt = quat_from_axis_angle(np.array([0.2, 1.0, 0.1]), np.array(0.6))
     turned_start, turn = 0.0037, 0.75
@@ -409,7 +412,7 @@ def dynamics_fixtures() -> list[Fixture]:
 
     fx = Fixture("dyn-fit-linear-law", fitdata)
     sigma_f = sigma * math.sqrt(
-        lowpass_noise_ratio(param("signals", "wrench_cutoff_hz"), 1000.0, param("signals", "filter_order"))
+        lowpass_noise_ratio(preprocessing.PARAMETERS.wrench_cutoff_hz, 1000.0, preprocessing.PARAMETERS.filter_order)
     )
     law = (
         f"force on the hand F = −{mass} a − {damping} v + white noise σ = {sigma} N per axis at 1 kHz ({sigma_f:.4f} N "

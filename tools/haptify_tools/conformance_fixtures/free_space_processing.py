@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from haptify import preprocessing
 from haptify.conventions import quat_from_axis_angle, quat_multiply
-from haptify.metric_definitions import param
 from haptify_tools import rig_builders as rb
 from haptify_tools.conformance_fixtures.records import Fixture, case
 from haptify_tools.conformance_fixtures.truth import Z, circle, grid, handle_trial, lowpass_pair_gain, manifest, spin
@@ -238,14 +238,14 @@ def jitter_fixture(truth: rb.HandleTruth) -> Fixture:
         w.write(path)
 
     fx = Fixture(name, build)
-    fc = param("signals", "mocap_cutoff_hz")
+    fc = preprocessing.PARAMETERS.mocap_cutoff_hz
     gains = {
         k: lowpass_pair_gain(f, rate, cut)
         for k, f, rate, cut in (
             ("mocap", j["position_hz"], 100.0, fc),
-            ("force", j["force_hz"], 1000.0, param("signals", "wrench_cutoff_hz")),
-            ("plate", j["plate_hz"], 1000.0, param("signals", "wrench_cutoff_hz")),
-            ("angle", j["angle_hz"], 100.0, param("signals", "angular_velocity_cutoff_hz")),
+            ("force", j["force_hz"], 1000.0, preprocessing.PARAMETERS.wrench_cutoff_hz),
+            ("plate", j["plate_hz"], 1000.0, preprocessing.PARAMETERS.wrench_cutoff_hz),
+            ("angle", j["angle_hz"], 100.0, preprocessing.PARAMETERS.angular_velocity_cutoff_hz),
         )
     }
     jit = (
@@ -282,7 +282,7 @@ def jitter_fixture(truth: rb.HandleTruth) -> Fixture:
             "rad/s",
             "analytic",
             f"constant rotation at 0.07 rad/s with {jit}; the angular velocity is low-passed at "
-            f"{param('signals', 'angular_velocity_cutoff_hz'):g} Hz (§7.4 step 4; gain {gains['angle']:.1e} at {j['angle_hz']:g} Hz). "
+            f"{preprocessing.PARAMETERS.angular_velocity_cutoff_hz:g} Hz (§7.4 step 4; gain {gains['angle']:.1e} at {j['angle_hz']:g} Hz). "
             "Tolerance 0.1 %: a rotation about the vertical turns the spin axis without changing |ω| to first order",
             desc,
         ),

@@ -8,8 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
+from haptify import calibration
+from haptify import force_plate
+from haptify import preprocessing
 from haptify.conventions import GRAVITY_W, quat_conjugate, quat_multiply, quat_rotate
-from haptify.metric_definitions import param
 from haptify_tools import rig_builders as rb
 from haptify_tools.conformance_fixtures.records import Fixture, case
 from haptify_tools.conformance_fixtures.truth import QUIET, SEED, lowpass_noise_ratio, rotated_rig_full
@@ -26,8 +28,8 @@ def calibration_rms(truth: rb.HandleTruth) -> list[float]:
     (F/T at 1 kHz, accelerometer at 2 kHz) after the 20 Hz zero-phase low-pass: per channel σ·√(variance gain);
     the torque residual τ − (b + c × F) adds the force noise through c × n_F, E|c × n|² = 2|c|²σ_F² (per axis
     ⅔|c|²σ_F²)."""
-    ft_var = lowpass_noise_ratio(param("signals", "wrench_cutoff_hz"), 1000.0, param("signals", "filter_order"))
-    acc_var = lowpass_noise_ratio(param("signals", "accel_cutoff_hz"), 2000.0, param("signals", "filter_order"))
+    ft_var = lowpass_noise_ratio(preprocessing.PARAMETERS.wrench_cutoff_hz, 1000.0, preprocessing.PARAMETERS.filter_order)
+    acc_var = lowpass_noise_ratio(preprocessing.PARAMETERS.accel_cutoff_hz, 2000.0, preprocessing.PARAMETERS.filter_order)
     torque_sigma = math.sqrt(truth.torque_noise**2 + 2 / 3 * float(truth.com @ truth.com) * truth.force_noise**2)
     return [truth.force_noise * math.sqrt(ft_var), truth.accel_noise * math.sqrt(acc_var), torque_sigma * math.sqrt(ft_var)]
 
@@ -37,7 +39,7 @@ def calibration_offset_u(truth: rb.HandleTruth, rig: dict, duration_s: float) ->
     noise σ (1 kHz) over ``duration_s`` of :func:`rig_builders.tumbling_orientation`: the low-pass keeps the noise's
     spectral density at 0 Hz, so on the fit grid (rate r) the scores' long-run covariance is σ²·(r/1000)·JᵀJ and
     Cov(c, ρ) = σ²·(r/1000)·(JᵀJ)⁻¹, Jᵢ = −(ĝᵢ, 1) with ĝᵢ the gravity direction in the sensor frame."""
-    rate = float(param("calibration", "fit_rate_hz"))
+    rate = calibration.PARAMETERS.fit_rate_hz
     t = np.arange(int(duration_s * rate)) / rate
     q_ws = quat_multiply(
         rb.tumbling_orientation(t),
@@ -274,10 +276,12 @@ def impact_peaks(t: np.ndarray, force: np.ndarray, rate: float) -> list[float]:
     deviation from the median, per axis the mean removed, zero-padding to a power of two, the largest |FFT| in the band
     and the vertex of the parabola through the log-magnitudes around it (clipped to half a bin)."""
     centre = t[np.argmax(np.linalg.norm(force - np.median(force, axis=0), axis=1))]
-    inside = (t >= centre - param("rig", "impact_pre_s")) & (t <= centre + param("rig", "impact_window_s"))
-    nfft = 1 << int(math.ceil(math.log2(inside.sum() * param("rig", "zero_pad_factor"))))
+    inside = (t >= centre - force_plate.PARAMETERS.impact_pre_s) & (t <= centre + force_plate.PARAMETERS.impact_window_s)
+    nfft = 1 << int(math.ceil(math.log2(inside.sum() * force_plate.PARAMETERS.zero_pad_factor)))
     freqs = np.arange(nfft // 2 + 1) * rate / nfft
-    band = (freqs >= param("rig", "impact_band_low_hz")) & (freqs <= param("rig", "impact_band_high_fraction") * rate / 2)
+    band = (freqs >= force_plate.PARAMETERS.impact_band_low_hz) & (
+        freqs <= force_plate.PARAMETERS.impact_band_high_fraction * rate / 2
+    )
     peaks = []
     for axis in range(3):
         x = force[inside, axis]

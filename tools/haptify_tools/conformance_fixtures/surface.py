@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from haptify.metric_definitions import param
+from haptify import surface
 from haptify_tools.conformance_fixtures.records import Fixture, case
 from haptify_tools.conformance_fixtures.truth import Fn, active_session, grid, pair_step
 
@@ -34,7 +34,7 @@ def surface_fixture(
     through ``point``) in contact during ``contacts`` (s), feeling ``planar(t)`` N against its motion and 1.5 N
     along the normal; outside contact ``outside`` N planar (None: ``planar``) and ``preload`` N along the normal.
     Its cases are the planar force's mean and SD over the guarded contact rows."""
-    guard = param("surface", "contact_guard_s")
+    guard = surface.PARAMETERS.contact_guard_s
     n = np.asarray(normal_raw, float) / np.linalg.norm(normal_raw)
     u, v = tangent_basis(n)
     pp = np.asarray(point, float)

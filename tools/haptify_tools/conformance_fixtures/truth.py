@@ -11,8 +11,8 @@ from typing import Callable
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
+from haptify import preprocessing
 from haptify.conventions import quat_from_axis_angle, quat_multiply
-from haptify.metric_definitions import param
 from haptify.storage import SessionWriter
 from haptify_tools import rig_builders as rb
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
@@ -212,18 +212,18 @@ def grid(duration_s: float, rate: float = 100.0) -> np.ndarray:
 
 def lowpass_pair_gain(f: float, fs: float, fc: float) -> float:
     """Amplitude gain at f of the forward-backward Butterworth low-pass of spec §7.2: |H|² = 1 / (1 + Ω^(2N))."""
-    fc = min(fc, param("signals", "max_cutoff_fraction") * fs / 2.0)
+    fc = min(fc, preprocessing.PARAMETERS.max_cutoff_fraction * fs / 2.0)
     omega = math.tan(math.pi * f / fs) / math.tan(math.pi * fc / fs)
-    return 1.0 / (1.0 + omega ** (2 * int(param("signals", "filter_order"))))
+    return 1.0 / (1.0 + omega ** (2 * preprocessing.PARAMETERS.filter_order))
 
 
 def pair_step(t: np.ndarray, fs: float, fc: float | None = None) -> np.ndarray:
     """Response at times ``t`` (s) of the zero-phase Butterworth low-pass of spec §7.2 (order ``filter_order``, cut-off
     ``fc``, default ``wrench_cutoff_hz``, at rate ``fs``) to a unit step whose first sample of 1 is at t = 0: it rises
     0 → 1 symmetrically about the step, ringing on both sides. scipy's butter + sosfiltfilt, as §7.2 names them."""
-    fc = float(param("signals", "wrench_cutoff_hz") if fc is None else fc)
+    fc = float(preprocessing.PARAMETERS.wrench_cutoff_hz if fc is None else fc)
     k = np.arange(-4 * int(fs), 4 * int(fs) + 1)
-    y = sosfiltfilt(butter(int(param("signals", "filter_order")), fc, fs=fs, output="sos"), (k >= 0).astype(float))
+    y = sosfiltfilt(butter(preprocessing.PARAMETERS.filter_order, fc, fs=fs, output="sos"), (k >= 0).astype(float))
     return np.interp(np.asarray(t, float) * fs, k, y)
 
 

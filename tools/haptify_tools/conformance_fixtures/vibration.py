@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from haptify import vibration
 from haptify.conventions import quat_from_axis_angle
-from haptify.metric_definitions import param
 from haptify_tools import rig_builders as rb
 from haptify_tools.conformance_fixtures.records import Fixture, case
 from haptify_tools.conformance_fixtures.truth import Fn, circle, clock, fixed, handle_trial, manifest, rotated_rig_full, spin
@@ -19,7 +19,7 @@ from haptify_tools.example_session import example_rig
 
 def hp_gain(f: float) -> float:
     """Net amplitude gain of the zero-phase high-pass of spec §10.2 at f: 1 / (1 + (fc/f)^(2·order))."""
-    fc, order = param("vibration", "highpass_cutoff_hz"), param("vibration", "highpass_order")
+    fc, order = vibration.PARAMETERS.highpass_cutoff_hz, vibration.PARAMETERS.highpass_order
     return 1.0 / (1.0 + (fc / f) ** (2 * order))
 
 
@@ -312,7 +312,7 @@ def bursts_fixture() -> Fixture:
 
     fx = Fixture(name, build)
     t = clock(secs - 1 / rate, rate)
-    trim = int(round(param("vibration", "edge_trim_s") * rate))
+    trim = int(round(vibration.PARAMETERS.edge_trim_s * rate))
     window = t[trim : len(t) - trim]
     x = hp_gain(f_tone) * a_tone * np.sin(2 * np.pi * f_tone * window)
     y = hp_gain(inner[0]) * burst(window, *inner)

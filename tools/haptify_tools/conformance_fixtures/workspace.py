@@ -10,8 +10,8 @@ from typing import Callable
 
 import numpy as np
 
+from haptify import volume_operator
 from haptify.conventions import quat_from_axis_angle, quat_rotate
-from haptify.metric_definitions import param
 from haptify_tools.conformance_fixtures.records import Fixture, case
 from haptify_tools.conformance_fixtures.truth import SEED, manifest, rotated_rig_full
 from haptify_tools.conformance_fixtures.workspace_shapes import (
@@ -32,8 +32,8 @@ from haptify_tools.example_session import example_rig
 
 def workspace_fixtures() -> list[Fixture]:
     out: list[Fixture] = []
-    pitch = param("workspace", "voxel_pitch_m")
-    cr = param("workspace", "closing_radius_m")
+    pitch = volume_operator.PARAMETERS.voxel_pitch_m
+    cr = volume_operator.PARAMETERS.closing_radius_m
     model_bias = (
         "the operator reproduces the full-size Touch models' Pappus volumes closely (spec §8.8); the links here "
         "are scaled by 0.45, so the voxels are 2.2× coarser relative to the solid"

@@ -44,12 +44,13 @@ from scipy.integrate import cumulative_trapezoid
 from scipy.interpolate import make_lsq_spline
 from scipy.signal import butter, sosfiltfilt
 
+from haptify import preprocessing
 from haptify import calibration as cal_mod
 from haptify.codes import Code
 from haptify.compute import ComputeContext
 from haptify.conventions import quat_normalize, quat_rotate
 from haptify.errors import fail
-from haptify.preprocessing import effective_cutoff, interp_columns, lowpass, nominal_rate, sp
+from haptify.preprocessing import effective_cutoff, interp_columns, lowpass, nominal_rate
 from haptify.signals import ACCEL_COLUMNS, HandleSignals
 from haptify.storage import SessionFolder
 from haptify_tools.discrepancy.model import PathSource
@@ -146,7 +147,7 @@ def accelerometer_path(
     rate = nominal_rate(ts)
     inside = (ts >= t[0]) & (ts <= t[-1])
     ts = ts[inside]
-    raw = lowpass(reading, rate, float(sp("accel_cutoff_hz")))[inside]
+    raw = lowpass(reading, rate, preprocessing.PARAMETERS.accel_cutoff_hz)[inside]
     q = quat_normalize(interp_columns(t, quaternion, ts))
     pose = cal_mod.sensor_pose(session, "accelerometer")
     lever = quat_rotate(q, np.broadcast_to(np.asarray(pose.position, float), (len(ts), 3)))
@@ -177,7 +178,7 @@ def smooth(t: np.ndarray, rate_hz: float, x: np.ndarray, cutoff_hz: float, ok: n
         x = fill_gaps(t, x, ok)
     slow = slow_part(t, x, ok)
     rest = x - slow if ok is None else np.where(ok[:, None], x - slow, 0.0)
-    sos = butter(int(sp("filter_order")), effective_cutoff(cutoff_hz, rate_hz), fs=rate_hz, output="sos")
+    sos = butter(preprocessing.PARAMETERS.filter_order, effective_cutoff(cutoff_hz, rate_hz), fs=rate_hz, output="sos")
     return slow + sosfiltfilt(sos, rest, axis=0, padtype="even", padlen=min(len(x) - 1, int(4 * rate_hz / cutoff_hz)))
 
 

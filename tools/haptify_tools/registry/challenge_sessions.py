@@ -13,8 +13,8 @@ from typing import Any, Callable
 
 import numpy as np
 
+from haptify.local_dynamics import parameter_file
 from haptify.conventions import quat_from_axis_angle
-from haptify.metric_definitions import param
 from haptify.versions import SPEC_VERSION
 from haptify_tools import rig_builders as rb
 from haptify_tools.conformance_fixtures.dynamics import LineMotion, Prediction, prediction_fixture
@@ -174,7 +174,7 @@ def dynamics(rng: np.random.Generator, path: Path, sid: str) -> list[Truth]:
     v = np.array(_round(rng.uniform(-0.003, 0.003, 3), 4))
     away = rng.normal(size=3)
     away -= (away @ v) / (v @ v) * v  # perpendicular: every test window's nearest training window is its twin
-    shift = away / np.linalg.norm(away) * param("dynamics", "R_p") * float(rng.uniform(0.3, 1.0))
+    shift = away / np.linalg.norm(away) * parameter_file.PARAMETERS.R_p * float(rng.uniform(0.3, 1.0))
     q = quat_from_axis_angle(rng.normal(size=3), np.array(float(rng.uniform(0.0, 1.0))))
     motion = LineMotion(
         np.array(_round(rng.uniform([-0.05, -0.03, 0.11], [0.05, 0.03, 0.16]), 3)),

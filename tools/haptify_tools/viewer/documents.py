@@ -89,12 +89,12 @@ def session_markdown(
             "workspace meshes) are not recorded: `haptify view --derived compact` or `--derived full` adds them."
         )
     else:
-        from haptify.metric_definitions import param
+        from haptify import free_space
 
         lines += [
             f"Arrows: hand force {HAND_FORCE_M_PER_N * 100:g} cm per N; plate force {PLATE_FORCE_M_PER_N * 100:g} cm per N.",
-            f"Free-space force field: mean hand force per {param('free_space', 'force_field_bin_m') * 100:g} cm bin "
-            f"holding at least {param('free_space', 'force_field_min_samples')} samples (spec §9.5).",
+            f"Free-space force field: mean hand force per {free_space.PARAMETERS.force_field_bin_m * 100:g} cm bin "
+            f"holding at least {free_space.PARAMETERS.force_field_min_samples} samples (spec §9.5).",
             "The plate arrow is the force the load exerts on the plate, drawn with its head at the COP.",
         ]
         if derived == "compact":
