@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from haptify.storage import open_session
+from haptify.formats.storage import open_session
 from haptify_tools.discrepancy.data import load_measured
 from haptify_tools.discrepancy.floor import replay_floors
 from haptify_tools.discrepancy.identify import select_effects

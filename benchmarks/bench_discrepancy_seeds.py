@@ -36,7 +36,7 @@ from typing import Callable
 
 import numpy as np
 
-from haptify.storage import open_session
+from haptify.formats.storage import open_session
 from haptify_tools.discrepancy import workspace as ws
 from haptify_tools.discrepancy.data import load_measured, simulate_all
 from haptify_tools.discrepancy.floor import gap_above_floor, heldout_gap

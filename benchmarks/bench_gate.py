@@ -41,21 +41,21 @@ PLAIN = textwrap.dedent("""
 """)
 VALIDATE = textwrap.dedent("""
     import sys, time
-    from haptify.validation import validate_session
+    from haptify.formats.validation import validate_session
     start = time.process_time(); report = validate_session(sys.argv[1]); assert report.valid
     print(time.process_time() - start)
 """)
 COMPUTE_UNGATED = textwrap.dedent("""
     import sys, time
-    from haptify.compute import compute_session
-    from haptify.storage import open_session
+    from haptify.pipeline.compute import compute_session
+    from haptify.formats.storage import open_session
     start = time.process_time(); compute_session(open_session(sys.argv[1]))
     print(time.process_time() - start)
 """)
 COMPUTE_GATED = textwrap.dedent("""
     import resource, sys, time
-    from haptify.compute import compute_session
-    from haptify.gate import open_checked_session
+    from haptify.pipeline.compute import compute_session
+    from haptify.pipeline.gate import open_checked_session
     start = time.process_time(); session = open_checked_session(sys.argv[1]); compute_session(session); session.finish()
     print(time.process_time() - start, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
 """)
@@ -90,7 +90,7 @@ def dossier(arg: str | None, tmp: Path) -> Path:
     if arg or (DEMO / "session").is_dir():
         return Path(arg or DEMO) / "session"
     out = tmp / "touch"
-    subprocess.run([sys.executable, "-m", "haptify.cli", "simulate", "--preset", "touch", "--protocol", "all", "--reps", "3",
+    subprocess.run([sys.executable, "-m", "haptify.cli.main", "simulate", "--preset", "touch", "--protocol", "all", "--reps", "3",
                     "--seed", "1", "-o", str(out)], check=True, capture_output=True)
     return out / "session"
 

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from figures import report
-from haptify.importers import import_c3d, import_csv
+from haptify.formats.importers import import_c3d, import_csv
 
 REPO = Path(__file__).resolve().parents[1]
 FIX = REPO / "fixtures" / "import"
@@ -87,12 +87,12 @@ def big_c3d(path: Path, megabytes: float) -> Path:
 
 CHILD = {
     "ezc3d": "import ezc3d; c = ezc3d.c3d({path!r}); n = c['data']['points'].shape[2]",
-    "import": ("from haptify.importers import import_c3d; "
+    "import": ("from haptify.formats.importers import import_c3d; "
                "import_c3d({path!r}, {out!r}, {map!r}, overwrite=True, stream={stream})"),
-    "haptify import": ("from haptify import cli; "
+    "haptify import": ("from haptify.cli import main as cli; "
                        "assert cli.main(['--quiet', 'import', 'c3d', {path!r}, '--map', {map!r}, '-o', {out!r}, '--overwrite']) == 0"),
-    "haptify validate": "from haptify import cli; assert cli.main(['--quiet', 'validate', {out!r}]) == 0",
-    "validate whole": ("from haptify.validation import SessionValidator; v = SessionValidator({out!r}); v.check_manifest(); "
+    "haptify validate": "from haptify.cli import main as cli; assert cli.main(['--quiet', 'validate', {out!r}]) == 0",
+    "validate whole": ("from haptify.formats.validation import SessionValidator; v = SessionValidator({out!r}); v.check_manifest(); "
                        "[v.check_stream(e, keep=True) for e in v.entries]; assert v.report.valid"),
 }
 

@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from haptify.storage import SessionWriter, open_session
-from haptify.validation import validate_session
+from haptify.formats.storage import SessionWriter, open_session
+from haptify.formats.validation import validate_session
 from haptify_tools.example_session import example_writer
 
 DURATION_S = 140.0

@@ -29,8 +29,8 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import lfilter
 
-from haptify.conventions import quat_from_axis_angle
-from haptify.local_dynamics import (
+from haptify.formats.conventions import quat_from_axis_angle
+from haptify.dynamics import (
     DistanceScales,
     FitOptions,
     fit,
@@ -55,7 +55,7 @@ PEER_RATIO_TARGET = 3.0
 HW_FIT = textwrap.dedent("""
     import json, sys, time
     import numpy as np
-    from haptify.local_dynamics import fit, predict, INPUT_NAMES
+    from haptify.dynamics import fit, predict, INPUT_NAMES
     data = np.load(sys.argv[1])
     def records(prefix):
         return [(data[f"{prefix}_u{k}"], data[f"{prefix}_y{k}"]) for k in range(len([f for f in data.files if f.startswith(prefix + "_u")]))]
@@ -126,8 +126,8 @@ def main() -> None:
 
 def export_records(session_dir: Path, path: Path) -> tuple[str, float]:
     """The training trial's valid runs and every test trial's (spec §11.7) as an .npz for both sides."""
-    from haptify import local_dynamics as ld
-    from haptify.storage import open_session
+    from haptify import dynamics as ld
+    from haptify.formats.storage import open_session
 
     session = open_session(session_dir)
     train = ld.training_trial(session)

@@ -17,8 +17,8 @@ import time
 from pathlib import Path
 
 from bench_workspace import best
-from haptify.compute import ComputeContext, compute_session
-from haptify.storage import open_session
+from haptify.pipeline.compute import ComputeContext, compute_session
+from haptify.formats.storage import open_session
 
 FAMILIES = ("workspace", "free_space", "vibration", "surface", "stiffness")
 
@@ -40,7 +40,7 @@ def main() -> None:
         print(f"whole dossier, compute_session (every family): {wall:.2f} s wall, {cpu:.2f} s CPU (target < 10 s); "
               f"{len(results.metrics)} metrics, {len(results.unavailable)} unavailable")
         for fam in FAMILIES:
-            module = importlib.import_module(f"haptify.{fam}")
+            module = importlib.import_module(f"haptify.metrics.{fam}")
             wall, cpu, out = best(args.repeat, lambda: module.compute(ComputeContext(session=open_session(path))))
             print(f"  {fam}: {wall:.2f} s wall, {cpu:.2f} s CPU ({len(out)} records)")
 

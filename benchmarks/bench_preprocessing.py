@@ -21,9 +21,9 @@ import numpy as np
 
 from bench_import import best_of
 from bench_io import build
-from haptify import calibration, force_plate, signals
-from haptify.conventions import STANDARD_GRAVITY
-from haptify.storage import atomic_write_json, open_session
+from haptify.processing import calibration, force_plate, signals
+from haptify.formats.conventions import STANDARD_GRAVITY
+from haptify.formats.storage import atomic_write_json, open_session
 
 RECORD = {"kind": "handle_gravity", "id": "bench", "force_bias_N": [0.1, -0.2, 0.3], "connector_mass_kg": 0.05,
           "connector_com_m": [0.0, 0.0, 0.02], "torque_bias_Nm": [0.0, 0.0, 0.0], "accel_bias_m_per_s2": [0.0, 0.0, 0.0],

@@ -37,11 +37,11 @@ sys.path.insert(0, str(REPO / "tests"))  # the registry tests' bundle builders (
 
 from _registry_fixtures import example_session, passing_report  # noqa: E402
 
-from haptify.metric_definitions import family  # noqa: E402
-from haptify.results import DeviceSummary, Implementation, MetricResult, ResultsFile  # noqa: E402
-from haptify.storage import sha256_file  # noqa: E402
+from haptify.metrics.metric_definitions import family  # noqa: E402
+from haptify.pipeline.results import DeviceSummary, Implementation, MetricResult, ResultsFile  # noqa: E402
+from haptify.formats.storage import sha256_file  # noqa: E402
 from haptify.versions import PACKAGE_VERSION  # noqa: E402
-from haptify.bundle_format import submission_id  # noqa: E402
+from haptify.formats.bundle_format import submission_id  # noqa: E402
 from haptify_tools.registry.bundle import build_bundle, pack  # noqa: E402
 from haptify_tools.registry.cmd_submit import post_bundle  # noqa: E402
 

@@ -21,7 +21,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "tests"))
 from _registry_fixtures import free_port, passing_report, wait_http  # noqa: E402
 
-HAPTIFY = [sys.executable, "-m", "haptify.cli"]
+HAPTIFY = [sys.executable, "-m", "haptify.cli.main"]
 
 
 def timed(argv: list[str]) -> float:

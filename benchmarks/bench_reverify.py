@@ -36,8 +36,8 @@ if __name__ == "__main__":  # not again in each registry worker: the forkserver 
     from _registry_fixtures import bundle_for, passing_report
     from figures import report
 
-    from haptify.compute import compute_session
-    from haptify.storage import open_session, sha256_file
+    from haptify.pipeline.compute import compute_session
+    from haptify.formats.storage import open_session, sha256_file
     from haptify_tools.cluster import dask_client
     from haptify_tools.registry.reverify import record_values, run_reverify, start_run
     from haptify_tools.registry.service import Caller, Registry, Settings

@@ -32,11 +32,11 @@ from pathlib import Path
 
 import numpy as np
 
-from haptify import kinematics as ref
-from haptify.compute import ComputeContext, compute_session
-from haptify.stiffness import FitRule, fit_stiffness, grid_rate
-from haptify.storage import open_session
-from haptify.surface import contact_signals
+from haptify.processing import kinematics as ref
+from haptify.pipeline.compute import ComputeContext, compute_session
+from haptify.metrics.stiffness import FitRule, fit_stiffness, grid_rate
+from haptify.formats.storage import open_session
+from haptify.metrics.surface import contact_signals
 from haptify_tools.twin import kinematics as tk
 from haptify_tools.twin.model import disable, preset, set_param
 from haptify_tools.twin.physics import drive_friction, potential_energy

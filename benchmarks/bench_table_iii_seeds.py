@@ -25,8 +25,8 @@ import numpy as np
 
 from figures import report
 from haptify import schemas
-from haptify.compute import compute_session
-from haptify.storage import open_session
+from haptify.pipeline.compute import compute_session
+from haptify.formats.storage import open_session
 from haptify_tools.twin.model import TwinFile, preset
 from haptify_tools.twin.simulate import DEVICE_PROTOCOLS, SimulationOptions, simulate_dossier
 

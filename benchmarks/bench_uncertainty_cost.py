@@ -2,7 +2,7 @@
 
 Simulates the ``touch`` preset's demo dossier once (every protocol × 3 repetitions plus the rig trials,
 seed 1; simulation not counted), or takes ``--session PATH``. Then, from a cold context each time:
-``compute_session`` alone (plain), and ``compute_session`` followed by ``haptify.uncertainty.attach`` on
+``compute_session`` alone (plain), and ``compute_session`` followed by ``haptify.metrics.uncertainty.attach`` on
 the same context (what ``haptify compute --uncertainty`` does). Best of ``--repeat`` runs, wall and CPU.
 
     python benchmarks/bench_uncertainty_cost.py [--repeat 2] [--session PATH]
@@ -17,8 +17,8 @@ from pathlib import Path
 
 from bench_workspace import best
 from figures import report
-from haptify.compute import ComputeContext, compute_session
-from haptify.storage import open_session
+from haptify.pipeline.compute import ComputeContext, compute_session
+from haptify.formats.storage import open_session
 
 LIMIT = 3.0  # total cost with uncertainty / plain cost (spec §19.5)
 

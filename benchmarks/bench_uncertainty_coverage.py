@@ -42,17 +42,17 @@ from typing import Callable
 import numpy as np
 
 from figures import report
-from haptify import stiffness, surface, workspace
-from haptify.compute import ComputeContext, compute_session
+from haptify.metrics import stiffness, surface, workspace
+from haptify.pipeline.compute import ComputeContext, compute_session
 from haptify.errors import HaptifyError
-from haptify.free_space import (FORCE_IDS, PLATE_ID, SPEED_IDS, magnitude_stats, plate_force_about_weight, plate_force_samples,
+from haptify.metrics.free_space import (FORCE_IDS, PLATE_ID, SPEED_IDS, magnitude_stats, plate_force_about_weight, plate_force_samples,
                                 speed_samples)
-from haptify.repetitions import definition_of
-from haptify.preprocessing import lowpass_resample, mocap_track, process_mocap, resample_track, sp
-from haptify.signals import handle_signals
-from haptify.storage import open_session
-from haptify.uncertainty import method_of
-from haptify.vibration import GROUPS, combine
+from haptify.pipeline.repetitions import definition_of
+from haptify.processing.preprocessing import lowpass_resample, mocap_track, process_mocap, resample_track, sp
+from haptify.processing.signals import handle_signals
+from haptify.formats.storage import open_session
+from haptify.metrics.uncertainty import method_of
+from haptify.metrics.vibration import GROUPS, combine
 
 TARGET, BAND = 0.95, 0.03
 #: Trial lengths (s): free space as the first study; surface and stiffness long enough for several

@@ -22,8 +22,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_io import build  # noqa: E402
 
-from haptify.storage import MANIFEST, check_csv_grammar, read_table, sha256_file, write_table  # noqa: E402
-from haptify.validation import validate_session  # noqa: E402
+from haptify.formats.storage import MANIFEST, check_csv_grammar, read_table, sha256_file, write_table  # noqa: E402
+from haptify.formats.validation import validate_session  # noqa: E402
 
 
 def to_csv(session: Path) -> list[tuple[Path, list[str]]]:

@@ -2,7 +2,7 @@
 (issue 21, item 4), and a 140 s trial with every stream to .rrd in under 2 s (issue 7).
 
 Issue 21: the demo dossier (``benchmarks/bench_gate.py``'s :func:`dossier`: ``demo-out/touch`` when present,
-else simulated as the demo does) is written by ``python -m haptify.cli view DOSSIER --save out.rrd`` (the
+else simulated as the demo does) is written by ``python -m haptify.cli.main view DOSSIER --save out.rrd`` (the
 default: raw streams only, each read once through the validation gate) and by :data:`PLAIN`, a plain script
 that reads every stream's Parquet and sends all its columns with one ``send_columns`` per stream. Each runs
 in a fresh interpreter under a small wrapper that reports the child's process CPU time (user + system, all
@@ -14,8 +14,8 @@ measured once beside them (no target: the derived signals cost what the referenc
 Issue 7: the trial holds every stream kind at its recommended rate: handle_wrench, commanded_wrench,
 device_joint_angles, sync and plate_wrench at 1 kHz, handle_accel at 2 kHz, handle_pose, markers
 (9 markers on 3 links) and link_poses (3 links) at 100 Hz — about 1.0 million samples — with calibration
-records, so the calibrated hand signals (haptify.signals) and the plate force and COP
-(haptify.force_plate) are computed as well (``derived="full"``). The figure is
+records, so the calibrated hand signals (haptify.processing.signals) and the plate force and COP
+(haptify.processing.force_plate) are computed as well (``derived="full"``). The figure is
 the process CPU time (all threads) of ``haptify_tools.viewer.save.build`` (reading the streams,
 planning, blueprint, writing and closing the .rrd), best of three; the wall time is printed beside it
 (the issue stated the target in wall time, which a shared machine's load inflates).
@@ -37,7 +37,7 @@ import numpy as np
 
 from bench_gate import dossier
 from figures import report
-from haptify.storage import SessionWriter, open_session
+from haptify.formats.storage import SessionWriter, open_session
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
 from haptify_tools.viewer.save import build
 
@@ -147,7 +147,7 @@ def measured(command: list[str]) -> tuple[float, float]:
 
 
 def view_command(session: Path, out: Path, *extra: str) -> list[str]:
-    return [sys.executable, "-m", "haptify.cli", "view", str(session), "--save", str(out), *extra]
+    return [sys.executable, "-m", "haptify.cli.main", "view", str(session), "--save", str(out), *extra]
 
 
 def against_plain(tmp: Path) -> None:

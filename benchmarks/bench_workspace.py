@@ -14,9 +14,9 @@ import time
 
 import numpy as np
 
-from haptify.kinematics import configurations_from_unit, forward_positions
-from haptify.session_format import Device
-from haptify.workspace import modeled_solid, volume_solid
+from haptify.processing.kinematics import configurations_from_unit, forward_positions
+from haptify.formats.session_format import Device
+from haptify.metrics.workspace import modeled_solid, volume_solid
 from haptify_tools.example_session import TOUCH_DEVICE
 
 

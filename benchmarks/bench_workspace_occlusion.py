@@ -7,10 +7,10 @@ script separates the candidate causes on workspace-only sessions of the ``touch`
 number, ``--reps`` sweeps each, every ``--duration``): for every trial it applies the volume operator
 (§8.4) to
 
-* ``meas``  — the trial's finite measured positions alone (:func:`haptify.workspace.measured_points`), as the
+* ``meas``  — the trial's finite measured positions alone (:func:`haptify.metrics.workspace.measured_points`), as the
   reference computed it before the repair of §8.7;
 * ``rep``   — the measured cloud with its occlusion gaps repaired from the other repetitions, as the reference
-  computes it now (:func:`haptify.workspace.trial_solid`, spec §8.7);
+  computes it now (:func:`haptify.metrics.workspace.trial_solid`, spec §8.7);
 * ``mask``  — the twin's true positions at the rows whose measured position is finite (the coverage study's
   truth until the repair): the examiner's sweep with the occlusion gaps cut out, no noise;
 * ``all``   — the twin's true positions at every row: the sweep as a perfect rig records it, the measurand of
@@ -45,9 +45,9 @@ from scipy.interpolate import PchipInterpolator
 from scipy.stats import skew
 from scipy.stats import t as student
 
-from haptify import workspace
-from haptify.compute import ComputeContext
-from haptify.storage import open_session
+from haptify.metrics import workspace
+from haptify.pipeline.compute import ComputeContext
+from haptify.formats.storage import open_session
 
 METRICS = {"ratio": "workspace.volume_ratio", "coverage": "workspace.coverage"}
 

@@ -21,8 +21,8 @@ from pathlib import Path
 
 import pytest
 
-from haptify.compute import compute_session
-from haptify.storage import open_session
+from haptify.formats.storage import open_session
+from haptify.pipeline.compute import compute_session
 from haptify_conform.cases import load_cases, select
 from haptify_conform.judge import Verdict
 from haptify_conform.report import ConformReport, build_report, header
@@ -234,7 +234,7 @@ def wait_http(url: str, timeout: float = 20.0, alive: subprocess.Popen | None = 
 
 
 SERVE = (
-    "import argparse, sys; from haptify.cli import UI; from haptify_tools.registry import cmd_registry; "
+    "import argparse, sys; from haptify.cli.main import UI; from haptify_tools.registry import cmd_registry; "
     "p = argparse.ArgumentParser(); cmd_registry.register(p.add_subparsers()); a = p.parse_args(sys.argv[1:]); "
     "sys.exit(a.func(a, UI(quiet=True)))"
 )

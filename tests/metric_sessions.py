@@ -11,9 +11,9 @@ from typing import Callable
 
 import numpy as np
 
-from haptify.calibration import gravity_in_sensor
-from haptify.conventions import STANDARD_GRAVITY, quat_conjugate, quat_from_axis_angle, quat_rotate, quat_to_matrix
-from haptify.storage import SessionWriter
+from haptify.formats.conventions import STANDARD_GRAVITY, quat_conjugate, quat_from_axis_angle, quat_rotate, quat_to_matrix
+from haptify.formats.storage import SessionWriter
+from haptify.processing.calibration import gravity_in_sensor
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
 
 Fn = Callable[[np.ndarray], np.ndarray]
@@ -43,7 +43,7 @@ def spin(rate: float = 0.07, axis=(0.3, -0.2, 1.0), tilt: float = 0.4) -> Fn:
     ax = np.asarray(axis, float)
 
     def q(t: np.ndarray) -> np.ndarray:
-        from haptify.conventions import quat_multiply
+        from haptify.formats.conventions import quat_multiply
 
         return quat_multiply(quat_from_axis_angle(np.broadcast_to(ax, (len(t), 3)), rate * t), np.broadcast_to(q0, (len(t), 4)))
 

@@ -8,10 +8,10 @@ import argparse
 import json
 
 import pytest
-
 from _registry_fixtures import example_session
-from haptify.cli import UI
-from haptify.cmd_compute import compute_folder
+
+from haptify.cli.cmd_compute import compute_folder
+from haptify.cli.main import UI
 from haptify.errors import HaptifyError
 from haptify_tools import cmd_batch
 from haptify_tools.cluster import dask_client

@@ -8,12 +8,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from haptify_tools import rig_builders as rb
-from haptify import calibration
-from haptify.conventions import STANDARD_GRAVITY, quat_from_axis_angle, quat_multiply, quat_normalize
 from haptify.errors import HaptifyError
-from haptify.session_format import Pose
-from haptify.storage import open_session
+from haptify.formats.conventions import STANDARD_GRAVITY, quat_from_axis_angle, quat_multiply, quat_normalize
+from haptify.formats.session_format import Pose
+from haptify.formats.storage import open_session
+from haptify.processing import calibration
+from haptify_tools import rig_builders as rb
 
 
 def _unit_vectors(n: int, rng: np.random.Generator) -> np.ndarray:

@@ -6,7 +6,7 @@ import json
 import subprocess
 import sys
 
-from haptify.cli import main
+from haptify.cli.main import main
 from haptify.versions import PACKAGE_VERSION, SCHEMA_VERSION, SPEC_VERSION
 
 
@@ -24,7 +24,7 @@ def test_unknown_command_and_no_command_exit_2(capsys):
 
 
 def test_console_script_runs_without_traceback():
-    proc = subprocess.run([sys.executable, "-m", "haptify.cli", "--help"], capture_output=True, text=True)
+    proc = subprocess.run([sys.executable, "-m", "haptify.cli.main", "--help"], capture_output=True, text=True)
     assert proc.returncode == 0
     assert "COMMAND" in proc.stdout and "Traceback" not in proc.stderr
 
@@ -38,7 +38,7 @@ def test_every_command_a_hint_names_exists():
     """A hint that sends the user to a command that does not exist is a dead end (spec §0.4)."""
     import re
 
-    from haptify.cli import command_names
+    from haptify.cli.main import command_names
     from haptify.errors import catalogue
     from haptify_conform.cli import build_parser as conform_parser
 

@@ -15,10 +15,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from haptify.compute import compute_session
 from haptify.errors import HaptifyError
-from haptify.storage import open_session, read_stream_file, write_table
-from haptify.validation import validate_session
+from haptify.formats.storage import open_session, read_stream_file, write_table
+from haptify.formats.validation import validate_session
+from haptify.pipeline.compute import compute_session
 from haptify_tools.example_session import example_writer
 
 FAST = ["free_space.speed_mean", "vibration.rms", "vibration.spectral_centroid", "workspace.spec_box_volume"]

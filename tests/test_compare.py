@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import json
 
-from haptify.cli import main
-from haptify.compare import build_table, to_csv, to_html, to_markdown
-from haptify.results import DeviceSummary, Implementation, MetricResult, ResultsFile
+from haptify.cli.main import main
+from haptify.pipeline.compare import build_table, to_csv, to_html, to_markdown
+from haptify.pipeline.results import DeviceSummary, Implementation, MetricResult, ResultsFile
 
 
 def _results(model: str, force: float, volume: float) -> ResultsFile:

@@ -66,7 +66,7 @@ def test_the_mutant_set_is_well_formed_and_its_recorded_result_current():
     mutants`) covers exactly this set and records every mutant caught."""
     import re
 
-    from haptify.metric_definitions import all_families
+    from haptify.metrics.metric_definitions import all_families
     from haptify_conform.requirements import by_id
 
     requirement_ids = set(by_id())

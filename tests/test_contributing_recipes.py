@@ -16,13 +16,14 @@ from pathlib import Path
 
 import jsonschema
 import pytest
+from metric_sessions import add_handle_trial, circle, spin, writer
 
 import haptify_schemas
-from haptify import families, metric_definitions
 from haptify.errors import HaptifyError
-from haptify.compute import compute_session
-from haptify.storage import open_session
-from metric_sessions import add_handle_trial, circle, spin, writer
+from haptify.formats.storage import open_session
+from haptify.metrics import metric_definitions
+from haptify.pipeline import families
+from haptify.pipeline.compute import compute_session
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -47,9 +48,9 @@ TOY_DEFINITION = {
 TOY_MODULE = '''
 """The toy family: the recorded length of each free-space trial (a recipe's example)."""
 
-from haptify.caching import session_of
-from haptify.metric_definitions import FamilyParameters, load_parameters
-from haptify.repetitions import TrialValue, aggregate, protocol_trials
+from haptify.processing.caching import session_of
+from haptify.metrics.metric_definitions import FamilyParameters, load_parameters
+from haptify.pipeline.repetitions import TrialValue, aggregate, protocol_trials
 
 FAMILY = "toy"
 METRIC = "toy.trial_duration"

@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from haptify.conventions import (
+from haptify.formats.conventions import (
     matrix_to_quat,
     quat_angle,
     quat_from_axis_angle,

@@ -19,10 +19,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from haptify.cli import main
-from haptify_tools.invalid_fixtures import defects, session_edits
-from haptify.storage import sha256_file
+from haptify.cli.main import main
+from haptify.formats.storage import sha256_file
 from haptify_tools.example_session import example_writer
+from haptify_tools.invalid_fixtures import defects, session_edits
 
 EXAMPLES = int(os.environ.get("HAPTIFY_CORRUPTION_EXAMPLES", "40"))
 MODEL = Path(__file__).resolve().parents[1] / "fixtures" / "conformance" / "dyn-predict" / "model-a.json"

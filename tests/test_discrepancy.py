@@ -10,17 +10,17 @@ import json
 import numpy as np
 import pytest
 
-from haptify.cli import UI
-from haptify.storage import open_session
+from haptify.cli.main import UI
+from haptify.formats.storage import open_session
 from haptify_tools.discrepancy import cmd_discrepancy
 from haptify_tools.discrepancy.data import load_measured, simulate_all
 from haptify_tools.discrepancy.demo import DEMO_TRUTH, demo_session
+from haptify_tools.discrepancy.floor import gap_above_floor, heldout_gap
 from haptify_tools.discrepancy.identify import select_effects
 from haptify_tools.discrepancy.model import DiscrepancyFile
-from haptify_tools.discrepancy.floor import gap_above_floor, heldout_gap
 from haptify_tools.discrepancy.workflow import run_discrepancy
-from haptify_tools.twin.model import disable, load_twin, preset, set_param, write_twin
 from haptify_tools.twin.dossier_plan import SimulationOptions
+from haptify_tools.twin.model import disable, load_twin, preset, set_param, write_twin
 from haptify_tools.twin.simulate import simulate_dossier
 
 FREE = {"free_space": 16.0, "figure_eight": 16.0, "stiffness": 8.0, "workspace": 60.0, "rig.handle_calibration": 12.0}

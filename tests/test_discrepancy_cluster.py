@@ -6,12 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from haptify.storage import open_session
+from haptify.formats.storage import open_session
 from haptify_tools.cluster import dask_client
 from haptify_tools.discrepancy.data import load_measured
 from haptify_tools.discrepancy.identify import select_effects
-from haptify_tools.twin.model import disable, preset, set_param
 from haptify_tools.twin.dossier_plan import SimulationOptions
+from haptify_tools.twin.model import disable, preset, set_param
 from haptify_tools.twin.simulate import simulate_dossier
 
 TORQUE = 0.04  # N·m, the hidden friction

@@ -9,15 +9,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as hst
 
-from haptify.conventions import quat_normalize, quat_to_matrix
-from haptify.compute import ComputeContext
-from haptify.session_format import SensorRange
-from haptify.signals import handle_signals
-from haptify.storage import open_session
+from haptify.formats.conventions import quat_normalize, quat_to_matrix
+from haptify.formats.session_format import SensorRange
+from haptify.formats.storage import open_session
+from haptify.pipeline.compute import ComputeContext
+from haptify.processing.signals import handle_signals
 from haptify_tools.discrepancy import hand_path as hp
 from haptify_tools.discrepancy.data import EDGE_S, load_measured
-from haptify_tools.twin.model import preset
 from haptify_tools.twin.dossier_plan import SimulationOptions
+from haptify_tools.twin.model import preset
 from haptify_tools.twin.simulate import simulate_dossier
 
 RATE = 100.0

@@ -13,12 +13,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from haptify.storage import open_session
+from haptify.formats.storage import open_session
 from haptify_tools.discrepancy.data import load_measured, simulate_all
 from haptify_tools.discrepancy.floor import heldout_gap
 from haptify_tools.discrepancy.workflow import assess
-from haptify_tools.twin.model import disable, preset, set_param
 from haptify_tools.twin.dossier_plan import SimulationOptions
+from haptify_tools.twin.model import disable, preset, set_param
 from haptify_tools.twin.simulate import simulate_dossier
 
 

@@ -14,13 +14,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as hst
 
-from haptify.storage import open_session
+from haptify.formats.storage import open_session
 from haptify_tools.discrepancy.data import load_measured, simulate_all
 from haptify_tools.discrepancy.floor import GAP_ALPHA, Floor, heldout_gap
 from haptify_tools.discrepancy.outside import Cogging, SpeedSquared, with_field
 from haptify_tools.discrepancy.workflow import assess, benchmark_gaps, verdict_of
-from haptify_tools.twin.model import preset
 from haptify_tools.twin.dossier_plan import SimulationOptions
+from haptify_tools.twin.model import preset
 from haptify_tools.twin.simulate import simulate_dossier
 
 

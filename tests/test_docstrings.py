@@ -68,7 +68,7 @@ def test_any_tracker_number_in_any_case_is_found_on_its_line(word, number, befor
 def test_the_scan_sees_the_source_trees():
     files = {p.relative_to(REPO).as_posix() for p in _sources()}
     for expected in (
-        "reference/haptify/vibration.py",
+        "reference/haptify/metrics/vibration.py",
         "conformance/haptify_conform/coverage.py",
         "conformance/mutants/run.py",
         "tools/haptify_tools/discrepancy/floor.py",

@@ -1,4 +1,4 @@
-"""The filter bank of the Hammerstein–Wiener fit (haptify.filter_bank; spec §11.3, §11.4.3)."""
+"""The filter bank of the Hammerstein–Wiener fit (haptify.processing.filter_bank; spec §11.3, §11.4.3)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.signal import lfilter
 
-from haptify.filter_bank import FilterBank, lfilter_columns
+from haptify.processing.filter_bank import FilterBank, lfilter_columns
 
 
 def test_first_order_impulse_response_is_the_geometric_sequence():

@@ -8,12 +8,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from haptify_tools import rig_builders as rb
-from haptify import force_plate
-from haptify.conventions import quat_from_axis_angle
 from haptify.errors import HaptifyError
-from haptify.session_format import Rig
-from haptify.storage import open_session
+from haptify.formats.conventions import quat_from_axis_angle
+from haptify.formats.session_format import Rig
+from haptify.formats.storage import open_session
+from haptify.processing import force_plate
+from haptify_tools import rig_builders as rb
 
 
 def turned_corner_rig() -> dict:

@@ -13,13 +13,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from metric_sessions import add_handle_trial, circle, spin, writer
 
-from haptify import free_space
-from haptify.compute import ComputeContext
-from haptify import preprocessing
-from haptify.conventions import quat_from_axis_angle, quat_multiply, quat_to_matrix
 from haptify.errors import HaptifyError
-from haptify.free_space import (
+from haptify.formats.conventions import quat_from_axis_angle, quat_multiply, quat_to_matrix
+from haptify.formats.storage import open_session
+from haptify.metrics import free_space
+from haptify.metrics.free_space import (
     _angular_of,
     compute,
     exceedance,
@@ -28,10 +28,10 @@ from haptify.free_space import (
     plate_force_about_weight,
     speed_samples,
 )
-from haptify.figures.free_space import report_figures
-from haptify.results import MetricResult, Unavailable
-from haptify.storage import open_session
-from metric_sessions import add_handle_trial, circle, spin, writer
+from haptify.pipeline.compute import ComputeContext
+from haptify.pipeline.results import MetricResult, Unavailable
+from haptify.processing import preprocessing
+from haptify.report.figures.free_space import report_figures
 
 
 def test_magnitude_statistics_of_a_known_force():

@@ -12,10 +12,10 @@ from pathlib import Path
 
 import pytest
 
-from haptify.cli import main
+from haptify.cli.main import main
 from haptify.errors import HaptifyError
-from haptify.gate import SessionRefused, open_checked_session
-from haptify.validation import validate_session
+from haptify.formats.validation import validate_session
+from haptify.pipeline.gate import SessionRefused, open_checked_session
 from haptify_tools import build_invalid_fixtures as fx
 from haptify_tools.invalid_fixtures import cases
 
@@ -191,7 +191,7 @@ HEAVY = (
 @pytest.mark.parametrize("argv", [[], ["validate"], ["compute"], ["--json", "validate", "--help"]])
 def test_building_the_parser_imports_none_of_the_heavy_packages(argv):
     code = (
-        "import sys; from haptify.cli import build_parser, split_global_flags; "
+        "import sys; from haptify.cli.main import build_parser, split_global_flags; "
         f"rest, flags, command = split_global_flags({argv!r}); build_parser(command); "
         f"print(sorted(m for m in sys.modules if m.split('.')[0] in {{h.split('.')[0] for h in {HEAVY!r}}} "
         f"and any(m == h or m.startswith(h + '.') for h in {HEAVY!r})))"

@@ -12,11 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from haptify.cli import main
+from haptify.cli.main import main
 from haptify.errors import HaptifyError
-from haptify.importers import import_c3d, read_c3d
-from haptify.storage import open_session
-from haptify.validation import validate_session
+from haptify.formats.importers import import_c3d, read_c3d
+from haptify.formats.storage import open_session
+from haptify.formats.validation import validate_session
 from haptify_tools.c3d_variants import C3DSpec, Platform, float32, header_words, patch_header, rectangle_corners, write_c3d
 from haptify_tools.example_session import TOUCH_DEVICE
 

@@ -11,14 +11,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from haptify.cli import main
-from haptify.conventions import matrix_to_quat
-from haptify.errors import HaptifyError
-from haptify.importers.exports import detect_format, import_export, read_export
-from haptify.storage import open_session
-from haptify_tools.example_session import TOUCH_DEVICE
 from test_import_c3d_variants import rot_z, sweep
+
+from haptify.cli.main import main
+from haptify.errors import HaptifyError
+from haptify.formats.conventions import matrix_to_quat
+from haptify.formats.importers.exports import detect_format, import_export, read_export
+from haptify.formats.storage import open_session
+from haptify_tools.example_session import TOUCH_DEVICE
 
 N = 2000
 RATE = 100.0

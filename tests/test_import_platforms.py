@@ -3,7 +3,7 @@
 Each file carries a known load by construction — an integer force (N) applied at an integer point of
 the top surface (mm) with a free moment (N·mm) — recorded as each platform type records it
 (haptify_tools.c3d_variants.known_load_channels; every channel exactly a float32). The import's
-plate_wrench, summed by §14.1 (haptify.force_plate.total_wrench, the consumer every metric uses), must
+plate_wrench, summed by §14.1 (haptify.processing.force_plate.total_wrench, the consumer every metric uses), must
 give back that load in W to 1e-9 relative, whatever the sensing origin, its sign convention, the
 calibration matrix or the plate's pose in the lab.
 """
@@ -20,10 +20,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from haptify.errors import HaptifyError
-from haptify.force_plate import PLATE_COLUMNS, center_of_pressure, corner_geometry, total_wrench
-from haptify.importers import import_c3d, read_c3d
-from haptify.storage import open_session
-from haptify.validation import validate_session
+from haptify.formats.importers import import_c3d, read_c3d
+from haptify.formats.storage import open_session
+from haptify.formats.validation import validate_session
+from haptify.processing.force_plate import PLATE_COLUMNS, center_of_pressure, corner_geometry, total_wrench
 from haptify_tools.c3d_variants import (
     PLATFORM_UNITS,
     C3DSpec,

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from haptify.importers import import_c3d, read_c3d, recording_chunks
-from haptify.storage import open_session
+from haptify.formats.importers import import_c3d, read_c3d, recording_chunks
+from haptify.formats.storage import open_session
 from haptify_tools.c3d_variants import (
     PLATFORM_UNITS,
     C3DSpec,
@@ -166,8 +166,9 @@ def test_an_import_in_small_chunks_writes_what_the_whole_file_import_writes(tmp_
 def test_a_text_export_in_small_chunks_imports_as_the_whole_file(tmp_path, fmt):
     """Qualisys TSV (6DOF and 3-D with QTM's zero gaps) and Motive CSV stream too (§5.5.1): the same
     streams, row for row, as the whole-file import."""
-    from haptify.importers.exports import import_export, read_export
-    from test_import_exports import write_motive, write_qtm_6d, workspace_map
+    from test_import_exports import workspace_map, write_motive, write_qtm_6d
+
+    from haptify.formats.importers.exports import import_export, read_export
 
     path = tmp_path / ("t.csv" if fmt == "motive" else "t.tsv")
     kind = fmt.split("-")[0]

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from haptify.cli import main
-from haptify.importers import import_c3d, import_csv
-from haptify.storage import open_session
-from haptify.suggest_map import guess_streams
+from haptify.cli.main import main
+from haptify.formats.importers import import_c3d, import_csv
+from haptify.formats.storage import open_session
+from haptify.formats.suggest_map import guess_streams
 from haptify_tools.c3d_variants import C3DSpec, Platform, float32, rectangle_corners, write_c3d
 from haptify_tools.example_session import TOUCH_DEVICE
 

@@ -13,12 +13,13 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from haptify import cli, cmd_import
-from haptify.conventions import STANDARD_GRAVITY
+from haptify.cli import cmd_import
+from haptify.cli import main as cli
 from haptify.errors import HaptifyError
-from haptify.importers import ImportMap, import_c3d, import_csv, read_c3d, sanitize_id
-from haptify.storage import open_session
-from haptify.validation import validate_session
+from haptify.formats.conventions import STANDARD_GRAVITY
+from haptify.formats.importers import ImportMap, import_c3d, import_csv, read_c3d, sanitize_id
+from haptify.formats.storage import open_session
+from haptify.formats.validation import validate_session
 from haptify_tools.example_session import TOUCH_DEVICE, example_rig
 
 REPO = Path(__file__).resolve().parents[1]

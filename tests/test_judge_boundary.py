@@ -10,7 +10,6 @@ import subprocess
 import sys
 
 import pytest
-
 from conftest import REPO
 
 JUDGE = REPO / "conformance" / "haptify_conform"
@@ -29,7 +28,9 @@ def imported_packages(source: str) -> set[str]:
 
 
 def test_the_import_check_sees_every_kind_of_import():
-    source = "import haptify.storage\nfrom haptify_tools import twin\ndef f():\n    from haptify.compute import x\n"
+    source = (
+        "import haptify.formats.storage\nfrom haptify_tools import twin\ndef f():\n    from haptify.pipeline.compute import x\n"
+    )
     assert imported_packages(source) == {"haptify", "haptify_tools"}
     assert imported_packages("from . import cases\nimport haptify_schemas\n") == {"haptify_schemas"}
 

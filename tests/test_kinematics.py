@@ -8,8 +8,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from haptify.kinematics import configurations_from_unit, forward_positions, jacobian, joint_limits, within_limits
-from haptify.session_format import Device
+from haptify.formats.session_format import Device
+from haptify.processing.kinematics import configurations_from_unit, forward_positions, jacobian, joint_limits, within_limits
 from haptify_tools.example_session import TOUCH_DEVICE
 
 KIN = Device.model_validate(TOUCH_DEVICE).kinematics

@@ -9,19 +9,19 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from haptify.local_dynamics import parameter_file
-from haptify.conventions import quat_from_axis_angle
-from haptify.errors import HaptifyError
-from haptify.local_dynamics import (
+from haptify.dynamics import (
     DistanceScales,
     WindowFeatures,
     line_fit,
     nearest_distances,
     pair_distance,
+    parameter_file,
     segment_distances,
     segment_force_errors,
     window_features,
 )
+from haptify.errors import HaptifyError
+from haptify.formats.conventions import quat_from_axis_angle
 
 R = DistanceScales.from_definition()
 WIN = 20  # 0.2 s at 100 Hz
@@ -83,7 +83,7 @@ def test_an_orientation_offset_of_86_degrees_gives_one():
     sig = motion(rng, n)
     turned = dict(sig)
     extra = quat_from_axis_angle(np.array([[0.0, 0.0, 1.0]]), np.array([math.radians(86.0)]))[0]
-    from haptify.conventions import quat_multiply
+    from haptify.formats.conventions import quat_multiply
 
     turned["quaternion"] = quat_multiply(np.tile(extra, (n, 1)), sig["quaternion"])  # rotated in the world frame
     d = np.diag(pair_distance(features(turned), features(sig), R))

@@ -11,9 +11,7 @@ from hypothesis import strategies as st
 from scipy.io import loadmat
 from scipy.signal import lfilter
 
-from haptify.errors import HaptifyError
-from haptify.local_dynamics import fitting, jacobian
-from haptify.local_dynamics import (
+from haptify.dynamics import (
     Channel,
     FitOptions,
     HWModelFile,
@@ -22,6 +20,8 @@ from haptify.local_dynamics import (
     UnitGainMap,
     export_mat,
     fit,
+    fitting,
+    jacobian,
     load_model,
     place_breakpoints,
     predict,
@@ -30,7 +30,7 @@ from haptify.local_dynamics import (
     rmse,
     save_model,
 )
-
+from haptify.errors import HaptifyError
 
 # ---------------------------------------------------------------------------------------------
 # helpers: a known model and smooth random inputs

@@ -16,11 +16,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from haptify.compute import ComputeContext
-from haptify.conventions import GRAVITY_W, quat_conjugate, quat_from_axis_angle, quat_rotate
+from haptify.dynamics import compute, line_fit, load_model, predict, trial_data
 from haptify.errors import HaptifyError
-from haptify.local_dynamics import compute, line_fit, load_model, predict, trial_data
-from haptify.storage import SessionWriter, open_session
+from haptify.formats.conventions import GRAVITY_W, quat_conjugate, quat_from_axis_angle, quat_rotate
+from haptify.formats.storage import SessionWriter, open_session
+from haptify.pipeline.compute import ComputeContext
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
 
 MASS, DAMPING, NOISE = 0.15, 0.8, 0.01
@@ -196,8 +196,8 @@ def _haptify(argv: list[str]) -> int:
     """Run a ``haptify dynamics …`` command line through the plugin's own parser."""
     import argparse
 
-    from haptify.cli import UI
-    from haptify.cmd_dynamics import register
+    from haptify.cli.cmd_dynamics import register
+    from haptify.cli.main import UI
 
     parser = argparse.ArgumentParser(prog="haptify")
     register(parser.add_subparsers(dest="command"))

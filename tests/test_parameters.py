@@ -15,23 +15,23 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import haptify_schemas
-from haptify import uncertainty
 from haptify.errors import HaptifyError
-from haptify.metric_definitions import FamilyParameters, all_families, family, load_parameters, validate_parameters
+from haptify.metrics import uncertainty
+from haptify.metrics.metric_definitions import FamilyParameters, all_families, family, load_parameters, validate_parameters
 
 REPO = Path(__file__).resolve().parents[1]
 
 #: family → the module that declares and loads its parameters
 OWNERS = {
-    "calibration": "haptify.calibration",
-    "dynamics": "haptify.local_dynamics.parameter_file",
-    "free_space": "haptify.free_space",
-    "rig": "haptify.force_plate",
-    "signals": "haptify.preprocessing",
-    "stiffness": "haptify.stiffness",
-    "surface": "haptify.surface",
-    "vibration": "haptify.vibration",
-    "workspace": "haptify.volume_operator",
+    "calibration": "haptify.processing.calibration",
+    "dynamics": "haptify.dynamics.parameter_file",
+    "free_space": "haptify.metrics.free_space",
+    "rig": "haptify.processing.force_plate",
+    "signals": "haptify.processing.preprocessing",
+    "stiffness": "haptify.metrics.stiffness",
+    "surface": "haptify.metrics.surface",
+    "vibration": "haptify.metrics.vibration",
+    "workspace": "haptify.metrics.volume_operator",
 }
 
 
@@ -52,7 +52,7 @@ def test_uncertainty_parameters_are_the_values_of_uncertainty_json():
 
 
 def test_parameters_are_frozen():
-    from haptify import vibration
+    from haptify.metrics import vibration
 
     with pytest.raises(Exception, match="frozen"):
         vibration.PARAMETERS.edge_trim_s = 0.0  # type: ignore[misc]
@@ -70,7 +70,7 @@ def _modified_vibration(tmp_path: Path, change) -> Path:
 
 
 def _only_finding(path: Path):
-    from haptify.vibration import VibrationParameters
+    from haptify.metrics.vibration import VibrationParameters
 
     with pytest.raises(HaptifyError) as exc:
         load_parameters(path, VibrationParameters)
@@ -81,7 +81,7 @@ def _only_finding(path: Path):
 
 
 def test_the_shipped_file_loads_through_a_path_as_through_the_family_name(tmp_path):
-    from haptify import vibration
+    from haptify.metrics import vibration
 
     assert load_parameters(_modified_vibration(tmp_path, lambda v: None), vibration.VibrationParameters) == vibration.PARAMETERS
 
@@ -114,14 +114,14 @@ def test_a_value_of_the_wrong_type_is_named(tmp_path, key, value, expected):
 
 
 def test_an_integer_is_taken_where_a_number_is_declared(tmp_path):
-    from haptify.vibration import VibrationParameters
+    from haptify.metrics.vibration import VibrationParameters
 
     p = load_parameters(_modified_vibration(tmp_path, lambda v: v.update(edge_trim_s=1)), VibrationParameters)
     assert p.edge_trim_s == 1.0 and isinstance(p.edge_trim_s, float)
 
 
 def test_every_problem_is_one_finding(tmp_path):
-    from haptify.vibration import VibrationParameters
+    from haptify.metrics.vibration import VibrationParameters
 
     path = _modified_vibration(tmp_path, lambda v: (v.pop("min_duration_s"), v.update(highpass_order="4", extra=1)))
     with pytest.raises(HaptifyError) as exc:
@@ -200,7 +200,7 @@ def _imports_of_parameters(path: Path) -> list[str]:
 
 
 def test_parameters_are_read_through_the_owning_module_never_bound_by_name():
-    """``from haptify.vibration import PARAMETERS`` would keep the object of import time: a patch of the owner's
+    """``from haptify.metrics.vibration import PARAMETERS`` would keep the object of import time: a patch of the owner's
     attribute (the mutants', a test's) would not reach that reader."""
     files = [*(REPO / "reference").rglob("*.py"), *(REPO / "tools").rglob("*.py"), *(REPO / "conformance").rglob("*.py")]
     assert [hit for f in files for hit in _imports_of_parameters(f)] == []

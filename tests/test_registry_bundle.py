@@ -9,12 +9,12 @@ import tarfile
 from pathlib import Path
 
 import pytest
+from _registry_fixtures import base, bundle_for, member, tar_gz  # noqa: F401  (base: fixture)
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from _registry_fixtures import base, bundle_for, member, tar_gz  # noqa: F401  (base: fixture)
 from haptify.errors import HaptifyError
-from haptify.bundle_format import Bundle, bundle_digest, canonical_json
+from haptify.formats.bundle_format import Bundle, bundle_digest, canonical_json
 from haptify_tools.registry.bundle import Limits, _member_name_problem, read_manifest, unpack
 from haptify_tools.registry.checks import agrees, check_bundle, tolerances
 
@@ -272,7 +272,7 @@ def test_tolerance_is_the_loosest_case_tolerance_per_metric():
 
 
 def test_metric_records_must_match_their_definitions(material):
-    from haptify.results import ResultsFile
+    from haptify.pipeline.results import ResultsFile
     from haptify_tools.registry.checks import metric_findings
 
     root, session, results, report = material

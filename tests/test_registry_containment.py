@@ -17,13 +17,9 @@ import urllib.error
 import urllib.request
 from pathlib import Path
 
+import _worker_jobs as jobs
 import numpy as np
 import pytest
-from fastapi.testclient import TestClient
-from hypothesis import given
-from hypothesis import strategies as st
-
-import _worker_jobs as jobs
 from _registry_fixtures import (  # noqa: F401  (base: fixture)
     base,
     bundle_for,
@@ -34,11 +30,15 @@ from _registry_fixtures import (  # noqa: F401  (base: fixture)
     variant,
     write_results,
 )
-from haptify.compare import Table
+from fastapi.testclient import TestClient
+from hypothesis import given
+from hypothesis import strategies as st
+
 from haptify.errors import HaptifyError
-from haptify.storage import sha256_file
-from haptify_tools.invalid_fixtures import session_edits
+from haptify.formats.storage import sha256_file
+from haptify.pipeline.compare import Table
 from haptify_tools.example_session import example_writer
+from haptify_tools.invalid_fixtures import session_edits
 from haptify_tools.registry.app import EXPORT_COLUMNS, FORMULA_LEAD, create_app, csv_cell, neutralised
 from haptify_tools.registry.bundle import Limits, unpack
 from haptify_tools.registry.records import Settings

@@ -14,13 +14,13 @@ import urllib.request
 from pathlib import Path
 
 import pytest
-
 from _registry_fixtures import SERVE, base, bundle_for, free_port, pg_server, start, variant, wait_http  # noqa: F401  (base: fixture)
-from haptify.cli import UI
+
+from haptify.cli.main import UI
 from haptify.errors import HaptifyError
 from haptify_tools.registry import cmd_registry, cmd_submit
-from haptify_tools.registry.service import Registry
 from haptify_tools.registry.records import Settings
+from haptify_tools.registry.service import Registry
 
 
 def _parse(argv: list[str]):

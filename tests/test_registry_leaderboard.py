@@ -78,8 +78,8 @@ def test_a_vector_metric_with_one_repetition_compares_without_an_sd():
     """The compare page built a results file whose vector sd held None (one repetition): HTTP 500."""
     from types import SimpleNamespace
 
-    from haptify.compare import build_table
-    from haptify.results import DeviceSummary, Implementation, MetricResult, ResultsFile
+    from haptify.pipeline.compare import build_table
+    from haptify.pipeline.results import DeviceSummary, Implementation, MetricResult, ResultsFile
     from haptify_tools.registry.aggregates import aggregate, defined_sd
 
     row = SimpleNamespace(per_repetition_json="[]", value_json="[0.1, 0.2, 0.3]", unit="N", definition_version="1.0.0")

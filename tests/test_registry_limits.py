@@ -8,15 +8,15 @@ import logging
 import socket
 import time
 
-from fastapi.testclient import TestClient
-
 from _registry_fixtures import base, bundle_for  # noqa: F401  (base: fixture)
-from haptify.cli import UI
+from fastapi.testclient import TestClient
+from test_registry_crash import _parse
+
+from haptify.cli.main import UI
 from haptify_tools.registry.app import create_app
 from haptify_tools.registry.bundle import Limits
 from haptify_tools.registry.live import serve_in_thread
 from haptify_tools.registry.records import Settings
-from test_registry_crash import _parse
 
 
 def test_the_limits_are_advertised(tmp_path):

@@ -18,14 +18,14 @@ from pathlib import Path
 from statistics import fmean, stdev
 
 import pytest
+from _registry_fixtures import base, browser, bundle_for, example_session, passing_report, pg_server, skip_or_fail  # noqa: F401 (base: fixture)
 from fastapi.testclient import TestClient
 
-from _registry_fixtures import base, browser, bundle_for, example_session, passing_report, pg_server, skip_or_fail  # noqa: F401 (base: fixture)
-from haptify.compare import _fmt
-from haptify.metric_definitions import family
-from haptify.results import Implementation, MetricResult, ResultsFile
+from haptify.formats.storage import sha256_file
+from haptify.metrics.metric_definitions import family
+from haptify.pipeline.compare import _fmt
+from haptify.pipeline.results import Implementation, MetricResult, ResultsFile
 from haptify.versions import PACKAGE_VERSION
-from haptify.storage import sha256_file
 from haptify_tools.registry.app import create_app
 from haptify_tools.registry.records import Settings
 

@@ -10,20 +10,20 @@ import json
 import shutil
 
 import pytest
+from _dask_cluster import separate_cluster
+from _registry_fixtures import base, bundle_for, variant  # noqa: F401  (base: fixture)
 from sqlalchemy import func, select, text
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
-from _dask_cluster import separate_cluster
-from _registry_fixtures import base, bundle_for, variant  # noqa: F401  (base: fixture)
-from haptify.cli import UI
+from haptify.cli.main import UI
 from haptify.errors import HaptifyError
 from haptify.versions import PACKAGE_VERSION
 from haptify_tools.cluster import dask_client
 from haptify_tools.registry import cmd_registry, db
 from haptify_tools.registry.checks import tolerances
-from haptify_tools.registry.reverify import plan, record_values, run_reverify, start_run
 from haptify_tools.registry.records import Caller, Settings
+from haptify_tools.registry.reverify import plan, record_values, run_reverify, start_run
 from haptify_tools.registry.service import Registry
 from haptify_tools.registry.storage import LocalFolderStore, open_store
 

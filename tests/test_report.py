@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+from conftest import REPO
 from scipy.io import wavfile
 
-from haptify.cli import main
-from haptify.figures.dynamics import report_figures as dynamics_figures
-from haptify.report import WAV_RATE_HZ, to_wav_samples
-from haptify.results import Implementation, MetricResult, ResultsFile
-
-from conftest import REPO
+from haptify.cli.main import main
+from haptify.pipeline.results import Implementation, MetricResult, ResultsFile
+from haptify.report.document import WAV_RATE_HZ, to_wav_samples
+from haptify.report.figures.dynamics import report_figures as dynamics_figures
 
 
 def test_wav_samples_are_resampled_to_44k1_and_scaled():

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from haptify.metric_definitions import all_families
+from haptify.metrics.metric_definitions import all_families
 from haptify_conform.cases import REPO_ROOT, Case, load_cases
 from haptify_conform.coverage import DISTINGUISHING_RATIO, MUTANT_RESULTS, cases_digest, coverage, requirement_problems
 from haptify_conform.lint import _budget_problems

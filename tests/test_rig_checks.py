@@ -9,13 +9,14 @@ import json
 import numpy as np
 import pytest
 
+from haptify.cli import cmd_rig_check
+from haptify.cli.main import UI
+from haptify.formats.session_format import Rig
+from haptify.formats.storage import open_session
+from haptify.metrics import rig_checks
+from haptify.pipeline.compute import compute_session
 from haptify_tools import rig_builders as rb
 from haptify_tools.conformance_fixtures.rig import calibration_offset_u
-from haptify import cmd_rig_check, rig_checks
-from haptify.cli import UI
-from haptify.compute import compute_session
-from haptify.session_format import Rig
-from haptify.storage import open_session
 
 RIG_IDS = [
     "rig.plate_natural_frequency",
@@ -111,7 +112,7 @@ def test_rig_check_skips_what_the_session_cannot_show(example_session, capsys):
 
 def test_rig_check_takes_the_global_json_flag_after_the_command(good, capsys):
     """``haptify rig-check SESSION --json``: the global flag where users put it (spec §0.5)."""
-    from haptify.cli import main
+    from haptify.cli.main import main
 
     assert main(["rig-check", str(good), "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
@@ -121,8 +122,8 @@ def test_rig_check_takes_the_global_json_flag_after_the_command(good, capsys):
 def test_sync_offset_without_usable_motion_capture_is_coded(tmp_path):
     # every handle_pose row occluded (a valid session: W405): the sync search had only NaN scores and
     # numpy's nanargmax raised ValueError (E999); now E611, and the calibration residuals still stand (spec §14.6)
+    from haptify.formats.validation import validate_session
     from haptify_tools.invalid_fixtures import session_edits
-    from haptify.validation import validate_session
 
     w = rb.writer()
     rb.add_calibration_trial(w, rb.HandleTruth(), np.random.default_rng(3), duration_s=12.0)

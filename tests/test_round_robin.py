@@ -10,20 +10,20 @@ import math
 
 import numpy as np
 import pytest
+from _registry_fixtures import bundle_for, passing_report
 from fastapi.testclient import TestClient
 
-from _registry_fixtures import bundle_for, passing_report
-from haptify.cli import UI
-from haptify.compute import compute_session
-from haptify.storage import open_session
+from haptify.cli.main import UI
+from haptify.formats.storage import open_session
+from haptify.pipeline.compute import compute_session
 from haptify_tools.registry.app import create_app
 from haptify_tools.registry.interlab import LabCell, components
 from haptify_tools.registry.records import Settings
 from haptify_tools.twin import cmd_simulate
+from haptify_tools.twin.dossier_plan import SimulationOptions
 from haptify_tools.twin.model import preset
 from haptify_tools.twin.rig import RigConfig
 from haptify_tools.twin.round_robin import SPREADS, draw_labs, parse_spreads, simulate_round_robin
-from haptify_tools.twin.dossier_plan import SimulationOptions
 
 METRIC = "stiffness.measured"
 LABS, REPS = 14, 7

@@ -21,9 +21,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from haptify.errors import catalogue
-from haptify.session_format import ALLOWED_VALUES, expected_columns, kind_table, quaternion_groups
-from haptify.storage import MANIFEST, SessionWriter, open_session, read_table, sha256_file, write_table
-from haptify.validation import MOCAP_KINDS, validate_session
+from haptify.formats.session_format import ALLOWED_VALUES, expected_columns, kind_table, quaternion_groups
+from haptify.formats.storage import MANIFEST, SessionWriter, open_session, read_table, sha256_file, write_table
+from haptify.formats.validation import MOCAP_KINDS, validate_session
 from haptify_tools.example_session import example_writer
 
 REPO = Path(__file__).resolve().parents[1]

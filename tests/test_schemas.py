@@ -6,13 +6,12 @@ import json
 
 import jsonschema
 import pytest
+from conftest import REPO
 
 from haptify import schemas
-from haptify.metric_definitions import MetricFamily
+from haptify.metrics.metric_definitions import MetricFamily
 from haptify.versions import SPEC_VERSION, schema_id
 from haptify_tools import gen_docs, gen_schemas
-
-from conftest import REPO
 
 SCHEMA_FILES = sorted((REPO / "schemas" / SPEC_VERSION).glob("*.schema.json"))
 
@@ -71,7 +70,7 @@ def test_the_definition_files_name_no_code_and_every_family_with_metrics_has_its
     import importlib
     from importlib.metadata import entry_points
 
-    from haptify.families import FAMILY_ENTRY_POINTS, family_module
+    from haptify.pipeline.families import FAMILY_ENTRY_POINTS, family_module
 
     families = {name.removesuffix(".json"): schemas.load(f"metrics/{name}") for name in schemas.list_dir("metrics")}
     assert all("module" not in data for data in families.values())

@@ -8,12 +8,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from haptify_tools import rig_builders as rb
-from haptify import preprocessing, signals
-from haptify.compute import ComputeContext
-from haptify.conventions import quat_from_axis_angle
 from haptify.errors import HaptifyError
-from haptify.storage import open_session
+from haptify.formats.conventions import quat_from_axis_angle
+from haptify.formats.storage import open_session
+from haptify.pipeline.compute import ComputeContext
+from haptify.processing import preprocessing, signals
+from haptify_tools import rig_builders as rb
 
 
 def _gain(rate: float, f: float, cutoff: float) -> float:

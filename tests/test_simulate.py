@@ -8,13 +8,13 @@ import json
 import numpy as np
 import pytest
 
-from haptify.calibration import handle_calibration
-from haptify.cli import UI
-from haptify.storage import open_session
-from haptify.validation import validate_session
+from haptify.cli.main import UI
+from haptify.formats.storage import open_session
+from haptify.formats.validation import validate_session
+from haptify.processing.calibration import handle_calibration
 from haptify_tools.twin import cmd_simulate
-from haptify_tools.twin.model import EFFECT_IDS, load_twin, preset
 from haptify_tools.twin.dossier_plan import SimulationOptions, plan
+from haptify_tools.twin.model import EFFECT_IDS, load_twin, preset
 from haptify_tools.twin.simulate import simulate_dossier
 
 SHORT = {
@@ -179,8 +179,8 @@ def test_cli_twin_export_and_simulate(tmp_path):
 
 
 def test_rig_effects_switch_off():
-    from haptify_tools.twin.model import disable
     from haptify_tools.twin.dossier_trials import DossierSimulator
+    from haptify_tools.twin.model import disable
 
     on = DossierSimulator(preset("touch"), SimulationOptions())
     assert on.conn_m > 0 and np.any(on.bias_f != 0) and np.any(on.bias_a != 0) and np.any(on.bias_p != 0)

@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from haptify.conventions import STANDARD_GRAVITY, quat_to_matrix
-from haptify.kinematics import forward_positions
-from haptify.storage import open_session
-from haptify.validation import validate_session
+from haptify.formats.conventions import STANDARD_GRAVITY, quat_to_matrix
+from haptify.formats.storage import open_session
+from haptify.formats.validation import validate_session
+from haptify.processing.kinematics import forward_positions
 
 REPO = Path(__file__).resolve().parents[1]
 WRITER = REPO / "spec" / "examples" / "write_session.js"

@@ -16,17 +16,17 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-from haptify.compute import ComputeContext
-from haptify.conventions import quat_from_axis_angle, quat_to_matrix
-from haptify.errors import HaptifyError
-from haptify.results import MetricResult, Unavailable
-from haptify.figures.stiffness import report_figures
-from haptify.stiffness import FitRule, compute, end_of_rise, find_presses, fit_stiffness, grid_rate, runs
-from haptify.storage import open_session
-from haptify.surface import contact_of, contact_signals, unit_normal
-from haptify_conform.cases import REPO_ROOT
 from metric_sessions import add_handle_trial, spin, writer
+
+from haptify.errors import HaptifyError
+from haptify.formats.conventions import quat_from_axis_angle, quat_to_matrix
+from haptify.formats.storage import open_session
+from haptify.metrics.stiffness import FitRule, compute, end_of_rise, find_presses, fit_stiffness, grid_rate, runs
+from haptify.metrics.surface import contact_of, contact_signals, unit_normal
+from haptify.pipeline.compute import ComputeContext
+from haptify.pipeline.results import MetricResult, Unavailable
+from haptify.report.figures.stiffness import report_figures
+from haptify_conform.cases import REPO_ROOT
 
 K_TRUE, F_SAT, K_CMD = 360.0, 2.7, 750.0
 DEPTH, PRESS_S, GAP_S, N_PRESSES = 0.012, 1.2, 0.5, 5

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from haptify.errors import HaptifyError
-from haptify.storage import atomic_write_text, open_session, resolve_inside, sha256_file
+from haptify.formats.storage import atomic_write_text, open_session, resolve_inside, sha256_file
 from haptify_tools.example_session import example_writer
 
 
@@ -51,7 +51,7 @@ def test_existing_output_is_refused_and_kept(tmp_path):
 
 
 def test_interrupted_write_leaves_nothing(tmp_path, monkeypatch):
-    from haptify.storage import writer
+    from haptify.formats.storage import writer
 
     def boom(*a, **k):
         raise OSError("disk full")

@@ -17,10 +17,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from haptify.errors import HaptifyError
-from haptify.storage import parse_json_file, read_stream_file
-from haptify.validation import validate_session
-from haptify_tools.invalid_fixtures import session_edits
+from haptify.formats.storage import parse_json_file, read_stream_file
+from haptify.formats.validation import validate_session
 from haptify_tools.example_session import example_writer
+from haptify_tools.invalid_fixtures import session_edits
 
 
 def _session(tmp_path: Path, fmt: str = "parquet", name: str = "s") -> Path:
@@ -96,7 +96,7 @@ MEMORY_BUDGET_MIB = 768  # above what the validator holds after its imports; far
 
 _CHILD = textwrap.dedent("""
     import resource, sys
-    from haptify.validation import validate_session
+    from haptify.formats.validation import validate_session
     def vm_bytes():
         with open("/proc/self/status") as fh:
             return next(int(l.split()[1]) * 1024 for l in fh if l.startswith("VmSize:"))

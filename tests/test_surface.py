@@ -12,16 +12,16 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-from haptify import surface
-from haptify.compute import ComputeContext
-from haptify.conventions import quat_from_axis_angle, quat_to_matrix
-from haptify.errors import HaptifyError
-from haptify.results import MetricResult, Unavailable
-from haptify.storage import open_session
-from haptify.figures.surface import report_figures
-from haptify.surface import compute, contact_of, guarded, planar_force, planar_stats, unit_normal
 from metric_sessions import add_handle_trial, spin, writer
+
+from haptify.errors import HaptifyError
+from haptify.formats.conventions import quat_from_axis_angle, quat_to_matrix
+from haptify.formats.storage import open_session
+from haptify.metrics import surface
+from haptify.metrics.surface import compute, contact_of, guarded, planar_force, planar_stats, unit_normal
+from haptify.pipeline.compute import ComputeContext
+from haptify.pipeline.results import MetricResult, Unavailable
+from haptify.report.figures.surface import report_figures
 
 NORMAL = unit_normal([0.0, 0.2, 1.0])
 PLANE_POINT = np.array([0.0, 0.05, 0.12])

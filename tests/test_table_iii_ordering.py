@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import pytest
 
-from haptify.compute import compute_session
-from haptify.storage import open_session
+from haptify.formats.storage import open_session
+from haptify.pipeline.compute import compute_session
 
 pytestmark = pytest.mark.slow
 

@@ -9,13 +9,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from haptify.conventions import STANDARD_GRAVITY, quat_conjugate, quat_rotate
-from haptify.kinematics import joint_limits
+from haptify.formats.conventions import STANDARD_GRAVITY, quat_conjugate, quat_rotate
+from haptify.processing.kinematics import joint_limits
 from haptify_tools.twin import examiner as ex
 from haptify_tools.twin import hand_path, plate_loads
-from haptify_tools.twin.reach import reach_from_twin
 from haptify_tools.twin.kinematics import inverse_kinematics, true_kinematics, world_to_device
 from haptify_tools.twin.model import preset
+from haptify_tools.twin.reach import reach_from_twin
 
 DEG = math.pi / 180
 RATE = 500.0  # a slower examiner clock keeps the tests fast; every generator takes rate_hz
@@ -69,7 +69,7 @@ def test_local_oscillations_band_directions_and_centre(reach):
 def test_local_oscillations_reach_the_papers_speeds_and_accelerations(reach):
     """Paper §VI-D: its examiner's windows differ by up to R_v = 1.6 m/s and R_a = 38 m/s² — the fastest
     oscillations come near both and never exceed the acceleration."""
-    from haptify.preprocessing import lowpass
+    from haptify.processing.preprocessing import lowpass
 
     tr = ex.local_oscillations(np.random.default_rng(5), reach, 40.0, rate_hz=RATE)
     p = lowpass(tr.position_W, RATE, 10.0)

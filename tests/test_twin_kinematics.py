@@ -10,9 +10,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from haptify import kinematics as ref
 from haptify.errors import HaptifyError
-from haptify.session_format import Kinematics
+from haptify.formats.session_format import Kinematics
+from haptify.processing import kinematics as ref
 from haptify_tools.twin import kinematics as tk
 from haptify_tools.twin.model import disable, preset, set_param
 

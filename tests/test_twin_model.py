@@ -7,7 +7,7 @@ import json
 import pytest
 
 from haptify.errors import HaptifyError
-from haptify.session_format import Device
+from haptify.formats.session_format import Device
 from haptify_tools.example_session import TOUCH_DEVICE
 from haptify_tools.twin.model import (
     EFFECT_IDS,

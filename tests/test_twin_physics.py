@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from haptify import kinematics as ref
-from haptify.conventions import quat_from_axis_angle, quat_to_matrix
+from haptify.formats.conventions import quat_from_axis_angle, quat_to_matrix
+from haptify.processing import kinematics as ref
 from haptify_tools.twin import kinematics as tk
 from haptify_tools.twin import physics as ph
 from haptify_tools.twin import rigid_body, vibration_model

@@ -1,5 +1,5 @@
 """The virtual rig's sensor models (design §4): noise levels and biases come out as configured, and the raw
-streams follow the reference's sign conventions (haptify.calibration, spec §6.1)."""
+streams follow the reference's sign conventions (haptify.processing.calibration, spec §6.1)."""
 
 from __future__ import annotations
 
@@ -11,9 +11,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from haptify.calibration import HandleCalibration, compensate_accel, compensate_wrench
-from haptify.conventions import STANDARD_GRAVITY, quat_conjugate, quat_normalize, quat_rotate
-from haptify.session_format import Pose, Rig
+from haptify.formats.conventions import STANDARD_GRAVITY, quat_conjugate, quat_normalize, quat_rotate
+from haptify.formats.session_format import Pose, Rig
+from haptify.processing.calibration import HandleCalibration, compensate_accel, compensate_wrench
 from haptify_tools.twin import rig as rg
 from haptify_tools.twin.model import NoiseFloor
 
@@ -74,7 +74,7 @@ def test_handle_wrench_noise_bias_and_connector_weight(bias, mass, seed):
 
 
 def test_reference_compensation_recovers_the_device_wrench():
-    """Raw → haptify.calibration.compensate_wrench gives back the device's force and torque at the gimbal."""
+    """Raw → haptify.processing.calibration.compensate_wrench gives back the device's force and torque at the gimbal."""
     rng = np.random.default_rng(1)
     n = 400
     quat = _random_quats(rng, 1).repeat(n, axis=0)  # one fixed pose per call (no connector inertia)

@@ -12,14 +12,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from haptify import preprocessing
-from haptify import significance
-from haptify import uncertainty as unc
-from haptify.compute import ComputeContext, compute_session
-from haptify.metric_definitions import all_families
-from haptify.results import BudgetTerm, ResultsFile
-from haptify.storage import open_session
-
+from haptify.formats.storage import open_session
+from haptify.metrics import significance
+from haptify.metrics import uncertainty as unc
+from haptify.metrics.metric_definitions import all_families
+from haptify.pipeline.compute import ComputeContext, compute_session
+from haptify.pipeline.results import BudgetTerm, ResultsFile
+from haptify.processing import preprocessing
 
 # --- the definition file (§19.1) -------------------------------------------------------------------
 
@@ -204,7 +203,7 @@ def test_the_judge_reads_the_uncertainty_record():
 
 
 def _record(value: float, u: float, dof: float | None):
-    from haptify.results import MetricResult, MetricUncertainty
+    from haptify.pipeline.results import MetricResult, MetricUncertainty
 
     k = unc.coverage_factor(math.inf if dof is None else dof, 0.95)
     return MetricResult(
@@ -237,8 +236,8 @@ def test_a_value_never_differs_from_itself_and_the_test_is_symmetric(x, u, nu):
 
 
 def test_compare_shows_u_and_marks_significant_pairs():
-    from haptify.compare import SIGNIFICANCE, build_table
-    from haptify.results import DeviceSummary, Implementation
+    from haptify.pipeline.compare import SIGNIFICANCE, build_table
+    from haptify.pipeline.results import DeviceSummary, Implementation
 
     def results(label: str, value: float, u: float) -> ResultsFile:
         return ResultsFile(
@@ -275,7 +274,7 @@ def test_ties_group_indistinguishable_devices():
 def test_compute_command_writes_the_records_only_when_asked(two_rep_free_space, tmp_path):
     import json
 
-    from haptify.cli import main
+    from haptify.cli.main import main
 
     out = tmp_path / "r.json"
     assert main(["compute", str(two_rep_free_space), "--metrics", "free_space.force_mean", "-o", str(out)]) == 0
@@ -288,7 +287,7 @@ def test_compute_command_writes_the_records_only_when_asked(two_rep_free_space, 
 def test_type_a_records_of_a_vector_and_of_placements():
     """rig.plate_natural_frequency from two impacts (per axis s/√2) and rig.cop_error whose n counts 10 placements
     (sd/√10, 9 dof); no Type B source is involved, so no session is read."""
-    from haptify.results import Implementation, MetricResult
+    from haptify.pipeline.results import Implementation, MetricResult
 
     freq = MetricResult(
         id="rig.plate_natural_frequency",
@@ -325,7 +324,7 @@ def test_force_noise_has_unit_sd_and_the_lowpass_autocorrelation():
     ∫|H|⁴ cos(2πfτ) df / ∫|H|⁴ df, from the filter's frequency response (not from its time-domain code)."""
     from scipy.signal import sosfreqz
 
-    from haptify.preprocessing import butter_lowpass, effective_cutoff
+    from haptify.processing.preprocessing import butter_lowpass, effective_cutoff
 
     e = unc.force_noise(GRID, 1000.0, 2000, np.random.default_rng(3))
     assert e.shape == (len(GRID), 2000) and e.std() == pytest.approx(1.0, abs=1e-12)
@@ -369,8 +368,8 @@ def test_bias_estimate_is_the_mean_over_trials_and_never_negative(monkeypatch):
     where a sharp top gives a negative Monte Carlo scatter."""
     from types import SimpleNamespace
 
-    from haptify import stiffness
-    from haptify.results import MetricResult
+    from haptify.metrics import stiffness
+    from haptify.pipeline.results import MetricResult
 
     plateau, top = np.full(len(GRID), 2.7), 5.6 - 0.1 * np.abs(np.arange(len(GRID)) - 120)
     windows = {"a": [(GRID, plateau), (GRID, plateau)], "b": [(GRID, plateau)], "c": [(GRID, top)]}
@@ -403,7 +402,7 @@ def test_bias_estimate_is_the_mean_over_trials_and_never_negative(monkeypatch):
 
 
 def test_attach_adds_the_one_sided_bias_to_U(two_rep_free_space, monkeypatch):
-    from haptify.results import UncorrectedBias
+    from haptify.pipeline.results import UncorrectedBias
 
     ctx = ComputeContext(session=open_session(two_rep_free_space))
     res = compute_session(ctx.session, ["free_space.force_mean"], ctx=ctx)
@@ -464,8 +463,8 @@ def test_mocap_noise_bias_is_the_mean_shift_of_the_recomputed_values(monkeypatch
     own noise sd and are shared by the family's metrics."""
     from types import SimpleNamespace
 
-    from haptify import workspace
-    from haptify.results import MetricResult
+    from haptify.metrics import workspace
+    from haptify.pipeline.results import MetricResult
 
     sd = {"a": np.array([1e-4, 1e-4, 1e-4]), "b": np.array([2e-4, 2e-4, 2e-4])}
     tracks = {
@@ -505,7 +504,7 @@ def test_mocap_noise_bias_is_the_mean_shift_of_the_recomputed_values(monkeypatch
 
 
 def test_attach_adds_the_magnitude_of_a_negative_bias_to_U(two_rep_free_space, monkeypatch):
-    from haptify.results import UncorrectedBias
+    from haptify.pipeline.results import UncorrectedBias
 
     ctx = ComputeContext(session=open_session(two_rep_free_space))
     res = compute_session(ctx.session, ["free_space.force_mean"], ctx=ctx)

@@ -13,18 +13,18 @@ import pyarrow.parquet as pq
 import pytest
 from jsonschema import Draft202012Validator
 
-from haptify import cli
-from haptify.conventions import QUATERNION_NORM_TOLERANCE
+from haptify.cli import main as cli
 from haptify.errors import catalogue
-from haptify.validation import (
+from haptify.formats.conventions import QUATERNION_NORM_TOLERANCE
+from haptify.formats.validation import (
     OCCLUSION_WARNING_SHARE,
     RATE_TOLERANCE,
     ValidationReportModel,
     validate_session,
 )
 from haptify_tools import build_invalid_fixtures as fx
-from haptify_tools.invalid_fixtures import cases, defects, session_edits
 from haptify_tools.example_session import example_writer
+from haptify_tools.invalid_fixtures import cases, defects, session_edits
 
 REPO = Path(__file__).resolve().parents[1]
 INVALID = REPO / "fixtures" / "invalid"
@@ -107,7 +107,8 @@ def test_rebuilt_trees_agree_up_to_the_cpus_rounding(tmp_path: Path, fmt: str, n
     """A rebuild whose numbers differ from the committed tree by a few units in the last place (numpy's
     vectorised sin and exp round differently on different CPUs) is the same fixture; a real change is not."""
     import numpy as np
-    from haptify.storage import read_table, sha256_file, write_table
+
+    from haptify.formats.storage import read_table, sha256_file, write_table
 
     committed = example_writer(duration_s=0.2, fmt=fmt).write(tmp_path / "committed")
     rebuilt = example_writer(duration_s=0.2, fmt=fmt).write(tmp_path / "rebuilt")
@@ -337,7 +338,7 @@ def test_cli_exit_code_0_for_a_valid_session_and_2_when_it_cannot_run(tmp_path: 
 @pytest.mark.parametrize("name", ["malformed-json", "truncated-parquet"])
 def test_no_traceback_reaches_the_user(name: str):
     proc = subprocess.run(
-        [sys.executable, "-m", "haptify.cli", "validate", str(INVALID / name)], capture_output=True, text=True, timeout=120
+        [sys.executable, "-m", "haptify.cli.main", "validate", str(INVALID / name)], capture_output=True, text=True, timeout=120
     )
     assert proc.returncode == 1
     assert "Traceback" not in proc.stdout + proc.stderr

@@ -15,10 +15,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from haptify import storage
-from haptify.validation import SessionValidator, ValidationReport, streams, validate_session
-from haptify_tools.invalid_fixtures import defects, session_edits
+from haptify.formats import storage
+from haptify.formats.validation import SessionValidator, ValidationReport, streams, validate_session
 from haptify_tools.example_session import example_writer
+from haptify_tools.invalid_fixtures import defects, session_edits
 
 REPO = Path(__file__).resolve().parents[1]
 FIXTURES = sorted(p for group in ("invalid", "valid") for p in (REPO / "fixtures" / group).iterdir() if p.is_dir())

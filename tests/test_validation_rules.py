@@ -14,19 +14,18 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from haptify.storage import csv_grammar
 from haptify.errors import HaptifyError
-from haptify.kinematics import RANGE_LATTICE_POINTS as LIMIT_LATTICE_POINTS
-from haptify.kinematics import configurations_from_unit
-from haptify.session_format import ALLOWED_VALUES, Kinematics
-from haptify.storage import CSV_CHUNK_BYTES, check_csv_grammar
-from haptify.validation import (
+from haptify.formats.session_format import ALLOWED_VALUES, Kinematics
+from haptify.formats.storage import CSV_CHUNK_BYTES, check_csv_grammar, csv_grammar
+from haptify.formats.validation import (
     NORMAL_NORM_TOLERANCE,
     kinematics_findings,
     validate_session,
 )
-from haptify_tools.invalid_fixtures import defects, session_edits
+from haptify.processing.kinematics import RANGE_LATTICE_POINTS as LIMIT_LATTICE_POINTS
+from haptify.processing.kinematics import configurations_from_unit
 from haptify_tools.example_session import TOUCH_DEVICE, example_writer
+from haptify_tools.invalid_fixtures import defects, session_edits
 
 
 def _write(tmp_path: Path, extend=None, name: str = "s") -> Path:
@@ -258,7 +257,7 @@ def chains(draw):
 @settings(max_examples=200, deadline=None)
 @given(kin=chains())
 def test_e115_is_exactly_compute_s_no_configuration_condition(kin: Kinematics):
-    """Oracle: the modeled workspace's own lattice (spec §8.3 step 1, haptify.kinematics) has no feasible row."""
+    """Oracle: the modeled workspace's own lattice (spec §8.3 step 1, haptify.processing.kinematics) has no feasible row."""
     n = len(kin.joints)
     axis = np.linspace(0.0, 1.0, LIMIT_LATTICE_POINTS)
     unit = np.array(list(itertools.product(axis, repeat=n)))

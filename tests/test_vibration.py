@@ -13,13 +13,11 @@ import matplotlib.pyplot as plt  # noqa: E402
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from haptify import vibration
-from haptify.compute import ComputeContext
-from haptify.conventions import quat_from_axis_angle, quat_to_matrix
 from haptify.errors import HaptifyError
-from haptify.results import MetricResult, Unavailable
-from haptify.storage import SessionWriter, open_session
-from haptify.vibration import (
+from haptify.formats.conventions import quat_from_axis_angle, quat_to_matrix
+from haptify.formats.storage import SessionWriter, open_session
+from haptify.metrics import vibration
+from haptify.metrics.vibration import (
     combine,
     compute,
     dft321,
@@ -28,7 +26,9 @@ from haptify.vibration import (
     rms,
     spectral_centroid,
 )
-from haptify.figures.vibration import report_audio, report_figures
+from haptify.pipeline.compute import ComputeContext
+from haptify.pipeline.results import MetricResult, Unavailable
+from haptify.report.figures.vibration import report_audio, report_figures
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
 
 RATE = 2000.0

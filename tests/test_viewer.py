@@ -23,24 +23,23 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import rerun.blueprint as rrb
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
-import rerun.blueprint as rrb
 from rerun.chunk import RrdReader
 
-from haptify.cli import UI
+from haptify.cli.main import UI
 from haptify.errors import HaptifyError
-from haptify.session_format import STREAM_KINDS
-from haptify.results import Implementation, MetricResult, ResultsFile, Unavailable
-from haptify.storage import open_session
+from haptify.formats.session_format import STREAM_KINDS
+from haptify.formats.storage import open_session
+from haptify.pipeline.results import Implementation, MetricResult, ResultsFile, Unavailable, load_results
 from haptify_tools.example_session import TOUCH_DEVICE, example_writer
 from haptify_tools.viewer import blueprints, cmd_view
-from haptify.results import load_results
-from haptify_tools.viewer.plan import HAND_FORCE_M_PER_N, PLATE_FORCE_M_PER_N, decimation_factor, envelope, time_ns
 from haptify_tools.viewer.arrays import nan_split, plane_rectangle, raw_pose_at
-from haptify_tools.viewer.recording import plan_recording, write_rrd
 from haptify_tools.viewer.documents import results_markdown
+from haptify_tools.viewer.plan import HAND_FORCE_M_PER_N, PLATE_FORCE_M_PER_N, decimation_factor, envelope, time_ns
+from haptify_tools.viewer.recording import plan_recording, write_rrd
 from haptify_tools.viewer.save import build
 
 CHROMIUM = Path("/usr/bin/chromium")
@@ -462,7 +461,7 @@ def test_blueprint_per_protocol(recorded):
 
 
 def test_every_protocol_has_a_layout():
-    from haptify.session_format import PROTOCOLS
+    from haptify.formats.session_format import PROTOCOLS
 
     assert set(PROTOCOLS) == set(blueprints.LAYOUTS)
 
@@ -582,8 +581,7 @@ def test_workspace_meshes_enclose_the_solids(recorded, sessions):
     and the measured one is close to the swept sphere's 4/3·π·r³."""
     plan, _ = recorded
     main, _, _ = sessions
-    from haptify import workspace
-
+    from haptify.metrics import workspace
     from haptify_tools.viewer.voxel_mesh import SurfaceMesh
 
     solid = workspace.volume_solid(workspace.measured_points(main, "workspace-1"))
@@ -701,7 +699,7 @@ def test_web_viewer_on_a_busy_port_is_a_coded_error(recorded):
 # runs where SIGINT is ignored (a background job of a non-interactive shell passes SIG_IGN on to its children).
 VIEW_WEB = (
     "import argparse, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-    "from haptify.cli import UI; from haptify_tools.viewer import cmd_view; "
+    "from haptify.cli.main import UI; from haptify_tools.viewer import cmd_view; "
     "p = argparse.ArgumentParser(); cmd_view.register(p.add_subparsers()); "
     "a = p.parse_args(sys.argv[1:]); sys.exit(a.func(a, UI()))"
 )
@@ -1027,7 +1025,7 @@ def test_unknown_derived_mode_and_chunk_size_are_usage_errors(sessions, tmp_path
 
 
 def test_forget_trial_drops_only_that_trials_memos(sessions):
-    from haptify.compute import ComputeContext
+    from haptify.pipeline.compute import ComputeContext
 
     main, _, _ = sessions
     ctx = ComputeContext(session=main)

@@ -17,25 +17,25 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import ConvexHull
 
-from haptify import volume_operator
-from haptify.compute import ComputeContext, compute_session
-from haptify.conventions import pose_apply, quat_from_axis_angle, quat_rotate
-from haptify.kinematics import configurations_from_unit, forward_positions
-from haptify.results import MetricResult, Unavailable
-from haptify.session_format import Device
-from haptify.storage import SessionWriter, open_session
-from haptify.volume_operator import _blocks_near
-from haptify.workspace import (
+from haptify.formats.conventions import pose_apply, quat_from_axis_angle, quat_rotate
+from haptify.formats.session_format import Device
+from haptify.formats.storage import SessionWriter, open_session
+from haptify.metrics import volume_operator
+from haptify.metrics.volume_operator import _blocks_near
+from haptify.metrics.workspace import (
     compute,
     gap_regions,
     longest_occlusion_gap,
-    occlusion_gaps,
-    repaired_points,
     modeled_solid,
+    occlusion_gaps,
     overlap_volume,
+    repaired_points,
     volume_solid,
 )
-from haptify.figures.workspace import report_figures
+from haptify.pipeline.compute import ComputeContext, compute_session
+from haptify.pipeline.results import MetricResult, Unavailable
+from haptify.processing.kinematics import configurations_from_unit, forward_positions
+from haptify.report.figures.workspace import report_figures
 from haptify_tools.conformance_fixtures.workspace_shapes import box_cloud, pose_cloud, sphere_sweep
 from haptify_tools.conformance_fixtures.workspace_shapes import sphere_cloud as sphere_surface
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig

@@ -4,7 +4,7 @@ Every case file runs in-process (the reference's ``analyse`` with the mutant's p
 run, one compute context per session as the JSON-lines reference keeps them) in ``--workers`` processes. A
 control run of the unpatched reference comes first: it must pass every case, or no verdict on a mutant means
 anything (exit 2). The validation of a fixture (spec chapter 4: more than half of a run's time) is done once per
-worker process and reused by every mutant that patches nothing in the ``haptify.validation`` package: the fixtures do not
+worker process and reused by every mutant that patches nothing in the ``haptify.formats.validation`` package: the fixtures do not
 change between mutants, and no other mutant can change a validation report. A mutant is **caught** when at least one case fails. Per mutant the failing cases are
 listed with their deviation in tolerances, ``max_i |value_i − expected_i| / (abs + rel·|expected_i|)``
 (none when the value is missing, of the wrong shape or unit, or the session was rejected).
@@ -29,9 +29,9 @@ from pathlib import Path
 from typing import Any, Callable
 from unittest import mock
 
-from haptify import validation
-from haptify.storage import atomic_write_text
 from haptify import conform_adapter as reference
+from haptify.formats import validation
+from haptify.formats.storage import atomic_write_text
 from haptify_conform.adapters import PythonAdapter
 from haptify_conform.cases import REPO_ROOT, SUITE_ROOT, Case, load_cases
 from haptify_conform.coverage import cases_digest
@@ -77,8 +77,8 @@ def _validate_once(real: Callable) -> Callable:
 
 
 def _in_validation(module: str) -> bool:
-    """True for ``haptify.validation`` and its modules (``haptify.validation.streams`` ...)."""
-    return module == "haptify.validation" or module.startswith("haptify.validation.")
+    """True for ``haptify.formats.validation`` and its modules (``haptify.formats.validation.streams`` ...)."""
+    return module == "haptify.formats.validation" or module.startswith("haptify.formats.validation.")
 
 
 def run_one(name: str) -> dict[str, Any]:

@@ -6,7 +6,7 @@ asked-for metric with the reference; it is what ``--python haptify.conform_adapt
 ``SESSION OUT [METRIC [PARAMS]]`` it behaves as a ``--cmd`` program and writes its answer to OUT.
 
 Work shared by the cases of one fixture (the modeled workspace, a fitted dynamic model, calibrated
-signals) is kept in a per-session :class:`~haptify.compute.ComputeContext`, keyed by the session folder,
+signals) is kept in a per-session :class:`~haptify.pipeline.compute.ComputeContext`, keyed by the session folder,
 the manifest's checksum and the case parameters, for the few most recent sessions.
 """
 
@@ -18,10 +18,10 @@ from collections import OrderedDict
 from pathlib import Path
 from typing import Any
 
-from haptify.compute import ComputeContext, compute_session
 from haptify.errors import HaptifyError
-from haptify.storage import MANIFEST, atomic_write_text, open_session, sha256_file
-from haptify.validation import validate_session
+from haptify.formats.storage import MANIFEST, atomic_write_text, open_session, sha256_file
+from haptify.formats.validation import validate_session
+from haptify.pipeline.compute import ComputeContext, compute_session
 from haptify.versions import PACKAGE_VERSION
 
 IMPLEMENTATION = {"name": "haptify-reference", "version": PACKAGE_VERSION}

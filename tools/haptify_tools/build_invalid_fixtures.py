@@ -24,10 +24,10 @@ import sys
 import tempfile
 from pathlib import Path
 
-from haptify.storage import atomic_write_json
+from haptify.formats.storage import atomic_write_json
 from haptify_conform.fixture_digest import trees_agree
 from haptify_tools.example_session import example_writer
-from haptify_tools.invalid_fixtures.cases import CASES, Case, VALID
+from haptify_tools.invalid_fixtures.cases import CASES, VALID, Case
 from haptify_tools.invalid_fixtures.session_edits import DURATION_S
 
 REPO = Path(__file__).resolve().parents[2]

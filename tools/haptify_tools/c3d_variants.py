@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from haptify.c3d_stream import parameter_records
+from haptify.formats.c3d_stream import parameter_records
 
 C3D_BLOCK = 512
 

@@ -2,7 +2,7 @@
 many sessions computed at once on a Dask cluster (spec §15.4, §17.9).
 
 Each session is one task doing exactly what ``haptify compute SESSION -o OUT/<name>/results.json`` does
-(:func:`haptify.cmd_compute.compute_folder`): the session passes the gate, its metrics are computed, the
+(:func:`haptify.cli.cmd_compute.compute_folder`): the session passes the gate, its metrics are computed, the
 rest of it is validated; ``OUT/<name>/results.json`` is written atomically, or for a refused session the
 findings document of §16.4.1 as ``OUT/<name>/findings.json``. ``<name>`` is the session folder's name, so
 each session has its own output folder. On a cluster of several machines the session folders and ``OUT``
@@ -63,8 +63,8 @@ def output_folders(sessions: list[Path], out: Path) -> dict[Path, Path]:
 
 def compute_one(session: str, folder: str, wanted: list[str] | None, parameters: dict[str, Any]) -> dict:
     """Task: ``haptify compute`` of one session into ``folder`` (results.json or findings.json, atomically)."""
-    from haptify.cmd_compute import compute_folder, write_findings
-    from haptify.storage import atomic_write_text
+    from haptify.cli.cmd_compute import compute_folder, write_findings
+    from haptify.formats.storage import atomic_write_text
 
     t0 = time.perf_counter()
     target = Path(folder)
@@ -118,7 +118,7 @@ def batch_compute(
 
 def run_compute(args, ui) -> int:
     """Run ``haptify batch compute``: exit 0 when every session was computed, 1 when one was refused or failed."""
-    from haptify.cmd_compute import _wanted_metrics, case_parameters
+    from haptify.cli.cmd_compute import _wanted_metrics, case_parameters
 
     wanted, parameters = _wanted_metrics(args.metrics), case_parameters(args.params)
     output_folders(args.sessions, args.out)

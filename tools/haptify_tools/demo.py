@@ -14,7 +14,7 @@ import sys
 import time
 from pathlib import Path
 
-from haptify.cli import main as haptify
+from haptify.cli.main import main as haptify
 from haptify_tools.discrepancy.demo import demo as discrepancy_demo
 
 DEVICES = (("touch", 1), ("touch-x", 2))  # preset and seed

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from haptify.storage import SessionWriter
+from haptify.formats.storage import SessionWriter
 
 DEG = math.pi / 180.0
 

@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from haptify import schemas
-from haptify.metric_definitions import family
+from haptify.metrics.metric_definitions import family
 from haptify_conform.coverage import coverage_table, suite_coverage
 from haptify_conform.requirements import all_requirements
 from haptify_tools.generated_files import generator_main
@@ -141,7 +141,7 @@ def import_units_table() -> str:
 
 
 def uncertainty_table() -> str:
-    from haptify.uncertainty import definitions
+    from haptify.metrics.uncertainty import definitions
 
     d = definitions()
     out = f"Definition file `uncertainty.json`, version {d.version}.\n\n"

@@ -13,8 +13,15 @@ from pathlib import Path
 
 import numpy as np
 
-from haptify.conventions import GRAVITY_W, STANDARD_GRAVITY, quat_conjugate, quat_from_axis_angle, quat_multiply, quat_rotate
-from haptify.storage import SessionWriter
+from haptify.formats.conventions import (
+    GRAVITY_W,
+    STANDARD_GRAVITY,
+    quat_conjugate,
+    quat_from_axis_angle,
+    quat_multiply,
+    quat_rotate,
+)
+from haptify.formats.storage import SessionWriter
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
 
 
@@ -183,8 +190,8 @@ def corner_readings(rig: dict, force_w: np.ndarray, point_w: np.ndarray, bias: n
     is carried by extra vertical forces, the vertical moment by tangential forces. Each corner reports the force the plate exerts on it in its own
     frame (moment about its origin zero: pin supports). The four readings reproduce the total wrench.
     """
-    from haptify.force_plate import corner_geometry
-    from haptify.session_format import Rig
+    from haptify.formats.session_format import Rig
+    from haptify.processing.force_plate import corner_geometry
 
     pos, rot = corner_geometry(Rig.model_validate(rig))
     n = len(force_w)
@@ -206,7 +213,7 @@ def corner_readings(rig: dict, force_w: np.ndarray, point_w: np.ndarray, bias: n
 
 
 def plate_stream(t: np.ndarray, raw: np.ndarray) -> dict:
-    from haptify.force_plate import PLATE_COLUMNS
+    from haptify.processing.force_plate import PLATE_COLUMNS
 
     return {"t": t, **{c: raw[:, j] for j, c in enumerate(PLATE_COLUMNS)}}
 

@@ -9,7 +9,8 @@ from typing import Callable
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-from haptify import preprocessing, storage
+from haptify.formats import storage
+from haptify.processing import preprocessing
 from haptify_mutants.catalogue.model import Mutant, Patch, _replace
 
 

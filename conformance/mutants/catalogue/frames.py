@@ -9,9 +9,11 @@ from typing import Any, Callable
 
 import numpy as np
 
-from haptify import calibration, free_space, storage
-from haptify.caching import session_of
-from haptify.conventions import STANDARD_GRAVITY, quat_conjugate, quat_rotate
+from haptify.formats import storage
+from haptify.formats.conventions import STANDARD_GRAVITY, quat_conjugate, quat_rotate
+from haptify.metrics import free_space
+from haptify.processing import calibration
+from haptify.processing.caching import session_of
 from haptify_mutants.catalogue.model import Make, Mutant, Patch, _post
 
 

@@ -8,7 +8,8 @@ from typing import Any
 
 import numpy as np
 
-from haptify import force_plate, free_space, preprocessing, surface
+from haptify.metrics import free_space, surface
+from haptify.processing import force_plate, preprocessing
 from haptify_mutants.catalogue.model import Mutant, Patch, _post, _replace
 
 

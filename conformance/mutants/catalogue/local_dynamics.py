@@ -9,11 +9,11 @@ from typing import Any, Callable
 
 import numpy as np
 
-from haptify.local_dynamics import distance as ld_distance
-from haptify.local_dynamics import fitting as ld_fitting
-from haptify.local_dynamics import metrics as ld_metrics
-from haptify.local_dynamics import prediction as ld_prediction
-from haptify.local_dynamics import trials as ld_trials
+from haptify.dynamics import distance as ld_distance
+from haptify.dynamics import fitting as ld_fitting
+from haptify.dynamics import metrics as ld_metrics
+from haptify.dynamics import prediction as ld_prediction
+from haptify.dynamics import trials as ld_trials
 from haptify_mutants.catalogue.model import Make, Mutant, Patch, _post, _replace
 
 

@@ -13,7 +13,6 @@ from unittest import mock
 
 from haptify import conform_adapter as reference
 
-
 Make = Callable[[Any], Any]  # the real object → its replacement
 
 
@@ -23,7 +22,7 @@ class Patch:
     while a mutant is applied.
 
     With ``everywhere`` the replacement also goes into every ``haptify`` module that bound the same object
-    by name (``from haptify.preprocessing import lowpass_resample``), so the whole reference sees one mistake.
+    by name (``from haptify.processing.preprocessing import lowpass_resample``), so the whole reference sees one mistake.
     """
 
     owner: Any

@@ -9,7 +9,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from haptify import preprocessing
+from haptify.processing import preprocessing
 from haptify_mutants.catalogue.model import Make, Mutant, Patch
 
 

@@ -7,7 +7,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from haptify import repetitions
+from haptify.pipeline import repetitions
 from haptify_mutants.catalogue.model import Mutant, Patch
 
 

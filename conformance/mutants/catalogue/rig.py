@@ -9,8 +9,9 @@ from typing import Any, Callable
 
 import numpy as np
 
-from haptify import calibration, force_plate, rig_checks
-from haptify.caching import session_of
+from haptify.metrics import rig_checks
+from haptify.processing import calibration, force_plate
+from haptify.processing.caching import session_of
 from haptify_mutants.catalogue.model import Mutant, Patch, _parameters, _post
 
 

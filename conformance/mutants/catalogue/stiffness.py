@@ -6,7 +6,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from haptify import stiffness
+from haptify.metrics import stiffness
 from haptify_mutants.catalogue.model import Mutant, Patch, _parameters, _post, _replace
 
 

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from haptify import surface
+from haptify.metrics import surface
 from haptify_mutants.catalogue.model import Mutant, Patch, _post, _replace
 
 

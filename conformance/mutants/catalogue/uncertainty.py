@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from typing import Any, Callable
 
-from haptify import uncertainty
+from haptify.metrics import uncertainty
 from haptify_mutants.catalogue.model import Mutant, Patch
 
 

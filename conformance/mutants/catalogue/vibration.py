@@ -10,7 +10,8 @@ from typing import Any, Callable
 import numpy as np
 from scipy.signal import cheby1, sosfilt
 
-from haptify import preprocessing, vibration
+from haptify.metrics import vibration
+from haptify.processing import preprocessing
 from haptify_mutants.catalogue.model import Mutant, Patch, _parameters, _replace
 
 

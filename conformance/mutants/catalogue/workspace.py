@@ -10,8 +10,8 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import ConvexHull
 
-from haptify import volume_operator, workspace
-from haptify.conventions import quat_conjugate, quat_rotate
+from haptify.formats.conventions import quat_conjugate, quat_rotate
+from haptify.metrics import volume_operator, workspace
 from haptify_mutants.catalogue.model import Mutant, Patch, _parameters, _post, _replace
 
 

@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import lfilter
 
-from haptify.local_dynamics import parameter_file
-from haptify import preprocessing
-from haptify.conventions import quat_from_axis_angle, quat_multiply
+from haptify.dynamics import parameter_file
+from haptify.formats.conventions import quat_from_axis_angle, quat_multiply
+from haptify.processing import preprocessing
 from haptify.versions import SPEC_VERSION
 from haptify_tools import rig_builders as rb
 from haptify_tools.conformance_fixtures.records import Fixture, case
@@ -29,7 +29,6 @@ from haptify_tools.conformance_fixtures.truth import (
     manifest,
 )
 from haptify_tools.example_session import example_rig
-
 
 INPUTS = ["qw", "qx", "qy", "qz", "px", "py", "pz", "vx", "vy", "vz", "ax", "ay", "az"]
 IN_UNITS = ["1"] * 4 + ["m"] * 3 + ["m/s"] * 3 + ["m/s^2"] * 3

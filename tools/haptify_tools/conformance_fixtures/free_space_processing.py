@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from haptify import preprocessing
-from haptify.conventions import quat_from_axis_angle, quat_multiply
+from haptify.formats.conventions import quat_from_axis_angle, quat_multiply
+from haptify.processing import preprocessing
 from haptify_tools import rig_builders as rb
 from haptify_tools.conformance_fixtures.records import Fixture, case
 from haptify_tools.conformance_fixtures.truth import Z, circle, grid, handle_trial, lowpass_pair_gain, manifest, spin

@@ -8,10 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from haptify import calibration
-from haptify import force_plate
-from haptify import preprocessing
-from haptify.conventions import GRAVITY_W, quat_conjugate, quat_multiply, quat_rotate
+from haptify.formats.conventions import GRAVITY_W, quat_conjugate, quat_multiply, quat_rotate
+from haptify.processing import calibration, force_plate, preprocessing
 from haptify_tools import rig_builders as rb
 from haptify_tools.conformance_fixtures.records import Fixture, case
 from haptify_tools.conformance_fixtures.truth import QUIET, SEED, lowpass_noise_ratio, rotated_rig_full

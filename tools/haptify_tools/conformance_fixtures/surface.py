@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from haptify import surface
+from haptify.metrics import surface
 from haptify_tools.conformance_fixtures.records import Fixture, case
 from haptify_tools.conformance_fixtures.truth import Fn, active_session, grid, pair_step
 

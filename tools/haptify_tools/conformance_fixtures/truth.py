@@ -11,9 +11,9 @@ from typing import Callable
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-from haptify import preprocessing
-from haptify.conventions import quat_from_axis_angle, quat_multiply
-from haptify.storage import SessionWriter
+from haptify.formats.conventions import quat_from_axis_angle, quat_multiply
+from haptify.formats.storage import SessionWriter
+from haptify.processing import preprocessing
 from haptify_tools import rig_builders as rb
 from haptify_tools.example_session import IDENTITY, TOUCH_DEVICE, example_rig
 

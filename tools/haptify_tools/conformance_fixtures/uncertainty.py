@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from haptify.storage import SessionWriter
+from haptify.formats.storage import SessionWriter
 from haptify_tools import rig_builders as rb
 from haptify_tools.conformance_fixtures.free_space import felt
 from haptify_tools.conformance_fixtures.records import Fixture, case

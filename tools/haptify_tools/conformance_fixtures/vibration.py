@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from haptify import vibration
-from haptify.conventions import quat_from_axis_angle
+from haptify.formats.conventions import quat_from_axis_angle
+from haptify.metrics import vibration
 from haptify_tools import rig_builders as rb
 from haptify_tools.conformance_fixtures.records import Fixture, case
 from haptify_tools.conformance_fixtures.truth import Fn, circle, clock, fixed, handle_trial, manifest, rotated_rig_full, spin

@@ -10,8 +10,8 @@ from typing import Callable
 
 import numpy as np
 
-from haptify import volume_operator
-from haptify.conventions import quat_from_axis_angle, quat_rotate
+from haptify.formats.conventions import quat_from_axis_angle, quat_rotate
+from haptify.metrics import volume_operator
 from haptify_tools.conformance_fixtures.records import Fixture, case
 from haptify_tools.conformance_fixtures.truth import SEED, manifest, rotated_rig_full
 from haptify_tools.conformance_fixtures.workspace_shapes import (

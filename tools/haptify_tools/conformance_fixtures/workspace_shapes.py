@@ -9,8 +9,8 @@ import math
 
 import numpy as np
 
-from haptify.conventions import quat_from_axis_angle, quat_multiply, quat_rotate
-from haptify.storage import SessionWriter
+from haptify.formats.conventions import quat_from_axis_angle, quat_multiply, quat_rotate
+from haptify.formats.storage import SessionWriter
 from haptify_tools.conformance_fixtures.truth import Z
 from haptify_tools.example_session import TOUCH_DEVICE
 

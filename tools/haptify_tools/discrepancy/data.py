@@ -21,13 +21,12 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from haptify.codes import Code
-from haptify.compute import ComputeContext
 from haptify.errors import fail
-from haptify.preprocessing import lowpass
-from haptify.signals import handle_signals
-from haptify.storage import SessionFolder
-from haptify.surface import contact_of, unit_normal
-
+from haptify.formats.storage import SessionFolder
+from haptify.metrics.surface import contact_of, unit_normal
+from haptify.pipeline.compute import ComputeContext
+from haptify.processing.preprocessing import lowpass
+from haptify.processing.signals import handle_signals
 from haptify_tools.discrepancy.drive_rest import hold_resting_drives
 from haptify_tools.discrepancy.hand_path import FROM_MOCAP, fill_gaps, hand_path, second_derivative
 from haptify_tools.discrepancy.model import PathSource

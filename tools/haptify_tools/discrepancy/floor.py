@@ -27,13 +27,12 @@ from pathlib import Path
 import numpy as np
 from scipy import stats as sps
 
-from haptify.storage import SessionFolder, open_session
-
+from haptify.formats.storage import SessionFolder, open_session
 from haptify_tools.discrepancy import data as dt
 from haptify_tools.discrepancy import stats as st
 from haptify_tools.discrepancy.library import Candidate
-from haptify_tools.twin.model import TwinFile, set_param
 from haptify_tools.twin.dossier_plan import SimulationOptions
+from haptify_tools.twin.model import TwinFile, set_param
 from haptify_tools.twin.simulate import simulate_dossier
 
 REPLAY_SEED = 0  # the replays are deterministic (seeds 0, 1, …), like the rest of the workflow

@@ -44,15 +44,15 @@ from scipy.integrate import cumulative_trapezoid
 from scipy.interpolate import make_lsq_spline
 from scipy.signal import butter, sosfiltfilt
 
-from haptify import preprocessing
-from haptify import calibration as cal_mod
 from haptify.codes import Code
-from haptify.compute import ComputeContext
-from haptify.conventions import quat_normalize, quat_rotate
 from haptify.errors import fail
-from haptify.preprocessing import effective_cutoff, interp_columns, lowpass, nominal_rate
-from haptify.signals import ACCEL_COLUMNS, HandleSignals
-from haptify.storage import SessionFolder
+from haptify.formats.conventions import quat_normalize, quat_rotate
+from haptify.formats.storage import SessionFolder
+from haptify.pipeline.compute import ComputeContext
+from haptify.processing import calibration as cal_mod
+from haptify.processing import preprocessing
+from haptify.processing.preprocessing import effective_cutoff, interp_columns, lowpass, nominal_rate
+from haptify.processing.signals import ACCEL_COLUMNS, HandleSignals
 from haptify_tools.discrepancy.model import PathSource
 
 PATH_CROSSOVER_HZ = 1.5  # motion capture below, the accelerometer above (the true twin's floor is lowest

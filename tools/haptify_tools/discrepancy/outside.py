@@ -16,8 +16,7 @@ from typing import Callable
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from haptify.preprocessing import lowpass
-
+from haptify.processing.preprocessing import lowpass
 from haptify_tools.discrepancy.data import RESIDUAL_CUTOFF_HZ, SIM_RATE_HZ, MeasuredTrial
 
 #: field(t s, position m (n, 3, W), velocity m/s (n, 3)) → force on the hand, N (n, 3, W)

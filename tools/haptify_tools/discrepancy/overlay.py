@@ -11,8 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from haptify.storage import SessionFolder
-
+from haptify.formats.storage import SessionFolder
 from haptify_tools.discrepancy.data import MeasuredTrial
 from haptify_tools.discrepancy.model import DiscrepancyFile
 

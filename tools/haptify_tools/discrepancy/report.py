@@ -13,8 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from haptify.storage import atomic_write_text
-
+from haptify.formats.storage import atomic_write_text
 from haptify_tools.discrepancy.data import MeasuredTrial
 from haptify_tools.discrepancy.identify import Selection
 from haptify_tools.discrepancy.model import DiscrepancyFile

@@ -26,8 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from haptify.preprocessing import lowpass
-
+from haptify.processing.preprocessing import lowpass
 from haptify_tools.discrepancy import stats as st
 from haptify_tools.discrepancy.data import RESIDUAL_CUTOFF_HZ, MeasuredTrial
 from haptify_tools.twin.kinematics import hand_to_joints

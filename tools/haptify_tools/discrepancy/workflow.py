@@ -19,12 +19,11 @@ from typing import Callable
 import numpy as np
 
 from haptify.errors import HaptifyError
-from haptify.free_space import magnitude_stats
-from haptify.stiffness import FitRule, fit_stiffness
-from haptify.gate import require_valid_session
-from haptify.storage import atomic_write_json, replace_folder_atomically
-from haptify.surface import planar_stats
-
+from haptify.formats.storage import atomic_write_json, replace_folder_atomically
+from haptify.metrics.free_space import magnitude_stats
+from haptify.metrics.stiffness import FitRule, fit_stiffness
+from haptify.metrics.surface import planar_stats
+from haptify.pipeline.gate import require_valid_session
 from haptify_tools.discrepancy import data as dt
 from haptify_tools.discrepancy import drive_rest
 from haptify_tools.discrepancy import hand_path as hp
@@ -58,8 +57,8 @@ from haptify_tools.discrepancy.model import (
     SignalGap,
     StateShape,
     Structure,
-    WorkspaceGap,
     Verdict,
+    WorkspaceGap,
     WorkspaceRegion,
 )
 from haptify_tools.twin.model import TwinFile, twin_from_dict, twin_to_dict, write_twin
@@ -243,7 +242,7 @@ def _tertile_labels(points: np.ndarray) -> list[str]:
 def workspace_gaps(sel: Selection) -> list[WorkspaceGap]:
     """Per workspace trial: residual RMS and volumes (reference operator) measured / twin before / after,
     and the regions where the sweep and the twin disagree (the Touch's missing lower lobe, paper §VI-A)."""
-    from haptify.workspace import volume_solid
+    from haptify.metrics.workspace import volume_solid
 
     out: list[WorkspaceGap] = []
     if sel.sweeps is None or sel.initial_sweep is None or sel.final_sweep is None:

@@ -22,13 +22,12 @@ import numpy as np
 
 from haptify.codes import Code
 from haptify.errors import fail
-from haptify.kinematics import joint_limits
-from haptify.storage import SessionFolder
-from haptify.workspace import measured_points
-
-from haptify_tools.twin.reach import reach_from_twin
+from haptify.formats.storage import SessionFolder
+from haptify.metrics.workspace import measured_points
+from haptify.processing.kinematics import joint_limits
 from haptify_tools.twin.kinematics import hand_to_joints, true_kinematics
 from haptify_tools.twin.model import Box, TwinFile, twin_from_dict, twin_to_dict
+from haptify_tools.twin.reach import reach_from_twin
 
 EFFECT_ID = "kinematics.base_collision"
 PARAMETER = "base_top_m"

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Callable
 
 from haptify.codes import Code
-from haptify.storage import MANIFEST, SessionWriter
+from haptify.formats.storage import MANIFEST, SessionWriter
 from haptify_tools.example_session import TOUCH_DEVICE
 from haptify_tools.invalid_fixtures.defects import (
     _csv_edit_line,

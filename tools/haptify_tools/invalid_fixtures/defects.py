@@ -16,7 +16,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from haptify.storage import MANIFEST, SessionWriter, atomic_write_json
+from haptify.formats.storage import MANIFEST, SessionWriter, atomic_write_json
 from haptify_tools.invalid_fixtures.session_edits import (
     DURATION_S,
     TRIAL,
@@ -32,7 +32,6 @@ from haptify_tools.invalid_fixtures.session_edits import (
     stream_of,
     trial_of,
 )
-
 
 _On = TypeVar("_On")
 

@@ -14,8 +14,7 @@ from typing import Any, Callable
 import numpy as np
 import pandas as pd
 
-from haptify.storage import MANIFEST, SessionWriter, atomic_write_json, read_table, sha256_file, write_table
-
+from haptify.formats.storage import MANIFEST, SessionWriter, atomic_write_json, read_table, sha256_file, write_table
 
 DURATION_S = 0.2
 TRIAL = "free_space-1"

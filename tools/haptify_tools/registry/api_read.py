@@ -21,7 +21,7 @@ from typing import Any
 from fastapi import APIRouter, Query, Request
 from sqlalchemy import func, select
 
-from haptify.metric_definitions import MetricDefinition, family
+from haptify.metrics.metric_definitions import MetricDefinition, family
 from haptify.schemas import list_dir
 from haptify_tools.registry import db
 from haptify_tools.registry.leaderboard import leaderboard, rule_text

@@ -25,14 +25,14 @@ from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.types import ASGIApp
 
-from haptify import compare
 from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError
+from haptify.pipeline import compare
 from haptify.versions import PACKAGE_VERSION, SPEC_VERSION
 from haptify_tools.registry import challenge
 from haptify_tools.registry.api_read import not_counted_notes, reads
-from haptify_tools.registry.service import Registry
 from haptify_tools.registry.records import Settings
+from haptify_tools.registry.service import Registry
 from haptify_tools.registry.uploads import Uploads
 
 API = "/api/v1"
@@ -450,7 +450,7 @@ def _register_devices(app: FastAPI, reg: Registry) -> None:
         paper: bool = False,
         verification: str = Query("verified", pattern=RANKED_FILTER),
     ) -> Any:
-        """The paper's Table III for any number of devices (``haptify.compare``; spec §15.5), from their
+        """The paper's Table III for any number of devices (``haptify.pipeline.compare``; spec §15.5), from their
         verified current submissions (``verification=all``: from all); a note counts those left out."""
         slugs = [s for s in devices.split(",") if s]
         if not slugs:

@@ -4,7 +4,7 @@ A bundle is a gzip-compressed POSIX tar archive holding only regular files:
 
 ``bundle.json``           the bundle manifest (:class:`Bundle`): who, which device and rig, which
                           implementation, and the size and sha256 of every other file;
-``results.json``          the results (``haptify.results.ResultsFile``);
+``results.json``          the results (``haptify.pipeline.results.ResultsFile``);
 ``conformance.json``      optional: the ``haptify-conform --json-report`` of that implementation;
 ``session/session.json``  the session manifest the results were computed from (and ``session/<file>``
                           for a device file it references);
@@ -36,7 +36,9 @@ from typing import IO
 
 from pydantic import ValidationError
 
-from haptify.bundle_format import (
+from haptify.codes import Code
+from haptify.errors import Finding, HaptifyError, fail
+from haptify.formats.bundle_format import (
     BUNDLE_JSON,
     CONFORMANCE_JSON,
     RESULTS_JSON,
@@ -49,10 +51,8 @@ from haptify.bundle_format import (
     bundle_digest,
     canonical_json,
 )
-from haptify.codes import Code
-from haptify.errors import Finding, HaptifyError, fail
-from haptify.session_format import is_safe_relative_path
-from haptify.storage import MANIFEST, parse_json_file, pydantic_findings, resolve_inside, sha256_file
+from haptify.formats.session_format import is_safe_relative_path
+from haptify.formats.storage import MANIFEST, parse_json_file, pydantic_findings, resolve_inside, sha256_file
 
 CHUNK = 1 << 16
 FILE_MODE = 0o600  # what the registry writes is readable by its service user only (spec §17.7)
@@ -109,8 +109,8 @@ def build_bundle(
     Reads the session manifest and the results only as far as needed to fill ``bundle.json``; the full
     checks are :func:`haptify_tools.registry.checks.check_bundle`'s (the registry runs the same).
     """
-    from haptify.results import ResultsFile
-    from haptify.storage import open_session, read_json_model
+    from haptify.formats.storage import open_session, read_json_model
+    from haptify.pipeline.results import ResultsFile
 
     session_dir = Path(session_dir)
     session = open_session(session_dir)

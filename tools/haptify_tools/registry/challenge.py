@@ -42,10 +42,10 @@ from sqlalchemy.orm import Session as DBSession
 
 from haptify.codes import Code
 from haptify.errors import fail
-from haptify.results import Implementation
+from haptify.pipeline.results import Implementation
 from haptify.versions import SPEC_VERSION
+from haptify_tools.registry.challenge_sessions import FAMILIES, ChallengeCase, generate
 from haptify_tools.registry.checks import agrees
-from haptify_tools.registry.challenge_sessions import ChallengeCase, FAMILIES, generate
 
 
 def pack_sessions(root: Path, target: Path) -> None:

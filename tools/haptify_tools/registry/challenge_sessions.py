@@ -13,8 +13,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from haptify.local_dynamics import parameter_file
-from haptify.conventions import quat_from_axis_angle
+from haptify.dynamics import parameter_file
+from haptify.formats.conventions import quat_from_axis_angle
 from haptify.versions import SPEC_VERSION
 from haptify_tools import rig_builders as rb
 from haptify_tools.conformance_fixtures.dynamics import LineMotion, Prediction, prediction_fixture
@@ -28,7 +28,6 @@ from haptify_tools.conformance_fixtures.vibration import tones_centroid, tones_r
 from haptify_tools.conformance_fixtures.workspace_shapes import pappus_volume, pose_cloud, scaled_device, sphere_cloud
 from haptify_tools.example_session import example_rig
 from haptify_tools.registry.checks import tolerances
-
 
 Truth = tuple[str, Any, str, dict]  # metric, expected value (number or list), unit, case parameters
 RATES_HZ = (1000.0, 1500.0, 2000.0)  # accelerometer rates of a vibration session

@@ -1,7 +1,7 @@
 """What the registry checks in a bundle (spec §17.3), shared by the service and ``haptify submit --dry-run``.
 
-1. Every document is valid against its model: results (``haptify.results.ResultsFile``), conformance
-   report (``haptify_conform.report.ConformReport``), session manifest (``haptify.session_format.Session``).
+1. Every document is valid against its model: results (``haptify.pipeline.results.ResultsFile``), conformance
+   report (``haptify_conform.report.ConformReport``), session manifest (``haptify.formats.session_format.Session``).
 2. The documents agree with each other and with ``bundle.json``: spec version, implementation, session
    id, lab, device, rig, and the results' ``manifest_sha256`` is the sha256 of the included manifest.
 3. The implementation conforms (:func:`check_conformance`).
@@ -21,13 +21,13 @@ from pydantic import BaseModel, ValidationError
 
 from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError, fail
-from haptify.metric_definitions import MetricDefinition, all_families
-from haptify.results import ResultsFile
-from haptify.storage import MANIFEST, open_session, parse_json_file, pydantic_findings, sha256_file
+from haptify.formats.bundle_format import CONFORMANCE_JSON, RESULTS_JSON, SESSION_DIR, Bundle, bundle_digest
+from haptify.formats.storage import MANIFEST, open_session, parse_json_file, pydantic_findings, sha256_file
+from haptify.metrics.metric_definitions import MetricDefinition, all_families
+from haptify.pipeline.results import ResultsFile
 from haptify.versions import SPEC_VERSION
 from haptify_conform.cases import load_cases, select
 from haptify_conform.report import ConformReport
-from haptify.bundle_format import CONFORMANCE_JSON, RESULTS_JSON, SESSION_DIR, Bundle, bundle_digest
 from haptify_tools.registry.bundle import Limits, Unpacked, read_manifest
 
 SUPPORTED_SPEC_VERSIONS = (SPEC_VERSION,)
@@ -340,8 +340,8 @@ def verify(session_root: Path, results: ResultsFile, spec_version: str = SPEC_VE
     compared with the loosest tolerance of its conformance cases; a metric the suite has no case for is
     ``unverifiable`` and keeps the submission from being ``verified``.
     """
-    from haptify.compute import compute_session
-    from haptify.validation import validate_session
+    from haptify.formats.validation import validate_session
+    from haptify.pipeline.compute import compute_session
 
     report = validate_session(session_root)
     errors = [f for f in report.findings if f.is_error]

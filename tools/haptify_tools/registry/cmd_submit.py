@@ -28,8 +28,8 @@ from pathlib import Path
 
 from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError, fail
-from haptify.gate import require_valid_session
-from haptify.bundle_format import submission_id
+from haptify.formats.bundle_format import submission_id
+from haptify.pipeline.gate import require_valid_session
 from haptify_tools.registry.bundle import build_bundle, pack, unpack
 from haptify_tools.registry.checks import check_bundle, verify_bundle
 

@@ -19,7 +19,7 @@ from scipy import stats
 
 from haptify.codes import Code
 from haptify.errors import fail
-from haptify.uncertainty import coverage_factor, welch_satterthwaite
+from haptify.metrics.uncertainty import coverage_factor, welch_satterthwaite
 
 
 @dataclass

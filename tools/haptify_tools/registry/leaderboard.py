@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from importlib import resources
 
-from haptify.significance import ties, welch_difference
+from haptify.metrics.significance import ties, welch_difference
 
 
 @lru_cache(maxsize=1)
@@ -76,7 +76,7 @@ def leaderboard(metric_id: str, device_results: list[dict]) -> list[Row]:
 
     ``device_results`` are :meth:`Registry.device_results` answers. Devices with equal means share a
     rank (1, 2, 2, 4); ties are listed by label. An unranked metric is listed by ascending mean. A ranked
-    metric's rows are cut into numbered ``tie_group``s, best first (:func:`haptify.significance.ties`).
+    metric's rows are cut into numbered ``tie_group``s, best first (:func:`haptify.metrics.significance.ties`).
     """
     have = []
     for d in device_results:

@@ -19,11 +19,11 @@ from sqlalchemy.orm import selectinload
 
 from haptify.codes import Code
 from haptify.errors import fail
-from haptify.results import DeviceSummary, Implementation, MetricResult, ResultsFile
+from haptify.formats.bundle_format import SESSION_DIR
+from haptify.pipeline.results import DeviceSummary, Implementation, MetricResult, ResultsFile
 from haptify.versions import PACKAGE_VERSION
 from haptify_tools.registry import db
 from haptify_tools.registry.aggregates import aggregate, defined_sd, not_counted
-from haptify.bundle_format import SESSION_DIR
 from haptify_tools.registry.bundle import DIR_MODE, unpack
 from haptify_tools.registry.records import RANKED, ReadContext, Settings
 from haptify_tools.registry.worker import run_contained
@@ -249,7 +249,7 @@ class RegistryQueries:
         }
 
     def comparison(self, slugs: list[str], *, verification: str = "verified") -> list[ResultsFile]:
-        """One synthetic results file per device, holding its aggregated means (for ``haptify.compare``)."""
+        """One synthetic results file per device, holding its aggregated means (for ``haptify.pipeline.compare``)."""
         out = []
         for slug in slugs:
             agg = self.device_results(slug, verification=verification)

@@ -33,11 +33,11 @@ from sqlalchemy.orm import Session as DBSession
 
 from haptify.codes import Code
 from haptify.errors import HaptifyError, fail
-from haptify.results import ResultsFile
+from haptify.formats.bundle_format import SESSION_DIR
+from haptify.pipeline.results import ResultsFile
 from haptify.versions import PACKAGE_VERSION, SPEC_VERSION
 from haptify_tools.cluster import RETRIES, each_completed, worker_name
 from haptify_tools.registry import db
-from haptify.bundle_format import SESSION_DIR
 from haptify_tools.registry.bundle import Limits, unpack_bundle
 from haptify_tools.registry.checks import agrees, tolerances, verify
 from haptify_tools.registry.storage import BundleStore

@@ -39,24 +39,24 @@ from starlette.concurrency import run_in_threadpool
 
 from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError, fail
+from haptify.formats.bundle_format import bundle_digest, submission_id
 from haptify_conform.report import ConformReport
 from haptify_tools.registry import db
-from haptify.bundle_format import bundle_digest, submission_id
+from haptify_tools.registry.aggregates import aggregate
 from haptify_tools.registry.bundle import DIR_MODE, FILE_MODE, unpack_bundle
 from haptify_tools.registry.checks import Checked, check_bundle, check_conformance, verify_bundle
 from haptify_tools.registry.queries import RegistryQueries
-from haptify_tools.registry.worker import run_contained
-from haptify_tools.registry.aggregates import aggregate
 from haptify_tools.registry.records import (
+    SCOPES,
+    TOKEN_PREFIX,
     Caller,
     Outcome,
     RateLimiter,
-    SCOPES,
     Settings,
-    TOKEN_PREFIX,
     hash_token,
     slugify,
 )
+from haptify_tools.registry.worker import run_contained
 
 log = logging.getLogger("haptify.registry")
 
@@ -142,7 +142,7 @@ class Registry(RegistryQueries):
         """Create a token for ``lab`` (created if new); returns the token, which is stored only hashed."""
         if scope not in SCOPES:
             raise fail(Code.REQUEST_INVALID, f"unknown scope {scope!r}", expected=list(SCOPES), found=scope)
-        from haptify.bundle_format import BundleLab
+        from haptify.formats.bundle_format import BundleLab
 
         try:
             BundleLab(id=lab)

@@ -18,7 +18,7 @@ from typing import Protocol
 
 from haptify.codes import Code
 from haptify.errors import fail
-from haptify.storage import resolve_inside
+from haptify.formats.storage import resolve_inside
 
 
 class BundleStore(Protocol):

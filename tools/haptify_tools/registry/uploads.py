@@ -35,7 +35,7 @@ from starlette.requests import ClientDisconnect
 
 from haptify.codes import Code
 from haptify.errors import fail
-from haptify.storage import atomic_write_text
+from haptify.formats.storage import atomic_write_text
 from haptify_tools.registry.bundle import DIR_MODE, FILE_MODE
 
 UPLOAD_TTL_S = 24 * 3600.0

@@ -6,7 +6,7 @@
   the figures of ``haptify report`` when a submission shipped them, and how to open its recording in
   the viewer;
 * ``/compare?device=a&device=b…`` — the paper's Table III for the chosen devices
-  (``haptify.compare.build_table`` / ``to_html`` over :meth:`Registry.comparison`);
+  (``haptify.pipeline.compare.build_table`` / ``to_html`` over :meth:`Registry.comparison`);
 * ``/submissions/{id}/report/index.html`` — for a submission with raw streams, the output of
   ``haptify report`` (figures, sounds) drawn by the reference from its session and results on first
   request, and ``/submissions/{id}/recording.rrd`` — its recording for the viewer (rerun), built with
@@ -35,8 +35,8 @@ from fastapi.staticfiles import StaticFiles
 from fastapi.templating import Jinja2Templates
 
 from haptify.codes import Code
-from haptify.compare import _fmt, build_table, to_html
 from haptify.errors import HaptifyError, fail
+from haptify.pipeline.compare import _fmt, build_table, to_html
 from haptify.versions import SPEC_VERSION
 from haptify_tools.registry import api_read
 from haptify_tools.registry.leaderboard import leaderboard, rule_text
@@ -278,10 +278,10 @@ def ensure_report(reg, sid: str) -> Path:
     out = report_folder(reg, sid)
     if out.is_dir():
         return out
-    from haptify.compute import ComputeContext
-    from haptify.report import write_report
-    from haptify.results import ResultsFile
-    from haptify.storage import open_session
+    from haptify.formats.storage import open_session
+    from haptify.pipeline.compute import ComputeContext
+    from haptify.pipeline.results import ResultsFile
+    from haptify.report.document import write_report
 
     with _derive_lock:
         if not out.is_dir():
@@ -296,8 +296,8 @@ def ensure_recording(reg, sid: str) -> Path:
     out = derived_folder(reg, sid) / "recording.rrd"
     if out.is_file():
         return out
-    from haptify.results import ResultsFile
-    from haptify.storage import open_session
+    from haptify.formats.storage import open_session
+    from haptify.pipeline.results import ResultsFile
     from haptify_tools.viewer.save import build
 
     with _derive_lock:

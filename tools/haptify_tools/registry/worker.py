@@ -26,7 +26,7 @@ from haptify.codes import Code
 from haptify.errors import Finding, HaptifyError, fail
 from haptify_tools.registry.bundle import Limits
 
-PRELOAD = ["haptify_tools.registry.checks", "haptify.compute", "haptify.validation"]
+PRELOAD = ["haptify_tools.registry.checks", "haptify.pipeline.compute", "haptify.formats.validation"]
 _context_lock = threading.Lock()
 _context: Any = None
 

@@ -10,27 +10,26 @@ from typing import Any
 
 import numpy as np
 
-from haptify.conventions import matrix_to_quat, pose_apply, quat_to_matrix
+from haptify.formats.conventions import matrix_to_quat, pose_apply, quat_to_matrix
 from haptify.versions import PACKAGE_VERSION
-
 from haptify_tools.twin import examiner as ex
 from haptify_tools.twin import hand_path, plate_loads
-from haptify_tools.twin.reach import reach_from_twin
 from haptify_tools.twin import rig as rg
-from haptify_tools.twin.kinematics import device_to_world, hand_to_joints, link_transforms, true_kinematics
-from haptify_tools.twin.model import TwinFile
-from haptify_tools.twin.physics import ActiveResult, PassiveResult, simulate_active, simulate_passive
-from haptify_tools.twin.vibration_model import device_vibration
 from haptify_tools.twin.dossier_plan import (
-    PlannedTrial,
     RENDER_STIFFNESS_N_PER_M,
     SESSION_DATE,
+    PlannedTrial,
     SimulationOptions,
     _paced,
     cop_dwell,
     trial_ft_gain,
     trial_rng,
 )
+from haptify_tools.twin.kinematics import device_to_world, hand_to_joints, link_transforms, true_kinematics
+from haptify_tools.twin.model import TwinFile
+from haptify_tools.twin.physics import ActiveResult, PassiveResult, simulate_active, simulate_passive
+from haptify_tools.twin.reach import reach_from_twin
+from haptify_tools.twin.vibration_model import device_vibration
 
 
 def _no_streams() -> tuple[dict[str, dict[str, np.ndarray]], dict[str, float], dict[str, list[str]], dict[str, float]]:

@@ -8,8 +8,7 @@ import math
 
 import numpy as np
 
-from haptify.conventions import quat_to_matrix
-
+from haptify.formats.conventions import quat_to_matrix
 from haptify_tools.twin import drive_loops
 from haptify_tools.twin.model import TwinFile
 from haptify_tools.twin.rigid_body import drive_friction, reflected_rotor_inertia

@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from haptify.conventions import (
+from haptify.formats.conventions import (
     quat_from_axis_angle,
     quat_multiply,
     quat_normalize,
@@ -34,8 +34,8 @@ from haptify.conventions import (
 from haptify_tools.twin.hand_path import (
     DEFAULT_RATE_HZ,
     DEG,
-    HandTrajectory,
     NATURAL_GRIP,
+    HandTrajectory,
     _finish,
     clock,
     derivative,

@@ -10,13 +10,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from haptify.conventions import (
+from haptify.formats.conventions import (
     quat_angle,
     quat_from_axis_angle,
     quat_multiply,
     quat_normalize,
 )
-
 
 DEG = math.pi / 180.0
 DEFAULT_RATE_HZ = 2000.0

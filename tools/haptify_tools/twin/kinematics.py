@@ -1,6 +1,6 @@
 """Twin-side kinematics: inverse kinematics, joint-limit and base-collision checks, gimbal angles (paper eq. 4; TWIN.md, Physics).
 
-Forward kinematics and the Jacobian are the reference's (:mod:`haptify.kinematics`, spec §8.2); this
+Forward kinematics and the Jacobian are the reference's (:mod:`haptify.processing.kinematics`, spec §8.2); this
 module adds what only the simulator needs. Positions are in the device frame D unless a name ends in
 ``_W`` (world frame); angles in rad; arrays are vectorised over a leading sample axis ``N``.
 """
@@ -14,12 +14,11 @@ from typing import Literal, overload
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from haptify import kinematics as ref
 from haptify.codes import Code
-from haptify.conventions import quat_to_matrix
 from haptify.errors import fail
-from haptify.session_format import Kinematics
-
+from haptify.formats.conventions import quat_to_matrix
+from haptify.formats.session_format import Kinematics
+from haptify.processing import kinematics as ref
 from haptify_tools.twin.model import Box, Cylinder, HalfSpace, Sphere, TwinFile
 
 # --- which kinematics ---------------------------------------------------------------------------

@@ -1,6 +1,6 @@
 """The device twin file: a versioned model of a grounded force-feedback device (design §4).
 
-A twin file is a superset of the standard device description (:class:`haptify.session_format.Device`,
+A twin file is a superset of the standard device description (:class:`haptify.formats.session_format.Device`,
 spec §2.3): ``device`` is the NOMINAL description that goes into simulated sessions, and the other
 sections say how the simulated device really behaves. Every physical effect is a separate component
 with named parameters and an ``enabled`` switch; effects are addressed by stable ids shared with the
@@ -33,9 +33,9 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from haptify.codes import Code
-from haptify.conventions import STANDARD_GRAVITY
 from haptify.errors import fail
-from haptify.session_format import Device, Pose, Vec3
+from haptify.formats.conventions import STANDARD_GRAVITY
+from haptify.formats.session_format import Device, Pose, Vec3
 
 TWIN_FORMAT: Final = "haptify-twin"
 TWIN_VERSION: Final = "1.0"
@@ -493,7 +493,7 @@ def twin_to_dict(twin: TwinFile) -> dict:
 
 def write_twin(twin: TwinFile, path: str | Path) -> Path:
     """Write a twin file atomically (spec §3.6 style)."""
-    from haptify.storage import atomic_write_json
+    from haptify.formats.storage import atomic_write_json
 
     path = Path(path)
     atomic_write_json(path, twin_to_dict(twin))

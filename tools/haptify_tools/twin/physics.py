@@ -39,12 +39,12 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 
-from haptify import kinematics as ref
 from haptify.codes import Code
 from haptify.errors import fail
-from haptify.session_format import Kinematics, Rendering
-
+from haptify.formats.session_format import Kinematics, Rendering
+from haptify.processing import kinematics as ref
 from haptify_tools.twin import drive_loops
+from haptify_tools.twin.drive_steps import _passive_drive, _render_loop
 from haptify_tools.twin.kinematics import (
     gimbal_angles,
     hand_to_joints,
@@ -57,7 +57,6 @@ from haptify_tools.twin.kinematics import (
     world_to_device,
 )
 from haptify_tools.twin.model import TwinFile, twin_to_dict
-from haptify_tools.twin.drive_steps import _passive_drive, _render_loop
 from haptify_tools.twin.rigid_body import (
     _backward_pass,
     _coupling,

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from haptify.conventions import (
+from haptify.formats.conventions import (
     STANDARD_GRAVITY,
 )
 from haptify_tools.twin.hand_path import clock, minimum_jerk

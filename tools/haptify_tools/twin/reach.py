@@ -9,7 +9,7 @@ from typing import Callable
 
 import numpy as np
 
-from haptify.conventions import (
+from haptify.formats.conventions import (
     quat_to_matrix,
 )
 
@@ -87,7 +87,7 @@ def reach_from_kinematics(
     ``clearance_D(p_D)`` is the signed distance (m) of gimbal-centre points in the device frame from the
     base geometry, negative in collision (None: no collision geometry).
     """
-    from haptify.kinematics import configurations_from_unit, forward_positions
+    from haptify.processing.kinematics import configurations_from_unit, forward_positions
     from haptify_tools.twin.kinematics import inverse_kinematics
 
     r_wd = quat_to_matrix(np.asarray(placement_quaternion, float))

@@ -4,7 +4,7 @@ Every model is a pure function of the true signals, its parameters and a seeded 
 returns the columns of one standard stream kind (``schemas/1.0/stream-kinds.json``). Raw means raw
 (spec §2.6): the handle F/T reports, in its own frame S, the force and torque the connector side
 exerts on the sensor (torque about S's origin) plus its bias — the sign convention of the reference's
-``haptify.calibration`` (spec §6.1): at rest and unattached it reads ``b_F + m g_S``. The accelerometer
+``haptify.processing.calibration`` (spec §6.1): at rest and unattached it reads ``b_F + m g_S``. The accelerometer
 reads specific force ``R_WAᵀ(a − g_W)`` (+g up at rest) plus bias, clipped to its range and quantised.
 The force plate's four corner sensors each report, in their own frame, the force the plate presses
 onto them (a weight on the plate reads negative ``fz``).
@@ -22,7 +22,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import signal
 
-from haptify.conventions import (
+from haptify.formats.conventions import (
     GRAVITY_W,
     STANDARD_GRAVITY,
     quat_conjugate,

@@ -10,9 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from haptify.conventions import quat_conjugate, quat_multiply, quat_to_matrix
-from haptify.session_format import Kinematics
-
+from haptify.formats.conventions import quat_conjugate, quat_multiply, quat_to_matrix
+from haptify.formats.session_format import Kinematics
 from haptify_tools.twin.kinematics import (
     link_transforms,
     placement_matrix,

@@ -27,14 +27,13 @@ import numpy as np
 
 from haptify.codes import Code
 from haptify.errors import fail
-from haptify.storage import atomic_write_json
-
+from haptify.formats.storage import atomic_write_json
 from haptify_tools.twin import rig as rg
-from haptify_tools.twin.model import TwinFile, set_param
 from haptify_tools.twin.dossier_plan import SimulationOptions, name_number, plan
 from haptify_tools.twin.dossier_trials import _slug
-from haptify_tools.twin.truth_files import built_in_place
+from haptify_tools.twin.model import TwinFile, set_param
 from haptify_tools.twin.simulate import simulate_dossier
+from haptify_tools.twin.truth_files import built_in_place
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ requested protocol and repetition plus the rig's calibration trials, drives the 
 raw streams with the virtual rig (:mod:`.rig`) and writes:
 
 - ``<out>/session/`` — a standard 1.0 session (spec chapters 2–3) written atomically by
-  :class:`haptify.storage.SessionWriter`; nothing in it reveals the truth;
+  :class:`haptify.formats.storage.SessionWriter`; nothing in it reveals the truth;
 - ``<out>/truth.json`` — every effect's parameters (the whole twin), the rig's noise levels, biases and
   geometry, every trial's examiner parameters and clock offsets;
 - ``<out>/truth.npz`` — the true trajectories, joint and gimbal angles and wrenches per trial (1 kHz), the
@@ -33,19 +33,17 @@ from typing import Callable
 
 from haptify.codes import Code
 from haptify.errors import fail
-from haptify.storage import SessionWriter, atomic_write_json
-
+from haptify.formats.storage import SessionWriter, atomic_write_json
 from haptify_tools.twin import plate_loads
-from haptify_tools.twin.model import TwinFile, twin_to_dict
-from haptify_tools.twin.dossier_plan import PlannedTrial, SimulationOptions, plan, planned_duration
 
 # re-exported for the benchmark scripts (bench_twin_physics, bench_stiffness_spread, bench_table_iii_seeds)
 from haptify_tools.twin.dossier_plan import DEFAULT_DURATIONS as DEFAULT_DURATIONS
 from haptify_tools.twin.dossier_plan import DEVICE_PROTOCOLS as DEVICE_PROTOCOLS
 from haptify_tools.twin.dossier_plan import RENDER_STIFFNESS_N_PER_M as RENDER_STIFFNESS_N_PER_M
+from haptify_tools.twin.dossier_plan import PlannedTrial, SimulationOptions, plan, planned_duration
 from haptify_tools.twin.dossier_trials import DossierSimulator, TrialOutput
+from haptify_tools.twin.model import TwinFile, twin_to_dict
 from haptify_tools.twin.truth_files import _jsonable, _truth_array, built_in_place, write_npz
-
 
 # --- the dossier -----------------------------------------------------------------------------------
 

@@ -25,7 +25,7 @@ def raw_pose_at(t_pose: np.ndarray, p: np.ndarray, q: np.ndarray, t: np.ndarray)
     Every finite sample counts as one segment, so a time is valid only between two finite samples;
     nothing is bridged or filtered (the viewer's "raw" quantities stay raw). A ``preprocessing.PoseOnGrid``.
     """
-    from haptify import preprocessing
+    from haptify.processing import preprocessing
 
     ok = finite_rows(p, q)
     nan3 = np.full((len(t_pose), 3), np.nan)

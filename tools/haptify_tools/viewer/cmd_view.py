@@ -25,9 +25,9 @@ from typing import IO
 
 from haptify.codes import Code
 from haptify.errors import fail
-from haptify.gate import CheckedSession, open_checked_session
-from haptify.results import load_results
-from haptify.storage import MANIFEST
+from haptify.formats.storage import MANIFEST
+from haptify.pipeline.gate import CheckedSession, open_checked_session
+from haptify.pipeline.results import load_results
 from haptify_tools.viewer.plan import DEFAULT_DERIVED, DERIVED_MODES
 from haptify_tools.viewer.save import build
 

@@ -6,11 +6,11 @@ from __future__ import annotations
 from collections.abc import Collection
 from typing import TYPE_CHECKING, Any
 
-from haptify.storage import SessionFolder
+from haptify.formats.storage import SessionFolder
 from haptify_tools.viewer.plan import COMPACT_RATE_HZ, HAND_FORCE_M_PER_N, PLATE_FORCE_M_PER_N, TrialPlan
 
 if TYPE_CHECKING:  # imported where used: a raw-only recording needs neither (start-up time)
-    from haptify.results import ResultsFile
+    from haptify.pipeline.results import ResultsFile
 
 
 def _cell(text: Any) -> str:
@@ -89,7 +89,7 @@ def session_markdown(
             "workspace meshes) are not recorded: `haptify view --derived compact` or `--derived full` adds them."
         )
     else:
-        from haptify import free_space
+        from haptify.metrics import free_space
 
         lines += [
             f"Arrows: hand force {HAND_FORCE_M_PER_N * 100:g} cm per N; plate force {PLATE_FORCE_M_PER_N * 100:g} cm per N.",

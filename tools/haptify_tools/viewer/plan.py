@@ -14,8 +14,7 @@ import rerun as rr
 
 from haptify.codes import Code
 from haptify.errors import fail
-from haptify.session_format import Trial
-
+from haptify.formats.session_format import Trial
 
 APP_ID = "haptify"
 TIMELINE = "time"

@@ -31,12 +31,12 @@ Entity paths (``<trial>`` is the escaped trial id, ``<role>`` is ``measured`` or
     /world/device                             the device base frame (device_placement)
     /world/<trial>/<role>/handle              handle pose (Transform3D) with axes
     /world/<trial>/<role>/trajectory          the gimbal-centre path
-    /world/<trial>/<role>/hand_force/calibrated  hand force (haptify.signals), arrow at the handle
+    /world/<trial>/<role>/hand_force/calibrated  hand force (haptify.processing.signals), arrow at the handle
     /world/<trial>/<role>/hand_force/raw      without calibration: raw F/T force rotated to W
-    /world/<trial>/<role>/plate_force         plate force (haptify.force_plate), arrow ending at the COP
+    /world/<trial>/<role>/plate_force         plate force (haptify.processing.force_plate), arrow ending at the COP
     /world/<trial>/<role>/markers/<link>      the motion-capture markers of a link, labelled, one colour per link
     /world/<trial>/<role>/links/<link>        link frames from link_poses
-    /world/<trial>/<role>/force_field         free space: mean force per bin (haptify.free_space)
+    /world/<trial>/<role>/force_field         free space: mean force per bin (haptify.metrics.free_space)
     /world/<trial>/<role>/workspace/points    workspace: the measured point cloud
     /world/<trial>/<role>/workspace/measured  workspace: the measured workspace (volume operator) as a mesh
     /world/<trial>/<role>/workspace/modeled   workspace: the modeled workspace (DH model) as a mesh
@@ -57,8 +57,8 @@ import rerun as rr
 
 from haptify.codes import Code
 from haptify.errors import fail
-from haptify.session_format import Trial
-from haptify.storage import SessionFolder
+from haptify.formats.session_format import Trial
+from haptify.formats.storage import SessionFolder
 from haptify_tools.viewer.arrays import xyzw
 from haptify_tools.viewer.documents import results_markdown, session_markdown
 from haptify_tools.viewer.plan import (
@@ -66,8 +66,8 @@ from haptify_tools.viewer.plan import (
     CHUNK_ROWS,
     DEFAULT_DERIVED,
     DERIVED_MODES,
-    Entry,
     PLATE_THICKNESS_M,
+    Entry,
     Plan,
     RrdWriter,
     TrialPlan,
@@ -76,8 +76,8 @@ from haptify_tools.viewer.plan import (
 from haptify_tools.viewer.trial_planner import CachedStreams, TrialPlanner
 
 if TYPE_CHECKING:  # imported where used: a raw-only recording needs neither (start-up time)
-    from haptify.compute import ComputeContext
-    from haptify.results import ResultsFile
+    from haptify.pipeline.compute import ComputeContext
+    from haptify.pipeline.results import ResultsFile
 
 
 # --- session level ---------------------------------------------------------------------------------
@@ -169,7 +169,7 @@ def plan_recording(
         cached = CachedStreams(folder)
         if derived == "off":
             return cached, None
-        from haptify.compute import ComputeContext
+        from haptify.pipeline.compute import ComputeContext
 
         return cached, ComputeContext(session=cached)
 

@@ -9,8 +9,8 @@ from typing import Any, Callable
 
 import rerun as rr
 
-from haptify.results import ResultsFile
-from haptify.storage import SessionFolder
+from haptify.formats.storage import SessionFolder
+from haptify.pipeline.results import ResultsFile
 from haptify_tools.viewer.blueprints import blueprint_for
 from haptify_tools.viewer.plan import CHUNK_ROWS, DEFAULT_DERIVED, Plan, RrdWriter
 from haptify_tools.viewer.recording import atomic_rrd, plan_recording, recording_id

@@ -13,40 +13,40 @@ import pandas as pd
 import rerun as rr
 
 from haptify.codes import Code
-from haptify.conventions import quat_multiply, quat_rotate
 from haptify.errors import HaptifyError, fail
-from haptify.session_format import Kinematics, Stream, Trial
-from haptify.storage import SessionFolder
-from haptify_tools.viewer.voxel_mesh import boundary_mesh
+from haptify.formats.conventions import quat_multiply, quat_rotate
+from haptify.formats.session_format import Kinematics, Stream, Trial
+from haptify.formats.storage import SessionFolder
 from haptify_tools.viewer.arrays import columns_of, finite_rows, nan_split, plane_rectangle, raw_pose_at, xyzw
 from haptify_tools.viewer.plan import (
-    Entry,
     FORCE_COLORS,
-    HANDLE_AXIS_M,
     HAND_FORCE_M_PER_N,
+    HANDLE_AXIS_M,
     LINK_AXIS_M,
     LINK_PALETTE,
     MESH_ALPHA,
     MODELED_COLOR,
     PLATE_FORCE_COLOR,
     PLATE_FORCE_M_PER_N,
-    Plan,
     ROLE_COLORS,
     SERIES,
     SERIES_COLORS,
+    Entry,
+    Plan,
     time_ns,
 )
+from haptify_tools.viewer.voxel_mesh import boundary_mesh
 
 if TYPE_CHECKING:  # imported where used: a raw-only recording needs neither (start-up time)
-    from haptify.compute import ComputeContext
+    from haptify.pipeline.compute import ComputeContext
 
 
 class CachedStreams(SessionFolder):
     """A session whose stream tables are read once per trial (spec §3.2 reading, unchanged).
 
     Reads go through the wrapped session (so a checked session validates each stream on its first
-    read, spec §4.8). The planner and the reference functions it calls (``haptify.signals``,
-    ``haptify.force_plate``) read the same streams; each caller gets a shallow copy, so replacing a
+    read, spec §4.8). The planner and the reference functions it calls (``haptify.processing.signals``,
+    ``haptify.processing.force_plate``) read the same streams; each caller gets a shallow copy, so replacing a
     column never leaks. :meth:`forget` drops the tables once a trial is written, so at most one
     trial's tables are in memory.
     """
@@ -149,7 +149,7 @@ class TrialPlanner:
         )
         if not self.derive:
             return
-        from haptify import workspace
+        from haptify.metrics import workspace
 
         try:
             solid = workspace.volume_solid(points)
@@ -209,7 +209,7 @@ class TrialPlanner:
         """The calibrated handle signals (spec §7.5, ``signals.HandleSignals``), once per trial; None (with a
         note) when unavailable, and None without computing anything when derived signals are off."""
         if not self._signals_tried and self.derive:
-            from haptify import signals
+            from haptify.processing import signals
 
             self._signals_tried = True
             if "handle_pose" in self.kinds and self.kinds & {"handle_wrench", "handle_accel"}:
@@ -266,7 +266,7 @@ class TrialPlanner:
         self.force_arrows(f"{self.world}/hand_force/{label}", t_a, origins, force, stream)
         ok = finite_rows(origins, force)
         if self.trial.protocol == "free_space" and ok.any():
-            from haptify import free_space
+            from haptify.metrics import free_space
 
             field_ = free_space.force_field(origins[ok], force[ok])  # the spec's binning (§9.5)
             if len(field_.centres):
@@ -294,7 +294,7 @@ class TrialPlanner:
                 self.add_series("accel/world", hs.t, hs.acceleration, ["ax", "ay", "az"], "handle_signals", derived=True)
             if not self.derive:
                 return
-            from haptify import vibration
+            from haptify.metrics import vibration
 
             try:
                 vib = vibration.trial_vibration(self.ctx, self.trial.id)
@@ -314,7 +314,7 @@ class TrialPlanner:
         self.add_series("plate/corner_torque_raw", t, columns_of(w, names_t), names_t, "plate_wrench")
         if not self.derive:
             return
-        from haptify import force_plate
+        from haptify.processing import force_plate
 
         try:
             ps = force_plate.plate_signals(self.ctx, self.trial.id)
@@ -424,7 +424,7 @@ class TrialPlanner:
         normal = np.asarray(r.surface_normal, dtype=np.float64)
         norm = float(np.linalg.norm(normal))
         if not (np.isfinite(norm) and norm > 0.0):
-            from haptify.surface import unit_normal
+            from haptify.metrics.surface import unit_normal
 
             unit_normal(normal, self.trial.id)  # the reference's coded error (E303)
         normal = normal / norm
@@ -447,7 +447,7 @@ class TrialPlanner:
             depth = (point - p) @ normal
             self.add_series("penetration", t_pose, depth, ["depth"], "handle_pose")
         if self.derive and {"commanded_wrench", "handle_wrench", "handle_pose"} <= self.kinds:
-            from haptify import surface
+            from haptify.metrics import surface
 
             try:
                 cs = surface.contact_signals(self.ctx, self.trial.id)
@@ -475,8 +475,8 @@ class TrialPlanner:
 
 @functools.lru_cache(maxsize=4)
 def modeled_solid(kinematics_json: str, position: tuple, quaternion: tuple) -> Any:
-    """``haptify.workspace.modeled_solid`` (spec §8.3, a ``VoxelSolid``), computed once per device model and placement."""
-    from haptify import workspace
+    """``haptify.metrics.workspace.modeled_solid`` (spec §8.3, a ``VoxelSolid``), computed once per device model and placement."""
+    from haptify.metrics import workspace
 
     kin = Kinematics.model_validate_json(kinematics_json)
     return workspace.modeled_solid(kin, position, quaternion)

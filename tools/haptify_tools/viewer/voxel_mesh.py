@@ -1,6 +1,6 @@
 """Boundary surface of a voxel solid as a triangle mesh, with numpy only (the workspace solids of spec §8.4).
 
-The workspace chapter's volume operator (``haptify.workspace.volume_solid``, spec §8.4) yields a
+The workspace chapter's volume operator (``haptify.metrics.workspace.volume_solid``, spec §8.4) yields a
 voxel solid on a W-anchored lattice. The viewer draws it as the set of exposed voxel faces: every
 face between a voxel inside the solid (fraction ≥ threshold) and one outside becomes a square, split
 into two triangles, wound counter-clockwise seen from outside (outward normals). The surface is
@@ -42,7 +42,7 @@ def boundary_mesh(inside: np.ndarray, origin: tuple[int, int, int], pitch: float
     """The exposed faces of the boolean voxel grid ``inside`` as a triangle mesh.
 
     Voxel ``(i, j, k)`` of the grid spans ``[(origin + (i, j, k))·pitch, (origin + (i, j, k) + 1)·pitch]``
-    in metres, as in ``haptify.workspace.VoxelSolid`` (spec §8.4).
+    in metres, as in ``haptify.metrics.workspace.VoxelSolid`` (spec §8.4).
     """
     padded = np.pad(np.asarray(inside, dtype=bool), 1)
     corners, normals = [], []

@@ -1,0 +1,66 @@
+"""Computing every metric a session allows (spec §15.4).
+
+Each family's module (:mod:`haptify.pipeline.families`) receives a :class:`~haptify.pipeline.context.ComputeContext`. Work shared between
+families (calibrated handle signals, plate wrenches) is cached on the context, so it is done once per trial.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Callable, Iterable
+
+from haptify.codes import Code
+from haptify.errors import Finding, HaptifyError
+from haptify.formats.storage import MANIFEST, SessionFolder, sha256_file
+from haptify.metrics.metric_definitions import all_families
+from haptify.pipeline.context import ComputeContext as ComputeContext
+from haptify.pipeline.families import family_modules
+from haptify.pipeline.results import DeviceSummary, Implementation, MetricResult, ResultsFile
+from haptify.versions import PACKAGE_VERSION
+
+
+def compute_session(
+    session: SessionFolder,
+    metrics: Iterable[str] | None = None,
+    progress: Callable[[int], None] | None = None,
+    ctx: ComputeContext | None = None,
+    uncertainty: bool = False,
+) -> ResultsFile:
+    """Compute every metric (or those in ``metrics``) that the session's trials allow (spec §15.4).
+
+    Pass ``ctx`` to share its cache with later work on the same session (the report's figures). With
+    ``uncertainty`` (or the case parameter ``{"uncertainty": true}``, §16.2), every metric whose method
+    applies gets its uncertainty record (spec chapter 19), propagated through the context's cached intermediates.
+    """
+    wanted = set(metrics) if metrics else None
+    known = {m.id for f in all_families() for m in f.metrics}
+    if wanted and not wanted <= known:
+        unknown = sorted(wanted - known)
+        raise HaptifyError(Finding(Code.USAGE, f"unknown metric id(s) {unknown}", expected=sorted(known), found=unknown))
+    ctx = ctx or ComputeContext(session=session)
+    ctx.wanted = wanted
+    device = session.device()
+    out = ResultsFile(
+        implementation=Implementation(name="haptify-reference", version=PACKAGE_VERSION),
+        session_id=session.session_id,
+        device=DeviceSummary(manufacturer=device.manufacturer, model=device.model, serial=device.serial),
+        manifest_sha256=sha256_file(session.root / MANIFEST),
+    )
+    for family, module_name in family_modules():
+        fam_ids = {m.id for f in all_families() if f.family == family for m in f.metrics}
+        if wanted is not None and not (fam_ids & wanted):
+            continue
+        module = importlib.import_module(module_name)
+        for item in module.compute(ctx):
+            if not ctx.wants(item.id):
+                continue
+            (out.metrics if isinstance(item, MetricResult) else out.unavailable).append(item)
+        if progress:
+            progress(1)
+    out.warnings = ctx.warnings
+    if uncertainty or ctx.parameters.get("uncertainty") is True:
+        from haptify.metrics.uncertainty import attach
+
+        attach(ctx, out)
+        ctx.wanted = wanted
+    return out
