@@ -53,8 +53,8 @@ class FitOptions(FitParameters):
         values.update(overrides)
         opts = cls.model_construct(**values)  # checked below, as the overrides need no type of their own
         for m in (opts.input_map, opts.output_map):
-            if m not in ("piecewise_linear", "unit_gain"):
-                raise fail(Code.USAGE, f"unknown map type {m!r}", expected=["piecewise_linear", "unit_gain"], found=m)
+            if m not in parameter_file.MAP_TYPES:
+                raise fail(Code.USAGE, f"unknown map type {m!r}", expected=list(parameter_file.MAP_TYPES), found=m)
         if opts.nb < 1 or opts.nf < 0 or opts.nk < 0 or opts.breakpoints < 2 or not abs(opts.initial_pole) < 1:
             raise fail(
                 Code.USAGE,

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import Annotated, Any, Final, Literal, Sequence, Union
+from typing import Annotated, Any, Final, Literal, Sequence, Union, get_args
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -21,6 +21,11 @@ from haptify.versions import SPEC_VERSION
 FAMILY = "dynamics"
 
 
+#: The static maps a fit may use (spec §11.2): breakpoint tables or none.
+MapType = Literal["piecewise_linear", "unit_gain"]
+MAP_TYPES: Final = get_args(MapType)
+
+
 class FitParameters(FamilyParameters):
     """The fitting rules of ``metrics/dynamics.json`` (spec §11.4): model orders and delay, the static maps
     and their breakpoints, the initialisation and the Levenberg–Marquardt schedule."""
@@ -28,8 +33,8 @@ class FitParameters(FamilyParameters):
     nb: int
     nf: int
     nk: int
-    input_map: Literal["piecewise_linear", "unit_gain"]
-    output_map: Literal["piecewise_linear", "unit_gain"]
+    input_map: MapType
+    output_map: MapType
     breakpoints: int
     breakpoint_quantiles: tuple[float, float]
     initial_pole: float
