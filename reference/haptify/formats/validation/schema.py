@@ -1,14 +1,19 @@
 """JSON Schema validation of session.json and device.json (spec §4.3.1): every schema error as a coded
-finding, the errors of an ``anyOf``/``oneOf`` taken from the branch the instance was meant to match."""
+finding, the errors of an ``anyOf``/``oneOf`` taken from the branch the instance was meant to match.
+
+An instance is first checked by jsonschema-rs (compiled, about a millisecond for a dossier's session.json);
+only an instance it rejects goes through ``jsonschema``, whose errors carry what the findings report (the
+branch an ``anyOf`` meant, the failing keyword's value). Both apply Draft 2020-12 with ``format`` as an
+annotation, so they agree on what is valid (tests/test_schema_validators.py).
+"""
 
 from __future__ import annotations
 
 import json
 from functools import lru_cache
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from jsonschema import Draft202012Validator
-from jsonschema.exceptions import ValidationError as SchemaError
+import jsonschema_rs
 from pydantic import BaseModel
 
 from haptify import schemas
@@ -19,15 +24,34 @@ from haptify.formats.storage import pointer_of
 from haptify.formats.validation.report import jsonable, short
 
 
+if TYPE_CHECKING:
+    from jsonschema import Draft202012Validator
+    from jsonschema.exceptions import ValidationError as SchemaError
+
+
 @lru_cache(maxsize=None)
-def _schema_validator(name: str) -> Draft202012Validator:
-    """The Draft 2020-12 validator of ``<name>.schema.json``; from the pydantic model when not yet generated."""
+def schema_document(name: str) -> dict[str, Any]:
+    """``<name>.schema.json``; from the pydantic model when not yet generated."""
     try:
-        schema = schemas.schema(name)
+        document: dict[str, Any] = schemas.schema(name)
+        return document
     except FileNotFoundError:
         models: dict[str, type[BaseModel]] = {"session": Session, "device": Device}
-        schema = models[name].model_json_schema()
-    return Draft202012Validator(schema)
+        return models[name].model_json_schema()
+
+
+@lru_cache(maxsize=None)
+def fast_validator(name: str) -> jsonschema_rs.Draft202012Validator:
+    """jsonschema-rs's Draft 2020-12 validator of ``<name>.schema.json`` (``format`` not asserted)."""
+    return jsonschema_rs.Draft202012Validator(schema_document(name), validate_formats=False)
+
+
+@lru_cache(maxsize=None)
+def detailed_validator(name: str) -> Draft202012Validator:
+    """``jsonschema``'s Draft 2020-12 validator of ``<name>.schema.json``, for the errors' details."""
+    from jsonschema import Draft202012Validator
+
+    return Draft202012Validator(schema_document(name))
 
 
 def _branch_errors(err: SchemaError) -> list[SchemaError]:
@@ -83,9 +107,10 @@ def _code_for(err: SchemaError, default: str) -> str:
 
 def schema_findings(instance: Any, schema_name: str, code: str, label: str) -> list[Finding]:
     """Every JSON Schema error of ``instance`` against ``<schema_name>.schema.json`` as findings (spec §4.3.1)."""
-    validator = _schema_validator(schema_name)
+    if fast_validator(schema_name).is_valid(instance):
+        return []
     out: list[Finding] = []
-    for top in validator.iter_errors(instance):
+    for top in detailed_validator(schema_name).iter_errors(instance):
         for err in _branch_errors(top):
             expected = err.validator_value if err.validator not in ("anyOf", "oneOf", "$ref", "additionalProperties") else None
             if isinstance(expected, (dict, list)) and len(json.dumps(expected, default=str)) > 200:
