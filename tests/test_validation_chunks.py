@@ -270,6 +270,30 @@ def test_the_default_chunk_is_about_32_mib_of_float64_rows():
     assert SessionValidator(".", chunk_rows=5).chunk_rows_for(7) == 5
 
 
+def test_a_parquet_stream_whose_footer_rows_fit_one_chunk_is_read_whole_else_in_chunks(tmp_path: Path, monkeypatch):
+    """spec §4.5: the footer's row count decides — a stream within one default chunk is read whole (one
+    read, hashed as read), the same stream is chunked once the chunk is smaller than its rows."""
+    folder = example_writer(duration_s=0.2).write(tmp_path / "s")
+    declared = [s for t in session_edits.manifest(folder)["trials"] for s in t["streams"]]
+    size = {s["file"]: 8 * s["rows"] * len(s["columns"]) for s in declared}  # decoded float64 bytes
+    asked: dict[str, int | None] = {}
+    reader = storage.read_stream_chunks
+
+    def spy(path, fmt_, columns, *, label, chunk_rows=None):
+        asked[label] = chunk_rows
+        return reader(path, fmt_, columns, label=label, chunk_rows=chunk_rows)
+
+    monkeypatch.setattr(streams, "read_stream_chunks", spy)
+    assert validate_session(folder).findings == []
+    assert asked == dict.fromkeys(size)  # every stream whole: each fits a 32 MiB chunk
+    chunk = sorted(size.values())[len(size) // 2]  # the median stream fits, the larger ones do not
+    monkeypatch.setattr(streams, "STREAM_CHUNK_BYTES", chunk)
+    asked.clear()
+    assert validate_session(folder).findings == []
+    assert {f for f, rows in asked.items() if rows is None} == {f for f, b in size.items() if b <= chunk}
+    assert len(set(asked.values())) > 1
+
+
 def test_an_integer_column_with_a_null_is_e212_judged_on_the_schema(tmp_path: Path):
     """spec §3.2: a column that is not float is E212 — also when a null would make a reader widen it to float64."""
     import pyarrow as pa

@@ -87,7 +87,7 @@ _READ_ERRORS = (OSError, pa.ArrowException, ValueError, pd.errors.ParserError, U
 def _parquet_chunks(parquet: pq.ParquetFile, chunk_rows: int | None) -> Iterator[pd.DataFrame]:
     """A Parquet file's table whole, or batch by batch; an empty file yields its empty table."""
     if chunk_rows is None:
-        yield arrow_frame(parquet.read())
+        yield arrow_frame(parquet.read(use_threads=False))
         return
     empty = True
     for batch in parquet.iter_batches(batch_size=chunk_rows, use_pandas_metadata=False):

@@ -25,6 +25,7 @@ class StreamEntry:
     declared: bool = False  # its declaration has been checked
     names_ok: bool = False  # its declared columns are its kind's, each once
     path: Path | None = None  # its file, once found inside the folder within its size bound
+    footer_rows: int | None = None  # the rows a Parquet file's footer declares, once read
 
 
 def collect(step: Callable[[], None], file: str | None) -> list[Finding]:

@@ -63,11 +63,13 @@ def stream_size_limit(columns: int, rows: int, row_groups: int = 1) -> int:
     )
 
 
-def parquet_row_groups(path: Path, label: str, rows: int) -> int:
-    """The number of row groups a Parquet file's footer declares (E112 unreadable; E113 more row groups
-    than declared rows, since every row group but an empty file's holds a row; spec §4.2)."""
+def parquet_footer(path: Path, label: str, rows: int) -> tuple[int, int]:
+    """The numbers of row groups and rows a Parquet file's footer declares (E112 unreadable; E113 more row
+    groups than declared rows, since every row group but an empty file's holds a row; spec §4.2). The
+    row count bounds what decoding the file can hold (its columns are fixed-width)."""
     try:
-        groups = pq.read_metadata(path).num_row_groups
+        footer = pq.read_metadata(path)
+        groups = footer.num_row_groups
     except MemoryError:
         raise
     except (OSError, pa.ArrowException, ValueError) as exc:
@@ -82,4 +84,4 @@ def parquet_row_groups(path: Path, label: str, rows: int) -> int:
                 found=groups,
             )
         )
-    return max(1, groups)
+    return max(1, groups), footer.num_rows

@@ -17,7 +17,7 @@ from haptify.errors import Finding, HaptifyError
 from haptify.formats.session_format import SensorRange, Stream, expected_columns, kind_table
 from haptify.formats.storage import MANIFEST, read_stream_chunks, resolve_inside, sha256_file
 from haptify.formats.validation.base import StreamEntry, ValidatorBase, collect
-from haptify.formats.validation.files import parquet_row_groups, regular_file, stream_size_limit
+from haptify.formats.validation.files import parquet_footer, regular_file, stream_size_limit
 from haptify.formats.validation.times import TimeScan
 from haptify.formats.validation.values import ValueScan
 
@@ -50,7 +50,8 @@ class StreamChecks(ValidatorBase):
         """Check one stream's declaration, file and data (spec §4.3.5); the findings go into the report.
 
         With ``keep`` the file is read whole and its table as read (stream clock) is returned, or None when
-        the file could not be read; without, it is read in chunks, in bounded memory, and None is returned."""
+        the file could not be read; without, it is read in chunks, in bounded memory (:meth:`reads_whole`),
+        and None is returned."""
         self.check_declaration(entry)
         kept: list[pd.DataFrame] = []
         path = entry.path
@@ -176,7 +177,7 @@ class StreamChecks(ValidatorBase):
         missing = f"stream file {label!r} does not exist"
         if s.format == "parquet":  # the footer says how many row groups the file may spend metadata on
             regular_file(path, label, Code.STREAM_FILE_MISSING, missing, stream_size_limit(len(declared), s.rows, max(1, s.rows)))
-            groups = parquet_row_groups(path, label, s.rows)
+            groups, entry.footer_rows = parquet_footer(path, label, s.rows)
             regular_file(path, label, Code.STREAM_FILE_MISSING, missing, stream_size_limit(len(declared), s.rows, groups))
         else:
             regular_file(path, label, Code.STREAM_FILE_MISSING, missing, stream_size_limit(len(declared), s.rows))
@@ -195,8 +196,9 @@ class StreamChecks(ValidatorBase):
         s, label = entry.stream, entry.stream.file
         declared = [c.name for c in s.columns]
         try:
+            whole = keep is not None or self.reads_whole(entry)
             digest, chunks = read_stream_chunks(
-                path, s.format, declared, label=label, chunk_rows=None if keep is not None else self.chunk_rows_for(len(declared))
+                path, s.format, declared, label=label, chunk_rows=None if whole else self.chunk_rows_for(len(declared))
             )
         except HaptifyError:
             self._check_digest(s, sha256_file(path), add)
@@ -258,6 +260,12 @@ class StreamChecks(ValidatorBase):
             offset = self.offsets.get(s.file, 0.0)
             entry.span = (times.first + offset, times.last + offset)
         values.findings(n, add)
+
+    def reads_whole(self, entry: StreamEntry) -> bool:
+        """Whether a stream is read in one piece, hashed as it is read (no first hashing pass): a Parquet
+        file whose footer's rows (fixed-width float columns) fit in one chunk, unless chunks are forced."""
+        rows = entry.footer_rows
+        return self.chunk_rows is None and rows is not None and rows <= self.chunk_rows_for(len(entry.stream.columns))
 
     def chunk_rows_for(self, columns: int) -> int:
         """Rows per chunk when a stream of ``columns`` columns is validated: :attr:`chunk_rows` when set (the
