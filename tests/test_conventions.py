@@ -63,3 +63,27 @@ def test_mean_of_symmetric_rotations_is_the_centre():
     spread += [-spread[0]]  # sign ambiguity must not matter
     np.testing.assert_allclose(quat_mean(np.array(spread[:2] + [spread[2]])), base, atol=0.07)
     np.testing.assert_allclose(quat_mean(np.array(spread[:2])), base, atol=1e-12)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    centres=st.lists(unit_quats, min_size=1, max_size=5),
+    angle=st.floats(0.0, 0.5),
+    seed=st.integers(0, 2**16),
+)
+def test_the_mean_of_a_stack_of_windows_is_each_window_s_mean_with_w_non_negative(centres, angle, seed):
+    """spec §11.6.1: windows (W, N, 4) averaged at once equal their means one by one, each the centre of
+    rotations spread symmetrically about it (sign-flipped samples included), scalar part ≥ 0."""
+    rng = np.random.default_rng(seed)
+    windows = []
+    for centre in centres:
+        axes = rng.standard_normal((3, 3))
+        spread = [quat_multiply(centre, quat_from_axis_angle(a, s * angle)) for a in axes for s in (-1.0, 1.0)]
+        windows.append(np.array([q if k % 3 else -q for k, q in enumerate(spread)]))
+    stack = np.array(windows)
+    means = quat_mean(stack)
+    assert means.shape == (len(centres), 4)
+    for k, window in enumerate(stack):
+        np.testing.assert_allclose(means[k], quat_mean(window), atol=1e-12)
+        expected = centres[k] if centres[k][0] >= 0 else -centres[k]
+        assert means[k][0] >= 0 and quat_angle(means[k], expected) < 1e-6

@@ -63,7 +63,7 @@ def window_features(
         return out
 
     q = np.asarray(quaternion, dtype=float)[:m].reshape(n_win, window_samples, 4)
-    orient = np.array([quat_mean(block) for block in q]) if n_win else np.zeros((0, 4))
+    orient = quat_mean(q) if n_win else np.zeros((0, 4))
     return WindowFeatures(means(position, 3), means(velocity, 3), means(acceleration, 3), orient)
 
 

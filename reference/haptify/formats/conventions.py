@@ -121,12 +121,12 @@ def quat_slerp(a: npt.ArrayLike, b: npt.ArrayLike, s: npt.ArrayLike) -> npt.NDAr
 
 
 def quat_mean(q: npt.ArrayLike) -> npt.NDArray[np.float64]:
-    """The average orientation of quaternions ``(N, 4)`` (Markley et al. 2007: principal eigenvector of Σ q qᵀ).
-    Spec §11.6.1."""
+    """The average orientation of quaternions ``(..., N, 4)`` (Markley et al. 2007: principal eigenvector of
+    Σ q qᵀ), with w ≥ 0: ``(..., 4)``, one mean per stack of N (e.g. per window, spec §11.6.1)."""
     q = quat_normalize(np.asarray(q, dtype=float))
-    _, vecs = np.linalg.eigh(q.T @ q)
-    mean = vecs[:, -1]
-    return mean if mean[0] >= 0 else -mean
+    _, vecs = np.linalg.eigh(np.swapaxes(q, -1, -2) @ q)
+    mean: npt.NDArray[np.float64] = vecs[..., :, -1]
+    return np.where(mean[..., :1] >= 0, mean, -mean)
 
 
 def pose_apply(position: npt.ArrayLike, quaternion: npt.ArrayLike, points: npt.ArrayLike) -> npt.NDArray[np.float64]:
