@@ -86,17 +86,22 @@ def lowpass(x: np.ndarray, rate_hz: float, cutoff_hz: float, *, order: int | Non
     The chord from the first to the last sample is subtracted before filtering and added back after,
     so straight lines pass unchanged and the ends start at zero (no edge transient from a slope);
     then odd padding of ``min(3·(2·sections + 1), N − 1)`` samples at each end.
+
+    The work runs with time on the last axis (a view: the columns of a table's ``to_numpy()`` are
+    contiguous), where scipy filters each signal in place without transposing copies; the result is
+    the same array of numbers, returned as ``(N, ...)``.
     """
     x = np.asarray(x, float)
     if len(x) < 2:  # nothing to filter; also no rate (nominal_rate of one sample is inf)
         return x.copy()
     order = PARAMETERS.filter_order if order is None else order
-    sos = butter_lowpass(order, effective_cutoff(cutoff_hz, rate_hz), rate_hz)
+    sos = _butter_lowpass(order, effective_cutoff(cutoff_hz, rate_hz), rate_hz)  # read only
     padlen = min(3 * (2 * len(sos) + 1), len(x) - 1)
-    ramp = np.linspace(0.0, 1.0, len(x)).reshape((-1,) + (1,) * (x.ndim - 1))
-    chord = x[0] + ramp * (x[-1] - x[0])
-    out: np.ndarray = sosfiltfilt(sos, x - chord, axis=0, padtype="odd", padlen=padlen) + chord
-    return out
+    xt = np.moveaxis(x, 0, -1)
+    chord = xt[..., :1] + np.linspace(0.0, 1.0, len(x)) * (xt[..., -1:] - xt[..., :1])
+    out: np.ndarray = sosfiltfilt(sos, xt - chord, axis=-1, padtype="odd", padlen=padlen)
+    out += chord
+    return np.moveaxis(out, -1, 0)
 
 
 def butter_lowpass(order: int, cutoff_hz: float, rate_hz: float) -> np.ndarray:
