@@ -23,7 +23,7 @@ from haptify.errors import fail
 from haptify.formats.conventions import quat_to_matrix
 from haptify.metrics.metric_definitions import FamilyParameters, load_parameters
 from haptify.processing.caching import cached, session_of
-from haptify.processing.preprocessing import nominal_rate
+from haptify.processing.preprocessing import nominal_rate, table_columns
 
 FAMILY = "rig"
 
@@ -142,7 +142,7 @@ def plate_bias(ctx_or_session: Any) -> tuple[np.ndarray, str]:
                 found=None,
             )
         df = session.read(trials[-1].id, "plate_wrench")
-        return df[PLATE_COLUMNS].to_numpy().mean(axis=0), f"trial:{trials[-1].id}"
+        return table_columns(df, PLATE_COLUMNS).mean(axis=0), f"trial:{trials[-1].id}"
 
     return cached(ctx_or_session, ("plate_bias",), build)
 
@@ -172,7 +172,7 @@ def plate_signals(ctx_or_session: Any, trial_id: str) -> PlateSignals:
         df = session.read(trial_id, "plate_wrench")
         pos, rot = corner_geometry(session.manifest.rig)
         bias, source = plate_bias(ctx_or_session)
-        force, moment = total_wrench(df[PLATE_COLUMNS].to_numpy(), pos, rot, bias)
+        force, moment = total_wrench(table_columns(df, PLATE_COLUMNS), pos, rot, bias)
         cop, ok = center_of_pressure(force, moment)
         t = df["t"].to_numpy()
         return PlateSignals(

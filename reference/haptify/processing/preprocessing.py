@@ -130,6 +130,19 @@ def _butter_lowpass(order: int, cutoff_hz: float, rate_hz: float) -> tuple[np.nd
     return sos, sosfilt_zi(sos)
 
 
+def table_columns(frame: Any, names: list[str]) -> np.ndarray:
+    """The columns ``names`` of a stream's table as one ``(N, k)`` array, column-major as
+    ``frame[names].to_numpy()`` gives them, without pandas' cost of selecting columns (spec §7.2 works on
+    these arrays): a view of the table's values when the columns are consecutive in it, else a copy.
+    Raises KeyError for a name the table does not have."""
+    at = [int(frame.columns.get_loc(name)) for name in names]
+    values = frame.to_numpy()
+    if at and at == list(range(at[0], at[0] + len(at))):
+        out: np.ndarray = values[:, at[0] : at[0] + len(at)]
+        return out
+    return np.asarray(values.T[at].T)
+
+
 def interp_columns(t_src: np.ndarray, x_src: np.ndarray, t_dst: np.ndarray) -> np.ndarray:
     """Linear interpolation of every column of ``x_src (N, k)`` at ``t_dst`` (values at the ends are held).
     Spec §7.2."""
@@ -348,7 +361,7 @@ def mocap_track(ctx_or_session: Any, trial_id: str) -> MocapTrack:
     def build() -> MocapTrack:
         session = session_of(ctx_or_session)
         pose = session.read(trial_id, "handle_pose")
-        return process_mocap(pose["t"].to_numpy(), pose[POSE_COLUMNS[:3]].to_numpy(), pose[POSE_COLUMNS[3:]].to_numpy())
+        return process_mocap(pose["t"].to_numpy(), table_columns(pose, POSE_COLUMNS[:3]), table_columns(pose, POSE_COLUMNS[3:]))
 
     return cached(ctx_or_session, ("mocap_track", trial_id), build)
 
