@@ -241,8 +241,9 @@ def bridge_gaps(
     if len(idx) < 2:
         return pos, quat, ok
     dt = float(np.median(np.diff(t)))
-    for i, j in zip(idx[:-1], idx[1:]):
-        if j - i > 1 and t[j] - t[i] <= max_gap_s + dt + 1e-12:
+    gaps = np.flatnonzero(np.diff(idx) > 1)  # valid samples idx[g], idx[g + 1] with missing ones between
+    for i, j in zip(idx[gaps], idx[gaps + 1]):
+        if t[j] - t[i] <= max_gap_s + dt + 1e-12:
             mid = np.arange(i + 1, j)
             s = (t[mid] - t[i]) / (t[j] - t[i])
             pos[mid] = pos[i] + s[:, None] * (pos[j] - pos[i])
