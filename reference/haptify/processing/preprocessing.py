@@ -24,7 +24,7 @@ from functools import lru_cache
 from typing import Any
 
 import numpy as np
-from scipy.signal import butter, sosfilt, sosfilt_zi
+from scipy.signal import butter, sosfiltfilt
 
 from haptify.codes import Code
 from haptify.errors import fail
@@ -95,39 +95,24 @@ def lowpass(x: np.ndarray, rate_hz: float, cutoff_hz: float, *, order: int | Non
     if len(x) < 2:  # nothing to filter; also no rate (nominal_rate of one sample is inf)
         return x.copy()
     order = PARAMETERS.filter_order if order is None else order
-    sos, zi = _butter_lowpass(order, effective_cutoff(cutoff_hz, rate_hz), rate_hz)
+    sos = butter_lowpass(order, effective_cutoff(cutoff_hz, rate_hz), rate_hz)
     padlen = min(3 * (2 * len(sos) + 1), len(x) - 1)
     xt = np.moveaxis(x, 0, -1)
     chord = xt[..., :1] + np.linspace(0.0, 1.0, len(x)) * (xt[..., -1:] - xt[..., :1])
-    out = _filtfilt_odd(sos, zi, xt - chord, padlen)
+    out: np.ndarray = sosfiltfilt(sos, xt - chord, axis=-1, padtype="odd", padlen=padlen)
     out += chord
     return np.moveaxis(out, -1, 0)
-
-
-def _filtfilt_odd(sos: np.ndarray, zi: np.ndarray, x: np.ndarray, padlen: int) -> np.ndarray:
-    """``scipy.signal.sosfiltfilt(sos, x, axis=-1, padtype="odd", padlen=padlen)`` for ``1 ≤ padlen < N``, the
-    same steps in the same arithmetic, with the sections' steady state ``zi = sosfilt_zi(sos)`` designed once
-    instead of on every call (spec §7.2): odd extension, forward pass from ``zi`` times the first sample,
-    backward pass from ``zi`` times the last output, extension cut off."""
-    ext = np.concatenate((2 * x[..., :1] - x[..., padlen:0:-1], x, 2 * x[..., -1:] - x[..., -2 : -(padlen + 2) : -1]), axis=-1)
-    zi = zi.reshape((len(sos),) + (1,) * (x.ndim - 1) + (2,))
-    y: np.ndarray = sosfilt(sos, ext, zi=zi * ext[..., :1])[0]
-    y = sosfilt(sos, y[..., ::-1], zi=zi * y[..., -1:])[0]
-    return y[..., ::-1][..., padlen:-padlen]
 
 
 def butter_lowpass(order: int, cutoff_hz: float, rate_hz: float) -> np.ndarray:
     """Second-order sections (a fresh array) of the Butterworth low-pass of ``order`` with its −3 dB point
     at ``cutoff_hz`` for ``rate_hz`` (Hz; spec §7.2); the design is made once per distinct triple."""
-    return _butter_lowpass(order, cutoff_hz, rate_hz)[0].copy()
+    return _butter_lowpass(order, cutoff_hz, rate_hz).copy()
 
 
 @lru_cache(maxsize=256)
-def _butter_lowpass(order: int, cutoff_hz: float, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
-    """The sections of :func:`butter_lowpass` and their steady state for a unit step (``sosfilt_zi``); shared
-    between calls, so never modified."""
-    sos = butter(order, cutoff_hz, btype="low", fs=rate_hz, output="sos")
-    return sos, sosfilt_zi(sos)
+def _butter_lowpass(order: int, cutoff_hz: float, rate_hz: float) -> np.ndarray:
+    return butter(order, cutoff_hz, btype="low", fs=rate_hz, output="sos")
 
 
 def table_columns(frame: Any, names: list[str]) -> np.ndarray:
