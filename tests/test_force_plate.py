@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from haptify.errors import HaptifyError
-from haptify.formats.conventions import quat_from_axis_angle
+from haptify.formats.conventions import quat_from_axis_angle, quat_to_matrix
 from haptify.formats.session_format import Rig
 from haptify.formats.storage import open_session
 from haptify.processing import force_plate
@@ -45,6 +45,29 @@ def test_point_load_gives_its_wrench_and_position(x, y, fx, fy, fz, turned):
     assert np.allclose(m, np.cross(point, load), atol=1e-9)
     cop, ok = force_plate.center_of_pressure(f, m)
     assert ok.all() and np.allclose(cop, [[x, y]], atol=1e-9)  # horizontal force does not move the COP
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 40))
+def test_total_wrench_is_the_sum_of_the_rotated_corner_readings(seed, n):
+    """Any corner poses and readings: F = Σ R_i (f_i − b_f,i) and M = Σ [R_i (τ_i − b_τ,i) + p_i × R_i (f_i − b_f,i)],
+    the spec §14.1 sums written out sample by sample and corner by corner."""
+    rng = np.random.default_rng(seed)
+    rotations = quat_to_matrix(rng.normal(size=(4, 4)))
+    positions = rng.uniform(-0.4, 0.4, size=(4, 3))
+    raw = rng.normal(size=(n, 24)) * 50.0
+    bias = rng.normal(size=24)
+    force, moment = force_plate.total_wrench(raw, positions, rotations, bias)
+    assert force.shape == moment.shape == (n, 3)
+    for k in range(n):
+        f_sum, m_sum = np.zeros(3), np.zeros(3)
+        for c in range(4):
+            f = rotations[c] @ (raw[k, 6 * c : 6 * c + 3] - bias[6 * c : 6 * c + 3])
+            tau = rotations[c] @ (raw[k, 6 * c + 3 : 6 * c + 6] - bias[6 * c + 3 : 6 * c + 6])
+            f_sum += f
+            m_sum += tau + np.cross(positions[c], f)
+        assert np.allclose(force[k], f_sum, rtol=1e-12, atol=1e-11)
+        assert np.allclose(moment[k], m_sum, rtol=1e-12, atol=1e-11)
 
 
 def test_paper_appendix_formula_for_vertical_loads():

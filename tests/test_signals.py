@@ -38,6 +38,28 @@ def test_lowpass_is_zero_phase_with_the_butterworth_magnitude():
         assert _gain(rate, f, fc) == pytest.approx(1.0 / (1.0 + omega ** (2 * order)), rel=0.01)
 
 
+@settings(max_examples=30, deadline=None)
+@given(
+    n=st.integers(2, 400),
+    k=st.integers(1, 5),
+    seed=st.integers(0, 2**32 - 1),
+    column_major=st.booleans(),
+)
+def test_lowpass_filters_each_signal_on_its_own_whatever_the_layout(n, k, seed, column_major):
+    """A block of signals gives, signal by signal, exactly the low-pass of that signal alone (spec §7.2 filters
+    each signal independently), whether its columns or its rows are contiguous and for (N, a, b) blocks."""
+    rng = np.random.default_rng(seed)
+    block = rng.normal(size=(n, k)) * 10.0 + rng.normal(size=k)
+    block = np.asfortranarray(block) if column_major else np.ascontiguousarray(block)
+    out = preprocessing.lowpass(block, 100.0, 7.0)
+    assert out.shape == (n, k)
+    for j in range(k):
+        assert np.array_equal(out[:, j], preprocessing.lowpass(np.ascontiguousarray(block[:, j]), 100.0, 7.0))
+    cube = preprocessing.lowpass(np.stack([block, -block], axis=2), 100.0, 7.0)
+    assert cube.shape == (n, k, 2)
+    assert np.array_equal(cube[:, :, 0], out) and np.array_equal(cube[:, :, 1], preprocessing.lowpass(-block, 100.0, 7.0))
+
+
 def test_cutoff_is_limited_by_nyquist():
     frac = preprocessing.PARAMETERS.max_cutoff_fraction
     assert preprocessing.effective_cutoff(20.0, 1000.0) == 20.0
@@ -87,6 +109,30 @@ def test_short_gaps_are_bridged_and_long_gaps_never_interpolated():
     inside_long = (grid > t[249]) & (grid < t[long.stop])
     assert not on.valid[inside_long].any() and on.valid[~inside_long].all()
     assert np.isnan(on.position[inside_long]).all()
+
+
+@settings(max_examples=40, deadline=None)
+@given(gaps=st.lists(st.tuples(st.integers(5, 380), st.integers(1, 30)), min_size=1, max_size=8))
+def test_every_gap_is_bridged_exactly_when_it_is_short(gaps):
+    """On a straight-line motion, each run of missing samples is filled on the line when the valid samples
+    around it are at most ``max_gap_s`` + one interval apart, and stays missing otherwise (spec §7.4)."""
+    t = np.arange(400) / 100.0
+    pos = np.column_stack([0.1 * t, -0.2 * t, 0.05 + 0 * t])
+    q = np.tile([1.0, 0, 0, 0], (400, 1))
+    missing = np.zeros(400, bool)
+    for start, length in gaps:
+        missing[start : start + length] = True
+    pos[missing] = np.nan
+    q[missing, 2] = np.nan  # one missing component makes the whole sample missing
+    filled, quat, ok = preprocessing.bridge_gaps(t, pos, q)
+    expected = ~missing
+    edges = np.flatnonzero(np.diff(np.r_[0, missing.astype(int), 0]))
+    for a, b in zip(edges[::2], edges[1::2]):  # missing run [a, b) between valid samples a − 1 and b
+        if 0 < a and b < 400 and t[b] - t[a - 1] <= preprocessing.PARAMETERS.max_gap_s + 0.01 + 1e-12:
+            expected[a:b] = True
+    assert np.array_equal(ok, expected)
+    assert np.allclose(filled[ok], np.column_stack([0.1 * t, -0.2 * t, 0.05 + 0 * t])[ok], atol=1e-12)
+    assert np.allclose(quat[ok], [1.0, 0, 0, 0], atol=1e-12) and np.isnan(filled[~ok]).all()
 
 
 def test_short_segments_are_dropped():
@@ -213,3 +259,20 @@ def test_lowpass_resample_of_one_sample_holds_it():
     x = np.array([[1.0, -2.0, 3.0]])
     out = preprocessing.lowpass_resample(np.array([0.5]), x, np.array([0.0, 0.5, 1.0]), 20.0)
     assert np.array_equal(out, np.repeat(x, 3, axis=0))
+
+
+@settings(max_examples=30, deadline=None)
+@given(names=st.lists(st.sampled_from(["fx", "fy", "fz", "tx", "ty", "tz"]), min_size=1, max_size=6, unique=True))
+def test_table_columns_are_the_named_columns(names):
+    """Any selection of a table's columns, consecutive or not and in any order, gives those columns' values
+    column by column, as ``frame[names]`` holds them."""
+    import pandas as pd
+
+    rng = np.random.default_rng(3)
+    frame = pd.DataFrame({c: rng.normal(size=50) for c in ["t", "fx", "fy", "fz", "tx", "ty", "tz"]})
+    out = preprocessing.table_columns(frame, names)
+    assert out.shape == (50, len(names))
+    for j, name in enumerate(names):
+        assert np.array_equal(out[:, j], frame[name].to_numpy())
+    with pytest.raises(KeyError):
+        preprocessing.table_columns(frame, ["fx", "nope"])

@@ -23,7 +23,8 @@ from haptify.errors import fail
 from haptify.formats.conventions import quat_to_matrix
 from haptify.metrics.metric_definitions import FamilyParameters, load_parameters
 from haptify.processing.caching import cached, session_of
-from haptify.processing.preprocessing import nominal_rate
+from haptify.processing.platform_wrench import cross
+from haptify.processing.preprocessing import nominal_rate, table_columns
 
 FAMILY = "rig"
 
@@ -91,16 +92,24 @@ def total_wrench(
     """Force (N) and moment about the world origin (N·m) the load exerts on the plate (spec §14.1).
 
     ``raw (N, 24)`` in the column order c1_fx … c4_tz; ``bias (24,)`` subtracted first (zeros if None).
+    Each corner's force and moment are rotated to W a signal at a time (rows of ``raw.T``, contiguous
+    for a table's columns), then summed c1 … c4.
     """
     x = np.asarray(raw, float)
     if bias is not None:
         x = x - np.asarray(bias, float)
-    x = x.reshape(len(x), 4, 6)
-    f_w = np.einsum("cij,ncj->nci", rotations, x[:, :, :3])
-    t_w = np.einsum("cij,ncj->nci", rotations, x[:, :, 3:])
-    force = f_w.sum(axis=1)
-    moment = (t_w + np.cross(positions[None, :, :], f_w)).sum(axis=1)
-    return force, moment
+    rows = x.T
+    force = moment = np.empty(0)
+    for c in range(len(CORNERS)):
+        f_w = _rotated(rotations[c], rows[6 * c : 6 * c + 3])
+        m_w = _rotated(rotations[c], rows[6 * c + 3 : 6 * c + 6]) + cross(positions[c], f_w)
+        force, moment = (f_w, m_w) if c == 0 else (force + f_w, moment + m_w)
+    return np.ascontiguousarray(force.T), np.ascontiguousarray(moment.T)
+
+
+def _rotated(r: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``r v`` for a rotation ``r (3, 3)`` and vectors as the rows of ``v (3, N)``, summed in the order j = 0, 1, 2."""
+    return np.stack([r[i, 0] * v[0] + r[i, 1] * v[1] + r[i, 2] * v[2] for i in range(3)])
 
 
 def center_of_pressure(force: np.ndarray, moment: np.ndarray, min_force_N: float | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -142,7 +151,7 @@ def plate_bias(ctx_or_session: Any) -> tuple[np.ndarray, str]:
                 found=None,
             )
         df = session.read(trials[-1].id, "plate_wrench")
-        return df[PLATE_COLUMNS].to_numpy().mean(axis=0), f"trial:{trials[-1].id}"
+        return table_columns(df, PLATE_COLUMNS).mean(axis=0), f"trial:{trials[-1].id}"
 
     return cached(ctx_or_session, ("plate_bias",), build)
 
@@ -172,7 +181,7 @@ def plate_signals(ctx_or_session: Any, trial_id: str) -> PlateSignals:
         df = session.read(trial_id, "plate_wrench")
         pos, rot = corner_geometry(session.manifest.rig)
         bias, source = plate_bias(ctx_or_session)
-        force, moment = total_wrench(df[PLATE_COLUMNS].to_numpy(), pos, rot, bias)
+        force, moment = total_wrench(table_columns(df, PLATE_COLUMNS), pos, rot, bias)
         cop, ok = center_of_pressure(force, moment)
         t = df["t"].to_numpy()
         return PlateSignals(

@@ -86,6 +86,10 @@ def lowpass(x: np.ndarray, rate_hz: float, cutoff_hz: float, *, order: int | Non
     The chord from the first to the last sample is subtracted before filtering and added back after,
     so straight lines pass unchanged and the ends start at zero (no edge transient from a slope);
     then odd padding of ``min(3·(2·sections + 1), N − 1)`` samples at each end.
+
+    The work runs with time on the last axis (a view: the columns of a table's ``to_numpy()`` are
+    contiguous), where scipy filters each signal in place without transposing copies; the result is
+    the same array of numbers, returned as ``(N, ...)``.
     """
     x = np.asarray(x, float)
     if len(x) < 2:  # nothing to filter; also no rate (nominal_rate of one sample is inf)
@@ -93,10 +97,11 @@ def lowpass(x: np.ndarray, rate_hz: float, cutoff_hz: float, *, order: int | Non
     order = PARAMETERS.filter_order if order is None else order
     sos = butter_lowpass(order, effective_cutoff(cutoff_hz, rate_hz), rate_hz)
     padlen = min(3 * (2 * len(sos) + 1), len(x) - 1)
-    ramp = np.linspace(0.0, 1.0, len(x)).reshape((-1,) + (1,) * (x.ndim - 1))
-    chord = x[0] + ramp * (x[-1] - x[0])
-    out: np.ndarray = sosfiltfilt(sos, x - chord, axis=0, padtype="odd", padlen=padlen) + chord
-    return out
+    xt = np.moveaxis(x, 0, -1)
+    chord = xt[..., :1] + np.linspace(0.0, 1.0, len(x)) * (xt[..., -1:] - xt[..., :1])
+    out: np.ndarray = sosfiltfilt(sos, xt - chord, axis=-1, padtype="odd", padlen=padlen)
+    out += chord
+    return np.moveaxis(out, -1, 0)
 
 
 def butter_lowpass(order: int, cutoff_hz: float, rate_hz: float) -> np.ndarray:
@@ -108,6 +113,19 @@ def butter_lowpass(order: int, cutoff_hz: float, rate_hz: float) -> np.ndarray:
 @lru_cache(maxsize=256)
 def _butter_lowpass(order: int, cutoff_hz: float, rate_hz: float) -> np.ndarray:
     return butter(order, cutoff_hz, btype="low", fs=rate_hz, output="sos")
+
+
+def table_columns(frame: Any, names: list[str]) -> np.ndarray:
+    """The columns ``names`` of a stream's table as one ``(N, k)`` array, column-major as
+    ``frame[names].to_numpy()`` gives them, without pandas' cost of selecting columns (spec §7.2 works on
+    these arrays): a view of the table's values when the columns are consecutive in it, else a copy.
+    Raises KeyError for a name the table does not have."""
+    at = [int(frame.columns.get_loc(name)) for name in names]
+    values = frame.to_numpy()
+    if at and at == list(range(at[0], at[0] + len(at))):
+        out: np.ndarray = values[:, at[0] : at[0] + len(at)]
+        return out
+    return np.asarray(values.T[at].T)
 
 
 def interp_columns(t_src: np.ndarray, x_src: np.ndarray, t_dst: np.ndarray) -> np.ndarray:
@@ -208,8 +226,9 @@ def bridge_gaps(
     if len(idx) < 2:
         return pos, quat, ok
     dt = float(np.median(np.diff(t)))
-    for i, j in zip(idx[:-1], idx[1:]):
-        if j - i > 1 and t[j] - t[i] <= max_gap_s + dt + 1e-12:
+    gaps = np.flatnonzero(np.diff(idx) > 1)  # valid samples idx[g], idx[g + 1] with missing ones between
+    for i, j in zip(idx[gaps], idx[gaps + 1]):
+        if t[j] - t[i] <= max_gap_s + dt + 1e-12:
             mid = np.arange(i + 1, j)
             s = (t[mid] - t[i]) / (t[j] - t[i])
             pos[mid] = pos[i] + s[:, None] * (pos[j] - pos[i])
@@ -328,7 +347,7 @@ def mocap_track(ctx_or_session: Any, trial_id: str) -> MocapTrack:
     def build() -> MocapTrack:
         session = session_of(ctx_or_session)
         pose = session.read(trial_id, "handle_pose")
-        return process_mocap(pose["t"].to_numpy(), pose[POSE_COLUMNS[:3]].to_numpy(), pose[POSE_COLUMNS[3:]].to_numpy())
+        return process_mocap(pose["t"].to_numpy(), table_columns(pose, POSE_COLUMNS[:3]), table_columns(pose, POSE_COLUMNS[3:]))
 
     return cached(ctx_or_session, ("mocap_track", trial_id), build)
 

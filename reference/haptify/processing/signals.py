@@ -24,6 +24,7 @@ from haptify.processing.preprocessing import (
     nominal_rate,
     orientation_at,
     pose_on_grid,
+    table_columns,
     uniform_grid,
 )
 
@@ -92,14 +93,16 @@ def build_handle_signals(ctx_or_session: Any, trial_id: str, rate_hz: float, cal
         cal = calibration if calibration is not None else cal_mod.handle_calibration(session)
     if "handle_wrench" in streams:
         w = streams["handle_wrench"]
-        raw = lowpass_resample(w["t"].to_numpy(), w[WRENCH_COLUMNS].to_numpy(), grid, preprocessing.PARAMETERS.wrench_cutoff_hz)
+        raw = lowpass_resample(
+            w["t"].to_numpy(), table_columns(w, WRENCH_COLUMNS), grid, preprocessing.PARAMETERS.wrench_cutoff_hz
+        )
         force, torque = np.full((len(grid), 3), np.nan), np.full((len(grid), 3), np.nan)
         force[v], torque[v] = cal_mod.compensate_wrench(
             raw[v], pose.quaternion[v], cal, cal_mod.sensor_pose(session, "ft_sensor")
         )
     if "handle_accel" in streams:
         a = streams["handle_accel"]
-        raw = lowpass_resample(a["t"].to_numpy(), a[ACCEL_COLUMNS].to_numpy(), grid, preprocessing.PARAMETERS.accel_cutoff_hz)
+        raw = lowpass_resample(a["t"].to_numpy(), table_columns(a, ACCEL_COLUMNS), grid, preprocessing.PARAMETERS.accel_cutoff_hz)
         accel = np.full((len(grid), 3), np.nan)
         accel[v] = cal_mod.compensate_accel(raw[v], pose.quaternion[v], cal, cal_mod.sensor_pose(session, "accelerometer"))
     return HandleSignals(
@@ -161,13 +164,13 @@ def handle_accel_native(ctx_or_session: Any, trial_id: str) -> NativeAccel:
         a = session.read(trial_id, "handle_accel")
         t = a["t"].to_numpy()
         cal = cal_mod.handle_calibration(ctx_or_session)
-        sensor = a[ACCEL_COLUMNS].to_numpy() - cal.accel_bias_m_per_s2
+        reading = table_columns(a, ACCEL_COLUMNS)
+        sensor = reading - cal.accel_bias_m_per_s2
         world = np.full_like(sensor, np.nan)
         valid = np.zeros(len(t), bool)
         if session.stream(trial_id, "handle_pose") is not None:
             q, valid = orientation_at(mocap_track(ctx_or_session, trial_id), t)
-            raw = a[ACCEL_COLUMNS].to_numpy()[valid]
-            world[valid] = cal_mod.compensate_accel(raw, q[valid], cal, cal_mod.sensor_pose(session, "accelerometer"))
+            world[valid] = cal_mod.compensate_accel(reading[valid], q[valid], cal, cal_mod.sensor_pose(session, "accelerometer"))
         return NativeAccel(t=t, acceleration=world, sensor=sensor, valid=valid, rate_hz=nominal_rate(t))
 
     return cached(ctx_or_session, ("handle_accel_native", trial_id), build)
