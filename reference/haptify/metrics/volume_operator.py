@@ -126,19 +126,25 @@ def volume_solid(points: np.ndarray, *, pitch: float | None = None, closing_radi
     # the band: within `band` face-steps of S (dilation) and not `band` steps deep inside it (erosion)
     band_c = _face_steps(coarse, band, outside=False) & _face_steps(~coarse, band, outside=True)
 
+    fraction = _refine(coarse, c).astype(np.float32)
     # the fine lattice as blocks: blockwise[I, J, K] is coarse voxel (I, J, K)'s c × c × c fine voxels
-    fine = np.empty((shape_c[0], c, shape_c[1], c, shape_c[2], c), dtype=np.float32)
-    fine[...] = coarse[:, None, :, None, :, None]
-    blockwise = fine.transpose(0, 2, 4, 1, 3, 5)
+    blockwise = fraction.reshape(shape_c[0], c, shape_c[1], c, shape_c[2], c).transpose(0, 2, 4, 1, 3, 5)
     in_band = band_c[tuple((vox // c).T)]
-    blockwise[band_c] = _band_fractions(coarse, c, band_c, lo, h, means[in_band])
+    blockwise[np.nonzero(band_c)] = _band_fractions(coarse, c, band_c, lo, h, means[in_band])
     return VoxelSolid(
         origin=(int(lo[0]), int(lo[1]), int(lo[2])),
         pitch=h,
-        fraction=fine.reshape(shape),
+        fraction=fraction,
         hull_volume=_hull_volume(vox, means, counts),
         n_points=len(pts),
     )
+
+
+def _refine(coarse: np.ndarray, c: int) -> np.ndarray:
+    """The fine-lattice array in which every coarse voxel becomes its block of c³ fine voxels (last axis
+    first: the element-wise repeat runs on the smallest array)."""
+    fine: np.ndarray = coarse.repeat(c, axis=2).repeat(c, axis=1).repeat(c, axis=0)
+    return fine
 
 
 def _within(mask: np.ndarray, radius: float) -> np.ndarray:
