@@ -70,8 +70,12 @@ def test_fill_holes_fills_a_hollow_cube_and_not_an_open_one():
 @settings(max_examples=60, deadline=None)
 @given(st.one_of(masks, sparse_masks), st.integers(0, 3))
 def test_face_steps_are_scipys_dilation_and_erosion(mask, steps):
-    np.testing.assert_array_equal(_face_steps(mask, steps, outside=False), ndi.binary_dilation(mask, iterations=steps) if steps else mask)
-    np.testing.assert_array_equal(~_face_steps(~mask, steps, outside=True), ndi.binary_erosion(mask, iterations=steps) if steps else mask)
+    np.testing.assert_array_equal(
+        _face_steps(mask, steps, outside=False), ndi.binary_dilation(mask, iterations=steps) if steps else mask
+    )
+    np.testing.assert_array_equal(
+        ~_face_steps(~mask, steps, outside=True), ndi.binary_erosion(mask, iterations=steps) if steps else mask
+    )
 
 
 def test_face_steps_grow_a_voxel_into_the_city_block_ball():

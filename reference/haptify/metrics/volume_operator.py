@@ -173,7 +173,7 @@ def _within(mask: np.ndarray, radius: float) -> np.ndarray:
             np.minimum(out[head], dist2[tail] + d * d, out=out[head])
             np.minimum(out[tail], dist2[head] + d * d, out=out[tail])
         dist2 = np.minimum(out, m + 1, out=out)
-    within: np.ndarray = dist2 <= m
+    within: np.ndarray = np.less_equal(dist2, m)
     return within
 
 
@@ -222,9 +222,7 @@ def _blocks_near(shape: tuple[int, ...], blocks: np.ndarray, c: int, reach_voxel
     return ndi.maximum_filter(occupied, size=2 * half + 1, mode="constant").astype(bool)
 
 
-def _band_fractions(
-    coarse: np.ndarray, c: int, band_c: np.ndarray, lo: np.ndarray, h: float, samples: np.ndarray
-) -> np.ndarray:
+def _band_fractions(coarse: np.ndarray, c: int, band_c: np.ndarray, lo: np.ndarray, h: float, samples: np.ndarray) -> np.ndarray:
     """Sub-voxel inside-fractions of the band voxels (spec §8.4 step 5): float32 (n, c, c, c), the c³ fine
     voxels of each of the n coarse voxels of the band ``band_c`` (in ``np.argwhere(band_c)`` order).
 
@@ -246,12 +244,13 @@ def _band_fractions(
     blocks = np.argwhere(band_c)[searched]
     # centre (m) of fine voxel (i, j, k): (i + lo + ½) h, looked up per axis
     offsets = np.stack(np.unravel_index(np.arange(c**3), (c, c, c)), axis=1)
-    centres = np.empty((len(blocks), c**3, 3))
+    grid = np.empty((len(blocks), c**3, 3))
     for axis in range(3):
         along = (np.arange(band_c.shape[axis] * c) + lo[axis] + 0.5) * h
-        centres[:, :, axis] = along[blocks[:, axis, None] * c + offsets[None, :, axis]]
-    centres = centres.reshape(-1, 3)
-    dist, near = tree.query(centres, k=1, distance_upper_bound=reach * h)
+        grid[:, :, axis] = along[blocks[:, axis, None] * c + offsets[None, :, axis]]
+    centres = grid.reshape(-1, 3)
+    dist, nearest = tree.query(centres, k=1, distance_upper_bound=reach * h)
+    near = np.asarray(nearest)
     l1 = np.abs(normal).sum(axis=1)
     hit = np.flatnonzero(np.isfinite(dist))
     hit = hit[l1[near[hit]] > 0.5]  # a unit normal has 1 ≤ ‖n‖₁ ≤ √3; 0 where no normal is defined
