@@ -120,15 +120,17 @@ def volume_solid(points: np.ndarray, *, pitch: float | None = None, closing_radi
 
     occupied = np.zeros(shape_c, dtype=bool)
     occupied[tuple((vox // c).T)] = True
-    dilated = ndi.distance_transform_edt(~occupied) <= rc
-    filled = ndi.binary_fill_holes(dilated)
-    coarse = ndi.distance_transform_edt(filled) > rc + PARAMETERS.erosion_offset_voxels
-    band_c = ndi.binary_dilation(coarse, iterations=band) & ~ndi.binary_erosion(coarse, iterations=band)
+    dilated = _within(occupied, rc)
+    filled = _fill_holes(dilated)
+    coarse = ~_within(~filled, rc + PARAMETERS.erosion_offset_voxels)
+    # the band: within `band` face-steps of S (dilation) and not `band` steps deep inside it (erosion)
+    band_c = _face_steps(coarse, band, outside=False) & _face_steps(~coarse, band, outside=True)
 
     fraction = _refine(coarse, c).astype(np.float32)
+    # the fine lattice as blocks: blockwise[I, J, K] is coarse voxel (I, J, K)'s c × c × c fine voxels
+    blockwise = fraction.reshape(shape_c[0], c, shape_c[1], c, shape_c[2], c).transpose(0, 2, 4, 1, 3, 5)
     in_band = band_c[tuple((vox // c).T)]
-    fine, band_fraction = _band_fractions(coarse, c, band_c, lo, h, means[in_band])
-    fraction[tuple(fine.T)] = band_fraction
+    blockwise[np.nonzero(band_c)] = _band_fractions(coarse, c, band_c, lo, h, means[in_band])
     return VoxelSolid(
         origin=(int(lo[0]), int(lo[1]), int(lo[2])),
         pitch=h,
@@ -139,14 +141,73 @@ def volume_solid(points: np.ndarray, *, pitch: float | None = None, closing_radi
 
 
 def _refine(coarse: np.ndarray, c: int) -> np.ndarray:
-    """The fine-lattice array in which every coarse voxel becomes its block of c³ fine voxels."""
-    return coarse.repeat(c, axis=0).repeat(c, axis=1).repeat(c, axis=2)
+    """The fine-lattice array in which every coarse voxel becomes its block of c³ fine voxels (last axis
+    first: the element-wise repeat runs on the smallest array)."""
+    fine: np.ndarray = coarse.repeat(c, axis=2).repeat(c, axis=1).repeat(c, axis=0)
+    return fine
 
 
-def _block_voxels(blocks: np.ndarray, c: int) -> np.ndarray:
-    """Fine-lattice indices (n·c³, 3) of the fine voxels of the coarse voxels ``blocks`` (n, 3), block by block."""
-    offsets = np.stack(np.unravel_index(np.arange(c**3), (c, c, c)), axis=1)
-    return (blocks[:, None, :] * c + offsets[None]).reshape(-1, 3)
+def _within(mask: np.ndarray, radius: float) -> np.ndarray:
+    """The voxels whose centre lies within ``radius`` (voxels) of the centre of a True voxel of ``mask``:
+    ``scipy.ndimage.distance_transform_edt(~mask) <= radius`` (spec §8.4 steps 2 and 4), exactly.
+
+    The squared distance to the nearest True voxel is a minimum over integer offsets, separable by axis
+    (d² = min over dz of [min over dy of (min over dx of dx²) + dy²] + dz²), and only whether it is at
+    most m — the largest integer whose float square root is ≤ ``radius`` — matters: so offsets up to
+    ⌊√m⌋ voxels suffice, one axis after the other, with every value above m held at m + 1."""
+    m = int(math.floor(radius * radius)) if radius >= 0 else -1
+    while m >= 0 and math.sqrt(m) > radius:
+        m -= 1
+    while math.sqrt(m + 1) <= radius:
+        m += 1
+    if m < 0:
+        return np.zeros_like(mask, dtype=bool)
+    reach = math.isqrt(m)
+    dist2 = np.where(mask, 0, m + 1).astype(np.int16 if m + 1 + reach * reach < 2**15 else np.int64)
+    for axis in range(mask.ndim):
+        n = mask.shape[axis]
+        out = dist2.copy()
+        for d in range(1, min(reach, n - 1) + 1):
+            head = tuple(slice(0, n - d) if a == axis else slice(None) for a in range(mask.ndim))
+            tail = tuple(slice(d, n) if a == axis else slice(None) for a in range(mask.ndim))
+            np.minimum(out[head], dist2[tail] + d * d, out=out[head])
+            np.minimum(out[tail], dist2[head] + d * d, out=out[tail])
+        dist2 = np.minimum(out, m + 1, out=out)
+    within: np.ndarray = np.less_equal(dist2, m)
+    return within
+
+
+def _fill_holes(mask: np.ndarray) -> np.ndarray:
+    """``scipy.ndimage.binary_fill_holes(mask)`` (spec §8.4 step 3), run on the bounding box of ``mask`` only:
+    every voxel beyond the box lies outside ``mask`` and is connected to the grid's border, so a component of
+    the complement reaches the grid's border exactly when it reaches a face of the box."""
+    if not mask.any():
+        return mask.copy()
+    axes = range(mask.ndim)
+    spans = [np.flatnonzero(mask.any(axis=tuple(b for b in axes if b != a))) for a in axes]
+    box = tuple(slice(int(span[0]), int(span[-1]) + 1) for span in spans)
+    filled = mask.copy()
+    filled[box] = ndi.binary_fill_holes(mask[box])
+    return filled
+
+
+def _face_steps(mask: np.ndarray, steps: int, *, outside: bool) -> np.ndarray:
+    """``mask`` grown by ``steps`` face-steps (6-connected dilation); beyond the grid counts as ``outside``.
+    ``_face_steps(m, n, outside=False)`` is ``binary_dilation(m, iterations=n)`` and
+    ``~_face_steps(~m, n, outside=True)`` is ``binary_erosion(m, iterations=n)`` (spec §8.4 step 5's band)."""
+    grown = mask.copy()
+    for _ in range(steps):
+        prev = grown.copy()
+        for axis in range(mask.ndim):
+            n = mask.shape[axis]
+            head = tuple(slice(0, n - 1) if a == axis else slice(None) for a in range(mask.ndim))
+            tail = tuple(slice(1, n) if a == axis else slice(None) for a in range(mask.ndim))
+            grown[head] |= prev[tail]
+            grown[tail] |= prev[head]
+            if outside:
+                grown[tuple(slice(0, 1) if a == axis else slice(None) for a in range(mask.ndim))] = True
+                grown[tuple(slice(n - 1, n) if a == axis else slice(None) for a in range(mask.ndim))] = True
+    return grown
 
 
 def _blocks_near(shape: tuple[int, ...], blocks: np.ndarray, c: int, reach_voxels: float) -> np.ndarray:
@@ -162,30 +223,55 @@ def _blocks_near(shape: tuple[int, ...], blocks: np.ndarray, c: int, reach_voxel
     return ndi.maximum_filter(occupied, size=2 * half + 1, mode="constant").astype(bool)
 
 
-def _band_fractions(
-    coarse: np.ndarray, c: int, band_c: np.ndarray, lo: np.ndarray, h: float, samples: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Sub-voxel inside-fractions of the band voxels (spec §8.4 step 5): the fine indices (n, 3) of the
-    fine voxels of the coarse band ``band_c`` and their fractions (n,).
+def _band_fractions(coarse: np.ndarray, c: int, band_c: np.ndarray, lo: np.ndarray, h: float, samples: np.ndarray) -> np.ndarray:
+    """Sub-voxel inside-fractions of the band voxels (spec §8.4 step 5): float32 (n, c, c, c), the c³ fine
+    voxels of each of the n coarse voxels of the band ``band_c`` (in ``np.argwhere(band_c)`` order).
 
-    ``samples`` are the sample means of the occupied band voxels. Each sample's normal: the eigenvector
-    of the smallest eigenvalue of the covariance of its ``normal_neighbours`` nearest samples within
-    ``normal_radius_voxels`` (a local plane fit), oriented along the outward direction −∇ of the coarse
-    solid's indicator smoothed by a Gaussian (central differences at the sample's coarse voxel); with
-    fewer than ``min_normal_neighbours`` neighbours, or neighbours along a line (second-largest eigenvalue
-    below ``min_normal_planarity`` times the largest), −∇ itself.
+    ``samples`` are the sample means of the occupied band voxels, each with its normal (:func:`_normals`).
     A band voxel with centre c takes the nearest sample p within ``surface_search_voxels`` and its normal
     n: signed depth s = (p − c)·n, fraction clip(1/2 + s / (h‖n‖₁), 0, 1). Without a sample in reach
     the voxel keeps its solid indicator (0 or 1); the nearest sample is searched only for the voxels of
     coarse voxels near a sample's (:func:`_blocks_near`).
     """
-    blocks = np.argwhere(band_c)
-    fine = _block_voxels(blocks, c)
-    inside = np.repeat(coarse[band_c].astype(np.float32), c**3)
+    inside = np.empty((int(band_c.sum()), c, c, c), dtype=np.float32)
+    inside[...] = coarse[band_c][:, None, None, None]
     if len(samples) < 3:
-        return fine, inside
-    smooth = ndi.gaussian_filter(coarse.astype(np.float32), PARAMETERS.normal_smoothing_voxels)
+        return inside
     ijk = (np.floor(samples / h).astype(np.int64) - lo) // c
+    tree = cKDTree(samples)
+    normal = _normals(coarse, ijk, h, samples, tree)
+    reach = PARAMETERS.surface_search_voxels
+    searched = _blocks_near(band_c.shape, ijk, c, reach)[band_c]
+    blocks = np.argwhere(band_c)[searched]
+    # centre (m) of fine voxel (i, j, k): (i + lo + ½) h, looked up per axis
+    offsets = np.stack(np.unravel_index(np.arange(c**3), (c, c, c)), axis=1)
+    grid = np.empty((len(blocks), c**3, 3))
+    for axis in range(3):
+        along = (np.arange(band_c.shape[axis] * c) + lo[axis] + 0.5) * h
+        grid[:, :, axis] = along[blocks[:, axis, None] * c + offsets[None, :, axis]]
+    centres = grid.reshape(-1, 3)
+    dist, nearest = tree.query(centres, k=1, distance_upper_bound=reach * h)
+    near = np.asarray(nearest)
+    l1 = np.abs(normal).sum(axis=1)
+    hit = np.flatnonzero(np.isfinite(dist))
+    hit = hit[l1[near[hit]] > 0.5]  # a unit normal has 1 ≤ ‖n‖₁ ≤ √3; 0 where no normal is defined
+    p = near[hit]
+    s = np.einsum("nj,nj->n", samples[p] - centres[hit], normal[p])
+    fractions = inside[searched].reshape(-1)
+    fractions[hit] = np.clip(0.5 + s / (h * l1[p]), 0.0, 1.0)
+    inside[searched] = fractions.reshape(-1, c, c, c)
+    return inside
+
+
+def _normals(coarse: np.ndarray, ijk: np.ndarray, h: float, samples: np.ndarray, tree: cKDTree) -> np.ndarray:
+    """Unit outward normals (n, 3) of the boundary ``samples`` (m) in coarse voxels ``ijk``, ``tree`` their
+    k-d tree (spec §8.4 step 5): the eigenvector of the smallest eigenvalue of the covariance of each
+    sample's ``normal_neighbours`` nearest samples within ``normal_radius_voxels`` (a local plane fit),
+    oriented along the outward direction −∇ of the coarse solid's indicator smoothed by a Gaussian
+    (central differences at the sample's coarse voxel); with fewer than ``min_normal_neighbours``
+    neighbours, or neighbours along a line (second-largest eigenvalue below ``min_normal_planarity``
+    times the largest), −∇ itself (0 where the smoothed indicator is flat)."""
+    smooth = ndi.gaussian_filter(coarse.astype(np.float32), PARAMETERS.normal_smoothing_voxels)
     outward = np.empty((len(samples), 3))
     for axis in range(3):
         up, dn = ijk.copy(), ijk.copy()
@@ -194,34 +280,22 @@ def _band_fractions(
         outward[:, axis] = (smooth[tuple(dn.T)] - smooth[tuple(up.T)]) / 2.0
     outward /= np.maximum(np.linalg.norm(outward, axis=1, keepdims=True), 1e-12)
 
-    tree = cKDTree(samples)
     k = min(PARAMETERS.normal_neighbours, len(samples))
     dist, j = tree.query(samples, k=k, distance_upper_bound=PARAMETERS.normal_radius_voxels * h)
     dist, j = np.asarray(dist).reshape(len(samples), k), np.asarray(j).reshape(len(samples), k)
-    w = np.isfinite(dist).astype(float)
-    count = w.sum(axis=1)
-    nb = samples[np.where(w > 0, j, 0)]
-    mean = (nb * w[..., None]).sum(axis=1) / count[:, None]
-    dev = (nb - mean[:, None, :]) * w[..., None]
+    found = np.isfinite(dist)
+    count = found.sum(axis=1)
+    # a missing neighbour (index len(samples)) is the zero row: it adds nothing to the sums
+    nb = np.concatenate([samples, np.zeros((1, 3))])[j]
+    mean = nb.sum(axis=1) / count[:, None]
+    dev = nb - mean[:, None, :]
+    dev[~found] = 0.0
     spread, vecs = np.linalg.eigh(np.einsum("nki,nkj->nij", dev, dev))
     normal = vecs[:, :, 0]
     normal = np.where((np.sum(normal * outward, axis=1) < 0)[:, None], -normal, normal)
     untrusted = (count < PARAMETERS.min_normal_neighbours) | (spread[:, 1] < PARAMETERS.min_normal_planarity * spread[:, 2])
-    normal = np.where(untrusted[:, None], outward, normal)
-
-    reach = PARAMETERS.surface_search_voxels
-    searched = np.repeat(_blocks_near(band_c.shape, ijk, c, reach)[band_c], c**3)
-    centres = (fine[searched] + lo + 0.5) * h
-    dist, near = tree.query(centres, k=1, distance_upper_bound=reach * h)
-    ok = np.isfinite(dist)
-    near = np.where(ok, near, 0)
-    n = normal[near]
-    s = np.einsum("nj,nj->n", samples[near] - centres, n)
-    l1 = np.abs(n).sum(axis=1)
-    ok &= l1 > 0.5  # a unit normal has 1 ≤ ‖n‖₁ ≤ √3; 0 where no normal is defined
-    frac = np.clip(0.5 + s / (h * np.where(ok, l1, 1.0)), 0.0, 1.0)
-    inside[searched] = np.where(ok, frac, inside[searched])
-    return fine, inside
+    normals: np.ndarray = np.where(untrusted[:, None], outward, normal)
+    return normals
 
 
 def _hull_volume(vox: np.ndarray, means: np.ndarray, counts: np.ndarray) -> float:
