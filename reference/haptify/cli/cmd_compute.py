@@ -134,7 +134,7 @@ def _compute_checked(
     """Compute on a gated session, then finish its validation (spec §4.8): the streams no metric read
     are checked too, so a result exists only for a session that validates whole. A coded failure of the
     computation is reported as the session's refusal when the session turns out invalid."""
-    ctx = ComputeContext(session=session, parameters=parameters)
+    ctx = ComputeContext(session=session, parameters=parameters, keep=False)
     with ui.progress("computing metrics", total=len(family_modules()) + 1) as advance:
         try:
             results = compute_session(session, wanted, progress=advance, ctx=ctx, uncertainty=uncertainty)

@@ -28,7 +28,9 @@ def compute_session(
 ) -> ResultsFile:
     """Compute every metric (or those in ``metrics``) that the session's trials allow (spec §15.4).
 
-    Pass ``ctx`` to share its cache with later work on the same session (the report's figures). With
+    Pass ``ctx`` to share its cache with later work on the same session (the report's figures; a context
+    made with ``keep=False``, as one made here, drops a trial's entries once no family still to run reads
+    its protocol). With
     ``uncertainty`` (or the case parameter ``{"uncertainty": true}``, §16.2), every metric whose method
     applies gets its uncertainty record (spec chapter 19), propagated through the context's cached intermediates.
     """
@@ -37,7 +39,7 @@ def compute_session(
     if wanted and not wanted <= known:
         unknown = sorted(wanted - known)
         raise HaptifyError(Finding(Code.USAGE, f"unknown metric id(s) {unknown}", expected=sorted(known), found=unknown))
-    ctx = ctx or ComputeContext(session=session)
+    ctx = ctx or ComputeContext(session=session, keep=False)
     ctx.wanted = wanted
     device = session.device()
     out = ResultsFile(
@@ -46,21 +48,39 @@ def compute_session(
         device=DeviceSummary(manufacturer=device.manufacturer, model=device.model, serial=device.serial),
         manifest_sha256=sha256_file(session.root / MANIFEST),
     )
-    for family, module_name in family_modules():
-        fam_ids = {m.id for f in all_families() if f.family == family for m in f.metrics}
-        if wanted is not None and not (fam_ids & wanted):
-            continue
+    definitions = {f.family: f for f in all_families()}
+    runs = [
+        (family, module_name)
+        for family, module_name in family_modules()
+        if wanted is None or {m.id for m in definitions[family].metrics} & wanted
+    ]
+    with_uncertainty = uncertainty or ctx.parameters.get("uncertainty") is True
+    release = not ctx.keep and not with_uncertainty  # the uncertainty pass re-reads the whole cache
+    for k, (family, module_name) in enumerate(runs):
         module = importlib.import_module(module_name)
         for item in module.compute(ctx):
             if not ctx.wants(item.id):
                 continue
             (out.metrics if isinstance(item, MetricResult) else out.unavailable).append(item)
+        if release:
+            _forget_finished_trials(
+                ctx, {p for later, _ in runs[k + 1 :] for m in definitions[later].metrics for p in m.protocols}
+            )
         if progress:
             progress(1)
     out.warnings = ctx.warnings
-    if uncertainty or ctx.parameters.get("uncertainty") is True:
+    if with_uncertainty:
         from haptify.metrics.uncertainty import attach
 
         attach(ctx, out)
         ctx.wanted = wanted
     return out
+
+
+def _forget_finished_trials(ctx: ComputeContext, protocols_still_read: set[str]) -> None:
+    """Drop what the run memoised for the trials of protocols no family still to run reads (spec §15.4):
+    their processed signals would otherwise stay in memory until the end. Session-wide entries (the
+    calibration, the plate bias) stay."""
+    for trial in ctx.session.manifest.trials:
+        if trial.protocol not in protocols_still_read:
+            ctx.forget_trial(trial.id)

@@ -23,6 +23,9 @@ class ComputeContext:
     wanted: set[str] | None = None  # metric ids asked for (None: all)
     parameters: dict[str, Any] = field(default_factory=dict)  # case parameters (spec §16.2), e.g. {"model": file}
     warnings: list[ResultWarning] = field(default_factory=list)
+    # keep every memoised entry for later work on this context (the report's figures); False: a trial's
+    # entries are dropped once no family still to run reads its protocol (spec §15.4)
+    keep: bool = True
     _cache: dict[Hashable, Any] = field(default_factory=dict)
 
     def cached(self, key: Hashable, build: Callable[[], T]) -> T:
