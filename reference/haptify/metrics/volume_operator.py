@@ -168,8 +168,7 @@ def _within(mask: np.ndarray, radius: float) -> np.ndarray:
         n = mask.shape[axis]
         out = dist2.copy()
         for d in range(1, min(reach, n - 1) + 1):
-            head = tuple(slice(0, n - d) if a == axis else slice(None) for a in range(mask.ndim))
-            tail = tuple(slice(d, n) if a == axis else slice(None) for a in range(mask.ndim))
+            head, tail = _along(mask.ndim, axis, slice(0, n - d)), _along(mask.ndim, axis, slice(d, n))
             np.minimum(out[head], dist2[tail] + d * d, out=out[head])
             np.minimum(out[tail], dist2[head] + d * d, out=out[tail])
         dist2 = np.minimum(out, m + 1, out=out)
@@ -200,14 +199,18 @@ def _face_steps(mask: np.ndarray, steps: int, *, outside: bool) -> np.ndarray:
         prev = grown.copy()
         for axis in range(mask.ndim):
             n = mask.shape[axis]
-            head = tuple(slice(0, n - 1) if a == axis else slice(None) for a in range(mask.ndim))
-            tail = tuple(slice(1, n) if a == axis else slice(None) for a in range(mask.ndim))
+            head, tail = _along(mask.ndim, axis, slice(0, n - 1)), _along(mask.ndim, axis, slice(1, n))
             grown[head] |= prev[tail]
             grown[tail] |= prev[head]
             if outside:
-                grown[tuple(slice(0, 1) if a == axis else slice(None) for a in range(mask.ndim))] = True
-                grown[tuple(slice(n - 1, n) if a == axis else slice(None) for a in range(mask.ndim))] = True
+                grown[_along(mask.ndim, axis, slice(0, 1))] = True
+                grown[_along(mask.ndim, axis, slice(n - 1, n))] = True
     return grown
+
+
+def _along(ndim: int, axis: int, part: slice) -> tuple[slice, ...]:
+    """The index of ``part`` along ``axis`` of an ``ndim``-dimensional array, everything along the others."""
+    return tuple(part if a == axis else slice(None) for a in range(ndim))
 
 
 def _blocks_near(shape: tuple[int, ...], blocks: np.ndarray, c: int, reach_voxels: float) -> np.ndarray:

@@ -35,7 +35,8 @@ def compute_session(
     applies gets its uncertainty record (spec chapter 19), propagated through the context's cached intermediates.
     """
     wanted = set(metrics) if metrics else None
-    known = {m.id for f in all_families() for m in f.metrics}
+    definitions = {f.family: f for f in all_families()}
+    known = {m.id for f in definitions.values() for m in f.metrics}
     if wanted and not wanted <= known:
         unknown = sorted(wanted - known)
         raise HaptifyError(Finding(Code.USAGE, f"unknown metric id(s) {unknown}", expected=sorted(known), found=unknown))
@@ -48,12 +49,12 @@ def compute_session(
         device=DeviceSummary(manufacturer=device.manufacturer, model=device.model, serial=device.serial),
         manifest_sha256=sha256_file(session.root / MANIFEST),
     )
-    definitions = {f.family: f for f in all_families()}
     runs = [
         (family, module_name)
         for family, module_name in family_modules()
         if wanted is None or {m.id for m in definitions[family].metrics} & wanted
     ]
+    reads = {family: {p for m in definitions[family].metrics for p in m.protocols} for family, _ in runs}
     with_uncertainty = uncertainty or ctx.parameters.get("uncertainty") is True
     release = not ctx.keep and not with_uncertainty  # the uncertainty pass re-reads the whole cache
     for k, (family, module_name) in enumerate(runs):
@@ -63,9 +64,7 @@ def compute_session(
                 continue
             (out.metrics if isinstance(item, MetricResult) else out.unavailable).append(item)
         if release:
-            _forget_finished_trials(
-                ctx, {p for later, _ in runs[k + 1 :] for m in definitions[later].metrics for p in m.protocols}
-            )
+            _forget_finished_trials(ctx, set().union(*(reads[later] for later, _ in runs[k + 1 :])))
         if progress:
             progress(1)
     out.warnings = ctx.warnings

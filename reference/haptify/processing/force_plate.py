@@ -14,6 +14,7 @@ with M about the world origin, the centre of the plate's top surface. A weight W
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import reduce
 from typing import Any
 
 import numpy as np
@@ -99,12 +100,9 @@ def total_wrench(
     if bias is not None:
         x = x - np.asarray(bias, float)
     rows = x.T
-    force = moment = np.empty(0)
-    for c in range(len(CORNERS)):
-        f_w = _rotated(rotations[c], rows[6 * c : 6 * c + 3])
-        m_w = _rotated(rotations[c], rows[6 * c + 3 : 6 * c + 6]) + cross(positions[c], f_w)
-        force, moment = (f_w, m_w) if c == 0 else (force + f_w, moment + m_w)
-    return np.ascontiguousarray(force.T), np.ascontiguousarray(moment.T)
+    forces = [_rotated(rotations[c], rows[6 * c : 6 * c + 3]) for c in range(len(CORNERS))]
+    moments = [_rotated(rotations[c], rows[6 * c + 3 : 6 * c + 6]) + cross(positions[c], forces[c]) for c in range(len(CORNERS))]
+    return np.ascontiguousarray(reduce(np.add, forces).T), np.ascontiguousarray(reduce(np.add, moments).T)
 
 
 def _rotated(r: np.ndarray, v: np.ndarray) -> np.ndarray:
