@@ -391,6 +391,33 @@ def test_normal_equations_by_blocks_of_rows_are_those_of_the_whole_jacobian(monk
         np.testing.assert_allclose(jac_e, e @ jac, rtol=1e-12, atol=1e-12 * np.abs(e @ jac).max())
 
 
+def test_single_precision_block_rounds_like_numpy_and_zeroes_values_below_the_floor():
+    # By construction: 2^-64, 2^-127 and 2^-200 lie below the floor 2^-63 (zeroed), 2^-63 and 1.5 · 2^-63 on or
+    # above it (kept exactly); 1/3 and -2.5e30 round as numpy rounds them.
+    floor = jacobian.SINGLE_PRECISION_FLOOR
+    assert floor == 2.0**-63 and np.float32(floor) ** 2 == np.float32(2.0**-126) == np.finfo(np.float32).smallest_normal
+    block = np.array([[2.0**-64, -(2.0**-127), floor, 1 / 3], [-1.5 * floor, 2.0**-200, -2.5e30, 0.0]])
+    wide = np.full((2, 6), np.nan, dtype=np.float32)
+    out = jacobian._single_precision(block, wide[:, :4])  # a view with strided rows, as the normal equations pass
+    expected = np.array([[0.0, 0.0, floor, np.float32(1 / 3)], [-1.5 * floor, 0.0, np.float32(-2.5e30), 0.0]], dtype=np.float32)
+    np.testing.assert_array_equal(out, expected)
+    assert np.isnan(wide[:, 4:]).all()  # nothing written outside the view
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(allow_nan=False, allow_infinity=False, width=64), min_size=1, max_size=64))
+def test_single_precision_is_numpy_rounding_without_products_below_the_smallest_normal(values):
+    block = np.array(values)[None, :]
+    with np.errstate(over="ignore"):  # beyond single precision's range both give ±inf
+        rounded = block.astype(np.float32)
+        expected = np.where(np.abs(rounded) >= jacobian.SINGLE_PRECISION_FLOOR, rounded, np.float32(0.0))
+        out = jacobian._single_precision(block, np.empty(block.shape, dtype=np.float32))
+    np.testing.assert_array_equal(out, expected)
+    kept = np.abs(out[out != 0])
+    if kept.size:  # the smallest product of two kept values is a normal number
+        assert kept.min() * kept.min() >= np.finfo(np.float32).smallest_normal
+
+
 def test_parameter_layout_puts_each_outputs_own_parameters_in_jacobian_order():
     st_, _, _ = _random_structure(np.random.default_rng(40), 0)
     nu, nb, nf = 3, 2, 2
