@@ -121,6 +121,36 @@ def test_cmd_adapter_reads_out_file_and_reports_no_output(tmp_path):
         CmdAdapter("tool {session}", 10)
 
 
+@pytest.mark.parametrize(
+    "passed, runs",
+    [
+        ("", 2),  # the command line holds the session only: one run per fixture
+        (" {params}", 3),  # the parameters too: the case with other parameters runs on its own
+        (" {metric}", 3),  # the metric too: the case of another metric runs on its own
+        (" {case}", 5),  # the case id: every case runs
+    ],
+)
+def test_cmd_adapter_runs_each_command_line_once(tmp_path, passed, runs):
+    # Five cases on two fixtures; c differs from a only by its parameters, d by its metric. The program logs
+    # each of its runs and answers 1.5 N for both metrics, so every case passes however many runs it took.
+    repo = _fixtures(tmp_path, "s", "t")
+    log = tmp_path / "runs.log"
+    prog = tmp_path / "impl.py"
+    prog.write_text(
+        "import json, sys\n"
+        f"open({str(log)!r}, 'a').write(' '.join(sys.argv[1:]) + '\\n')\n"
+        "json.dump({'metrics': [{'id': m, 'value': 1.5, 'unit': 'N'} for m in ('x.y', 'x.z')]}, open(sys.argv[2], 'w'))\n"
+    )
+    cases = [case("a", "s"), case("b", "s"), case("c", "s"), case("d", "s", metric="x.z"), case("e", "t")]
+    cases[2] = cases[2].model_copy(update={"parameters": {"model": "other.json"}})
+    adapter = CmdAdapter(f"{sys.executable} {prog} {{session}} {{out}}{passed}", 10)
+    verdicts = run_cases(cases, adapter, repo=repo)
+    assert [v.status for v in verdicts] == ["passed"] * 5
+    assert len(log.read_text().splitlines()) == runs
+    assert verdicts[0].duration_s > 0
+    assert (verdicts[1].duration_s == 0.0) is (passed != " {case}")  # b answered by a's run: no time of its own
+
+
 def test_skip_list_is_reported_not_dropped(tmp_path):
     repo = _fixtures(tmp_path, "v1.5")
     verdicts = run_cases([case("a", "v1.5")], JsonlAdapter(f"{sys.executable} {TOY}", 2.0), skips={"a": "not yet"}, repo=repo)

@@ -4,6 +4,7 @@ process, or an in-process Python function. Every adapter turns one case into an 
 
 from __future__ import annotations
 
+import copy
 import importlib
 import json
 import queue
@@ -12,7 +13,7 @@ import subprocess
 import tempfile
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import IO, Any, Callable, Protocol
 
@@ -95,8 +96,8 @@ EXIT_NOT_EXECUTABLE, EXIT_NOT_FOUND = 126, 127  # a shell's "cannot execute" and
 
 
 class CmdAdapter:
-    """``--cmd "PROGRAM {session} {out}"``: one process per case (substituted: {session} {out} {metric} {case} {params}).
-    Spec §16.4.1."""
+    """``--cmd "PROGRAM {session} {out}"``: one process per case (substituted: {session} {out} {metric} {case} {params}),
+    cases that give the same command line sharing one run. Spec §16.4.1."""
 
     name = "cmd"
 
@@ -107,8 +108,30 @@ class CmdAdapter:
             raise ValueError("the --cmd template must contain {session} and {out}")
         self.timeout_s = timeout_s
         self.answered = False  # has the program run once (then a later 126/127 is that case's error)
+        self._uses = {key: any(key in a for a in self.argv) for key in ("{metric}", "{case}", "{params}")}
+        self._answers: dict[tuple[str, ...], Answer] = {}  # by command line (:meth:`_command_line`)
+
+    def _command_line(self, case: CaseRequest, session: Path) -> tuple[str, ...]:
+        """What the program would be told for ``case``, but for the output file's name: the session, and the
+        case's metric, id and parameters where the template passes them (spec §16.4.1)."""
+        return (
+            str(session),
+            case.metric if self._uses["{metric}"] else "",
+            case.id if self._uses["{case}"] else "",
+            json.dumps(case.parameters, sort_keys=True) if self._uses["{params}"] else "",
+        )
 
     def run(self, case: CaseRequest, session: Path) -> Answer:
+        """The program's answer for ``case``: from a run of its own, or from the earlier run of the same command
+        line (a copy, with no time of its own: ``duration_s`` 0)."""
+        line = self._command_line(case, session)
+        if line in self._answers:
+            return replace(copy.deepcopy(self._answers[line]), duration_s=0.0)
+        answer = self._run(case, session)
+        self._answers[line] = copy.deepcopy(answer)
+        return answer
+
+    def _run(self, case: CaseRequest, session: Path) -> Answer:
         with tempfile.TemporaryDirectory(prefix="haptify-conform-") as tmp:
             out = Path(tmp) / "out.json"
             params = Path(tmp) / "params.json"
