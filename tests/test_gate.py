@@ -120,6 +120,33 @@ def test_reading_a_stream_through_the_gate_is_its_validation(tmp_path):
     assert [f.code for f in refused.value.findings] == [f.code for f in validate_session(folder).findings] == ["E111"]
 
 
+def test_compute_stops_after_the_family_whose_read_refused_the_session(tmp_path, monkeypatch):
+    # The first family reads the corrupted handle_wrench and, as every family does with a trial's coded error,
+    # carries on; compute_session refuses the session as soon as that family ends, and no later family runs.
+    import importlib
+
+    from haptify.pipeline.compute import compute_session
+    from haptify.pipeline.families import family_modules
+
+    folder = _build("checksum-mismatch", tmp_path)
+    session = open_checked_session(folder)
+    (_, first_module), (_, second_module) = family_modules()[:2]
+
+    def reads_the_broken_stream(ctx):
+        try:
+            ctx.session.read_stream(ctx.session.stream("free_space-1", "handle_wrench"))
+        except HaptifyError:
+            pass  # the trial's metrics would be unavailable
+        return []
+
+    later_runs = []
+    monkeypatch.setattr(importlib.import_module(first_module), "compute", reads_the_broken_stream)
+    monkeypatch.setattr(importlib.import_module(second_module), "compute", lambda ctx: later_runs.append(1) or [])
+    with pytest.raises(SessionRefused) as refused:
+        compute_session(session)
+    assert [f.code for f in refused.value.findings] == ["E111"] and later_runs == []
+
+
 def test_a_folder_that_is_not_there_cannot_run_rather_than_being_refused(tmp_path):
     with pytest.raises(HaptifyError) as err:
         open_checked_session(tmp_path / "missing")

@@ -15,6 +15,7 @@ from haptify.formats.storage import MANIFEST, SessionFolder, sha256_file
 from haptify.metrics.metric_definitions import all_families
 from haptify.pipeline.context import ComputeContext as ComputeContext
 from haptify.pipeline.families import family_modules
+from haptify.pipeline.gate import CheckedSession
 from haptify.pipeline.results import DeviceSummary, Implementation, MetricResult, ResultsFile
 from haptify.versions import PACKAGE_VERSION
 
@@ -27,6 +28,10 @@ def compute_session(
     uncertainty: bool = False,
 ) -> ResultsFile:
     """Compute every metric (or those in ``metrics``) that the session's trials allow (spec §15.4).
+
+    A session opened through the gate (spec §4.8) that one of a family's reads refused raises
+    :class:`~haptify.pipeline.gate.SessionRefused` once that family ends: the families catch a trial's coded
+    error to mark its metrics unavailable, and no later family is computed for a refused session.
 
     Pass ``ctx`` to share its cache with later work on the same session (the report's figures; a context
     made with ``keep=False``, as one made here, drops a trial's entries once no family still to run reads
@@ -63,6 +68,8 @@ def compute_session(
             if not ctx.wants(item.id):
                 continue
             (out.metrics if isinstance(item, MetricResult) else out.unavailable).append(item)
+        if isinstance(session, CheckedSession):  # a stream the family read refused the session: compute no more
+            session.refuse_on_errors()
         if release:
             _forget_finished_trials(ctx, set().union(*(reads[later] for later, _ in runs[k + 1 :])))
         if progress:

@@ -52,7 +52,7 @@ class CheckedSession(SessionFolder):
         if entry is None:
             return super().read_stream(stream, verify=verify, session_clock=session_clock)
         table = self._validator.check_stream(entry, keep=True)
-        self._refuse_on_errors()
+        self.refuse_on_errors()
         assert table is not None  # a stream whose file could not be read has an error finding
         if session_clock:
             offset = self.clock_offset(stream)
@@ -65,14 +65,16 @@ class CheckedSession(SessionFolder):
         Returns the warnings of the whole validation, each with its trial."""
         for file in list(self._unchecked):
             self._validator.check_stream(self._unchecked.pop(file))
-            self._refuse_on_errors()
+            self.refuse_on_errors()
             if advance is not None:
                 advance(1)
         self._validator.check_overlap()
-        self._refuse_on_errors()
+        self.refuse_on_errors()
         return [item for item in self._validator.report.items if not item.finding.is_error]
 
-    def _refuse_on_errors(self) -> None:
+    def refuse_on_errors(self) -> None:
+        """Refuse the session (:class:`SessionRefused`) when a stream checked so far has an error: a caller
+        that carries on after a failed read (a family marks the trial's metrics unavailable) stops here."""
         if self._validator.report.errors:
             raise refusal(self.root, self._validator.report.findings)
 
