@@ -12,6 +12,7 @@ from typing import Any, Sequence
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
+from scipy.signal import lfilter
 
 from haptify.codes import Code
 from haptify.dynamics import parameter_file
@@ -320,9 +321,6 @@ def _initial_linear_block(
     """The initial linear block of spec §11.4.2 from the initially mapped input records: F = (1 − p q^-1)^nf
     and B by ridge least squares of ``target`` (N, ny) on the delayed, F-filtered inputs. Returns f₀, B₀
     (nu·nb, ny) and the block's response x₀ (N, ny)."""
-    # imported on the first filtering: a session the gate refuses before that (spec §4.8) never loads scipy.signal
-    from scipy.signal import lfilter
-
     f0 = np.poly(np.full(opts.nf, opts.initial_pole))[1:] if opts.nf else np.zeros(0)
     regs = []
     for w0 in inputs:

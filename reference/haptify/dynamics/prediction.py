@@ -5,6 +5,7 @@ hemisphere rule, the linear output-error block simulated from rest, and the RMS 
 from __future__ import annotations
 
 import numpy as np
+from scipy.signal import lfilter
 
 from haptify.codes import Code
 from haptify.dynamics.parameter_file import HWModelFile, PiecewiseLinearMap, QuaternionHemisphere, UnitGainMap
@@ -117,9 +118,6 @@ def predict(model: HWModelFile, u: np.ndarray) -> np.ndarray:
     equation z(t) = Σ_k b_k w(t − nk − k + 1) − Σ_l f_l z(t − l) with w, z = 0 before t = 0, summation
     over inputs, output maps. Deterministic (double precision, no randomness).
     """
-    # imported on the first filtering: a session the gate refuses before that (spec §4.8) never loads scipy.signal
-    from scipy.signal import lfilter
-
     u = hemisphere_align(_check_inputs(model, u), model.quaternion_hemisphere)
     w = np.column_stack([apply_map(model.input_maps[i], u[:, i]) for i in range(model.nu)])
     y = np.empty((len(u), model.ny))

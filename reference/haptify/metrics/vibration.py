@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from scipy.signal import butter, sosfiltfilt
 
 from haptify.codes import Code
 from haptify.errors import fail
@@ -59,9 +60,6 @@ def highpass(x: np.ndarray, rate_hz: float) -> np.ndarray:
             expected=f"rate > {2 * fc:g} Hz",
             found=rate_hz,
         )
-    # imported on the first filtering: a session the gate refuses before that (spec §4.8) never loads scipy.signal
-    from scipy.signal import butter, sosfiltfilt
-
     sos = butter(PARAMETERS.highpass_order, fc, btype="highpass", fs=rate_hz, output="sos")
     x = np.asarray(x, dtype=float)
     return sosfiltfilt(sos, x - x.mean(axis=0), axis=0)

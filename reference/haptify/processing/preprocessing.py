@@ -24,6 +24,7 @@ from functools import lru_cache
 from typing import Any
 
 import numpy as np
+from scipy.signal import butter, sosfiltfilt
 
 from haptify.codes import Code
 from haptify.errors import fail
@@ -98,9 +99,6 @@ def lowpass(x: np.ndarray, rate_hz: float, cutoff_hz: float, *, order: int | Non
     padlen = min(3 * (2 * len(sos) + 1), len(x) - 1)
     xt = np.moveaxis(x, 0, -1)
     chord = xt[..., :1] + np.linspace(0.0, 1.0, len(x)) * (xt[..., -1:] - xt[..., :1])
-    # imported on the first filtering: a session the gate refuses before that (spec §4.8) never loads scipy.signal
-    from scipy.signal import sosfiltfilt
-
     out: np.ndarray = sosfiltfilt(sos, xt - chord, axis=-1, padtype="odd", padlen=padlen)
     out += chord
     return np.moveaxis(out, -1, 0)
@@ -114,9 +112,6 @@ def butter_lowpass(order: int, cutoff_hz: float, rate_hz: float) -> np.ndarray:
 
 @lru_cache(maxsize=256)
 def _butter_lowpass(order: int, cutoff_hz: float, rate_hz: float) -> np.ndarray:
-    # imported on the first filtering: a session the gate refuses before that (spec §4.8) never loads scipy.signal
-    from scipy.signal import butter
-
     return butter(order, cutoff_hz, btype="low", fs=rate_hz, output="sos")
 
 
