@@ -6,7 +6,7 @@ drawn from its own seed: three placements of a weight whose marker sits a drawn 
 load point, 5 mN noise on every plate channel. The reference computes ``rig.cop_error`` (``compute_session``);
 the answer known by construction is the mean of the offsets' lengths. Reported: the deviations' sd and
 largest magnitude, and how many sd the budget allows (target: at least 5, so that the reference does not fail
-its own challenge by chance; the budget states six).
+its own challenge by chance).
 
 ``python benchmarks/bench_cop_error_spread.py [SESSIONS]`` (default 300: about a minute on 2 cores).
 """

@@ -17,7 +17,7 @@ from haptify.errors import Finding, HaptifyError, fail
 from haptify.formats.storage import atomic_write_text, parse_json_file
 from haptify.pipeline.compute import ComputeContext, compute_session
 from haptify.pipeline.families import family_modules
-from haptify.pipeline.gate import CheckedSession, as_result_warnings, open_checked_session
+from haptify.pipeline.gate import CheckedSession, SessionRefused, as_result_warnings, open_checked_session
 from haptify.pipeline.results import ResultsFile
 
 if TYPE_CHECKING:
@@ -138,6 +138,8 @@ def _compute_checked(
     with ui.progress("computing metrics", total=len(family_modules()) + 1) as advance:
         try:
             results = compute_session(session, wanted, progress=advance, ctx=ctx, uncertainty=uncertainty)
+        except SessionRefused:
+            raise  # it carries the whole folder's validation report already (gate.refusal)
         except HaptifyError:
             session.finish()
             raise

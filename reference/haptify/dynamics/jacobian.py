@@ -6,11 +6,12 @@ analytic Jacobian of the simulation error, accumulated into normal equations blo
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
 from haptify.dynamics.prediction import Segments, _hat_columns, _segments, pwl_basis
+from haptify.processing.compiled_loops import compiled_loop
 from haptify.processing.filter_bank import FilterBank, lfilter_columns
 
 
@@ -267,9 +268,6 @@ def normal_equations_buffer(st: _Structure, rows: int) -> np.ndarray:
 #: at least 2^-126, single precision's smallest normal number.
 SINGLE_PRECISION_FLOOR = 2.0**-63
 
-#: The compiled loop of :func:`_single_precision`, once compiled.
-_ROUND_TO_SINGLE: Callable[[np.ndarray, np.ndarray], None] | None = None
-
 
 def _single_precision(block: np.ndarray, out: np.ndarray) -> np.ndarray:
     """``block`` (float64) rounded to single precision into ``out`` (float32, same shape), every value below
@@ -277,23 +275,20 @@ def _single_precision(block: np.ndarray, out: np.ndarray) -> np.ndarray:
     values of the rounded block is subnormal. Decaying filter responses put values down to 1e-300 in J; the
     ones zeroed change JᵀJ by less than 1e-15 against a ridge term of 1e-5, but a processor multiplies
     subnormals an order of magnitude slower (on an AVX-512 machine a 2048 × 192 block's Gram matrix took
-    8 ms instead of 0.8 ms). One compiled pass (numba, compiled on first use and cached)."""
-    global _ROUND_TO_SINGLE
-    if _ROUND_TO_SINGLE is None:
-        from numba import njit
-
-        @njit("void(f8[:, :], f4[:, :])", cache=True, nogil=True)
-        def run(source: np.ndarray, target: np.ndarray) -> None:
-            floor = np.float32(SINGLE_PRECISION_FLOOR)
-            zero = np.float32(0.0)
-            for i in range(source.shape[0]):
-                for k in range(source.shape[1]):
-                    value = np.float32(source[i, k])
-                    target[i, k] = value if abs(value) >= floor else zero
-
-        _ROUND_TO_SINGLE = run
-    _ROUND_TO_SINGLE(block, out)
+    8 ms instead of 0.8 ms). One compiled pass (:func:`_round_to_single`)."""
+    _round_to_single(block, out)
     return out
+
+
+@compiled_loop("void(f8[:, :], f4[:, :])")
+def _round_to_single(source: np.ndarray, target: np.ndarray) -> None:
+    """The loop of :func:`_single_precision`."""
+    floor = np.float32(SINGLE_PRECISION_FLOOR)
+    zero = np.float32(0.0)
+    for i in range(source.shape[0]):
+        for k in range(source.shape[1]):
+            value = np.float32(source[i, k])
+            target[i, k] = value if abs(value) >= floor else zero
 
 
 def _normal_equations(

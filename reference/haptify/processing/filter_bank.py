@@ -20,79 +20,69 @@ which adds and subtracts exact zeros (the same values, up to the sign of a zero)
 
 from __future__ import annotations
 
-from typing import Callable
-
 import numpy as np
 import numpy.typing as npt
 from numpy.lib.stride_tricks import as_strided
 
-#: The compiled loop of :func:`_kernel` (arguments as its signature string says), once compiled.
-_KERNEL: Callable[..., None] | None = None
+from haptify.processing.compiled_loops import compiled_loop
 
 
-def _kernel() -> Callable[..., None]:
-    """The compiled loop (numba is imported, and the cached machine code loaded, on the first filtering)."""
-    global _KERNEL
-    if _KERNEL is None:
-        from numba import njit
-
-        @njit("void(f8[:, ::1], f8[:, ::1], f8[::1], i8, f8[::1], u1[::1], f8[::1], i8, f8[:, ::1])", cache=True, nogil=True)
-        def run(
-            b: npt.NDArray[np.float64],
-            a: npt.NDArray[np.float64],
-            x: npt.NDArray[np.float64],
-            x_stride: int,
-            gain: npt.NDArray[np.float64],
-            rest: npt.NDArray[np.uint8],
-            out: npt.NDArray[np.float64],
-            out_stride: int,
-            state: npt.NDArray[np.float64],
-        ) -> None:
-            # b, a: (order + 1, M) coefficients, order ≥ 2; row t of the M signals is x[t * x_stride:][:M];
-            # gain: (N,); rest: (N,) 1 where every filter restarts from rest; row t of the result is
-            # out[t * out_stride:][:M]; state: (order, M) the delays before row 0, left as they are after row N − 1
-            order = b.shape[0] - 1
-            n, m = len(gain), b.shape[1]
-            if order == 2:
-                z0, z1 = state[0].copy(), state[1].copy()
-                b0, b1, b2, a1, a2 = b[0].copy(), b[1].copy(), b[2].copy(), a[1].copy(), a[2].copy()
-                for t in range(n):
-                    if rest[t]:
-                        z0[:] = 0.0
-                        z1[:] = 0.0
-                    xt = x[t * x_stride : t * x_stride + m]
-                    ot = out[t * out_stride : t * out_stride + m]
-                    g = gain[t]
-                    for r in range(m):
-                        xr = xt[r]
-                        yr = z0[r] + b0[r] * xr
-                        z0[r] = z1[r] + xr * b1[r] - yr * a1[r]
-                        z1[r] = 0.0 + xr * b2[r] - yr * a2[r]
-                        ot[r] = yr * g
-                state[0], state[1] = z0, z1
-                return
-            z = np.zeros((order + 1, m))  # z[order] stays 0: the last delay has no successor
-            z[:order] = state
-            y = np.empty(m)
-            for t in range(n):
-                if rest[t]:
-                    z[:] = 0.0
-                xt = x[t * x_stride : t * x_stride + m]
-                z0, b0 = z[0], b[0]
-                for r in range(m):
-                    y[r] = z0[r] + b0[r] * xt[r]
-                for k in range(order):
-                    zk, zk1, bk, ak = z[k], z[k + 1], b[k + 1], a[k + 1]
-                    for r in range(m):
-                        zk[r] = zk1[r] + xt[r] * bk[r] - y[r] * ak[r]
-                g = gain[t]
-                ot = out[t * out_stride : t * out_stride + m]
-                for r in range(m):
-                    ot[r] = y[r] * g
-            state[:] = z[:order]
-
-        _KERNEL = run
-    return _KERNEL
+@compiled_loop("void(f8[:, ::1], f8[:, ::1], f8[::1], i8, f8[::1], u1[::1], f8[::1], i8, f8[:, ::1])")
+def _filter_rows(
+    b: npt.NDArray[np.float64],
+    a: npt.NDArray[np.float64],
+    x: npt.NDArray[np.float64],
+    x_stride: int,
+    gain: npt.NDArray[np.float64],
+    rest: npt.NDArray[np.uint8],
+    out: npt.NDArray[np.float64],
+    out_stride: int,
+    state: npt.NDArray[np.float64],
+) -> None:
+    """Filter rows 0 … N − 1 of M signals, each by its own filter, in the transposed direct form II of
+    ``lfilter`` (the module's docstring says why), continuing from and updating the delays ``state``."""
+    # b, a: (order + 1, M) coefficients, order ≥ 2; row t of the M signals is x[t * x_stride:][:M];
+    # gain: (N,); rest: (N,) 1 where every filter restarts from rest; row t of the result is
+    # out[t * out_stride:][:M]; state: (order, M) the delays before row 0, left as they are after row N − 1
+    order = b.shape[0] - 1
+    n, m = len(gain), b.shape[1]
+    if order == 2:
+        z0, z1 = state[0].copy(), state[1].copy()
+        b0, b1, b2, a1, a2 = b[0].copy(), b[1].copy(), b[2].copy(), a[1].copy(), a[2].copy()
+        for t in range(n):
+            if rest[t]:
+                z0[:] = 0.0
+                z1[:] = 0.0
+            xt = x[t * x_stride : t * x_stride + m]
+            ot = out[t * out_stride : t * out_stride + m]
+            g = gain[t]
+            for r in range(m):
+                xr = xt[r]
+                yr = z0[r] + b0[r] * xr
+                z0[r] = z1[r] + xr * b1[r] - yr * a1[r]
+                z1[r] = 0.0 + xr * b2[r] - yr * a2[r]
+                ot[r] = yr * g
+        state[0], state[1] = z0, z1
+        return
+    z = np.zeros((order + 1, m))  # z[order] stays 0: the last delay has no successor
+    z[:order] = state
+    y = np.empty(m)
+    for t in range(n):
+        if rest[t]:
+            z[:] = 0.0
+        xt = x[t * x_stride : t * x_stride + m]
+        z0, b0 = z[0], b[0]
+        for r in range(m):
+            y[r] = z0[r] + b0[r] * xt[r]
+        for k in range(order):
+            zk, zk1, bk, ak = z[k], z[k + 1], b[k + 1], a[k + 1]
+            for r in range(m):
+                zk[r] = zk1[r] + xt[r] * bk[r] - y[r] * ak[r]
+        g = gain[t]
+        ot = out[t * out_stride : t * out_stride + m]
+        for r in range(m):
+            ot[r] = y[r] * g
+    state[:] = z[:order]
 
 
 def _rows(array: np.ndarray) -> tuple[np.ndarray, int]:
@@ -181,7 +171,7 @@ class FilterBank:
         if out.size:  # then n ≥ 1 and signals ≥ 1
             x_flat, x_stride = _rows(x)
             out_flat, out_stride = _rows(out)
-            _kernel()(self._b, self._a, x_flat, x_stride, gain, rest, out_flat, out_stride, self._delays)
+            _filter_rows(self._b, self._a, x_flat, x_stride, gain, rest, out_flat, out_stride, self._delays)
         return out
 
 

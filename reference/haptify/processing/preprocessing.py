@@ -112,6 +112,7 @@ def butter_lowpass(order: int, cutoff_hz: float, rate_hz: float) -> np.ndarray:
 
 @lru_cache(maxsize=256)
 def _butter_lowpass(order: int, cutoff_hz: float, rate_hz: float) -> np.ndarray:
+    """The sections of :func:`butter_lowpass`, shared between calls, so never modified."""
     return butter(order, cutoff_hz, btype="low", fs=rate_hz, output="sos")
 
 
