@@ -135,3 +135,55 @@ def test_signals_are_used_in_turn_when_the_filters_are_a_multiple_of_them_and_ma
         assert np.array_equal(y[:, m], lfilter(b[m], a[m], x[:, m % 3]))
     with pytest.raises(ValueError, match="a multiple of"):
         lfilter_columns(b[:4], a[:4], x)
+
+
+@pytest.mark.parametrize("order", [1, 3])  # the order-2 loop and the general loop
+def test_single_precision_output_zeroes_values_below_the_floor_and_keeps_nan(order):
+    # 1 / (1 − q^-1/2) driven by a unit impulse gives 2^-t (exact in single precision down to 2^-149): with the
+    # floor 2^-63, rows 0 … 63 are kept exactly and later rows are 0. Higher orders add poles at 0 (no effect).
+    # A NaN input in the second column is not a value below the floor: it stays NaN from its row on.
+    n = 120
+    x = np.zeros((n, 2))
+    x[0] = 1.0
+    x[5, 1] = np.nan
+    a = np.tile(np.r_[1.0, -0.5, np.zeros(order - 1)], (2, 1))
+    out = np.full((n, 3), -1.0, dtype=np.float32)
+    FilterBank(np.ones((2, 1)), a)(x, out=out[:, :2], floor=2.0**-63)
+    t = np.arange(n)
+    np.testing.assert_array_equal(out[:, 0], np.where(t <= 63, 2.0 ** -t.astype(float), 0.0).astype(np.float32))
+    np.testing.assert_array_equal(out[:5, 1], (2.0 ** -t[:5].astype(float)).astype(np.float32))
+    assert np.isnan(out[5:, 1]).all()
+    assert (out[:, 2] == -1.0).all()  # nothing written outside the view
+
+
+def test_sums_accumulate_the_weighted_results_in_double_precision_across_blocks():
+    # 1 / (1 − p q^-1) from an impulse gives p^t; with unit weights Σ_t p^t = (1 − p^N) / (1 − p), and with
+    # weights (−1)^t Σ_t (−p)^t = (1 − (−p)^N) / (1 + p), whatever the blocks the rows come in and even when the
+    # results are stored in single precision.
+    n, poles = 90, np.array([0.9, -0.7])
+    x = np.zeros((n, 2))
+    x[0] = 1.0
+    bank = FilterBank(np.ones((2, 1)), np.column_stack([np.ones(2), -poles]))
+    out = np.empty((n, 2), dtype=np.float32)
+    plain, alternating = np.zeros(2), np.zeros(2)
+    for lo, hi in [(0, 7), (7, 50), (50, n)]:
+        bank(x[lo:hi], out=out[lo:hi], weights=np.ones(hi - lo), sums=plain)
+    bank = FilterBank(np.ones((2, 1)), np.column_stack([np.ones(2), -poles]))
+    bank(x, out=out, weights=(-1.0) ** np.arange(n), sums=alternating)
+    np.testing.assert_allclose(plain, (1 - poles**n) / (1 - poles), rtol=1e-14)
+    np.testing.assert_allclose(alternating, (1 - (-poles) ** n) / (1 + poles), rtol=1e-14)
+    np.testing.assert_array_equal(out, (poles[None, :] ** np.arange(n)[:, None]).astype(np.float32))
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"out": np.empty((10, 2), dtype=np.int64)}, "float64 or float32"),
+        ({"weights": np.ones(10)}, "go together"),
+        ({"weights": np.ones(9), "sums": np.zeros(2)}, r"weights must be \(10,\)"),
+        ({"weights": np.ones(10), "sums": np.zeros(2, dtype=np.float32)}, "sums contiguous float64"),
+    ],
+)
+def test_inconsistent_outputs_and_sums_are_refused(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        FilterBank(np.ones((2, 1)), np.tile([1.0, -0.5], (2, 1)))(np.ones((10, 2)), **kwargs)

@@ -382,7 +382,8 @@ def test_normal_equations_by_blocks_of_rows_are_those_of_the_whole_jacobian(monk
     monkeypatch.setattr(jacobian, "BLOCK_ROWS", block_rows)
     sim = jacobian._simulation(st_, theta, rec)
     weights = np.array([0.7, 1.3])
-    buffer = np.full((block_rows, st_.n_shared + max(st_.own(j).stop - st_.own(j).start for j in range(2)) + 2), np.nan)
+    width = st_.n_shared + max(st_.own(j).stop - st_.own(j).start for j in range(2)) + 2
+    buffer = np.full((block_rows, width), np.nan, dtype=np.float32)
     for j, (gram, jac_e) in enumerate(jacobian._normal_equations(st_, theta, rec, weights, sim, buffer)):
         yhat, jac = jacobian._output_jacobian(st_, theta, rec, j, weight=weights[j], sim=sim)
         e = (rec.y[:, j] - yhat) * weights[j]

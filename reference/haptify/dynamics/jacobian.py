@@ -222,22 +222,40 @@ class _JacobianPass:
             signals=[sim.w] * nb + [sim.z[:, j * nu : (j + 1) * nu]] * nf,
         )
 
-    def rows(self, rec: _Record, rows: slice, out: np.ndarray) -> None:
+    def rows(
+        self, rec: _Record, rows: slice, out: np.ndarray, residual: np.ndarray | None = None, sums: np.ndarray | None = None
+    ) -> None:
         """Write the Jacobian's rows ``rows`` (the block after the previous call's) into ``out``:
         ∂z_ji/∂v_ik = q^-nk B_ji/F_ji φ_ik over Φ, ∂z_ji/∂b_k = q^-(nk+k-1)/F_ji w_i and ∂z_ji/∂f_l =
-        −q^-l/F_ji z_ji over ``signals``, each times the gain; the output map's hat functions times the weight."""
+        −q^-l/F_ji z_ji over ``signals``, each times the gain; the output map's hat functions times the weight.
+        ``out`` is float64, or float32 for a Gram matrix: the rows are then rounded to single precision as
+        they are written, values below :data:`SINGLE_PRECISION_FLOOR` zeroed (:func:`_single_precision`).
+        With the block's weighted residuals ``residual`` and ``sums`` (columns,), ``sums += residualᵀ J``
+        in double precision, from the rows before rounding."""
         ns, n_lin = self.shared.columns, self.linear.columns
         starts = rec.starts[(rec.starts >= rows.start) & (rec.starts < rows.stop)] - rows.start
         gain = self.gain[rows]
+        single = out.dtype == np.float32
+        floor = SINGLE_PRECISION_FLOOR if single else 0.0
+
+        def summing(columns: slice) -> dict[str, Any]:
+            return {} if residual is None or sums is None else {"weights": residual, "sums": sums[columns]}
+
         if ns:
-            self.shared(rec.basis[rows], out=out[:, :ns], gain=gain, starts=starts)
+            self.shared(rec.basis[rows], out=out[:, :ns], gain=gain, starts=starts, floor=floor, **summing(slice(0, ns)))
         signals = rec.scratch("signals", len(gain), n_lin)
         width = n_lin // len(self.signals)
         for m, signal in enumerate(self.signals):
             signals[:, m * width : (m + 1) * width] = signal[rows]
-        self.linear(signals, out=out[:, ns : ns + n_lin], gain=gain, starts=starts)
+        lin = slice(ns, ns + n_lin)
+        self.linear(signals, out=out[:, lin], gain=gain, starts=starts, floor=floor, **summing(lin))
         if self.segments is not None:
-            _hat_columns(out[:, ns + n_lin :], self.segments[0][rows], self.segments[1][rows], self.weight)
+            hats = rec.scratch("hats", len(gain), self.hats) if single else out[:, ns + n_lin :]
+            _hat_columns(hats, self.segments[0][rows], self.segments[1][rows], self.weight)
+            if residual is not None and sums is not None:
+                sums[ns + n_lin :] += residual @ hats
+            if single:
+                _single_precision(hats, out[:, ns + n_lin :])
 
 
 def _output_jacobian(
@@ -253,15 +271,16 @@ def _output_jacobian(
     return jacobian.yhat, jac
 
 
-#: Rows of the Jacobians formed at a time by :func:`_normal_equations`: a block of 2048 × ~200 columns (3 MiB)
-#: stays in the processor's cache between being filtered and entering the Gram matrix.
+#: Rows of the Jacobians formed at a time by :func:`_normal_equations`: a block of 2048 × ~200 columns
+#: (1.6 MiB in single precision) stays in the processor's cache between being filtered and entering the Gram matrix.
 BLOCK_ROWS = 2048
 
 
 def normal_equations_buffer(st: _Structure, rows: int) -> np.ndarray:
-    """The buffer :func:`_normal_equations` forms its blocks of J in, for ``rows`` stacked samples: up to
-    :data:`BLOCK_ROWS` rows, as wide as the widest output's Jacobian."""
-    return np.empty((min(rows, BLOCK_ROWS), st.n_shared + max(st.own(j).stop - st.own(j).start for j in range(st.ny))))
+    """The single-precision buffer :func:`_normal_equations` forms its blocks of J in, for ``rows`` stacked
+    samples: up to :data:`BLOCK_ROWS` rows, as wide as the widest output's Jacobian."""
+    width = st.n_shared + max(st.own(j).stop - st.own(j).start for j in range(st.ny))
+    return np.empty((min(rows, BLOCK_ROWS), width), dtype=np.float32)
 
 
 #: Values of J below this magnitude (2^-63 ≈ 1.1e-19) enter JᵀJ as zeros: the product of two larger ones is
@@ -275,7 +294,8 @@ def _single_precision(block: np.ndarray, out: np.ndarray) -> np.ndarray:
     values of the rounded block is subnormal. Decaying filter responses put values down to 1e-300 in J; the
     ones zeroed change JᵀJ by less than 1e-15 against a ridge term of 1e-5, but a processor multiplies
     subnormals an order of magnitude slower (on an AVX-512 machine a 2048 × 192 block's Gram matrix took
-    8 ms instead of 0.8 ms). One compiled pass (:func:`_round_to_single`)."""
+    8 ms instead of 0.8 ms). The filter bank applies the same rule to the columns it writes
+    (:meth:`_JacobianPass.rows`); this compiled pass (:func:`_round_to_single`) to the output map's."""
     _round_to_single(block, out)
     return out
 
@@ -288,7 +308,7 @@ def _round_to_single(source: np.ndarray, target: np.ndarray) -> None:
     for i in range(source.shape[0]):
         for k in range(source.shape[1]):
             value = np.float32(source[i, k])
-            target[i, k] = value if abs(value) >= floor else zero
+            target[i, k] = zero if abs(value) < floor else value
 
 
 def _normal_equations(
@@ -296,24 +316,22 @@ def _normal_equations(
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """JᵀJ and Jᵀe of every output j (spec §11.4.3; J of :func:`_output_jacobian` with weight ``weights[j]``,
     e the weighted residuals), accumulated over blocks of :data:`BLOCK_ROWS` rows formed in ``buffer``
-    (≥ BLOCK_ROWS × columns), the outputs' blocks of the same rows one after the other (so a block of the
-    input basis Φ is read once for all outputs). Jᵀe is summed in double precision; JᵀJ from the block
-    rounded to single precision, its tiniest values zeroed (:func:`_single_precision`; spec §11.4.3: it only
-    shapes the step, the gradient fixes where the descent stops), summed in double."""
+    (float32, ≥ BLOCK_ROWS × columns), the outputs' blocks of the same rows one after the other (so a block
+    of the input basis Φ is read once for all outputs). Jᵀe is summed in double precision as the rows are
+    formed; JᵀJ from the block rounded to single precision, its tiniest values zeroed
+    (:func:`_single_precision`; spec §11.4.3: it only shapes the step, the gradient fixes where the descent
+    stops), summed in double."""
     passes = [_JacobianPass.of(st, theta, rec, j, weights[j], sim) for j in range(st.ny)]
     residuals = [(rec.y[:, j] - p.yhat) * weights[j] for j, p in enumerate(passes)]
     grams = [np.zeros((p.columns, p.columns)) for p in passes]
     gradients = [np.zeros(p.columns) for p in passes]
-    single = np.empty(buffer.shape, dtype=np.float32)
     n = len(rec.u)
     for start in range(0, n, BLOCK_ROWS):
         rows = slice(start, min(start + BLOCK_ROWS, n))
         for jacobian, e, gram, jac_e in zip(passes, residuals, grams, gradients):
             block = buffer[: rows.stop - rows.start, : jacobian.columns]
-            jacobian.rows(rec, rows, block)
-            jac_e += e[rows] @ block
-            low = _single_precision(block, single[: rows.stop - rows.start, : jacobian.columns])
-            gram += low.T @ low
+            jacobian.rows(rec, rows, block, e[rows], jac_e)
+            gram += block.T @ block
     return list(zip(grams, gradients))
 
 

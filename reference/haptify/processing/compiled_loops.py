@@ -10,9 +10,10 @@ from typing import Callable
 Loop = Callable[..., None]
 
 
-def compiled_loop(signature: str) -> Callable[[Loop], Loop]:
-    """Decorator: the function compiled by numba as ``njit(signature, cache=True, nogil=True)`` when first
-    called (numba is imported then), the compiled loop called from then on."""
+def compiled_loop(*signatures: str) -> Callable[[Loop], Loop]:
+    """Decorator: the function compiled by numba as ``njit(list(signatures), cache=True, nogil=True)`` (one
+    machine-code version per signature, e.g. per output type) when first called (numba is imported then),
+    the compiled loop called from then on."""
 
     def wrap(py_func: Loop) -> Loop:
         loop: Loop | None = None
@@ -23,7 +24,7 @@ def compiled_loop(signature: str) -> Callable[[Loop], Loop]:
             if loop is None:
                 from numba import njit
 
-                loop = njit(signature, cache=True, nogil=True)(py_func)
+                loop = njit(list(signatures), cache=True, nogil=True)(py_func)
             loop(*args)
 
         return call

@@ -16,6 +16,10 @@ Filters of order ≤ 2 (every transfer function of the default structure, nk = 0
 loop that keeps the two delays of every column in their own arrays and reads each row of the signals
 once; higher orders take the general loop. Filters of order < 2 run as order 2 with zero coefficients,
 which adds and subtracts exact zeros (the same values, up to the sign of a zero).
+
+For the fit's Gram matrices a bank also writes its results in single precision, values below a floor
+as zero, and sums them weighted by the residuals as it goes (Jᵀe in double precision), so the fit
+never stores its Jacobian in double (spec §11.4.3).
 """
 
 from __future__ import annotations
@@ -27,7 +31,10 @@ from numpy.lib.stride_tricks import as_strided
 from haptify.processing.compiled_loops import compiled_loop
 
 
-@compiled_loop("void(f8[:, ::1], f8[:, ::1], f8[::1], i8, f8[::1], u1[::1], f8[::1], i8, f8[:, ::1])")
+_SIGNATURE = "void(f8[:, ::1], f8[:, ::1], f8[::1], i8, f8[::1], u1[::1], {out}[::1], i8, f8[:, ::1], f8, f8[::1], f8[::1])"
+
+
+@compiled_loop(_SIGNATURE.format(out="f8"), _SIGNATURE.format(out="f4"))
 def _filter_rows(
     b: npt.NDArray[np.float64],
     a: npt.NDArray[np.float64],
@@ -35,15 +42,20 @@ def _filter_rows(
     x_stride: int,
     gain: npt.NDArray[np.float64],
     rest: npt.NDArray[np.uint8],
-    out: npt.NDArray[np.float64],
+    out: npt.NDArray[np.floating],
     out_stride: int,
     state: npt.NDArray[np.float64],
+    floor: float,
+    weights: npt.NDArray[np.float64],
+    sums: npt.NDArray[np.float64],
 ) -> None:
     """Filter rows 0 … N − 1 of M signals, each by its own filter, in the transposed direct form II of
     ``lfilter`` (the module's docstring says why), continuing from and updating the delays ``state``."""
     # b, a: (order + 1, M) coefficients, order ≥ 2; row t of the M signals is x[t * x_stride:][:M];
     # gain: (N,); rest: (N,) 1 where every filter restarts from rest; row t of the result is
-    # out[t * out_stride:][:M]; state: (order, M) the delays before row 0, left as they are after row N − 1
+    # out[t * out_stride:][:M] (float64, or float32: rounded), a value whose magnitude once stored is below
+    # floor stored as 0; sums (M,) += weights[t] times row t's result before rounding; state: (order, M) the
+    # delays before row 0, left as they are after row N − 1
     order = b.shape[0] - 1
     n, m = len(gain), b.shape[1]
     if order == 2:
@@ -55,13 +67,17 @@ def _filter_rows(
                 z1[:] = 0.0
             xt = x[t * x_stride : t * x_stride + m]
             ot = out[t * out_stride : t * out_stride + m]
-            g = gain[t]
+            g, wt = gain[t], weights[t]
             for r in range(m):
                 xr = xt[r]
                 yr = z0[r] + b0[r] * xr
                 z0[r] = z1[r] + xr * b1[r] - yr * a1[r]
                 z1[r] = 0.0 + xr * b2[r] - yr * a2[r]
-                ot[r] = yr * g
+                value = yr * g
+                sums[r] += value * wt
+                ot[r] = value
+                if abs(ot[r]) < floor:
+                    ot[r] = 0.0
         state[0], state[1] = z0, z1
         return
     z = np.zeros((order + 1, m))  # z[order] stays 0: the last delay has no successor
@@ -78,10 +94,14 @@ def _filter_rows(
             zk, zk1, bk, ak = z[k], z[k + 1], b[k + 1], a[k + 1]
             for r in range(m):
                 zk[r] = zk1[r] + xt[r] * bk[r] - y[r] * ak[r]
-        g = gain[t]
+        g, wt = gain[t], weights[t]
         ot = out[t * out_stride : t * out_stride + m]
         for r in range(m):
-            ot[r] = y[r] * g
+            value = y[r] * g
+            sums[r] += value * wt
+            ot[r] = value
+            if abs(ot[r]) < floor:
+                ot[r] = 0.0
     state[:] = z[:order]
 
 
@@ -131,7 +151,15 @@ class FilterBank:
         self._delays = np.zeros((max(order, 2), len(b)))  # at rest
 
     def __call__(
-        self, x: np.ndarray, out: np.ndarray | None = None, gain: np.ndarray | None = None, starts: np.ndarray | None = None
+        self,
+        x: np.ndarray,
+        out: np.ndarray | None = None,
+        gain: np.ndarray | None = None,
+        starts: np.ndarray | None = None,
+        *,
+        floor: float = 0.0,
+        weights: np.ndarray | None = None,
+        sums: np.ndarray | None = None,
     ) -> np.ndarray:
         """Filter the next block of rows: column m of the result is ``x[:, m % S]`` through filter m, continuing
         from the delays the previous block left (at rest before the first), times ``gain[t]`` at row t when a
@@ -140,7 +168,10 @@ class FilterBank:
 
         ``x`` is (N, S) with M a multiple of S (the signals are used in turn; ``x`` is then tiled to M
         columns first). ``x`` and ``out`` (N, M), which receives the result when given, may be views with
-        strided rows, e.g. some columns of a Jacobian.
+        strided rows, e.g. some columns of a Jacobian. ``out`` may be float32: the results are then rounded to
+        single precision as they are stored. A stored value whose magnitude is below ``floor`` is stored as 0
+        (the fit's Gram matrices, spec §11.4.3). With ``weights`` (N,) and ``sums`` (M,) float64, ``sums[m]``
+        is increased by Σ_t weights[t] · result[t, m], the result in double precision before rounding (Jᵀe).
         """
         x = np.asarray(x, dtype=float)
         if x.ndim != 2:
@@ -157,11 +188,21 @@ class FilterBank:
             x = np.ascontiguousarray(x)
         if out is None:
             out = np.empty((n, m))
-        elif out.shape != (n, m) or not _row_major(out):
-            raise ValueError(f"out must have shape {(n, m)} with contiguous rows; got {out.shape}")
+        elif out.shape != (n, m) or not _row_major(out) or out.dtype not in (np.float64, np.float32):
+            raise ValueError(
+                f"out must be float64 or float32 of shape {(n, m)} with contiguous rows; got {out.dtype} {out.shape}"
+            )
         gain = np.ones(n) if gain is None else np.ascontiguousarray(gain, dtype=float)
         if gain.shape != (n,):
             raise ValueError(f"gain must hold one factor per sample ({n}); got shape {gain.shape}")
+        if (weights is None) != (sums is None):
+            raise ValueError("weights and sums go together")
+        if weights is None or sums is None:
+            weights, sums = np.zeros(n), np.zeros(m)
+        elif weights.shape != (n,) or sums.shape != (m,) or sums.dtype != np.float64 or not sums.flags.c_contiguous:
+            raise ValueError(
+                f"weights must be ({n},) and sums contiguous float64 ({m},); got {weights.shape}, {sums.dtype} {sums.shape}"
+            )
         rest = np.zeros(n, dtype=np.uint8)
         if starts is not None and n:
             starts = np.asarray(starts, dtype=np.int64)
@@ -171,7 +212,9 @@ class FilterBank:
         if out.size:  # then n ≥ 1 and signals ≥ 1
             x_flat, x_stride = _rows(x)
             out_flat, out_stride = _rows(out)
-            _filter_rows(self._b, self._a, x_flat, x_stride, gain, rest, out_flat, out_stride, self._delays)
+            weights = np.ascontiguousarray(weights, dtype=float)
+            filters = (self._b, self._a)
+            _filter_rows(*filters, x_flat, x_stride, gain, rest, out_flat, out_stride, self._delays, float(floor), weights, sums)
         return out
 
 
