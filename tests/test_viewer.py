@@ -36,7 +36,7 @@ from haptify.formats.storage import open_session
 from haptify.pipeline.results import Implementation, MetricResult, ResultsFile, Unavailable, load_results
 from haptify_tools.example_session import TOUCH_DEVICE, example_writer
 from haptify_tools.viewer import blueprints, cmd_view
-from haptify_tools.viewer.arrays import nan_split, plane_rectangle, raw_pose_at
+from haptify_tools.viewer.arrays import columns_of, nan_split, plane_rectangle, raw_pose_at, side_by_side
 from haptify_tools.viewer.documents import results_markdown
 from haptify_tools.viewer.plan import HAND_FORCE_M_PER_N, PLATE_FORCE_M_PER_N, decimation_factor, envelope, time_ns
 from haptify_tools.viewer.recording import plan_recording, write_rrd
@@ -1057,3 +1057,44 @@ def test_view_web_command_stopped_by_sigterm_leaves_no_viewer(sessions):
         stop_child(proc)
     with socket.socket() as s:
         s.bind(("127.0.0.1", port))
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    width=st.integers(1, 12),
+    rows=st.integers(0, 40),
+    picks=st.lists(st.integers(0, 11), min_size=1, max_size=8),
+    layout=st.sampled_from(["stream reader", "separate columns"]),
+)
+def test_columns_of_is_the_stacked_columns_and_a_read_only_view_when_they_lie_side_by_side(width, rows, picks, layout):
+    import pandas as pd
+    import pyarrow as pa
+
+    from haptify.formats.storage.stream_files import arrow_frame
+
+    names = [f"c{k}" for k in range(width)]
+    chosen = [names[k % width] for k in picks]
+    data = {name: np.arange(rows, dtype=np.float64) * (k + 1) + k / 8 for k, name in enumerate(names)}
+    if layout == "stream reader":  # one (columns × rows) block, as a stream is read
+        frame = arrow_frame(pa.table(data))
+    else:
+        frame = pd.DataFrame({name: column.copy() for name, column in data.items()})
+    got = columns_of(frame, chosen)
+    np.testing.assert_array_equal(got, np.column_stack([data[name] for name in chosen]))
+    shared = np.shares_memory(got, frame[chosen[0]].to_numpy())
+    assert not (shared and got.flags.writeable)  # a view of the table is read-only
+    if layout == "stream reader" and rows:  # a view exactly when the columns are evenly spaced in the block
+        positions = [names.index(name) for name in chosen]
+        assert shared == (len(set(np.diff(positions))) <= 1)
+
+
+def test_side_by_side_refuses_columns_that_are_not_evenly_spaced_in_one_block():
+    block = np.arange(40.0).reshape(4, 10)
+    view = side_by_side([block[3], block[2], block[1]])  # in reverse order: a negative step
+    assert view is not None and not view.flags.writeable
+    np.testing.assert_array_equal(view, block[::-1][:3].T)
+    assert side_by_side([block[0], block[1], block[3]]) is None  # uneven spacing
+    assert side_by_side([block[0], block[1, ::2]]) is None  # another length and stride
+    other = np.arange(40.0).reshape(4, 10)
+    assert side_by_side([block[0], other[1]]) is None  # two owners
+    assert side_by_side([block[0], block[1].astype(np.float32)]) is None  # another dtype

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from numpy.lib.stride_tricks import as_strided
 from numpy.typing import ArrayLike
 
 from haptify_tools.viewer.plan import SURFACE_MARGIN_M, SURFACE_MIN_HALF_M
@@ -41,9 +42,37 @@ def raw_pose_at(t_pose: np.ndarray, p: np.ndarray, q: np.ndarray, t: np.ndarray)
 
 
 def columns_of(frame: pd.DataFrame, names: list[str]) -> np.ndarray:
-    """The columns ``names`` of a stream table as one float64 array (rows × names), built column by column
-    (selecting a list of columns through pandas builds an index each time and costs more than the copy)."""
-    return np.column_stack([frame[name].to_numpy(dtype=np.float64) for name in names]) if names else np.empty((len(frame), 0))
+    """The columns ``names`` of a stream table as one float64 array (rows × names): a read-only view when they
+    lie side by side in one block of memory (:func:`side_by_side`; the stream reader lays a table out so,
+    ``haptify.formats.storage.stream_files.arrow_frame``), else a copy built column by column (selecting a
+    list of columns through pandas builds an index each time and costs more than the copy)."""
+    columns = [frame[name].to_numpy(dtype=np.float64) for name in names]
+    if not columns:
+        return np.empty((len(frame), 0))
+    view = side_by_side(columns)
+    return np.column_stack(columns) if view is None else view
+
+
+def _owner(array: np.ndarray) -> object:
+    """The object that owns the memory of ``array`` (the end of its chain of bases)."""
+    while isinstance(array.base, np.ndarray):
+        array = array.base
+    return array if array.base is None else array.base
+
+
+def side_by_side(columns: list[np.ndarray]) -> np.ndarray | None:
+    """The read-only (rows × k) view whose column i is ``columns[i]`` (1-D, same length and dtype) when they
+    are evenly spaced in the memory of one owner — the rows of a (columns × rows) block, in order — else
+    None. Every element the view reads is an element of one of the columns, and the view keeps their
+    owner alive."""
+    first = columns[0]
+    step = columns[1].ctypes.data - first.ctypes.data if len(columns) > 1 else first.itemsize
+    owner = _owner(first)
+    for i, column in enumerate(columns):
+        same_layout = column.dtype == first.dtype and column.shape == first.shape and column.strides == first.strides
+        if not same_layout or column.ctypes.data != first.ctypes.data + i * step or _owner(column) is not owner:
+            return None
+    return as_strided(first, shape=(len(first), len(columns)), strides=(first.strides[0], step), writeable=False)
 
 
 def finite_rows(*arrays: np.ndarray) -> np.ndarray:
