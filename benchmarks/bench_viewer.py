@@ -43,7 +43,7 @@ from haptify_tools.viewer.save import build
 
 DURATION_S = 140.0
 TARGET_S = 2.0
-REPEATS = 3
+REPEATS = 5  # pairs: one pair's CPU ratio moves by ±15 % on a shared VM, the median of five far less
 CPU_RATIO, RSS_RATIO, SIZE_RATIO = 1.3, 1.3, 1.2
 
 # The peer: every stream of every trial, all its columns as one Scalars entity, one send_columns per stream,

@@ -44,13 +44,14 @@ def raw_pose_at(t_pose: np.ndarray, p: np.ndarray, q: np.ndarray, t: np.ndarray)
 def columns_of(frame: pd.DataFrame, names: list[str]) -> np.ndarray:
     """The columns ``names`` of a stream table as one float64 array (rows × names): a read-only view when they
     lie side by side in one block of memory (:func:`side_by_side`; the stream reader lays a table out so,
-    ``haptify.formats.storage.stream_files.arrow_frame``), else a copy built column by column (selecting a
-    list of columns through pandas builds an index each time and costs more than the copy)."""
+    ``haptify.formats.storage.stream_files.arrow_frame``), else a copy (selecting a list of columns through
+    pandas builds an index each time and costs more than the copy). The copy is column-major: each column
+    is copied whole, which is several times faster than writing rows of interleaved values."""
     columns = [frame[name].to_numpy(dtype=np.float64) for name in names]
     if not columns:
         return np.empty((len(frame), 0))
     view = side_by_side(columns)
-    return np.column_stack(columns) if view is None else view
+    return np.vstack(columns).T if view is None else view
 
 
 def _owner(array: np.ndarray) -> object:
