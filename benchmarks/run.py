@@ -20,6 +20,7 @@ import re
 import subprocess
 import sys
 import time
+import tomllib
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -113,16 +114,14 @@ def run_script(script: Path) -> tuple[int, list[dict]]:
     return proc.wait(), rows
 
 
-#: The folders of the project's import packages (pyproject.toml's package-dir).
-PACKAGE_FOLDERS = ("reference/haptify", "schemas", "tools/haptify_tools", "conformance/haptify_conform", "conformance/mutants")
-
-
 def compile_packages() -> None:
-    """Byte-compile the project's packages before any script runs, so that every fresh interpreter a script
-    starts loads them as an installed package does. Without it, a run under ``PYTHONDONTWRITEBYTECODE`` (set
-    on some shared machines) compiles the project's modules from source in every interpreter it starts, a
-    cost the peers, installed from wheels with their bytecode, never pay."""
-    for folder in PACKAGE_FOLDERS:
+    """Byte-compile the project's packages (the folders of pyproject.toml's ``package-dir``) before any script
+    runs, so that every fresh interpreter a script starts loads them as an installed package does. Without
+    it, a run under ``PYTHONDONTWRITEBYTECODE`` (set on some shared machines) compiles the project's modules
+    from source in every interpreter it starts, a cost the peers, installed from wheels with their bytecode,
+    never pay."""
+    project = tomllib.loads((HERE.parent / "pyproject.toml").read_text(encoding="utf-8"))
+    for folder in project["tool"]["setuptools"]["package-dir"].values():
         compileall.compile_dir(HERE.parent / folder, quiet=1)
 
 

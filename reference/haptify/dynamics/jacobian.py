@@ -11,7 +11,6 @@ from typing import Any, Sequence
 import numpy as np
 
 from haptify.dynamics.prediction import Segments, _hat_columns, _segments, pwl_basis
-from haptify.processing.compiled_loops import compiled_loop
 from haptify.processing.filter_bank import FilterBank, lfilter_columns
 
 
@@ -295,20 +294,11 @@ def _single_precision(block: np.ndarray, out: np.ndarray) -> np.ndarray:
     ones zeroed change JᵀJ by less than 1e-15 against a ridge term of 1e-5, but a processor multiplies
     subnormals an order of magnitude slower (on an AVX-512 machine a 2048 × 192 block's Gram matrix took
     8 ms instead of 0.8 ms). The filter bank applies the same rule to the columns it writes
-    (:meth:`_JacobianPass.rows`); this compiled pass (:func:`_round_to_single`) to the output map's."""
-    _round_to_single(block, out)
+    (:meth:`_JacobianPass.rows`); this function to the output map's few columns."""
+    with np.errstate(over="ignore"):  # beyond single precision's range: ±inf
+        out[...] = block
+    out[np.abs(out) < SINGLE_PRECISION_FLOOR] = 0.0
     return out
-
-
-@compiled_loop("void(f8[:, :], f4[:, :])")
-def _round_to_single(source: np.ndarray, target: np.ndarray) -> None:
-    """The loop of :func:`_single_precision`."""
-    floor = np.float32(SINGLE_PRECISION_FLOOR)
-    zero = np.float32(0.0)
-    for i in range(source.shape[0]):
-        for k in range(source.shape[1]):
-            value = np.float32(source[i, k])
-            target[i, k] = zero if abs(value) < floor else value
 
 
 def _normal_equations(

@@ -199,7 +199,8 @@ class FilterBank:
             raise ValueError("weights and sums go together")
         if weights is None or sums is None:
             weights, sums = np.zeros(n), np.zeros(m)
-        elif weights.shape != (n,) or sums.shape != (m,) or sums.dtype != np.float64 or not sums.flags.c_contiguous:
+        weights = np.ascontiguousarray(weights, dtype=float)
+        if weights.shape != (n,) or sums.shape != (m,) or sums.dtype != np.float64 or not sums.flags.c_contiguous:
             raise ValueError(
                 f"weights must be ({n},) and sums contiguous float64 ({m},); got {weights.shape}, {sums.dtype} {sums.shape}"
             )
@@ -212,7 +213,6 @@ class FilterBank:
         if out.size:  # then n ≥ 1 and signals ≥ 1
             x_flat, x_stride = _rows(x)
             out_flat, out_stride = _rows(out)
-            weights = np.ascontiguousarray(weights, dtype=float)
             filters = (self._b, self._a)
             _filter_rows(*filters, x_flat, x_stride, gain, rest, out_flat, out_stride, self._delays, float(floor), weights, sums)
         return out
